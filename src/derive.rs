@@ -1,0 +1,216 @@
+//! The derivation pipeline (DESIGN.md steps 1–5): C → Ċ → C̈ → J, c → A, b → λ, forces.
+//!
+//! For each constraint: Ċ and C̈ by the product rule at the vector level, Jᵢ = ∇ᵣᵢC for the
+//! bodies it involves, and c = C̈ with the accelerations set to zero. Each ∇C is divided by
+//! its positive constant content κ (∇(r·r − l²) = 2r → direction r): the multiplier then
+//! belongs to the direction people write (the article's λ), and J, c, A, b and λ all refer
+//! to C/κ, so A λ + b = 0 holds among them exactly. The force on each body, Σₖ λₖ Jₖᵢ, does
+//! not depend on κ.
+//!
+//! A is sparse: Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ over the bodies the two constraints share, so an
+//! N-link chain has O(N) entries and the derivation is linear in N.
+//!
+//! Not here: numbers (`numeric`), layouts of the derivation for people (`report`).
+
+use crate::expr::diff::{DiffError, time_derivative};
+use crate::expr::grad::gradient;
+use crate::expr::{Id, Rational, TypeError};
+use crate::model::system::System;
+use std::collections::HashMap;
+
+/// Everything derived for one constraint.
+#[derive(Clone, Debug)]
+pub struct DerivedConstraint {
+    /// `C`, simplified.
+    pub c: Id,
+    /// `d/dt C` as the product rule gives it, before collecting.
+    pub c_dot_raw: Id,
+    pub c_dot: Id,
+    /// `d/dt Ċ` as the product rule gives it, before collecting.
+    pub c_ddot_raw: Id,
+    pub c_ddot: Id,
+    /// `(body, ∇C)` for each body involved, simplified.
+    pub gradient: Vec<(usize, Id)>,
+    /// κ: the positive constant content taken out of ∇C.
+    pub scale: Rational,
+    /// `(body, J = ∇C / κ)`.
+    pub direction: Vec<(usize, Id)>,
+    /// `c = C̈|ₐ₌₀ / κ`, so that C̈/κ = Σᵢ Jᵢ·aᵢ + c.
+    pub c_term: Id,
+}
+
+/// The derivation of a whole system.
+#[derive(Clone, Debug)]
+pub struct Derivation {
+    pub constraints: Vec<DerivedConstraint>,
+    /// Non-zero entries `(k, j, Aₖⱼ)` with `k ≤ j` (A is symmetric).
+    pub a: Vec<(usize, usize, Id)>,
+    pub b: Vec<Id>,
+    /// λ in closed form, when there is a single constraint.
+    pub lambda: Option<Id>,
+    /// `(body, force)` in closed form, when there is a single constraint.
+    pub forces: Option<Vec<(usize, Id)>>,
+}
+
+impl Derivation {
+    /// `Aₖⱼ` (either order), if non-zero.
+    pub fn a_entry(&self, k: usize, j: usize) -> Option<Id> {
+        let (k, j) = if k <= j { (k, j) } else { (j, k) };
+        self.a.iter().find(|e| e.0 == k && e.1 == j).map(|e| e.2)
+    }
+}
+
+/// Why a system could not be derived.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum DeriveError {
+    #[error("constraint `{name}`: {error}")]
+    Diff { name: String, error: DiffError },
+    #[error("constraint `{0}` has a zero gradient everywhere: it does not constrain any position")]
+    ZeroGradient(String),
+    #[error("internal type error: {0}")]
+    Type(#[from] TypeError),
+}
+
+/// Runs DESIGN.md steps 1–5 on every constraint of `system`.
+pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
+    let mut constraints = Vec::with_capacity(system.constraints.len());
+    for k in 0..system.constraints.len() {
+        constraints.push(derive_constraint(system, k)?);
+    }
+    let (a, b) = assemble(system, &constraints)?;
+    let (mut lambda, mut forces) = (None, None);
+    if let [only] = constraints.as_slice() {
+        let g = &mut system.graph;
+        let s = &mut system.simplifier;
+        // λ = −b / A
+        let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
+        let minus_b = g.neg(b[0]);
+        let l = g.div(minus_b, a00)?;
+        let l = s.simplify(g, l)?;
+        let mut f = Vec::with_capacity(only.direction.len());
+        for &(body, j) in &only.direction {
+            let product = g.mul(vec![l, j])?;
+            f.push((body, s.simplify(g, product)?));
+        }
+        lambda = Some(l);
+        forces = Some(f);
+    }
+    Ok(Derivation { constraints, a, b, lambda, forces })
+}
+
+fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint, DeriveError> {
+    let name = system.constraints[k].name.clone();
+    let diff_error = |error| DeriveError::Diff { name: name.clone(), error };
+    let c_raw = system.constraints[k].c;
+    let involved = system.constraints[k].bodies.clone();
+    let g = &mut system.graph;
+    let s = &mut system.simplifier;
+    let c = s.simplify(g, c_raw)?;
+    let c_dot_raw = time_derivative(g, c).map_err(diff_error)?;
+    let c_dot = s.simplify(g, c_dot_raw)?;
+    let c_ddot_raw = time_derivative(g, c_dot).map_err(diff_error)?;
+    let c_ddot = s.simplify(g, c_ddot_raw)?;
+    let mut gradient_parts = Vec::with_capacity(involved.len());
+    let mut scale: Option<Rational> = None;
+    for &body in &involved {
+        let r = system.bodies[body].position;
+        let grad = gradient(g, c, r)?;
+        let grad = s.simplify(g, grad)?;
+        if s.is_zero(g, grad)? {
+            continue;
+        }
+        let content = s.content(g, grad)?;
+        scale = Some(match scale {
+            None => content,
+            Some(k) => k.gcd(&content),
+        });
+        gradient_parts.push((body, grad));
+    }
+    let scale = scale.ok_or_else(|| DeriveError::ZeroGradient(name.clone()))?;
+    let inv = scale.recip().unwrap_or(Rational::ONE);
+    let mut direction = Vec::with_capacity(gradient_parts.len());
+    for &(body, grad) in &gradient_parts {
+        direction.push((body, s.scaled(g, grad, &inv)?));
+    }
+    // c = C̈ with every acceleration set to zero, over κ.
+    let zero = g.zero_vector();
+    let mut to_zero = HashMap::new();
+    for &(body, _) in &gradient_parts {
+        let a = g.sym(system.bodies[body].acceleration);
+        to_zero.insert(a, zero);
+    }
+    let at_rest = g.substitute(c_ddot, &to_zero)?;
+    let c_term = s.scaled(g, at_rest, &inv)?;
+    Ok(DerivedConstraint {
+        c,
+        c_dot_raw,
+        c_dot,
+        c_ddot_raw,
+        c_ddot,
+        gradient: gradient_parts,
+        scale,
+        direction,
+        c_term,
+    })
+}
+
+/// A (sparse, upper triangle) and b from the constraints' directions.
+#[allow(clippy::type_complexity)]
+fn assemble(
+    system: &mut System,
+    constraints: &[DerivedConstraint],
+) -> Result<(Vec<(usize, usize, Id)>, Vec<Id>), TypeError> {
+    // Which constraints act on each body.
+    let mut on_body: Vec<Vec<(usize, Id)>> = vec![Vec::new(); system.bodies.len()];
+    for (k, dc) in constraints.iter().enumerate() {
+        for &(body, j) in &dc.direction {
+            on_body[body].push((k, j));
+        }
+    }
+    let g = &mut system.graph;
+    let s = &mut system.simplifier;
+    let mut inv_mass = Vec::with_capacity(system.bodies.len());
+    for body in &system.bodies {
+        inv_mass.push(g.powi(body.mass, -1)?);
+    }
+    // Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ, collected per pair (k ≤ j) over shared bodies.
+    let mut pairs: Vec<((usize, usize), Vec<Id>)> = Vec::new();
+    let mut index: HashMap<(usize, usize), usize> = HashMap::new();
+    for (body, acting) in on_body.iter().enumerate() {
+        for (x, &(k, jk)) in acting.iter().enumerate() {
+            for &(j, jj) in &acting[x..] {
+                let dot = g.dot(jk, jj)?;
+                let term = g.mul(vec![dot, inv_mass[body]])?;
+                let key = (k.min(j), k.max(j));
+                let slot = *index.entry(key).or_insert_with(|| {
+                    pairs.push((key, Vec::new()));
+                    pairs.len() - 1
+                });
+                pairs[slot].1.push(term);
+            }
+        }
+    }
+    pairs.sort_by_key(|(key, _)| *key);
+    let mut a = Vec::with_capacity(pairs.len());
+    for ((k, j), terms) in pairs {
+        let sum = g.add(terms)?;
+        let entry = s.simplify(g, sum)?;
+        if !s.is_zero(g, entry)? {
+            a.push((k, j, entry));
+        }
+    }
+    // bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ
+    let mut b = Vec::with_capacity(constraints.len());
+    for dc in constraints {
+        let mut terms = Vec::with_capacity(dc.direction.len() + 1);
+        for &(body, j) in &dc.direction {
+            let f = g.sym(system.bodies[body].force);
+            let dot = g.dot(j, f)?;
+            terms.push(g.mul(vec![dot, inv_mass[body]])?);
+        }
+        terms.push(dc.c_term);
+        let sum = g.add(terms)?;
+        b.push(s.simplify(g, sum)?);
+    }
+    Ok((a, b))
+}

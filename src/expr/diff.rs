@@ -1,0 +1,229 @@
+//! d/dt at the vector level: forward mode over the graph, with the product and chain rules.
+//!
+//! d(a·b)/dt = ȧ·b + a·ḃ, d(a×b)/dt = ȧ×b + a×ḃ, d|a|/dt = a·ȧ/|a|, d f(u)/dt = f'(u) u̇;
+//! a position's derivative is its body's velocity symbol, a velocity's is the acceleration,
+//! `t` has derivative 1 and parameters are constant. The result is written the way a person
+//! applies the rules (`d(r·r)/dt = v·r + r·v`): only zero terms and unit factors are
+//! dropped here; collecting is the simplifier's job.
+//!
+//! The walk is iterative in id order (children first), so deep graphs cannot overflow the
+//! stack, and each shared subexpression is differentiated once.
+
+use super::graph::{Func, Graph, Id, Node, Role, Ty, TypeError};
+use super::num::Rational;
+use std::collections::HashMap;
+
+/// Why a derivative could not be taken.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum DiffError {
+    #[error("the time derivative of `{0}` is not defined: constraints may use positions, parameters and t")]
+    NoDerivative(String),
+    #[error("internal type error while differentiating: {0}")]
+    Type(#[from] TypeError),
+}
+
+/// d/dt of `root`.
+pub fn time_derivative(graph: &mut Graph, root: Id) -> Result<Id, DiffError> {
+    let order = graph.reachable(&[root]);
+    let mut d: HashMap<Id, Id> = HashMap::with_capacity(order.len());
+    for id in order {
+        let node = graph.node(id).clone();
+        let di = derive_node(graph, id, &node, &d)?;
+        d.insert(id, di);
+    }
+    Ok(d[&root])
+}
+
+fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &HashMap<Id, Id>) -> Result<Id, DiffError> {
+    let ty = g.ty(id);
+    Ok(match node {
+        Node::Num(_) => g.int(0),
+        Node::Sym(s) => {
+            let info = g.symbol(*s);
+            match (info.role, info.derivative) {
+                (Role::Time, _) => g.int(1),
+                (Role::Parameter | Role::Mass { .. }, _) => zero(g, ty),
+                (_, Some(next)) => g.sym(next),
+                (_, None) => return Err(DiffError::NoDerivative(info.name.clone())),
+            }
+        }
+        Node::Vector(xs) => {
+            let ds: Vec<Id> = xs.iter().map(|x| d[x]).collect();
+            if ds.iter().all(|&x| g.is_zero(x)) { g.zero_vector() } else { g.vector(ds)? }
+        }
+        Node::Add(xs) => {
+            let ds: Vec<Id> = xs.iter().map(|x| d[x]).collect();
+            add(g, ds, ty)?
+        }
+        Node::Mul(xs) => {
+            // Product rule: Σᵢ x₁ ⋯ ẋᵢ ⋯ xₙ.
+            let mut terms = Vec::new();
+            for (i, x) in xs.iter().enumerate() {
+                if g.is_zero(d[x]) {
+                    continue;
+                }
+                let mut factors = xs.to_vec();
+                factors[i] = d[x];
+                terms.push(mul(g, factors, ty)?);
+            }
+            add(g, terms, ty)?
+        }
+        Node::Pow([b, e]) => {
+            let (db, de) = (d[b], d[e]);
+            let mut terms = Vec::new();
+            if !g.is_zero(db) {
+                // d(b^e) = e b^(e-1) ḃ for constant e.
+                let e_minus_one = match g.as_num(*e) {
+                    Some(q) => {
+                        let q = q.sub(&Rational::ONE);
+                        g.num(q)
+                    }
+                    None => {
+                        let minus_one = g.int(-1);
+                        g.add(vec![*e, minus_one])?
+                    }
+                };
+                let power = pow(g, *b, e_minus_one)?;
+                terms.push(mul(g, vec![*e, power, db], Ty::Scalar)?);
+            }
+            if !g.is_zero(de) {
+                // d(b^e) = b^e ln(b) ė for the exponent's part.
+                let ln_b = g.call(Func::Ln, *b)?;
+                terms.push(mul(g, vec![id, ln_b, de], Ty::Scalar)?);
+            }
+            add(g, terms, Ty::Scalar)?
+        }
+        Node::Dot([a, b]) => {
+            let mut terms = Vec::new();
+            if !g.is_zero(d[a]) {
+                terms.push(g.dot(d[a], *b)?);
+            }
+            if !g.is_zero(d[b]) {
+                terms.push(g.dot(*a, d[b])?);
+            }
+            add(g, terms, ty)?
+        }
+        Node::Cross([a, b]) => {
+            let mut terms = Vec::new();
+            if !g.is_zero(d[a]) {
+                terms.push(g.cross(d[a], *b)?);
+            }
+            if !g.is_zero(d[b]) {
+                terms.push(g.cross(*a, d[b])?);
+            }
+            add(g, terms, ty)?
+        }
+        Node::Norm(a) => {
+            if g.is_zero(d[a]) {
+                return Ok(g.int(0));
+            }
+            // d|a|/dt = a·ȧ / |a|
+            let num = g.dot(*a, d[a])?;
+            g.div(num, id)?
+        }
+        Node::Comp(a, axis) => {
+            if g.is_zero(d[a]) {
+                g.int(0)
+            } else {
+                g.comp(d[a], *axis)?
+            }
+        }
+        Node::Call(f, a) => {
+            if g.is_zero(d[a]) {
+                return Ok(g.int(0));
+            }
+            let outer = chain_factor(g, *f, *a, id)?;
+            mul(g, vec![outer, d[a]], Ty::Scalar)?
+        }
+        Node::Atan2([y, x]) => {
+            if g.is_zero(d[y]) && g.is_zero(d[x]) {
+                return Ok(g.int(0));
+            }
+            // d atan2(y, x) = (x ẏ − y ẋ) / (x² + y²)
+            let x_dy = mul(g, vec![*x, d[y]], Ty::Scalar)?;
+            let y_dx = mul(g, vec![*y, d[x]], Ty::Scalar)?;
+            let minus_y_dx = g.neg(y_dx);
+            let num = add(g, vec![x_dy, minus_y_dx], Ty::Scalar)?;
+            let den = atan2_denominator(g, *y, *x)?;
+            g.div(num, den)?
+        }
+    })
+}
+
+/// `x² + y²`, the denominator of atan2's derivatives.
+pub(super) fn atan2_denominator(g: &mut Graph, y: Id, x: Id) -> Result<Id, TypeError> {
+    let x2 = g.powi(x, 2)?;
+    let y2 = g.powi(y, 2)?;
+    g.add(vec![x2, y2])
+}
+
+/// f'(u) for f(u) = `fu` (the node itself, reused where f' is f, as for exp).
+pub(super) fn chain_factor(g: &mut Graph, f: Func, u: Id, fu: Id) -> Result<Id, TypeError> {
+    let one = g.int(1);
+    Ok(match f {
+        // 1 / (2 sqrt u)
+        Func::Sqrt => {
+            let half = g.num(Rational::new(1, 2));
+            let inv = g.powi(fu, -1)?;
+            g.mul(vec![half, inv])?
+        }
+        Func::Sin => g.call(Func::Cos, u)?,
+        Func::Cos => {
+            let s = g.call(Func::Sin, u)?;
+            g.neg(s)
+        }
+        // 1 + tan² u
+        Func::Tan => {
+            let t2 = g.powi(fu, 2)?;
+            g.add(vec![one, t2])?
+        }
+        // ±1 / sqrt(1 − u²)
+        Func::Asin | Func::Acos => {
+            let u2 = g.powi(u, 2)?;
+            let diff = g.sub(one, u2)?;
+            let root = g.call(Func::Sqrt, diff)?;
+            let inv = g.powi(root, -1)?;
+            if f == Func::Acos { g.neg(inv) } else { inv }
+        }
+        // 1 / (1 + u²)
+        Func::Atan => {
+            let u2 = g.powi(u, 2)?;
+            let den = g.add(vec![one, u2])?;
+            g.powi(den, -1)?
+        }
+        Func::Exp => fu,
+        Func::Ln => g.powi(u, -1)?,
+    })
+}
+
+/// The zero of a type.
+pub(super) fn zero(g: &mut Graph, ty: Ty) -> Id {
+    match ty {
+        Ty::Scalar => g.int(0),
+        Ty::Vector => g.zero_vector(),
+    }
+}
+
+/// A sum without its zero terms.
+pub(super) fn add(g: &mut Graph, terms: Vec<Id>, ty: Ty) -> Result<Id, TypeError> {
+    let terms: Vec<Id> = terms.into_iter().filter(|&t| !g.is_zero(t)).collect();
+    if terms.is_empty() { Ok(zero(g, ty)) } else { g.add(terms) }
+}
+
+/// A product without unit factors; zero if any factor is zero.
+pub(super) fn mul(g: &mut Graph, factors: Vec<Id>, ty: Ty) -> Result<Id, TypeError> {
+    if factors.iter().any(|&f| g.is_zero(f)) {
+        return Ok(zero(g, ty));
+    }
+    let factors: Vec<Id> = factors.into_iter().filter(|&f| !g.as_num(f).is_some_and(Rational::is_one)).collect();
+    if factors.is_empty() { Ok(g.int(1)) } else { g.mul(factors) }
+}
+
+/// `b^e`, without the trivial powers 0 and 1.
+pub(super) fn pow(g: &mut Graph, b: Id, e: Id) -> Result<Id, TypeError> {
+    match g.as_num(e) {
+        Some(q) if q.is_zero() => Ok(g.int(1)),
+        Some(q) if q.is_one() => Ok(b),
+        _ => g.pow(b, e),
+    }
+}

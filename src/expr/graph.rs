@@ -1,0 +1,643 @@
+//! The expression graph: a hash-consed arena of typed nodes.
+//!
+//! Every node is stored once (`Graph::intern` returns the existing [`Id`] for an equal node),
+//! children before parents, so equal subexpressions are shared and a derivative reuses the
+//! structure of the expression it came from. Each node carries its type (scalar or vector
+//! of the graph's dimension), fixed when it is built: the constructors here are the type
+//! checker's last line of defence and refuse ill-typed nodes.
+//!
+//! Subtraction is `a + (-1)·b`, division is `a · b^-1` and negation is `(-1)·a`, so there
+//! is one way to write each thing; printers turn them back into `-`, `/` and unary minus.
+//!
+//! Not here: parsing, simplification, printing (see the sibling modules).
+
+use super::num::Rational;
+use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
+use std::cmp::Ordering;
+use std::collections::HashMap;
+use std::fmt;
+
+/// A handle to a node of a [`Graph`]. Children always have smaller ids than parents.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Debug)]
+pub struct Id(u32);
+
+impl Id {
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// A handle to an interned symbol.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Debug)]
+pub struct Symbol(u32);
+
+impl Symbol {
+    pub fn index(self) -> usize {
+        self.0 as usize
+    }
+}
+
+/// The type of a node.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub enum Ty {
+    Scalar,
+    Vector,
+}
+
+impl fmt::Display for Ty {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Ty::Scalar => "a scalar",
+            Ty::Vector => "a vector",
+        })
+    }
+}
+
+/// A coordinate axis, for components `a.x` and unit vectors.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Debug)]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+impl Axis {
+    pub const ALL: [Axis; 3] = [Axis::X, Axis::Y, Axis::Z];
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    pub fn name(self) -> &'static str {
+        ["x", "y", "z"][self.index()]
+    }
+}
+
+/// Scalar functions of one argument.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Debug)]
+pub enum Func {
+    Sqrt,
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Atan,
+    Exp,
+    Ln,
+}
+
+impl Func {
+    pub const ALL: [Func; 9] =
+        [Func::Sqrt, Func::Sin, Func::Cos, Func::Tan, Func::Asin, Func::Acos, Func::Atan, Func::Exp, Func::Ln];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Func::Sqrt => "sqrt",
+            Func::Sin => "sin",
+            Func::Cos => "cos",
+            Func::Tan => "tan",
+            Func::Asin => "asin",
+            Func::Acos => "acos",
+            Func::Atan => "atan",
+            Func::Exp => "exp",
+            Func::Ln => "ln",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Func> {
+        Func::ALL.into_iter().find(|f| f.name() == name)
+    }
+}
+
+/// What a symbol stands for; this decides its time derivative and its place in sorted order.
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Debug)]
+pub enum Role {
+    /// The time `t`: dt/dt = 1.
+    Time,
+    /// A constant of the scene.
+    Parameter,
+    /// A body's position; its derivative is the body's velocity symbol.
+    Position { body: usize },
+    /// A body's velocity; its derivative is the body's acceleration symbol.
+    Velocity { body: usize },
+    /// A body's acceleration; its time derivative is not defined here.
+    Acceleration { body: usize },
+    /// A body's external force; appears in forces and multipliers, never differentiated.
+    Force { body: usize },
+    /// A body's mass: a constant.
+    Mass { body: usize },
+}
+
+impl Role {
+    /// Sort rank: forces, then positions, velocities, accelerations, then the rest, so that
+    /// `dot(v, r)` is written `r·v` and `F·r` reads as in the article.
+    fn rank(self) -> (u8, usize) {
+        match self {
+            Role::Force { body } => (0, body),
+            Role::Position { body } => (1, body),
+            Role::Velocity { body } => (2, body),
+            Role::Acceleration { body } => (3, body),
+            Role::Mass { body } => (4, body),
+            Role::Parameter => (5, 0),
+            Role::Time => (6, 0),
+        }
+    }
+}
+
+/// An interned symbol: its name, type and role.
+#[derive(Clone, Debug)]
+pub struct SymbolInfo {
+    pub name: String,
+    pub ty: Ty,
+    pub role: Role,
+    /// The symbol its time derivative is, for positions and velocities.
+    pub derivative: Option<Symbol>,
+}
+
+/// A node of the graph. Operand lists of `Add` and `Mul` have at least two entries.
+#[derive(Clone, PartialEq, Eq, Hash, Debug)]
+pub enum Node {
+    Num(Rational),
+    Sym(Symbol),
+    /// A vector literal `[e1, e2]` or `[e1, e2, e3]` (as many entries as the dimension).
+    Vector(Box<[Id]>),
+    /// A sum of scalars, or of vectors.
+    Add(Box<[Id]>),
+    /// A product of scalars, with at most one vector factor, which comes last.
+    Mul(Box<[Id]>),
+    /// `[base, exponent]`, scalars.
+    Pow([Id; 2]),
+    Dot([Id; 2]),
+    /// A vector in 3D; in 2D the scalar z-part `a.x b.y − a.y b.x`.
+    Cross([Id; 2]),
+    Norm(Id),
+    Comp(Id, Axis),
+    Call(Func, Id),
+    /// `[y, x]`.
+    Atan2([Id; 2]),
+}
+
+impl Node {
+    /// The direct children, in order.
+    pub fn children(&self) -> &[Id] {
+        match self {
+            Node::Num(_) | Node::Sym(_) => &[],
+            Node::Vector(xs) | Node::Add(xs) | Node::Mul(xs) => xs,
+            Node::Pow(ab) | Node::Dot(ab) | Node::Cross(ab) | Node::Atan2(ab) => ab,
+            Node::Norm(a) | Node::Comp(a, _) | Node::Call(_, a) => std::slice::from_ref(a),
+        }
+    }
+}
+
+/// Why a node could not be built: the type rules of the expression language.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum TypeError {
+    #[error("expected a scalar here, found a vector")]
+    ExpectedScalar,
+    #[error("expected a vector here, found a scalar")]
+    ExpectedVector,
+    #[error("cannot add a scalar and a vector")]
+    MixedSum,
+    #[error("cannot multiply a vector by a vector: use dot(a, b) or cross(a, b)")]
+    VectorProduct,
+    #[error("cannot divide by a vector")]
+    DivideByVector,
+    #[error("a vector literal in a {dim}D file needs {dim} entries, found {found}")]
+    VectorLength { dim: usize, found: usize },
+    #[error("component `{axis}` does not exist in a 2D file")]
+    NoZComponent { axis: &'static str },
+    #[error("cannot compare a vector with a scalar")]
+    MixedRelation,
+}
+
+/// The deepest a node may sit above the leaves; keeps every recursive walk shallow.
+pub const MAX_DEPTH: u32 = 20_000;
+
+/// The arena. `dim` is the dimension of every vector in it (2 or 3).
+#[derive(Clone, Debug)]
+pub struct Graph {
+    dim: usize,
+    nodes: Vec<Node>,
+    tys: Vec<Ty>,
+    depths: Vec<u32>,
+    index: HashMap<Node, Id>,
+    symbols: Vec<SymbolInfo>,
+    by_name: HashMap<String, Symbol>,
+}
+
+impl Graph {
+    /// An empty graph for vectors of `dim` components (2 or 3).
+    pub fn new(dim: usize) -> Graph {
+        assert!(dim == 2 || dim == 3, "dimension must be 2 or 3");
+        Graph {
+            dim,
+            nodes: Vec::new(),
+            tys: Vec::new(),
+            depths: Vec::new(),
+            index: HashMap::new(),
+            symbols: Vec::new(),
+            by_name: HashMap::new(),
+        }
+    }
+
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    pub fn len(&self) -> usize {
+        self.nodes.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.nodes.is_empty()
+    }
+
+    pub fn node(&self, id: Id) -> &Node {
+        &self.nodes[id.index()]
+    }
+
+    pub fn ty(&self, id: Id) -> Ty {
+        self.tys[id.index()]
+    }
+
+    /// Height above the leaves (a leaf is 1).
+    pub fn depth(&self, id: Id) -> u32 {
+        self.depths[id.index()]
+    }
+
+    // ---- symbols ----------------------------------------------------------------------
+
+    /// Declares a symbol, or returns the existing one of that name.
+    ///
+    /// The name must be new or declared with the same type and role.
+    pub fn declare(&mut self, name: &str, ty: Ty, role: Role) -> Symbol {
+        if let Some(&s) = self.by_name.get(name) {
+            debug_assert_eq!(self.symbols[s.index()].ty, ty);
+            return s;
+        }
+        let s = Symbol(self.symbols.len() as u32);
+        self.symbols.push(SymbolInfo { name: name.to_string(), ty, role, derivative: None });
+        self.by_name.insert(name.to_string(), s);
+        s
+    }
+
+    /// Records that `d/dt of` is `derivative` (position → velocity → acceleration).
+    pub fn set_derivative(&mut self, of: Symbol, derivative: Symbol) {
+        self.symbols[of.index()].derivative = Some(derivative);
+    }
+
+    pub fn symbol(&self, s: Symbol) -> &SymbolInfo {
+        &self.symbols[s.index()]
+    }
+
+    pub fn symbol_named(&self, name: &str) -> Option<Symbol> {
+        self.by_name.get(name).copied()
+    }
+
+    pub fn symbols(&self) -> impl Iterator<Item = (Symbol, &SymbolInfo)> {
+        self.symbols.iter().enumerate().map(|(i, s)| (Symbol(i as u32), s))
+    }
+
+    // ---- interning --------------------------------------------------------------------
+
+    /// Stores `node` once and returns its id; `ty` must be the node's type.
+    fn intern(&mut self, node: Node, ty: Ty) -> Id {
+        if let Some(&id) = self.index.get(&node) {
+            return id;
+        }
+        let depth = node.children().iter().map(|c| self.depths[c.index()]).max().unwrap_or(0) + 1;
+        let id = Id(self.nodes.len() as u32);
+        self.nodes.push(node.clone());
+        self.tys.push(ty);
+        self.depths.push(depth);
+        self.index.insert(node, id);
+        id
+    }
+
+    /// Looks a node up without adding it.
+    pub fn find(&self, node: &Node) -> Option<Id> {
+        self.index.get(node).copied()
+    }
+
+    // ---- typed constructors ------------------------------------------------------------
+
+    pub fn num(&mut self, q: Rational) -> Id {
+        self.intern(Node::Num(q), Ty::Scalar)
+    }
+
+    pub fn int(&mut self, n: i64) -> Id {
+        self.num(Rational::int(n))
+    }
+
+    pub fn sym(&mut self, s: Symbol) -> Id {
+        let ty = self.symbols[s.index()].ty;
+        self.intern(Node::Sym(s), ty)
+    }
+
+    /// The constant as a rational, when `id` is a number node.
+    pub fn as_num(&self, id: Id) -> Option<&Rational> {
+        match self.node(id) {
+            Node::Num(q) => Some(q),
+            _ => None,
+        }
+    }
+
+    /// The zero vector `[0, 0]` or `[0, 0, 0]`.
+    pub fn zero_vector(&mut self) -> Id {
+        let zero = self.int(0);
+        let entries = vec![zero; self.dim];
+        self.intern(Node::Vector(entries.into()), Ty::Vector)
+    }
+
+    /// Whether `id` is the number 0 or the zero vector literal.
+    pub fn is_zero(&self, id: Id) -> bool {
+        match self.node(id) {
+            Node::Num(q) => q.is_zero(),
+            Node::Vector(xs) => xs.iter().all(|&x| self.is_zero(x)),
+            _ => false,
+        }
+    }
+
+    pub fn vector(&mut self, entries: Vec<Id>) -> Result<Id, TypeError> {
+        if entries.len() != self.dim {
+            return Err(TypeError::VectorLength { dim: self.dim, found: entries.len() });
+        }
+        self.expect_all(&entries, Ty::Scalar)?;
+        Ok(self.intern(Node::Vector(entries.into()), Ty::Vector))
+    }
+
+    /// The sum of `terms`, all scalars or all vectors. One term is returned as is.
+    pub fn add(&mut self, terms: Vec<Id>) -> Result<Id, TypeError> {
+        match terms.len() {
+            0 => Ok(self.int(0)),
+            1 => Ok(terms[0]),
+            _ => {
+                let ty = self.ty(terms[0]);
+                if terms.iter().any(|&t| self.ty(t) != ty) {
+                    return Err(TypeError::MixedSum);
+                }
+                Ok(self.intern(Node::Add(terms.into()), ty))
+            }
+        }
+    }
+
+    /// The product of `factors`: scalars with at most one vector, which is moved last.
+    pub fn mul(&mut self, mut factors: Vec<Id>) -> Result<Id, TypeError> {
+        let vectors = factors.iter().filter(|&&f| self.ty(f) == Ty::Vector).count();
+        if vectors > 1 {
+            return Err(TypeError::VectorProduct);
+        }
+        if vectors == 1 {
+            let i = factors.iter().position(|&f| self.ty(f) == Ty::Vector).unwrap_or(0);
+            let v = factors.remove(i);
+            factors.push(v);
+        }
+        match factors.len() {
+            0 => Ok(self.int(1)),
+            1 => Ok(factors[0]),
+            _ => {
+                let ty = if vectors == 1 { Ty::Vector } else { Ty::Scalar };
+                Ok(self.intern(Node::Mul(factors.into()), ty))
+            }
+        }
+    }
+
+    pub fn neg(&mut self, a: Id) -> Id {
+        let minus_one = self.int(-1);
+        // Cannot fail: -1 is a scalar and `a` is the only other factor.
+        self.mul(vec![minus_one, a]).unwrap_or(a)
+    }
+
+    pub fn sub(&mut self, a: Id, b: Id) -> Result<Id, TypeError> {
+        let nb = self.neg(b);
+        self.add(vec![a, nb])
+    }
+
+    pub fn div(&mut self, a: Id, b: Id) -> Result<Id, TypeError> {
+        if self.ty(b) == Ty::Vector {
+            return Err(TypeError::DivideByVector);
+        }
+        let minus_one = self.int(-1);
+        let inv = self.pow(b, minus_one)?;
+        self.mul(vec![a, inv])
+    }
+
+    pub fn pow(&mut self, base: Id, exponent: Id) -> Result<Id, TypeError> {
+        self.expect_all(&[base, exponent], Ty::Scalar)?;
+        Ok(self.intern(Node::Pow([base, exponent]), Ty::Scalar))
+    }
+
+    pub fn powi(&mut self, base: Id, n: i64) -> Result<Id, TypeError> {
+        let e = self.int(n);
+        self.pow(base, e)
+    }
+
+    pub fn dot(&mut self, a: Id, b: Id) -> Result<Id, TypeError> {
+        self.expect_all(&[a, b], Ty::Vector)?;
+        Ok(self.intern(Node::Dot([a, b]), Ty::Scalar))
+    }
+
+    pub fn cross(&mut self, a: Id, b: Id) -> Result<Id, TypeError> {
+        self.expect_all(&[a, b], Ty::Vector)?;
+        let ty = if self.dim == 3 { Ty::Vector } else { Ty::Scalar };
+        Ok(self.intern(Node::Cross([a, b]), ty))
+    }
+
+    pub fn norm(&mut self, a: Id) -> Result<Id, TypeError> {
+        self.expect_all(&[a], Ty::Vector)?;
+        Ok(self.intern(Node::Norm(a), Ty::Scalar))
+    }
+
+    pub fn comp(&mut self, a: Id, axis: Axis) -> Result<Id, TypeError> {
+        self.expect_all(&[a], Ty::Vector)?;
+        if axis.index() >= self.dim {
+            return Err(TypeError::NoZComponent { axis: axis.name() });
+        }
+        Ok(self.intern(Node::Comp(a, axis), Ty::Scalar))
+    }
+
+    pub fn call(&mut self, f: Func, a: Id) -> Result<Id, TypeError> {
+        self.expect_all(&[a], Ty::Scalar)?;
+        Ok(self.intern(Node::Call(f, a), Ty::Scalar))
+    }
+
+    pub fn atan2(&mut self, y: Id, x: Id) -> Result<Id, TypeError> {
+        self.expect_all(&[y, x], Ty::Scalar)?;
+        Ok(self.intern(Node::Atan2([y, x]), Ty::Scalar))
+    }
+
+    fn expect_all(&self, ids: &[Id], ty: Ty) -> Result<(), TypeError> {
+        match ids.iter().find(|&&id| self.ty(id) != ty) {
+            None => Ok(()),
+            Some(_) if ty == Ty::Scalar => Err(TypeError::ExpectedScalar),
+            Some(_) => Err(TypeError::ExpectedVector),
+        }
+    }
+
+    /// Rebuilds `node` with the same shape from already-typed children (used by rewriters).
+    ///
+    /// Rewriters only ever map a child to a node of the same type, so this cannot fail for
+    /// well-typed input; a mismatch is reported rather than ignored.
+    pub fn rebuild(&mut self, node: &Node, kids: &[Id]) -> Result<Id, TypeError> {
+        match node {
+            Node::Num(_) | Node::Sym(_) => Ok(self.intern(node.clone(), self.node_ty_hint(node))),
+            Node::Vector(_) => self.vector(kids.to_vec()),
+            Node::Add(_) => self.add(kids.to_vec()),
+            Node::Mul(_) => self.mul(kids.to_vec()),
+            Node::Pow(..) => self.pow(kids[0], kids[1]),
+            Node::Dot(..) => self.dot(kids[0], kids[1]),
+            Node::Cross(..) => self.cross(kids[0], kids[1]),
+            Node::Norm(_) => self.norm(kids[0]),
+            Node::Comp(_, axis) => self.comp(kids[0], *axis),
+            Node::Call(f, _) => self.call(*f, kids[0]),
+            Node::Atan2(..) => self.atan2(kids[0], kids[1]),
+        }
+    }
+
+    fn node_ty_hint(&self, node: &Node) -> Ty {
+        match node {
+            Node::Sym(s) => self.symbols[s.index()].ty,
+            _ => Ty::Scalar,
+        }
+    }
+
+    // ---- traversal ---------------------------------------------------------------------
+
+    /// Every node reachable from `roots`, in increasing id order (children before parents).
+    ///
+    /// Iterative, so deep graphs cannot overflow the stack.
+    pub fn reachable(&self, roots: &[Id]) -> Vec<Id> {
+        let mut seen = vec![false; self.nodes.len()];
+        let mut stack: Vec<Id> = roots.to_vec();
+        let mut out = Vec::new();
+        while let Some(id) = stack.pop() {
+            if std::mem::replace(&mut seen[id.index()], true) {
+                continue;
+            }
+            out.push(id);
+            stack.extend_from_slice(self.node(id).children());
+        }
+        out.sort_unstable();
+        out
+    }
+
+    /// The symbols that `root` depends on.
+    pub fn free_symbols(&self, root: Id) -> Vec<Symbol> {
+        let mut syms: Vec<Symbol> = self
+            .reachable(&[root])
+            .into_iter()
+            .filter_map(|id| match self.node(id) {
+                Node::Sym(s) => Some(*s),
+                _ => None,
+            })
+            .collect();
+        syms.sort_unstable();
+        syms.dedup();
+        syms
+    }
+
+    /// Replaces every occurrence of the nodes in `map` (keys) by their values, bottom-up.
+    pub fn substitute(&mut self, root: Id, map: &HashMap<Id, Id>) -> Result<Id, TypeError> {
+        let order = self.reachable(&[root]);
+        let mut new: HashMap<Id, Id> = HashMap::with_capacity(order.len());
+        for id in order {
+            let replaced = match map.get(&id) {
+                Some(&to) => to,
+                None => {
+                    let node = self.node(id).clone();
+                    let kids: Vec<Id> = node.children().iter().map(|c| new[c]).collect();
+                    if kids.as_slice() == node.children() { id } else { self.rebuild(&node, &kids)? }
+                }
+            };
+            new.insert(id, replaced);
+        }
+        Ok(new[&root])
+    }
+
+    // ---- canonical order ---------------------------------------------------------------
+
+    /// A total order on nodes that depends only on their structure and symbol names, never
+    /// on ids, so that a canonical form is the same whatever order things were built in.
+    pub fn cmp_nodes(&self, a: Id, b: Id) -> Ordering {
+        if a == b {
+            return Ordering::Equal;
+        }
+        stacker::maybe_grow(STACK_RED_ZONE, STACK_GROWTH, || self.cmp_distinct(a, b))
+    }
+
+    fn cmp_distinct(&self, a: Id, b: Id) -> Ordering {
+        let (na, nb) = (self.node(a), self.node(b));
+        let rank = |n: &Node| match n {
+            Node::Num(_) => 0,
+            Node::Sym(_) => 1,
+            Node::Comp(..) => 2,
+            Node::Dot(..) => 3,
+            Node::Cross(..) => 4,
+            Node::Norm(_) => 5,
+            Node::Call(..) => 6,
+            Node::Atan2(..) => 7,
+            Node::Pow(..) => 8,
+            Node::Mul(_) => 9,
+            Node::Add(_) => 10,
+            Node::Vector(_) => 11,
+        };
+        rank(na).cmp(&rank(nb)).then_with(|| match (na, nb) {
+            (Node::Num(x), Node::Num(y)) => x.cmp(y),
+            (Node::Sym(x), Node::Sym(y)) => self.cmp_symbols(*x, *y),
+            (Node::Comp(x, i), Node::Comp(y, j)) => self.cmp_nodes(*x, *y).then(i.cmp(j)),
+            // Dot products sort by their later operand first, so `v·v` comes before `r·a`.
+            (Node::Dot([x1, x2]), Node::Dot([y1, y2])) => {
+                self.cmp_nodes(*x2, *y2).then_with(|| self.cmp_nodes(*x1, *y1))
+            }
+            (Node::Call(f, x), Node::Call(g, y)) => f.cmp(g).then_with(|| self.cmp_nodes(*x, *y)),
+            _ => self.cmp_lists(na.children(), nb.children()),
+        })
+    }
+
+    fn cmp_lists(&self, xs: &[Id], ys: &[Id]) -> Ordering {
+        for (x, y) in xs.iter().zip(ys) {
+            let o = self.cmp_nodes(*x, *y);
+            if o != Ordering::Equal {
+                return o;
+            }
+        }
+        xs.len().cmp(&ys.len())
+    }
+
+    /// Symbols sort by role (forces, positions, velocities, …), then body, then name.
+    pub fn cmp_symbols(&self, a: Symbol, b: Symbol) -> Ordering {
+        let (sa, sb) = (self.symbol(a), self.symbol(b));
+        sa.role.rank().cmp(&sb.role.rank()).then_with(|| natural_cmp(&sa.name, &sb.name))
+    }
+}
+
+/// Compares names with digit runs as numbers, so `l2 < l10`.
+pub fn natural_cmp(a: &str, b: &str) -> Ordering {
+    let (mut x, mut y) = (a.as_bytes(), b.as_bytes());
+    while let (Some(&cx), Some(&cy)) = (x.first(), y.first()) {
+        if cx.is_ascii_digit() && cy.is_ascii_digit() {
+            let nx = x.iter().take_while(|c| c.is_ascii_digit()).count();
+            let ny = y.iter().take_while(|c| c.is_ascii_digit()).count();
+            let (dx, dy) = (trim_zeros(&x[..nx]), trim_zeros(&y[..ny]));
+            let o = dx.len().cmp(&dy.len()).then_with(|| dx.cmp(dy));
+            if o != Ordering::Equal {
+                return o;
+            }
+            x = &x[nx..];
+            y = &y[ny..];
+        } else {
+            if cx != cy {
+                return cx.cmp(&cy);
+            }
+            x = &x[1..];
+            y = &y[1..];
+        }
+    }
+    x.len().cmp(&y.len()).then_with(|| a.cmp(b))
+}
+
+fn trim_zeros(d: &[u8]) -> &[u8] {
+    let k = d.iter().take_while(|&&c| c == b'0').count();
+    &d[k..]
+}

@@ -1,0 +1,368 @@
+//! Name resolution and type checking: a [`Syntax`] tree becomes graph nodes.
+//!
+//! Each name is looked up in a [`Scope`] (symbols, definitions, `t`), each function is
+//! checked for its arity and argument types, and every node gets a type, scalar or vector,
+//! before anything is derived. Errors carry the span of the offending piece of text.
+//!
+//! Two folds make printing and parsing inverse to each other: a negated number literal is a
+//! negative number, and a leading `p/q` of number literals is the rational `p/q` (so the
+//! printed `-1/2*x` parses back to the same node). Nothing else is evaluated here.
+
+use super::graph::{Func, Graph, Id, Ty, TypeError};
+use super::num::Rational;
+use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
+use super::syntax::{MulOp, RelOp, Relation, Sign, Span, Syntax, SyntaxKind};
+use std::collections::HashMap;
+
+/// The names an expression may use, each bound to a graph node (a symbol or a definition).
+#[derive(Clone, Debug, Default)]
+pub struct Scope {
+    names: HashMap<String, Id>,
+}
+
+impl Scope {
+    pub fn new() -> Scope {
+        Scope::default()
+    }
+
+    pub fn insert(&mut self, name: impl Into<String>, id: Id) {
+        self.names.insert(name.into(), id);
+    }
+
+    pub fn get(&self, name: &str) -> Option<Id> {
+        self.names.get(name).copied()
+    }
+
+    pub fn contains(&self, name: &str) -> bool {
+        self.names.contains_key(name)
+    }
+
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.names.keys().map(String::as_str)
+    }
+}
+
+/// What went wrong while resolving or type checking, and where.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{kind}")]
+pub struct LowerError {
+    pub span: Span,
+    pub kind: LowerErrorKind,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum LowerErrorKind {
+    #[error("unknown symbol `{name}`{}", hint(suggestion))]
+    UnknownSymbol { name: String, suggestion: Option<String> },
+    #[error("unknown function `{name}`{}", hint(suggestion))]
+    UnknownFunction { name: String, suggestion: Option<String> },
+    #[error("`{name}` is not a function")]
+    NotAFunction { name: String },
+    #[error("`{name}` is a function: call it as `{name}(…)`")]
+    FunctionAsValue { name: String },
+    #[error("`{name}` takes {expected} argument{}, found {found}", if *expected == 1 { "" } else { "s" })]
+    Arity { name: String, expected: usize, found: usize },
+    #[error("`{function}` needs {expected} here, found {}", found)]
+    Argument { function: String, expected: Ty, found: Ty },
+    #[error("number `{text}` is out of range")]
+    NumberRange { text: String },
+    #[error("a constraint must be a scalar, found a vector: compare components, e.g. `r.x = 0`")]
+    VectorConstraint,
+    #[error("{0}")]
+    Type(#[from] TypeError),
+}
+
+fn hint(suggestion: &Option<String>) -> String {
+    suggestion.as_ref().map(|s| format!(" (did you mean `{s}`?)")).unwrap_or_default()
+}
+
+/// Vector functions of the language, with their arity.
+const VECTOR_FUNCTIONS: [(&str, usize); 4] = [("dot", 2), ("cross", 2), ("norm", 1), ("atan2", 2)];
+
+/// Whether `name` is a function of the expression language (and so cannot name a symbol).
+pub fn is_function_name(name: &str) -> bool {
+    Func::from_name(name).is_some() || VECTOR_FUNCTIONS.iter().any(|(f, _)| *f == name)
+}
+
+fn function_names() -> impl Iterator<Item = &'static str> {
+    Func::ALL.into_iter().map(Func::name).chain(VECTOR_FUNCTIONS.iter().map(|(f, _)| *f))
+}
+
+/// The closest candidate within a small edit distance, for "did you mean".
+pub fn suggest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> Option<String> {
+    let limit = (name.chars().count() / 3).max(1);
+    candidates
+        .map(|c| (edit_distance(name, c), c))
+        .filter(|&(d, c)| d <= limit && c != name)
+        .min_by(|a, b| a.0.cmp(&b.0).then_with(|| a.1.cmp(b.1)))
+        .map(|(_, c)| c.to_string())
+}
+
+fn edit_distance(a: &str, b: &str) -> usize {
+    let b: Vec<char> = b.chars().collect();
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, ca) in a.chars().enumerate() {
+        let mut prev = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let cur = row[j + 1];
+            row[j + 1] = (prev + usize::from(ca != cb)).min(row[j] + 1).min(cur + 1);
+            prev = cur;
+        }
+    }
+    row[b.len()]
+}
+
+/// Lowers an expression.
+pub fn lower(syntax: &Syntax, scope: &Scope, graph: &mut Graph) -> Result<Id, LowerError> {
+    Lower { scope, graph }.expr(syntax)
+}
+
+/// A constraint: its function `C` (meaning `C = 0` or `C ≥ 0`) and whether it is an inequality.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LoweredRelation {
+    pub c: Id,
+    pub inequality: bool,
+}
+
+/// Lowers `lhs = rhs` to `C = lhs − rhs`, `lhs >= rhs` to `C = lhs − rhs ≥ 0`, and
+/// `lhs <= rhs` to `C = rhs − lhs ≥ 0`; a bare expression is `C` itself.
+pub fn lower_relation(rel: &Relation, scope: &Scope, graph: &mut Graph) -> Result<LoweredRelation, LowerError> {
+    let mut l = Lower { scope, graph };
+    let lhs = l.expr(&rel.lhs)?;
+    let Some((op, op_span, rhs_syntax)) = &rel.rel else {
+        if l.graph.ty(lhs) == Ty::Vector {
+            return Err(LowerError { span: rel.lhs.span, kind: LowerErrorKind::VectorConstraint });
+        }
+        return Ok(LoweredRelation { c: lhs, inequality: false });
+    };
+    let rhs = l.expr(rhs_syntax)?;
+    let (lt, rt) = (l.graph.ty(lhs), l.graph.ty(rhs));
+    if lt != rt {
+        return Err(LowerError { span: *op_span, kind: TypeError::MixedRelation.into() });
+    }
+    if lt == Ty::Vector {
+        return Err(LowerError { span: rel.lhs.span.to(rhs_syntax.span), kind: LowerErrorKind::VectorConstraint });
+    }
+    let span = rel.lhs.span.to(rhs_syntax.span);
+    let (a, b) = if *op == RelOp::Le { (rhs, lhs) } else { (lhs, rhs) };
+    // `C = 0` written as `expr = 0` is just `expr`.
+    let c = if l.graph.is_zero(b) { a } else { l.graph.sub(a, b).map_err(|e| LowerError { span, kind: e.into() })? };
+    Ok(LoweredRelation { c, inequality: *op != RelOp::Eq })
+}
+
+struct Lower<'a> {
+    scope: &'a Scope,
+    graph: &'a mut Graph,
+}
+
+impl Lower<'_> {
+    fn expr(&mut self, s: &Syntax) -> Result<Id, LowerError> {
+        stacker::maybe_grow(STACK_RED_ZONE, STACK_GROWTH, || self.expr_inner(s))
+    }
+
+    fn expr_inner(&mut self, s: &Syntax) -> Result<Id, LowerError> {
+        let at = |kind: TypeError| LowerError { span: s.span, kind: kind.into() };
+        match &s.kind {
+            SyntaxKind::Number(text) => self.number(text, s.span).map(|q| self.graph.num(q)),
+            SyntaxKind::Ident(name) => self.ident(name, s.span),
+            SyntaxKind::Paren(inner) => self.expr(inner),
+            SyntaxKind::Neg(inner) => {
+                if let SyntaxKind::Number(text) = &inner.kind {
+                    let q = self.number(text, inner.span)?;
+                    return Ok(self.graph.num(q.neg()));
+                }
+                let x = self.expr(inner)?;
+                Ok(self.graph.neg(x))
+            }
+            SyntaxKind::Sum(terms) => {
+                let mut ids = Vec::with_capacity(terms.len());
+                let mut ty = None;
+                for (sign, term) in terms {
+                    let id = self.term(term, *sign == Sign::Minus)?;
+                    let t = self.graph.ty(id);
+                    if *ty.get_or_insert(t) != t {
+                        return Err(LowerError { span: term.span, kind: TypeError::MixedSum.into() });
+                    }
+                    ids.push(id);
+                }
+                self.graph.add(ids).map_err(at)
+            }
+            SyntaxKind::Product(factors) => self.product(factors, false),
+            SyntaxKind::Pow(base, exponent) => {
+                let b = self.scalar(base, "^")?;
+                let e = self.scalar(exponent, "^")?;
+                self.graph.pow(b, e).map_err(at)
+            }
+            SyntaxKind::Component(inner, axis, axis_span) => {
+                let x = self.expr(inner)?;
+                if self.graph.ty(x) != Ty::Vector {
+                    let kind = LowerErrorKind::Argument {
+                        function: format!(".{}", axis.name()),
+                        expected: Ty::Vector,
+                        found: Ty::Scalar,
+                    };
+                    return Err(LowerError { span: inner.span, kind });
+                }
+                self.graph.comp(x, *axis).map_err(|e| LowerError { span: *axis_span, kind: e.into() })
+            }
+            SyntaxKind::Vector(items) => {
+                let mut ids = Vec::with_capacity(items.len());
+                for item in items {
+                    ids.push(self.scalar(item, "[…]")?);
+                }
+                self.graph.vector(ids).map_err(at)
+            }
+            SyntaxKind::Call { name, name_span, args } => self.call(name, *name_span, args, s.span),
+        }
+    }
+
+    fn number(&self, text: &str, span: Span) -> Result<Rational, LowerError> {
+        Rational::parse_decimal(text)
+            .ok_or_else(|| LowerError { span, kind: LowerErrorKind::NumberRange { text: text.to_string() } })
+    }
+
+    fn ident(&mut self, name: &str, span: Span) -> Result<Id, LowerError> {
+        if let Some(id) = self.scope.get(name) {
+            return Ok(id);
+        }
+        if is_function_name(name) {
+            return Err(LowerError { span, kind: LowerErrorKind::FunctionAsValue { name: name.to_string() } });
+        }
+        let suggestion = suggest(name, self.scope.names());
+        Err(LowerError { span, kind: LowerErrorKind::UnknownSymbol { name: name.to_string(), suggestion } })
+    }
+
+    /// A term of a sum, negated when it followed a `-`.
+    fn term(&mut self, term: &Syntax, negate: bool) -> Result<Id, LowerError> {
+        match &term.kind {
+            _ if !negate => self.expr(term),
+            SyntaxKind::Number(text) => Ok(self.graph.num(self.number(text, term.span)?.neg())),
+            SyntaxKind::Product(factors) => self.product(factors, true),
+            _ => {
+                let x = self.expr(term)?;
+                Ok(self.graph.neg(x))
+            }
+        }
+    }
+
+    /// The number a literal (or negated literal) stands for, if it is one.
+    fn literal(&self, s: &Syntax) -> Result<Option<Rational>, LowerError> {
+        match &s.kind {
+            SyntaxKind::Number(text) => self.number(text, s.span).map(Some),
+            SyntaxKind::Neg(inner) => match &inner.kind {
+                SyntaxKind::Number(text) => self.number(text, inner.span).map(|q| Some(q.neg())),
+                _ => Ok(None),
+            },
+            _ => Ok(None),
+        }
+    }
+
+    /// A product; with `negate` (after a `-` in a sum) its first factor is negated, which is
+    /// how the printer writes `a - m*x`.
+    fn product(&mut self, factors: &[(MulOp, Syntax)], negate: bool) -> Result<Id, LowerError> {
+        let mut ids = Vec::with_capacity(factors.len());
+        let mut rest = factors;
+        let mut negate_first = negate;
+        // A leading `p` or `p/q` of literals is one rational number.
+        if let Some(p) = self.literal(&factors[0].1)? {
+            let mut q = p;
+            rest = &factors[1..];
+            if let Some(((MulOp::Over, d), tail)) = rest.split_first().map(|(h, t)| (h.clone(), t))
+                && let Some(d) = self.literal(&d)?
+                && !d.is_zero()
+            {
+                q = q.div(&d).unwrap_or(q);
+                rest = tail;
+            }
+            ids.push(self.graph.num(if negate { q.neg() } else { q }));
+            negate_first = false;
+        }
+        let mut vector: Option<Span> = None;
+        for (op, f) in rest {
+            let mut id = self.expr(f)?;
+            if std::mem::take(&mut negate_first) {
+                id = self.graph.neg(id);
+            }
+            if self.graph.ty(id) == Ty::Vector {
+                if *op == MulOp::Over {
+                    return Err(LowerError { span: f.span, kind: TypeError::DivideByVector.into() });
+                }
+                if vector.is_some() {
+                    return Err(LowerError { span: f.span, kind: TypeError::VectorProduct.into() });
+                }
+                vector = Some(f.span);
+            }
+            if *op == MulOp::Over {
+                let minus_one = self.graph.int(-1);
+                id = self.graph.pow(id, minus_one).map_err(|e| LowerError { span: f.span, kind: e.into() })?;
+            }
+            ids.push(id);
+        }
+        let span = factors[0].1.span.to(factors[factors.len() - 1].1.span);
+        self.graph.mul(ids).map_err(|e| LowerError { span, kind: e.into() })
+    }
+
+    fn scalar(&mut self, s: &Syntax, function: &str) -> Result<Id, LowerError> {
+        let id = self.expr(s)?;
+        self.expect(id, Ty::Scalar, s.span, function)
+    }
+
+    fn vector(&mut self, s: &Syntax, function: &str) -> Result<Id, LowerError> {
+        let id = self.expr(s)?;
+        self.expect(id, Ty::Vector, s.span, function)
+    }
+
+    fn expect(&self, id: Id, ty: Ty, span: Span, function: &str) -> Result<Id, LowerError> {
+        let found = self.graph.ty(id);
+        if found == ty {
+            return Ok(id);
+        }
+        Err(LowerError { span, kind: LowerErrorKind::Argument { function: function.to_string(), expected: ty, found } })
+    }
+
+    fn call(&mut self, name: &str, name_span: Span, args: &[Syntax], span: Span) -> Result<Id, LowerError> {
+        let arity = Func::from_name(name)
+            .map(|_| 1)
+            .or_else(|| VECTOR_FUNCTIONS.iter().find(|(f, _)| *f == name).map(|(_, n)| *n));
+        let Some(arity) = arity else {
+            let kind = if self.scope.contains(name) {
+                LowerErrorKind::NotAFunction { name: name.to_string() }
+            } else {
+                LowerErrorKind::UnknownFunction { name: name.to_string(), suggestion: suggest(name, function_names()) }
+            };
+            return Err(LowerError { span: name_span, kind });
+        };
+        if args.len() != arity {
+            let kind = LowerErrorKind::Arity { name: name.to_string(), expected: arity, found: args.len() };
+            return Err(LowerError { span, kind });
+        }
+        let at = |e: TypeError| LowerError { span, kind: e.into() };
+        match name {
+            "dot" => {
+                let a = self.vector(&args[0], name)?;
+                let b = self.vector(&args[1], name)?;
+                self.graph.dot(a, b).map_err(at)
+            }
+            "cross" => {
+                let a = self.vector(&args[0], name)?;
+                let b = self.vector(&args[1], name)?;
+                self.graph.cross(a, b).map_err(at)
+            }
+            "norm" => {
+                let a = self.vector(&args[0], name)?;
+                self.graph.norm(a).map_err(at)
+            }
+            "atan2" => {
+                let y = self.scalar(&args[0], name)?;
+                let x = self.scalar(&args[1], name)?;
+                self.graph.atan2(y, x).map_err(at)
+            }
+            _ => {
+                let f = Func::from_name(name).ok_or_else(|| at(TypeError::ExpectedScalar))?;
+                let a = self.scalar(&args[0], name)?;
+                self.graph.call(f, a).map_err(at)
+            }
+        }
+    }
+}

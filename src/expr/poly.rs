@@ -1,0 +1,586 @@
+//! Polynomials and rational functions over atoms: the simplifier's canonical form.
+//!
+//! An atom is a graph node the algebra treats as a variable (`m`, `r·v`, `sin(θ)`). A
+//! [`Mono`] is a product of atom powers, a [`Poly`] a sum of rational multiples of monomials,
+//! and a [`Frac`] a polynomial over a product of polynomial factors. Two expressions that are
+//! equal as rational functions of their atoms have equal forms, so collecting like terms,
+//! cancelling and comparing are structural.
+//!
+//! Terms are stored in a graded monomial order over atom ids (total degree, then exponents
+//! in id order), which is compatible with multiplication, so exact division works. The order
+//! people read is applied only when the form is turned back into a graph (`simplify`).
+//!
+//! Every operation that can grow the form (products, powers, common denominators) is
+//! bounded by [`MAX_TERMS`]: past it the operation returns `None` and the caller keeps that
+//! piece unexpanded. Nothing here is exponential.
+
+use super::graph::Id;
+use super::num::Rational;
+use smallvec::SmallVec;
+use std::cmp::Ordering;
+
+/// The most terms a polynomial may reach by expansion before it is kept unexpanded.
+pub const MAX_TERMS: usize = 2000;
+
+/// A product of atom powers, sorted by atom id, exponents positive.
+#[derive(Clone, PartialEq, Eq, Hash, Debug, Default)]
+pub struct Mono(pub SmallVec<[(Id, u32); 4]>);
+
+impl Mono {
+    pub fn one() -> Mono {
+        Mono(SmallVec::new())
+    }
+
+    pub fn atom(id: Id) -> Mono {
+        let mut v = SmallVec::new();
+        v.push((id, 1));
+        Mono(v)
+    }
+
+    pub fn is_one(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    pub fn degree(&self) -> u64 {
+        self.0.iter().map(|&(_, e)| e as u64).sum()
+    }
+
+    pub fn exponent(&self, atom: Id) -> u32 {
+        self.0.iter().find(|&&(a, _)| a == atom).map_or(0, |&(_, e)| e)
+    }
+
+    /// The single atom, if this is `x¹`.
+    pub fn as_atom(&self) -> Option<Id> {
+        match self.0.as_slice() {
+            [(a, 1)] => Some(*a),
+            _ => None,
+        }
+    }
+
+    pub fn mul(&self, other: &Mono) -> Mono {
+        let mut out = SmallVec::with_capacity(self.0.len() + other.0.len());
+        let (mut i, mut j) = (0, 0);
+        let (a, b) = (&self.0, &other.0);
+        while i < a.len() && j < b.len() {
+            match a[i].0.cmp(&b[j].0) {
+                Ordering::Less => {
+                    out.push(a[i]);
+                    i += 1;
+                }
+                Ordering::Greater => {
+                    out.push(b[j]);
+                    j += 1;
+                }
+                Ordering::Equal => {
+                    out.push((a[i].0, a[i].1 + b[j].1));
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+        out.extend_from_slice(&a[i..]);
+        out.extend_from_slice(&b[j..]);
+        Mono(out)
+    }
+
+    /// Whether `self` divides `other`.
+    pub fn divides(&self, other: &Mono) -> bool {
+        self.0.iter().all(|&(a, e)| other.exponent(a) >= e)
+    }
+
+    /// `self / other`; `other` must divide `self`.
+    pub fn div(&self, other: &Mono) -> Mono {
+        Mono(
+            self.0
+                .iter()
+                .filter_map(|&(a, e)| {
+                    let r = e - other.exponent(a).min(e);
+                    (r > 0).then_some((a, r))
+                })
+                .collect(),
+        )
+    }
+
+    /// The greatest common divisor (minimum exponents).
+    pub fn gcd(&self, other: &Mono) -> Mono {
+        Mono(
+            self.0
+                .iter()
+                .filter_map(|&(a, e)| {
+                    let m = e.min(other.exponent(a));
+                    (m > 0).then_some((a, m))
+                })
+                .collect(),
+        )
+    }
+
+    /// Replaces the exponent of `atom` (removing it at zero).
+    pub fn with_exponent(&self, atom: Id, e: u32) -> Mono {
+        let mut v: SmallVec<[(Id, u32); 4]> = self.0.iter().copied().filter(|&(a, _)| a != atom).collect();
+        if e > 0 {
+            let pos = v.iter().position(|&(a, _)| a > atom).unwrap_or(v.len());
+            v.insert(pos, (atom, e));
+        }
+        Mono(v)
+    }
+}
+
+/// Graded order: total degree first, then exponents compared atom by atom in id order.
+impl Ord for Mono {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.degree().cmp(&other.degree()).then_with(|| {
+            let (a, b) = (&self.0, &other.0);
+            let (mut i, mut j) = (0, 0);
+            loop {
+                match (a.get(i), b.get(j)) {
+                    (None, None) => return Ordering::Equal,
+                    (Some(_), None) => return Ordering::Greater,
+                    (None, Some(_)) => return Ordering::Less,
+                    (Some(&(x, ex)), Some(&(y, ey))) => match x.cmp(&y) {
+                        // `self` has atom x and `other` does not: self is larger in x.
+                        Ordering::Less => return Ordering::Greater,
+                        Ordering::Greater => return Ordering::Less,
+                        Ordering::Equal => match ex.cmp(&ey) {
+                            Ordering::Equal => {
+                                i += 1;
+                                j += 1;
+                            }
+                            o => return o,
+                        },
+                    },
+                }
+            }
+        })
+    }
+}
+
+impl PartialOrd for Mono {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+/// A polynomial: terms sorted by increasing monomial, no zero coefficients.
+#[derive(Clone, PartialEq, Eq, Hash, Debug, Default, PartialOrd, Ord)]
+pub struct Poly(pub Vec<(Mono, Rational)>);
+
+impl Poly {
+    pub fn zero() -> Poly {
+        Poly(Vec::new())
+    }
+
+    pub fn constant(q: Rational) -> Poly {
+        if q.is_zero() { Poly::zero() } else { Poly(vec![(Mono::one(), q)]) }
+    }
+
+    pub fn atom(id: Id) -> Poly {
+        Poly(vec![(Mono::atom(id), Rational::ONE)])
+    }
+
+    pub fn is_zero(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    pub fn len(&self) -> usize {
+        self.0.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.0.is_empty()
+    }
+
+    pub fn as_constant(&self) -> Option<Rational> {
+        match self.0.as_slice() {
+            [] => Some(Rational::ZERO),
+            [(m, q)] if m.is_one() => Some(q.clone()),
+            _ => None,
+        }
+    }
+
+    /// The single atom, if this is exactly `x`.
+    pub fn as_atom(&self) -> Option<Id> {
+        match self.0.as_slice() {
+            [(m, q)] if q.is_one() => m.as_atom(),
+            _ => None,
+        }
+    }
+
+    /// The leading (largest) term.
+    pub fn leading(&self) -> Option<&(Mono, Rational)> {
+        self.0.last()
+    }
+
+    pub fn add(&self, other: &Poly) -> Poly {
+        let (a, b) = (&self.0, &other.0);
+        let mut out = Vec::with_capacity(a.len() + b.len());
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() && j < b.len() {
+            match a[i].0.cmp(&b[j].0) {
+                Ordering::Less => {
+                    out.push(a[i].clone());
+                    i += 1;
+                }
+                Ordering::Greater => {
+                    out.push(b[j].clone());
+                    j += 1;
+                }
+                Ordering::Equal => {
+                    let q = a[i].1.add(&b[j].1);
+                    if !q.is_zero() {
+                        out.push((a[i].0.clone(), q));
+                    }
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+        out.extend_from_slice(&a[i..]);
+        out.extend_from_slice(&b[j..]);
+        Poly(out)
+    }
+
+    pub fn neg(&self) -> Poly {
+        Poly(self.0.iter().map(|(m, q)| (m.clone(), q.neg())).collect())
+    }
+
+    pub fn scale(&self, k: &Rational) -> Poly {
+        if k.is_zero() {
+            return Poly::zero();
+        }
+        Poly(self.0.iter().map(|(m, q)| (m.clone(), q.mul(k))).collect())
+    }
+
+    pub fn mul_mono(&self, m: &Mono) -> Poly {
+        // Multiplying every term by the same monomial keeps the order.
+        Poly(self.0.iter().map(|(t, q)| (t.mul(m), q.clone())).collect())
+    }
+
+    /// The product, or `None` when it would pass [`MAX_TERMS`].
+    pub fn mul(&self, other: &Poly) -> Option<Poly> {
+        if self.len().saturating_mul(other.len()) > 4 * MAX_TERMS {
+            return None;
+        }
+        let (small, big) = if self.len() <= other.len() { (self, other) } else { (other, self) };
+        let mut acc = Poly::zero();
+        for (m, q) in &small.0 {
+            let mut row = big.mul_mono(m);
+            for t in &mut row.0 {
+                t.1 = t.1.mul(q);
+            }
+            acc = acc.add(&row);
+        }
+        (acc.len() <= MAX_TERMS).then_some(acc)
+    }
+
+    pub fn powi(&self, n: u32) -> Option<Poly> {
+        let mut result = Poly::constant(Rational::ONE);
+        let mut base = self.clone();
+        let mut n = n;
+        while n > 0 {
+            if n & 1 == 1 {
+                result = result.mul(&base)?;
+            }
+            n >>= 1;
+            if n > 0 {
+                base = base.mul(&base)?;
+            }
+        }
+        Some(result)
+    }
+
+    /// The positive rational gcd of the coefficients (1 for zero).
+    pub fn content(&self) -> Rational {
+        let mut it = self.0.iter();
+        let Some((_, first)) = it.next() else { return Rational::ONE };
+        it.fold(first.abs(), |g, (_, q)| g.gcd(q))
+    }
+
+    /// The largest monomial dividing every term (1 for zero or a constant).
+    pub fn common_mono(&self) -> Mono {
+        let mut it = self.0.iter();
+        let Some((first, _)) = it.next() else { return Mono::one() };
+        it.fold(first.clone(), |g, (m, _)| g.gcd(m))
+    }
+
+    pub fn div_mono(&self, m: &Mono) -> Poly {
+        Poly(self.0.iter().map(|(t, q)| (t.div(m), q.clone())).collect())
+    }
+
+    /// `self / d` when `d` divides `self` exactly, by multivariate division.
+    pub fn div_exact(&self, d: &Poly) -> Option<Poly> {
+        let (lm, lq) = d.leading()?;
+        if self.is_zero() {
+            return Some(Poly::zero());
+        }
+        let mut r = self.clone();
+        let mut quotient = Poly::zero();
+        // Each step removes the leading term of r; the bound keeps a non-divisor cheap.
+        for _ in 0..(self.len() + 1) * 4 {
+            let Some((rm, rq)) = r.leading().cloned() else { return Some(quotient) };
+            if !lm.divides(&rm) {
+                return None;
+            }
+            let t = Poly(vec![(rm.div(lm), rq.div(lq)?)]);
+            quotient = quotient.add(&t);
+            r = r.add(&d.mul(&t)?.neg());
+            if r.len() > MAX_TERMS {
+                return None;
+            }
+        }
+        r.is_zero().then_some(quotient)
+    }
+
+    /// Splits `self = k · m · P` with `k` rational (the sign of the leading term), `m` the common
+    /// monomial and `P` primitive with a positive leading coefficient.
+    pub fn split(&self) -> (Rational, Mono, Poly) {
+        let m = self.common_mono();
+        let mut k = self.content();
+        if self.leading().is_some_and(|(_, q)| q.is_negative()) {
+            k = k.neg();
+        }
+        let inv = k.recip().unwrap_or(Rational::ONE);
+        (k, m.clone(), self.div_mono(&m).scale(&inv))
+    }
+}
+
+/// A rational function: `num / Π factorᵢ^eᵢ`, each factor primitive (or a single atom),
+/// with a positive leading coefficient, sorted and distinct.
+#[derive(Clone, PartialEq, Eq, Hash, Debug, Default)]
+pub struct Frac {
+    pub num: Poly,
+    pub den: Vec<(Poly, u32)>,
+}
+
+impl Frac {
+    pub fn zero() -> Frac {
+        Frac::default()
+    }
+
+    pub fn constant(q: Rational) -> Frac {
+        Frac { num: Poly::constant(q), den: Vec::new() }
+    }
+
+    pub fn atom(id: Id) -> Frac {
+        Frac { num: Poly::atom(id), den: Vec::new() }
+    }
+
+    pub fn poly(p: Poly) -> Frac {
+        Frac { num: p, den: Vec::new() }
+    }
+
+    pub fn is_zero(&self) -> bool {
+        self.num.is_zero()
+    }
+
+    pub fn as_constant(&self) -> Option<Rational> {
+        if self.den.is_empty() { self.num.as_constant() } else { None }
+    }
+
+    /// The number of terms in numerator and denominator, a measure of size.
+    pub fn size(&self) -> usize {
+        self.num.len() + self.den.iter().map(|(p, _)| p.len()).sum::<usize>()
+    }
+
+    pub fn neg(&self) -> Frac {
+        Frac { num: self.num.neg(), den: self.den.clone() }
+    }
+
+    pub fn scale(&self, k: &Rational) -> Frac {
+        if k.is_zero() {
+            return Frac::zero();
+        }
+        Frac { num: self.num.scale(k), den: self.den.clone() }
+    }
+
+    pub fn add(&self, other: &Frac) -> Option<Frac> {
+        if self.is_zero() {
+            return Some(other.clone());
+        }
+        if other.is_zero() {
+            return Some(self.clone());
+        }
+        if self.den == other.den {
+            return Some(Frac { num: self.num.add(&other.num), den: self.den.clone() }.normalize());
+        }
+        let lcm = lcm(&self.den, &other.den);
+        let a = self.num.mul(&expand(&quotient(&lcm, &self.den))?)?;
+        let b = other.num.mul(&expand(&quotient(&lcm, &other.den))?)?;
+        Some(Frac { num: a.add(&b), den: lcm }.normalize())
+    }
+
+    pub fn sub(&self, other: &Frac) -> Option<Frac> {
+        self.add(&other.neg())
+    }
+
+    pub fn mul(&self, other: &Frac) -> Option<Frac> {
+        if self.is_zero() || other.is_zero() {
+            return Some(Frac::zero());
+        }
+        let num = self.num.mul(&other.num)?;
+        let mut den = self.den.clone();
+        for (f, e) in &other.den {
+            push_factor(&mut den, f.clone(), *e);
+        }
+        Some(Frac { num, den }.normalize())
+    }
+
+    /// `1 / self`, or `None` for zero or when too large.
+    pub fn recip(&self) -> Option<Frac> {
+        if self.is_zero() {
+            return None;
+        }
+        let (k, m, p) = self.num.split();
+        let mut den = Vec::new();
+        for &(a, e) in &m.0 {
+            push_factor(&mut den, Poly::atom(a), e);
+        }
+        if p.as_constant().is_none() {
+            push_factor(&mut den, p, 1);
+        }
+        let num = expand(&self.den)?.scale(&k.recip()?);
+        Some(Frac { num, den }.normalize())
+    }
+
+    pub fn powi(&self, n: i64) -> Option<Frac> {
+        if n < 0 {
+            return self.recip()?.powi(n.checked_neg()?);
+        }
+        let n = u32::try_from(n).ok()?;
+        let num = self.num.powi(n)?;
+        let den = self.den.iter().map(|(f, e)| (f.clone(), e.saturating_mul(n))).collect();
+        Some(Frac { num, den }.normalize())
+    }
+
+    /// Cancels common atoms and exactly dividing factors between numerator and denominator.
+    pub fn normalize(mut self) -> Frac {
+        if self.num.is_zero() {
+            self.den.clear();
+            return self;
+        }
+        if self.den.is_empty() {
+            return self;
+        }
+        let common = self.num.common_mono();
+        let mut cancel = Mono::one();
+        for (f, e) in &mut self.den {
+            if let Some(a) = f.as_atom() {
+                let k = (*e).min(common.exponent(a));
+                if k > 0 {
+                    *e -= k;
+                    cancel = cancel.mul(&Mono(smallvec::smallvec![(a, k)]));
+                }
+            } else {
+                while *e > 0 && self.num.len() >= f.len() {
+                    match self.num.div_exact(f) {
+                        Some(q) => {
+                            self.num = q;
+                            *e -= 1;
+                        }
+                        None => break,
+                    }
+                }
+            }
+        }
+        if !cancel.is_one() {
+            self.num = self.num.div_mono(&cancel);
+        }
+        self.den.retain(|(_, e)| *e > 0);
+        self
+    }
+}
+
+/// Adds `f^e` to a factor list, keeping it sorted and merged.
+pub fn push_factor(den: &mut Vec<(Poly, u32)>, f: Poly, e: u32) {
+    if e == 0 {
+        return;
+    }
+    match den.binary_search_by(|(g, _)| g.cmp(&f)) {
+        Ok(i) => den[i].1 += e,
+        Err(i) => den.insert(i, (f, e)),
+    }
+}
+
+/// The least common multiple of two factor lists (maximum exponents).
+fn lcm(a: &[(Poly, u32)], b: &[(Poly, u32)]) -> Vec<(Poly, u32)> {
+    let mut out = a.to_vec();
+    for (f, e) in b {
+        match out.binary_search_by(|(g, _)| g.cmp(f)) {
+            Ok(i) => out[i].1 = out[i].1.max(*e),
+            Err(i) => out.insert(i, (f.clone(), *e)),
+        }
+    }
+    out
+}
+
+/// `big / small` for factor lists where `small` divides `big`.
+fn quotient(big: &[(Poly, u32)], small: &[(Poly, u32)]) -> Vec<(Poly, u32)> {
+    big.iter()
+        .filter_map(|(f, e)| {
+            let s = small.iter().find(|(g, _)| g == f).map_or(0, |(_, k)| *k);
+            (e > &s).then(|| (f.clone(), e - s))
+        })
+        .collect()
+}
+
+/// The product of a factor list as one polynomial.
+pub fn expand(factors: &[(Poly, u32)]) -> Option<Poly> {
+    let mut acc = Poly::constant(Rational::ONE);
+    for (f, e) in factors {
+        acc = acc.mul(&f.powi(*e)?)?;
+    }
+    Some(acc)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::expr::graph::Graph;
+
+    fn atoms() -> (Id, Id) {
+        let mut g = Graph::new(2);
+        (g.int(7), g.int(8))
+    }
+
+    #[test]
+    fn graded_order_is_a_monomial_order() {
+        let (x, y) = atoms();
+        let mx = Mono::atom(x);
+        let my = Mono::atom(y);
+        let ms = [Mono::one(), mx.clone(), my.clone(), mx.mul(&mx), mx.mul(&my), my.mul(&my)];
+        for a in &ms {
+            for b in &ms {
+                for c in &ms {
+                    if a < b {
+                        assert!(a.mul(c) < b.mul(c), "{a:?} < {b:?} but not after * {c:?}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn exact_division_and_cancellation() {
+        let (x, y) = atoms();
+        let px = Poly::atom(x);
+        let py = Poly::atom(y);
+        let sum = px.add(&py);
+        let diff = px.add(&py.neg());
+        let prod = sum.mul(&diff).unwrap();
+        assert_eq!(prod.div_exact(&sum), Some(diff.clone()));
+        assert_eq!(prod.div_exact(&px.add(&Poly::constant(Rational::int(3)))), None);
+        // (x² − y²) / (x + y) = x − y
+        let f = Frac::poly(prod).mul(&Frac::poly(sum).recip().unwrap()).unwrap();
+        assert_eq!(f, Frac::poly(diff));
+        // x / x = 1
+        let one = Frac::atom(x).mul(&Frac::atom(x).recip().unwrap()).unwrap();
+        assert_eq!(one.as_constant(), Some(Rational::ONE));
+    }
+
+    #[test]
+    fn expansion_is_bounded() {
+        let (x, y) = atoms();
+        let s = Poly::atom(x).add(&Poly::atom(y));
+        assert!(s.powi(10).is_some());
+        assert!(s.powi(100_000).is_none());
+    }
+}

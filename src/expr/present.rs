@@ -1,0 +1,490 @@
+//! From canonical form back to a graph a person reads easily.
+//!
+//! The canonical form is fully expanded (`r1·r1 − 2 r1·r2 + r2·r2`); this module lays it out
+//! the way a derivation is written by hand, without changing its value:
+//! - a fraction is one numerator over one denominator, with the rational content and sign
+//!   in front: `−(m v·v + F·r)/(r·r)`;
+//! - a common monomial is taken out of a sum: `m (x + y)`;
+//! - dot products that factor are factored back: `(r1 − r2)·(v1 − v2)`, found as a rank-one
+//!   bilinear form over the vector atoms (this also keeps the formula accurate in f64: no
+//!   cancellation between `r1·r1` and `r2·r2` for nearby bodies far from the origin);
+//! - a vector groups its atoms by common coefficient: `−(m v·v + F·r)/(r·r) r`,
+//!   `2 (r1 − r2)`, unit vectors as one literal `[x, y]`;
+//! - terms are ordered by weighted degree, kinematic atoms (positions, velocities, …) before
+//!   parameters, so `r·r − l²`, `m v·v + F·r`, `2 v·v + 2 r·a` read as in the article.
+//!
+//! Whatever is built here simplifies back to the same canonical form (tested), so
+//! `simplify` is idempotent.
+
+use super::graph::{Graph, Id, Node, Role, TypeError};
+use super::num::Rational;
+use super::poly::{Frac, Mono, Poly};
+use super::simplify::{Canon, Simplifier, VAtom, VecForm};
+use std::cmp::Ordering;
+use std::collections::HashMap;
+
+impl Simplifier {
+    /// The readable graph of a canonical form.
+    pub(super) fn build(&mut self, g: &mut Graph, c: &Canon) -> Result<Id, TypeError> {
+        match c {
+            Canon::S(f) => self.build_frac(g, f),
+            Canon::V(v) => self.build_vec(g, v),
+        }
+    }
+
+    fn build_frac(&mut self, g: &mut Graph, f: &Frac) -> Result<Id, TypeError> {
+        if let Some(q) = f.as_constant() {
+            return Ok(g.num(q));
+        }
+        let terms = reading_order(g, &f.num);
+        let mut k = f.num.content();
+        if terms.first().is_some_and(|(_, q)| q.is_negative()) {
+            k = k.neg();
+        }
+        let inv = k.recip().unwrap_or(Rational::ONE);
+        let mut factors = Vec::new();
+        if let [(m, _)] = terms.as_slice() {
+            factors.extend(mono_factors(g, m)?);
+        } else {
+            let common = f.num.common_mono();
+            factors.extend(mono_factors(g, &common)?);
+            let rest = f.num.div_mono(&common).scale(&inv);
+            factors.push(self.build_poly(g, &rest)?);
+        }
+        if f.den.is_empty() {
+            return term(g, &k, factors);
+        }
+        // Rational content p/q: p stays in front, q joins the denominator.
+        let (p, q) = k.parts();
+        let (p, q) = (Rational::from_parts(p, 1.into()), Rational::from_parts(q, 1.into()));
+        let mut den = Vec::new();
+        if !q.is_one() {
+            den.push(g.num(q));
+        }
+        let mut dens: Vec<&(Poly, u32)> = f.den.iter().collect();
+        dens.sort_by(|a, b| cmp_poly_reading(g, &a.0, &b.0));
+        for (factor, e) in dens {
+            let node = match factor.as_atom() {
+                Some(a) => a,
+                None => self.build_poly(g, factor)?,
+            };
+            den.push(if *e == 1 { node } else { g.powi(node, i64::from(*e))? });
+        }
+        let numerator = term(g, &p, factors)?;
+        let denominator = g.mul(den)?;
+        let inv_den = g.powi(denominator, -1)?;
+        let mut all = splice(g, numerator);
+        all.push(inv_den);
+        g.mul(all)
+    }
+
+    /// A primitive polynomial as a sum, with factorable dot products factored.
+    fn build_poly(&mut self, g: &mut Graph, p: &Poly) -> Result<Id, TypeError> {
+        let terms = reading_order(g, p);
+        let mut replaced: HashMap<usize, Option<(Rational, Mono, Id)>> = HashMap::new();
+        for (indices, factored) in bilinear_groups(g, &terms)? {
+            for (n, &i) in indices.iter().enumerate() {
+                replaced.insert(i, if n == 0 { Some(factored.clone()) } else { None });
+            }
+        }
+        // Factored groups with the same dot product combine: m1 X + m2 X = (m1 + m2) X.
+        let mut by_dot: HashMap<Id, Poly> = HashMap::new();
+        for (k, cofactor, dot) in replaced.values().flatten() {
+            let part = Poly(vec![(cofactor.clone(), k.clone())]);
+            let sum = by_dot.get(dot).map_or(part.clone(), |p| p.add(&part));
+            by_dot.insert(*dot, sum);
+        }
+        let mut nodes = Vec::with_capacity(terms.len());
+        for (i, (m, q)) in terms.iter().enumerate() {
+            match replaced.get(&i) {
+                Some(Some((_, _, dot))) => {
+                    let Some(cofactors) = by_dot.remove(dot) else { continue };
+                    let node = if cofactors.len() == 1 {
+                        let (c, k) = &cofactors.0[0];
+                        let mut factors = mono_factors(g, c)?;
+                        factors.push(*dot);
+                        term(g, k, factors)?
+                    } else {
+                        let (k, common, rest) = cofactors.split();
+                        let mut factors = mono_factors(g, &common)?;
+                        factors.push(self.build_poly(g, &rest)?);
+                        factors.push(*dot);
+                        term(g, &k, factors)?
+                    };
+                    nodes.push(node);
+                }
+                Some(None) => {}
+                None => {
+                    let factors = mono_factors(g, m)?;
+                    nodes.push(term(g, q, factors)?);
+                }
+            }
+        }
+        g.add(nodes)
+    }
+
+    fn build_vec(&mut self, g: &mut Graph, v: &VecForm) -> Result<Id, TypeError> {
+        if v.0.is_empty() {
+            return Ok(g.zero_vector());
+        }
+        let mut literal: Vec<Option<Id>> = vec![None; g.dim()];
+        // Group atoms whose coefficients agree up to a rational factor: shape → [(atom, k)].
+        let mut groups: Vec<(Frac, Vec<(Id, Rational)>)> = Vec::new();
+        let mut atoms: Vec<(Id, &Frac)> = Vec::new();
+        for (u, s) in &v.0 {
+            match u {
+                VAtom::Basis(axis) => literal[axis.index()] = Some(self.build_frac(g, s)?),
+                VAtom::Atom(a) => atoms.push((*a, s)),
+            }
+        }
+        atoms.sort_by(|x, y| g.cmp_nodes(x.0, y.0));
+        for (a, s) in atoms {
+            let k = signed_content(g, &s.num);
+            let shape = s.scale(&k.recip().unwrap_or(Rational::ONE));
+            match groups.iter_mut().find(|(sh, _)| *sh == shape) {
+                Some((_, members)) => members.push((a, k)),
+                None => groups.push((shape, vec![(a, k)])),
+            }
+        }
+        let mut nodes = Vec::new();
+        for (shape, members) in groups {
+            let mut kk = members[0].1.abs();
+            for (_, k) in &members[1..] {
+                kk = kk.gcd(k);
+            }
+            if members[0].1.is_negative() {
+                kk = kk.neg();
+            }
+            let inv = kk.recip().unwrap_or(Rational::ONE);
+            let mut parts = Vec::with_capacity(members.len());
+            for (a, k) in &members {
+                parts.push(term(g, &k.mul(&inv), vec![*a])?);
+            }
+            let vector = g.add(parts)?;
+            let scalar = self.build_frac(g, &shape.scale(&kk))?;
+            nodes.push(times(g, scalar, vector)?);
+        }
+        if literal.iter().any(Option::is_some) {
+            let zero = g.int(0);
+            let entries = literal.into_iter().map(|e| e.unwrap_or(zero)).collect();
+            nodes.push(g.vector(entries)?);
+        }
+        g.add(nodes)
+    }
+}
+
+/// `coef · f₁ ⋯ fₙ` as people write it (and as the parser reads it back): `f₁ f₂` for 1,
+/// `−f₁ f₂` (the first factor negated) for −1, `3 f₁ f₂` otherwise.
+fn term(g: &mut Graph, coef: &Rational, factors: Vec<Id>) -> Result<Id, TypeError> {
+    if factors.is_empty() {
+        return Ok(g.num(coef.clone()));
+    }
+    if coef.is_one() {
+        return g.mul(factors);
+    }
+    let minus_one = Rational::int(-1);
+    if *coef == minus_one {
+        let mut factors = factors;
+        factors[0] = g.neg(factors[0]);
+        return g.mul(factors);
+    }
+    let mut all = vec![g.num(coef.clone())];
+    all.extend(factors);
+    g.mul(all)
+}
+
+/// `s · v` with `s` scalar: the factors of `s` followed by `v`.
+fn times(g: &mut Graph, s: Id, v: Id) -> Result<Id, TypeError> {
+    if g.as_num(s).is_some_and(Rational::is_one) {
+        return Ok(v);
+    }
+    let mut factors = splice(g, s);
+    factors.push(v);
+    g.mul(factors)
+}
+
+/// The factors of a product, to be joined into a larger product; a negation `−x` stays whole.
+fn splice(g: &Graph, id: Id) -> Vec<Id> {
+    match g.node(id) {
+        Node::Mul(xs) if !is_negation(g, id) => xs.to_vec(),
+        _ => vec![id],
+    }
+}
+
+/// Whether `id` is `(−1)·x`, the graph's negation.
+pub(super) fn is_negation(g: &Graph, id: Id) -> bool {
+    match g.node(id) {
+        Node::Mul(xs) => xs.len() == 2 && g.as_num(xs[0]).is_some_and(|q| *q == Rational::int(-1)),
+        _ => false,
+    }
+}
+
+/// The atoms of a monomial as factors `x` or `x^e`, in canonical atom order.
+fn mono_factors(g: &mut Graph, m: &Mono) -> Result<Vec<Id>, TypeError> {
+    let mut atoms: Vec<(Id, u32)> = m.0.to_vec();
+    atoms.sort_by(|a, b| g.cmp_nodes(a.0, b.0));
+    atoms.into_iter().map(|(a, e)| if e == 1 { Ok(a) } else { g.powi(a, i64::from(e)) }).collect()
+}
+
+/// The content of `p` with the sign of its first term in reading order.
+fn signed_content(g: &Graph, p: &Poly) -> Rational {
+    let k = p.content();
+    match reading_order(g, p).first() {
+        Some((_, q)) if q.is_negative() => k.neg(),
+        _ => k,
+    }
+}
+
+/// The terms of `p` in the order people read: higher weighted degree first, then terms with
+/// positions, velocities and forces before those of parameters alone.
+fn reading_order(g: &Graph, p: &Poly) -> Vec<(Mono, Rational)> {
+    let mut terms = p.0.clone();
+    terms.sort_by(|a, b| cmp_mono_reading(g, &a.0, &b.0));
+    terms
+}
+
+fn cmp_poly_reading(g: &Graph, a: &Poly, b: &Poly) -> Ordering {
+    let (ra, rb) = (reading_order(g, a), reading_order(g, b));
+    for (x, y) in ra.iter().zip(&rb) {
+        let o = cmp_mono_reading(g, &x.0, &y.0);
+        if o != Ordering::Equal {
+            return o;
+        }
+    }
+    ra.len().cmp(&rb.len())
+}
+
+fn cmp_mono_reading(g: &Graph, a: &Mono, b: &Mono) -> Ordering {
+    let key = |m: &Mono| {
+        let mut atoms: Vec<(bool, Id, u32)> = m.0.iter().map(|&(x, e)| (is_kinematic(g, x), x, e)).collect();
+        atoms.sort_by(|p, q| q.0.cmp(&p.0).then_with(|| g.cmp_nodes(p.1, q.1)));
+        atoms
+    };
+    weighted_degree(g, b).cmp(&weighted_degree(g, a)).then_with(|| {
+        let (ka, kb) = (key(a), key(b));
+        for (x, y) in ka.iter().zip(&kb) {
+            let o = y.0.cmp(&x.0).then_with(|| g.cmp_nodes(x.1, y.1)).then_with(|| y.2.cmp(&x.2));
+            if o != Ordering::Equal {
+                return o;
+            }
+        }
+        kb.len().cmp(&ka.len())
+    })
+}
+
+/// Degree counting a dot product as two factors, a triple product as three.
+fn weighted_degree(g: &Graph, m: &Mono) -> u64 {
+    m.0.iter()
+        .map(|&(a, e)| {
+            let w = match g.node(a) {
+                Node::Dot([_, b]) if matches!(g.node(*b), Node::Cross(_)) => 3,
+                Node::Dot(_) | Node::Cross(_) => 2,
+                _ => 1,
+            };
+            w * u64::from(e)
+        })
+        .sum()
+}
+
+/// Whether an atom involves a body's position, velocity, acceleration or force.
+fn is_kinematic(g: &Graph, atom: Id) -> bool {
+    let mut stack = vec![atom];
+    let mut budget = 64;
+    while let Some(id) = stack.pop() {
+        if let Node::Sym(s) = g.node(id)
+            && !matches!(g.symbol(*s).role, Role::Parameter | Role::Mass { .. } | Role::Time)
+        {
+            return true;
+        }
+        budget -= 1;
+        if budget == 0 {
+            return false;
+        }
+        stack.extend_from_slice(g.node(id).children());
+    }
+    false
+}
+
+/// A term eligible for dot factoring: `cofactor · (u·w)`.
+struct DotTerm {
+    index: usize,
+    u: Id,
+    w: Id,
+    coef: Rational,
+}
+
+/// Groups of terms that factor as `k · cofactor · (Σ aᵢ uᵢ)·(Σ bⱼ wⱼ)`; each with the term
+/// indices it replaces and the replacement `(k, cofactor, dot product)`.
+#[allow(clippy::type_complexity)]
+fn bilinear_groups(
+    g: &mut Graph,
+    terms: &[(Mono, Rational)],
+) -> Result<Vec<(Vec<usize>, (Rational, Mono, Id))>, TypeError> {
+    // Group by cofactor: the monomial without its single dot atom.
+    let mut by_cofactor: Vec<(Mono, Vec<DotTerm>)> = Vec::new();
+    for (index, (m, q)) in terms.iter().enumerate() {
+        let dots: Vec<(Id, u32)> =
+            m.0.iter().copied().filter(|(a, _)| matches!(g.node(*a), Node::Dot(_)) && !is_triple(g, *a)).collect();
+        let [(dot, 1)] = dots.as_slice() else { continue };
+        let Node::Dot([u, w]) = *g.node(*dot) else { continue };
+        let cofactor = m.with_exponent(*dot, 0);
+        let t = DotTerm { index, u, w, coef: q.clone() };
+        match by_cofactor.iter_mut().find(|(c, _)| *c == cofactor) {
+            Some((_, list)) => list.push(t),
+            None => by_cofactor.push((cofactor, vec![t])),
+        }
+    }
+    let mut out = Vec::new();
+    for (cofactor, list) in by_cofactor {
+        if list.len() < 2 {
+            continue;
+        }
+        for component in components(&list) {
+            if component.len() < 2 {
+                continue;
+            }
+            let members: Vec<&DotTerm> = component.iter().map(|&i| &list[i]).collect();
+            if let Some((k, a, b)) = factor_bilinear(g, &members) {
+                let ua = vector_sum(g, &a)?;
+                let wb = vector_sum(g, &b)?;
+                let (x, y) = if g.cmp_nodes(a[0].0, b[0].0).is_le() { (ua, wb) } else { (wb, ua) };
+                let dot = g.dot(x, y)?;
+                let indices = members.iter().map(|t| t.index).collect();
+                out.push((indices, (k, cofactor.clone(), dot)));
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn is_triple(g: &Graph, a: Id) -> bool {
+    matches!(g.node(a), Node::Dot([_, b]) if matches!(g.node(*b), Node::Cross(_)))
+}
+
+/// Connected components of the terms, joined when they share a vector atom.
+fn components(list: &[DotTerm]) -> Vec<Vec<usize>> {
+    let mut parent: Vec<usize> = (0..list.len()).collect();
+    fn find(parent: &mut [usize], i: usize) -> usize {
+        let mut r = i;
+        while parent[r] != r {
+            r = parent[r];
+        }
+        parent[i] = r;
+        r
+    }
+    for i in 0..list.len() {
+        for j in 0..i {
+            let (a, b) = (&list[i], &list[j]);
+            if a.u == b.u || a.u == b.w || a.w == b.u || a.w == b.w {
+                let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
+                parent[ri] = rj;
+            }
+        }
+    }
+    let mut groups: Vec<(usize, Vec<usize>)> = Vec::new();
+    for i in 0..list.len() {
+        let r = find(&mut parent, i);
+        match groups.iter_mut().find(|(root, _)| *root == r) {
+            Some((_, members)) => members.push(i),
+            None => groups.push((r, vec![i])),
+        }
+    }
+    groups.into_iter().map(|(_, m)| m).collect()
+}
+
+/// Writes `Σ c (u·w)` as `k (Σ aᵢ uᵢ)·(Σ bⱼ wⱼ)` when the bilinear form has rank one, with
+/// `a`, `b` primitive integer vectors whose first entry (in reading order) is positive.
+#[allow(clippy::type_complexity)]
+fn factor_bilinear(g: &Graph, terms: &[&DotTerm]) -> Option<(Rational, Vec<(Id, Rational)>, Vec<(Id, Rational)>)> {
+    let mut atoms: Vec<Id> = terms.iter().flat_map(|t| [t.u, t.w]).collect();
+    atoms.sort_by(|x, y| g.cmp_nodes(*x, *y));
+    atoms.dedup();
+    let coef = |x: Id, y: Id| -> Rational {
+        terms
+            .iter()
+            .find(|t| (t.u == x && t.w == y) || (t.u == y && t.w == x))
+            .map_or(Rational::ZERO, |t| t.coef.clone())
+    };
+    let (k, a, b) = if terms.iter().any(|t| t.u == t.w) {
+        // Symmetric: M = k a aᵀ with M_ii = c_ii and M_ij = c_ij / 2.
+        let half = Rational::new(1, 2);
+        let m = |x: Id, y: Id| if x == y { coef(x, x) } else { coef(x, y).mul(&half) };
+        let p = *atoms.iter().find(|&&x| !coef(x, x).is_zero())?;
+        let k = m(p, p);
+        let a: Vec<(Id, Rational)> = atoms.iter().map(|&x| (x, m(p, x).div(&k).unwrap_or(Rational::ZERO))).collect();
+        for (x, ax) in &a {
+            for (y, ay) in &a {
+                if m(*x, *y) != k.mul(ax).mul(ay) {
+                    return None;
+                }
+            }
+        }
+        (k, a.clone(), a)
+    } else {
+        // Bipartite: the atoms split in two sides with every term across.
+        let mut side: HashMap<Id, bool> = HashMap::new();
+        side.insert(atoms[0], true);
+        let mut changed = true;
+        while changed {
+            changed = false;
+            for t in terms {
+                match (side.get(&t.u).copied(), side.get(&t.w).copied()) {
+                    (Some(x), None) => {
+                        side.insert(t.w, !x);
+                        changed = true;
+                    }
+                    (None, Some(y)) => {
+                        side.insert(t.u, !y);
+                        changed = true;
+                    }
+                    (Some(x), Some(y)) if x == y => return None,
+                    _ => {}
+                }
+            }
+        }
+        let xs: Vec<Id> = atoms.iter().copied().filter(|a| side.get(a) == Some(&true)).collect();
+        let ys: Vec<Id> = atoms.iter().copied().filter(|a| side.get(a) == Some(&false)).collect();
+        let (x0, y0) = (xs[0], *ys.first()?);
+        let k = coef(x0, y0);
+        if k.is_zero() {
+            return None;
+        }
+        let a: Vec<(Id, Rational)> = xs.iter().map(|&x| (x, coef(x, y0).div(&k).unwrap_or(Rational::ZERO))).collect();
+        let b: Vec<(Id, Rational)> = ys.iter().map(|&y| (y, coef(x0, y).div(&k).unwrap_or(Rational::ZERO))).collect();
+        for (x, ax) in &a {
+            for (y, by) in &b {
+                if coef(*x, *y) != k.mul(ax).mul(by) {
+                    return None;
+                }
+            }
+        }
+        (k, a, b)
+    };
+    let (a, sa) = primitive(a);
+    let (b, sb) = primitive(b);
+    let k = k.mul(&sa).mul(&sb);
+    Some((k, a, b))
+}
+
+/// `v = s · v'` with `v'` integer, gcd 1, first entry positive; zero entries dropped.
+fn primitive(v: Vec<(Id, Rational)>) -> (Vec<(Id, Rational)>, Rational) {
+    let v: Vec<(Id, Rational)> = v.into_iter().filter(|(_, q)| !q.is_zero()).collect();
+    let mut s = v.first().map_or(Rational::ONE, |(_, q)| q.abs());
+    for (_, q) in &v[1.min(v.len())..] {
+        s = s.gcd(q);
+    }
+    if v.first().is_some_and(|(_, q)| q.is_negative()) {
+        s = s.neg();
+    }
+    let inv = s.recip().unwrap_or(Rational::ONE);
+    (v.into_iter().map(|(x, q)| (x, q.mul(&inv))).collect(), s)
+}
+
+/// `Σ aᵢ uᵢ` as a graph: `r1 − r2`.
+fn vector_sum(g: &mut Graph, v: &[(Id, Rational)]) -> Result<Id, TypeError> {
+    let mut parts = Vec::with_capacity(v.len());
+    for (u, q) in v {
+        parts.push(term(g, q, vec![*u])?);
+    }
+    g.add(parts)
+}

@@ -1,0 +1,597 @@
+//! Printers: the expression language (parses back to the same graph), Unicode text, LaTeX.
+//!
+//! `Style::Source` is exact: for every graph the lowering or the simplifier builds,
+//! `lower(parse(print(e)))` is `e` itself (a property test checks it), so formulas in JSON
+//! can be read back by lagrange or any evaluator. `Style::Text` and `Style::Latex` are for
+//! people: `−(m v·v + F·r)/(r·r) r`, `\frac{…}{…}`, `\vec{r}`.
+//!
+//! Printing expands the graph into a tree, so a graph with heavy sharing could print to an
+//! enormous string; [`MAX_OUTPUT`] bounds that and [`MAX_PRINT_DEPTH`] bounds recursion.
+//!
+//! Not here: documents (derivation layouts live in `report`), numbers' evaluation.
+
+use super::graph::{Graph, Id, Node, Ty};
+use super::num::Rational;
+use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
+use super::present::is_negation;
+
+/// Which notation to print in.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub enum Style {
+    /// The expression language of constraint files.
+    Source,
+    /// Unicode for terminals: `·`, `×`, `²`, `−`.
+    Text,
+    /// LaTeX math.
+    Latex,
+}
+
+/// The longest printed expression, in bytes.
+pub const MAX_OUTPUT: usize = 16 << 20;
+/// The deepest expression printed.
+pub const MAX_PRINT_DEPTH: u32 = 4000;
+
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum PrintError {
+    #[error("expression too deep to print ({0} levels)")]
+    TooDeep(u32),
+    #[error("expression too large to print (more than {MAX_OUTPUT} bytes)")]
+    TooLarge,
+}
+
+/// Prints `id` in `style`.
+pub fn print(g: &Graph, id: Id, style: Style) -> Result<String, PrintError> {
+    if g.depth(id) > MAX_PRINT_DEPTH {
+        return Err(PrintError::TooDeep(g.depth(id)));
+    }
+    let mut p = Printer { g, out: String::new() };
+    match style {
+        Style::Source => p.source(id)?,
+        Style::Text | Style::Latex => p.human(id, style, 0)?,
+    }
+    Ok(p.out)
+}
+
+/// Prints with the source style; for `Display`-like use where errors cannot occur in practice.
+pub fn source(g: &Graph, id: Id) -> String {
+    print(g, id, Style::Source).unwrap_or_else(|e| format!("<{e}>"))
+}
+
+struct Printer<'g> {
+    g: &'g Graph,
+    out: String,
+}
+
+const MINUS: &str = "−";
+
+fn is_fraction_or_negative(q: &Rational) -> bool {
+    q.is_negative() || !q.is_integer()
+}
+
+impl Printer<'_> {
+    fn push(&mut self, s: &str) -> Result<(), PrintError> {
+        if self.out.len() + s.len() > MAX_OUTPUT {
+            return Err(PrintError::TooLarge);
+        }
+        self.out.push_str(s);
+        Ok(())
+    }
+
+    fn node(&self, id: Id) -> &Node {
+        self.g.node(id)
+    }
+
+    // ---- the expression language -------------------------------------------------------
+
+    fn source(&mut self, id: Id) -> Result<(), PrintError> {
+        stacker::maybe_grow(STACK_RED_ZONE, STACK_GROWTH, || self.source_inner(id))
+    }
+
+    fn source_inner(&mut self, id: Id) -> Result<(), PrintError> {
+        match self.node(id).clone() {
+            Node::Num(q) => self.push(&q.to_string()),
+            Node::Sym(s) => {
+                let name = self.g.symbol(s).name.clone();
+                self.push(&name)
+            }
+            Node::Vector(xs) => self.call_source("", &xs, "[", "]"),
+            Node::Add(xs) => {
+                self.source_wrapped(xs[0], matches!(self.node(xs[0]), Node::Add(_)))?;
+                for &x in &xs[1..] {
+                    self.source_term(x)?;
+                }
+                Ok(())
+            }
+            Node::Mul(xs) if is_negation(self.g, id) => {
+                self.push("-")?;
+                self.source_unary_operand(xs[1])
+            }
+            Node::Mul(xs) => self.source_product(&xs, 0),
+            Node::Pow([b, e]) => {
+                let plain_base = match self.node(b) {
+                    Node::Num(q) => !is_fraction_or_negative(q),
+                    Node::Add(_) | Node::Mul(_) | Node::Pow(_) => false,
+                    _ => true,
+                };
+                self.source_wrapped(b, !plain_base)?;
+                self.push("^")?;
+                let plain_exponent = match self.node(e) {
+                    Node::Num(q) => q.is_integer(),
+                    Node::Add(_) => false,
+                    Node::Mul(_) => is_negation(self.g, e),
+                    _ => true,
+                };
+                self.source_wrapped(e, !plain_exponent)
+            }
+            Node::Dot([a, b]) => self.call_source("dot", &[a, b], "(", ")"),
+            Node::Cross([a, b]) => self.call_source("cross", &[a, b], "(", ")"),
+            Node::Norm(a) => self.call_source("norm", &[a], "(", ")"),
+            Node::Call(f, a) => self.call_source(f.name(), &[a], "(", ")"),
+            Node::Atan2([y, x]) => self.call_source("atan2", &[y, x], "(", ")"),
+            Node::Comp(a, axis) => {
+                let plain = matches!(self.node(a), Node::Sym(_) | Node::Vector(_) | Node::Call(..));
+                self.source_wrapped(a, !plain)?;
+                self.push(".")?;
+                self.push(axis.name())
+            }
+        }
+    }
+
+    fn source_wrapped(&mut self, id: Id, wrap: bool) -> Result<(), PrintError> {
+        if wrap {
+            self.push("(")?;
+        }
+        self.source(id)?;
+        if wrap {
+            self.push(")")?;
+        }
+        Ok(())
+    }
+
+    fn call_source(&mut self, name: &str, args: &[Id], open: &str, close: &str) -> Result<(), PrintError> {
+        self.push(name)?;
+        self.push(open)?;
+        for (i, &a) in args.iter().enumerate() {
+            if i > 0 {
+                self.push(", ")?;
+            }
+            self.source(a)?;
+        }
+        self.push(close)
+    }
+
+    /// The operand of a unary minus: numbers, products and sums in parentheses.
+    fn source_unary_operand(&mut self, y: Id) -> Result<(), PrintError> {
+        let wrap = matches!(self.node(y), Node::Num(_) | Node::Mul(_) | Node::Add(_));
+        self.source_wrapped(y, wrap)
+    }
+
+    /// A term after the first of a sum, with its sign: the lowering reads `a - 2*x` as
+    /// `a + (-2)·x` and `a - m*x` as `a + (−m)·x`, so those print with `-`.
+    fn source_term(&mut self, x: Id) -> Result<(), PrintError> {
+        match self.node(x).clone() {
+            Node::Num(q) if q.is_negative() => {
+                self.push(" - ")?;
+                self.push(&q.neg().to_string())
+            }
+            Node::Mul(fs) if is_negation(self.g, x) => {
+                self.push(" - ")?;
+                let y = fs[1];
+                let wrap = matches!(self.node(y), Node::Num(_) | Node::Mul(_) | Node::Add(_));
+                self.source_wrapped(y, wrap)
+            }
+            Node::Mul(fs) => match self.node(fs[0]).clone() {
+                Node::Num(q) if q.is_negative() && !self.folds_with_next(&fs) => {
+                    self.push(" - ")?;
+                    self.push(&q.neg().to_string())?;
+                    self.source_factors(&fs, 1)
+                }
+                Node::Mul(inner) if is_negation(self.g, fs[0]) && !matches!(self.node(inner[1]), Node::Num(_)) => {
+                    self.push(" - ")?;
+                    self.source_first_factor(inner[1], &fs)?;
+                    self.source_factors(&fs, 1)
+                }
+                _ => {
+                    self.push(" + ")?;
+                    self.source(x)
+                }
+            },
+            Node::Add(_) => {
+                self.push(" + ")?;
+                self.source_wrapped(x, true)
+            }
+            _ => {
+                self.push(" + ")?;
+                self.source(x)
+            }
+        }
+    }
+
+    /// Whether `fs[0]` (a number) followed by `/fs[1]` (a number) would be read as one rational.
+    fn folds_with_next(&self, fs: &[Id]) -> bool {
+        matches!(self.node(fs[0]), Node::Num(_))
+            && fs.get(1).is_some_and(|&f| match self.node(f) {
+                Node::Pow([b, e]) => {
+                    matches!(self.node(*b), Node::Num(_)) && self.g.as_num(*e).is_some_and(|q| *q == Rational::int(-1))
+                }
+                _ => false,
+            })
+    }
+
+    fn source_product(&mut self, fs: &[Id], _: usize) -> Result<(), PrintError> {
+        let first = fs[0];
+        match self.node(first).clone() {
+            Node::Num(q) if !self.folds_with_next(fs) => self.push(&q.to_string())?,
+            Node::Num(_) => self.source_wrapped(first, true)?,
+            Node::Mul(inner) if is_negation(self.g, first) => {
+                self.push("-")?;
+                self.source_unary_operand(inner[1])?;
+            }
+            _ => self.source_first_factor(first, fs)?,
+        }
+        self.source_factors(fs, 1)
+    }
+
+    /// A product's first factor, not a number or a negation.
+    fn source_first_factor(&mut self, f: Id, _fs: &[Id]) -> Result<(), PrintError> {
+        let wrap = matches!(self.node(f), Node::Add(_) | Node::Mul(_));
+        self.source_wrapped(f, wrap)
+    }
+
+    /// Factors `fs[from..]`, each as `*f` or `/d` for `d^-1`.
+    fn source_factors(&mut self, fs: &[Id], from: usize) -> Result<(), PrintError> {
+        for &f in &fs[from..] {
+            if let Node::Pow([b, e]) = *self.node(f)
+                && self.g.as_num(e).is_some_and(|q| *q == Rational::int(-1))
+            {
+                self.push("/")?;
+                let wrap = match self.node(b) {
+                    Node::Num(q) => is_fraction_or_negative(q),
+                    Node::Add(_) | Node::Mul(_) => true,
+                    _ => false,
+                };
+                self.source_wrapped(b, wrap)?;
+                continue;
+            }
+            self.push("*")?;
+            let wrap = match self.node(f) {
+                Node::Num(q) => is_fraction_or_negative(q),
+                Node::Add(_) | Node::Mul(_) => true,
+                _ => false,
+            };
+            self.source_wrapped(f, wrap)?;
+        }
+        Ok(())
+    }
+
+    // ---- text and LaTeX ------------------------------------------------------------------
+
+    /// Prints at a context of precedence `ctx` (0 top, 1 sum, 2 product, 3 unary, 4 power).
+    fn human(&mut self, id: Id, style: Style, ctx: u8) -> Result<(), PrintError> {
+        stacker::maybe_grow(STACK_RED_ZONE, STACK_GROWTH, || self.human_at(id, style, ctx))
+    }
+
+    fn human_at(&mut self, id: Id, style: Style, ctx: u8) -> Result<(), PrintError> {
+        let prec = self.human_prec(id);
+        let wrap = prec < ctx;
+        if wrap {
+            self.push(if style == Style::Latex { "\\left(" } else { "(" })?;
+        }
+        self.human_inner(id, style)?;
+        if wrap {
+            self.push(if style == Style::Latex { "\\right)" } else { ")" })?;
+        }
+        Ok(())
+    }
+
+    fn human_prec(&self, id: Id) -> u8 {
+        match self.node(id) {
+            Node::Add(_) => 1,
+            Node::Mul(_) if is_negation(self.g, id) => 3,
+            Node::Mul(_) => 2,
+            Node::Dot(_) | Node::Cross(_) => 2,
+            Node::Num(q) if q.is_negative() => 3,
+            Node::Num(q) if !q.is_integer() => 2,
+            Node::Pow(_) => 4,
+            _ => 5,
+        }
+    }
+
+    fn human_inner(&mut self, id: Id, style: Style) -> Result<(), PrintError> {
+        let latex = style == Style::Latex;
+        match self.node(id).clone() {
+            Node::Num(q) => {
+                let (n, d) = q.parts();
+                let sign = if q.is_negative() { if latex { "-" } else { MINUS } } else { "" };
+                let n = n.magnitude().to_string();
+                if q.is_integer() {
+                    self.push(&format!("{sign}{n}"))
+                } else if latex {
+                    self.push(&format!("{sign}\\frac{{{n}}}{{{d}}}"))
+                } else {
+                    self.push(&format!("{sign}{n}/{d}"))
+                }
+            }
+            Node::Sym(s) => {
+                let info = self.g.symbol(s);
+                let name = if latex { latex_name(&info.name, info.ty == Ty::Vector) } else { text_name(&info.name) };
+                self.push(&name)
+            }
+            Node::Vector(xs) => {
+                self.push(if latex { "\\begin{bmatrix}" } else { "[" })?;
+                for (i, &x) in xs.iter().enumerate() {
+                    if i > 0 {
+                        self.push(if latex { " \\\\ " } else { ", " })?;
+                    }
+                    self.human(x, style, 0)?;
+                }
+                self.push(if latex { "\\end{bmatrix}" } else { "]" })
+            }
+            Node::Add(xs) => {
+                for (i, &x) in xs.iter().enumerate() {
+                    let start = self.out.len();
+                    self.human(x, style, 1)?;
+                    if i == 0 {
+                        continue;
+                    }
+                    // Turn `+ −x` into `− x`.
+                    let term = self.out.split_off(start);
+                    let minus = if latex { "-" } else { MINUS };
+                    match term.strip_prefix(minus) {
+                        Some(rest) => self.push(&format!(" {minus} {rest}"))?,
+                        None => self.push(&format!(" + {term}"))?,
+                    }
+                }
+                Ok(())
+            }
+            Node::Mul(xs) if is_negation(self.g, id) => {
+                self.push(if latex { "-" } else { MINUS })?;
+                self.human(xs[1], style, 3)
+            }
+            Node::Mul(xs) => self.human_product(&xs, style),
+            Node::Pow([b, e]) => {
+                self.human(b, style, 5)?;
+                match self.g.as_num(e).and_then(Rational::to_i64) {
+                    Some(n) if !latex => self.push(&superscript(n)),
+                    _ if latex => {
+                        self.push("^{")?;
+                        self.human(e, style, 0)?;
+                        self.push("}")
+                    }
+                    _ => {
+                        self.push("^")?;
+                        self.human(e, style, 5)
+                    }
+                }
+            }
+            Node::Dot([a, b]) => {
+                self.human(a, style, 3)?;
+                self.push(if latex { " \\cdot " } else { "·" })?;
+                self.human(b, style, 3)
+            }
+            Node::Cross([a, b]) => {
+                self.human(a, style, 3)?;
+                self.push(if latex { " \\times " } else { "×" })?;
+                self.human(b, style, 3)
+            }
+            Node::Norm(a) => {
+                self.push(if latex { "\\left\\lVert " } else { "|" })?;
+                self.human(a, style, 0)?;
+                self.push(if latex { " \\right\\rVert" } else { "|" })
+            }
+            Node::Comp(a, axis) => {
+                self.human(a, style, 5)?;
+                if latex {
+                    self.push(&format!("_{{{}}}", axis.name()))
+                } else {
+                    self.push(&format!(".{}", axis.name()))
+                }
+            }
+            Node::Call(f, a) => {
+                if latex {
+                    if f.name() == "sqrt" {
+                        self.push("\\sqrt{")?;
+                        self.human(a, style, 0)?;
+                        return self.push("}");
+                    }
+                    let name = if f.name() == "asin" || f.name() == "acos" || f.name() == "atan" {
+                        format!("\\operatorname{{{}}}", f.name())
+                    } else {
+                        format!("\\{}", f.name())
+                    };
+                    self.push(&name)?;
+                    self.push("\\left(")?;
+                    self.human(a, style, 0)?;
+                    self.push("\\right)")
+                } else {
+                    if f.name() == "sqrt" {
+                        self.push("√")?;
+                        return self.human(a, style, 5);
+                    }
+                    self.push(f.name())?;
+                    self.push("(")?;
+                    self.human(a, style, 0)?;
+                    self.push(")")
+                }
+            }
+            Node::Atan2([y, x]) => {
+                self.push(if latex { "\\operatorname{atan2}\\left(" } else { "atan2(" })?;
+                self.human(y, style, 0)?;
+                self.push(", ")?;
+                self.human(x, style, 0)?;
+                self.push(if latex { "\\right)" } else { ")" })
+            }
+        }
+    }
+
+    /// A product as `sign numerator / denominator vector`.
+    fn human_product(&mut self, xs: &[Id], style: Style) -> Result<(), PrintError> {
+        let latex = style == Style::Latex;
+        let mut numerator: Vec<Id> = Vec::new();
+        let mut denominator: Vec<(Id, i64)> = Vec::new();
+        let mut coefficient = Rational::ONE;
+        let mut vector = None;
+        let mut negative = false;
+        for (i, &x) in xs.iter().enumerate() {
+            match self.node(x) {
+                Node::Num(q) => coefficient = coefficient.mul(q),
+                Node::Pow([b, e]) if self.g.as_num(*e).is_some_and(|q| q.is_negative() && q.is_integer()) => {
+                    let n = self.g.as_num(*e).and_then(Rational::to_i64).unwrap_or(-1);
+                    denominator.push((*b, -n));
+                }
+                _ if i == xs.len() - 1 && self.g.ty(x) == Ty::Vector => vector = Some(x),
+                Node::Mul(inner) if i == 0 && is_negation(self.g, x) => {
+                    negative = true;
+                    numerator.push(inner[1]);
+                }
+                _ => numerator.push(x),
+            }
+        }
+        if coefficient.is_negative() {
+            negative = !negative;
+            coefficient = coefficient.neg();
+        }
+        let (p, q) = coefficient.parts();
+        let (p, q) = (Rational::from_parts(p, 1.into()), Rational::from_parts(q, 1.into()));
+        if negative {
+            self.push(if latex { "-" } else { MINUS })?;
+        }
+        let has_den = !denominator.is_empty() || !q.is_one();
+        let mut pieces = 0;
+        // `(F + F_c)/m` rather than `1/m (F + F_c)`.
+        if let Some(v) = vector.filter(|_| has_den && numerator.is_empty() && p.is_one() && !latex) {
+            self.human(v, style, 3)?;
+            vector = None;
+            pieces += 1;
+        }
+        if has_den && latex {
+            self.push("\\frac{")?;
+        }
+        // Numerator: the integer coefficient and the factors.
+        if !p.is_one() || (numerator.is_empty() && pieces == 0 && (has_den || vector.is_none())) {
+            self.push(&p.to_string())?;
+            pieces += 1;
+        }
+        let single = numerator.len() == 1 && pieces == 0;
+        for (i, &f) in numerator.iter().enumerate() {
+            if pieces > 0 {
+                self.push(if latex { " \\, " } else { " " })?;
+            }
+            let last = i + 1 == numerator.len() && vector.is_none();
+            let ctx = match (latex && has_den, single) {
+                // Inside \frac{…} the braces group a lone numerator.
+                (true, true) => 0,
+                // A lone numerator: `(a + b)/c`, `−(a + b)`, `2 r·v`.
+                (_, true) if has_den || negative => 3,
+                (_, true) => 2,
+                // A dot product reads unambiguously as the last factor: `m v·v`.
+                _ if last && !has_den => 2,
+                _ => 3,
+            };
+            self.human(f, style, ctx)?;
+            pieces += 1;
+        }
+        if has_den {
+            if latex {
+                self.push("}{")?;
+            } else {
+                self.push("/")?;
+            }
+            let mut parts = 0;
+            let many = denominator.len() + usize::from(!q.is_one()) > 1;
+            if many && !latex {
+                self.push("(")?;
+            }
+            if !q.is_one() {
+                self.push(&q.to_string())?;
+                parts += 1;
+            }
+            for (b, n) in &denominator {
+                if parts > 0 {
+                    self.push(if latex { " \\, " } else { " " })?;
+                }
+                let ctx = if latex && !many {
+                    0
+                } else if latex || many {
+                    3
+                } else {
+                    5
+                };
+                self.human(*b, style, if *n == 1 { ctx } else { 5 })?;
+                if *n != 1 {
+                    if latex { self.push(&format!("^{{{n}}}"))? } else { self.push(&superscript(*n))? }
+                }
+                parts += 1;
+            }
+            if many && !latex {
+                self.push(")")?;
+            }
+            if latex {
+                self.push("}")?;
+            }
+        }
+        if let Some(v) = vector {
+            if pieces > 0 || has_den {
+                self.push(if latex { " \\, " } else { " " })?;
+            }
+            self.human(v, style, 3)?;
+        }
+        Ok(())
+    }
+}
+
+fn superscript(n: i64) -> String {
+    n.to_string()
+        .chars()
+        .map(|c| match c {
+            '-' => '⁻',
+            '0' => '⁰',
+            '1' => '¹',
+            '2' => '²',
+            '3' => '³',
+            '4' => '⁴',
+            '5' => '⁵',
+            '6' => '⁶',
+            '7' => '⁷',
+            '8' => '⁸',
+            _ => '⁹',
+        })
+        .collect()
+}
+
+const GREEK: [&str; 24] = [
+    "alpha", "beta", "gamma", "delta", "epsilon", "zeta", "eta", "theta", "iota", "kappa", "lambda", "mu", "nu", "xi",
+    "omicron", "pi", "rho", "sigma", "tau", "upsilon", "phi", "chi", "psi", "omega",
+];
+const GREEK_TEXT: [&str; 24] = [
+    "α", "β", "γ", "δ", "ε", "ζ", "η", "θ", "ι", "κ", "λ", "μ", "ν", "ξ", "ο", "π", "ρ", "σ", "τ", "υ", "φ", "χ", "ψ",
+    "ω",
+];
+
+/// `name` split as letters and a trailing digit run: `theta12` → (`theta`, `12`).
+fn split_index(name: &str) -> (&str, &str) {
+    let cut = name.trim_end_matches(|c: char| c.is_ascii_digit()).len();
+    if cut == 0 { (name, "") } else { name.split_at(cut) }
+}
+
+fn text_name(name: &str) -> String {
+    let (stem, index) = split_index(name);
+    match GREEK.iter().position(|g| *g == stem) {
+        Some(i) => format!("{}{index}", GREEK_TEXT[i]),
+        None => name.to_string(),
+    }
+}
+
+fn latex_name(name: &str, vector: bool) -> String {
+    let (stem, index) = split_index(name);
+    let stem = stem.trim_end_matches('_');
+    let base = if GREEK.contains(&stem) {
+        format!("\\{stem}")
+    } else if stem.chars().count() == 1 {
+        stem.to_string()
+    } else {
+        format!("\\mathrm{{{}}}", stem.replace('_', "\\_"))
+    };
+    let base = if vector { format!("\\vec{{{base}}}") } else { base };
+    if index.is_empty() { base } else { format!("{base}_{{{index}}}") }
+}

@@ -1,0 +1,662 @@
+//! The simplifier: every expression to a canonical form, and back to a readable graph.
+//!
+//! Design note. A scalar becomes a rational function ([`Frac`]) over *atoms*: scalar
+//! symbols, components `r.x`, dot products of vector atoms in canonical order, `cross` in 2D,
+//! triple products in 3D, and function applications with simplified arguments. A vector
+//! becomes `Σ sⱼ uⱼ`: scalar coefficients times vector atoms (vector symbols, `cross` of
+//! atoms in 3D) and unit vectors (from literals `[a, b]`). `dot` and `cross` expand
+//! bilinearly over those sums, so `dot(v,r) + dot(r,v)` is `2 r·v`, and −b/A for the bead
+//! cancels to the article's form. Equal rational functions of the atoms have equal forms.
+//!
+//! The alternatives were rewrite rules to a fixpoint (egg-style equality saturation, or
+//! SymPy's heuristics): more general, but neither bounded nor canonical for free. A
+//! normal form is both, and it is what a person does by hand for these formulas.
+//!
+//! The rules, grouped:
+//!
+//! | group         | rule                                                                 |
+//! |---------------|----------------------------------------------------------------------|
+//! | constants     | exact rational folding; `sqrt(4) = 2`, `sin(0) = 0`, `exp(0) = 1`    |
+//! | sums          | flatten, collect like terms, common denominator                      |
+//! | products      | expand over sums (bounded), add exponents, cancel common factors     |
+//! | dot           | bilinear; `u·w = w·u`; `u·eₓ = u.x`; `(p×q)·w` is a triple product   |
+//! | cross         | bilinear; `u×u = 0`; `w×u = −u×w`; `(p×q)×w = q(p·w) − p(q·w)`      |
+//! | radicals      | `sqrt(x)² = x`; `norm(u)² = u·u`; `norm(c u) = |c| norm(u)`          |
+//! | functions     | `ln(exp x) = x`, `exp(ln x) = x`                                     |
+//!
+//! Work is bounded: every expansion is capped by [`super::poly::MAX_TERMS`]; past it the
+//! piece is kept unexpanded as an atom, which is correct, only less simplified. Results are
+//! memoised per node, so shared subexpressions are simplified once.
+//!
+//! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
+
+use super::graph::{Axis, Func, Graph, Id, Node, Ty, TypeError};
+use super::num::Rational;
+use super::poly::{Frac, Mono, Poly, push_factor};
+use std::collections::HashMap;
+use std::rc::Rc;
+
+/// A vector atom of the canonical form: a graph node, or a unit vector.
+#[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
+pub(super) enum VAtom {
+    Atom(Id),
+    Basis(Axis),
+}
+
+/// `Σ sⱼ uⱼ`, sorted by atom, no zero coefficients.
+#[derive(Clone, PartialEq, Eq, Debug, Default)]
+pub(super) struct VecForm(pub(super) Vec<(VAtom, Frac)>);
+
+/// The canonical form of a node.
+#[derive(Clone, PartialEq, Eq, Debug)]
+pub(super) enum Canon {
+    S(Frac),
+    V(VecForm),
+}
+
+/// Simplifies nodes of one graph, remembering what it has done.
+///
+/// Keep one per graph: ids of different graphs mean different things.
+#[derive(Debug, Default)]
+pub struct Simplifier {
+    pub(super) memo: HashMap<Id, Rc<Canon>>,
+    pub(super) built: HashMap<Id, Id>,
+    /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
+    pub(super) radicals: HashMap<Id, Rc<Frac>>,
+}
+
+impl Simplifier {
+    pub fn new() -> Simplifier {
+        Simplifier::default()
+    }
+
+    /// The simplified form of `id`: equal in value, collected, cancelled, readable.
+    pub fn simplify(&mut self, g: &mut Graph, id: Id) -> Result<Id, TypeError> {
+        if let Some(&s) = self.built.get(&id) {
+            return Ok(s);
+        }
+        let c = self.canon(g, id)?;
+        let s = self.build(g, &c)?;
+        self.built.insert(id, s);
+        self.built.insert(s, s);
+        Ok(s)
+    }
+
+    /// Whether `a` and `b` are equal as rational functions of their atoms.
+    pub fn equivalent(&mut self, g: &mut Graph, a: Id, b: Id) -> Result<bool, TypeError> {
+        Ok(self.canon(g, a)? == self.canon(g, b)?)
+    }
+
+    /// Whether `id` simplifies to zero.
+    pub fn is_zero(&mut self, g: &mut Graph, id: Id) -> Result<bool, TypeError> {
+        Ok(match &*self.canon(g, id)? {
+            Canon::S(f) => f.is_zero(),
+            Canon::V(v) => v.0.is_empty(),
+        })
+    }
+
+    /// The positive rational content of an expression: the largest `k` with `e = k · e'` and
+    /// `e'` having integer coefficients of gcd 1 (1 for zero).
+    pub fn content(&mut self, g: &mut Graph, id: Id) -> Result<Rational, TypeError> {
+        Ok(match &*self.canon(g, id)? {
+            Canon::S(f) => f.num.content(),
+            Canon::V(v) => {
+                let mut it = v.0.iter();
+                match it.next() {
+                    None => Rational::ONE,
+                    Some((_, s)) => it.fold(s.num.content(), |k, (_, s)| k.gcd(&s.num.content())),
+                }
+            }
+        })
+    }
+
+    /// The simplified `k · e`.
+    pub fn scaled(&mut self, g: &mut Graph, id: Id, k: &Rational) -> Result<Id, TypeError> {
+        let c = match &*self.canon(g, id)? {
+            Canon::S(f) => Canon::S(f.scale(k)),
+            Canon::V(v) => Canon::V(VecForm(v.0.iter().map(|(a, s)| (*a, s.scale(k))).collect())),
+        };
+        self.build(g, &c)
+    }
+
+    /// The canonical form of `id`, computing every reachable node's form once, children first.
+    pub(super) fn canon(&mut self, g: &mut Graph, id: Id) -> Result<Rc<Canon>, TypeError> {
+        if let Some(c) = self.memo.get(&id) {
+            return Ok(c.clone());
+        }
+        for n in g.reachable(&[id]) {
+            if self.memo.contains_key(&n) {
+                continue;
+            }
+            let node = g.node(n).clone();
+            let c = self.canon_node(g, n, &node)?;
+            self.memo.insert(n, Rc::new(c));
+        }
+        Ok(self.memo[&id].clone())
+    }
+
+    fn scalar_of(&self, id: Id) -> Frac {
+        match &*self.memo[&id] {
+            Canon::S(f) => f.clone(),
+            Canon::V(_) => Frac::zero(),
+        }
+    }
+
+    fn vector_of(&self, id: Id) -> VecForm {
+        match &*self.memo[&id] {
+            Canon::V(v) => v.clone(),
+            Canon::S(_) => VecForm::default(),
+        }
+    }
+
+    /// Keeps `node` unexpanded, its children simplified, as an atom.
+    fn frozen(&mut self, g: &mut Graph, id: Id, node: &Node) -> Result<Canon, TypeError> {
+        let mut kids = Vec::with_capacity(node.children().len());
+        for &c in node.children() {
+            let form = self.memo[&c].clone();
+            kids.push(self.build(g, &form)?);
+        }
+        let atom = g.rebuild(node, &kids)?;
+        Ok(match g.ty(id) {
+            Ty::Scalar => Canon::S(Frac::atom(atom)),
+            Ty::Vector => Canon::V(VecForm(vec![(VAtom::Atom(atom), Frac::constant(Rational::ONE))])),
+        })
+    }
+
+    fn canon_node(&mut self, g: &mut Graph, id: Id, node: &Node) -> Result<Canon, TypeError> {
+        let result = match node {
+            Node::Num(q) => Some(Canon::S(Frac::constant(q.clone()))),
+            Node::Sym(_) => Some(match g.ty(id) {
+                Ty::Scalar => Canon::S(Frac::atom(id)),
+                Ty::Vector => Canon::V(VecForm(vec![(VAtom::Atom(id), Frac::constant(Rational::ONE))])),
+            }),
+            Node::Vector(xs) => {
+                let mut terms = Vec::new();
+                for (k, x) in xs.iter().enumerate() {
+                    let s = self.scalar_of(*x);
+                    if !s.is_zero() {
+                        terms.push((VAtom::Basis(Axis::ALL[k]), s));
+                    }
+                }
+                Some(Canon::V(VecForm(terms)))
+            }
+            Node::Add(xs) => match g.ty(id) {
+                Ty::Scalar => {
+                    let mut acc = Some(Frac::zero());
+                    for x in xs.iter() {
+                        acc = acc.and_then(|a| a.add(&self.scalar_of(*x)));
+                    }
+                    acc.map(Canon::S)
+                }
+                Ty::Vector => {
+                    let mut acc = Some(VecForm::default());
+                    for x in xs.iter() {
+                        acc = acc.and_then(|a| a.add(&self.vector_of(*x)));
+                    }
+                    acc.map(Canon::V)
+                }
+            },
+            Node::Mul(xs) => {
+                let mut k = Some(Frac::constant(Rational::ONE));
+                let mut vector = None;
+                for x in xs.iter() {
+                    match &*self.memo[x] {
+                        Canon::S(f) => k = k.and_then(|k| k.mul(f)).map(|k| self.reduce_radicals(k)),
+                        Canon::V(v) => vector = Some(v.clone()),
+                    }
+                }
+                match (k, vector) {
+                    (Some(k), Some(v)) => v.scale(&k).map(Canon::V),
+                    (Some(k), None) => Some(Canon::S(k)),
+                    (None, _) => None,
+                }
+            }
+            Node::Pow([b, e]) => self.power(g, *b, *e)?,
+            Node::Dot([a, b]) => {
+                let (a, b) = (self.vector_of(*a), self.vector_of(*b));
+                self.dot(g, &a, &b)?.map(Canon::S)
+            }
+            Node::Cross([a, b]) => {
+                let (a, b) = (self.vector_of(*a), self.vector_of(*b));
+                if g.dim() == 3 { self.cross3(g, &a, &b)?.map(Canon::V) } else { self.cross2(g, &a, &b)?.map(Canon::S) }
+            }
+            Node::Norm(a) => {
+                let a = self.vector_of(*a);
+                self.norm(g, &a)?.map(Canon::S)
+            }
+            Node::Comp(a, axis) => {
+                let a = self.vector_of(*a);
+                let e = VecForm(vec![(VAtom::Basis(*axis), Frac::constant(Rational::ONE))]);
+                self.dot(g, &a, &e)?.map(Canon::S)
+            }
+            Node::Call(f, a) => self.call(g, *f, *a)?.map(Canon::S),
+            Node::Atan2([y, x]) => {
+                let (sy, sx) = (self.memo[y].clone(), self.memo[x].clone());
+                let (sy, sx) = (self.build(g, &sy)?, self.build(g, &sx)?);
+                let atom = g.atan2(sy, sx)?;
+                Some(Canon::S(Frac::atom(atom)))
+            }
+        };
+        match result {
+            Some(c) => Ok(c),
+            None => self.frozen(g, id, node),
+        }
+    }
+
+    fn power(&mut self, g: &mut Graph, b: Id, e: Id) -> Result<Option<Canon>, TypeError> {
+        let base = self.scalar_of(b);
+        let exponent = self.scalar_of(e);
+        let Some(q) = exponent.as_constant() else {
+            return self.opaque_power(g, b, e);
+        };
+        if let Some(n) = q.to_i64() {
+            if n == 0 {
+                return Ok(Some(Canon::S(Frac::constant(Rational::ONE))));
+            }
+            if let Some(c) = base.as_constant() {
+                return Ok(c.pow(n).map(|c| Canon::S(Frac::constant(c))));
+            }
+            return Ok(base.powi(n).map(|f| Canon::S(self.reduce_radicals(f))));
+        }
+        // b^(p/2) = sqrt(b)^p
+        if let Some((p, 2)) = q.as_small() {
+            let root = self.sqrt(g, &base)?;
+            return Ok(root.and_then(|r| r.powi(p)).map(|f| Canon::S(self.reduce_radicals(f))));
+        }
+        self.opaque_power(g, b, e)
+    }
+
+    fn opaque_power(&mut self, g: &mut Graph, b: Id, e: Id) -> Result<Option<Canon>, TypeError> {
+        let (cb, ce) = (self.memo[&b].clone(), self.memo[&e].clone());
+        let (sb, se) = (self.build(g, &cb)?, self.build(g, &ce)?);
+        let atom = g.pow(sb, se)?;
+        Ok(Some(Canon::S(Frac::atom(atom))))
+    }
+
+    /// `sqrt(f)`: exact for rational squares, with square rational content taken out.
+    fn sqrt(&mut self, g: &mut Graph, f: &Frac) -> Result<Option<Frac>, TypeError> {
+        if let Some(c) = f.as_constant()
+            && let Some(r) = c.sqrt_exact()
+        {
+            return Ok(Some(Frac::constant(r)));
+        }
+        let content = f.num.content();
+        let (outside, inside) = match content.sqrt_exact() {
+            Some(r) if !f.num.leading().is_some_and(|(_, q)| q.is_negative()) => {
+                (r, f.scale(&content.recip().unwrap_or(Rational::ONE)))
+            }
+            _ => (Rational::ONE, f.clone()),
+        };
+        let arg = self.build(g, &Canon::S(inside.clone()))?;
+        let atom = g.call(Func::Sqrt, arg)?;
+        self.radicals.insert(atom, Rc::new(inside));
+        Ok(Some(Frac::atom(atom).scale(&outside)))
+    }
+
+    fn call(&mut self, g: &mut Graph, f: Func, a: Id) -> Result<Option<Frac>, TypeError> {
+        let arg = self.scalar_of(a);
+        if f == Func::Sqrt {
+            return self.sqrt(g, &arg);
+        }
+        if let Some(q) = arg.as_constant() {
+            // Exact values only: sin(0) = 0, cos(0) = 1, exp(0) = 1, ln(1) = 0, …
+            let exact = match f {
+                Func::Sin | Func::Tan | Func::Asin | Func::Atan if q.is_zero() => Some(Rational::ZERO),
+                Func::Cos | Func::Exp if q.is_zero() => Some(Rational::ONE),
+                Func::Ln | Func::Acos if q.is_one() => Some(Rational::ZERO),
+                _ => None,
+            };
+            if let Some(v) = exact {
+                return Ok(Some(Frac::constant(v)));
+            }
+        }
+        // ln(exp x) = x and exp(ln x) = x.
+        if let Some(inner) = arg.num.as_atom().filter(|_| arg.den.is_empty())
+            && let Node::Call(h, x) = g.node(inner).clone()
+            && ((f == Func::Ln && h == Func::Exp) || (f == Func::Exp && h == Func::Ln))
+        {
+            let c = self.canon(g, x)?;
+            if let Canon::S(s) = &*c {
+                return Ok(Some(s.clone()));
+            }
+        }
+        let built = self.memo[&a].clone();
+        let arg_node = self.build(g, &built)?;
+        let atom = g.call(f, arg_node)?;
+        Ok(Some(Frac::atom(atom)))
+    }
+
+    /// Replaces `sqrt(x)^k` by `x^(k div 2) sqrt(x)^(k mod 2)`, and `norm(u)^k` likewise.
+    pub(super) fn reduce_radicals(&self, f: Frac) -> Frac {
+        if self.radicals.is_empty() {
+            return f;
+        }
+        let heavy = |m: &Mono| m.0.iter().any(|(a, e)| *e >= 2 && self.radicals.contains_key(a));
+        let num_heavy = f.num.0.iter().any(|(m, _)| heavy(m));
+        let den_heavy =
+            f.den.iter().any(|(p, e)| *e >= 2 && p.as_atom().is_some_and(|a| self.radicals.contains_key(&a)));
+        if !num_heavy && !den_heavy {
+            return f;
+        }
+        let reduced = || -> Option<Frac> {
+            let mut num = Frac::zero();
+            for (m, q) in &f.num.0 {
+                let mut term = Frac::constant(q.clone());
+                let mut rest = Mono::one();
+                for &(a, e) in &m.0 {
+                    match self.radicals.get(&a) {
+                        Some(square) if e >= 2 => {
+                            term = term.mul(&square.powi(i64::from(e / 2))?)?;
+                            if e % 2 == 1 {
+                                rest = rest.mul(&Mono::atom(a));
+                            }
+                        }
+                        _ => rest = rest.mul(&Mono(smallvec::smallvec![(a, e)])),
+                    }
+                }
+                term = term.mul(&Frac::poly(Poly(vec![(rest, Rational::ONE)])))?;
+                num = num.add(&term)?;
+            }
+            // Denominator factors stay factored; only heavy radicals move.
+            let mut kept = Vec::new();
+            let mut extra = Frac::constant(Rational::ONE);
+            for (p, e) in &f.den {
+                match p.as_atom().and_then(|a| self.radicals.get(&a)) {
+                    Some(square) if *e >= 2 => {
+                        push_factor(&mut kept, p.clone(), e % 2);
+                        extra = extra.mul(&square.powi(-i64::from(e / 2))?)?;
+                    }
+                    _ => push_factor(&mut kept, p.clone(), *e),
+                }
+            }
+            num.mul(&Frac { num: Poly::constant(Rational::ONE), den: kept })?.mul(&extra)
+        };
+        reduced().unwrap_or(f)
+    }
+
+    // ---- vector algebra ----------------------------------------------------------------
+
+    /// `a·b`, bilinear over the two sums.
+    fn dot(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<Frac>, TypeError> {
+        let mut acc = Frac::zero();
+        for (u, s) in &a.0 {
+            for (w, t) in &b.0 {
+                let atom = self.dot_atoms(g, *u, *w)?;
+                let Some(term) = s.mul(t).and_then(|st| st.mul(&atom)) else { return Ok(None) };
+                let Some(sum) = acc.add(&term) else { return Ok(None) };
+                acc = sum;
+            }
+        }
+        Ok(Some(self.reduce_radicals(acc)))
+    }
+
+    fn dot_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Frac, TypeError> {
+        Ok(match (u, w) {
+            (VAtom::Basis(x), VAtom::Basis(y)) => Frac::constant(if x == y { Rational::ONE } else { Rational::ZERO }),
+            (VAtom::Atom(a), VAtom::Basis(x)) | (VAtom::Basis(x), VAtom::Atom(a)) => self.component(g, a, x)?,
+            (VAtom::Atom(a), VAtom::Atom(b)) => {
+                match (g.node(a).clone(), g.node(b).clone()) {
+                    // (p×q)·(s×t) = (p·s)(q·t) − (p·t)(q·s)
+                    (Node::Cross([p, q]), Node::Cross([s, t])) => {
+                        let ps = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(s))?;
+                        let qt = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(t))?;
+                        let pt = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(t))?;
+                        let qs = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(s))?;
+                        let first = ps.mul(&qt).unwrap_or_default();
+                        let second = pt.mul(&qs).unwrap_or_default();
+                        first.sub(&second).unwrap_or_default()
+                    }
+                    (Node::Cross([p, q]), _) => self.triple(g, b, p, q)?,
+                    (_, Node::Cross([p, q])) => self.triple(g, a, p, q)?,
+                    _ => {
+                        let (x, y) = if g.cmp_nodes(a, b).is_le() { (a, b) } else { (b, a) };
+                        Frac::atom(g.dot(x, y)?)
+                    }
+                }
+            }
+        })
+    }
+
+    /// `x·(p×q)` as a signed, sorted triple product; zero when two entries are equal.
+    fn triple(&mut self, g: &mut Graph, x: Id, p: Id, q: Id) -> Result<Frac, TypeError> {
+        let mut v = [x, p, q];
+        if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
+            return Ok(Frac::zero());
+        }
+        // Sort with a parity count: the triple product is antisymmetric.
+        let mut sign = 1;
+        for i in 0..3 {
+            for j in 0..2 - i {
+                if g.cmp_nodes(v[j], v[j + 1]).is_gt() {
+                    v.swap(j, j + 1);
+                    sign = -sign;
+                }
+            }
+        }
+        let c = g.cross(v[1], v[2])?;
+        let atom = g.dot(v[0], c)?;
+        Ok(Frac::atom(atom).scale(&Rational::int(sign)))
+    }
+
+    /// The component `axis` of a vector atom.
+    fn component(&mut self, g: &mut Graph, a: Id, axis: Axis) -> Result<Frac, TypeError> {
+        if let Node::Cross([p, q]) = g.node(a).clone() {
+            // (p×q)ₓ = p_y q_z − p_z q_y, cyclically.
+            let (i, j) = match axis {
+                Axis::X => (Axis::Y, Axis::Z),
+                Axis::Y => (Axis::Z, Axis::X),
+                Axis::Z => (Axis::X, Axis::Y),
+            };
+            let (pi, pj) = (self.component(g, p, i)?, self.component(g, p, j)?);
+            let (qi, qj) = (self.component(g, q, i)?, self.component(g, q, j)?);
+            let first = pi.mul(&qj).unwrap_or_default();
+            let second = pj.mul(&qi).unwrap_or_default();
+            return Ok(first.sub(&second).unwrap_or_default());
+        }
+        Ok(Frac::atom(g.comp(a, axis)?))
+    }
+
+    /// `a×b` in 3D, bilinear.
+    fn cross3(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<VecForm>, TypeError> {
+        let mut acc = VecForm::default();
+        for (u, s) in &a.0 {
+            for (w, t) in &b.0 {
+                let atom = self.cross_atoms(g, *u, *w)?;
+                let Some(st) = s.mul(t) else { return Ok(None) };
+                let Some(term) = atom.scale(&st) else { return Ok(None) };
+                let Some(sum) = acc.add(&term) else { return Ok(None) };
+                acc = sum;
+            }
+        }
+        Ok(Some(acc))
+    }
+
+    fn cross_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<VecForm, TypeError> {
+        let one = || Frac::constant(Rational::ONE);
+        Ok(match (u, w) {
+            (VAtom::Basis(x), VAtom::Basis(y)) => {
+                let (i, j) = (x.index(), y.index());
+                if i == j {
+                    VecForm::default()
+                } else {
+                    let k = 3 - i - j;
+                    let sign = if (j + 3 - i) % 3 == 1 { 1 } else { -1 };
+                    VecForm(vec![(VAtom::Basis(Axis::ALL[k]), Frac::constant(Rational::int(sign)))])
+                }
+            }
+            (VAtom::Atom(a), VAtom::Basis(e)) => {
+                // a × eₑ through components: Σᵢ εᵢⱼₑ a_j eᵢ
+                let mut terms = VecForm::default();
+                for i in Axis::ALL {
+                    for j in Axis::ALL {
+                        let sign = levi_civita(i.index(), j.index(), e.index());
+                        if sign != 0 {
+                            let aj = self.component(g, a, j)?.scale(&Rational::int(sign));
+                            let basis = VecForm(vec![(VAtom::Basis(i), aj)]);
+                            terms = terms.add(&basis).unwrap_or_default();
+                        }
+                    }
+                }
+                terms
+            }
+            (VAtom::Basis(_), VAtom::Atom(_)) => self.cross_atoms(g, w, u)?.negated(),
+            (VAtom::Atom(a), VAtom::Atom(b)) => {
+                if a == b {
+                    return Ok(VecForm::default());
+                }
+                match (g.node(a).clone(), g.node(b).clone()) {
+                    // (p×q)×w = q(p·w) − p(q·w)
+                    (Node::Cross([p, q]), _) => {
+                        let pw = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(b))?;
+                        let qw = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(b))?;
+                        let first = VecForm(vec![(VAtom::Atom(q), pw)]);
+                        let second = VecForm(vec![(VAtom::Atom(p), qw)]);
+                        first.add(&second.negated()).unwrap_or_default()
+                    }
+                    // u×(p×q) = p(u·q) − q(u·p)
+                    (_, Node::Cross([p, q])) => {
+                        let uq = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(q))?;
+                        let up = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(p))?;
+                        let first = VecForm(vec![(VAtom::Atom(p), uq)]);
+                        let second = VecForm(vec![(VAtom::Atom(q), up)]);
+                        first.add(&second.negated()).unwrap_or_default()
+                    }
+                    _ => {
+                        let (x, y, sign) = if g.cmp_nodes(a, b).is_lt() { (a, b, 1) } else { (b, a, -1) };
+                        let atom = g.cross(x, y)?;
+                        VecForm(vec![(VAtom::Atom(atom), one().scale(&Rational::int(sign)))])
+                    }
+                }
+            }
+        })
+    }
+
+    /// `a×b` in 2D: the scalar `a.x b.y − a.y b.x`, bilinear.
+    fn cross2(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<Frac>, TypeError> {
+        let mut acc = Frac::zero();
+        for (u, s) in &a.0 {
+            for (w, t) in &b.0 {
+                let atom = match (*u, *w) {
+                    (VAtom::Basis(x), VAtom::Basis(y)) => Frac::constant(Rational::int(match (x, y) {
+                        (Axis::X, Axis::Y) => 1,
+                        (Axis::Y, Axis::X) => -1,
+                        _ => 0,
+                    })),
+                    // u × eₓ = −u.y, u × e_y = u.x
+                    (VAtom::Atom(p), VAtom::Basis(x)) => {
+                        let (axis, sign) = if x == Axis::X { (Axis::Y, -1) } else { (Axis::X, 1) };
+                        self.component(g, p, axis)?.scale(&Rational::int(sign))
+                    }
+                    (VAtom::Basis(x), VAtom::Atom(p)) => {
+                        let (axis, sign) = if x == Axis::X { (Axis::Y, 1) } else { (Axis::X, -1) };
+                        self.component(g, p, axis)?.scale(&Rational::int(sign))
+                    }
+                    (VAtom::Atom(p), VAtom::Atom(q)) if p == q => Frac::zero(),
+                    (VAtom::Atom(p), VAtom::Atom(q)) => {
+                        let (x, y, sign) = if g.cmp_nodes(p, q).is_lt() { (p, q, 1) } else { (q, p, -1) };
+                        Frac::atom(g.cross(x, y)?).scale(&Rational::int(sign))
+                    }
+                };
+                let Some(term) = s.mul(t).and_then(|st| st.mul(&atom)) else { return Ok(None) };
+                let Some(sum) = acc.add(&term) else { return Ok(None) };
+                acc = sum;
+            }
+        }
+        Ok(Some(acc))
+    }
+
+    /// `norm(a)`: positive content taken out, sign normalised, `norm(u)² = u·u` remembered.
+    fn norm(&mut self, g: &mut Graph, a: &VecForm) -> Result<Option<Frac>, TypeError> {
+        if a.0.is_empty() {
+            return Ok(Some(Frac::zero()));
+        }
+        let mut content = a.0[0].1.num.content();
+        for (_, s) in &a.0[1..] {
+            content = content.gcd(&s.num.content());
+        }
+        // norm(−u) = norm(u): make the coefficient of the first atom, in the order people
+        // read, positive.
+        let first =
+            a.0.iter()
+                .min_by(|x, y| match (x.0, y.0) {
+                    (VAtom::Atom(p), VAtom::Atom(q)) => g.cmp_nodes(p, q),
+                    (p, q) => p.cmp(&q),
+                })
+                .map(|(_, s)| s);
+        if first.and_then(|s| s.num.leading()).is_some_and(|(_, q)| q.is_negative()) {
+            content = content.neg();
+        }
+        let inv = content.recip().unwrap_or(Rational::ONE);
+        let Some(inner) = a.scale(&Frac::constant(inv)) else { return Ok(None) };
+        let square = match self.dot(g, &inner, &inner)? {
+            Some(s) => s,
+            None => return Ok(None),
+        };
+        if let [(VAtom::Basis(_), s)] = inner.0.as_slice()
+            && s.as_constant().is_some()
+        {
+            return Ok(Some(Frac::constant(content.abs())));
+        }
+        let arg = self.build(g, &Canon::V(inner))?;
+        let atom = g.norm(arg)?;
+        self.radicals.insert(atom, Rc::new(square));
+        Ok(Some(Frac::atom(atom).scale(&content.abs())))
+    }
+}
+
+fn levi_civita(i: usize, j: usize, k: usize) -> i64 {
+    match (i, j, k) {
+        (0, 1, 2) | (1, 2, 0) | (2, 0, 1) => 1,
+        (0, 2, 1) | (2, 1, 0) | (1, 0, 2) => -1,
+        _ => 0,
+    }
+}
+
+impl VecForm {
+    pub(super) fn add(&self, other: &VecForm) -> Option<VecForm> {
+        let mut out: Vec<(VAtom, Frac)> = Vec::with_capacity(self.0.len() + other.0.len());
+        let (a, b) = (&self.0, &other.0);
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() || j < b.len() {
+            let take = match (a.get(i), b.get(j)) {
+                (Some(x), Some(y)) => x.0.cmp(&y.0),
+                (Some(_), None) => std::cmp::Ordering::Less,
+                _ => std::cmp::Ordering::Greater,
+            };
+            match take {
+                std::cmp::Ordering::Less => {
+                    out.push(a[i].clone());
+                    i += 1;
+                }
+                std::cmp::Ordering::Greater => {
+                    out.push(b[j].clone());
+                    j += 1;
+                }
+                std::cmp::Ordering::Equal => {
+                    let s = a[i].1.add(&b[j].1)?;
+                    if !s.is_zero() {
+                        out.push((a[i].0, s));
+                    }
+                    i += 1;
+                    j += 1;
+                }
+            }
+        }
+        Some(VecForm(out))
+    }
+
+    pub(super) fn scale(&self, k: &Frac) -> Option<VecForm> {
+        if k.is_zero() {
+            return Some(VecForm::default());
+        }
+        let mut out = Vec::with_capacity(self.0.len());
+        for (u, s) in &self.0 {
+            out.push((*u, s.mul(k)?));
+        }
+        Some(VecForm(out))
+    }
+
+    fn negated(&self) -> VecForm {
+        VecForm(self.0.iter().map(|(u, s)| (*u, s.neg())).collect())
+    }
+}

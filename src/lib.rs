@@ -1,0 +1,10 @@
+//! lagrange: derive constraint forces from constraints written as text, and compute them.
+//!
+//! The pipeline: a constraint file ([`model::file`]) becomes a [`model::system::System`] of
+//! graph nodes ([`expr`]); [`derive`] takes Ċ, C̈, ∇C, A and b and, for one constraint, λ
+//! and the forces in closed form; [`report`] lays the results out for people and programs.
+
+pub mod derive;
+pub mod expr;
+pub mod model;
+pub mod report;

@@ -1,0 +1,274 @@
+//! Constraint definition files (TOML, DESIGN.md): raw serde structs and their validation.
+//!
+//! [`RawFile`] mirrors the TOML exactly, with spans; [`load`] validates it into a
+//! [`System`] and the numbers `solve` and `simulate` need. Only validation builds the
+//! model (the raw structs never leave this module's callers half-checked). Every problem
+//! carries a byte span into the file text, so messages point at the fault.
+//!
+//! Not here: printing or rendering messages (the caller renders [`Problem`]s).
+
+use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
+use crate::expr::Ty;
+use crate::expr::lower::LowerError;
+use crate::expr::parse::ParseError;
+use crate::expr::syntax::{Syntax, SyntaxKind};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::ops::Range;
+use toml::Spanned;
+
+/// The largest constraint file read, in bytes.
+pub const MAX_FILE_BYTES: usize = 16 << 20;
+
+/// A file as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawFile {
+    pub title: Option<Spanned<String>>,
+    pub dimension: Spanned<i64>,
+    #[serde(default)]
+    pub parameters: BTreeMap<Spanned<String>, Spanned<RawValue>>,
+    #[serde(default)]
+    pub definitions: BTreeMap<Spanned<String>, Spanned<String>>,
+    #[serde(default)]
+    pub bodies: Vec<Spanned<RawBody>>,
+    #[serde(default)]
+    pub constraints: Vec<Spanned<RawConstraint>>,
+    pub scene: Option<Spanned<toml::Table>>,
+    #[serde(default)]
+    pub expect: Vec<Spanned<toml::Table>>,
+}
+
+/// A parameter value: a number or a vector of numbers.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum RawValue {
+    Number(f64),
+    Vector(Vec<f64>),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawBody {
+    pub name: Spanned<String>,
+    pub position: Spanned<String>,
+    pub velocity: Spanned<String>,
+    pub acceleration: Spanned<String>,
+    pub mass: Spanned<RawMass>,
+    pub force: Spanned<String>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum RawMass {
+    Number(f64),
+    Symbol(String),
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawConstraint {
+    pub name: Spanned<String>,
+    pub expr: Spanned<String>,
+}
+
+/// One problem in a file: where (a byte range of the file text) and what.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Problem {
+    pub span: Option<Range<usize>>,
+    pub message: String,
+}
+
+/// A validated file: the system and the parameter values.
+#[derive(Debug)]
+pub struct Loaded {
+    pub system: System,
+    pub values: BTreeMap<String, RawValue>,
+    pub raw: RawFile,
+}
+
+/// Parses and validates a constraint file's text. Every problem found is returned.
+pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
+    if text.len() > MAX_FILE_BYTES {
+        return Err(vec![Problem {
+            span: None,
+            message: format!("file is too large ({} bytes; the limit is {MAX_FILE_BYTES})", text.len()),
+        }]);
+    }
+    let raw: RawFile = toml::from_str(text)
+        .map_err(|e| vec![Problem { span: e.span(), message: e.message().trim_end().to_string() }])?;
+    let mut problems = Vec::new();
+    let system = build(text, &raw, &mut problems);
+    match system {
+        Some(system) if problems.is_empty() => {
+            let values = raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
+            Ok(Loaded { system, values, raw })
+        }
+        _ => Err(problems),
+    }
+}
+
+fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<System> {
+    let title = raw.title.as_ref().map_or("", |t| t.get_ref().as_str());
+    let mut b = match SystemBuilder::new(title, *raw.dimension.get_ref()) {
+        Ok(b) => b,
+        Err(e) => {
+            problems.push(Problem { span: Some(raw.dimension.span()), message: e.to_string() });
+            return None;
+        }
+    };
+    let dim = *raw.dimension.get_ref() as usize;
+    for (name, value) in &raw.parameters {
+        let ty = match value.get_ref() {
+            RawValue::Number(_) => Ty::Scalar,
+            RawValue::Vector(v) if v.len() == dim => Ty::Vector,
+            RawValue::Vector(v) => {
+                problems.push(Problem {
+                    span: Some(value.span()),
+                    message: format!("parameter `{}` has {} components in a {dim}D file", name.get_ref(), v.len()),
+                });
+                continue;
+            }
+        };
+        if let Err(e) = b.parameter(name.get_ref(), ty) {
+            problems.push(Problem { span: Some(name.span()), message: e.to_string() });
+        }
+    }
+    for body in &raw.bodies {
+        let body = body.get_ref();
+        let mass = match body.mass.get_ref() {
+            RawMass::Number(x) if x.is_finite() && *x > 0.0 => MassSpec::Number(*x),
+            RawMass::Number(x) => {
+                problems.push(Problem {
+                    span: Some(body.mass.span()),
+                    message: format!("a mass must be a positive finite number, found {x}"),
+                });
+                continue;
+            }
+            RawMass::Symbol(s) => MassSpec::Symbol(s),
+        };
+        let spec = BodySpec {
+            name: body.name.get_ref(),
+            position: body.position.get_ref(),
+            velocity: body.velocity.get_ref(),
+            acceleration: body.acceleration.get_ref(),
+            force: body.force.get_ref(),
+            mass,
+        };
+        if let Err(e) = b.body(&spec) {
+            problems.push(Problem { span: Some(body.name.span()), message: e.to_string() });
+        }
+    }
+    for (name, def_text) in definitions_in_order(raw, problems) {
+        if let Err(e) = b.definition(name.get_ref(), def_text.get_ref()) {
+            problems.push(build_problem(text, def_text, &e, name.span()));
+        }
+    }
+    for c in &raw.constraints {
+        let c = c.get_ref();
+        if let Err(e) = b.constraint(c.name.get_ref(), c.expr.get_ref()) {
+            problems.push(build_problem(text, &c.expr, &e, c.name.span()));
+        }
+    }
+    if raw.constraints.is_empty() {
+        problems.push(Problem { span: None, message: "the file has no [[constraints]]".into() });
+    }
+    Some(b.finish())
+}
+
+/// A builder error, located: in the expression text where it has a span, else at `fallback`.
+fn build_problem(text: &str, expr: &Spanned<String>, e: &BuildError, fallback: Range<usize>) -> Problem {
+    let inner = match e {
+        BuildError::Parse { error: ParseError { span, .. }, .. } => Some(*span),
+        BuildError::Lower { error: LowerError { span, .. }, .. } => Some(*span),
+        _ => None,
+    };
+    let span = match inner {
+        Some(s) => locate(text, expr, s.start..s.end.max(s.start)),
+        None => fallback,
+    };
+    Problem { span: Some(span), message: e.to_string() }
+}
+
+/// Maps a byte range inside a string value to the file: exact when the string is written
+/// without escapes (the common case), else the whole string.
+pub fn locate(text: &str, value: &Spanned<String>, inner: Range<usize>) -> Range<usize> {
+    let outer = value.span();
+    let written = text.get(outer.clone()).unwrap_or("");
+    let content = value.get_ref();
+    for quote in ["\"\"\"", "'''", "\"", "'"] {
+        if let Some(body) = written.strip_prefix(quote).and_then(|w| w.strip_suffix(quote))
+            && body == content.as_str()
+        {
+            let start = outer.start + quote.len();
+            return (start + inner.start).min(outer.end)..(start + inner.end).min(outer.end);
+        }
+    }
+    outer
+}
+
+/// Definitions ordered so that each comes after those it uses; cycles are reported.
+fn definitions_in_order<'a>(
+    raw: &'a RawFile,
+    problems: &mut Vec<Problem>,
+) -> Vec<(&'a Spanned<String>, &'a Spanned<String>)> {
+    let names: Vec<&String> = raw.definitions.keys().map(|k| k.get_ref()).collect();
+    let mut uses: BTreeMap<&String, Vec<&String>> = BTreeMap::new();
+    for (name, def_text) in &raw.definitions {
+        let mut idents = Vec::new();
+        if let Ok(syntax) = crate::expr::parse::parse_expr(def_text.get_ref()) {
+            collect_idents(&syntax, &mut idents);
+        }
+        uses.insert(name.get_ref(), names.iter().copied().filter(|n| idents.contains(n)).collect());
+    }
+    let mut order = Vec::new();
+    let mut state: BTreeMap<&String, u8> = BTreeMap::new();
+    for name in raw.definitions.keys() {
+        visit(name.get_ref(), &uses, &mut state, &mut order, &mut Vec::new(), raw, problems);
+    }
+    order.into_iter().filter_map(|n| raw.definitions.iter().find(|(k, _)| k.get_ref() == n)).collect()
+}
+
+fn visit<'a>(
+    name: &'a String,
+    uses: &BTreeMap<&'a String, Vec<&'a String>>,
+    state: &mut BTreeMap<&'a String, u8>,
+    order: &mut Vec<&'a String>,
+    path: &mut Vec<&'a String>,
+    raw: &RawFile,
+    problems: &mut Vec<Problem>,
+) {
+    match state.get(name) {
+        Some(2) => return,
+        Some(1) => {
+            let span = raw.definitions.keys().find(|k| k.get_ref() == name).map(|k| k.span());
+            let cycle: Vec<&str> = path.iter().map(|s| s.as_str()).collect();
+            problems.push(Problem { span, message: BuildError::Cycle(name.clone(), cycle.join(" → ")).to_string() });
+            return;
+        }
+        _ => {}
+    }
+    state.insert(name, 1);
+    path.push(name);
+    for dep in uses.get(name).into_iter().flatten() {
+        visit(dep, uses, state, order, path, raw, problems);
+    }
+    path.pop();
+    state.insert(name, 2);
+    order.push(name);
+}
+
+fn collect_idents(s: &Syntax, out: &mut Vec<String>) {
+    let mut stack = vec![s];
+    while let Some(s) = stack.pop() {
+        match &s.kind {
+            SyntaxKind::Ident(n) => out.push(n.clone()),
+            SyntaxKind::Number(_) => {}
+            SyntaxKind::Sum(ts) => stack.extend(ts.iter().map(|(_, t)| t)),
+            SyntaxKind::Product(fs) => stack.extend(fs.iter().map(|(_, f)| f)),
+            SyntaxKind::Neg(x) | SyntaxKind::Paren(x) | SyntaxKind::Component(x, _, _) => stack.push(x),
+            SyntaxKind::Pow(a, b) => stack.extend([a.as_ref(), b.as_ref()]),
+            SyntaxKind::Call { args, .. } | SyntaxKind::Vector(args) => stack.extend(args.iter()),
+        }
+    }
+}

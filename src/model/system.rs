@@ -1,0 +1,284 @@
+//! The resolved system: bodies, parameters and constraints as graph nodes, ready to derive.
+//!
+//! A [`System`] is built only through [`SystemBuilder`], which declares every symbol with
+//! its role (position → velocity → acceleration, force, mass, parameter, `t`), refuses name
+//! clashes, and parses and type-checks each constraint in scope. Files are one way to
+//! fill a builder (`model::file`); tests and benchmarks fill it directly.
+//!
+//! Not here: TOML, numbers for solving (`model::file` keeps those), derivation (`derive`).
+
+use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
+use crate::expr::parse::{ParseError, parse_expr, parse_relation};
+use crate::expr::{Graph, Id, Role, Simplifier, Symbol, Ty};
+
+/// A point mass.
+#[derive(Clone, Debug)]
+pub struct Body {
+    pub name: String,
+    pub position: Symbol,
+    pub velocity: Symbol,
+    pub acceleration: Symbol,
+    pub force: Symbol,
+    /// A mass symbol or a number.
+    pub mass: Id,
+}
+
+/// A position constraint `C = 0` or `C ≥ 0`.
+#[derive(Clone, Debug)]
+pub struct Constraint {
+    pub name: String,
+    /// As written in the file.
+    pub text: String,
+    /// `C` with definitions substituted, as lowered (not yet simplified).
+    pub c: Id,
+    pub inequality: bool,
+    /// Indices of the bodies whose positions `C` depends on.
+    pub bodies: Vec<usize>,
+}
+
+/// Bodies and constraints over one expression graph.
+#[derive(Debug)]
+pub struct System {
+    pub title: String,
+    pub graph: Graph,
+    pub simplifier: Simplifier,
+    pub bodies: Vec<Body>,
+    pub constraints: Vec<Constraint>,
+    /// Parameters in declaration order, with their types.
+    pub parameters: Vec<(String, Symbol)>,
+    pub time: Symbol,
+    pub scope: Scope,
+}
+
+impl System {
+    pub fn dim(&self) -> usize {
+        self.graph.dim()
+    }
+
+    pub fn body_named(&self, name: &str) -> Option<usize> {
+        self.bodies.iter().position(|b| b.name == name)
+    }
+
+    pub fn constraint_named(&self, name: &str) -> Option<usize> {
+        self.constraints.iter().position(|c| c.name == name)
+    }
+
+    /// Parses and type-checks an expression in the system's scope (for expectations, forces).
+    pub fn expression(&mut self, text: &str) -> Result<Id, BuildError> {
+        let syntax = parse_expr(text).map_err(|e| BuildError::Parse { context: String::new(), error: e })?;
+        lower(&syntax, &self.scope, &mut self.graph).map_err(|e| BuildError::Lower { context: String::new(), error: e })
+    }
+}
+
+/// What the builder refuses.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum BuildError {
+    #[error("the dimension must be 2 or 3, found {0}")]
+    Dimension(i64),
+    #[error("`{name}` is declared twice (as {first} and as {second})")]
+    Duplicate { name: String, first: String, second: String },
+    #[error("`{0}` is reserved (a function or the time `t`)")]
+    Reserved(String),
+    #[error("`{0}` is not a valid name: use letters, digits and `_`, starting with a letter")]
+    BadName(String),
+    #[error("{context}{error}")]
+    Parse { context: String, error: ParseError },
+    #[error("{context}{error}")]
+    Lower { context: String, error: LowerError },
+    #[error("constraint `{0}` does not involve the position of any body")]
+    NoBody(String),
+    #[error("constraint `{name}` uses `{symbol}`: constraints may depend on positions, parameters and t only")]
+    NotPositional { name: String, symbol: String },
+    #[error("definition `{0}` refers to itself (through {1})")]
+    Cycle(String, String),
+}
+
+/// Fills a [`System`] one declaration at a time.
+#[derive(Debug)]
+pub struct SystemBuilder {
+    system: System,
+    /// What each name was declared as, for clash messages.
+    kinds: Vec<(String, String)>,
+}
+
+/// The symbols of one body, by name.
+#[derive(Clone, Debug)]
+pub struct BodySpec<'a> {
+    pub name: &'a str,
+    pub position: &'a str,
+    pub velocity: &'a str,
+    pub acceleration: &'a str,
+    pub force: &'a str,
+    /// A symbol name or a number.
+    pub mass: MassSpec<'a>,
+}
+
+#[derive(Clone, Debug)]
+pub enum MassSpec<'a> {
+    Symbol(&'a str),
+    Number(f64),
+}
+
+impl SystemBuilder {
+    pub fn new(title: &str, dim: i64) -> Result<SystemBuilder, BuildError> {
+        if dim != 2 && dim != 3 {
+            return Err(BuildError::Dimension(dim));
+        }
+        let mut graph = Graph::new(dim as usize);
+        let time = graph.declare("t", Ty::Scalar, Role::Time);
+        let t_node = graph.sym(time);
+        let mut scope = Scope::new();
+        scope.insert("t", t_node);
+        let system = System {
+            title: title.to_string(),
+            graph,
+            simplifier: Simplifier::new(),
+            bodies: Vec::new(),
+            constraints: Vec::new(),
+            parameters: Vec::new(),
+            time,
+            scope,
+        };
+        Ok(SystemBuilder { system, kinds: vec![("t".into(), "the time".into())] })
+    }
+
+    /// Claims `name` for `what`, refusing clashes and reserved names.
+    fn claim(&mut self, name: &str, what: String) -> Result<(), BuildError> {
+        let valid = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
+            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if !valid {
+            return Err(BuildError::BadName(name.to_string()));
+        }
+        if is_function_name(name) {
+            return Err(BuildError::Reserved(name.to_string()));
+        }
+        if let Some((_, first)) = self.kinds.iter().find(|(n, _)| n == name) {
+            if name == "t" {
+                return Err(BuildError::Reserved(name.to_string()));
+            }
+            return Err(BuildError::Duplicate { name: name.to_string(), first: first.clone(), second: what });
+        }
+        self.kinds.push((name.to_string(), what));
+        Ok(())
+    }
+
+    fn symbol(&mut self, name: &str, ty: Ty, role: Role, what: String) -> Result<Symbol, BuildError> {
+        self.claim(name, what)?;
+        let s = self.system.graph.declare(name, ty, role);
+        let node = self.system.graph.sym(s);
+        self.system.scope.insert(name, node);
+        Ok(s)
+    }
+
+    /// Declares a scalar or vector parameter.
+    pub fn parameter(&mut self, name: &str, ty: Ty) -> Result<Symbol, BuildError> {
+        let s = self.symbol(name, ty, Role::Parameter, "a parameter".into())?;
+        self.system.parameters.push((name.to_string(), s));
+        Ok(s)
+    }
+
+    /// Declares a body and its symbols; returns its index.
+    pub fn body(&mut self, spec: &BodySpec<'_>) -> Result<usize, BuildError> {
+        let body = self.system.bodies.len();
+        if let Some(other) = self.system.bodies.iter().find(|b| b.name == spec.name) {
+            return Err(BuildError::Duplicate {
+                name: spec.name.to_string(),
+                first: format!("body `{}`", other.name),
+                second: "another body".into(),
+            });
+        }
+        let of = |what: &str| format!("the {what} of body `{}`", spec.name);
+        let position = self.symbol(spec.position, Ty::Vector, Role::Position { body }, of("position"))?;
+        let velocity = self.symbol(spec.velocity, Ty::Vector, Role::Velocity { body }, of("velocity"))?;
+        let acceleration =
+            self.symbol(spec.acceleration, Ty::Vector, Role::Acceleration { body }, of("acceleration"))?;
+        let force = self.symbol(spec.force, Ty::Vector, Role::Force { body }, of("force"))?;
+        let g = &mut self.system.graph;
+        g.set_derivative(position, velocity);
+        g.set_derivative(velocity, acceleration);
+        let mass = match spec.mass {
+            MassSpec::Symbol(name) => {
+                // Bodies may share a mass symbol (`m` for every link of a chain).
+                // A mass may also be a scalar parameter (`m = 1.0` in [parameters]).
+                match self.system.scope.get(name) {
+                    Some(id) if self.system.graph.ty(id) == Ty::Scalar && self.is_constant(name) => id,
+                    _ => {
+                        let s = self.symbol(name, Ty::Scalar, Role::Mass { body }, of("mass"))?;
+                        self.system.graph.sym(s)
+                    }
+                }
+            }
+            MassSpec::Number(x) => {
+                let q = crate::expr::Rational::parse_decimal(&format!("{x:e}"))
+                    .ok_or_else(|| BuildError::BadName(format!("{x}")))?;
+                self.system.graph.num(q)
+            }
+        };
+        self.system.bodies.push(Body { name: spec.name.to_string(), position, velocity, acceleration, force, mass });
+        Ok(body)
+    }
+
+    fn is_constant(&self, name: &str) -> bool {
+        self.kinds.iter().any(|(n, what)| n == name && (what.starts_with("the mass") || what == "a parameter"))
+    }
+
+    /// Declares a named expression, substituted wherever the name is used. Definitions may
+    /// use earlier ones; order them (see `model::file` for the dependency sort).
+    pub fn definition(&mut self, name: &str, text: &str) -> Result<Id, BuildError> {
+        let context = format!("in definition `{name}`: ");
+        let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context.clone(), error })?;
+        let id = lower(&syntax, &self.system.scope, &mut self.system.graph)
+            .map_err(|error| BuildError::Lower { context, error })?;
+        self.claim(name, "a definition".into())?;
+        self.system.scope.insert(name, id);
+        Ok(id)
+    }
+
+    /// Declares a constraint `lhs = rhs`, `lhs >= rhs`, `lhs <= rhs` or a bare `C`.
+    pub fn constraint(&mut self, name: &str, text: &str) -> Result<usize, BuildError> {
+        let context = format!("in constraint `{name}`: ");
+        let relation = parse_relation(text).map_err(|error| BuildError::Parse { context: context.clone(), error })?;
+        let LoweredRelation { c, inequality } = lower_relation(&relation, &self.system.scope, &mut self.system.graph)
+            .map_err(|error| BuildError::Lower { context, error })?;
+        let g = &self.system.graph;
+        let mut bodies = Vec::new();
+        for s in g.free_symbols(c) {
+            let info = g.symbol(s);
+            match info.role {
+                Role::Position { body } => bodies.push(body),
+                Role::Velocity { .. } | Role::Acceleration { .. } | Role::Force { .. } => {
+                    return Err(BuildError::NotPositional { name: name.to_string(), symbol: info.name.clone() });
+                }
+                _ => {}
+            }
+        }
+        if bodies.is_empty() {
+            return Err(BuildError::NoBody(name.to_string()));
+        }
+        if self.system.constraints.iter().any(|k| k.name == name) {
+            return Err(BuildError::Duplicate {
+                name: name.to_string(),
+                first: "a constraint".into(),
+                second: "another constraint".into(),
+            });
+        }
+        let k = self.system.constraints.len();
+        self.system.constraints.push(Constraint {
+            name: name.to_string(),
+            text: text.to_string(),
+            c,
+            inequality,
+            bodies,
+        });
+        Ok(k)
+    }
+
+    pub fn finish(self) -> System {
+        self.system
+    }
+
+    /// The system so far (for resolving expressions between declarations).
+    pub fn system(&self) -> &System {
+        &self.system
+    }
+}

@@ -1,0 +1,381 @@
+//! Layouts of a derivation for people and programs: text, LaTeX, Markdown, JSON.
+//!
+//! `derive` prints C, Ċ, C̈, ∇C per body, the λ equation (A, b), and λ and the force on each
+//! body where a closed form exists; `--steps` walks through the derivation as the article
+//! does, one step at a time, with the file's own expressions. Every function here returns
+//! a `String` or a JSON value; the caller decides where it goes.
+//!
+//! Not here: deriving (`derive`), expression printing rules (`expr::print`).
+
+use crate::derive::Derivation;
+use crate::expr::print::{PrintError, Style, print};
+use crate::expr::{Graph, Id, Role, Ty, TypeError};
+use crate::model::system::System;
+use serde_json::{Value, json};
+use std::fmt::Write;
+
+/// The document formats of `derive`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Text,
+    Latex,
+    Markdown,
+    Json,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error(transparent)]
+    Print(#[from] PrintError),
+    #[error(transparent)]
+    Type(#[from] TypeError),
+}
+
+/// How expressions look in one document format.
+struct Doc {
+    style: Style,
+    format: Format,
+}
+
+impl Doc {
+    fn new(format: Format) -> Doc {
+        let style = match format {
+            Format::Text => Style::Text,
+            Format::Latex | Format::Markdown => Style::Latex,
+            Format::Json => Style::Source,
+        };
+        Doc { style, format }
+    }
+
+    fn expr(&self, g: &Graph, id: Id) -> Result<String, PrintError> {
+        print(g, id, self.style)
+    }
+
+    /// An equation `lhs = rhs` as a display line.
+    fn line(&self, out: &mut String, lhs: &str, rhs: &str) {
+        match self.format {
+            Format::Text => {
+                let _ = writeln!(out, "  {lhs} = {rhs}");
+            }
+            Format::Latex => {
+                let _ = writeln!(out, "\\[ {lhs} = {rhs} \\]");
+            }
+            _ => {
+                let _ = writeln!(out, "$$ {lhs} = {rhs} $$\n");
+            }
+        }
+    }
+
+    fn heading(&self, out: &mut String, text: &str) {
+        match self.format {
+            Format::Text => {
+                let _ = writeln!(out, "\n{text}");
+            }
+            Format::Latex => {
+                let _ = writeln!(out, "\n\\subsection*{{{}}}", latex_escape(text));
+            }
+            _ => {
+                let _ = writeln!(out, "\n## {text}\n");
+            }
+        }
+    }
+
+    fn para(&self, out: &mut String, text: &str) {
+        match self.format {
+            Format::Text => {
+                let _ = writeln!(out, "  {text}");
+            }
+            Format::Latex => {
+                let _ = writeln!(out, "{}\n", latex_escape(text));
+            }
+            _ => {
+                let _ = writeln!(out, "{text}\n");
+            }
+        }
+    }
+
+    /// The names `C`, `Ċ`, `C̈`, `∇C`, `λ` in this format, with a subscript.
+    fn sym(&self, which: &str, sub: &str) -> String {
+        let latex = self.style == Style::Latex;
+        let base = match (which, latex) {
+            ("C", _) => "C".to_string(),
+            ("Cdot", false) => "Ċ".into(),
+            ("Cdot", true) => "\\dot{C}".into(),
+            ("Cddot", false) => "C̈".into(),
+            ("Cddot", true) => "\\ddot{C}".into(),
+            ("grad", false) => "∇C".into(),
+            ("grad", true) => "\\nabla C".into(),
+            ("lambda", false) => "λ".into(),
+            ("lambda", true) => "\\lambda".into(),
+            ("force", false) => "F_c".into(),
+            ("force", true) => "\\vec{F}_c".into(),
+            (other, _) => other.to_string(),
+        };
+        match (sub.is_empty(), latex) {
+            (true, _) => base,
+            (false, false) => format!("{base}[{sub}]"),
+            (false, true) => format!("{base}_{{\\mathrm{{{}}}}}", latex_escape(sub)),
+        }
+    }
+}
+
+fn latex_escape(s: &str) -> String {
+    s.replace('\\', "\\textbackslash{}").replace('_', "\\_").replace('&', "\\&").replace('%', "\\%").replace('#', "\\#")
+}
+
+/// The derivation as a document (text, LaTeX or Markdown).
+pub fn document(system: &mut System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
+    let doc = Doc::new(format);
+    let mut out = String::new();
+    let title = if system.title.is_empty() { "Constraint forces".to_string() } else { system.title.clone() };
+    match format {
+        Format::Text => {
+            let _ = writeln!(out, "{title} ({}D)", system.dim());
+        }
+        Format::Latex => {
+            let _ = writeln!(out, "\\section*{{{} ({}D)}}", latex_escape(&title), system.dim());
+        }
+        _ => {
+            let _ = writeln!(out, "# {title} ({}D)", system.dim());
+        }
+    }
+    if steps {
+        steps_document(system, d, &doc, &mut out)?;
+    } else {
+        summary(system, d, &doc, &mut out)?;
+    }
+    Ok(out)
+}
+
+fn kind(system: &System, k: usize) -> &'static str {
+    if system.constraints[k].inequality { "inequality C ≥ 0" } else { "equality C = 0" }
+}
+
+fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    let g = &system.graph;
+    let many = d.constraints.len() > 1;
+    for (k, dc) in d.constraints.iter().enumerate() {
+        let c = &system.constraints[k];
+        doc.heading(out, &format!("Constraint {}: {}  ({})", c.name, c.text, kind(system, k)));
+        let sub = if many { c.name.as_str() } else { "" };
+        doc.line(out, &doc.sym("C", sub), &doc.expr(g, dc.c)?);
+        doc.line(out, &doc.sym("Cdot", sub), &doc.expr(g, dc.c_dot)?);
+        doc.line(out, &doc.sym("Cddot", sub), &doc.expr(g, dc.c_ddot)?);
+        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
+            let name = &system.bodies[body].name;
+            let r = &g.symbol(system.bodies[body].position).name;
+            doc.line(out, &format!("{} (∇ wrt {r}, body {name})", doc.sym("grad", sub)), &doc.expr(g, grad)?);
+            if !dc.scale.is_one() {
+                doc.line(out, &format!("J (direction, ∇C/{}, body {name})", dc.scale), &doc.expr(g, dir)?);
+            }
+        }
+        doc.line(out, &format!("c (C̈ at a = 0{})", scale_note(dc.scale.is_one(), &dc.scale)), &doc.expr(g, dc.c_term)?);
+    }
+    doc.heading(out, "The multiplier equation  A λ + b = 0");
+    for &(k, j, a) in &d.a {
+        let lhs = if many {
+            format!("A[{}, {}]", system.constraints[k].name, system.constraints[j].name)
+        } else {
+            "A".into()
+        };
+        doc.line(out, &lhs, &doc.expr(g, a)?);
+    }
+    for (k, &b) in d.b.iter().enumerate() {
+        let lhs = if many { format!("b[{}]", system.constraints[k].name) } else { "b".into() };
+        doc.line(out, &lhs, &doc.expr(g, b)?);
+    }
+    if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
+        doc.heading(out, "Multiplier and constraint force");
+        doc.line(out, &doc.sym("lambda", ""), &doc.expr(g, lambda)?);
+        for &(body, f) in forces {
+            let name = &system.bodies[body].name;
+            doc.line(out, &doc.sym("force", name), &doc.expr(g, f)?);
+        }
+    } else {
+        forces_as_sums(system, d, doc, out)?;
+    }
+    Ok(())
+}
+
+fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
+    if one { String::new() } else { format!(", over {scale}") }
+}
+
+/// For several constraints: the force on each body as Σₖ λₖ Jₖᵢ, with named multipliers.
+fn forces_as_sums(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    doc.heading(out, "Constraint forces (λ solves A λ = −b at a state: lagrange solve)");
+    let mut lambdas = Vec::with_capacity(d.constraints.len());
+    for c in &system.constraints {
+        let s = system.graph.declare(&format!("lambda_{}", c.name), Ty::Scalar, Role::Parameter);
+        lambdas.push(system.graph.sym(s));
+    }
+    for body in 0..system.bodies.len() {
+        let mut terms = Vec::new();
+        for (k, dc) in d.constraints.iter().enumerate() {
+            if let Some(&(_, j)) = dc.direction.iter().find(|(b, _)| *b == body) {
+                terms.push(system.graph.mul(vec![lambdas[k], j])?);
+            }
+        }
+        if terms.is_empty() {
+            continue;
+        }
+        let sum = system.graph.add(terms)?;
+        let name = system.bodies[body].name.clone();
+        doc.line(out, &doc.sym("force", &name), &doc.expr(&system.graph, sum)?);
+    }
+    Ok(())
+}
+
+fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    let many = d.constraints.len() > 1;
+    for (k, dc) in d.constraints.iter().enumerate() {
+        let (name, text) = (system.constraints[k].name.clone(), system.constraints[k].text.clone());
+        let sub = if many { name.as_str() } else { "" };
+        let g = &system.graph;
+        doc.heading(out, &format!("Constraint {name}: {text}"));
+        doc.para(out, &format!("Step 1. The position constraint, written as C = 0 ({}):", kind(system, k)));
+        doc.line(out, &doc.sym("C", sub), &doc.expr(g, dc.c)?);
+        doc.para(out, "Step 2. Differentiate in time. d(a·b)/dt = ȧ·b + a·ḃ (product rule), dr/dt = v:");
+        let (raw, done) = (doc.expr(g, dc.c_dot_raw)?, doc.expr(g, dc.c_dot)?);
+        doc.line(out, &doc.sym("Cdot", sub), &chain(&raw, &done));
+        doc.para(out, "Step 3. Differentiate again, dv/dt = a:");
+        let (raw, done) = (doc.expr(g, dc.c_ddot_raw)?, doc.expr(g, dc.c_ddot)?);
+        doc.line(out, &doc.sym("Cddot", sub), &chain(&raw, &done));
+    }
+    // Newton: aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ, substituted into each C̈.
+    doc.heading(out, "Newton's law");
+    doc.para(out, "Step 4. Each body obeys m a = F + F_c, so a = (F + F_c)/m. Substituted into C̈ = 0:");
+    let mut fc_nodes = Vec::with_capacity(system.bodies.len());
+    for body in &system.bodies {
+        let name = if system.bodies.len() == 1 { "F_c".to_string() } else { format!("F_c_{}", body.name) };
+        let s = system.graph.declare(&name, Ty::Vector, Role::Parameter);
+        fc_nodes.push(system.graph.sym(s));
+    }
+    for (k, dc) in d.constraints.iter().enumerate() {
+        let mut map = std::collections::HashMap::new();
+        for &body in &system.constraints[k].bodies {
+            let b = &system.bodies[body];
+            let g = &mut system.graph;
+            let a = g.sym(b.acceleration);
+            let f = g.sym(b.force);
+            let total = g.add(vec![f, fc_nodes[body]])?;
+            let inv_m = g.powi(b.mass, -1)?;
+            let accel = g.mul(vec![inv_m, total])?;
+            map.insert(a, accel);
+        }
+        let substituted = system.graph.substitute(dc.c_ddot, &map)?;
+        let sub = if many { system.constraints[k].name.clone() } else { String::new() };
+        doc.line(out, &doc.sym("Cddot", &sub), &format!("{} = 0", doc.expr(&system.graph, substituted)?));
+    }
+    doc.heading(out, "The direction of the force");
+    doc.para(
+        out,
+        "Step 5. Constraint forces do no work on any motion the constraint allows (D'Alembert): \
+         F_c·v = 0 whenever Ċ = ∇C·v = 0, so F_c is parallel to ∇C: F_c = λ ∇C. \
+         Constant factors of ∇C go into λ:",
+    );
+    for (k, dc) in d.constraints.iter().enumerate() {
+        let sub = if many { system.constraints[k].name.clone() } else { String::new() };
+        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
+            let g = &system.graph;
+            let name = &system.bodies[body].name;
+            let lhs = format!("{} on {name}", doc.sym("grad", &sub));
+            let rhs = if dc.scale.is_one() {
+                doc.expr(g, grad)?
+            } else {
+                format!("{} = {} · ({})", doc.expr(g, grad)?, dc.scale, doc.expr(g, dir)?)
+            };
+            doc.line(out, &lhs, &rhs);
+        }
+    }
+    doc.heading(out, "The multiplier");
+    doc.para(out, "Step 6. With F_c = Σ λ J, the conditions C̈ = 0 are linear in λ: A λ + b = 0, where");
+    let g = &system.graph;
+    for &(k, j, a) in &d.a {
+        let lhs = if many {
+            format!("A[{}, {}]", system.constraints[k].name, system.constraints[j].name)
+        } else {
+            "A".into()
+        };
+        doc.line(out, &lhs, &doc.expr(g, a)?);
+    }
+    for (k, &b) in d.b.iter().enumerate() {
+        let lhs = if many { format!("b[{}]", system.constraints[k].name) } else { "b".into() };
+        doc.line(out, &lhs, &doc.expr(g, b)?);
+    }
+    if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
+        doc.para(out, "so λ = −b/A:");
+        doc.line(out, &doc.sym("lambda", ""), &doc.expr(g, lambda)?);
+        doc.heading(out, "The constraint force");
+        doc.para(out, "Step 7. Magnitude λ times direction J:");
+        for &(body, f) in forces {
+            let name = &system.bodies[body].name;
+            doc.line(out, &doc.sym("force", name), &doc.expr(g, f)?);
+        }
+        Ok(())
+    } else {
+        doc.para(out, "Step 7. λ solves A λ = −b at each state (lagrange solve); the force on each body is Σₖ λₖ Jₖ:");
+        forces_as_sums(system, d, doc, out)
+    }
+}
+
+/// `raw = done`, or just `done` when the rule gave the collected form already.
+fn chain(raw: &str, done: &str) -> String {
+    if raw == done { done.to_string() } else { format!("{raw} = {done}") }
+}
+
+/// The derivation as JSON: every expression a string in the expression language.
+pub fn json(system: &System, d: &Derivation) -> Result<Value, ReportError> {
+    let g = &system.graph;
+    let e = |id: Id| print(g, id, Style::Source);
+    let mut constraints = Vec::new();
+    for (k, dc) in d.constraints.iter().enumerate() {
+        let c = &system.constraints[k];
+        let mut gradient = serde_json::Map::new();
+        for &(body, j) in &dc.direction {
+            gradient.insert(system.bodies[body].name.clone(), json!(e(j)?));
+        }
+        constraints.push(json!({
+            "name": c.name,
+            "kind": if c.inequality { "inequality" } else { "equality" },
+            "C": e(dc.c)?,
+            "C_dot": e(dc.c_dot)?,
+            "C_ddot": e(dc.c_ddot)?,
+            "scale": dc.scale.to_string(),
+            "gradient": gradient,
+            "c": e(dc.c_term)?,
+        }));
+    }
+    let n = d.constraints.len();
+    let mut a = vec![vec![json!("0"); n]; n];
+    for &(k, j, id) in &d.a {
+        let s = e(id)?;
+        a[k][j] = json!(s.clone());
+        a[j][k] = json!(s);
+    }
+    let b: Result<Vec<String>, PrintError> = d.b.iter().map(|&id| e(id)).collect();
+    let mut out = json!({
+        "title": system.title,
+        "dimension": system.dim(),
+        "bodies": system.bodies.iter().map(|b| json!({
+            "name": b.name,
+            "position": g.symbol(b.position).name,
+            "velocity": g.symbol(b.velocity).name,
+            "acceleration": g.symbol(b.acceleration).name,
+            "force": g.symbol(b.force).name,
+            "mass": e(b.mass).unwrap_or_default(),
+        })).collect::<Vec<_>>(),
+        "constraints": constraints,
+        "A": a,
+        "b": b?,
+    });
+    if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
+        out["lambda"] = json!({ system.constraints[0].name.clone(): e(lambda)? });
+        let mut f = serde_json::Map::new();
+        for &(body, id) in forces {
+            f.insert(system.bodies[body].name.clone(), json!(e(id)?));
+        }
+        out["forces"] = Value::Object(f);
+    }
+    Ok(out)
+}

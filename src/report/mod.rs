@@ -1,0 +1,6 @@
+//! Documents for people and programs: derivations, diagnostics, (later) tables and plots.
+//!
+//! Everything here returns strings or JSON values; only `main.rs` writes them out.
+
+pub mod derivation;
+pub mod diagnostic;
