@@ -405,6 +405,27 @@ fn factor_bilinear(g: &Graph, terms: &[&DotTerm]) -> Option<(Rational, Vec<(Id, 
             .find(|t| (t.u == x && t.w == y) || (t.u == y && t.w == x))
             .map_or(Rational::ZERO, |t| t.coef.clone())
     };
+    if let Some(found) = factor_symmetric_or_bipartite(g, terms, &atoms, &coef) {
+        return Some(found);
+    }
+    // A vector common to every term: u·(Σ cⱼ wⱼ), as in r1·r1 − r1·r2 = r1·(r1 − r2).
+    let common = atoms.iter().copied().find(|&u| terms.iter().all(|t| t.u == u || t.w == u))?;
+    let other: Vec<(Id, Rational)> =
+        terms.iter().map(|t| (if t.u == common { t.w } else { t.u }, t.coef.clone())).collect();
+    let mut other = other;
+    other.sort_by(|x, y| g.cmp_nodes(x.0, y.0));
+    let (b, sb) = primitive(other);
+    Some((sb, vec![(common, Rational::ONE)], b))
+}
+
+#[allow(clippy::type_complexity)]
+fn factor_symmetric_or_bipartite(
+    g: &Graph,
+    terms: &[&DotTerm],
+    atoms: &[Id],
+    coef: &dyn Fn(Id, Id) -> Rational,
+) -> Option<(Rational, Vec<(Id, Rational)>, Vec<(Id, Rational)>)> {
+    let _ = g;
     let (k, a, b) = if terms.iter().any(|t| t.u == t.w) {
         // Symmetric: M = k a aᵀ with M_ii = c_ii and M_ij = c_ij / 2.
         let half = Rational::new(1, 2);

@@ -346,7 +346,9 @@ impl Printer<'_> {
             }
             Node::Mul(xs) if is_negation(self.g, id) => {
                 self.push(if latex { "-" } else { MINUS })?;
-                self.human(xs[1], style, 3)
+                // −r·v is −(r·v) whichever way it is read.
+                let ctx = if matches!(self.node(xs[1]), Node::Dot(_) | Node::Cross(_)) { 2 } else { 3 };
+                self.human(xs[1], style, ctx)
             }
             Node::Mul(xs) => self.human_product(&xs, style),
             Node::Pow([b, e]) => {
@@ -439,11 +441,17 @@ impl Printer<'_> {
                     let n = self.g.as_num(*e).and_then(Rational::to_i64).unwrap_or(-1);
                     denominator.push((*b, -n));
                 }
-                _ if i == xs.len() - 1 && self.g.ty(x) == Ty::Vector => vector = Some(x),
-                Node::Mul(inner) if i == 0 && is_negation(self.g, x) => {
-                    negative = true;
-                    numerator.push(inner[1]);
+                // A negated factor anywhere: the sign goes in front.
+                Node::Mul(inner) if is_negation(self.g, x) => {
+                    negative = !negative;
+                    let y = inner[1];
+                    if i == xs.len() - 1 && self.g.ty(y) == Ty::Vector {
+                        vector = Some(y);
+                    } else {
+                        numerator.push(y);
+                    }
                 }
+                _ if i == xs.len() - 1 && self.g.ty(x) == Ty::Vector => vector = Some(x),
                 _ => numerator.push(x),
             }
         }
@@ -575,6 +583,12 @@ fn split_index(name: &str) -> (&str, &str) {
 }
 
 fn text_name(name: &str) -> String {
+    // `lambda_rod1` → `λ_rod1`, `theta2` → `θ2`.
+    if let Some((head, tail)) = name.split_once('_')
+        && let Some(i) = GREEK.iter().position(|g| *g == head)
+    {
+        return format!("{}_{tail}", GREEK_TEXT[i]);
+    }
     let (stem, index) = split_index(name);
     match GREEK.iter().position(|g| *g == stem) {
         Some(i) => format!("{}{index}", GREEK_TEXT[i]),
@@ -583,8 +597,16 @@ fn text_name(name: &str) -> String {
 }
 
 fn latex_name(name: &str, vector: bool) -> String {
+    // `lambda_rod1` → `\lambda_{\mathrm{rod1}}`, `F_c` → `F_{c}`.
+    if let Some((head, tail)) = name.split_once('_')
+        && !head.is_empty()
+        && !tail.is_empty()
+    {
+        let base = latex_name(head, vector);
+        let tail = if tail.chars().count() == 1 { tail.to_string() } else { format!("\\mathrm{{{}}}", tail.replace('_', "\\_")) };
+        return format!("{base}_{{{tail}}}");
+    }
     let (stem, index) = split_index(name);
-    let stem = stem.trim_end_matches('_');
     let base = if GREEK.contains(&stem) {
         format!("\\{stem}")
     } else if stem.chars().count() == 1 {

@@ -111,6 +111,9 @@ impl Doc {
             ("force", true) => "\\vec{F}_c".into(),
             (other, _) => other.to_string(),
         };
+        if which == "force" && latex && !sub.is_empty() {
+            return format!("\\vec{{F}}_{{c,\\mathrm{{{}}}}}", latex_escape(sub));
+        }
         match (sub.is_empty(), latex) {
             (true, _) => base,
             (false, false) => format!("{base}[{sub}]"),
