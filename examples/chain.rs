@@ -25,7 +25,11 @@ fn chain(n: usize) -> String {
     }
     let _ = writeln!(s, "[[constraints]]\nname = \"link1\"\nexpr = \"dot(r1, r1) = l^2\"\n");
     for i in 2..=n {
-        let _ = writeln!(s, "[[constraints]]\nname = \"link{i}\"\nexpr = \"dot(r{i} - r{j}, r{i} - r{j}) = l^2\"\n", j = i - 1);
+        let _ = writeln!(
+            s,
+            "[[constraints]]\nname = \"link{i}\"\nexpr = \"dot(r{i} - r{j}, r{i} - r{j}) = l^2\"\n",
+            j = i - 1
+        );
     }
     let initial: Vec<String> =
         (1..=n).map(|i| format!("r{i} = [{:.1}, 0.0], v{i} = [0.0, 0.0]", 0.5 * i as f64)).collect();

@@ -603,7 +603,11 @@ fn latex_name(name: &str, vector: bool) -> String {
         && !tail.is_empty()
     {
         let base = latex_name(head, vector);
-        let tail = if tail.chars().count() == 1 { tail.to_string() } else { format!("\\mathrm{{{}}}", tail.replace('_', "\\_")) };
+        let tail = if tail.chars().count() == 1 {
+            tail.to_string()
+        } else {
+            format!("\\mathrm{{{}}}", tail.replace('_', "\\_"))
+        };
         return format!("{base}_{{{tail}}}");
     }
     let (stem, index) = split_index(name);
