@@ -7,6 +7,7 @@
 //!
 //! Not here: printing or rendering messages (the caller renders [`Problem`]s).
 
+use super::scene::{RawScene, Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
 use crate::expr::Ty;
 use crate::expr::lower::LowerError;
@@ -34,7 +35,7 @@ pub struct RawFile {
     pub bodies: Vec<Spanned<RawBody>>,
     #[serde(default)]
     pub constraints: Vec<Spanned<RawConstraint>>,
-    pub scene: Option<Spanned<toml::Table>>,
+    pub scene: Option<Spanned<RawScene>>,
     #[serde(default)]
     pub expect: Vec<Spanned<toml::Table>>,
 }
@@ -79,11 +80,12 @@ pub struct Problem {
     pub message: String,
 }
 
-/// A validated file: the system and the parameter values.
+/// A validated file: the system, the parameter values and the scene.
 #[derive(Debug)]
 pub struct Loaded {
     pub system: System,
     pub values: BTreeMap<String, RawValue>,
+    pub scene: Scene,
     pub raw: RawFile,
 }
 
@@ -98,14 +100,18 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
     let raw: RawFile = toml::from_str(text)
         .map_err(|e| vec![Problem { span: e.span(), message: e.message().trim_end().to_string() }])?;
     let mut problems = Vec::new();
-    let system = build(text, &raw, &mut problems);
-    match system {
-        Some(system) if problems.is_empty() => {
-            let values = raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
-            Ok(Loaded { system, values, raw })
-        }
-        _ => Err(problems),
+    let Some(mut system) = build(text, &raw, &mut problems) else {
+        return Err(problems);
+    };
+    let scene = match &raw.scene {
+        Some(s) => validate(text, s.get_ref(), &mut system, &mut problems),
+        None => Scene::default(),
+    };
+    if !problems.is_empty() {
+        return Err(problems);
     }
+    let values = raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
+    Ok(Loaded { system, values, scene, raw })
 }
 
 fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<System> {
