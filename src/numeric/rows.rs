@@ -50,11 +50,17 @@ pub struct RowProgram {
 }
 
 impl RowProgram {
-    pub fn new(system: &mut System, derivation: &Derivation) -> RowProgram {
+    /// Gathers the rows of `derivation`. The external force on body i is `forces`' expression
+    /// for i when it has one (so a simulation re-evaluates `F = m*g - k*v` at every state),
+    /// else the body's force symbol, whose value the state gives.
+    pub fn new(system: &mut System, derivation: &Derivation, forces: &[(usize, Id)]) -> RowProgram {
         let mut roots = Vec::new();
-        for body in &system.bodies {
+        for (i, body) in system.bodies.iter().enumerate() {
             let v = system.graph.sym(body.velocity);
-            let f = system.graph.sym(body.force);
+            let f = match forces.iter().find(|(b, _)| *b == i) {
+                Some(&(_, expr)) => expr,
+                None => system.graph.sym(body.force),
+            };
             roots.extend([body.mass, v, f]);
         }
         let mut inverse_scale = Vec::new();
