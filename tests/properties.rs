@@ -22,7 +22,7 @@
 mod common;
 
 use common::{Rng, random_env};
-use lagrange::derive::derive;
+use lagrange::derive::{DeriveError, derive};
 use lagrange::expr::diff::time_derivative;
 use lagrange::expr::eval::{Env, Value, eval_one};
 use lagrange::expr::grad::gradient;
@@ -204,6 +204,32 @@ fn along(system: &System, env: &Env, h: f64) -> Env {
     out
 }
 
+/// Whether every root's value is stable under relative perturbations of 1e-9 of every
+/// input. Expressions like `dot(cross(u, r1), r1)/dot(r1, cross(r1, r2))` are 0/0 in exact
+/// arithmetic and rounding noise in f64: such states say nothing about the rules.
+fn well_conditioned(system: &System, roots: &[Id], env: &Env, rng: &mut Rng) -> bool {
+    let base: Vec<Option<Vec<f64>>> = roots.iter().map(|&id| value(system, id, env)).collect();
+    for _ in 0..4 {
+        let mut moved = env.clone();
+        for (sym, _) in system.graph.symbols() {
+            let wiggle = |x: f64, rng: &mut Rng| x * (1.0 + 1e-9 * rng.uniform(-1.0, 1.0));
+            match env.get(sym) {
+                Some(Value::Scalar(x)) => moved.set(sym, Value::Scalar(wiggle(x, rng))),
+                Some(Value::Vector(v)) => moved.set(sym, Value::Vector(v.map(|x| wiggle(x, rng)))),
+                None => {}
+            }
+        }
+        for (&id, b) in roots.iter().zip(&base) {
+            let (Some(b), Some(m)) = (b, value(system, id, &moved)) else { return false };
+            let scale = b.iter().fold(1f64, |acc, x| acc.max(x.abs()));
+            if b.iter().zip(&m).any(|(x, y)| (x - y).abs() > 1e-5 * scale) {
+                return false;
+            }
+        }
+    }
+    true
+}
+
 /// What a numeric comparison concluded.
 enum Verdict {
     Agree,
@@ -224,7 +250,9 @@ fn compare_fd(
         Some(plus.iter().zip(&minus).map(|(p, m)| (p - m) / (2.0 * h)).collect())
     };
     let (Some(d1), Some(d2)) = (diff(h), diff(h / 2.0)) else { return Ok(Verdict::Skip) };
-    let scale = exact.iter().chain(f0).chain(&d2).fold(1f64, |m, x| m.max(x.abs()));
+    // The scale comes from the function and its difference quotient, never from the value
+    // under test: a wrong, huge derivative must not widen its own tolerance.
+    let scale = f0.iter().chain(&d2).fold(1f64, |m, x| m.max(x.abs()));
     let spread = d1.iter().zip(&d2).fold(0f64, |m, (a, b)| m.max((a - b).abs()));
     // Huge values come from dividing by a quantity that is zero in exact arithmetic
     // (`1/dot(cross(r2, r1), r2)`): rounding noise, not a function to differentiate.
@@ -285,6 +313,10 @@ fn time_derivative_matches_finite_differences() {
         let mut rng = Rng::new(seed);
         for _ in 0..STATES {
             let env = random_env(&system, &mut rng);
+            if !well_conditioned(&system, &[e, de], &env, &mut rng) {
+                tally.record(Verdict::Skip);
+                continue;
+            }
             let (Some(exact), Some(f0)) = (value(&system, de, &env), value(&system, e, &env)) else {
                 tally.record(Verdict::Skip);
                 continue;
@@ -307,6 +339,10 @@ fn gradient_matches_finite_differences() {
         let mut rng = Rng::new(seed);
         for _ in 0..STATES {
             let env = random_env(&system, &mut rng);
+            if !well_conditioned(&system, &[e, grad], &env, &mut rng) {
+                tally.record(Verdict::Skip);
+                continue;
+            }
             let (Some(exact), Some(f0)) = (value(&system, grad, &env), value(&system, e, &env)) else {
                 tally.record(Verdict::Skip);
                 continue;
@@ -352,14 +388,30 @@ fn simplify_keeps_the_value_and_is_a_fixpoint() {
         let mut rng = Rng::new(seed);
         for _ in 0..STATES {
             let env = random_env(&system, &mut rng);
+            if !well_conditioned(&system, &[e, s], &env, &mut rng) {
+                tally.record(Verdict::Skip);
+                continue;
+            }
             let (Some(x), Some(y)) = (value(&system, e, &env), value(&system, s, &env)) else {
                 tally.record(Verdict::Skip);
                 continue;
             };
             let scale = x.iter().chain(&y).fold(1f64, |m, v| m.max(v.abs()));
+            // atan2 jumps by 2π across its cut (y = 0, x < 0); when y is zero in exact
+            // arithmetic (a vanishing triple product) rounding noise picks the side.
+            let on_cut = |a: f64, b: f64| {
+                let turns = (a - b) / std::f64::consts::TAU;
+                text.contains("atan2") && turns.round() != 0.0 && (turns - turns.round()).abs() < 1e-9
+            };
+            if x.iter().zip(&y).any(|(a, b)| on_cut(*a, *b)) {
+                tally.record(Verdict::Skip);
+                continue;
+            }
             for (a, b) in x.iter().zip(&y) {
+                // 1e-6: sqrt of a rounding-noise zero (1e-16) is already 1e-8, and a wrong
+                // rule is off by far more.
                 prop_assert!(
-                    (a - b).abs() <= 1e-8 * scale,
+                    (a - b).abs() <= 1e-6 * scale,
                     "simplify changed the value of {}: {} vs {} (simplified: {})",
                     text,
                     a,
@@ -403,7 +455,15 @@ fn derived_constraints_satisfy_the_velocity_and_acceleration_identities() {
     });
     check("derive", 150, strategy, |(dim, text, seed)| {
         let mut system = system(dim, Some(&text)).map_err(TestCaseError::fail)?;
-        let d = derive(&mut system).map_err(|err| TestCaseError::fail(format!("{text}: {err}")))?;
+        let d = match derive(&mut system) {
+            Ok(d) => d,
+            // `dot(-r2, k*r1) + k*dot(r1, r2)` is zero: refusing it is the right answer.
+            Err(DeriveError::ZeroGradient(_)) => {
+                tally.record(Verdict::Skip);
+                return Ok(());
+            }
+            Err(err) => return Err(TestCaseError::fail(format!("{text}: {err}"))),
+        };
         let dc = d.constraints[0].clone();
         let g = &mut system.graph;
         let t = g.symbol_named("t").expect("t");

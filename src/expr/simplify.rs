@@ -30,10 +30,9 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::{Axis, Func, Graph, Id, Node, Ty, TypeError};
+use super::graph::{Axis, FastMap, Func, Graph, Id, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
-use std::collections::HashMap;
 use std::rc::Rc;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
@@ -59,10 +58,10 @@ pub(super) enum Canon {
 /// Keep one per graph: ids of different graphs mean different things.
 #[derive(Debug, Default)]
 pub struct Simplifier {
-    pub(super) memo: HashMap<Id, Rc<Canon>>,
-    pub(super) built: HashMap<Id, Id>,
+    pub(super) memo: FastMap<Id, Rc<Canon>>,
+    pub(super) built: FastMap<Id, Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
-    pub(super) radicals: HashMap<Id, Rc<Frac>>,
+    pub(super) radicals: FastMap<Id, Rc<Frac>>,
 }
 
 impl Simplifier {
