@@ -89,13 +89,15 @@ fn function_names() -> impl Iterator<Item = &'static str> {
 }
 
 /// The closest candidate within a small edit distance, for "did you mean".
+///
+/// Among equally close candidates, one differing only in case wins (`L` → `l`, not `F`).
 pub fn suggest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> Option<String> {
     let limit = (name.chars().count() / 3).max(1);
     candidates
-        .map(|c| (edit_distance(name, c), c))
-        .filter(|&(d, c)| d <= limit && c != name)
-        .min_by(|a, b| a.0.cmp(&b.0).then_with(|| a.1.cmp(b.1)))
-        .map(|(_, c)| c.to_string())
+        .map(|c| (edit_distance(name, c), !c.eq_ignore_ascii_case(name), c))
+        .filter(|&(d, _, c)| d <= limit && c != name)
+        .min()
+        .map(|(_, _, c)| c.to_string())
 }
 
 fn edit_distance(a: &str, b: &str) -> usize {

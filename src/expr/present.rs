@@ -238,9 +238,11 @@ fn signed_content(g: &Graph, p: &Poly) -> Rational {
 /// The terms of `p` in the order people read: higher weighted degree first, then terms with
 /// positions, velocities and forces before those of parameters alone.
 fn reading_order(g: &Graph, p: &Poly) -> Vec<(Mono, Rational)> {
-    let mut terms = p.0.clone();
-    terms.sort_by(|a, b| cmp_mono_reading(g, &a.0, &b.0));
-    terms
+    // Each term's key is computed once, not once per comparison (that allocated and
+    // walked the atoms O(n log n) times and was a seventh of a chain's derivation).
+    let mut keyed: Vec<(ReadingKey, &(Mono, Rational))> = p.0.iter().map(|t| (reading_key(g, &t.0), t)).collect();
+    keyed.sort_by(|a, b| cmp_reading_keys(g, &a.0, &b.0));
+    keyed.into_iter().map(|(_, t)| t.clone()).collect()
 }
 
 fn cmp_poly_reading(g: &Graph, a: &Poly, b: &Poly) -> Ordering {
@@ -255,20 +257,31 @@ fn cmp_poly_reading(g: &Graph, a: &Poly, b: &Poly) -> Ordering {
 }
 
 fn cmp_mono_reading(g: &Graph, a: &Mono, b: &Mono) -> Ordering {
-    let key = |m: &Mono| {
-        let mut atoms: Vec<(bool, Id, u32)> = m.0.iter().map(|&(x, e)| (is_kinematic(g, x), x, e)).collect();
-        atoms.sort_by(|p, q| q.0.cmp(&p.0).then_with(|| g.cmp_nodes(p.1, q.1)));
-        atoms
-    };
-    weighted_degree(g, b).cmp(&weighted_degree(g, a)).then_with(|| {
-        let (ka, kb) = (key(a), key(b));
-        for (x, y) in ka.iter().zip(&kb) {
+    cmp_reading_keys(g, &reading_key(g, a), &reading_key(g, b))
+}
+
+/// What the reading order compares: the weighted degree, then the atoms with kinematic
+/// ones (positions, velocities, …) first.
+struct ReadingKey {
+    degree: u64,
+    atoms: Vec<(bool, Id, u32)>,
+}
+
+fn reading_key(g: &Graph, m: &Mono) -> ReadingKey {
+    let mut atoms: Vec<(bool, Id, u32)> = m.0.iter().map(|&(x, e)| (is_kinematic(g, x), x, e)).collect();
+    atoms.sort_by(|p, q| q.0.cmp(&p.0).then_with(|| g.cmp_nodes(p.1, q.1)));
+    ReadingKey { degree: weighted_degree(g, m), atoms }
+}
+
+fn cmp_reading_keys(g: &Graph, a: &ReadingKey, b: &ReadingKey) -> Ordering {
+    b.degree.cmp(&a.degree).then_with(|| {
+        for (x, y) in a.atoms.iter().zip(&b.atoms) {
             let o = y.0.cmp(&x.0).then_with(|| g.cmp_nodes(x.1, y.1)).then_with(|| y.2.cmp(&x.2));
             if o != Ordering::Equal {
                 return o;
             }
         }
-        kb.len().cmp(&ka.len())
+        b.atoms.len().cmp(&a.atoms.len())
     })
 }
 

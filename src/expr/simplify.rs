@@ -30,10 +30,9 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::{Axis, Func, Graph, Id, Node, Ty, TypeError};
+use super::graph::{Axis, FastMap, Func, Graph, Id, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
-use std::collections::HashMap;
 use std::rc::Rc;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
@@ -59,10 +58,10 @@ pub(super) enum Canon {
 /// Keep one per graph: ids of different graphs mean different things.
 #[derive(Debug, Default)]
 pub struct Simplifier {
-    pub(super) memo: HashMap<Id, Rc<Canon>>,
-    pub(super) built: HashMap<Id, Id>,
+    pub(super) memo: FastMap<Id, Rc<Canon>>,
+    pub(super) built: FastMap<Id, Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
-    pub(super) radicals: HashMap<Id, Rc<Frac>>,
+    pub(super) radicals: FastMap<Id, Rc<Frac>>,
 }
 
 impl Simplifier {
@@ -83,8 +82,19 @@ impl Simplifier {
     }
 
     /// Whether `a` and `b` are equal as rational functions of their atoms.
+    ///
+    /// Denominators are kept as lists of factors, not fully factored, so one function can
+    /// have two forms (`1/((k²+1)(k⁶+1))` and `1/(k⁸+k⁶+k²+1)`): when the forms differ, the
+    /// difference `a − b` is brought to a common denominator and tested for zero.
     pub fn equivalent(&mut self, g: &mut Graph, a: Id, b: Id) -> Result<bool, TypeError> {
-        Ok(self.canon(g, a)? == self.canon(g, b)?)
+        if self.canon(g, a)? == self.canon(g, b)? {
+            return Ok(true);
+        }
+        if g.ty(a) != g.ty(b) {
+            return Ok(false);
+        }
+        let difference = g.sub(a, b)?;
+        self.is_zero(g, difference)
     }
 
     /// Whether `id` simplifies to zero.
@@ -237,8 +247,14 @@ impl Simplifier {
                 Some(Canon::S(Frac::atom(atom)))
             }
         };
+        // Sums and products of sums (common denominators, bilinear dot) can create
+        // `sqrt(x)²` anew; reduce them in every form, not only after products and powers.
         match result {
-            Some(c) => Ok(c),
+            Some(Canon::S(f)) => Ok(Canon::S(self.reduce_radicals(f))),
+            Some(Canon::V(v)) => {
+                let terms = v.0.into_iter().map(|(u, s)| (u, self.reduce_radicals(s))).filter(|(_, s)| !s.is_zero());
+                Ok(Canon::V(VecForm(terms.collect())))
+            }
             None => self.frozen(g, id, node),
         }
     }
@@ -256,6 +272,14 @@ impl Simplifier {
             if let Some(c) = base.as_constant() {
                 return Ok(c.pow(n).map(|c| Canon::S(Frac::constant(c))));
             }
+            // A denominator written as a product or a power stays a list of factors
+            // instead of being expanded into one polynomial, so simplifying the printed
+            // `1/((k^6 + 1)*(k^2 + 1))` again gives the same form (idempotence).
+            if n < 0
+                && let Some(f) = self.factored_power(g, b, n)
+            {
+                return Ok(Some(Canon::S(self.reduce_radicals(f))));
+            }
             return Ok(base.powi(n).map(|f| Canon::S(self.reduce_radicals(f))));
         }
         // b^(p/2) = sqrt(b)^p
@@ -264,6 +288,25 @@ impl Simplifier {
             return Ok(root.and_then(|r| r.powi(p)).map(|f| Canon::S(self.reduce_radicals(f))));
         }
         self.opaque_power(g, b, e)
+    }
+
+    /// `b^n` for `n < 0` with the factors of `b` kept apart: `(x y)^n = xⁿ yⁿ` and
+    /// `(x^m)^n = x^(mn)` for integer `m`. `None` when a factor is zero or too large.
+    fn factored_power(&self, g: &Graph, b: Id, n: i64) -> Option<Frac> {
+        match g.node(b) {
+            Node::Mul(xs) => {
+                let mut acc = Frac::constant(Rational::ONE);
+                for x in xs.iter() {
+                    acc = acc.mul(&self.factored_power(g, *x, n)?)?;
+                }
+                Some(acc)
+            }
+            Node::Pow([x, e]) => match self.scalar_of(*e).as_constant().and_then(|q| q.to_i64()) {
+                Some(m) if m > 0 => self.factored_power(g, *x, n.checked_mul(m)?),
+                _ => self.scalar_of(b).powi(n),
+            },
+            _ => self.scalar_of(b).powi(n),
+        }
     }
 
     fn opaque_power(&mut self, g: &mut Graph, b: Id, e: Id) -> Result<Option<Canon>, TypeError> {
@@ -339,7 +382,11 @@ impl Simplifier {
             return f;
         }
         let reduced = || -> Option<Frac> {
-            let mut num = Frac::zero();
+            // Terms whose replacement is a polynomial (the square has no denominator, the
+            // common case) are summed in one sort; adding them one by one as fractions
+            // tried an exact division per term and took 40 s on `sqrt(1 + (r1·r2/(1+t²))²)`.
+            let mut poly_terms: Vec<(Mono, Rational)> = Vec::new();
+            let mut fractions = Frac::zero();
             for (m, q) in &f.num.0 {
                 let mut term = Frac::constant(q.clone());
                 let mut rest = Mono::one();
@@ -355,8 +402,13 @@ impl Simplifier {
                     }
                 }
                 term = term.mul(&Frac::poly(Poly(vec![(rest, Rational::ONE)])))?;
-                num = num.add(&term)?;
+                if term.den.is_empty() {
+                    poly_terms.extend(term.num.0);
+                } else {
+                    fractions = fractions.add(&term)?;
+                }
             }
+            let num = Frac::poly(sum_terms(poly_terms)).add(&fractions)?;
             // Denominator factors stay factored; only heavy radicals move.
             let mut kept = Vec::new();
             let mut extra = Frac::constant(Rational::ONE);
@@ -492,7 +544,7 @@ impl Simplifier {
                         let sign = levi_civita(i.index(), j.index(), e.index());
                         if sign != 0 {
                             let aj = self.component(g, a, j)?.scale(&Rational::int(sign));
-                            let basis = VecForm(vec![(VAtom::Basis(i), aj)]);
+                            let basis = VecForm::term(VAtom::Basis(i), aj);
                             terms = terms.add(&basis).unwrap_or_default();
                         }
                     }
@@ -509,16 +561,16 @@ impl Simplifier {
                     (Node::Cross([p, q]), _) => {
                         let pw = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(b))?;
                         let qw = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(b))?;
-                        let first = VecForm(vec![(VAtom::Atom(q), pw)]);
-                        let second = VecForm(vec![(VAtom::Atom(p), qw)]);
+                        let first = VecForm::term(VAtom::Atom(q), pw);
+                        let second = VecForm::term(VAtom::Atom(p), qw);
                         first.add(&second.negated()).unwrap_or_default()
                     }
                     // u×(p×q) = p(u·q) − q(u·p)
                     (_, Node::Cross([p, q])) => {
                         let uq = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(q))?;
                         let up = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(p))?;
-                        let first = VecForm(vec![(VAtom::Atom(p), uq)]);
-                        let second = VecForm(vec![(VAtom::Atom(q), up)]);
+                        let first = VecForm::term(VAtom::Atom(p), uq);
+                        let second = VecForm::term(VAtom::Atom(q), up);
                         first.add(&second.negated()).unwrap_or_default()
                     }
                     _ => {
@@ -604,6 +656,27 @@ impl Simplifier {
     }
 }
 
+/// The polynomial `Σ qᵢ mᵢ` of unsorted terms: sorted once, like terms collected.
+fn sum_terms(mut terms: Vec<(Mono, Rational)>) -> Poly {
+    terms.sort_by(|a, b| a.0.cmp(&b.0));
+    let mut out: Vec<(Mono, Rational)> = Vec::with_capacity(terms.len());
+    for (m, q) in terms {
+        match out.last_mut() {
+            Some(last) if last.0 == m => last.1 = last.1.add(&q),
+            _ => {
+                if out.last().is_some_and(|l| l.1.is_zero()) {
+                    out.pop();
+                }
+                out.push((m, q));
+            }
+        }
+    }
+    if out.last().is_some_and(|l| l.1.is_zero()) {
+        out.pop();
+    }
+    Poly(out)
+}
+
 fn levi_civita(i: usize, j: usize, k: usize) -> i64 {
     match (i, j, k) {
         (0, 1, 2) | (1, 2, 0) | (2, 0, 1) => 1,
@@ -613,6 +686,12 @@ fn levi_civita(i: usize, j: usize, k: usize) -> i64 {
 }
 
 impl VecForm {
+    /// `s u` alone; empty when `s` is zero (a form never holds a zero coefficient: the
+    /// triple product in `(p×q)×w = q(p·w) − p(q·w)` can vanish, as for `w = q×p`).
+    fn term(u: VAtom, s: Frac) -> VecForm {
+        if s.is_zero() { VecForm::default() } else { VecForm(vec![(u, s)]) }
+    }
+
     pub(super) fn add(&self, other: &VecForm) -> Option<VecForm> {
         let mut out: Vec<(VAtom, Frac)> = Vec::with_capacity(self.0.len() + other.0.len());
         let (a, b) = (&self.0, &other.0);

@@ -10,6 +10,7 @@
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Role, Simplifier, Symbol, Ty};
+use std::collections::{HashMap, HashSet};
 
 /// A point mass.
 #[derive(Clone, Debug)]
@@ -98,7 +99,12 @@ pub enum BuildError {
 pub struct SystemBuilder {
     system: System,
     /// What each name was declared as, for clash messages.
-    kinds: Vec<(String, String)>,
+    /// Looked up by name for every declaration, so a map (a chain of 1000 links declares
+    /// 5000 names; a list made loading quadratic).
+    kinds: HashMap<String, String>,
+    /// Names of bodies and constraints declared so far, for duplicate checks.
+    body_names: HashSet<String>,
+    constraint_names: HashSet<String>,
 }
 
 /// The symbols of one body, by name.
@@ -139,7 +145,8 @@ impl SystemBuilder {
             time,
             scope,
         };
-        Ok(SystemBuilder { system, kinds: vec![("t".into(), "the time".into())] })
+        let kinds = HashMap::from([("t".to_string(), "the time".to_string())]);
+        Ok(SystemBuilder { system, kinds, body_names: HashSet::new(), constraint_names: HashSet::new() })
     }
 
     /// Claims `name` for `what`, refusing clashes and reserved names.
@@ -152,13 +159,13 @@ impl SystemBuilder {
         if is_function_name(name) {
             return Err(BuildError::Reserved(name.to_string()));
         }
-        if let Some((_, first)) = self.kinds.iter().find(|(n, _)| n == name) {
+        if let Some(first) = self.kinds.get(name) {
             if name == "t" {
                 return Err(BuildError::Reserved(name.to_string()));
             }
             return Err(BuildError::Duplicate { name: name.to_string(), first: first.clone(), second: what });
         }
-        self.kinds.push((name.to_string(), what));
+        self.kinds.insert(name.to_string(), what);
         Ok(())
     }
 
@@ -180,10 +187,10 @@ impl SystemBuilder {
     /// Declares a body and its symbols; returns its index.
     pub fn body(&mut self, spec: &BodySpec<'_>) -> Result<usize, BuildError> {
         let body = self.system.bodies.len();
-        if let Some(other) = self.system.bodies.iter().find(|b| b.name == spec.name) {
+        if self.body_names.contains(spec.name) {
             return Err(BuildError::Duplicate {
                 name: spec.name.to_string(),
-                first: format!("body `{}`", other.name),
+                first: format!("body `{}`", spec.name),
                 second: "another body".into(),
             });
         }
@@ -214,12 +221,13 @@ impl SystemBuilder {
                 self.system.graph.num(q)
             }
         };
+        self.body_names.insert(spec.name.to_string());
         self.system.bodies.push(Body { name: spec.name.to_string(), position, velocity, acceleration, force, mass });
         Ok(body)
     }
 
     fn is_constant(&self, name: &str) -> bool {
-        self.kinds.iter().any(|(n, what)| n == name && (what.starts_with("the mass") || what == "a parameter"))
+        self.kinds.get(name).is_some_and(|what| what.starts_with("the mass") || what == "a parameter")
     }
 
     /// Declares a named expression, substituted wherever the name is used. Definitions may
@@ -255,7 +263,7 @@ impl SystemBuilder {
         if bodies.is_empty() {
             return Err(BuildError::NoBody(name.to_string()));
         }
-        if self.system.constraints.iter().any(|k| k.name == name) {
+        if self.constraint_names.contains(name) {
             return Err(BuildError::Duplicate {
                 name: name.to_string(),
                 first: "a constraint".into(),
@@ -263,6 +271,7 @@ impl SystemBuilder {
             });
         }
         let k = self.system.constraints.len();
+        self.constraint_names.insert(name.to_string());
         self.system.constraints.push(Constraint {
             name: name.to_string(),
             text: text.to_string(),

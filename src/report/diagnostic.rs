@@ -14,6 +14,12 @@ pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
     let config = Config::default();
     let mut out = String::new();
     for p in problems {
+        if let Some(span) = &p.span
+            && let Some(clipped) = render_long_line(path, text, &p.message, span)
+        {
+            out.push_str(&clipped);
+            continue;
+        }
         let mut d = Diagnostic::error().with_message(&p.message);
         match &p.span {
             Some(span) => {
@@ -29,6 +35,47 @@ pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
         }
     }
     out
+}
+
+/// Source lines longer than this are shown as a window around the fault.
+const MAX_LINE_CHARS: usize = 160;
+
+/// The same layout as codespan's, for a problem on a source line too long to echo whole
+/// (a 10 MB expression must not become a 10 MB message): the line is cut to a window of
+/// the fault, marked with `…`. `None` when the line is short enough to show as it is.
+fn render_long_line(path: &str, text: &str, message: &str, span: &std::ops::Range<usize>) -> Option<String> {
+    let start = floor_char(text, span.start.min(text.len()));
+    let end = floor_char(text, span.end.clamp(start, text.len()));
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
+    let line = &text[line_start..line_end];
+    if line.chars().count() <= MAX_LINE_CHARS {
+        return None;
+    }
+    let number = text[..start].matches('\n').count() + 1;
+    let before: Vec<char> = text[line_start..start].chars().collect();
+    let column = before.len() + 1;
+    let shown_before = before.len().min(MAX_LINE_CHARS / 3);
+    let after: String = text[start..line_end].chars().take(MAX_LINE_CHARS - shown_before).collect();
+    let clipped_left = shown_before < before.len();
+    let clipped_right = start + after.len() < line_end;
+    let mut excerpt = String::new();
+    if clipped_left {
+        excerpt.push('…');
+    }
+    excerpt.extend(&before[before.len() - shown_before..]);
+    excerpt.push_str(&after);
+    if clipped_right {
+        excerpt.push('…');
+    }
+    let caret_at = shown_before + usize::from(clipped_left);
+    let carets = text[start..end.min(start + after.len())].chars().count().max(1);
+    let gutter = " ".repeat(number.to_string().len());
+    Some(format!(
+        "error: {message}\n{gutter} ┌─ {path}:{number}:{column}\n{gutter} │\n{number} │ {excerpt}\n{gutter} │ {}{}\n\n",
+        " ".repeat(caret_at),
+        "^".repeat(carets)
+    ))
 }
 
 /// The nearest char boundary at or before `i`.

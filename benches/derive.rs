@@ -1,0 +1,83 @@
+//! Parse + validate + derive (with simplification) per constraint file, with divan.
+//!
+//! `cargo bench --bench derive`. Cases: the article's bead in 2D and 3D, and an N-link
+//! chain (N = 10, 50, 200, 1000) with A and b for every link. Each derive case has its
+//! baseline in the same run: `load` alone (parsing, type checking, building the graph), so
+//! the cost of the derivation itself is the difference. Targets (issue 2): bead < 20 µs;
+//! chain linear in N, N = 200 < 4 ms, N = 1000 < 20 ms.
+
+use divan::{Bencher, black_box};
+use lagrange::derive::derive;
+use lagrange::model::file::load;
+use std::fmt::Write;
+
+fn main() {
+    divan::main();
+}
+
+const BEAD_2D: &str = include_str!("../constraints/bead_on_wire.toml");
+const BEAD_3D: &str = include_str!("../constraints/bead_on_sphere.toml");
+
+/// The TOML text of an `n`-link chain hanging from the origin (as `examples/chain.rs`).
+fn chain(n: usize) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "title = \"Chain of {n} links\"\ndimension = 2\n");
+    let _ = writeln!(s, "[parameters]\nl = 0.5\nm = 1.0\ng = [0.0, -9.81]\n");
+    for i in 1..=n {
+        let _ = writeln!(
+            s,
+            "[[bodies]]\nname = \"p{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\nmass = \"m\"\nforce = \"F{i}\"\n"
+        );
+    }
+    let _ = writeln!(s, "[[constraints]]\nname = \"link1\"\nexpr = \"dot(r1, r1) = l^2\"\n");
+    for i in 2..=n {
+        let j = i - 1;
+        let _ = writeln!(s, "[[constraints]]\nname = \"link{i}\"\nexpr = \"dot(r{i} - r{j}, r{i} - r{j}) = l^2\"\n");
+    }
+    s
+}
+
+fn load_and_derive(text: &str) -> usize {
+    let mut loaded = load(text).expect("the file loads");
+    let d = derive(&mut loaded.system).expect("the file derives");
+    d.a.len() + d.b.len()
+}
+
+#[divan::bench(args = [2, 3])]
+fn bead(bencher: Bencher, dim: usize) {
+    let text = if dim == 2 { BEAD_2D } else { BEAD_3D };
+    bencher.bench(|| load_and_derive(black_box(text)));
+}
+
+#[divan::bench(args = [2, 3])]
+fn bead_load_only(bencher: Bencher, dim: usize) {
+    let text = if dim == 2 { BEAD_2D } else { BEAD_3D };
+    bencher.bench(|| load(black_box(text)).map(|l| l.system.graph.len()).unwrap_or(0));
+}
+
+/// Two bodies and a radical over a time-dependent rational function: its C̈ is large, and
+/// reducing `sqrt(x)²` in it once took 40 s (now well under a second).
+#[divan::bench(sample_count = 5)]
+fn radical_of_rational(bencher: Bencher) {
+    let text = format!(
+        "dimension = 2\n[parameters]\nk = 1.0\n{}{}[[constraints]]\nname = \"c\"\n\
+         expr = \"sqrt(1 + (dot(r1/(1 + t^2), r2 + r1))^2) + k*dot(r1, r2)\"\n",
+        "[[bodies]]\nname = \"p1\"\nposition = \"r1\"\nvelocity = \"v1\"\nacceleration = \"a1\"\nmass = \"m1\"\nforce = \"F1\"\n",
+        "[[bodies]]\nname = \"p2\"\nposition = \"r2\"\nvelocity = \"v2\"\nacceleration = \"a2\"\nmass = \"m2\"\nforce = \"F2\"\n",
+    );
+    bencher.bench(|| load_and_derive(black_box(&text)));
+}
+
+#[divan::bench(args = [10, 50, 200, 1000], sample_count = 20)]
+fn chain_links(bencher: Bencher, n: usize) {
+    let text = chain(n);
+    // A is tridiagonal: n diagonal and n − 1 off-diagonal entries, and n entries of b.
+    assert_eq!(load_and_derive(&text), 3 * n - 1);
+    bencher.bench(|| load_and_derive(black_box(&text)));
+}
+
+#[divan::bench(args = [10, 50, 200, 1000], sample_count = 20)]
+fn chain_load_only(bencher: Bencher, n: usize) {
+    let text = chain(n);
+    bencher.bench(|| load(black_box(&text)).map(|l| l.system.graph.len()).unwrap_or(0));
+}

@@ -1,0 +1,141 @@
+//! Helpers shared by the integration tests: small systems, random states, evaluation.
+//!
+//! Each test binary uses a different subset, hence the `dead_code` allowance.
+#![allow(dead_code)]
+
+use lagrange::expr::eval::{Env, Value, eval_one};
+use lagrange::expr::{Id, Role, Ty};
+use lagrange::model::system::{BodySpec, MassSpec, System, SystemBuilder};
+
+/// A small deterministic generator (SplitMix64): tests must be reproducible.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed)
+    }
+
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[lo, hi)`.
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        let unit = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        lo + (hi - lo) * unit
+    }
+
+    /// A vector with `dim` components uniform in `[-1, 1)` (trailing components zero).
+    pub fn vector(&mut self, dim: usize) -> [f64; 3] {
+        let mut v = [0.0; 3];
+        for x in v.iter_mut().take(dim) {
+            *x = self.uniform(-1.0, 1.0);
+        }
+        v
+    }
+}
+
+/// A body named `name` with symbols `r{i} v{i} a{i} F{i}` and mass `m{i}` (or without the
+/// suffix when `i` is empty).
+pub fn body<'a>(name: &'a str, r: &'a str, v: &'a str, a: &'a str, f: &'a str, m: &'a str) -> BodySpec<'a> {
+    BodySpec { name, position: r, velocity: v, acceleration: a, force: f, mass: MassSpec::Symbol(m) }
+}
+
+/// The article's bead: one body `r v a F m`, parameter `l`, constraint `dot(r,r) = l^2`.
+pub fn bead(dim: i64) -> System {
+    let mut b = SystemBuilder::new("bead", dim).expect("dimension");
+    b.parameter("l", Ty::Scalar).expect("l");
+    b.body(&body("bead", "r", "v", "a", "F", "m")).expect("bead");
+    b.constraint("wire", "dot(r,r) = l^2").expect("wire");
+    b.finish()
+}
+
+/// Two bodies `p1` (`r1 v1 a1 F1 m1`) and `p2` (`r2 v2 a2 F2 m2`), scalar parameters
+/// `params`, and the given constraints `(name, text)`.
+pub fn two_bodies(dim: i64, params: &[&str], constraints: &[(&str, &str)]) -> System {
+    let mut b = SystemBuilder::new("two bodies", dim).expect("dimension");
+    for p in params {
+        b.parameter(p, Ty::Scalar).expect("parameter");
+    }
+    b.body(&body("p1", "r1", "v1", "a1", "F1", "m1")).expect("p1");
+    b.body(&body("p2", "r2", "v2", "a2", "F2", "m2")).expect("p2");
+    for (name, text) in constraints {
+        b.constraint(name, text).expect("constraint");
+    }
+    b.finish()
+}
+
+/// A random state for every symbol of `system`: vectors in `[-1, 1)ᵈ`, masses and scalar
+/// parameters in `[0.5, 2)`, `t` in `[-1, 1)`.
+pub fn random_env(system: &System, rng: &mut Rng) -> Env {
+    let dim = system.dim();
+    let mut env = Env::new();
+    for (s, info) in system.graph.symbols() {
+        let value = match (info.ty, info.role) {
+            (Ty::Vector, _) => Value::Vector(rng.vector(dim)),
+            (Ty::Scalar, Role::Time) => Value::Scalar(rng.uniform(-1.0, 1.0)),
+            (Ty::Scalar, _) => Value::Scalar(rng.uniform(0.5, 2.0)),
+        };
+        env.set(s, value);
+    }
+    env
+}
+
+pub fn scalar(system: &System, id: Id, env: &Env) -> f64 {
+    eval_one(&system.graph, id, env).expect("evaluates").scalar().expect("a scalar")
+}
+
+pub fn vector(system: &System, id: Id, env: &Env) -> [f64; 3] {
+    eval_one(&system.graph, id, env).expect("evaluates").vector().expect("a vector")
+}
+
+/// `|a − b| ≤ rel · max(1, |a|, |b|)`.
+pub fn close(a: f64, b: f64, rel: f64) -> bool {
+    (a - b).abs() <= rel * 1f64.max(a.abs()).max(b.abs())
+}
+
+/// Component-wise [`close`], with the scale taken from the larger vector.
+pub fn close_vec(a: [f64; 3], b: [f64; 3], rel: f64) -> bool {
+    let scale = a.iter().chain(&b).fold(1f64, |m, x| m.max(x.abs()));
+    a.iter().zip(&b).all(|(x, y)| (x - y).abs() <= rel * scale)
+}
+
+pub fn add3(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+
+pub fn scale3(k: f64, a: [f64; 3]) -> [f64; 3] {
+    [k * a[0], k * a[1], k * a[2]]
+}
+
+pub fn dot3(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Solves the small dense system `M x = y` by Gaussian elimination with partial pivoting.
+pub fn solve(mut m: Vec<Vec<f64>>, mut y: Vec<f64>) -> Vec<f64> {
+    let n = y.len();
+    for col in 0..n {
+        let pivot = (col..n).max_by(|&i, &j| m[i][col].abs().total_cmp(&m[j][col].abs())).unwrap_or(col);
+        m.swap(col, pivot);
+        y.swap(col, pivot);
+        let pivot_row = m[col].clone();
+        for row in col + 1..n {
+            let f = m[row][col] / pivot_row[col];
+            for (x, p) in m[row][col..].iter_mut().zip(&pivot_row[col..]) {
+                *x -= f * p;
+            }
+            y[row] -= f * y[col];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for row in (0..n).rev() {
+        let s: f64 = (row + 1..n).map(|k| m[row][k] * x[k]).sum();
+        x[row] = (y[row] - s) / m[row][row];
+    }
+    x
+}
