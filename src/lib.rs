@@ -7,4 +7,5 @@
 pub mod derive;
 pub mod expr;
 pub mod model;
+pub mod numeric;
 pub mod report;
