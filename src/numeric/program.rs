@@ -321,6 +321,15 @@ impl Builder {
         if let Some(x) = self.negated(a) {
             return self.sub(b, x);
         }
+        // x + (−c) = x − c, exactly.
+        if let Some(y) = self.k(b).filter(|y| *y < 0.0) {
+            let c = self.constant(-y);
+            return self.sub(a, c);
+        }
+        if let Some(x) = self.k(a).filter(|x| *x < 0.0) {
+            let c = self.constant(-x);
+            return self.sub(b, c);
+        }
         self.push(Op::Add(a.min(b), a.max(b)))
     }
 
@@ -359,6 +368,16 @@ impl Builder {
             _ => {}
         }
         // Signs move outwards, where sums turn them into subtractions.
+        if let Some(y) = self.k(b).filter(|y| *y < 0.0) {
+            let c = self.constant(-y);
+            let p = self.mul(a, c);
+            return self.neg(p);
+        }
+        if let Some(x) = self.k(a).filter(|x| *x < 0.0) {
+            let c = self.constant(-x);
+            let p = self.mul(c, b);
+            return self.neg(p);
+        }
         if let Some(x) = self.negated(a) {
             let p = self.mul(x, b);
             return self.neg(p);
