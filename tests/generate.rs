@@ -287,3 +287,17 @@ fn specialised_code_carries_no_parameters() {
     assert!(names.contains(&"r") && names.contains(&"v") && names.contains(&"F"), "{names:?}");
     let _: Vec<Symbol> = m.fields.iter().map(|f| f.0).collect();
 }
+
+/// The modules the benchmarks include are what the generator writes today.
+#[test]
+fn checked_in_generated_code_is_current() {
+    for (file, generated) in [
+        ("constraints/bead_on_wire.toml", "benches/generated/bead_on_wire.rs"),
+        ("benches/data/chain_10.toml", "benches/generated/chain_10.rs"),
+    ] {
+        let mut l = loaded(Path::new(file));
+        let code = lagrange::codegen::generate(&mut l, &Options::default()).expect("generates");
+        let on_disk = std::fs::read_to_string(generated).expect("checked-in module");
+        assert!(code == on_disk, "{generated} is stale: run `cargo run --release -- generate {file} -o {generated}`");
+    }
+}

@@ -209,7 +209,42 @@ impl Program {
         }
         let mut p = Program { ops: b.ops, n_inputs: n as usize, input_ranges, outputs, output_ranges };
         p.drop_dead();
+        p.share_reciprocals();
         Ok(p)
+    }
+
+    /// Divisions by a value that divides twice or more become products with its reciprocal,
+    /// computed once (`x/m, y/m` → `k = 1/m; x·k, y·k`): one division instead of many, the
+    /// rounding the interpreter has (it computes `x · m⁻¹`).
+    fn share_reciprocals(&mut self) {
+        let mut divisions = vec![0u32; self.ops.len()];
+        for op in &self.ops {
+            if let Op::Div(_, d) = op {
+                divisions[*d as usize] += 1;
+            }
+        }
+        if divisions.iter().all(|&k| k < 2) {
+            return;
+        }
+        let mut b = Builder::default();
+        let mut map: Vec<Val> = Vec::with_capacity(self.ops.len());
+        for op in &self.ops {
+            let m = |v: Val| map[v as usize];
+            let v = match *op {
+                Op::Div(x, d) if divisions[d as usize] >= 2 => {
+                    let one = b.constant(1.0);
+                    let k = b.push(Op::Div(one, m(d)));
+                    b.mul(m(x), k)
+                }
+                other => b.push(renumber(other, &map)),
+            };
+            map.push(v);
+        }
+        for o in &mut self.outputs {
+            *o = map[*o as usize];
+        }
+        self.ops = b.ops;
+        self.drop_dead();
     }
 
     /// Removes operations no output depends on (inputs stay) and renumbers the rest.

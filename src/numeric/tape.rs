@@ -18,7 +18,7 @@
 //!
 //! Not here: the lowering itself (`program.rs`), text, files.
 
-use super::program::{LowerError, Op, Program, norm2, norm3};
+use super::program::{LowerError, Op, Program, Val, norm2, norm3};
 use crate::expr::eval;
 use crate::expr::{Func, Graph, Id, Symbol};
 use rayon::prelude::*;
@@ -38,7 +38,12 @@ pub enum TapeError {
     Lower(#[from] LowerError),
 }
 
-/// What an instruction computes; operands are register numbers in [`Inst`].
+/// What an instruction computes; operands are register numbers in [`Inst`]. A flat list,
+/// so dispatch is one jump table.
+///
+/// The fused codes are products feeding a sum, `a·b + c·d` and friends: the commonest shape
+/// of a lowered dot product. They round exactly as the separate operations do (no FMA), so
+/// fusing changes the instruction count, never a result.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Code {
     Add,
@@ -46,22 +51,63 @@ enum Code {
     Mul,
     Div,
     Neg,
-    Powi(i32),
+    /// `a^imm`.
+    Powi,
     Powf,
-    Call(Func),
+    Sqrt,
+    Sin,
+    Cos,
+    Tan,
+    Asin,
+    Acos,
+    Atan,
+    Exp,
+    Ln,
     Atan2,
     Norm2,
     Norm3,
+    /// `a·b + c·e`.
+    MulMulAdd,
+    /// `a·b − c·e`.
+    MulMulSub,
+    /// `a·b + c`.
+    MulAdd,
+    /// `a·b − c`.
+    MulSub,
+    /// `a − b·c`.
+    SubMul,
+    /// `−(a·b)`.
+    NegMul,
+    /// `−(a/b)`.
+    NegDiv,
 }
 
-/// `r[d] = code(r[a], r[b], r[c])`. Unused operands repeat `a`, and `d` is never an operand.
+impl Code {
+    fn call(f: Func) -> Code {
+        match f {
+            Func::Sqrt => Code::Sqrt,
+            Func::Sin => Code::Sin,
+            Func::Cos => Code::Cos,
+            Func::Tan => Code::Tan,
+            Func::Asin => Code::Asin,
+            Func::Acos => Code::Acos,
+            Func::Atan => Code::Atan,
+            Func::Exp => Code::Exp,
+            Func::Ln => Code::Ln,
+        }
+    }
+}
+
+/// `r[d] = code(r[a], r[b], r[c], r[e])`. Unused operands repeat `a`; `d` is never an operand.
 #[derive(Clone, Copy, Debug)]
 struct Inst {
     code: Code,
+    imm: i32,
     d: u32,
     a: u32,
     b: u32,
     c: u32,
+    e: u32,
 }
 
 /// A compiled set of expressions. Immutable; share it between threads freely.
@@ -115,14 +161,70 @@ impl Tape {
         Ok(Tape::from_program(&p))
     }
 
-    /// Allocates registers for a lowered program.
+    /// Fuses products into the sums that use them, then allocates registers.
     pub fn from_program(p: &Program) -> Tape {
         let n = p.ops.len();
+        let uses = p.use_counts();
+        let single_mul = |v: Val| match p.ops[v as usize] {
+            Op::Mul(x, y) if uses[v as usize] == 1 => Some((x, y)),
+            _ => None,
+        };
+        // Instructions over values: (value, code, imm, operands). Products read only by one
+        // sum are absorbed into it.
+        let mut absorbed = vec![false; n];
+        let mut virt: Vec<(usize, Code, i32, [Val; 4])> = Vec::with_capacity(n);
+        for (i, op) in p.ops.iter().enumerate() {
+            let (code, imm, args) = match *op {
+                Op::Input(_) | Op::Const(_) => continue,
+                Op::Add(a, b) | Op::Sub(a, b) => {
+                    let sub = matches!(op, Op::Sub(..));
+                    match (single_mul(a), single_mul(b)) {
+                        (Some((p, q)), Some((r, t))) => {
+                            absorbed[a as usize] = true;
+                            absorbed[b as usize] = true;
+                            (if sub { Code::MulMulSub } else { Code::MulMulAdd }, 0, [p, q, r, t])
+                        }
+                        (Some((p, q)), None) => {
+                            absorbed[a as usize] = true;
+                            (if sub { Code::MulSub } else { Code::MulAdd }, 0, [p, q, b, p])
+                        }
+                        (None, Some((r, t))) => {
+                            absorbed[b as usize] = true;
+                            if sub { (Code::SubMul, 0, [a, r, t, a]) } else { (Code::MulAdd, 0, [r, t, a, r]) }
+                        }
+                        (None, None) => (if sub { Code::Sub } else { Code::Add }, 0, [a, b, a, a]),
+                    }
+                }
+                Op::Mul(a, b) => (Code::Mul, 0, [a, b, a, a]),
+                Op::Div(a, b) => (Code::Div, 0, [a, b, a, a]),
+                Op::Neg(a) => match (single_mul(a), p.ops[a as usize]) {
+                    (Some((x, y)), _) => {
+                        absorbed[a as usize] = true;
+                        (Code::NegMul, 0, [x, y, x, x])
+                    }
+                    (None, Op::Div(x, y)) if uses[a as usize] == 1 => {
+                        absorbed[a as usize] = true;
+                        (Code::NegDiv, 0, [x, y, x, x])
+                    }
+                    _ => (Code::Neg, 0, [a; 4]),
+                },
+                Op::Powi(a, k) => (Code::Powi, k, [a; 4]),
+                Op::Powf(a, b) => (Code::Powf, 0, [a, b, a, a]),
+                Op::Call(f, a) => (Code::call(f), 0, [a; 4]),
+                Op::Atan2(a, b) => (Code::Atan2, 0, [a, b, a, a]),
+                Op::Norm2(a, b) => (Code::Norm2, 0, [a, b, a, a]),
+                Op::Norm3(a, b, c) => (Code::Norm3, 0, [a, b, c, a]),
+            };
+            virt.push((i, code, imm, args));
+        }
+        // Sums come after their products, so a product is absorbed before it would be emitted
+        // only if we look ahead: drop absorbed products now.
+        virt.retain(|(i, ..)| !absorbed[*i]);
         // Last reader of each value; outputs are read at the end.
         let mut last = vec![0usize; n];
-        for (i, op) in p.ops.iter().enumerate() {
-            for a in op.operands() {
-                last[a as usize] = i;
+        for (k, (_, _, _, args)) in virt.iter().enumerate() {
+            for &a in args {
+                last[a as usize] = k;
             }
         }
         for &o in &p.outputs {
@@ -144,35 +246,21 @@ impl Tape {
         let first_temp = (p.n_inputs + consts.len()) as u32;
         let mut n_regs = first_temp;
         let mut free: Vec<u32> = Vec::new();
-        let mut code = Vec::with_capacity(n);
-        for (i, op) in p.ops.iter().enumerate() {
-            let (kind, args): (Code, [u32; 3]) = match *op {
-                Op::Input(_) | Op::Const(_) => continue,
-                Op::Add(a, b) => (Code::Add, [a, b, a]),
-                Op::Sub(a, b) => (Code::Sub, [a, b, a]),
-                Op::Mul(a, b) => (Code::Mul, [a, b, a]),
-                Op::Div(a, b) => (Code::Div, [a, b, a]),
-                Op::Neg(a) => (Code::Neg, [a, a, a]),
-                Op::Powi(a, k) => (Code::Powi(k), [a, a, a]),
-                Op::Powf(a, b) => (Code::Powf, [a, b, a]),
-                Op::Call(f, a) => (Code::Call(f), [a, a, a]),
-                Op::Atan2(a, b) => (Code::Atan2, [a, b, a]),
-                Op::Norm2(a, b) => (Code::Norm2, [a, b, a]),
-                Op::Norm3(a, b, c) => (Code::Norm3, [a, b, c]),
-            };
+        let mut code = Vec::with_capacity(virt.len());
+        for (k, &(i, kind, imm, args)) in virt.iter().enumerate() {
             // The destination is taken before the operands are freed, so it is never one of them.
             let d = free.pop().unwrap_or_else(|| {
                 n_regs += 1;
                 n_regs - 1
             });
             reg[i] = d;
-            let [a, b, c] = args.map(|v| reg[v as usize]);
-            code.push(Inst { code: kind, d, a, b, c });
+            let [a, b, c, e] = args.map(|v| reg[v as usize]);
+            code.push(Inst { code: kind, imm, d, a, b, c, e });
             let mut operands = args;
             operands.sort_unstable();
-            for (k, &v) in operands.iter().enumerate() {
+            for (x, &v) in operands.iter().enumerate() {
                 let r = reg[v as usize];
-                if last[v as usize] == i && r >= first_temp && (k == 0 || operands[k - 1] != v) {
+                if last[v as usize] == k && r >= first_temp && (x == 0 || operands[x - 1] != v) {
                     free.push(r);
                 }
             }
@@ -243,12 +331,27 @@ impl Tape {
                 Code::Mul => a * b,
                 Code::Div => a / b,
                 Code::Neg => -a,
-                Code::Powi(n) => a.powi(n),
+                Code::Powi => a.powi(i.imm),
                 Code::Powf => eval::pow(a, b),
-                Code::Call(f) => eval::apply(f, a),
+                Code::Sqrt => a.sqrt(),
+                Code::Sin => a.sin(),
+                Code::Cos => a.cos(),
+                Code::Tan => a.tan(),
+                Code::Asin => a.asin(),
+                Code::Acos => a.acos(),
+                Code::Atan => a.atan(),
+                Code::Exp => a.exp(),
+                Code::Ln => a.ln(),
                 Code::Atan2 => a.atan2(b),
                 Code::Norm2 => norm2(a, b),
                 Code::Norm3 => norm3(a, b, r[i.c as usize]),
+                Code::MulMulAdd => a * b + r[i.c as usize] * r[i.e as usize],
+                Code::MulMulSub => a * b - r[i.c as usize] * r[i.e as usize],
+                Code::MulAdd => a * b + r[i.c as usize],
+                Code::MulSub => a * b - r[i.c as usize],
+                Code::SubMul => a - b * r[i.c as usize],
+                Code::NegMul => -(a * b),
+                Code::NegDiv => -(a / b),
             };
         }
         for (o, &reg) in outputs.iter_mut().zip(&self.outputs) {
@@ -309,37 +412,56 @@ impl Tape {
         let mut s = range.start;
         while s < range.end {
             let len = LANES.min(range.end - s);
-            for j in 0..self.n_inputs {
-                regs[j * LANES..j * LANES + len].copy_from_slice(&inputs[j * n + s..j * n + s + len]);
-            }
+            // Inputs are read where they are (rows of `inputs`), not copied into registers.
             for (k, &x) in self.consts.iter().enumerate() {
                 let r = (self.n_inputs + k) * LANES;
                 regs[r..r + len].fill(x);
             }
-            self.run_lane(regs, len);
+            self.run_lane(regs, Rows { inputs, n, start: s, count: self.n_inputs }, len);
             for (k, &reg) in self.outputs.iter().enumerate() {
-                let r = reg as usize * LANES;
-                store(k, s, &regs[r..r + len]);
+                let r = reg as usize;
+                // An output may be an input itself (the direction of `r·r` is `r`).
+                let lane = if r < self.n_inputs {
+                    &inputs[r * n + s..r * n + s + len]
+                } else {
+                    &regs[r * LANES..r * LANES + len]
+                };
+                store(k, s, lane);
             }
             s += len;
         }
     }
 
-    /// One pass of the tape over `len` states held in `regs` (register `k` at `k * LANES`).
-    fn run_lane(&self, regs: &mut [f64], len: usize) {
+    /// One pass of the tape over `len` states: input registers read from `rows`, the others
+    /// held in `regs` (register `k` at `k * LANES`).
+    fn run_lane(&self, regs: &mut [f64], rows: Rows<'_>, len: usize) {
         for i in &self.code {
-            let (out, [a, b, c]) = lanes(regs, i, len);
+            let (out, [a, b, c, e]) = lanes(regs, rows, i, len);
             match i.code {
                 Code::Add => zip2(out, a, b, |x, y| x + y),
                 Code::Sub => zip2(out, a, b, |x, y| x - y),
                 Code::Mul => zip2(out, a, b, |x, y| x * y),
                 Code::Div => zip2(out, a, b, |x, y| x / y),
                 Code::Neg => zip1(out, a, |x| -x),
-                Code::Powi(n) => zip1(out, a, |x| x.powi(n)),
+                Code::Powi => zip1(out, a, |x| x.powi(i.imm)),
                 Code::Powf => zip2(out, a, b, eval::pow),
-                Code::Call(Func::Sqrt) => zip1(out, a, f64::sqrt),
-                Code::Call(f) => zip1(out, a, |x| eval::apply(f, x)),
+                Code::Sqrt => zip1(out, a, f64::sqrt),
+                Code::Sin => zip1(out, a, f64::sin),
+                Code::Cos => zip1(out, a, f64::cos),
+                Code::Tan => zip1(out, a, f64::tan),
+                Code::Asin => zip1(out, a, f64::asin),
+                Code::Acos => zip1(out, a, f64::acos),
+                Code::Atan => zip1(out, a, f64::atan),
+                Code::Exp => zip1(out, a, f64::exp),
+                Code::Ln => zip1(out, a, f64::ln),
                 Code::Atan2 => zip2(out, a, b, f64::atan2),
+                Code::MulMulAdd => zip4(out, a, b, c, e, |w, x, y, z| w * x + y * z),
+                Code::MulMulSub => zip4(out, a, b, c, e, |w, x, y, z| w * x - y * z),
+                Code::MulAdd => zip3(out, a, b, c, |x, y, z| x * y + z),
+                Code::MulSub => zip3(out, a, b, c, |x, y, z| x * y - z),
+                Code::SubMul => zip3(out, a, b, c, |x, y, z| x - y * z),
+                Code::NegMul => zip2(out, a, b, |x, y| -(x * y)),
+                Code::NegDiv => zip2(out, a, b, |x, y| -(x / y)),
                 Code::Norm2 => {
                     // Plain formula over the lane (vectorised), then the rare overflow cases again.
                     zip2(out, a, b, |x, y| (x * x + y * y).sqrt());
@@ -350,9 +472,7 @@ impl Tape {
                     }
                 }
                 Code::Norm3 => {
-                    for (((o, &x), &y), &z) in out.iter_mut().zip(a).zip(b).zip(c) {
-                        *o = (x * x + y * y + z * z).sqrt();
-                    }
+                    zip3(out, a, b, c, |x, y, z| (x * x + y * y + z * z).sqrt());
                     for (((o, &x), &y), &z) in out.iter_mut().zip(a).zip(b).zip(c) {
                         if !(o.is_finite() && *o >= 1e-150) {
                             *o = norm3(x, y, z);
@@ -364,8 +484,18 @@ impl Tape {
     }
 }
 
-/// The destination lane of `i` (mutable) and its three operand lanes.
-fn lanes<'r>(regs: &'r mut [f64], i: &Inst, len: usize) -> (&'r mut [f64], [&'r [f64]; 3]) {
+/// Where the input registers of a lane are: slot `k` of the states `start..` is
+/// `inputs[k * n + start..]`.
+#[derive(Clone, Copy)]
+struct Rows<'a> {
+    inputs: &'a [f64],
+    n: usize,
+    start: usize,
+    count: usize,
+}
+
+/// The destination lane of `i` (mutable) and its four operand lanes.
+fn lanes<'r>(regs: &'r mut [f64], rows: Rows<'r>, i: &Inst, len: usize) -> (&'r mut [f64], [&'r [f64]; 4]) {
     let d = i.d as usize;
     let (below, rest) = regs.split_at_mut(d * LANES);
     let (out, above) = rest.split_at_mut(LANES);
@@ -373,9 +503,15 @@ fn lanes<'r>(regs: &'r mut [f64], i: &Inst, len: usize) -> (&'r mut [f64], [&'r 
     // `d` is never an operand (see `Inst`), so every operand lies below or above it.
     let get = |k: u32| {
         let k = k as usize;
-        if k < d { &below[k * LANES..k * LANES + len] } else { &above[(k - d - 1) * LANES..(k - d - 1) * LANES + len] }
+        if k < rows.count {
+            &rows.inputs[k * rows.n + rows.start..k * rows.n + rows.start + len]
+        } else if k < d {
+            &below[k * LANES..k * LANES + len]
+        } else {
+            &above[(k - d - 1) * LANES..(k - d - 1) * LANES + len]
+        }
     };
-    (&mut out[..len], [get(i.a), get(i.b), get(i.c)])
+    (&mut out[..len], [get(i.a), get(i.b), get(i.c), get(i.e)])
 }
 
 #[inline(always)]
@@ -389,5 +525,19 @@ fn zip1(out: &mut [f64], a: &[f64], f: impl Fn(f64) -> f64) {
 fn zip2(out: &mut [f64], a: &[f64], b: &[f64], f: impl Fn(f64, f64) -> f64) {
     for ((o, &x), &y) in out.iter_mut().zip(a).zip(b) {
         *o = f(x, y);
+    }
+}
+
+#[inline(always)]
+fn zip3(out: &mut [f64], a: &[f64], b: &[f64], c: &[f64], f: impl Fn(f64, f64, f64) -> f64) {
+    for (((o, &x), &y), &z) in out.iter_mut().zip(a).zip(b).zip(c) {
+        *o = f(x, y, z);
+    }
+}
+
+#[inline(always)]
+fn zip4(out: &mut [f64], a: &[f64], b: &[f64], c: &[f64], d: &[f64], f: impl Fn(f64, f64, f64, f64) -> f64) {
+    for ((((o, &w), &x), &y), &z) in out.iter_mut().zip(a).zip(b).zip(c).zip(d) {
+        *o = f(w, x, y, z);
     }
 }
