@@ -279,3 +279,18 @@ fn large_batches_run_in_parallel_and_agree() {
         }
     }
 }
+
+#[test]
+fn a_malformed_program_is_refused_not_run() {
+    use lagrange::numeric::program::{Op, Program};
+    // Value 1 reads value 2 before it exists.
+    let p = Program {
+        ops: vec![Op::Input(0), Op::Add(0, 2), Op::Call(lagrange::expr::Func::Sqrt, 0)],
+        n_inputs: 1,
+        input_ranges: std::iter::once(0..1).collect(),
+        outputs: vec![1],
+        output_ranges: std::iter::once(0..1).collect(),
+    };
+    let built = std::panic::catch_unwind(|| Tape::from_program(&p));
+    assert!(built.is_err(), "a forward reference must not compile to a tape");
+}

@@ -162,6 +162,10 @@ impl Tape {
     }
 
     /// Fuses products into the sums that use them, then allocates registers.
+    ///
+    /// # Panics
+    /// If `p` is malformed (an operand used before it is computed, an input slot past
+    /// `n_inputs`); programs from [`Program::lower`] never are.
     pub fn from_program(p: &Program) -> Tape {
         let n = p.ops.len();
         let uses = p.use_counts();
@@ -265,11 +269,20 @@ impl Tape {
                 }
             }
         }
+        // `eval` reads registers without bounds checks: every register number must be below
+        // `n_regs`. Lowering guarantees it; a hand-made malformed `Program` stops here.
+        let n_regs = n_regs as usize;
+        let valid = |k: u32| (k as usize) < n_regs;
+        assert!(
+            code.iter().all(|i| [i.d, i.a, i.b, i.c, i.e].into_iter().all(valid))
+                && p.outputs.iter().all(|&o| valid(reg[o as usize])),
+            "malformed program: an operand is not computed before it is used"
+        );
         Tape {
             code,
             n_inputs: p.n_inputs,
             consts,
-            n_regs: n_regs as usize,
+            n_regs,
             outputs: p.outputs.iter().map(|&o| reg[o as usize]).collect(),
             output_ranges: p.output_ranges.clone(),
             input_ranges: p.input_ranges.clone(),
@@ -324,8 +337,11 @@ impl Tape {
         r[..self.n_inputs].copy_from_slice(inputs);
         r[self.n_inputs..self.n_inputs + self.consts.len()].copy_from_slice(&self.consts);
         for i in &self.code {
-            let (a, b) = (r[i.a as usize], r[i.b as usize]);
-            r[i.d as usize] = match i.code {
+            // SAFETY: `from_program` only writes register numbers below `n_regs` into `code`, and
+            // `r` has exactly `n_regs` registers (asserted above).
+            let reg = |k: u32| unsafe { *r.get_unchecked(k as usize) };
+            let (a, b) = (reg(i.a), reg(i.b));
+            let x = match i.code {
                 Code::Add => a + b,
                 Code::Sub => a - b,
                 Code::Mul => a * b,
@@ -344,15 +360,17 @@ impl Tape {
                 Code::Ln => a.ln(),
                 Code::Atan2 => a.atan2(b),
                 Code::Norm2 => norm2(a, b),
-                Code::Norm3 => norm3(a, b, r[i.c as usize]),
-                Code::MulMulAdd => a * b + r[i.c as usize] * r[i.e as usize],
-                Code::MulMulSub => a * b - r[i.c as usize] * r[i.e as usize],
-                Code::MulAdd => a * b + r[i.c as usize],
-                Code::MulSub => a * b - r[i.c as usize],
-                Code::SubMul => a - b * r[i.c as usize],
+                Code::Norm3 => norm3(a, b, reg(i.c)),
+                Code::MulMulAdd => a * b + reg(i.c) * reg(i.e),
+                Code::MulMulSub => a * b - reg(i.c) * reg(i.e),
+                Code::MulAdd => a * b + reg(i.c),
+                Code::MulSub => a * b - reg(i.c),
+                Code::SubMul => a - b * reg(i.c),
                 Code::NegMul => -(a * b),
                 Code::NegDiv => -(a / b),
             };
+            // SAFETY: as above.
+            unsafe { *r.get_unchecked_mut(i.d as usize) = x };
         }
         for (o, &reg) in outputs.iter_mut().zip(&self.outputs) {
             *o = r[reg as usize];
