@@ -301,3 +301,15 @@ fn checked_in_generated_code_is_current() {
         assert!(code == on_disk, "{generated} is stale: run `cargo run --release -- generate {file} -o {generated}`");
     }
 }
+
+/// Specialising a tiny parameter must not turn a finite formula into ∞·0: collecting over a
+/// common denominator would need constants past f64's range.
+#[test]
+fn specialising_extreme_values_keeps_formulas_finite() {
+    let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("bead");
+    let text = text.replace("l = 2.0", "l = 1e-200");
+    assert!(text.contains("l = 1e-200"));
+    let mut l = load(&text).expect("loads");
+    let code = lagrange::codegen::generate(&mut l, &Options { specialize: true }).expect("generates");
+    assert!(!code.contains("INFINITY") && !code.contains("NAN"), "{code}");
+}

@@ -147,7 +147,10 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
         let simplifier = &mut system.simplifier;
         formulas = formulas.map(|id| {
             let replaced = g.substitute(id, &map)?;
-            Ok(simplifier.simplify(g, replaced)?)
+            let simplified = simplifier.simplify(g, replaced)?;
+            // Collecting over a common denominator can build constants past f64's range
+            // (l = 1e-200 gives 1e400 l²-free forms); then keep the formula as substituted.
+            Ok(if out_of_range(g, simplified) && !out_of_range(g, replaced) { replaced } else { simplified })
         })?;
     }
     let g = &system.graph;
@@ -336,6 +339,17 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     }
     out.push_str(HELPERS);
     Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
+}
+
+/// Whether a constant of `id` is non-zero but rounds to 0, ∞ or near the edges of f64.
+fn out_of_range(g: &Graph, id: Id) -> bool {
+    g.reachable(&[id]).into_iter().any(|x| match g.as_num(x) {
+        Some(q) if !q.is_zero() => {
+            let v = q.to_f64().abs();
+            !(1e-280..=1e280).contains(&v)
+        }
+        _ => false,
+    })
 }
 
 /// An `f64` as an exact rational (the decimal it prints as), if finite and not huge.
