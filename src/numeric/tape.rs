@@ -383,7 +383,9 @@ impl Tape {
 
     /// Evaluates every root at `n` states stored as structure of arrays: input slot `j` of
     /// state `s` is `inputs[j * n + s]`, output component `k` of state `s` goes to
-    /// `outputs[k * n + s]`. Batches of [`PARALLEL_MIN`] states or more run in parallel.
+    /// `outputs[k * n + s]`. Batches of [`PARALLEL_MIN`] states or more run in parallel;
+    /// that path allocates once per call (task bookkeeping and a register file per worker),
+    /// the serial path never does.
     ///
     /// # Panics
     /// If the slices are not `n` times [`input_len`](Tape::input_len) and
