@@ -1,6 +1,7 @@
 //! The `lagrange` command line: parse arguments, call the library, print. Nothing else.
 
 use clap::{Parser, Subcommand, ValueEnum};
+use lagrange::codegen::{Options, generate};
 use lagrange::derive::derive;
 use lagrange::model::file::{Problem, load};
 use lagrange::report::derivation::{self, Format};
@@ -33,6 +34,25 @@ enum Command {
         #[arg(long)]
         steps: bool,
     },
+    /// Write source code for the formulas: plain functions, no dependency on lagrange.
+    Generate {
+        /// The constraint file (TOML).
+        file: PathBuf,
+        /// The language to write.
+        #[arg(long, value_enum, default_value_t = LangArg::Rust)]
+        lang: LangArg,
+        /// Write to this file instead of stdout.
+        #[arg(short = 'o', long = "output")]
+        output: Option<PathBuf>,
+        /// Write the file's parameter values into the formulas (only what the scene needs).
+        #[arg(long)]
+        specialize: bool,
+    },
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum LangArg {
+    Rust,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -60,6 +80,9 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
+        Command::Generate { file, lang: LangArg::Rust, output, specialize } => {
+            cmd_generate(&file, output.as_deref(), specialize)
+        }
     }
 }
 
@@ -127,6 +150,40 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
         Err(e) => {
             eprintln!("error: {}: {e}", path.display());
             ExitCode::from(1)
+        }
+    }
+}
+
+fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCode {
+    let text = match read_text(path) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::from(1);
+        }
+    };
+    let mut loaded = match load(&text) {
+        Ok(l) => l,
+        Err(problems) => return report_problems(path, &text, &problems),
+    };
+    let code = match generate(&mut loaded, &Options { specialize }) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {}: {e}", path.display());
+            return ExitCode::from(1);
+        }
+    };
+    match output {
+        Some(out) => match std::fs::write(out, code) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(e) => {
+                eprintln!("error: cannot write {}: {e}", out.display());
+                ExitCode::from(1)
+            }
+        },
+        None => {
+            print!("{code}");
+            ExitCode::SUCCESS
         }
     }
 }

@@ -37,8 +37,21 @@ fn rules() -> Vec<Rule> {
         Rule {
             scope: "src/numeric",
             exempt: &[],
-            forbidden: &["toml", "serde", "println!", "print!", "eprintln!", "eprint!", "std::fs", "fs::"],
-            why: "numeric knows nothing of TOML, serde or text output",
+            forbidden: &[
+                "toml",
+                "serde",
+                "println!",
+                "print!",
+                "eprintln!",
+                "eprint!",
+                "std::fs",
+                "fs::",
+                "model::file",
+                "model::scene",
+                "expr::print",
+                "report",
+            ],
+            why: "numeric knows nothing of TOML, files or text: it sees the resolved System, never the file",
         },
         Rule {
             scope: "src",

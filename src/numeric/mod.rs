@@ -1,7 +1,18 @@
-//! Numbers: the rows of a derived system at a state, and the multiplier solve.
+//! Numbers from formulas: compiled evaluation, the rows of a derived system at a state, and
+//! the multiplier solve.
 //!
-//! This module knows nothing of TOML or text: states arrive as [`crate::expr::eval::Env`],
-//! results leave as plain numbers and diagnostics.
+//! [`program`] lowers graph expressions to one scalar SSA program (components, folded
+//! constants, scalar-level CSE); [`tape`] allocates registers for it and evaluates it at one
+//! state or at many (structure of arrays, vectorised lanes, rayon for large batches). The Rust
+//! generator (`codegen`) starts from the same program. [`rows`] evaluates a derivation's rows
+//! (C, Ċ, J, c) at a state; [`solve`] finds the multipliers.
+//!
+//! This module knows nothing of TOML, files or text: states arrive as
+//! [`crate::expr::eval::Env`], results leave as plain numbers and diagnostics.
 
+pub mod program;
 pub mod rows;
 pub mod solve;
+pub mod tape;
+
+pub use tape::{BatchScratch, Scratch, Tape, TapeError};

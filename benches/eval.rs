@@ -1,0 +1,295 @@
+//! Evaluation speed, always against a handwritten baseline from the same run.
+//!
+//! The article's bead force F_c = −(m v·v + F·r)/(r·r) r and a 10-link chain's A and b, each
+//! computed by: handwritten Rust, the code `lagrange generate` writes (checked in under
+//! `benches/generated/`, kept current by `tests/generate.rs`), the compiled tape for one
+//! state, and the tape batched over many states (structure of arrays).
+//!
+//! Run: `cargo bench --bench eval`. Per-state figures of batches are the time divided by
+//! the batch size (divan also prints the throughput).
+
+use divan::{Bencher, black_box, counter::ItemsCount};
+use lagrange::derive::derive;
+use lagrange::expr::{Id, Symbol};
+use lagrange::model::file::load;
+use lagrange::numeric::Tape;
+
+#[allow(dead_code, clippy::all)]
+mod bead {
+    include!("generated/bead_on_wire.rs");
+}
+
+#[allow(dead_code, clippy::all)]
+mod chain {
+    include!("generated/chain_10.rs");
+}
+
+fn main() {
+    divan::main();
+}
+
+const BATCHES: [usize; 2] = [1024, 65536];
+
+// ---- the bead -----------------------------------------------------------------------------
+
+/// A bead state for the handwritten function, passed by reference like the generated one.
+struct BeadState {
+    r: [f64; 2],
+    v: [f64; 2],
+    f: [f64; 2],
+    m: f64,
+}
+
+/// The article's formula by hand: λ = −(m v·v + F·r)/(r·r), F_c = λ r.
+#[inline(never)]
+fn bead_by_hand(s: &BeadState) -> [f64; 2] {
+    let BeadState { r, v, f, m } = *s;
+    let lambda = -(m * (v[0] * v[0] + v[1] * v[1]) + (f[0] * r[0] + f[1] * r[1])) / (r[0] * r[0] + r[1] * r[1]);
+    [lambda * r[0], lambda * r[1]]
+}
+
+#[inline(never)]
+fn bead_generated(s: &bead::State) -> [f64; 2] {
+    bead::force_bead(s)
+}
+
+/// The bead's force as a tape over the inputs [r, v, F, m] (7 slots).
+fn bead_tape() -> Tape {
+    let mut l = load(include_str!("../constraints/bead_on_wire.toml")).expect("bead file");
+    let d = derive(&mut l.system).expect("derives");
+    let force = d.forces.expect("one constraint")[0].1;
+    let b = &l.system.bodies[0];
+    let m = l.system.graph.symbol_named("m").expect("m");
+    Tape::compile(&l.system.graph, &[force], &[b.position, b.velocity, b.force, m]).expect("compiles")
+}
+
+const R: [f64; 2] = [1.2, -1.6];
+const V: [f64; 2] = [0.3, 0.9];
+const F: [f64; 2] = [0.0, -9.81];
+const M: f64 = 1.5;
+
+#[divan::bench(name = "bead_1_handwritten")]
+fn bead_handwritten(b: Bencher) {
+    let s = BeadState { r: R, v: V, f: F, m: M };
+    b.bench_local(|| bead_by_hand(black_box(&s)));
+}
+
+#[divan::bench(name = "bead_2_generated")]
+fn bead_generated_bench(b: Bencher) {
+    let s = bead::State { r: R, v: V, f: F, m: M, ..Default::default() };
+    b.bench_local(|| bead_generated(black_box(&s)));
+}
+
+#[divan::bench(name = "bead_3_tape")]
+fn bead_tape_bench(b: Bencher) {
+    let tape = bead_tape();
+    let mut scratch = tape.scratch();
+    let inputs = [R[0], R[1], V[0], V[1], F[0], F[1], M];
+    let mut out = [0.0; 2];
+    b.bench_local(|| {
+        tape.eval(black_box(&inputs), &mut scratch, &mut out);
+        black_box(out)
+    });
+}
+
+/// Random bead states, structure of arrays: rows rx, ry, vx, vy, Fx, Fy, m.
+fn bead_states(n: usize) -> Vec<f64> {
+    let mut x = 0x2545_f491_4f6c_dd1d_u64;
+    let mut next = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        (x >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut soa = Vec::with_capacity(7 * n);
+    for row in 0..7 {
+        for _ in 0..n {
+            soa.push(if row == 6 { 0.5 + next() } else { 4.0 * next() - 2.0 });
+        }
+    }
+    soa
+}
+
+/// The handwritten batch loop over the same layout.
+#[inline(never)]
+fn bead_batch_by_hand(n: usize, inputs: &[f64], out: &mut [f64]) {
+    let (rx, rest) = inputs.split_at(n);
+    let (ry, rest) = rest.split_at(n);
+    let (vx, rest) = rest.split_at(n);
+    let (vy, rest) = rest.split_at(n);
+    let (fx, rest) = rest.split_at(n);
+    let (fy, m) = rest.split_at(n);
+    let (ox, oy) = out.split_at_mut(n);
+    for s in 0..n.min(m.len()).min(ox.len()).min(oy.len()) {
+        let lambda = -(m[s] * (vx[s] * vx[s] + vy[s] * vy[s]) + (fx[s] * rx[s] + fy[s] * ry[s]))
+            / (rx[s] * rx[s] + ry[s] * ry[s]);
+        ox[s] = lambda * rx[s];
+        oy[s] = lambda * ry[s];
+    }
+}
+
+#[divan::bench(name = "bead_batch_1_handwritten", args = BATCHES)]
+fn bead_batch_handwritten(b: Bencher, n: usize) {
+    let inputs = bead_states(n);
+    let mut out = vec![0.0; 2 * n];
+    b.counter(ItemsCount::new(n)).bench_local(|| bead_batch_by_hand(n, black_box(&inputs), &mut out));
+}
+
+#[divan::bench(name = "bead_batch_2_tape", args = BATCHES)]
+fn bead_batch_tape(b: Bencher, n: usize) {
+    let tape = bead_tape();
+    let inputs = bead_states(n);
+    let mut out = vec![0.0; 2 * n];
+    let mut scratch = tape.batch_scratch();
+    b.counter(ItemsCount::new(n)).bench_local(|| tape.eval_batch(n, black_box(&inputs), &mut scratch, &mut out));
+}
+
+// ---- the 10-link chain: A and b -----------------------------------------------------------
+
+const LINKS: usize = 10;
+
+/// One vector per body.
+type PerBody = [[f64; 2]; LINKS];
+
+/// A chain state: positions along a zig-zag, some velocities and forces.
+fn chain_state() -> (PerBody, PerBody, PerBody, f64) {
+    let mut r = [[0.0; 2]; LINKS];
+    let mut v = [[0.0; 2]; LINKS];
+    let mut f = [[0.0; 2]; LINKS];
+    for i in 0..LINKS {
+        let x = i as f64;
+        r[i] = [0.5 * (x + 1.0), if i % 2 == 0 { 0.1 } else { -0.1 }];
+        v[i] = [0.1 * x, -0.05 * x];
+        f[i] = [0.0, -9.81];
+    }
+    (r, v, f, 1.0)
+}
+
+/// A and b of the chain by hand: dₖ = rₖ − rₖ₋₁ (r₀ = 0), Aₖₖ = dₖ·dₖ (1/mₖ₋₁ + 1/mₖ),
+/// Aₖ,ₖ₊₁ = −dₖ·dₖ₊₁ / mₖ, bₖ = dₖ·(Fₖ/mₖ − Fₖ₋₁/mₖ₋₁) + |vₖ − vₖ₋₁|², in the generated layout.
+#[inline(never)]
+fn chain_by_hand(r: &PerBody, v: &PerBody, f: &PerBody, m: f64) -> ([[f64; LINKS]; LINKS], [f64; LINKS]) {
+    let inv_m = 1.0 / m;
+    let mut d = [[0.0; 2]; LINKS];
+    let mut u = [[0.0; 2]; LINKS];
+    let mut g = [[0.0; 2]; LINKS];
+    for k in 0..LINKS {
+        let (rp, vp, fp) = if k == 0 { ([0.0; 2], [0.0; 2], [0.0; 2]) } else { (r[k - 1], v[k - 1], f[k - 1]) };
+        d[k] = [r[k][0] - rp[0], r[k][1] - rp[1]];
+        u[k] = [v[k][0] - vp[0], v[k][1] - vp[1]];
+        g[k] = [f[k][0] - fp[0], f[k][1] - fp[1]];
+    }
+    let mut a = [[0.0; LINKS]; LINKS];
+    let mut b = [0.0; LINKS];
+    for k in 0..LINKS {
+        let dd = d[k][0] * d[k][0] + d[k][1] * d[k][1];
+        a[k][k] = if k == 0 { dd * inv_m } else { 2.0 * dd * inv_m };
+        if k + 1 < LINKS {
+            let off = -(d[k][0] * d[k + 1][0] + d[k][1] * d[k + 1][1]) * inv_m;
+            a[k][k + 1] = off;
+            a[k + 1][k] = off;
+        }
+        b[k] = (d[k][0] * g[k][0] + d[k][1] * g[k][1]) * inv_m + u[k][0] * u[k][0] + u[k][1] * u[k][1];
+    }
+    (a, b)
+}
+
+#[inline(never)]
+fn chain_generated(s: &chain::State) -> ([[f64; LINKS]; LINKS], [f64; LINKS]) {
+    (chain::a_matrix(s), chain::b_vector(s))
+}
+
+fn chain_generated_state() -> chain::State {
+    let (r, v, f, m) = chain_state();
+    chain::State {
+        r1: r[0],
+        r2: r[1],
+        r3: r[2],
+        r4: r[3],
+        r5: r[4],
+        r6: r[5],
+        r7: r[6],
+        r8: r[7],
+        r9: r[8],
+        r10: r[9],
+        v1: v[0],
+        v2: v[1],
+        v3: v[2],
+        v4: v[3],
+        v5: v[4],
+        v6: v[5],
+        v7: v[6],
+        v8: v[7],
+        v9: v[8],
+        v10: v[9],
+        f1: f[0],
+        f2: f[1],
+        f3: f[2],
+        f4: f[3],
+        f5: f[4],
+        f6: f[5],
+        f7: f[6],
+        f8: f[7],
+        f9: f[8],
+        f10: f[9],
+        m,
+        ..Default::default()
+    }
+}
+
+/// A tape of the chain's non-zero A entries and b over the inputs [r₁…r₁₀, v₁…v₁₀, F₁…F₁₀, m].
+fn chain_tape() -> Tape {
+    let mut l = load(include_str!("data/chain_10.toml")).expect("chain file");
+    let d = derive(&mut l.system).expect("derives");
+    let mut roots: Vec<Id> = d.a.iter().map(|e| e.2).collect();
+    roots.extend(&d.b);
+    let s = &l.system;
+    let mut inputs: Vec<Symbol> = s.bodies.iter().map(|b| b.position).collect();
+    inputs.extend(s.bodies.iter().map(|b| b.velocity));
+    inputs.extend(s.bodies.iter().map(|b| b.force));
+    inputs.push(s.graph.symbol_named("m").expect("m"));
+    Tape::compile(&s.graph, &roots, &inputs).expect("compiles")
+}
+
+fn chain_inputs() -> Vec<f64> {
+    let (r, v, f, m) = chain_state();
+    let mut x: Vec<f64> = r.iter().chain(&v).chain(&f).flatten().copied().collect();
+    x.push(m);
+    x
+}
+
+#[divan::bench(name = "chain10_ab_1_handwritten")]
+fn chain_handwritten(b: Bencher) {
+    let (r, v, f, m) = chain_state();
+    // The baseline must compute what the generated code computes.
+    let (hand, generated) = (chain_by_hand(&r, &v, &f, m), chain_generated(&chain_generated_state()));
+    for (x, y) in hand.0.iter().flatten().chain(&hand.1).zip(generated.0.iter().flatten().chain(&generated.1)) {
+        assert!((x - y).abs() <= 1e-12 * (1.0 + y.abs()), "handwritten chain differs: {x} vs {y}");
+    }
+    b.bench_local(|| chain_by_hand(black_box(&r), black_box(&v), black_box(&f), black_box(m)));
+}
+
+#[divan::bench(name = "chain10_ab_2_generated")]
+fn chain_generated_bench(b: Bencher) {
+    let s = chain_generated_state();
+    b.bench_local(|| chain_generated(black_box(&s)));
+}
+
+#[divan::bench(name = "chain10_ab_3_tape")]
+fn chain_tape_bench(b: Bencher) {
+    let tape = chain_tape();
+    let mut scratch = tape.scratch();
+    let inputs = chain_inputs();
+    let mut out = vec![0.0; tape.output_len()];
+    b.bench_local(|| tape.eval(black_box(&inputs), &mut scratch, &mut out));
+}
+
+#[divan::bench(name = "chain10_ab_batch_tape", args = BATCHES)]
+fn chain_batch_tape(b: Bencher, n: usize) {
+    let tape = chain_tape();
+    let one = chain_inputs();
+    let inputs: Vec<f64> = one.iter().flat_map(|&x| std::iter::repeat_n(x, n)).collect();
+    let mut out = vec![0.0; tape.output_len() * n];
+    let mut scratch = tape.batch_scratch();
+    b.counter(ItemsCount::new(n)).bench_local(|| tape.eval_batch(n, black_box(&inputs), &mut scratch, &mut out));
+}

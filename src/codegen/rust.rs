@@ -1,0 +1,691 @@
+//! `lagrange generate --lang rust`: a self-contained Rust module for a constraint file.
+//!
+//! The module has a `State` struct (time, positions, velocities, external forces, masses and
+//! parameters as fields, vectors as `[f64; D]`) and plain functions of it: the constraint
+//! values, A, b, the directions J (∇C over its constant content) and c, λ and the force on
+//! each body. With one constraint λ and the forces are closed formulas; with several, λ
+//! comes from a small Gaussian elimination in the module (A λ = −b).
+//!
+//! Each function body is the scalar [`Program`] of its formulas: values used more than once
+//! become `let` bindings, values used once are written inline. `--specialize` substitutes
+//! the file's parameter values first and simplifies again, so terms that vanish for this
+//! scene vanish from the code.
+//!
+//! Nothing a file contains can break the module: names become snake_case identifiers
+//! (keywords get a trailing `_`, clashes a numeric suffix), and text in comments is one line
+//! per comment with control and bidirectional characters escaped.
+//!
+//! Not here: files or stdout (`main.rs`), evaluation (`numeric`).
+
+use crate::derive::{DeriveError, derive};
+use crate::expr::print::{Style, print};
+use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
+use crate::model::file::{Loaded, RawValue};
+use crate::numeric::program::{LowerError, Op, Program};
+use std::collections::{HashMap, HashSet};
+use std::fmt::Write;
+
+/// What to generate.
+#[derive(Clone, Debug, Default)]
+pub struct Options {
+    /// Substitute the file's parameter values (and numeric masses) before generating.
+    pub specialize: bool,
+}
+
+/// Why code could not be generated.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum GenerateError {
+    #[error(transparent)]
+    Derive(#[from] DeriveError),
+    #[error("internal type error: {0}")]
+    Type(#[from] TypeError),
+    #[error(transparent)]
+    Lower(#[from] LowerError),
+    #[error("parameter `{0}` has a value that cannot be written exactly (not finite, or too large)")]
+    BadValue(String),
+}
+
+/// Longest formula quoted in a doc comment, in characters.
+const MAX_DOC_FORMULA: usize = 400;
+/// Deepest expression written inline; deeper values get a `let`, so rustc never sees a
+/// pathologically nested expression.
+const MAX_INLINE_DEPTH: u32 = 24;
+
+/// Every formula the module needs, as graph nodes.
+struct Formulas {
+    c: Vec<Id>,
+    /// `(k, j, Aₖⱼ)`, upper triangle.
+    a: Vec<(usize, usize, Id)>,
+    b: Vec<Id>,
+    direction: Vec<Vec<(usize, Id)>>,
+    c_term: Vec<Id>,
+    lambda: Option<Id>,
+    forces: Option<Vec<(usize, Id)>>,
+}
+
+impl Formulas {
+    fn map(self, mut f: impl FnMut(Id) -> Result<Id, GenerateError>) -> Result<Formulas, GenerateError> {
+        let mut each = |xs: Vec<Id>| xs.into_iter().map(&mut f).collect::<Result<Vec<_>, _>>();
+        let c = each(self.c)?;
+        let b = each(self.b)?;
+        let c_term = each(self.c_term)?;
+        let a = self.a.into_iter().map(|(k, j, x)| Ok((k, j, f(x)?))).collect::<Result<_, GenerateError>>()?;
+        let direction = self
+            .direction
+            .into_iter()
+            .map(|d| d.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>())
+            .collect::<Result<_, _>>()?;
+        let lambda = self.lambda.map(&mut f).transpose()?;
+        let forces = match self.forces {
+            Some(fs) => Some(fs.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>()?),
+            None => None,
+        };
+        Ok(Formulas { c, a, b, direction, c_term, lambda, forces })
+    }
+}
+
+/// A field of `State`.
+struct Field {
+    symbol: Symbol,
+    ident: String,
+    doc: String,
+}
+
+/// A generated module and the `State` field that holds each input symbol.
+#[derive(Clone, Debug)]
+pub struct Module {
+    pub code: String,
+    pub fields: Vec<(Symbol, String)>,
+}
+
+/// Generates the Rust module for a loaded file (the source text).
+pub fn generate(loaded: &mut Loaded, options: &Options) -> Result<String, GenerateError> {
+    Ok(module(loaded, options)?.code)
+}
+
+/// Generates the Rust module for a loaded file, with its `State` layout.
+pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, GenerateError> {
+    let d = derive(&mut loaded.system)?;
+    let system = &mut loaded.system;
+    let mut formulas = Formulas {
+        c: d.constraints.iter().map(|c| c.c).collect(),
+        a: d.a.clone(),
+        b: d.b.clone(),
+        direction: d.constraints.iter().map(|c| c.direction.clone()).collect(),
+        c_term: d.constraints.iter().map(|c| c.c_term).collect(),
+        lambda: d.lambda,
+        forces: d.forces.clone(),
+    };
+    let mut substituted = HashSet::new();
+    if options.specialize {
+        let g = &mut system.graph;
+        let mut map = HashMap::new();
+        for (name, value) in &loaded.values {
+            let Some(s) = g.symbol_named(name) else { continue };
+            let bad = || GenerateError::BadValue(name.clone());
+            let node = match value {
+                RawValue::Number(x) => {
+                    let q = exact(*x).ok_or_else(bad)?;
+                    g.num(q)
+                }
+                RawValue::Vector(xs) => {
+                    let mut entries = Vec::with_capacity(xs.len());
+                    for x in xs {
+                        let q = exact(*x).ok_or_else(bad)?;
+                        entries.push(g.num(q));
+                    }
+                    g.vector(entries)?
+                }
+            };
+            if g.ty(node) != g.symbol(s).ty {
+                return Err(bad());
+            }
+            let sym = g.sym(s);
+            map.insert(sym, node);
+            substituted.insert(s);
+        }
+        let simplifier = &mut system.simplifier;
+        formulas = formulas.map(|id| {
+            let replaced = g.substitute(id, &map)?;
+            let simplified = simplifier.simplify(g, replaced)?;
+            // Collecting over a common denominator can build constants past f64's range
+            // (l = 1e-200 gives 1e400 l²-free forms); then keep the formula as substituted.
+            Ok(if out_of_range(g, simplified) && !out_of_range(g, replaced) { replaced } else { simplified })
+        })?;
+    }
+    let g = &system.graph;
+    let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
+    let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
+    let fields = state_fields(g, &body_names, &substituted);
+    let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
+    let slots = slot_exprs(g, &fields);
+    let (dim, n, k) = (g.dim(), system.bodies.len(), system.constraints.len());
+
+    let mut out = String::new();
+    let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
+    let _ = writeln!(
+        out,
+        "// Generated by `lagrange generate --lang rust{}`.",
+        if options.specialize { " --specialize" } else { "" }
+    );
+    let _ = writeln!(out, "// Scene: {}", comment_text(title));
+    let _ = writeln!(out, "// Do not edit: regenerate. Self-contained: no dependency on lagrange or any crate.");
+    let _ = writeln!(
+        out,
+        "// {dim}D, {n} bod{}, {k} constraint{}; vectors are [f64; {dim}].",
+        if n == 1 { "y" } else { "ies" },
+        if k == 1 { "" } else { "s" }
+    );
+    if options.specialize {
+        let _ = writeln!(out, "// Specialised: the file's parameter values are written into the formulas.");
+    }
+    let _ = writeln!(out);
+
+    // The state.
+    let _ = writeln!(out, "/// A state of the scene: every input of the formulas below.");
+    let _ = writeln!(out, "#[derive(Clone, Copy, Debug, Default, PartialEq)]");
+    let _ = writeln!(out, "pub struct State {{");
+    for f in &fields {
+        let ty = if g.symbol(f.symbol).ty == Ty::Vector { format!("[f64; {dim}]") } else { "f64".into() };
+        let _ = writeln!(out, "    /// {}", f.doc);
+        let _ = writeln!(out, "    pub {}: {ty},", f.ident);
+    }
+    let _ = writeln!(out, "}}\n");
+    let _ = writeln!(out, "/// Space dimension.\npub const DIM: usize = {dim};");
+    let _ = writeln!(out, "/// Number of bodies (in file order).\npub const BODIES: usize = {n};");
+    let _ = writeln!(out, "/// Number of constraints (in file order).\npub const CONSTRAINTS: usize = {k};\n");
+
+    let ctx = Ctx { g, inputs: &inputs, slots: &slots };
+
+    // C
+    let mut doc = vec!["The constraint values C (zero on the constraint):".to_string()];
+    for (i, &c) in formulas.c.iter().enumerate() {
+        doc.push(format!("- `{}`: {}", comment_text(constraint_names[i]), formula(g, c)));
+    }
+    let (lets, exprs) = ctx.body(&formulas.c)?;
+    emit_fn(&mut out, &doc, "constraints", &format!("[f64; {k}]"), &lets, &array(&exprs));
+
+    // A
+    let mut doc = vec![
+        "A of A λ + b = 0: Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ (symmetric, positive semidefinite). Non-zero entries:".to_string(),
+    ];
+    let mut roots = Vec::new();
+    let mut where_: HashMap<(usize, usize), usize> = HashMap::new();
+    for &(r, c, id) in &formulas.a {
+        doc.push(format!("- A[{r}][{c}] = {}", formula(g, id)));
+        // Off the diagonal the entry is used twice (A is symmetric): listing it twice makes
+        // its value a `let`.
+        where_.insert((r, c), roots.len());
+        roots.push(id);
+        if r != c {
+            where_.insert((c, r), roots.len());
+            roots.push(id);
+        }
+    }
+    let (lets, exprs) = ctx.body(&roots)?;
+    let rows: Vec<String> = (0..k)
+        .map(|r| {
+            array(
+                &(0..k)
+                    .map(|c| where_.get(&(r, c)).map_or("0.0".to_string(), |&i| exprs[i].clone()))
+                    .collect::<Vec<_>>(),
+            )
+        })
+        .collect();
+    emit_fn(&mut out, &doc, "a_matrix", &format!("[[f64; {k}]; {k}]"), &lets, &array(&rows));
+
+    // b
+    let mut doc = vec!["b of A λ + b = 0: bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ.".to_string()];
+    for (i, &b) in formulas.b.iter().enumerate() {
+        doc.push(format!("- b[{i}] = {}", formula(g, b)));
+    }
+    let (lets, exprs) = ctx.body(&formulas.b)?;
+    emit_fn(&mut out, &doc, "b_vector", &format!("[f64; {k}]"), &lets, &array(&exprs));
+
+    // J
+    let mut doc = vec![format!(
+        "J: row k is the force direction of constraint k (∇C over its constant content), body i's \
+         components at columns i·{dim} .. i·{dim} + {dim}."
+    )];
+    let mut roots = Vec::new();
+    let mut at: HashMap<(usize, usize), usize> = HashMap::new();
+    for (r, dirs) in formulas.direction.iter().enumerate() {
+        for &(body, id) in dirs {
+            doc.push(format!("- J[{r}], body `{}`: {}", comment_text(body_names[body]), formula(g, id)));
+            at.insert((r, body), roots.len());
+            roots.push(id);
+        }
+    }
+    let (lets, exprs) = ctx.body(&roots)?;
+    let rows: Vec<String> = (0..k)
+        .map(|r| {
+            let mut row = Vec::with_capacity(n * dim);
+            for body in 0..n {
+                for axis in 0..dim {
+                    row.push(match at.get(&(r, body)) {
+                        Some(&i) => exprs[i * dim + axis].clone(),
+                        None => "0.0".into(),
+                    });
+                }
+            }
+            array(&row)
+        })
+        .collect();
+    emit_fn(&mut out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, &array(&rows));
+
+    // c
+    let mut doc = vec!["c: the part of C̈ (over the same constant) without accelerations, C̈ = J·a + c.".to_string()];
+    for (i, &c) in formulas.c_term.iter().enumerate() {
+        doc.push(format!("- c[{i}] = {}", formula(g, c)));
+    }
+    let (lets, exprs) = ctx.body(&formulas.c_term)?;
+    emit_fn(&mut out, &doc, "c_term", &format!("[f64; {k}]"), &lets, &array(&exprs));
+
+    // λ and the forces.
+    let mut namer = Namer::new(&["constraints", "a_matrix", "b_vector", "jacobian", "c_term", "lambda", "forces"]);
+    let force_fns: Vec<String> = body_names.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
+    match (formulas.lambda, &formulas.forces) {
+        (Some(lambda), Some(forces)) => {
+            let doc = vec!["The multiplier λ, in closed form:".to_string(), format!("λ = {}", formula(g, lambda))];
+            let (lets, exprs) = ctx.body(&[lambda])?;
+            emit_fn(&mut out, &doc, "lambda", "[f64; 1]", &lets, &array(&exprs));
+            for (body, name) in force_fns.iter().enumerate() {
+                let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
+                let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(body_names[body]))];
+                let (lets, exprs) = match found {
+                    Some(id) => {
+                        doc.push(formula(g, id));
+                        ctx.body(&[id])?
+                    }
+                    None => {
+                        doc.push("zero: no constraint involves this body.".into());
+                        (Vec::new(), vec!["0.0".to_string(); dim])
+                    }
+                };
+                emit_fn(&mut out, &doc, name, &format!("[f64; {dim}]"), &lets, &array(&exprs));
+            }
+            let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
+            let doc = vec!["The constraint force on every body (in file order).".to_string()];
+            emit_fn(&mut out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+        }
+        _ => {
+            let _ = writeln!(
+                out,
+                "/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial\n\
+                 /// pivoting; NaN when A is singular, e.g. redundant constraints).\n\
+                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                 let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
+            );
+            let _ = writeln!(
+                out,
+                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                 pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                 let (l, j) = (lambda(s), jacobian(s));\n    \
+                 let mut f = [[0.0; {dim}]; {n}];\n    \
+                 for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
+                 for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
+                 for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
+                 f\n}}\n"
+            );
+            for (body, name) in force_fns.iter().enumerate() {
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force on body `{}`.\npub fn {name}(s: &State) -> [f64; {dim}] {{\n    forces(s)[{body}]\n}}\n",
+                    comment_text(body_names[body])
+                );
+            }
+            out.push_str(SOLVE);
+        }
+    }
+    out.push_str(HELPERS);
+    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
+}
+
+/// Whether a constant of `id` is non-zero but rounds to 0, ∞ or near the edges of f64.
+fn out_of_range(g: &Graph, id: Id) -> bool {
+    g.reachable(&[id]).into_iter().any(|x| match g.as_num(x) {
+        Some(q) if !q.is_zero() => {
+            let v = q.to_f64().abs();
+            !(1e-280..=1e280).contains(&v)
+        }
+        _ => false,
+    })
+}
+
+/// An `f64` as an exact rational (the decimal it prints as), if finite and not huge.
+fn exact(x: f64) -> Option<Rational> {
+    if !x.is_finite() {
+        return None;
+    }
+    let q = Rational::parse_decimal(&format!("{:e}", x.abs()))?;
+    Some(if x < 0.0 { q.neg() } else { q })
+}
+
+/// The fields of `State`: every symbol but accelerations and substituted ones.
+fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>) -> Vec<Field> {
+    let mut namer = Namer::new(&[]);
+    let mut fields = Vec::new();
+    for (symbol, info) in g.symbols() {
+        if substituted.contains(&symbol) {
+            continue;
+        }
+        let name = comment_text(&info.name);
+        let body = |i: usize| comment_text(bodies.get(i).copied().unwrap_or("?"));
+        let doc = match info.role {
+            Role::Acceleration { .. } => continue,
+            Role::Time => format!("The time `{name}`."),
+            Role::Parameter => format!("Parameter `{name}`."),
+            Role::Position { body: i } => format!("Position `{name}` of body `{}`.", body(i)),
+            Role::Velocity { body: i } => format!("Velocity `{name}` of body `{}`.", body(i)),
+            Role::Force { body: i } => format!("External force `{name}` on body `{}`.", body(i)),
+            Role::Mass { body: i } => format!("Mass `{name}` (of body `{}`).", body(i)),
+        };
+        fields.push(Field { symbol, ident: namer.name(&snake(&info.name)), doc });
+    }
+    fields
+}
+
+/// The Rust expression of every input slot, in slot order.
+fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {
+    let mut slots = Vec::new();
+    for f in fields {
+        if g.symbol(f.symbol).ty == Ty::Vector {
+            slots.extend((0..g.dim()).map(|k| format!("s.{}[{k}]", f.ident)));
+        } else {
+            slots.push(format!("s.{}", f.ident));
+        }
+    }
+    slots
+}
+
+/// Lowers formulas to Rust statements and expressions.
+struct Ctx<'a> {
+    g: &'a Graph,
+    inputs: &'a [Symbol],
+    slots: &'a [String],
+}
+
+/// Operator precedence of a rendered expression: what it may appear inside unparenthesised.
+#[derive(Clone, Copy, PartialEq, PartialOrd)]
+enum Prec {
+    Sum,
+    Product,
+    Unary,
+    Atom,
+}
+
+impl Ctx<'_> {
+    /// `let` statements and one expression per output component of `roots`.
+    fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
+        let p = Program::lower(self.g, roots, self.inputs)?;
+        let uses = p.use_counts();
+        // Each value: its text, precedence and inline depth.
+        let mut text: Vec<(String, Prec, u32)> = Vec::with_capacity(p.ops.len());
+        let mut lets = Vec::new();
+        for (i, op) in p.ops.iter().enumerate() {
+            let arg = |v: u32, min: Prec| -> (String, u32) {
+                let (t, prec, depth) = &text[v as usize];
+                if *prec >= min { (t.clone(), *depth) } else { (format!("({t})"), *depth) }
+            };
+            let receiver = |v: u32| -> (String, u32) {
+                match p.ops[v as usize] {
+                    // Folding leaves no constant receivers; should one appear, type it.
+                    Op::Const(bits) if f64::from_bits(bits).is_finite() => {
+                        (format!("({:?}_f64)", f64::from_bits(bits)), 0)
+                    }
+                    _ => arg(v, Prec::Atom),
+                }
+            };
+            let bin = |a: u32, b: u32, sym: &str, prec: Prec| {
+                let (x, dx) = arg(a, prec);
+                // The right operand binds tighter: floating-point sums are not associative.
+                let (y, dy) = arg(b, if prec == Prec::Sum { Prec::Product } else { Prec::Unary });
+                (format!("{x} {sym} {y}"), prec, dx.max(dy) + 1)
+            };
+            let (t, prec, depth) = match *op {
+                Op::Input(j) => (self.slots[j as usize].clone(), Prec::Atom, 0),
+                Op::Const(bits) => {
+                    let (t, prec) = literal(f64::from_bits(bits));
+                    (t, prec, 0)
+                }
+                Op::Add(a, b) => bin(a, b, "+", Prec::Sum),
+                Op::Sub(a, b) => bin(a, b, "-", Prec::Sum),
+                Op::Mul(a, b) => bin(a, b, "*", Prec::Product),
+                Op::Div(a, b) => bin(a, b, "/", Prec::Product),
+                Op::Neg(a) => {
+                    let (x, d) = arg(a, Prec::Atom);
+                    (format!("-{x}"), Prec::Unary, d + 1)
+                }
+                Op::Powi(a, n) => {
+                    let (x, d) = receiver(a);
+                    (format!("{x}.powi({n})"), Prec::Atom, d + 1)
+                }
+                Op::Call(f, a) => {
+                    let (x, d) = receiver(a);
+                    (format!("{x}.{}()", f.name()), Prec::Atom, d + 1)
+                }
+                Op::Atan2(y, x) => {
+                    let (y, dy) = receiver(y);
+                    let (x, dx) = arg(x, Prec::Sum);
+                    (format!("{y}.atan2({x})"), Prec::Atom, dx.max(dy) + 1)
+                }
+                Op::Powf(a, b) | Op::Norm2(a, b) => {
+                    let name = if matches!(op, Op::Powf(..)) { "powf" } else { "norm2" };
+                    let ((x, dx), (y, dy)) = (arg(a, Prec::Sum), arg(b, Prec::Sum));
+                    (format!("{name}({x}, {y})"), Prec::Atom, dx.max(dy) + 1)
+                }
+                Op::Norm3(a, b, c) => {
+                    let ((x, dx), (y, dy), (z, dz)) = (arg(a, Prec::Sum), arg(b, Prec::Sum), arg(c, Prec::Sum));
+                    (format!("norm3({x}, {y}, {z})"), Prec::Atom, dx.max(dy).max(dz) + 1)
+                }
+            };
+            let simple = matches!(op, Op::Input(_) | Op::Const(_));
+            if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
+                let name = format!("x{}", lets.len());
+                lets.push(format!("let {name} = {t};"));
+                text.push((name, Prec::Atom, 0));
+            } else {
+                text.push((t, prec, depth));
+            }
+        }
+        let exprs = p.outputs.iter().map(|&o| text[o as usize].0.clone()).collect();
+        Ok((lets, exprs))
+    }
+}
+
+/// A float literal and its precedence (a negative literal is a unary minus).
+fn literal(x: f64) -> (String, Prec) {
+    if x.is_nan() {
+        ("f64::NAN".into(), Prec::Atom)
+    } else if x == f64::INFINITY {
+        ("f64::INFINITY".into(), Prec::Atom)
+    } else if x == f64::NEG_INFINITY {
+        ("f64::NEG_INFINITY".into(), Prec::Atom)
+    } else {
+        // `{:?}` writes the shortest text that reads back as the same f64, with a `.` or `e`.
+        let t = format!("{x:?}");
+        if x.is_sign_negative() { (t, Prec::Unary) } else { (t, Prec::Atom) }
+    }
+}
+
+fn array(items: &[String]) -> String {
+    format!("[{}]", items.join(", "))
+}
+
+fn emit_fn(out: &mut String, doc: &[String], name: &str, ret: &str, lets: &[String], value: &str) {
+    for line in doc {
+        let _ = writeln!(out, "/// {line}");
+    }
+    let _ = writeln!(out, "pub fn {name}(s: &State) -> {ret} {{");
+    if lets.is_empty() && !value.contains("s.") && !value.contains("(s)") {
+        // Keep the parameter used in name only: the value does not depend on the state.
+        let _ = writeln!(out, "    let _ = s;");
+    }
+    for l in lets {
+        let _ = writeln!(out, "    {l}");
+    }
+    let _ = writeln!(out, "    {value}\n}}\n");
+}
+
+/// A formula for a doc comment: Unicode text, one line, escaped, shortened if long.
+fn formula(g: &Graph, id: Id) -> String {
+    match print(g, id, Style::Text) {
+        Ok(t) if t.chars().count() > MAX_DOC_FORMULA => {
+            let short: String = t.chars().take(MAX_DOC_FORMULA).collect();
+            format!("{} …", comment_text(&short))
+        }
+        Ok(t) => comment_text(&t),
+        Err(e) => format!("({})", comment_text(&e.to_string())),
+    }
+}
+
+/// Text safe inside a `//` or `///` comment: one line, no control or bidirectional
+/// characters (those are written as `\u{…}`).
+pub fn comment_text(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for ch in s.chars() {
+        let bidi = matches!(ch, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}');
+        if ch.is_control() || bidi || ch == '\u{2028}' || ch == '\u{2029}' || ch == '\u{feff}' {
+            let _ = write!(out, "\\u{{{:x}}}", ch as u32);
+        } else {
+            out.push(ch);
+        }
+    }
+    out
+}
+
+/// Rust's keywords (strict, reserved and weak ones that cannot name a field or function).
+const KEYWORDS: &[&str] = &[
+    "as", "break", "const", "continue", "crate", "else", "enum", "extern", "false", "fn", "for", "if", "impl", "in",
+    "let", "loop", "match", "mod", "move", "mut", "pub", "ref", "return", "self", "static", "struct", "super", "trait",
+    "true", "type", "unsafe", "use", "where", "while", "async", "await", "dyn", "abstract", "become", "box", "do",
+    "final", "macro", "override", "priv", "typeof", "unsized", "virtual", "yield", "try", "gen", "union", "static",
+    "raw", "safe",
+];
+
+/// A snake_case identifier for `name`: ASCII letters and digits kept (camel case split with
+/// `_`), other characters as `_` or their code point (`λ` → `u3bb`), never a keyword, never
+/// starting with a digit, never empty.
+pub fn snake(name: &str) -> String {
+    let mut out = String::new();
+    let mut after_lower = false;
+    for ch in name.chars() {
+        if ch.is_ascii_alphanumeric() {
+            if ch.is_ascii_uppercase() && after_lower {
+                out.push('_');
+            }
+            out.push(ch.to_ascii_lowercase());
+            after_lower = ch.is_ascii_lowercase() || ch.is_ascii_digit();
+        } else if ch.is_alphanumeric() {
+            if !out.is_empty() && !out.ends_with('_') {
+                out.push('_');
+            }
+            let _ = write!(out, "u{:x}_", ch as u32);
+            after_lower = false;
+        } else {
+            if !out.ends_with('_') {
+                out.push('_');
+            }
+            after_lower = false;
+        }
+    }
+    let mut out = out.trim_matches('_').to_string();
+    while out.contains("__") {
+        out = out.replace("__", "_");
+    }
+    if out.is_empty() {
+        out.push('x');
+    }
+    if out.starts_with(|c: char| c.is_ascii_digit()) {
+        out.insert_str(0, "n_");
+    }
+    if KEYWORDS.contains(&out.as_str()) {
+        out.push('_');
+    }
+    out
+}
+
+/// Hands out distinct identifiers: a clash gets `_2`, `_3`, ….
+struct Namer {
+    used: HashSet<String>,
+}
+
+impl Namer {
+    fn new(taken: &[&str]) -> Namer {
+        Namer { used: taken.iter().map(|s| s.to_string()).collect() }
+    }
+
+    fn name(&mut self, wanted: &str) -> String {
+        let mut name = wanted.to_string();
+        let mut k = 2;
+        while !self.used.insert(name.clone()) {
+            // `self_` + `_2` would be `self__2`, which is not snake_case.
+            name = format!("{}_{k}", wanted.trim_end_matches('_'));
+            k += 1;
+        }
+        name
+    }
+}
+
+const SOLVE: &str = "/// Solves `a x = b` by Gaussian elimination with partial pivoting; NaN if `a` is singular.
+#[allow(clippy::needless_range_loop)]
+fn solve<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> [f64; K] {
+    for col in 0..K {
+        let mut p = col;
+        for row in col + 1..K {
+            if a[row][col].abs() > a[p][col].abs() {
+                p = row;
+            }
+        }
+        a.swap(col, p);
+        b.swap(col, p);
+        let pivot = a[col][col];
+        if pivot == 0.0 || !pivot.is_finite() {
+            return [f64::NAN; K];
+        }
+        for row in col + 1..K {
+            let f = a[row][col] / pivot;
+            if f != 0.0 {
+                for c in col..K {
+                    a[row][c] -= f * a[col][c];
+                }
+                b[row] -= f * b[col];
+            }
+        }
+    }
+    let mut x = [0.0; K];
+    for row in (0..K).rev() {
+        let mut acc = b[row];
+        for c in row + 1..K {
+            acc -= a[row][c] * x[c];
+        }
+        x[row] = acc / a[row][row];
+    }
+    x
+}
+
+";
+
+const HELPERS: &str = "/// |(x, y)| without overflow or underflow (the plain formula unless it would lose range).
+#[allow(dead_code)]
+#[inline]
+fn norm2(x: f64, y: f64) -> f64 {
+    let s = x * x + y * y;
+    if s.is_finite() && s >= f64::MIN_POSITIVE { s.sqrt() } else { x.hypot(y) }
+}
+
+/// |(x, y, z)| without overflow or underflow.
+#[allow(dead_code)]
+#[inline]
+fn norm3(x: f64, y: f64, z: f64) -> f64 {
+    let s = x * x + y * y + z * z;
+    if s.is_finite() && s >= f64::MIN_POSITIVE { s.sqrt() } else { x.hypot(y).hypot(z) }
+}
+
+/// `b^e`, integer exponents by `powi` so that negative bases work.
+#[allow(dead_code)]
+#[inline]
+fn powf(b: f64, e: f64) -> f64 {
+    if e == e.trunc() && e.abs() <= i32::MAX as f64 { b.powi(e as i32) } else { b.powf(e) }
+}
+";

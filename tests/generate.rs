@@ -1,0 +1,315 @@
+//! `lagrange generate --lang rust`: the generated modules compile with rustc (warnings
+//! denied) and compute what the reference interpreter computes, for every file in
+//! `constraints/` and for a file of hostile names, plain and specialised.
+
+use lagrange::codegen::{Module, Options, module};
+use lagrange::derive::{Derivation, derive};
+use lagrange::expr::eval::{Env, Value, eval_one};
+use lagrange::expr::{Graph, Role, Symbol, Ty};
+use lagrange::model::file::{Loaded, RawValue, load};
+use std::fmt::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// States per module.
+const STATES: usize = 4;
+
+struct Rng(u64);
+
+impl Rng {
+    fn unit(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.unit()
+    }
+}
+
+/// Named outputs (`lambda`, `forces`, …) and their values, flattened row by row.
+type Outputs = Vec<(String, Vec<f64>)>;
+
+/// One generated module to check: its code, and for each state the literal and the
+/// expected outputs (name, values) computed by the interpreter.
+struct Case {
+    name: String,
+    module: Module,
+    states: Vec<(String, Outputs)>,
+}
+
+fn files() -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir("constraints")
+        .expect("constraints/")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    files.sort();
+    files.push(PathBuf::from("tests/data/hostile_names.toml"));
+    files
+}
+
+fn loaded(path: &Path) -> Loaded {
+    let text = std::fs::read_to_string(path).expect("readable");
+    load(&text).unwrap_or_else(|e| panic!("{}: {e:?}", path.display()))
+}
+
+fn value_of(raw: &RawValue) -> Value {
+    match raw {
+        RawValue::Number(x) => Value::Scalar(*x),
+        RawValue::Vector(v) => {
+            let mut out = [0.0; 3];
+            out[..v.len()].copy_from_slice(v);
+            Value::Vector(out)
+        }
+    }
+}
+
+/// A random state of the system: the interpreter's environment (with parameter values from
+/// the file when `file_parameters`) and the generated `State` literal.
+fn random_state(l: &Loaded, m: &Module, rng: &mut Rng, file_parameters: bool) -> (Env, String) {
+    let g = &l.system.graph;
+    let mut env = Env::new();
+    for (s, info) in g.symbols() {
+        let value = match info.ty {
+            Ty::Scalar if matches!(info.role, Role::Mass { .. } | Role::Parameter) => {
+                Value::Scalar(rng.range(0.5, 2.0))
+            }
+            Ty::Scalar => Value::Scalar(rng.range(-2.0, 2.0)),
+            Ty::Vector => {
+                // The interpreter's vectors have zeros past the dimension.
+                let mut v = [0.0; 3];
+                for x in v.iter_mut().take(g.dim()) {
+                    *x = rng.range(-2.0, 2.0);
+                }
+                Value::Vector(v)
+            }
+        };
+        env.set(s, value);
+    }
+    if file_parameters {
+        for (name, raw) in &l.values {
+            if let Some(s) = g.symbol_named(name) {
+                env.set(s, value_of(raw));
+            }
+        }
+    }
+    let mut literal = String::from("State { ");
+    for (s, field) in &m.fields {
+        match env.get(*s) {
+            Some(Value::Scalar(x)) => {
+                let _ = write!(literal, "{field}: {x:?}, ");
+            }
+            Some(Value::Vector(v)) => {
+                let _ = write!(literal, "{field}: {:?}, ", &v[..g.dim()]);
+            }
+            None => panic!("no value for field {field}"),
+        }
+    }
+    literal.push('}');
+    (env, literal)
+}
+
+fn scalar(g: &Graph, id: lagrange::expr::Id, env: &Env) -> f64 {
+    eval_one(g, id, env).expect("evaluates").scalar().expect("scalar")
+}
+
+fn vector(g: &Graph, id: lagrange::expr::Id, env: &Env) -> Vec<f64> {
+    eval_one(g, id, env).expect("evaluates").components(g.dim())
+}
+
+/// What the generated functions must return, from the interpreter.
+fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
+    let g = &l.system.graph;
+    let (dim, n, k) = (g.dim(), l.system.bodies.len(), d.constraints.len());
+    let c: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c, env)).collect();
+    let mut a = vec![0.0; k * k];
+    for &(r, col, id) in &d.a {
+        let x = scalar(g, id, env);
+        a[r * k + col] = x;
+        a[col * k + r] = x;
+    }
+    let b: Vec<f64> = d.b.iter().map(|&id| scalar(g, id, env)).collect();
+    let mut j = vec![0.0; k * n * dim];
+    for (r, dc) in d.constraints.iter().enumerate() {
+        for &(body, id) in &dc.direction {
+            j[r * n * dim + body * dim..][..dim].copy_from_slice(&vector(g, id, env));
+        }
+    }
+    let c_term: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c_term, env)).collect();
+    let lambda: Vec<f64> = match d.lambda {
+        Some(id) => vec![scalar(g, id, env)],
+        None => {
+            let am = nalgebra::DMatrix::from_row_slice(k, k, &a);
+            let bm = nalgebra::DVector::from_iterator(k, b.iter().map(|x| -x));
+            am.lu().solve(&bm).expect("A is regular at a random state").iter().copied().collect()
+        }
+    };
+    let mut forces = vec![0.0; n * dim];
+    for (r, lr) in lambda.iter().enumerate() {
+        for (f, jj) in forces.iter_mut().zip(&j[r * n * dim..(r + 1) * n * dim]) {
+            *f += lr * jj;
+        }
+    }
+    vec![
+        ("constraints".into(), c),
+        ("a_matrix".into(), a),
+        ("b_vector".into(), b),
+        ("jacobian".into(), j),
+        ("c_term".into(), c_term),
+        ("lambda".into(), lambda),
+        ("forces".into(), forces),
+    ]
+}
+
+fn rustc() -> String {
+    std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into())
+}
+
+#[test]
+fn generated_rust_compiles_and_agrees_with_the_interpreter() {
+    let mut cases = Vec::new();
+    let mut rng = Rng(0x5eed_1234_abcd_0001);
+    for path in files() {
+        for specialize in [false, true] {
+            let mut l = loaded(&path);
+            let m = module(&mut l, &Options { specialize }).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            // The reference derivation, on a fresh load (the generator may have grown the graph).
+            let mut reference = loaded(&path);
+            let d = derive(&mut reference.system).expect("derives");
+            let mut states = Vec::new();
+            for _ in 0..STATES {
+                let (env, literal) = random_state(&reference, &m, &mut rng, specialize);
+                states.push((literal, expected(&reference, &d, &env)));
+            }
+            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("file").replace('-', "_");
+            let name = format!("{stem}{}", if specialize { "_specialized" } else { "" });
+            cases.push(Case { name, module: m, states });
+        }
+    }
+    // One crate: each module included in its own `mod`, and a main that prints every output.
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut main = String::from("// Test harness generated by tests/generate.rs.\n");
+    for case in &cases {
+        let file = dir.join(format!("{}.rs", case.name));
+        std::fs::write(&file, &case.module.code).expect("write module");
+        let _ = writeln!(main, "#[allow(dead_code)]\nmod {} {{\n    include!({:?});\n}}", case.name, file);
+    }
+    main.push_str("\nfn show(label: &str, xs: &[f64]) {\n    println!(\"{label} {xs:?}\");\n}\n\nfn main() {\n");
+    for case in &cases {
+        for (i, (literal, _)) in case.states.iter().enumerate() {
+            let m = &case.name;
+            let _ = writeln!(main, "    {{\n        use {m}::*;\n        let s = {literal};");
+            for f in ["constraints", "b_vector", "c_term", "lambda"] {
+                let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s));");
+            }
+            for f in ["a_matrix", "jacobian", "forces"] {
+                let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s).concat());");
+            }
+            main.push_str("    }\n");
+        }
+    }
+    main.push_str("}\n");
+    let main_path = dir.join("harness.rs");
+    std::fs::write(&main_path, &main).expect("write harness");
+    let exe = dir.join("harness");
+    let out = Command::new(rustc())
+        .args(["--edition", "2021", "-C", "opt-level=1", "-D", "warnings", "-o"])
+        .arg(&exe)
+        .arg(&main_path)
+        .output()
+        .expect("rustc runs (set RUSTC or put rustc on PATH)");
+    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
+    let run = Command::new(&exe).output().expect("harness runs");
+    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let mut lines = stdout.lines();
+    let mut checked = 0;
+    for case in &cases {
+        for (i, (_, expect)) in case.states.iter().enumerate() {
+            for f in ["constraints", "b_vector", "c_term", "lambda", "a_matrix", "jacobian", "forces"] {
+                let line = lines.next().expect("one line per output");
+                let (label, values) = line.split_once(" [").expect("label [values]");
+                assert_eq!(label, format!("{} {i} {f}", case.name));
+                let got: Vec<f64> = values
+                    .trim_end_matches(']')
+                    .split(", ")
+                    .filter(|x| !x.is_empty())
+                    .map(|x| x.parse().expect("a number"))
+                    .collect();
+                let want = &expect.iter().find(|e| e.0 == f).expect("expected output").1;
+                assert_eq!(got.len(), want.len(), "{label}");
+                let scale = want.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+                for (x, y) in got.iter().zip(want) {
+                    assert!((x - y).abs() <= 1e-9 * scale, "{label}: generated {got:?}, interpreter {want:?}");
+                }
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, cases.len() * STATES * 7);
+}
+
+#[test]
+fn hostile_names_become_safe_identifiers_and_comments() {
+    let mut l = loaded(Path::new("tests/data/hostile_names.toml"));
+    let m = module(&mut l, &Options::default()).expect("generates");
+    let fields: Vec<&str> = m.fields.iter().map(|f| f.1.as_str()).collect();
+    // Distinct, valid, not keywords.
+    let mut sorted = fields.clone();
+    sorted.sort_unstable();
+    sorted.dedup();
+    assert_eq!(sorted.len(), fields.len(), "{fields:?}");
+    for f in &fields {
+        assert!(f.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_'), "{f}");
+        assert!(!["self", "type", "mut", "fn"].contains(f), "{f}");
+    }
+    // No line of the module is a comment that a name could end early, and no raw control
+    // or direction-changing characters survive.
+    assert!(!m.code.contains('\u{202e}') && !m.code.contains('\r'));
+    for line in m.code.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.contains("panic!") {
+            assert!(trimmed.starts_with("//"), "code injected from a name: {line}");
+        }
+    }
+}
+
+#[test]
+fn specialised_code_carries_no_parameters() {
+    let mut l = loaded(Path::new("constraints/bead_on_wire.toml"));
+    let m = module(&mut l, &Options { specialize: true }).expect("generates");
+    let g = &l.system.graph;
+    let names: Vec<&str> = m.fields.iter().map(|(s, _)| g.symbol(*s).name.as_str()).collect();
+    assert!(!names.contains(&"l") && !names.contains(&"m") && !names.contains(&"g"), "{names:?}");
+    assert!(names.contains(&"r") && names.contains(&"v") && names.contains(&"F"), "{names:?}");
+    let _: Vec<Symbol> = m.fields.iter().map(|f| f.0).collect();
+}
+
+/// The modules the benchmarks include are what the generator writes today.
+#[test]
+fn checked_in_generated_code_is_current() {
+    for (file, generated) in [
+        ("constraints/bead_on_wire.toml", "benches/generated/bead_on_wire.rs"),
+        ("benches/data/chain_10.toml", "benches/generated/chain_10.rs"),
+    ] {
+        let mut l = loaded(Path::new(file));
+        let code = lagrange::codegen::generate(&mut l, &Options::default()).expect("generates");
+        let on_disk = std::fs::read_to_string(generated).expect("checked-in module");
+        assert!(code == on_disk, "{generated} is stale: run `cargo run --release -- generate {file} -o {generated}`");
+    }
+}
+
+/// Specialising a tiny parameter must not turn a finite formula into ∞·0: collecting over a
+/// common denominator would need constants past f64's range.
+#[test]
+fn specialising_extreme_values_keeps_formulas_finite() {
+    let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("bead");
+    let text = text.replace("l = 2.0", "l = 1e-200");
+    assert!(text.contains("l = 1e-200"));
+    let mut l = load(&text).expect("loads");
+    let code = lagrange::codegen::generate(&mut l, &Options { specialize: true }).expect("generates");
+    assert!(!code.contains("INFINITY") && !code.contains("NAN"), "{code}");
+}
