@@ -3,5 +3,8 @@
 //! This module knows nothing of TOML or text: states arrive as [`crate::expr::eval::Env`],
 //! results leave as plain numbers and diagnostics.
 
+pub mod banded;
+pub mod contact;
+pub mod qp;
 pub mod rows;
 pub mod solve;

@@ -1,0 +1,175 @@
+//! Symmetric banded matrices and their Cholesky factor: the linear-time λ solve of chains.
+//!
+//! A constraint couples to another only through a body they share, so the A of an N-link
+//! chain (constraints numbered along the chain) is tridiagonal: bandwidth w = 1. Cholesky
+//! of a band matrix keeps the band (no fill outside it), costing O(n w²) time and O(n w)
+//! memory instead of O(n³) and O(n²) dense. Design note: a general sparse Cholesky (faer,
+//! nalgebra-sparse) would also handle trees and meshes, but costs a heavy dependency or an
+//! ordering step; the band covers chains, ropes and stacks numbered in order, and the
+//! caller falls back to dense otherwise (`numeric::solve` picks by bandwidth).
+//!
+//! Not here: choosing between band and dense, rank-deficient systems (the caller falls back
+//! to a dense SVD when [`Banded::cholesky`] reports a small pivot).
+
+/// A symmetric n×n matrix with Aᵢⱼ = 0 for |i − j| > w, storing the lower band row by row.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Banded {
+    n: usize,
+    w: usize,
+    /// Row i holds Aᵢ,ᵢ₋w … Aᵢᵢ at `i*(w+1) ..`; entries left of column 0 stay zero.
+    data: Vec<f64>,
+}
+
+/// The lower Cholesky factor L (A = L Lᵀ) of a [`Banded`] matrix, with the same band.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BandedCholesky {
+    n: usize,
+    w: usize,
+    l: Vec<f64>,
+}
+
+impl Banded {
+    /// The zero matrix of size `n` and bandwidth `w`.
+    pub fn zeros(n: usize, w: usize) -> Banded {
+        Banded { n, w, data: vec![0.0; n * (w + 1)] }
+    }
+
+    pub fn size(&self) -> usize {
+        self.n
+    }
+
+    pub fn bandwidth(&self) -> usize {
+        self.w
+    }
+
+    fn at(&self, i: usize, j: usize) -> usize {
+        i * (self.w + 1) + self.w + j - i
+    }
+
+    /// Adds `x` to Aᵢⱼ (and so to Aⱼᵢ). Entries outside the band are ignored (debug assert).
+    pub fn add(&mut self, i: usize, j: usize, x: f64) {
+        let (i, j) = if i >= j { (i, j) } else { (j, i) };
+        debug_assert!(i - j <= self.w, "entry ({i}, {j}) outside bandwidth {}", self.w);
+        if i - j <= self.w {
+            let at = self.at(i, j);
+            self.data[at] += x;
+        }
+    }
+
+    /// Aᵢⱼ.
+    pub fn get(&self, i: usize, j: usize) -> f64 {
+        let (i, j) = if i >= j { (i, j) } else { (j, i) };
+        if i - j > self.w { 0.0 } else { self.data[self.at(i, j)] }
+    }
+
+    /// y = A x.
+    pub fn mul(&self, x: &[f64], y: &mut [f64]) {
+        y.iter_mut().for_each(|v| *v = 0.0);
+        for i in 0..self.n {
+            let lo = i.saturating_sub(self.w);
+            let row = &self.data[i * (self.w + 1)..(i + 1) * (self.w + 1)];
+            let mut s = 0.0;
+            for j in lo..i {
+                let a = row[self.w + j - i];
+                s += a * x[j];
+                y[j] += a * x[i];
+            }
+            y[i] += s + row[self.w] * x[i];
+        }
+    }
+
+    /// The Cholesky factor, or the first row whose pivot (Schur complement) falls to
+    /// `pivot_floor` or below: the matrix is then singular or too close to it to trust.
+    pub fn cholesky(&self, pivot_floor: f64) -> Result<BandedCholesky, usize> {
+        let (n, w) = (self.n, self.w);
+        let mut l = vec![0.0; n * (w + 1)];
+        let at = |i: usize, j: usize| i * (w + 1) + w + j - i;
+        for i in 0..n {
+            let lo = i.saturating_sub(w);
+            for j in lo..=i {
+                // Lᵢⱼ = (Aᵢⱼ − Σₖ Lᵢₖ Lⱼₖ) / Lⱼⱼ over the k both rows' bands share.
+                let mut s = self.data[at(i, j)];
+                for k in lo.max(j.saturating_sub(w))..j {
+                    s -= l[at(i, k)] * l[at(j, k)];
+                }
+                if i == j {
+                    if !(s > pivot_floor) {
+                        return Err(i);
+                    }
+                    l[at(i, i)] = s.sqrt();
+                } else {
+                    l[at(i, j)] = s / l[at(j, j)];
+                }
+            }
+        }
+        Ok(BandedCholesky { n, w, l })
+    }
+}
+
+impl BandedCholesky {
+    /// Overwrites `x` (the right-hand side) with the solution of L Lᵀ y = x.
+    pub fn solve_in_place(&self, x: &mut [f64]) {
+        let (n, w) = (self.n, self.w);
+        let at = |i: usize, j: usize| i * (w + 1) + w + j - i;
+        // Forward: L y = x.
+        for i in 0..n {
+            let mut s = x[i];
+            for k in i.saturating_sub(w)..i {
+                s -= self.l[at(i, k)] * x[k];
+            }
+            x[i] = s / self.l[at(i, i)];
+        }
+        // Backward: Lᵀ z = y, column by column of L.
+        for i in (0..n).rev() {
+            x[i] /= self.l[at(i, i)];
+            let xi = x[i];
+            for k in i.saturating_sub(w)..i {
+                x[k] -= self.l[at(i, k)] * xi;
+            }
+        }
+    }
+
+    /// The smallest pivot Lᵢᵢ² (a lower bound on the smallest eigenvalue's order).
+    pub fn smallest_pivot(&self) -> f64 {
+        (0..self.n).map(|i| self.l[i * (self.w + 1) + self.w].powi(2)).fold(f64::INFINITY, f64::min)
+    }
+
+    /// The largest pivot Lᵢᵢ².
+    pub fn largest_pivot(&self) -> f64 {
+        (0..self.n).map(|i| self.l[i * (self.w + 1) + self.w].powi(2)).fold(0.0, f64::max)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tridiagonal_solve_matches_a_dense_one() {
+        let n = 7;
+        let mut a = Banded::zeros(n, 1);
+        for i in 0..n {
+            a.add(i, i, 2.0 + i as f64 * 0.1);
+            if i > 0 {
+                a.add(i, i - 1, -0.9);
+            }
+        }
+        let x: Vec<f64> = (0..n).map(|i| (i as f64).sin() + 0.5).collect();
+        let mut b = vec![0.0; n];
+        a.mul(&x, &mut b);
+        let ch = a.cholesky(1e-12).expect("positive definite");
+        ch.solve_in_place(&mut b);
+        for (got, want) in b.iter().zip(&x) {
+            assert!((got - want).abs() < 1e-13, "{got} vs {want}");
+        }
+    }
+
+    #[test]
+    fn singular_matrix_reports_the_row() {
+        let mut a = Banded::zeros(2, 1);
+        a.add(0, 0, 1.0);
+        a.add(1, 1, 1.0);
+        a.add(1, 0, 1.0);
+        assert_eq!(a.cholesky(1e-12), Err(1));
+    }
+}
