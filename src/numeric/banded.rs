@@ -93,7 +93,7 @@ impl Banded {
                     s -= l[at(i, k)] * l[at(j, k)];
                 }
                 if i == j {
-                    if !(s > pivot_floor) {
+                    if s.is_nan() || s <= pivot_floor {
                         return Err(i);
                     }
                     l[at(i, i)] = s.sqrt();
@@ -113,18 +113,16 @@ impl BandedCholesky {
         let at = |i: usize, j: usize| i * (w + 1) + w + j - i;
         // Forward: L y = x.
         for i in 0..n {
-            let mut s = x[i];
-            for k in i.saturating_sub(w)..i {
-                s -= self.l[at(i, k)] * x[k];
-            }
-            x[i] = s / self.l[at(i, i)];
+            let lo = i.saturating_sub(w);
+            let s: f64 = (lo..i).zip(&x[lo..i]).map(|(k, xk)| self.l[at(i, k)] * xk).sum();
+            x[i] = (x[i] - s) / self.l[at(i, i)];
         }
         // Backward: Lᵀ z = y, column by column of L.
         for i in (0..n).rev() {
             x[i] /= self.l[at(i, i)];
-            let xi = x[i];
-            for k in i.saturating_sub(w)..i {
-                x[k] -= self.l[at(i, k)] * xi;
+            let (xi, lo) = (x[i], i.saturating_sub(w));
+            for (k, xk) in (lo..i).zip(&mut x[lo..i]) {
+                *xk -= self.l[at(i, k)] * xi;
             }
         }
     }

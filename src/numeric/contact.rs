@@ -70,7 +70,7 @@ pub fn classify(rows: &Rows, settings: &Settings) -> Vec<Option<ContactState>> {
             let rate = row.rate / norm;
             if distance > tol * settings.length_scale {
                 Some(ContactState::Apart)
-            } else if !(distance >= -tol * settings.length_scale) {
+            } else if distance.is_nan() || distance < -tol * settings.length_scale {
                 Some(ContactState::Penetrating)
             } else if rate > tol * speed {
                 Some(ContactState::Separating)
@@ -138,7 +138,7 @@ pub fn impulses(rows: &Rows, restitution: f64, settings: &Settings) -> Impulses 
         0.0
     };
     let contacts = classify(rows, settings);
-    if !contacts.iter().any(|c| *c == Some(ContactState::Closing)) {
+    if !contacts.contains(&Some(ContactState::Closing)) {
         return out;
     }
     let scaled = Scaled::new(rows, &mut out.diagnostics, &mut out.status);
@@ -162,8 +162,8 @@ pub fn impulses(rows: &Rows, restitution: f64, settings: &Settings) -> Impulses 
         out.impulse[q] = scaled.unscale(q, p[s]);
         for (body, j) in &scaled.jacobian[q] {
             let w = rows.inverse_mass[*body];
-            for d in 0..3 {
-                out.velocity_change[*body][d] += p[s] * j[d] * w;
+            for (dv, jd) in out.velocity_change[*body].iter_mut().zip(j) {
+                *dv += p[s] * jd * w;
             }
         }
     }

@@ -300,8 +300,8 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
                 }
         })
         .collect();
-    for q in 0..k {
-        if let Some(ContactState::Closing) = contacts[q] {
+    for (q, contact) in contacts.iter().enumerate() {
+        if let Some(ContactState::Closing) = contact {
             diagnostics.push(Diagnostic {
                 constraints: vec![q],
                 message: format!(
@@ -309,7 +309,7 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
                 ),
             });
         }
-        if let Some(ContactState::Penetrating) = contacts[q] {
+        if let Some(ContactState::Penetrating) = contact {
             diagnostics.push(Diagnostic {
                 constraints: vec![q],
                 message: format!("contact {q} is violated (C < 0 beyond the tolerance); it is treated as touching"),
