@@ -2,9 +2,14 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::derive::derive;
+use lagrange::model::file::RawValue;
 use lagrange::model::file::{Problem, load};
+use lagrange::model::scene::environment;
+use lagrange::numeric::rows::RowProgram;
+use lagrange::numeric::solve::{Settings, safe_norm, solve_with};
 use lagrange::report::derivation::{self, Format};
 use lagrange::report::diagnostic::render;
+use lagrange::report::solution;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -33,6 +38,33 @@ enum Command {
         #[arg(long)]
         steps: bool,
     },
+    /// Numbers at a state: C, Ċ and λ per constraint, force and acceleration per body.
+    ///
+    /// The state is the file's [parameters] and [scene] initial values, then `--at`, then
+    /// each `--set` (later wins); forces come from [scene] forces unless given. `value`,
+    /// `rate` and `lambda` refer to C/κ, like `derive --format json` (whose `gradient` is
+    /// ∇C/κ, `scale` κ): the force on a body is Σ λ·gradient. A missing or non-finite value
+    /// is an error naming the symbol (exit 1).
+    Solve {
+        /// The constraint file (TOML).
+        file: PathBuf,
+        /// A state file (.toml or .json): a flat table symbol = number or [x, y(, z)], for
+        /// positions, velocities, forces, masses, parameters and `t`.
+        #[arg(long, value_name = "STATE")]
+        at: Option<PathBuf>,
+        /// Override one symbol: NAME=NUMBER or NAME=[x,y]; may repeat.
+        #[arg(long = "set", value_name = "NAME=VALUE")]
+        set: Vec<String>,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = SolveFormat::Text)]
+        format: SolveFormat,
+    },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum SolveFormat {
+    Text,
+    Json,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -60,6 +92,10 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
+        Command::Solve { file, at, set, format } => match cmd_solve(&file, at.as_deref(), &set, format) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(code) => code,
+        },
     }
 }
 
@@ -129,4 +165,78 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// The symbol values of a `--at` file: a flat TOML or JSON table.
+fn read_state(path: &Path) -> Result<Vec<(String, RawValue)>, String> {
+    let text = read_text(path)?;
+    let table: std::collections::BTreeMap<String, RawValue> = match path.extension().and_then(|e| e.to_str()) {
+        Some("toml") => toml::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
+        Some("json") => serde_json::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
+        _ => return Err(format!("error: {}: a state file must end in .toml or .json", path.display())),
+    };
+    Ok(table.into_iter().collect())
+}
+
+/// `NAME=VALUE` with VALUE a finite number or `[x, y]`.
+fn parse_set(arg: &str) -> Result<(String, RawValue), String> {
+    let Some((name, value)) = arg.split_once('=') else {
+        return Err(format!("error: --set {arg}: expected NAME=VALUE, e.g. --set r=[1,0] or --set m=2"));
+    };
+    let (name, value) = (name.trim(), value.trim());
+    let parsed = match value.parse::<f64>() {
+        Ok(x) => RawValue::Number(x),
+        Err(_) => serde_json::from_str::<RawValue>(value)
+            .map_err(|_| format!("error: --set {arg}: `{value}` is not a number or a vector [x, y]"))?,
+    };
+    let finite = match &parsed {
+        RawValue::Number(x) => x.is_finite(),
+        RawValue::Vector(v) => v.iter().all(|x| x.is_finite()),
+    };
+    if !finite {
+        return Err(format!("error: --set {arg}: `{name}` must be finite"));
+    }
+    Ok((name.to_string(), parsed))
+}
+
+fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat) -> Result<(), ExitCode> {
+    let fail = |message: String| {
+        eprintln!("{message}");
+        ExitCode::from(1)
+    };
+    let text = read_text(path).map_err(fail)?;
+    let mut loaded = load(&text).map_err(|problems| report_problems(path, &text, &problems))?;
+    let derivation = derive(&mut loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let mut overrides = match at {
+        Some(p) => read_state(p).map_err(fail)?,
+        None => Vec::new(),
+    };
+    for arg in set {
+        overrides.push(parse_set(arg).map_err(fail)?);
+    }
+    let system = &loaded.system;
+    let env = environment(system, &loaded.values, &loaded.scene, &overrides)
+        .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let program = RowProgram::new(&mut loaded.system, &derivation, &loaded.scene.forces);
+    let system = &loaded.system;
+    let rows = program.evaluate(system, &env).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    // Contact distances count as zero relative to the size of the scene.
+    let length = system
+        .bodies
+        .iter()
+        .filter_map(|b| env.get(b.position).and_then(|v| v.vector()))
+        .map(|r| safe_norm(&r))
+        .fold(0.0, f64::max);
+    let settings =
+        Settings { length_scale: if length > 0.0 && length.is_finite() { length } else { 1.0 }, ..Settings::default() };
+    let solution = solve_with(&rows, &settings);
+    let t = env.get(system.time).and_then(|v| v.scalar()).unwrap_or(0.0);
+    match format {
+        SolveFormat::Json => {
+            let v = solution::json(system, &derivation, &rows, &solution, t);
+            println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        }
+        SolveFormat::Text => print!("{}", solution::text(system, &derivation, &rows, &solution, t)),
+    }
+    Ok(())
 }
