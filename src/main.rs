@@ -217,7 +217,10 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     let system = &loaded.system;
     let env = environment(system, &loaded.values, &loaded.scene, &overrides)
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
-    let program = RowProgram::new(&mut loaded.system, &derivation, &loaded.scene.forces);
+    // A force given in the state replaces the scene's expression for that body.
+    let given = |b: usize| overrides.iter().any(|(n, _)| *n == system.graph.symbol(system.bodies[b].force).name);
+    let forces: Vec<_> = loaded.scene.forces.iter().copied().filter(|&(b, _)| !given(b)).collect();
+    let program = RowProgram::new(&mut loaded.system, &derivation, &forces);
     let system = &loaded.system;
     let rows = program.evaluate(system, &env).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     // Contact distances count as zero relative to the size of the scene.
