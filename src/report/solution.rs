@@ -110,8 +110,7 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
         "constraint", "kind", "κ", "C/κ", "Ċ/κ", "λ", "active"
     );
     for (k, c) in system.constraints.iter().enumerate() {
-        let _ = writeln!(
-            out,
+        let line = format!(
             "{:<width$}  {:<10}  {:>4}  {:>13}  {:>13}  {:>13}  {:<6}  {}",
             c.name,
             if c.inequality { "inequality" } else { "equality" },
@@ -122,6 +121,7 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
             if solution.active[k] { "yes" } else { "no" },
             solution.contacts[k].map_or("", |s| s.name()),
         );
+        let _ = writeln!(out, "{}", line.trim_end());
     }
     let bw = system.bodies.iter().map(|b| b.name.chars().count()).max().unwrap_or(0).max(4);
     let vector = |v: &[f64; 3]| v[..dim].iter().map(|x| number(*x)).collect::<Vec<_>>().join(", ");
