@@ -575,3 +575,48 @@ fn straight_chain_band_and_dense_agree_with_statics() {
         }
     }
 }
+
+/// A wire and a line through the bead's position with the same normal: C̈ = 0 asks
+/// v·v + r·a = 0 and a.x = 0 at once, which cannot both hold when the bead moves.
+#[test]
+fn contradictory_constraints_are_reported_inconsistent() {
+    let text = BEAD.replace(
+        "expr = \"dot(r,r) = l^2\"",
+        "expr = \"dot(r,r) = l^2\"\n[[constraints]]\nname = \"line\"\nexpr = \"r.x = l\"",
+    );
+    let setup = setup(&text);
+    let rows = setup.rows(&[("r", v(&[2.0, 0.0])), ("v", v(&[0.0, 1.0]))]);
+    let sol = solve(&rows);
+    assert_eq!(sol.status, Status::Inconsistent);
+    assert!(sol.diagnostics.iter().any(|d| d.message.contains("inconsistent") && d.constraints == vec![0, 1]));
+    assert!(sol.lambda.iter().chain(sol.constraint_force[0].iter()).all(|x| x.is_finite()));
+    // At rest the same pair is merely redundant.
+    let sol = solve(&setup.rows(&[("r", v(&[2.0, 0.0])), ("v", v(&[0.0, 0.0]))]));
+    assert_eq!(sol.status, Status::MinimumNorm);
+    assert_close(&sol.acceleration[0], &[0.0, -9.81], 1e-12, 9.81, "slides down the line");
+}
+
+/// A body hitting a corner (floor and wall both closing): the two impulses are the
+/// single-contact formula each, since the normals are orthogonal.
+#[test]
+fn simultaneous_impulses_at_a_corner() {
+    let rows = Rows {
+        dim: 2,
+        inverse_mass: vec![0.25],
+        velocity: vec![[-3.0, -2.0, 0.0]],
+        force: vec![[0.0, -39.24, 0.0]],
+        rows: vec![
+            Row { value: 0.0, rate: -2.0, bias: 0.0, inequality: true, jacobian: vec![(0, [0.0, 1.0, 0.0])] },
+            Row { value: 0.0, rate: -3.0, bias: 0.0, inequality: true, jacobian: vec![(0, [1.0, 0.0, 0.0])] },
+        ],
+    };
+    let e = 0.8;
+    let out = impulses(&rows, e, &Settings::default());
+    assert_eq!(out.status, Status::Solved, "{:?}", out.diagnostics);
+    for (k, speed) in [(0, 2.0), (1, 3.0)] {
+        let single = impulse(&rows, k, e).expect("usable");
+        assert!((single - (1.0 + e) * 4.0 * speed).abs() <= 1e-12 * single);
+        assert!((out.impulse[k] - single).abs() <= 1e-9 * single, "{k}: {} vs {single}", out.impulse[k]);
+    }
+    assert_close(&out.velocity_change[0], &[3.0 * 1.8, 2.0 * 1.8], 1e-9, 6.0, "corner bounce");
+}

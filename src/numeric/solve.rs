@@ -193,12 +193,16 @@ impl Scaled {
             Scaled { norm: vec![0.0; k], jacobi: vec![0.0; k], usable: vec![false; k], jacobian: vec![Vec::new(); k] };
         for (q, row) in rows.rows.iter().enumerate() {
             let norm = row_norm(&row.jacobian);
-            let finite = norm.is_finite() && row.bias.is_finite() && !row.jacobian.iter().any(|(b, _)| bad_body[*b]);
+            // An inequality also needs C and Ċ to be classified.
+            let finite = norm.is_finite()
+                && row.bias.is_finite()
+                && !row.jacobian.iter().any(|(b, _)| bad_body[*b])
+                && (!row.inequality || (row.value.is_finite() && row.rate.is_finite()));
             if !finite {
                 diagnostics.push(Diagnostic {
                     constraints: vec![q],
                     message: format!(
-                        "constraint {q} has non-finite numbers here (gradient, c term, or a body's mass, velocity or force); it is left out"
+                        "constraint {q} has non-finite numbers here (gradient, c term, C or Ċ of an inequality, or a body's mass, velocity or force); it is left out"
                     ),
                 });
                 *status = (*status).max(Status::Failed);
