@@ -7,6 +7,7 @@ use lagrange::derive::{Derivation, derive};
 use lagrange::model::file::{Loaded, RawValue, load};
 use lagrange::model::scene::environment;
 use lagrange::numeric::contact::{ContactState, impulse, impulses};
+use lagrange::numeric::qp::{QpStatus, solve_qp};
 use lagrange::numeric::rows::{Row, RowProgram, Rows};
 use lagrange::numeric::solve::{Settings, Solution, Status, solve, solve_with};
 use proptest::prelude::*;
@@ -454,7 +455,7 @@ fn contact_rows() -> impl Strategy<Value = Rows> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 200, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 500, max_global_rejects: 10_000, ..ProptestConfig::default() })]
 
     #[test]
     fn contacts_are_complementary(rows in contact_rows()) {
@@ -484,11 +485,15 @@ proptest! {
             forces.push((k, sol.lambda[k] * jn, cdd[k] / jn));
         }
         // Force scale: the largest contact force or the weight-like scale, whichever is larger.
+        // Near-parallel contacts need huge opposing forces; C̈ is then only known to the
+        // rounding of those forces (ε·F·w), which the tolerance includes.
         let fscale = forces.iter().map(|f| f.1.abs()).fold(heavy * accel, f64::max);
+        let wmax = rows.inverse_mass.iter().fold(0.0f64, |m, w| m.max(*w));
+        let allowed = tol * accel + 64.0 * f64::EPSILON * fscale * wmax;
         for (k, force, normal) in forces {
             prop_assert!(force >= 0.0, "λ{k} = {}", sol.lambda[k]);
-            prop_assert!(normal >= -tol * accel, "C̈{k}/‖J‖ = {normal:e} (scale {accel:e})");
-            prop_assert!((force * normal).abs() <= tol * accel * fscale, "λ·C̈ row {k}: {:e}", force * normal);
+            prop_assert!(normal >= -allowed, "C̈{k}/‖J‖ = {normal:e} (allowed {allowed:e})");
+            prop_assert!((force * normal).abs() <= allowed * fscale, "λ·C̈ row {k}: {:e}", force * normal);
         }
     }
 
@@ -515,6 +520,50 @@ proptest! {
         prop_assert_eq!(sol.status, Status::Solved);
         for (a, b) in sol.lambda.iter().zip(&eq.lambda) {
             prop_assert!((a - b).abs() <= 1e-9 * b.abs(), "{a} vs {b}");
+        }
+        // Clarabel alone on the raw QP (A = J M⁻¹ Jᵀ, b = J M⁻¹ F + c) lands there too, to
+        // interior-point accuracy.
+        let n = rows.rows.len();
+        let mut a = Vec::new();
+        for p in 0..n {
+            for q in p..n {
+                let mut x = 0.0;
+                for (bp, jp) in &rows.rows[p].jacobian {
+                    for (bq, jq) in &rows.rows[q].jacobian {
+                        if bp == bq {
+                            x += (jp[0] * jq[0] + jp[1] * jq[1]) * rows.inverse_mass[*bp];
+                        }
+                    }
+                }
+                a.push((p, q, x));
+            }
+        }
+        let b: Vec<f64> = rows.rows.iter().map(|r| {
+            r.jacobian.iter().map(|(i, j)| (j[0] * rows.force[*i][0] + j[1] * rows.force[*i][1]) * rows.inverse_mass[*i]).sum::<f64>() + r.bias
+        }).collect();
+        // Clarabel on the Jacobi-scaled problem (Ã = D A D, b̃ = D b, λ = D λ̃, as the solve
+        // does before calling it), where A is well conditioned (κ(Ã) < 1e3): elsewhere λ itself is
+        // ill-determined at interior-point tolerances, which is why the solve polishes.
+        let mut dense = nalgebra::DMatrix::<f64>::zeros(n, n);
+        for &(p, q, x) in &a {
+            dense[(p, q)] = x;
+            dense[(q, p)] = x;
+        }
+        let d: Vec<f64> = (0..n).map(|p| 1.0 / dense[(p, p)].sqrt()).collect();
+        let scaled = nalgebra::DMatrix::from_fn(n, n, |p, q| dense[(p, q)] * d[p] * d[q]);
+        let eig = scaled.clone().symmetric_eigenvalues();
+        prop_assume!(eig.min() > 1e-3 * eig.max());
+        let a_scaled: Vec<(usize, usize, f64)> = a.iter().map(|&(p, q, _)| (p, q, scaled[(p, q)])).collect();
+        let b_scaled: Vec<f64> = b.iter().zip(&d).map(|(x, y)| x * y).collect();
+        let qp = solve_qp(&a_scaled, &b_scaled, &vec![true; n]);
+        prop_assert!(matches!(qp.status, QpStatus::Solved | QpStatus::AlmostSolved), "{:?}", qp.status);
+        // Compared in the scaled multipliers λ̃ = λ/D, the units Clarabel's tolerances apply to.
+        let exact: Vec<f64> = eq.lambda.iter().zip(&d).map(|(x, y)| x / y).collect();
+        let big = exact.iter().chain(&b_scaled).fold(0.0f64, |m, x| m.max(x.abs()));
+        for (x, y) in qp.lambda.iter().zip(&exact) {
+            // Interior-point accuracy: relative ~1e-3 on nearly inactive rows, absolute ~1e-5
+            // at the unit scale of Ã (the polish in `numeric::solve` recovers full precision).
+            prop_assert!((x - y).abs() <= 1e-3 * big + 1e-5, "QP {x} vs {y}");
         }
     }
 }

@@ -18,7 +18,10 @@
 //!   touching rows already pushes on every inequality (λ ≥ 0), it is the answer (the QP's
 //!   solution then coincides with it). Otherwise the QP (`numeric::qp`, Clarabel) picks the
 //!   active set, and the equality solve on that set polishes it to full precision; KKT
-//!   residuals are checked and reported when poor.
+//!   residuals are checked and reported when poor. When Clarabel fails (iteration limit,
+//!   numerical error) or its active set does not polish, Murty's least-index principal
+//!   pivoting (exact, terminates for positive definite Ã) starts from its guess, for blocks
+//!   of up to 64 rows.
 //!
 //! Minimum norm is taken in the scaled multipliers λ̃ (a constraint's force magnitude over
 //! the square root of its effective mass), which does not depend on how C is written.
@@ -381,64 +384,52 @@ pub(crate) fn multipliers(
     }
     let qp = solve_qp(&block.a, b, nonnegative);
     let names = |rows: &[usize]| rows.iter().map(|&p| index[p]).collect::<Vec<_>>();
-    match qp.status {
-        QpStatus::Solved | QpStatus::AlmostSolved => {}
-        other => {
-            let (message, worst) = match other {
-                QpStatus::Infeasible => {
-                    ("the contact QP is infeasible: the constraints contradict each other", Status::Inconsistent)
-                }
-                QpStatus::Unbounded => (
-                    "the contact QP is unbounded: the equality rows are inconsistent (no λ balances b)",
-                    Status::Inconsistent,
-                ),
-                QpStatus::MaxIterations => ("the contact QP reached its iteration limit", Status::Failed),
-                QpStatus::NumericalError => ("the contact QP stopped on a numerical error", Status::Failed),
-                _ => ("the contact QP was rejected by Clarabel (an internal error)", Status::Failed),
-            };
-            diagnostics
-                .push(Diagnostic { constraints: names(&(0..block.n).collect::<Vec<_>>()), message: message.into() });
-            *status = (*status).max(worst);
-            return vec![0.0; block.n];
-        }
-    }
+    let all = names(&(0..block.n).collect::<Vec<_>>());
+    let clarabel_ok = matches!(qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
     // Polish: the equality solve on the rows the QP keeps (free rows and λ > 0).
     let big = qp.lambda.iter().fold(1.0f64, |m, v| m.max(v.abs()));
-    let keep: Vec<usize> = (0..block.n).filter(|&p| !nonnegative[p] || qp.lambda[p] > tol.sqrt() * big).collect();
-    let mut position = vec![usize::MAX; block.n];
-    for (s, &p) in keep.iter().enumerate() {
-        position[p] = s;
-    }
-    let sub = Block {
-        n: keep.len(),
-        bandwidth: block.bandwidth,
-        a: block
-            .a
-            .iter()
-            .filter(|(p, q, _)| position[*p] != usize::MAX && position[*q] != usize::MAX)
-            .map(|&(p, q, v)| (position[p], position[q], v))
-            .collect(),
-    };
-    let sub_b: Vec<f64> = keep.iter().map(|&p| b[p]).collect();
-    let sub_index: Vec<usize> = keep.iter().map(|&p| index[p]).collect();
-    let (mut d1, mut s1) = (Vec::new(), Status::Solved);
-    let y = equality(&sub, &sub_b, &sub_index, settings, &mut d1, &mut s1);
-    let mut polished = vec![0.0; block.n];
-    for (s, &p) in keep.iter().enumerate() {
-        polished[p] = y[s];
-    }
+    let keep: Vec<bool> = (0..block.n).map(|p| !nonnegative[p] || qp.lambda[p] > tol.sqrt() * big).collect();
+    let (polished, d1, s1) = solve_subset(block, b, &keep, index, settings);
+    let polished: Vec<f64> =
+        polished.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect();
     let r_polished = kkt(&block.a, b, nonnegative, &polished);
-    let r_qp = qp.residuals;
-    let (answer, residuals) = if r_polished.worst() <= r_qp.worst().max(tol) {
+    if clarabel_ok && r_polished.worst() <= tol {
         diagnostics.extend(d1);
         *status = (*status).max(s1);
-        (polished.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect(), r_polished)
+        return polished;
+    }
+    // Clarabel failed or its active set does not polish: principal pivoting from its guess.
+    if let Some((x, d2, s2)) = pivoting(block, b, nonnegative, &keep, index, settings) {
+        diagnostics.extend(d2);
+        *status = (*status).max(s2);
+        return x;
+    }
+    if !clarabel_ok {
+        let (message, worst) = match qp.status {
+            QpStatus::Infeasible => {
+                ("the contact QP is infeasible: the constraints contradict each other", Status::Inconsistent)
+            }
+            QpStatus::Unbounded => {
+                ("the contact QP is unbounded: the rows are inconsistent (no λ ≥ 0 balances b)", Status::Inconsistent)
+            }
+            QpStatus::MaxIterations => ("the contact QP reached its iteration limit", Status::Failed),
+            QpStatus::NumericalError => ("the contact QP stopped on a numerical error", Status::Failed),
+            _ => ("the contact QP was rejected by Clarabel (an internal error)", Status::Failed),
+        };
+        diagnostics.push(Diagnostic { constraints: all, message: message.into() });
+        *status = (*status).max(worst);
+        return vec![0.0; block.n];
+    }
+    let (answer, residuals) = if r_polished.worst() <= qp.residuals.worst() {
+        diagnostics.extend(d1);
+        *status = (*status).max(s1);
+        (polished, r_polished)
     } else {
-        (qp.lambda.clone(), r_qp)
+        (qp.lambda.clone(), qp.residuals)
     };
     if qp.status == QpStatus::AlmostSolved || residuals.worst() > tol.sqrt() {
         diagnostics.push(Diagnostic {
-            constraints: names(&(0..block.n).collect::<Vec<_>>()),
+            constraints: all,
             message: format!(
                 "the contact QP ({:?}, {} iterations) has poor KKT residuals: stationarity {:.1e}, feasibility {:.1e}, complementarity {:.1e}",
                 qp.status, qp.iterations, residuals.stationarity, residuals.feasibility, residuals.complementarity
@@ -447,6 +438,81 @@ pub(crate) fn multipliers(
         *status = (*status).max(Status::Inaccurate);
     }
     answer
+}
+
+/// The equality solve on the rows of `block` marked in `keep`; the others get λ = 0.
+fn solve_subset(
+    block: &Block,
+    b: &[f64],
+    keep: &[bool],
+    index: &[usize],
+    settings: &Settings,
+) -> (Vec<f64>, Vec<Diagnostic>, Status) {
+    let rows: Vec<usize> = (0..block.n).filter(|&p| keep[p]).collect();
+    let mut position = vec![usize::MAX; block.n];
+    for (s, &p) in rows.iter().enumerate() {
+        position[p] = s;
+    }
+    let sub = Block {
+        n: rows.len(),
+        bandwidth: block.bandwidth,
+        a: block
+            .a
+            .iter()
+            .filter(|(p, q, _)| position[*p] != usize::MAX && position[*q] != usize::MAX)
+            .map(|&(p, q, v)| (position[p], position[q], v))
+            .collect(),
+    };
+    let sub_b: Vec<f64> = rows.iter().map(|&p| b[p]).collect();
+    let sub_index: Vec<usize> = rows.iter().map(|&p| index[p]).collect();
+    let (mut d, mut s) = (Vec::new(), Status::Solved);
+    let y = equality(&sub, &sub_b, &sub_index, settings, &mut d, &mut s);
+    let mut x = vec![0.0; block.n];
+    for (i, &p) in rows.iter().enumerate() {
+        x[p] = y[i];
+    }
+    (x, d, s)
+}
+
+/// Murty's least-index principal pivoting (Murty 1974) for the contact LCP, from the set
+/// `start`: solve the equalities on the set, then flip the first inequality row that is
+/// infeasible (λ < 0 inside, C̈ < 0 outside). It terminates when Ã restricted to the
+/// inequality rows' Schur complement is positive definite; otherwise it gives up (`None`)
+/// after a bounded number of flips. Only used for small blocks, when Clarabel fails.
+fn pivoting(
+    block: &Block,
+    b: &[f64],
+    nonnegative: &[bool],
+    start: &[bool],
+    index: &[usize],
+    settings: &Settings,
+) -> Option<(Vec<f64>, Vec<Diagnostic>, Status)> {
+    const MAX_ROWS: usize = 64;
+    let n = block.n;
+    if n > MAX_ROWS {
+        return None;
+    }
+    let tol = settings.contact_tolerance;
+    let mut in_set: Vec<bool> = (0..n).map(|p| !nonnegative[p] || start[p]).collect();
+    for _ in 0..(200 * n + 1000) {
+        let (x, d, s) = solve_subset(block, b, &in_set, index, settings);
+        if s > Status::MinimumNorm {
+            return None;
+        }
+        let w: Vec<f64> = super::qp::sym_mul(n, &block.a, &x).iter().zip(b).map(|(u, v)| u + v).collect();
+        let scale = b.iter().chain(&x).fold(1.0f64, |m, v| m.max(v.abs()));
+        let flip = (0..n)
+            .find(|&p| nonnegative[p] && ((in_set[p] && x[p] < -tol * scale) || (!in_set[p] && w[p] < -tol * scale)));
+        match flip {
+            None => {
+                let x: Vec<f64> =
+                    x.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect();
+                return Some((x, d, s));
+            }
+            Some(p) => in_set[p] = !in_set[p],
+        }
+    }
+    None
 }
 
 /// Solves Ã μ = −b̃ on a block: band or dense Cholesky, SVD when singular.
