@@ -4,7 +4,8 @@
 //! unit masses in a zig-zag, moving, under gravity, so A is tridiagonal and full of
 //! non-trivial numbers. Both sides include the same scaling and assembly, so the
 //! difference is the factorisation: O(N³) dense against O(N) banded. Dense stops at
-//! N = 1000 (N = 10 000 would need 800 MB and minutes).
+//! N = 1000 (N = 10 000 would need 800 MB and minutes). `auto_scrambled` lists the links
+//! out of order, so the band has to be found by renumbering.
 
 use divan::{Bencher, black_box};
 use lagrange::numeric::rows::{Row, Rows};
@@ -52,5 +53,19 @@ fn dense(bencher: Bencher, n: usize) {
 fn banded(bencher: Bencher, n: usize) {
     let rows = chain(n);
     let settings = Settings { method: Method::Banded, ..Settings::default() };
+    bencher.bench(|| solve_with(black_box(&rows), &settings));
+}
+
+/// The chain with its links listed in a scrambled order: `Auto` renumbers it (reverse
+/// Cuthill–McKee) back into a band, so this stays linear too.
+#[divan::bench(args = [1000, 10000])]
+fn auto_scrambled(bencher: Bencher, n: usize) {
+    let mut rows = chain(n);
+    let mut scrambled = vec![None; n];
+    for (k, row) in rows.rows.drain(..).enumerate() {
+        scrambled[(k * 7919) % n] = Some(row);
+    }
+    rows.rows = scrambled.into_iter().flatten().collect();
+    let settings = Settings::default();
     bencher.bench(|| solve_with(black_box(&rows), &settings));
 }

@@ -669,3 +669,34 @@ fn simultaneous_impulses_at_a_corner() {
     }
     assert_close(&out.velocity_change[0], &[3.0 * 1.8, 2.0 * 1.8], 1e-9, 6.0, "corner bounce");
 }
+
+/// The same straight chain with its links listed in a scrambled order: the band is found
+/// again by renumbering, and every link still holds the weight below it.
+#[test]
+fn scrambled_chain_is_renumbered_into_a_band() {
+    let n = 300;
+    let (m, g) = (0.7, 9.81);
+    // Link k at position (k * 7919) mod n in the list (7919 is prime, so this is a permutation).
+    let mut rows = vec![None; n];
+    for k in 0..n {
+        let mut jacobian = vec![(k, [0.0, -0.5, 0.0])];
+        if k > 0 {
+            jacobian.insert(0, (k - 1, [0.0, 0.5, 0.0]));
+        }
+        rows[(k * 7919) % n] = Some((k, Row { value: 0.0, rate: 0.0, bias: 0.0, inequality: false, jacobian }));
+    }
+    let (links, rows): (Vec<usize>, Vec<Row>) = rows.into_iter().map(|r| r.expect("a permutation")).unzip();
+    let rows = Rows {
+        dim: 2,
+        inverse_mass: vec![1.0 / m; n],
+        velocity: vec![[0.0; 3]; n],
+        force: vec![[0.0, -m * g, 0.0]; n],
+        rows,
+    };
+    let sol = solve(&rows);
+    assert_eq!(sol.status, Status::Solved);
+    for (q, &k) in links.iter().enumerate() {
+        let want = -((n - k) as f64) * m * g / 0.5;
+        assert!((sol.lambda[q] - want).abs() <= 1e-9 * want.abs(), "link {k}: {} vs {want}", sol.lambda[q]);
+    }
+}

@@ -37,12 +37,14 @@ use nalgebra::{DMatrix, DVector};
 /// Which factorisation the equality solve uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Method {
-    /// Band Cholesky when the bandwidth is under a quarter of the size, dense otherwise.
+    /// Band Cholesky when the bandwidth (after reverse Cuthill–McKee renumbering if that
+    /// narrows it) is under a quarter of the size, dense otherwise.
     #[default]
     Auto,
     /// Dense Cholesky (nalgebra), whatever the structure.
     Dense,
-    /// Band Cholesky with the bandwidth the rows have, whatever it is.
+    /// Band Cholesky (renumbered by reverse Cuthill–McKee if that narrows the band),
+    /// whatever the bandwidth.
     Banded,
 }
 
@@ -529,26 +531,53 @@ pub(crate) fn equality(
         return Vec::new();
     }
     let rhs: Vec<f64> = b.iter().map(|x| -x).collect();
+    // Renumber by reverse Cuthill–McKee when the given order is not already narrow.
+    let mut order: Option<Vec<usize>> = None;
+    let mut bandwidth = block.bandwidth;
+    if settings.method != Method::Dense && 4 * bandwidth >= n && n >= 16 {
+        let rcm = super::banded::reverse_cuthill_mckee(n, block.a.iter().map(|&(p, q, _)| (p, q)));
+        let mut position = vec![0; n];
+        for (new, &old) in rcm.iter().enumerate() {
+            position[old] = new;
+        }
+        let width = block.a.iter().map(|&(p, q, _)| position[p].abs_diff(position[q])).max().unwrap_or(0);
+        if width < bandwidth {
+            bandwidth = width;
+            order = Some(rcm);
+        }
+    }
     let banded = match settings.method {
         Method::Banded => true,
         Method::Dense => false,
-        Method::Auto => 4 * block.bandwidth < n,
+        Method::Auto => 4 * bandwidth < n,
     };
     let floor = settings.rank_tolerance;
     if banded {
-        let mut a = Banded::zeros(n, block.bandwidth);
+        // position[old] = new (the identity without a renumbering).
+        let mut position: Vec<usize> = (0..n).collect();
+        if let Some(order) = &order {
+            for (new, &old) in order.iter().enumerate() {
+                position[old] = new;
+            }
+        }
+        let mut a = Banded::zeros(n, bandwidth);
         for &(p, q, v) in &block.a {
-            a.add(q, p, v);
+            a.add(position[q], position[p], v);
         }
         if let Ok(ch) = a.cholesky(floor) {
-            let mut x = rhs.clone();
+            let mut permuted = vec![0.0; n];
+            for (old, &new) in position.iter().enumerate() {
+                permuted[new] = rhs[old];
+            }
+            let mut x = permuted.clone();
             ch.solve_in_place(&mut x);
             // One step of iterative refinement: x += A⁻¹ (rhs − A x).
             let mut ax = vec![0.0; n];
             a.mul(&x, &mut ax);
-            let mut r: Vec<f64> = rhs.iter().zip(&ax).map(|(u, v)| u - v).collect();
+            let mut r: Vec<f64> = permuted.iter().zip(&ax).map(|(u, v)| u - v).collect();
             ch.solve_in_place(&mut r);
             x.iter_mut().zip(&r).for_each(|(u, v)| *u += v);
+            let x = position.iter().map(|&new| x[new]).collect();
             return finite_or_zero(x, index, diagnostics, status);
         }
     } else {
