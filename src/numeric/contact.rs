@@ -92,7 +92,13 @@ pub fn impulse(rows: &Rows, k: usize, restitution: f64) -> Option<f64> {
         return None;
     }
     let (mut d, mut s) = (Vec::new(), Status::Solved);
-    let single = Rows { rows: vec![row.clone()], ..rows.clone() };
+    let single = Rows {
+        dim: rows.dim,
+        inverse_mass: rows.inverse_mass.clone(),
+        velocity: rows.velocity.clone(),
+        force: rows.force.clone(),
+        rows: vec![row.clone()],
+    };
     let scaled = Scaled::new(&single, &mut d, &mut s);
     if !scaled.usable[0] {
         return None;

@@ -342,6 +342,17 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
     for (p, &q) in index.iter().enumerate() {
         scaled_lambda[q] = mu[p];
         lambda[q] = scaled.unscale(q, mu[p]);
+        // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
+        // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
+        if mu[p] != 0.0 && !lambda[q].is_normal() {
+            diagnostics.push(Diagnostic {
+                constraints: vec![q],
+                message: format!(
+                    "λ of constraint {q} is outside the normal f64 range at this scale ({:e}); the forces and accelerations are exact",
+                    lambda[q]
+                ),
+            });
+        }
     }
     // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
     let mut constraint_force = vec![[0.0; 3]; n_bodies];
