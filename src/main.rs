@@ -5,8 +5,9 @@ use lagrange::derive::derive;
 use lagrange::model::file::RawValue;
 use lagrange::model::file::{Problem, load};
 use lagrange::model::scene::environment;
+use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::rows::RowProgram;
-use lagrange::numeric::solve::{Settings, safe_norm, solve_with};
+use lagrange::numeric::solve::{Settings, safe_norm};
 use lagrange::report::derivation::{self, Format};
 use lagrange::report::diagnostic::render;
 use lagrange::report::solution;
@@ -222,7 +223,7 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     let forces: Vec<_> = loaded.scene.forces.iter().copied().filter(|&(b, _)| !given(b)).collect();
     let program = RowProgram::new(&mut loaded.system, &derivation, &forces);
     let system = &loaded.system;
-    let rows = program.evaluate(system, &env).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+
     // Contact distances count as zero relative to the size of the scene.
     let length = system
         .bodies
@@ -232,7 +233,8 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         .fold(0.0, f64::max);
     let settings =
         Settings { length_scale: if length > 0.0 && length.is_finite() { length } else { 1.0 }, ..Settings::default() };
-    let solution = solve_with(&rows, &settings);
+    let (rows, solution) =
+        solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     let t = env.get(system.time).and_then(|v| v.scalar()).unwrap_or(0.0);
     match format {
         SolveFormat::Json => {

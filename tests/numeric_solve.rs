@@ -700,3 +700,37 @@ fn scrambled_chain_is_renumbered_into_a_band() {
         assert!((sol.lambda[q] - want).abs() <= 1e-9 * want.abs(), "link {k}: {} vs {want}", sol.lambda[q]);
     }
 }
+
+/// Where the raw rows overflow (|v| ≈ 1e155 makes c = v·v infinite, |r| ≈ 1e200 makes
+/// r·r infinite), the solve is redone in a length unit scaled by a power of two: exact
+/// forces, and C scaled back (its rounding noise ε·l² may itself overflow). A row that is not homogeneous (`l^2 + 1`) is
+/// not rescaled: the raw answer stands, with its diagnostic, and no NaN.
+#[test]
+fn overflowing_rows_are_solved_in_a_rescaled_unit() {
+    use lagrange::numeric::rescale::solve_at;
+    let setup = setup(BEAD);
+    let system = &setup.loaded.system;
+    for (l, speed) in [(1e155, 1e155), (1e200, 3e199), (1e300, 1.0), (2.0, 1.0)] {
+        let (theta, g) = (0.9f64, [0.0, -9.81]);
+        let r = [l * theta.cos(), l * theta.sin()];
+        let vel = [-speed * theta.sin(), speed * theta.cos()];
+        let o = vec![("l".to_string(), s(l)), ("r".to_string(), v(&r)), ("v".to_string(), v(&vel))];
+        let env = environment(system, &setup.loaded.values, &setup.loaded.scene, &o).expect("state");
+        let (rows, sol) = solve_at(&setup.program, system, &env, &Settings::default()).expect("rows");
+        assert_eq!(sol.status, Status::Solved, "l = {l:e}: {:?}", sol.diagnostics);
+        let want = article_force(1.0, &r, &vel, &g);
+        assert_close(&sol.constraint_force[0], &want, 1e-9, norm(&want), &format!("rescaled bead l = {l:e}"));
+        // C/κ is rounding noise of size ε·l², ±∞ where even that is beyond f64, never NaN.
+        assert!(!rows.rows[0].value.is_nan() && !rows.rows[0].bias.is_nan());
+        assert_eq!(sol.diagnostics.iter().any(|d| d.message.contains("length unit")), l > 1e154);
+    }
+    let text = BEAD.replace("expr = \"dot(r,r) = l^2\"", "expr = \"dot(r,r) = l^2 + 1\"");
+    let setup = self::setup(&text);
+    let system = &setup.loaded.system;
+    let o = vec![("l".to_string(), s(1e155)), ("r".to_string(), v(&[1e155, 0.0])), ("v".to_string(), v(&[0.0, 1e155]))];
+    let env = environment(system, &setup.loaded.values, &setup.loaded.scene, &o).expect("state");
+    let (_, sol) = solve_at(&setup.program, system, &env, &Settings::default()).expect("rows");
+    assert_eq!(sol.status, Status::Failed);
+    assert!(sol.diagnostics.iter().any(|d| d.message.contains("non-finite")));
+    assert!(sol.lambda.iter().chain(&sol.constraint_force[0]).all(|x| x.is_finite()));
+}

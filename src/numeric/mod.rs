@@ -6,5 +6,6 @@
 pub mod banded;
 pub mod contact;
 pub mod qp;
+pub mod rescale;
 pub mod rows;
 pub mod solve;
