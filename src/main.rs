@@ -3,9 +3,15 @@
 use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::codegen::{Options, generate};
 use lagrange::derive::derive;
+use lagrange::model::file::RawValue;
 use lagrange::model::file::{Problem, load};
+use lagrange::model::scene::environment;
+use lagrange::numeric::rescale::solve_at;
+use lagrange::numeric::rows::RowProgram;
+use lagrange::numeric::solve::{Settings, safe_norm};
 use lagrange::report::derivation::{self, Format};
 use lagrange::report::diagnostic::render;
+use lagrange::report::solution;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -48,11 +54,38 @@ enum Command {
         #[arg(long)]
         specialize: bool,
     },
+    /// Numbers at a state: C, Ċ and λ per constraint, force and acceleration per body.
+    ///
+    /// The state is the file's [parameters] and [scene] initial values, then `--at`, then
+    /// each `--set` (later wins); forces come from [scene] forces unless given. `value`,
+    /// `rate` and `lambda` refer to C/κ, like `derive --format json` (whose `gradient` is
+    /// ∇C/κ, `scale` κ): the force on a body is Σ λ·gradient. A missing or non-finite value
+    /// is an error naming the symbol (exit 1).
+    Solve {
+        /// The constraint file (TOML).
+        file: PathBuf,
+        /// A state file (.toml or .json): a flat table symbol = number or [x, y(, z)], for
+        /// positions, velocities, forces, masses, parameters and `t`.
+        #[arg(long, value_name = "STATE")]
+        at: Option<PathBuf>,
+        /// Override one symbol: NAME=NUMBER or NAME=[x,y]; may repeat.
+        #[arg(long = "set", value_name = "NAME=VALUE")]
+        set: Vec<String>,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = SolveFormat::Text)]
+        format: SolveFormat,
+    },
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum LangArg {
     Rust,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum SolveFormat {
+    Text,
+    Json,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -83,6 +116,10 @@ fn run(cli: Cli) -> ExitCode {
         Command::Generate { file, lang: LangArg::Rust, output, specialize } => {
             cmd_generate(&file, output.as_deref(), specialize)
         }
+        Command::Solve { file, at, set, format } => match cmd_solve(&file, at.as_deref(), &set, format) {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(code) => code,
+        },
     }
 }
 
@@ -186,4 +223,82 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
             ExitCode::SUCCESS
         }
     }
+}
+
+/// The symbol values of a `--at` file: a flat TOML or JSON table.
+fn read_state(path: &Path) -> Result<Vec<(String, RawValue)>, String> {
+    let text = read_text(path)?;
+    let table: std::collections::BTreeMap<String, RawValue> = match path.extension().and_then(|e| e.to_str()) {
+        Some("toml") => toml::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
+        Some("json") => serde_json::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
+        _ => return Err(format!("error: {}: a state file must end in .toml or .json", path.display())),
+    };
+    Ok(table.into_iter().collect())
+}
+
+/// `NAME=VALUE` with VALUE a finite number or `[x, y]`.
+fn parse_set(arg: &str) -> Result<(String, RawValue), String> {
+    let Some((name, value)) = arg.split_once('=') else {
+        return Err(format!("error: --set {arg}: expected NAME=VALUE, e.g. --set r=[1,0] or --set m=2"));
+    };
+    let (name, value) = (name.trim(), value.trim());
+    let parsed = match value.parse::<f64>() {
+        Ok(x) => RawValue::Number(x),
+        Err(_) => serde_json::from_str::<RawValue>(value)
+            .map_err(|_| format!("error: --set {arg}: `{value}` is not a number or a vector [x, y]"))?,
+    };
+    let finite = match &parsed {
+        RawValue::Number(x) => x.is_finite(),
+        RawValue::Vector(v) => v.iter().all(|x| x.is_finite()),
+    };
+    if !finite {
+        return Err(format!("error: --set {arg}: `{name}` must be finite"));
+    }
+    Ok((name.to_string(), parsed))
+}
+
+fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat) -> Result<(), ExitCode> {
+    let fail = |message: String| {
+        eprintln!("{message}");
+        ExitCode::from(1)
+    };
+    let text = read_text(path).map_err(fail)?;
+    let mut loaded = load(&text).map_err(|problems| report_problems(path, &text, &problems))?;
+    let derivation = derive(&mut loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let mut overrides = match at {
+        Some(p) => read_state(p).map_err(fail)?,
+        None => Vec::new(),
+    };
+    for arg in set {
+        overrides.push(parse_set(arg).map_err(fail)?);
+    }
+    let system = &loaded.system;
+    let env = environment(system, &loaded.values, &loaded.scene, &overrides)
+        .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    // A force given in the state replaces the scene's expression for that body.
+    let given = |b: usize| overrides.iter().any(|(n, _)| *n == system.graph.symbol(system.bodies[b].force).name);
+    let forces: Vec<_> = loaded.scene.forces.iter().copied().filter(|&(b, _)| !given(b)).collect();
+    let program = RowProgram::new(&mut loaded.system, &derivation, &forces);
+    let system = &loaded.system;
+
+    // Contact distances count as zero relative to the size of the scene.
+    let length = system
+        .bodies
+        .iter()
+        .filter_map(|b| env.get(b.position).and_then(|v| v.vector()))
+        .map(|r| safe_norm(&r))
+        .fold(0.0, f64::max);
+    let settings =
+        Settings { length_scale: if length > 0.0 && length.is_finite() { length } else { 1.0 }, ..Settings::default() };
+    let (rows, solution) =
+        solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let t = env.get(system.time).and_then(|v| v.scalar()).unwrap_or(0.0);
+    match format {
+        SolveFormat::Json => {
+            let v = solution::json(system, &derivation, &rows, &solution, t);
+            println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+        }
+        SolveFormat::Text => print!("{}", solution::text(system, &derivation, &rows, &solution, t)),
+    }
+    Ok(())
 }

@@ -10,7 +10,11 @@
 //! This module knows nothing of TOML, files or text: states arrive as
 //! [`crate::expr::eval::Env`], results leave as plain numbers and diagnostics.
 
+pub mod banded;
+pub mod contact;
 pub mod program;
+pub mod qp;
+pub mod rescale;
 pub mod rows;
 pub mod solve;
 pub mod tape;

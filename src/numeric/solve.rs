@@ -1,22 +1,127 @@
-//! The multiplier solve (DESIGN.md steps 4–6): A λ = −b at one state, the constraint force
-//! on each body Σₖ λₖ Jₖᵢ and the accelerations aᵢ = (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ.
+//! The multiplier solve (DESIGN.md steps 4–6): A λ + b = 0 at one state, with λₖ ≥ 0 and
+//! complementarity on active inequality rows; the constraint force on each body Σₖ λₖ Jₖᵢ
+//! and the accelerations aᵢ = (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ.
 //!
-//! Design note. Rows are scaled first, Ĵₖ = Jₖ/‖Jₖ‖, so A's diagonal is made of inverse
-//! masses and every threshold can be relative; λ is scaled back at the end. The fast path is
-//! Cholesky of the scaled A; when it fails (redundant constraints, a singular configuration)
-//! an SVD gives the minimum-norm λ, and the diagnostics say which constraints are involved
-//! and whether the system is consistent. Active inequality rows are kept by a small active
-//! set loop (drop rows whose λ < 0); the Clarabel QP replaces it for large contact sets.
+//! Design note.
+//! - Scaling. Each row is scaled twice before anything is multiplied: Ĵ = J/‖J‖ (‖J‖ computed
+//!   without overflow), then J̃ = Ĵ/√Âₖₖ (Jacobi), so Ã = J̃ M⁻¹ J̃ᵀ has a unit diagonal and
+//!   every threshold below is relative. No product of two raw J is ever formed, so rows
+//!   with |J| ≈ 1e155 or 1e-150 solve as well as |J| ≈ 1. λₖ = λ̃ₖ (√Âₖₖ⁻¹)/‖Jₖ‖ and the force
+//!   Σ λ̃ₖ J̃ₖᵢ comes straight from the scaled quantities.
+//! - Equalities. A is banded when constraints are numbered along a chain; the band Cholesky
+//!   (`numeric::banded`) is linear in the number of rows, dense Cholesky is the alternative.
+//!   A small pivot (Ã singular within `rank_tolerance`: a redundant constraint, a singular
+//!   configuration) falls back to a dense SVD: the minimum-norm λ̃ when the system is
+//!   consistent, least squares when not, always with a diagnostic naming the rows, the
+//!   rank and a condition estimate. One step of iterative refinement follows each solve.
+//! - Inequalities. Rows are classified by `numeric::contact`. If the equality solve over all
+//!   touching rows already pushes on every inequality (λ ≥ 0), it is the answer (the QP's
+//!   solution then coincides with it). Otherwise the QP (`numeric::qp`, Clarabel) picks the
+//!   active set, and the equality solve on that set polishes it to full precision; KKT
+//!   residuals are checked and reported when poor. When Clarabel fails (iteration limit,
+//!   numerical error) or its active set does not polish, Murty's least-index principal
+//!   pivoting (exact, terminates for positive definite Ã) starts from its guess, for blocks
+//!   of up to 64 rows.
+//!
+//! Minimum norm is taken in the scaled multipliers λ̃ (a constraint's force magnitude over
+//! the square root of its effective mass), which does not depend on how C is written.
 //!
 //! Not here: evaluating rows (`numeric::rows`), files, text.
 
+use super::banded::Banded;
+use super::contact::{ContactState, classify};
+use super::qp::{QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use nalgebra::{DMatrix, DVector};
 
-/// Relative tolerance under which a row counts as touching (C ≈ 0) or resting (Ċ ≈ 0).
-pub const CONTACT_TOLERANCE: f64 = 1e-9;
-/// Singular values below this fraction of the largest are treated as zero.
-pub const RANK_TOLERANCE: f64 = 1e-10;
+/// Which factorisation the equality solve uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Method {
+    /// Band Cholesky when the bandwidth (after reverse Cuthill–McKee renumbering if that
+    /// narrows it) is under a quarter of the size, dense otherwise.
+    #[default]
+    Auto,
+    /// Dense Cholesky (nalgebra), whatever the structure.
+    Dense,
+    /// Band Cholesky (renumbered by reverse Cuthill–McKee if that narrows the band),
+    /// whatever the bandwidth.
+    Banded,
+}
+
+/// Tolerances and choices of the solve. Build with `Settings::default()` and field updates,
+/// then [`Settings::validate`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    /// Pivots and singular values of the unit-diagonal Ã at or below this are zero.
+    pub rank_tolerance: f64,
+    /// Relative tolerance of "touching" and "resting" for inequality rows
+    /// (`numeric::contact`), of consistency checks and of the QP's KKT residuals.
+    pub contact_tolerance: f64,
+    /// The length against which a contact distance |C|/‖∇C‖ counts as zero.
+    pub length_scale: f64,
+    pub method: Method,
+}
+
+impl Default for Settings {
+    fn default() -> Settings {
+        Settings { rank_tolerance: 1e-10, contact_tolerance: 1e-9, length_scale: 1.0, method: Method::Auto }
+    }
+}
+
+/// A setting out of range.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SettingsError {
+    #[error("`{name}` must be a finite positive number below 1, found {value}")]
+    Tolerance { name: &'static str, value: f64 },
+    #[error("`length_scale` must be a finite positive number, found {0}")]
+    Length(f64),
+}
+
+impl Settings {
+    pub fn validate(&self) -> Result<(), SettingsError> {
+        for (name, value) in [("rank_tolerance", self.rank_tolerance), ("contact_tolerance", self.contact_tolerance)] {
+            if !(value > 0.0 && value < 1.0) {
+                return Err(SettingsError::Tolerance { name, value });
+            }
+        }
+        if !(self.length_scale > 0.0 && self.length_scale.is_finite()) {
+            return Err(SettingsError::Length(self.length_scale));
+        }
+        Ok(())
+    }
+}
+
+/// How a solve went, from best to worst (`Ord` follows this order).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Status {
+    /// Every condition holds to the tolerances.
+    #[default]
+    Solved,
+    /// Redundant constraints (A singular) with consistent data: the minimum-norm λ.
+    MinimumNorm,
+    /// A constraint has a zero gradient here (a singular configuration): it carries no force.
+    Singular,
+    /// The QP solved to reduced accuracy or with poor KKT residuals.
+    Inaccurate,
+    /// The constraints contradict each other here: the least-squares minimum-norm λ.
+    Inconsistent,
+    /// No answer: non-finite input, or the QP failed. λ is 0 on the rows involved.
+    Failed,
+}
+
+impl Status {
+    /// A short name for reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Status::Solved => "solved",
+            Status::MinimumNorm => "minimum-norm",
+            Status::Singular => "singular",
+            Status::Inaccurate => "inaccurate",
+            Status::Inconsistent => "inconsistent",
+            Status::Failed => "failed",
+        }
+    }
+}
 
 /// Something the caller should know about a solve.
 #[derive(Clone, Debug, PartialEq)]
@@ -31,13 +136,18 @@ pub struct Diagnostic {
 pub struct Solution {
     /// λ per constraint (0 for inactive inequalities), referring to C/κ like the rows.
     pub lambda: Vec<f64>,
-    /// Whether each constraint takes part (equalities always; inequalities when active).
+    /// Equalities: whether the row could take part (a non-zero, finite gradient).
+    /// Inequalities: whether the row carries a force (λ > 0).
     pub active: Vec<bool>,
     /// Σₖ λₖ Jₖᵢ per body.
     pub constraint_force: Vec<[f64; 3]>,
     /// (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ per body.
     pub acceleration: Vec<[f64; 3]>,
     pub diagnostics: Vec<Diagnostic>,
+    /// The worst outcome of the solve; `Solved` when `diagnostics` holds nothing serious.
+    pub status: Status,
+    /// Per constraint: the contact state of an inequality row, `None` for equalities.
+    pub contacts: Vec<Option<ContactState>>,
 }
 
 /// ‖x‖ without overflow or underflow for any finite components.
@@ -50,63 +160,206 @@ pub fn safe_norm(x: &[f64; 3]) -> f64 {
     big * s.sqrt()
 }
 
+/// ‖J‖ of a whole row (all bodies' parts), without overflow.
+pub fn row_norm(jacobian: &[(usize, [f64; 3])]) -> f64 {
+    jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0f64, |a, b| safe_norm(&[a, b, 0.0]))
+}
+
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
-/// Solves for λ at `rows`.
+/// The rows rescaled to a unit-diagonal Ã (see the design note).
+#[derive(Clone, Debug)]
+pub(crate) struct Scaled {
+    /// ‖Jₖ‖.
+    pub norm: Vec<f64>,
+    /// 1/√Âₖₖ.
+    pub jacobi: Vec<f64>,
+    /// Whether the row has a finite, non-zero gradient and finite numbers.
+    pub usable: Vec<bool>,
+    /// J̃ₖ = Jₖ/‖Jₖ‖/√Âₖₖ per body.
+    pub jacobian: Vec<Vec<(usize, [f64; 3])>>,
+}
+
+impl Scaled {
+    /// Scales `rows`; rows that cannot carry a force get a diagnostic and `usable = false`.
+    pub fn new(rows: &Rows, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) -> Scaled {
+        let k = rows.rows.len();
+        let bad_body: Vec<bool> = (0..rows.inverse_mass.len())
+            .map(|i| {
+                let w = rows.inverse_mass[i];
+                !(w.is_finite() && w >= 0.0)
+                    || rows.force[i].iter().any(|x| !x.is_finite())
+                    || rows.velocity[i].iter().any(|x| !x.is_finite())
+            })
+            .collect();
+        let mut s =
+            Scaled { norm: vec![0.0; k], jacobi: vec![0.0; k], usable: vec![false; k], jacobian: vec![Vec::new(); k] };
+        for (q, row) in rows.rows.iter().enumerate() {
+            let norm = row_norm(&row.jacobian);
+            // An inequality also needs C and Ċ to be classified.
+            let finite = norm.is_finite()
+                && row.bias.is_finite()
+                && !row.jacobian.iter().any(|(b, _)| bad_body[*b])
+                && (!row.inequality || (row.value.is_finite() && row.rate.is_finite()));
+            if !finite {
+                diagnostics.push(Diagnostic {
+                    constraints: vec![q],
+                    message: format!(
+                        "constraint {q} has non-finite numbers here (gradient, c term, C or Ċ of an inequality, or a body's mass, velocity or force); it is left out"
+                    ),
+                });
+                *status = (*status).max(Status::Failed);
+                continue;
+            }
+            if norm == 0.0 {
+                diagnostics.push(Diagnostic {
+                    constraints: vec![q],
+                    message: format!(
+                        "singular configuration: the gradient of constraint {q} is zero here, so it carries no force (λ = 0){}",
+                        if row.bias == 0.0 { "" } else { "; its C̈ = 0 cannot hold" }
+                    ),
+                });
+                *status = (*status).max(Status::Singular);
+                continue;
+            }
+            // Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ with Ĵ = J/‖J‖ (division, not a reciprocal, so tiny norms stay finite).
+            let unit: Vec<(usize, [f64; 3])> =
+                row.jacobian.iter().map(|&(b, j)| (b, [j[0] / norm, j[1] / norm, j[2] / norm])).collect();
+            let a_kk: f64 = unit.iter().map(|(b, j)| dot(j, j) * rows.inverse_mass[*b]).sum();
+            if !(a_kk > 0.0 && a_kk.is_finite()) {
+                diagnostics.push(Diagnostic {
+                    constraints: vec![q],
+                    message: format!("constraint {q} acts only on bodies of infinite mass; it carries no force"),
+                });
+                *status = (*status).max(Status::Singular);
+                continue;
+            }
+            let d = 1.0 / a_kk.sqrt();
+            s.norm[q] = norm;
+            s.jacobi[q] = d;
+            s.usable[q] = true;
+            s.jacobian[q] = unit.into_iter().map(|(b, j)| (b, [j[0] * d, j[1] * d, j[2] * d])).collect();
+        }
+        s
+    }
+
+    /// λₖ from λ̃ₖ.
+    pub fn unscale(&self, k: usize, x: f64) -> f64 {
+        if self.usable[k] { (x * self.jacobi[k]) / self.norm[k] } else { 0.0 }
+    }
+
+    /// A row quantity of C/κ (a rate, a c term) in the scaled row: x/‖J‖/√Â.
+    pub fn scale(&self, k: usize, x: f64) -> f64 {
+        (x / self.norm[k]) * self.jacobi[k]
+    }
+}
+
+/// Ã restricted to some rows: upper-triangle triplets and the bandwidth in that order.
+pub(crate) struct Block {
+    pub n: usize,
+    pub bandwidth: usize,
+    pub a: Vec<(usize, usize, f64)>,
+}
+
+/// Ãₚq = Σᵢ J̃ₚᵢ·J̃qᵢ wᵢ over the bodies rows p and q of `index` share.
+pub(crate) fn assemble(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -> Block {
+    let mut on_body: Vec<Vec<(usize, [f64; 3])>> = vec![Vec::new(); inverse_mass.len()];
+    for (p, &k) in index.iter().enumerate() {
+        for &(b, j) in &scaled.jacobian[k] {
+            on_body[b].push((p, j));
+        }
+    }
+    let mut a = Vec::new();
+    let mut bandwidth = 0;
+    for (b, acting) in on_body.iter().enumerate() {
+        let w = inverse_mass[b];
+        for (x, &(p, jp)) in acting.iter().enumerate() {
+            for &(q, jq) in &acting[x..] {
+                let (lo, hi) = if p <= q { (p, q) } else { (q, p) };
+                bandwidth = bandwidth.max(hi - lo);
+                a.push((lo, hi, dot(&jp, &jq) * w));
+            }
+        }
+    }
+    Block { n: index.len(), bandwidth, a }
+}
+
+/// Solves for λ at `rows` with the default settings.
 pub fn solve(rows: &Rows) -> Solution {
+    solve_with(rows, &Settings::default())
+}
+
+/// Solves for λ at `rows`.
+pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
     let n_bodies = rows.inverse_mass.len();
     let k = rows.rows.len();
     let mut diagnostics = Vec::new();
-    // Row scales 1/‖Jₖ‖; a zero gradient leaves the row out (it can carry no force).
-    let mut scale = vec![0.0; k];
-    for (q, row) in rows.rows.iter().enumerate() {
-        let norm = row.jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0f64, |a, b| safe_norm(&[a, b, 0.0]));
-        if norm > 0.0 && norm.is_finite() {
-            scale[q] = 1.0 / norm;
-        } else {
+    let mut status = Status::Solved;
+    let scaled = Scaled::new(rows, &mut diagnostics, &mut status);
+    let contacts = classify(rows, settings);
+    // Candidates: usable equalities, and inequality rows touching without separating.
+    let index: Vec<usize> = (0..k)
+        .filter(|&q| {
+            scaled.usable[q]
+                && match contacts[q] {
+                    None => true,
+                    Some(c) => c.is_candidate(),
+                }
+        })
+        .collect();
+    for (q, contact) in contacts.iter().enumerate() {
+        if let Some(ContactState::Closing) = contact {
             diagnostics.push(Diagnostic {
                 constraints: vec![q],
                 message: format!(
-                    "singular configuration: the gradient of constraint {q} is {} here, so it carries no force",
-                    if norm == 0.0 { "zero" } else { "not finite" }
+                    "contact {q} is closing (Ċ < 0): it needs an impulse P = −(1+e) J v / (J M⁻¹ Jᵀ) (numeric::contact::impulses); the force shown holds it as if resting"
+                ),
+            });
+        }
+        if let Some(ContactState::Penetrating) = contact {
+            diagnostics.push(Diagnostic {
+                constraints: vec![q],
+                message: format!("contact {q} is violated (C < 0 beyond the tolerance); it is treated as touching"),
+            });
+        }
+    }
+    // b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ
+    let b: Vec<f64> = index
+        .iter()
+        .map(|&q| {
+            let ext: f64 =
+                scaled.jacobian[q].iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
+            ext + scaled.scale(q, rows.rows[q].bias)
+        })
+        .collect();
+    let nonnegative: Vec<bool> = index.iter().map(|&q| rows.rows[q].inequality).collect();
+    let block = assemble(&scaled, &rows.inverse_mass, &index);
+    let mu = multipliers(&block, &b, &nonnegative, &index, settings, &mut diagnostics, &mut status);
+    let mut lambda = vec![0.0; k];
+    let mut scaled_lambda = vec![0.0; k];
+    for (p, &q) in index.iter().enumerate() {
+        scaled_lambda[q] = mu[p];
+        lambda[q] = scaled.unscale(q, mu[p]);
+        // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
+        // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
+        if mu[p] != 0.0 && !lambda[q].is_normal() {
+            diagnostics.push(Diagnostic {
+                constraints: vec![q],
+                message: format!(
+                    "λ of constraint {q} is outside the normal f64 range at this scale ({:e}); the forces and accelerations are exact",
+                    lambda[q]
                 ),
             });
         }
     }
-    let mut active: Vec<bool> = rows
-        .rows
-        .iter()
-        .enumerate()
-        .map(|(q, r)| {
-            scale[q] > 0.0
-                && (!r.inequality || {
-                    let (c, rate) = (r.value * scale[q], r.rate * scale[q]);
-                    c <= CONTACT_TOLERANCE && rate <= CONTACT_TOLERANCE
-                })
-        })
-        .collect();
-    let mut lambda = vec![0.0; k];
-    // Active set: solve, drop inequality rows that would pull, repeat (at most k times).
-    for _ in 0..=k {
-        lambda.iter_mut().for_each(|l| *l = 0.0);
-        let index: Vec<usize> = (0..k).filter(|&q| active[q]).collect();
-        solve_equalities(rows, &scale, &index, &mut lambda, &mut diagnostics);
-        let pulling: Vec<usize> =
-            index.iter().copied().filter(|&q| rows.rows[q].inequality && lambda[q] < 0.0).collect();
-        if pulling.is_empty() {
-            break;
-        }
-        for q in pulling {
-            active[q] = false;
-        }
-    }
+    // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
     let mut constraint_force = vec![[0.0; 3]; n_bodies];
-    for (q, row) in rows.rows.iter().enumerate() {
-        for (b, j) in &row.jacobian {
+    for &q in &index {
+        for (body, j) in &scaled.jacobian[q] {
             for d in 0..3 {
-                constraint_force[*b][d] += lambda[q] * j[d];
+                constraint_force[*body][d] += scaled_lambda[q] * j[d];
             }
         }
     }
@@ -116,85 +369,322 @@ pub fn solve(rows: &Rows) -> Solution {
             [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]
         })
         .collect();
-    Solution { lambda, active, constraint_force, acceleration, diagnostics }
+    let active = (0..k).map(|q| scaled.usable[q] && (!rows.rows[q].inequality || lambda[q] > 0.0)).collect();
+    Solution { lambda, active, constraint_force, acceleration, diagnostics, status, contacts }
 }
 
-/// Solves the scaled equations of the rows in `index` and writes their λ.
-fn solve_equalities(
-    rows: &Rows,
-    scale: &[f64],
+/// The scaled multipliers of a block: the equality solve when no row is `nonnegative`, else
+/// the QP, polished. `index` maps block rows to constraint numbers for diagnostics.
+pub(crate) fn multipliers(
+    block: &Block,
+    b: &[f64],
+    nonnegative: &[bool],
     index: &[usize],
-    lambda: &mut [f64],
+    settings: &Settings,
     diagnostics: &mut Vec<Diagnostic>,
-) {
-    let n = index.len();
-    if n == 0 {
-        return;
+    status: &mut Status,
+) -> Vec<f64> {
+    if !nonnegative.iter().any(|&x| x) {
+        return equality(block, b, index, settings, diagnostics, status);
     }
-    // Âₚq = Σᵢ Ĵₚᵢ·Ĵqᵢ/mᵢ and b̂ₚ = Σᵢ Ĵₚᵢ·Fᵢ/mᵢ + ĉₚ, with Ĵ = J/‖J‖.
-    let mut a = DMatrix::<f64>::zeros(n, n);
-    let mut b = DVector::<f64>::zeros(n);
-    for (p, &kp) in index.iter().enumerate() {
-        let rp = &rows.rows[kp];
-        for &(body, ref j) in &rp.jacobian {
-            let w = rows.inverse_mass[body] * scale[kp];
-            b[p] += dot(j, &rows.force[body]) * w;
-            for (q, &kq) in index.iter().enumerate() {
-                for &(other, ref jq) in &rows.rows[kq].jacobian {
-                    if other == body {
-                        a[(p, q)] += dot(j, jq) * w * scale[kq];
-                    }
+    let tol = settings.contact_tolerance;
+    // Every touching inequality as an equality first: if they all push, that is the answer.
+    let (mut d0, mut s0) = (Vec::new(), Status::Solved);
+    let x = equality(block, b, index, settings, &mut d0, &mut s0);
+    let scale = x.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    if s0 == Status::Solved && x.iter().zip(nonnegative).all(|(v, &nn)| !nn || *v >= -tol * scale) {
+        return x.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect();
+    }
+    let qp = solve_qp(&block.a, b, nonnegative);
+    let names = |rows: &[usize]| rows.iter().map(|&p| index[p]).collect::<Vec<_>>();
+    let all = names(&(0..block.n).collect::<Vec<_>>());
+    let clarabel_ok = matches!(qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
+    // Polish: the equality solve on the rows the QP keeps (free rows and λ > 0).
+    let big = qp.lambda.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    let keep: Vec<bool> = (0..block.n).map(|p| !nonnegative[p] || qp.lambda[p] > tol.sqrt() * big).collect();
+    let (polished, d1, s1) = solve_subset(block, b, &keep, index, settings);
+    let polished: Vec<f64> =
+        polished.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect();
+    let r_polished = kkt(&block.a, b, nonnegative, &polished);
+    if clarabel_ok && r_polished.worst() <= tol {
+        diagnostics.extend(d1);
+        *status = (*status).max(s1);
+        return polished;
+    }
+    // Clarabel failed or its active set does not polish: principal pivoting from its guess.
+    if let Some((x, d2, s2)) = pivoting(block, b, nonnegative, &keep, index, settings) {
+        diagnostics.extend(d2);
+        *status = (*status).max(s2);
+        return x;
+    }
+    if !clarabel_ok {
+        let (message, worst) = match qp.status {
+            QpStatus::Infeasible => {
+                ("the contact QP is infeasible: the constraints contradict each other", Status::Inconsistent)
+            }
+            QpStatus::Unbounded => {
+                ("the contact QP is unbounded: the rows are inconsistent (no λ ≥ 0 balances b)", Status::Inconsistent)
+            }
+            QpStatus::MaxIterations => ("the contact QP reached its iteration limit", Status::Failed),
+            QpStatus::NumericalError => ("the contact QP stopped on a numerical error", Status::Failed),
+            _ => ("the contact QP was rejected by Clarabel (an internal error)", Status::Failed),
+        };
+        diagnostics.push(Diagnostic { constraints: all, message: message.into() });
+        *status = (*status).max(worst);
+        return vec![0.0; block.n];
+    }
+    let (answer, residuals) = if r_polished.worst() <= qp.residuals.worst() {
+        diagnostics.extend(d1);
+        *status = (*status).max(s1);
+        (polished, r_polished)
+    } else {
+        (qp.lambda.clone(), qp.residuals)
+    };
+    if qp.status == QpStatus::AlmostSolved || residuals.worst() > tol.sqrt() {
+        diagnostics.push(Diagnostic {
+            constraints: all,
+            message: format!(
+                "the contact QP ({:?}, {} iterations) has poor KKT residuals: stationarity {:.1e}, feasibility {:.1e}, complementarity {:.1e}",
+                qp.status, qp.iterations, residuals.stationarity, residuals.feasibility, residuals.complementarity
+            ),
+        });
+        *status = (*status).max(Status::Inaccurate);
+    }
+    answer
+}
+
+/// The equality solve on the rows of `block` marked in `keep`; the others get λ = 0.
+fn solve_subset(
+    block: &Block,
+    b: &[f64],
+    keep: &[bool],
+    index: &[usize],
+    settings: &Settings,
+) -> (Vec<f64>, Vec<Diagnostic>, Status) {
+    let rows: Vec<usize> = (0..block.n).filter(|&p| keep[p]).collect();
+    let mut position = vec![usize::MAX; block.n];
+    for (s, &p) in rows.iter().enumerate() {
+        position[p] = s;
+    }
+    let sub = Block {
+        n: rows.len(),
+        bandwidth: block.bandwidth,
+        a: block
+            .a
+            .iter()
+            .filter(|(p, q, _)| position[*p] != usize::MAX && position[*q] != usize::MAX)
+            .map(|&(p, q, v)| (position[p], position[q], v))
+            .collect(),
+    };
+    let sub_b: Vec<f64> = rows.iter().map(|&p| b[p]).collect();
+    let sub_index: Vec<usize> = rows.iter().map(|&p| index[p]).collect();
+    let (mut d, mut s) = (Vec::new(), Status::Solved);
+    let y = equality(&sub, &sub_b, &sub_index, settings, &mut d, &mut s);
+    let mut x = vec![0.0; block.n];
+    for (i, &p) in rows.iter().enumerate() {
+        x[p] = y[i];
+    }
+    (x, d, s)
+}
+
+/// Murty's least-index principal pivoting (Murty 1974) for the contact LCP, from the set
+/// `start`: solve the equalities on the set, then flip the first inequality row that is
+/// infeasible (λ < 0 inside, C̈ < 0 outside). It terminates when Ã restricted to the
+/// inequality rows' Schur complement is positive definite; otherwise it gives up (`None`)
+/// after a bounded number of flips. Only used for small blocks, when Clarabel fails.
+fn pivoting(
+    block: &Block,
+    b: &[f64],
+    nonnegative: &[bool],
+    start: &[bool],
+    index: &[usize],
+    settings: &Settings,
+) -> Option<(Vec<f64>, Vec<Diagnostic>, Status)> {
+    const MAX_ROWS: usize = 64;
+    let n = block.n;
+    if n > MAX_ROWS {
+        return None;
+    }
+    let tol = settings.contact_tolerance;
+    let mut in_set: Vec<bool> = (0..n).map(|p| !nonnegative[p] || start[p]).collect();
+    for _ in 0..(200 * n + 1000) {
+        let (x, d, s) = solve_subset(block, b, &in_set, index, settings);
+        if s > Status::MinimumNorm {
+            return None;
+        }
+        let w: Vec<f64> = super::qp::sym_mul(n, &block.a, &x).iter().zip(b).map(|(u, v)| u + v).collect();
+        let scale = b.iter().chain(&x).fold(1.0f64, |m, v| m.max(v.abs()));
+        let flip = (0..n)
+            .find(|&p| nonnegative[p] && ((in_set[p] && x[p] < -tol * scale) || (!in_set[p] && w[p] < -tol * scale)));
+        match flip {
+            None => {
+                let x: Vec<f64> =
+                    x.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect();
+                return Some((x, d, s));
+            }
+            Some(p) => in_set[p] = !in_set[p],
+        }
+    }
+    None
+}
+
+/// Solves Ã μ = −b̃ on a block: band or dense Cholesky, SVD when singular.
+pub(crate) fn equality(
+    block: &Block,
+    b: &[f64],
+    index: &[usize],
+    settings: &Settings,
+    diagnostics: &mut Vec<Diagnostic>,
+    status: &mut Status,
+) -> Vec<f64> {
+    let n = block.n;
+    if n == 0 {
+        return Vec::new();
+    }
+    let rhs: Vec<f64> = b.iter().map(|x| -x).collect();
+    // Renumber by reverse Cuthill–McKee when the given order is not already narrow.
+    let mut order: Option<Vec<usize>> = None;
+    let mut bandwidth = block.bandwidth;
+    if settings.method != Method::Dense && 4 * bandwidth >= n && n >= 16 {
+        let rcm = super::banded::reverse_cuthill_mckee(n, block.a.iter().map(|&(p, q, _)| (p, q)));
+        let mut position = vec![0; n];
+        for (new, &old) in rcm.iter().enumerate() {
+            position[old] = new;
+        }
+        let width = block.a.iter().map(|&(p, q, _)| position[p].abs_diff(position[q])).max().unwrap_or(0);
+        if width < bandwidth {
+            bandwidth = width;
+            order = Some(rcm);
+        }
+    }
+    let banded = match settings.method {
+        Method::Banded => true,
+        Method::Dense => false,
+        Method::Auto => 4 * bandwidth < n,
+    };
+    let floor = settings.rank_tolerance;
+    if banded {
+        // position[old] = new (the identity without a renumbering).
+        let mut position: Vec<usize> = (0..n).collect();
+        if let Some(order) = &order {
+            for (new, &old) in order.iter().enumerate() {
+                position[old] = new;
+            }
+        }
+        let mut a = Banded::zeros(n, bandwidth);
+        for &(p, q, v) in &block.a {
+            a.add(position[q], position[p], v);
+        }
+        if let Ok(ch) = a.cholesky(floor) {
+            let mut permuted = vec![0.0; n];
+            for (old, &new) in position.iter().enumerate() {
+                permuted[new] = rhs[old];
+            }
+            let mut x = permuted.clone();
+            ch.solve_in_place(&mut x);
+            // One step of iterative refinement: x += A⁻¹ (rhs − A x).
+            let mut ax = vec![0.0; n];
+            a.mul(&x, &mut ax);
+            let mut r: Vec<f64> = permuted.iter().zip(&ax).map(|(u, v)| u - v).collect();
+            ch.solve_in_place(&mut r);
+            x.iter_mut().zip(&r).for_each(|(u, v)| *u += v);
+            let x = position.iter().map(|&new| x[new]).collect();
+            return finite_or_zero(x, index, diagnostics, status);
+        }
+    } else {
+        let a = dense(block);
+        if let Some(ch) = a.clone().cholesky()
+            && ch.l().diagonal().iter().all(|d| d * d > floor)
+        {
+            let rhs = DVector::from_vec(rhs.clone());
+            let mut x = ch.solve(&rhs);
+            let r = &rhs - &a * &x;
+            x += ch.solve(&r);
+            return finite_or_zero(x.iter().copied().collect(), index, diagnostics, status);
+        }
+    }
+    let x = minimum_norm(&dense(block), &rhs, index, settings, diagnostics, status);
+    finite_or_zero(x, index, diagnostics, status)
+}
+
+fn dense(block: &Block) -> DMatrix<f64> {
+    let mut a = DMatrix::<f64>::zeros(block.n, block.n);
+    for &(p, q, v) in &block.a {
+        a[(p, q)] += v;
+        if p != q {
+            a[(q, p)] += v;
+        }
+    }
+    a
+}
+
+fn finite_or_zero(
+    mut x: Vec<f64>,
+    index: &[usize],
+    diagnostics: &mut Vec<Diagnostic>,
+    status: &mut Status,
+) -> Vec<f64> {
+    for (p, v) in x.iter_mut().enumerate() {
+        if !v.is_finite() {
+            diagnostics.push(Diagnostic {
+                constraints: vec![index[p]],
+                message: format!("λ of constraint {} came out non-finite; it is set to 0", index[p]),
+            });
+            *status = (*status).max(Status::Failed);
+            *v = 0.0;
+        }
+    }
+    x
+}
+
+/// The minimum-norm (least-squares if inconsistent) solution of a singular `a μ = rhs` by
+/// SVD, with a diagnostic naming the rows in the null space.
+fn minimum_norm(
+    a: &DMatrix<f64>,
+    rhs: &[f64],
+    index: &[usize],
+    settings: &Settings,
+    diagnostics: &mut Vec<Diagnostic>,
+    status: &mut Status,
+) -> Vec<f64> {
+    let n = rhs.len();
+    let rhs = DVector::from_column_slice(rhs);
+    let svd = a.clone().svd(true, true);
+    let largest = svd.singular_values.amax();
+    let threshold = settings.rank_tolerance * largest.max(f64::MIN_POSITIVE);
+    let rank = svd.singular_values.iter().filter(|s| **s > threshold).count();
+    let mu = svd.solve(&rhs, threshold).unwrap_or_else(|_| DVector::zeros(n));
+    let residual = (a * &mu - &rhs).amax();
+    let size = rhs.amax() + a.amax() * mu.amax();
+    let consistent = residual <= settings.contact_tolerance.sqrt() * 1e-2 * size || size == 0.0;
+    let smallest = svd.singular_values.iter().copied().filter(|s| *s > threshold).fold(f64::INFINITY, f64::min);
+    // Rows with a visible part in a null vector are the redundant ones.
+    let mut involved = vec![false; n];
+    if let Some(v_t) = &svd.v_t {
+        for (s, sigma) in svd.singular_values.iter().enumerate() {
+            if *sigma <= threshold {
+                let row = v_t.row(s);
+                let top = row.amax();
+                for p in 0..n {
+                    involved[p] |= row[p].abs() > 1e-6 * top;
                 }
             }
         }
-        b[p] += rp.bias * scale[kp];
     }
-    let rhs = -&b;
-    let mu = match a.clone().cholesky() {
-        Some(ch) if ch.l().diagonal().iter().all(|d| *d > RANK_TOLERANCE.sqrt() * a.diagonal().amax().sqrt()) => {
-            ch.solve(&rhs)
-        }
-        _ => minimum_norm(&a, &rhs, index, diagnostics),
-    };
-    for (p, &kp) in index.iter().enumerate() {
-        lambda[kp] = mu[p] * scale[kp];
-        if !lambda[kp].is_finite() {
-            diagnostics.push(Diagnostic {
-                constraints: vec![kp],
-                message: format!("λ of constraint {kp} is not finite; it is set to 0"),
-            });
-            lambda[kp] = 0.0;
-        }
-    }
-}
-
-/// The minimum-norm solution of a singular `a μ = rhs` by SVD, with a diagnostic.
-fn minimum_norm(
-    a: &DMatrix<f64>,
-    rhs: &DVector<f64>,
-    index: &[usize],
-    diagnostics: &mut Vec<Diagnostic>,
-) -> DVector<f64> {
-    let svd = a.clone().svd(true, true);
-    let largest = svd.singular_values.amax();
-    let threshold = RANK_TOLERANCE * largest;
-    let rank = svd.singular_values.iter().filter(|s| **s > threshold).count();
-    let mu = svd.solve(rhs, threshold).unwrap_or_else(|_| DVector::zeros(rhs.len()));
-    let residual = (a * &mu - rhs).amax();
-    let consistent = residual <= 1e-8 * (rhs.amax() + a.amax() * mu.amax()).max(f64::MIN_POSITIVE);
-    let smallest = svd.singular_values.iter().copied().filter(|s| *s > threshold).fold(f64::INFINITY, f64::min);
+    let involved: Vec<usize> = (0..n).filter(|&p| involved[p]).map(|p| index[p]).collect();
+    let named = involved.iter().map(|q| q.to_string()).collect::<Vec<_>>().join(", ");
     diagnostics.push(Diagnostic {
-        constraints: index.to_vec(),
+        constraints: involved.clone(),
         message: format!(
-            "redundant or singular constraints: rank {rank} of {} (condition of the rest ≈ {:.1e}); {}",
-            index.len(),
+            "redundant or singular constraints ({named}): rank {rank} of {n}, condition of the rest ≈ {:.1e}; {}",
             largest / smallest,
             if consistent {
                 "consistent, minimum-norm λ".to_string()
             } else {
-                format!("inconsistent (residual {residual:.2e}), least-squares minimum-norm λ")
+                format!("inconsistent (relative residual {:.1e}), least-squares minimum-norm λ", residual / size)
             }
         ),
     });
-    mu
+    *status = (*status).max(if consistent { Status::MinimumNorm } else { Status::Inconsistent });
+    mu.iter().copied().collect()
 }

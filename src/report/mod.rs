@@ -4,3 +4,4 @@
 
 pub mod derivation;
 pub mod diagnostic;
+pub mod solution;

@@ -1,0 +1,176 @@
+//! Solving where the raw rows overflow: evaluate at a state rescaled by a power of two, solve
+//! there, and scale the answer back.
+//!
+//! At |r| ≈ 1e155, C = r·r − l² is ∞ − ∞ and at |v| ≈ 1e155 the c term v·v is ∞, although
+//! the force is finite. Changing the length unit by s = 2⁻ᵏ multiplies positions,
+//! velocities, forces and length-like parameters by s, and a row homogeneous of degree p
+//! in them gives C → sᵖC, Ċ → sᵖĊ, c → sᵖc, J → sᵖ⁻¹J; the forces then come out times s and
+//! λ (for C/κ) times s²⁻ᵖ. Masses and t are not scaled. Which parameters are lengths is not
+//! known, so every parameter outside the masses is scaled, and the scaling is *verified*:
+//! the rows are evaluated at s and at s/2, and every number must change by the exact power
+//! of two its degree predicts (powers of two scale floating-point results exactly). A row
+//! that is not homogeneous (sin(ω t) with ω scaled, `l^2 + 1`) fails the check, and the raw
+//! answer, with its diagnostics, stands.
+//!
+//! Not here: the solve itself (`numeric::solve`), files or text.
+
+use super::rows::{RowProgram, Rows};
+use super::solve::{Diagnostic, Settings, Solution, solve_with};
+use crate::expr::Symbol;
+use crate::expr::eval::{Env, EvalError, Value};
+use crate::model::system::System;
+
+/// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+pub fn pow2(mut x: f64, mut e: i64) -> f64 {
+    while e > 1000 {
+        x *= 2f64.powi(1000);
+        e -= 1000;
+    }
+    while e < -1000 {
+        x *= 2f64.powi(-1000);
+        e += 1000;
+    }
+    x * 2f64.powi(e as i32)
+}
+
+fn rows_finite(rows: &Rows) -> bool {
+    let v3 = |v: &[f64; 3]| v.iter().all(|x| x.is_finite());
+    rows.inverse_mass.iter().all(|x| x.is_finite())
+        && rows.velocity.iter().all(v3)
+        && rows.force.iter().all(v3)
+        && rows.rows.iter().all(|r| {
+            r.value.is_finite() && r.rate.is_finite() && r.bias.is_finite() && r.jacobian.iter().all(|(_, j)| v3(j))
+        })
+}
+
+/// The symbols a change of length unit scales: positions, velocities, forces and the
+/// parameters that no mass depends on.
+fn length_symbols(system: &System) -> Vec<Symbol> {
+    let mass_symbols: Vec<Symbol> = system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
+    let mut out: Vec<Symbol> = system.bodies.iter().flat_map(|b| [b.position, b.velocity, b.force]).collect();
+    out.extend(system.parameters.iter().map(|&(_, s)| s).filter(|s| !mass_symbols.contains(s)));
+    out
+}
+
+fn scaled_env(env: &Env, symbols: &[Symbol], e: i64) -> Env {
+    let mut out = env.clone();
+    for &s in symbols {
+        match env.get(s) {
+            Some(Value::Scalar(x)) => out.set(s, Value::Scalar(pow2(x, e))),
+            Some(Value::Vector(v)) => out.set(s, Value::Vector(v.map(|x| pow2(x, e)))),
+            None => {}
+        }
+    }
+    out
+}
+
+/// The degree p of each row if `at` (scaled by 2ᵉ) and `half` (by 2ᵉ⁻¹) differ exactly as a
+/// homogeneous row would, else `None`.
+fn degrees(at: &Rows, half: &Rows) -> Option<Vec<i64>> {
+    let exact = |a: f64, b: f64, p: i64| a == pow2(b, p);
+    let body_ok = at.inverse_mass == half.inverse_mass
+        && at.velocity.iter().zip(&half.velocity).all(|(a, b)| (0..3).all(|d| exact(a[d], b[d], 1)))
+        && at.force.iter().zip(&half.force).all(|(a, b)| (0..3).all(|d| exact(a[d], b[d], 1)));
+    if !body_ok {
+        return None;
+    }
+    let mut out = Vec::with_capacity(at.rows.len());
+    for (a, b) in at.rows.iter().zip(&half.rows) {
+        // The degree from the first non-zero number: scalars have degree p, J has p − 1.
+        let scalars = [(a.value, b.value), (a.rate, b.rate), (a.bias, b.bias)];
+        let from_scalar = scalars.iter().find(|(x, _)| *x != 0.0).map(|&(x, y)| (x / y).log2().round() as i64);
+        let from_j = a
+            .jacobian
+            .iter()
+            .zip(&b.jacobian)
+            .flat_map(|((_, x), (_, y))| (0..3).map(move |d| (x[d], y[d])))
+            .find(|(x, _)| *x != 0.0)
+            .map(|(x, y)| (x / y).log2().round() as i64 + 1);
+        let p = from_scalar.or(from_j).unwrap_or(0);
+        let ok = scalars.iter().all(|&(x, y)| exact(x, y, p))
+            && a.jacobian.iter().zip(&b.jacobian).all(|((_, x), (_, y))| (0..3).all(|d| exact(x[d], y[d], p - 1)));
+        if !ok {
+            return None;
+        }
+        out.push(p);
+    }
+    Some(out)
+}
+
+/// The rows at `env` and their solution; when the raw rows are not finite, the verified
+/// rescaled solve (see the module note), with a diagnostic saying so. The rows returned are
+/// the raw ones scaled back from the rescaled state (∞ where the true number overflows).
+pub fn solve_at(
+    program: &RowProgram,
+    system: &System,
+    env: &Env,
+    settings: &Settings,
+) -> Result<(Rows, Solution), EvalError> {
+    let raw = program.evaluate(system, env)?;
+    if rows_finite(&raw) {
+        let solution = solve_with(&raw, settings);
+        return Ok((raw, solution));
+    }
+    let symbols = length_symbols(system);
+    let big = symbols
+        .iter()
+        .filter_map(|&s| env.get(s))
+        .flat_map(|v| match v {
+            Value::Scalar(x) => [x, 0.0, 0.0],
+            Value::Vector(v) => v,
+        })
+        .fold(0.0f64, |m, x| m.max(x.abs()));
+    if !(big.is_finite() && big > 0.0) {
+        let solution = solve_with(&raw, settings);
+        return Ok((raw, solution));
+    }
+    // s = 2⁻ᵏ brings the largest length-like number near 1.
+    let k = big.log2().floor() as i64;
+    let at = program.evaluate(system, &scaled_env(env, &symbols, -k))?;
+    let half = program.evaluate(system, &scaled_env(env, &symbols, -k - 1))?;
+    let p = match (rows_finite(&at) && rows_finite(&half)).then(|| degrees(&at, &half)).flatten() {
+        Some(p) => p,
+        None => {
+            let solution = solve_with(&raw, settings);
+            return Ok((raw, solution));
+        }
+    };
+    let scaled_settings = Settings { length_scale: pow2(settings.length_scale, -k), ..*settings };
+    let mut solution = solve_with(&at, &scaled_settings);
+    // Back to the caller's units: forces and accelerations × 2ᵏ = 1/s, λ = λ'·s^{p−2}.
+    for f in solution.constraint_force.iter_mut().chain(solution.acceleration.iter_mut()) {
+        *f = f.map(|x| pow2(x, k));
+    }
+    for (q, (l, &p)) in solution.lambda.iter_mut().zip(&p).enumerate() {
+        let scaled = *l;
+        *l = pow2(scaled, -k * (p - 2));
+        if scaled != 0.0 && !l.is_normal() {
+            solution.diagnostics.push(Diagnostic {
+                constraints: vec![q],
+                message: format!(
+                    "λ of constraint {q} is outside the normal f64 range at this scale ({l:e}); the forces and accelerations are exact"
+                ),
+            });
+        }
+    }
+    solution.diagnostics.push(Diagnostic {
+        constraints: Vec::new(),
+        message: format!(
+            "the numbers overflow at this state; solved in a length unit scaled by 2^{} (verified homogeneous) and scaled back",
+            -k
+        ),
+    });
+    let mut rows = at;
+    for (row, &p) in rows.rows.iter_mut().zip(&p) {
+        row.value = pow2(row.value, k * p);
+        row.rate = pow2(row.rate, k * p);
+        row.bias = pow2(row.bias, k * p);
+        for (_, j) in row.jacobian.iter_mut() {
+            *j = j.map(|x| pow2(x, k * (p - 1)));
+        }
+    }
+    for v in rows.velocity.iter_mut().chain(rows.force.iter_mut()) {
+        *v = v.map(|x| pow2(x, k));
+    }
+    Ok((rows, solution))
+}

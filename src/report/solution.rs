@@ -1,0 +1,141 @@
+//! Layouts of a numeric solve (`lagrange solve`) for people (a table) and programs (JSON).
+//!
+//! Units: `value`, `rate` and `lambda` refer to C/κ, exactly as `derive --format json` does
+//! (its `gradient` is ∇C/κ and its `scale` is κ, repeated here): the force on a body is
+//! Σₖ λₖ·gradientₖ, with both taken from the same C/κ. Multiply `value` and `rate` by κ, and
+//! divide `lambda` by κ, for C as written.
+//!
+//! Not here: solving (`numeric::solve`), writing anything out.
+
+use crate::derive::Derivation;
+use crate::model::system::System;
+use crate::numeric::rows::Rows;
+use crate::numeric::solve::Solution;
+use serde_json::{Value, json};
+use std::fmt::Write;
+
+fn names(system: &System, rows: &[usize]) -> Vec<String> {
+    rows.iter().filter_map(|&k| system.constraints.get(k).map(|c| c.name.clone())).collect()
+}
+
+/// The JSON of DESIGN.md: `{"t", "status", "constraints": [{"name", "kind", "value", "rate",
+/// "lambda", "active", "scale", "contact"}], "forces": {body: [..]}, "accelerations": {..},
+/// "diagnostics": [{"constraints": [names], "message"}]}`. Non-finite numbers become `null`
+/// and always come with a diagnostic.
+pub fn json(system: &System, derivation: &Derivation, rows: &Rows, solution: &Solution, t: f64) -> Value {
+    let dim = system.dim();
+    let constraints: Vec<Value> = system
+        .constraints
+        .iter()
+        .enumerate()
+        .map(|(k, c)| {
+            json!({
+                "name": c.name,
+                "kind": if c.inequality { "inequality" } else { "equality" },
+                "value": rows.rows[k].value,
+                "rate": rows.rows[k].rate,
+                "lambda": solution.lambda[k],
+                "active": solution.active[k],
+                "scale": derivation.constraints[k].scale.to_string(),
+                "contact": solution.contacts[k].map(|s| s.name()),
+            })
+        })
+        .collect();
+    let per_body = |v: &[[f64; 3]]| {
+        let mut m = serde_json::Map::new();
+        for (i, b) in system.bodies.iter().enumerate() {
+            m.insert(b.name.clone(), json!(v[i][..dim]));
+        }
+        Value::Object(m)
+    };
+    json!({
+        "t": t,
+        "status": solution.status.name(),
+        "constraints": constraints,
+        "forces": per_body(&solution.constraint_force),
+        "accelerations": per_body(&solution.acceleration),
+        "diagnostics": diagnostics(system, rows, solution).into_iter().map(|(c, m)| json!({
+            "constraints": c,
+            "message": m,
+        })).collect::<Vec<_>>(),
+    })
+}
+
+/// The solver's diagnostics with constraint names, plus one per non-finite row number.
+fn diagnostics(system: &System, rows: &Rows, solution: &Solution) -> Vec<(Vec<String>, String)> {
+    let mut out: Vec<(Vec<String>, String)> = solution
+        .diagnostics
+        .iter()
+        .map(|d| {
+            let mut message = d.message.clone();
+            // Indices in messages are for programs; people get names.
+            for &k in &d.constraints {
+                if let Some(c) = system.constraints.get(k) {
+                    message = message.replace(&format!("constraint {k} "), &format!("constraint `{}` ", c.name));
+                    message = message.replace(&format!("contact {k} "), &format!("contact `{}` ", c.name));
+                }
+            }
+            (names(system, &d.constraints), message)
+        })
+        .collect();
+    for (k, row) in rows.rows.iter().enumerate() {
+        if !row.value.is_finite() || !row.rate.is_finite() {
+            out.push((
+                names(system, &[k]),
+                format!(
+                    "C or Ċ of `{}` is not representable at this state (overflow); it is reported as null",
+                    system.constraints[k].name
+                ),
+            ));
+        }
+    }
+    out
+}
+
+fn number(x: f64) -> String {
+    if x == 0.0 { "0".into() } else { format!("{x:.6e}") }
+}
+
+/// A readable table of the same numbers.
+pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &Solution, t: f64) -> String {
+    let dim = system.dim();
+    let mut out = String::new();
+    let title = if system.title.is_empty() { "lagrange solve" } else { system.title.as_str() };
+    let _ = writeln!(out, "{title} at t = {t}  (status: {})", solution.status.name());
+    let _ = writeln!(out, "values, rates and λ refer to C/κ (κ: the constant taken out of ∇C, as in `derive`)\n");
+    let width = system.constraints.iter().map(|c| c.name.chars().count()).max().unwrap_or(0).max(10);
+    let _ = writeln!(
+        out,
+        "{:<width$}  {:<10}  {:>4}  {:>13}  {:>13}  {:>13}  {:<6}  contact",
+        "constraint", "kind", "κ", "C/κ", "Ċ/κ", "λ", "active"
+    );
+    for (k, c) in system.constraints.iter().enumerate() {
+        let line = format!(
+            "{:<width$}  {:<10}  {:>4}  {:>13}  {:>13}  {:>13}  {:<6}  {}",
+            c.name,
+            if c.inequality { "inequality" } else { "equality" },
+            derivation.constraints[k].scale.to_string(),
+            number(rows.rows[k].value),
+            number(rows.rows[k].rate),
+            number(solution.lambda[k]),
+            if solution.active[k] { "yes" } else { "no" },
+            solution.contacts[k].map_or("", |s| s.name()),
+        );
+        let _ = writeln!(out, "{}", line.trim_end());
+    }
+    let bw = system.bodies.iter().map(|b| b.name.chars().count()).max().unwrap_or(0).max(4);
+    let vector = |v: &[f64; 3]| v[..dim].iter().map(|x| number(*x)).collect::<Vec<_>>().join(", ");
+    let _ = writeln!(out, "\n{:<bw$}  constraint force / acceleration", "body");
+    for (i, b) in system.bodies.iter().enumerate() {
+        let _ = writeln!(out, "{:<bw$}  F_c = [{}]", b.name, vector(&solution.constraint_force[i]));
+        let _ = writeln!(out, "{:<bw$}  a   = [{}]", "", vector(&solution.acceleration[i]));
+    }
+    let diags = diagnostics(system, rows, solution);
+    if !diags.is_empty() {
+        let _ = writeln!(out, "\ndiagnostics");
+        for (c, m) in diags {
+            let _ = writeln!(out, "  - [{}] {m}", c.join(", "));
+        }
+    }
+    out
+}

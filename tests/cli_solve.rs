@@ -1,0 +1,150 @@
+//! `lagrange solve` end to end: the JSON shape, its consistency with `derive --format json`,
+//! states from `--at` and `--set`, and the errors for missing and non-finite values.
+
+use serde_json::Value;
+use std::process::{Command, Output};
+
+fn lagrange(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lagrange")).args(args).output().expect("runs")
+}
+
+fn stdout_json(out: &Output) -> Value {
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).expect("JSON on stdout")
+}
+
+fn numbers(v: &Value) -> Vec<f64> {
+    v.as_array().expect("array").iter().map(|x| x.as_f64().expect("number")).collect()
+}
+
+fn temp_file(name: &str, text: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("lagrange-cli-solve-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let path = dir.join(name);
+    std::fs::write(&path, text).expect("write");
+    path
+}
+
+#[test]
+fn json_has_the_documented_shape_and_matches_derive() {
+    let out = lagrange(&[
+        "solve",
+        "constraints/bead_on_wire.toml",
+        "--set",
+        "r=[1.2,-1.6]",
+        "--set",
+        "v=[1.6, 1.2]",
+        "--format",
+        "json",
+    ]);
+    let v = stdout_json(&out);
+    assert_eq!(v["t"].as_f64(), Some(0.0));
+    assert_eq!(v["status"], "solved");
+    let c = &v["constraints"][0];
+    for key in ["name", "kind", "value", "rate", "lambda", "active"] {
+        assert!(c.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(
+        (c["name"].as_str(), c["kind"].as_str(), c["active"].as_bool()),
+        (Some("wire"), Some("equality"), Some(true))
+    );
+    assert!(v["diagnostics"].as_array().expect("array").is_empty());
+    // λ refers to C/κ like derive's gradient: force = λ·gradient, and derive's gradient is r.
+    let derived = stdout_json(&lagrange(&["derive", "constraints/bead_on_wire.toml", "--format", "json"]));
+    assert_eq!(derived["constraints"][0]["gradient"]["bead"], "r");
+    let lambda = c["lambda"].as_f64().expect("number");
+    let force = numbers(&v["forces"]["bead"]);
+    let (r, vel, m, g) = ([1.2, -1.6], [1.6, 1.2], 1.0, -9.81);
+    for d in 0..2 {
+        assert!((force[d] - lambda * r[d]).abs() <= 1e-12 * force[d].abs().max(1.0));
+    }
+    // The article: λ = −(m v·v + F·r)/(r·r).
+    let want = -(m * (vel[0] * vel[0] + vel[1] * vel[1]) + m * g * r[1]) / (r[0] * r[0] + r[1] * r[1]);
+    assert!((lambda - want).abs() <= 1e-12 * want.abs(), "{lambda} vs {want}");
+    let a = numbers(&v["accelerations"]["bead"]);
+    assert!((a[1] - (force[1] + m * g) / m).abs() <= 1e-12 * 10.0);
+}
+
+#[test]
+fn state_files_in_toml_and_json() {
+    let toml = temp_file("state.toml", "r = [0.0, -2.0]\nv = [3.0, 0.0]\nt = 1.5\n");
+    let json = temp_file("state.json", r#"{"r": [0.0, -2.0], "v": [3.0, 0.0], "t": 1.5}"#);
+    for path in [&toml, &json] {
+        let v = stdout_json(&lagrange(&[
+            "solve",
+            "constraints/bead_on_wire.toml",
+            "--at",
+            path.to_str().expect("utf-8"),
+            "--format",
+            "json",
+        ]));
+        assert_eq!(v["t"].as_f64(), Some(1.5));
+        // At the bottom: tension m v²/l + m g = 4.5 + 9.81 upwards.
+        let f = numbers(&v["forces"]["bead"]);
+        assert!((f[1] - 14.31).abs() <= 1e-12 * 14.31 && f[0] == 0.0, "{f:?}");
+    }
+    // --set wins over --at.
+    let v = stdout_json(&lagrange(&[
+        "solve",
+        "constraints/bead_on_wire.toml",
+        "--at",
+        toml.to_str().expect("utf-8"),
+        "--set",
+        "v=[0,0]",
+        "--format",
+        "json",
+    ]));
+    let f = numbers(&v["forces"]["bead"]);
+    assert!((f[1] - 9.81).abs() <= 1e-12 * 9.81, "{f:?}");
+}
+
+#[test]
+fn bad_state_files_report_the_location() {
+    let bad = temp_file("bad.toml", "r = [0.0, -2.0]\nv = [3.0, \n");
+    let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--at", bad.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.toml") && err.contains("line 2"), "{err}");
+    let bad = temp_file("bad.json", "{\"r\": [0.0, -2.0],\n \"v\": }");
+    let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--at", bad.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("line 2"), "{err}");
+}
+
+#[test]
+fn a_missing_value_is_an_error_naming_the_symbol() {
+    let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
+    let cut = text.find("[scene]").expect("scene");
+    let path = temp_file("no_scene.toml", &text[..cut]);
+    let out = lagrange(&["solve", path.to_str().expect("utf-8")]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no value for `r`"), "{err}");
+    assert!(out.stdout.is_empty());
+}
+
+#[test]
+fn non_finite_values_are_rejected() {
+    for set in ["v=nan", "v=[NaN, 1]", "m=inf", "l=1e999", "v=[1,"] {
+        let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--set", set]);
+        assert_eq!(out.status.code(), Some(1), "{set}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains("--set") && err.contains(set.split('=').next().expect("name")), "{set}: {err}");
+    }
+    let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--set", "m=-1"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("mass must be positive"));
+}
+
+#[test]
+fn text_table_and_diagnostics_for_a_singular_state() {
+    let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--set", "r=[0,0]"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("status: singular") && text.contains("wire") && text.contains("gradient"), "{text}");
+    let out = lagrange(&["solve", "constraints/floor.toml", "--format", "json"]);
+    let v = stdout_json(&out);
+    assert_eq!(v["constraints"][0]["contact"], "resting");
+    assert!((v["constraints"][0]["lambda"].as_f64().expect("number") - 9.81).abs() < 1e-12);
+}
