@@ -33,6 +33,12 @@ enum Command {
         #[arg(long)]
         steps: bool,
     },
+    /// Run the files' [[expect]] entries; exit non-zero on any failure.
+    Check {
+        /// Constraint files (TOML).
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -60,6 +66,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
+        Command::Check { files } => cmd_check(&files),
     }
 }
 
@@ -129,4 +136,56 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// `check`: each file's expectations, one line per check, failures with their location and
+/// details; the last line is `N passed, M failed` (an unreadable or invalid file counts as
+/// one failure).
+fn cmd_check(files: &[PathBuf]) -> ExitCode {
+    use lagrange::check::Checked;
+    let (mut passed, mut failed) = (0usize, 0usize);
+    for path in files {
+        let name = path.display().to_string();
+        let text = match read_text(path) {
+            Ok(t) => t,
+            Err(e) => {
+                eprintln!("{e}");
+                failed += 1;
+                continue;
+            }
+        };
+        let mut checked = match Checked::from_text(&name, &text) {
+            Ok(c) => c,
+            Err(e) => {
+                eprintln!("{e}");
+                failed += 1;
+                continue;
+            }
+        };
+        let outcomes = checked.run();
+        if outcomes.is_empty() {
+            println!("{name}: no [[expect]] entries");
+        }
+        for o in outcomes {
+            let place = o.span.as_ref().map_or(name.clone(), |s| location(&name, &text, s.start));
+            if o.passed {
+                passed += 1;
+                println!("ok     {place}: {} ({})", o.label, o.how);
+            } else {
+                failed += 1;
+                println!("FAILED {place}: {} ({})", o.label, o.how);
+                println!("{}", o.detail);
+            }
+        }
+    }
+    println!("{passed} passed, {failed} failed");
+    if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) }
+}
+
+/// `file:line:col` of a byte offset.
+fn location(name: &str, text: &str, offset: usize) -> String {
+    let before = &text[..lagrange::report::diagnostic::floor_char(text, offset.min(text.len()))];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    format!("{name}:{line}:{col}")
 }

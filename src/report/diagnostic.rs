@@ -32,7 +32,7 @@ pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
 }
 
 /// The nearest char boundary at or before `i`.
-fn floor_char(text: &str, mut i: usize) -> usize {
+pub fn floor_char(text: &str, mut i: usize) -> usize {
     while i > 0 && !text.is_char_boundary(i) {
         i -= 1;
     }
