@@ -354,7 +354,7 @@ impl Checked {
             let want = eval(&self.loaded.system, expected, env);
             let verdict = compare(&got, &want, FORMULA_TOLERANCE);
             if !verdict.0 {
-                let detail = self.failure(env, &got, &want, verdict.1, derived);
+                let detail = self.failure(env, &got, &want, verdict.1, derived, expected);
                 self.states = Some(Ok(states));
                 return Ok(outcome(
                     false,
@@ -387,7 +387,7 @@ impl Checked {
             return Ok(outcome(true, &how, String::new()));
         }
         let detail = format!(
-            "  lagrange:  {}\n  expected:  {}\n  difference: {}",
+            "  lagrange = {}\n  expected = {}\n  difference: {}",
             show(&got),
             show(&want),
             diff.map_or("-".into(), |d| format!("{d:e}"))
@@ -435,6 +435,7 @@ impl Checked {
         want: &Result<Vec<f64>, String>,
         diff: Option<f64>,
         derived: Option<Id>,
+        expected: Id,
     ) -> String {
         let g = &self.loaded.system.graph;
         let mut state = Vec::new();
@@ -446,9 +447,10 @@ impl Checked {
                 state.push(format!("{} = {}", info.name, show_value(v, g.dim())));
             }
         }
-        let formula = derived.and_then(|d| print(g, d, Style::Source).ok()).unwrap_or_else(|| "(λ solve)".into());
+        let formula = derived.and_then(|d| print(g, d, Style::Source).ok()).unwrap_or_else(|| "(the λ solve)".into());
+        let wanted = print(g, expected, Style::Source).unwrap_or_default();
         format!(
-            "  lagrange:  {formula}\n  at the state {}\n  lagrange:  {}\n  expected:  {}\n  difference: {}",
+            "  derived:   {formula}\n  expected:  {wanted}\n  at the state {}\n  derived  = {}\n  expected = {}\n  difference: {}",
             state.join(", "),
             show(got),
             show(want),
