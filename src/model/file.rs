@@ -103,6 +103,7 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         Ok(raw) => raw,
         Err(e) => {
             problems.push(Problem { span: e.span(), message: e.message().trim_end().to_string() });
+            problems.sort_by_key(|p| p.span.as_ref().map_or(0, |s| s.start));
             return Err(problems);
         }
     };
@@ -118,6 +119,8 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
+        // In file order, so the messages read top to bottom.
+        problems.sort_by_key(|p| p.span.as_ref().map_or(0, |s| s.start));
         return Err(problems);
     }
     Ok(Loaded { system, values, scene, expect, raw })
@@ -133,7 +136,10 @@ fn masses_have_values(
     expect: &[Expectation],
     problems: &mut Vec<Problem>,
 ) {
-    for (body, raw_body) in system.bodies.iter().zip(&raw.bodies) {
+    for body in &system.bodies {
+        let Some(raw_body) = raw.bodies.iter().find(|b| *b.get_ref().name.get_ref() == body.name) else {
+            continue;
+        };
         let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
             continue;
         };
@@ -295,7 +301,32 @@ fn definitions_in_order<'a>(
     for name in raw.definitions.keys() {
         visit(name.get_ref(), &uses, &mut state, &mut order, &mut Vec::new(), raw, problems);
     }
+    // A definition on a cycle is reported once (in `visit`), not again as an unknown symbol
+    // of the others: leave out every definition on a cycle or using one.
+    let mut bad: Vec<&String> = Vec::new();
+    for name in &order {
+        if is_on_cycle(name, &uses) || uses.get(name).is_some_and(|deps| deps.iter().any(|d| bad.contains(d))) {
+            bad.push(name);
+        }
+    }
+    order.retain(|n| !bad.contains(n));
     order.into_iter().filter_map(|n| raw.definitions.iter().find(|(k, _)| k.get_ref() == n)).collect()
+}
+
+/// Whether `name` can reach itself through the definitions it uses.
+fn is_on_cycle(name: &String, uses: &BTreeMap<&String, Vec<&String>>) -> bool {
+    let mut seen: Vec<&String> = Vec::new();
+    let mut stack: Vec<&String> = uses.get(name).cloned().unwrap_or_default();
+    while let Some(n) = stack.pop() {
+        if n == name {
+            return true;
+        }
+        if !seen.contains(&n) {
+            seen.push(n);
+            stack.extend(uses.get(n).into_iter().flatten().copied());
+        }
+    }
+    false
 }
 
 fn visit<'a>(
