@@ -75,6 +75,12 @@ enum Command {
         #[arg(long, value_enum, default_value_t = SolveFormat::Text)]
         format: SolveFormat,
     },
+    /// Run the files' [[expect]] entries; exit non-zero on any failure.
+    Check {
+        /// Constraint files (TOML).
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+    },
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -120,27 +126,14 @@ fn run(cli: Cli) -> ExitCode {
             Ok(()) => ExitCode::SUCCESS,
             Err(code) => code,
         },
+        Command::Check { files } => cmd_check(&files),
     }
 }
 
 /// Reads a file as UTF-8 text, with a clear message for the ways that fails.
+/// The file's text (size-limited, UTF-8), or the message to print.
 fn read_text(path: &Path) -> Result<String, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("error: cannot read {}: {e}", path.display()))?;
-    if bytes.len() > lagrange::model::file::MAX_FILE_BYTES {
-        return Err(format!(
-            "error: {} is too large ({} bytes; the limit is {} bytes)",
-            path.display(),
-            bytes.len(),
-            lagrange::model::file::MAX_FILE_BYTES
-        ));
-    }
-    String::from_utf8(bytes).map_err(|e| {
-        format!(
-            "error: {} is not valid UTF-8 (invalid byte at offset {})",
-            path.display(),
-            e.utf8_error().valid_up_to()
-        )
-    })
+    lagrange::check::read_text(path).map_err(|e| format!("error: {e}"))
 }
 
 fn report_problems(path: &Path, text: &str, problems: &[Problem]) -> ExitCode {
@@ -301,4 +294,56 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         SolveFormat::Text => print!("{}", solution::text(system, &derivation, &rows, &solution, t)),
     }
     Ok(())
+}
+
+/// `check`: each file's expectations, one line per check, failures with their location and
+/// details; the last line is `N passed, M failed` (an unreadable or invalid file counts as
+/// one failure).
+fn cmd_check(files: &[PathBuf]) -> ExitCode {
+    use lagrange::check::Checked;
+    let (mut passed, mut failed) = (0usize, 0usize);
+    for path in files {
+        let name = path.display().to_string();
+        let text = match read_text(path) {
+            Ok(t) => t,
+            Err(e) => {
+                eprintln!("{e}");
+                failed += 1;
+                continue;
+            }
+        };
+        let mut checked = match Checked::from_text(&name, &text) {
+            Ok(c) => c,
+            Err(e) => {
+                eprintln!("{e}");
+                failed += 1;
+                continue;
+            }
+        };
+        let outcomes = checked.run();
+        if outcomes.is_empty() {
+            println!("{name}: no [[expect]] entries");
+        }
+        for o in outcomes {
+            let place = o.span.as_ref().map_or(name.clone(), |s| location(&name, &text, s.start));
+            if o.passed {
+                passed += 1;
+                println!("ok     {place}: {} ({})", o.label, o.how);
+            } else {
+                failed += 1;
+                println!("FAILED {place}: {} ({})", o.label, o.how);
+                println!("{}", o.detail);
+            }
+        }
+    }
+    println!("{passed} passed, {failed} failed");
+    if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) }
+}
+
+/// `file:line:col` of a byte offset.
+fn location(name: &str, text: &str, offset: usize) -> String {
+    let before = &text[..lagrange::report::diagnostic::floor_char(text, offset.min(text.len()))];
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    format!("{name}:{line}:{col}")
 }

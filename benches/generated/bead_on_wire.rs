@@ -44,7 +44,7 @@ pub fn a_matrix(s: &State) -> [[f64; 1]; 1] {
 /// b of A λ + b = 0: bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ.
 /// - b[0] = (m v·v + F·r)/m
 pub fn b_vector(s: &State) -> [f64; 1] {
-    [(s.r[0] * s.f[0] + s.r[1] * s.f[1] + s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1])) / s.m]
+    [(s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.f[0] + s.r[1] * s.f[1])) / s.m]
 }
 
 /// J: row k is the force direction of constraint k (∇C over its constant content), body i's components at columns i·2 .. i·2 + 2.
@@ -62,13 +62,13 @@ pub fn c_term(s: &State) -> [f64; 1] {
 /// The multiplier λ, in closed form:
 /// λ = −(m v·v + F·r)/(r·r)
 pub fn lambda(s: &State) -> [f64; 1] {
-    [-((s.r[0] * s.f[0] + s.r[1] * s.f[1] + s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]))]
+    [-((s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.f[0] + s.r[1] * s.f[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]))]
 }
 
 /// The constraint force on body `bead`:
 /// −(m v·v + F·r)/(r·r) r
 pub fn force_bead(s: &State) -> [f64; 2] {
-    let x0 = (s.r[0] * s.f[0] + s.r[1] * s.f[1] + s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]);
+    let x0 = (s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.f[0] + s.r[1] * s.f[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]);
     [-(s.r[0] * x0), -(s.r[1] * x0)]
 }
 

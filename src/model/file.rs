@@ -7,6 +7,8 @@
 //!
 //! Not here: printing or rendering messages (the caller renders [`Problem`]s).
 
+use super::expect::{Expectation, RawExpect, resolve};
+use super::keys::unknown_keys;
 use super::scene::{RawScene, Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
 use crate::expr::Ty;
@@ -21,9 +23,9 @@ use toml::Spanned;
 /// The largest constraint file read, in bytes.
 pub const MAX_FILE_BYTES: usize = 16 << 20;
 
-/// A file as written.
+/// A file as written. Unknown keys are ignored here and reported, all of them, by
+/// `model::keys` (serde's `deny_unknown_fields` would stop at the first).
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct RawFile {
     pub title: Option<Spanned<String>>,
     pub dimension: Spanned<i64>,
@@ -37,7 +39,7 @@ pub struct RawFile {
     pub constraints: Vec<Spanned<RawConstraint>>,
     pub scene: Option<Spanned<RawScene>>,
     #[serde(default)]
-    pub expect: Vec<Spanned<toml::Table>>,
+    pub expect: Vec<Spanned<RawExpect>>,
 }
 
 /// A parameter value: a number or a vector of numbers.
@@ -49,7 +51,6 @@ pub enum RawValue {
 }
 
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct RawBody {
     pub name: Spanned<String>,
     pub position: Spanned<String>,
@@ -67,7 +68,6 @@ pub enum RawMass {
 }
 
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct RawConstraint {
     pub name: Spanned<String>,
     pub expr: Spanned<String>,
@@ -80,12 +80,13 @@ pub struct Problem {
     pub message: String,
 }
 
-/// A validated file: the system, the parameter values and the scene.
+/// A validated file: the system, the parameter values, the scene and the expectations.
 #[derive(Debug)]
 pub struct Loaded {
     pub system: System,
     pub values: BTreeMap<String, RawValue>,
     pub scene: Scene,
+    pub expect: Vec<Expectation>,
     pub raw: RawFile,
 }
 
@@ -97,9 +98,15 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
             message: format!("file is too large ({} bytes; the limit is {MAX_FILE_BYTES})", text.len()),
         }]);
     }
-    let raw: RawFile = toml::from_str(text)
-        .map_err(|e| vec![Problem { span: e.span(), message: e.message().trim_end().to_string() }])?;
-    let mut problems = Vec::new();
+    let mut problems = unknown_keys(text);
+    let raw: RawFile = match toml::from_str(text) {
+        Ok(raw) => raw,
+        Err(e) => {
+            problems.push(Problem { span: e.span(), message: e.message().trim_end().to_string() });
+            problems.sort_by_key(|p| p.span.as_ref().map_or(0, |s| s.start));
+            return Err(problems);
+        }
+    };
     let Some(mut system) = build(text, &raw, &mut problems) else {
         return Err(problems);
     };
@@ -107,11 +114,61 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         Some(s) => validate(text, s.get_ref(), &mut system, &mut problems),
         None => Scene::default(),
     };
+    let expect = resolve(text, &raw.expect, &mut system, &mut problems);
+    let values: BTreeMap<String, RawValue> =
+        raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
+    masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
+        // In file order, so the messages read top to bottom.
+        problems.sort_by_key(|p| p.span.as_ref().map_or(0, |s| s.start));
         return Err(problems);
     }
-    let values = raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
-    Ok(Loaded { system, values, scene, raw })
+    Ok(Loaded { system, values, scene, expect, raw })
+}
+
+/// A mass symbol that is not a parameter needs a value wherever numbers are computed: from
+/// `[scene] initial` when the file has a scene, and from each `at` state of an `[[expect]]`.
+/// (Formula checks draw random masses, so they need none.)
+fn masses_have_values(
+    raw: &RawFile,
+    system: &System,
+    scene: &Scene,
+    expect: &[Expectation],
+    problems: &mut Vec<Problem>,
+) {
+    for body in &system.bodies {
+        let Some(raw_body) = raw.bodies.iter().find(|b| *b.get_ref().name.get_ref() == body.name) else {
+            continue;
+        };
+        let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
+            continue;
+        };
+        if !matches!(system.graph.symbol(*s).role, crate::expr::Role::Mass { .. }) {
+            continue;
+        }
+        let name = &system.graph.symbol(*s).name;
+        let span = Some(raw_body.get_ref().mass.span());
+        if raw.scene.is_some() && !scene.initial.iter().any(|(x, _)| x == s) {
+            problems.push(Problem {
+                span,
+                message: format!(
+                    "the mass `{name}` has no value, and the [scene] needs one: give it in [parameters] or in [scene] initial"
+                ),
+            });
+        }
+        for e in expect {
+            if let Some(at) = &e.at
+                && !at.iter().any(|(x, _)| x == name)
+            {
+                problems.push(Problem {
+                    span: Some(e.span.clone()),
+                    message: format!(
+                        "this [[expect]] is checked at a state (`at`), which gives no value to the mass `{name}`: add it to `at` or to [parameters]"
+                    ),
+                });
+            }
+        }
+    }
 }
 
 fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<System> {
@@ -162,7 +219,19 @@ fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<Syste
             mass,
         };
         if let Err(e) = b.body(&spec) {
-            problems.push(Problem { span: Some(body.name.span()), message: e.to_string() });
+            // Point at the field whose symbol clashes, not just at the body.
+            let span = match &e {
+                BuildError::Duplicate { name, .. } => [&body.position, &body.velocity, &body.acceleration, &body.force]
+                    .into_iter()
+                    .find(|f| f.get_ref() == name)
+                    .map_or_else(|| body.name.span(), |f| f.span()),
+                _ => body.name.span(),
+            };
+            let span = match (&e, body.mass.get_ref()) {
+                (BuildError::Duplicate { name, .. }, RawMass::Symbol(m)) if m == name => body.mass.span(),
+                _ => span,
+            };
+            problems.push(Problem { span: Some(span), message: e.to_string() });
         }
     }
     for (name, def_text) in definitions_in_order(raw, problems) {
@@ -232,7 +301,32 @@ fn definitions_in_order<'a>(
     for name in raw.definitions.keys() {
         visit(name.get_ref(), &uses, &mut state, &mut order, &mut Vec::new(), raw, problems);
     }
+    // A definition on a cycle is reported once (in `visit`), not again as an unknown symbol
+    // of the others: leave out every definition on a cycle or using one.
+    let mut bad: Vec<&String> = Vec::new();
+    for name in &order {
+        if is_on_cycle(name, &uses) || uses.get(name).is_some_and(|deps| deps.iter().any(|d| bad.contains(d))) {
+            bad.push(name);
+        }
+    }
+    order.retain(|n| !bad.contains(n));
     order.into_iter().filter_map(|n| raw.definitions.iter().find(|(k, _)| k.get_ref() == n)).collect()
+}
+
+/// Whether `name` can reach itself through the definitions it uses.
+fn is_on_cycle(name: &String, uses: &BTreeMap<&String, Vec<&String>>) -> bool {
+    let mut seen: Vec<&String> = Vec::new();
+    let mut stack: Vec<&String> = uses.get(name).cloned().unwrap_or_default();
+    while let Some(n) = stack.pop() {
+        if n == name {
+            return true;
+        }
+        if !seen.contains(&n) {
+            seen.push(n);
+            stack.extend(uses.get(n).into_iter().flatten().copied());
+        }
+    }
+    false
 }
 
 fn visit<'a>(

@@ -4,6 +4,8 @@
 //! `file` reads TOML into raw serde structs and validates them into a `System`; `scene`
 //! resolves the `[scene]` table and gives a state its numbers.
 
+pub mod expect;
 pub mod file;
+pub mod keys;
 pub mod scene;
 pub mod system;

@@ -16,9 +16,8 @@ use serde::Deserialize;
 use std::collections::BTreeMap;
 use toml::Spanned;
 
-/// The `[scene]` table as written.
+/// The `[scene]` table as written (unknown keys are reported by `model::keys`).
 #[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
 pub struct RawScene {
     /// Initial values of positions, velocities and other symbols (`t`, masses).
     #[serde(default)]

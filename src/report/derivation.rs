@@ -183,6 +183,9 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
         };
         doc.line(out, &lhs, &doc.expr(g, a)?);
     }
+    if many {
+        doc.para(out, "(A is symmetric, A[k, j] = A[j, k]; entries not listed are 0.)");
+    }
     for (k, &b) in d.b.iter().enumerate() {
         let lhs = if many { format!("b[{}]", system.constraints[k].name) } else { "b".into() };
         doc.line(out, &lhs, &doc.expr(g, b)?);
@@ -301,6 +304,9 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
             "A".into()
         };
         doc.line(out, &lhs, &doc.expr(g, a)?);
+    }
+    if many {
+        doc.para(out, "(A is symmetric, A[k, j] = A[j, k]; entries not listed are 0.)");
     }
     for (k, &b) in d.b.iter().enumerate() {
         let lhs = if many { format!("b[{}]", system.constraints[k].name) } else { "b".into() };

@@ -79,7 +79,7 @@ fn render_long_line(path: &str, text: &str, message: &str, span: &std::ops::Rang
 }
 
 /// The nearest char boundary at or before `i`.
-fn floor_char(text: &str, mut i: usize) -> usize {
+pub fn floor_char(text: &str, mut i: usize) -> usize {
     while i > 0 && !text.is_char_boundary(i) {
         i -= 1;
     }

@@ -1,0 +1,325 @@
+//! The `[[expect]]` entries of a constraint file: raw serde shape and their validation.
+//!
+//! One entry is one check. Without `at` it holds formulas, in the file's symbols, that the
+//! derived ones must equal (`lagrange check` judges equality on the constraint manifold):
+//!
+//! ```toml
+//! [[expect]]
+//! force  = { bead = "-(m*dot(v,v) + dot(F,r))/l^2 * r" }   # by body
+//! lambda = { wire = "-(m*dot(v,v) + dot(F,r))/(2*l^2)" }   # by constraint
+//! C_dot  = { wire = "2*dot(r,v)" }                          # by constraint
+//! C_ddot = { wire = "2*dot(v,v) + 2*dot(r,a)" }             # by constraint
+//! A      = { "wire,wire" = "4*dot(r,r)/m" }                 # by "constraint,constraint"
+//! b      = { wire = "2*dot(r,F)/m + 2*dot(v,v)" }          # by constraint
+//! ```
+//!
+//! With `at = { symbol = value, … }` it holds numbers at that state (`force` by body as a
+//! vector, `lambda` by constraint as a number; a formula there is evaluated at the state),
+//! compared within the relative `tolerance` (default [`DEFAULT_TOLERANCE`]).
+//!
+//! Every quantity refers to C as written (DESIGN.md): `lhs = rhs` and `lhs >= rhs` mean
+//! C = lhs − rhs, `lhs <= rhs` means C = rhs − lhs; the force on body i is Σₖ λₖ ∇ᵢCₖ, and
+//! Aₖⱼ = Σᵢ ∇ᵢCₖ·∇ᵢCⱼ/mᵢ, bₖ = Σᵢ ∇ᵢCₖ·Fᵢ/mᵢ + C̈ₖ|ₐ₌₀. (The derivation's own λ, A, b refer
+//! to C/κ; `check` converts.)
+//!
+//! Not here: judging the entries (`check`).
+
+use super::file::{Problem, RawValue, locate};
+use super::scene::value_for;
+use super::system::{BuildError, System};
+use crate::expr::lower::suggest;
+use crate::expr::{Id, Role, Ty};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::ops::Range;
+use toml::Spanned;
+
+/// The relative tolerance of numeric (`at`) checks unless the entry gives one.
+pub const DEFAULT_TOLERANCE: f64 = 1e-9;
+
+type Entries = BTreeMap<Spanned<String>, Spanned<RawExpected>>;
+
+/// One `[[expect]]` entry as written (unknown keys are reported by `model::keys`).
+#[derive(Debug, Default, Deserialize)]
+pub struct RawExpect {
+    #[serde(default)]
+    pub force: Entries,
+    #[serde(default)]
+    pub lambda: Entries,
+    #[serde(default, rename = "C_dot")]
+    pub c_dot: Entries,
+    #[serde(default, rename = "C_ddot")]
+    pub c_ddot: Entries,
+    #[serde(default, rename = "A")]
+    pub a: Entries,
+    #[serde(default)]
+    pub b: Entries,
+    pub at: Option<Spanned<BTreeMap<Spanned<String>, Spanned<RawValue>>>>,
+    pub tolerance: Option<Spanned<f64>>,
+    /// Free text, shown with the result.
+    pub note: Option<String>,
+}
+
+/// An expected value as written: a formula, a number or a vector.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum RawExpected {
+    Formula(String),
+    Number(f64),
+    Vector(Vec<f64>),
+}
+
+/// What an item checks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Quantity {
+    /// The constraint force on a body.
+    Force(usize),
+    /// λ of a constraint, for C as written.
+    Lambda(usize),
+    CDot(usize),
+    CDdot(usize),
+    /// Aₖⱼ for C as written.
+    A(usize, usize),
+    /// bₖ for C as written.
+    B(usize),
+}
+
+/// The expected side of an item.
+#[derive(Clone, Debug)]
+pub enum Expected {
+    Formula { id: Id, text: String },
+    Numbers(Vec<f64>),
+}
+
+/// One checked quantity.
+#[derive(Clone, Debug)]
+pub struct Item {
+    pub quantity: Quantity,
+    pub expected: Expected,
+    /// Where the item is written (its key).
+    pub span: Range<usize>,
+}
+
+/// A validated `[[expect]]` entry.
+#[derive(Clone, Debug)]
+pub struct Expectation {
+    pub span: Range<usize>,
+    /// The state of a numeric check: values by symbol name (each checked against its symbol).
+    pub at: Option<Vec<(String, RawValue)>>,
+    pub tolerance: f64,
+    pub items: Vec<Item>,
+    pub note: Option<String>,
+}
+
+/// Validates every entry against `system`; each problem goes to `problems`, located.
+pub fn resolve(
+    text: &str,
+    raw: &[Spanned<RawExpect>],
+    system: &mut System,
+    problems: &mut Vec<Problem>,
+) -> Vec<Expectation> {
+    let mut out = Vec::with_capacity(raw.len());
+    for entry in raw {
+        let e = entry.get_ref();
+        let mut at = None;
+        if let Some(state) = &e.at {
+            let mut values = Vec::new();
+            for (name, value) in state.get_ref() {
+                match value_for(system, name.get_ref(), value.get_ref(), system.dim()) {
+                    Ok(_) => values.push((name.get_ref().clone(), value.get_ref().clone())),
+                    Err(message) => problems.push(Problem { span: Some(name.span()), message }),
+                }
+            }
+            at = Some(values);
+        }
+        let tolerance = match &e.tolerance {
+            None => DEFAULT_TOLERANCE,
+            Some(t) if t.get_ref().is_finite() && *t.get_ref() > 0.0 => *t.get_ref(),
+            Some(t) => {
+                problems.push(Problem {
+                    span: Some(t.span()),
+                    message: format!("`tolerance` must be a positive finite number, found {}", t.get_ref()),
+                });
+                DEFAULT_TOLERANCE
+            }
+        };
+        let nothing = [&e.force, &e.lambda, &e.c_dot, &e.c_ddot, &e.a, &e.b].iter().all(|t| t.is_empty());
+        let mut r = Resolver { text, system, problems, numeric: at.is_some(), items: Vec::new() };
+        r.table(&e.force, "force", Target::Body);
+        r.table(&e.lambda, "lambda", Target::Constraint);
+        r.table(&e.c_dot, "C_dot", Target::Constraint);
+        r.table(&e.c_ddot, "C_ddot", Target::Constraint);
+        r.table(&e.a, "A", Target::Pair);
+        r.table(&e.b, "b", Target::Constraint);
+        let items = r.items;
+        if nothing {
+            problems.push(Problem {
+                span: Some(entry.span()),
+                message: "this [[expect]] entry checks nothing: give `force`, `lambda`, `C_dot`, `C_ddot`, `A` or `b`"
+                    .into(),
+            });
+        }
+        out.push(Expectation { span: entry.span(), at, tolerance, items, note: e.note.clone() });
+    }
+    out
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Target {
+    Body,
+    Constraint,
+    Pair,
+}
+
+struct Resolver<'a> {
+    text: &'a str,
+    system: &'a mut System,
+    problems: &'a mut Vec<Problem>,
+    numeric: bool,
+    items: Vec<Item>,
+}
+
+impl Resolver<'_> {
+    fn problem(&mut self, span: Range<usize>, message: String) {
+        self.problems.push(Problem { span: Some(span), message });
+    }
+
+    fn table(&mut self, entries: &Entries, what: &str, target: Target) {
+        for (key, value) in entries {
+            let Some(quantity) = self.quantity(key, what, target) else {
+                continue;
+            };
+            if self.numeric && !matches!(quantity, Quantity::Force(_) | Quantity::Lambda(_)) {
+                self.problem(
+                    key.span(),
+                    format!("only `force` and `lambda` can be checked at a state (`at`); `{what}` needs a formula check without `at`"),
+                );
+                continue;
+            }
+            if let Some(expected) = self.expected(quantity, what, value) {
+                self.items.push(Item { quantity, expected, span: key.span() });
+            }
+        }
+    }
+
+    /// The quantity a key names, or a located problem.
+    fn quantity(&mut self, key: &Spanned<String>, what: &str, target: Target) -> Option<Quantity> {
+        let name = key.get_ref().as_str();
+        match target {
+            Target::Body => self.body(name, key.span()).map(Quantity::Force),
+            Target::Constraint => {
+                let k = self.constraint(name, key.span())?;
+                Some(match what {
+                    "lambda" => Quantity::Lambda(k),
+                    "C_dot" => Quantity::CDot(k),
+                    "C_ddot" => Quantity::CDdot(k),
+                    _ => Quantity::B(k),
+                })
+            }
+            Target::Pair => {
+                let parts: Vec<&str> = name.split(',').map(str::trim).collect();
+                let [k, j] = parts.as_slice() else {
+                    self.problem(
+                        key.span(),
+                        format!("an `A` key names two constraints as \"k,j\" (e.g. \"rod1,rod2\"), found \"{name}\""),
+                    );
+                    return None;
+                };
+                let k = self.constraint(k, key.span());
+                let j = self.constraint(j, key.span());
+                Some(Quantity::A(k?, j?))
+            }
+        }
+    }
+
+    fn body(&mut self, name: &str, span: Range<usize>) -> Option<usize> {
+        let found = self.system.body_named(name);
+        if found.is_none() {
+            let names: Vec<&str> = self.system.bodies.iter().map(|b| b.name.as_str()).collect();
+            let message = unknown("body", name, &names);
+            self.problem(span, message);
+        }
+        found
+    }
+
+    fn constraint(&mut self, name: &str, span: Range<usize>) -> Option<usize> {
+        let found = self.system.constraint_named(name);
+        if found.is_none() {
+            let names: Vec<&str> = self.system.constraints.iter().map(|c| c.name.as_str()).collect();
+            let message = unknown("constraint", name, &names);
+            self.problem(span, message);
+        }
+        found
+    }
+
+    fn expected(&mut self, quantity: Quantity, what: &str, value: &Spanned<RawExpected>) -> Option<Expected> {
+        let want = if matches!(quantity, Quantity::Force(_)) { Ty::Vector } else { Ty::Scalar };
+        let dim = self.system.dim();
+        match value.get_ref() {
+            RawExpected::Formula(text) => {
+                let spanned = Spanned::new(value.span(), text.clone());
+                let id = match self.system.expression(text) {
+                    Ok(id) => id,
+                    Err(e) => {
+                        let inner = match &e {
+                            BuildError::Parse { error, .. } => Some(error.span.start..error.span.end),
+                            BuildError::Lower { error, .. } => Some(error.span.start..error.span.end),
+                            _ => None,
+                        };
+                        let span = inner.map_or(value.span(), |s| locate(self.text, &spanned, s));
+                        self.problem(span, format!("in the expected `{what}`: {e}"));
+                        return None;
+                    }
+                };
+                if self.system.graph.ty(id) != want {
+                    let (w, f) = if want == Ty::Vector { ("a vector", "a scalar") } else { ("a scalar", "a vector") };
+                    self.problem(value.span(), format!("the expected `{what}` must be {w}, found {f}"));
+                    return None;
+                }
+                if !matches!(quantity, Quantity::CDdot(_)) {
+                    for s in self.system.graph.free_symbols(id) {
+                        let info = self.system.graph.symbol(s);
+                        if matches!(info.role, Role::Acceleration { .. }) {
+                            let message = format!(
+                                "the expected `{what}` uses the acceleration `{}`; only `C_ddot` may (forces and λ do not depend on it)",
+                                info.name
+                            );
+                            self.problem(value.span(), message);
+                            return None;
+                        }
+                    }
+                }
+                Some(Expected::Formula { id, text: text.clone() })
+            }
+            numbers if !self.numeric => {
+                let _ = numbers;
+                self.problem(
+                    value.span(),
+                    format!("the expected `{what}` is a number: give the state it holds at with `at = {{ … }}`, or write a formula"),
+                );
+                None
+            }
+            RawExpected::Number(x) if want == Ty::Scalar => Some(Expected::Numbers(vec![*x])),
+            RawExpected::Vector(xs) if want == Ty::Vector && xs.len() == dim => Some(Expected::Numbers(xs.clone())),
+            RawExpected::Vector(xs) if want == Ty::Vector => {
+                self.problem(
+                    value.span(),
+                    format!("the expected `{what}` has {} components in a {dim}D file", xs.len()),
+                );
+                None
+            }
+            _ => {
+                let w = if want == Ty::Vector { format!("a vector of {dim} numbers") } else { "a number".into() };
+                self.problem(value.span(), format!("the expected `{what}` must be {w}"));
+                None
+            }
+        }
+    }
+}
+
+fn unknown(kind: &str, name: &str, names: &[&str]) -> String {
+    match suggest(name, names.iter().copied()) {
+        Some(s) => format!("`{name}` is not a {kind} of this file; did you mean `{s}`?"),
+        None => format!("`{name}` is not a {kind} of this file ({kind}s: {})", names.join(", ")),
+    }
+}

@@ -1,0 +1,67 @@
+//! Unknown keys of a constraint file, every one of them, each with a "did you mean".
+//!
+//! serde's `deny_unknown_fields` stops at the first unknown key; a person who misspells
+//! three keys wants three messages. So the file is first read as a spanned TOML tree
+//! (`toml::de::DeTable`) and walked against the schema below; the typed serde pass then
+//! ignores unknown keys (they have been reported here).
+//!
+//! Not here: the types of values (serde checks those), meaning (validation in `file`).
+
+use super::file::Problem;
+use crate::expr::lower::suggest;
+use toml::Spanned;
+use toml::de::{DeTable, DeValue};
+
+/// The keys of each table, by path. `[]` marks an array of tables.
+const SCHEMA: &[(&str, &[&str])] = &[
+    ("", &["title", "dimension", "parameters", "definitions", "bodies", "constraints", "scene", "expect"]),
+    ("bodies[]", &["name", "position", "velocity", "acceleration", "mass", "force"]),
+    ("constraints[]", &["name", "expr"]),
+    ("scene", &["initial", "forces", "dt", "duration", "restitution"]),
+    ("expect[]", &["force", "lambda", "C_dot", "C_ddot", "A", "b", "at", "tolerance", "note"]),
+];
+
+/// Every unknown key of the file, located. A file that is not TOML gives no problems here
+/// (the typed pass reports the syntax error).
+pub fn unknown_keys(text: &str) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    if let Ok(root) = DeTable::parse(text) {
+        walk("", root.get_ref(), &mut problems);
+    }
+    problems
+}
+
+fn walk(path: &str, table: &DeTable<'_>, problems: &mut Vec<Problem>) {
+    let Some(&(_, known)) = SCHEMA.iter().find(|(p, _)| *p == path) else {
+        return;
+    };
+    for (key, value) in table.iter() {
+        let name: &str = key.get_ref();
+        if !known.contains(&name) {
+            let hint = match suggest(name, known.iter().copied()) {
+                Some(s) => format!("; did you mean `{s}`?"),
+                None => format!(" (expected one of: {})", known.join(", ")),
+            };
+            let place = if path.is_empty() { "at the top level".to_string() } else { format!("in `{path}`") };
+            problems.push(Problem { span: Some(key.span()), message: format!("unknown key `{name}` {place}{hint}") });
+            continue;
+        }
+        let child = if path.is_empty() { name.to_string() } else { format!("{path}.{name}") };
+        descend(&child, value, problems);
+    }
+}
+
+fn descend(path: &str, value: &Spanned<DeValue<'_>>, problems: &mut Vec<Problem>) {
+    match value.get_ref() {
+        DeValue::Table(t) => walk(path, t, problems),
+        DeValue::Array(items) => {
+            let element = format!("{path}[]");
+            for item in items.iter() {
+                if let DeValue::Table(t) = item.get_ref() {
+                    walk(&element, t, problems);
+                }
+            }
+        }
+        _ => {}
+    }
+}
