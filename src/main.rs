@@ -33,6 +33,70 @@ enum Command {
         #[arg(long)]
         steps: bool,
     },
+    /// Run the scene: integrate, stabilise, report drift and energy.
+    Simulate(SimulateArgs),
+}
+
+/// Options of `simulate`.
+#[derive(clap::Args, Debug)]
+struct SimulateArgs {
+    /// The constraint file (TOML) with a [scene].
+    file: PathBuf,
+    #[arg(long, value_enum, default_value_t = IntegratorArg::Verlet)]
+    integrator: IntegratorArg,
+    /// Drift control: none, Baumgarte (--zeta, --omega-dt) or projection after each step.
+    #[arg(long, value_enum, default_value_t = StabilizeArg::Projection)]
+    stabilize: StabilizeArg,
+    /// Baumgarte damping ratio ζ (α = ζω).
+    #[arg(long, default_value_t = 1.0)]
+    zeta: f64,
+    /// Baumgarte frequency relative to the step, ω·dt (β = ω).
+    #[arg(long, default_value_t = 0.1)]
+    omega_dt: f64,
+    /// Projection tolerance, relative to the scene's size.
+    #[arg(long, default_value_t = 1e-13)]
+    tolerance: f64,
+    /// Time step (overrides the scene's).
+    #[arg(long)]
+    dt: Option<f64>,
+    /// Simulated time (overrides the scene's).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Number of steps (overrides --duration).
+    #[arg(long)]
+    steps: Option<u64>,
+    /// Write t, state, λ, C, Ċ per recorded step to this CSV file.
+    #[arg(long)]
+    csv: Option<PathBuf>,
+    /// Write every k-th step to the CSV.
+    #[arg(long, default_value_t = 1)]
+    every: u64,
+    /// Write trajectory, |C| and energy error to this SVG file.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = OutArg::Text)]
+    format: OutArg,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum IntegratorArg {
+    Euler,
+    Verlet,
+    Rk4,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum StabilizeArg {
+    None,
+    Baumgarte,
+    Projection,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
+enum OutArg {
+    Text,
+    Json,
+    Csv,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -60,6 +124,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
+        Command::Simulate(args) => cmd_simulate(&args),
     }
 }
 
@@ -129,4 +194,105 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// Reads, loads and derives a file into a runnable scenario, or reports why not.
+fn scenario(path: &Path) -> Result<lagrange::scenario::Scenario, ExitCode> {
+    let text = read_text(path).map_err(|e| {
+        eprintln!("{e}");
+        ExitCode::from(1)
+    })?;
+    let loaded = load(&text).map_err(|problems| report_problems(path, &text, &problems))?;
+    lagrange::scenario::Scenario::new(loaded, &[]).map_err(|e| {
+        eprintln!("error: {}: {e}", path.display());
+        ExitCode::from(1)
+    })
+}
+
+fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
+    use lagrange::numeric::integrate::Integrator;
+    use lagrange::numeric::stabilize::Stabilize;
+    let scenario = match scenario(&args.file) {
+        Ok(s) => s,
+        Err(code) => return code,
+    };
+    let mut settings = scenario.settings();
+    settings.dt = args.dt.unwrap_or(settings.dt);
+    let duration = args.duration.unwrap_or(scenario.scene.duration);
+    settings.steps = args.steps.unwrap_or((duration / settings.dt).round().max(0.0) as u64);
+    settings.integrator = match args.integrator {
+        IntegratorArg::Euler => Integrator::Euler,
+        IntegratorArg::Verlet => Integrator::Verlet,
+        IntegratorArg::Rk4 => Integrator::Rk4,
+    };
+    settings.stabilize = match args.stabilize {
+        StabilizeArg::None => Stabilize::None,
+        StabilizeArg::Baumgarte => Stabilize::Baumgarte { zeta: args.zeta, omega_dt: args.omega_dt },
+        StabilizeArg::Projection => Stabilize::Projection { tolerance: args.tolerance, max_iterations: 20 },
+    };
+    if let Err(e) = settings.validate() {
+        eprintln!("error: {e}");
+        return ExitCode::from(2);
+    }
+    let mut csv = match &args.csv {
+        None => None,
+        Some(path) => {
+            let file = std::fs::File::create(path).map_err(|e| e.to_string());
+            let out = file.and_then(|f| {
+                let out = std::io::BufWriter::new(f);
+                lagrange::report::csv::CsvWriter::new(&scenario.system, out, args.every, settings.steps)
+                    .map_err(|e| e.to_string())
+            });
+            match out {
+                Ok(w) => Some(w),
+                Err(e) => {
+                    eprintln!("error: cannot write {}: {e}", path.display());
+                    return ExitCode::from(1);
+                }
+            }
+        }
+    };
+    use std::io::IsTerminal;
+    let bar = (std::io::stderr().is_terminal() && settings.steps >= 20_000)
+        .then(|| indicatif::ProgressBar::new(settings.steps));
+    let result = scenario.simulate(settings, &mut |frame| {
+        if let Some(bar) = &bar
+            && frame.step.is_multiple_of(1000)
+        {
+            bar.set_position(frame.step);
+        }
+        csv.as_mut().map_or(Ok(()), |w| w.frame(frame)).map_err(|e| e.to_string())
+    });
+    if let Some(bar) = bar {
+        bar.finish_and_clear();
+    }
+    if let Some(Err(e)) = csv.as_mut().map(|w| w.flush()) {
+        eprintln!("error: cannot write the CSV: {e}");
+    }
+    let (summary, code) = match result {
+        Ok(s) => (s, ExitCode::SUCCESS),
+        Err(failure) => {
+            eprintln!("error: {}: {}", args.file.display(), failure.error);
+            (failure.summary, ExitCode::from(2))
+        }
+    };
+    let dim = scenario.system.dim();
+    if args.format == OutArg::Json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&lagrange::report::simulation::json(&summary, dim)).unwrap_or_default()
+        );
+    } else {
+        println!("{}", lagrange::report::simulation::text(&summary, dim));
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{} — {} + {}", scenario.system.title, summary.integrator, summary.stabilize);
+        let written = lagrange::report::plot::simulation(&title, &summary)
+            .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
+        if let Err(e) = written {
+            eprintln!("error: {}: {e}", path.display());
+            return ExitCode::from(1);
+        }
+    }
+    code
 }

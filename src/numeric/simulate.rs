@@ -271,7 +271,7 @@ impl<'s> Simulation<'s> {
                 if summary.max_kinetic > 0.0 { max_energy_error / summary.max_kinetic } else { max_energy_error }
             });
             let solution = self.dynamics.solve(&mut rows);
-            if n % stride == 0 || n == s.steps {
+            if n.is_multiple_of(stride) || n == s.steps {
                 summary.samples.push(Sample {
                     time: t,
                     max_abs_c: c_max,

@@ -2,5 +2,8 @@
 //!
 //! Everything here returns strings or JSON values; only `main.rs` writes them out.
 
+pub mod csv;
 pub mod derivation;
 pub mod diagnostic;
+pub mod plot;
+pub mod simulation;
