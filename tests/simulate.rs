@@ -1,33 +1,99 @@
 //! Simulation: drift and energy of the pendulum, determinism, the integrators' orders.
 
-use lagrange::derive::derive;
-use lagrange::model::file::load;
-use lagrange::model::scene::environment;
-use lagrange::numeric::dynamics::Dynamics;
-use lagrange::numeric::integrate::Integrator;
-use lagrange::numeric::rows::RowProgram;
-use lagrange::numeric::simulate::{Settings, Simulation, Summary};
-use lagrange::numeric::stabilize::Stabilize;
+mod common;
 
-fn run(path: &str, integrator: Integrator, stabilize: Stabilize, dt: f64, steps: u64) -> Summary {
-    let text = std::fs::read_to_string(path).expect("file");
-    let mut loaded = load(&text).expect("valid file");
-    let derivation = derive(&mut loaded.system).expect("derives");
-    let program = RowProgram::new(&mut loaded.system, &derivation, &loaded.scene.forces);
-    let env = environment(&loaded.system, &loaded.values, &loaded.scene, &[]).expect("state");
-    let dynamics = Dynamics::new(&loaded.system, program, env.clone());
-    let mut settings = Settings::new(dt, dt * steps as f64);
-    settings.integrator = integrator;
-    settings.stabilize = stabilize;
-    settings.steps = steps;
-    let mut sim = Simulation::new(dynamics, &env, settings).expect("settings");
-    sim.run(&mut |_| Ok(())).expect("runs")
-}
+use common::{run, run_observed, scenario, settings};
+use lagrange::numeric::integrate::Integrator;
+use lagrange::numeric::stabilize::Stabilize;
+use lagrange::report::csv::CsvWriter;
+use std::collections::hash_map::DefaultHasher;
+use std::hash::{Hash, Hasher};
 
 #[test]
 fn pendulum_verlet_projection_1e5_steps_keeps_drift_and_energy() {
-    let s = run("constraints/pendulum.toml", Integrator::Verlet, Stabilize::PROJECTION, 1e-3, 100_000);
-    eprintln!("{s:?}", s = (s.max_abs_c, s.max_abs_c_dot, s.energy_rel_drift, s.wall_seconds, s.evaluations));
+    let s = run("constraints/pendulum.toml", Some(100_000)).expect("runs");
+    assert_eq!(s.steps, 100_000);
     assert!(s.max_abs_c <= 1e-9, "max |C| = {}", s.max_abs_c);
+    assert!(s.max_abs_c_dot <= 1e-9, "max |Ċ| = {}", s.max_abs_c_dot);
     assert!(s.energy_rel_drift.expect("time-independent") <= 1e-3, "energy {:?}", s.energy_rel_drift);
+}
+
+/// The CSV bytes and final state of one run.
+fn csv_of(path: &str, integrator: Integrator, stabilize: Stabilize) -> (Vec<u8>, Vec<[f64; 3]>) {
+    let s = scenario(path);
+    let settings = settings(&s, integrator, stabilize, 1e-3, 1000);
+    let mut writer = CsvWriter::new(&s.system, Vec::new(), 7, 1000).expect("header");
+    let summary = s.simulate(settings, &mut |f| writer.frame(f).map_err(|e| e.to_string())).expect("runs");
+    let mut out = summary.final_position;
+    out.extend(summary.final_velocity);
+    (writer.into_inner(), out)
+}
+
+fn hash(bytes: &[u8]) -> u64 {
+    let mut h = DefaultHasher::new();
+    bytes.hash(&mut h);
+    h.finish()
+}
+
+#[test]
+fn same_file_and_options_give_bit_identical_runs() {
+    for (path, integrator, stabilize) in [
+        ("constraints/chain_5.toml", Integrator::Rk4, Stabilize::PROJECTION),
+        ("constraints/chain_5.toml", Integrator::Verlet, Stabilize::PROJECTION),
+        ("constraints/double_pendulum.toml", Integrator::Euler, Stabilize::BAUMGARTE),
+        ("constraints/hard/rope.toml", Integrator::Verlet, Stabilize::PROJECTION),
+    ] {
+        let (a, qa) = csv_of(path, integrator, stabilize);
+        let (b, qb) = csv_of(path, integrator, stabilize);
+        assert_eq!(hash(&a), hash(&b), "{path}");
+        assert_eq!(a, b);
+        let bits = |q: &[[f64; 3]]| q.iter().flatten().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&qa), bits(&qb));
+        assert!(a.len() > 1000);
+    }
+}
+
+/// The pendulum's final position error after 1 s at step `dt` against a fine RK4 run.
+fn error_at(integrator: Integrator, dt: f64, reference: &[f64; 3]) -> f64 {
+    let steps = (1.0 / dt).round() as u64;
+    let s = run_observed(
+        "constraints/pendulum.toml",
+        integrator,
+        Stabilize::PROJECTION,
+        Some(dt),
+        Some(steps),
+        &mut |_| {},
+    )
+    .expect("runs");
+    let q = s.final_position[0];
+    ((q[0] - reference[0]).powi(2) + (q[1] - reference[1]).powi(2)).sqrt()
+}
+
+#[test]
+fn integrators_converge_at_their_orders() {
+    let reference = run_observed(
+        "constraints/pendulum.toml",
+        Integrator::Rk4,
+        Stabilize::PROJECTION,
+        Some(1e-4),
+        Some(10_000),
+        &mut |_| {},
+    )
+    .expect("runs")
+    .final_position[0];
+    for (integrator, order) in [(Integrator::Euler, 1.0), (Integrator::Verlet, 2.0), (Integrator::Rk4, 4.0)] {
+        let (e1, e2) = (error_at(integrator, 0.01, &reference), error_at(integrator, 0.005, &reference));
+        let observed = (e1 / e2).log2();
+        assert!((observed - order).abs() <= 0.5, "{integrator:?}: order {observed} ({e1:e}, {e2:e})");
+    }
+}
+
+#[test]
+fn baumgarte_keeps_drift_small_and_none_lets_it_grow() {
+    let path = "constraints/double_pendulum.toml";
+    let go = |stabilize| {
+        run_observed(path, Integrator::Euler, stabilize, Some(2e-3), Some(2000), &mut |_| {}).expect("runs").max_abs_c
+    };
+    let (none, baumgarte) = (go(Stabilize::None), go(Stabilize::BAUMGARTE));
+    assert!(baumgarte < none / 10.0, "baumgarte {baumgarte:e}, none {none:e}");
 }

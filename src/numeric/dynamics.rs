@@ -21,6 +21,10 @@ pub enum SimError {
     #[error("step {step} (t = {time}): the state of body `{body}` is not finite")]
     NonFinite { step: u64, time: f64, body: String },
     #[error(
+        "step {step} (t = {time}): constraint `{constraint}` evaluates to {value} — its formula overflows or is undefined at this state (check the scene's scale and the singular points of C)"
+    )]
+    NonFiniteRow { step: u64, time: f64, constraint: String, value: f64 },
+    #[error(
         "step {step} (t = {time}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt or --stabilize projection"
     )]
     Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },

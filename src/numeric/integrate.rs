@@ -76,7 +76,7 @@ fn axpy(out: &mut Vectors, x: &Vectors, h: f64, y: &Vectors) {
 }
 
 /// `x += h y`, componentwise.
-fn add_scaled(x: &mut Vectors, h: f64, y: &Vectors) {
+pub fn add_scaled(x: &mut Vectors, h: f64, y: &Vectors) {
     for (x, y) in x.iter_mut().zip(y) {
         for d in 0..3 {
             x[d] += h * y[d];
@@ -88,6 +88,30 @@ impl Stepper {
     pub fn new(integrator: Integrator, n: usize) -> Stepper {
         let z = vec![[0.0; 3]; n];
         Stepper { integrator, q: z.clone(), v: z.clone(), dq: z.clone(), k: [z.clone(), z.clone(), z] }
+    }
+
+    /// Verlet's first half: v½ = v + dt/2 a₀ (written into `v`); q⁺ = q + dt v½.
+    pub fn verlet_drift(dt: f64, q: &mut Vectors, v: &mut Vectors, a0: &Vectors) {
+        add_scaled(v, 0.5 * dt, a0);
+        add_scaled(q, dt, v);
+    }
+
+    /// Verlet's second half at t⁺ = t + dt: v⁺ = v½ + dt/2 a₁ with a₁ = a(q⁺, ṽ) at the
+    /// predicted velocity ṽ = v½ + dt/2 a₀ (= v + dt a₀); `v` holds v½ on entry.
+    pub fn verlet_kick<F: Field>(
+        &mut self,
+        field: &mut F,
+        t_next: f64,
+        dt: f64,
+        q: &Vectors,
+        v: &mut Vectors,
+        a0: &Vectors,
+    ) -> Result<(), F::Error> {
+        let [a1, _, _] = &mut self.k;
+        axpy(&mut self.v, v, 0.5 * dt, a0);
+        field.acceleration(t_next, q, &self.v, a1)?;
+        add_scaled(v, 0.5 * dt, a1);
+        Ok(())
     }
 
     /// Advances (q, v) from t to t + dt; `a0` is the acceleration at (t, q, v).
@@ -107,15 +131,8 @@ impl Stepper {
                 add_scaled(q, dt, v);
             }
             Integrator::Verlet => {
-                let [a1, _, _] = &mut self.k;
-                // v½ = v + dt/2 a₀;  q⁺ = q + dt v½.
-                add_scaled(v, 0.5 * dt, a0);
-                add_scaled(q, dt, v);
-                // a₁ = a(q⁺, ṽ) at the predicted velocity ṽ = v½ + dt/2 a₀ (= v + dt a₀).
-                axpy(&mut self.v, v, 0.5 * dt, a0);
-                field.acceleration(t + dt, q, &self.v, a1)?;
-                // v⁺ = v½ + dt/2 a₁.
-                add_scaled(v, 0.5 * dt, a1);
+                Stepper::verlet_drift(dt, q, v, a0);
+                self.verlet_kick(field, t + dt, dt, q, v, a0)?;
             }
             Integrator::Rk4 => {
                 // Stages on y = (q, v), y' = (v, a): k₁ = (v, a₀) at y; k₂ at y + dt/2 k₁;

@@ -19,7 +19,7 @@
 use super::dynamics::{Dynamics, SimError};
 use super::integrate::{Integrator, Stepper, Vectors};
 use super::rows::Rows;
-use super::stabilize::{Stabilize, distance, project_positions, velocity_step};
+use super::stabilize::{Stabilize, distance, project_positions, shake_positions, update_rates, velocity_step};
 use crate::expr::eval::{Env, Value};
 use crate::model::system::System;
 use std::time::Instant;
@@ -154,6 +154,8 @@ pub struct Simulation<'s> {
     q: Vec<[f64; 3]>,
     v: Vec<[f64; 3]>,
     a: Vec<[f64; 3]>,
+    /// v½ of a RATTLE step.
+    half: Vec<[f64; 3]>,
 }
 
 impl<'s> Simulation<'s> {
@@ -170,6 +172,7 @@ impl<'s> Simulation<'s> {
             q,
             v,
             a: vec![[0.0; 3]; n],
+            half: vec![[0.0; 3]; n],
         })
     }
 
@@ -199,6 +202,17 @@ impl<'s> Simulation<'s> {
         }
     }
 
+    /// A NaN or infinity in the state stops the run, naming the body.
+    fn check_finite(&self, step: u64, time: f64) -> Result<(), SimError> {
+        for (i, (q, v)) in self.q.iter().zip(&self.v).enumerate() {
+            if !(q.iter().chain(v).all(|x| x.is_finite())) {
+                let body = self.dynamics.system().bodies[i].name.clone();
+                return Err(SimError::NonFinite { step, time, body });
+            }
+        }
+        Ok(())
+    }
+
     fn run_inner(
         &mut self,
         s: Settings,
@@ -224,7 +238,12 @@ impl<'s> Simulation<'s> {
             let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
             for (k, row) in rows.rows.iter().enumerate() {
                 let d = distance(row);
-                if !row.value.is_finite() || d.abs() > bound && (!row.inequality || d < 0.0) {
+                if !(row.value.is_finite() && row.rate.is_finite()) {
+                    let value = if row.value.is_finite() { row.rate } else { row.value };
+                    let constraint = system.constraints[k].name.clone();
+                    return Err(SimError::NonFiniteRow { step: n, time: t, constraint, value });
+                }
+                if d.abs() > bound && (!row.inequality || d < 0.0) {
                     return Err(SimError::Drift {
                         step: n,
                         time: t,
@@ -295,17 +314,43 @@ impl<'s> Simulation<'s> {
                 break;
             }
             self.a.copy_from_slice(&solution.acceleration);
-            self.stepper.step(&mut self.dynamics, t, s.dt, &mut self.q, &mut self.v, &self.a)?;
-            for (i, (q, v)) in self.q.iter().zip(&self.v).enumerate() {
-                if !(q.iter().chain(v).all(|x| x.is_finite())) {
-                    return Err(SimError::NonFinite {
-                        step: n + 1,
-                        time: t + s.dt,
-                        body: system.bodies[i].name.clone(),
-                    });
-                }
-            }
             let t1 = self.t0 + (n + 1) as f64 * s.dt;
+            if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) =
+                (s.integrator, s.stabilize)
+            {
+                // RATTLE: drift, SHAKE along the start's gradients, kick, velocity projection.
+                Stepper::verlet_drift(s.dt, &mut self.q, &mut self.v, &self.a);
+                let (mut end, _) = shake_positions(
+                    &mut self.dynamics,
+                    t1,
+                    s.dt,
+                    &mut self.q,
+                    &mut self.v,
+                    &mut rows,
+                    length,
+                    tolerance,
+                    max_iterations,
+                )?;
+                if has_inequalities {
+                    (end, _) = project_positions(
+                        &mut self.dynamics,
+                        t1,
+                        &mut self.q,
+                        &self.v,
+                        length,
+                        tolerance,
+                        max_iterations,
+                    )?;
+                }
+                self.half.copy_from_slice(&self.v);
+                self.stepper.verlet_kick(&mut self.dynamics, t1, s.dt, &self.q, &mut self.v, &self.a)?;
+                update_rates(&mut end, &self.half, &self.v);
+                velocity_step(end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                self.check_finite(n + 1, t1)?;
+                continue;
+            }
+            self.stepper.step(&mut self.dynamics, t, s.dt, &mut self.q, &mut self.v, &self.a)?;
+            self.check_finite(n + 1, t1)?;
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {
                     let (rows, _) = project_positions(

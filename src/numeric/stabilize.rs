@@ -101,10 +101,17 @@ pub fn row_norm(row: &Row) -> f64 {
     row.jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0f64, |a, b| safe_norm(&[a, b, 0.0]))
 }
 
-/// The first-order distance of a row to its surface, C/‖J‖ (signed; 0 when J = 0).
+/// The first-order distance of a row to its surface, C/‖J‖ (signed). Where J = 0 (a
+/// singular configuration) it is 0 on the surface and ±∞ off it: no step along J reaches it.
 pub fn distance(row: &Row) -> f64 {
     let n = row_norm(row);
-    if n > 0.0 && n.is_finite() { row.value / n } else { 0.0 }
+    if n > 0.0 && n.is_finite() {
+        row.value / n
+    } else if row.value == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY.copysign(row.value)
+    }
 }
 
 /// The normal speed of a row, Ċ/‖J‖ (signed; 0 when J = 0).
@@ -182,6 +189,73 @@ pub fn project_positions(
         }
         apply_correction(&mut rows, q);
         iterations += 1;
+    }
+}
+
+/// SHAKE (Ryckaert, Ciccotti, Berendsen 1977; with the velocity step below it is RATTLE,
+/// Andersen 1983): corrects Verlet's drift q⁺ = q + dt v½ along the gradients at the
+/// *start* of the step, Δq = M⁻¹Jₙᵀμ with (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺) (a quasi-Newton
+/// iteration), and folds the correction into v½ += Δq/dt. Along Jₙ rather than J(q⁺), the
+/// step stays symplectic, so the energy error of a long run stays bounded. Equalities only:
+/// a contact's correction must not turn into a velocity (that would pre-empt its impulse
+/// and restitution), so violated inequalities are left to [`project_positions`]. `start` holds
+/// the rows at the start of the step (its C, Ċ and c are overwritten; its J is kept).
+/// Returns the rows at the final positions.
+#[allow(clippy::too_many_arguments)]
+pub fn shake_positions(
+    dynamics: &mut Dynamics<'_>,
+    t: f64,
+    dt: f64,
+    q: &mut Vectors,
+    v_half: &mut Vectors,
+    start: &mut Rows,
+    length: f64,
+    tolerance: f64,
+    max_iterations: usize,
+) -> Result<(Rows, usize), SimError> {
+    let inequality: Vec<bool> = dynamics.system().constraints.iter().map(|c| c.inequality).collect();
+    let bound = tolerance * length;
+    let mut iterations = 0;
+    loop {
+        let rows = dynamics.rows(t, q, v_half)?;
+        let mut residual = 0.0f64;
+        for row in rows.rows.iter().filter(|r| !r.inequality) {
+            residual = residual.max(distance(row).abs());
+        }
+        if residual <= bound || iterations >= max_iterations {
+            return Ok((rows, iterations));
+        }
+        for ((old, new), &ineq) in start.rows.iter_mut().zip(&rows.rows).zip(&inequality) {
+            old.inequality = ineq;
+            if !ineq {
+                // (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺): c = C(q⁺).
+                enforce(old, new.value);
+            } else {
+                leave_out(old);
+            }
+        }
+        start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        let solution = solve(start);
+        for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
+            for d in 0..3 {
+                if dq[d].is_finite() {
+                    q[d] += dq[d];
+                    v[d] += dq[d] / dt;
+                }
+            }
+        }
+        iterations += 1;
+    }
+}
+
+/// Ċ of `rows` after the velocities changed from `before` to `after` (Ċ is affine in v:
+/// Ċ = Σᵢ Jᵢ·vᵢ + ∂C/∂t), without evaluating again.
+pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {
+    for row in &mut rows.rows {
+        for (b, j) in &row.jacobian {
+            let (x, y) = (before[*b], after[*b]);
+            row.rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
+        }
     }
 }
 

@@ -70,6 +70,11 @@ impl<W: Write> CsvWriter<W> {
         self.out.write_all(self.line.as_bytes())
     }
 
+    /// The underlying writer.
+    pub fn into_inner(self) -> W {
+        self.out
+    }
+
     /// Flushes what was written (also on a failed run).
     pub fn flush(&mut self) -> std::io::Result<()> {
         self.out.flush()
