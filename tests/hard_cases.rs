@@ -88,9 +88,9 @@ fn tiny_pendulum_is_the_unit_pendulum_scaled() {
     // |r| ≈ 1e-150: r·r = 1e-300 is still a normal f64, so the motion is the unit one × 1e-150.
     let s = run("constraints/hard/tiny.toml", None).expect("runs");
     let unit = unit_pendulum(s.steps);
-    for d in 0..2 {
-        let scaled = s.final_position[0][d] * 1e150;
-        assert!((scaled - unit[d]).abs() <= 1e-9, "{scaled} vs {}", unit[d]);
+    for (x, u) in s.final_position[0].iter().zip(unit) {
+        let scaled = x * 1e150;
+        assert!((scaled - u).abs() <= 1e-9, "{scaled} vs {u}");
     }
     assert!(s.max_abs_c <= 1e-9 * 1e-300, "{}", s.max_abs_c);
 }
