@@ -4,6 +4,7 @@
 //! graph nodes ([`expr`]); [`derive`] takes Ċ, C̈, ∇C, A and b and, for one constraint, λ
 //! and the forces in closed form; [`report`] lays the results out for people and programs.
 
+pub mod bench;
 pub mod derive;
 pub mod expr;
 pub mod model;

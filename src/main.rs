@@ -35,6 +35,29 @@ enum Command {
     },
     /// Run the scene: integrate, stabilise, report drift and energy.
     Simulate(SimulateArgs),
+    /// Speed against error: a work-precision sweep and the formulas' f64 accuracy.
+    Bench(BenchArgs),
+}
+
+/// Options of `bench`.
+#[derive(clap::Args, Debug)]
+struct BenchArgs {
+    /// The constraint file (TOML) with a [scene].
+    file: PathBuf,
+    /// The middle step size; the sweep runs 4, 2, 1 and ½ times it (default: the scene's).
+    #[arg(long)]
+    dt: Option<f64>,
+    /// Simulated time per run (default: the scene's).
+    #[arg(long)]
+    duration: Option<f64>,
+    /// Random (and as many hard) states for the formula accuracy.
+    #[arg(long, default_value_t = 200)]
+    states: usize,
+    #[arg(long, value_enum, default_value_t = OutArg::Text)]
+    format: OutArg,
+    /// Write the work-precision plot (error against time, log-log) to this SVG file.
+    #[arg(long)]
+    plot: Option<PathBuf>,
 }
 
 /// Options of `simulate`.
@@ -125,6 +148,7 @@ fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
         Command::Simulate(args) => cmd_simulate(&args),
+        Command::Bench(args) => cmd_bench(&args),
     }
 }
 
@@ -295,4 +319,44 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         }
     }
     code
+}
+
+fn cmd_bench(args: &BenchArgs) -> ExitCode {
+    use lagrange::report::bench as table;
+    let scenario = match scenario(&args.file) {
+        Ok(s) => s,
+        Err(code) => return code,
+    };
+    let sweep = lagrange::bench::Sweep::new(
+        args.dt.unwrap_or(scenario.scene.dt),
+        args.duration.unwrap_or(scenario.scene.duration),
+    );
+    let wp = match lagrange::bench::work_precision(&scenario, &sweep) {
+        Ok(wp) => wp,
+        Err(e) => {
+            eprintln!("error: {}: {e}", args.file.display());
+            return ExitCode::from(2);
+        }
+    };
+    let accuracy = lagrange::bench::accuracy::formula_accuracy(&scenario, args.states, 1);
+    match args.format {
+        OutArg::Text => println!("{}", table::text(&wp, &accuracy)),
+        OutArg::Json => println!("{}", serde_json::to_string_pretty(&table::json(&wp, &accuracy)).unwrap_or_default()),
+        OutArg::Csv => print!("{}", table::csv(&wp, &accuracy)),
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{}: final-state error against time", scenario.system.title);
+        let written = lagrange::report::plot::work_precision(
+            &title,
+            "wall seconds per simulated second",
+            "final-state error / scene size",
+            &table::lines(&wp),
+        )
+        .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
+        if let Err(e) = written {
+            eprintln!("error: {}: {e}", path.display());
+            return ExitCode::from(1);
+        }
+    }
+    ExitCode::SUCCESS
 }

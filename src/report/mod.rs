@@ -2,6 +2,7 @@
 //!
 //! Everything here returns strings or JSON values; only `main.rs` writes them out.
 
+pub mod bench;
 pub mod csv;
 pub mod derivation;
 pub mod diagnostic;
