@@ -40,7 +40,8 @@ pub fn json(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> Json {
         .collect();
     json!({
         "reference": {"integrator": "rk4", "stabilize": "projection", "dt": wp.reference_dt,
-                      "steps": wp.reference_steps, "wall_seconds": wp.reference_wall_seconds},
+                      "steps": wp.reference_steps, "wall_seconds": num(wp.reference_wall_seconds),
+                      "error": wp.reference_error},
         "rows": rows,
         "accuracy": accuracy,
     })
@@ -59,6 +60,9 @@ pub fn text(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> String {
         "reference: rk4 + projection, dt = {:.3e} ({} steps, {:.2} s)\n\n",
         wp.reference_dt, wp.reference_steps, wp.reference_wall_seconds
     );
+    if let Some(e) = &wp.reference_error {
+        s += &format!("warning: {e}; final-state errors are unknown\n\n");
+    }
     s += &format!(
         "{:<8} {:<11} {:>9} {:>8} {:>11} {:>9} {:>9} {:>9} {:>11}  status\n",
         "method", "stabilize", "dt", "steps", "s/sim-s", "max|C|", "max|Ċ|", "energy", "final err"
