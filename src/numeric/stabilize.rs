@@ -213,7 +213,7 @@ pub fn shake_positions(
     tolerance: f64,
     max_iterations: usize,
 ) -> Result<(Rows, usize), SimError> {
-    let inequality: Vec<bool> = dynamics.system().constraints.iter().map(|c| c.inequality).collect();
+    let system = dynamics.system();
     let bound = tolerance * length;
     let mut iterations = 0;
     loop {
@@ -225,9 +225,9 @@ pub fn shake_positions(
         if residual <= bound || iterations >= max_iterations {
             return Ok((rows, iterations));
         }
-        for ((old, new), &ineq) in start.rows.iter_mut().zip(&rows.rows).zip(&inequality) {
-            old.inequality = ineq;
-            if !ineq {
+        for ((old, new), constraint) in start.rows.iter_mut().zip(&rows.rows).zip(&system.constraints) {
+            old.inequality = constraint.inequality;
+            if !constraint.inequality {
                 // (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺): c = C(q⁺).
                 enforce(old, new.value);
             } else {
