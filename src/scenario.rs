@@ -6,6 +6,7 @@
 //! Not here: reading files (the caller passes a [`Loaded`]), printing.
 
 use crate::derive::{Derivation, DeriveError, derive};
+use crate::expr::Role;
 use crate::expr::eval::Env;
 use crate::model::file::{Loaded, RawValue};
 use crate::model::scene::{Scene, StateError, environment};
@@ -57,7 +58,11 @@ impl Scenario {
         settings: Settings,
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<Summary, Box<Failure>> {
-        let dynamics = Dynamics::new(&self.system, self.program.clone(), self.env.clone());
+        let mut dynamics = Dynamics::new(&self.system, self.program.clone(), self.env.clone());
+        dynamics.velocity_dependent_forces = self.scene.forces.iter().any(|&(_, f)| {
+            let graph = &self.system.graph;
+            graph.free_symbols(f).into_iter().any(|s| matches!(graph.symbol(s).role, Role::Velocity { .. }))
+        });
         let mut simulation = Simulation::new(dynamics, &self.env, settings)
             .map_err(|error| Box::new(Failure { error, summary: Summary::default() }))?;
         simulation.run(observe)

@@ -48,7 +48,11 @@ pub struct Dynamics<'s> {
     env: Env,
     /// Added to the bias of every row before the acceleration solve (None: no Baumgarte).
     pub baumgarte: Option<BaumgarteTerms>,
-    /// Accelerations evaluated so far (for cost accounting).
+    /// Whether an external force depends on a velocity (damping, drag). When not, Verlet's
+    /// second half needs no evaluation of its own (RATTLE takes F(q⁺) from the rows it has).
+    /// `true` is always safe.
+    pub velocity_dependent_forces: bool,
+    /// Row evaluations so far (the cost unit).
     pub evaluations: u64,
 }
 
@@ -56,7 +60,7 @@ impl<'s> Dynamics<'s> {
     /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
-        Dynamics { system, program, env, baumgarte: None, evaluations: 0 }
+        Dynamics { system, program, env, baumgarte: None, velocity_dependent_forces: true, evaluations: 0 }
     }
 
     pub fn system(&self) -> &'s System {

@@ -343,7 +343,17 @@ impl<'s> Simulation<'s> {
                     )?;
                 }
                 self.half.copy_from_slice(&self.v);
-                self.stepper.verlet_kick(&mut self.dynamics, t1, s.dt, &self.q, &mut self.v, &self.a)?;
+                if self.dynamics.velocity_dependent_forces {
+                    self.stepper.verlet_kick(&mut self.dynamics, t1, s.dt, &self.q, &mut self.v, &self.a)?;
+                } else {
+                    // v⁺ = v½ + dt/2 M⁻¹F(q⁺): the constraint part of the kick is what the
+                    // velocity projection below removes anyway, so no solve is needed here.
+                    for ((v, f), w) in self.v.iter_mut().zip(&end.force).zip(&end.inverse_mass) {
+                        for d in 0..3 {
+                            v[d] += 0.5 * s.dt * f[d] * w;
+                        }
+                    }
+                }
                 update_rates(&mut end, &self.half, &self.v);
                 velocity_step(end, &mut self.v, true, touch, s.restitution, bounce_speed);
                 self.check_finite(n + 1, t1)?;
