@@ -97,8 +97,15 @@ struct SimulateArgs {
     /// Write trajectory, |C| and energy error to this SVG file.
     #[arg(long)]
     plot: Option<PathBuf>,
-    #[arg(long, value_enum, default_value_t = OutArg::Text)]
-    format: OutArg,
+    /// The summary as text or as JSON.
+    #[arg(long, value_enum, default_value_t = SummaryArg::Text)]
+    format: SummaryArg,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
+enum SummaryArg {
+    Text,
+    Json,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -115,7 +122,7 @@ enum StabilizeArg {
     Projection,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
+#[derive(Clone, Copy, Debug, ValueEnum)]
 enum OutArg {
     Text,
     Json,
@@ -301,7 +308,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         }
     };
     let dim = scenario.system.dim();
-    if args.format == OutArg::Json {
+    if args.format == SummaryArg::Json {
         println!(
             "{}",
             serde_json::to_string_pretty(&lagrange::report::simulation::json(&summary, dim)).unwrap_or_default()

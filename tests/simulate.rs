@@ -97,3 +97,30 @@ fn baumgarte_keeps_drift_small_and_none_lets_it_grow() {
     let (none, baumgarte) = (go(Stabilize::None), go(Stabilize::BAUMGARTE));
     assert!(baumgarte < none / 10.0, "baumgarte {baumgarte:e}, none {none:e}");
 }
+
+#[test]
+fn energy_balance_counts_the_work_of_velocity_dependent_forces() {
+    // Drag takes most of the energy out, yet ΔT − W stays at the integrator's error.
+    let s = run("constraints/damped_pendulum.toml", None).expect("runs");
+    let v = s.final_velocity[0];
+    assert!(0.5 * (v[0] * v[0] + v[1] * v[1]) < 0.5 * s.max_kinetic, "drag took energy out");
+    assert!(s.energy_rel_drift.expect("reported") <= 1e-4, "{:?}", s.energy_rel_drift);
+    assert!(s.max_abs_c <= 1e-9);
+}
+
+#[test]
+fn time_dependent_constraints_keep_drift_small_and_do_not_report_energy() {
+    for integrator in Integrator::ALL {
+        let s = run_observed(
+            "constraints/driven_pendulum.toml",
+            integrator,
+            Stabilize::PROJECTION,
+            None,
+            None,
+            &mut |_| {},
+        )
+        .expect("runs");
+        assert_eq!(s.energy_rel_drift, None);
+        assert!(s.max_abs_c <= 1e-9 && s.max_abs_c_dot <= 1e-9, "{integrator:?}: {} {}", s.max_abs_c, s.max_abs_c_dot);
+    }
+}
