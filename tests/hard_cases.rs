@@ -66,6 +66,20 @@ fn mass_ratio_1e9_chain_keeps_its_links() {
     assert!(finite(&s.final_position) && finite(&s.final_velocity));
 }
 
+#[test]
+fn stiff_mass_ratio_chain_stops_with_a_diagnostic() {
+    let failure = run("constraints/hard/mass_ratio_stiff.toml", None).expect_err("too stiff for explicit steps");
+    match &failure.error {
+        SimError::Drift { step, constraint, .. } => {
+            assert!(constraint.starts_with("link"), "{constraint}");
+            assert!(*step > 0 && *step < 2000, "{step}");
+        }
+        SimError::NonFiniteRow { constraint, .. } => assert!(constraint.starts_with("link")),
+        other => panic!("unexpected error {other}"),
+    }
+    assert!(finite(&failure.summary.final_position) && finite(&failure.summary.final_velocity));
+}
+
 /// The unit pendulum's final position after `steps`, for the scaled cases.
 fn unit_pendulum(steps: u64) -> [f64; 3] {
     run("constraints/pendulum.toml", Some(steps)).expect("runs").final_position[0]

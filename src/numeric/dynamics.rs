@@ -18,7 +18,7 @@ use crate::model::system::System;
 pub enum SimError {
     #[error("cannot evaluate the rows at t = {time}: {error}")]
     Eval { time: f64, error: EvalError },
-    #[error("step {step} (t = {time}): the state of body `{body}` is not finite")]
+    #[error("step {step} (t = {time}): the state or force of body `{body}` is not finite")]
     NonFinite { step: u64, time: f64, body: String },
     #[error(
         "step {step} (t = {time}): constraint `{constraint}` evaluates to {value} — its formula overflows or is undefined at this state (check the scene's scale and the singular points of C)"
@@ -54,13 +54,15 @@ pub struct Dynamics<'s> {
     pub velocity_dependent_forces: bool,
     /// Row evaluations so far (the cost unit).
     pub evaluations: u64,
+    /// The step being computed, for diagnostics.
+    pub step: u64,
 }
 
 impl<'s> Dynamics<'s> {
     /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
-        Dynamics { system, program, env, baumgarte: None, velocity_dependent_forces: true, evaluations: 0 }
+        Dynamics { system, program, env, baumgarte: None, velocity_dependent_forces: true, evaluations: 0, step: 0 }
     }
 
     pub fn system(&self) -> &'s System {
@@ -75,7 +77,25 @@ impl<'s> Dynamics<'s> {
             self.env.set(body.position, Value::Vector(q[i]));
             self.env.set(body.velocity, Value::Vector(v[i]));
         }
-        self.program.evaluate(self.system, &self.env).map_err(|error| SimError::Eval { time: t, error })
+        let rows = self.program.evaluate(self.system, &self.env).map_err(|error| SimError::Eval { time: t, error })?;
+        // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
+        for (k, row) in rows.rows.iter().enumerate() {
+            let bad = [row.value, row.rate, row.bias]
+                .into_iter()
+                .chain(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied()))
+                .find(|x| !x.is_finite());
+            if let Some(value) = bad {
+                let constraint = self.system.constraints[k].name.clone();
+                return Err(SimError::NonFiniteRow { step: self.step, time: t, constraint, value });
+            }
+        }
+        for (i, ((f, v), w)) in rows.force.iter().zip(&rows.velocity).zip(&rows.inverse_mass).enumerate() {
+            if !(f.iter().chain(v).all(|x| x.is_finite()) && w.is_finite()) {
+                let body = self.system.bodies[i].name.clone();
+                return Err(SimError::NonFinite { step: self.step, time: t, body });
+            }
+        }
+        Ok(rows)
     }
 
     /// Solves for λ at `rows` (Baumgarte terms added first when set).

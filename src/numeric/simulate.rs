@@ -236,6 +236,7 @@ impl<'s> Simulation<'s> {
         let mut bounce_speed = 0.0;
         for n in 0..=s.steps {
             let t = self.t0 + n as f64 * s.dt;
+            self.dynamics.step = n;
             let mut rows = self.dynamics.rows(t, &self.q, &self.v)?;
             // Drift: |C| and |Ċ| of what should be zero; stop when a surface is out of reach.
             let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
@@ -329,6 +330,7 @@ impl<'s> Simulation<'s> {
             }
             self.a.copy_from_slice(&solution.acceleration);
             let t1 = self.t0 + (n + 1) as f64 * s.dt;
+            self.dynamics.step = n + 1;
             if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) =
                 (s.integrator, s.stabilize)
             {
