@@ -25,7 +25,7 @@ pub enum SimError {
     )]
     NonFiniteRow { step: u64, time: f64, constraint: String, value: f64 },
     #[error(
-        "step {step} (t = {time}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt or --stabilize projection"
+        "step {step} (t = {time}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt (and --stabilize projection if it is off)"
     )]
     Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
     #[error("cannot write the output: {0}")]

@@ -216,15 +216,19 @@ pub fn shake_positions(
     let system = dynamics.system();
     let bound = tolerance * length;
     let mut iterations = 0;
+    let mut previous = f64::INFINITY;
     loop {
         let rows = dynamics.rows(t, q, v_half)?;
         let mut residual = 0.0f64;
         for row in rows.rows.iter().filter(|r| !r.inequality) {
             residual = residual.max(distance(row).abs());
         }
-        if residual <= bound || iterations >= max_iterations {
+        // Stop when converged, out of iterations, or diverging (the step was too large for
+        // the quasi-Newton iteration; the run's drift check then reports it).
+        if residual <= bound || iterations >= max_iterations || residual > 2.0 * previous {
             return Ok((rows, iterations));
         }
+        previous = residual;
         for ((old, new), constraint) in start.rows.iter_mut().zip(&rows.rows).zip(&system.constraints) {
             old.inequality = constraint.inequality;
             if !constraint.inequality {
