@@ -8,7 +8,7 @@ use lagrange::check::{CheckError, Checked};
 fn main() -> Result<(), CheckError> {
     // The tension of a pendulum hinged at p, as a mechanics text writes it (l² where lagrange
     // has |r − p|²: equal wherever the rod holds, which is where the check looks).
-    Checked::load("constraints/pendulum.toml")?
+    Checked::load("constraints/pendulum_pivot.toml")?
         .assert_force("bob", "-(m*dot(v,v) + dot(F, r - p))/l^2 * (r - p)")
         .assert_lambda("rod", "-(m*dot(v,v) + dot(F, r - p))/(2*l^2)");
 

@@ -135,7 +135,7 @@ fn the_norm_bead_needs_velocities_on_the_manifold_too() {
 
 #[test]
 fn the_api_asserts_in_a_few_lines() {
-    Checked::load("constraints/pendulum.toml")
+    Checked::load("constraints/pendulum_pivot.toml")
         .expect("loads")
         .assert_force("bob", "-(m*dot(v,v) + dot(F, r - p))/l^2 * (r - p)")
         .assert_lambda("rod", "-(m*dot(v,v) + dot(F, r - p))/(2*l^2)")

@@ -1,22 +1,27 @@
-//! Numbers from formulas: compiled evaluation, the rows of a derived system at a state, and
-//! the multiplier solve.
+//! Numbers from formulas: compiled evaluation, the rows of a derived system at a state, the
+//! multiplier solve, and simulation.
 //!
 //! [`program`] lowers graph expressions to one scalar SSA program (components, folded
 //! constants, scalar-level CSE); [`tape`] allocates registers for it and evaluates it at one
 //! state or at many (structure of arrays, vectorised lanes, rayon for large batches). The Rust
 //! generator (`codegen`) starts from the same program. [`rows`] evaluates a derivation's rows
-//! (C, Ċ, J, c) at a state; [`solve`] finds the multipliers.
+//! (C, Ċ, J, c) at a state; [`solve`] finds the multipliers ([`banded`], [`qp`], [`contact`],
+//! [`rescale`]). [`dynamics`], [`integrate`], [`stabilize`] and [`simulate`] step a scene.
 //!
 //! This module knows nothing of TOML, files or text: states arrive as
 //! [`crate::expr::eval::Env`], results leave as plain numbers and diagnostics.
 
 pub mod banded;
 pub mod contact;
+pub mod dynamics;
+pub mod integrate;
 pub mod program;
 pub mod qp;
 pub mod rescale;
 pub mod rows;
+pub mod simulate;
 pub mod solve;
+pub mod stabilize;
 pub mod tape;
 
 pub use tape::{BatchScratch, Scratch, Tape, TapeError};

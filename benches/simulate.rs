@@ -1,0 +1,84 @@
+//! Cost of a simulation step against the size of a chain (N = 10, 100, 1000 links), and a
+//! handwritten pendulum step as the baseline of what a step can cost.
+//!
+//! `cargo bench --bench simulate`. Each sample is one `simulate` call of one step (the
+//! recorded state at step 0 plus one Verlet + projection step). With the dense λ solve the
+//! N = 1000 case is dominated by the O(N³) Cholesky; with a banded/sparse solve behind
+//! `numeric::solve` the cost per step grows linearly.
+
+use lagrange::model::file::load;
+use lagrange::numeric::integrate::Integrator;
+use lagrange::numeric::stabilize::Stabilize;
+use lagrange::scenario::Scenario;
+
+fn main() {
+    divan::main();
+}
+
+fn chain(n: usize) -> Scenario {
+    let mut s = format!("title = \"Chain of {n}\"\ndimension = 2\n[parameters]\nl = 0.5\nm = 1.0\ng = [0.0, -9.81]\n");
+    for i in 1..=n {
+        s += &format!(
+            "[[bodies]]\nname = \"p{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\nmass = \"m\"\nforce = \"F{i}\"\n"
+        );
+    }
+    s += "[[constraints]]\nname = \"link1\"\nexpr = \"dot(r1, r1) = l^2\"\n";
+    for i in 2..=n {
+        s += &format!(
+            "[[constraints]]\nname = \"link{i}\"\nexpr = \"dot(r{i} - r{j}, r{i} - r{j}) = l^2\"\n",
+            j = i - 1
+        );
+    }
+    let initial: Vec<String> =
+        (1..=n).map(|i| format!("r{i} = [{:.1}, 0.0], v{i} = [0.0, 0.0]", 0.5 * i as f64)).collect();
+    let forces: Vec<String> = (1..=n).map(|i| format!("F{i} = \"m*g\"")).collect();
+    s += &format!("[scene]\ninitial = {{ {} }}\nforces = {{ {} }}\n", initial.join(", "), forces.join(", "));
+    Scenario::new(load(&s).expect("valid"), &[]).expect("derives")
+}
+
+#[divan::bench(args = [10, 100, 1000], sample_count = 5, sample_size = 1)]
+fn chain_step(bencher: divan::Bencher, n: usize) {
+    let s = chain(n);
+    let mut settings = s.settings();
+    settings.integrator = Integrator::Verlet;
+    settings.stabilize = Stabilize::PROJECTION;
+    settings.steps = 1;
+    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+}
+
+/// The baseline: one Verlet step of the pendulum with λ = −(m v·v + F·r)/(r·r) written by
+/// hand, and a projection back onto |r| = l.
+#[divan::bench]
+fn handwritten_pendulum_step(bencher: divan::Bencher) {
+    let (l, m, g) = (1.0f64, 1.0f64, -9.81f64);
+    let dt = 1e-3;
+    let accel = |r: [f64; 2], v: [f64; 2]| {
+        let lambda = -(m * (v[0] * v[0] + v[1] * v[1]) + m * g * r[1]) / (r[0] * r[0] + r[1] * r[1]);
+        [lambda * r[0] / m, g + lambda * r[1] / m]
+    };
+    bencher.bench_local(|| {
+        let (mut r, mut v) = (divan::black_box([l, 0.0]), divan::black_box([0.0, 0.0]));
+        let a = accel(r, v);
+        for d in 0..2 {
+            v[d] += 0.5 * dt * a[d];
+            r[d] += dt * v[d];
+        }
+        let a1 = accel(r, [v[0] + 0.5 * dt * a[0], v[1] + 0.5 * dt * a[1]]);
+        for d in 0..2 {
+            v[d] += 0.5 * dt * a1[d];
+        }
+        let k = l / (r[0] * r[0] + r[1] * r[1]).sqrt();
+        let along = (v[0] * r[0] + v[1] * r[1]) / (r[0] * r[0] + r[1] * r[1]);
+        ([r[0] * k, r[1] * k], [v[0] - along * r[0], v[1] - along * r[1]])
+    });
+}
+
+/// The same pendulum step through lagrange (rows by the interpreter, the λ solve).
+#[divan::bench(sample_count = 20)]
+fn lagrange_pendulum_step(bencher: divan::Bencher) {
+    let text = std::fs::read_to_string("constraints/pendulum.toml").expect("file");
+    let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
+    let mut settings = s.settings();
+    settings.steps = 1;
+    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+}

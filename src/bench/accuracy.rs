@@ -1,0 +1,226 @@
+//! Formula accuracy: every derived constraint force evaluated in f64 against a
+//! double-double reference of the same graph, over random and hard states, with the f64
+//! evaluation time beside it — speed and error side by side.
+//!
+//! The f64 path is what `solve` and `simulate` use: the closed form λ J when the system has
+//! one constraint, else the rows and the λ solve. The reference evaluates the same
+//! expressions in double-double and solves A λ = −b by Gaussian elimination in
+//! double-double. States: *random* ones around the scene's initial state (positions within
+//! the scene's size, velocities of its speed scale), and *hard* ones — everything scaled
+//! towards the origin (1e-7: near singular gradients such as the bead's centre) or away
+//! from it (1e7: large cancelling terms). Formulas are compared as formulas: the states need
+//! not satisfy the constraints.
+//!
+//! Not here: the simulation error (`bench::work_precision`).
+
+use super::reference::{Dd, eval_dd, solve_dense};
+use crate::expr::eval::{Env, Value, eval};
+use crate::numeric::solve::solve;
+use crate::scenario::Scenario;
+use std::time::Instant;
+use twofloat::TwoFloat;
+
+/// The error of one body's force over a class of states.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AccuracyRow {
+    pub body: String,
+    /// "closed form" or "solve".
+    pub method: String,
+    /// "random" or "hard".
+    pub states: String,
+    pub count: usize,
+    pub median_rel_error: f64,
+    pub max_rel_error: f64,
+    /// f64 evaluation of all forces at one state, in nanoseconds.
+    pub nanos_per_eval: f64,
+}
+
+/// A small deterministic generator (SplitMix64), so a bench is reproducible.
+pub struct Rng(u64);
+
+impl Rng {
+    pub fn new(seed: u64) -> Rng {
+        Rng(seed)
+    }
+
+    /// Uniform in [−0.5, 0.5).
+    pub fn centred(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+    }
+}
+
+fn norm(x: &[f64; 3]) -> f64 {
+    crate::numeric::solve::safe_norm(x)
+}
+
+/// The forces on every body at `env`, in f64, by the path the library uses.
+fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
+    match &s.derivation.forces {
+        Some(closed) => {
+            let ids: Vec<_> = closed.iter().map(|&(_, id)| id).collect();
+            let values = eval(&s.system.graph, &ids, env).ok()?;
+            let mut out = vec![[0.0; 3]; s.system.bodies.len()];
+            for (&(b, _), v) in closed.iter().zip(values) {
+                out[b] = v.vector()?;
+            }
+            Some(out)
+        }
+        None => {
+            let mut rows = s.program.evaluate(&s.system, env).ok()?;
+            rows.rows.iter_mut().for_each(|r| r.inequality = false);
+            Some(solve(&rows).constraint_force)
+        }
+    }
+}
+
+/// The same forces in double-double (None where the reference is undefined there).
+fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
+    let graph = &s.system.graph;
+    let n = s.system.bodies.len();
+    let zero = TwoFloat::from(0.0);
+    if let Some(closed) = &s.derivation.forces {
+        let ids: Vec<_> = closed.iter().map(|&(_, id)| id).collect();
+        let values = eval_dd(graph, &ids, env).ok()?;
+        let mut out = vec![[zero; 3]; n];
+        for (&(b, _), v) in closed.iter().zip(values) {
+            out[b] = v.vector();
+        }
+        return Some(out);
+    }
+    // Masses and external forces per body.
+    let mut roots: Vec<_> = s.system.bodies.iter().map(|b| b.mass).collect();
+    let force_expr: Vec<Option<_>> =
+        (0..n).map(|i| s.scene.forces.iter().find(|(b, _)| *b == i).map(|&(_, id)| id)).collect();
+    roots.extend(force_expr.iter().flatten());
+    for d in &s.derivation.constraints {
+        roots.push(d.c_term);
+        roots.extend(d.direction.iter().map(|&(_, j)| j));
+    }
+    let values = eval_dd(graph, &roots, env).ok()?;
+    let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar()).collect();
+    let mut at = n;
+    let mut force = Vec::with_capacity(n);
+    for (i, f) in force_expr.iter().enumerate() {
+        force.push(match f {
+            Some(_) => {
+                at += 1;
+                values[at - 1].vector()
+            }
+            None => match env.get(s.system.bodies[i].force) {
+                Some(Value::Vector(v)) => v.map(TwoFloat::from),
+                _ => [zero; 3],
+            },
+        });
+    }
+    let dot = |a: &[TwoFloat; 3], b: &[TwoFloat; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let mut c = Vec::new();
+    let mut jac: Vec<Vec<(usize, [TwoFloat; 3])>> = Vec::new();
+    for d in &s.derivation.constraints {
+        c.push(values[at].scalar());
+        at += 1;
+        jac.push(d.direction.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector())).collect());
+        at += d.direction.len();
+    }
+    // A λ = −b with Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ/mᵢ, bₖ = Σᵢ Jₖᵢ·Fᵢ/mᵢ + cₖ.
+    let k = c.len();
+    let mut a = vec![vec![zero; k]; k];
+    let mut b = vec![zero; k];
+    for p in 0..k {
+        for &(body, ref jp) in &jac[p] {
+            b[p] += dot(jp, &force[body]) * inverse_mass[body];
+            for q in 0..k {
+                for &(other, ref jq) in &jac[q] {
+                    if other == body {
+                        a[p][q] += dot(jp, jq) * inverse_mass[body];
+                    }
+                }
+            }
+        }
+        b[p] = -(b[p] + c[p]);
+    }
+    let lambda = solve_dense(a, b)?;
+    let mut out = vec![[zero; 3]; n];
+    for (p, l) in lambda.iter().enumerate() {
+        for &(body, ref j) in &jac[p] {
+            for d in 0..3 {
+                out[body][d] += *l * j[d];
+            }
+        }
+    }
+    Some(out)
+}
+
+/// Measures every body's force over `count` random and `count` hard states.
+pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRow> {
+    let system = &s.system;
+    let n = system.bodies.len();
+    let get = |sym| s.env.get(sym).and_then(Value::vector).unwrap_or([0.0; 3]);
+    let q0: Vec<[f64; 3]> = system.bodies.iter().map(|b| get(b.position)).collect();
+    let v0: Vec<[f64; 3]> = system.bodies.iter().map(|b| get(b.velocity)).collect();
+    let length = q0.iter().map(norm).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    let length = if length > f64::MIN_POSITIVE { length } else { 1.0 };
+    let speed = v0.iter().map(norm).fold(0.0, f64::max).max(length);
+    let dim = system.dim();
+    let method = if s.derivation.forces.is_some() { "closed form" } else { "solve" };
+    let mut rng = Rng::new(seed);
+    let mut rows = Vec::new();
+    for class in ["random", "hard"] {
+        let mut errors: Vec<Vec<f64>> = vec![Vec::new(); n];
+        let mut envs = Vec::new();
+        for k in 0..count {
+            let (qs, vs) =
+                if class == "random" { (1.0, 1.0) } else { [(1e-7, 1.0), (1.0, 1e7), (1e7, 1e7), (1e-7, 1e-7)][k % 4] };
+            let mut env = s.env.clone();
+            for (i, body) in system.bodies.iter().enumerate() {
+                let mut q = [0.0; 3];
+                let mut v = [0.0; 3];
+                for d in 0..dim {
+                    q[d] = qs * (q0[i][d] + length * rng.centred());
+                    v[d] = vs * (v0[i][d] + speed * rng.centred());
+                }
+                env.set(body.position, Value::Vector(q));
+                env.set(body.velocity, Value::Vector(v));
+            }
+            envs.push(env);
+        }
+        // Time the f64 path alone.
+        let repeats = 5;
+        let start = Instant::now();
+        for _ in 0..repeats {
+            for env in &envs {
+                std::hint::black_box(forces_f64(s, env));
+            }
+        }
+        let nanos = start.elapsed().as_secs_f64() * 1e9 / (repeats * envs.len().max(1)) as f64;
+        for env in &envs {
+            let (Some(f), Some(r)) = (forces_f64(s, env), forces_dd(s, env)) else { continue };
+            for i in 0..n {
+                let diff: [f64; 3] = std::array::from_fn(|d| (TwoFloat::from(f[i][d]) - r[i][d]).hi());
+                let size = norm(&std::array::from_fn(|d| r[i][d].hi()));
+                if size > 0.0 && size.is_finite() {
+                    let e = norm(&diff) / size;
+                    errors[i].push(if e.is_nan() { f64::INFINITY } else { e });
+                }
+            }
+        }
+        for (i, mut e) in errors.into_iter().enumerate() {
+            e.sort_by(f64::total_cmp);
+            let median = if e.is_empty() { f64::NAN } else { e[e.len() / 2] };
+            rows.push(AccuracyRow {
+                body: system.bodies[i].name.clone(),
+                method: method.into(),
+                states: class.into(),
+                count: e.len(),
+                median_rel_error: median,
+                max_rel_error: e.last().copied().unwrap_or(f64::NAN),
+                nanos_per_eval: nanos,
+            });
+        }
+    }
+    rows
+}

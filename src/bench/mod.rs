@@ -1,0 +1,171 @@
+//! `lagrange bench`: speed against error. A work-precision sweep of the simulation
+//! (integrator × stabilisation × step size against a fine reference run) and the formula
+//! accuracy of the derived forces (f64 against double-double).
+//!
+//! Work-precision. Every method runs the same scene for the same simulated time at ≥ 4
+//! step sizes; the reference is the same scene with RK4 + projection at a step 16 times
+//! finer than the finest of the sweep. Per run: wall time per simulated second, max |C|,
+//! max |Ċ|, the energy balance, and the final-state error max |qᵢ − qᵢ,ref| over the
+//! scene's size. Plotted as error against time (log-log), a method further down-left is
+//! better: less error for the same time.
+//!
+//! Not here: printing or files (`report::bench`, `main.rs`).
+
+pub mod accuracy;
+pub mod reference;
+
+use crate::numeric::integrate::Integrator;
+use crate::numeric::simulate::Summary;
+use crate::numeric::stabilize::Stabilize;
+use crate::scenario::Scenario;
+
+/// What to sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sweep {
+    pub integrators: Vec<Integrator>,
+    pub stabilizers: Vec<Stabilize>,
+    /// Step sizes, at least 4.
+    pub steps: Vec<f64>,
+    pub duration: f64,
+    /// The reference step is the finest step divided by this.
+    pub refinement: f64,
+}
+
+impl Sweep {
+    /// Every method, at dt × 4, 2, 1, ½ of the scene's step.
+    pub fn new(dt: f64, duration: f64) -> Sweep {
+        Sweep {
+            integrators: Integrator::ALL.to_vec(),
+            stabilizers: vec![Stabilize::None, Stabilize::BAUMGARTE, Stabilize::PROJECTION],
+            steps: vec![4.0 * dt, 2.0 * dt, dt, 0.5 * dt],
+            duration,
+            refinement: 16.0,
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), String> {
+        if self.steps.len() < 4 {
+            return Err(format!("a sweep needs at least 4 step sizes, found {}", self.steps.len()));
+        }
+        if self.steps.iter().any(|dt| !(dt.is_finite() && *dt > 0.0)) {
+            return Err("step sizes must be finite and positive".into());
+        }
+        if !(self.duration.is_finite() && self.duration > 0.0) {
+            return Err(format!("the duration must be positive, found {}", self.duration));
+        }
+        if self.integrators.is_empty() || self.stabilizers.is_empty() {
+            return Err("nothing to sweep".into());
+        }
+        Ok(())
+    }
+}
+
+/// One run of the sweep.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchRow {
+    pub integrator: String,
+    pub stabilize: String,
+    pub dt: f64,
+    pub steps: u64,
+    /// Wall seconds per simulated second.
+    pub wall_per_second: f64,
+    pub max_abs_c: f64,
+    pub max_abs_c_dot: f64,
+    pub energy_error: Option<f64>,
+    /// max |qᵢ − qᵢ,ref| / the scene's size; None when the run failed.
+    pub final_error: Option<f64>,
+    /// "ok", or why the run stopped.
+    pub status: String,
+}
+
+/// The reference run and the sweep's rows.
+#[derive(Clone, Debug, PartialEq)]
+pub struct WorkPrecision {
+    pub reference_dt: f64,
+    pub reference_steps: u64,
+    pub reference_wall_seconds: f64,
+    /// Why the reference run failed, if it did (the final-state errors are then unknown).
+    pub reference_error: Option<String>,
+    pub rows: Vec<BenchRow>,
+}
+
+fn steps_for(duration: f64, dt: f64) -> u64 {
+    (duration / dt).round().max(1.0) as u64
+}
+
+/// Runs the sweep over `scenario`.
+pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecision, String> {
+    sweep.validate()?;
+    let run = |integrator, stabilize, dt: f64| -> Result<Summary, String> {
+        let mut settings = scenario.settings();
+        settings.integrator = integrator;
+        settings.stabilize = stabilize;
+        // Same simulated time for every step: round the step count, then fit dt to it.
+        settings.steps = steps_for(sweep.duration, dt);
+        settings.dt = sweep.duration / settings.steps as f64;
+        scenario.simulate(settings, &mut |_| Ok(())).map_err(|f| f.error.to_string())
+    };
+    let finest = sweep.steps.iter().copied().fold(f64::INFINITY, f64::min);
+    let reference_dt = finest / sweep.refinement;
+    // A failed reference leaves the final-state errors unknown, not the rest of the table.
+    let (reference, reference_error) = match run(Integrator::Rk4, Stabilize::PROJECTION, reference_dt) {
+        Ok(s) => (Some(s), None),
+        Err(e) => (None, Some(format!("the reference run (RK4 + projection, dt = {reference_dt:e}) failed: {e}"))),
+    };
+    let reference_position = reference.as_ref().map(|r| r.final_position.clone());
+    let length = reference_position.iter().flatten().map(crate::numeric::solve::safe_norm).fold(0.0, f64::max);
+    let length = if length > 0.0 { length } else { 1.0 };
+    let mut rows = Vec::new();
+    for &integrator in &sweep.integrators {
+        for &stabilize in &sweep.stabilizers {
+            for &dt in &sweep.steps {
+                let steps = steps_for(sweep.duration, dt);
+                let row = match run(integrator, stabilize, dt) {
+                    Ok(s) => {
+                        let error = reference_position.as_ref().map(|reference| {
+                            s.final_position
+                                .iter()
+                                .zip(reference)
+                                .flat_map(|(a, b)| (0..3).map(move |d| (a[d] - b[d]).abs()))
+                                .fold(0.0, f64::max)
+                                / length
+                        });
+                        BenchRow {
+                            integrator: integrator.name().into(),
+                            stabilize: stabilize.name().into(),
+                            dt: s.dt,
+                            steps,
+                            wall_per_second: s.wall_seconds / s.duration.max(f64::MIN_POSITIVE),
+                            max_abs_c: s.max_abs_c,
+                            max_abs_c_dot: s.max_abs_c_dot,
+                            energy_error: s.energy_rel_drift,
+                            final_error: error,
+                            status: "ok".into(),
+                        }
+                    }
+                    Err(e) => BenchRow {
+                        integrator: integrator.name().into(),
+                        stabilize: stabilize.name().into(),
+                        dt: sweep.duration / steps as f64,
+                        steps,
+                        wall_per_second: f64::NAN,
+                        max_abs_c: f64::NAN,
+                        max_abs_c_dot: f64::NAN,
+                        energy_error: None,
+                        final_error: None,
+                        status: e,
+                    },
+                };
+                rows.push(row);
+            }
+        }
+    }
+    let reference_steps = steps_for(sweep.duration, reference_dt);
+    Ok(WorkPrecision {
+        reference_dt: sweep.duration / reference_steps as f64,
+        reference_steps,
+        reference_wall_seconds: reference.as_ref().map_or(f64::NAN, |r| r.wall_seconds),
+        reference_error,
+        rows,
+    })
+}

@@ -1,0 +1,122 @@
+//! The equations of motion at a state: rows → λ → accelerations, behind one function.
+//!
+//! [`Dynamics::rows`] is the only place where a simulation turns a state (t, q, v) into
+//! numbers; when the compiled tape replaces the interpreter behind [`RowProgram`], this is
+//! the one call that changes. [`Dynamics`] is a [`Field`] for the integrators, with the
+//! Baumgarte terms (when chosen) added to the bias c before the solve.
+//!
+//! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
+
+use super::integrate::{Field, Vectors};
+use super::rows::{RowProgram, Rows};
+use super::solve::{Solution, solve};
+use crate::expr::eval::{Env, EvalError, Value};
+use crate::model::system::System;
+
+/// Why a simulation stopped.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SimError {
+    #[error("cannot evaluate the rows at t = {time}: {error}")]
+    Eval { time: f64, error: EvalError },
+    #[error("step {step} (t = {time}): the state or force of body `{body}` is not finite")]
+    NonFinite { step: u64, time: f64, body: String },
+    #[error(
+        "step {step} (t = {time}): constraint `{constraint}` evaluates to {value} — its formula overflows or is undefined at this state (check the scene's scale and the singular points of C)"
+    )]
+    NonFiniteRow { step: u64, time: f64, constraint: String, value: f64 },
+    #[error(
+        "step {step} (t = {time}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt (and --stabilize projection if it is off)"
+    )]
+    Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
+    #[error("cannot write the output: {0}")]
+    Output(String),
+    #[error("invalid settings: {0}")]
+    Settings(String),
+}
+
+/// Baumgarte's terms b += 2αĊ + β²C, stored as (2α, β²).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BaumgarteTerms {
+    pub two_alpha: f64,
+    pub beta_squared: f64,
+}
+
+/// The equations of motion of a system at any state.
+pub struct Dynamics<'s> {
+    system: &'s System,
+    program: RowProgram,
+    env: Env,
+    /// Added to the bias of every row before the acceleration solve (None: no Baumgarte).
+    pub baumgarte: Option<BaumgarteTerms>,
+    /// Whether an external force depends on a velocity (damping, drag). When not, Verlet's
+    /// second half needs no evaluation of its own (RATTLE takes F(q⁺) from the rows it has).
+    /// `true` is always safe.
+    pub velocity_dependent_forces: bool,
+    /// Row evaluations so far (the cost unit).
+    pub evaluations: u64,
+    /// The step being computed, for diagnostics.
+    pub step: u64,
+}
+
+impl<'s> Dynamics<'s> {
+    /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
+    /// positions, velocities and `t` are overwritten at each evaluation.
+    pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
+        Dynamics { system, program, env, baumgarte: None, velocity_dependent_forces: true, evaluations: 0, step: 0 }
+    }
+
+    pub fn system(&self) -> &'s System {
+        self.system
+    }
+
+    /// The rows at (t, q, v): the one place states become numbers.
+    pub fn rows(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
+        self.evaluations += 1;
+        self.env.set(self.system.time, Value::Scalar(t));
+        for (i, body) in self.system.bodies.iter().enumerate() {
+            self.env.set(body.position, Value::Vector(q[i]));
+            self.env.set(body.velocity, Value::Vector(v[i]));
+        }
+        let rows = self.program.evaluate(self.system, &self.env).map_err(|error| SimError::Eval { time: t, error })?;
+        // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
+        for (k, row) in rows.rows.iter().enumerate() {
+            let bad = [row.value, row.rate, row.bias]
+                .into_iter()
+                .chain(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied()))
+                .find(|x| !x.is_finite());
+            if let Some(value) = bad {
+                let constraint = self.system.constraints[k].name.clone();
+                return Err(SimError::NonFiniteRow { step: self.step, time: t, constraint, value });
+            }
+        }
+        for (i, ((f, v), w)) in rows.force.iter().zip(&rows.velocity).zip(&rows.inverse_mass).enumerate() {
+            if !(f.iter().chain(v).all(|x| x.is_finite()) && w.is_finite()) {
+                let body = self.system.bodies[i].name.clone();
+                return Err(SimError::NonFinite { step: self.step, time: t, body });
+            }
+        }
+        Ok(rows)
+    }
+
+    /// Solves for λ at `rows` (Baumgarte terms added first when set).
+    pub fn solve(&self, rows: &mut Rows) -> Solution {
+        if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
+            for row in &mut rows.rows {
+                // C̈ + 2αĊ + β²C = 0 ⇒ the bias c gains 2αĊ + β²C.
+                row.bias += two_alpha * row.rate + beta_squared * row.value;
+            }
+        }
+        solve(rows)
+    }
+}
+
+impl Field for Dynamics<'_> {
+    type Error = SimError;
+
+    fn acceleration(&mut self, t: f64, q: &Vectors, v: &Vectors, a: &mut Vectors) -> Result<(), SimError> {
+        let mut rows = self.rows(t, q, v)?;
+        let solution = self.solve(&mut rows);
+        a.copy_from_slice(&solution.acceleration);
+        Ok(())
+    }
+}

@@ -1,0 +1,402 @@
+//! The run loop: integrate, stabilise, handle contacts, measure drift and energy, and hand
+//! every state to an observer (CSV writer, progress bar) — with a summary at the end.
+//!
+//! A step: record the state (rows, λ, |C|, |Ċ|, energy balance) → integrate with the
+//! acceleration just solved → project positions (Newton) → velocity solve (closing
+//! contacts with restitution; with projection also Ċ = 0 for equalities). The state is
+//! checked after every step: a NaN or a constraint farther from its surface than the
+//! scene's size stops the run with the step and the constraint named, and what was
+//! observed so far stays with the observer.
+//!
+//! Energy balance: E(t) = (T(t) − T(0)) − W(t), with T = ½ Σ mᵢ|vᵢ|² and W the work of the
+//! external forces, ∫ Σ Fᵢ·vᵢ dt by the trapezoid rule over the recorded states with its
+//! Euler–Maclaurin end correction (O(dt⁴), finer than any of the integrators); it is 0
+//! for exact motion under time-independent constraints (their forces do no work), so
+//! max |E| / max T measures the integrator. A constraint that depends on t does work, and
+//! the figure is then not reported.
+//!
+//! Not here: files, text, printing (the observer does that), the λ solve.
+
+use super::dynamics::{Dynamics, SimError};
+use super::integrate::{Integrator, Stepper, Vectors};
+use super::rows::Rows;
+use super::stabilize::{Stabilize, distance, project_positions, shake_positions, update_rates, velocity_step};
+use crate::expr::eval::{Env, Value};
+use crate::model::system::System;
+use std::time::Instant;
+
+/// How a run goes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    pub integrator: Integrator,
+    pub stabilize: Stabilize,
+    pub dt: f64,
+    pub steps: u64,
+    /// Coefficient of restitution of closing contacts, in [0, 1].
+    pub restitution: f64,
+    /// The run stops when a constraint is farther than `blowup` × the scene's length from
+    /// its surface.
+    pub blowup: f64,
+    /// Samples kept for plots (trajectory, |C|, energy); the CSV sees every step.
+    pub samples: usize,
+}
+
+impl Settings {
+    pub fn new(dt: f64, duration: f64) -> Settings {
+        Settings {
+            integrator: Integrator::Verlet,
+            stabilize: Stabilize::PROJECTION,
+            dt,
+            steps: (duration / dt).round().max(0.0) as u64,
+            restitution: 0.0,
+            blowup: 1.0,
+            samples: 4000,
+        }
+    }
+
+    /// Bad settings, before any loop runs.
+    pub fn validate(&self) -> Result<(), SimError> {
+        let bad = |m: String| Err(SimError::Settings(m));
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return bad(format!("the step must be finite and positive, found {}", self.dt));
+        }
+        if !(0.0..=1.0).contains(&self.restitution) {
+            return bad(format!("the restitution must lie in [0, 1], found {}", self.restitution));
+        }
+        if !(self.blowup.is_finite() && self.blowup > 0.0) {
+            return bad(format!("the blow-up bound must be positive, found {}", self.blowup));
+        }
+        self.stabilize.validate().map_err(SimError::Settings)
+    }
+}
+
+/// One recorded state, as the observer sees it.
+pub struct Frame<'a> {
+    pub step: u64,
+    pub time: f64,
+    pub position: &'a Vectors,
+    pub velocity: &'a Vectors,
+    /// The rows at this state (C/κ, Ċ/κ per constraint).
+    pub rows: &'a Rows,
+    pub lambda: &'a [f64],
+    /// (T − T₀) − W.
+    pub energy_error: f64,
+}
+
+/// A sample for plots.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    pub time: f64,
+    pub max_abs_c: f64,
+    pub energy_error: f64,
+    /// Positions of the first few bodies.
+    pub position: Vec<[f64; 3]>,
+}
+
+/// What a run measured.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Summary {
+    pub integrator: String,
+    pub stabilize: String,
+    pub steps: u64,
+    pub dt: f64,
+    /// Simulated time.
+    pub duration: f64,
+    pub wall_seconds: f64,
+    /// max over steps and constraints of |C/κ| (inequalities: their violation only).
+    pub max_abs_c: f64,
+    /// max of |Ċ/κ| (inequalities: only while touching and closing).
+    pub max_abs_c_dot: f64,
+    /// max |E| / max T; None when a constraint depends on time.
+    pub energy_rel_drift: Option<f64>,
+    /// The energy balance E at the end, and max T.
+    pub final_energy_error: f64,
+    pub max_kinetic: f64,
+    /// Row evaluations (the cost unit).
+    pub evaluations: u64,
+    /// Symbol name → final value (positions and velocities).
+    pub final_state: Vec<(String, Value)>,
+    pub final_position: Vec<[f64; 3]>,
+    pub final_velocity: Vec<[f64; 3]>,
+    pub samples: Vec<Sample>,
+}
+
+/// A run that stopped early: why, and what it measured until then.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Failure {
+    pub error: SimError,
+    pub summary: Summary,
+}
+
+/// The positions and velocities that `env` gives the bodies.
+pub fn initial_state(system: &System, env: &Env) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, f64) {
+    let get = |s| env.get(s).and_then(Value::vector).unwrap_or([0.0; 3]);
+    let q = system.bodies.iter().map(|b| get(b.position)).collect();
+    let v = system.bodies.iter().map(|b| get(b.velocity)).collect();
+    let t = env.get(system.time).and_then(Value::scalar).unwrap_or(0.0);
+    (q, v, t)
+}
+
+/// Whether some constraint depends on t (its force then does work).
+pub fn time_dependent(system: &System) -> bool {
+    system.constraints.iter().any(|c| system.graph.free_symbols(c.c).contains(&system.time))
+}
+
+fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// A simulation in progress: the state and its scratch.
+pub struct Simulation<'s> {
+    dynamics: Dynamics<'s>,
+    settings: Settings,
+    stepper: Stepper,
+    t0: f64,
+    q: Vec<[f64; 3]>,
+    v: Vec<[f64; 3]>,
+    a: Vec<[f64; 3]>,
+    /// v½ of a RATTLE step.
+    half: Vec<[f64; 3]>,
+}
+
+impl<'s> Simulation<'s> {
+    pub fn new(mut dynamics: Dynamics<'s>, env: &Env, settings: Settings) -> Result<Simulation<'s>, SimError> {
+        settings.validate()?;
+        let (q, v, t0) = initial_state(dynamics.system(), env);
+        dynamics.baumgarte = settings.stabilize.baumgarte_terms(settings.dt);
+        let n = q.len();
+        Ok(Simulation {
+            dynamics,
+            settings,
+            stepper: Stepper::new(settings.integrator, n),
+            t0,
+            q,
+            v,
+            a: vec![[0.0; 3]; n],
+            half: vec![[0.0; 3]; n],
+        })
+    }
+
+    /// Runs all steps, calling `observe` at every recorded state (step 0 … steps).
+    pub fn run(&mut self, observe: &mut dyn FnMut(&Frame) -> Result<(), String>) -> Result<Summary, Box<Failure>> {
+        let start = Instant::now();
+        let system = self.dynamics.system();
+        let s = self.settings;
+        let mut summary = Summary {
+            integrator: s.integrator.name().into(),
+            stabilize: s.stabilize.name().into(),
+            dt: s.dt,
+            ..Summary::default()
+        };
+        let result = self.run_inner(s, &mut summary, observe);
+        summary.wall_seconds = start.elapsed().as_secs_f64();
+        summary.evaluations = self.dynamics.evaluations;
+        summary.final_position = self.q.clone();
+        summary.final_velocity = self.v.clone();
+        for (i, body) in system.bodies.iter().enumerate() {
+            summary.final_state.push((system.graph.symbol(body.position).name.clone(), Value::Vector(self.q[i])));
+            summary.final_state.push((system.graph.symbol(body.velocity).name.clone(), Value::Vector(self.v[i])));
+        }
+        match result {
+            Ok(()) => Ok(summary),
+            Err(error) => Err(Box::new(Failure { error, summary })),
+        }
+    }
+
+    /// A NaN or infinity in the state stops the run, naming the body.
+    fn check_finite(&self, step: u64, time: f64) -> Result<(), SimError> {
+        for (i, (q, v)) in self.q.iter().zip(&self.v).enumerate() {
+            if !(q.iter().chain(v).all(|x| x.is_finite())) {
+                let body = self.dynamics.system().bodies[i].name.clone();
+                return Err(SimError::NonFinite { step, time, body });
+            }
+        }
+        Ok(())
+    }
+
+    fn run_inner(
+        &mut self,
+        s: Settings,
+        summary: &mut Summary,
+        observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
+    ) -> Result<(), SimError> {
+        let system = self.dynamics.system();
+        let has_inequalities = system.constraints.iter().any(|c| c.inequality);
+        let energy_reported = !time_dependent(system);
+        // The scene's length scale: the largest initial |rᵢ| (1 when every body is at 0).
+        let length = self.q.iter().map(super::solve::safe_norm).fold(0.0, f64::max);
+        let length = if length > 0.0 { length } else { 1.0 };
+        let bound = s.blowup * length;
+        let touch = 1e-9 * length;
+        let stride = (s.steps / s.samples.max(1) as u64).max(1);
+        let plotted = self.q.len().min(8);
+        let (mut kinetic0, mut work, mut max_energy_error) = (0.0, 0.0, 0.0f64);
+        // P at steps n−2, n−1 and dP/dt at step 0, for the end correction of the trapezoid.
+        let (mut power_2, mut power_1, mut power_rate0) = (0.0, 0.0, 0.0);
+        let mut bounce_speed = 0.0;
+        for n in 0..=s.steps {
+            let t = self.t0 + n as f64 * s.dt;
+            self.dynamics.step = n;
+            let mut rows = self.dynamics.rows(t, &self.q, &self.v)?;
+            // Drift: |C| and |Ċ| of what should be zero; stop when a surface is out of reach.
+            let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
+            for (k, row) in rows.rows.iter().enumerate() {
+                let d = distance(row);
+                if !(row.value.is_finite() && row.rate.is_finite()) {
+                    let value = if row.value.is_finite() { row.rate } else { row.value };
+                    let constraint = system.constraints[k].name.clone();
+                    return Err(SimError::NonFiniteRow { step: n, time: t, constraint, value });
+                }
+                if d.abs() > bound && (!row.inequality || d < 0.0) {
+                    return Err(SimError::Drift {
+                        step: n,
+                        time: t,
+                        constraint: system.constraints[k].name.clone(),
+                        value: row.value,
+                        distance: d,
+                        bound,
+                    });
+                }
+                if row.inequality {
+                    c_max = c_max.max((-row.value).max(0.0));
+                    if d <= touch && row.rate < 0.0 {
+                        c_dot_max = c_dot_max.max(-row.rate);
+                    }
+                } else {
+                    c_max = c_max.max(row.value.abs());
+                    c_dot_max = c_dot_max.max(row.rate.abs());
+                }
+            }
+            summary.max_abs_c = summary.max_abs_c.max(c_max);
+            summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
+            // Energy balance: T − T₀ − ∫ F·v dt (trapezoid).
+            let (mut kinetic, mut power, mut accel) = (0.0, 0.0, 0.0f64);
+            for i in 0..self.q.len() {
+                let w = rows.inverse_mass[i];
+                kinetic += 0.5 * dot(&self.v[i], &self.v[i]) / w;
+                power += dot(&rows.force[i], &self.v[i]);
+                accel = accel.max(super::solve::safe_norm(&rows.force[i]) * w);
+            }
+            if n == 0 {
+                kinetic0 = kinetic;
+                let speed = self.v.iter().map(super::solve::safe_norm).fold(0.0, f64::max);
+                // Approaches slower than what ten steps of the external forces build up do not bounce.
+                bounce_speed = 10.0 * s.dt * accel + 1e-6 * speed;
+            } else {
+                work += 0.5 * (power_1 + power) * s.dt;
+            }
+            // Euler–Maclaurin: ∫P dt = trapezoid − dt²/12 (Ṗ(t) − Ṗ(0)) + O(dt⁴), with Ṗ from
+            // second-order one-sided differences, so the balance measures the integrator and
+            // not the quadrature (the plain trapezoid's O(dt²) would hide RK4's error).
+            let mut end_correction = 0.0;
+            if n == 2 {
+                power_rate0 = (-3.0 * power_2 + 4.0 * power_1 - power) / (2.0 * s.dt);
+            }
+            if n >= 2 {
+                let power_rate = (3.0 * power - 4.0 * power_1 + power_2) / (2.0 * s.dt);
+                end_correction = -s.dt * s.dt / 12.0 * (power_rate - power_rate0);
+            }
+            (power_2, power_1) = (power_1, power);
+            let energy_error = (kinetic - kinetic0) - (work + end_correction);
+            max_energy_error = max_energy_error.max(energy_error.abs());
+            summary.max_kinetic = summary.max_kinetic.max(kinetic);
+            summary.final_energy_error = energy_error;
+            summary.energy_rel_drift = energy_reported.then(|| {
+                if summary.max_kinetic > 0.0 { max_energy_error / summary.max_kinetic } else { max_energy_error }
+            });
+            let solution = self.dynamics.solve(&mut rows);
+            if n.is_multiple_of(stride) || n == s.steps {
+                summary.samples.push(Sample {
+                    time: t,
+                    max_abs_c: c_max,
+                    energy_error,
+                    position: self.q[..plotted].to_vec(),
+                });
+            }
+            let frame = Frame {
+                step: n,
+                time: t,
+                position: &self.q,
+                velocity: &self.v,
+                rows: &rows,
+                lambda: &solution.lambda,
+                energy_error,
+            };
+            observe(&frame).map_err(SimError::Output)?;
+            summary.steps = n;
+            summary.duration = n as f64 * s.dt;
+            if n == s.steps {
+                break;
+            }
+            self.a.copy_from_slice(&solution.acceleration);
+            let t1 = self.t0 + (n + 1) as f64 * s.dt;
+            self.dynamics.step = n + 1;
+            if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) =
+                (s.integrator, s.stabilize)
+            {
+                // RATTLE: drift, SHAKE along the start's gradients, kick, velocity projection.
+                Stepper::verlet_drift(s.dt, &mut self.q, &mut self.v, &self.a);
+                let (mut end, _) = shake_positions(
+                    &mut self.dynamics,
+                    t1,
+                    s.dt,
+                    &mut self.q,
+                    &mut self.v,
+                    &mut rows,
+                    length,
+                    tolerance,
+                    max_iterations,
+                )?;
+                if has_inequalities {
+                    (end, _) = project_positions(
+                        &mut self.dynamics,
+                        t1,
+                        &mut self.q,
+                        &self.v,
+                        length,
+                        tolerance,
+                        max_iterations,
+                    )?;
+                }
+                self.half.copy_from_slice(&self.v);
+                if self.dynamics.velocity_dependent_forces {
+                    self.stepper.verlet_kick(&mut self.dynamics, t1, s.dt, &self.q, &mut self.v, &self.a)?;
+                } else {
+                    // v⁺ = v½ + dt/2 M⁻¹F(q⁺): the constraint part of the kick is what the
+                    // velocity projection below removes anyway, so no solve is needed here.
+                    for ((v, f), w) in self.v.iter_mut().zip(&end.force).zip(&end.inverse_mass) {
+                        for d in 0..3 {
+                            v[d] += 0.5 * s.dt * f[d] * w;
+                        }
+                    }
+                }
+                update_rates(&mut end, &self.half, &self.v);
+                velocity_step(end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                self.check_finite(n + 1, t1)?;
+                continue;
+            }
+            self.stepper.step(&mut self.dynamics, t, s.dt, &mut self.q, &mut self.v, &self.a)?;
+            self.check_finite(n + 1, t1)?;
+            match s.stabilize {
+                Stabilize::Projection { tolerance, max_iterations } => {
+                    let (rows, _) = project_positions(
+                        &mut self.dynamics,
+                        t1,
+                        &mut self.q,
+                        &self.v,
+                        length,
+                        tolerance,
+                        max_iterations,
+                    )?;
+                    velocity_step(rows, &mut self.v, true, touch, s.restitution, bounce_speed);
+                }
+                _ if has_inequalities => {
+                    let rows = self.dynamics.rows(t1, &self.q, &self.v)?;
+                    velocity_step(rows, &mut self.v, false, touch, s.restitution, bounce_speed);
+                }
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,303 @@
+//! Drift control and contacts after a step: projection onto C = 0 and Ċ = 0, Baumgarte
+//! settings, and impulses for closing contacts.
+//!
+//! Methods. Baumgarte (J. Baumgarte, "Stabilization of constraints and integrals of motion
+//! in dynamical systems", Comput. Methods Appl. Mech. Eng. 1, 1972) replaces C̈ = 0 by
+//! C̈ + 2αĊ + β²C = 0. Post-stabilisation by projection (U. Ascher, H. Chin, L. Petzold,
+//! S. Reich, "Stabilization of constrained mechanical systems with DAEs and invariant
+//! manifolds", Mech. Struct. Mach. 23, 1995; U. Ascher, "Stabilization of invariants of
+//! discretized differential systems", Numer. Algorithms 14, 1997) moves the state back onto
+//! the manifold after each step with the mass-weighted minimum-norm correction:
+//!
+//!   positions  (Newton):  Δr = M⁻¹Jᵀμ,  (J M⁻¹ Jᵀ) μ = −C,  repeated until |C| is small;
+//!   velocities (linear):  Δv = M⁻¹Jᵀμ,  (J M⁻¹ Jᵀ) μ = −Ċ.
+//!
+//! Design note. Both are the λ solve of `numeric::solve` in disguise: with the external
+//! forces set to zero and the bias c set to C (or Ċ), `solve` returns μ and the
+//! "accelerations" M⁻¹Jᵀμ are exactly Δr (or Δv). Reusing it means the sparse solve and the
+//! QP for inequalities serve projection and contacts too, with one set of diagnostics.
+//! Inequality rows take part only where they are violated (C < 0) or closing (Ċ < 0 while
+//! touching); `solve`'s active set keeps their μ ≥ 0, so a contact only ever pushes.
+//!
+//! Contacts. A closing contact gets the impulse P = −(1+e)(J v)/(J M⁻¹ Jᵀ) (DESIGN.md step
+//! 6): the same velocity solve with c = (1+e)Ċ, so Ċ⁺ = −eĊ. Approaches slower than a
+//! threshold get e = 0, so a resting body or a taut rope does not bounce on round-off.
+//! (When `numeric::contact` lands, the impulse belongs there; this is the minimal version.)
+//!
+//! Not here: the integrators, the run loop.
+
+use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
+use super::integrate::Vectors;
+use super::rows::{Row, Rows};
+use super::solve::{safe_norm, solve};
+
+/// How drift is controlled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Stabilize {
+    None,
+    /// C̈ + 2ζωĊ + ω²C = 0 with ω = `omega_dt` / dt.
+    Baumgarte {
+        zeta: f64,
+        omega_dt: f64,
+    },
+    /// Newton onto C = 0 to the relative `tolerance`, then velocities onto Ċ = 0.
+    Projection {
+        tolerance: f64,
+        max_iterations: usize,
+    },
+}
+
+impl Stabilize {
+    pub const BAUMGARTE: Stabilize = Stabilize::Baumgarte { zeta: 1.0, omega_dt: 0.1 };
+    pub const PROJECTION: Stabilize = Stabilize::Projection { tolerance: 1e-13, max_iterations: 20 };
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Stabilize::None => "none",
+            Stabilize::Baumgarte { .. } => "baumgarte",
+            Stabilize::Projection { .. } => "projection",
+        }
+    }
+
+    /// The Baumgarte terms for step `dt`: ω = omega_dt/dt, α = ζω, β = ω.
+    pub fn baumgarte_terms(self, dt: f64) -> Option<BaumgarteTerms> {
+        match self {
+            Stabilize::Baumgarte { zeta, omega_dt } => {
+                let omega = omega_dt / dt;
+                Some(BaumgarteTerms { two_alpha: 2.0 * zeta * omega, beta_squared: omega * omega })
+            }
+            _ => None,
+        }
+    }
+
+    /// Bad settings, before any loop runs.
+    pub fn validate(self) -> Result<(), String> {
+        match self {
+            Stabilize::None => Ok(()),
+            Stabilize::Baumgarte { zeta, omega_dt } => {
+                if !(zeta.is_finite() && zeta >= 0.0) {
+                    return Err(format!("the Baumgarte damping ratio must be finite and ≥ 0, found {zeta}"));
+                }
+                if !(omega_dt.is_finite() && omega_dt > 0.0 && omega_dt <= 1.0) {
+                    return Err(format!("the Baumgarte frequency ω·dt must lie in (0, 1], found {omega_dt}"));
+                }
+                Ok(())
+            }
+            Stabilize::Projection { tolerance, max_iterations } => {
+                if !(tolerance.is_finite() && tolerance > 0.0) {
+                    return Err(format!("the projection tolerance must be positive, found {tolerance}"));
+                }
+                if max_iterations == 0 {
+                    return Err("the projection needs at least one iteration".into());
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// ‖Jₖ‖ over all bodies of a row.
+pub fn row_norm(row: &Row) -> f64 {
+    row.jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0f64, |a, b| safe_norm(&[a, b, 0.0]))
+}
+
+/// The first-order distance of a row to its surface, C/‖J‖ (signed). Where J = 0 (a
+/// singular configuration) it is 0 on the surface and ±∞ off it: no step along J reaches it.
+pub fn distance(row: &Row) -> f64 {
+    let n = row_norm(row);
+    if n > 0.0 && n.is_finite() {
+        row.value / n
+    } else if row.value == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY.copysign(row.value)
+    }
+}
+
+/// The normal speed of a row, Ċ/‖J‖ (signed; 0 when J = 0).
+pub fn normal_speed(row: &Row) -> f64 {
+    let n = row_norm(row);
+    if n > 0.0 && n.is_finite() { row.rate / n } else { 0.0 }
+}
+
+/// Marks a row as left out of a correction solve: an inactive inequality (λ = 0).
+fn leave_out(row: &mut Row) {
+    row.inequality = true;
+    row.value = f64::MAX;
+    row.rate = f64::MAX;
+    row.bias = 0.0;
+}
+
+/// Marks a row as enforced with target ΔX = −`bias` (X = C or Ċ).
+fn enforce(row: &mut Row, bias: f64) {
+    row.value = 0.0;
+    row.rate = 0.0;
+    row.bias = bias;
+}
+
+/// Adds M⁻¹Jᵀμ for the rows to `x` and returns the largest |step| component.
+fn apply_correction(rows: &mut Rows, x: &mut Vectors) -> f64 {
+    rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+    let solution = solve(rows);
+    let mut largest = 0.0f64;
+    for (x, dx) in x.iter_mut().zip(&solution.acceleration) {
+        for d in 0..3 {
+            if dx[d].is_finite() {
+                x[d] += dx[d];
+                largest = largest.max(dx[d].abs());
+            }
+        }
+    }
+    largest
+}
+
+/// Newton onto C = 0 (equalities, and violated inequalities) at time t; `length` is the
+/// scene's length scale for the relative tolerance. Returns the rows at the final positions
+/// and the iterations taken.
+pub fn project_positions(
+    dynamics: &mut Dynamics<'_>,
+    t: f64,
+    q: &mut Vectors,
+    v: &Vectors,
+    length: f64,
+    tolerance: f64,
+    max_iterations: usize,
+) -> Result<(Rows, usize), SimError> {
+    let bound = tolerance * length;
+    let mut iterations = 0;
+    loop {
+        let mut rows = dynamics.rows(t, q, v)?;
+        // Residual: the largest first-order distance to a surface that is to be enforced.
+        let enforced = |row: &Row, s: f64| !row.inequality || s < 0.0;
+        let mut residual = 0.0f64;
+        for row in &rows.rows {
+            let s = distance(row);
+            if enforced(row, s) {
+                residual = residual.max(s.abs());
+            }
+        }
+        if residual <= bound || iterations >= max_iterations {
+            return Ok((rows, iterations));
+        }
+        for row in &mut rows.rows {
+            if enforced(row, distance(row)) {
+                // (J M⁻¹ Jᵀ) μ = −C: c = C.
+                enforce(row, row.value);
+            } else {
+                leave_out(row);
+            }
+        }
+        apply_correction(&mut rows, q);
+        iterations += 1;
+    }
+}
+
+/// SHAKE (Ryckaert, Ciccotti, Berendsen 1977; with the velocity step below it is RATTLE,
+/// Andersen 1983): corrects Verlet's drift q⁺ = q + dt v½ along the gradients at the
+/// *start* of the step, Δq = M⁻¹Jₙᵀμ with (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺) (a quasi-Newton
+/// iteration), and folds the correction into v½ += Δq/dt. Along Jₙ rather than J(q⁺), the
+/// step stays symplectic, so the energy error of a long run stays bounded. Equalities only:
+/// a contact's correction must not turn into a velocity (that would pre-empt its impulse
+/// and restitution), so violated inequalities are left to [`project_positions`]. `start` holds
+/// the rows at the start of the step (its C, Ċ and c are overwritten; its J is kept).
+/// Returns the rows at the final positions.
+#[allow(clippy::too_many_arguments)]
+pub fn shake_positions(
+    dynamics: &mut Dynamics<'_>,
+    t: f64,
+    dt: f64,
+    q: &mut Vectors,
+    v_half: &mut Vectors,
+    start: &mut Rows,
+    length: f64,
+    tolerance: f64,
+    max_iterations: usize,
+) -> Result<(Rows, usize), SimError> {
+    let system = dynamics.system();
+    let bound = tolerance * length;
+    let mut iterations = 0;
+    let mut previous = f64::INFINITY;
+    loop {
+        let rows = dynamics.rows(t, q, v_half)?;
+        let mut residual = 0.0f64;
+        for row in rows.rows.iter().filter(|r| !r.inequality) {
+            residual = residual.max(distance(row).abs());
+        }
+        // Stop when converged, out of iterations, or diverging (the step was too large for
+        // the quasi-Newton iteration; the run's drift check then reports it).
+        if residual <= bound || iterations >= max_iterations || residual > 2.0 * previous {
+            return Ok((rows, iterations));
+        }
+        previous = residual;
+        for ((old, new), constraint) in start.rows.iter_mut().zip(&rows.rows).zip(&system.constraints) {
+            old.inequality = constraint.inequality;
+            if !constraint.inequality {
+                // (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺): c = C(q⁺).
+                enforce(old, new.value);
+            } else {
+                leave_out(old);
+            }
+        }
+        start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        let solution = solve(start);
+        for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
+            for d in 0..3 {
+                if dq[d].is_finite() {
+                    q[d] += dq[d];
+                    v[d] += dq[d] / dt;
+                }
+            }
+        }
+        iterations += 1;
+    }
+}
+
+/// Ċ of `rows` after the velocities changed from `before` to `after` (Ċ is affine in v:
+/// Ċ = Σᵢ Jᵢ·vᵢ + ∂C/∂t), without evaluating again.
+pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {
+    for row in &mut rows.rows {
+        for (b, j) in &row.jacobian {
+            let (x, y) = (before[*b], after[*b]);
+            row.rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
+        }
+    }
+}
+
+/// The velocity solve at the rows of the current positions: closing contacts (touching
+/// within `touch`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
+/// `project` the equalities go onto Ċ = 0 too, else they keep their Ċ. Returns whether
+/// anything was applied.
+pub fn velocity_step(
+    mut rows: Rows,
+    v: &mut Vectors,
+    project: bool,
+    touch: f64,
+    restitution: f64,
+    bounce_speed: f64,
+) -> bool {
+    let mut any = false;
+    for row in &mut rows.rows {
+        if row.inequality {
+            let (s, u) = (distance(row), normal_speed(row));
+            if s <= touch && u < 0.0 {
+                let e = if -u > bounce_speed { restitution } else { 0.0 };
+                // ΔĊ = −(1+e)Ċ: c = (1+e)Ċ.
+                enforce(row, (1.0 + e) * row.rate);
+                any = true;
+            } else {
+                leave_out(row);
+            }
+        } else if project {
+            // ΔĊ = −Ċ.
+            enforce(row, row.rate);
+            any = true;
+        } else {
+            // Equalities keep their rate (the impulse must not tear the rods).
+            enforce(row, 0.0);
+        }
+    }
+    if any {
+        apply_correction(&mut rows, v);
+    }
+    any
+}

@@ -1,0 +1,55 @@
+//! A simulation's summary for people (text) and programs (JSON).
+
+use crate::expr::eval::Value;
+use crate::numeric::simulate::Summary;
+use serde_json::{Map, Value as Json, json};
+
+fn value_json(v: &Value, dim: usize) -> Json {
+    match v {
+        Value::Scalar(x) => json!(x),
+        Value::Vector(xs) => json!(xs[..dim]),
+    }
+}
+
+/// `{"steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "final": {symbol: value}}`.
+pub fn json(summary: &Summary, dim: usize) -> Json {
+    let mut last = Map::new();
+    for (name, v) in &summary.final_state {
+        last.insert(name.clone(), value_json(v, dim));
+    }
+    json!({
+        "integrator": summary.integrator,
+        "stabilize": summary.stabilize,
+        "dt": summary.dt,
+        "steps": summary.steps,
+        "duration": summary.duration,
+        "wall_seconds": summary.wall_seconds,
+        "max_abs_C": summary.max_abs_c,
+        "max_abs_C_dot": summary.max_abs_c_dot,
+        "energy_rel_drift": summary.energy_rel_drift,
+        "evaluations": summary.evaluations,
+        "final": last,
+    })
+}
+
+/// A few lines: method, drift, energy, cost, final state.
+pub fn text(summary: &Summary, dim: usize) -> String {
+    let mut s = format!(
+        "{} steps (dt = {:e}, t = {}) with {} + {}\n",
+        summary.steps, summary.dt, summary.duration, summary.integrator, summary.stabilize
+    );
+    s += &format!("  max |C|   {:.3e}\n  max |Ċ|   {:.3e}\n", summary.max_abs_c, summary.max_abs_c_dot);
+    match summary.energy_rel_drift {
+        Some(e) => s += &format!("  energy balance  {e:.3e} of the largest kinetic energy\n"),
+        None => s += "  energy balance  not reported (a constraint depends on t and does work)\n",
+    }
+    let per_second = if summary.duration > 0.0 { summary.wall_seconds / summary.duration } else { 0.0 };
+    s += &format!(
+        "  wall time {:.3} s ({:.3e} s per simulated second, {} row evaluations)\n  final:",
+        summary.wall_seconds, per_second, summary.evaluations
+    );
+    for (name, v) in &summary.final_state {
+        s += &format!(" {name} = {}", value_json(v, dim));
+    }
+    s
+}

@@ -1,0 +1,70 @@
+//! `bench` on every scene file: a table of 12+ rows, an SVG, and formula accuracy.
+
+mod common;
+
+use lagrange::bench::accuracy::formula_accuracy;
+use lagrange::bench::{Sweep, work_precision};
+use lagrange::report::{bench, plot};
+
+fn scene_files() -> Vec<String> {
+    let mut files = Vec::new();
+    for dir in ["constraints", "constraints/hard"] {
+        for entry in std::fs::read_dir(dir).expect("dir") {
+            let path = entry.expect("entry").path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                files.push(path.display().to_string());
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+#[test]
+fn bench_writes_a_table_and_a_plot_for_every_scene_file() {
+    let mut benched = 0;
+    for path in scene_files() {
+        // Files without a runnable scene (no initial state) are not scene files.
+        let text = std::fs::read_to_string(&path).expect("file");
+        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
+        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+        benched += 1;
+        // A short sweep (10 steps at the coarsest) keeps this fast; the table's shape is the point.
+        let mut sweep = Sweep::new(s.scene.dt, 40.0 * s.scene.dt);
+        if path.contains("chain_100") {
+            sweep.duration = 8.0 * s.scene.dt;
+            sweep.refinement = 2.0;
+        }
+        let wp = work_precision(&s, &sweep).expect("sweep");
+        assert!(wp.rows.len() >= 12, "{path}: {} rows", wp.rows.len());
+        let accuracy = formula_accuracy(&s, 8, 7);
+        assert!(!accuracy.is_empty(), "{path}");
+        let json = bench::json(&wp, &accuracy);
+        assert_eq!(json["rows"].as_array().map(Vec::len), Some(wp.rows.len()));
+        assert!(bench::text(&wp, &accuracy).lines().count() >= 12);
+        assert!(bench::csv(&wp, &accuracy).lines().count() >= 13);
+        let svg = plot::work_precision(&path, "time", "error", &bench::lines(&wp)).expect("svg");
+        assert!(svg.starts_with("<svg") && svg.contains("</svg>"), "{path}");
+    }
+    assert!(benched >= 15, "only {benched} scene files");
+}
+
+#[test]
+fn pendulum_work_precision_ranks_the_methods() {
+    let s = common::scenario("constraints/pendulum.toml");
+    let wp = work_precision(&s, &Sweep::new(1e-3, 2.0)).expect("sweep");
+    let error = |integrator: &str, dt: f64| {
+        wp.rows
+            .iter()
+            .find(|r| r.integrator == integrator && r.stabilize == "projection" && (r.dt - dt).abs() < 1e-12)
+            .and_then(|r| r.final_error)
+            .expect("row")
+    };
+    // At every step size RK4 beats Verlet beats Euler, and every error falls as dt does.
+    for dt in [4e-3, 2e-3, 1e-3, 5e-4] {
+        assert!(error("rk4", dt) < error("verlet", dt) && error("verlet", dt) < error("euler", dt), "dt {dt}");
+    }
+    assert!(error("verlet", 5e-4) < error("verlet", 4e-3) / 16.0);
+    let accuracy = formula_accuracy(&s, 100, 3);
+    assert!(accuracy.iter().all(|a| a.median_rel_error <= 1e-15 && a.max_rel_error <= 1e-13), "{accuracy:?}");
+}

@@ -1,0 +1,93 @@
+//! The `simulate` and `bench` commands end to end: outputs, JSON shape, failures.
+
+use std::process::Command;
+
+fn lagrange(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_lagrange")).args(args).output().expect("runs")
+}
+
+#[test]
+fn simulate_prints_the_json_summary_and_writes_csv_and_svg() {
+    let dir = std::env::temp_dir().join(format!("lagrange-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let (csv, svg) = (dir.join("run.csv"), dir.join("run.svg"));
+    let out = lagrange(&[
+        "simulate",
+        "constraints/pendulum.toml",
+        "--steps",
+        "1000",
+        "--every",
+        "10",
+        "--format",
+        "json",
+        "--csv",
+        csv.to_str().expect("utf-8"),
+        "--plot",
+        svg.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    for key in ["steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "final"] {
+        assert!(json.get(key).is_some(), "missing {key}");
+    }
+    assert_eq!(json["steps"], 1000);
+    assert_eq!(json["final"]["r"].as_array().map(Vec::len), Some(2));
+    let text = std::fs::read_to_string(&csv).expect("csv");
+    assert_eq!(text.lines().next(), Some("t,r.x,r.y,v.x,v.y,lambda_rod,C_rod,Cdot_rod"));
+    assert_eq!(text.lines().count(), 1 + 101);
+    assert!(std::fs::read_to_string(&svg).expect("svg").contains("</svg>"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_run_that_blows_up_names_step_and_constraint_and_keeps_its_csv() {
+    let dir = std::env::temp_dir().join(format!("lagrange-cli-fail-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let csv = dir.join("run.csv");
+    // Euler without stabilisation at a huge step: the rod stretches past the scene's size.
+    let out = lagrange(&[
+        "simulate",
+        "constraints/pendulum.toml",
+        "--integrator",
+        "euler",
+        "--stabilize",
+        "none",
+        "--dt",
+        "0.2",
+        "--steps",
+        "1000",
+        "--csv",
+        csv.to_str().expect("utf-8"),
+    ]);
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("step ") && stderr.contains("`rod`"), "{stderr}");
+    let text = std::fs::read_to_string(&csv).expect("csv kept");
+    assert!(text.lines().count() >= 2, "{text}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn simulate_rejects_bad_settings_before_running() {
+    let out = lagrange(&["simulate", "constraints/pendulum.toml", "--dt=-1"]);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("step must be finite and positive"));
+}
+
+#[test]
+fn bench_prints_rows_as_json() {
+    let out = lagrange(&[
+        "bench",
+        "constraints/bead_on_wire.toml",
+        "--duration",
+        "0.05",
+        "--states",
+        "10",
+        "--format",
+        "json",
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert!(json["rows"].as_array().map_or(0, Vec::len) >= 12);
+    assert!(json["accuracy"].as_array().map_or(0, Vec::len) >= 2);
+}
