@@ -141,7 +141,19 @@ fn empty_file() {
 
 #[test]
 fn not_toml() {
-    refused("not-toml", b"this is { not toml ]]\n\x20= =\n", "error");
+    // Every syntax error is reported (here two), each located.
+    let stderr = refused_at_length("not-toml", b"this is { not toml ]]\n\x20= =\n", "error");
+    assert!(stderr.contains("2 problems") && stderr.contains(":1:6") && stderr.contains(":2:4"), "{stderr}");
+}
+
+#[test]
+fn many_syntax_errors_are_capped() {
+    // A thousand broken lines: a handful of located messages, not a thousand.
+    let garbage = "x = = 1\n".repeat(1000);
+    let stderr = refused_at_length("garbage", garbage.as_bytes(), "extra `=`");
+    let errors = stderr.matches("error: ").count();
+    assert!((2..=8).contains(&errors), "{errors} errors shown:\n{}", clip(&stderr));
+    assert!(stderr.len() < 4000, "{}", clip(&stderr));
 }
 
 #[test]

@@ -25,17 +25,22 @@ use toml::de::{DeTable, DeValue};
 
 type Value<'i> = Spanned<DeValue<'i>>;
 
+/// Syntax errors shown at most (after a few, the parser's recovery is mostly guessing).
+const MAX_SYNTAX_ERRORS: usize = 8;
+
 /// Parses `text` and reads it into a [`RawFile`]; every problem goes to `problems`.
-/// `None` when the text is not TOML (the syntax error is the one problem then: what follows
-/// a syntax error is the parser's guess, and its complaints would mislead).
+/// `None` when the text is not TOML: then the syntax errors (toml's recovering parser finds
+/// them all; the first [`MAX_SYNTAX_ERRORS`] are kept) are the problems, and nothing else is
+/// judged — the tree after a syntax error is the parser's guess, and complaints about it
+/// would mislead.
 pub fn read(text: &str, problems: &mut Vec<Problem>) -> Option<RawFile> {
-    let root = match DeTable::parse(text) {
-        Ok(root) => root,
-        Err(e) => {
+    let (root, errors) = DeTable::parse_recoverable(text);
+    if !errors.is_empty() {
+        for e in errors.iter().take(MAX_SYNTAX_ERRORS) {
             problems.push(Problem { span: e.span(), message: syntax_message(e.message()) });
-            return None;
         }
-    };
+        return None;
+    }
     problems.extend(unknown_keys(root.get_ref()));
     let mut r = Reader { problems, bodies_read: 0 };
     let table = root.get_ref();

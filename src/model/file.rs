@@ -102,6 +102,7 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
     }
     let mut problems = Vec::new();
     let Some(raw) = read(text, &mut problems) else {
+        sort(&mut problems);
         return Err(problems);
     };
     let Some(mut system) = build(text, &raw, &mut problems) else {
