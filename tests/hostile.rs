@@ -200,3 +200,23 @@ fn deep_input_through_the_library_on_a_small_stack() {
         assert!(r.contains("too deeply") || r.contains("nest"), "{}", clip(r));
     }
 }
+
+/// Deep expressions wherever the file holds one — a scene force, an expected formula, a
+/// definition — are each refused with their place, all in one run.
+#[test]
+fn deep_expressions_in_every_expression_field() {
+    let n = 100_000;
+    let file = format!(
+        "{}[definitions]\nc = '{}t{}'\n[scene]\nforces = {{ F = '{}r{}' }}\n[[expect]]\nC_dot = {{ wire = '{}1' }}\n",
+        bead_with("dot(r, r) = l^2"),
+        "sin(".repeat(n / 2),
+        ")".repeat(n / 2),
+        "(".repeat(n),
+        ")".repeat(n),
+        "-".repeat(n),
+    );
+    let stderr = refused_at_length("deep-fields", file.as_bytes(), "3 problems");
+    for place in ["in definition `c`", "in the force on `F`", "in the expected `C_dot`"] {
+        assert!(stderr.contains(&format!("{place}: expression nested too deeply")), "{place}:\n{}", clip(&stderr));
+    }
+}

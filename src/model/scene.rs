@@ -75,13 +75,14 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
             .position(|b| b.name == *name.get_ref() || system.graph.symbol(b.force).name == *name.get_ref());
         let Some(body) = body else {
             let forces: Vec<&str> = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.as_str()).collect();
+            let known = if forces.is_empty() {
+                "the file declares no bodies".to_string()
+            } else {
+                format!("force symbols: {}", forces.join(", "))
+            };
             problems.push(Problem {
                 span: Some(name.span()),
-                message: format!(
-                    "`{}` is not a body's force symbol or a body's name (force symbols: {})",
-                    name.get_ref(),
-                    forces.join(", ")
-                ),
+                message: format!("`{}` is not a body's force symbol or a body's name ({known})", name.get_ref()),
             });
             continue;
         };
