@@ -6,8 +6,12 @@
 //! wants every problem at once, in the file's words. So the text is parsed once into toml's
 //! spanned tree ([`DeTable`]), unknown keys are reported by `model::keys`, and the raw
 //! structs are filled here by hand: each field that is missing or of the wrong type is one
-//! [`Problem`] at its span, and reading goes on. A field that cannot be read is left out
-//! (`None`, or the entry is skipped), so validation (`model::file`) sees only what was read.
+//! [`Problem`] at its span, and reading goes on. What cannot be read is left out (`None`, or
+//! the entry skipped) — except where leaving it out would breed follow-on messages: a bad
+//! parameter keeps its name (as a placeholder value of its shape), a body keeps its symbols
+//! (placeholders for unreadable ones, see `RawBody`), a constraint without `expr` keeps its
+//! name for `[[expect]]`. A file with any problem derives nothing, so placeholders are never
+//! used for numbers.
 //!
 //! Numbers are rejected here when they are not finite (`nan`, `inf` are valid TOML floats,
 //! never valid values of a constraint file). Deep nesting is refused by toml's parser (a
