@@ -79,6 +79,73 @@ fn file_level_invalid_files_report_every_problem_located() {
     }
 }
 
+/// The "mixed problems" file: problems of every stage — a misspelled table, wrong types, a
+/// non-finite number, a missing field, an expression error, a bad scene value, unknown names
+/// in an expectation, a bad tolerance — are all reported by one load, in file order.
+#[test]
+fn mixed_problems_are_all_reported_at_once() {
+    let rel = Path::new("constraints/invalid/file_mixed_problems.toml");
+    let name = rel.display().to_string();
+    let Err(CheckError::Invalid { rendered, count, .. }) = Checked::from_text(&name, &text(rel)) else {
+        panic!("{name}: expected validation problems");
+    };
+    let kinds = [
+        "unknown key `paramters` at the top level; did you mean `parameters`?",
+        "`l` in [parameters] must be a number or a vector of numbers, found a string",
+        "`k` in [parameters] must be a finite number, found nan",
+        "body `ring` has no `acceleration`",
+        "the mass of body `ring` must be a number or a symbol name (a string), found a table",
+        "in constraint `axis`: `dot` takes 2 arguments, found 1",
+        "`dt` must be a finite positive number",
+        "`vel` is not a symbol of this file",
+        "`wier` is not a constraint of this file",
+        "`tolerance` must be a positive finite number, found 0",
+    ];
+    for needle in kinds {
+        assert!(rendered.contains(needle), "{needle:?} missing in\n{rendered}");
+    }
+    assert_eq!(count, kinds.len(), "one message per problem, no follow-on noise:\n{rendered}");
+    // In file order: line numbers never decrease.
+    let lines: Vec<usize> = rendered
+        .lines()
+        .filter_map(|l| l.split(&format!("{name}:")).nth(1))
+        .filter_map(|rest| rest.split(':').next()?.parse().ok())
+        .collect();
+    assert_eq!(lines.len(), count);
+    assert!(lines.windows(2).all(|w| w[0] <= w[1]), "not in file order: {lines:?}");
+}
+
+/// A problem found in one part of a file does not hide the others, nor breed follow-on
+/// messages: a body whose velocity is a number still declares its position, so the
+/// constraint that uses it is not reported as using an unknown symbol.
+#[test]
+fn an_unreadable_field_does_not_cascade() {
+    let original = text(Path::new(WIRE));
+    // The velocity's name was never given, so its uses are unknown; the position's is.
+    let changed = original.replacen("velocity = \"v\"", "velocity = 7", 1);
+    let Err(CheckError::Invalid { rendered, .. }) = Checked::from_text("x.toml", &changed) else {
+        panic!("expected a refusal");
+    };
+    assert!(rendered.contains("`velocity` of body `bead` must be a string, found an integer"), "{rendered}");
+    assert!(!rendered.contains("in constraint `wire`"), "the constraint uses only r:\n{rendered}");
+    for (from, to, expect) in [
+        ("mass = \"m\"", "mass = { kg = 1 }", "the mass of body `bead` must be a number or a symbol name"),
+        ("mass = \"m\"", "mass = nan", "a mass must be a positive finite number, found nan"),
+        ("l = 2.0", "l = \"two\"", "`l` in [parameters] must be a number or a vector of numbers, found a string"),
+        ("l = 2.0", "l = inf", "`l` in [parameters] must be a finite number, found inf"),
+        ("expr = \"dot(r,r) = l^2\"", "expr = 5", "`expr` of constraint `wire` must be a string, found an integer"),
+        ("expr = \"dot(r,r) = l^2\"", "expr = \"dot(r) = l^2\"", "in constraint `wire`: `dot` takes 2 arguments"),
+    ] {
+        assert!(original.contains(from), "{from}");
+        let changed = original.replacen(from, to, 1);
+        let Err(CheckError::Invalid { rendered, count, .. }) = Checked::from_text("x.toml", &changed) else {
+            panic!("{to:?}: expected a refusal");
+        };
+        assert!(rendered.contains(expect), "{expect:?} missing in\n{rendered}");
+        assert_eq!(count, 1, "{to:?}: one problem, no follow-on messages:\n{rendered}");
+    }
+}
+
 const WIRE: &str = "constraints/bead_on_wire.toml";
 
 #[test]

@@ -38,6 +38,13 @@ fn bead_with(expr: &str) -> String {
 /// Runs `lagrange derive FILE` and checks the outcome: exit 1, a message on stderr that is
 /// short and contains `expect`, no panic. Returns stderr.
 fn refused(tag: &str, bytes: &[u8], expect: &str) -> String {
+    let stderr = refused_at_length(tag, bytes, expect);
+    assert!(stderr.len() < 2000 && stderr.lines().count() <= 12, "{tag}: message too long:\n{}", clip(&stderr));
+    stderr
+}
+
+/// [`refused`] without the length limit (for files with several problems).
+fn refused_at_length(tag: &str, bytes: &[u8], expect: &str) -> String {
     let file = TempFile::new(tag, bytes);
     let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("derive").arg(&file.0).output().expect("binary runs");
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
@@ -46,13 +53,21 @@ fn refused(tag: &str, bytes: &[u8], expect: &str) -> String {
         Some(1),
         "{tag}: expected exit code 1 (a refusal), got {:?} (101 is a panic, None a signal)\n{}",
         out.status,
-        &stderr[..stderr.len().min(2000)]
+        clip(&stderr)
     );
-    assert!(!stderr.contains("panicked"), "{tag}: panic\n{stderr}");
-    assert!(stderr.contains(expect), "{tag}: expected {expect:?} in\n{}", &stderr[..stderr.len().min(2000)]);
-    assert!(stderr.len() < 2000 && stderr.lines().count() <= 12, "{tag}: message too long:\n{}", &stderr[..2000]);
+    assert!(!stderr.contains("panicked"), "{tag}: panic\n{}", clip(&stderr));
+    assert!(stderr.contains(expect), "{tag}: expected {expect:?} in\n{}", clip(&stderr));
     assert!(out.stdout.is_empty(), "{tag}: nothing belongs on stdout");
     stderr
+}
+
+/// The first 2000 bytes (or fewer, at a char boundary) of a message, for assertion output.
+fn clip(s: &str) -> &str {
+    let mut end = s.len().min(2000);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    &s[..end]
 }
 
 #[test]
@@ -79,6 +94,46 @@ fn ten_megabyte_expression() {
     refused("huge", bead_with(&expr).as_bytes(), "too long");
 }
 
+/// A bead file with `extra` appended at the top level (before any table header).
+fn bead_with_top(extra: &str) -> String {
+    format!("{extra}\n{}", bead_with("dot(r, r) = l^2"))
+}
+
+#[test]
+fn deeply_nested_arrays_and_tables() {
+    let n = 100_000;
+    let arrays = format!("x = {}{}", "[".repeat(n), "]".repeat(n));
+    refused("arrays", bead_with_top(&arrays).as_bytes(), "nests arrays or tables too deeply");
+    let inline = format!("x = {}1{}", "{a = ".repeat(n), "}".repeat(n));
+    refused("inline-tables", bead_with_top(&inline).as_bytes(), "nests arrays or tables too deeply");
+    // The same depth where a value is expected: a parameter, a mass, an `at` state.
+    let parameter = bead_with("dot(r, r) = l^2").replace("l = 1.0", &format!("l = {}{}", "[".repeat(n), "]".repeat(n)));
+    refused("parameter", parameter.as_bytes(), "too deeply");
+}
+
+#[test]
+fn deeply_nested_keys() {
+    let n = 100_000;
+    let dotted = format!("x.{}b = 1", "a.".repeat(n));
+    refused("dotted", bead_with_top(&dotted).as_bytes(), "too deeply");
+    let header = format!("{}\n[{}b]\nc = 1\n", bead_with("dot(r, r) = l^2"), "a.".repeat(n));
+    refused("header", header.as_bytes(), "too deeply");
+}
+
+#[test]
+fn wide_arrays_are_not_deep() {
+    // 200 000 small arrays side by side: wide, not deep; an unknown key, said once.
+    let wide = format!("x = [{}]", "[1],".repeat(200_000));
+    refused("wide", bead_with_top(&wide).as_bytes(), "unknown key `x` at the top level");
+}
+
+#[test]
+fn non_finite_and_mistyped_values() {
+    let file = bead_with("dot(r, r) = l^2").replace("l = 1.0", "l = nan").replace("m = 1.0", "m = \"one\"");
+    let stderr = refused_at_length("nan", file.as_bytes(), "must be a finite number, found nan");
+    assert!(stderr.contains("found a string") && stderr.contains("2 problems"), "{stderr}");
+}
+
 #[test]
 fn empty_file() {
     refused("empty", b"", "dimension");
@@ -86,7 +141,19 @@ fn empty_file() {
 
 #[test]
 fn not_toml() {
-    refused("not-toml", b"this is { not toml ]]\n\x20= =\n", "error");
+    // Every syntax error is reported (here two), each located.
+    let stderr = refused_at_length("not-toml", b"this is { not toml ]]\n\x20= =\n", "error");
+    assert!(stderr.contains("2 problems") && stderr.contains(":1:6") && stderr.contains(":2:4"), "{stderr}");
+}
+
+#[test]
+fn many_syntax_errors_are_capped() {
+    // A thousand broken lines: a handful of located messages, not a thousand.
+    let garbage = "x = = 1\n".repeat(1000);
+    let stderr = refused_at_length("garbage", garbage.as_bytes(), "extra `=`");
+    let errors = stderr.matches("error: ").count();
+    assert!((2..=8).contains(&errors), "{errors} errors shown:\n{}", clip(&stderr));
+    assert!(stderr.len() < 4000, "{}", clip(&stderr));
 }
 
 #[test]
@@ -102,4 +169,54 @@ fn missing_file() {
     let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("derive").arg(&path).output().expect("binary runs");
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read"));
+}
+
+/// The library, not only the binary (which runs on a large stack): a user's test calls
+/// `Checked::from_text` on an ordinary test thread, and deep input is refused there too.
+#[test]
+fn deep_input_through_the_library_on_a_small_stack() {
+    let n = 100_000;
+    let inputs = [
+        bead_with_top(&format!("x = {}{}", "[".repeat(n), "]".repeat(n))),
+        bead_with_top(&format!("x = {}1{}", "{a = ".repeat(n), "}".repeat(n))),
+        bead_with_top(&format!("x.{}b = 1", "a.".repeat(n))),
+        bead_with(&format!("{}dot(r, r){} = l^2", "(".repeat(n), ")".repeat(n))),
+    ];
+    let worker = std::thread::Builder::new()
+        .stack_size(1 << 20)
+        .spawn(move || {
+            inputs
+                .iter()
+                .map(|text| match lagrange::check::Checked::from_text("deep.toml", text) {
+                    Err(lagrange::check::CheckError::Invalid { rendered, .. }) => rendered,
+                    Err(other) => panic!("expected validation problems, got {other}"),
+                    Ok(_) => panic!("deep input accepted"),
+                })
+                .collect::<Vec<String>>()
+        })
+        .expect("thread starts");
+    let rendered = worker.join().expect("no stack overflow or panic on a 1 MiB stack");
+    for r in &rendered {
+        assert!(r.contains("too deeply") || r.contains("nest"), "{}", clip(r));
+    }
+}
+
+/// Deep expressions wherever the file holds one — a scene force, an expected formula, a
+/// definition — are each refused with their place, all in one run.
+#[test]
+fn deep_expressions_in_every_expression_field() {
+    let n = 100_000;
+    let file = format!(
+        "{}[definitions]\nc = '{}t{}'\n[scene]\nforces = {{ F = '{}r{}' }}\n[[expect]]\nC_dot = {{ wire = '{}1' }}\n",
+        bead_with("dot(r, r) = l^2"),
+        "sin(".repeat(n / 2),
+        ")".repeat(n / 2),
+        "(".repeat(n),
+        ")".repeat(n),
+        "-".repeat(n),
+    );
+    let stderr = refused_at_length("deep-fields", file.as_bytes(), "3 problems");
+    for place in ["in definition `c`", "in the force on `F`", "in the expected `C_dot`"] {
+        assert!(stderr.contains(&format!("{place}: expression nested too deeply")), "{place}:\n{}", clip(&stderr));
+    }
 }

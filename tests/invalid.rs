@@ -1,7 +1,9 @@
-//! Every file in `constraints/invalid/` is refused by `lagrange derive` with a located
-//! message: `file:line:col`, the source line, and a caret under the fault. The rendered
-//! messages are snapshots (`tests/snapshots/`), one per error class of the expression
-//! language; a new file there needs a new test below.
+//! Every file in `constraints/invalid/` is refused by `lagrange derive` with located
+//! messages: `file:line:col`, the source line, and a caret under the fault. The
+//! expression-level files (one per error class of the expression language) have a test
+//! below and a snapshot each; a new one needs a new test. The file-level files
+//! (`file_*.toml`, several problems each) are snapshot-tested by `constraint_files.rs` and
+//! run through the binary here.
 
 use std::path::Path;
 use std::process::Command;
@@ -57,23 +59,67 @@ invalid! {
     syntax_error: "expected an expression",
 }
 
-/// Every expression-level file in `constraints/invalid/` has a test above (adding a file adds
-/// a test); the file-level ones (`file_*.toml`) are snapshot-tested by `constraint_files.rs`.
+/// The file-level invalid files (`file_*.toml`, snapshot-tested through the library by
+/// `constraint_files.rs`) through the binary: exit code 1, nothing on stdout, and on stderr
+/// exactly the library's rendering — the same messages whichever way a file is loaded —
+/// followed by the count.
+#[test]
+fn file_level_files_through_the_binary() {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let mut count = 0;
+    for stem in stems().into_iter().filter(|s| s.starts_with("file_")) {
+        let rel = format!("constraints/invalid/{stem}.toml");
+        let out = Command::new(env!("CARGO_BIN_EXE_lagrange"))
+            .current_dir(root)
+            .args(["derive", &rel])
+            .output()
+            .expect("the lagrange binary runs");
+        let stderr = String::from_utf8(out.stderr).expect("stderr is UTF-8");
+        assert_eq!(out.status.code(), Some(1), "{rel}: {stderr}");
+        assert!(out.stdout.is_empty(), "{rel}: nothing should be printed on stdout");
+        let text = std::fs::read_to_string(Path::new(root).join(&rel)).expect("readable");
+        let Err(lagrange::check::CheckError::Invalid { rendered, count: problems, .. }) =
+            lagrange::check::Checked::from_text(&rel, &text)
+        else {
+            panic!("{rel}: the library accepted an invalid file");
+        };
+        assert_eq!(stderr, format!("{rendered}{problems} problems in {rel}\n"), "{rel}");
+        count += 1;
+    }
+    assert!(count >= 9, "expected the file-level invalid files, found {count}");
+}
+
+/// The stems of the `.toml` files in `constraints/invalid/`, sorted.
+fn stems() -> Vec<String> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/invalid");
+    let mut out: Vec<String> = std::fs::read_dir(dir)
+        .expect("constraints/invalid exists")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .filter_map(|p| p.file_stem().and_then(|s| s.to_str()).map(str::to_string))
+        .collect();
+    out.sort();
+    out
+}
+
+/// Every file in `constraints/invalid/` is snapshot-tested (adding a file adds a test): the
+/// expression-level ones by a test above, the file-level ones (`file_*.toml`) by the loop in
+/// `constraint_files.rs`; each has its snapshot in `tests/snapshots/`.
 #[test]
 fn every_invalid_file_is_tested() {
     let source = include_str!("invalid.rs");
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/invalid");
-    let mut count = 0;
-    for entry in std::fs::read_dir(dir).expect("constraints/invalid exists").flatten() {
-        let path = entry.path();
-        if path.extension().is_some_and(|e| e == "toml") {
-            let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_string();
-            if stem.starts_with("file_") {
-                continue;
-            }
+    let snapshots = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/snapshots");
+    let all = stems();
+    for stem in &all {
+        let snapshot = if stem.starts_with("file_") {
+            format!("constraint_files__{stem}.snap")
+        } else {
             assert!(source.contains(&format!("    {stem}: \"")), "constraints/invalid/{stem}.toml has no test");
-            count += 1;
-        }
+            format!("invalid__{stem}.snap")
+        };
+        assert!(snapshots.join(&snapshot).is_file(), "constraints/invalid/{stem}.toml has no snapshot {snapshot}");
     }
-    assert!(count >= 8, "expected at least 8 invalid files, found {count}");
+    let expression_level = all.iter().filter(|s| !s.starts_with("file_")).count();
+    assert!(expression_level >= 8, "expected at least 8 expression-level invalid files, found {expression_level}");
 }

@@ -29,7 +29,6 @@ use super::scene::value_for;
 use super::system::{BuildError, System};
 use crate::expr::lower::suggest;
 use crate::expr::{Id, Role, Ty};
-use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::ops::Range;
 use toml::Spanned;
@@ -39,30 +38,30 @@ pub const DEFAULT_TOLERANCE: f64 = 1e-9;
 
 type Entries = BTreeMap<Spanned<String>, Spanned<RawExpected>>;
 
-/// One `[[expect]]` entry as written (unknown keys are reported by `model::keys`).
-#[derive(Debug, Default, Deserialize)]
+/// One `[[expect]]` entry as written (read by `model::document`; unknown keys are
+/// reported by `model::keys`).
+#[derive(Debug, Default)]
 pub struct RawExpect {
-    #[serde(default)]
     pub force: Entries,
-    #[serde(default)]
     pub lambda: Entries,
-    #[serde(default, rename = "C_dot")]
+    /// `C_dot` in the file.
     pub c_dot: Entries,
-    #[serde(default, rename = "C_ddot")]
+    /// `C_ddot` in the file.
     pub c_ddot: Entries,
-    #[serde(default, rename = "A")]
+    /// `A` in the file.
     pub a: Entries,
-    #[serde(default)]
     pub b: Entries,
     pub at: Option<Spanned<BTreeMap<Spanned<String>, Spanned<RawValue>>>>,
     pub tolerance: Option<Spanned<f64>>,
+    /// How many of `force`, `lambda`, `C_dot`, `C_ddot`, `A`, `b` the entry writes, read or
+    /// not (an entry whose quantities were all unreadable is not also "checking nothing").
+    pub written: usize,
     /// Free text, shown with the result.
     pub note: Option<String>,
 }
 
 /// An expected value as written: a formula, a number or a vector.
-#[derive(Clone, Debug, Deserialize)]
-#[serde(untagged)]
+#[derive(Clone, Debug)]
 pub enum RawExpected {
     Formula(String),
     Number(f64),
@@ -112,9 +111,13 @@ pub struct Expectation {
 }
 
 /// Validates every entry against `system`; each problem goes to `problems`, located.
+///
+/// `written` names every body and constraint the file writes, including those refused: an
+/// item naming one of those is dropped quietly (the refusal is the message).
 pub fn resolve(
     text: &str,
     raw: &[Spanned<RawExpect>],
+    written: &[&str],
     system: &mut System,
     problems: &mut Vec<Problem>,
 ) -> Vec<Expectation> {
@@ -132,19 +135,27 @@ pub fn resolve(
             }
             at = Some(values);
         }
+        if let (Some(t), None) = (&e.tolerance, &e.at) {
+            problems.push(Problem {
+                span: Some(t.span()),
+                message: "`tolerance` applies to checks at a state (`at = { … }`); formula checks use a fixed relative tolerance of 1e-9"
+                    .into(),
+            });
+        }
         let tolerance = match &e.tolerance {
             None => DEFAULT_TOLERANCE,
             Some(t) if t.get_ref().is_finite() && *t.get_ref() > 0.0 => *t.get_ref(),
             Some(t) => {
+                let shown = if t.get_ref().is_nan() { "nan".to_string() } else { t.get_ref().to_string() };
                 problems.push(Problem {
                     span: Some(t.span()),
-                    message: format!("`tolerance` must be a positive finite number, found {}", t.get_ref()),
+                    message: format!("`tolerance` must be a positive finite number, found {shown}"),
                 });
                 DEFAULT_TOLERANCE
             }
         };
-        let nothing = [&e.force, &e.lambda, &e.c_dot, &e.c_ddot, &e.a, &e.b].iter().all(|t| t.is_empty());
-        let mut r = Resolver { text, system, problems, numeric: at.is_some(), items: Vec::new() };
+        let nothing = e.written == 0;
+        let mut r = Resolver { text, system, problems, written, numeric: at.is_some(), items: Vec::new() };
         r.table(&e.force, "force", Target::Body);
         r.table(&e.lambda, "lambda", Target::Constraint);
         r.table(&e.c_dot, "C_dot", Target::Constraint);
@@ -175,6 +186,7 @@ struct Resolver<'a> {
     text: &'a str,
     system: &'a mut System,
     problems: &'a mut Vec<Problem>,
+    written: &'a [&'a str],
     numeric: bool,
     items: Vec<Item>,
 }
@@ -234,7 +246,7 @@ impl Resolver<'_> {
 
     fn body(&mut self, name: &str, span: Range<usize>) -> Option<usize> {
         let found = self.system.body_named(name);
-        if found.is_none() {
+        if found.is_none() && !self.written.contains(&name) {
             let names: Vec<&str> = self.system.bodies.iter().map(|b| b.name.as_str()).collect();
             let message = unknown("body", name, &names);
             self.problem(span, message);
@@ -244,7 +256,7 @@ impl Resolver<'_> {
 
     fn constraint(&mut self, name: &str, span: Range<usize>) -> Option<usize> {
         let found = self.system.constraint_named(name);
-        if found.is_none() {
+        if found.is_none() && !self.written.contains(&name) {
             let names: Vec<&str> = self.system.constraints.iter().map(|c| c.name.as_str()).collect();
             let message = unknown("constraint", name, &names);
             self.problem(span, message);
@@ -318,8 +330,10 @@ impl Resolver<'_> {
 }
 
 fn unknown(kind: &str, name: &str, names: &[&str]) -> String {
+    let kinds = if kind == "body" { "bodies" } else { "constraints" };
     match suggest(name, names.iter().copied()) {
         Some(s) => format!("`{name}` is not a {kind} of this file; did you mean `{s}`?"),
-        None => format!("`{name}` is not a {kind} of this file ({kind}s: {})", names.join(", ")),
+        None if names.is_empty() => format!("`{name}` is not a {kind} of this file (it declares no {kinds})"),
+        None => format!("`{name}` is not a {kind} of this file ({kinds}: {})", names.join(", ")),
     }
 }

@@ -7,8 +7,8 @@
 //!
 //! Not here: printing or rendering messages (the caller renders [`Problem`]s).
 
+use super::document::read;
 use super::expect::{Expectation, RawExpect, resolve};
-use super::keys::unknown_keys;
 use super::scene::{RawScene, Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
 use crate::expr::Ty;
@@ -23,26 +23,24 @@ use toml::Spanned;
 /// The largest constraint file read, in bytes.
 pub const MAX_FILE_BYTES: usize = 16 << 20;
 
-/// A file as written. Unknown keys are ignored here and reported, all of them, by
-/// `model::keys` (serde's `deny_unknown_fields` would stop at the first).
-#[derive(Debug, Deserialize)]
+/// A file as written, read field by field from the spanned TOML tree by `model::document`
+/// (every missing field and wrong type is a problem there; what could not be read is left
+/// out here). Unknown keys are reported, all of them, by `model::keys`.
+#[derive(Debug, Default)]
 pub struct RawFile {
     pub title: Option<Spanned<String>>,
-    pub dimension: Spanned<i64>,
-    #[serde(default)]
+    /// `None` when missing or not an integer (already reported).
+    pub dimension: Option<Spanned<i64>>,
     pub parameters: BTreeMap<Spanned<String>, Spanned<RawValue>>,
-    #[serde(default)]
     pub definitions: BTreeMap<Spanned<String>, Spanned<String>>,
-    #[serde(default)]
     pub bodies: Vec<Spanned<RawBody>>,
-    #[serde(default)]
     pub constraints: Vec<Spanned<RawConstraint>>,
     pub scene: Option<Spanned<RawScene>>,
-    #[serde(default)]
     pub expect: Vec<Spanned<RawExpect>>,
 }
 
-/// A parameter value: a number or a vector of numbers.
+/// A parameter value: a number or a vector of numbers (finite, when read from a file).
+/// `Deserialize` serves `solve --at STATE` files.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(untagged)]
 pub enum RawValue {
@@ -50,7 +48,11 @@ pub enum RawValue {
     Vector(Vec<f64>),
 }
 
-#[derive(Debug, Deserialize)]
+/// A body as written. A symbol field that is missing or not a string (reported by
+/// `model::document`) holds a placeholder name, `unread_<field>_<n>`, and a mass that is not
+/// a number or a string holds 1: the body stays declared, so its other symbols are not
+/// reported again as unknown wherever they are used. (A file with a problem derives nothing.)
+#[derive(Debug)]
 pub struct RawBody {
     pub name: Spanned<String>,
     pub position: Spanned<String>,
@@ -60,17 +62,17 @@ pub struct RawBody {
     pub force: Spanned<String>,
 }
 
-#[derive(Clone, Debug, Deserialize)]
-#[serde(untagged)]
+#[derive(Clone, Debug)]
 pub enum RawMass {
     Number(f64),
     Symbol(String),
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug)]
 pub struct RawConstraint {
     pub name: Spanned<String>,
-    pub expr: Spanned<String>,
+    /// `None` when missing or not a string (reported by `model::document`).
+    pub expr: Option<Spanned<String>>,
 }
 
 /// One problem in a file: where (a byte range of the file text) and what.
@@ -98,32 +100,43 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
             message: format!("file is too large ({} bytes; the limit is {MAX_FILE_BYTES})", text.len()),
         }]);
     }
-    let mut problems = unknown_keys(text);
-    let raw: RawFile = match toml::from_str(text) {
-        Ok(raw) => raw,
-        Err(e) => {
-            problems.push(Problem { span: e.span(), message: e.message().trim_end().to_string() });
-            problems.sort_by_key(|p| p.span.as_ref().map_or(0, |s| s.start));
-            return Err(problems);
-        }
+    let mut problems = Vec::new();
+    let Some(raw) = read(text, &mut problems) else {
+        sort(&mut problems);
+        return Err(problems);
     };
     let Some(mut system) = build(text, &raw, &mut problems) else {
+        sort(&mut problems);
         return Err(problems);
     };
     let scene = match &raw.scene {
         Some(s) => validate(text, s.get_ref(), &mut system, &mut problems),
         None => Scene::default(),
     };
-    let expect = resolve(text, &raw.expect, &mut system, &mut problems);
+    // Names the file writes, valid or not: an expectation naming a body or constraint that
+    // was refused (and reported) is left out, not reported again as naming an unknown one.
+    let written: Vec<&str> = raw
+        .bodies
+        .iter()
+        .map(|b| b.get_ref().name.get_ref().as_str())
+        .chain(raw.constraints.iter().map(|c| c.get_ref().name.get_ref().as_str()))
+        .collect();
+    let expect = resolve(text, &raw.expect, &written, &mut system, &mut problems);
     let values: BTreeMap<String, RawValue> =
         raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
-        // In file order, so the messages read top to bottom.
-        problems.sort_by_key(|p| p.span.as_ref().map_or(0, |s| s.start));
+        sort(&mut problems);
         return Err(problems);
     }
     Ok(Loaded { system, values, scene, expect, raw })
+}
+
+/// In file order, so the messages read top to bottom (unlocated ones first); a problem
+/// found twice (by two passes over the same value) is shown once.
+fn sort(problems: &mut Vec<Problem>) {
+    problems.sort_by_key(|p| p.span.as_ref().map_or((0, 0), |s| (s.start, s.end)));
+    problems.dedup();
 }
 
 /// A mass symbol that is not a parameter needs a value wherever numbers are computed: from
@@ -173,14 +186,15 @@ fn masses_have_values(
 
 fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<System> {
     let title = raw.title.as_ref().map_or("", |t| t.get_ref().as_str());
-    let mut b = match SystemBuilder::new(title, *raw.dimension.get_ref()) {
+    let dimension = raw.dimension.as_ref()?;
+    let mut b = match SystemBuilder::new(title, *dimension.get_ref()) {
         Ok(b) => b,
         Err(e) => {
-            problems.push(Problem { span: Some(raw.dimension.span()), message: e.to_string() });
+            problems.push(Problem { span: Some(dimension.span()), message: e.to_string() });
             return None;
         }
     };
-    let dim = *raw.dimension.get_ref() as usize;
+    let dim = *dimension.get_ref() as usize;
     for (name, value) in &raw.parameters {
         let ty = match value.get_ref() {
             RawValue::Number(_) => Ty::Scalar,
@@ -202,11 +216,13 @@ fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<Syste
         let mass = match body.mass.get_ref() {
             RawMass::Number(x) if x.is_finite() && *x > 0.0 => MassSpec::Number(*x),
             RawMass::Number(x) => {
+                let shown = if x.is_nan() { "nan".to_string() } else { x.to_string() };
                 problems.push(Problem {
                     span: Some(body.mass.span()),
-                    message: format!("a mass must be a positive finite number, found {x}"),
+                    message: format!("a mass must be a positive finite number, found {shown}"),
                 });
-                continue;
+                // Declared all the same, so the body's symbols are known where used.
+                MassSpec::Number(1.0)
             }
             RawMass::Symbol(s) => MassSpec::Symbol(s),
         };
@@ -241,8 +257,12 @@ fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<Syste
     }
     for c in &raw.constraints {
         let c = c.get_ref();
-        if let Err(e) = b.constraint(c.name.get_ref(), c.expr.get_ref()) {
-            problems.push(build_problem(text, &c.expr, &e, c.name.span()));
+        // Without an expression (reported) the constraint is only a name, for `[[expect]]`.
+        let Some(expr) = &c.expr else {
+            continue;
+        };
+        if let Err(e) = b.constraint(c.name.get_ref(), expr.get_ref()) {
+            problems.push(build_problem(text, expr, &e, c.name.span()));
         }
     }
     if raw.constraints.is_empty() {

@@ -21,13 +21,10 @@ const SCHEMA: &[(&str, &[&str])] = &[
     ("expect[]", &["force", "lambda", "C_dot", "C_ddot", "A", "b", "at", "tolerance", "note"]),
 ];
 
-/// Every unknown key of the file, located. A file that is not TOML gives no problems here
-/// (the typed pass reports the syntax error).
-pub fn unknown_keys(text: &str) -> Vec<Problem> {
+/// Every unknown key of the file's tree, located.
+pub fn unknown_keys(root: &DeTable<'_>) -> Vec<Problem> {
     let mut problems = Vec::new();
-    if let Ok(root) = DeTable::parse(text) {
-        walk("", root.get_ref(), &mut problems);
-    }
+    walk("", root, &mut problems);
     problems
 }
 
@@ -38,7 +35,7 @@ fn walk(path: &str, table: &DeTable<'_>, problems: &mut Vec<Problem>) {
     for (key, value) in table.iter() {
         let name: &str = key.get_ref();
         if !known.contains(&name) {
-            let hint = match suggest(name, known.iter().copied()) {
+            let hint = match suggest(name, known.iter().copied()).or_else(|| swapped(name, known)) {
                 Some(s) => format!("; did you mean `{s}`?"),
                 None => format!(" (expected one of: {})", known.join(", ")),
             };
@@ -64,4 +61,20 @@ fn descend(path: &str, value: &Spanned<DeValue<'_>>, problems: &mut Vec<Problem>
         }
         _ => {}
     }
+}
+
+/// A known key that `name` spells with two neighbouring letters swapped (`titel` for
+/// `title`): one slip of the fingers, though two edits apart.
+fn swapped(name: &str, known: &[&str]) -> Option<String> {
+    let a: Vec<char> = name.chars().collect();
+    known.iter().find_map(|k| {
+        let b: Vec<char> = k.chars().collect();
+        let differ: Vec<usize> = (0..a.len()).filter(|&i| a.len() == b.len() && a[i] != b[i]).collect();
+        let one_swap = a.len() == b.len()
+            && differ.len() == 2
+            && differ[1] == differ[0] + 1
+            && a[differ[0]] == b[differ[1]]
+            && a[differ[1]] == b[differ[0]];
+        one_swap.then(|| k.to_string())
+    })
 }

@@ -12,18 +12,16 @@ use super::file::{Problem, RawValue, locate};
 use super::system::{BuildError, System};
 use crate::expr::eval::{Env, EvalError, Value, eval_one};
 use crate::expr::{Id, Role, Symbol, Ty};
-use serde::Deserialize;
 use std::collections::BTreeMap;
 use toml::Spanned;
 
-/// The `[scene]` table as written (unknown keys are reported by `model::keys`).
-#[derive(Debug, Default, Deserialize)]
+/// The `[scene]` table as written (read by `model::document`; unknown keys are reported
+/// by `model::keys`).
+#[derive(Debug, Default)]
 pub struct RawScene {
     /// Initial values of positions, velocities and other symbols (`t`, masses).
-    #[serde(default)]
     pub initial: BTreeMap<Spanned<String>, Spanned<RawValue>>,
     /// External force per body: the force symbol (or the body's name) → an expression.
-    #[serde(default)]
     pub forces: BTreeMap<Spanned<String>, Spanned<String>>,
     pub dt: Option<Spanned<f64>>,
     pub duration: Option<Spanned<f64>>,
@@ -77,13 +75,14 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
             .position(|b| b.name == *name.get_ref() || system.graph.symbol(b.force).name == *name.get_ref());
         let Some(body) = body else {
             let forces: Vec<&str> = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.as_str()).collect();
+            let known = if forces.is_empty() {
+                "the file declares no bodies".to_string()
+            } else {
+                format!("force symbols: {}", forces.join(", "))
+            };
             problems.push(Problem {
                 span: Some(name.span()),
-                message: format!(
-                    "`{}` is not a body's force symbol or a body's name (force symbols: {})",
-                    name.get_ref(),
-                    forces.join(", ")
-                ),
+                message: format!("`{}` is not a body's force symbol or a body's name ({known})", name.get_ref()),
             });
             continue;
         };
@@ -152,7 +151,15 @@ fn force_expression(system: &mut System, text: &str) -> Result<Id, (Option<std::
 /// The symbol `name` and `value` as a value of its type, or why not.
 pub fn value_for(system: &System, name: &str, value: &RawValue, dim: usize) -> Result<(Symbol, Value), String> {
     let Some(s) = system.graph.symbol_named(name) else {
-        return Err(format!("`{name}` is not a symbol of this file"));
+        let names = system.graph.symbols().map(|(_, info)| info.name.as_str());
+        // One letter is one edit from every other one-letter name: only a different case
+        // (`L` for `l`) is a useful hint there.
+        let hint = crate::expr::lower::suggest(name, names)
+            .filter(|hint| name.chars().count() >= 3 || hint.eq_ignore_ascii_case(name));
+        return Err(match hint {
+            Some(hint) => format!("`{name}` is not a symbol of this file; did you mean `{hint}`?"),
+            None => format!("`{name}` is not a symbol of this file"),
+        });
     };
     let info = system.graph.symbol(s);
     if matches!(info.role, Role::Acceleration { .. }) {

@@ -5,6 +5,11 @@
 //! does, one step at a time, with the file's own expressions. Every function here returns
 //! a `String` or a JSON value; the caller decides where it goes.
 //!
+//! With several constraints there is no closed form for λ: the entries of A and b are
+//! printed one by one, named by constraints (`A[rod1, rod2]`), the force on each body as
+//! Σₖ λₖ Jₖᵢ, and `--steps` adds each Jₖᵢ and cₖ and the system A λ = −b row by row. The
+//! JSON then carries `multipliers` (constraint → symbol) and `force_sums` (body → Σ λ J).
+//!
 //! Not here: deriving (`derive`), expression printing rules (`expr::print`).
 
 use crate::derive::Derivation;
@@ -122,6 +127,19 @@ impl Doc {
     }
 }
 
+impl Doc {
+    /// A named entry of a matrix or vector, `A[rod1, rod2]` (`A_{\mathrm{rod1},\mathrm{rod2}}`
+    /// in LaTeX): entries of A, b, J and c are named by constraints (and bodies), not numbered.
+    fn entry(&self, base: &str, names: &[&str]) -> String {
+        if self.style == Style::Latex {
+            let names: Vec<String> = names.iter().map(|n| format!("\\mathrm{{{}}}", latex_escape(n))).collect();
+            format!("{base}_{{{}}}", names.join(","))
+        } else {
+            format!("{base}[{}]", names.join(", "))
+        }
+    }
+}
+
 fn latex_escape(s: &str) -> String {
     s.replace('\\', "\\textbackslash{}").replace('_', "\\_").replace('&', "\\&").replace('%', "\\%").replace('#', "\\#")
 }
@@ -175,21 +193,7 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
         doc.line(out, &format!("c (C̈ at a = 0{})", scale_note(dc.scale.is_one(), &dc.scale)), &doc.expr(g, dc.c_term)?);
     }
     doc.heading(out, "The multiplier equation  A λ + b = 0");
-    for &(k, j, a) in &d.a {
-        let lhs = if many {
-            format!("A[{}, {}]", system.constraints[k].name, system.constraints[j].name)
-        } else {
-            "A".into()
-        };
-        doc.line(out, &lhs, &doc.expr(g, a)?);
-    }
-    if many {
-        doc.para(out, "(A is symmetric, A[k, j] = A[j, k]; entries not listed are 0.)");
-    }
-    for (k, &b) in d.b.iter().enumerate() {
-        let lhs = if many { format!("b[{}]", system.constraints[k].name) } else { "b".into() };
-        doc.line(out, &lhs, &doc.expr(g, b)?);
-    }
+    a_and_b(system, d, doc, out)?;
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
         doc.heading(out, "Multiplier and constraint force");
         doc.line(out, &doc.sym("lambda", ""), &doc.expr(g, lambda)?);
@@ -201,6 +205,46 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
         forces_as_sums(system, d, doc, out)?;
     }
     Ok(())
+}
+
+/// The entries of A (upper triangle, non-zero) and b, named by constraints when several.
+fn a_and_b(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    let g = &system.graph;
+    let many = d.constraints.len() > 1;
+    let name = |k: usize| system.constraints[k].name.as_str();
+    for &(k, j, a) in &d.a {
+        let lhs = if many { doc.entry("A", &[name(k), name(j)]) } else { "A".into() };
+        doc.line(out, &lhs, &doc.expr(g, a)?);
+    }
+    if many {
+        doc.para(out, "(A is symmetric, A[k, j] = A[j, k]; entries not listed are 0.)");
+    }
+    for (k, &b) in d.b.iter().enumerate() {
+        let lhs = if many { doc.entry("b", &[name(k)]) } else { "b".into() };
+        doc.line(out, &lhs, &doc.expr(g, b)?);
+    }
+    Ok(())
+}
+
+/// For several constraints, the system A λ = −b row by row, with the entries by name:
+/// `A[rod1, rod1] λ[rod1] + A[rod1, rod2] λ[rod2] = −b[rod1]`.
+fn system_rows(system: &System, d: &Derivation, doc: &Doc, out: &mut String) {
+    let name = |k: usize| system.constraints[k].name.as_str();
+    let lambda = if doc.style == Style::Latex { "\\lambda" } else { "λ" };
+    let minus = if doc.style == Style::Latex { "-" } else { "−" };
+    for k in 0..d.constraints.len() {
+        let terms: Vec<String> = (0..d.constraints.len())
+            .filter(|&j| d.a_entry(k, j).is_some())
+            .map(|j| {
+                // The multipliers as the force lines print them: λ_rod1, \lambda_{\mathrm{rod1}}.
+                let l =
+                    if doc.style == Style::Latex { doc.entry(lambda, &[name(j)]) } else { format!("λ_{}", name(j)) };
+                format!("{} {l}", doc.entry("A", &[name(k), name(j)]))
+            })
+            .collect();
+        let lhs = if terms.is_empty() { "0".to_string() } else { terms.join(" + ") };
+        doc.line(out, &lhs, &format!("{minus}{}", doc.entry("b", &[name(k)])));
+    }
 }
 
 fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
@@ -292,26 +336,37 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
                 format!("{} = {} · ({})", doc.expr(g, grad)?, dc.scale, doc.expr(g, dir)?)
             };
             doc.line(out, &lhs, &rhs);
+            if many {
+                let k_name = system.constraints[k].name.as_str();
+                doc.line(out, &doc.entry("J", &[k_name, name]), &doc.expr(g, dir)?);
+            }
         }
     }
     doc.heading(out, "The multiplier");
-    doc.para(out, "Step 6. With F_c = Σ λ J, the conditions C̈ = 0 are linear in λ: A λ + b = 0, where");
-    let g = &system.graph;
-    for &(k, j, a) in &d.a {
-        let lhs = if many {
-            format!("A[{}, {}]", system.constraints[k].name, system.constraints[j].name)
-        } else {
-            "A".into()
-        };
-        doc.line(out, &lhs, &doc.expr(g, a)?);
-    }
     if many {
-        doc.para(out, "(A is symmetric, A[k, j] = A[j, k]; entries not listed are 0.)");
+        // DESIGN step 3 made visible: the part of each C̈ that does not involve a.
+        doc.para(
+            out,
+            "Step 6. Each C̈ₖ (over the factor κₖ taken out of ∇Cₖ) is affine in the accelerations: \
+             C̈ₖ/κₖ = Σᵢ Jₖᵢ·aᵢ + cₖ, with cₖ = C̈ₖ/κₖ at a = 0:",
+        );
+        for (k, dc) in d.constraints.iter().enumerate() {
+            doc.line(
+                out,
+                &doc.entry("c", &[system.constraints[k].name.as_str()]),
+                &doc.expr(&system.graph, dc.c_term)?,
+            );
+        }
+        doc.para(
+            out,
+            "With aᵢ = (Fᵢ + Σⱼ λⱼ Jⱼᵢ)/mᵢ the conditions C̈ = 0 are linear in λ: A λ + b = 0, where \
+             Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ/mᵢ and bₖ = Σᵢ Jₖᵢ·Fᵢ/mᵢ + cₖ:",
+        );
+    } else {
+        doc.para(out, "Step 6. With F_c = Σ λ J, the conditions C̈ = 0 are linear in λ: A λ + b = 0, where");
     }
-    for (k, &b) in d.b.iter().enumerate() {
-        let lhs = if many { format!("b[{}]", system.constraints[k].name) } else { "b".into() };
-        doc.line(out, &lhs, &doc.expr(g, b)?);
-    }
+    let g = &system.graph;
+    a_and_b(system, d, doc, out)?;
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
         doc.para(out, "so λ = −b/A:");
         doc.line(out, &doc.sym("lambda", ""), &doc.expr(g, lambda)?);
@@ -323,7 +378,12 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
         }
         Ok(())
     } else {
-        doc.para(out, "Step 7. λ solves A λ = −b at each state (lagrange solve); the force on each body is Σₖ λₖ Jₖ:");
+        doc.para(
+            out,
+            "Step 7. The system A λ = −b, one row per constraint; λ solves it at each state (lagrange solve):",
+        );
+        system_rows(system, d, doc, out);
+        doc.para(out, "The force on each body is Σₖ λₖ Jₖᵢ:");
         forces_as_sums(system, d, doc, out)
     }
 }
@@ -385,6 +445,36 @@ pub fn json(system: &System, d: &Derivation) -> Result<Value, ReportError> {
             f.insert(system.bodies[body].name.clone(), json!(e(id)?));
         }
         out["forces"] = Value::Object(f);
+    } else {
+        // Several constraints: no closed form. The multipliers are named symbols, and the
+        // force on each body is Σₖ λₖ Jₖᵢ in them (as `derive` prints it), so the JSON parses
+        // again once the multiplier names are declared as scalars.
+        let names: Vec<String> = system.constraints.iter().map(|c| multiplier_name(&c.name)).collect();
+        let mut sums = serde_json::Map::new();
+        for (body, b) in system.bodies.iter().enumerate() {
+            let mut terms = Vec::new();
+            for (k, dc) in d.constraints.iter().enumerate() {
+                if let Some(&(_, j)) = dc.direction.iter().find(|(i, _)| *i == body) {
+                    let j = e(j)?;
+                    let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
+                    terms.push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
+                }
+            }
+            if !terms.is_empty() {
+                sums.insert(b.name.clone(), json!(terms.join(" + ")));
+            }
+        }
+        let multipliers: serde_json::Map<String, Value> =
+            system.constraints.iter().zip(&names).map(|(c, n)| (c.name.clone(), json!(n))).collect();
+        out["multipliers"] = Value::Object(multipliers);
+        out["force_sums"] = Value::Object(sums);
     }
     Ok(out)
+}
+
+/// The symbol of constraint `name`'s multiplier in JSON: `lambda_<name>`, with every
+/// character that cannot be part of a name replaced by `_` (constraint names are free text).
+pub fn multiplier_name(name: &str) -> String {
+    let clean: String = name.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
+    format!("lambda_{clean}")
 }
