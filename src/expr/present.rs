@@ -55,8 +55,7 @@ impl Simplifier {
             return term(g, &k, factors);
         }
         // Rational content p/q: p stays in front, q joins the denominator.
-        let (p, q) = k.parts();
-        let (p, q) = (Rational::from_parts(p, 1.into()), Rational::from_parts(q, 1.into()));
+        let (p, q) = k.split_parts();
         let mut den = Vec::new();
         if !q.is_one() {
             den.push(g.num(q));

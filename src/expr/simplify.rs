@@ -30,7 +30,7 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::{Axis, FastMap, Func, Graph, Id, Node, Ty, TypeError};
+use super::graph::{Axis, FastMap, FastSet, Func, Graph, Id, IdMap, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
 use std::rc::Rc;
@@ -58,8 +58,8 @@ pub(super) enum Canon {
 /// Keep one per graph: ids of different graphs mean different things.
 #[derive(Debug, Default)]
 pub struct Simplifier {
-    pub(super) memo: FastMap<Id, Rc<Canon>>,
-    pub(super) built: FastMap<Id, Id>,
+    pub(super) memo: IdMap<Rc<Canon>>,
+    pub(super) built: IdMap<Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
 }
@@ -78,6 +78,9 @@ impl Simplifier {
         let s = self.build(g, &c)?;
         self.built.insert(id, s);
         self.built.insert(s, s);
+        // What `build` lays out has the canonical form it came from (the round trip is
+        // tested), so `is_zero`, `content` and `scaled` on the result need not redo it.
+        self.memo.insert_if_absent(s, c);
         Ok(s)
     }
 
@@ -134,10 +137,20 @@ impl Simplifier {
         if let Some(c) = self.memo.get(&id) {
             return Ok(c.clone());
         }
-        for n in g.reachable(&[id]) {
-            if self.memo.contains_key(&n) {
+        // The nodes below `id` without a form yet; the walk stops at memoised nodes, so
+        // a new expression over old ones costs the size of what is new.
+        let mut todo = Vec::new();
+        let mut seen: FastSet<Id> = FastSet::default();
+        let mut stack = vec![id];
+        while let Some(n) = stack.pop() {
+            if self.memo.contains_key(&n) || !seen.insert(n) {
                 continue;
             }
+            todo.push(n);
+            stack.extend_from_slice(g.node(n).children());
+        }
+        todo.sort_unstable();
+        for n in todo {
             let node = g.node(n).clone();
             let c = self.canon_node(g, n, &node)?;
             self.memo.insert(n, Rc::new(c));
@@ -276,7 +289,7 @@ impl Simplifier {
             // instead of being expanded into one polynomial, so simplifying the printed
             // `1/((k^6 + 1)*(k^2 + 1))` again gives the same form (idempotence).
             if n < 0
-                && let Some(f) = self.factored_power(g, b, n)
+                && let Some(f) = self.factored_power(g, b, n)?
             {
                 return Ok(Some(Canon::S(self.reduce_radicals(f))));
             }
@@ -292,20 +305,30 @@ impl Simplifier {
 
     /// `b^n` for `n < 0` with the factors of `b` kept apart: `(x y)^n = xⁿ yⁿ` and
     /// `(x^m)^n = x^(mn)` for integer `m`. `None` when a factor is zero or too large.
-    fn factored_power(&self, g: &Graph, b: Id, n: i64) -> Option<Frac> {
-        match g.node(b) {
+    fn factored_power(&mut self, g: &mut Graph, b: Id, n: i64) -> Result<Option<Frac>, TypeError> {
+        // The walk goes below `b`'s direct children, whose forms `canon` may not have
+        // needed yet (it stops at memoised nodes): they are computed here on demand.
+        match g.node(b).clone() {
             Node::Mul(xs) => {
                 let mut acc = Frac::constant(Rational::ONE);
                 for x in xs.iter() {
-                    acc = acc.mul(&self.factored_power(g, *x, n)?)?;
+                    let Some(f) = self.factored_power(g, *x, n)? else { return Ok(None) };
+                    let Some(product) = acc.mul(&f) else { return Ok(None) };
+                    acc = product;
                 }
-                Some(acc)
+                Ok(Some(acc))
             }
-            Node::Pow([x, e]) => match self.scalar_of(*e).as_constant().and_then(|q| q.to_i64()) {
-                Some(m) if m > 0 => self.factored_power(g, *x, n.checked_mul(m)?),
-                _ => self.scalar_of(b).powi(n),
-            },
-            _ => self.scalar_of(b).powi(n),
+            Node::Pow([x, e]) => {
+                let exponent = self.canon(g, e)?;
+                match scalar(&exponent).as_constant().and_then(|q| q.to_i64()) {
+                    Some(m) if m > 0 => match n.checked_mul(m) {
+                        Some(nm) => self.factored_power(g, x, nm),
+                        None => Ok(None),
+                    },
+                    _ => Ok(scalar(&*self.canon(g, b)?).powi(n)),
+                }
+            }
+            _ => Ok(scalar(&*self.canon(g, b)?).powi(n)),
         }
     }
 
@@ -653,6 +676,14 @@ impl Simplifier {
         let atom = g.norm(arg)?;
         self.radicals.insert(atom, Rc::new(square));
         Ok(Some(Frac::atom(atom).scale(&content.abs())))
+    }
+}
+
+/// The scalar part of a form (zero for a vector).
+fn scalar(c: &Canon) -> Frac {
+    match c {
+        Canon::S(f) => f.clone(),
+        Canon::V(_) => Frac::zero(),
     }
 }
 
