@@ -663,7 +663,8 @@ impl Graph {
     /// Replaces every occurrence of the nodes in `map` (keys) by their values, bottom-up.
     pub fn substitute(&mut self, root: Id, map: &HashMap<Id, Id>) -> Result<Id, TypeError> {
         let order = self.reachable(&[root]);
-        let mut new: HashMap<Id, Id> = HashMap::with_capacity(order.len());
+        let mut new: FastMap<Id, Id> = FastMap::default();
+        new.reserve(order.len());
         for id in order {
             let replaced = match map.get(&id) {
                 Some(&to) => to,

@@ -207,14 +207,20 @@ impl Simplifier {
                 Ty::Scalar => {
                     let mut acc = Some(Frac::zero());
                     for x in xs.iter() {
-                        acc = acc.and_then(|a| a.add(&self.scalar_of(*x)));
+                        let form = self.memo[x].clone();
+                        if let Canon::S(f) = &*form {
+                            acc = acc.and_then(|a| a.add(f));
+                        }
                     }
                     acc.map(Canon::S)
                 }
                 Ty::Vector => {
                     let mut acc = Some(VecForm::default());
                     for x in xs.iter() {
-                        acc = acc.and_then(|a| a.add(&self.vector_of(*x)));
+                        let form = self.memo[x].clone();
+                        if let Canon::V(v) = &*form {
+                            acc = acc.and_then(|a| a.add(v));
+                        }
                     }
                     acc.map(Canon::V)
                 }
@@ -236,8 +242,11 @@ impl Simplifier {
             }
             Node::Pow([b, e]) => self.power(g, *b, *e)?,
             Node::Dot([a, b]) => {
-                let (a, b) = (self.vector_of(*a), self.vector_of(*b));
-                self.dot(g, &a, &b)?.map(Canon::S)
+                let (a, b) = (self.memo[a].clone(), self.memo[b].clone());
+                match (&*a, &*b) {
+                    (Canon::V(a), Canon::V(b)) => self.dot(g, a, b)?.map(Canon::S),
+                    _ => Some(Canon::S(Frac::zero())),
+                }
             }
             Node::Cross([a, b]) => {
                 let (a, b) = (self.vector_of(*a), self.vector_of(*b));
@@ -453,6 +462,29 @@ impl Simplifier {
 
     /// `a·b`, bilinear over the two sums.
     fn dot(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<Frac>, TypeError> {
+        // Polynomial coefficients and atoms (the common case): collect every product's
+        // terms and sum them once, instead of merging a new sum per pair. Sums of
+        // polynomials do not depend on their order, so the result is the same.
+        let polynomial = |v: &VecForm| v.0.iter().all(|(_, s)| s.den.is_empty());
+        if polynomial(a) && polynomial(b) {
+            let mut terms: Vec<(Mono, Rational)> = Vec::new();
+            let mut general = false;
+            'pairs: for (u, s) in &a.0 {
+                for (w, t) in &b.0 {
+                    let atom = self.dot_atoms(g, *u, *w)?;
+                    if !atom.den.is_empty() {
+                        general = true;
+                        break 'pairs;
+                    }
+                    let Some(st) = s.num.mul(&t.num) else { return Ok(None) };
+                    let Some(product) = st.mul(&atom.num) else { return Ok(None) };
+                    terms.extend(product.0);
+                }
+            }
+            if !general {
+                return Ok(Some(self.reduce_radicals(Frac::poly(sum_terms(terms)))));
+            }
+        }
         let mut acc = Frac::zero();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
