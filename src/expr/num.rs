@@ -150,6 +150,14 @@ impl Rational {
 
     pub fn add(&self, other: &Rational) -> Rational {
         if let (Rational::Small(a, b), Rational::Small(c, d)) = (self, other) {
+            // Integers (most coefficients): no gcd needed.
+            if *b == 1
+                && *d == 1
+                && let Some(n) = a.checked_add(*c)
+                && n != i64::MIN
+            {
+                return Rational::Small(n, 1);
+            }
             if b == d {
                 if let Some(n) = a.checked_add(*c) {
                     return Rational::reduce_small(n, *b);
@@ -169,6 +177,13 @@ impl Rational {
 
     pub fn mul(&self, other: &Rational) -> Rational {
         if let (Rational::Small(a, b), Rational::Small(c, d)) = (self, other) {
+            if *b == 1
+                && *d == 1
+                && let Some(n) = a.checked_mul(*c)
+                && n != i64::MIN
+            {
+                return Rational::Small(n, 1);
+            }
             // Cross-reduce first so the products stay small.
             let g1 = a.gcd(d).max(1);
             let g2 = c.gcd(b).max(1);

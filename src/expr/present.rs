@@ -36,14 +36,10 @@ impl Simplifier {
         if let Some(q) = f.as_constant() {
             return Ok(g.num(q));
         }
-        let terms = reading_order(g, &f.num);
-        let mut k = f.num.content();
-        if terms.first().is_some_and(|(_, q)| q.is_negative()) {
-            k = k.neg();
-        }
+        let k = signed_content(g, &f.num);
         let inv = k.recip().unwrap_or(Rational::ONE);
         let mut factors = Vec::new();
-        if let [(m, _)] = terms.as_slice() {
+        if let [(m, _)] = f.num.0.as_slice() {
             factors.extend(mono_factors(g, m)?);
         } else {
             let common = f.num.common_mono();

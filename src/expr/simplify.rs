@@ -476,6 +476,14 @@ impl Simplifier {
                         general = true;
                         break 'pairs;
                     }
+                    if let (Some(p), Some(q)) = (s.num.as_constant(), t.num.as_constant()) {
+                        // Constant coefficients: the atom's terms times one number.
+                        let pq = p.mul(&q);
+                        if !pq.is_zero() {
+                            terms.extend(atom.num.0.into_iter().map(|(m, c)| (m, c.mul(&pq))));
+                        }
+                        continue;
+                    }
                     let Some(st) = s.num.mul(&t.num) else { return Ok(None) };
                     let Some(product) = st.mul(&atom.num) else { return Ok(None) };
                     terms.extend(product.0);
