@@ -3,12 +3,15 @@
 //! `cargo bench --bench derive`. Cases: the article's bead in 2D and 3D, and an N-link
 //! chain (N = 10, 50, 200, 1000) with A and b for every link. Each derive case has its
 //! baseline in the same run: `load` alone (parsing, type checking, building the graph), so
-//! the cost of the derivation itself is the difference. Targets (issue 2): bead < 20 µs;
-//! chain linear in N, N = 200 < 4 ms, N = 1000 < 20 ms.
+//! the cost of the derivation itself is the difference. The `*_text` cases add what
+//! `lagrange derive FILE` does after that: the text document (`report::derivation`), so the
+//! whole command is measured too, file reading and stdout aside. Targets (issue 2): bead
+//! < 20 µs; chain linear in N, N = 200 < 4 ms, N = 1000 < 20 ms.
 
 use divan::{Bencher, black_box};
 use lagrange::derive::derive;
 use lagrange::model::file::load;
+use lagrange::report::derivation::{Format, document};
 use std::fmt::Write;
 
 fn main() {
@@ -41,6 +44,13 @@ fn load_and_derive(text: &str) -> usize {
     let mut loaded = load(text).expect("the file loads");
     let d = derive(&mut loaded.system).expect("the file derives");
     d.a.len() + d.b.len()
+}
+
+/// What `lagrange derive FILE` does for the text output: load, derive, lay out.
+fn load_derive_and_print(text: &str) -> usize {
+    let mut loaded = load(text).expect("the file loads");
+    let d = derive(&mut loaded.system).expect("the file derives");
+    document(&mut loaded.system, &d, Format::Text, false).expect("the document builds").len()
 }
 
 #[divan::bench(args = [2, 3])]
@@ -80,4 +90,16 @@ fn chain_links(bencher: Bencher, n: usize) {
 fn chain_load_only(bencher: Bencher, n: usize) {
     let text = chain(n);
     bencher.bench(|| load(black_box(&text)).map(|l| l.system.graph.len()).unwrap_or(0));
+}
+
+#[divan::bench(args = [2, 3])]
+fn bead_text(bencher: Bencher, dim: usize) {
+    let text = if dim == 2 { BEAD_2D } else { BEAD_3D };
+    bencher.bench(|| load_derive_and_print(black_box(text)));
+}
+
+#[divan::bench(args = [10, 50, 200, 1000], sample_count = 20)]
+fn chain_text(bencher: Bencher, n: usize) {
+    let text = chain(n);
+    bencher.bench(|| load_derive_and_print(black_box(&text)));
 }

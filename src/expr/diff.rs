@@ -9,9 +9,9 @@
 //! The walk is iterative in id order (children first), so deep graphs cannot overflow the
 //! stack, and each shared subexpression is differentiated once.
 
+use super::graph::FastMap;
 use super::graph::{Func, Graph, Id, Node, Role, Ty, TypeError};
 use super::num::Rational;
-use std::collections::HashMap;
 
 /// Why a derivative could not be taken.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -25,7 +25,8 @@ pub enum DiffError {
 /// d/dt of `root`.
 pub fn time_derivative(graph: &mut Graph, root: Id) -> Result<Id, DiffError> {
     let order = graph.reachable(&[root]);
-    let mut d: HashMap<Id, Id> = HashMap::with_capacity(order.len());
+    let mut d: FastMap<Id, Id> = FastMap::default();
+    d.reserve(order.len());
     for id in order {
         let node = graph.node(id).clone();
         let di = derive_node(graph, id, &node, &d)?;
@@ -34,7 +35,7 @@ pub fn time_derivative(graph: &mut Graph, root: Id) -> Result<Id, DiffError> {
     Ok(d[&root])
 }
 
-fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &HashMap<Id, Id>) -> Result<Id, DiffError> {
+fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &FastMap<Id, Id>) -> Result<Id, DiffError> {
     let ty = g.ty(id);
     Ok(match node {
         Node::Num(_) => g.int(0),

@@ -11,9 +11,9 @@
 //! the part of the expression that involves it.
 
 use super::diff::{add, atan2_denominator, chain_factor, mul, zero};
+use super::graph::FastMap;
 use super::graph::{Axis, Graph, Id, Node, Symbol, Ty, TypeError};
 use super::num::Rational;
-use std::collections::HashMap;
 
 /// ∂root/∂wrt: a vector for a vector symbol, a scalar for a scalar one. `root` is a scalar.
 pub fn gradient(graph: &mut Graph, root: Id, wrt: Symbol) -> Result<Id, TypeError> {
@@ -21,7 +21,8 @@ pub fn gradient(graph: &mut Graph, root: Id, wrt: Symbol) -> Result<Id, TypeErro
     let target_ty = graph.ty(target);
     let order = graph.reachable(&[root]);
     // Which nodes depend on the symbol at all (children come first in `order`).
-    let mut depends: HashMap<Id, bool> = HashMap::with_capacity(order.len());
+    let mut depends: FastMap<Id, bool> = FastMap::default();
+    depends.reserve(order.len());
     for &id in &order {
         let dep = id == target || graph.node(id).children().iter().any(|c| depends[c]);
         depends.insert(id, dep);
@@ -29,7 +30,7 @@ pub fn gradient(graph: &mut Graph, root: Id, wrt: Symbol) -> Result<Id, TypeErro
     if !depends[&root] {
         return Ok(zero(graph, target_ty));
     }
-    let mut parts: HashMap<Id, Vec<Id>> = HashMap::new();
+    let mut parts: FastMap<Id, Vec<Id>> = FastMap::default();
     let one = graph.int(1);
     parts.insert(root, vec![one]);
     for &id in order.iter().rev() {

@@ -71,6 +71,56 @@ impl Hasher for FxHasher {
 /// A `HashMap` with [`FxHasher`].
 pub type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
 
+/// A `HashSet` with [`FxHasher`].
+pub type FastSet<K> = std::collections::HashSet<K, BuildHasherDefault<FxHasher>>;
+
+/// A map from node ids to values, stored densely by id: ids are small consecutive
+/// integers, so a vector indexed by id beats hashing them (and stays in cache on large
+/// graphs, where a hash map's random probes made long chains superlinear in wall time).
+#[derive(Clone, Debug)]
+pub struct IdMap<V> {
+    slots: Vec<Option<V>>,
+}
+
+impl<V> Default for IdMap<V> {
+    fn default() -> Self {
+        IdMap { slots: Vec::new() }
+    }
+}
+
+impl<V> IdMap<V> {
+    pub fn get(&self, id: &Id) -> Option<&V> {
+        self.slots.get(id.index()).and_then(Option::as_ref)
+    }
+
+    pub fn contains_key(&self, id: &Id) -> bool {
+        self.get(id).is_some()
+    }
+
+    pub fn insert(&mut self, id: Id, value: V) {
+        let i = id.index();
+        if i >= self.slots.len() {
+            self.slots.resize_with((i + 1).max(2 * self.slots.len()), || None);
+        }
+        self.slots[i] = Some(value);
+    }
+
+    /// Inserts `value` unless `id` already has one.
+    pub fn insert_if_absent(&mut self, id: Id, value: V) {
+        if !self.contains_key(&id) {
+            self.insert(id, value);
+        }
+    }
+}
+
+impl<V> std::ops::Index<&Id> for IdMap<V> {
+    type Output = V;
+
+    fn index(&self, id: &Id) -> &V {
+        self.get(id).expect("no entry for this id")
+    }
+}
+
 /// A handle to a node of a [`Graph`]. Children always have smaller ids than parents.
 #[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Debug)]
 pub struct Id(u32);
@@ -275,7 +325,10 @@ pub struct Graph {
     nodes: Vec<Node>,
     tys: Vec<Ty>,
     depths: Vec<u32>,
-    index: FastMap<Node, Id>,
+    /// Hash-consing index: a node's hash → the newest node with that hash; `same_hash`
+    /// chains to older ones. Nodes are stored once, in `nodes` (no clone as a map key).
+    index: FastMap<u64, Id>,
+    same_hash: Vec<Option<Id>>,
     symbols: Vec<SymbolInfo>,
     by_name: HashMap<String, Symbol>,
 }
@@ -290,6 +343,7 @@ impl Graph {
             tys: Vec::new(),
             depths: Vec::new(),
             index: FastMap::default(),
+            same_hash: Vec::new(),
             symbols: Vec::new(),
             by_name: HashMap::new(),
         }
@@ -357,21 +411,33 @@ impl Graph {
 
     /// Stores `node` once and returns its id; `ty` must be the node's type.
     fn intern(&mut self, node: Node, ty: Ty) -> Id {
-        if let Some(&id) = self.index.get(&node) {
+        let hash = node_hash(&node);
+        if let Some(id) = self.lookup(hash, &node) {
             return id;
         }
         let depth = node.children().iter().map(|c| self.depths[c.index()]).max().unwrap_or(0) + 1;
         let id = Id(self.nodes.len() as u32);
-        self.nodes.push(node.clone());
+        self.nodes.push(node);
         self.tys.push(ty);
         self.depths.push(depth);
-        self.index.insert(node, id);
+        self.same_hash.push(self.index.insert(hash, id));
         id
+    }
+
+    fn lookup(&self, hash: u64, node: &Node) -> Option<Id> {
+        let mut next = self.index.get(&hash).copied();
+        while let Some(id) = next {
+            if self.nodes[id.index()] == *node {
+                return Some(id);
+            }
+            next = self.same_hash[id.index()];
+        }
+        None
     }
 
     /// Looks a node up without adding it.
     pub fn find(&self, node: &Node) -> Option<Id> {
-        self.index.get(node).copied()
+        self.lookup(node_hash(node), node)
     }
 
     // ---- typed constructors ------------------------------------------------------------
@@ -597,7 +663,8 @@ impl Graph {
     /// Replaces every occurrence of the nodes in `map` (keys) by their values, bottom-up.
     pub fn substitute(&mut self, root: Id, map: &HashMap<Id, Id>) -> Result<Id, TypeError> {
         let order = self.reachable(&[root]);
-        let mut new: HashMap<Id, Id> = HashMap::with_capacity(order.len());
+        let mut new: FastMap<Id, Id> = FastMap::default();
+        new.reserve(order.len());
         for id in order {
             let replaced = match map.get(&id) {
                 Some(&to) => to,
@@ -667,6 +734,11 @@ impl Graph {
         let (sa, sb) = (self.symbol(a), self.symbol(b));
         sa.role.rank().cmp(&sb.role.rank()).then_with(|| natural_cmp(&sa.name, &sb.name))
     }
+}
+
+fn node_hash(node: &Node) -> u64 {
+    use std::hash::BuildHasher;
+    BuildHasherDefault::<FxHasher>::default().hash_one(node)
 }
 
 /// Compares names with digit runs as numbers, so `l2 < l10`.

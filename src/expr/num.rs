@@ -37,6 +37,9 @@ impl Rational {
     /// `num / den`, reduced. `den` must be non-zero.
     pub fn new(num: i64, den: i64) -> Rational {
         debug_assert!(den != 0);
+        if num != i64::MIN && den != i64::MIN && den != 0 {
+            return Rational::reduce_small(num, den);
+        }
         Rational::from_big(BigRational::new(BigInt::from(num), BigInt::from(den)))
     }
 
@@ -147,6 +150,14 @@ impl Rational {
 
     pub fn add(&self, other: &Rational) -> Rational {
         if let (Rational::Small(a, b), Rational::Small(c, d)) = (self, other) {
+            // Integers (most coefficients): no gcd needed.
+            if *b == 1
+                && *d == 1
+                && let Some(n) = a.checked_add(*c)
+                && n != i64::MIN
+            {
+                return Rational::Small(n, 1);
+            }
             if b == d {
                 if let Some(n) = a.checked_add(*c) {
                     return Rational::reduce_small(n, *b);
@@ -166,6 +177,13 @@ impl Rational {
 
     pub fn mul(&self, other: &Rational) -> Rational {
         if let (Rational::Small(a, b), Rational::Small(c, d)) = (self, other) {
+            if *b == 1
+                && *d == 1
+                && let Some(n) = a.checked_mul(*c)
+                && n != i64::MIN
+            {
+                return Rational::Small(n, 1);
+            }
             // Cross-reduce first so the products stay small.
             let g1 = a.gcd(d).max(1);
             let g2 = c.gcd(b).max(1);
@@ -228,6 +246,17 @@ impl Rational {
         (&n * &n == *b.numer() && &d * &d == *b.denom()).then(|| Rational::from_big(BigRational::new(n, d)))
     }
 
+    /// The numerator and the denominator as integer rationals: `p/q → (p, q)`.
+    pub fn split_parts(&self) -> (Rational, Rational) {
+        match self {
+            Rational::Small(n, d) => (Rational::Small(*n, 1), Rational::Small(*d, 1)),
+            Rational::Big(_) => {
+                let (p, q) = self.parts();
+                (Rational::from_parts(p, 1.into()), Rational::from_parts(q, 1.into()))
+            }
+        }
+    }
+
     /// Numerator and denominator as big integers.
     pub fn parts(&self) -> (BigInt, BigInt) {
         let b = self.to_big();
@@ -251,6 +280,19 @@ impl Rational {
 
     /// The greatest common divisor of two rationals: `gcd(a/b, c/d) = gcd(a,c)/lcm(b,d)`, positive.
     pub fn gcd(&self, other: &Rational) -> Rational {
+        // Small values (nearly all of them) need no big integers: gcd(a, c) and lcm(b, d)
+        // in i64, when the lcm fits.
+        if let (Rational::Small(a, b), Rational::Small(c, d)) = (self, other) {
+            let n = a.unsigned_abs().gcd(&c.unsigned_abs());
+            if n == 0 {
+                return Rational::ONE;
+            }
+            let g = b.gcd(d);
+            if let (Ok(n), Some(l)) = (i64::try_from(n), (b / g).checked_mul(*d)) {
+                // n divides a and c, l is a multiple of b and d: gcd(n, l) = 1 already.
+                return Rational::reduce_small(n, l);
+            }
+        }
         let (a, b) = self.parts();
         let (c, d) = other.parts();
         let n = a.gcd(&c);

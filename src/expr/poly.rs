@@ -261,6 +261,15 @@ impl Poly {
             return None;
         }
         let (small, big) = if self.len() <= other.len() { (self, other) } else { (other, self) };
+        // One term (often a constant): every product keeps the order, no merging.
+        if let [(m, q)] = small.0.as_slice() {
+            let row = if m.is_one() {
+                big.0.iter().map(|(t, p)| (t.clone(), p.mul(q))).collect()
+            } else {
+                big.0.iter().map(|(t, p)| (t.mul(m), p.mul(q))).collect()
+            };
+            return (big.len() <= MAX_TERMS).then_some(Poly(row));
+        }
         let mut acc = Poly::zero();
         for (m, q) in &small.0 {
             let mut row = big.mul_mono(m);

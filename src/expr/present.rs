@@ -16,12 +16,12 @@
 //! Whatever is built here simplifies back to the same canonical form (tested), so
 //! `simplify` is idempotent.
 
-use super::graph::{Graph, Id, Node, Role, TypeError};
+use super::graph::{FastMap, Graph, Id, Node, Role, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly};
 use super::simplify::{Canon, Simplifier, VAtom, VecForm};
+use smallvec::SmallVec;
 use std::cmp::Ordering;
-use std::collections::HashMap;
 
 impl Simplifier {
     /// The readable graph of a canonical form.
@@ -36,14 +36,10 @@ impl Simplifier {
         if let Some(q) = f.as_constant() {
             return Ok(g.num(q));
         }
-        let terms = reading_order(g, &f.num);
-        let mut k = f.num.content();
-        if terms.first().is_some_and(|(_, q)| q.is_negative()) {
-            k = k.neg();
-        }
+        let k = signed_content(g, &f.num);
         let inv = k.recip().unwrap_or(Rational::ONE);
         let mut factors = Vec::new();
-        if let [(m, _)] = terms.as_slice() {
+        if let [(m, _)] = f.num.0.as_slice() {
             factors.extend(mono_factors(g, m)?);
         } else {
             let common = f.num.common_mono();
@@ -55,8 +51,7 @@ impl Simplifier {
             return term(g, &k, factors);
         }
         // Rational content p/q: p stays in front, q joins the denominator.
-        let (p, q) = k.parts();
-        let (p, q) = (Rational::from_parts(p, 1.into()), Rational::from_parts(q, 1.into()));
+        let (p, q) = k.split_parts();
         let mut den = Vec::new();
         if !q.is_one() {
             den.push(g.num(q));
@@ -81,14 +76,14 @@ impl Simplifier {
     /// A primitive polynomial as a sum, with factorable dot products factored.
     fn build_poly(&mut self, g: &mut Graph, p: &Poly) -> Result<Id, TypeError> {
         let terms = reading_order(g, p);
-        let mut replaced: HashMap<usize, Option<(Rational, Mono, Id)>> = HashMap::new();
+        let mut replaced: FastMap<usize, Option<(Rational, Mono, Id)>> = FastMap::default();
         for (indices, factored) in bilinear_groups(g, &terms)? {
             for (n, &i) in indices.iter().enumerate() {
                 replaced.insert(i, if n == 0 { Some(factored.clone()) } else { None });
             }
         }
         // Factored groups with the same dot product combine: m1 X + m2 X = (m1 + m2) X.
-        let mut by_dot: HashMap<Id, Poly> = HashMap::new();
+        let mut by_dot: FastMap<Id, Poly> = FastMap::default();
         for (k, cofactor, dot) in replaced.values().flatten() {
             let part = Poly(vec![(cofactor.clone(), k.clone())]);
             let sum = by_dot.get(dot).map_or(part.clone(), |p| p.add(&part));
@@ -229,7 +224,16 @@ fn mono_factors(g: &mut Graph, m: &Mono) -> Result<Vec<Id>, TypeError> {
 /// The content of `p` with the sign of its first term in reading order.
 fn signed_content(g: &Graph, p: &Poly) -> Rational {
     let k = p.content();
-    match reading_order(g, p).first() {
+    // The first term in reading order is the first minimum of the order (the sort is stable).
+    let first = match p.0.as_slice() {
+        [only] => Some(only),
+        terms => terms
+            .iter()
+            .map(|t| (reading_key(g, &t.0), t))
+            .min_by(|a, b| cmp_reading_keys(g, &a.0, &b.0))
+            .map(|(_, t)| t),
+    };
+    match first {
         Some((_, q)) if q.is_negative() => k.neg(),
         _ => k,
     }
@@ -238,6 +242,9 @@ fn signed_content(g: &Graph, p: &Poly) -> Rational {
 /// The terms of `p` in the order people read: higher weighted degree first, then terms with
 /// positions, velocities and forces before those of parameters alone.
 fn reading_order(g: &Graph, p: &Poly) -> Vec<(Mono, Rational)> {
+    if p.len() < 2 {
+        return p.0.clone();
+    }
     // Each term's key is computed once, not once per comparison (that allocated and
     // walked the atoms O(n log n) times and was a seventh of a chain's derivation).
     let mut keyed: Vec<(ReadingKey, &(Mono, Rational))> = p.0.iter().map(|t| (reading_key(g, &t.0), t)).collect();
@@ -264,11 +271,11 @@ fn cmp_mono_reading(g: &Graph, a: &Mono, b: &Mono) -> Ordering {
 /// ones (positions, velocities, …) first.
 struct ReadingKey {
     degree: u64,
-    atoms: Vec<(bool, Id, u32)>,
+    atoms: SmallVec<[(bool, Id, u32); 4]>,
 }
 
 fn reading_key(g: &Graph, m: &Mono) -> ReadingKey {
-    let mut atoms: Vec<(bool, Id, u32)> = m.0.iter().map(|&(x, e)| (is_kinematic(g, x), x, e)).collect();
+    let mut atoms: SmallVec<[(bool, Id, u32); 4]> = m.0.iter().map(|&(x, e)| (is_kinematic(g, x), x, e)).collect();
     atoms.sort_by(|p, q| q.0.cmp(&p.0).then_with(|| g.cmp_nodes(p.1, q.1)));
     ReadingKey { degree: weighted_degree(g, m), atoms }
 }
@@ -301,7 +308,7 @@ fn weighted_degree(g: &Graph, m: &Mono) -> u64 {
 
 /// Whether an atom involves a body's position, velocity, acceleration or force.
 fn is_kinematic(g: &Graph, atom: Id) -> bool {
-    let mut stack = vec![atom];
+    let mut stack: SmallVec<[Id; 16]> = smallvec::smallvec![atom];
     let mut budget = 64;
     while let Some(id) = stack.pop() {
         if let Node::Sym(s) = g.node(id)
@@ -336,7 +343,7 @@ fn bilinear_groups(
     // Group by cofactor: the monomial without its single dot atom.
     let mut by_cofactor: Vec<(Mono, Vec<DotTerm>)> = Vec::new();
     for (index, (m, q)) in terms.iter().enumerate() {
-        let dots: Vec<(Id, u32)> =
+        let dots: SmallVec<[(Id, u32); 4]> =
             m.0.iter().copied().filter(|(a, _)| matches!(g.node(*a), Node::Dot(_)) && !is_triple(g, *a)).collect();
         let [(dot, 1)] = dots.as_slice() else { continue };
         let Node::Dot([u, w]) = *g.node(*dot) else { continue };
@@ -456,7 +463,7 @@ fn factor_symmetric_or_bipartite(
         (k, a.clone(), a)
     } else {
         // Bipartite: the atoms split in two sides with every term across.
-        let mut side: HashMap<Id, bool> = HashMap::new();
+        let mut side: FastMap<Id, bool> = FastMap::default();
         side.insert(atoms[0], true);
         let mut changed = true;
         while changed {

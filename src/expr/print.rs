@@ -299,11 +299,19 @@ impl Printer<'_> {
 
     fn human_inner(&mut self, id: Id, style: Style) -> Result<(), PrintError> {
         let latex = style == Style::Latex;
-        match self.node(id).clone() {
+        // The graph outlives the printer: its nodes are read in place, not cloned.
+        let g = self.g;
+        match g.node(id) {
             Node::Num(q) => {
-                let (n, d) = q.parts();
+                // Small values (nearly all) without big integers.
+                let (n, d) = match q.as_small() {
+                    Some((n, d)) => (n.unsigned_abs().to_string(), d.to_string()),
+                    None => {
+                        let (n, d) = q.parts();
+                        (n.magnitude().to_string(), d.to_string())
+                    }
+                };
                 let sign = if q.is_negative() { if latex { "-" } else { MINUS } } else { "" };
-                let n = n.magnitude().to_string();
                 if q.is_integer() {
                     self.push(&format!("{sign}{n}"))
                 } else if latex {
@@ -312,7 +320,7 @@ impl Printer<'_> {
                     self.push(&format!("{sign}{n}/{d}"))
                 }
             }
-            Node::Sym(s) => {
+            &Node::Sym(s) => {
                 let info = self.g.symbol(s);
                 let name = if latex { latex_name(&info.name, info.ty == Ty::Vector) } else { text_name(&info.name) };
                 self.push(&name)
@@ -334,13 +342,18 @@ impl Printer<'_> {
                     if i == 0 {
                         continue;
                     }
-                    // Turn `+ −x` into `− x`.
-                    let term = self.out.split_off(start);
+                    // Turn `+ −x` into `− x`, in place.
                     let minus = if latex { "-" } else { MINUS };
-                    match term.strip_prefix(minus) {
-                        Some(rest) => self.push(&format!(" {minus} {rest}"))?,
-                        None => self.push(&format!(" + {term}"))?,
+                    let joint = if self.out[start..].starts_with(minus) {
+                        self.out.replace_range(start..start + minus.len(), "");
+                        if latex { " - " } else { " − " }
+                    } else {
+                        " + "
+                    };
+                    if self.out.len() + joint.len() > MAX_OUTPUT {
+                        return Err(PrintError::TooLarge);
                     }
+                    self.out.insert_str(start, joint);
                 }
                 Ok(())
             }
@@ -350,8 +363,8 @@ impl Printer<'_> {
                 let ctx = if matches!(self.node(xs[1]), Node::Dot(_) | Node::Cross(_)) { 2 } else { 3 };
                 self.human(xs[1], style, ctx)
             }
-            Node::Mul(xs) => self.human_product(&xs, style),
-            Node::Pow([b, e]) => {
+            Node::Mul(xs) => self.human_product(xs, style),
+            &Node::Pow([b, e]) => {
                 self.human(b, style, 5)?;
                 match self.g.as_num(e).and_then(Rational::to_i64) {
                     Some(n) if !latex => self.push(&superscript(n)),
@@ -366,22 +379,22 @@ impl Printer<'_> {
                     }
                 }
             }
-            Node::Dot([a, b]) => {
+            &Node::Dot([a, b]) => {
                 self.human(a, style, 3)?;
                 self.push(if latex { " \\cdot " } else { "·" })?;
                 self.human(b, style, 3)
             }
-            Node::Cross([a, b]) => {
+            &Node::Cross([a, b]) => {
                 self.human(a, style, 3)?;
                 self.push(if latex { " \\times " } else { "×" })?;
                 self.human(b, style, 3)
             }
-            Node::Norm(a) => {
+            &Node::Norm(a) => {
                 self.push(if latex { "\\left\\lVert " } else { "|" })?;
                 self.human(a, style, 0)?;
                 self.push(if latex { " \\right\\rVert" } else { "|" })
             }
-            Node::Comp(a, axis) => {
+            &Node::Comp(a, axis) => {
                 self.human(a, style, 5)?;
                 if latex {
                     self.push(&format!("_{{{}}}", axis.name()))
@@ -389,7 +402,7 @@ impl Printer<'_> {
                     self.push(&format!(".{}", axis.name()))
                 }
             }
-            Node::Call(f, a) => {
+            &Node::Call(f, a) => {
                 if latex {
                     if f.name() == "sqrt" {
                         self.push("\\sqrt{")?;
@@ -416,7 +429,7 @@ impl Printer<'_> {
                     self.push(")")
                 }
             }
-            Node::Atan2([y, x]) => {
+            &Node::Atan2([y, x]) => {
                 self.push(if latex { "\\operatorname{atan2}\\left(" } else { "atan2(" })?;
                 self.human(y, style, 0)?;
                 self.push(", ")?;

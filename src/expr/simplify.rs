@@ -30,7 +30,7 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::{Axis, FastMap, Func, Graph, Id, Node, Ty, TypeError};
+use super::graph::{Axis, FastMap, FastSet, Func, Graph, Id, IdMap, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
 use std::rc::Rc;
@@ -58,8 +58,8 @@ pub(super) enum Canon {
 /// Keep one per graph: ids of different graphs mean different things.
 #[derive(Debug, Default)]
 pub struct Simplifier {
-    pub(super) memo: FastMap<Id, Rc<Canon>>,
-    pub(super) built: FastMap<Id, Id>,
+    pub(super) memo: IdMap<Rc<Canon>>,
+    pub(super) built: IdMap<Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
 }
@@ -78,6 +78,9 @@ impl Simplifier {
         let s = self.build(g, &c)?;
         self.built.insert(id, s);
         self.built.insert(s, s);
+        // What `build` lays out has the canonical form it came from (the round trip is
+        // tested), so `is_zero`, `content` and `scaled` on the result need not redo it.
+        self.memo.insert_if_absent(s, c);
         Ok(s)
     }
 
@@ -134,10 +137,20 @@ impl Simplifier {
         if let Some(c) = self.memo.get(&id) {
             return Ok(c.clone());
         }
-        for n in g.reachable(&[id]) {
-            if self.memo.contains_key(&n) {
+        // The nodes below `id` without a form yet; the walk stops at memoised nodes, so
+        // a new expression over old ones costs the size of what is new.
+        let mut todo = Vec::new();
+        let mut seen: FastSet<Id> = FastSet::default();
+        let mut stack = vec![id];
+        while let Some(n) = stack.pop() {
+            if self.memo.contains_key(&n) || !seen.insert(n) {
                 continue;
             }
+            todo.push(n);
+            stack.extend_from_slice(g.node(n).children());
+        }
+        todo.sort_unstable();
+        for n in todo {
             let node = g.node(n).clone();
             let c = self.canon_node(g, n, &node)?;
             self.memo.insert(n, Rc::new(c));
@@ -194,14 +207,20 @@ impl Simplifier {
                 Ty::Scalar => {
                     let mut acc = Some(Frac::zero());
                     for x in xs.iter() {
-                        acc = acc.and_then(|a| a.add(&self.scalar_of(*x)));
+                        let form = self.memo[x].clone();
+                        if let Canon::S(f) = &*form {
+                            acc = acc.and_then(|a| a.add(f));
+                        }
                     }
                     acc.map(Canon::S)
                 }
                 Ty::Vector => {
                     let mut acc = Some(VecForm::default());
                     for x in xs.iter() {
-                        acc = acc.and_then(|a| a.add(&self.vector_of(*x)));
+                        let form = self.memo[x].clone();
+                        if let Canon::V(v) = &*form {
+                            acc = acc.and_then(|a| a.add(v));
+                        }
                     }
                     acc.map(Canon::V)
                 }
@@ -223,8 +242,11 @@ impl Simplifier {
             }
             Node::Pow([b, e]) => self.power(g, *b, *e)?,
             Node::Dot([a, b]) => {
-                let (a, b) = (self.vector_of(*a), self.vector_of(*b));
-                self.dot(g, &a, &b)?.map(Canon::S)
+                let (a, b) = (self.memo[a].clone(), self.memo[b].clone());
+                match (&*a, &*b) {
+                    (Canon::V(a), Canon::V(b)) => self.dot(g, a, b)?.map(Canon::S),
+                    _ => Some(Canon::S(Frac::zero())),
+                }
             }
             Node::Cross([a, b]) => {
                 let (a, b) = (self.vector_of(*a), self.vector_of(*b));
@@ -276,7 +298,7 @@ impl Simplifier {
             // instead of being expanded into one polynomial, so simplifying the printed
             // `1/((k^6 + 1)*(k^2 + 1))` again gives the same form (idempotence).
             if n < 0
-                && let Some(f) = self.factored_power(g, b, n)
+                && let Some(f) = self.factored_power(g, b, n)?
             {
                 return Ok(Some(Canon::S(self.reduce_radicals(f))));
             }
@@ -292,20 +314,30 @@ impl Simplifier {
 
     /// `b^n` for `n < 0` with the factors of `b` kept apart: `(x y)^n = xⁿ yⁿ` and
     /// `(x^m)^n = x^(mn)` for integer `m`. `None` when a factor is zero or too large.
-    fn factored_power(&self, g: &Graph, b: Id, n: i64) -> Option<Frac> {
-        match g.node(b) {
+    fn factored_power(&mut self, g: &mut Graph, b: Id, n: i64) -> Result<Option<Frac>, TypeError> {
+        // The walk goes below `b`'s direct children, whose forms `canon` may not have
+        // needed yet (it stops at memoised nodes): they are computed here on demand.
+        match g.node(b).clone() {
             Node::Mul(xs) => {
                 let mut acc = Frac::constant(Rational::ONE);
                 for x in xs.iter() {
-                    acc = acc.mul(&self.factored_power(g, *x, n)?)?;
+                    let Some(f) = self.factored_power(g, *x, n)? else { return Ok(None) };
+                    let Some(product) = acc.mul(&f) else { return Ok(None) };
+                    acc = product;
                 }
-                Some(acc)
+                Ok(Some(acc))
             }
-            Node::Pow([x, e]) => match self.scalar_of(*e).as_constant().and_then(|q| q.to_i64()) {
-                Some(m) if m > 0 => self.factored_power(g, *x, n.checked_mul(m)?),
-                _ => self.scalar_of(b).powi(n),
-            },
-            _ => self.scalar_of(b).powi(n),
+            Node::Pow([x, e]) => {
+                let exponent = self.canon(g, e)?;
+                match scalar(&exponent).as_constant().and_then(|q| q.to_i64()) {
+                    Some(m) if m > 0 => match n.checked_mul(m) {
+                        Some(nm) => self.factored_power(g, x, nm),
+                        None => Ok(None),
+                    },
+                    _ => Ok(scalar(&*self.canon(g, b)?).powi(n)),
+                }
+            }
+            _ => Ok(scalar(&*self.canon(g, b)?).powi(n)),
         }
     }
 
@@ -430,6 +462,37 @@ impl Simplifier {
 
     /// `a·b`, bilinear over the two sums.
     fn dot(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<Frac>, TypeError> {
+        // Polynomial coefficients and atoms (the common case): collect every product's
+        // terms and sum them once, instead of merging a new sum per pair. Sums of
+        // polynomials do not depend on their order, so the result is the same.
+        let polynomial = |v: &VecForm| v.0.iter().all(|(_, s)| s.den.is_empty());
+        if polynomial(a) && polynomial(b) {
+            let mut terms: Vec<(Mono, Rational)> = Vec::new();
+            let mut general = false;
+            'pairs: for (u, s) in &a.0 {
+                for (w, t) in &b.0 {
+                    let atom = self.dot_atoms(g, *u, *w)?;
+                    if !atom.den.is_empty() {
+                        general = true;
+                        break 'pairs;
+                    }
+                    if let (Some(p), Some(q)) = (s.num.as_constant(), t.num.as_constant()) {
+                        // Constant coefficients: the atom's terms times one number.
+                        let pq = p.mul(&q);
+                        if !pq.is_zero() {
+                            terms.extend(atom.num.0.into_iter().map(|(m, c)| (m, c.mul(&pq))));
+                        }
+                        continue;
+                    }
+                    let Some(st) = s.num.mul(&t.num) else { return Ok(None) };
+                    let Some(product) = st.mul(&atom.num) else { return Ok(None) };
+                    terms.extend(product.0);
+                }
+            }
+            if !general {
+                return Ok(Some(self.reduce_radicals(Frac::poly(sum_terms(terms)))));
+            }
+        }
         let mut acc = Frac::zero();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
@@ -653,6 +716,14 @@ impl Simplifier {
         let atom = g.norm(arg)?;
         self.radicals.insert(atom, Rc::new(square));
         Ok(Some(Frac::atom(atom).scale(&content.abs())))
+    }
+}
+
+/// The scalar part of a form (zero for a vector).
+fn scalar(c: &Canon) -> Frac {
+    match c {
+        Canon::S(f) => f.clone(),
+        Canon::V(_) => Frac::zero(),
     }
 }
 
