@@ -4,7 +4,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::codegen::{Options, generate};
 use lagrange::derive::derive;
 use lagrange::model::file::RawValue;
-use lagrange::model::file::{Problem, load};
+use lagrange::model::file::{Loaded, Problem, load};
 use lagrange::model::scene::environment;
 use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::rows::RowProgram;
@@ -238,17 +238,20 @@ fn report_problems(path: &Path, text: &str, problems: &[Problem]) -> ExitCode {
     ExitCode::from(1)
 }
 
+/// Reads and validates a constraint file, or prints why not (every problem, located) and
+/// gives the exit code.
+fn load_file(path: &Path) -> Result<Loaded, ExitCode> {
+    let text = read_text(path).map_err(|e| {
+        eprintln!("{e}");
+        ExitCode::from(1)
+    })?;
+    load(&text).map_err(|problems| report_problems(path, &text, &problems))
+}
+
 fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
-    let text = match read_text(path) {
-        Ok(t) => t,
-        Err(e) => {
-            eprintln!("{e}");
-            return ExitCode::from(1);
-        }
-    };
-    let mut loaded = match load(&text) {
+    let mut loaded = match load_file(path) {
         Ok(l) => l,
-        Err(problems) => return report_problems(path, &text, &problems),
+        Err(code) => return code,
     };
     let derivation = match derive(&mut loaded.system) {
         Ok(d) => d,
@@ -281,16 +284,9 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
 }
 
 fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCode {
-    let text = match read_text(path) {
-        Ok(t) => t,
-        Err(e) => {
-            eprintln!("{e}");
-            return ExitCode::from(1);
-        }
-    };
-    let mut loaded = match load(&text) {
+    let mut loaded = match load_file(path) {
         Ok(l) => l,
-        Err(problems) => return report_problems(path, &text, &problems),
+        Err(code) => return code,
     };
     let code = match generate(&mut loaded, &Options { specialize }) {
         Ok(code) => code,
@@ -351,8 +347,7 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         eprintln!("{message}");
         ExitCode::from(1)
     };
-    let text = read_text(path).map_err(fail)?;
-    let mut loaded = load(&text).map_err(|problems| report_problems(path, &text, &problems))?;
+    let mut loaded = load_file(path)?;
     let derivation = derive(&mut loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     let mut overrides = match at {
         Some(p) => read_state(p).map_err(fail)?,
@@ -446,11 +441,7 @@ fn location(name: &str, text: &str, offset: usize) -> String {
 
 /// Reads, loads and derives a file into a runnable scenario, or reports why not.
 fn scenario(path: &Path) -> Result<lagrange::scenario::Scenario, ExitCode> {
-    let text = read_text(path).map_err(|e| {
-        eprintln!("{e}");
-        ExitCode::from(1)
-    })?;
-    let loaded = load(&text).map_err(|problems| report_problems(path, &text, &problems))?;
+    let loaded = load_file(path)?;
     lagrange::scenario::Scenario::new(loaded, &[]).map_err(|e| {
         eprintln!("error: {}: {e}", path.display());
         ExitCode::from(1)
