@@ -117,9 +117,9 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
         forces: d.forces.clone(),
     };
     let mut substituted = HashSet::new();
+    let mut map = HashMap::new();
     if options.specialize {
         let g = &mut system.graph;
-        let mut map = HashMap::new();
         for (name, value) in &loaded.values {
             let Some(s) = g.symbol_named(name) else { continue };
             let bad = || GenerateError::BadValue(name.clone());
@@ -153,6 +153,12 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             Ok(if out_of_range(g, simplified) && !out_of_range(g, replaced) { replaced } else { simplified })
         })?;
     }
+    // The code computes A from the directions, Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ, as assembled: the derivation's
+    // canonical Aₖⱼ expands each dot bilinearly (a chain's (r₁ − r₂)·(r₂ − r₃) becomes four dot
+    // products), which costs more operations and loses digits to cancellation. The doc
+    // comments keep the canonical form.
+    let masses = system.bodies.iter().map(|b| system.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
+    let a_code = assembled_a(&mut system.graph, &formulas, &masses)?;
     let g = &system.graph;
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
@@ -211,8 +217,8 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     ];
     let mut roots = Vec::new();
     let mut where_: HashMap<(usize, usize), usize> = HashMap::new();
-    for &(r, c, id) in &formulas.a {
-        doc.push(format!("- A[{r}][{c}] = {}", formula(g, id)));
+    for (&(r, c, shown), &id) in formulas.a.iter().zip(&a_code) {
+        doc.push(format!("- A[{r}][{c}] = {}", formula(g, shown)));
         // Off the diagonal the entry is used twice (A is symmetric): listing it twice makes
         // its value a `let`.
         where_.insert((r, c), roots.len());
@@ -339,6 +345,47 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     }
     out.push_str(HELPERS);
     Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
+}
+
+/// Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ for every non-zero entry of `f.a`, unsimplified: the sum over the
+/// bodies both constraints act on, terms with the same mass summed before one division.
+fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, GenerateError> {
+    let mut entries = Vec::with_capacity(f.a.len());
+    for &(k, j, _) in &f.a {
+        // (mass, dots over the bodies of that mass), in body order.
+        let mut by_mass: Vec<(Id, Vec<Id>)> = Vec::new();
+        for &(body, jk) in &f.direction[k] {
+            let Some(&(_, jj)) = f.direction[j].iter().find(|d| d.0 == body) else { continue };
+            // Signs out of the dot: (−u)·w = −(u·w) exactly, and u is then shared with the
+            // other constraint on this body (a chain's link k − 1 and k both see r₍ₖ₋₁₎ − rₖ).
+            let ((nk, uk), (nj, uj)) = (split_sign(g, jk), split_sign(g, jj));
+            let dot = g.dot(uk, uj)?;
+            let dot = if nk != nj { g.neg(dot) } else { dot };
+            match by_mass.iter_mut().find(|e| e.0 == masses[body]) {
+                Some(e) => e.1.push(dot),
+                None => by_mass.push((masses[body], vec![dot])),
+            }
+        }
+        let mut terms = Vec::with_capacity(by_mass.len());
+        for (m, dots) in by_mass {
+            let sum = g.add(dots)?;
+            let inv = g.powi(m, -1)?;
+            terms.push(g.mul(vec![sum, inv])?);
+        }
+        entries.push(g.add(terms)?);
+    }
+    Ok(entries)
+}
+
+/// `(true, u)` when `id` is `−u`, else `(false, id)`.
+fn split_sign(g: &Graph, id: Id) -> (bool, Id) {
+    if let crate::expr::Node::Mul(xs) = g.node(id)
+        && let [first, u] = xs[..]
+        && g.as_num(first).is_some_and(|q| *q == Rational::int(-1))
+    {
+        return (true, u);
+    }
+    (false, id)
 }
 
 /// Whether a constant of `id` is non-zero but rounds to 0, ∞ or near the edges of f64.
