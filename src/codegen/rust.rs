@@ -6,7 +6,7 @@
 //! each body. With one constraint λ and the forces are closed formulas; with several, λ
 //! comes from a small Gaussian elimination in the module (A λ = −b).
 //!
-//! A is a dense `[[f64; K]; K]` (`a_matrix`) up to [`DENSE_MAX`] constraints; past that, when
+//! A is a dense `[[f64; K]; K]` (`a_matrix`) up to `DENSE_MAX` (16) constraints; past that, when
 //! A is banded (a chain listed in order), only its band is written (`a_band`, row k holding
 //! A[k][k..=k + w], with `A_BANDWIDTH` = w) and λ comes from a band Cholesky in the module,
 //! so code size and work grow linearly with a chain's length. The entries of A are computed

@@ -33,7 +33,7 @@ use std::ops::Range;
 
 /// Most states per lane in batched evaluation: 2 KiB a register, and dispatch costs little
 /// next to 256 operations. Tapes with many live temporaries use narrower lanes (down to
-/// [`MIN_LANES`]) so that their register file stays in L1 (see [`L1_BYTES`]).
+/// `MIN_LANES`) so that their register file stays in L1 (see `L1_BYTES`).
 pub const LANES: usize = 256;
 /// Fewest states per lane: below this, dispatch costs more than the cache misses it saves.
 const MIN_LANES: usize = 32;
