@@ -14,8 +14,7 @@
 //! (with AVX2 when the processor has it, chosen at run time), and splits batches of more
 //! than [`PARALLEL_MIN`] states over the cores with rayon. Memory traffic is what a lane
 //! costs, so: inputs are read in place and outputs written in place (never copied through
-//! registers), squares read their operand once (`x·x + y·y`), and tapes with many live
-//! temporaries get narrower lanes so that their register file stays in L1.
+//! registers), and squares read their operand once (`x·x + y·y`).
 //!
 //! Design note: a tape interpreter rather than a JIT. Dispatch costs 1–3 ns an instruction
 //! for one state and amortises to almost nothing over a lane of states, where each
@@ -31,15 +30,10 @@ use crate::expr::{Func, Graph, Id, Symbol};
 use rayon::prelude::*;
 use std::ops::Range;
 
-/// Most states per lane in batched evaluation: 2 KiB a register, and dispatch costs little
-/// next to 256 operations. Tapes with many live temporaries use narrower lanes (down to
-/// `MIN_LANES`) so that their register file stays in L1 (see `L1_BYTES`).
+/// States per lane in batched evaluation: 2 KiB a register, and dispatch costs little next
+/// to 256 operations. (Narrower lanes that keep a big tape's register file in L1 were
+/// measured: a 10-link chain's A and b, 60 live temporaries, ran no faster at 32 lanes.)
 pub const LANES: usize = 256;
-/// Fewest states per lane: below this, dispatch costs more than the cache misses it saves.
-const MIN_LANES: usize = 32;
-/// The register file a lane may fill: half of a typical 32–48 KiB L1 data cache, leaving
-/// room for the input and output rows streaming through.
-const L1_BYTES: usize = 24 * 1024;
 /// Batches smaller than this run on the calling thread.
 pub const PARALLEL_MIN: usize = 8192;
 /// States per parallel task.
@@ -318,11 +312,7 @@ impl Tape {
                 homes[r as usize] = Home::Output(k as u32);
             }
         }
-        // The widest power-of-two lane whose register file (constants and temporaries) fits
-        // in `L1_BYTES`.
-        let in_file = homes.iter().filter(|h| **h == Home::Temp).count().max(1);
-        let fits = (L1_BYTES / (8 * in_file)).clamp(MIN_LANES, LANES);
-        let lanes = 1 << fits.ilog2();
+        let lanes = LANES;
         Tape {
             code,
             n_inputs: p.n_inputs,
