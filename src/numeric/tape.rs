@@ -136,8 +136,6 @@ pub struct Tape {
     input_ranges: Vec<Range<usize>>,
     /// Where each register lives in batched evaluation.
     homes: Vec<Home>,
-    /// States per lane in batched evaluation.
-    lanes: usize,
 }
 
 /// Registers for single-state evaluation; make one with [`Tape::scratch`] and reuse it.
@@ -312,7 +310,6 @@ impl Tape {
                 homes[r as usize] = Home::Output(k as u32);
             }
         }
-        let lanes = LANES;
         Tape {
             code,
             n_inputs: p.n_inputs,
@@ -322,7 +319,6 @@ impl Tape {
             output_ranges: p.output_ranges.clone(),
             input_ranges: p.input_ranges.clone(),
             homes,
-            lanes,
         }
     }
 
@@ -358,7 +354,7 @@ impl Tape {
 
     /// Registers for the serial part of [`eval_batch`](Tape::eval_batch).
     pub fn batch_scratch(&self) -> BatchScratch {
-        BatchScratch { regs: vec![0.0; self.n_regs * self.lanes] }
+        BatchScratch { regs: vec![0.0; self.n_regs * LANES] }
     }
 
     /// Evaluates every root at one state.
@@ -430,7 +426,7 @@ impl Tape {
     pub fn eval_batch(&self, n: usize, inputs: &[f64], scratch: &mut BatchScratch, outputs: &mut [f64]) {
         assert_eq!(inputs.len(), self.n_inputs * n, "input length");
         assert_eq!(outputs.len(), self.outputs.len() * n, "output length");
-        assert_eq!(scratch.regs.len(), self.n_regs * self.lanes, "scratch made by another tape");
+        assert_eq!(scratch.regs.len(), self.n_regs * LANES, "scratch made by another tape");
         if n == 0 {
             return;
         }
@@ -443,7 +439,7 @@ impl Tape {
         }
         let blocks = n.div_ceil(BLOCK);
         (0..blocks).into_par_iter().for_each_init(
-            || vec![0.0; self.n_regs * self.lanes],
+            || vec![0.0; self.n_regs * LANES],
             |regs, block| {
                 let range = block * BLOCK..((block + 1) * BLOCK).min(n);
                 // SAFETY: as above; each block writes only its own states `range` of every
@@ -458,24 +454,16 @@ impl Tape {
     /// # Safety
     /// `out` must point to `output_len · n` writable values that nothing else reads or
     /// writes in the states `range` during the call; `inputs` must be `input_len · n` long
-    /// and `regs` `n_regs · lanes` long.
+    /// and `regs` `n_regs · LANES` long.
     unsafe fn run_range(&self, regs: &mut [f64], inputs: &[f64], out: OutPtr, n: usize, range: Range<usize>) {
         let mut s = range.start;
         while s < range.end {
-            let len = self.lanes.min(range.end - s);
+            let len = LANES.min(range.end - s);
             for (k, &x) in self.consts.iter().enumerate() {
-                let r = (self.n_inputs + k) * self.lanes;
+                let r = (self.n_inputs + k) * LANES;
                 regs[r..r + len].fill(x);
             }
-            let at = Lane {
-                inputs: inputs.as_ptr(),
-                outputs: out.0,
-                regs: regs.as_mut_ptr(),
-                stride: self.lanes,
-                n,
-                start: s,
-                len,
-            };
+            let at = Lane { inputs: inputs.as_ptr(), outputs: out.0, regs: regs.as_mut_ptr(), n, start: s, len };
             // SAFETY: the caller's contract, and `Lane::at` stays inside the three buffers.
             unsafe {
                 self.run_lane(at);
@@ -592,7 +580,7 @@ enum Home {
     Input(u32),
     /// Row `k` of the caller's outputs: an output value is computed where it is returned.
     Output(u32),
-    /// The register file: register `r` at `r · lanes`.
+    /// The register file: register `r` at `r · LANES`.
     Temp,
 }
 
@@ -610,8 +598,6 @@ struct Lane {
     inputs: *const f64,
     outputs: *mut f64,
     regs: *mut f64,
-    /// Values per register in `regs` (the tape's lane width).
-    stride: usize,
     n: usize,
     start: usize,
     len: usize,
@@ -629,7 +615,7 @@ impl Lane {
             match home {
                 Home::Input(j) => self.inputs.add(j as usize * self.n + self.start) as *mut f64,
                 Home::Output(k) => self.outputs.add(k as usize * self.n + self.start),
-                Home::Temp => self.regs.add(reg as usize * self.stride),
+                Home::Temp => self.regs.add(reg as usize * LANES),
             }
         }
     }
