@@ -5,6 +5,9 @@
 //! `benches/generated/`, kept current by `tests/generate.rs`), the compiled tape for one
 //! state, and the tape batched over many states (structure of arrays).
 //!
+//! The bead's batch also runs on one core (calls below `PARALLEL_MIN`), so the tape's own
+//! speed can be told from what rayon adds or, on a busy machine, costs.
+//!
 //! Run: `cargo bench --bench eval`. Per-state figures of batches are the time divided by
 //! the batch size (divan also prints the throughput).
 
