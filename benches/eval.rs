@@ -5,6 +5,9 @@
 //! `benches/generated/`, kept current by `tests/generate.rs`), the compiled tape for one
 //! state, and the tape batched over many states (structure of arrays).
 //!
+//! The bead's batch also runs on one core (calls below `PARALLEL_MIN`), so the tape's own
+//! speed can be told from what rayon adds or, on a busy machine, costs.
+//!
 //! Run: `cargo bench --bench eval`. Per-state figures of batches are the time divided by
 //! the batch size (divan also prints the throughput).
 
@@ -13,6 +16,7 @@ use lagrange::derive::derive;
 use lagrange::expr::{Id, Symbol};
 use lagrange::model::file::load;
 use lagrange::numeric::Tape;
+use lagrange::numeric::tape::PARALLEL_MIN;
 
 #[allow(dead_code, clippy::all)]
 mod bead {
@@ -142,6 +146,27 @@ fn bead_batch_tape(b: Bencher, n: usize) {
     let mut out = vec![0.0; 2 * n];
     let mut scratch = tape.batch_scratch();
     b.counter(ItemsCount::new(n)).bench_local(|| tape.eval_batch(n, black_box(&inputs), &mut scratch, &mut out));
+}
+
+/// The same batch on one core: calls of fewer than `PARALLEL_MIN` states each (the rows of a
+/// call are slices of the big rows, so this copies the inputs once per call, outside timing).
+#[divan::bench(name = "bead_batch_3_tape_one_core", args = BATCHES)]
+fn bead_batch_tape_one_core(b: Bencher, n: usize) {
+    let tape = bead_tape();
+    let inputs = bead_states(n);
+    let piece = (PARALLEL_MIN / 2).min(n);
+    // Structure of arrays per piece: the rows of states s..s + piece.
+    let pieces: Vec<Vec<f64>> = (0..n)
+        .step_by(piece)
+        .map(|s| (0..7).flat_map(|row| inputs[row * n + s..row * n + s + piece].iter().copied()).collect())
+        .collect();
+    let mut out = vec![0.0; 2 * piece];
+    let mut scratch = tape.batch_scratch();
+    b.counter(ItemsCount::new(n)).bench_local(|| {
+        for p in &pieces {
+            tape.eval_batch(piece, black_box(p), &mut scratch, &mut out);
+        }
+    });
 }
 
 // ---- the 10-link chain: A and b -----------------------------------------------------------

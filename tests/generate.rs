@@ -313,3 +313,97 @@ fn specialising_extreme_values_keeps_formulas_finite() {
     let code = lagrange::codegen::generate(&mut l, &Options { specialize: true }).expect("generates");
     assert!(!code.contains("INFINITY") && !code.contains("NAN"), "{code}");
 }
+
+/// A chain of `n` links in 2D hanging from the origin, with its own mass per body.
+fn chain_file(n: usize) -> String {
+    let mut t = format!("title = \"Chain of {n} links\"\ndimension = 2\n\n[parameters]\nl = 0.5\n");
+    for i in 1..=n {
+        let _ = write!(
+            t,
+            "\n[[bodies]]\nname = \"p{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\n\
+             mass = \"m{i}\"\nforce = \"F{i}\"\n"
+        );
+    }
+    for i in 1..=n {
+        let link = if i == 1 { "r1".to_string() } else { format!("r{i} - r{}", i - 1) };
+        let _ = write!(t, "\n[[constraints]]\nname = \"link{i}\"\nexpr = \"dot({link}, {link}) = l^2\"\n");
+    }
+    t
+}
+
+/// Past `DENSE_MAX` constraints a chain's A is generated as its band only (`a_band`, no
+/// N×N array) and λ solved by band Cholesky; the compiled module agrees with the
+/// interpreter at random states: the band entry by entry, b, and λ through the residual
+/// of A λ + b = 0 with the interpreter's A.
+#[test]
+fn big_chains_get_a_banded_a_that_compiles_and_agrees() {
+    const LINKS: usize = 40;
+    let text = chain_file(LINKS);
+    let mut l = load(&text).expect("chain loads");
+    let m = module(&mut l, &Options::default()).expect("generates");
+    assert!(m.code.contains("pub const A_BANDWIDTH: usize = 1;"), "a chain is tridiagonal");
+    assert!(m.code.contains("pub fn a_band(s: &State) -> [[f64; 2]; 40]"));
+    assert!(!m.code.contains("fn a_matrix") && !m.code.contains("[[f64; 40]; 40]"), "no dense A");
+    let mut reference = load(&text).expect("chain loads");
+    let d = derive(&mut reference.system).expect("derives");
+    let mut rng = Rng(0x0c4a_1150_0000_0040);
+    let states: Vec<(Env, String)> = (0..STATES).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
+
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_band");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let module_path = dir.join("chain.rs");
+    std::fs::write(&module_path, &m.code).expect("write module");
+    let mut main = format!("#[allow(dead_code)]\nmod chain {{\n    include!({module_path:?});\n}}\nuse chain::*;\n\n");
+    main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
+    for (_, literal) in &states {
+        let _ = writeln!(main, "    let s = {literal};");
+        main.push_str("    show(&a_band(&s).concat());\n    show(&b_vector(&s));\n    show(&lambda(&s));\n");
+        main.push_str("    show(&forces(&s).concat());\n");
+    }
+    main.push_str("}\n");
+    let main_path = dir.join("harness.rs");
+    std::fs::write(&main_path, &main).expect("write harness");
+    let exe = dir.join("harness");
+    let out = Command::new(rustc())
+        .args(["--edition", "2021", "-C", "opt-level=1", "-D", "warnings", "-o"])
+        .arg(&exe)
+        .arg(&main_path)
+        .output()
+        .expect("rustc runs (set RUSTC or put rustc on PATH)");
+    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
+    let run = Command::new(&exe).output().expect("harness runs");
+    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let mut lines = stdout.lines().map(|line| -> Vec<f64> {
+        line.trim_matches(['[', ']']).split(", ").map(|x| x.parse().expect("a number")).collect()
+    });
+    let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-9 * scale.max(1.0);
+    for (env, _) in &states {
+        let want = expected(&reference, &d, env);
+        let get = |name: &str| &want.iter().find(|e| e.0 == name).expect(name).1;
+        let (a, b, jac) = (get("a_matrix"), get("b_vector"), get("jacobian"));
+        let (band, b_got, lambda, forces) =
+            (lines.next().unwrap(), lines.next().unwrap(), lines.next().unwrap(), lines.next().unwrap());
+        let a_scale = a.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for r in 0..LINKS {
+            for w in 0..2 {
+                let want = if r + w < LINKS { a[r * LINKS + r + w] } else { 0.0 };
+                assert!(close(band[r * 2 + w], want, a_scale), "A[{r}][{}]: {} vs {want}", r + w, band[r * 2 + w]);
+            }
+        }
+        let b_scale = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(b_got.iter().zip(b).all(|(x, y)| close(*x, *y, b_scale)), "b: {b_got:?} vs {b:?}");
+        // A λ + b = 0 with the interpreter's A and b.
+        let l_scale = lambda.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for r in 0..LINKS {
+            let residual: f64 = (0..LINKS).map(|c| a[r * LINKS + c] * lambda[c]).sum::<f64>() + b[r];
+            assert!(residual.abs() <= 1e-9 * (a_scale * l_scale + b_scale), "row {r}: residual {residual}");
+        }
+        // Forces = Jᵀ λ with the interpreter's J.
+        for (i, f) in forces.iter().enumerate() {
+            let want: f64 = (0..LINKS).map(|r| lambda[r] * jac[r * 2 * LINKS + i]).sum();
+            assert!(close(*f, want, l_scale), "force component {i}: {f} vs {want}");
+        }
+    }
+    assert!(lines.next().is_none());
+}

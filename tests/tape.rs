@@ -294,3 +294,31 @@ fn a_malformed_program_is_refused_not_run() {
     let built = std::panic::catch_unwind(|| Tape::from_program(&p));
     assert!(built.is_err(), "a forward reference must not compile to a tape");
 }
+
+#[test]
+fn batch_outputs_that_are_inputs_constants_or_repeated_agree() {
+    let mut system = playground();
+    let r = system.bodies[0].position;
+    let mut roots = Vec::new();
+    for text in ["r", "dot(r, r)", "2", "dot(r, r)", "r", "sqrt(dot(r, r)) * r", "dot(r, r) + 1"] {
+        roots.push(system.expression(text).expect(text));
+    }
+    let tape = Tape::compile(&system.graph, &roots, &[r]).expect("compiles");
+    // Odd sizes: partial lanes, and past `PARALLEL_MIN` the parallel path.
+    for n in [1, 3, 257, lagrange::numeric::tape::PARALLEL_MIN + 5] {
+        let mut rng = Rng(n as u64);
+        let inputs: Vec<f64> = (0..tape.input_len() * n).map(|_| rng.range(-2.0, 2.0)).collect();
+        let mut batch = vec![f64::NAN; tape.output_len() * n];
+        tape.eval_batch(n, &inputs, &mut tape.batch_scratch(), &mut batch);
+        let (mut scratch, mut one, mut out) = (tape.scratch(), vec![0.0; 3], vec![0.0; tape.output_len()]);
+        for s in 0..n {
+            for (j, x) in one.iter_mut().enumerate() {
+                *x = inputs[j * n + s];
+            }
+            tape.eval(&one, &mut scratch, &mut out);
+            for (k, x) in out.iter().enumerate() {
+                assert_eq!(x.to_bits(), batch[k * n + s].to_bits(), "n {n} state {s} output {k}");
+            }
+        }
+    }
+}

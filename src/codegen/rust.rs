@@ -6,6 +6,13 @@
 //! each body. With one constraint λ and the forces are closed formulas; with several, λ
 //! comes from a small Gaussian elimination in the module (A λ = −b).
 //!
+//! A is a dense `[[f64; K]; K]` (`a_matrix`) up to `DENSE_MAX` (16) constraints; past that, when
+//! A is banded (a chain listed in order), only its band is written (`a_band`, row k holding
+//! A[k][k..=k + w], with `A_BANDWIDTH` = w) and λ comes from a band Cholesky in the module,
+//! so code size and work grow linearly with a chain's length. The entries of A are computed
+//! from the directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the canonical, bilinearly
+//! expanded form the doc comments show: fewer operations and no cancellation.
+//!
 //! Each function body is the scalar [`Program`] of its formulas: values used more than once
 //! become `let` bindings, values used once are written inline. `--specialize` substitutes
 //! the file's parameter values first and simplifies again, so terms that vanish for this
@@ -47,6 +54,9 @@ pub enum GenerateError {
 
 /// Longest formula quoted in a doc comment, in characters.
 const MAX_DOC_FORMULA: usize = 400;
+/// Most constraints for which A is written as a dense K×K array; past this, a banded A
+/// (a chain's) is written as its band only and solved by band Cholesky.
+const DENSE_MAX: usize = 16;
 /// Deepest expression written inline; deeper values get a `let`, so rustc never sees a
 /// pathologically nested expression.
 const MAX_INLINE_DEPTH: u32 = 24;
@@ -117,9 +127,9 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
         forces: d.forces.clone(),
     };
     let mut substituted = HashSet::new();
+    let mut map = HashMap::new();
     if options.specialize {
         let g = &mut system.graph;
-        let mut map = HashMap::new();
         for (name, value) in &loaded.values {
             let Some(s) = g.symbol_named(name) else { continue };
             let bad = || GenerateError::BadValue(name.clone());
@@ -153,6 +163,12 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             Ok(if out_of_range(g, simplified) && !out_of_range(g, replaced) { replaced } else { simplified })
         })?;
     }
+    // The code computes A from the directions, Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ, as assembled: the derivation's
+    // canonical Aₖⱼ expands each dot bilinearly (a chain's (r₁ − r₂)·(r₂ − r₃) becomes four dot
+    // products), which costs more operations and loses digits to cancellation. The doc
+    // comments keep the canonical form.
+    let masses = system.bodies.iter().map(|b| system.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
+    let a_code = assembled_a(&mut system.graph, &formulas, &masses)?;
     let g = &system.graph;
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
@@ -211,8 +227,8 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     ];
     let mut roots = Vec::new();
     let mut where_: HashMap<(usize, usize), usize> = HashMap::new();
-    for &(r, c, id) in &formulas.a {
-        doc.push(format!("- A[{r}][{c}] = {}", formula(g, id)));
+    for (&(r, c, shown), &id) in formulas.a.iter().zip(&a_code) {
+        doc.push(format!("- A[{r}][{c}] = {}", formula(g, shown)));
         // Off the diagonal the entry is used twice (A is symmetric): listing it twice makes
         // its value a `let`.
         where_.insert((r, c), roots.len());
@@ -223,16 +239,40 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
         }
     }
     let (lets, exprs) = ctx.body(&roots)?;
-    let rows: Vec<String> = (0..k)
-        .map(|r| {
-            array(
-                &(0..k)
+    let bandwidth = formulas.a.iter().map(|&(r, c, _)| r.abs_diff(c)).max().unwrap_or(0);
+    let banded = k > DENSE_MAX && 2 * (bandwidth + 1) <= k;
+    if banded {
+        // Only the band: row r holds A[r][r], A[r][r + 1], …, A[r][r + w] (zeros past the end).
+        let rows: Vec<String> = (0..k)
+            .map(|r| {
+                let band: Vec<String> = (r..=r + bandwidth)
                     .map(|c| where_.get(&(r, c)).map_or("0.0".to_string(), |&i| exprs[i].clone()))
-                    .collect::<Vec<_>>(),
-            )
-        })
-        .collect();
-    emit_fn(&mut out, &doc, "a_matrix", &format!("[[f64; {k}]; {k}]"), &lets, &array(&rows));
+                    .collect();
+                array(&band)
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "/// Half-bandwidth of A: Aₖⱼ = 0 when |k − j| > A_BANDWIDTH.\npub const A_BANDWIDTH: usize = {bandwidth};\n"
+        );
+        doc.push(String::new());
+        doc.push(format!(
+            "Stored as a band (A is symmetric): row k holds A[k][k], A[k][k + 1], …, A[k][k + {bandwidth}], \
+             zeros past the last column."
+        ));
+        emit_fn(&mut out, &doc, "a_band", &format!("[[f64; {}]; {k}]", bandwidth + 1), &lets, &array(&rows));
+    } else {
+        let rows: Vec<String> = (0..k)
+            .map(|r| {
+                array(
+                    &(0..k)
+                        .map(|c| where_.get(&(r, c)).map_or("0.0".to_string(), |&i| exprs[i].clone()))
+                        .collect::<Vec<_>>(),
+                )
+            })
+            .collect();
+        emit_fn(&mut out, &doc, "a_matrix", &format!("[[f64; {k}]; {k}]"), &lets, &array(&rows));
+    }
 
     // b
     let mut doc = vec!["b of A λ + b = 0: bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ.".to_string()];
@@ -309,13 +349,23 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             emit_fn(&mut out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
         }
         _ => {
-            let _ = writeln!(
-                out,
-                "/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial\n\
-                 /// pivoting; NaN when A is singular, e.g. redundant constraints).\n\
-                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                 let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
-            );
+            if banded {
+                let _ = writeln!(
+                    out,
+                    "/// The multipliers λ: the solution of A λ = −b (band Cholesky, O(K w²); NaN when A\n\
+                     /// is singular, e.g. redundant constraints).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let b = b_vector(s);\n    solve_band(a_band(s), b.map(|x| -x))\n}}\n"
+                );
+            } else {
+                let _ = writeln!(
+                    out,
+                    "/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial\n\
+                     /// pivoting; NaN when A is singular, e.g. redundant constraints).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
+                );
+            }
             let _ = writeln!(
                 out,
                 "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
@@ -334,11 +384,52 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                     comment_text(body_names[body])
                 );
             }
-            out.push_str(SOLVE);
+            out.push_str(if banded { SOLVE_BAND } else { SOLVE });
         }
     }
     out.push_str(HELPERS);
     Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
+}
+
+/// Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ for every non-zero entry of `f.a`, unsimplified: the sum over the
+/// bodies both constraints act on, terms with the same mass summed before one division.
+fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, GenerateError> {
+    let mut entries = Vec::with_capacity(f.a.len());
+    for &(k, j, _) in &f.a {
+        // (mass, dots over the bodies of that mass), in body order.
+        let mut by_mass: Vec<(Id, Vec<Id>)> = Vec::new();
+        for &(body, jk) in &f.direction[k] {
+            let Some(&(_, jj)) = f.direction[j].iter().find(|d| d.0 == body) else { continue };
+            // Signs out of the dot: (−u)·w = −(u·w) exactly, and u is then shared with the
+            // other constraint on this body (a chain's link k − 1 and k both see r₍ₖ₋₁₎ − rₖ).
+            let ((nk, uk), (nj, uj)) = (split_sign(g, jk), split_sign(g, jj));
+            let dot = g.dot(uk, uj)?;
+            let dot = if nk != nj { g.neg(dot) } else { dot };
+            match by_mass.iter_mut().find(|e| e.0 == masses[body]) {
+                Some(e) => e.1.push(dot),
+                None => by_mass.push((masses[body], vec![dot])),
+            }
+        }
+        let mut terms = Vec::with_capacity(by_mass.len());
+        for (m, dots) in by_mass {
+            let sum = g.add(dots)?;
+            let inv = g.powi(m, -1)?;
+            terms.push(g.mul(vec![sum, inv])?);
+        }
+        entries.push(g.add(terms)?);
+    }
+    Ok(entries)
+}
+
+/// `(true, u)` when `id` is `−u`, else `(false, id)`.
+fn split_sign(g: &Graph, id: Id) -> (bool, Id) {
+    if let crate::expr::Node::Mul(xs) = g.node(id)
+        && let [first, u] = xs[..]
+        && g.as_num(first).is_some_and(|q| *q == Rational::int(-1))
+    {
+        return (true, u);
+    }
+    (false, id)
 }
 
 /// Whether a constant of `id` is non-zero but rounds to 0, ∞ or near the edges of f64.
@@ -662,6 +753,49 @@ fn solve<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> [f64; K] {
         x[row] = acc / a[row][row];
     }
     x
+}
+
+";
+
+const SOLVE_BAND: &str = "/// Solves `a x = b` for a symmetric positive definite band matrix given as its upper band
+/// (`a[i][d]` = A[i][i + d]) by Cholesky, A = RᵀR, in place; NaN if A is not positive definite.
+#[allow(clippy::needless_range_loop)]
+fn solve_band<const K: usize, const B: usize>(mut a: [[f64; B]; K], mut b: [f64; K]) -> [f64; K] {
+    let w = B - 1;
+    for i in 0..K {
+        for d in 0..B.min(K - i) {
+            let j = i + d;
+            // A[i][j] − Σₚ R[p][i] R[p][j] over the rows p < i whose band reaches column j.
+            let mut acc = a[i][d];
+            for p in j.saturating_sub(w)..i {
+                acc -= a[p][i - p] * a[p][j - p];
+            }
+            if d == 0 {
+                if !(acc > 0.0 && acc.is_finite()) {
+                    return [f64::NAN; K];
+                }
+                a[i][0] = acc.sqrt();
+            } else {
+                a[i][d] = acc / a[i][0];
+            }
+        }
+    }
+    // Rᵀ y = b, then R x = y (in place in b).
+    for i in 0..K {
+        let mut acc = b[i];
+        for p in i.saturating_sub(w)..i {
+            acc -= a[p][i - p] * b[p];
+        }
+        b[i] = acc / a[i][0];
+    }
+    for i in (0..K).rev() {
+        let mut acc = b[i];
+        for q in i + 1..K.min(i + B) {
+            acc -= a[i][q - i] * b[q];
+        }
+        b[i] = acc / a[i][0];
+    }
+    b
 }
 
 ";

@@ -10,8 +10,11 @@
 //!
 //! [`Tape::eval_batch`] evaluates many states at once, stored as structure of arrays
 //! (input slot `j` of state `s` at `inputs[j * n + s]`, outputs alike). It runs each
-//! instruction over a lane of [`LANES`] states, an inner loop the compiler vectorises, and
-//! splits batches of more than [`PARALLEL_MIN`] states over the cores with rayon.
+//! instruction over a lane of up to [`LANES`] states, an inner loop the compiler vectorises
+//! (with AVX2 when the processor has it, chosen at run time), and splits batches of more
+//! than [`PARALLEL_MIN`] states over the cores with rayon. Memory traffic is what a lane
+//! costs, so: inputs are read in place and outputs written in place (never copied through
+//! registers), and squares read their operand once (`x·x + y·y`).
 //!
 //! Design note: a tape interpreter rather than a JIT. Dispatch costs 1–3 ns an instruction
 //! for one state and amortises to almost nothing over a lane of states, where each
@@ -27,8 +30,9 @@ use crate::expr::{Func, Graph, Id, Symbol};
 use rayon::prelude::*;
 use std::ops::Range;
 
-/// States per lane in batched evaluation: 2 KiB a register, so a dozen live registers fit
-/// in L1, and dispatch costs little next to 256 operations (64 measured ~20 % slower).
+/// States per lane in batched evaluation: 2 KiB a register, and dispatch costs little next
+/// to 256 operations. (Narrower lanes that keep a big tape's register file in L1 were
+/// measured: a 10-link chain's A and b, 60 live temporaries, ran no faster at 32 lanes.)
 pub const LANES: usize = 256;
 /// Batches smaller than this run on the calling thread.
 pub const PARALLEL_MIN: usize = 8192;
@@ -70,6 +74,10 @@ enum Code {
     Atan2,
     Norm2,
     Norm3,
+    /// `a·a`.
+    Sq,
+    /// `a·a + c·c` (a vector's squared length, `d·d` in 2D).
+    SqAddSq,
     /// `a·b + c·e`.
     MulMulAdd,
     /// `a·b − c·e`.
@@ -126,6 +134,8 @@ pub struct Tape {
     outputs: Vec<u32>,
     output_ranges: Vec<Range<usize>>,
     input_ranges: Vec<Range<usize>>,
+    /// Where each register lives in batched evaluation.
+    homes: Vec<Home>,
 }
 
 /// Registers for single-state evaluation; make one with [`Tape::scratch`] and reuse it.
@@ -190,7 +200,13 @@ impl Tape {
                         (Some((p, q)), Some((r, t))) => {
                             absorbed[a as usize] = true;
                             absorbed[b as usize] = true;
-                            (if sub { Code::MulMulSub } else { Code::MulMulAdd }, 0, [p, q, r, t])
+                            // Squares read each operand once: half the loads of a batched lane.
+                            let code = match (sub, p == q && r == t) {
+                                (false, true) => Code::SqAddSq,
+                                (false, false) => Code::MulMulAdd,
+                                (true, _) => Code::MulMulSub,
+                            };
+                            (code, 0, [p, q, r, t])
                         }
                         (Some((p, q)), None) => {
                             absorbed[a as usize] = true;
@@ -203,6 +219,7 @@ impl Tape {
                         (None, None) => (if sub { Code::Sub } else { Code::Add }, 0, [a, b, a, a]),
                     }
                 }
+                Op::Mul(a, b) if a == b => (Code::Sq, 0, [a; 4]),
                 Op::Mul(a, b) => (Code::Mul, 0, [a, b, a, a]),
                 Op::Div(a, b) => (Code::Div, 0, [a, b, a, a]),
                 Op::Neg(a) => match (single_mul(a), p.ops[a as usize]) {
@@ -282,14 +299,26 @@ impl Tape {
                 && p.outputs.iter().all(|&o| valid(reg[o as usize])),
             "malformed program: an operand is not computed before it is used"
         );
+        let outputs: Vec<u32> = p.outputs.iter().map(|&o| reg[o as usize]).collect();
+        // Batched homes: inputs stay in the caller's rows; a computed output is written
+        // straight into its output row (its register is never reused: outputs are read "at
+        // the end"); constants and the other temporaries live in the register file.
+        let mut homes: Vec<Home> =
+            (0..n_regs).map(|r| if r < p.n_inputs { Home::Input(r as u32) } else { Home::Temp }).collect();
+        for (k, &r) in outputs.iter().enumerate() {
+            if r >= first_temp && homes[r as usize] == Home::Temp {
+                homes[r as usize] = Home::Output(k as u32);
+            }
+        }
         Tape {
             code,
             n_inputs: p.n_inputs,
             consts,
             n_regs,
-            outputs: p.outputs.iter().map(|&o| reg[o as usize]).collect(),
+            outputs,
             output_ranges: p.output_ranges.clone(),
             input_ranges: p.input_ranges.clone(),
+            homes,
         }
     }
 
@@ -365,6 +394,11 @@ impl Tape {
                 Code::Atan2 => a.atan2(b),
                 Code::Norm2 => norm2(a, b),
                 Code::Norm3 => norm3(a, b, reg(i.c)),
+                Code::Sq => a * a,
+                Code::SqAddSq => {
+                    let c = reg(i.c);
+                    a * a + c * c
+                }
                 Code::MulMulAdd => a * b + reg(i.c) * reg(i.e),
                 Code::MulMulSub => a * b - reg(i.c) * reg(i.e),
                 Code::MulAdd => a * b + reg(i.c),
@@ -384,8 +418,7 @@ impl Tape {
     /// Evaluates every root at `n` states stored as structure of arrays: input slot `j` of
     /// state `s` is `inputs[j * n + s]`, output component `k` of state `s` goes to
     /// `outputs[k * n + s]`. Batches of [`PARALLEL_MIN`] states or more run in parallel;
-    /// that path allocates once per call (task bookkeeping and a register file per worker),
-    /// the serial path never does.
+    /// that path allocates a register file per worker, the serial path never allocates.
     ///
     /// # Panics
     /// If the slices are not `n` times [`input_len`](Tape::input_len) and
@@ -397,76 +430,108 @@ impl Tape {
         if n == 0 {
             return;
         }
+        let out = OutPtr(outputs.as_mut_ptr());
         if n < PARALLEL_MIN || rayon::current_num_threads() < 2 {
-            self.run_range(&mut scratch.regs, inputs, n, 0..n, |k, at, lane| {
-                outputs[k * n + at..k * n + at + lane.len()].copy_from_slice(lane);
-            });
+            // SAFETY: `outputs` is `output_len · n` long (asserted) and borrowed mutably for
+            // the whole call; `inputs` is `input_len · n` long.
+            unsafe { self.run_range(&mut scratch.regs, inputs, out, n, 0..n) };
             return;
         }
-        // Each task owns, for every output, the piece of its row that holds its block of states.
         let blocks = n.div_ceil(BLOCK);
-        let mut pieces: Vec<Vec<&mut [f64]>> = (0..blocks).map(|_| Vec::with_capacity(self.outputs.len())).collect();
-        for row in outputs.chunks_mut(n) {
-            for (block, piece) in row.chunks_mut(BLOCK).enumerate() {
-                pieces[block].push(piece);
-            }
-        }
-        pieces.into_par_iter().enumerate().for_each_init(
+        (0..blocks).into_par_iter().for_each_init(
             || vec![0.0; self.n_regs * LANES],
-            |regs, (block, mut rows)| {
-                let start = block * BLOCK;
-                let end = (start + BLOCK).min(n);
-                self.run_range(regs, inputs, n, start..end, |k, at, lane| {
-                    rows[k][at - start..at - start + lane.len()].copy_from_slice(lane);
-                });
+            |regs, block| {
+                let range = block * BLOCK..((block + 1) * BLOCK).min(n);
+                // SAFETY: as above; each block writes only its own states `range` of every
+                // output row, and the blocks are disjoint.
+                unsafe { self.run_range(regs, inputs, out, n, range) };
             },
         );
     }
 
-    /// Runs the states `range` lane by lane; `store(k, s, values)` receives output `k` of
-    /// the states `s..s + values.len()`.
-    fn run_range(
-        &self,
-        regs: &mut [f64],
-        inputs: &[f64],
-        n: usize,
-        range: Range<usize>,
-        mut store: impl FnMut(usize, usize, &[f64]),
-    ) {
+    /// Runs the states `range` lane by lane, writing their outputs into the rows at `out`.
+    ///
+    /// # Safety
+    /// `out` must point to `output_len · n` writable values that nothing else reads or
+    /// writes in the states `range` during the call; `inputs` must be `input_len · n` long
+    /// and `regs` `n_regs · LANES` long.
+    unsafe fn run_range(&self, regs: &mut [f64], inputs: &[f64], out: OutPtr, n: usize, range: Range<usize>) {
         let mut s = range.start;
         while s < range.end {
             let len = LANES.min(range.end - s);
-            // Inputs are read where they are (rows of `inputs`), not copied into registers.
             for (k, &x) in self.consts.iter().enumerate() {
                 let r = (self.n_inputs + k) * LANES;
                 regs[r..r + len].fill(x);
             }
-            self.run_lane(regs, Rows { inputs, n, start: s, count: self.n_inputs }, len);
-            for (k, &reg) in self.outputs.iter().enumerate() {
-                let r = reg as usize;
-                // An output may be an input itself (the direction of `r·r` is `r`).
-                let lane = if r < self.n_inputs {
-                    &inputs[r * n + s..r * n + s + len]
-                } else {
-                    &regs[r * LANES..r * LANES + len]
-                };
-                store(k, s, lane);
+            let at = Lane { inputs: inputs.as_ptr(), outputs: out.0, regs: regs.as_mut_ptr(), n, start: s, len };
+            // SAFETY: the caller's contract, and `Lane::at` stays inside the three buffers.
+            unsafe {
+                self.run_lane(at);
+                // Outputs computed elsewhere (an input, a constant, a value output twice).
+                for (k, &reg) in self.outputs.iter().enumerate() {
+                    if self.homes[reg as usize] != Home::Output(k as u32) {
+                        let from = at.get(self.homes[reg as usize], reg);
+                        let to = at.get(Home::Output(k as u32), reg);
+                        std::ptr::copy_nonoverlapping(from, to, len);
+                    }
+                }
             }
             s += len;
         }
     }
 
-    /// One pass of the tape over `len` states: input registers read from `rows`, the others
-    /// held in `regs` (register `k` at `k * LANES`).
-    fn run_lane(&self, regs: &mut [f64], rows: Rows<'_>, len: usize) {
+    /// One pass of the tape over one lane of states, with the widest vector instructions
+    /// the processor has (AVX2 on x86-64 when present: the same IEEE operations four at a
+    /// time, no FMA, so results are bitwise those of [`eval`](Tape::eval)).
+    ///
+    /// # Safety
+    /// As [`run_range`](Tape::run_range), for the lane `at`.
+    unsafe fn run_lane(&self, at: Lane) {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2 (checked); the rest is the caller's contract.
+            return unsafe { self.run_lane_avx2(at) };
+        }
+        // SAFETY: the caller's contract.
+        unsafe { self.run_lane_any(at) }
+    }
+
+    /// [`run_lane_any`](Tape::run_lane_any) compiled for AVX2.
+    ///
+    /// # Safety
+    /// The processor must have AVX2; otherwise as [`run_range`](Tape::run_range).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn run_lane_avx2(&self, at: Lane) {
+        // SAFETY: the caller's contract.
+        unsafe { self.run_lane_any(at) }
+    }
+
+    /// One pass of the tape over one lane of states. Operands are read where they live
+    /// (input rows, output rows, or the register file) and results written where they live.
+    ///
+    /// # Safety
+    /// As [`run_range`](Tape::run_range), for the lane `at`.
+    #[inline(always)]
+    unsafe fn run_lane_any(&self, at: Lane) {
+        let len = at.len;
         for i in &self.code {
-            let (out, [a, b, c, e]) = lanes(regs, rows, i, len);
+            // SAFETY: every register has its own home (inputs, outputs and temporaries are
+            // disjoint memory), and `d` is never an operand, so the destination lane does not
+            // overlap any operand lane; each lane is `len` values inside its buffer.
+            let (out, [a, b, c, e]) = unsafe {
+                let lane = |k: u32| std::slice::from_raw_parts(at.get(*self.homes.get_unchecked(k as usize), k), len);
+                let out = std::slice::from_raw_parts_mut(at.get(*self.homes.get_unchecked(i.d as usize), i.d), len);
+                (out, [lane(i.a), lane(i.b), lane(i.c), lane(i.e)])
+            };
             match i.code {
                 Code::Add => zip2(out, a, b, |x, y| x + y),
                 Code::Sub => zip2(out, a, b, |x, y| x - y),
                 Code::Mul => zip2(out, a, b, |x, y| x * y),
                 Code::Div => zip2(out, a, b, |x, y| x / y),
                 Code::Neg => zip1(out, a, |x| -x),
+                Code::Sq => zip1(out, a, |x| x * x),
+                Code::SqAddSq => zip2(out, a, c, |x, y| x * x + y * y),
                 Code::Powi => zip1(out, a, |x| x.powi(i.imm)),
                 Code::Powf => zip2(out, a, b, eval::pow),
                 Code::Sqrt => zip1(out, a, f64::sqrt),
@@ -508,34 +573,52 @@ impl Tape {
     }
 }
 
-/// Where the input registers of a lane are: slot `k` of the states `start..` is
-/// `inputs[k * n + start..]`.
-#[derive(Clone, Copy)]
-struct Rows<'a> {
-    inputs: &'a [f64],
-    n: usize,
-    start: usize,
-    count: usize,
+/// Where a register's lane lives in batched evaluation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Home {
+    /// Row `j` of the caller's inputs (read in place, never copied).
+    Input(u32),
+    /// Row `k` of the caller's outputs: an output value is computed where it is returned.
+    Output(u32),
+    /// The register file: register `r` at `r · LANES`.
+    Temp,
 }
 
-/// The destination lane of `i` (mutable) and its four operand lanes.
-fn lanes<'r>(regs: &'r mut [f64], rows: Rows<'r>, i: &Inst, len: usize) -> (&'r mut [f64], [&'r [f64]; 4]) {
-    let d = i.d as usize;
-    let (below, rest) = regs.split_at_mut(d * LANES);
-    let (out, above) = rest.split_at_mut(LANES);
-    let (below, above): (&[f64], &[f64]) = (below, above);
-    // `d` is never an operand (see `Inst`), so every operand lies below or above it.
-    let get = |k: u32| {
-        let k = k as usize;
-        if k < rows.count {
-            &rows.inputs[k * rows.n + rows.start..k * rows.n + rows.start + len]
-        } else if k < d {
-            &below[k * LANES..k * LANES + len]
-        } else {
-            &above[(k - d - 1) * LANES..(k - d - 1) * LANES + len]
+/// The output buffer of a batch, shared by the parallel tasks (each writes its own states).
+#[derive(Clone, Copy)]
+struct OutPtr(*mut f64);
+// SAFETY: tasks write disjoint state ranges of the buffer (see `eval_batch`).
+unsafe impl Send for OutPtr {}
+// SAFETY: as above.
+unsafe impl Sync for OutPtr {}
+
+/// One lane of a batch: the states `start..start + len` of `n`.
+#[derive(Clone, Copy)]
+struct Lane {
+    inputs: *const f64,
+    outputs: *mut f64,
+    regs: *mut f64,
+    n: usize,
+    start: usize,
+    len: usize,
+}
+
+impl Lane {
+    /// The first value of register `reg`'s lane, living at `home`.
+    ///
+    /// # Safety
+    /// The row or register must exist in its buffer (`Tape::homes` guarantees it).
+    #[inline(always)]
+    unsafe fn get(self, home: Home, reg: u32) -> *mut f64 {
+        // SAFETY: the caller's; rows are `n` long and `start + len ≤ n`.
+        unsafe {
+            match home {
+                Home::Input(j) => self.inputs.add(j as usize * self.n + self.start) as *mut f64,
+                Home::Output(k) => self.outputs.add(k as usize * self.n + self.start),
+                Home::Temp => self.regs.add(reg as usize * LANES),
+            }
         }
-    };
-    (&mut out[..len], [get(i.a), get(i.b), get(i.c), get(i.e)])
+    }
 }
 
 #[inline(always)]
