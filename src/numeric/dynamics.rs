@@ -8,7 +8,7 @@
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
 use super::integrate::{Field, Vectors};
-use super::rows::{RowProgram, Rows};
+use super::rows::{RowProgram, RowScratch, Rows};
 use super::solve::{Solution, solve};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -45,6 +45,7 @@ pub struct BaumgarteTerms {
 pub struct Dynamics<'s> {
     system: &'s System,
     program: RowProgram,
+    scratch: RowScratch,
     env: Env,
     /// Added to the bias of every row before the acceleration solve (None: no Baumgarte).
     pub baumgarte: Option<BaumgarteTerms>,
@@ -62,7 +63,17 @@ impl<'s> Dynamics<'s> {
     /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
-        Dynamics { system, program, env, baumgarte: None, velocity_dependent_forces: true, evaluations: 0, step: 0 }
+        let scratch = program.scratch();
+        Dynamics {
+            system,
+            program,
+            scratch,
+            env,
+            baumgarte: None,
+            velocity_dependent_forces: true,
+            evaluations: 0,
+            step: 0,
+        }
     }
 
     pub fn system(&self) -> &'s System {
@@ -77,7 +88,10 @@ impl<'s> Dynamics<'s> {
             self.env.set(body.position, Value::Vector(q[i]));
             self.env.set(body.velocity, Value::Vector(v[i]));
         }
-        let rows = self.program.evaluate(self.system, &self.env).map_err(|error| SimError::Eval { time: t, error })?;
+        let mut rows = Rows::default();
+        self.program
+            .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)
+            .map_err(|error| SimError::Eval { time: t, error })?;
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
         for (k, row) in rows.rows.iter().enumerate() {
             let bad = [row.value, row.rate, row.bias]
