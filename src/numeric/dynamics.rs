@@ -8,6 +8,7 @@
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
 use super::integrate::{Field, Vectors};
+use super::rescale::Unit;
 use super::rows::{RowProgram, RowScratch, Rows};
 use super::solve::{Solution, solve};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -40,6 +41,11 @@ pub struct BaumgarteTerms {
     pub two_alpha: f64,
     pub beta_squared: f64,
 }
+
+/// Scenes whose lengths lie within 2^±32 of 1 run in their own unit: squares and products of
+/// a few such numbers stay far from the ends of the f64 range, and the solve's absolute
+/// thresholds (a contact's `length_scale` of 1) still mean something.
+pub const NATURAL_RANGE: i64 = 32;
 
 /// The equations of motion of a system at any state.
 pub struct Dynamics<'s> {
@@ -78,6 +84,22 @@ impl<'s> Dynamics<'s> {
 
     pub fn system(&self) -> &'s System {
         self.system
+    }
+
+    /// Moves to a length unit near the scene's size when `env`'s lengths are beyond 2^±[`NATURAL_RANGE`]
+    /// and the rows are verifiably homogeneous (`numeric::rescale::Unit`): from then on
+    /// [`rows`](Dynamics::rows) expects and returns numbers in that unit. Returns the unit,
+    /// or `None` when the numbers stay as they are.
+    pub fn choose_unit(&mut self, env: &Env) -> Result<Option<Unit>, SimError> {
+        let Some(k) = Unit::exponent_at(self.system, env).filter(|k| k.abs() > NATURAL_RANGE) else {
+            return Ok(None);
+        };
+        let unit =
+            Unit::verified(&self.program, self.system, env, k).map_err(|error| SimError::Eval { time: 0.0, error })?;
+        if let Some(unit) = &unit {
+            self.env = unit.to_unit(&self.env);
+        }
+        Ok(unit)
     }
 
     /// The rows at (t, q, v): the one place states become numbers.
