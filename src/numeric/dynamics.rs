@@ -52,6 +52,9 @@ pub struct Dynamics<'s> {
     system: &'s System,
     program: RowProgram,
     scratch: RowScratch,
+    /// Rows handed back by [`recycle`](Dynamics::recycle), refilled by the next evaluation
+    /// so that a step allocates nothing once the pool is warm.
+    spare: Vec<Rows>,
     env: Env,
     /// Added to the bias of every row before the acceleration solve (None: no Baumgarte).
     pub baumgarte: Option<BaumgarteTerms>,
@@ -74,6 +77,7 @@ impl<'s> Dynamics<'s> {
             system,
             program,
             scratch,
+            spare: Vec::new(),
             env,
             baumgarte: None,
             velocity_dependent_forces: true,
@@ -110,7 +114,7 @@ impl<'s> Dynamics<'s> {
             self.env.set(body.position, Value::Vector(q[i]));
             self.env.set(body.velocity, Value::Vector(v[i]));
         }
-        let mut rows = Rows::default();
+        let mut rows = self.spare.pop().unwrap_or_default();
         self.program
             .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
@@ -134,6 +138,14 @@ impl<'s> Dynamics<'s> {
         Ok(rows)
     }
 
+    /// Gives rows back for reuse by the next [`rows`](Dynamics::rows) (optional: dropping
+    /// them is correct, only slower).
+    pub fn recycle(&mut self, rows: Rows) {
+        if self.spare.len() < 4 {
+            self.spare.push(rows);
+        }
+    }
+
     /// Solves for λ at `rows` (Baumgarte terms added first when set).
     pub fn solve(&self, rows: &mut Rows) -> Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
@@ -153,6 +165,7 @@ impl Field for Dynamics<'_> {
         let mut rows = self.rows(t, q, v)?;
         let solution = self.solve(&mut rows);
         a.copy_from_slice(&solution.acceleration);
+        self.recycle(rows);
         Ok(())
     }
 }

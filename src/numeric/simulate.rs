@@ -430,7 +430,9 @@ impl<'s> Simulation<'s> {
                     }
                 }
                 update_rates(&mut end, &self.half, &self.v);
-                velocity_step(end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                self.dynamics.recycle(end);
+                self.dynamics.recycle(rows);
                 self.check_finite(n + 1, t1)?;
                 continue;
             }
@@ -438,7 +440,7 @@ impl<'s> Simulation<'s> {
             self.check_finite(n + 1, t1)?;
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {
-                    let (rows, _) = project_positions(
+                    let (mut end, _) = project_positions(
                         &mut self.dynamics,
                         t1,
                         &mut self.q,
@@ -447,14 +449,17 @@ impl<'s> Simulation<'s> {
                         tolerance,
                         max_iterations,
                     )?;
-                    velocity_step(rows, &mut self.v, true, touch, s.restitution, bounce_speed);
+                    velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                    self.dynamics.recycle(end);
                 }
                 _ if has_inequalities => {
-                    let rows = self.dynamics.rows(t1, &self.q, &self.v)?;
-                    velocity_step(rows, &mut self.v, false, touch, s.restitution, bounce_speed);
+                    let mut end = self.dynamics.rows(t1, &self.q, &self.v)?;
+                    velocity_step(&mut end, &mut self.v, false, touch, s.restitution, bounce_speed);
+                    self.dynamics.recycle(end);
                 }
                 _ => {}
             }
+            self.dynamics.recycle(rows);
         }
         Ok(())
     }

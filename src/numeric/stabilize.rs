@@ -188,6 +188,7 @@ pub fn project_positions(
             }
         }
         apply_correction(&mut rows, q);
+        dynamics.recycle(rows);
         iterations += 1;
     }
 }
@@ -238,6 +239,7 @@ pub fn shake_positions(
                 leave_out(old);
             }
         }
+        dynamics.recycle(rows);
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
         let solution = solve(start);
         for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
@@ -266,9 +268,9 @@ pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {
 /// The velocity solve at the rows of the current positions: closing contacts (touching
 /// within `touch`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
 /// `project` the equalities go onto Ċ = 0 too, else they keep their Ċ. Returns whether
-/// anything was applied.
+/// anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
 pub fn velocity_step(
-    mut rows: Rows,
+    rows: &mut Rows,
     v: &mut Vectors,
     project: bool,
     touch: f64,
@@ -297,7 +299,7 @@ pub fn velocity_step(
         }
     }
     if any {
-        apply_correction(&mut rows, v);
+        apply_correction(rows, v);
     }
     any
 }
