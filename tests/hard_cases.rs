@@ -135,15 +135,36 @@ fn bead_at_speed_1e8_keeps_the_wire_and_its_speed() {
 }
 
 #[test]
-fn chain_of_100_links_keeps_bounded_drift() {
-    // 2 000 steps (2 s of the 5 s scene; 200 in debug builds) with the interpreter and the
-    // dense solve: 1e5 steps take ~70 s today; the compiled tape and the banded solve make
-    // them affordable.
-    let steps = if cfg!(debug_assertions) { 200 } else { 2_000 };
-    let s = run("constraints/hard/chain_100.toml", Some(steps)).expect("runs");
+fn chain_of_100_links_keeps_bounded_drift_for_1e5_steps() {
+    // 1e5 steps (100 s, 20 times the scene's 5 s; 2 000 in debug builds): with the compiled
+    // tape and the band solve a step costs O(N), ~0.2 ms here. Measured in release:
+    // max |C| 3.5e-12, max |Ċ| 1.1e-14, energy balance 6.2e-3 of the largest kinetic energy.
+    let steps: u64 = if cfg!(debug_assertions) { 2_000 } else { 100_000 };
+    let (mut early, mut late) = (0.0f64, 0.0f64);
+    let s = run_observed(
+        "constraints/hard/chain_100.toml",
+        Integrator::Verlet,
+        Stabilize::PROJECTION,
+        None,
+        Some(steps),
+        &mut |f| {
+            if f.step < steps / 10 {
+                early = early.max(f.energy_error.abs());
+            } else if f.step >= steps / 10 * 9 {
+                late = late.max(f.energy_error.abs());
+            }
+        },
+    )
+    .expect("runs");
+    assert_eq!(s.steps, steps);
+    // Drift: every link within 1e-9 (C/κ = (|rᵢ − rᵢ₋₁|² − l²)/2, l = 0.5) at every step.
     assert!(s.max_abs_c <= 1e-9, "{}", s.max_abs_c);
     assert!(s.max_abs_c_dot <= 1e-9, "{}", s.max_abs_c_dot);
-    assert!(s.energy_rel_drift.expect("reported") <= 1e-3, "{:?}", s.energy_rel_drift);
+    // Energy: RATTLE's error stays bounded — no larger in the last tenth than in the first.
+    assert!(s.energy_rel_drift.expect("reported") <= 2e-2, "{:?}", s.energy_rel_drift);
+    // Measured: max |E| 1.5e2 in the first tenth, 3.6e1 in the last.
+    assert!(late <= 2.0 * early, "early {early:e}, late {late:e}");
+    assert!(finite(&s.final_position) && finite(&s.final_velocity));
 }
 
 #[test]
