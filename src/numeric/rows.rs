@@ -102,6 +102,20 @@ impl RowProgram {
         RowProgram { roots, inverse_scale, shape, tape, inputs }
     }
 
+    /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
+    /// `--set F=…`): a body whose force symbol is named in `given` keeps that symbol, so the
+    /// state's value replaces the scene's expression.
+    pub fn with_given_forces(
+        system: &mut System,
+        derivation: &Derivation,
+        forces: &[(usize, Id)],
+        given: &[&str],
+    ) -> RowProgram {
+        let named = |b: usize| given.contains(&system.graph.symbol(system.bodies[b].force).name.as_str());
+        let forces: Vec<(usize, Id)> = forces.iter().copied().filter(|&(b, _)| !named(b)).collect();
+        RowProgram::new(system, derivation, &forces)
+    }
+
     /// Buffers for [`evaluate_into`](RowProgram::evaluate_into).
     pub fn scratch(&self) -> RowScratch {
         RowScratch {

@@ -241,6 +241,13 @@ impl<'s> Simulation<'s> {
         Ok(())
     }
 
+    /// Newton onto C = 0 at `t` (`stabilize::project_positions`): the rows at the result.
+    fn project(&mut self, t: f64, length: f64, tolerance: f64, max_iterations: usize) -> Result<Rows, SimError> {
+        let (rows, _) =
+            project_positions(&mut self.dynamics, t, &mut self.q, &self.v, length, tolerance, max_iterations)?;
+        Ok(rows)
+    }
+
     fn run_inner(
         &mut self,
         s: Settings,
@@ -407,15 +414,7 @@ impl<'s> Simulation<'s> {
                     max_iterations,
                 )?;
                 if has_inequalities {
-                    (end, _) = project_positions(
-                        &mut self.dynamics,
-                        t1,
-                        &mut self.q,
-                        &self.v,
-                        length,
-                        tolerance,
-                        max_iterations,
-                    )?;
+                    end = self.project(t1, length, tolerance, max_iterations)?;
                 }
                 self.half.copy_from_slice(&self.v);
                 if self.dynamics.velocity_dependent_forces {
@@ -440,15 +439,7 @@ impl<'s> Simulation<'s> {
             self.check_finite(n + 1, t1)?;
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {
-                    let (mut end, _) = project_positions(
-                        &mut self.dynamics,
-                        t1,
-                        &mut self.q,
-                        &self.v,
-                        length,
-                        tolerance,
-                        max_iterations,
-                    )?;
+                    let mut end = self.project(t1, length, tolerance, max_iterations)?;
                     velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
                     self.dynamics.recycle(end);
                 }
