@@ -1,9 +1,12 @@
 //! The equations of motion at a state: rows → λ → accelerations, behind one function.
 //!
 //! [`Dynamics::rows`] is the only place where a simulation turns a state (t, q, v) into
-//! numbers; when the compiled tape replaces the interpreter behind [`RowProgram`], this is
-//! the one call that changes. [`Dynamics`] is a [`Field`] for the integrators, with the
-//! Baumgarte terms (when chosen) added to the bias c before the solve.
+//! numbers: [`RowProgram::evaluate_into`] runs the compiled tape into rows recycled from
+//! earlier evaluations ([`Dynamics::recycle`]), so a warm step allocates nothing there.
+//! [`Dynamics`] is a [`Field`] for the integrators, with the Baumgarte terms (when chosen)
+//! added to the bias c before the solve. [`Dynamics::choose_unit`] moves a scene whose
+//! lengths are far from 1 (|r| ≈ 1e155 or 1e-150) to a verified power-of-two unit
+//! (`numeric::rescale::Unit`); the run loop converts what it reports back.
 //!
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 

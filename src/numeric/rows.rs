@@ -6,6 +6,10 @@
 //! `value` = C/κ, `rate` = Ċ/κ, `jacobian` = ∇C/κ, `bias` = c, so C̈/κ = Σᵢ Jᵢ·aᵢ + c and a
 //! Newton step on `value` along `jacobian` is consistent.
 //!
+//! Evaluation goes through one compiled [`Tape`] of every root (`evaluate`, `evaluate_into`);
+//! the interpreter (`expr::eval`, the reference semantics) stays available as
+//! `evaluate_interpreted`, and a test holds the two together on every constraint file.
+//!
 //! Not here: files or text (the state arrives as an [`Env`]); solving (`numeric::solve`).
 
 use crate::derive::Derivation;
