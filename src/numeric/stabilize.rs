@@ -22,7 +22,11 @@
 //! Contacts. A closing contact gets the impulse P = −(1+e)(J v)/(J M⁻¹ Jᵀ) (DESIGN.md step
 //! 6): the same velocity solve with c = (1+e)Ċ, so Ċ⁺ = −eĊ. Approaches slower than a
 //! threshold get e = 0, so a resting body or a taut rope does not bounce on round-off.
-//! (When `numeric::contact` lands, the impulse belongs there; this is the minimal version.)
+//! `numeric::contact::impulses` is the same QP on velocities, but not the same step: it
+//! acts only when some contact is closing, holds every touching contact (resting ones too)
+//! and always sets the equalities' Ċ to 0, with no bounce threshold; the run loop needs the
+//! projection of Ċ = 0 at every step, contacts measured against the scene's size, and the
+//! threshold, so it keeps [`velocity_step`].
 //!
 //! Not here: the integrators, the run loop.
 
