@@ -360,9 +360,8 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     let env = environment(system, &loaded.values, &loaded.scene, &overrides)
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     // A force given in the state replaces the scene's expression for that body.
-    let given = |b: usize| overrides.iter().any(|(n, _)| *n == system.graph.symbol(system.bodies[b].force).name);
-    let forces: Vec<_> = loaded.scene.forces.iter().copied().filter(|&(b, _)| !given(b)).collect();
-    let program = RowProgram::new(&mut loaded.system, &derivation, &forces);
+    let given: Vec<&str> = overrides.iter().map(|(n, _)| n.as_str()).collect();
+    let program = RowProgram::with_given_forces(&mut loaded.system, &derivation, &loaded.scene.forces, &given);
     let system = &loaded.system;
 
     // Contact distances count as zero relative to the size of the scene.

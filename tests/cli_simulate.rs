@@ -91,3 +91,30 @@ fn bench_prints_rows_as_json() {
     assert!(json["rows"].as_array().map_or(0, Vec::len) >= 12);
     assert!(json["accuracy"].as_array().map_or(0, Vec::len) >= 2);
 }
+
+#[test]
+fn a_pendulum_of_1e155_metres_runs_in_its_own_unit_and_plots() {
+    let dir = std::env::temp_dir().join(format!("lagrange-cli-huge-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let (csv, svg) = (dir.join("run.csv"), dir.join("run.svg"));
+    let out = lagrange(&[
+        "simulate",
+        "constraints/hard/huge.toml",
+        "--format",
+        "json",
+        "--csv",
+        csv.to_str().expect("utf-8"),
+        "--plot",
+        svg.to_str().expect("utf-8"),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert_eq!(json["steps"], 1000);
+    assert_eq!(json["unit_exponent"], 518);
+    // The CSV is in metres: the last row's r.x is about −0.986 × 1e155.
+    let text = std::fs::read_to_string(&csv).expect("csv");
+    let last: Vec<f64> = text.lines().last().expect("rows").split(',').map(|x| x.parse().expect("a number")).collect();
+    assert!((last[1] / 1e155 + 0.986).abs() < 1e-3, "{last:?}");
+    assert!(std::fs::read_to_string(&svg).expect("svg").contains("</svg>"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -166,7 +166,7 @@ pub fn impulses(rows: &Rows, restitution: f64, settings: &Settings) -> Impulses 
     let p = multipliers(&block, &b, &nonnegative, &index, settings, &mut out.diagnostics, &mut out.status);
     for (s, &q) in index.iter().enumerate() {
         out.impulse[q] = scaled.unscale(q, p[s]);
-        for (body, j) in &scaled.jacobian[q] {
+        for (body, j) in scaled.jacobian(q) {
             let w = rows.inverse_mass[*body];
             for (dv, jd) in out.velocity_change[*body].iter_mut().zip(j) {
                 *dv += p[s] * jd * w;

@@ -1,14 +1,18 @@
 //! The equations of motion at a state: rows → λ → accelerations, behind one function.
 //!
 //! [`Dynamics::rows`] is the only place where a simulation turns a state (t, q, v) into
-//! numbers; when the compiled tape replaces the interpreter behind [`RowProgram`], this is
-//! the one call that changes. [`Dynamics`] is a [`Field`] for the integrators, with the
-//! Baumgarte terms (when chosen) added to the bias c before the solve.
+//! numbers: [`RowProgram::evaluate_into`] runs the compiled tape into rows recycled from
+//! earlier evaluations ([`Dynamics::recycle`]), so a warm step allocates nothing there.
+//! [`Dynamics`] is a [`Field`] for the integrators, with the Baumgarte terms (when chosen)
+//! added to the bias c before the solve. [`Dynamics::choose_unit`] moves a scene whose
+//! lengths are far from 1 (|r| ≈ 1e155 or 1e-150) to a verified power-of-two unit
+//! (`numeric::rescale::Unit`); the run loop converts what it reports back.
 //!
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
 use super::integrate::{Field, Vectors};
-use super::rows::{RowProgram, Rows};
+use super::rescale::Unit;
+use super::rows::{RowProgram, RowScratch, Rows};
 use super::solve::{Solution, solve};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -41,10 +45,19 @@ pub struct BaumgarteTerms {
     pub beta_squared: f64,
 }
 
+/// Scenes whose lengths lie within 2^±32 of 1 run in their own unit: squares and products of
+/// a few such numbers stay far from the ends of the f64 range, and the solve's absolute
+/// thresholds (a contact's `length_scale` of 1) still mean something.
+pub const NATURAL_RANGE: i64 = 32;
+
 /// The equations of motion of a system at any state.
 pub struct Dynamics<'s> {
     system: &'s System,
     program: RowProgram,
+    scratch: RowScratch,
+    /// Rows handed back by [`recycle`](Dynamics::recycle), refilled by the next evaluation
+    /// so that a step allocates nothing once the pool is warm.
+    spare: Vec<Rows>,
     env: Env,
     /// Added to the bias of every row before the acceleration solve (None: no Baumgarte).
     pub baumgarte: Option<BaumgarteTerms>,
@@ -62,11 +75,38 @@ impl<'s> Dynamics<'s> {
     /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
-        Dynamics { system, program, env, baumgarte: None, velocity_dependent_forces: true, evaluations: 0, step: 0 }
+        let scratch = program.scratch();
+        Dynamics {
+            system,
+            program,
+            scratch,
+            spare: Vec::new(),
+            env,
+            baumgarte: None,
+            velocity_dependent_forces: true,
+            evaluations: 0,
+            step: 0,
+        }
     }
 
     pub fn system(&self) -> &'s System {
         self.system
+    }
+
+    /// Moves to a length unit near the scene's size when `env`'s lengths are beyond 2^±[`NATURAL_RANGE`]
+    /// and the rows are verifiably homogeneous (`numeric::rescale::Unit`): from then on
+    /// [`rows`](Dynamics::rows) expects and returns numbers in that unit. Returns the unit,
+    /// or `None` when the numbers stay as they are.
+    pub fn choose_unit(&mut self, env: &Env) -> Result<Option<Unit>, SimError> {
+        let Some(k) = Unit::exponent_at(self.system, env).filter(|k| k.abs() > NATURAL_RANGE) else {
+            return Ok(None);
+        };
+        let unit =
+            Unit::verified(&self.program, self.system, env, k).map_err(|error| SimError::Eval { time: 0.0, error })?;
+        if let Some(unit) = &unit {
+            self.env = unit.to_unit(&self.env);
+        }
+        Ok(unit)
     }
 
     /// The rows at (t, q, v): the one place states become numbers.
@@ -77,7 +117,10 @@ impl<'s> Dynamics<'s> {
             self.env.set(body.position, Value::Vector(q[i]));
             self.env.set(body.velocity, Value::Vector(v[i]));
         }
-        let rows = self.program.evaluate(self.system, &self.env).map_err(|error| SimError::Eval { time: t, error })?;
+        let mut rows = self.spare.pop().unwrap_or_default();
+        self.program
+            .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)
+            .map_err(|error| SimError::Eval { time: t, error })?;
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
         for (k, row) in rows.rows.iter().enumerate() {
             let bad = [row.value, row.rate, row.bias]
@@ -96,6 +139,14 @@ impl<'s> Dynamics<'s> {
             }
         }
         Ok(rows)
+    }
+
+    /// Gives rows back for reuse by the next [`rows`](Dynamics::rows) (optional: dropping
+    /// them is correct, only slower).
+    pub fn recycle(&mut self, rows: Rows) {
+        if self.spare.len() < 4 {
+            self.spare.push(rows);
+        }
     }
 
     /// Solves for λ at `rows` (Baumgarte terms added first when set).
@@ -117,6 +168,7 @@ impl Field for Dynamics<'_> {
         let mut rows = self.rows(t, q, v)?;
         let solution = self.solve(&mut rows);
         a.copy_from_slice(&solution.acceleration);
+        self.recycle(rows);
         Ok(())
     }
 }

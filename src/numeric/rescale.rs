@@ -12,6 +12,11 @@
 //! that is not homogeneous (sin(ω t) with ω scaled, `l^2 + 1`) fails the check, and the raw
 //! answer, with its diagnostics, stands.
 //!
+//! [`Unit`] is that change of unit as a value: [`solve_at`] uses it for one state when the
+//! raw rows overflow; a simulation (`numeric::dynamics::Dynamics::choose_unit`) uses it for
+//! a whole run when the scene's lengths are far from 1, integrating in the new unit and
+//! converting what it reports back (exactly: the factors are powers of two).
+//!
 //! Not here: the solve itself (`numeric::solve`), files or text.
 
 use super::rows::{RowProgram, Rows};
@@ -97,6 +102,101 @@ fn degrees(at: &Rows, half: &Rows) -> Option<Vec<i64>> {
     Some(out)
 }
 
+/// A change of length unit to 2ᵏ (one new unit is 2ᵏ old ones), verified homogeneous for a
+/// program at a state: positions, velocities, forces and the length-like parameters are
+/// multiplied by 2⁻ᵏ, and row q's numbers change by the exact power of two of its degree.
+/// Converting with powers of two is exact, so a run in the new unit is the run in the old
+/// one, scaled — with every intermediate number near 1 instead of near the ends of the
+/// f64 range.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Unit {
+    /// k.
+    pub exponent: i64,
+    /// The degree p of each row: C, Ċ and c scale by 2^{kp}, J by 2^{k(p−1)}.
+    pub degrees: Vec<i64>,
+    symbols: Vec<Symbol>,
+}
+
+impl Unit {
+    /// The exponent k that brings the largest length-like number of `env` (a position,
+    /// velocity, force or parameter outside the masses) into [1, 2); `None` when there is
+    /// none, or it is not finite.
+    pub fn exponent_at(system: &System, env: &Env) -> Option<i64> {
+        let big = length_symbols(system)
+            .iter()
+            .filter_map(|&s| env.get(s))
+            .flat_map(|v| match v {
+                Value::Scalar(x) => [x, 0.0, 0.0],
+                Value::Vector(v) => v,
+            })
+            .fold(0.0f64, |m, x| m.max(x.abs()));
+        (big.is_finite() && big > 0.0).then(|| big.log2().floor() as i64)
+    }
+
+    /// The unit 2ᵏ for `program` at `env`, if its rows are finite there at 2⁻ᵏ and 2⁻ᵏ⁻¹ and
+    /// every number changes by the exact power of two its degree predicts; `None` when a row
+    /// is not homogeneous (`sin(ω t)` with ω scaled, `l^2 + 1`).
+    pub fn verified(
+        program: &RowProgram,
+        system: &System,
+        env: &Env,
+        exponent: i64,
+    ) -> Result<Option<Unit>, EvalError> {
+        let symbols = length_symbols(system);
+        let at = program.evaluate(system, &scaled_env(env, &symbols, -exponent))?;
+        let half = program.evaluate(system, &scaled_env(env, &symbols, -exponent - 1))?;
+        let degrees = (rows_finite(&at) && rows_finite(&half)).then(|| degrees(&at, &half)).flatten();
+        Ok(degrees.map(|degrees| Unit { exponent, degrees, symbols }))
+    }
+
+    /// `env` in the new unit (its length-like values × 2⁻ᵏ).
+    pub fn to_unit(&self, env: &Env) -> Env {
+        scaled_env(env, &self.symbols, -self.exponent)
+    }
+
+    /// A length (position, velocity, force, acceleration) back in the old unit: x · 2ᵏ.
+    pub fn length(&self, x: f64) -> f64 {
+        pow2(x, self.exponent)
+    }
+
+    /// A vector of lengths back in the old unit.
+    pub fn vector(&self, x: [f64; 3]) -> [f64; 3] {
+        x.map(|x| self.length(x))
+    }
+
+    /// C, Ċ or c of row q back in the old unit: x · 2^{kp}.
+    pub fn row_value(&self, q: usize, x: f64) -> f64 {
+        pow2(x, self.exponent * self.degrees[q])
+    }
+
+    /// λ of row q back in the old unit: λ · 2^{−k(p−2)} (forces scale by 2ᵏ, J by 2^{k(p−1)}).
+    pub fn lambda(&self, q: usize, x: f64) -> f64 {
+        pow2(x, -self.exponent * (self.degrees[q] - 2))
+    }
+
+    /// An energy (mass × length²/time²) back in the old unit: x · 2^{2k}.
+    pub fn energy(&self, x: f64) -> f64 {
+        pow2(x, 2 * self.exponent)
+    }
+
+    /// Rows evaluated in the new unit, back in the old one (∞ where the true number
+    /// overflows f64).
+    pub fn rows(&self, rows: &mut Rows) {
+        for (q, row) in rows.rows.iter_mut().enumerate() {
+            row.value = self.row_value(q, row.value);
+            row.rate = self.row_value(q, row.rate);
+            row.bias = self.row_value(q, row.bias);
+            let p = self.degrees[q];
+            for (_, j) in row.jacobian.iter_mut() {
+                *j = j.map(|x| pow2(x, self.exponent * (p - 1)));
+            }
+        }
+        for v in rows.velocity.iter_mut().chain(rows.force.iter_mut()) {
+            *v = self.vector(*v);
+        }
+    }
+}
+
 /// The rows at `env` and their solution; when the raw rows are not finite, the verified
 /// rescaled solve (see the module note), with a diagnostic saying so. The rows returned are
 /// the raw ones scaled back from the rescaled state (∞ where the true number overflows).
@@ -111,39 +211,26 @@ pub fn solve_at(
         let solution = solve_with(&raw, settings);
         return Ok((raw, solution));
     }
-    let symbols = length_symbols(system);
-    let big = symbols
-        .iter()
-        .filter_map(|&s| env.get(s))
-        .flat_map(|v| match v {
-            Value::Scalar(x) => [x, 0.0, 0.0],
-            Value::Vector(v) => v,
-        })
-        .fold(0.0f64, |m, x| m.max(x.abs()));
-    if !(big.is_finite() && big > 0.0) {
+    // 2⁻ᵏ brings the largest length-like number near 1.
+    let unit = match Unit::exponent_at(system, env) {
+        Some(k) => Unit::verified(program, system, env, k)?,
+        None => None,
+    };
+    let Some(unit) = unit else {
         let solution = solve_with(&raw, settings);
         return Ok((raw, solution));
-    }
-    // s = 2⁻ᵏ brings the largest length-like number near 1.
-    let k = big.log2().floor() as i64;
-    let at = program.evaluate(system, &scaled_env(env, &symbols, -k))?;
-    let half = program.evaluate(system, &scaled_env(env, &symbols, -k - 1))?;
-    let p = match (rows_finite(&at) && rows_finite(&half)).then(|| degrees(&at, &half)).flatten() {
-        Some(p) => p,
-        None => {
-            let solution = solve_with(&raw, settings);
-            return Ok((raw, solution));
-        }
     };
+    let k = unit.exponent;
+    let mut rows = program.evaluate(system, &unit.to_unit(env))?;
     let scaled_settings = Settings { length_scale: pow2(settings.length_scale, -k), ..*settings };
-    let mut solution = solve_with(&at, &scaled_settings);
+    let mut solution = solve_with(&rows, &scaled_settings);
     // Back to the caller's units: forces and accelerations × 2ᵏ = 1/s, λ = λ'·s^{p−2}.
     for f in solution.constraint_force.iter_mut().chain(solution.acceleration.iter_mut()) {
-        *f = f.map(|x| pow2(x, k));
+        *f = unit.vector(*f);
     }
-    for (q, (l, &p)) in solution.lambda.iter_mut().zip(&p).enumerate() {
+    for (q, l) in solution.lambda.iter_mut().enumerate() {
         let scaled = *l;
-        *l = pow2(scaled, -k * (p - 2));
+        *l = unit.lambda(q, scaled);
         if scaled != 0.0 && !l.is_normal() {
             solution.diagnostics.push(Diagnostic {
                 constraints: vec![q],
@@ -160,17 +247,6 @@ pub fn solve_at(
             -k
         ),
     });
-    let mut rows = at;
-    for (row, &p) in rows.rows.iter_mut().zip(&p) {
-        row.value = pow2(row.value, k * p);
-        row.rate = pow2(row.rate, k * p);
-        row.bias = pow2(row.bias, k * p);
-        for (_, j) in row.jacobian.iter_mut() {
-            *j = j.map(|x| pow2(x, k * (p - 1)));
-        }
-    }
-    for v in rows.velocity.iter_mut().chain(rows.force.iter_mut()) {
-        *v = v.map(|x| pow2(x, k));
-    }
+    unit.rows(&mut rows);
     Ok((rows, solution))
 }

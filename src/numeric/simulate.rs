@@ -19,6 +19,7 @@
 
 use super::dynamics::{Dynamics, SimError};
 use super::integrate::{Integrator, Stepper, Vectors};
+use super::rescale::Unit;
 use super::rows::Rows;
 use super::stabilize::{Stabilize, distance, project_positions, shake_positions, update_rates, velocity_step};
 use crate::expr::eval::{Env, Value};
@@ -109,11 +110,15 @@ pub struct Summary {
     pub max_abs_c_dot: f64,
     /// max |E| / max T; None when a constraint depends on time.
     pub energy_rel_drift: Option<f64>,
-    /// The energy balance E at the end, and max T.
+    /// The energy balance E at the end, and max T (±∞ when outside the f64 range in the
+    /// scene's unit; the ratio above is always finite).
     pub final_energy_error: f64,
     pub max_kinetic: f64,
     /// Row evaluations (the cost unit).
     pub evaluations: u64,
+    /// k when the run worked in a length unit of 2ᵏ (the scene's lengths were beyond
+    /// 2^±[`NATURAL_RANGE`](super::dynamics::NATURAL_RANGE)); 0 when it ran in the scene's own. Every figure here is in the scene's unit.
+    pub unit_exponent: i64,
     /// Symbol name → final value (positions and velocities).
     pub final_state: Vec<(String, Value)>,
     pub final_position: Vec<[f64; 3]>,
@@ -157,12 +162,29 @@ pub struct Simulation<'s> {
     a: Vec<[f64; 3]>,
     /// v½ of a RATTLE step.
     half: Vec<[f64; 3]>,
+    /// The length unit the run works in, when not the scene's own (see [`Dynamics::choose_unit`]).
+    unit: Option<Unit>,
+    /// What the observer sees when the run works in another unit: the state, rows and λ
+    /// converted back (buffers reused from step to step).
+    shown: Shown,
+}
+
+#[derive(Default)]
+struct Shown {
+    q: Vec<[f64; 3]>,
+    v: Vec<[f64; 3]>,
+    rows: Rows,
+    lambda: Vec<f64>,
 }
 
 impl<'s> Simulation<'s> {
     pub fn new(mut dynamics: Dynamics<'s>, env: &Env, settings: Settings) -> Result<Simulation<'s>, SimError> {
         settings.validate()?;
-        let (q, v, t0) = initial_state(dynamics.system(), env);
+        let unit = dynamics.choose_unit(env)?;
+        let (q, v, t0) = match &unit {
+            Some(unit) => initial_state(dynamics.system(), &unit.to_unit(env)),
+            None => initial_state(dynamics.system(), env),
+        };
         dynamics.baumgarte = settings.stabilize.baumgarte_terms(settings.dt);
         let n = q.len();
         Ok(Simulation {
@@ -174,6 +196,8 @@ impl<'s> Simulation<'s> {
             v,
             a: vec![[0.0; 3]; n],
             half: vec![[0.0; 3]; n],
+            unit,
+            shown: Shown::default(),
         })
     }
 
@@ -186,16 +210,19 @@ impl<'s> Simulation<'s> {
             integrator: s.integrator.name().into(),
             stabilize: s.stabilize.name().into(),
             dt: s.dt,
+            unit_exponent: self.unit.as_ref().map_or(0, |u| u.exponent),
             ..Summary::default()
         };
         let result = self.run_inner(s, &mut summary, observe);
         summary.wall_seconds = start.elapsed().as_secs_f64();
         summary.evaluations = self.dynamics.evaluations;
-        summary.final_position = self.q.clone();
-        summary.final_velocity = self.v.clone();
+        let back = |x: &[f64; 3]| self.unit.as_ref().map_or(*x, |u| u.vector(*x));
+        summary.final_position = self.q.iter().map(back).collect();
+        summary.final_velocity = self.v.iter().map(back).collect();
         for (i, body) in system.bodies.iter().enumerate() {
-            summary.final_state.push((system.graph.symbol(body.position).name.clone(), Value::Vector(self.q[i])));
-            summary.final_state.push((system.graph.symbol(body.velocity).name.clone(), Value::Vector(self.v[i])));
+            let (q, v) = (summary.final_position[i], summary.final_velocity[i]);
+            summary.final_state.push((system.graph.symbol(body.position).name.clone(), Value::Vector(q)));
+            summary.final_state.push((system.graph.symbol(body.velocity).name.clone(), Value::Vector(v)));
         }
         match result {
             Ok(()) => Ok(summary),
@@ -214,6 +241,13 @@ impl<'s> Simulation<'s> {
         Ok(())
     }
 
+    /// Newton onto C = 0 at `t` (`stabilize::project_positions`): the rows at the result.
+    fn project(&mut self, t: f64, length: f64, tolerance: f64, max_iterations: usize) -> Result<Rows, SimError> {
+        let (rows, _) =
+            project_positions(&mut self.dynamics, t, &mut self.q, &self.v, length, tolerance, max_iterations)?;
+        Ok(rows)
+    }
+
     fn run_inner(
         &mut self,
         s: Settings,
@@ -221,6 +255,11 @@ impl<'s> Simulation<'s> {
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<(), SimError> {
         let system = self.dynamics.system();
+        // Numbers of the run (in its unit) → the caller's unit, for everything reported.
+        let unit = self.unit.clone();
+        let row_back = |q: usize, x: f64| unit.as_ref().map_or(x, |u| u.row_value(q, x));
+        let length_back = |x: f64| unit.as_ref().map_or(x, |u| u.length(x));
+        let energy_back = |x: f64| unit.as_ref().map_or(x, |u| u.energy(x));
         let has_inequalities = system.constraints.iter().any(|c| c.inequality);
         let energy_reported = !time_dependent(system);
         // The scene's length scale: the largest initial |rᵢ| (1 when every body is at 0).
@@ -230,7 +269,7 @@ impl<'s> Simulation<'s> {
         let touch = 1e-9 * length;
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
         let plotted = self.q.len().min(8);
-        let (mut kinetic0, mut work, mut max_energy_error) = (0.0, 0.0, 0.0f64);
+        let (mut kinetic0, mut work, mut max_energy_error, mut max_kinetic) = (0.0, 0.0, 0.0f64, 0.0f64);
         // P at steps n−2, n−1 and dP/dt at step 0, for the end correction of the trapezoid.
         let (mut power_2, mut power_1, mut power_rate0) = (0.0, 0.0, 0.0);
         let mut bounce_speed = 0.0;
@@ -252,19 +291,20 @@ impl<'s> Simulation<'s> {
                         step: n,
                         time: t,
                         constraint: system.constraints[k].name.clone(),
-                        value: row.value,
-                        distance: d,
-                        bound,
+                        value: row_back(k, row.value),
+                        distance: length_back(d),
+                        bound: length_back(bound),
                     });
                 }
+                let (value, rate) = (row_back(k, row.value), row_back(k, row.rate));
                 if row.inequality {
-                    c_max = c_max.max((-row.value).max(0.0));
-                    if d <= touch && row.rate < 0.0 {
-                        c_dot_max = c_dot_max.max(-row.rate);
+                    c_max = c_max.max((-value).max(0.0));
+                    if d <= touch && rate < 0.0 {
+                        c_dot_max = c_dot_max.max(-rate);
                     }
                 } else {
-                    c_max = c_max.max(row.value.abs());
-                    c_dot_max = c_dot_max.max(row.rate.abs());
+                    c_max = c_max.max(value.abs());
+                    c_dot_max = c_dot_max.max(rate.abs());
                 }
             }
             summary.max_abs_c = summary.max_abs_c.max(c_max);
@@ -299,10 +339,14 @@ impl<'s> Simulation<'s> {
             (power_2, power_1) = (power_1, power);
             let energy_error = (kinetic - kinetic0) - (work + end_correction);
             max_energy_error = max_energy_error.max(energy_error.abs());
-            summary.max_kinetic = summary.max_kinetic.max(kinetic);
+            max_kinetic = max_kinetic.max(kinetic);
+            // The ratio is the same in any unit; the energies themselves may leave the f64
+            // range in the caller's (a 1e155 m pendulum has T ≈ 1e311 J).
+            summary.max_kinetic = energy_back(max_kinetic);
+            let energy_error = energy_back(energy_error);
             summary.final_energy_error = energy_error;
             summary.energy_rel_drift = energy_reported.then(|| {
-                if summary.max_kinetic > 0.0 { max_energy_error / summary.max_kinetic } else { max_energy_error }
+                if max_kinetic > 0.0 { max_energy_error / max_kinetic } else { energy_back(max_energy_error) }
             });
             let solution = self.dynamics.solve(&mut rows);
             if n.is_multiple_of(stride) || n == s.steps {
@@ -310,17 +354,39 @@ impl<'s> Simulation<'s> {
                     time: t,
                     max_abs_c: c_max,
                     energy_error,
-                    position: self.q[..plotted].to_vec(),
+                    position: self.q[..plotted].iter().map(|x| unit.as_ref().map_or(*x, |u| u.vector(*x))).collect(),
                 });
             }
-            let frame = Frame {
-                step: n,
-                time: t,
-                position: &self.q,
-                velocity: &self.v,
-                rows: &rows,
-                lambda: &solution.lambda,
-                energy_error,
+            let frame = match &unit {
+                None => Frame {
+                    step: n,
+                    time: t,
+                    position: &self.q,
+                    velocity: &self.v,
+                    rows: &rows,
+                    lambda: &solution.lambda,
+                    energy_error,
+                },
+                Some(u) => {
+                    let shown = &mut self.shown;
+                    shown.q.clear();
+                    shown.q.extend(self.q.iter().map(|x| u.vector(*x)));
+                    shown.v.clear();
+                    shown.v.extend(self.v.iter().map(|x| u.vector(*x)));
+                    shown.rows.clone_from(&rows);
+                    u.rows(&mut shown.rows);
+                    shown.lambda.clear();
+                    shown.lambda.extend(solution.lambda.iter().enumerate().map(|(q, l)| u.lambda(q, *l)));
+                    Frame {
+                        step: n,
+                        time: t,
+                        position: &shown.q,
+                        velocity: &shown.v,
+                        rows: &shown.rows,
+                        lambda: &shown.lambda,
+                        energy_error,
+                    }
+                }
             };
             observe(&frame).map_err(SimError::Output)?;
             summary.steps = n;
@@ -348,15 +414,7 @@ impl<'s> Simulation<'s> {
                     max_iterations,
                 )?;
                 if has_inequalities {
-                    (end, _) = project_positions(
-                        &mut self.dynamics,
-                        t1,
-                        &mut self.q,
-                        &self.v,
-                        length,
-                        tolerance,
-                        max_iterations,
-                    )?;
+                    end = self.project(t1, length, tolerance, max_iterations)?;
                 }
                 self.half.copy_from_slice(&self.v);
                 if self.dynamics.velocity_dependent_forces {
@@ -371,7 +429,9 @@ impl<'s> Simulation<'s> {
                     }
                 }
                 update_rates(&mut end, &self.half, &self.v);
-                velocity_step(end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                self.dynamics.recycle(end);
+                self.dynamics.recycle(rows);
                 self.check_finite(n + 1, t1)?;
                 continue;
             }
@@ -379,23 +439,18 @@ impl<'s> Simulation<'s> {
             self.check_finite(n + 1, t1)?;
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {
-                    let (rows, _) = project_positions(
-                        &mut self.dynamics,
-                        t1,
-                        &mut self.q,
-                        &self.v,
-                        length,
-                        tolerance,
-                        max_iterations,
-                    )?;
-                    velocity_step(rows, &mut self.v, true, touch, s.restitution, bounce_speed);
+                    let mut end = self.project(t1, length, tolerance, max_iterations)?;
+                    velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                    self.dynamics.recycle(end);
                 }
                 _ if has_inequalities => {
-                    let rows = self.dynamics.rows(t1, &self.q, &self.v)?;
-                    velocity_step(rows, &mut self.v, false, touch, s.restitution, bounce_speed);
+                    let mut end = self.dynamics.rows(t1, &self.q, &self.v)?;
+                    velocity_step(&mut end, &mut self.v, false, touch, s.restitution, bounce_speed);
+                    self.dynamics.recycle(end);
                 }
                 _ => {}
             }
+            self.dynamics.recycle(rows);
         }
         Ok(())
     }

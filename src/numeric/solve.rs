@@ -178,8 +178,10 @@ pub(crate) struct Scaled {
     pub jacobi: Vec<f64>,
     /// Whether the row has a finite, non-zero gradient and finite numbers.
     pub usable: Vec<bool>,
-    /// J̃ₖ = Jₖ/‖Jₖ‖/√Âₖₖ per body.
-    pub jacobian: Vec<Vec<(usize, [f64; 3])>>,
+    /// J̃ₖ = Jₖ/‖Jₖ‖/√Âₖₖ per body, all rows in one buffer: row k is `parts[start[k]..start[k + 1]]`
+    /// (empty when not usable).
+    parts: Vec<(usize, [f64; 3])>,
+    start: Vec<usize>,
 }
 
 impl Scaled {
@@ -194,9 +196,16 @@ impl Scaled {
                     || rows.velocity[i].iter().any(|x| !x.is_finite())
             })
             .collect();
-        let mut s =
-            Scaled { norm: vec![0.0; k], jacobi: vec![0.0; k], usable: vec![false; k], jacobian: vec![Vec::new(); k] };
+        let parts = rows.rows.iter().map(|r| r.jacobian.len()).sum();
+        let mut s = Scaled {
+            norm: vec![0.0; k],
+            jacobi: vec![0.0; k],
+            usable: vec![false; k],
+            parts: Vec::with_capacity(parts),
+            start: Vec::with_capacity(k + 1),
+        };
         for (q, row) in rows.rows.iter().enumerate() {
+            s.start.push(s.parts.len());
             let norm = row_norm(&row.jacobian);
             // An inequality also needs C and Ċ to be classified.
             let finite = norm.is_finite()
@@ -225,9 +234,8 @@ impl Scaled {
                 continue;
             }
             // Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ with Ĵ = J/‖J‖ (division, not a reciprocal, so tiny norms stay finite).
-            let unit: Vec<(usize, [f64; 3])> =
-                row.jacobian.iter().map(|&(b, j)| (b, [j[0] / norm, j[1] / norm, j[2] / norm])).collect();
-            let a_kk: f64 = unit.iter().map(|(b, j)| dot(j, j) * rows.inverse_mass[*b]).sum();
+            let unit = |j: &[f64; 3]| [j[0] / norm, j[1] / norm, j[2] / norm];
+            let a_kk: f64 = row.jacobian.iter().map(|(b, j)| dot(&unit(j), &unit(j)) * rows.inverse_mass[*b]).sum();
             if !(a_kk > 0.0 && a_kk.is_finite()) {
                 diagnostics.push(Diagnostic {
                     constraints: vec![q],
@@ -240,9 +248,18 @@ impl Scaled {
             s.norm[q] = norm;
             s.jacobi[q] = d;
             s.usable[q] = true;
-            s.jacobian[q] = unit.into_iter().map(|(b, j)| (b, [j[0] * d, j[1] * d, j[2] * d])).collect();
+            s.parts.extend(row.jacobian.iter().map(|(b, j)| {
+                let j = unit(j);
+                (*b, [j[0] * d, j[1] * d, j[2] * d])
+            }));
         }
+        s.start.push(s.parts.len());
         s
+    }
+
+    /// J̃ₖ per body (empty when row k is not usable).
+    pub fn jacobian(&self, k: usize) -> &[(usize, [f64; 3])] {
+        &self.parts[self.start[k]..self.start[k + 1]]
     }
 
     /// λₖ from λ̃ₖ.
@@ -265,15 +282,29 @@ pub(crate) struct Block {
 
 /// Ãₚq = Σᵢ J̃ₚᵢ·J̃qᵢ wᵢ over the bodies rows p and q of `index` share.
 pub(crate) fn assemble(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -> Block {
-    let mut on_body: Vec<Vec<(usize, [f64; 3])>> = vec![Vec::new(); inverse_mass.len()];
-    for (p, &k) in index.iter().enumerate() {
-        for &(b, j) in &scaled.jacobian[k] {
-            on_body[b].push((p, j));
+    // The rows acting on each body, bucketed by body (counting sort: one buffer, no Vec per body).
+    let n_bodies = inverse_mass.len();
+    let mut first = vec![0usize; n_bodies + 1];
+    for &k in index {
+        for &(b, _) in scaled.jacobian(k) {
+            first[b + 1] += 1;
         }
     }
-    let mut a = Vec::new();
+    for b in 0..n_bodies {
+        first[b + 1] += first[b];
+    }
+    let mut fill = first.clone();
+    let mut acting_on = vec![(0usize, [0.0; 3]); first[n_bodies]];
+    for (p, &k) in index.iter().enumerate() {
+        for &(b, j) in scaled.jacobian(k) {
+            acting_on[fill[b]] = (p, j);
+            fill[b] += 1;
+        }
+    }
+    let mut a = Vec::with_capacity(acting_on.len() * 2);
     let mut bandwidth = 0;
-    for (b, acting) in on_body.iter().enumerate() {
+    for b in 0..n_bodies {
+        let acting = &acting_on[first[b]..first[b + 1]];
         let w = inverse_mass[b];
         for (x, &(p, jp)) in acting.iter().enumerate() {
             for &(q, jq) in &acting[x..] {
@@ -330,7 +361,7 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
         .iter()
         .map(|&q| {
             let ext: f64 =
-                scaled.jacobian[q].iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
+                scaled.jacobian(q).iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
             ext + scaled.scale(q, rows.rows[q].bias)
         })
         .collect();
@@ -357,7 +388,7 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
     // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
     let mut constraint_force = vec![[0.0; 3]; n_bodies];
     for &q in &index {
-        for (body, j) in &scaled.jacobian[q] {
+        for (body, j) in scaled.jacobian(q) {
             for d in 0..3 {
                 constraint_force[*body][d] += scaled_lambda[q] * j[d];
             }

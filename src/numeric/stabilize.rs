@@ -22,7 +22,11 @@
 //! Contacts. A closing contact gets the impulse P = −(1+e)(J v)/(J M⁻¹ Jᵀ) (DESIGN.md step
 //! 6): the same velocity solve with c = (1+e)Ċ, so Ċ⁺ = −eĊ. Approaches slower than a
 //! threshold get e = 0, so a resting body or a taut rope does not bounce on round-off.
-//! (When `numeric::contact` lands, the impulse belongs there; this is the minimal version.)
+//! `numeric::contact::impulses` is the same QP on velocities, but not the same step: it
+//! acts only when some contact is closing, holds every touching contact (resting ones too)
+//! and always sets the equalities' Ċ to 0, with no bounce threshold; the run loop needs the
+//! projection of Ċ = 0 at every step, contacts measured against the scene's size, and the
+//! threshold, so it keeps [`velocity_step`].
 //!
 //! Not here: the integrators, the run loop.
 
@@ -188,6 +192,7 @@ pub fn project_positions(
             }
         }
         apply_correction(&mut rows, q);
+        dynamics.recycle(rows);
         iterations += 1;
     }
 }
@@ -238,6 +243,7 @@ pub fn shake_positions(
                 leave_out(old);
             }
         }
+        dynamics.recycle(rows);
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
         let solution = solve(start);
         for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
@@ -266,9 +272,9 @@ pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {
 /// The velocity solve at the rows of the current positions: closing contacts (touching
 /// within `touch`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
 /// `project` the equalities go onto Ċ = 0 too, else they keep their Ċ. Returns whether
-/// anything was applied.
+/// anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
 pub fn velocity_step(
-    mut rows: Rows,
+    rows: &mut Rows,
     v: &mut Vectors,
     project: bool,
     touch: f64,
@@ -297,7 +303,7 @@ pub fn velocity_step(
         }
     }
     if any {
-        apply_correction(&mut rows, v);
+        apply_correction(rows, v);
     }
     any
 }

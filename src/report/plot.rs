@@ -45,7 +45,13 @@ fn log_range(xs: impl Iterator<Item = f64>) -> (f64, f64) {
         .filter(|x| x.is_finite())
         .map(|x| x.max(LOG_FLOOR))
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
-    if lo > hi { (LOG_FLOOR, 1.0) } else { (lo / 2.0, (hi * 2.0).max(lo * 10.0)) }
+    if lo > hi {
+        return (LOG_FLOOR, 1.0);
+    }
+    // At most 30 decades: a log axis over hundreds (|C| ≈ 1e296 of a 1e155 m pendulum next
+    // to the floor) shows nothing more, and plotters' tick generation then takes minutes.
+    let lo = lo.max(hi * 1e-30);
+    (lo / 2.0, (hi * 2.0).max(lo * 10.0))
 }
 
 /// Three panels: the trajectory (first two coordinates of up to 8 bodies), max |C| and

@@ -11,7 +11,7 @@ fn value_json(v: &Value, dim: usize) -> Json {
     }
 }
 
-/// `{"steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "final": {symbol: value}}`.
+/// `{"steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "unit_exponent", "final": {symbol: value}}`.
 pub fn json(summary: &Summary, dim: usize) -> Json {
     let mut last = Map::new();
     for (name, v) in &summary.final_state {
@@ -28,6 +28,7 @@ pub fn json(summary: &Summary, dim: usize) -> Json {
         "max_abs_C_dot": summary.max_abs_c_dot,
         "energy_rel_drift": summary.energy_rel_drift,
         "evaluations": summary.evaluations,
+        "unit_exponent": summary.unit_exponent,
         "final": last,
     })
 }
@@ -42,6 +43,12 @@ pub fn text(summary: &Summary, dim: usize) -> String {
     match summary.energy_rel_drift {
         Some(e) => s += &format!("  energy balance  {e:.3e} of the largest kinetic energy\n"),
         None => s += "  energy balance  not reported (a constraint depends on t and does work)\n",
+    }
+    if summary.unit_exponent != 0 {
+        s += &format!(
+            "  unit      lengths ran in units of 2^{} (verified homogeneous); every figure is in the scene's units\n",
+            summary.unit_exponent
+        );
     }
     let per_second = if summary.duration > 0.0 { summary.wall_seconds / summary.duration } else { 0.0 };
     s += &format!(
