@@ -12,7 +12,7 @@ use divan::{Bencher, black_box};
 use lagrange::derive::derive;
 use lagrange::model::file::load;
 use lagrange::report::derivation::{Format, document};
-use std::fmt::Write;
+use lagrange::scenario::chain;
 
 fn main() {
     divan::main();
@@ -20,25 +20,6 @@ fn main() {
 
 const BEAD_2D: &str = include_str!("../constraints/bead_on_wire.toml");
 const BEAD_3D: &str = include_str!("../constraints/bead_on_sphere.toml");
-
-/// The TOML text of an `n`-link chain hanging from the origin (as `examples/chain.rs`).
-fn chain(n: usize) -> String {
-    let mut s = String::new();
-    let _ = writeln!(s, "title = \"Chain of {n} links\"\ndimension = 2\n");
-    let _ = writeln!(s, "[parameters]\nl = 0.5\nm = 1.0\ng = [0.0, -9.81]\n");
-    for i in 1..=n {
-        let _ = writeln!(
-            s,
-            "[[bodies]]\nname = \"p{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\nmass = \"m\"\nforce = \"F{i}\"\n"
-        );
-    }
-    let _ = writeln!(s, "[[constraints]]\nname = \"link1\"\nexpr = \"dot(r1, r1) = l^2\"\n");
-    for i in 2..=n {
-        let j = i - 1;
-        let _ = writeln!(s, "[[constraints]]\nname = \"link{i}\"\nexpr = \"dot(r{i} - r{j}, r{i} - r{j}) = l^2\"\n");
-    }
-    s
-}
 
 fn load_and_derive(text: &str) -> usize {
     let mut loaded = load(text).expect("the file loads");

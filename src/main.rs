@@ -14,6 +14,7 @@ use lagrange::report::diagnostic::render;
 use lagrange::report::solution;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Derive constraint forces from constraints written as text.
 ///
@@ -196,12 +197,39 @@ enum FormatArg {
     Json,
 }
 
+/// Set when standard output failed for a reason other than its reader going away.
+static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
+
+/// Writes to standard output. A closed pipe (`lagrange check … | head`) is not an error: the
+/// reader has what it wanted, and the command goes on (files it writes are still written).
+/// Any other failure is reported once and makes the exit code 1.
+fn emit(args: std::fmt::Arguments<'_>) {
+    use std::io::Write;
+    if let Err(e) = std::io::stdout().lock().write_fmt(args)
+        && e.kind() != std::io::ErrorKind::BrokenPipe
+        && !STDOUT_FAILED.swap(true, Ordering::Relaxed)
+    {
+        eprintln!("error: cannot write to standard output: {e}");
+    }
+}
+
+/// `print!` through [`emit`].
+macro_rules! out {
+    ($($arg:tt)*) => { emit(format_args!($($arg)*)) };
+}
+
+/// `println!` through [`emit`].
+macro_rules! outln {
+    ($($arg:tt)*) => { emit(format_args!("{}\n", format_args!($($arg)*))) };
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // Run on a thread with a generous stack: recursion is bounded everywhere, and this is a
     // second line of defence for inputs nobody thought of.
     let worker = std::thread::Builder::new().stack_size(256 << 20).spawn(move || run(cli));
     match worker.map(|h| h.join()) {
+        Ok(Ok(_)) if STDOUT_FAILED.load(Ordering::Relaxed) => ExitCode::from(1),
         Ok(Ok(code)) => code,
         _ => {
             eprintln!("error: internal failure (please report it with the input file)");
@@ -273,7 +301,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
     };
     match result {
         Ok(s) => {
-            println!("{s}");
+            outln!("{s}");
             ExitCode::SUCCESS
         }
         Err(e) => {
@@ -304,7 +332,7 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
             }
         },
         None => {
-            print!("{code}");
+            out!("{code}");
             ExitCode::SUCCESS
         }
     }
@@ -379,9 +407,9 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     match format {
         SolveFormat::Json => {
             let v = solution::json(system, &derivation, &rows, &solution, t);
-            println!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+            outln!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
         }
-        SolveFormat::Text => print!("{}", solution::text(system, &derivation, &rows, &solution, t)),
+        SolveFormat::Text => out!("{}", solution::text(system, &derivation, &rows, &solution, t)),
     }
     Ok(())
 }
@@ -412,21 +440,21 @@ fn cmd_check(files: &[PathBuf]) -> ExitCode {
         };
         let outcomes = checked.run();
         if outcomes.is_empty() {
-            println!("{name}: no [[expect]] entries");
+            outln!("{name}: no [[expect]] entries");
         }
         for o in outcomes {
             let place = o.span.as_ref().map_or(name.clone(), |s| location(&name, &text, s.start));
             if o.passed {
                 passed += 1;
-                println!("ok     {place}: {} ({})", o.label, o.how);
+                outln!("ok     {place}: {} ({})", o.label, o.how);
             } else {
                 failed += 1;
-                println!("FAILED {place}: {} ({})", o.label, o.how);
-                println!("{}", o.detail);
+                outln!("FAILED {place}: {} ({})", o.label, o.how);
+                outln!("{}", o.detail);
             }
         }
     }
-    println!("{passed} passed, {failed} failed");
+    outln!("{passed} passed, {failed} failed");
     if failed == 0 { ExitCode::SUCCESS } else { ExitCode::from(1) }
 }
 
@@ -516,12 +544,12 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     };
     let dim = scenario.system.dim();
     if args.format == SummaryArg::Json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&lagrange::report::simulation::json(&summary, dim)).unwrap_or_default()
         );
     } else {
-        println!("{}", lagrange::report::simulation::text(&summary, dim));
+        outln!("{}", lagrange::report::simulation::text(&summary, dim));
     }
     if let Some(path) = &args.plot {
         let title = format!("{} — {} + {}", scenario.system.title, summary.integrator, summary.stabilize);
@@ -554,9 +582,9 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
     };
     let accuracy = lagrange::bench::accuracy::formula_accuracy(&scenario, args.states, 1);
     match args.format {
-        OutArg::Text => println!("{}", table::text(&wp, &accuracy)),
-        OutArg::Json => println!("{}", serde_json::to_string_pretty(&table::json(&wp, &accuracy)).unwrap_or_default()),
-        OutArg::Csv => print!("{}", table::csv(&wp, &accuracy)),
+        OutArg::Text => outln!("{}", table::text(&wp, &accuracy)),
+        OutArg::Json => outln!("{}", serde_json::to_string_pretty(&table::json(&wp, &accuracy)).unwrap_or_default()),
+        OutArg::Csv => out!("{}", table::csv(&wp, &accuracy)),
     }
     if let Some(path) = &args.plot {
         let title = format!("{}: final-state error against time", scenario.system.title);

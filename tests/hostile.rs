@@ -220,3 +220,22 @@ fn deep_expressions_in_every_expression_field() {
         assert!(stderr.contains(&format!("{place}: expression nested too deeply")), "{place}:\n{}", clip(&stderr));
     }
 }
+
+/// `lagrange … | head`: the reader goes away before the output is written. That is not an
+/// internal failure; the command finishes with its own exit code.
+#[test]
+fn closed_standard_output_is_not_a_failure() {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lagrange"))
+        .args(["derive", "--steps"])
+        .arg(root.join("constraints/chain_5.toml"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("binary runs");
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("binary finishes");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "exit {:?}, stderr: {stderr}", out.status.code());
+    assert!(stderr.is_empty(), "a closed pipe printed: {stderr}");
+}
