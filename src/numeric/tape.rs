@@ -367,8 +367,12 @@ impl Tape {
         assert_eq!(outputs.len(), self.outputs.len(), "output length");
         assert_eq!(scratch.regs.len(), self.n_regs, "scratch made by another tape");
         let r = scratch.regs.as_mut_slice();
-        r[..self.n_inputs].copy_from_slice(inputs);
-        r[self.n_inputs..self.n_inputs + self.consts.len()].copy_from_slice(&self.consts);
+        for (d, &x) in r.iter_mut().zip(inputs) {
+            *d = x;
+        }
+        for (d, &x) in r[self.n_inputs..].iter_mut().zip(&self.consts) {
+            *d = x;
+        }
         for i in &self.code {
             // SAFETY: `from_program` only writes register numbers below `n_regs` into `code`, and
             // `r` has exactly `n_regs` registers (asserted above).
