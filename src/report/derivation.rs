@@ -99,6 +99,16 @@ impl Doc {
         }
     }
 
+    /// A displayed name with a note in words: `∇C (∇ wrt r, body bead)`; in LaTeX the note
+    /// is set as text beside the mathematics (`\quad \text{…}`, amsmath).
+    fn label(&self, math: &str, note: &str) -> String {
+        if self.style == Style::Latex {
+            format!("{math} \\quad \\text{{({})}}", latex_escape(note))
+        } else {
+            format!("{math} ({note})")
+        }
+    }
+
     /// The names `C`, `Ċ`, `C̈`, `∇C`, `λ` in this format, with a subscript.
     fn sym(&self, which: &str, sub: &str) -> String {
         let latex = self.style == Style::Latex;
@@ -140,8 +150,111 @@ impl Doc {
     }
 }
 
+/// Text (a title, a heading, a sentence) as LaTeX text: the characters LaTeX treats as
+/// commands escaped, and the mathematical ones this report writes (λ, ∇, Ċ, C̈, ·, ≥, ₖ, ²…)
+/// turned into inline math, consecutive ones in one `$…$`. The result is ASCII for every
+/// sentence lagrange writes; other characters of a user's title pass through as UTF-8.
 fn latex_escape(s: &str) -> String {
-    s.replace('\\', "\\textbackslash{}").replace('_', "\\_").replace('&', "\\&").replace('%', "\\%").replace('#', "\\#")
+    enum Piece {
+        Text(String),
+        Math(String),
+    }
+    fn push(pieces: &mut Vec<Piece>, piece: Piece) {
+        match (pieces.last_mut(), piece) {
+            (Some(Piece::Math(m)), Piece::Math(x)) => m.push_str(&x),
+            (Some(Piece::Text(t)), Piece::Text(x)) => t.push_str(&x),
+            (_, piece) => pieces.push(piece),
+        }
+    }
+    let mut pieces: Vec<Piece> = Vec::new();
+    let mut chars = s.chars().peekable();
+    while let Some(c) = chars.next() {
+        // A combining dot or diaeresis puts its accent on this character: `C̈`.
+        let accent = match chars.peek() {
+            Some('\u{307}') => Some("dot"),
+            Some('\u{308}') => Some("ddot"),
+            _ => None,
+        };
+        if let Some(accent) = accent {
+            chars.next();
+            push(&mut pieces, Piece::Math(format!("\\{accent}{{{c}}}")));
+            continue;
+        }
+        // Sub- and superscripts gather into one script on the letter before them: `Jₖᵢ`, `l²`.
+        let script = |c: char| match c {
+            'ₖ' => Some(('_', 'k')),
+            'ᵢ' => Some(('_', 'i')),
+            'ⱼ' => Some(('_', 'j')),
+            '²' => Some(('^', '2')),
+            _ => None,
+        };
+        if let Some((kind, first)) = script(c) {
+            let mut run = String::from(first);
+            while let Some((k, x)) = chars.peek().copied().and_then(script) {
+                if k != kind {
+                    break;
+                }
+                run.push(x);
+                chars.next();
+            }
+            // The base: a letter just before (taken into the math), the math just before
+            // (unless it ends in a script of the same kind), or an empty group.
+            let base = match pieces.last_mut() {
+                Some(Piece::Text(t)) if t.ends_with(|b: char| b.is_ascii_alphabetic()) => {
+                    t.pop().map(String::from).unwrap_or_default()
+                }
+                Some(Piece::Math(m)) if !(m.ends_with('}') && m.rfind('{').is_some_and(|i| m[..i].ends_with(kind))) => {
+                    String::new()
+                }
+                _ => "{}".into(),
+            };
+            if matches!(pieces.last(), Some(Piece::Text(t)) if t.is_empty()) {
+                pieces.pop();
+            }
+            push(&mut pieces, Piece::Math(format!("{base}{kind}{{{run}}}")));
+            continue;
+        }
+        let math = match c {
+            'λ' => "\\lambda ",
+            'κ' => "\\kappa ",
+            'Σ' => "\\sum ",
+            '∇' => "\\nabla ",
+            '·' => "\\cdot ",
+            '×' => "\\times ",
+            '≥' => "\\geq ",
+            '≤' => "\\leq ",
+            '→' => "\\to ",
+            '−' => "-",
+            'Ċ' => "\\dot{C}",
+            'ȧ' => "\\dot{a}",
+            'ḃ' => "\\dot{b}",
+            _ => "",
+        };
+        if !math.is_empty() {
+            push(&mut pieces, Piece::Math(math.to_string()));
+            continue;
+        }
+        let text = match c {
+            '\\' => "\\textbackslash{}".to_string(),
+            '^' => "\\textasciicircum{}".to_string(),
+            '~' => "\\textasciitilde{}".to_string(),
+            '_' | '&' | '%' | '#' | '$' | '{' | '}' => format!("\\{c}"),
+            _ => c.to_string(),
+        };
+        push(&mut pieces, Piece::Text(text));
+    }
+    let mut out = String::with_capacity(s.len());
+    for piece in pieces {
+        match piece {
+            Piece::Text(t) => out.push_str(&t),
+            Piece::Math(m) => {
+                out.push('$');
+                out.push_str(m.trim_end());
+                out.push('$');
+            }
+        }
+    }
+    out
 }
 
 /// The derivation as a document (text, LaTeX or Markdown).
@@ -185,12 +298,13 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
         for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
             let name = &system.bodies[body].name;
             let r = &g.symbol(system.bodies[body].position).name;
-            doc.line(out, &format!("{} (∇ wrt {r}, body {name})", doc.sym("grad", sub)), &doc.expr(g, grad)?);
+            doc.line(out, &doc.label(&doc.sym("grad", sub), &format!("∇ wrt {r}, body {name}")), &doc.expr(g, grad)?);
             if !dc.scale.is_one() {
-                doc.line(out, &format!("J (direction, ∇C/{}, body {name})", dc.scale), &doc.expr(g, dir)?);
+                doc.line(out, &doc.label("J", &format!("direction, ∇C/{}, body {name}", dc.scale)), &doc.expr(g, dir)?);
             }
         }
-        doc.line(out, &format!("c (C̈ at a = 0{})", scale_note(dc.scale.is_one(), &dc.scale)), &doc.expr(g, dc.c_term)?);
+        let note = format!("C̈ at a = 0{}", scale_note(dc.scale.is_one(), &dc.scale));
+        doc.line(out, &doc.label("c", &note), &doc.expr(g, dc.c_term)?);
     }
     doc.heading(out, "The multiplier equation  A λ + b = 0");
     a_and_b(system, d, doc, out)?;
@@ -329,11 +443,12 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
         for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
             let g = &system.graph;
             let name = &system.bodies[body].name;
-            let lhs = format!("{} on {name}", doc.sym("grad", &sub));
+            let lhs = doc.label(&doc.sym("grad", &sub), &format!("on {name}"));
             let rhs = if dc.scale.is_one() {
                 doc.expr(g, grad)?
             } else {
-                format!("{} = {} · ({})", doc.expr(g, grad)?, dc.scale, doc.expr(g, dir)?)
+                let times = if doc.style == Style::Latex { "\\cdot" } else { "·" };
+                format!("{} = {} {times} ({})", doc.expr(g, grad)?, dc.scale, doc.expr(g, dir)?)
             };
             doc.line(out, &lhs, &rhs);
             if many {
