@@ -10,7 +10,7 @@
 
 use super::file::{Problem, RawValue, locate};
 use super::system::{BuildError, System};
-use crate::expr::eval::{Env, EvalError, Value, eval_one};
+use crate::expr::eval::{Env, EvalError, Value, eval, eval_one};
 use crate::expr::{Id, Role, Symbol, Ty};
 use std::collections::BTreeMap;
 use toml::Spanned;
@@ -152,10 +152,7 @@ fn force_expression(system: &mut System, text: &str) -> Result<Id, (Option<std::
 pub fn value_for(system: &System, name: &str, value: &RawValue, dim: usize) -> Result<(Symbol, Value), String> {
     let Some(s) = system.graph.symbol_named(name) else {
         let names = system.graph.symbols().map(|(_, info)| info.name.as_str());
-        // One letter is one edit from every other one-letter name: only a different case
-        // (`L` for `l`) is a useful hint there.
-        let hint = crate::expr::lower::suggest(name, names)
-            .filter(|hint| name.chars().count() >= 3 || hint.eq_ignore_ascii_case(name));
+        let hint = crate::expr::lower::suggest(name, names);
         return Err(match hint {
             Some(hint) => format!("`{name}` is not a symbol of this file; did you mean `{hint}`?"),
             None => format!("`{name}` is not a symbol of this file"),
@@ -230,24 +227,46 @@ pub fn environment(
     for body in &system.bodies {
         env.get(body.position).ok_or_else(|| missing(body.position))?;
         env.get(body.velocity).ok_or_else(|| missing(body.velocity))?;
-        let m =
-            eval_one(&system.graph, body.mass, &env).map_err(|EvalError::Missing(name)| StateError::Missing(name))?;
+    }
+    // Masses and forces are evaluated in one pass each (an evaluation walks the graph once,
+    // so one per body would cost bodies × graph size for a large scene).
+    let masses: Vec<Id> = system.bodies.iter().map(|b| b.mass).collect();
+    let masses = eval(&system.graph, &masses, &env).map_err(|EvalError::Missing(name)| StateError::Missing(name))?;
+    for (body, m) in system.bodies.iter().zip(masses) {
         let m = m.scalar().unwrap_or(f64::NAN);
         if !(m.is_finite() && m > 0.0) {
             return Err(StateError::Mass { name: body.name.clone(), value: m });
         }
     }
-    let given: Vec<bool> = system.bodies.iter().map(|b| env.get(b.force).is_some()).collect();
+    let mut expression: Vec<Option<Id>> = vec![None; system.bodies.len()];
+    for &(i, id) in &scene.forces {
+        if let Some(slot) = expression.get_mut(i) {
+            slot.get_or_insert(id);
+        }
+    }
+    let wanted: Vec<(usize, Id)> = (0..system.bodies.len())
+        .filter(|&i| env.get(system.bodies[i].force).is_none())
+        .filter_map(|i| expression[i].map(|id| (i, id)))
+        .collect();
+    let roots: Vec<Id> = wanted.iter().map(|&(_, id)| id).collect();
+    let values = eval(&system.graph, &roots, &env).map_err(|error| {
+        // Name the body: the first whose own expression fails.
+        let body = wanted
+            .iter()
+            .find(|&&(_, id)| eval_one(&system.graph, id, &env).is_err())
+            .map_or_else(String::new, |&(i, _)| system.bodies[i].name.clone());
+        StateError::Force { body, error }
+    })?;
+    let mut computed: Vec<Option<Value>> = vec![None; system.bodies.len()];
+    for (&(i, _), v) in wanted.iter().zip(values) {
+        computed[i] = Some(v);
+    }
     let mut forces = Vec::new();
     for (i, body) in system.bodies.iter().enumerate() {
-        if given[i] {
+        if env.get(body.force).is_some() {
             continue;
         }
-        let value = match scene.forces.iter().find(|(b, _)| *b == i) {
-            Some(&(_, id)) => eval_one(&system.graph, id, &env)
-                .map_err(|error| StateError::Force { body: body.name.clone(), error })?,
-            None => Value::Vector([0.0; 3]),
-        };
+        let value = computed[i].unwrap_or(Value::Vector([0.0; 3]));
         let v = value.vector().unwrap_or([f64::NAN; 3]);
         if !value.is_finite() {
             return Err(StateError::NonFiniteForce { body: body.name.clone(), value: v });
