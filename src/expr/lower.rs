@@ -91,11 +91,15 @@ fn function_names() -> impl Iterator<Item = &'static str> {
 /// The closest candidate within a small edit distance, for "did you mean".
 ///
 /// Among equally close candidates, one differing only in case wins (`L` → `l`, not `F`).
+///
+/// A name of one or two letters is one edit from every other short name, so there only a
+/// different case (`L` for `l`) is offered.
 pub fn suggest<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -> Option<String> {
+    let short = name.chars().count() < 3;
     let limit = (name.chars().count() / 3).max(1);
     candidates
         .map(|c| (edit_distance(name, c), !c.eq_ignore_ascii_case(name), c))
-        .filter(|&(d, _, c)| d <= limit && c != name)
+        .filter(|&(d, other, c)| d <= limit && c != name && !(short && other))
         .min()
         .map(|(_, _, c)| c.to_string())
 }
