@@ -1,30 +1,29 @@
 //! The `simulate` and `bench` commands end to end: outputs, JSON shape, failures.
 
+use std::path::PathBuf;
 use std::process::Command;
 
 fn lagrange(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_lagrange")).args(args).output().expect("runs")
 }
 
-#[test]
-fn simulate_prints_the_json_summary_and_writes_csv_and_svg() {
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-{}", std::process::id()));
+/// `simulate FILE ARGS… --format json --csv DIR/run.csv --plot DIR/run.svg` in a fresh
+/// directory named by `tag`: the output, the directory, the CSV and the SVG paths.
+fn simulate_with_files(tag: &str, file: &str, args: &[&str]) -> (std::process::Output, PathBuf, PathBuf, PathBuf) {
+    let dir = std::env::temp_dir().join(format!("lagrange-cli-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let (csv, svg) = (dir.join("run.csv"), dir.join("run.svg"));
-    let out = lagrange(&[
-        "simulate",
-        "constraints/pendulum.toml",
-        "--steps",
-        "1000",
-        "--every",
-        "10",
-        "--format",
-        "json",
-        "--csv",
-        csv.to_str().expect("utf-8"),
-        "--plot",
-        svg.to_str().expect("utf-8"),
-    ]);
+    let mut all = vec!["simulate", file];
+    all.extend_from_slice(args);
+    all.extend_from_slice(&["--format", "json", "--csv", csv.to_str().expect("utf-8")]);
+    all.extend_from_slice(&["--plot", svg.to_str().expect("utf-8")]);
+    (lagrange(&all), dir, csv, svg)
+}
+
+#[test]
+fn simulate_prints_the_json_summary_and_writes_csv_and_svg() {
+    let (out, dir, csv, svg) =
+        simulate_with_files("pendulum", "constraints/pendulum.toml", &["--steps", "1000", "--every", "10"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
     for key in ["steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "final"] {
@@ -94,19 +93,7 @@ fn bench_prints_rows_as_json() {
 
 #[test]
 fn a_pendulum_of_1e155_metres_runs_in_its_own_unit_and_plots() {
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-huge-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("dir");
-    let (csv, svg) = (dir.join("run.csv"), dir.join("run.svg"));
-    let out = lagrange(&[
-        "simulate",
-        "constraints/hard/huge.toml",
-        "--format",
-        "json",
-        "--csv",
-        csv.to_str().expect("utf-8"),
-        "--plot",
-        svg.to_str().expect("utf-8"),
-    ]);
+    let (out, dir, csv, svg) = simulate_with_files("huge", "constraints/hard/huge.toml", &[]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
     assert_eq!(json["steps"], 1000);

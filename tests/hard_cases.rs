@@ -8,6 +8,21 @@ use lagrange::numeric::integrate::Integrator;
 use lagrange::numeric::solve::solve;
 use lagrange::numeric::stabilize::Stabilize;
 
+/// Runs `path` for `steps` Verlet + projection steps: the summary and the largest |energy
+/// error| in the first and in the last tenth of the run.
+fn verlet_energy_tenths(path: &str, steps: u64) -> (lagrange::numeric::simulate::Summary, f64, f64) {
+    let (mut early, mut late) = (0.0f64, 0.0f64);
+    let s = run_observed(path, Integrator::Verlet, Stabilize::PROJECTION, None, Some(steps), &mut |f| {
+        if f.step < steps / 10 {
+            early = early.max(f.energy_error.abs());
+        } else if f.step >= steps / 10 * 9 {
+            late = late.max(f.energy_error.abs());
+        }
+    })
+    .expect("runs");
+    (s, early, late)
+}
+
 fn finite(xs: &[[f64; 3]]) -> bool {
     xs.iter().flatten().all(|x| x.is_finite())
 }
@@ -140,22 +155,7 @@ fn chain_of_100_links_keeps_bounded_drift_for_1e5_steps() {
     // tape and the band solve a step costs O(N), ~0.2 ms here. Measured in release:
     // max |C| 3.5e-12, max |Ċ| 1.1e-14, energy balance 6.2e-3 of the largest kinetic energy.
     let steps: u64 = if cfg!(debug_assertions) { 2_000 } else { 100_000 };
-    let (mut early, mut late) = (0.0f64, 0.0f64);
-    let s = run_observed(
-        "constraints/hard/chain_100.toml",
-        Integrator::Verlet,
-        Stabilize::PROJECTION,
-        None,
-        Some(steps),
-        &mut |f| {
-            if f.step < steps / 10 {
-                early = early.max(f.energy_error.abs());
-            } else if f.step >= steps / 10 * 9 {
-                late = late.max(f.energy_error.abs());
-            }
-        },
-    )
-    .expect("runs");
+    let (s, early, late) = verlet_energy_tenths("constraints/hard/chain_100.toml", steps);
     assert_eq!(s.steps, steps);
     // Drift: every link within 1e-9 (C/κ = (|rᵢ − rᵢ₋₁|² − l²)/2, l = 0.5) at every step.
     assert!(s.max_abs_c <= 1e-9, "{}", s.max_abs_c);
@@ -243,23 +243,8 @@ fn ball_bounces_with_restitution() {
 fn pendulum_1e6_verlet_steps_have_bounded_energy_error() {
     // A million steps (1 000 s, ~450 periods; 1e5 in debug builds): RATTLE keeps the energy
     // error bounded — the same size in the last tenth as in the first.
-    let (mut early, mut late) = (0.0f64, 0.0f64);
     let steps: u64 = if cfg!(debug_assertions) { 100_000 } else { 1_000_000 };
-    let s = run_observed(
-        "constraints/pendulum.toml",
-        Integrator::Verlet,
-        Stabilize::PROJECTION,
-        None,
-        Some(steps),
-        &mut |f| {
-            if f.step < steps / 10 {
-                early = early.max(f.energy_error.abs());
-            } else if f.step >= steps / 10 * 9 {
-                late = late.max(f.energy_error.abs());
-            }
-        },
-    )
-    .expect("runs");
+    let (s, early, late) = verlet_energy_tenths("constraints/pendulum.toml", steps);
     assert!(s.energy_rel_drift.expect("reported") <= 1e-3, "{:?}", s.energy_rel_drift);
     assert!(late <= 2.0 * early + 1e-12, "early {early:e}, late {late:e}");
     assert!(s.max_abs_c <= 1e-9);

@@ -8,20 +8,27 @@
 use std::path::Path;
 use std::process::Command;
 
+/// Runs `lagrange derive REL` from the crate root and returns stderr, after checking that the
+/// file was refused: exit code 1 and nothing on stdout.
+fn refused(rel: &str) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_lagrange"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["derive", rel])
+        .output()
+        .expect("the lagrange binary runs");
+    let stderr = String::from_utf8(out.stderr).expect("stderr is UTF-8");
+    assert_eq!(out.status.code(), Some(1), "{rel}: expected exit code 1, got {:?}\n{stderr}", out.status);
+    assert!(out.stdout.is_empty(), "{rel}: nothing should be printed on stdout");
+    stderr
+}
+
 /// Runs `lagrange derive constraints/invalid/NAME.toml` from the crate root (so the path in
 /// the message is relative and the snapshot machine-independent); returns stderr.
 fn derive_invalid(name: &str) -> String {
     let root = env!("CARGO_MANIFEST_DIR");
     let rel = format!("constraints/invalid/{name}.toml");
     assert!(Path::new(root).join(&rel).is_file(), "{rel} is missing");
-    let out = Command::new(env!("CARGO_BIN_EXE_lagrange"))
-        .current_dir(root)
-        .args(["derive", &rel])
-        .output()
-        .expect("the lagrange binary runs");
-    let stderr = String::from_utf8(out.stderr).expect("stderr is UTF-8");
-    assert_eq!(out.status.code(), Some(1), "{rel}: expected exit code 1, got {:?}\n{stderr}", out.status);
-    assert!(out.stdout.is_empty(), "{rel}: nothing should be printed on stdout");
+    let stderr = refused(&rel);
     // The shape every snapshot must have, checked here too so a bad snapshot cannot be
     // accepted by eye: a located header, the offending source line, a caret.
     let location = format!("{rel}:");
@@ -69,14 +76,7 @@ fn file_level_files_through_the_binary() {
     let mut count = 0;
     for stem in stems().into_iter().filter(|s| s.starts_with("file_")) {
         let rel = format!("constraints/invalid/{stem}.toml");
-        let out = Command::new(env!("CARGO_BIN_EXE_lagrange"))
-            .current_dir(root)
-            .args(["derive", &rel])
-            .output()
-            .expect("the lagrange binary runs");
-        let stderr = String::from_utf8(out.stderr).expect("stderr is UTF-8");
-        assert_eq!(out.status.code(), Some(1), "{rel}: {stderr}");
-        assert!(out.stdout.is_empty(), "{rel}: nothing should be printed on stdout");
+        let stderr = refused(&rel);
         let text = std::fs::read_to_string(Path::new(root).join(&rel)).expect("readable");
         let Err(lagrange::check::CheckError::Invalid { rendered, count: problems, .. }) =
             lagrange::check::Checked::from_text(&rel, &text)
