@@ -57,6 +57,13 @@ const MAX_DOC_FORMULA: usize = 400;
 /// Most constraints for which A is written as a dense K×K array; past this, a banded A
 /// (a chain's) is written as its band only and solved by band Cholesky.
 const DENSE_MAX: usize = 16;
+/// Most entries (K · N · DIM) of a Jacobian written as a dense array (32 KiB); past this J
+/// is written as its non-zero blocks, `(constraint, body, direction)`.
+const DENSE_J_MAX: usize = 4096;
+/// Most items (entries, band rows, blocks) a big output computes in one function; past this
+/// it is split into private functions of `PART` items each, so no stack frame grows with the
+/// system's size.
+const PART: usize = 64;
 /// Deepest expression written inline; deeper values get a `let`, so rustc never sees a
 /// pathologically nested expression.
 const MAX_INLINE_DEPTH: u32 = 24;
@@ -218,8 +225,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     for (i, &c) in formulas.c.iter().enumerate() {
         doc.push(format!("- `{}`: {}", comment_text(constraint_names[i]), formula(g, c)));
     }
-    let (lets, exprs) = ctx.body(&formulas.c)?;
-    emit_fn(&mut out, &doc, "constraints", &format!("[f64; {k}]"), &lets, &array(&exprs));
+    ctx.emit_scalars(&mut out, &doc, "constraints", &formulas.c)?;
 
     // A
     let mut doc = vec![
@@ -238,10 +244,49 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             roots.push(id);
         }
     }
-    let (lets, exprs) = ctx.body(&roots)?;
     let bandwidth = formulas.a.iter().map(|&(r, c, _)| r.abs_diff(c)).max().unwrap_or(0);
     let banded = k > DENSE_MAX && 2 * (bandwidth + 1) <= k;
-    if banded {
+    if banded && k > PART {
+        // One item per band row, each entry once: the parts need no shared `let`s.
+        let _ = writeln!(
+            out,
+            "/// Half-bandwidth of A: Aₖⱼ = 0 when |k − j| > A_BANDWIDTH.\npub const A_BANDWIDTH: usize = {bandwidth};\n"
+        );
+        doc.push(String::new());
+        doc.push(format!(
+            "Stored as a band (A is symmetric): row k holds A[k][k], A[k][k + 1], …, A[k][k + {bandwidth}], \
+             zeros past the last column."
+        ));
+        let present = |r: usize| (r..=r + bandwidth).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
+        let items: Vec<Vec<Id>> =
+            (0..k).map(|r| present(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
+        let store = |r: usize, exprs: &[String]| {
+            let mut values = vec!["0.0".to_string(); bandwidth + 1];
+            for (c, e) in present(r).into_iter().zip(exprs) {
+                values[c - r] = e.clone();
+            }
+            format!("out[{r}] = {};", array(&values))
+        };
+        let ret = format!("[[f64; {}]; {k}]", bandwidth + 1);
+        let init = format!("[[0.0; {}]; {k}]", bandwidth + 1);
+        ctx.emit_items(&mut out, &doc, "a_band", &ret, &init, &format!("[f64; {}]", bandwidth + 1), &items, store)?;
+    } else if k > DENSE_MAX && !banded {
+        // K² numbers: on the heap, written entry by entry (an array literal would be built on
+        // the stack first). Only the non-zero entries are stored, row by row.
+        let row = |r: usize| (0..k).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
+        let items: Vec<Vec<Id>> = (0..k).map(|r| row(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
+        let store = |r: usize, exprs: &[String]| {
+            let stores: Vec<String> =
+                row(r).into_iter().zip(exprs).map(|(c, e)| format!("out[{r}][{c}] = {e};")).collect();
+            stores.join("\n    ")
+        };
+        doc.push(String::new());
+        doc.push(format!("On the heap ({k} rows of {k}): A is not banded and too big for the stack."));
+        let ret = format!("Vec<[f64; {k}]>");
+        let init = format!("vec![[0.0; {k}]; {k}]");
+        ctx.emit_items(&mut out, &doc, "a_matrix", &ret, &init, &format!("[f64; {k}]"), &items, store)?;
+    } else if banded {
+        let (lets, exprs) = ctx.body(&roots)?;
         // Only the band: row r holds A[r][r], A[r][r + 1], …, A[r][r + w] (zeros past the end).
         let rows: Vec<String> = (0..k)
             .map(|r| {
@@ -262,6 +307,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
         ));
         emit_fn(&mut out, &doc, "a_band", &format!("[[f64; {}]; {k}]", bandwidth + 1), &lets, &array(&rows));
     } else {
+        let (lets, exprs) = ctx.body(&roots)?;
         let rows: Vec<String> = (0..k)
             .map(|r| {
                 array(
@@ -279,8 +325,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     for (i, &b) in formulas.b.iter().enumerate() {
         doc.push(format!("- b[{i}] = {}", formula(g, b)));
     }
-    let (lets, exprs) = ctx.body(&formulas.b)?;
-    emit_fn(&mut out, &doc, "b_vector", &format!("[f64; {k}]"), &lets, &array(&exprs));
+    ctx.emit_scalars(&mut out, &doc, "b_vector", &formulas.b)?;
 
     // J
     let mut doc = vec![format!(
@@ -296,33 +341,73 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             roots.push(id);
         }
     }
-    let (lets, exprs) = ctx.body(&roots)?;
-    let rows: Vec<String> = (0..k)
-        .map(|r| {
-            let mut row = Vec::with_capacity(n * dim);
-            for body in 0..n {
-                for axis in 0..dim {
-                    row.push(match at.get(&(r, body)) {
-                        Some(&i) => exprs[i * dim + axis].clone(),
-                        None => "0.0".into(),
-                    });
+    let sparse_j = k * n * dim > DENSE_J_MAX;
+    if sparse_j {
+        // Block triplets by constraint, each constraint's bodies as the derivation lists them.
+        let blocks: Vec<(usize, usize, Id)> = formulas
+            .direction
+            .iter()
+            .enumerate()
+            .flat_map(|(r, dirs)| dirs.iter().map(move |&(body, id)| (r, body, id)))
+            .collect();
+        let _ = writeln!(
+            out,
+            "/// Number of non-zero blocks of J: the entries `jacobian_blocks` returns.\n\
+             pub const JACOBIAN_BLOCKS: usize = {};\n",
+            blocks.len()
+        );
+        doc[0] = format!(
+            "J, sparse: every non-zero block `(k, i, d)`, where d is the force direction of constraint k \
+             (∇C over its constant content) on body i, so Jₖ at columns i·{dim} .. i·{dim} + {dim} is d. \
+             Sorted by k; a body a constraint does not involve has no block in its row."
+        );
+        let items: Vec<Vec<Id>> = blocks.iter().map(|b| vec![b.2]).collect();
+        let store =
+            |i: usize, exprs: &[String]| format!("out[{i}] = ({}, {}, {});", blocks[i].0, blocks[i].1, array(exprs));
+        // On the heap: a block is 2 + DIM words, and an unoptimised build copies a returned
+        // array several times on its way out.
+        let ret = format!("Vec<(usize, usize, [f64; {dim}])>");
+        let init = format!("vec![(0, 0, [0.0; {dim}]); {}]", blocks.len());
+        let elem = format!("(usize, usize, [f64; {dim}])");
+        ctx.emit_items(&mut out, &doc, "jacobian_blocks", &ret, &init, &elem, &items, store)?;
+    } else {
+        let (lets, exprs) = ctx.body(&roots)?;
+        let rows: Vec<String> = (0..k)
+            .map(|r| {
+                let mut row = Vec::with_capacity(n * dim);
+                for body in 0..n {
+                    for axis in 0..dim {
+                        row.push(match at.get(&(r, body)) {
+                            Some(&i) => exprs[i * dim + axis].clone(),
+                            None => "0.0".into(),
+                        });
+                    }
                 }
-            }
-            array(&row)
-        })
-        .collect();
-    emit_fn(&mut out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, &array(&rows));
+                array(&row)
+            })
+            .collect();
+        emit_fn(&mut out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, &array(&rows));
+    }
 
     // c
     let mut doc = vec!["c: the part of C̈ (over the same constant) without accelerations, C̈ = J·a + c.".to_string()];
     for (i, &c) in formulas.c_term.iter().enumerate() {
         doc.push(format!("- c[{i}] = {}", formula(g, c)));
     }
-    let (lets, exprs) = ctx.body(&formulas.c_term)?;
-    emit_fn(&mut out, &doc, "c_term", &format!("[f64; {k}]"), &lets, &array(&exprs));
+    ctx.emit_scalars(&mut out, &doc, "c_term", &formulas.c_term)?;
 
     // λ and the forces.
-    let mut namer = Namer::new(&["constraints", "a_matrix", "b_vector", "jacobian", "c_term", "lambda", "forces"]);
+    let mut namer = Namer::new(&[
+        "constraints",
+        "a_matrix",
+        "a_band",
+        "b_vector",
+        "jacobian",
+        "jacobian_blocks",
+        "c_term",
+        "lambda",
+        "forces",
+    ]);
     let force_fns: Vec<String> = body_names.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
     match (formulas.lambda, &formulas.forces) {
         (Some(lambda), Some(forces)) => {
@@ -355,7 +440,9 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                     "/// The multipliers λ: the solution of A λ = −b (band Cholesky, O(K w²); NaN when A\n\
                      /// is singular, e.g. redundant constraints).\n\
                      pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                     let b = b_vector(s);\n    solve_band(a_band(s), b.map(|x| -x))\n}}\n"
+                     let mut b = b_vector(s);\n    \
+                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
+                     solve_band(a_band(s), b)\n}}\n"
                 );
             } else {
                 let _ = writeln!(
@@ -366,9 +453,21 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                      let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
                 );
             }
-            let _ = writeln!(
-                out,
-                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+            if sparse_j {
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                     pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                     let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
+                     let mut f = [[0.0; {dim}]; {n}];\n    \
+                     for (k, i, d) in j {{\n        \
+                     for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
+                     f\n}}\n"
+                );
+            } else {
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
                  pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
                  let (l, j) = (lambda(s), jacobian(s));\n    \
                  let mut f = [[0.0; {dim}]; {n}];\n    \
@@ -376,7 +475,8 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                  for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
                  for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
                  f\n}}\n"
-            );
+                );
+            }
             for (body, name) in force_fns.iter().enumerate() {
                 let _ = writeln!(
                     out,
@@ -384,7 +484,15 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                     comment_text(body_names[body])
                 );
             }
-            out.push_str(if banded { SOLVE_BAND } else { SOLVE });
+            if banded {
+                out.push_str(SOLVE_BAND);
+            } else if k > DENSE_MAX {
+                // The same elimination on the heap matrix `a_matrix` returns (the code indexes
+                // rows alike).
+                out.push_str(&SOLVE.replace("mut a: [[f64; K]; K]", "mut a: Vec<[f64; K]>"));
+            } else {
+                out.push_str(SOLVE);
+            }
         }
     }
     out.push_str(HELPERS);
@@ -506,6 +614,90 @@ enum Prec {
 }
 
 impl Ctx<'_> {
+    /// `pub fn name(s: &State) -> [f64; K]` for one scalar formula per entry: an array literal,
+    /// or item by item ([`Ctx::emit_items`]) past [`PART`] entries.
+    fn emit_scalars(&self, out: &mut String, doc: &[String], name: &str, roots: &[Id]) -> Result<(), GenerateError> {
+        let k = roots.len();
+        if k > PART {
+            let items: Vec<Vec<Id>> = roots.iter().map(|&r| vec![r]).collect();
+            let store = |i: usize, e: &[String]| format!("out[{i}] = {};", e[0]);
+            self.emit_items(out, doc, name, &format!("[f64; {k}]"), &format!("[0.0; {k}]"), "f64", &items, store)
+        } else {
+            let (lets, exprs) = self.body(roots)?;
+            emit_fn(out, doc, name, &format!("[f64; {k}]"), &lets, &array(&exprs));
+            Ok(())
+        }
+    }
+
+    /// `pub fn name(s: &State) -> ret` that starts from `init` and stores every item:
+    /// `store(i, exprs)` is the statement storing item i from the expressions of its roots'
+    /// components. Past [`PART`] items the work is split into private `#[inline(never)]`
+    /// functions of [`PART`] items each, called in turn on `&mut out` (a slice of `elem`):
+    /// an unoptimised build gives every value of a function its own stack slot, so one
+    /// function for a whole chain of thousands of links would need megabytes of stack. Values
+    /// shared across two parts are computed in both.
+    #[allow(clippy::too_many_arguments)]
+    fn emit_items(
+        &self,
+        out: &mut String,
+        doc: &[String],
+        name: &str,
+        ret: &str,
+        init: &str,
+        elem: &str,
+        items: &[Vec<Id>],
+        store: impl Fn(usize, &[String]) -> String,
+    ) -> Result<(), GenerateError> {
+        // The statements of items lo..hi: `let`s first, then one store per item.
+        let statements = |lo: usize, hi: usize| -> Result<Vec<String>, GenerateError> {
+            let roots: Vec<Id> = items[lo..hi].iter().flatten().copied().collect();
+            let (mut lines, exprs) = self.body(&roots)?;
+            let per_root = exprs.len() / roots.len().max(1);
+            let mut at = 0;
+            for (i, item) in items[lo..hi].iter().enumerate() {
+                let n = item.len() * per_root;
+                lines.push(store(lo + i, &exprs[at..at + n]));
+                at += n;
+            }
+            Ok(lines)
+        };
+        for line in doc {
+            let _ = writeln!(out, "/// {line}");
+        }
+        let _ = writeln!(out, "pub fn {name}(s: &State) -> {ret} {{");
+        let _ = writeln!(out, "    let mut out = {init};");
+        if items.len() <= PART {
+            let lines = statements(0, items.len())?;
+            if !lines.iter().any(|l| l.contains("s.")) {
+                let _ = writeln!(out, "    let _ = s;");
+            }
+            for l in lines {
+                let _ = writeln!(out, "    {l}");
+            }
+            let _ = writeln!(out, "    out\n}}\n");
+            return Ok(());
+        }
+        let parts: Vec<(usize, usize)> =
+            (0..items.len()).step_by(PART).map(|lo| (lo, (lo + PART).min(items.len()))).collect();
+        for &(lo, _) in &parts {
+            let _ = writeln!(out, "    {name}_from_{lo}(s, &mut out);");
+        }
+        let _ = writeln!(out, "    out\n}}\n");
+        for (lo, hi) in parts {
+            let lines = statements(lo, hi)?;
+            let _ = writeln!(out, "/// Items {lo}..{hi} of [`{name}`].\n#[inline(never)]");
+            let _ = writeln!(out, "fn {name}_from_{lo}(s: &State, out: &mut [{elem}]) {{");
+            if !lines.iter().any(|l| l.contains("s.")) {
+                let _ = writeln!(out, "    let _ = s;");
+            }
+            for l in lines {
+                let _ = writeln!(out, "    {l}");
+            }
+            let _ = writeln!(out, "}}\n");
+        }
+        Ok(())
+    }
+
     /// `let` statements and one expression per output component of `roots`.
     fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let p = Program::lower(self.g, roots, self.inputs)?;
