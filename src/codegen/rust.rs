@@ -202,6 +202,32 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     if options.specialize {
         let _ = writeln!(out, "// Specialised: the file's parameter values are written into the formulas.");
     }
+    // How a big system is laid out, so that none of its functions needs a big stack.
+    let bandwidth = formulas.a.iter().map(|&(r, c, _)| r.abs_diff(c)).max().unwrap_or(0);
+    let banded = k > DENSE_MAX && 2 * (bandwidth + 1) <= k;
+    let sparse_j = k * n * dim > DENSE_J_MAX;
+    if banded {
+        let _ = writeln!(
+            out,
+            "// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = {bandwidth}; λ by band Cholesky."
+        );
+    } else if k > DENSE_MAX {
+        let _ = writeln!(out, "// A is dense and not banded: `a_matrix` returns its {k} rows on the heap (Vec).");
+    }
+    if sparse_j {
+        let _ = writeln!(
+            out,
+            "// J is sparse: `jacobian_blocks(s)` is a Vec of its JACOBIAN_BLOCKS non-zero blocks (k, i, d): \
+             constraint k's direction d on body i, sorted by k. Σₖ λₖ·d over the blocks of body i is its force."
+        );
+    }
+    if banded || sparse_j || k > DENSE_MAX {
+        let _ = writeln!(
+            out,
+            "// Outputs of more than {PART} items are filled by private parts of {PART}: no function's stack grows \
+             with the system's size beyond its own O(K) arrays."
+        );
+    }
     let _ = writeln!(out);
 
     // The state.
@@ -244,8 +270,6 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             roots.push(id);
         }
     }
-    let bandwidth = formulas.a.iter().map(|&(r, c, _)| r.abs_diff(c)).max().unwrap_or(0);
-    let banded = k > DENSE_MAX && 2 * (bandwidth + 1) <= k;
     if banded && k > PART {
         // One item per band row, each entry once: the parts need no shared `let`s.
         let _ = writeln!(
@@ -341,7 +365,6 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             roots.push(id);
         }
     }
-    let sparse_j = k * n * dim > DENSE_J_MAX;
     if sparse_j {
         // Block triplets by constraint, each constraint's bodies as the derivation lists them.
         let blocks: Vec<(usize, usize, Id)> = formulas
