@@ -9,9 +9,20 @@
 //! A is a dense `[[f64; K]; K]` (`a_matrix`) up to `DENSE_MAX` (16) constraints; past that, when
 //! A is banded (a chain listed in order), only its band is written (`a_band`, row k holding
 //! A[k][k..=k + w], with `A_BANDWIDTH` = w) and λ comes from a band Cholesky in the module,
-//! so code size and work grow linearly with a chain's length. The entries of A are computed
-//! from the directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the canonical, bilinearly
-//! expanded form the doc comments show: fewer operations and no cancellation.
+//! so code size and work grow linearly with a chain's length. A big A that is not banded is
+//! a `Vec<[f64; K]>` on the heap (`a_matrix`), solved by the same elimination. The entries
+//! of A are computed from the directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the
+//! canonical, bilinearly expanded form the doc comments show: fewer operations and no
+//! cancellation.
+//!
+//! Big systems must not need a big stack (a 1000-link chain's dense J alone is 16 MB). Up to
+//! `DENSE_J_MAX` (4096) entries J is a dense `[[f64; N·DIM]; K]` (`jacobian`); past that it
+//! is `jacobian_blocks`, a `Vec` of its non-zero blocks `(k, i, d)`: constraint k's direction
+//! d on body i, sorted by k — what an engine iterates to form Jᵀλ, J v or J M⁻¹ Jᵀ. And an
+//! output of more than `PART` (64) formulas is filled by private `#[inline(never)]`
+//! functions of at most 64 formulas each: an unoptimised build gives every value its own
+//! stack slot, so one function for the whole output would grow with the system. What stays
+//! on the stack is O(K + N): the `State`, the returned vectors, the band.
 //!
 //! Each function body is the scalar [`Program`] of its formulas: values used more than once
 //! become `let` bindings, values used once are written inline. `--specialize` substitutes
@@ -60,9 +71,9 @@ const DENSE_MAX: usize = 16;
 /// Most entries (K · N · DIM) of a Jacobian written as a dense array (32 KiB); past this J
 /// is written as its non-zero blocks, `(constraint, body, direction)`.
 const DENSE_J_MAX: usize = 4096;
-/// Most items (entries, band rows, blocks) a big output computes in one function; past this
-/// it is split into private functions of `PART` items each, so no stack frame grows with the
-/// system's size.
+/// Most formulas (entries of C, b or c, of A, blocks of J) an output computes in one
+/// function; a bigger output is filled by private functions of at most `PART` formulas each,
+/// so no stack frame grows with the system's size.
 const PART: usize = 64;
 /// Deepest expression written inline; deeper values get a `let`, so rustc never sees a
 /// pathologically nested expression.
@@ -224,8 +235,8 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     if banded || sparse_j || k > DENSE_MAX {
         let _ = writeln!(
             out,
-            "// Outputs of more than {PART} items are filled by private parts of {PART}: no function's stack grows \
-             with the system's size beyond its own O(K) arrays."
+            "// Outputs of more than {PART} formulas are filled by private parts of at most {PART}: no function's \
+             stack grows with the system's size beyond its own O(K) arrays."
         );
     }
     let _ = writeln!(out);
@@ -270,7 +281,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             roots.push(id);
         }
     }
-    if banded && k > PART {
+    if banded && formulas.a.len() > PART {
         // One item per band row, each entry once: the parts need no shared `let`s.
         let _ = writeln!(
             out,
@@ -638,7 +649,7 @@ enum Prec {
 
 impl Ctx<'_> {
     /// `pub fn name(s: &State) -> [f64; K]` for one scalar formula per entry: an array literal,
-    /// or item by item ([`Ctx::emit_items`]) past [`PART`] entries.
+    /// or entry by entry ([`Ctx::emit_items`]) past [`PART`] entries.
     fn emit_scalars(&self, out: &mut String, doc: &[String], name: &str, roots: &[Id]) -> Result<(), GenerateError> {
         let k = roots.len();
         if k > PART {
@@ -654,8 +665,9 @@ impl Ctx<'_> {
 
     /// `pub fn name(s: &State) -> ret` that starts from `init` and stores every item:
     /// `store(i, exprs)` is the statement storing item i from the expressions of its roots'
-    /// components. Past [`PART`] items the work is split into private `#[inline(never)]`
-    /// functions of [`PART`] items each, called in turn on `&mut out` (a slice of `elem`):
+    /// components. Past [`PART`] formulas (roots) the work is split into private
+    /// `#[inline(never)]` functions of consecutive items, at most [`PART`] formulas each
+    /// unless one item has more, called in turn on `&mut out` (a slice of `elem`):
     /// an unoptimised build gives every value of a function its own stack slot, so one
     /// function for a whole chain of thousands of links would need megabytes of stack. Values
     /// shared across two parts are computed in both.
@@ -689,7 +701,7 @@ impl Ctx<'_> {
         }
         let _ = writeln!(out, "pub fn {name}(s: &State) -> {ret} {{");
         let _ = writeln!(out, "    let mut out = {init};");
-        if items.len() <= PART {
+        if items.iter().map(Vec::len).sum::<usize>() <= PART {
             let lines = statements(0, items.len())?;
             if !lines.iter().any(|l| l.contains("s.")) {
                 let _ = writeln!(out, "    let _ = s;");
@@ -700,8 +712,17 @@ impl Ctx<'_> {
             let _ = writeln!(out, "    out\n}}\n");
             return Ok(());
         }
-        let parts: Vec<(usize, usize)> =
-            (0..items.len()).step_by(PART).map(|lo| (lo, (lo + PART).min(items.len()))).collect();
+        // Consecutive items up to PART formulas a part (at least one item each).
+        let mut parts: Vec<(usize, usize)> = Vec::new();
+        let (mut lo, mut roots) = (0, 0);
+        for (i, item) in items.iter().enumerate() {
+            if i > lo && roots + item.len() > PART {
+                parts.push((lo, i));
+                (lo, roots) = (i, 0);
+            }
+            roots += item.len();
+        }
+        parts.push((lo, items.len()));
         for &(lo, _) in &parts {
             let _ = writeln!(out, "    {name}_from_{lo}(s, &mut out);");
         }
