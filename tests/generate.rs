@@ -555,26 +555,56 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
 
 /// A chain whose constraints are listed odd links first, then even ones: A is not banded,
 /// so past 16 constraints it is a dense `a_matrix` on the heap (rows filled in parts), λ by
-/// Gaussian elimination on the heap, and J is `jacobian_blocks`. Compiled with warnings
-/// denied, run on a 2 MiB stack, it agrees with the interpreter entry by entry.
+/// Gaussian elimination on the heap, and J is `jacobian_blocks`.
 #[test]
 fn a_big_unbanded_system_gets_a_heap_a_that_compiles_and_agrees() {
     const LINKS: usize = 100;
     let text = chain_file_in_order(LINKS, (1..=LINKS).step_by(2).chain((2..=LINKS).step_by(2)));
-    let mut l = load(&text).expect("reordered chain loads");
+    let code = sparse_j_agrees("heap_a", &text, 0x0dd5_e7e0_0000_0100);
+    assert!(code.contains(&format!("pub fn a_matrix(s: &State) -> Vec<[f64; {LINKS}]>")), "a heap A");
+    assert!(!code.contains("A_BANDWIDTH"));
+}
+
+/// Few constraints on many bodies (a 10-link chain, body 11 on a circle, 200 free bodies):
+/// A stays a small dense array, but J (11 × 420 entries) is written as its 20 blocks.
+#[test]
+fn few_constraints_on_many_bodies_get_a_sparse_j() {
+    let mut text = chain_file(10);
+    let bodies = text.find("\n[[constraints]]").expect("constraints");
+    let free: String = (11..=210)
+        .map(|i| {
+            format!(
+                "\n[[bodies]]\nname = \"p{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\n\
+                 mass = \"m{i}\"\nforce = \"F{i}\"\n"
+            )
+        })
+        .collect();
+    text.insert_str(bodies, &free);
+    text.push_str("\n[[constraints]]\nname = \"circle\"\nexpr = \"dot(r11, r11) = l^2\"\n");
+    let code = sparse_j_agrees("many_bodies", &text, 0x0b0d_1e50_0000_0210);
+    assert!(code.contains("pub fn a_matrix(s: &State) -> [[f64; 11]; 11]"), "a small dense A");
+    assert!(code.contains("pub const JACOBIAN_BLOCKS: usize = 20;"));
+}
+
+/// Generates `text`'s module, checks J is `jacobian_blocks`, compiles it with warnings denied
+/// and unoptimised, runs every function on a 2 MiB thread at two random states and compares
+/// C, b, c, λ, A, J (made dense from its blocks) and the forces with the interpreter, entry by
+/// entry. Returns the module's code.
+fn sparse_j_agrees(name: &str, text: &str, seed: u64) -> String {
+    let mut l = load(text).expect("loads");
     let m = module(&mut l, &Options::default()).expect("generates");
-    assert!(m.code.contains(&format!("pub fn a_matrix(s: &State) -> Vec<[f64; {LINKS}]>")), "a heap A");
-    assert!(!m.code.contains("A_BANDWIDTH") && m.code.contains("pub fn jacobian_blocks"));
-    let mut reference = load(&text).expect("reordered chain loads");
+    assert!(m.code.contains("pub fn jacobian_blocks") && !m.code.contains("fn jacobian("), "a sparse J");
+    let mut reference = load(text).expect("loads");
     let d = derive(&mut reference.system).expect("derives");
-    let mut rng = Rng(0x0dd5_e7e0_0000_0100);
+    let mut rng = Rng(seed);
     let states: Vec<(Env, String)> = (0..2).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
 
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_heap_a");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("generate_{name}"));
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let module_path = dir.join("chain.rs");
+    let module_path = dir.join("module.rs");
     std::fs::write(&module_path, &m.code).expect("write module");
-    let mut main = format!("#[allow(dead_code)]\nmod chain {{\n    include!({module_path:?});\n}}\nuse chain::*;\n\n");
+    let mut main =
+        format!("#[allow(dead_code)]\nmod system {{\n    include!({module_path:?});\n}}\nuse system::*;\n\n");
     main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
     for (_, literal) in &states {
         let _ = writeln!(main, "    let s = Box::new({literal});");
@@ -612,9 +642,10 @@ fn a_big_unbanded_system_gets_a_heap_a_that_compiles_and_agrees() {
             assert_eq!(got.len(), want.len(), "{f}");
             let scale = want.iter().fold(1.0f64, |m, x| m.max(x.abs()));
             for (i, (x, y)) in got.iter().zip(want).enumerate() {
-                assert!((x - y).abs() <= 1e-9 * scale, "{f}[{i}]: generated {x}, interpreter {y}");
+                assert!((x - y).abs() <= 1e-9 * scale, "{name} {f}[{i}]: generated {x}, interpreter {y}");
             }
         }
     }
     assert!(lines.next().is_none());
+    m.code
 }

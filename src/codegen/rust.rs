@@ -235,7 +235,9 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
              constraint k's direction d on body i, sorted by k. Σₖ λₖ·d over the blocks of body i is its force."
         );
     }
-    if banded || sparse_j || k > DENSE_MAX {
+    let blocks = formulas.direction.iter().map(Vec::len).sum::<usize>();
+    let parted = k > PART || (k > DENSE_MAX && formulas.a.len() > PART) || (sparse_j && blocks > PART);
+    if parted {
         let _ = writeln!(
             out,
             "// Outputs of more than {PART} formulas are filled by private parts of at most {PART}: no function's \
