@@ -316,6 +316,11 @@ fn specialising_extreme_values_keeps_formulas_finite() {
 
 /// A chain of `n` links in 2D hanging from the origin, with its own mass per body.
 fn chain_file(n: usize) -> String {
+    chain_file_in_order(n, 1..=n)
+}
+
+/// [`chain_file`] with its constraints (links 1 ..= n) listed in the order given.
+fn chain_file_in_order(n: usize, links: impl Iterator<Item = usize>) -> String {
     let mut t = format!("title = \"Chain of {n} links\"\ndimension = 2\n\n[parameters]\nl = 0.5\n");
     for i in 1..=n {
         let _ = write!(
@@ -324,7 +329,7 @@ fn chain_file(n: usize) -> String {
              mass = \"m{i}\"\nforce = \"F{i}\"\n"
         );
     }
-    for i in 1..=n {
+    for i in links {
         let link = if i == 1 { "r1".to_string() } else { format!("r{i} - r{}", i - 1) };
         let _ = write!(t, "\n[[constraints]]\nname = \"link{i}\"\nexpr = \"dot({link}, {link}) = l^2\"\n");
     }
@@ -406,4 +411,241 @@ fn big_chains_get_a_banded_a_that_compiles_and_agrees() {
         }
     }
     assert!(lines.next().is_none());
+}
+
+/// Links of the big chain. Its dense J would be 500 × 1000 f64 = 4 MB, twice a spawned
+/// thread's default 2 MiB stack, and the module takes rustc about 2–3 s.
+const BIG_LINKS: usize = 500;
+
+/// Parses a harness line `[x, y, …]`.
+fn numbers(line: &str) -> Vec<f64> {
+    line.trim_matches(['[', ']']).split(", ").filter(|x| !x.is_empty()).map(|x| x.parse().expect("a number")).collect()
+}
+
+/// A chain of hundreds of links (`scenario::chain`): J is written as its non-zero blocks on
+/// the heap, A as its band, every big output filled in parts; the module compiles with
+/// warnings denied and unoptimised (where stack frames are largest), every function runs in
+/// a thread with a 2 MiB stack, and agrees with the interpreter at random states: C, the
+/// band of A, b, c and the blocks of J entry by entry, λ through the residual of A λ + b = 0
+/// with the interpreter's A, and the forces as Σₖ λₖ Jₖᵢ with the interpreter's J.
+#[test]
+fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
+    const STATES: usize = 2;
+    let text = lagrange::scenario::chain(BIG_LINKS);
+    let mut l = load(&text).expect("chain loads");
+    let m = module(&mut l, &Options::default()).expect("generates");
+    let code = &m.code;
+    assert!(code.contains("pub fn jacobian_blocks(s: &State) -> Vec<(usize, usize, [f64; 2])>"));
+    assert!(code.contains(&format!("pub const JACOBIAN_BLOCKS: usize = {};", 2 * BIG_LINKS - 1)));
+    assert!(code.contains(&format!("pub fn a_band(s: &State) -> [[f64; 2]; {BIG_LINKS}]")));
+    assert!(!code.contains("fn jacobian(") && !code.contains("fn a_matrix"), "no dense J or A");
+    // No array on the stack bigger than the state's own O(N) size (generic lengths skipped).
+    for (at, _) in code.match_indices("[[f64; ") {
+        let inner = code[at + 7..].split(']').next().and_then(|x| x.parse::<usize>().ok());
+        let outer = code[at..].split("]; ").nth(1).and_then(|x| x.split(']').next()?.parse::<usize>().ok());
+        if let (Some(inner), Some(outer)) = (inner, outer) {
+            assert!(inner * outer <= 2 * BIG_LINKS, "an array of {inner} × {outer} f64");
+        }
+    }
+
+    let mut reference = load(&text).expect("chain loads");
+    let d = derive(&mut reference.system).expect("derives");
+    let mut rng = Rng(0xb16c_4a11_0000_0500);
+    let states: Vec<(Env, String)> = (0..STATES).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
+
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_big");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let module_path = dir.join("chain.rs");
+    std::fs::write(&module_path, code).expect("write module");
+    let mut main = format!("#[allow(dead_code)]\nmod chain {{\n    include!({module_path:?});\n}}\nuse chain::*;\n\n");
+    main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
+    for (_, literal) in &states {
+        // The state is built on the main thread; every function runs on a 2 MiB stack.
+        let _ = writeln!(main, "    let s = Box::new({literal});");
+        main.push_str(
+            "    std::thread::Builder::new()\n        .stack_size(2 << 20)\n        .spawn(move || {\n            \
+             show(&constraints(&s));\n            show(&a_band(&s).concat());\n            show(&b_vector(&s));\n            \
+             show(&c_term(&s));\n            \
+             let j: Vec<f64> = jacobian_blocks(&s).iter().flat_map(|&(k, i, d)| [k as f64, i as f64, d[0], d[1]]).collect();\n            \
+             show(&j);\n            show(&lambda(&s));\n            show(&forces(&s).concat());\n            \
+             show(&force_p1(&s));\n        })\n        .expect(\"spawns\")\n        .join()\n        .expect(\"no overflow\");\n",
+        );
+    }
+    main.push_str("}\n");
+    let main_path = dir.join("harness.rs");
+    std::fs::write(&main_path, &main).expect("write harness");
+    let exe = dir.join("harness");
+    let out = Command::new(rustc())
+        .args(["--edition", "2021", "-C", "opt-level=0", "-D", "warnings", "-o"])
+        .arg(&exe)
+        .arg(&main_path)
+        .output()
+        .expect("rustc runs (set RUSTC or put rustc on PATH)");
+    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
+    let run = Command::new(&exe).output().expect("harness runs");
+    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let mut lines = stdout.lines().map(numbers);
+
+    let g = &reference.system.graph;
+    let k = BIG_LINKS;
+    let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-9 * scale.max(1.0);
+    let max_abs = |xs: &[f64]| xs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let agree = |what: &str, got: &[f64], want: &[f64]| {
+        assert_eq!(got.len(), want.len(), "{what}");
+        let scale = max_abs(want);
+        for (i, (x, y)) in got.iter().zip(want).enumerate() {
+            assert!(close(*x, *y, scale), "{what}[{i}]: generated {x}, interpreter {y}");
+        }
+    };
+    for (env, _) in &states {
+        let mut next = || lines.next().expect("one line per output");
+        let (c, band, b, c_term, blocks, lambda, forces, force_p1) =
+            (next(), next(), next(), next(), next(), next(), next(), next());
+        let want = |ids: &mut dyn Iterator<Item = lagrange::expr::Id>| -> Vec<f64> {
+            ids.map(|id| scalar(g, id, env)).collect()
+        };
+        agree("C", &c, &want(&mut d.constraints.iter().map(|c| c.c)));
+        let b_want = want(&mut d.b.iter().copied());
+        agree("b", &b, &b_want);
+        agree("c", &c_term, &want(&mut d.constraints.iter().map(|c| c.c_term)));
+        // A: the interpreter's upper triangle, as band rows.
+        let mut band_want = vec![0.0; 2 * k];
+        for &(r, col, id) in &d.a {
+            let (r, col) = (r.min(col), r.max(col));
+            assert!(col - r <= 1, "a chain's A is tridiagonal");
+            band_want[2 * r + col - r] = scalar(g, id, env);
+        }
+        agree("A band", &band, &band_want);
+        // J: (k, i, d) blocks in the derivation's order.
+        let mut j_want = Vec::new();
+        for (r, dc) in d.constraints.iter().enumerate() {
+            for &(body, id) in &dc.direction {
+                j_want.extend([r as f64, body as f64]);
+                j_want.extend(vector(g, id, env));
+            }
+        }
+        agree("J blocks", &blocks, &j_want);
+        // A λ + b = 0 with the interpreter's A.
+        let a_scale = max_abs(&band_want);
+        let (l_scale, b_scale) = (max_abs(&lambda), max_abs(&b_want));
+        let mut residual = b_want.clone();
+        for r in 0..k {
+            residual[r] += band_want[2 * r] * lambda[r];
+            if r + 1 < k {
+                residual[r] += band_want[2 * r + 1] * lambda[r + 1];
+                residual[r + 1] += band_want[2 * r + 1] * lambda[r];
+            }
+        }
+        for (r, x) in residual.iter().enumerate() {
+            assert!(x.abs() <= 1e-9 * (a_scale * l_scale + b_scale), "row {r}: residual {x}");
+        }
+        // Forces = Σₖ λₖ Jₖᵢ with the interpreter's J.
+        let mut f_want = vec![0.0; 2 * k];
+        for block in j_want.chunks(4) {
+            let (r, body) = (block[0] as usize, block[1] as usize);
+            f_want[2 * body] += lambda[r] * block[2];
+            f_want[2 * body + 1] += lambda[r] * block[3];
+        }
+        agree("forces", &forces, &f_want);
+        agree("force on p1", &force_p1, &f_want[..2]);
+    }
+    assert!(lines.next().is_none());
+}
+
+/// A chain whose constraints are listed odd links first, then even ones: A is not banded,
+/// so past 16 constraints it is a dense `a_matrix` on the heap (rows filled in parts), λ by
+/// Gaussian elimination on the heap, and J is `jacobian_blocks`.
+#[test]
+fn a_big_unbanded_system_gets_a_heap_a_that_compiles_and_agrees() {
+    const LINKS: usize = 100;
+    let text = chain_file_in_order(LINKS, (1..=LINKS).step_by(2).chain((2..=LINKS).step_by(2)));
+    let code = sparse_j_agrees("heap_a", &text, 0x0dd5_e7e0_0000_0100);
+    assert!(code.contains(&format!("pub fn a_matrix(s: &State) -> Vec<[f64; {LINKS}]>")), "a heap A");
+    assert!(!code.contains("A_BANDWIDTH"));
+}
+
+/// Few constraints on many bodies (a 10-link chain, body 11 on a circle, 200 free bodies):
+/// A stays a small dense array, but J (11 × 420 entries) is written as its 20 blocks.
+#[test]
+fn few_constraints_on_many_bodies_get_a_sparse_j() {
+    let mut text = chain_file(10);
+    let bodies = text.find("\n[[constraints]]").expect("constraints");
+    let free: String = (11..=210)
+        .map(|i| {
+            format!(
+                "\n[[bodies]]\nname = \"p{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\n\
+                 mass = \"m{i}\"\nforce = \"F{i}\"\n"
+            )
+        })
+        .collect();
+    text.insert_str(bodies, &free);
+    text.push_str("\n[[constraints]]\nname = \"circle\"\nexpr = \"dot(r11, r11) = l^2\"\n");
+    let code = sparse_j_agrees("many_bodies", &text, 0x0b0d_1e50_0000_0210);
+    assert!(code.contains("pub fn a_matrix(s: &State) -> [[f64; 11]; 11]"), "a small dense A");
+    assert!(code.contains("pub const JACOBIAN_BLOCKS: usize = 20;"));
+}
+
+/// Generates `text`'s module, checks J is `jacobian_blocks`, compiles it with warnings denied
+/// and unoptimised, runs every function on a 2 MiB thread at two random states and compares
+/// C, b, c, λ, A, J (made dense from its blocks) and the forces with the interpreter, entry by
+/// entry. Returns the module's code.
+fn sparse_j_agrees(name: &str, text: &str, seed: u64) -> String {
+    let mut l = load(text).expect("loads");
+    let m = module(&mut l, &Options::default()).expect("generates");
+    assert!(m.code.contains("pub fn jacobian_blocks") && !m.code.contains("fn jacobian("), "a sparse J");
+    let mut reference = load(text).expect("loads");
+    let d = derive(&mut reference.system).expect("derives");
+    let mut rng = Rng(seed);
+    let states: Vec<(Env, String)> = (0..2).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
+
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("generate_{name}"));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let module_path = dir.join("module.rs");
+    std::fs::write(&module_path, &m.code).expect("write module");
+    let mut main =
+        format!("#[allow(dead_code)]\nmod system {{\n    include!({module_path:?});\n}}\nuse system::*;\n\n");
+    main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
+    for (_, literal) in &states {
+        let _ = writeln!(main, "    let s = Box::new({literal});");
+        main.push_str(
+            "    std::thread::Builder::new()\n        .stack_size(2 << 20)\n        .spawn(move || {\n            \
+             show(&constraints(&s));\n            show(&b_vector(&s));\n            show(&c_term(&s));\n            \
+             show(&lambda(&s));\n            show(&a_matrix(&s).concat());\n            \
+             let mut j = vec![0.0; CONSTRAINTS * BODIES * DIM];\n            \
+             for (k, i, d) in jacobian_blocks(&s) {\n                \
+             j[k * BODIES * DIM + i * DIM..][..DIM].copy_from_slice(&d);\n            }\n            \
+             show(&j);\n            show(&forces(&s).concat());\n        })\n        .expect(\"spawns\")\n        \
+             .join()\n        .expect(\"no overflow\");\n",
+        );
+    }
+    main.push_str("}\n");
+    let main_path = dir.join("harness.rs");
+    std::fs::write(&main_path, &main).expect("write harness");
+    let exe = dir.join("harness");
+    let out = Command::new(rustc())
+        .args(["--edition", "2021", "-C", "opt-level=0", "-D", "warnings", "-o"])
+        .arg(&exe)
+        .arg(&main_path)
+        .output()
+        .expect("rustc runs (set RUSTC or put rustc on PATH)");
+    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
+    let run = Command::new(&exe).output().expect("harness runs");
+    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    let mut lines = stdout.lines().map(numbers);
+    for (env, _) in &states {
+        let want = expected(&reference, &d, env);
+        for f in ["constraints", "b_vector", "c_term", "lambda", "a_matrix", "jacobian", "forces"] {
+            let got = lines.next().expect("one line per output");
+            let want = &want.iter().find(|e| e.0 == f).expect(f).1;
+            assert_eq!(got.len(), want.len(), "{f}");
+            let scale = want.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+            for (i, (x, y)) in got.iter().zip(want).enumerate() {
+                assert!((x - y).abs() <= 1e-9 * scale, "{name} {f}[{i}]: generated {x}, interpreter {y}");
+            }
+        }
+    }
+    assert!(lines.next().is_none());
+    m.code
 }

@@ -7,6 +7,8 @@
 //! Codegen may print text (it writes source), but it never touches files or stdout:
 //! `main.rs` decides where the text goes.
 
+mod names;
 pub mod rust;
+mod support;
 
 pub use rust::{GenerateError, Module, Options, generate, module};

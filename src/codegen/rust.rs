@@ -9,9 +9,20 @@
 //! A is a dense `[[f64; K]; K]` (`a_matrix`) up to `DENSE_MAX` (16) constraints; past that, when
 //! A is banded (a chain listed in order), only its band is written (`a_band`, row k holding
 //! A[k][k..=k + w], with `A_BANDWIDTH` = w) and λ comes from a band Cholesky in the module,
-//! so code size and work grow linearly with a chain's length. The entries of A are computed
-//! from the directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the canonical, bilinearly
-//! expanded form the doc comments show: fewer operations and no cancellation.
+//! so code size and work grow linearly with a chain's length. A big A that is not banded is
+//! a `Vec<[f64; K]>` on the heap (`a_matrix`), solved by the same elimination. The entries
+//! of A are computed from the directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the
+//! canonical, bilinearly expanded form the doc comments show: fewer operations and no
+//! cancellation.
+//!
+//! Big systems must not need a big stack (a 1000-link chain's dense J alone is 16 MB). Up to
+//! `DENSE_J_MAX` (4096) entries J is a dense `[[f64; N·DIM]; K]` (`jacobian`); past that it
+//! is `jacobian_blocks`, a `Vec` of its non-zero blocks `(k, i, d)`: constraint k's direction
+//! d on body i, sorted by k — what an engine iterates to form Jᵀλ, J v or J M⁻¹ Jᵀ. And an
+//! output of more than `PART` (64) formulas is filled by private `#[inline(never)]`
+//! functions of at most 64 formulas each: an unoptimised build gives every value its own
+//! stack slot, so one function for the whole output would grow with the system. What stays
+//! on the stack is O(K + N): the `State`, the returned vectors, the band.
 //!
 //! Each function body is the scalar [`Program`] of its formulas: values used more than once
 //! become `let` bindings, values used once are written inline. `--specialize` substitutes
@@ -24,6 +35,9 @@
 //!
 //! Not here: files or stdout (`main.rs`), evaluation (`numeric`).
 
+use super::names::Namer;
+pub use super::names::{comment_text, snake};
+use super::support::{HELPERS, SOLVE, SOLVE_BAND};
 use crate::derive::{DeriveError, derive};
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
@@ -57,6 +71,13 @@ const MAX_DOC_FORMULA: usize = 400;
 /// Most constraints for which A is written as a dense K×K array; past this, a banded A
 /// (a chain's) is written as its band only and solved by band Cholesky.
 const DENSE_MAX: usize = 16;
+/// Most entries (K · N · DIM) of a Jacobian written as a dense array (32 KiB); past this J
+/// is written as its non-zero blocks, `(constraint, body, direction)`.
+const DENSE_J_MAX: usize = 4096;
+/// Most formulas (entries of C, b or c, of A, blocks of J) an output computes in one
+/// function; a bigger output is filled by private functions of at most `PART` formulas each,
+/// so no stack frame grows with the system's size.
+const PART: usize = 64;
 /// Deepest expression written inline; deeper values get a `let`, so rustc never sees a
 /// pathologically nested expression.
 const MAX_INLINE_DEPTH: u32 = 24;
@@ -195,6 +216,34 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     if options.specialize {
         let _ = writeln!(out, "// Specialised: the file's parameter values are written into the formulas.");
     }
+    // How a big system is laid out, so that none of its functions needs a big stack.
+    let bandwidth = formulas.a.iter().map(|&(r, c, _)| r.abs_diff(c)).max().unwrap_or(0);
+    let banded = k > DENSE_MAX && 2 * (bandwidth + 1) <= k;
+    let sparse_j = k * n * dim > DENSE_J_MAX;
+    if banded {
+        let _ = writeln!(
+            out,
+            "// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = {bandwidth}; λ by band Cholesky."
+        );
+    } else if k > DENSE_MAX {
+        let _ = writeln!(out, "// A is dense and not banded: `a_matrix` returns its {k} rows on the heap (Vec).");
+    }
+    if sparse_j {
+        let _ = writeln!(
+            out,
+            "// J is sparse: `jacobian_blocks(s)` is a Vec of its JACOBIAN_BLOCKS non-zero blocks (k, i, d): \
+             constraint k's direction d on body i, sorted by k. Σₖ λₖ·d over the blocks of body i is its force."
+        );
+    }
+    let blocks = formulas.direction.iter().map(Vec::len).sum::<usize>();
+    let parted = k > PART || (k > DENSE_MAX && formulas.a.len() > PART) || (sparse_j && blocks > PART);
+    if parted {
+        let _ = writeln!(
+            out,
+            "// Outputs of more than {PART} formulas are filled by private parts of at most {PART}: no function's \
+             stack grows with the system's size beyond its own O(K) arrays."
+        );
+    }
     let _ = writeln!(out);
 
     // The state.
@@ -218,8 +267,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     for (i, &c) in formulas.c.iter().enumerate() {
         doc.push(format!("- `{}`: {}", comment_text(constraint_names[i]), formula(g, c)));
     }
-    let (lets, exprs) = ctx.body(&formulas.c)?;
-    emit_fn(&mut out, &doc, "constraints", &format!("[f64; {k}]"), &lets, &array(&exprs));
+    ctx.emit_scalars(&mut out, &doc, "constraints", &formulas.c)?;
 
     // A
     let mut doc = vec![
@@ -238,10 +286,47 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             roots.push(id);
         }
     }
-    let (lets, exprs) = ctx.body(&roots)?;
-    let bandwidth = formulas.a.iter().map(|&(r, c, _)| r.abs_diff(c)).max().unwrap_or(0);
-    let banded = k > DENSE_MAX && 2 * (bandwidth + 1) <= k;
-    if banded {
+    if banded && formulas.a.len() > PART {
+        // One item per band row, each entry once: the parts need no shared `let`s.
+        let _ = writeln!(
+            out,
+            "/// Half-bandwidth of A: Aₖⱼ = 0 when |k − j| > A_BANDWIDTH.\npub const A_BANDWIDTH: usize = {bandwidth};\n"
+        );
+        doc.push(String::new());
+        doc.push(format!(
+            "Stored as a band (A is symmetric): row k holds A[k][k], A[k][k + 1], …, A[k][k + {bandwidth}], \
+             zeros past the last column."
+        ));
+        let present = |r: usize| (r..=r + bandwidth).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
+        let items: Vec<Vec<Id>> =
+            (0..k).map(|r| present(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
+        let store = |r: usize, exprs: &[String]| {
+            let mut values = vec!["0.0".to_string(); bandwidth + 1];
+            for (c, e) in present(r).into_iter().zip(exprs) {
+                values[c - r] = e.clone();
+            }
+            format!("out[{r}] = {};", array(&values))
+        };
+        let ret = format!("[[f64; {}]; {k}]", bandwidth + 1);
+        let init = format!("[[0.0; {}]; {k}]", bandwidth + 1);
+        ctx.emit_items(&mut out, &doc, "a_band", &ret, &init, &format!("[f64; {}]", bandwidth + 1), &items, store)?;
+    } else if k > DENSE_MAX && !banded {
+        // K² numbers: on the heap, written entry by entry (an array literal would be built on
+        // the stack first). Only the non-zero entries are stored, row by row.
+        let row = |r: usize| (0..k).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
+        let items: Vec<Vec<Id>> = (0..k).map(|r| row(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
+        let store = |r: usize, exprs: &[String]| {
+            let stores: Vec<String> =
+                row(r).into_iter().zip(exprs).map(|(c, e)| format!("out[{r}][{c}] = {e};")).collect();
+            stores.join("\n    ")
+        };
+        doc.push(String::new());
+        doc.push(format!("On the heap ({k} rows of {k}): A is not banded and too big for the stack."));
+        let ret = format!("Vec<[f64; {k}]>");
+        let init = format!("vec![[0.0; {k}]; {k}]");
+        ctx.emit_items(&mut out, &doc, "a_matrix", &ret, &init, &format!("[f64; {k}]"), &items, store)?;
+    } else if banded {
+        let (lets, exprs) = ctx.body(&roots)?;
         // Only the band: row r holds A[r][r], A[r][r + 1], …, A[r][r + w] (zeros past the end).
         let rows: Vec<String> = (0..k)
             .map(|r| {
@@ -262,6 +347,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
         ));
         emit_fn(&mut out, &doc, "a_band", &format!("[[f64; {}]; {k}]", bandwidth + 1), &lets, &array(&rows));
     } else {
+        let (lets, exprs) = ctx.body(&roots)?;
         let rows: Vec<String> = (0..k)
             .map(|r| {
                 array(
@@ -279,8 +365,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     for (i, &b) in formulas.b.iter().enumerate() {
         doc.push(format!("- b[{i}] = {}", formula(g, b)));
     }
-    let (lets, exprs) = ctx.body(&formulas.b)?;
-    emit_fn(&mut out, &doc, "b_vector", &format!("[f64; {k}]"), &lets, &array(&exprs));
+    ctx.emit_scalars(&mut out, &doc, "b_vector", &formulas.b)?;
 
     // J
     let mut doc = vec![format!(
@@ -296,33 +381,72 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             roots.push(id);
         }
     }
-    let (lets, exprs) = ctx.body(&roots)?;
-    let rows: Vec<String> = (0..k)
-        .map(|r| {
-            let mut row = Vec::with_capacity(n * dim);
-            for body in 0..n {
-                for axis in 0..dim {
-                    row.push(match at.get(&(r, body)) {
-                        Some(&i) => exprs[i * dim + axis].clone(),
-                        None => "0.0".into(),
-                    });
+    if sparse_j {
+        // Block triplets by constraint, each constraint's bodies as the derivation lists them.
+        let blocks: Vec<(usize, usize, Id)> = formulas
+            .direction
+            .iter()
+            .enumerate()
+            .flat_map(|(r, dirs)| dirs.iter().map(move |&(body, id)| (r, body, id)))
+            .collect();
+        let _ = writeln!(
+            out,
+            "/// Number of non-zero blocks of J: the entries `jacobian_blocks` returns.\n\
+             pub const JACOBIAN_BLOCKS: usize = {};\n",
+            blocks.len()
+        );
+        doc[0] = format!(
+            "J, sparse: every non-zero block `(k, i, d)`, where d is the force direction of constraint k \
+             (∇C over its constant content) on body i, so Jₖ at columns i·{dim} .. i·{dim} + {dim} is d. \
+             Sorted by k; a body a constraint does not involve has no block in its row."
+        );
+        let items: Vec<Vec<Id>> = blocks.iter().map(|b| vec![b.2]).collect();
+        let store =
+            |i: usize, exprs: &[String]| format!("out[{i}] = ({}, {}, {});", blocks[i].0, blocks[i].1, array(exprs));
+        // On the heap: a block is 2 + DIM words, and an unoptimised build copies a returned
+        // array several times on its way out.
+        let ret = format!("Vec<(usize, usize, [f64; {dim}])>");
+        let init = format!("vec![(0, 0, [0.0; {dim}]); {}]", blocks.len());
+        let elem = format!("(usize, usize, [f64; {dim}])");
+        ctx.emit_items(&mut out, &doc, "jacobian_blocks", &ret, &init, &elem, &items, store)?;
+    } else {
+        let (lets, exprs) = ctx.body(&roots)?;
+        let rows: Vec<String> = (0..k)
+            .map(|r| {
+                let mut row = Vec::with_capacity(n * dim);
+                for body in 0..n {
+                    for axis in 0..dim {
+                        row.push(match at.get(&(r, body)) {
+                            Some(&i) => exprs[i * dim + axis].clone(),
+                            None => "0.0".into(),
+                        });
+                    }
                 }
-            }
-            array(&row)
-        })
-        .collect();
-    emit_fn(&mut out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, &array(&rows));
+                array(&row)
+            })
+            .collect();
+        emit_fn(&mut out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, &array(&rows));
+    }
 
     // c
     let mut doc = vec!["c: the part of C̈ (over the same constant) without accelerations, C̈ = J·a + c.".to_string()];
     for (i, &c) in formulas.c_term.iter().enumerate() {
         doc.push(format!("- c[{i}] = {}", formula(g, c)));
     }
-    let (lets, exprs) = ctx.body(&formulas.c_term)?;
-    emit_fn(&mut out, &doc, "c_term", &format!("[f64; {k}]"), &lets, &array(&exprs));
+    ctx.emit_scalars(&mut out, &doc, "c_term", &formulas.c_term)?;
 
     // λ and the forces.
-    let mut namer = Namer::new(&["constraints", "a_matrix", "b_vector", "jacobian", "c_term", "lambda", "forces"]);
+    let mut namer = Namer::new(&[
+        "constraints",
+        "a_matrix",
+        "a_band",
+        "b_vector",
+        "jacobian",
+        "jacobian_blocks",
+        "c_term",
+        "lambda",
+        "forces",
+    ]);
     let force_fns: Vec<String> = body_names.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
     match (formulas.lambda, &formulas.forces) {
         (Some(lambda), Some(forces)) => {
@@ -355,7 +479,9 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                     "/// The multipliers λ: the solution of A λ = −b (band Cholesky, O(K w²); NaN when A\n\
                      /// is singular, e.g. redundant constraints).\n\
                      pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                     let b = b_vector(s);\n    solve_band(a_band(s), b.map(|x| -x))\n}}\n"
+                     let mut b = b_vector(s);\n    \
+                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
+                     solve_band(a_band(s), b)\n}}\n"
                 );
             } else {
                 let _ = writeln!(
@@ -366,9 +492,21 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                      let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
                 );
             }
-            let _ = writeln!(
-                out,
-                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+            if sparse_j {
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                     pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                     let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
+                     let mut f = [[0.0; {dim}]; {n}];\n    \
+                     for (k, i, d) in j {{\n        \
+                     for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
+                     f\n}}\n"
+                );
+            } else {
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
                  pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
                  let (l, j) = (lambda(s), jacobian(s));\n    \
                  let mut f = [[0.0; {dim}]; {n}];\n    \
@@ -376,7 +514,8 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                  for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
                  for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
                  f\n}}\n"
-            );
+                );
+            }
             for (body, name) in force_fns.iter().enumerate() {
                 let _ = writeln!(
                     out,
@@ -384,7 +523,15 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                     comment_text(body_names[body])
                 );
             }
-            out.push_str(if banded { SOLVE_BAND } else { SOLVE });
+            if banded {
+                out.push_str(SOLVE_BAND);
+            } else if k > DENSE_MAX {
+                // The same elimination on the heap matrix `a_matrix` returns (the code indexes
+                // rows alike).
+                out.push_str(&SOLVE.replace("mut a: [[f64; K]; K]", "mut a: Vec<[f64; K]>"));
+            } else {
+                out.push_str(SOLVE);
+            }
         }
     }
     out.push_str(HELPERS);
@@ -506,6 +653,100 @@ enum Prec {
 }
 
 impl Ctx<'_> {
+    /// `pub fn name(s: &State) -> [f64; K]` for one scalar formula per entry: an array literal,
+    /// or entry by entry ([`Ctx::emit_items`]) past [`PART`] entries.
+    fn emit_scalars(&self, out: &mut String, doc: &[String], name: &str, roots: &[Id]) -> Result<(), GenerateError> {
+        let k = roots.len();
+        if k > PART {
+            let items: Vec<Vec<Id>> = roots.iter().map(|&r| vec![r]).collect();
+            let store = |i: usize, e: &[String]| format!("out[{i}] = {};", e[0]);
+            self.emit_items(out, doc, name, &format!("[f64; {k}]"), &format!("[0.0; {k}]"), "f64", &items, store)
+        } else {
+            let (lets, exprs) = self.body(roots)?;
+            emit_fn(out, doc, name, &format!("[f64; {k}]"), &lets, &array(&exprs));
+            Ok(())
+        }
+    }
+
+    /// `pub fn name(s: &State) -> ret` that starts from `init` and stores every item:
+    /// `store(i, exprs)` is the statement storing item i from the expressions of its roots'
+    /// components. Past [`PART`] formulas (roots) the work is split into private
+    /// `#[inline(never)]` functions of consecutive items, at most [`PART`] formulas each
+    /// unless one item has more, called in turn on `&mut out` (a slice of `elem`):
+    /// an unoptimised build gives every value of a function its own stack slot, so one
+    /// function for a whole chain of thousands of links would need megabytes of stack. Values
+    /// shared across two parts are computed in both.
+    #[allow(clippy::too_many_arguments)]
+    fn emit_items(
+        &self,
+        out: &mut String,
+        doc: &[String],
+        name: &str,
+        ret: &str,
+        init: &str,
+        elem: &str,
+        items: &[Vec<Id>],
+        store: impl Fn(usize, &[String]) -> String,
+    ) -> Result<(), GenerateError> {
+        // The statements of items lo..hi: `let`s first, then one store per item.
+        let statements = |lo: usize, hi: usize| -> Result<Vec<String>, GenerateError> {
+            let roots: Vec<Id> = items[lo..hi].iter().flatten().copied().collect();
+            let (mut lines, exprs) = self.body(&roots)?;
+            let per_root = exprs.len() / roots.len().max(1);
+            let mut at = 0;
+            for (i, item) in items[lo..hi].iter().enumerate() {
+                let n = item.len() * per_root;
+                lines.push(store(lo + i, &exprs[at..at + n]));
+                at += n;
+            }
+            Ok(lines)
+        };
+        for line in doc {
+            let _ = writeln!(out, "/// {line}");
+        }
+        let _ = writeln!(out, "pub fn {name}(s: &State) -> {ret} {{");
+        let _ = writeln!(out, "    let mut out = {init};");
+        if items.iter().map(Vec::len).sum::<usize>() <= PART {
+            let lines = statements(0, items.len())?;
+            if !lines.iter().any(|l| l.contains("s.")) {
+                let _ = writeln!(out, "    let _ = s;");
+            }
+            for l in lines {
+                let _ = writeln!(out, "    {l}");
+            }
+            let _ = writeln!(out, "    out\n}}\n");
+            return Ok(());
+        }
+        // Consecutive items up to PART formulas a part (at least one item each).
+        let mut parts: Vec<(usize, usize)> = Vec::new();
+        let (mut lo, mut roots) = (0, 0);
+        for (i, item) in items.iter().enumerate() {
+            if i > lo && roots + item.len() > PART {
+                parts.push((lo, i));
+                (lo, roots) = (i, 0);
+            }
+            roots += item.len();
+        }
+        parts.push((lo, items.len()));
+        for &(lo, _) in &parts {
+            let _ = writeln!(out, "    {name}_from_{lo}(s, &mut out);");
+        }
+        let _ = writeln!(out, "    out\n}}\n");
+        for (lo, hi) in parts {
+            let lines = statements(lo, hi)?;
+            let _ = writeln!(out, "/// Items {lo}..{hi} of [`{name}`].\n#[inline(never)]");
+            let _ = writeln!(out, "fn {name}_from_{lo}(s: &State, out: &mut [{elem}]) {{");
+            if !lines.iter().any(|l| l.contains("s.")) {
+                let _ = writeln!(out, "    let _ = s;");
+            }
+            for l in lines {
+                let _ = writeln!(out, "    {l}");
+            }
+            let _ = writeln!(out, "}}\n");
+        }
+        Ok(())
+    }
+
     /// `let` statements and one expression per output component of `roots`.
     fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let p = Program::lower(self.g, roots, self.inputs)?;
@@ -629,197 +870,3 @@ fn formula(g: &Graph, id: Id) -> String {
         Err(e) => format!("({})", comment_text(&e.to_string())),
     }
 }
-
-/// Text safe inside a `//` or `///` comment: one line, no control or bidirectional
-/// characters (those are written as `\u{…}`).
-pub fn comment_text(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for ch in s.chars() {
-        let bidi = matches!(ch, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}');
-        if ch.is_control() || bidi || ch == '\u{2028}' || ch == '\u{2029}' || ch == '\u{feff}' {
-            let _ = write!(out, "\\u{{{:x}}}", ch as u32);
-        } else {
-            out.push(ch);
-        }
-    }
-    out
-}
-
-/// Rust's keywords (strict, reserved and weak ones that cannot name a field or function).
-const KEYWORDS: &[&str] = &[
-    "as", "break", "const", "continue", "crate", "else", "enum", "extern", "false", "fn", "for", "if", "impl", "in",
-    "let", "loop", "match", "mod", "move", "mut", "pub", "ref", "return", "self", "static", "struct", "super", "trait",
-    "true", "type", "unsafe", "use", "where", "while", "async", "await", "dyn", "abstract", "become", "box", "do",
-    "final", "macro", "override", "priv", "typeof", "unsized", "virtual", "yield", "try", "gen", "union", "static",
-    "raw", "safe",
-];
-
-/// A snake_case identifier for `name`: ASCII letters and digits kept (camel case split with
-/// `_`), other characters as `_` or their code point (`λ` → `u3bb`), never a keyword, never
-/// starting with a digit, never empty.
-pub fn snake(name: &str) -> String {
-    let mut out = String::new();
-    let mut after_lower = false;
-    for ch in name.chars() {
-        if ch.is_ascii_alphanumeric() {
-            if ch.is_ascii_uppercase() && after_lower {
-                out.push('_');
-            }
-            out.push(ch.to_ascii_lowercase());
-            after_lower = ch.is_ascii_lowercase() || ch.is_ascii_digit();
-        } else if ch.is_alphanumeric() {
-            if !out.is_empty() && !out.ends_with('_') {
-                out.push('_');
-            }
-            let _ = write!(out, "u{:x}_", ch as u32);
-            after_lower = false;
-        } else {
-            if !out.ends_with('_') {
-                out.push('_');
-            }
-            after_lower = false;
-        }
-    }
-    let mut out = out.trim_matches('_').to_string();
-    while out.contains("__") {
-        out = out.replace("__", "_");
-    }
-    if out.is_empty() {
-        out.push('x');
-    }
-    if out.starts_with(|c: char| c.is_ascii_digit()) {
-        out.insert_str(0, "n_");
-    }
-    if KEYWORDS.contains(&out.as_str()) {
-        out.push('_');
-    }
-    out
-}
-
-/// Hands out distinct identifiers: a clash gets `_2`, `_3`, ….
-struct Namer {
-    used: HashSet<String>,
-}
-
-impl Namer {
-    fn new(taken: &[&str]) -> Namer {
-        Namer { used: taken.iter().map(|s| s.to_string()).collect() }
-    }
-
-    fn name(&mut self, wanted: &str) -> String {
-        let mut name = wanted.to_string();
-        let mut k = 2;
-        while !self.used.insert(name.clone()) {
-            // `self_` + `_2` would be `self__2`, which is not snake_case.
-            name = format!("{}_{k}", wanted.trim_end_matches('_'));
-            k += 1;
-        }
-        name
-    }
-}
-
-const SOLVE: &str = "/// Solves `a x = b` by Gaussian elimination with partial pivoting; NaN if `a` is singular.
-#[allow(clippy::needless_range_loop)]
-fn solve<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> [f64; K] {
-    for col in 0..K {
-        let mut p = col;
-        for row in col + 1..K {
-            if a[row][col].abs() > a[p][col].abs() {
-                p = row;
-            }
-        }
-        a.swap(col, p);
-        b.swap(col, p);
-        let pivot = a[col][col];
-        if pivot == 0.0 || !pivot.is_finite() {
-            return [f64::NAN; K];
-        }
-        for row in col + 1..K {
-            let f = a[row][col] / pivot;
-            if f != 0.0 {
-                for c in col..K {
-                    a[row][c] -= f * a[col][c];
-                }
-                b[row] -= f * b[col];
-            }
-        }
-    }
-    let mut x = [0.0; K];
-    for row in (0..K).rev() {
-        let mut acc = b[row];
-        for c in row + 1..K {
-            acc -= a[row][c] * x[c];
-        }
-        x[row] = acc / a[row][row];
-    }
-    x
-}
-
-";
-
-const SOLVE_BAND: &str = "/// Solves `a x = b` for a symmetric positive definite band matrix given as its upper band
-/// (`a[i][d]` = A[i][i + d]) by Cholesky, A = RᵀR, in place; NaN if A is not positive definite.
-#[allow(clippy::needless_range_loop)]
-fn solve_band<const K: usize, const B: usize>(mut a: [[f64; B]; K], mut b: [f64; K]) -> [f64; K] {
-    let w = B - 1;
-    for i in 0..K {
-        for d in 0..B.min(K - i) {
-            let j = i + d;
-            // A[i][j] − Σₚ R[p][i] R[p][j] over the rows p < i whose band reaches column j.
-            let mut acc = a[i][d];
-            for p in j.saturating_sub(w)..i {
-                acc -= a[p][i - p] * a[p][j - p];
-            }
-            if d == 0 {
-                if !(acc > 0.0 && acc.is_finite()) {
-                    return [f64::NAN; K];
-                }
-                a[i][0] = acc.sqrt();
-            } else {
-                a[i][d] = acc / a[i][0];
-            }
-        }
-    }
-    // Rᵀ y = b, then R x = y (in place in b).
-    for i in 0..K {
-        let mut acc = b[i];
-        for p in i.saturating_sub(w)..i {
-            acc -= a[p][i - p] * b[p];
-        }
-        b[i] = acc / a[i][0];
-    }
-    for i in (0..K).rev() {
-        let mut acc = b[i];
-        for q in i + 1..K.min(i + B) {
-            acc -= a[i][q - i] * b[q];
-        }
-        b[i] = acc / a[i][0];
-    }
-    b
-}
-
-";
-
-const HELPERS: &str = "/// |(x, y)| without overflow or underflow (the plain formula unless it would lose range).
-#[allow(dead_code)]
-#[inline]
-fn norm2(x: f64, y: f64) -> f64 {
-    let s = x * x + y * y;
-    if s.is_finite() && s >= f64::MIN_POSITIVE { s.sqrt() } else { x.hypot(y) }
-}
-
-/// |(x, y, z)| without overflow or underflow.
-#[allow(dead_code)]
-#[inline]
-fn norm3(x: f64, y: f64, z: f64) -> f64 {
-    let s = x * x + y * y + z * z;
-    if s.is_finite() && s >= f64::MIN_POSITIVE { s.sqrt() } else { x.hypot(y).hypot(z) }
-}
-
-/// `b^e`, integer exponents by `powi` so that negative bases work.
-#[allow(dead_code)]
-#[inline]
-fn powf(b: f64, e: f64) -> f64 {
-    if e == e.trunc() && e.abs() <= i32::MAX as f64 { b.powi(e as i32) } else { b.powf(e) }
-}
-";
