@@ -167,6 +167,24 @@ fn rustc() -> String {
     std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into())
 }
 
+/// Writes `main` as `dir/harness.rs`, compiles it with `rustc -D warnings` at `opt_level`,
+/// runs it, and returns its standard output; panics with rustc's or the harness's stderr.
+fn compile_and_run(dir: &Path, main: &str, opt_level: u8) -> String {
+    let main_path = dir.join("harness.rs");
+    std::fs::write(&main_path, main).expect("write harness");
+    let exe = dir.join("harness");
+    let out = Command::new(rustc())
+        .args(["--edition", "2021", "-C", &format!("opt-level={opt_level}"), "-D", "warnings", "-o"])
+        .arg(&exe)
+        .arg(&main_path)
+        .output()
+        .expect("rustc runs (set RUSTC or put rustc on PATH)");
+    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
+    let run = Command::new(&exe).output().expect("harness runs");
+    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
+    String::from_utf8_lossy(&run.stdout).into_owned()
+}
+
 #[test]
 fn generated_rust_compiles_and_agrees_with_the_interpreter() {
     let mut cases = Vec::new();
@@ -212,19 +230,7 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
         }
     }
     main.push_str("}\n");
-    let main_path = dir.join("harness.rs");
-    std::fs::write(&main_path, &main).expect("write harness");
-    let exe = dir.join("harness");
-    let out = Command::new(rustc())
-        .args(["--edition", "2021", "-C", "opt-level=1", "-D", "warnings", "-o"])
-        .arg(&exe)
-        .arg(&main_path)
-        .output()
-        .expect("rustc runs (set RUSTC or put rustc on PATH)");
-    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
-    let run = Command::new(&exe).output().expect("harness runs");
-    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stdout = compile_and_run(&dir, &main, 1);
     let mut lines = stdout.lines();
     let mut checked = 0;
     for case in &cases {
@@ -366,19 +372,7 @@ fn big_chains_get_a_banded_a_that_compiles_and_agrees() {
         main.push_str("    show(&forces(&s).concat());\n");
     }
     main.push_str("}\n");
-    let main_path = dir.join("harness.rs");
-    std::fs::write(&main_path, &main).expect("write harness");
-    let exe = dir.join("harness");
-    let out = Command::new(rustc())
-        .args(["--edition", "2021", "-C", "opt-level=1", "-D", "warnings", "-o"])
-        .arg(&exe)
-        .arg(&main_path)
-        .output()
-        .expect("rustc runs (set RUSTC or put rustc on PATH)");
-    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
-    let run = Command::new(&exe).output().expect("harness runs");
-    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stdout = compile_and_run(&dir, &main, 1);
     let mut lines = stdout.lines().map(|line| -> Vec<f64> {
         line.trim_matches(['[', ']']).split(", ").map(|x| x.parse().expect("a number")).collect()
     });
@@ -472,19 +466,7 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
         );
     }
     main.push_str("}\n");
-    let main_path = dir.join("harness.rs");
-    std::fs::write(&main_path, &main).expect("write harness");
-    let exe = dir.join("harness");
-    let out = Command::new(rustc())
-        .args(["--edition", "2021", "-C", "opt-level=0", "-D", "warnings", "-o"])
-        .arg(&exe)
-        .arg(&main_path)
-        .output()
-        .expect("rustc runs (set RUSTC or put rustc on PATH)");
-    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
-    let run = Command::new(&exe).output().expect("harness runs");
-    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stdout = compile_and_run(&dir, &main, 0);
     let mut lines = stdout.lines().map(numbers);
 
     let g = &reference.system.graph;
@@ -620,19 +602,7 @@ fn sparse_j_agrees(name: &str, text: &str, seed: u64) -> String {
         );
     }
     main.push_str("}\n");
-    let main_path = dir.join("harness.rs");
-    std::fs::write(&main_path, &main).expect("write harness");
-    let exe = dir.join("harness");
-    let out = Command::new(rustc())
-        .args(["--edition", "2021", "-C", "opt-level=0", "-D", "warnings", "-o"])
-        .arg(&exe)
-        .arg(&main_path)
-        .output()
-        .expect("rustc runs (set RUSTC or put rustc on PATH)");
-    assert!(out.status.success(), "generated code does not compile:\n{}", String::from_utf8_lossy(&out.stderr));
-    let run = Command::new(&exe).output().expect("harness runs");
-    assert!(run.status.success(), "harness failed: {}", String::from_utf8_lossy(&run.stderr));
-    let stdout = String::from_utf8_lossy(&run.stdout);
+    let stdout = compile_and_run(&dir, &main, 0);
     let mut lines = stdout.lines().map(numbers);
     for (env, _) in &states {
         let want = expected(&reference, &d, env);
