@@ -288,15 +288,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     }
     if banded && formulas.a.len() > PART {
         // One item per band row, each entry once: the parts need no shared `let`s.
-        let _ = writeln!(
-            out,
-            "/// Half-bandwidth of A: Aₖⱼ = 0 when |k − j| > A_BANDWIDTH.\npub const A_BANDWIDTH: usize = {bandwidth};\n"
-        );
-        doc.push(String::new());
-        doc.push(format!(
-            "Stored as a band (A is symmetric): row k holds A[k][k], A[k][k + 1], …, A[k][k + {bandwidth}], \
-             zeros past the last column."
-        ));
+        band_header(&mut out, &mut doc, bandwidth);
         let present = |r: usize| (r..=r + bandwidth).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
         let items: Vec<Vec<Id>> =
             (0..k).map(|r| present(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
@@ -336,15 +328,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
                 array(&band)
             })
             .collect();
-        let _ = writeln!(
-            out,
-            "/// Half-bandwidth of A: Aₖⱼ = 0 when |k − j| > A_BANDWIDTH.\npub const A_BANDWIDTH: usize = {bandwidth};\n"
-        );
-        doc.push(String::new());
-        doc.push(format!(
-            "Stored as a band (A is symmetric): row k holds A[k][k], A[k][k + 1], …, A[k][k + {bandwidth}], \
-             zeros past the last column."
-        ));
+        band_header(&mut out, &mut doc, bandwidth);
         emit_fn(&mut out, &doc, "a_band", &format!("[[f64; {}]; {k}]", bandwidth + 1), &lets, &array(&rows));
     } else {
         let (lets, exprs) = ctx.body(&roots)?;
@@ -869,4 +853,17 @@ fn formula(g: &Graph, id: Id) -> String {
         Ok(t) => comment_text(&t),
         Err(e) => format!("({})", comment_text(&e.to_string())),
     }
+}
+
+/// The `A_BANDWIDTH` constant and the doc lines that say how a banded A is stored.
+fn band_header(out: &mut String, doc: &mut Vec<String>, bandwidth: usize) {
+    let _ = writeln!(
+        out,
+        "/// Half-bandwidth of A: Aₖⱼ = 0 when |k − j| > A_BANDWIDTH.\npub const A_BANDWIDTH: usize = {bandwidth};\n"
+    );
+    doc.push(String::new());
+    doc.push(format!(
+        "Stored as a band (A is symmetric): row k holds A[k][k], A[k][k + 1], …, A[k][k + {bandwidth}], \
+         zeros past the last column."
+    ));
 }
