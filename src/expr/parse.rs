@@ -71,7 +71,7 @@ fn cut<'a, T>(at: &'a str, message: impl Into<String>) -> Res<'a, T> {
 }
 
 /// Parses one expression (no relation).
-pub fn parse_expr(text: &str) -> Result<Syntax, ParseError> {
+pub fn parse_expr(text: &str) -> Result<Syntax<'_>, ParseError> {
     let p = Parse::new(text)?;
     let (rest, e) = p.expr(text, 0).map_err(|e| p.error(e))?;
     p.finish(rest)?;
@@ -79,7 +79,7 @@ pub fn parse_expr(text: &str) -> Result<Syntax, ParseError> {
 }
 
 /// Parses `lhs = rhs`, `lhs >= rhs`, `lhs <= rhs` or a bare `C`.
-pub fn parse_relation(text: &str) -> Result<Relation, ParseError> {
+pub fn parse_relation(text: &str) -> Result<Relation<'_>, ParseError> {
     let p = Parse::new(text)?;
     let (rest, lhs) = p.expr(text, 0).map_err(|e| p.error(e))?;
     let (rest, _) = ws(rest).map_err(|e| p.error(e))?;
@@ -186,17 +186,19 @@ impl<'s> Parse<'s> {
     }
 
     /// `term (± term)*`
-    fn expr(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn expr(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         // Nesting recurses through here; grow the stack on the heap when it runs low, so
         // the nesting limit, not the thread's stack size, is what bounds the depth.
         stacker::maybe_grow(STACK_RED_ZONE, STACK_GROWTH, || self.expr_inner(i, depth))
     }
 
-    fn expr_inner(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn expr_inner(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let (i, _) = ws(i)?;
         let start = i;
         let (mut i, first) = self.term(i, depth)?;
-        let mut terms = vec![(Sign::Plus, first)];
+        // Most sums are a single term: the list is allocated at the first operator.
+        let mut first = Some(first);
+        let mut terms = Vec::new();
         loop {
             let (j, _) = ws(i)?;
             let sign = match j.chars().next() {
@@ -206,11 +208,14 @@ impl<'s> Parse<'s> {
             };
             let (j, _) = ws(&j[1..])?;
             let (j, t) = self.term(j, depth).or_else(|e| self.expected_operand(e, j))?;
+            if let Some(first) = first.take() {
+                terms.push((Sign::Plus, first));
+            }
             terms.push((sign, t));
             i = j;
         }
-        if terms.len() == 1 {
-            return Ok((i, terms.pop().map(|(_, t)| t).unwrap_or_else(|| unreachable!())));
+        if let Some(first) = first {
+            return Ok((i, first));
         }
         Ok((i, Syntax { kind: SyntaxKind::Sum(terms), span: self.span(start, i) }))
     }
@@ -225,10 +230,11 @@ impl<'s> Parse<'s> {
     }
 
     /// `unary (*/ unary)*`
-    fn term(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn term(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let start = i;
         let (mut i, first) = self.unary(i, depth)?;
-        let mut factors = vec![(MulOp::Times, first)];
+        let mut first = Some(first);
+        let mut factors = Vec::new();
         loop {
             let (j, _) = ws(i)?;
             let op = match j.chars().next() {
@@ -238,17 +244,20 @@ impl<'s> Parse<'s> {
             };
             let (j, _) = ws(&j[1..])?;
             let (j, f) = self.unary(j, depth).or_else(|e| self.expected_operand(e, j))?;
+            if let Some(first) = first.take() {
+                factors.push((MulOp::Times, first));
+            }
             factors.push((op, f));
             i = j;
         }
-        if factors.len() == 1 {
-            return Ok((i, factors.pop().map(|(_, f)| f).unwrap_or_else(|| unreachable!())));
+        if let Some(first) = first {
+            return Ok((i, first));
         }
         Ok((i, Syntax { kind: SyntaxKind::Product(factors), span: self.span(start, i) }))
     }
 
     /// `- unary | power`
-    fn unary(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn unary(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         if let Some(rest) = i.strip_prefix('-') {
             self.nested(i, depth)?;
             let (j, _) = ws(rest)?;
@@ -260,7 +269,7 @@ impl<'s> Parse<'s> {
     }
 
     /// `postfix (^ unary)?`
-    fn power(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn power(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let (i2, base) = self.postfix(i, depth)?;
         let (j, _) = ws(i2)?;
         if let Some(rest) = j.strip_prefix('^') {
@@ -275,7 +284,7 @@ impl<'s> Parse<'s> {
     }
 
     /// `atom (.x | .y | .z)*`
-    fn postfix(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn postfix(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let start = i;
         let (mut i, mut e) = self.atom(i, depth)?;
         while let Some(rest) = i.strip_prefix('.') {
@@ -293,7 +302,7 @@ impl<'s> Parse<'s> {
         Ok((i, e))
     }
 
-    fn atom(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn atom(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         match i.chars().next() {
             Some('(') => {
                 self.nested(i, depth)?;
@@ -316,14 +325,14 @@ impl<'s> Parse<'s> {
                 if let Some(after_paren) = k.strip_prefix('(') {
                     self.nested(i, depth)?;
                     let (k, args) = self.list(after_paren, depth + 1, ')')?;
-                    let kind = SyntaxKind::Call { name: name.to_string(), name_span, args };
+                    let kind = SyntaxKind::Call { name, name_span, args };
                     return Ok((k, Syntax { kind, span: self.span(i, k) }));
                 }
-                Ok((j, Syntax { kind: SyntaxKind::Ident(name.to_string()), span: name_span }))
+                Ok((j, Syntax { kind: SyntaxKind::Ident(name), span: name_span }))
             }
             Some(c) if c.is_ascii_digit() || c == '.' => {
                 let (j, text) = number(i)?;
-                Ok((j, Syntax { kind: SyntaxKind::Number(text.to_string()), span: self.span(i, j) }))
+                Ok((j, Syntax { kind: SyntaxKind::Number(text), span: self.span(i, j) }))
             }
             Some(c) => fail(i, format!("expected an expression, found `{c}`")),
             None => fail(i, "expected an expression, found the end of the text"),
@@ -331,7 +340,7 @@ impl<'s> Parse<'s> {
     }
 
     /// `e (, e)* close`, at least one entry.
-    fn list(&self, i: &'s str, depth: u32, close: char) -> Res<'s, Vec<Syntax>> {
+    fn list(&self, i: &'s str, depth: u32, close: char) -> Res<'s, Vec<Syntax<'s>>> {
         let mut items = Vec::new();
         let (mut i, _) = ws(i)?;
         if let Some(rest) = i.strip_prefix(close) {
@@ -358,8 +367,8 @@ mod tests {
 
     fn shape(e: &Syntax) -> String {
         match &e.kind {
-            SyntaxKind::Number(n) => n.clone(),
-            SyntaxKind::Ident(n) => n.clone(),
+            SyntaxKind::Number(n) => n.to_string(),
+            SyntaxKind::Ident(n) => n.to_string(),
             SyntaxKind::Sum(ts) => {
                 let parts: Vec<String> = ts
                     .iter()

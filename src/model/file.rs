@@ -382,7 +382,7 @@ fn collect_idents(s: &Syntax, out: &mut Vec<String>) {
     let mut stack = vec![s];
     while let Some(s) = stack.pop() {
         match &s.kind {
-            SyntaxKind::Ident(n) => out.push(n.clone()),
+            SyntaxKind::Ident(n) => out.push(n.to_string()),
             SyntaxKind::Number(_) => {}
             SyntaxKind::Sum(ts) => stack.extend(ts.iter().map(|(_, t)| t)),
             SyntaxKind::Product(fs) => stack.extend(fs.iter().map(|(_, f)| f)),
