@@ -648,7 +648,8 @@ impl Graph {
     /// The symbols that `root` depends on.
     pub fn free_symbols(&self, root: Id) -> Vec<Symbol> {
         // The walk of `reachable`, keeping only the symbols (no sort of every node).
-        let mut seen: FastSet<Id> = FastSet::default();
+        // Room for a small formula's nodes up front: growing the set rehashes it each time.
+        let mut seen: FastSet<Id> = FastSet::with_capacity_and_hasher(32, Default::default());
         let mut stack = vec![root];
         let mut syms = Vec::new();
         while let Some(id) = stack.pop() {

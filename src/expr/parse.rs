@@ -18,6 +18,7 @@ use nom::character::complete::{char, multispace0, satisfy};
 use nom::combinator::{opt, recognize};
 use nom::error::{ErrorKind, ParseError as NomParseError};
 use nom::{Err, IResult, Parser};
+use std::borrow::Cow;
 
 /// The deepest nesting of parentheses, brackets, calls, unary minus and powers.
 pub const MAX_NESTING: u32 = 200;
@@ -39,15 +40,18 @@ pub struct ParseError {
 }
 
 /// nom's error type for this parser: the remaining input where it failed and what was expected.
+///
+/// Alternatives that fail are part of parsing good text (`opt` of a fraction or an exponent
+/// of every number), so a fixed message is borrowed, not allocated.
 #[derive(Debug)]
 struct PErr<'a> {
     at: &'a str,
-    message: String,
+    message: Cow<'static, str>,
 }
 
 impl<'a> NomParseError<&'a str> for PErr<'a> {
     fn from_error_kind(input: &'a str, _kind: ErrorKind) -> Self {
-        PErr { at: input, message: "unexpected input".into() }
+        PErr { at: input, message: Cow::Borrowed("unexpected input") }
     }
 
     fn append(_: &'a str, _: ErrorKind, other: Self) -> Self {
@@ -62,11 +66,11 @@ impl<'a> NomParseError<&'a str> for PErr<'a> {
 
 type Res<'a, T> = IResult<&'a str, T, PErr<'a>>;
 
-fn fail<'a, T>(at: &'a str, message: impl Into<String>) -> Res<'a, T> {
+fn fail<'a, T>(at: &'a str, message: impl Into<Cow<'static, str>>) -> Res<'a, T> {
     Err(Err::Error(PErr { at, message: message.into() }))
 }
 
-fn cut<'a, T>(at: &'a str, message: impl Into<String>) -> Res<'a, T> {
+fn cut<'a, T>(at: &'a str, message: impl Into<Cow<'static, str>>) -> Res<'a, T> {
     Err(Err::Failure(PErr { at, message: message.into() }))
 }
 
@@ -157,7 +161,7 @@ impl<'s> Parse<'s> {
             Err::Error(e) | Err::Failure(e) => {
                 let start = self.offset(e.at);
                 let end = (start + e.at.chars().next().map_or(0, char::len_utf8)).min(self.src.len());
-                ParseError { span: Span::new(start, end), message: e.message }
+                ParseError { span: Span::new(start, end), message: e.message.into_owned() }
             }
             Err::Incomplete(_) => {
                 ParseError { span: Span::new(self.src.len(), self.src.len()), message: "unexpected end".into() }

@@ -153,7 +153,7 @@ impl Simplifier {
             let inv = kk.recip().unwrap_or(Rational::ONE);
             let mut parts = Vec::with_capacity(members.len());
             for (a, k) in &members {
-                parts.push(term(g, &k.mul(&inv), vec![*a])?);
+                parts.push(term1(g, &k.mul(&inv), *a)?);
             }
             let vector = g.add(parts)?;
             let scalar = self.build_frac(g, &shape.scale(&kk))?;
@@ -186,6 +186,18 @@ fn term(g: &mut Graph, coef: &Rational, factors: Vec<Id>) -> Result<Id, TypeErro
     let mut all = vec![g.num(coef.clone())];
     all.extend(factors);
     g.mul(all)
+}
+
+/// [`term`] of one factor, without its lists: `x`, `−x` or `3 x`.
+fn term1(g: &mut Graph, coef: &Rational, x: Id) -> Result<Id, TypeError> {
+    if coef.is_one() {
+        return Ok(x);
+    }
+    if *coef == Rational::int(-1) {
+        return Ok(g.neg(x));
+    }
+    let k = g.num(coef.clone());
+    g.mul(vec![k, x])
 }
 
 /// `s · v` with `s` scalar: the factors of `s` followed by `v`.
@@ -308,6 +320,16 @@ fn weighted_degree(g: &Graph, m: &Mono) -> u64 {
 
 /// Whether an atom involves a body's position, velocity, acceleration or force.
 fn is_kinematic(g: &Graph, atom: Id) -> bool {
+    let kinematic_symbol = |id: Id| match g.node(id) {
+        Node::Sym(s) => !matches!(g.symbol(*s).role, Role::Parameter | Role::Mass { .. } | Role::Time),
+        _ => false,
+    };
+    // Most atoms are a symbol or a few symbols under one node (`r·v`, `r.x`): the walk
+    // below would visit them all well within its budget, so look at them directly.
+    let children = g.node(atom).children();
+    if children.len() <= 8 && children.iter().all(|&c| matches!(g.node(c), Node::Sym(_))) {
+        return kinematic_symbol(atom) || children.iter().any(|&c| kinematic_symbol(c));
+    }
     let mut stack: SmallVec<[Id; 16]> = smallvec::smallvec![atom];
     let mut budget = 64;
     while let Some(id) = stack.pop() {
@@ -525,7 +547,7 @@ fn primitive(v: Vec<(Id, Rational)>) -> (Vec<(Id, Rational)>, Rational) {
 fn vector_sum(g: &mut Graph, v: &[(Id, Rational)]) -> Result<Id, TypeError> {
     let mut parts = Vec::with_capacity(v.len());
     for (u, q) in v {
-        parts.push(term(g, q, vec![*u])?);
+        parts.push(term1(g, q, *u)?);
     }
     g.add(parts)
 }
