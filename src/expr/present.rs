@@ -36,17 +36,30 @@ impl Simplifier {
         if let Some(q) = f.as_constant() {
             return Ok(g.num(q));
         }
-        let k = signed_content(g, &f.num);
-        let inv = k.recip().unwrap_or(Rational::ONE);
         let mut factors = Vec::new();
-        if let [(m, _)] = f.num.0.as_slice() {
+        let k = if let [(m, _)] = f.num.0.as_slice() {
             factors.extend(mono_factors(g, m)?);
+            signed_content(g, &f.num)
         } else {
             let common = f.num.common_mono();
-            factors.extend(mono_factors(g, &common)?);
-            let rest = f.num.div_mono(&common).scale(&inv);
-            factors.push(self.build_poly(g, &rest)?);
-        }
+            if common.is_one() {
+                // Without a common factor the terms to lay out are the numerator's own
+                // monomials: put them in reading order once, for the sign and the sum.
+                let ordered = reading_order(g, &f.num);
+                let k = with_sign_of(f.num.content(), ordered.first());
+                let inv = k.recip().unwrap_or(Rational::ONE);
+                let rest: Vec<(Mono, Rational)> = ordered.into_iter().map(|(m, q)| (m, q.mul(&inv))).collect();
+                factors.push(self.build_ordered(g, rest)?);
+                k
+            } else {
+                let k = signed_content(g, &f.num);
+                let inv = k.recip().unwrap_or(Rational::ONE);
+                factors.extend(mono_factors(g, &common)?);
+                let rest = f.num.div_mono(&common).scale(&inv);
+                factors.push(self.build_poly(g, &rest)?);
+                k
+            }
+        };
         if f.den.is_empty() {
             return term(g, &k, factors);
         }
@@ -75,7 +88,11 @@ impl Simplifier {
 
     /// A primitive polynomial as a sum, with factorable dot products factored.
     fn build_poly(&mut self, g: &mut Graph, p: &Poly) -> Result<Id, TypeError> {
-        let terms = reading_order(g, p);
+        self.build_ordered(g, reading_order(g, p))
+    }
+
+    /// [`Simplifier::build_poly`] of terms already in reading order.
+    fn build_ordered(&mut self, g: &mut Graph, terms: Vec<(Mono, Rational)>) -> Result<Id, TypeError> {
         let mut replaced: FastMap<usize, Option<(Rational, Mono, Id)>> = FastMap::default();
         for (indices, factored) in bilinear_groups(g, &terms)? {
             for (n, &i) in indices.iter().enumerate() {
@@ -245,6 +262,11 @@ fn signed_content(g: &Graph, p: &Poly) -> Rational {
             .min_by(|a, b| cmp_reading_keys(g, &a.0, &b.0))
             .map(|(_, t)| t),
     };
+    with_sign_of(k, first)
+}
+
+/// `k`, negated when the first term in reading order is negative.
+fn with_sign_of(k: Rational, first: Option<&(Mono, Rational)>) -> Rational {
     match first {
         Some((_, q)) if q.is_negative() => k.neg(),
         _ => k,
