@@ -11,12 +11,12 @@ use super::document::read;
 use super::expect::{Expectation, RawExpect, resolve};
 use super::scene::{RawScene, Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
-use crate::expr::Ty;
 use crate::expr::lower::LowerError;
 use crate::expr::parse::ParseError;
 use crate::expr::syntax::{Syntax, SyntaxKind};
+use crate::expr::{Symbol, Ty};
 use serde::Deserialize;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::ops::Range;
 use toml::Spanned;
 
@@ -149,10 +149,17 @@ fn masses_have_values(
     expect: &[Expectation],
     problems: &mut Vec<Problem>,
 ) {
+    // Looked up by name and symbol, not searched per body (quadratic in a long chain).
+    let mut raw_bodies: HashMap<&str, usize> = HashMap::new();
+    for (i, b) in raw.bodies.iter().enumerate() {
+        raw_bodies.entry(b.get_ref().name.get_ref().as_str()).or_insert(i);
+    }
+    let initial: HashSet<Symbol> = scene.initial.iter().map(|(x, _)| *x).collect();
     for body in &system.bodies {
-        let Some(raw_body) = raw.bodies.iter().find(|b| *b.get_ref().name.get_ref() == body.name) else {
+        let Some(&raw_body) = raw_bodies.get(body.name.as_str()) else {
             continue;
         };
+        let raw_body = &raw.bodies[raw_body];
         let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
             continue;
         };
@@ -161,7 +168,7 @@ fn masses_have_values(
         }
         let name = &system.graph.symbol(*s).name;
         let span = Some(raw_body.get_ref().mass.span());
-        if raw.scene.is_some() && !scene.initial.iter().any(|(x, _)| x == s) {
+        if raw.scene.is_some() && !initial.contains(s) {
             problems.push(Problem {
                 span,
                 message: format!(
