@@ -149,23 +149,28 @@ fn masses_have_values(
     expect: &[Expectation],
     problems: &mut Vec<Problem>,
 ) {
-    // Looked up by name and symbol, not searched per body (quadratic in a long chain).
-    let mut raw_bodies: HashMap<&str, usize> = HashMap::new();
-    for (i, b) in raw.bodies.iter().enumerate() {
-        raw_bodies.entry(b.get_ref().name.get_ref().as_str()).or_insert(i);
-    }
-    let initial: HashSet<Symbol> = scene.initial.iter().map(|(x, _)| *x).collect();
+    // Raw bodies by name and the initial values' symbols, looked up rather than searched
+    // per body (quadratic in a long chain); built at the first mass symbol, as most files
+    // have none (a parameter or a number is a mass's value).
+    let mut lookup: Option<(HashMap<&str, usize>, HashSet<Symbol>)> = None;
     for body in &system.bodies {
-        let Some(&raw_body) = raw_bodies.get(body.name.as_str()) else {
-            continue;
-        };
-        let raw_body = &raw.bodies[raw_body];
         let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
             continue;
         };
         if !matches!(system.graph.symbol(*s).role, crate::expr::Role::Mass { .. }) {
             continue;
         }
+        let (raw_bodies, initial) = lookup.get_or_insert_with(|| {
+            let mut raw_bodies = HashMap::new();
+            for (i, b) in raw.bodies.iter().enumerate() {
+                raw_bodies.entry(b.get_ref().name.get_ref().as_str()).or_insert(i);
+            }
+            (raw_bodies, scene.initial.iter().map(|(x, _)| *x).collect())
+        });
+        let Some(&raw_body) = raw_bodies.get(body.name.as_str()) else {
+            continue;
+        };
+        let raw_body = &raw.bodies[raw_body];
         let name = &system.graph.symbol(*s).name;
         let span = Some(raw_body.get_ref().mass.span());
         if raw.scene.is_some() && !initial.contains(s) {
