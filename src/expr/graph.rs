@@ -647,14 +647,20 @@ impl Graph {
 
     /// The symbols that `root` depends on.
     pub fn free_symbols(&self, root: Id) -> Vec<Symbol> {
-        let mut syms: Vec<Symbol> = self
-            .reachable(&[root])
-            .into_iter()
-            .filter_map(|id| match self.node(id) {
-                Node::Sym(s) => Some(*s),
-                _ => None,
-            })
-            .collect();
+        // The walk of `reachable`, keeping only the symbols (no sort of every node).
+        // Room for a small formula's nodes up front: growing the set rehashes it each time.
+        let mut seen: FastSet<Id> = FastSet::with_capacity_and_hasher(32, Default::default());
+        let mut stack = vec![root];
+        let mut syms = Vec::new();
+        while let Some(id) = stack.pop() {
+            if !seen.insert(id) {
+                continue;
+            }
+            match self.node(id) {
+                Node::Sym(s) => syms.push(*s),
+                node => stack.extend_from_slice(node.children()),
+            }
+        }
         syms.sort_unstable();
         syms.dedup();
         syms

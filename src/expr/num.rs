@@ -75,9 +75,25 @@ impl Rational {
         if !int_part.bytes().chain(frac_part.bytes()).all(|b| b.is_ascii_digit()) {
             return None;
         }
+        let scale = exponent.checked_sub(frac_part.len() as i64)?;
+        // Nearly every literal is an i64 over a power of ten below 10¹⁹: no big integers,
+        // no digit string (the same reduced value as the general path below).
+        if scale.unsigned_abs() <= 18 {
+            let mut digits = int_part.bytes().chain(frac_part.bytes());
+            let n = digits.try_fold(0i64, |n, b| n.checked_mul(10)?.checked_add(i64::from(b - b'0')));
+            let power = 10i64.pow(scale.unsigned_abs() as u32);
+            match n {
+                Some(n) if scale < 0 => return Some(Rational::new(n, power)),
+                Some(n) => {
+                    if let Some(v) = n.checked_mul(power) {
+                        return Some(Rational::int(v));
+                    }
+                }
+                None => {}
+            }
+        }
         let digits = format!("{int_part}{frac_part}");
         let digits = digits.trim_start_matches('0');
-        let scale = exponent.checked_sub(frac_part.len() as i64)?;
         // 10^k needs about 3.33 k bits: refuse literals whose exact value would be huge.
         let size_bits = (digits.len() as i64 + scale.abs()) * 4;
         if size_bits > MAX_BITS as i64 {
@@ -349,6 +365,22 @@ mod tests {
         assert_eq!(Rational::parse_decimal("1e400").map(|r| r.is_integer()), Some(true));
         assert_eq!(Rational::parse_decimal("1e100000"), None);
         assert_eq!(Rational::parse_decimal("nan"), None);
+    }
+
+    /// The i64 fast path and the big-integer path agree where they meet.
+    #[test]
+    fn decimals_at_the_edge_of_i64() {
+        let ten = |k: u32| Rational::from_big(BigRational::from_integer(num_traits::pow(BigInt::from(10), k as usize)));
+        assert_eq!(Rational::parse_decimal("1e18"), Some(ten(18)));
+        assert_eq!(Rational::parse_decimal("1e19"), Some(ten(19)));
+        assert_eq!(Rational::parse_decimal("10e18"), Some(ten(19)));
+        assert_eq!(Rational::parse_decimal("1e-18"), ten(18).recip());
+        assert_eq!(Rational::parse_decimal("1e-19"), ten(19).recip());
+        assert_eq!(Rational::parse_decimal("9223372036854775807"), Some(Rational::int(i64::MAX)));
+        assert!(matches!(Rational::parse_decimal("9223372036854775808"), Some(Rational::Big(_))));
+        assert_eq!(Rational::parse_decimal("0.000"), Some(Rational::ZERO));
+        assert_eq!(Rational::parse_decimal("2.50"), Some(Rational::new(5, 2)));
+        assert_eq!(Rational::parse_decimal("0.1e1"), Some(Rational::ONE));
     }
 
     #[test]

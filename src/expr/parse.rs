@@ -18,6 +18,7 @@ use nom::character::complete::{char, multispace0, satisfy};
 use nom::combinator::{opt, recognize};
 use nom::error::{ErrorKind, ParseError as NomParseError};
 use nom::{Err, IResult, Parser};
+use std::borrow::Cow;
 
 /// The deepest nesting of parentheses, brackets, calls, unary minus and powers.
 pub const MAX_NESTING: u32 = 200;
@@ -39,15 +40,18 @@ pub struct ParseError {
 }
 
 /// nom's error type for this parser: the remaining input where it failed and what was expected.
+///
+/// Alternatives that fail are part of parsing good text (`opt` of a fraction or an exponent
+/// of every number), so a fixed message is borrowed, not allocated.
 #[derive(Debug)]
 struct PErr<'a> {
     at: &'a str,
-    message: String,
+    message: Cow<'static, str>,
 }
 
 impl<'a> NomParseError<&'a str> for PErr<'a> {
     fn from_error_kind(input: &'a str, _kind: ErrorKind) -> Self {
-        PErr { at: input, message: "unexpected input".into() }
+        PErr { at: input, message: Cow::Borrowed("unexpected input") }
     }
 
     fn append(_: &'a str, _: ErrorKind, other: Self) -> Self {
@@ -62,16 +66,16 @@ impl<'a> NomParseError<&'a str> for PErr<'a> {
 
 type Res<'a, T> = IResult<&'a str, T, PErr<'a>>;
 
-fn fail<'a, T>(at: &'a str, message: impl Into<String>) -> Res<'a, T> {
+fn fail<'a, T>(at: &'a str, message: impl Into<Cow<'static, str>>) -> Res<'a, T> {
     Err(Err::Error(PErr { at, message: message.into() }))
 }
 
-fn cut<'a, T>(at: &'a str, message: impl Into<String>) -> Res<'a, T> {
+fn cut<'a, T>(at: &'a str, message: impl Into<Cow<'static, str>>) -> Res<'a, T> {
     Err(Err::Failure(PErr { at, message: message.into() }))
 }
 
 /// Parses one expression (no relation).
-pub fn parse_expr(text: &str) -> Result<Syntax, ParseError> {
+pub fn parse_expr(text: &str) -> Result<Syntax<'_>, ParseError> {
     let p = Parse::new(text)?;
     let (rest, e) = p.expr(text, 0).map_err(|e| p.error(e))?;
     p.finish(rest)?;
@@ -79,7 +83,7 @@ pub fn parse_expr(text: &str) -> Result<Syntax, ParseError> {
 }
 
 /// Parses `lhs = rhs`, `lhs >= rhs`, `lhs <= rhs` or a bare `C`.
-pub fn parse_relation(text: &str) -> Result<Relation, ParseError> {
+pub fn parse_relation(text: &str) -> Result<Relation<'_>, ParseError> {
     let p = Parse::new(text)?;
     let (rest, lhs) = p.expr(text, 0).map_err(|e| p.error(e))?;
     let (rest, _) = ws(rest).map_err(|e| p.error(e))?;
@@ -157,7 +161,7 @@ impl<'s> Parse<'s> {
             Err::Error(e) | Err::Failure(e) => {
                 let start = self.offset(e.at);
                 let end = (start + e.at.chars().next().map_or(0, char::len_utf8)).min(self.src.len());
-                ParseError { span: Span::new(start, end), message: e.message }
+                ParseError { span: Span::new(start, end), message: e.message.into_owned() }
             }
             Err::Incomplete(_) => {
                 ParseError { span: Span::new(self.src.len(), self.src.len()), message: "unexpected end".into() }
@@ -186,17 +190,19 @@ impl<'s> Parse<'s> {
     }
 
     /// `term (± term)*`
-    fn expr(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn expr(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         // Nesting recurses through here; grow the stack on the heap when it runs low, so
         // the nesting limit, not the thread's stack size, is what bounds the depth.
         stacker::maybe_grow(STACK_RED_ZONE, STACK_GROWTH, || self.expr_inner(i, depth))
     }
 
-    fn expr_inner(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn expr_inner(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let (i, _) = ws(i)?;
         let start = i;
         let (mut i, first) = self.term(i, depth)?;
-        let mut terms = vec![(Sign::Plus, first)];
+        // Most sums are a single term: the list is allocated at the first operator.
+        let mut first = Some(first);
+        let mut terms = Vec::new();
         loop {
             let (j, _) = ws(i)?;
             let sign = match j.chars().next() {
@@ -206,11 +212,14 @@ impl<'s> Parse<'s> {
             };
             let (j, _) = ws(&j[1..])?;
             let (j, t) = self.term(j, depth).or_else(|e| self.expected_operand(e, j))?;
+            if let Some(first) = first.take() {
+                terms.push((Sign::Plus, first));
+            }
             terms.push((sign, t));
             i = j;
         }
-        if terms.len() == 1 {
-            return Ok((i, terms.pop().map(|(_, t)| t).unwrap_or_else(|| unreachable!())));
+        if let Some(first) = first {
+            return Ok((i, first));
         }
         Ok((i, Syntax { kind: SyntaxKind::Sum(terms), span: self.span(start, i) }))
     }
@@ -225,10 +234,11 @@ impl<'s> Parse<'s> {
     }
 
     /// `unary (*/ unary)*`
-    fn term(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn term(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let start = i;
         let (mut i, first) = self.unary(i, depth)?;
-        let mut factors = vec![(MulOp::Times, first)];
+        let mut first = Some(first);
+        let mut factors = Vec::new();
         loop {
             let (j, _) = ws(i)?;
             let op = match j.chars().next() {
@@ -238,17 +248,20 @@ impl<'s> Parse<'s> {
             };
             let (j, _) = ws(&j[1..])?;
             let (j, f) = self.unary(j, depth).or_else(|e| self.expected_operand(e, j))?;
+            if let Some(first) = first.take() {
+                factors.push((MulOp::Times, first));
+            }
             factors.push((op, f));
             i = j;
         }
-        if factors.len() == 1 {
-            return Ok((i, factors.pop().map(|(_, f)| f).unwrap_or_else(|| unreachable!())));
+        if let Some(first) = first {
+            return Ok((i, first));
         }
         Ok((i, Syntax { kind: SyntaxKind::Product(factors), span: self.span(start, i) }))
     }
 
     /// `- unary | power`
-    fn unary(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn unary(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         if let Some(rest) = i.strip_prefix('-') {
             self.nested(i, depth)?;
             let (j, _) = ws(rest)?;
@@ -260,7 +273,7 @@ impl<'s> Parse<'s> {
     }
 
     /// `postfix (^ unary)?`
-    fn power(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn power(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let (i2, base) = self.postfix(i, depth)?;
         let (j, _) = ws(i2)?;
         if let Some(rest) = j.strip_prefix('^') {
@@ -275,7 +288,7 @@ impl<'s> Parse<'s> {
     }
 
     /// `atom (.x | .y | .z)*`
-    fn postfix(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn postfix(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         let start = i;
         let (mut i, mut e) = self.atom(i, depth)?;
         while let Some(rest) = i.strip_prefix('.') {
@@ -293,7 +306,7 @@ impl<'s> Parse<'s> {
         Ok((i, e))
     }
 
-    fn atom(&self, i: &'s str, depth: u32) -> Res<'s, Syntax> {
+    fn atom(&self, i: &'s str, depth: u32) -> Res<'s, Syntax<'s>> {
         match i.chars().next() {
             Some('(') => {
                 self.nested(i, depth)?;
@@ -316,14 +329,14 @@ impl<'s> Parse<'s> {
                 if let Some(after_paren) = k.strip_prefix('(') {
                     self.nested(i, depth)?;
                     let (k, args) = self.list(after_paren, depth + 1, ')')?;
-                    let kind = SyntaxKind::Call { name: name.to_string(), name_span, args };
+                    let kind = SyntaxKind::Call { name, name_span, args };
                     return Ok((k, Syntax { kind, span: self.span(i, k) }));
                 }
-                Ok((j, Syntax { kind: SyntaxKind::Ident(name.to_string()), span: name_span }))
+                Ok((j, Syntax { kind: SyntaxKind::Ident(name), span: name_span }))
             }
             Some(c) if c.is_ascii_digit() || c == '.' => {
                 let (j, text) = number(i)?;
-                Ok((j, Syntax { kind: SyntaxKind::Number(text.to_string()), span: self.span(i, j) }))
+                Ok((j, Syntax { kind: SyntaxKind::Number(text), span: self.span(i, j) }))
             }
             Some(c) => fail(i, format!("expected an expression, found `{c}`")),
             None => fail(i, "expected an expression, found the end of the text"),
@@ -331,7 +344,7 @@ impl<'s> Parse<'s> {
     }
 
     /// `e (, e)* close`, at least one entry.
-    fn list(&self, i: &'s str, depth: u32, close: char) -> Res<'s, Vec<Syntax>> {
+    fn list(&self, i: &'s str, depth: u32, close: char) -> Res<'s, Vec<Syntax<'s>>> {
         let mut items = Vec::new();
         let (mut i, _) = ws(i)?;
         if let Some(rest) = i.strip_prefix(close) {
@@ -358,8 +371,8 @@ mod tests {
 
     fn shape(e: &Syntax) -> String {
         match &e.kind {
-            SyntaxKind::Number(n) => n.clone(),
-            SyntaxKind::Ident(n) => n.clone(),
+            SyntaxKind::Number(n) => n.to_string(),
+            SyntaxKind::Ident(n) => n.to_string(),
             SyntaxKind::Sum(ts) => {
                 let parts: Vec<String> = ts
                     .iter()

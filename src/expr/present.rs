@@ -36,17 +36,30 @@ impl Simplifier {
         if let Some(q) = f.as_constant() {
             return Ok(g.num(q));
         }
-        let k = signed_content(g, &f.num);
-        let inv = k.recip().unwrap_or(Rational::ONE);
         let mut factors = Vec::new();
-        if let [(m, _)] = f.num.0.as_slice() {
+        let k = if let [(m, _)] = f.num.0.as_slice() {
             factors.extend(mono_factors(g, m)?);
+            signed_content(g, &f.num)
         } else {
             let common = f.num.common_mono();
-            factors.extend(mono_factors(g, &common)?);
-            let rest = f.num.div_mono(&common).scale(&inv);
-            factors.push(self.build_poly(g, &rest)?);
-        }
+            if common.is_one() {
+                // Without a common factor the terms to lay out are the numerator's own
+                // monomials: put them in reading order once, for the sign and the sum.
+                let ordered = reading_order(g, &f.num);
+                let k = with_sign_of(f.num.content(), ordered.first());
+                let inv = k.recip().unwrap_or(Rational::ONE);
+                let rest: Vec<(Mono, Rational)> = ordered.into_iter().map(|(m, q)| (m, q.mul(&inv))).collect();
+                factors.push(self.build_ordered(g, rest)?);
+                k
+            } else {
+                let k = signed_content(g, &f.num);
+                let inv = k.recip().unwrap_or(Rational::ONE);
+                factors.extend(mono_factors(g, &common)?);
+                let rest = f.num.div_mono(&common).scale(&inv);
+                factors.push(self.build_poly(g, &rest)?);
+                k
+            }
+        };
         if f.den.is_empty() {
             return term(g, &k, factors);
         }
@@ -75,7 +88,11 @@ impl Simplifier {
 
     /// A primitive polynomial as a sum, with factorable dot products factored.
     fn build_poly(&mut self, g: &mut Graph, p: &Poly) -> Result<Id, TypeError> {
-        let terms = reading_order(g, p);
+        self.build_ordered(g, reading_order(g, p))
+    }
+
+    /// [`Simplifier::build_poly`] of terms already in reading order.
+    fn build_ordered(&mut self, g: &mut Graph, terms: Vec<(Mono, Rational)>) -> Result<Id, TypeError> {
         let mut replaced: FastMap<usize, Option<(Rational, Mono, Id)>> = FastMap::default();
         for (indices, factored) in bilinear_groups(g, &terms)? {
             for (n, &i) in indices.iter().enumerate() {
@@ -153,7 +170,7 @@ impl Simplifier {
             let inv = kk.recip().unwrap_or(Rational::ONE);
             let mut parts = Vec::with_capacity(members.len());
             for (a, k) in &members {
-                parts.push(term(g, &k.mul(&inv), vec![*a])?);
+                parts.push(term1(g, &k.mul(&inv), *a)?);
             }
             let vector = g.add(parts)?;
             let scalar = self.build_frac(g, &shape.scale(&kk))?;
@@ -186,6 +203,18 @@ fn term(g: &mut Graph, coef: &Rational, factors: Vec<Id>) -> Result<Id, TypeErro
     let mut all = vec![g.num(coef.clone())];
     all.extend(factors);
     g.mul(all)
+}
+
+/// [`term`] of one factor, without its lists: `x`, `−x` or `3 x`.
+fn term1(g: &mut Graph, coef: &Rational, x: Id) -> Result<Id, TypeError> {
+    if coef.is_one() {
+        return Ok(x);
+    }
+    if *coef == Rational::int(-1) {
+        return Ok(g.neg(x));
+    }
+    let k = g.num(coef.clone());
+    g.mul(vec![k, x])
 }
 
 /// `s · v` with `s` scalar: the factors of `s` followed by `v`.
@@ -233,6 +262,11 @@ fn signed_content(g: &Graph, p: &Poly) -> Rational {
             .min_by(|a, b| cmp_reading_keys(g, &a.0, &b.0))
             .map(|(_, t)| t),
     };
+    with_sign_of(k, first)
+}
+
+/// `k`, negated when the first term in reading order is negative.
+fn with_sign_of(k: Rational, first: Option<&(Mono, Rational)>) -> Rational {
     match first {
         Some((_, q)) if q.is_negative() => k.neg(),
         _ => k,
@@ -308,6 +342,16 @@ fn weighted_degree(g: &Graph, m: &Mono) -> u64 {
 
 /// Whether an atom involves a body's position, velocity, acceleration or force.
 fn is_kinematic(g: &Graph, atom: Id) -> bool {
+    let kinematic_symbol = |id: Id| match g.node(id) {
+        Node::Sym(s) => !matches!(g.symbol(*s).role, Role::Parameter | Role::Mass { .. } | Role::Time),
+        _ => false,
+    };
+    // Most atoms are a symbol or a few symbols under one node (`r·v`, `r.x`): the walk
+    // below would visit them all well within its budget, so look at them directly.
+    let children = g.node(atom).children();
+    if children.len() <= 8 && children.iter().all(|&c| matches!(g.node(c), Node::Sym(_))) {
+        return kinematic_symbol(atom) || children.iter().any(|&c| kinematic_symbol(c));
+    }
     let mut stack: SmallVec<[Id; 16]> = smallvec::smallvec![atom];
     let mut budget = 64;
     while let Some(id) = stack.pop() {
@@ -525,7 +569,7 @@ fn primitive(v: Vec<(Id, Rational)>) -> (Vec<(Id, Rational)>, Rational) {
 fn vector_sum(g: &mut Graph, v: &[(Id, Rational)]) -> Result<Id, TypeError> {
     let mut parts = Vec::with_capacity(v.len());
     for (u, q) in v {
-        parts.push(term(g, q, vec![*u])?);
+        parts.push(term1(g, q, *u)?);
     }
     g.add(parts)
 }

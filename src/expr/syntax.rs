@@ -28,8 +28,8 @@ impl Span {
 
 /// A node of the syntax tree.
 #[derive(Clone, PartialEq, Debug)]
-pub struct Syntax {
-    pub kind: SyntaxKind,
+pub struct Syntax<'a> {
+    pub kind: SyntaxKind<'a>,
     pub span: Span,
 }
 
@@ -48,28 +48,28 @@ pub enum MulOp {
 }
 
 #[derive(Clone, PartialEq, Debug)]
-pub enum SyntaxKind {
+pub enum SyntaxKind<'a> {
     /// A decimal literal, as written.
-    Number(String),
-    Ident(String),
+    Number(&'a str),
+    Ident(&'a str),
     /// `t1 ± t2 ± …`; the first sign is always `Plus` (a leading minus is `Neg`).
-    Sum(Vec<(Sign, Syntax)>),
+    Sum(Vec<(Sign, Syntax<'a>)>),
     /// `f1 */ f2 */ …`; the first operator is always `Times`.
-    Product(Vec<(MulOp, Syntax)>),
-    Neg(Box<Syntax>),
-    Pow(Box<Syntax>, Box<Syntax>),
+    Product(Vec<(MulOp, Syntax<'a>)>),
+    Neg(Box<Syntax<'a>>),
+    Pow(Box<Syntax<'a>>, Box<Syntax<'a>>),
     /// `name(args…)`, with the span of the name.
     Call {
-        name: String,
+        name: &'a str,
         name_span: Span,
-        args: Vec<Syntax>,
+        args: Vec<Syntax<'a>>,
     },
     /// `e.x`, with the span of the component letter.
-    Component(Box<Syntax>, Axis, Span),
+    Component(Box<Syntax<'a>>, Axis, Span),
     /// `[e1, e2, …]`.
-    Vector(Vec<Syntax>),
+    Vector(Vec<Syntax<'a>>),
     /// `( e )`: kept so that printing and parsing again gives the same grouping.
-    Paren(Box<Syntax>),
+    Paren(Box<Syntax<'a>>),
 }
 
 /// The comparison of a constraint.
@@ -92,7 +92,7 @@ impl RelOp {
 
 /// `lhs op rhs`, or a bare expression meaning `expr = 0`.
 #[derive(Clone, PartialEq, Debug)]
-pub struct Relation {
-    pub lhs: Syntax,
-    pub rel: Option<(RelOp, Span, Syntax)>,
+pub struct Relation<'a> {
+    pub lhs: Syntax<'a>,
+    pub rel: Option<(RelOp, Span, Syntax<'a>)>,
 }

@@ -24,6 +24,7 @@ use super::file::{Problem, RawBody, RawConstraint, RawFile, RawMass, RawValue};
 use super::keys::unknown_keys;
 use super::scene::RawScene;
 use std::collections::BTreeMap;
+use std::fmt::{self, Display};
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
 
@@ -98,6 +99,16 @@ fn spanned_key(key: &Spanned<std::borrow::Cow<'_, str>>) -> Spanned<String> {
     Spanned::new(key.span(), key.get_ref().to_string())
 }
 
+/// A label for messages, written out only when a message is: reading a good file builds
+/// no label text (formatting every field's label was a tenth of loading a small file).
+struct Label<F: Fn(&mut fmt::Formatter<'_>) -> fmt::Result>(F);
+
+impl<F: Fn(&mut fmt::Formatter<'_>) -> fmt::Result> Display for Label<F> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        (self.0)(f)
+    }
+}
+
 struct Reader<'p> {
     problems: &'p mut Vec<Problem>,
     /// Bodies read so far, to name placeholders.
@@ -105,21 +116,21 @@ struct Reader<'p> {
 }
 
 impl Reader<'_> {
-    fn wrong(&mut self, v: &Value<'_>, what: &str, expected: &str) {
+    fn wrong<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W, expected: &str) {
         self.problems.push(Problem {
             span: Some(v.span()),
             message: format!("{what} must be {expected}, found {}", kind(v.get_ref())),
         });
     }
 
-    fn missing(&mut self, table: &Value<'_>, what: &str, key: &str, example: &str) {
+    fn missing<W: Display + ?Sized>(&mut self, table: &Value<'_>, what: &W, key: &str, example: &str) {
         self.problems.push(Problem {
             span: Some(table.span()),
             message: format!("{what} has no `{key}` (e.g. `{key} = {example}`)"),
         });
     }
 
-    fn string(&mut self, v: &Value<'_>, what: &str) -> Option<Spanned<String>> {
+    fn string<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W) -> Option<Spanned<String>> {
         match v.get_ref() {
             DeValue::String(s) => Some(Spanned::new(v.span(), s.to_string())),
             _ => {
@@ -139,7 +150,7 @@ impl Reader<'_> {
     }
 
     /// A finite number.
-    fn number(&mut self, v: &Value<'_>, what: &str) -> Option<Spanned<f64>> {
+    fn number<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W) -> Option<Spanned<f64>> {
         match Self::raw_number(v.get_ref()) {
             Some(x) if x.is_finite() => Some(Spanned::new(v.span(), x)),
             Some(x) => {
@@ -158,7 +169,7 @@ impl Reader<'_> {
         }
     }
 
-    fn integer(&mut self, v: &Value<'_>, what: &str) -> Option<Spanned<i64>> {
+    fn integer<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W) -> Option<Spanned<i64>> {
         match v.get_ref() {
             DeValue::Integer(i) => match i64::from_str_radix(i.as_str(), i.radix()) {
                 Ok(n) => Some(Spanned::new(v.span(), n)),
@@ -175,7 +186,7 @@ impl Reader<'_> {
     }
 
     /// A number or a vector of finite numbers; each bad component is reported.
-    fn value(&mut self, v: &Value<'_>, what: &str) -> Option<Spanned<RawValue>> {
+    fn value<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W) -> Option<Spanned<RawValue>> {
         let before = self.problems.len();
         let value = self.value_or_placeholder(v, what)?;
         (self.problems.len() == before).then_some(value)
@@ -184,12 +195,12 @@ impl Reader<'_> {
     /// Like [`Reader::value`], but a number or an array that is reported as bad still gives
     /// a value of its shape (bad numbers as 0), so the name it declares stays declared and
     /// its uses are not reported again as unknown. `None` for other kinds (reported).
-    fn value_or_placeholder(&mut self, v: &Value<'_>, what: &str) -> Option<Spanned<RawValue>> {
+    fn value_or_placeholder<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W) -> Option<Spanned<RawValue>> {
         match v.get_ref() {
             DeValue::Array(items) => {
                 let xs: Vec<f64> = items
                     .iter()
-                    .map(|x| self.number(x, &format!("each component of {what}")).map_or(0.0, |x| *x.get_ref()))
+                    .map(|x| self.number(x, &format_args!("each component of {what}")).map_or(0.0, |x| *x.get_ref()))
                     .collect();
                 Some(Spanned::new(v.span(), RawValue::Vector(xs)))
             }
@@ -204,7 +215,7 @@ impl Reader<'_> {
         }
     }
 
-    fn table<'a, 'i>(&mut self, v: &'a Value<'i>, what: &str) -> Option<&'a DeTable<'i>> {
+    fn table<'a, 'i, W: Display + ?Sized>(&mut self, v: &'a Value<'i>, what: &W) -> Option<&'a DeTable<'i>> {
         match v.get_ref() {
             DeValue::Table(t) => Some(t),
             _ => {
@@ -225,7 +236,7 @@ impl Reader<'_> {
         t.iter()
             .filter_map(|(k, x)| {
                 let name = spanned_key(k);
-                let value = self.value_or_placeholder(x, &format!("`{}` in {what}", name.get_ref()));
+                let value = self.value_or_placeholder(x, &format_args!("`{}` in {what}", name.get_ref()));
                 let value = match value {
                     None if declares => Spanned::new(x.span(), RawValue::Number(0.0)),
                     value => value?,
@@ -243,7 +254,7 @@ impl Reader<'_> {
         t.iter()
             .filter_map(|(k, x)| {
                 let name = spanned_key(k);
-                let text = self.string(x, &format!("`{}` in {what}", name.get_ref()))?;
+                let text = self.string(x, &format_args!("`{}` in {what}", name.get_ref()))?;
                 Some((name, text))
             })
             .collect()
@@ -260,7 +271,7 @@ impl Reader<'_> {
             return Vec::new();
         };
         let DeValue::Array(items) = v.get_ref() else {
-            self.wrong(v, &format!("`{key}`"), &format!("an array of tables (`[[{key}]]` sections)"));
+            self.wrong(v, &format_args!("`{key}`"), &format!("an array of tables (`[[{key}]]` sections)"));
             return Vec::new();
         };
         let mut out = Vec::new();
@@ -271,23 +282,23 @@ impl Reader<'_> {
                         out.push(Spanned::new(x.span(), value));
                     }
                 }
-                _ => self.wrong(x, &format!("each entry of `{key}`"), "a table"),
+                _ => self.wrong(x, &format_args!("each entry of `{key}`"), "a table"),
             }
         }
         out
     }
 
     /// A required string field of a table.
-    fn field(
+    fn field<W: Display + ?Sized>(
         &mut self,
         at: &Value<'_>,
         t: &DeTable<'_>,
-        what: &str,
+        what: &W,
         key: &str,
         example: &str,
     ) -> Option<Spanned<String>> {
         match t.get(key) {
-            Some(v) => self.string(v, &format!("`{key}` of {what}")),
+            Some(v) => self.string(v, &format_args!("`{key}` of {what}")),
             None => {
                 self.missing(at, what, key, example);
                 None
@@ -296,10 +307,10 @@ impl Reader<'_> {
     }
 
     fn body(&mut self, at: &Value<'_>, t: &DeTable<'_>) -> Option<RawBody> {
-        let label = match t.get("name").map(|v| v.get_ref()) {
-            Some(DeValue::String(s)) => format!("body `{s}`"),
-            _ => "a body".to_string(),
-        };
+        let label = Label(|f| match t.get("name").map(|v| v.get_ref()) {
+            Some(DeValue::String(s)) => write!(f, "body `{s}`"),
+            _ => f.write_str("a body"),
+        });
         let name = self.field(at, t, "a body", "name", "\"bead\"");
         // Placeholders for unreadable symbols (see `RawBody`): the problem is reported, the
         // body stays declared.
@@ -324,7 +335,7 @@ impl Reader<'_> {
                     Spanned::new(v.span(), RawMass::Number(Self::raw_number(v.get_ref()).unwrap_or(f64::NAN)))
                 }
                 _ => {
-                    self.wrong(v, &format!("the mass of {label}"), "a number or a symbol name (a string)");
+                    self.wrong(v, &format_args!("the mass of {label}"), "a number or a symbol name (a string)");
                     Spanned::new(v.span(), RawMass::Number(1.0))
                 }
             },
@@ -333,10 +344,10 @@ impl Reader<'_> {
     }
 
     fn constraint(&mut self, at: &Value<'_>, t: &DeTable<'_>) -> Option<RawConstraint> {
-        let label = match t.get("name").map(|v| v.get_ref()) {
-            Some(DeValue::String(s)) => format!("constraint `{s}`"),
-            _ => "a constraint".to_string(),
-        };
+        let label = Label(|f| match t.get("name").map(|v| v.get_ref()) {
+            Some(DeValue::String(s)) => write!(f, "constraint `{s}`"),
+            _ => f.write_str("a constraint"),
+        });
         let name = self.field(at, t, "a constraint", "name", "\"wire\"");
         let expr = self.field(at, t, &label, "expr", "\"dot(r,r) = l^2\"");
         Some(RawConstraint { name: name?, expr })
@@ -344,7 +355,7 @@ impl Reader<'_> {
 
     fn scene(&mut self, v: &Value<'_>) -> Option<Spanned<RawScene>> {
         let t = self.table(v, "[scene]")?;
-        let mut number = |key: &str| t.get(key).and_then(|x| self.number(x, &format!("`{key}` in [scene]")));
+        let mut number = |key: &str| t.get(key).and_then(|x| self.number(x, &format_args!("`{key}` in [scene]")));
         let dt = number("dt");
         let duration = number("duration");
         let restitution = number("restitution");
@@ -385,14 +396,14 @@ impl Reader<'_> {
 
     /// The `name = expected` entries of one quantity of an `[[expect]]`.
     fn expected(&mut self, v: &Value<'_>, key: &str) -> BTreeMap<Spanned<String>, Spanned<RawExpected>> {
-        let what = format!("`{key}` in [[expect]]");
+        let what = Label(|f| write!(f, "`{key}` in [[expect]]"));
         let Some(t) = self.table(v, &what) else {
             return BTreeMap::new();
         };
         let mut out = BTreeMap::new();
         for (k, x) in t.iter() {
             let name = spanned_key(k);
-            let label = format!("the expected `{key}` of `{}`", name.get_ref());
+            let label = Label(|f| write!(f, "the expected `{key}` of `{}`", name.get_ref()));
             let value = match x.get_ref() {
                 DeValue::String(s) => Some(RawExpected::Formula(s.to_string())),
                 DeValue::Integer(_) | DeValue::Float(_) | DeValue::Array(_) => {

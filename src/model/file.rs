@@ -11,12 +11,12 @@ use super::document::read;
 use super::expect::{Expectation, RawExpect, resolve};
 use super::scene::{RawScene, Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
-use crate::expr::Ty;
 use crate::expr::lower::LowerError;
 use crate::expr::parse::ParseError;
 use crate::expr::syntax::{Syntax, SyntaxKind};
+use crate::expr::{Symbol, Ty};
 use serde::Deserialize;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap, HashSet};
 use std::ops::Range;
 use toml::Spanned;
 
@@ -149,19 +149,31 @@ fn masses_have_values(
     expect: &[Expectation],
     problems: &mut Vec<Problem>,
 ) {
+    // Raw bodies by name and the initial values' symbols, looked up rather than searched
+    // per body (quadratic in a long chain); built at the first mass symbol, as most files
+    // have none (a parameter or a number is a mass's value).
+    let mut lookup: Option<(HashMap<&str, usize>, HashSet<Symbol>)> = None;
     for body in &system.bodies {
-        let Some(raw_body) = raw.bodies.iter().find(|b| *b.get_ref().name.get_ref() == body.name) else {
-            continue;
-        };
         let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
             continue;
         };
         if !matches!(system.graph.symbol(*s).role, crate::expr::Role::Mass { .. }) {
             continue;
         }
+        let (raw_bodies, initial) = lookup.get_or_insert_with(|| {
+            let mut raw_bodies = HashMap::new();
+            for (i, b) in raw.bodies.iter().enumerate() {
+                raw_bodies.entry(b.get_ref().name.get_ref().as_str()).or_insert(i);
+            }
+            (raw_bodies, scene.initial.iter().map(|(x, _)| *x).collect())
+        });
+        let Some(&raw_body) = raw_bodies.get(body.name.as_str()) else {
+            continue;
+        };
+        let raw_body = &raw.bodies[raw_body];
         let name = &system.graph.symbol(*s).name;
         let span = Some(raw_body.get_ref().mass.span());
-        if raw.scene.is_some() && !scene.initial.iter().any(|(x, _)| x == s) {
+        if raw.scene.is_some() && !initial.contains(s) {
             problems.push(Problem {
                 span,
                 message: format!(
@@ -382,7 +394,7 @@ fn collect_idents(s: &Syntax, out: &mut Vec<String>) {
     let mut stack = vec![s];
     while let Some(s) = stack.pop() {
         match &s.kind {
-            SyntaxKind::Ident(n) => out.push(n.clone()),
+            SyntaxKind::Ident(n) => out.push(n.to_string()),
             SyntaxKind::Number(_) => {}
             SyntaxKind::Sum(ts) => stack.extend(ts.iter().map(|(_, t)| t)),
             SyntaxKind::Product(fs) => stack.extend(fs.iter().map(|(_, f)| f)),

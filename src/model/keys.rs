@@ -43,24 +43,42 @@ fn walk(path: &str, table: &DeTable<'_>, problems: &mut Vec<Problem>) {
             problems.push(Problem { span: Some(key.span()), message: format!("unknown key `{name}` {place}{hint}") });
             continue;
         }
-        let child = if path.is_empty() { name.to_string() } else { format!("{path}.{name}") };
-        descend(&child, value, problems);
+        descend(path, name, value, problems);
     }
 }
 
-fn descend(path: &str, value: &Spanned<DeValue<'_>>, problems: &mut Vec<Problem>) {
+/// Walks a known key's value if the schema describes it: a table at `parent.name`, or the
+/// tables of an array at `parent.name[]`. The path is the schema's own string, so no path
+/// is built for the many values (strings, numbers, tables without a schema) that have none.
+fn descend(parent: &str, name: &str, value: &Spanned<DeValue<'_>>, problems: &mut Vec<Problem>) {
     match value.get_ref() {
-        DeValue::Table(t) => walk(path, t, problems),
+        DeValue::Table(t) => {
+            if let Some(path) = schema_path(parent, name, false) {
+                walk(path, t, problems);
+            }
+        }
         DeValue::Array(items) => {
-            let element = format!("{path}[]");
-            for item in items.iter() {
-                if let DeValue::Table(t) = item.get_ref() {
-                    walk(&element, t, problems);
+            if let Some(path) = schema_path(parent, name, true) {
+                for item in items.iter() {
+                    if let DeValue::Table(t) = item.get_ref() {
+                        walk(path, t, problems);
+                    }
                 }
             }
         }
         _ => {}
     }
+}
+
+/// The schema path `parent.name` (`name` at the top level), with `[]` appended for an
+/// array, if the schema has it.
+fn schema_path(parent: &str, name: &str, array: bool) -> Option<&'static str> {
+    SCHEMA.iter().map(|&(path, _)| path).find(|path| {
+        let rest =
+            if parent.is_empty() { Some(*path) } else { path.strip_prefix(parent).and_then(|r| r.strip_prefix('.')) };
+        let rest = if array { rest.and_then(|r| r.strip_suffix("[]")) } else { rest };
+        rest == Some(name)
+    })
 }
 
 /// A known key that `name` spells with two neighbouring letters swapped (`titel` for

@@ -12,7 +12,7 @@ use super::file::{Problem, RawValue, locate};
 use super::system::{BuildError, System};
 use crate::expr::eval::{Env, EvalError, Value, eval, eval_one};
 use crate::expr::{Id, Role, Symbol, Ty};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use toml::Spanned;
 
 /// The `[scene]` table as written (read by `model::document`; unknown keys are reported
@@ -68,11 +68,19 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
             Err(message) => problems.push(Problem { span: Some(name.span()), message }),
         }
     }
-    for (name, expr) in &raw.forces {
-        let body = system
-            .bodies
-            .iter()
-            .position(|b| b.name == *name.get_ref() || system.graph.symbol(b.force).name == *name.get_ref());
+    // The first body a name denotes, as its name or its force symbol's, looked up by name
+    // (a search per force made loading a chain of N links quadratic in N).
+    let bodies: Vec<Option<usize>> = {
+        let mut by_name: HashMap<&str, usize> = HashMap::new();
+        if !raw.forces.is_empty() {
+            for (i, b) in system.bodies.iter().enumerate() {
+                by_name.entry(b.name.as_str()).or_insert(i);
+                by_name.entry(system.graph.symbol(b.force).name.as_str()).or_insert(i);
+            }
+        }
+        raw.forces.keys().map(|name| by_name.get(name.get_ref().as_str()).copied()).collect()
+    };
+    for ((name, expr), body) in raw.forces.iter().zip(bodies) {
         let Some(body) = body else {
             let forces: Vec<&str> = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.as_str()).collect();
             let known = if forces.is_empty() {

@@ -11,6 +11,8 @@ use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, l
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Role, Simplifier, Symbol, Ty};
 use std::collections::{HashMap, HashSet};
+use std::fmt;
+use std::sync::Arc;
 
 /// A point mass.
 #[derive(Clone, Debug)]
@@ -101,10 +103,36 @@ pub struct SystemBuilder {
     /// What each name was declared as, for clash messages.
     /// Looked up by name for every declaration, so a map (a chain of 1000 links declares
     /// 5000 names; a list made loading quadratic).
-    kinds: HashMap<String, String>,
+    kinds: HashMap<String, Kind>,
     /// Names of bodies and constraints declared so far, for duplicate checks.
     body_names: HashSet<String>,
     constraint_names: HashSet<String>,
+}
+
+/// What a name was declared as; written out (`the position of body `bead``) only for a
+/// clash message, so declaring a chain's thousands of names formats nothing.
+#[derive(Clone, Debug)]
+enum Kind {
+    Time,
+    Parameter,
+    Definition,
+    /// A symbol of a body: `what` (position, velocity, …) and the body's name, shared by
+    /// its symbols.
+    OfBody {
+        what: &'static str,
+        body: Arc<str>,
+    },
+}
+
+impl fmt::Display for Kind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Kind::Time => f.write_str("the time"),
+            Kind::Parameter => f.write_str("a parameter"),
+            Kind::Definition => f.write_str("a definition"),
+            Kind::OfBody { what, body } => write!(f, "the {what} of body `{body}`"),
+        }
+    }
 }
 
 /// The symbols of one body, by name.
@@ -145,12 +173,12 @@ impl SystemBuilder {
             time,
             scope,
         };
-        let kinds = HashMap::from([("t".to_string(), "the time".to_string())]);
+        let kinds = HashMap::from([("t".to_string(), Kind::Time)]);
         Ok(SystemBuilder { system, kinds, body_names: HashSet::new(), constraint_names: HashSet::new() })
     }
 
     /// Claims `name` for `what`, refusing clashes and reserved names.
-    fn claim(&mut self, name: &str, what: String) -> Result<(), BuildError> {
+    fn claim(&mut self, name: &str, what: Kind) -> Result<(), BuildError> {
         let valid = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
             && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
         if !valid {
@@ -163,13 +191,17 @@ impl SystemBuilder {
             if name == "t" {
                 return Err(BuildError::Reserved(name.to_string()));
             }
-            return Err(BuildError::Duplicate { name: name.to_string(), first: first.clone(), second: what });
+            return Err(BuildError::Duplicate {
+                name: name.to_string(),
+                first: first.to_string(),
+                second: what.to_string(),
+            });
         }
         self.kinds.insert(name.to_string(), what);
         Ok(())
     }
 
-    fn symbol(&mut self, name: &str, ty: Ty, role: Role, what: String) -> Result<Symbol, BuildError> {
+    fn symbol(&mut self, name: &str, ty: Ty, role: Role, what: Kind) -> Result<Symbol, BuildError> {
         self.claim(name, what)?;
         let s = self.system.graph.declare(name, ty, role);
         let node = self.system.graph.sym(s);
@@ -179,7 +211,7 @@ impl SystemBuilder {
 
     /// Declares a scalar or vector parameter.
     pub fn parameter(&mut self, name: &str, ty: Ty) -> Result<Symbol, BuildError> {
-        let s = self.symbol(name, ty, Role::Parameter, "a parameter".into())?;
+        let s = self.symbol(name, ty, Role::Parameter, Kind::Parameter)?;
         self.system.parameters.push((name.to_string(), s));
         Ok(s)
     }
@@ -194,7 +226,8 @@ impl SystemBuilder {
                 second: "another body".into(),
             });
         }
-        let of = |what: &str| format!("the {what} of body `{}`", spec.name);
+        let body_name: Arc<str> = Arc::from(spec.name);
+        let of = |what: &'static str| Kind::OfBody { what, body: body_name.clone() };
         let position = self.symbol(spec.position, Ty::Vector, Role::Position { body }, of("position"))?;
         let velocity = self.symbol(spec.velocity, Ty::Vector, Role::Velocity { body }, of("velocity"))?;
         let acceleration =
@@ -227,7 +260,7 @@ impl SystemBuilder {
     }
 
     fn is_constant(&self, name: &str) -> bool {
-        self.kinds.get(name).is_some_and(|what| what.starts_with("the mass") || what == "a parameter")
+        self.kinds.get(name).is_some_and(|what| matches!(what, Kind::OfBody { what: "mass", .. } | Kind::Parameter))
     }
 
     /// Declares a named expression, substituted wherever the name is used. Definitions may
@@ -237,7 +270,7 @@ impl SystemBuilder {
         let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context.clone(), error })?;
         let id = lower(&syntax, &self.system.scope, &mut self.system.graph)
             .map_err(|error| BuildError::Lower { context, error })?;
-        self.claim(name, "a definition".into())?;
+        self.claim(name, Kind::Definition)?;
         self.system.scope.insert(name, id);
         Ok(id)
     }
