@@ -239,6 +239,23 @@ impl Poly {
         Poly(out)
     }
 
+    /// The sum of many polynomials at once: every term gathered, sorted and merged, so a
+    /// sum of k polynomials of n terms costs O(kn log kn) rather than k passes over the
+    /// growing total. Equal to adding them one by one (the representation is canonical).
+    pub fn sum<'a>(polys: impl IntoIterator<Item = &'a Poly>) -> Poly {
+        let mut terms: Vec<(Mono, Rational)> = polys.into_iter().flat_map(|p| p.0.iter().cloned()).collect();
+        terms.sort_by(|a, b| a.0.cmp(&b.0));
+        let mut out: Vec<(Mono, Rational)> = Vec::with_capacity(terms.len());
+        for (m, q) in terms {
+            match out.last_mut() {
+                Some((last, sum)) if *last == m => *sum = sum.add(&q),
+                _ => out.push((m, q)),
+            }
+        }
+        out.retain(|(_, q)| !q.is_zero());
+        Poly(out)
+    }
+
     pub fn neg(&self) -> Poly {
         Poly(self.0.iter().map(|(m, q)| (m.clone(), q.neg())).collect())
     }
@@ -548,6 +565,22 @@ mod tests {
     fn atoms() -> (Id, Id) {
         let mut g = Graph::new(2);
         (g.int(7), g.int(8))
+    }
+
+    #[test]
+    fn sum_of_many_equals_adding_one_by_one() {
+        let (x, y) = atoms();
+        let (px, py) = (Poly::atom(x), Poly::atom(y));
+        let one = Poly::constant(Rational::ONE);
+        let a = px.add(&one).powi(3).expect("small");
+        let b = py.add(&px.neg()).powi(2).expect("small");
+        let c = a.neg();
+        let d = px.mul(&py).expect("small").scale(&Rational::int(5));
+        let polys = [a, b, c, d, Poly::zero(), one];
+        let pairwise = polys.iter().fold(Poly::zero(), |acc, p| acc.add(p));
+        assert_eq!(Poly::sum(&polys), pairwise);
+        // Terms that cancel are gone, not kept with a zero coefficient.
+        assert!(Poly::sum([&polys[0], &polys[2]]).is_zero());
     }
 
     #[test]

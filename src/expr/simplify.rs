@@ -205,14 +205,26 @@ impl Simplifier {
             }
             Node::Add(xs) => match g.ty(id) {
                 Ty::Scalar => {
-                    let mut acc = Some(Frac::zero());
-                    for x in xs.iter() {
-                        let form = self.memo[x].clone();
-                        if let Canon::S(f) = &*form {
+                    let forms: Vec<_> = xs.iter().map(|x| self.memo[x].clone()).collect();
+                    let fracs: Vec<&Frac> = forms
+                        .iter()
+                        .filter_map(|form| match &**form {
+                            Canon::S(f) => Some(f),
+                            Canon::V(_) => None,
+                        })
+                        .collect();
+                    if fracs.len() > 2 && fracs.iter().all(|f| f.den.is_empty()) {
+                        // Polynomials: one merge of all the terms (pairwise sums would pass
+                        // over the growing total once per operand).
+                        let num = Poly::sum(fracs.iter().map(|f| &f.num));
+                        Some(Canon::S(Frac { num, den: Vec::new() }.normalize()))
+                    } else {
+                        let mut acc = Some(Frac::zero());
+                        for f in fracs {
                             acc = acc.and_then(|a| a.add(f));
                         }
+                        acc.map(Canon::S)
                     }
-                    acc.map(Canon::S)
                 }
                 Ty::Vector => {
                     let mut acc = Some(VecForm::default());
