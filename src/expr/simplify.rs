@@ -205,22 +205,25 @@ impl Simplifier {
             }
             Node::Add(xs) => match g.ty(id) {
                 Ty::Scalar => {
-                    let forms: Vec<_> = xs.iter().map(|x| self.memo[x].clone()).collect();
-                    let fracs: Vec<&Frac> = forms
-                        .iter()
-                        .filter_map(|form| match &**form {
-                            Canon::S(f) => Some(f),
-                            Canon::V(_) => None,
-                        })
-                        .collect();
-                    if fracs.len() > 2 && fracs.iter().all(|f| f.den.is_empty()) {
-                        // Polynomials: one merge of all the terms (pairwise sums would pass
-                        // over the growing total once per operand).
-                        let num = Poly::sum(fracs.iter().map(|f| &f.num));
+                    let scalar = |x: &Id| match &*self.memo[x] {
+                        Canon::S(f) => Some(f),
+                        Canon::V(_) => None,
+                    };
+                    let (mut count, mut terms, mut polynomials) = (0usize, 0usize, true);
+                    for f in xs.iter().filter_map(scalar) {
+                        count += 1;
+                        terms += f.num.len();
+                        polynomials &= f.den.is_empty();
+                    }
+                    if count > 2 && terms > 64 && polynomials {
+                        // Large sums of polynomials: one merge of all the terms (pairwise sums
+                        // would pass over the growing total once per operand); small ones
+                        // are cheaper pairwise.
+                        let num = Poly::sum(xs.iter().filter_map(scalar).map(|f| &f.num));
                         Some(Canon::S(Frac { num, den: Vec::new() }.normalize()))
                     } else {
                         let mut acc = Some(Frac::zero());
-                        for f in fracs {
+                        for f in xs.iter().filter_map(scalar) {
                             acc = acc.and_then(|a| a.add(f));
                         }
                         acc.map(Canon::S)
