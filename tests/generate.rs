@@ -167,6 +167,20 @@ fn rustc() -> String {
     std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into())
 }
 
+/// A fresh directory `CARGO_TARGET_TMPDIR/DIR_NAME` holding the generated `code` as
+/// `module.rs`, and the start of a harness that includes it and opens `main` (with `show`,
+/// which prints a slice of numbers on one line).
+fn harness_start(dir_name: impl AsRef<Path>, code: &str) -> (std::path::PathBuf, String) {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(dir_name);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let module_path = dir.join("module.rs");
+    std::fs::write(&module_path, code).expect("write module");
+    let mut main =
+        format!("#[allow(dead_code)]\nmod system {{\n    include!({module_path:?});\n}}\nuse system::*;\n\n");
+    main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
+    (dir, main)
+}
+
 /// Writes `main` as `dir/harness.rs`, compiles it with `rustc -D warnings` at `opt_level`,
 /// runs it, and returns its standard output; panics with rustc's or the harness's stderr.
 fn compile_and_run(dir: &Path, main: &str, opt_level: u8) -> String {
@@ -360,12 +374,7 @@ fn big_chains_get_a_banded_a_that_compiles_and_agrees() {
     let mut rng = Rng(0x0c4a_1150_0000_0040);
     let states: Vec<(Env, String)> = (0..STATES).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
 
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_band");
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let module_path = dir.join("chain.rs");
-    std::fs::write(&module_path, &m.code).expect("write module");
-    let mut main = format!("#[allow(dead_code)]\nmod chain {{\n    include!({module_path:?});\n}}\nuse chain::*;\n\n");
-    main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
+    let (dir, mut main) = harness_start("generate_band", &m.code);
     for (_, literal) in &states {
         let _ = writeln!(main, "    let s = {literal};");
         main.push_str("    show(&a_band(&s).concat());\n    show(&b_vector(&s));\n    show(&lambda(&s));\n");
@@ -447,12 +456,7 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
     let mut rng = Rng(0xb16c_4a11_0000_0500);
     let states: Vec<(Env, String)> = (0..STATES).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
 
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_big");
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let module_path = dir.join("chain.rs");
-    std::fs::write(&module_path, code).expect("write module");
-    let mut main = format!("#[allow(dead_code)]\nmod chain {{\n    include!({module_path:?});\n}}\nuse chain::*;\n\n");
-    main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
+    let (dir, mut main) = harness_start("generate_big", code);
     for (_, literal) in &states {
         // The state is built on the main thread; every function runs on a 2 MiB stack.
         let _ = writeln!(main, "    let s = Box::new({literal});");
@@ -581,13 +585,7 @@ fn sparse_j_agrees(name: &str, text: &str, seed: u64) -> String {
     let mut rng = Rng(seed);
     let states: Vec<(Env, String)> = (0..2).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
 
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("generate_{name}"));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    let module_path = dir.join("module.rs");
-    std::fs::write(&module_path, &m.code).expect("write module");
-    let mut main =
-        format!("#[allow(dead_code)]\nmod system {{\n    include!({module_path:?});\n}}\nuse system::*;\n\n");
-    main.push_str("fn show(xs: &[f64]) {\n    println!(\"{xs:?}\");\n}\n\nfn main() {\n");
+    let (dir, mut main) = harness_start(format!("generate_{name}"), &m.code);
     for (_, literal) in &states {
         let _ = writeln!(main, "    let s = Box::new({literal});");
         main.push_str(
