@@ -260,6 +260,7 @@ impl<'s> Simulation<'s> {
         let row_back = |q: usize, x: f64| unit.as_ref().map_or(x, |u| u.row_value(q, x));
         let length_back = |x: f64| unit.as_ref().map_or(x, |u| u.length(x));
         let energy_back = |x: f64| unit.as_ref().map_or(x, |u| u.energy(x));
+        let vector_back = |x: &[f64; 3]| unit.as_ref().map_or(*x, |u| u.vector(*x));
         let has_inequalities = system.constraints.iter().any(|c| c.inequality);
         let energy_reported = !time_dependent(system);
         // The scene's length scale: the largest initial |rᵢ| (1 when every body is at 0).
@@ -354,7 +355,7 @@ impl<'s> Simulation<'s> {
                     time: t,
                     max_abs_c: c_max,
                     energy_error,
-                    position: self.q[..plotted].iter().map(|x| unit.as_ref().map_or(*x, |u| u.vector(*x))).collect(),
+                    position: self.q[..plotted].iter().map(vector_back).collect(),
                 });
             }
             let frame = match &unit {

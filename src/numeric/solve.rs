@@ -235,7 +235,14 @@ impl Scaled {
             }
             // Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ with Ĵ = J/‖J‖ (division, not a reciprocal, so tiny norms stay finite).
             let unit = |j: &[f64; 3]| [j[0] / norm, j[1] / norm, j[2] / norm];
-            let a_kk: f64 = row.jacobian.iter().map(|(b, j)| dot(&unit(j), &unit(j)) * rows.inverse_mass[*b]).sum();
+            let a_kk: f64 = row
+                .jacobian
+                .iter()
+                .map(|(b, j)| {
+                    let u = unit(j);
+                    dot(&u, &u) * rows.inverse_mass[*b]
+                })
+                .sum();
             if !(a_kk > 0.0 && a_kk.is_finite()) {
                 diagnostics.push(Diagnostic {
                     constraints: vec![q],
