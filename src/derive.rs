@@ -14,7 +14,9 @@
 
 use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
-use crate::expr::{Id, Rational, TypeError};
+use crate::expr::graph::FastMap;
+use crate::expr::shape::{Shape, renaming};
+use crate::expr::{Graph, Id, Rational, Role, Symbol, TypeError};
 use crate::model::system::System;
 use std::collections::HashMap;
 
@@ -73,9 +75,24 @@ pub enum DeriveError {
 
 /// Runs DESIGN.md steps 1–5 on every constraint of `system`.
 pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
-    let mut constraints = Vec::with_capacity(system.constraints.len());
+    let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
+    // Constraints already derived, by shape: a repeat (the next link of a chain) is the
+    // earlier derivation with the bodies renamed.
+    let mut derived: FastMap<Vec<u32>, (usize, Vec<Symbol>)> = FastMap::default();
     for k in 0..system.constraints.len() {
-        constraints.push(derive_constraint(system, k)?);
+        let shape = Shape::of(&system.graph, &[system.constraints[k].c]);
+        let repeat = match derived.get(&shape.key) {
+            Some((earlier, from)) => renamed(system, &constraints[*earlier], from, &shape.symbols, k)?,
+            None => None,
+        };
+        let dc = match repeat {
+            Some(dc) => dc,
+            None => {
+                derived.insert(shape.key, (k, shape.symbols));
+                derive_constraint(system, k)?
+            }
+        };
+        constraints.push(dc);
     }
     let (a, b) = assemble(system, &constraints)?;
     let (mut lambda, mut forces) = (None, None);
@@ -154,6 +171,57 @@ fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint,
     })
 }
 
+/// `earlier`'s derivation with its symbols `from` renamed to `to` (the symbols of constraint
+/// `k`, of the same shape), or `None` if its bodies do not correspond.
+fn renamed(
+    system: &mut System,
+    earlier: &DerivedConstraint,
+    from: &[Symbol],
+    to: &[Symbol],
+    k: usize,
+) -> Result<Option<DerivedConstraint>, DeriveError> {
+    let g = &mut system.graph;
+    let body_of = |g: &Graph, s: Symbol| match g.symbol(s).role {
+        Role::Position { body } => Some(body),
+        _ => None,
+    };
+    let bodies: FastMap<usize, usize> =
+        from.iter().zip(to).filter_map(|(&a, &b)| Some((body_of(g, a)?, body_of(g, b)?))).collect();
+    let involved = &system.constraints[k].bodies;
+    // Each body's place among constraint k's bodies, for the order of its gradient.
+    let mut place = Vec::with_capacity(earlier.gradient.len());
+    for (body, _) in &earlier.gradient {
+        let Some(b) = bodies.get(body) else { return Ok(None) };
+        let Some(i) = involved.iter().position(|x| x == b) else { return Ok(None) };
+        place.push((i, *b));
+    }
+    let map = renaming(g, from, to, true);
+    let n = earlier.gradient.len();
+    let mut roots =
+        vec![earlier.c, earlier.c_dot_raw, earlier.c_dot, earlier.c_ddot_raw, earlier.c_ddot, earlier.c_term];
+    roots.extend(earlier.gradient.iter().map(|e| e.1));
+    roots.extend(earlier.direction.iter().map(|e| e.1));
+    let new = g.substitute_all(&roots, &map)?;
+    let s = &mut system.simplifier;
+    for &id in [new[0], new[2], new[4], new[5]].iter().chain(&new[6..]) {
+        s.adopt(id);
+    }
+    let mut gradient: Vec<(usize, usize, Id, Id)> =
+        (0..n).map(|j| (place[j].0, place[j].1, new[6 + j], new[6 + n + j])).collect();
+    gradient.sort_by_key(|e| e.0);
+    Ok(Some(DerivedConstraint {
+        c: new[0],
+        c_dot_raw: new[1],
+        c_dot: new[2],
+        c_ddot_raw: new[3],
+        c_ddot: new[4],
+        gradient: gradient.iter().map(|e| (e.1, e.2)).collect(),
+        scale: earlier.scale.clone(),
+        direction: gradient.iter().map(|e| (e.1, e.3)).collect(),
+        c_term: new[5],
+    }))
+}
+
 /// A (sparse, upper triangle) and b from the constraints' directions.
 #[allow(clippy::type_complexity)]
 fn assemble(
@@ -194,8 +262,9 @@ fn assemble(
     let mut a = Vec::with_capacity(pairs.len());
     for ((k, j), terms) in pairs {
         let sum = g.add(terms)?;
-        let entry = s.simplify(g, sum)?;
-        if !s.is_zero(g, entry)? {
+        let entry = s.simplify_alike(g, sum)?;
+        // A simplified zero is the number 0.
+        if !g.is_zero(entry) {
             a.push((k, j, entry));
         }
     }
@@ -210,7 +279,7 @@ fn assemble(
         }
         terms.push(dc.c_term);
         let sum = g.add(terms)?;
-        b.push(s.simplify(g, sum)?);
+        b.push(s.simplify_alike(g, sum)?);
     }
     Ok((a, b))
 }

@@ -510,3 +510,71 @@ fn derived_constraints_satisfy_the_velocity_and_acceleration_identities() {
     });
     tally.assert_enough("derive", 300);
 }
+
+/// A constraint that repeats another with the bodies renamed (the next link of a chain) is
+/// derived by renaming the earlier derivation (`expr::shape`). What comes out must be what
+/// deriving it alone gives, printed the same, whether the renaming keeps the bodies' order
+/// (`r1, r2` → `r3, r4`, reused) or reverses it (→ `r4, r3`, derived afresh).
+#[test]
+fn a_repeated_constraint_derives_as_if_it_were_alone() {
+    let reused = Cell::new(0);
+    let strategy =
+        cases(Leaves::Positional, 3, false).prop_map(|(dim, text, _)| (dim, format!("{text} + k*dot(r1, r2)")));
+    check("repeats", 120, strategy, |(dim, text)| {
+        let four = |constraints: &[&str]| -> Result<System, TestCaseError> {
+            let mut b = SystemBuilder::new("repeats", dim as i64).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            for p in ["k", "c"] {
+                b.parameter(p, Ty::Scalar).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            }
+            b.parameter("u", Ty::Vector).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            for i in 1..=4 {
+                let names = [
+                    format!("p{i}"),
+                    format!("r{i}"),
+                    format!("v{i}"),
+                    format!("a{i}"),
+                    format!("F{i}"),
+                    format!("m{i}"),
+                ];
+                b.body(&common::body(&names[0], &names[1], &names[2], &names[3], &names[4], &names[5]))
+                    .map_err(|e| TestCaseError::fail(e.to_string()))?;
+            }
+            for (k, c) in constraints.iter().enumerate() {
+                b.constraint(&format!("c{k}"), c).map_err(|e| TestCaseError::fail(e.to_string()))?;
+            }
+            Ok(b.finish())
+        };
+        for (x, y) in [("r3", "r4"), ("r4", "r3")] {
+            let renamed = text.replace("r1", "X").replace("r2", y).replace('X', x);
+            let mut alone = four(&[&renamed])?;
+            let Ok(one) = derive(&mut alone) else { return Ok(()) };
+            let mut together = four(&[&text, &renamed])?;
+            let both = derive(&mut together).map_err(|e| TestCaseError::fail(format!("{text}: {e}")))?;
+            let show = |system: &System, id: Id| print(&system.graph, id, Style::Source).unwrap_or_default();
+            let fields = |system: &System, d: &lagrange::derive::Derivation, k: usize| {
+                let dc = &d.constraints[k];
+                let mut out = vec![
+                    show(system, dc.c),
+                    show(system, dc.c_dot_raw),
+                    show(system, dc.c_dot),
+                    show(system, dc.c_ddot_raw),
+                    show(system, dc.c_ddot),
+                    show(system, dc.c_term),
+                    dc.scale.to_string(),
+                    d.a_entry(k, k).map(|a| show(system, a)).unwrap_or_default(),
+                    show(system, d.b[k]),
+                ];
+                for (&(body, grad), &(_, j)) in dc.gradient.iter().zip(&dc.direction) {
+                    out.push(format!("{body}: {} / {}", show(system, grad), show(system, j)));
+                }
+                out
+            };
+            prop_assert_eq!(fields(&together, &both, 1), fields(&alone, &one, 0), "{} then {}", text, renamed);
+            if x == "r3" {
+                reused.set(reused.get() + 1);
+            }
+        }
+        Ok(())
+    });
+    assert!(reused.get() >= 60, "only {} repeats were compared", reused.get());
+}

@@ -13,10 +13,11 @@
 
 use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
+use smallvec::SmallVec;
 use std::cmp::Ordering;
 use std::collections::HashMap;
 use std::fmt;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::hash::{BuildHasher, BuildHasherDefault, Hasher};
 
 /// FxHash (as in rustc and Firefox): a fast hasher for maps keyed by ids and nodes. The
 /// default SipHash was a tenth of the derivation's time; keys here are small integers.
@@ -667,22 +668,39 @@ impl Graph {
     }
 
     /// Replaces every occurrence of the nodes in `map` (keys) by their values, bottom-up.
-    pub fn substitute(&mut self, root: Id, map: &HashMap<Id, Id>) -> Result<Id, TypeError> {
-        let order = self.reachable(&[root]);
+    pub fn substitute<S: BuildHasher>(&mut self, root: Id, map: &HashMap<Id, Id, S>) -> Result<Id, TypeError> {
+        // One root in, one node out.
+        Ok(self.substitute_all(&[root], map)?[0])
+    }
+
+    /// [`Graph::substitute`] on several roots at once, each shared node rebuilt once.
+    pub fn substitute_all<S: BuildHasher>(
+        &mut self,
+        roots: &[Id],
+        map: &HashMap<Id, Id, S>,
+    ) -> Result<Vec<Id>, TypeError> {
+        let order = self.reachable(roots);
         let mut new: FastMap<Id, Id> = FastMap::default();
         new.reserve(order.len());
         for id in order {
             let replaced = match map.get(&id) {
                 Some(&to) => to,
-                None => {
-                    let node = self.node(id).clone();
-                    let kids: Vec<Id> = node.children().iter().map(|c| new[c]).collect();
-                    if kids.as_slice() == node.children() { id } else { self.rebuild(&node, &kids)? }
-                }
+                None => self.rebuilt(id, &new)?,
             };
             new.insert(id, replaced);
         }
-        Ok(new[&root])
+        Ok(roots.iter().map(|r| new[r]).collect())
+    }
+
+    /// `id` over the children `new` maps its children to (itself when none changed).
+    fn rebuilt(&mut self, id: Id, new: &FastMap<Id, Id>) -> Result<Id, TypeError> {
+        let children = self.node(id).children();
+        if children.iter().all(|c| new[c] == *c) {
+            return Ok(id);
+        }
+        let kids: SmallVec<[Id; 4]> = children.iter().map(|c| new[c]).collect();
+        let node = self.node(id).clone();
+        self.rebuild(&node, &kids)
     }
 
     // ---- canonical order ---------------------------------------------------------------

@@ -16,6 +16,7 @@ pub mod parse;
 pub mod poly;
 mod present;
 pub mod print;
+pub mod shape;
 pub mod simplify;
 pub mod syntax;
 

@@ -30,9 +30,11 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
+use super::graph::Symbol;
 use super::graph::{Axis, FastMap, FastSet, Func, Graph, Id, IdMap, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
+use super::shape::{Shape, renaming};
 use std::rc::Rc;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
@@ -62,6 +64,9 @@ pub struct Simplifier {
     pub(super) built: IdMap<Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
+    /// What [`Simplifier::simplify_alike`] did, by shape: the result and the symbols it
+    /// was for.
+    alike: FastMap<Vec<u32>, (Id, Vec<Symbol>)>,
 }
 
 impl Simplifier {
@@ -82,6 +87,34 @@ impl Simplifier {
         // tested), so `is_zero`, `content` and `scaled` on the result need not redo it.
         self.memo.insert_if_absent(s, c);
         Ok(s)
+    }
+
+    /// [`Simplifier::simplify`], reusing the work done on an expression of the same shape
+    /// (equal up to renaming bodies' symbols, [`Shape`]): the earlier result, renamed.
+    ///
+    /// For the many entries of a scene that repeat one pattern (A and b of a chain); the
+    /// cost of a repeat is a walk over the expression and the result.
+    pub fn simplify_alike(&mut self, g: &mut Graph, id: Id) -> Result<Id, TypeError> {
+        if let Some(&s) = self.built.get(&id) {
+            return Ok(s);
+        }
+        let shape = Shape::of(g, &[id]);
+        if let Some((earlier, from)) = self.alike.get(&shape.key) {
+            let map = renaming(g, from, &shape.symbols, false);
+            let result = g.substitute(*earlier, &map)?;
+            self.built.insert(id, result);
+            self.adopt(result);
+            return Ok(result);
+        }
+        let result = self.simplify(g, id)?;
+        self.alike.insert(shape.key, (result, shape.symbols));
+        Ok(result)
+    }
+
+    /// Records that `id` is in simplified form (it is a renaming of a simplified node), so
+    /// simplifying it again returns it as it is.
+    pub fn adopt(&mut self, id: Id) {
+        self.built.insert_if_absent(id, id);
     }
 
     /// Whether `a` and `b` are equal as rational functions of their atoms.
