@@ -15,8 +15,8 @@
 use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
 use crate::expr::graph::FastMap;
-use crate::expr::shape::{Shape, renaming};
-use crate::expr::{Graph, Id, Rational, Role, Symbol, TypeError};
+use crate::expr::shape::{Shaper, Template};
+use crate::expr::{Id, Rational, Role, Symbol, TypeError};
 use crate::model::system::System;
 use std::collections::HashMap;
 
@@ -78,18 +78,23 @@ pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
     let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
     // Constraints already derived, by shape: a repeat (the next link of a chain) is the
     // earlier derivation with the bodies renamed.
-    let mut derived: FastMap<Vec<u32>, (usize, Vec<Symbol>)> = FastMap::default();
+    let mut derived: FastMap<Vec<u32>, (usize, Template, Vec<Symbol>)> = FastMap::default();
+    let mut shaper = Shaper::default();
     for k in 0..system.constraints.len() {
-        let shape = Shape::of(&system.graph, &[system.constraints[k].c]);
+        let shape = shaper.shape(&system.graph, &[system.constraints[k].c]);
         let repeat = match derived.get(&shape.key) {
-            Some((earlier, from)) => renamed(system, &constraints[*earlier], from, &shape.symbols, k)?,
+            Some((earlier, template, from)) => {
+                renamed(system, &constraints[*earlier], template, from, &shape.symbols, k)
+            }
             None => None,
         };
         let dc = match repeat {
             Some(dc) => dc,
             None => {
-                derived.insert(shape.key, (k, shape.symbols));
-                derive_constraint(system, k)?
+                let dc = derive_constraint(system, k)?;
+                let template = Template::new(&system.graph, &roots(&dc), &shape.symbols, true);
+                derived.insert(shape.key, (k, template, shape.symbols));
+                dc
             }
         };
         constraints.push(dc);
@@ -171,55 +176,52 @@ fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint,
     })
 }
 
-/// `earlier`'s derivation with its symbols `from` renamed to `to` (the symbols of constraint
-/// `k`, of the same shape), or `None` if its bodies do not correspond.
+/// Every expression of a derived constraint, in the order [`renamed`] reads them back.
+fn roots(dc: &DerivedConstraint) -> Vec<Id> {
+    let mut roots = vec![dc.c, dc.c_dot_raw, dc.c_dot, dc.c_ddot_raw, dc.c_ddot, dc.c_term];
+    roots.extend(dc.gradient.iter().map(|e| e.1));
+    roots.extend(dc.direction.iter().map(|e| e.1));
+    roots
+}
+
+/// `earlier`'s derivation (of a constraint whose symbols were `from`) renamed to constraint
+/// `k`, of the same shape, whose symbols are `to`; `None` if the bodies do not correspond.
 fn renamed(
     system: &mut System,
     earlier: &DerivedConstraint,
+    template: &Template,
     from: &[Symbol],
     to: &[Symbol],
     k: usize,
-) -> Result<Option<DerivedConstraint>, DeriveError> {
+) -> Option<DerivedConstraint> {
     let g = &mut system.graph;
-    let body_of = |g: &Graph, s: Symbol| match g.symbol(s).role {
-        Role::Position { body } => Some(body),
-        _ => None,
-    };
-    let bodies: FastMap<usize, usize> =
-        from.iter().zip(to).filter_map(|(&a, &b)| Some((body_of(g, a)?, body_of(g, b)?))).collect();
-    let involved = &system.constraints[k].bodies;
-    // Each body's place among constraint k's bodies, for the order of its gradient.
-    let mut place = Vec::with_capacity(earlier.gradient.len());
-    for (body, _) in &earlier.gradient {
-        let Some(b) = bodies.get(body) else { return Ok(None) };
-        let Some(i) = involved.iter().position(|x| x == b) else { return Ok(None) };
-        place.push((i, *b));
-    }
-    let map = renaming(g, from, to, true);
+    let new = template.instantiate(g, to)?;
+    // Bodies correspond through their positions' slots.
     let n = earlier.gradient.len();
-    let mut roots =
-        vec![earlier.c, earlier.c_dot_raw, earlier.c_dot, earlier.c_ddot_raw, earlier.c_ddot, earlier.c_term];
-    roots.extend(earlier.gradient.iter().map(|e| e.1));
-    roots.extend(earlier.direction.iter().map(|e| e.1));
-    let new = g.substitute_all(&roots, &map)?;
+    let involved = &system.constraints[k].bodies;
+    let mut parts = Vec::with_capacity(n);
+    for (j, &(body, _)) in earlier.gradient.iter().enumerate() {
+        let position = system.bodies[body].position;
+        let slot = from.iter().position(|&s| s == position)?;
+        let Role::Position { body } = g.symbol(*to.get(slot)?).role else { return None };
+        parts.push((involved.iter().position(|&b| b == body)?, body, new[6 + j], new[6 + n + j]));
+    }
+    parts.sort_by_key(|e| e.0);
     let s = &mut system.simplifier;
     for &id in [new[0], new[2], new[4], new[5]].iter().chain(&new[6..]) {
         s.adopt(id);
     }
-    let mut gradient: Vec<(usize, usize, Id, Id)> =
-        (0..n).map(|j| (place[j].0, place[j].1, new[6 + j], new[6 + n + j])).collect();
-    gradient.sort_by_key(|e| e.0);
-    Ok(Some(DerivedConstraint {
+    Some(DerivedConstraint {
         c: new[0],
         c_dot_raw: new[1],
         c_dot: new[2],
         c_ddot_raw: new[3],
         c_ddot: new[4],
-        gradient: gradient.iter().map(|e| (e.1, e.2)).collect(),
+        gradient: parts.iter().map(|e| (e.1, e.2)).collect(),
         scale: earlier.scale.clone(),
-        direction: gradient.iter().map(|e| (e.1, e.3)).collect(),
+        direction: parts.iter().map(|e| (e.1, e.3)).collect(),
         c_term: new[5],
-    }))
+    })
 }
 
 /// A (sparse, upper triangle) and b from the constraints' directions.

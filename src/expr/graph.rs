@@ -17,7 +17,7 @@ use smallvec::SmallVec;
 use std::cmp::Ordering;
 use std::collections::HashMap;
 use std::fmt;
-use std::hash::{BuildHasher, BuildHasherDefault, Hasher};
+use std::hash::{BuildHasherDefault, Hasher};
 
 /// FxHash (as in rustc and Firefox): a fast hasher for maps keyed by ids and nodes. The
 /// default SipHash was a tenth of the derivation's time; keys here are small integers.
@@ -616,6 +616,28 @@ impl Graph {
         }
     }
 
+    /// The node `like` over other children of the same types (a renaming of its symbols,
+    /// `expr::shape`), interned with `like`'s type and no type checks.
+    pub fn renamed_node(&mut self, like: Id, kids: &[Id]) -> Id {
+        debug_assert!(self.node(like).children().iter().zip(kids).all(|(a, b)| self.ty(*a) == self.ty(*b)));
+        let pair = |k: &[Id]| [k[0], k[1]];
+        let node = match self.node(like) {
+            Node::Num(_) | Node::Sym(_) => return like,
+            Node::Vector(_) => Node::Vector(kids.into()),
+            Node::Add(_) => Node::Add(kids.into()),
+            Node::Mul(_) => Node::Mul(kids.into()),
+            Node::Pow(_) => Node::Pow(pair(kids)),
+            Node::Dot(_) => Node::Dot(pair(kids)),
+            Node::Cross(_) => Node::Cross(pair(kids)),
+            Node::Atan2(_) => Node::Atan2(pair(kids)),
+            Node::Norm(_) => Node::Norm(kids[0]),
+            Node::Comp(_, axis) => Node::Comp(kids[0], *axis),
+            Node::Call(f, _) => Node::Call(*f, kids[0]),
+        };
+        let ty = self.ty(like);
+        self.intern(node, ty)
+    }
+
     fn node_ty_hint(&self, node: &Node) -> Ty {
         match node {
             Node::Sym(s) => self.symbols[s.index()].ty,
@@ -668,18 +690,8 @@ impl Graph {
     }
 
     /// Replaces every occurrence of the nodes in `map` (keys) by their values, bottom-up.
-    pub fn substitute<S: BuildHasher>(&mut self, root: Id, map: &HashMap<Id, Id, S>) -> Result<Id, TypeError> {
-        // One root in, one node out.
-        Ok(self.substitute_all(&[root], map)?[0])
-    }
-
-    /// [`Graph::substitute`] on several roots at once, each shared node rebuilt once.
-    pub fn substitute_all<S: BuildHasher>(
-        &mut self,
-        roots: &[Id],
-        map: &HashMap<Id, Id, S>,
-    ) -> Result<Vec<Id>, TypeError> {
-        let order = self.reachable(roots);
+    pub fn substitute(&mut self, root: Id, map: &HashMap<Id, Id>) -> Result<Id, TypeError> {
+        let order = self.reachable(&[root]);
         let mut new: FastMap<Id, Id> = FastMap::default();
         new.reserve(order.len());
         for id in order {
@@ -689,7 +701,7 @@ impl Graph {
             };
             new.insert(id, replaced);
         }
-        Ok(roots.iter().map(|r| new[r]).collect())
+        Ok(new[&root])
     }
 
     /// `id` over the children `new` maps its children to (itself when none changed).

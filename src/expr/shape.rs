@@ -5,7 +5,7 @@
 //! renamed, and so is everything derived from it. A [`Shape`] is an expression with its
 //! symbols replaced by numbered slots, so such expressions have equal shapes; work done on
 //! one (simplifying, deriving) is reused for the others by renaming its result
-//! ([`Graph::substitute_all`] with the map of [`renaming`]).
+//! ([`Template`]).
 //!
 //! Renaming symbols one-to-one preserves value, so a reused result is always correct. It
 //! is also the result the work would have given: the shape records the order in which the
@@ -16,6 +16,7 @@
 //! Not here: what is reused (`derive`, [`super::Simplifier::simplify_alike`]).
 
 use super::graph::{FastMap, Graph, Id, Node, Role, Symbol};
+use smallvec::SmallVec;
 
 /// An expression with its renameable symbols numbered by first appearance.
 #[derive(Clone, Debug)]
@@ -48,20 +49,37 @@ fn fixed(role: Role) -> bool {
     matches!(role, Role::Parameter | Role::Time)
 }
 
-impl Shape {
+/// Scratch space for [`Shaper::shape`]: a number per graph node, reused from call to call,
+/// so that a shape costs its expression's size and no hashing.
+#[derive(Debug, Default)]
+pub struct Shaper {
+    /// For each node: the call that last numbered it, and its number then.
+    seen: Vec<(u32, u32)>,
+    call: u32,
+}
+
+impl Shaper {
     /// The shape of the expressions `roots` taken together.
     ///
     /// Linear in the number of distinct nodes: shared subexpressions are recorded once and
     /// referred to by their index, so a deeply shared graph cannot blow the key up.
-    pub fn of(g: &Graph, roots: &[Id]) -> Shape {
-        let mut key = Vec::new();
-        let mut symbols = Vec::new();
-        let mut slot_of: FastMap<Symbol, u32> = FastMap::default();
-        // Nodes are numbered in the order their records are written (children first).
-        let mut index: FastMap<Id, u32> = FastMap::default();
+    pub fn shape(&mut self, g: &Graph, roots: &[Id]) -> Shape {
+        if self.seen.len() < g.len() {
+            self.seen.resize(g.len().max(2 * self.seen.len()), (0, 0));
+        }
+        self.call = self.call.wrapping_add(1);
+        if self.call == 0 {
+            // After 2³² calls the stamps wrap: start them again.
+            self.seen.iter_mut().for_each(|e| *e = (0, 0));
+            self.call = 1;
+        }
+        let call = self.call;
+        let mut key = Vec::with_capacity(64);
+        let mut symbols: Vec<Symbol> = Vec::new();
+        let mut count = 0u32;
         let mut stack: Vec<(Id, bool)> = roots.iter().rev().map(|&r| (r, false)).collect();
         while let Some((id, expanded)) = stack.pop() {
-            if index.contains_key(&id) {
+            if self.seen[id.index()].0 == call {
                 continue;
             }
             let node = g.node(id);
@@ -70,18 +88,21 @@ impl Shape {
                 stack.extend(node.children().iter().rev().map(|&c| (c, false)));
                 continue;
             }
-            let kid = |c: &Id| index[c];
+            let seen = &self.seen;
+            let kid = |c: &Id| seen[c.index()].1;
             match node {
                 // Equal numbers are one node of the graph (hash-consing), so the id is the value.
                 Node::Num(_) => key.extend([NUM, id.index() as u32]),
                 Node::Sym(s) if fixed(g.symbol(*s).role) => key.extend([FIXED, s.index() as u32]),
                 Node::Sym(s) => {
-                    let next = symbols.len() as u32;
-                    let slot = *slot_of.entry(*s).or_insert(next);
-                    if slot == next {
-                        symbols.push(*s);
-                    }
-                    key.extend([SLOT, slot]);
+                    let slot = match symbols.iter().position(|x| x == s) {
+                        Some(i) => i,
+                        None => {
+                            symbols.push(*s);
+                            symbols.len() - 1
+                        }
+                    };
+                    key.extend([SLOT, slot as u32]);
                 }
                 Node::Vector(xs) | Node::Add(xs) | Node::Mul(xs) => {
                     let tag = match node {
@@ -100,11 +121,12 @@ impl Shape {
                 Node::Comp(a, axis) => key.extend([COMP, axis.index() as u32, kid(a)]),
                 Node::Call(f, a) => key.extend([CALL, *f as u32, kid(a)]),
             }
-            index.insert(id, index.len() as u32);
+            self.seen[id.index()] = (call, count);
+            count += 1;
         }
         // Which root is which record.
         key.push(u32::MAX);
-        key.extend(roots.iter().map(|r| index[r]));
+        key.extend(roots.iter().map(|r| self.seen[r.index()].1));
         // What each slot is, and the order the slots' symbols sort in.
         for &s in &symbols {
             key.push(role_code(g.symbol(s).role));
@@ -128,30 +150,106 @@ fn role_code(role: Role) -> u32 {
     }
 }
 
-/// The map from the symbol nodes of `from` to those of `to` (the symbols of two shapes with
-/// equal keys).
-///
-/// With `along_derivatives`, renaming a position renames its velocity and acceleration too,
-/// so what is derived from an expression renames with it; the slots themselves come first
-/// (an expression with `r₁` and `v₂` may be renamed to one with `r₃` and `v₃`).
-pub fn renaming(g: &mut Graph, from: &[Symbol], to: &[Symbol], along_derivatives: bool) -> FastMap<Id, Id> {
-    let mut map = FastMap::default();
-    for (&a, &b) in from.iter().zip(to) {
-        let (na, nb) = (g.sym(a), g.sym(b));
-        map.insert(na, nb);
-    }
-    if along_derivatives {
-        for (&a, &b) in from.iter().zip(to) {
-            let (mut a, mut b) = (g.symbol(a).derivative, g.symbol(b).derivative);
-            while let (Some(x), Some(y)) = (a, b) {
-                let (nx, ny) = (g.sym(x), g.sym(y));
-                map.entry(nx).or_insert(ny);
-                a = g.symbol(x).derivative;
-                b = g.symbol(y).derivative;
+/// Results to be renamed many times: the nodes of their graph that involve renamed symbols,
+/// children first, as a small program over their own numbering.
+#[derive(Clone, Debug)]
+pub struct Template {
+    ops: Vec<Op>,
+    roots: Vec<u32>,
+    /// The renamed symbols: a slot of the shape, and how many time derivatives down from it.
+    symbols: Vec<(u32, u8)>,
+}
+
+#[derive(Clone, Debug)]
+enum Op {
+    /// A node without renamed symbols, used as it is.
+    Keep(Id),
+    /// The symbol `symbols[i]`, renamed.
+    Symbol(usize),
+    /// The node `like` over the renamed children at these places.
+    Node(Id, SmallVec<[u32; 4]>),
+}
+
+impl Template {
+    /// The template of `roots`, whose expression had the shape's symbols `slots`.
+    ///
+    /// With `along_derivatives`, the slots' velocities and accelerations are renamed with
+    /// them, so what is derived from an expression renames with it; the slots themselves
+    /// come first (an expression with `r₁` and `v₂` may be renamed to one with `r₃` and `v₃`).
+    pub fn new(g: &Graph, roots: &[Id], slots: &[Symbol], along_derivatives: bool) -> Template {
+        let mut renamed: FastMap<Symbol, usize> = FastMap::default();
+        let mut symbols = Vec::new();
+        for (i, &s) in slots.iter().enumerate() {
+            renamed.insert(s, symbols.len());
+            symbols.push((i as u32, 0));
+        }
+        if along_derivatives {
+            for (i, &s) in slots.iter().enumerate() {
+                let (mut next, mut depth) = (g.symbol(s).derivative, 1u8);
+                while let Some(d) = next {
+                    if let std::collections::hash_map::Entry::Vacant(e) = renamed.entry(d) {
+                        e.insert(symbols.len());
+                        symbols.push((i as u32, depth));
+                    }
+                    next = g.symbol(d).derivative;
+                    depth = depth.saturating_add(1);
+                }
             }
         }
+        let order = g.reachable(roots);
+        let mut place: FastMap<Id, u32> = FastMap::default();
+        let mut ops = Vec::with_capacity(order.len());
+        for id in order {
+            let node = g.node(id);
+            let op = match node {
+                Node::Sym(s) => match renamed.get(s) {
+                    Some(&i) => Op::Symbol(i),
+                    None => Op::Keep(id),
+                },
+                _ => {
+                    let kids: SmallVec<[u32; 4]> = node.children().iter().map(|c| place[c]).collect();
+                    if kids.iter().all(|&k| matches!(ops[k as usize], Op::Keep(_))) {
+                        Op::Keep(id)
+                    } else {
+                        Op::Node(id, kids)
+                    }
+                }
+            };
+            place.insert(id, ops.len() as u32);
+            ops.push(op);
+        }
+        let roots = roots.iter().map(|r| place[r]).collect();
+        Template { ops, roots, symbols }
     }
-    map
+
+    /// The roots with the slots renamed to `slots` (the symbols of a shape with the same key
+    /// as the template's), or `None` if a renamed symbol has no counterpart (a slot without
+    /// the time derivatives the template's has).
+    pub fn instantiate(&self, g: &mut Graph, slots: &[Symbol]) -> Option<Vec<Id>> {
+        let mut symbols = Vec::with_capacity(self.symbols.len());
+        for &(slot, depth) in &self.symbols {
+            let mut s = *slots.get(slot as usize)?;
+            for _ in 0..depth {
+                s = g.symbol(s).derivative?;
+            }
+            symbols.push(g.sym(s));
+        }
+        let mut made: Vec<Id> = Vec::with_capacity(self.ops.len());
+        let mut kids: SmallVec<[Id; 4]> = SmallVec::new();
+        for op in &self.ops {
+            let id = match op {
+                Op::Keep(id) => *id,
+                Op::Symbol(i) => symbols[*i],
+                Op::Node(like, places) => {
+                    kids.clear();
+                    kids.extend(places.iter().map(|&k| made[k as usize]));
+                    g.renamed_node(*like, &kids)
+                }
+            };
+            made.push(id);
+        }
+        Some(self.roots.iter().map(|&r| made[r as usize]).collect())
+    }
 }
 
 #[cfg(test)]
@@ -186,22 +284,29 @@ mod tests {
     fn renamed_bodies_have_the_same_shape_and_rename_back() {
         let (mut g, r, k, _) = graph(4);
         let (first, second) = (link(&mut g, r[1], r[0], k), link(&mut g, r[3], r[2], k));
-        let (a, b) = (Shape::of(&g, &[first]), Shape::of(&g, &[second]));
+        let mut shaper = Shaper::default();
+        let (a, b) = (shaper.shape(&g, &[first]), shaper.shape(&g, &[second]));
         assert_eq!(a.key, b.key);
-        let map = renaming(&mut g, &a.symbols, &b.symbols, false);
-        assert_eq!(g.substitute(first, &map).expect("renames"), second);
+        let template = Template::new(&g, &[first], &a.symbols, false);
+        assert_eq!(template.instantiate(&mut g, &b.symbols), Some(vec![second]));
         // Along derivatives, the velocities are renamed with the positions.
-        let map = renaming(&mut g, &a.symbols, &b.symbols, true);
-        let (v0, v2) = (g.symbol_named("v0").expect("v0"), g.symbol_named("v2").expect("v2"));
-        let (v0, v2) = (g.sym(v0), g.sym(v2));
-        assert_eq!(map.get(&v0), Some(&v2));
+        let v = |g: &mut Graph, name: &str| {
+            let s = g.symbol_named(name).expect("declared");
+            g.sym(s)
+        };
+        let (v0, v1, v2, v3) = (v(&mut g, "v0"), v(&mut g, "v1"), v(&mut g, "v2"), v(&mut g, "v3"));
+        let moving = g.dot(v1, v0).expect("vectors");
+        let template = Template::new(&g, &[first, moving], &a.symbols, true);
+        let expected = g.dot(v3, v2).expect("vectors");
+        assert_eq!(template.instantiate(&mut g, &b.symbols), Some(vec![second, expected]));
     }
 
     #[test]
     fn shapes_differ_in_body_order_parameters_and_numbers() {
         let (mut g, r, k, c) = graph(3);
         let base = link(&mut g, r[1], r[0], k);
-        let shape = |g: &Graph, id| Shape::of(g, &[id]).key;
+        let mut shaper = Shaper::default();
+        let mut shape = |g: &Graph, id| shaper.shape(g, &[id]).key;
         // The bodies in the other order sort the other way: not the same layout.
         let reversed = link(&mut g, r[0], r[1], k);
         assert_ne!(shape(&g, base), shape(&g, reversed));
@@ -225,7 +330,7 @@ mod tests {
         for _ in 0..60 {
             x = g.mul(vec![x, x]).expect("scalars");
         }
-        let shape = Shape::of(&g, &[x]);
+        let shape = Shaper::default().shape(&g, &[x]);
         assert!(shape.key.len() < 400, "key of {} words", shape.key.len());
         assert_eq!(shape.symbols.len(), 1);
     }

@@ -30,11 +30,10 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::Symbol;
 use super::graph::{Axis, FastMap, FastSet, Func, Graph, Id, IdMap, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
-use super::shape::{Shape, renaming};
+use super::shape::{Shaper, Template};
 use std::rc::Rc;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
@@ -64,9 +63,9 @@ pub struct Simplifier {
     pub(super) built: IdMap<Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
-    /// What [`Simplifier::simplify_alike`] did, by shape: the result and the symbols it
-    /// was for.
-    alike: FastMap<Vec<u32>, (Id, Vec<Symbol>)>,
+    /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
+    alike: FastMap<Vec<u32>, Template>,
+    shaper: Shaper,
 }
 
 impl Simplifier {
@@ -98,16 +97,15 @@ impl Simplifier {
         if let Some(&s) = self.built.get(&id) {
             return Ok(s);
         }
-        let shape = Shape::of(g, &[id]);
-        if let Some((earlier, from)) = self.alike.get(&shape.key) {
-            let map = renaming(g, from, &shape.symbols, false);
-            let result = g.substitute(*earlier, &map)?;
+        let shape = self.shaper.shape(g, &[id]);
+        if let Some(renamed) = self.alike.get(&shape.key).and_then(|t| t.instantiate(g, &shape.symbols)) {
+            let result = renamed[0];
             self.built.insert(id, result);
             self.adopt(result);
             return Ok(result);
         }
         let result = self.simplify(g, id)?;
-        self.alike.insert(shape.key, (result, shape.symbols));
+        self.alike.insert(shape.key, Template::new(g, &[result], &shape.symbols, false));
         Ok(result)
     }
 
