@@ -15,7 +15,7 @@
 use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
 use crate::expr::graph::FastMap;
-use crate::expr::shape::{Shaper, Template};
+use crate::expr::shape::{Reuse, Shaper};
 use crate::expr::{Id, Rational, Role, Symbol, TypeError};
 use crate::model::system::System;
 use std::collections::HashMap;
@@ -78,28 +78,33 @@ pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
     let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
     // Constraints already derived, by shape: a repeat (the next link of a chain) is the
     // earlier derivation with the bodies renamed.
-    let mut derived: FastMap<Vec<u32>, (usize, Template, Vec<Symbol>)> = FastMap::default();
+    let mut derived: FastMap<Vec<u32>, (usize, Reuse)> = FastMap::default();
     let mut shaper = Shaper::default();
+    // With one constraint nothing repeats: shapes would be work for nothing.
+    let repeats = system.constraints.len() > 1;
+    // A link of a chain adds about 60 nodes to the graph.
+    system.graph.reserve(64 * system.constraints.len());
     for k in 0..system.constraints.len() {
+        if !repeats {
+            constraints.push(derive_constraint(system, k)?);
+            continue;
+        }
         let shape = shaper.shape(&system.graph, &[system.constraints[k].c]);
-        let repeat = match derived.get(&shape.key) {
-            Some((earlier, template, from)) => {
-                renamed(system, &constraints[*earlier], template, from, &shape.symbols, k)
-            }
+        let repeat = match derived.get_mut(&shape.key) {
+            Some((earlier, reuse)) => renamed(system, &constraints[*earlier], reuse, &shape.symbols, k),
             None => None,
         };
         let dc = match repeat {
             Some(dc) => dc,
             None => {
                 let dc = derive_constraint(system, k)?;
-                let template = Template::new(&system.graph, &roots(&dc), &shape.symbols, true);
-                derived.insert(shape.key, (k, template, shape.symbols));
+                derived.insert(shape.key, (k, Reuse::new(roots(&dc), shape.symbols, true)));
                 dc
             }
         };
         constraints.push(dc);
     }
-    let (a, b) = assemble(system, &constraints)?;
+    let (a, b) = assemble(system, &constraints, repeats)?;
     let (mut lambda, mut forces) = (None, None);
     if let [only] = constraints.as_slice() {
         let g = &mut system.graph;
@@ -184,18 +189,18 @@ fn roots(dc: &DerivedConstraint) -> Vec<Id> {
     roots
 }
 
-/// `earlier`'s derivation (of a constraint whose symbols were `from`) renamed to constraint
-/// `k`, of the same shape, whose symbols are `to`; `None` if the bodies do not correspond.
+/// `earlier`'s derivation (kept in `reuse`) renamed to constraint `k`, of the same shape,
+/// whose symbols are `to`; `None` if the bodies do not correspond.
 fn renamed(
     system: &mut System,
     earlier: &DerivedConstraint,
-    template: &Template,
-    from: &[Symbol],
+    reuse: &mut Reuse,
     to: &[Symbol],
     k: usize,
 ) -> Option<DerivedConstraint> {
     let g = &mut system.graph;
-    let new = template.instantiate(g, to)?;
+    let new = reuse.renamed(g, to)?;
+    let from = reuse.slots();
     // Bodies correspond through their positions' slots.
     let n = earlier.gradient.len();
     let involved = &system.constraints[k].bodies;
@@ -224,11 +229,13 @@ fn renamed(
     })
 }
 
-/// A (sparse, upper triangle) and b from the constraints' directions.
+/// A (sparse, upper triangle) and b from the constraints' directions; with `repeats`,
+/// entries of the same shape as earlier ones are renamed from them.
 #[allow(clippy::type_complexity)]
 fn assemble(
     system: &mut System,
     constraints: &[DerivedConstraint],
+    repeats: bool,
 ) -> Result<(Vec<(usize, usize, Id)>, Vec<Id>), TypeError> {
     // Which constraints act on each body.
     let mut on_body: Vec<Vec<(usize, Id)>> = vec![Vec::new(); system.bodies.len()];
@@ -264,7 +271,7 @@ fn assemble(
     let mut a = Vec::with_capacity(pairs.len());
     for ((k, j), terms) in pairs {
         let sum = g.add(terms)?;
-        let entry = s.simplify_alike(g, sum)?;
+        let entry = if repeats { s.simplify_alike(g, sum)? } else { s.simplify(g, sum)? };
         // A simplified zero is the number 0.
         if !g.is_zero(entry) {
             a.push((k, j, entry));
@@ -281,7 +288,7 @@ fn assemble(
         }
         terms.push(dc.c_term);
         let sum = g.add(terms)?;
-        b.push(s.simplify_alike(g, sum)?);
+        b.push(if repeats { s.simplify_alike(g, sum)? } else { s.simplify(g, sum)? });
     }
     Ok((a, b))
 }

@@ -350,6 +350,16 @@ impl Graph {
         }
     }
 
+    /// Room for `additional` more nodes, so a graph grown by a known amount (a derivation of
+    /// many constraints) is not copied and rehashed on the way.
+    pub fn reserve(&mut self, additional: usize) {
+        self.nodes.reserve(additional);
+        self.tys.reserve(additional);
+        self.depths.reserve(additional);
+        self.same_hash.reserve(additional);
+        self.index.reserve(additional);
+    }
+
     pub fn dim(&self) -> usize {
         self.dim
     }

@@ -150,6 +150,36 @@ fn role_code(role: Role) -> u32 {
     }
 }
 
+/// Results kept for reuse by shape: as they are at first, made a [`Template`] when their
+/// shape comes again (in a small scene most shapes come once, and a template costs a walk).
+#[derive(Clone, Debug)]
+pub struct Reuse {
+    roots: Vec<Id>,
+    slots: Vec<Symbol>,
+    along_derivatives: bool,
+    template: Option<Template>,
+}
+
+impl Reuse {
+    /// `roots`, computed from an expression whose shape had the symbols `slots`; see
+    /// [`Template::new`] for `along_derivatives`.
+    pub fn new(roots: Vec<Id>, slots: Vec<Symbol>, along_derivatives: bool) -> Reuse {
+        Reuse { roots, slots, along_derivatives, template: None }
+    }
+
+    /// The symbols of the expression the results were computed from.
+    pub fn slots(&self) -> &[Symbol] {
+        &self.slots
+    }
+
+    /// The results renamed to `slots` ([`Template::instantiate`]).
+    pub fn renamed(&mut self, g: &mut Graph, slots: &[Symbol]) -> Option<Vec<Id>> {
+        let (roots, from, along) = (&self.roots, &self.slots, self.along_derivatives);
+        let template = self.template.get_or_insert_with(|| Template::new(g, roots, from, along));
+        template.instantiate(g, slots)
+    }
+}
+
 /// Results to be renamed many times: the nodes of their graph that involve renamed symbols,
 /// children first, as a small program over their own numbering.
 #[derive(Clone, Debug)]

@@ -33,7 +33,7 @@
 use super::graph::{Axis, FastMap, FastSet, Func, Graph, Id, IdMap, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
-use super::shape::{Shaper, Template};
+use super::shape::{Reuse, Shaper};
 use std::rc::Rc;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
@@ -64,7 +64,7 @@ pub struct Simplifier {
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
     /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
-    alike: FastMap<Vec<u32>, Template>,
+    alike: FastMap<Vec<u32>, Reuse>,
     shaper: Shaper,
 }
 
@@ -98,14 +98,14 @@ impl Simplifier {
             return Ok(s);
         }
         let shape = self.shaper.shape(g, &[id]);
-        if let Some(renamed) = self.alike.get(&shape.key).and_then(|t| t.instantiate(g, &shape.symbols)) {
+        if let Some(renamed) = self.alike.get_mut(&shape.key).and_then(|r| r.renamed(g, &shape.symbols)) {
             let result = renamed[0];
             self.built.insert(id, result);
             self.adopt(result);
             return Ok(result);
         }
         let result = self.simplify(g, id)?;
-        self.alike.insert(shape.key, Template::new(g, &[result], &shape.symbols, false));
+        self.alike.insert(shape.key, Reuse::new(vec![result], shape.symbols, false));
         Ok(result)
     }
 
