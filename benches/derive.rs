@@ -8,6 +8,11 @@
 //! whole command is measured too, file reading and stdout aside. Targets (issue 2): bead
 //! < 20 µs; chain linear in N, N = 200 < 4 ms, N = 1000 < 20 ms.
 
+/// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
+/// many small forms).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use divan::{Bencher, black_box};
 use lagrange::derive::derive;
 use lagrange::model::file::load;

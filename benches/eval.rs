@@ -11,6 +11,11 @@
 //! Run: `cargo bench --bench eval`. Per-state figures of batches are the time divided by
 //! the batch size (divan also prints the throughput).
 
+/// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
+/// many small forms).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use divan::{Bencher, black_box, counter::ItemsCount};
 use lagrange::derive::derive;
 use lagrange::expr::{Id, Symbol};

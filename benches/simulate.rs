@@ -8,6 +8,11 @@
 //! so the cost per step grows linearly in N. Deriving the 10 000-link chain takes ~20 s
 //! before its samples start.
 
+/// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
+/// many small forms).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use lagrange::model::file::load;
 use lagrange::numeric::integrate::Integrator;
 use lagrange::numeric::stabilize::Stabilize;

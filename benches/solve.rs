@@ -7,6 +7,11 @@
 //! N = 1000 (N = 10 000 would need 800 MB and minutes). `auto_scrambled` lists the links
 //! out of order, so the band has to be found by renumbering.
 
+/// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
+/// many small forms).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use divan::{Bencher, black_box};
 use lagrange::numeric::rows::{Row, Rows};
 use lagrange::numeric::solve::{Method, Settings, solve_with};

@@ -82,8 +82,10 @@ pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
     let mut shaper = Shaper::default();
     // With one constraint nothing repeats: shapes would be work for nothing.
     let repeats = system.constraints.len() > 1;
-    // A link of a chain adds about 60 nodes to the graph.
-    system.graph.reserve(64 * system.constraints.len());
+    if repeats {
+        // A link of a chain adds about 60 nodes to the graph.
+        system.graph.reserve(64 * system.constraints.len());
+    }
     for k in 0..system.constraints.len() {
         if !repeats {
             constraints.push(derive_constraint(system, k)?);

@@ -1,5 +1,10 @@
 //! The `lagrange` command line: parse arguments, call the library, print. Nothing else.
 
+/// mimalloc: a derivation allocates and frees many small forms; with it a derivation takes
+/// 15–18 % fewer instructions than with the system allocator (README, Speed).
+#[global_allocator]
+static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::codegen::{Options, generate};
 use lagrange::derive::derive;
