@@ -15,7 +15,9 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use divan::{Bencher, black_box};
 use lagrange::derive::derive;
+use lagrange::expr::Ty;
 use lagrange::model::file::load;
+use lagrange::model::system::{BodySpec, MassSpec, SystemBuilder};
 use lagrange::report::derivation::{Format, document};
 use lagrange::scenario::chain;
 
@@ -43,6 +45,32 @@ fn load_derive_and_print(text: &str) -> usize {
 fn bead(bencher: Bencher, dim: usize) {
     let text = if dim == 2 { BEAD_2D } else { BEAD_3D };
     bencher.bench(|| load_and_derive(black_box(text)));
+}
+
+/// Parse + derive + simplify of the bead from its declarations, without a file: the symbols
+/// declared, the constraint parsed from its text `dot(r,r) = l^2`, derived, simplified. This
+/// is the work SymPy, SymEngine and CasADi were timed on in issue 2; `bead` adds reading the
+/// TOML file (and checking its `[[expect]]` formulas and `[scene]`).
+#[divan::bench(args = [2, 3])]
+fn bead_expressions(bencher: Bencher, dim: usize) {
+    bencher.bench(|| {
+        let mut b = SystemBuilder::new("bead", black_box(dim as i64)).expect("a dimension");
+        b.parameter("l", Ty::Scalar).expect("a new name");
+        b.parameter("m", Ty::Scalar).expect("a new name");
+        let bead = BodySpec {
+            name: "bead",
+            position: "r",
+            velocity: "v",
+            acceleration: "a",
+            force: "F",
+            mass: MassSpec::Symbol("m"),
+        };
+        b.body(&bead).expect("new names");
+        b.constraint("wire", black_box("dot(r,r) = l^2")).expect("a constraint");
+        let mut system = b.finish();
+        let d = derive(&mut system).expect("the bead derives");
+        d.a.len() + d.b.len()
+    });
 }
 
 #[divan::bench(args = [2, 3])]

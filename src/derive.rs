@@ -163,7 +163,7 @@ fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint,
     }
     // c = C̈ with every acceleration set to zero, over κ.
     let zero = g.zero_vector();
-    let mut to_zero = HashMap::new();
+    let mut to_zero = FastMap::default();
     for &(body, _) in &gradient_parts {
         let a = g.sym(system.bodies[body].acceleration);
         to_zero.insert(a, zero);

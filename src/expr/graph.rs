@@ -17,7 +17,7 @@ use smallvec::SmallVec;
 use std::cmp::Ordering;
 use std::collections::HashMap;
 use std::fmt;
-use std::hash::{BuildHasherDefault, Hasher};
+use std::hash::{BuildHasher, BuildHasherDefault, Hasher};
 
 /// FxHash (as in rustc and Firefox): a fast hasher for maps keyed by ids and nodes. The
 /// default SipHash was a tenth of the derivation's time; keys here are small integers.
@@ -331,7 +331,7 @@ pub struct Graph {
     index: FastMap<u64, Id>,
     same_hash: Vec<Option<Id>>,
     symbols: Vec<SymbolInfo>,
-    by_name: HashMap<String, Symbol>,
+    by_name: FastMap<String, Symbol>,
 }
 
 impl Graph {
@@ -346,7 +346,7 @@ impl Graph {
             index: FastMap::default(),
             same_hash: Vec::new(),
             symbols: Vec::new(),
-            by_name: HashMap::new(),
+            by_name: FastMap::default(),
         }
     }
 
@@ -700,7 +700,7 @@ impl Graph {
     }
 
     /// Replaces every occurrence of the nodes in `map` (keys) by their values, bottom-up.
-    pub fn substitute(&mut self, root: Id, map: &HashMap<Id, Id>) -> Result<Id, TypeError> {
+    pub fn substitute<S: BuildHasher>(&mut self, root: Id, map: &HashMap<Id, Id, S>) -> Result<Id, TypeError> {
         let order = self.reachable(&[root]);
         let mut new: FastMap<Id, Id> = FastMap::default();
         new.reserve(order.len());
