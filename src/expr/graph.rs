@@ -330,6 +330,8 @@ pub struct Graph {
     /// chains to older ones. Nodes are stored once, in `nodes` (no clone as a map key).
     index: FastMap<u64, Id>,
     same_hash: Vec<Option<Id>>,
+    /// Each symbol's node, once made (looked up for every symbol a renaming writes).
+    sym_nodes: Vec<Option<Id>>,
     symbols: Vec<SymbolInfo>,
     by_name: FastMap<String, Symbol>,
 }
@@ -345,6 +347,7 @@ impl Graph {
             depths: Vec::new(),
             index: FastMap::default(),
             same_hash: Vec::new(),
+            sym_nodes: Vec::new(),
             symbols: Vec::new(),
             by_name: FastMap::default(),
         }
@@ -462,8 +465,16 @@ impl Graph {
     }
 
     pub fn sym(&mut self, s: Symbol) -> Id {
+        if let Some(&Some(id)) = self.sym_nodes.get(s.index()) {
+            return id;
+        }
         let ty = self.symbols[s.index()].ty;
-        self.intern(Node::Sym(s), ty)
+        let id = self.intern(Node::Sym(s), ty);
+        if self.sym_nodes.len() <= s.index() {
+            self.sym_nodes.resize(self.symbols.len().max(s.index() + 1), None);
+        }
+        self.sym_nodes[s.index()] = Some(id);
+        id
     }
 
     /// The constant as a rational, when `id` is a number node.
