@@ -299,6 +299,9 @@ impl Poly {
     }
 
     pub fn powi(&self, n: u32) -> Option<Poly> {
+        if n == 1 {
+            return Some(self.clone());
+        }
         let mut result = Poly::constant(Rational::ONE);
         let mut base = self.clone();
         let mut n = n;
@@ -468,6 +471,9 @@ impl Frac {
     }
 
     pub fn powi(&self, n: i64) -> Option<Frac> {
+        if n == -1 {
+            return self.recip();
+        }
         if n < 0 {
             return self.recip()?.powi(n.checked_neg()?);
         }

@@ -30,7 +30,7 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::{Axis, FastMap, FastSet, Func, Graph, Id, IdMap, Node, Ty, TypeError};
+use super::graph::{Axis, FastMap, Func, Graph, Id, IdMap, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
 use super::shape::{Reuse, Shaper};
@@ -66,6 +66,9 @@ pub struct Simplifier {
     /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
     alike: FastMap<Vec<u32>, Reuse>,
     shaper: Shaper,
+    /// `canon`'s marks of the nodes queued in its current walk (`walk`), by node.
+    queued: Vec<u32>,
+    walk: u32,
 }
 
 impl Simplifier {
@@ -171,12 +174,21 @@ impl Simplifier {
         // The nodes below `id` without a form yet; the walk stops at memoised nodes, so
         // a new expression over old ones costs the size of what is new.
         let mut todo = Vec::new();
-        let mut seen: FastSet<Id> = FastSet::default();
+        // Nodes already queued in this walk: a mark per node, reused from walk to walk.
+        if self.queued.len() < g.len() {
+            self.queued.resize(g.len().max(2 * self.queued.len()), 0);
+        }
+        self.walk = self.walk.wrapping_add(1);
+        if self.walk == 0 {
+            self.queued.iter_mut().for_each(|m| *m = 0);
+            self.walk = 1;
+        }
         let mut stack = vec![id];
         while let Some(n) = stack.pop() {
-            if self.memo.contains_key(&n) || !seen.insert(n) {
+            if self.memo.contains_key(&n) || self.queued[n.index()] == self.walk {
                 continue;
             }
+            self.queued[n.index()] = self.walk;
             todo.push(n);
             stack.extend_from_slice(g.node(n).children());
         }
