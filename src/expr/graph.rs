@@ -340,7 +340,7 @@ impl Graph {
     /// An empty graph for vectors of `dim` components (2 or 3).
     pub fn new(dim: usize) -> Graph {
         assert!(dim == 2 || dim == 3, "dimension must be 2 or 3");
-        Graph {
+        let mut g = Graph {
             dim,
             nodes: Vec::new(),
             tys: Vec::new(),
@@ -350,7 +350,11 @@ impl Graph {
             sym_nodes: Vec::new(),
             symbols: Vec::new(),
             by_name: FastMap::default(),
-        }
+        };
+        // The article's bead derives in about 200 nodes: room for a small scene at once,
+        // instead of growing (and rehashing) through every power of two up to it.
+        g.reserve(256);
+        g
     }
 
     /// Room for `additional` more nodes, so a graph grown by a known amount (a derivation of
@@ -675,9 +679,10 @@ impl Graph {
     /// size of the answer, not of the graph (a 1000-link chain calls this thousands of
     /// times on a graph of ~10⁵ nodes).
     pub fn reachable(&self, roots: &[Id]) -> Vec<Id> {
-        let mut seen: std::collections::HashSet<Id, BuildHasherDefault<FxHasher>> = Default::default();
+        // Room for a small formula's nodes up front: growing the set rehashes it each time.
+        let mut seen: FastSet<Id> = FastSet::with_capacity_and_hasher(64, Default::default());
         let mut stack: Vec<Id> = roots.to_vec();
-        let mut out = Vec::new();
+        let mut out = Vec::with_capacity(64);
         while let Some(id) = stack.pop() {
             if !seen.insert(id) {
                 continue;

@@ -36,7 +36,7 @@ impl Simplifier {
         if let Some(q) = f.as_constant() {
             return Ok(g.num(q));
         }
-        let mut factors = Vec::new();
+        let mut factors = Vec::with_capacity(4);
         let k = if let [(m, _)] = f.num.0.as_slice() {
             factors.extend(mono_factors(g, m)?);
             signed_content(g, &f.num)

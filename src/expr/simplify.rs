@@ -173,7 +173,7 @@ impl Simplifier {
         }
         // The nodes below `id` without a form yet; the walk stops at memoised nodes, so
         // a new expression over old ones costs the size of what is new.
-        let mut todo = Vec::new();
+        let mut todo = Vec::with_capacity(16);
         // Nodes already queued in this walk: a mark per node, reused from walk to walk.
         if self.queued.len() < g.len() {
             self.queued.resize(g.len().max(2 * self.queued.len()), 0);
@@ -183,7 +183,8 @@ impl Simplifier {
             self.queued.iter_mut().for_each(|m| *m = 0);
             self.walk = 1;
         }
-        let mut stack = vec![id];
+        let mut stack = Vec::with_capacity(16);
+        stack.push(id);
         while let Some(n) = stack.pop() {
             if self.memo.contains_key(&n) || self.queued[n.index()] == self.walk {
                 continue;
