@@ -51,6 +51,26 @@ fn text_names_every_entry_and_sums_the_forces() {
     assert!(!text.lines().any(|l| l.trim_start().starts_with("λ = ")), "{text}");
 }
 
+/// Neighbouring links of a chain share a body: their A entry is the dot product of the two
+/// link vectors, written so (`(r1 − r2)·(r2 − r3)`, a bilinear form of rank two), not expanded
+/// into four dot products that cancel in floating point when the links are short and far from
+/// the origin. The later links are the first ones renamed (`expr::shape`) and read the same.
+#[test]
+fn a_chain_couples_neighbouring_links_by_one_dot_product() {
+    let text = derive(CHAIN, &[]);
+    assert_all(
+        &text,
+        &[
+            "A[link1, link2] = (r1·(r1 − r2))/m",
+            "A[link2, link3] = −((r1 − r2)·(r2 − r3))/m",
+            "A[link3, link4] = −((r2 − r3)·(r3 − r4))/m",
+            "A[link4, link5] = −((r3 − r4)·(r4 − r5))/m",
+            "A[link5, link5] = 2 ((r4 − r5)·(r4 − r5))/m",
+        ],
+        "chain",
+    );
+}
+
 #[test]
 fn steps_show_each_constraint_then_the_system() {
     let text = derive(DOUBLE, &["--steps"]);

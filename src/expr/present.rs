@@ -473,13 +473,21 @@ fn factor_bilinear(g: &Graph, terms: &[&DotTerm]) -> Option<(Rational, Vec<(Id, 
         return Some(found);
     }
     // A vector common to every term: u·(Σ cⱼ wⱼ), as in r1·r1 − r1·r2 = r1·(r1 − r2).
-    let common = atoms.iter().copied().find(|&u| terms.iter().all(|t| t.u == u || t.w == u))?;
-    let other: Vec<(Id, Rational)> =
-        terms.iter().map(|t| (if t.u == common { t.w } else { t.u }, t.coef.clone())).collect();
-    let mut other = other;
-    other.sort_by(|x, y| g.cmp_nodes(x.0, y.0));
-    let (b, sb) = primitive(other);
-    Some((sb, vec![(common, Rational::ONE)], b))
+    if let Some(common) = atoms.iter().copied().find(|&u| terms.iter().all(|t| t.u == u || t.w == u)) {
+        let mut other: Vec<(Id, Rational)> =
+            terms.iter().map(|t| (if t.u == common { t.w } else { t.u }, t.coef.clone())).collect();
+        other.sort_by(|x, y| g.cmp_nodes(x.0, y.0));
+        let (b, sb) = primitive(other);
+        return Some((sb, vec![(common, Rational::ONE)], b));
+    }
+    // Two different sums, sharing atoms: (r1 − r2)·(r2 − r3).
+    let half = Rational::new(1, 2);
+    let m = |x: Id, y: Id| if x == y { coef(x, x) } else { coef(x, y).mul(&half) };
+    let p = *atoms.iter().find(|&&x| !coef(x, x).is_zero())?;
+    let (k, a, b) = rank_two(&atoms, p, &m)?;
+    let (a, sa) = primitive(a);
+    let (b, sb) = primitive(b);
+    Some((k.mul(&sa).mul(&sb), a, b))
 }
 
 #[allow(clippy::type_complexity)]
@@ -551,6 +559,43 @@ fn factor_symmetric_or_bipartite(
     Some((k, a, b))
 }
 
+/// `Q(x) = Σ Mᵢⱼ xᵢ xⱼ` as `(1/Mₚₚ) (a·x)(b·x)`, when it is such a product (rank two,
+/// indefinite, over the rationals): `r1·r2 − r2·r2 − r1·r3 + r2·r3 = (r1 − r2)·(r2 − r3)`,
+/// the A entry between two links of a chain.
+///
+/// Completing the square in `xₚ` (`Mₚₚ ≠ 0`) with `L = Σⱼ Mₚⱼ xⱼ` over the other atoms and
+/// `R` their part of `Q`: `Mₚₚ Q = (Mₚₚ xₚ + L)² − D` with `D = L² − Mₚₚ R`. `Q` factors exactly
+/// when `D = (d·x)²` for a rational `d`, and then `Mₚₚ Q = (Mₚₚ xₚ + L − d·x)(Mₚₚ xₚ + L + d·x)`.
+#[allow(clippy::type_complexity)]
+fn rank_two(
+    atoms: &[Id],
+    p: Id,
+    m: &dyn Fn(Id, Id) -> Rational,
+) -> Option<(Rational, Vec<(Id, Rational)>, Vec<(Id, Rational)>)> {
+    let mpp = m(p, p);
+    let rest: Vec<Id> = atoms.iter().copied().filter(|&x| x != p).collect();
+    let l: Vec<Rational> = rest.iter().map(|&x| m(p, x)).collect();
+    // D's matrix: Nᵢⱼ = Lᵢ Lⱼ − Mₚₚ Mᵢⱼ; it must be d dᵀ.
+    let n = |i: usize, j: usize| l[i].mul(&l[j]).sub(&mpp.mul(&m(rest[i], rest[j])));
+    let q = (0..rest.len()).find(|&i| !n(i, i).is_zero())?;
+    let s = n(q, q).sqrt_exact()?;
+    let d: Vec<Rational> = (0..rest.len()).map(|j| n(q, j).div(&s)).collect::<Option<_>>()?;
+    let square = (0..rest.len()).all(|i| (0..rest.len()).all(|j| n(i, j) == d[i].mul(&d[j])));
+    if !square {
+        return None;
+    }
+    let side = |sign: i64| -> Vec<(Id, Rational)> {
+        atoms
+            .iter()
+            .map(|&x| match rest.iter().position(|&y| y == x) {
+                Some(j) => (x, l[j].add(&d[j].mul(&Rational::int(sign)))),
+                None => (x, mpp.clone()),
+            })
+            .collect()
+    };
+    Some((mpp.recip()?, side(-1), side(1)))
+}
+
 /// `v = s · v'` with `v'` integer, gcd 1, first entry positive; zero entries dropped.
 fn primitive(v: Vec<(Id, Rational)>) -> (Vec<(Id, Rational)>, Rational) {
     let v: Vec<(Id, Rational)> = v.into_iter().filter(|(_, q)| !q.is_zero()).collect();
@@ -572,4 +617,73 @@ fn vector_sum(g: &mut Graph, v: &[(Id, Rational)]) -> Result<Id, TypeError> {
         parts.push(term1(g, q, *u)?);
     }
     g.add(parts)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::expr::graph::{Role, Ty};
+
+    /// Every bilinear form `Σ c (u·w)` that is a dot product `(Σ aᵢ uᵢ)·(Σ bⱼ uⱼ)` of two
+    /// integer combinations of three vectors (each coefficient in −2..=2) is found to be one,
+    /// and the factors found multiply back to the same form: rank one (`a ∥ b`), across two
+    /// sides, with a vector in common, and rank two (`(r1 − r2)·(r2 − r3)`).
+    #[test]
+    fn every_dot_product_of_two_sums_is_factored_back_exactly() {
+        let mut g = Graph::new(2);
+        let atoms: Vec<Id> = (0..3)
+            .map(|body| {
+                let s = g.declare(&format!("r{body}"), Ty::Vector, Role::Position { body });
+                g.sym(s)
+            })
+            .collect();
+        let combos: Vec<[i64; 3]> = (0..125).map(|n| [n % 5 - 2, (n / 5) % 5 - 2, n / 25 - 2]).collect();
+        let form = |a: &[i64; 3], b: &[i64; 3]| -> Vec<DotTerm> {
+            let mut terms = Vec::new();
+            for i in 0..3 {
+                for j in i..3 {
+                    let c = if i == j { a[i] * b[i] } else { a[i] * b[j] + a[j] * b[i] };
+                    if c != 0 {
+                        terms.push(DotTerm { index: terms.len(), u: atoms[i], w: atoms[j], coef: Rational::int(c) });
+                    }
+                }
+            }
+            terms
+        };
+        let mut rank_two = 0;
+        for a in &combos {
+            for b in &combos {
+                let terms = form(a, b);
+                if terms.is_empty() {
+                    continue;
+                }
+                let refs: Vec<&DotTerm> = terms.iter().collect();
+                let Some((k, x, y)) = factor_bilinear(&g, &refs) else {
+                    panic!("{a:?}·{b:?} was not factored");
+                };
+                // k (Σ xᵢ uᵢ)·(Σ yⱼ uⱼ), expanded, is the form again.
+                let coefficient =
+                    |v: &[(Id, Rational)], u: Id| v.iter().find(|e| e.0 == u).map_or(Rational::ZERO, |e| e.1.clone());
+                let (x, y): (Vec<Rational>, Vec<Rational>) =
+                    atoms.iter().map(|&u| (coefficient(&x, u), coefficient(&y, u))).unzip();
+                for i in 0..3 {
+                    for j in i..3 {
+                        let product = if i == j { x[i].mul(&y[i]) } else { x[i].mul(&y[j]).add(&x[j].mul(&y[i])) };
+                        let expected = terms
+                            .iter()
+                            .find(|t| t.u == atoms[i] && t.w == atoms[j])
+                            .map_or(Rational::ZERO, |t| t.coef.clone());
+                        assert_eq!(k.mul(&product), expected, "{a:?}·{b:?}: entry ({i}, {j})");
+                    }
+                }
+                if x != y
+                    && x.iter().zip(&y).any(|(p, q)| !p.is_zero() && !q.is_zero())
+                    && terms.iter().any(|t| t.u == t.w)
+                {
+                    rank_two += 1;
+                }
+            }
+        }
+        assert!(rank_two > 1000, "only {rank_two} forms of rank two with shared vectors");
+    }
 }
