@@ -80,6 +80,9 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
         }
         raw.forces.keys().map(|name| by_name.get(name.get_ref().as_str()).copied()).collect()
     };
+    // Forces written alike (`m*g` on every link of a chain) are one expression: parsed,
+    // lowered and checked once (the same text in the same scope is the same node).
+    let mut resolved: HashMap<&str, Result<Id, ForceError>> = HashMap::new();
     for ((name, expr), body) in raw.forces.iter().zip(bodies) {
         let Some(body) = body else {
             let forces: Vec<&str> = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.as_str()).collect();
@@ -94,7 +97,9 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
             });
             continue;
         };
-        match force_expression(system, expr.get_ref()) {
+        let result =
+            resolved.entry(expr.get_ref().as_str()).or_insert_with(|| force_expression(system, expr.get_ref()));
+        match result.clone() {
             Ok(id) => scene.forces.push((body, id)),
             Err((inner, message)) => {
                 let span = inner.map_or(expr.span(), |s| locate(text, expr, s));
@@ -133,9 +138,12 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
     scene
 }
 
+/// Why a force expression was refused: where in its text (when known), and the message.
+type ForceError = (Option<std::ops::Range<usize>>, String);
+
 /// Parses a force expression: a vector that may use positions, velocities, masses,
 /// parameters and `t`, but not accelerations or forces (which it defines).
-fn force_expression(system: &mut System, text: &str) -> Result<Id, (Option<std::ops::Range<usize>>, String)> {
+fn force_expression(system: &mut System, text: &str) -> Result<Id, ForceError> {
     let id = system.expression(text).map_err(|e| {
         let span = match &e {
             BuildError::Parse { error, .. } => Some(error.span.start..error.span.end),
