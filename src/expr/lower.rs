@@ -29,6 +29,11 @@ impl Scope {
         self.names.insert(name.into(), id);
     }
 
+    /// Room for `additional` more names.
+    pub fn reserve(&mut self, additional: usize) {
+        self.names.reserve(additional);
+    }
+
     pub fn get(&self, name: &str) -> Option<Id> {
         self.names.get(name).copied()
     }

@@ -206,6 +206,7 @@ fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<Syste
             return None;
         }
     };
+    b.reserve(raw.bodies.len(), raw.constraints.len(), raw.parameters.len() + raw.definitions.len());
     let dim = *dimension.get_ref() as usize;
     for (name, value) in &raw.parameters {
         let ty = match value.get_ref() {

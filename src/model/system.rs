@@ -10,6 +10,7 @@
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Role, Simplifier, Symbol, Ty};
+use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 use std::fmt;
 use std::sync::Arc;
@@ -177,28 +178,43 @@ impl SystemBuilder {
         Ok(SystemBuilder { system, kinds, body_names: HashSet::new(), constraint_names: HashSet::new() })
     }
 
+    /// Room for `bodies` bodies, `constraints` constraints and `names` other names
+    /// (parameters, definitions), so that declaring a long chain does not grow (and rehash)
+    /// the name maps step by step. Only a hint: declaring more works all the same.
+    pub fn reserve(&mut self, bodies: usize, constraints: usize, names: usize) {
+        // A body declares up to five names (position, velocity, acceleration, force, mass).
+        let names = names.saturating_add(bodies.saturating_mul(5));
+        self.kinds.reserve(names);
+        self.system.scope.reserve(names);
+        self.system.bodies.reserve(bodies);
+        self.body_names.reserve(bodies);
+        self.system.constraints.reserve(constraints);
+        self.constraint_names.reserve(constraints);
+    }
+
     /// Claims `name` for `what`, refusing clashes and reserved names.
     fn claim(&mut self, name: &str, what: Kind) -> Result<(), BuildError> {
-        let valid = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
-            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        let valid = name.as_bytes().first().is_some_and(u8::is_ascii_alphabetic)
+            && name.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_');
         if !valid {
             return Err(BuildError::BadName(name.to_string()));
         }
         if is_function_name(name) {
             return Err(BuildError::Reserved(name.to_string()));
         }
-        if let Some(first) = self.kinds.get(name) {
-            if name == "t" {
-                return Err(BuildError::Reserved(name.to_string()));
+        // One lookup, through the entry (the name is owned either way: kept when new).
+        match self.kinds.entry(name.to_string()) {
+            Entry::Vacant(slot) => {
+                slot.insert(what);
+                Ok(())
             }
-            return Err(BuildError::Duplicate {
+            Entry::Occupied(_) if name == "t" => Err(BuildError::Reserved(name.to_string())),
+            Entry::Occupied(first) => Err(BuildError::Duplicate {
                 name: name.to_string(),
-                first: first.to_string(),
+                first: first.get().to_string(),
                 second: what.to_string(),
-            });
+            }),
         }
-        self.kinds.insert(name.to_string(), what);
-        Ok(())
     }
 
     fn symbol(&mut self, name: &str, ty: Ty, role: Role, what: Kind) -> Result<Symbol, BuildError> {
@@ -266,10 +282,10 @@ impl SystemBuilder {
     /// Declares a named expression, substituted wherever the name is used. Definitions may
     /// use earlier ones; order them (see `model::file` for the dependency sort).
     pub fn definition(&mut self, name: &str, text: &str) -> Result<Id, BuildError> {
-        let context = format!("in definition `{name}`: ");
-        let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context.clone(), error })?;
+        let context = || format!("in definition `{name}`: ");
+        let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context(), error })?;
         let id = lower(&syntax, &self.system.scope, &mut self.system.graph)
-            .map_err(|error| BuildError::Lower { context, error })?;
+            .map_err(|error| BuildError::Lower { context: context(), error })?;
         self.claim(name, Kind::Definition)?;
         self.system.scope.insert(name, id);
         Ok(id)
@@ -277,10 +293,11 @@ impl SystemBuilder {
 
     /// Declares a constraint `lhs = rhs`, `lhs >= rhs`, `lhs <= rhs` or a bare `C`.
     pub fn constraint(&mut self, name: &str, text: &str) -> Result<usize, BuildError> {
-        let context = format!("in constraint `{name}`: ");
-        let relation = parse_relation(text).map_err(|error| BuildError::Parse { context: context.clone(), error })?;
+        // The message's context is written only for a message (most constraints have none).
+        let context = || format!("in constraint `{name}`: ");
+        let relation = parse_relation(text).map_err(|error| BuildError::Parse { context: context(), error })?;
         let LoweredRelation { c, inequality } = lower_relation(&relation, &self.system.scope, &mut self.system.graph)
-            .map_err(|error| BuildError::Lower { context, error })?;
+            .map_err(|error| BuildError::Lower { context: context(), error })?;
         let g = &self.system.graph;
         let mut bodies = Vec::new();
         for s in g.free_symbols(c) {
