@@ -9,7 +9,7 @@
 
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
-use crate::expr::{Graph, Id, Role, Simplifier, Symbol, Ty};
+use crate::expr::{Graph, Id, Node, Role, Simplifier, Symbol, Ty};
 use std::collections::hash_map::Entry;
 use std::collections::{HashMap, HashSet};
 use std::fmt;
@@ -108,6 +108,47 @@ pub struct SystemBuilder {
     /// Names of bodies and constraints declared so far, for duplicate checks.
     body_names: HashSet<String>,
     constraint_names: HashSet<String>,
+    /// Scratch of the walk for a constraint's symbols, kept from one constraint to the next.
+    walk: SymbolWalk,
+}
+
+/// The symbols an expression depends on (`Graph::free_symbols`), with its buffers kept: a
+/// mark per node, stamped with the walk's number, instead of a fresh hash set per walk.
+#[derive(Debug, Default)]
+struct SymbolWalk {
+    stamps: Vec<u32>,
+    stamp: u32,
+    stack: Vec<Id>,
+    symbols: Vec<Symbol>,
+}
+
+impl SymbolWalk {
+    /// The free symbols of `root`, sorted, each once.
+    fn free_symbols(&mut self, g: &Graph, root: Id) -> &[Symbol] {
+        if self.stamp == u32::MAX {
+            self.stamps.clear();
+            self.stamp = 0;
+        }
+        self.stamp += 1;
+        self.stamps.resize(g.len(), 0);
+        self.symbols.clear();
+        self.stack.clear();
+        self.stack.push(root);
+        while let Some(id) = self.stack.pop() {
+            let mark = &mut self.stamps[id.index()];
+            if *mark == self.stamp {
+                continue;
+            }
+            *mark = self.stamp;
+            match g.node(id) {
+                Node::Sym(s) => self.symbols.push(*s),
+                node => self.stack.extend_from_slice(node.children()),
+            }
+        }
+        self.symbols.sort_unstable();
+        self.symbols.dedup();
+        &self.symbols
+    }
 }
 
 /// What a name was declared as; written out (`the position of body `bead``) only for a
@@ -175,7 +216,13 @@ impl SystemBuilder {
             scope,
         };
         let kinds = HashMap::from([("t".to_string(), Kind::Time)]);
-        Ok(SystemBuilder { system, kinds, body_names: HashSet::new(), constraint_names: HashSet::new() })
+        Ok(SystemBuilder {
+            system,
+            kinds,
+            body_names: HashSet::new(),
+            constraint_names: HashSet::new(),
+            walk: SymbolWalk::default(),
+        })
     }
 
     /// Room for `bodies` bodies, `constraints` constraints and `names` other names
@@ -300,7 +347,7 @@ impl SystemBuilder {
             .map_err(|error| BuildError::Lower { context: context(), error })?;
         let g = &self.system.graph;
         let mut bodies = Vec::new();
-        for s in g.free_symbols(c) {
+        for &s in self.walk.free_symbols(g, c) {
             let info = g.symbol(s);
             match info.role {
                 Role::Position { body } => bodies.push(body),
