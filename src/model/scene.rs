@@ -8,7 +8,7 @@
 //!
 //! Not here: reading files, the derivation, solving.
 
-use super::file::{Problem, RawValue, locate};
+use super::file::{Problem, RawValue, Text, locate};
 use super::system::{BuildError, System};
 use crate::expr::eval::{Env, EvalError, Value, eval, eval_one};
 use crate::expr::{Id, Role, Symbol, Ty};
@@ -18,11 +18,11 @@ use toml::Spanned;
 /// The `[scene]` table as written (read by `model::document`; unknown keys are reported
 /// by `model::keys`).
 #[derive(Debug, Default)]
-pub struct RawScene {
+pub struct RawScene<'a> {
     /// Initial values of positions, velocities and other symbols (`t`, masses).
-    pub initial: BTreeMap<Spanned<String>, Spanned<RawValue>>,
+    pub initial: BTreeMap<Text<'a>, Spanned<RawValue>>,
     /// External force per body: the force symbol (or the body's name) → an expression.
-    pub forces: BTreeMap<Spanned<String>, Spanned<String>>,
+    pub forces: BTreeMap<Text<'a>, Text<'a>>,
     pub dt: Option<Spanned<f64>>,
     pub duration: Option<Spanned<f64>>,
     /// Coefficient of restitution for closing contacts, in [0, 1].
@@ -59,7 +59,7 @@ impl Default for Scene {
 }
 
 /// Resolves a raw scene against `system`; every problem goes to `problems`.
-pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut Vec<Problem>) -> Scene {
+pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &mut Vec<Problem>) -> Scene {
     let mut scene = Scene::default();
     let dim = system.dim();
     for (name, value) in &raw.initial {
@@ -78,7 +78,7 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
                 by_name.entry(system.graph.symbol(b.force).name.as_str()).or_insert(i);
             }
         }
-        raw.forces.keys().map(|name| by_name.get(name.get_ref().as_str()).copied()).collect()
+        raw.forces.keys().map(|name| by_name.get(name.get_ref().as_ref()).copied()).collect()
     };
     // Forces written alike (`m*g` on every link of a chain) are one expression: parsed,
     // lowered and checked once (the same text in the same scope is the same node).
@@ -98,7 +98,7 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
             continue;
         };
         let result =
-            resolved.entry(expr.get_ref().as_str()).or_insert_with(|| force_expression(system, expr.get_ref()));
+            resolved.entry(expr.get_ref().as_ref()).or_insert_with(|| force_expression(system, expr.get_ref()));
         match result.clone() {
             Ok(id) => scene.forces.push((body, id)),
             Err((inner, message)) => {
