@@ -26,7 +26,7 @@
 
 use super::file::{Problem, RawValue, Text, locate};
 use super::scene::value_for;
-use super::system::{BuildError, System};
+use super::system::{BuildError, SymbolWalk, System};
 use crate::expr::lower::suggest;
 use crate::expr::{Id, Role, Ty};
 use std::borrow::Cow;
@@ -123,6 +123,7 @@ pub fn resolve(
     problems: &mut Vec<Problem>,
 ) -> Vec<Expectation> {
     let mut out = Vec::with_capacity(raw.len());
+    let mut walk = SymbolWalk::default();
     for entry in raw {
         let e = entry.get_ref();
         let mut at = None;
@@ -156,7 +157,7 @@ pub fn resolve(
             }
         };
         let nothing = e.written == 0;
-        let mut r = Resolver { text, system, problems, written, numeric: at.is_some(), items: Vec::new() };
+        let mut r = Resolver { text, system, problems, written, numeric: at.is_some(), items: Vec::new(), walk };
         r.table(&e.force, "force", Target::Body);
         r.table(&e.lambda, "lambda", Target::Constraint);
         r.table(&e.c_dot, "C_dot", Target::Constraint);
@@ -164,6 +165,7 @@ pub fn resolve(
         r.table(&e.a, "A", Target::Pair);
         r.table(&e.b, "b", Target::Constraint);
         let items = r.items;
+        walk = r.walk;
         if nothing {
             problems.push(Problem {
                 span: Some(entry.span()),
@@ -190,6 +192,8 @@ struct Resolver<'a> {
     written: &'a [&'a str],
     numeric: bool,
     items: Vec<Item>,
+    /// For the symbols of expected formulas, kept from one formula to the next.
+    walk: SymbolWalk,
 }
 
 impl Resolver<'_> {
@@ -290,7 +294,7 @@ impl Resolver<'_> {
                     return None;
                 }
                 if !matches!(quantity, Quantity::CDdot(_)) {
-                    for s in self.system.graph.free_symbols(id) {
+                    for &s in self.walk.free_symbols(&self.system.graph, id) {
                         let info = self.system.graph.symbol(s);
                         if matches!(info.role, Role::Acceleration { .. }) {
                             let message = format!(

@@ -10,8 +10,7 @@
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Node, Role, Simplifier, Symbol, Ty};
-use std::collections::hash_map::Entry;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 use std::fmt;
 use std::sync::Arc;
 
@@ -101,10 +100,13 @@ pub enum BuildError {
 #[derive(Debug)]
 pub struct SystemBuilder {
     system: System,
-    /// What each name was declared as, for clash messages.
-    /// Looked up by name for every declaration, so a map (a chain of 1000 links declares
-    /// 5000 names; a list made loading quadratic).
-    kinds: HashMap<String, Kind>,
+    /// What each symbol was declared as (by the symbol's index), for clash messages and
+    /// [`SystemBuilder::is_constant`]. Whether a name is taken is the scope's to say (every
+    /// claimed name enters it), so declaring a chain's thousands of names keeps no second
+    /// map of them.
+    symbol_kinds: Vec<Option<Kind>>,
+    /// Names of definitions (whose nodes may be symbols' nodes, so known by name).
+    definitions: HashSet<String>,
     /// Names of bodies and constraints declared so far, for duplicate checks.
     body_names: HashSet<String>,
     constraint_names: HashSet<String>,
@@ -115,7 +117,7 @@ pub struct SystemBuilder {
 /// The symbols an expression depends on (`Graph::free_symbols`), with its buffers kept: a
 /// mark per node, stamped with the walk's number, instead of a fresh hash set per walk.
 #[derive(Debug, Default)]
-struct SymbolWalk {
+pub(crate) struct SymbolWalk {
     stamps: Vec<u32>,
     stamp: u32,
     stack: Vec<Id>,
@@ -124,7 +126,7 @@ struct SymbolWalk {
 
 impl SymbolWalk {
     /// The free symbols of `root`, sorted, each once.
-    fn free_symbols(&mut self, g: &Graph, root: Id) -> &[Symbol] {
+    pub(crate) fn free_symbols(&mut self, g: &Graph, root: Id) -> &[Symbol] {
         if self.stamp == u32::MAX {
             self.stamps.clear();
             self.stamp = 0;
@@ -215,10 +217,12 @@ impl SystemBuilder {
             time,
             scope,
         };
-        let kinds = HashMap::from([("t".to_string(), Kind::Time)]);
+        let mut symbol_kinds = vec![None; time.index() + 1];
+        symbol_kinds[time.index()] = Some(Kind::Time);
         Ok(SystemBuilder {
             system,
-            kinds,
+            symbol_kinds,
+            definitions: HashSet::new(),
             body_names: HashSet::new(),
             constraint_names: HashSet::new(),
             walk: SymbolWalk::default(),
@@ -231,7 +235,7 @@ impl SystemBuilder {
     pub fn reserve(&mut self, bodies: usize, constraints: usize, names: usize) {
         // A body declares up to five names (position, velocity, acceleration, force, mass).
         let names = names.saturating_add(bodies.saturating_mul(5));
-        self.kinds.reserve(names);
+        self.symbol_kinds.reserve(names);
         self.system.scope.reserve(names);
         self.system.bodies.reserve(bodies);
         self.body_names.reserve(bodies);
@@ -239,8 +243,8 @@ impl SystemBuilder {
         self.constraint_names.reserve(constraints);
     }
 
-    /// Claims `name` for `what`, refusing clashes and reserved names.
-    fn claim(&mut self, name: &str, what: Kind) -> Result<(), BuildError> {
+    /// Checks that `name` may be declared as `what`: refuses clashes and reserved names.
+    fn claim(&self, name: &str, what: &Kind) -> Result<(), BuildError> {
         let valid = name.as_bytes().first().is_some_and(u8::is_ascii_alphabetic)
             && name.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_');
         if !valid {
@@ -249,26 +253,37 @@ impl SystemBuilder {
         if is_function_name(name) {
             return Err(BuildError::Reserved(name.to_string()));
         }
-        // One lookup, through the entry (the name is owned either way: kept when new).
-        match self.kinds.entry(name.to_string()) {
-            Entry::Vacant(slot) => {
-                slot.insert(what);
-                Ok(())
-            }
-            Entry::Occupied(_) if name == "t" => Err(BuildError::Reserved(name.to_string())),
-            Entry::Occupied(first) => Err(BuildError::Duplicate {
-                name: name.to_string(),
-                first: first.get().to_string(),
-                second: what.to_string(),
-            }),
+        if !self.system.scope.contains(name) {
+            return Ok(());
         }
+        if name == "t" {
+            return Err(BuildError::Reserved(name.to_string()));
+        }
+        // Every name in scope was claimed, as a definition or a symbol.
+        let first = self.kind(name).map_or_else(String::new, Kind::to_string);
+        Err(BuildError::Duplicate { name: name.to_string(), first, second: what.to_string() })
+    }
+
+    /// What a declared name was declared as.
+    fn kind(&self, name: &str) -> Option<&Kind> {
+        if self.definitions.contains(name) {
+            return Some(&Kind::Definition);
+        }
+        let Node::Sym(s) = self.system.graph.node(self.system.scope.get(name)?) else {
+            return None;
+        };
+        self.symbol_kinds.get(s.index())?.as_ref()
     }
 
     fn symbol(&mut self, name: &str, ty: Ty, role: Role, what: Kind) -> Result<Symbol, BuildError> {
-        self.claim(name, what)?;
+        self.claim(name, &what)?;
         let s = self.system.graph.declare(name, ty, role);
         let node = self.system.graph.sym(s);
         self.system.scope.insert(name, node);
+        if self.symbol_kinds.len() <= s.index() {
+            self.symbol_kinds.resize(s.index() + 1, None);
+        }
+        self.symbol_kinds[s.index()] = Some(what);
         Ok(s)
     }
 
@@ -323,7 +338,7 @@ impl SystemBuilder {
     }
 
     fn is_constant(&self, name: &str) -> bool {
-        self.kinds.get(name).is_some_and(|what| matches!(what, Kind::OfBody { what: "mass", .. } | Kind::Parameter))
+        self.kind(name).is_some_and(|what| matches!(what, Kind::OfBody { what: "mass", .. } | Kind::Parameter))
     }
 
     /// Declares a named expression, substituted wherever the name is used. Definitions may
@@ -333,8 +348,9 @@ impl SystemBuilder {
         let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context(), error })?;
         let id = lower(&syntax, &self.system.scope, &mut self.system.graph)
             .map_err(|error| BuildError::Lower { context: context(), error })?;
-        self.claim(name, Kind::Definition)?;
+        self.claim(name, &Kind::Definition)?;
         self.system.scope.insert(name, id);
+        self.definitions.insert(name.to_string());
         Ok(id)
     }
 
