@@ -280,8 +280,9 @@ impl SystemBuilder {
         let s = self.system.graph.declare(name, ty, role);
         let node = self.system.graph.sym(s);
         self.system.scope.insert(name, node);
+        // Symbols are numbered in declaration order, so this is usually a push.
         if self.symbol_kinds.len() <= s.index() {
-            self.symbol_kinds.resize(s.index() + 1, None);
+            self.symbol_kinds.resize_with(s.index() + 1, || None);
         }
         self.symbol_kinds[s.index()] = Some(what);
         Ok(s)
