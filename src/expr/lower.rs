@@ -13,6 +13,7 @@ use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
 use super::syntax::{MulOp, RelOp, Relation, Sign, Span, Syntax, SyntaxKind};
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 
 /// The names an expression may use, each bound to a graph node (a symbol or a definition).
 #[derive(Clone, Debug, Default)]
@@ -32,6 +33,19 @@ impl Scope {
     /// Room for `additional` more names.
     pub fn reserve(&mut self, additional: usize) {
         self.names.reserve(additional);
+    }
+
+    /// Binds `name` to the node `bind` gives, unless it is bound already (then `bind` is
+    /// not called): what else `bind` made, or `None` when the name was taken.
+    pub fn insert_new<T>(&mut self, name: &str, bind: impl FnOnce() -> (Id, T)) -> Option<T> {
+        match self.names.entry(name.to_string()) {
+            Entry::Vacant(slot) => {
+                let (id, made) = bind();
+                slot.insert(id);
+                Some(made)
+            }
+            Entry::Occupied(_) => None,
+        }
     }
 
     pub fn get(&self, name: &str) -> Option<Id> {

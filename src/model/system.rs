@@ -243,8 +243,11 @@ impl SystemBuilder {
         self.constraint_names.reserve(constraints);
     }
 
-    /// Checks that `name` may be declared as `what`: refuses clashes and reserved names.
-    fn claim(&self, name: &str, what: &Kind) -> Result<(), BuildError> {
+    /// Binds `name` in the scope to the node `bind` gives (called only when the name may be
+    /// declared, with what else it made), refusing bad, reserved and taken names, in that
+    /// order. One lookup of the name: the scope is asked whether it is taken and told its
+    /// node at once.
+    fn claim<T>(&mut self, name: &str, what: &Kind, bind: impl FnOnce(&mut Graph) -> (Id, T)) -> Result<T, BuildError> {
         let valid = name.as_bytes().first().is_some_and(u8::is_ascii_alphabetic)
             && name.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_');
         if !valid {
@@ -253,8 +256,9 @@ impl SystemBuilder {
         if is_function_name(name) {
             return Err(BuildError::Reserved(name.to_string()));
         }
-        if !self.system.scope.contains(name) {
-            return Ok(());
+        let System { scope, graph, .. } = &mut self.system;
+        if let Some(made) = scope.insert_new(name, || bind(graph)) {
+            return Ok(made);
         }
         if name == "t" {
             return Err(BuildError::Reserved(name.to_string()));
@@ -276,10 +280,10 @@ impl SystemBuilder {
     }
 
     fn symbol(&mut self, name: &str, ty: Ty, role: Role, what: Kind) -> Result<Symbol, BuildError> {
-        self.claim(name, &what)?;
-        let s = self.system.graph.declare(name, ty, role);
-        let node = self.system.graph.sym(s);
-        self.system.scope.insert(name, node);
+        let s = self.claim(name, &what, |g| {
+            let s = g.declare(name, ty, role);
+            (g.sym(s), s)
+        })?;
         // Symbols are numbered in declaration order, so this is usually a push.
         if self.symbol_kinds.len() <= s.index() {
             self.symbol_kinds.resize_with(s.index() + 1, || None);
@@ -349,8 +353,7 @@ impl SystemBuilder {
         let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context(), error })?;
         let id = lower(&syntax, &self.system.scope, &mut self.system.graph)
             .map_err(|error| BuildError::Lower { context: context(), error })?;
-        self.claim(name, &Kind::Definition)?;
-        self.system.scope.insert(name, id);
+        self.claim(name, &Kind::Definition, |_| (id, ()))?;
         self.definitions.insert(name.to_string());
         Ok(id)
     }
