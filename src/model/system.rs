@@ -7,10 +7,11 @@
 //!
 //! Not here: TOML, numbers for solving (`model::file` keeps those), derivation (`derive`).
 
+use crate::expr::graph::FastSet;
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Node, Role, Simplifier, Symbol, Ty};
-use std::collections::HashSet;
+
 use std::fmt;
 use std::sync::Arc;
 
@@ -106,10 +107,10 @@ pub struct SystemBuilder {
     /// map of them.
     symbol_kinds: Vec<Option<Kind>>,
     /// Names of definitions (whose nodes may be symbols' nodes, so known by name).
-    definitions: HashSet<String>,
+    definitions: FastSet<String>,
     /// Names of bodies and constraints declared so far, for duplicate checks.
-    body_names: HashSet<String>,
-    constraint_names: HashSet<String>,
+    body_names: FastSet<String>,
+    constraint_names: FastSet<String>,
     /// Scratch of the walk for a constraint's symbols, kept from one constraint to the next.
     walk: SymbolWalk,
 }
@@ -222,9 +223,9 @@ impl SystemBuilder {
         Ok(SystemBuilder {
             system,
             symbol_kinds,
-            definitions: HashSet::new(),
-            body_names: HashSet::new(),
-            constraint_names: HashSet::new(),
+            definitions: FastSet::default(),
+            body_names: FastSet::default(),
+            constraint_names: FastSet::default(),
             walk: SymbolWalk::default(),
         })
     }
