@@ -8,16 +8,17 @@
 //! negative number, and a leading `p/q` of number literals is the rational `p/q` (so the
 //! printed `-1/2*x` parses back to the same node). Nothing else is evaluated here.
 
-use super::graph::{Func, Graph, Id, Ty, TypeError};
+use super::graph::{FastMap, Func, Graph, Id, Ty, TypeError};
 use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
 use super::syntax::{MulOp, RelOp, Relation, Sign, Span, Syntax, SyntaxKind};
-use std::collections::HashMap;
+use std::collections::hash_map::Entry;
 
 /// The names an expression may use, each bound to a graph node (a symbol or a definition).
+/// Hashed like the graph's own names (Fx): looked up for every name of every expression.
 #[derive(Clone, Debug, Default)]
 pub struct Scope {
-    names: HashMap<String, Id>,
+    names: FastMap<String, Id>,
 }
 
 impl Scope {
@@ -27,6 +28,24 @@ impl Scope {
 
     pub fn insert(&mut self, name: impl Into<String>, id: Id) {
         self.names.insert(name.into(), id);
+    }
+
+    /// Room for `additional` more names.
+    pub fn reserve(&mut self, additional: usize) {
+        self.names.reserve(additional);
+    }
+
+    /// Binds `name` to the node `bind` gives, unless it is bound already (then `bind` is
+    /// not called): what else `bind` made, or `None` when the name was taken.
+    pub fn insert_new<T>(&mut self, name: &str, bind: impl FnOnce() -> (Id, T)) -> Option<T> {
+        match self.names.entry(name.to_string()) {
+            Entry::Vacant(slot) => {
+                let (id, made) = bind();
+                slot.insert(id);
+                Some(made)
+            }
+            Entry::Occupied(_) => None,
+        }
     }
 
     pub fn get(&self, name: &str) -> Option<Id> {

@@ -13,8 +13,8 @@
 use super::graph::Axis;
 use super::syntax::{MulOp, RelOp, Relation, Sign, Span, Syntax, SyntaxKind};
 use nom::branch::alt;
-use nom::bytes::complete::{tag, take_while, take_while1};
-use nom::character::complete::{char, multispace0, satisfy};
+use nom::bytes::complete::{tag, take_while1};
+use nom::character::complete::char;
 use nom::combinator::{opt, recognize};
 use nom::error::{ErrorKind, ParseError as NomParseError};
 use nom::{Err, IResult, Parser};
@@ -109,8 +109,11 @@ struct Parse<'s> {
     src: &'s str,
 }
 
+/// Spaces, tabs and line breaks (nom's `multispace0`, as a loop over bytes: it runs
+/// between every two tokens).
 fn ws(i: &str) -> Res<'_, &str> {
-    multispace0(i)
+    let n = i.bytes().take_while(|b| matches!(b, b' ' | b'\t' | b'\r' | b'\n')).count();
+    Ok((&i[n..], &i[..n]))
 }
 
 fn is_ident_start(c: char) -> bool {
@@ -121,8 +124,14 @@ fn is_ident_char(c: char) -> bool {
     c.is_ascii_alphanumeric() || c == '_'
 }
 
+/// A name: a letter or `_`, then letters, digits and `_` (all ASCII, so bytes suffice).
 fn ident(i: &str) -> Res<'_, &str> {
-    recognize((satisfy(is_ident_start), take_while(is_ident_char))).parse(i)
+    let bytes = i.as_bytes();
+    if !bytes.first().is_some_and(|&b| is_ident_start(b as char)) {
+        return fail(i, "unexpected input");
+    }
+    let n = 1 + bytes[1..].iter().take_while(|&&b| is_ident_char(b as char)).count();
+    Ok((&i[n..], &i[..n]))
 }
 
 /// `12`, `1.5`, `.5`, `2.`, `1e-3`: digits with an optional fraction and exponent, no sign.

@@ -20,9 +20,10 @@
 //! Not here: meaning (symbols, dimensions, expressions — `model::file`, `scene`, `expect`).
 
 use super::expect::{RawExpect, RawExpected};
-use super::file::{Problem, RawBody, RawConstraint, RawFile, RawMass, RawValue};
+use super::file::{Problem, RawBody, RawConstraint, RawFile, RawMass, RawValue, Text};
 use super::keys::unknown_keys;
 use super::scene::RawScene;
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt::{self, Display};
 use toml::Spanned;
@@ -38,7 +39,7 @@ const MAX_SYNTAX_ERRORS: usize = 8;
 /// them all; the first [`MAX_SYNTAX_ERRORS`] are kept) are the problems, and nothing else is
 /// judged — the tree after a syntax error is the parser's guess, and complaints about it
 /// would mislead.
-pub fn read(text: &str, problems: &mut Vec<Problem>) -> Option<RawFile> {
+pub fn read<'i>(text: &'i str, problems: &mut Vec<Problem>) -> Option<RawFile<'i>> {
     let (root, errors) = DeTable::parse_recoverable(text);
     if !errors.is_empty() {
         for e in errors.iter().take(MAX_SYNTAX_ERRORS) {
@@ -95,8 +96,9 @@ fn kind(v: &DeValue<'_>) -> &'static str {
     }
 }
 
-fn spanned_key(key: &Spanned<std::borrow::Cow<'_, str>>) -> Spanned<String> {
-    Spanned::new(key.span(), key.get_ref().to_string())
+/// A key as written (borrowed from the text, like every string read here).
+fn spanned_key<'i>(key: &Spanned<Cow<'i, str>>) -> Text<'i> {
+    Spanned::new(key.span(), key.get_ref().clone())
 }
 
 /// A label for messages, written out only when a message is: reading a good file builds
@@ -130,9 +132,9 @@ impl Reader<'_> {
         });
     }
 
-    fn string<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W) -> Option<Spanned<String>> {
+    fn string<'i, W: Display + ?Sized>(&mut self, v: &Value<'i>, what: &W) -> Option<Text<'i>> {
         match v.get_ref() {
-            DeValue::String(s) => Some(Spanned::new(v.span(), s.to_string())),
+            DeValue::String(s) => Some(Spanned::new(v.span(), s.clone())),
             _ => {
                 self.wrong(v, what, "a string");
                 None
@@ -229,7 +231,7 @@ impl Reader<'_> {
     /// reported and kept as a placeholder of its shape (see [`Reader::value_or_placeholder`]);
     /// a bad parameter of no shape (a string, a table) is kept as a scalar, since the name
     /// is declared either way.
-    fn values(&mut self, v: &Value<'_>, what: &str, declares: bool) -> BTreeMap<Spanned<String>, Spanned<RawValue>> {
+    fn values<'i>(&mut self, v: &Value<'i>, what: &str, declares: bool) -> BTreeMap<Text<'i>, Spanned<RawValue>> {
         let Some(t) = self.table(v, what) else {
             return BTreeMap::new();
         };
@@ -247,7 +249,7 @@ impl Reader<'_> {
     }
 
     /// `name = "text"` entries (definitions, forces).
-    fn strings(&mut self, v: &Value<'_>, what: &str) -> BTreeMap<Spanned<String>, Spanned<String>> {
+    fn strings<'i>(&mut self, v: &Value<'i>, what: &str) -> BTreeMap<Text<'i>, Text<'i>> {
         let Some(t) = self.table(v, what) else {
             return BTreeMap::new();
         };
@@ -261,11 +263,11 @@ impl Reader<'_> {
     }
 
     /// `[[key]]` entries, each read by `item` (which reports its own problems).
-    fn array_of_tables<T>(
+    fn array_of_tables<'i, T>(
         &mut self,
-        v: Option<&Value<'_>>,
+        v: Option<&Value<'i>>,
         key: &str,
-        item: impl Fn(&mut Self, &Value<'_>, &DeTable<'_>) -> Option<T>,
+        item: impl Fn(&mut Self, &Value<'i>, &DeTable<'i>) -> Option<T>,
     ) -> Vec<Spanned<T>> {
         let Some(v) = v else {
             return Vec::new();
@@ -289,14 +291,14 @@ impl Reader<'_> {
     }
 
     /// A required string field of a table.
-    fn field<W: Display + ?Sized>(
+    fn field<'i, W: Display + ?Sized>(
         &mut self,
         at: &Value<'_>,
-        t: &DeTable<'_>,
+        t: &DeTable<'i>,
         what: &W,
         key: &str,
         example: &str,
-    ) -> Option<Spanned<String>> {
+    ) -> Option<Text<'i>> {
         match t.get(key) {
             Some(v) => self.string(v, &format_args!("`{key}` of {what}")),
             None => {
@@ -306,7 +308,7 @@ impl Reader<'_> {
         }
     }
 
-    fn body(&mut self, at: &Value<'_>, t: &DeTable<'_>) -> Option<RawBody> {
+    fn body<'i>(&mut self, at: &Value<'i>, t: &DeTable<'i>) -> Option<RawBody<'i>> {
         let label = Label(|f| match t.get("name").map(|v| v.get_ref()) {
             Some(DeValue::String(s)) => write!(f, "body `{s}`"),
             _ => f.write_str("a body"),
@@ -317,7 +319,8 @@ impl Reader<'_> {
         self.bodies_read += 1;
         let n = self.bodies_read;
         let symbol = |r: &mut Self, key: &str, example: &str| {
-            r.field(at, t, &label, key, example).unwrap_or_else(|| Spanned::new(at.span(), format!("unread_{key}_{n}")))
+            r.field(at, t, &label, key, example)
+                .unwrap_or_else(|| Spanned::new(at.span(), Cow::Owned(format!("unread_{key}_{n}"))))
         };
         let position = symbol(self, "position", "\"r\"");
         let velocity = symbol(self, "velocity", "\"v\"");
@@ -329,7 +332,7 @@ impl Reader<'_> {
                 Spanned::new(at.span(), RawMass::Number(1.0))
             }
             Some(v) => match v.get_ref() {
-                DeValue::String(s) => Spanned::new(v.span(), RawMass::Symbol(s.to_string())),
+                DeValue::String(s) => Spanned::new(v.span(), RawMass::Symbol(s.clone())),
                 // Finiteness and sign are judged in `model::file` with the other mass checks.
                 DeValue::Integer(_) | DeValue::Float(_) => {
                     Spanned::new(v.span(), RawMass::Number(Self::raw_number(v.get_ref()).unwrap_or(f64::NAN)))
@@ -343,7 +346,7 @@ impl Reader<'_> {
         Some(RawBody { name: name?, position, velocity, acceleration, mass, force })
     }
 
-    fn constraint(&mut self, at: &Value<'_>, t: &DeTable<'_>) -> Option<RawConstraint> {
+    fn constraint<'i>(&mut self, at: &Value<'i>, t: &DeTable<'i>) -> Option<RawConstraint<'i>> {
         let label = Label(|f| match t.get("name").map(|v| v.get_ref()) {
             Some(DeValue::String(s)) => write!(f, "constraint `{s}`"),
             _ => f.write_str("a constraint"),
@@ -353,7 +356,7 @@ impl Reader<'_> {
         Some(RawConstraint { name: name?, expr })
     }
 
-    fn scene(&mut self, v: &Value<'_>) -> Option<Spanned<RawScene>> {
+    fn scene<'i>(&mut self, v: &Value<'i>) -> Option<Spanned<RawScene<'i>>> {
         let t = self.table(v, "[scene]")?;
         let mut number = |key: &str| t.get(key).and_then(|x| self.number(x, &format_args!("`{key}` in [scene]")));
         let dt = number("dt");
@@ -369,7 +372,7 @@ impl Reader<'_> {
         Some(Spanned::new(v.span(), scene))
     }
 
-    fn expect(&mut self, _at: &Value<'_>, t: &DeTable<'_>) -> Option<RawExpect> {
+    fn expect<'i>(&mut self, _at: &Value<'i>, t: &DeTable<'i>) -> Option<RawExpect<'i>> {
         let mut entries = |key: &str| t.get(key).map(|x| self.expected(x, key)).unwrap_or_default();
         let force = entries("force");
         let lambda = entries("lambda");
@@ -389,13 +392,13 @@ impl Reader<'_> {
                 None
             }
         });
-        let note = t.get("note").and_then(|x| self.string(x, "`note`")).map(|s| s.into_inner());
+        let note = t.get("note").and_then(|x| self.string(x, "`note`")).map(|s| s.into_inner().into_owned());
         let written = ["force", "lambda", "C_dot", "C_ddot", "A", "b"].iter().filter(|k| t.contains_key(**k)).count();
         Some(RawExpect { force, lambda, c_dot, c_ddot, a, b, at, tolerance, written, note })
     }
 
     /// The `name = expected` entries of one quantity of an `[[expect]]`.
-    fn expected(&mut self, v: &Value<'_>, key: &str) -> BTreeMap<Spanned<String>, Spanned<RawExpected>> {
+    fn expected<'i>(&mut self, v: &Value<'i>, key: &str) -> BTreeMap<Text<'i>, Spanned<RawExpected<'i>>> {
         let what = Label(|f| write!(f, "`{key}` in [[expect]]"));
         let Some(t) = self.table(v, &what) else {
             return BTreeMap::new();
@@ -405,7 +408,7 @@ impl Reader<'_> {
             let name = spanned_key(k);
             let label = Label(|f| write!(f, "the expected `{key}` of `{}`", name.get_ref()));
             let value = match x.get_ref() {
-                DeValue::String(s) => Some(RawExpected::Formula(s.to_string())),
+                DeValue::String(s) => Some(RawExpected::Formula(s.clone())),
                 DeValue::Integer(_) | DeValue::Float(_) | DeValue::Array(_) => {
                     self.value(x, &label).map(|v| match v.into_inner() {
                         RawValue::Number(n) => RawExpected::Number(n),

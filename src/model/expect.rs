@@ -24,11 +24,12 @@
 //!
 //! Not here: judging the entries (`check`).
 
-use super::file::{Problem, RawValue, locate};
+use super::file::{Problem, RawValue, Text, locate};
 use super::scene::value_for;
-use super::system::{BuildError, System};
+use super::system::{BuildError, SymbolWalk, System};
 use crate::expr::lower::suggest;
 use crate::expr::{Id, Role, Ty};
+use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::ops::Range;
 use toml::Spanned;
@@ -36,22 +37,22 @@ use toml::Spanned;
 /// The relative tolerance of numeric (`at`) checks unless the entry gives one.
 pub const DEFAULT_TOLERANCE: f64 = 1e-9;
 
-type Entries = BTreeMap<Spanned<String>, Spanned<RawExpected>>;
+type Entries<'a> = BTreeMap<Text<'a>, Spanned<RawExpected<'a>>>;
 
 /// One `[[expect]]` entry as written (read by `model::document`; unknown keys are
 /// reported by `model::keys`).
 #[derive(Debug, Default)]
-pub struct RawExpect {
-    pub force: Entries,
-    pub lambda: Entries,
+pub struct RawExpect<'a> {
+    pub force: Entries<'a>,
+    pub lambda: Entries<'a>,
     /// `C_dot` in the file.
-    pub c_dot: Entries,
+    pub c_dot: Entries<'a>,
     /// `C_ddot` in the file.
-    pub c_ddot: Entries,
+    pub c_ddot: Entries<'a>,
     /// `A` in the file.
-    pub a: Entries,
-    pub b: Entries,
-    pub at: Option<Spanned<BTreeMap<Spanned<String>, Spanned<RawValue>>>>,
+    pub a: Entries<'a>,
+    pub b: Entries<'a>,
+    pub at: Option<Spanned<BTreeMap<Text<'a>, Spanned<RawValue>>>>,
     pub tolerance: Option<Spanned<f64>>,
     /// How many of `force`, `lambda`, `C_dot`, `C_ddot`, `A`, `b` the entry writes, read or
     /// not (an entry whose quantities were all unreadable is not also "checking nothing").
@@ -62,8 +63,8 @@ pub struct RawExpect {
 
 /// An expected value as written: a formula, a number or a vector.
 #[derive(Clone, Debug)]
-pub enum RawExpected {
-    Formula(String),
+pub enum RawExpected<'a> {
+    Formula(Cow<'a, str>),
     Number(f64),
     Vector(Vec<f64>),
 }
@@ -116,12 +117,13 @@ pub struct Expectation {
 /// item naming one of those is dropped quietly (the refusal is the message).
 pub fn resolve(
     text: &str,
-    raw: &[Spanned<RawExpect>],
+    raw: &[Spanned<RawExpect<'_>>],
     written: &[&str],
     system: &mut System,
     problems: &mut Vec<Problem>,
 ) -> Vec<Expectation> {
     let mut out = Vec::with_capacity(raw.len());
+    let mut walk = SymbolWalk::default();
     for entry in raw {
         let e = entry.get_ref();
         let mut at = None;
@@ -129,7 +131,7 @@ pub fn resolve(
             let mut values = Vec::new();
             for (name, value) in state.get_ref() {
                 match value_for(system, name.get_ref(), value.get_ref(), system.dim()) {
-                    Ok(_) => values.push((name.get_ref().clone(), value.get_ref().clone())),
+                    Ok(_) => values.push((name.get_ref().to_string(), value.get_ref().clone())),
                     Err(message) => problems.push(Problem { span: Some(name.span()), message }),
                 }
             }
@@ -155,7 +157,7 @@ pub fn resolve(
             }
         };
         let nothing = e.written == 0;
-        let mut r = Resolver { text, system, problems, written, numeric: at.is_some(), items: Vec::new() };
+        let mut r = Resolver { text, system, problems, written, numeric: at.is_some(), items: Vec::new(), walk };
         r.table(&e.force, "force", Target::Body);
         r.table(&e.lambda, "lambda", Target::Constraint);
         r.table(&e.c_dot, "C_dot", Target::Constraint);
@@ -163,6 +165,7 @@ pub fn resolve(
         r.table(&e.a, "A", Target::Pair);
         r.table(&e.b, "b", Target::Constraint);
         let items = r.items;
+        walk = r.walk;
         if nothing {
             problems.push(Problem {
                 span: Some(entry.span()),
@@ -189,6 +192,8 @@ struct Resolver<'a> {
     written: &'a [&'a str],
     numeric: bool,
     items: Vec<Item>,
+    /// For the symbols of expected formulas, kept from one formula to the next.
+    walk: SymbolWalk,
 }
 
 impl Resolver<'_> {
@@ -196,7 +201,7 @@ impl Resolver<'_> {
         self.problems.push(Problem { span: Some(span), message });
     }
 
-    fn table(&mut self, entries: &Entries, what: &str, target: Target) {
+    fn table(&mut self, entries: &Entries<'_>, what: &str, target: Target) {
         for (key, value) in entries {
             let Some(quantity) = self.quantity(key, what, target) else {
                 continue;
@@ -215,8 +220,8 @@ impl Resolver<'_> {
     }
 
     /// The quantity a key names, or a located problem.
-    fn quantity(&mut self, key: &Spanned<String>, what: &str, target: Target) -> Option<Quantity> {
-        let name = key.get_ref().as_str();
+    fn quantity(&mut self, key: &Text<'_>, what: &str, target: Target) -> Option<Quantity> {
+        let name = key.get_ref().as_ref();
         match target {
             Target::Body => self.body(name, key.span()).map(Quantity::Force),
             Target::Constraint => {
@@ -264,12 +269,11 @@ impl Resolver<'_> {
         found
     }
 
-    fn expected(&mut self, quantity: Quantity, what: &str, value: &Spanned<RawExpected>) -> Option<Expected> {
+    fn expected(&mut self, quantity: Quantity, what: &str, value: &Spanned<RawExpected<'_>>) -> Option<Expected> {
         let want = if matches!(quantity, Quantity::Force(_)) { Ty::Vector } else { Ty::Scalar };
         let dim = self.system.dim();
         match value.get_ref() {
             RawExpected::Formula(text) => {
-                let spanned = Spanned::new(value.span(), text.clone());
                 let id = match self.system.expression(text) {
                     Ok(id) => id,
                     Err(e) => {
@@ -278,7 +282,8 @@ impl Resolver<'_> {
                             BuildError::Lower { error, .. } => Some(error.span.start..error.span.end),
                             _ => None,
                         };
-                        let span = inner.map_or(value.span(), |s| locate(self.text, &spanned, s));
+                        let written = Spanned::new(value.span(), text.as_ref());
+                        let span = inner.map_or(value.span(), |s| locate(self.text, &written, s));
                         self.problem(span, format!("in the expected `{what}`: {e}"));
                         return None;
                     }
@@ -289,7 +294,7 @@ impl Resolver<'_> {
                     return None;
                 }
                 if !matches!(quantity, Quantity::CDdot(_)) {
-                    for s in self.system.graph.free_symbols(id) {
+                    for &s in self.walk.free_symbols(&self.system.graph, id) {
                         let info = self.system.graph.symbol(s);
                         if matches!(info.role, Role::Acceleration { .. }) {
                             let message = format!(
@@ -301,7 +306,7 @@ impl Resolver<'_> {
                         }
                     }
                 }
-                Some(Expected::Formula { id, text: text.clone() })
+                Some(Expected::Formula { id, text: text.to_string() })
             }
             numbers if !self.numeric => {
                 let _ = numbers;

@@ -16,6 +16,7 @@ use crate::expr::parse::ParseError;
 use crate::expr::syntax::{Syntax, SyntaxKind};
 use crate::expr::{Symbol, Ty};
 use serde::Deserialize;
+use std::borrow::Cow;
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::ops::Range;
 use toml::Spanned;
@@ -23,20 +24,25 @@ use toml::Spanned;
 /// The largest constraint file read, in bytes.
 pub const MAX_FILE_BYTES: usize = 16 << 20;
 
+/// A string as written, with its span: borrowed from the file text unless TOML escapes
+/// made it differ (a file of a thousand bodies holds thousands of them, and allocating
+/// each was a tenth of loading it).
+pub type Text<'a> = Spanned<Cow<'a, str>>;
+
 /// A file as written, read field by field from the spanned TOML tree by `model::document`
 /// (every missing field and wrong type is a problem there; what could not be read is left
 /// out here). Unknown keys are reported, all of them, by `model::keys`.
 #[derive(Debug, Default)]
-pub struct RawFile {
-    pub title: Option<Spanned<String>>,
+pub struct RawFile<'a> {
+    pub title: Option<Text<'a>>,
     /// `None` when missing or not an integer (already reported).
     pub dimension: Option<Spanned<i64>>,
-    pub parameters: BTreeMap<Spanned<String>, Spanned<RawValue>>,
-    pub definitions: BTreeMap<Spanned<String>, Spanned<String>>,
-    pub bodies: Vec<Spanned<RawBody>>,
-    pub constraints: Vec<Spanned<RawConstraint>>,
-    pub scene: Option<Spanned<RawScene>>,
-    pub expect: Vec<Spanned<RawExpect>>,
+    pub parameters: BTreeMap<Text<'a>, Spanned<RawValue>>,
+    pub definitions: BTreeMap<Text<'a>, Text<'a>>,
+    pub bodies: Vec<Spanned<RawBody<'a>>>,
+    pub constraints: Vec<Spanned<RawConstraint<'a>>>,
+    pub scene: Option<Spanned<RawScene<'a>>>,
+    pub expect: Vec<Spanned<RawExpect<'a>>>,
 }
 
 /// A parameter value: a number or a vector of numbers (finite, when read from a file).
@@ -53,26 +59,26 @@ pub enum RawValue {
 /// a number or a string holds 1: the body stays declared, so its other symbols are not
 /// reported again as unknown wherever they are used. (A file with a problem derives nothing.)
 #[derive(Debug)]
-pub struct RawBody {
-    pub name: Spanned<String>,
-    pub position: Spanned<String>,
-    pub velocity: Spanned<String>,
-    pub acceleration: Spanned<String>,
-    pub mass: Spanned<RawMass>,
-    pub force: Spanned<String>,
+pub struct RawBody<'a> {
+    pub name: Text<'a>,
+    pub position: Text<'a>,
+    pub velocity: Text<'a>,
+    pub acceleration: Text<'a>,
+    pub mass: Spanned<RawMass<'a>>,
+    pub force: Text<'a>,
 }
 
 #[derive(Clone, Debug)]
-pub enum RawMass {
+pub enum RawMass<'a> {
     Number(f64),
-    Symbol(String),
+    Symbol(Cow<'a, str>),
 }
 
 #[derive(Debug)]
-pub struct RawConstraint {
-    pub name: Spanned<String>,
+pub struct RawConstraint<'a> {
+    pub name: Text<'a>,
     /// `None` when missing or not a string (reported by `model::document`).
-    pub expr: Option<Spanned<String>>,
+    pub expr: Option<Text<'a>>,
 }
 
 /// One problem in a file: where (a byte range of the file text) and what.
@@ -83,13 +89,13 @@ pub struct Problem {
 }
 
 /// A validated file: the system, the parameter values, the scene and the expectations.
+/// (The raw file is not kept: it borrows the text, and all it said is in these.)
 #[derive(Debug)]
 pub struct Loaded {
     pub system: System,
     pub values: BTreeMap<String, RawValue>,
     pub scene: Scene,
     pub expect: Vec<Expectation>,
-    pub raw: RawFile,
 }
 
 /// Parses and validates a constraint file's text. Every problem found is returned.
@@ -118,18 +124,18 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
     let written: Vec<&str> = raw
         .bodies
         .iter()
-        .map(|b| b.get_ref().name.get_ref().as_str())
-        .chain(raw.constraints.iter().map(|c| c.get_ref().name.get_ref().as_str()))
+        .map(|b| b.get_ref().name.get_ref().as_ref())
+        .chain(raw.constraints.iter().map(|c| c.get_ref().name.get_ref().as_ref()))
         .collect();
     let expect = resolve(text, &raw.expect, &written, &mut system, &mut problems);
     let values: BTreeMap<String, RawValue> =
-        raw.parameters.iter().map(|(k, v)| (k.get_ref().clone(), v.get_ref().clone())).collect();
+        raw.parameters.iter().map(|(k, v)| (k.get_ref().to_string(), v.get_ref().clone())).collect();
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
         sort(&mut problems);
         return Err(problems);
     }
-    Ok(Loaded { system, values, scene, expect, raw })
+    Ok(Loaded { system, values, scene, expect })
 }
 
 /// In file order, so the messages read top to bottom (unlocated ones first); a problem
@@ -143,7 +149,7 @@ fn sort(problems: &mut Vec<Problem>) {
 /// `[scene] initial` when the file has a scene, and from each `at` state of an `[[expect]]`.
 /// (Formula checks draw random masses, so they need none.)
 fn masses_have_values(
-    raw: &RawFile,
+    raw: &RawFile<'_>,
     system: &System,
     scene: &Scene,
     expect: &[Expectation],
@@ -163,7 +169,7 @@ fn masses_have_values(
         let (raw_bodies, initial) = lookup.get_or_insert_with(|| {
             let mut raw_bodies = HashMap::new();
             for (i, b) in raw.bodies.iter().enumerate() {
-                raw_bodies.entry(b.get_ref().name.get_ref().as_str()).or_insert(i);
+                raw_bodies.entry(b.get_ref().name.get_ref().as_ref()).or_insert(i);
             }
             (raw_bodies, scene.initial.iter().map(|(x, _)| *x).collect())
         });
@@ -196,8 +202,8 @@ fn masses_have_values(
     }
 }
 
-fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<System> {
-    let title = raw.title.as_ref().map_or("", |t| t.get_ref().as_str());
+fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<System> {
+    let title = raw.title.as_ref().map_or("", |t| t.get_ref().as_ref());
     let dimension = raw.dimension.as_ref()?;
     let mut b = match SystemBuilder::new(title, *dimension.get_ref()) {
         Ok(b) => b,
@@ -206,6 +212,7 @@ fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<Syste
             return None;
         }
     };
+    b.reserve(raw.bodies.len(), raw.constraints.len(), raw.parameters.len() + raw.definitions.len());
     let dim = *dimension.get_ref() as usize;
     for (name, value) in &raw.parameters {
         let ty = match value.get_ref() {
@@ -251,12 +258,14 @@ fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<Syste
             let span = match &e {
                 BuildError::Duplicate { name, .. } => [&body.position, &body.velocity, &body.acceleration, &body.force]
                     .into_iter()
-                    .find(|f| f.get_ref() == name)
+                    .find(|f| f.get_ref().as_ref() == name.as_str())
                     .map_or_else(|| body.name.span(), |f| f.span()),
                 _ => body.name.span(),
             };
             let span = match (&e, body.mass.get_ref()) {
-                (BuildError::Duplicate { name, .. }, RawMass::Symbol(m)) if m == name => body.mass.span(),
+                (BuildError::Duplicate { name, .. }, RawMass::Symbol(m)) if m.as_ref() == name.as_str() => {
+                    body.mass.span()
+                }
                 _ => span,
             };
             problems.push(Problem { span: Some(span), message: e.to_string() });
@@ -284,7 +293,7 @@ fn build(text: &str, raw: &RawFile, problems: &mut Vec<Problem>) -> Option<Syste
 }
 
 /// A builder error, located: in the expression text where it has a span, else at `fallback`.
-fn build_problem(text: &str, expr: &Spanned<String>, e: &BuildError, fallback: Range<usize>) -> Problem {
+fn build_problem(text: &str, expr: &Text<'_>, e: &BuildError, fallback: Range<usize>) -> Problem {
     let inner = match e {
         BuildError::Parse { error: ParseError { span, .. }, .. } => Some(*span),
         BuildError::Lower { error: LowerError { span, .. }, .. } => Some(*span),
@@ -299,13 +308,13 @@ fn build_problem(text: &str, expr: &Spanned<String>, e: &BuildError, fallback: R
 
 /// Maps a byte range inside a string value to the file: exact when the string is written
 /// without escapes (the common case), else the whole string.
-pub fn locate(text: &str, value: &Spanned<String>, inner: Range<usize>) -> Range<usize> {
+pub fn locate<S: AsRef<str>>(text: &str, value: &Spanned<S>, inner: Range<usize>) -> Range<usize> {
     let outer = value.span();
     let written = text.get(outer.clone()).unwrap_or("");
-    let content = value.get_ref();
+    let content = value.get_ref().as_ref();
     for quote in ["\"\"\"", "'''", "\"", "'"] {
         if let Some(body) = written.strip_prefix(quote).and_then(|w| w.strip_suffix(quote))
-            && body == content.as_str()
+            && body == content
         {
             let start = outer.start + quote.len();
             return (start + inner.start).min(outer.end)..(start + inner.end).min(outer.end);
@@ -315,27 +324,27 @@ pub fn locate(text: &str, value: &Spanned<String>, inner: Range<usize>) -> Range
 }
 
 /// Definitions ordered so that each comes after those it uses; cycles are reported.
-fn definitions_in_order<'a>(
-    raw: &'a RawFile,
+fn definitions_in_order<'a, 'b>(
+    raw: &'a RawFile<'b>,
     problems: &mut Vec<Problem>,
-) -> Vec<(&'a Spanned<String>, &'a Spanned<String>)> {
-    let names: Vec<&String> = raw.definitions.keys().map(|k| k.get_ref()).collect();
-    let mut uses: BTreeMap<&String, Vec<&String>> = BTreeMap::new();
+) -> Vec<(&'a Text<'b>, &'a Text<'b>)> {
+    let names: Vec<&str> = raw.definitions.keys().map(|k| k.get_ref().as_ref()).collect();
+    let mut uses: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
     for (name, def_text) in &raw.definitions {
         let mut idents = Vec::new();
         if let Ok(syntax) = crate::expr::parse::parse_expr(def_text.get_ref()) {
             collect_idents(&syntax, &mut idents);
         }
-        uses.insert(name.get_ref(), names.iter().copied().filter(|n| idents.contains(n)).collect());
+        uses.insert(name.get_ref().as_ref(), names.iter().copied().filter(|n| idents.contains(n)).collect());
     }
     let mut order = Vec::new();
-    let mut state: BTreeMap<&String, u8> = BTreeMap::new();
+    let mut state: BTreeMap<&str, u8> = BTreeMap::new();
     for name in raw.definitions.keys() {
-        visit(name.get_ref(), &uses, &mut state, &mut order, &mut Vec::new(), raw, problems);
+        visit(name.get_ref().as_ref(), &uses, &mut state, &mut order, &mut Vec::new(), raw, problems);
     }
     // A definition on a cycle is reported once (in `visit`), not again as an unknown symbol
     // of the others: leave out every definition on a cycle or using one.
-    let mut bad: Vec<&String> = Vec::new();
+    let mut bad: Vec<&str> = Vec::new();
     for name in &order {
         if is_on_cycle(name, &uses) || uses.get(name).is_some_and(|deps| deps.iter().any(|d| bad.contains(d))) {
             bad.push(name);
@@ -346,9 +355,9 @@ fn definitions_in_order<'a>(
 }
 
 /// Whether `name` can reach itself through the definitions it uses.
-fn is_on_cycle(name: &String, uses: &BTreeMap<&String, Vec<&String>>) -> bool {
-    let mut seen: Vec<&String> = Vec::new();
-    let mut stack: Vec<&String> = uses.get(name).cloned().unwrap_or_default();
+fn is_on_cycle(name: &str, uses: &BTreeMap<&str, Vec<&str>>) -> bool {
+    let mut seen: Vec<&str> = Vec::new();
+    let mut stack: Vec<&str> = uses.get(name).cloned().unwrap_or_default();
     while let Some(n) = stack.pop() {
         if n == name {
             return true;
@@ -362,20 +371,20 @@ fn is_on_cycle(name: &String, uses: &BTreeMap<&String, Vec<&String>>) -> bool {
 }
 
 fn visit<'a>(
-    name: &'a String,
-    uses: &BTreeMap<&'a String, Vec<&'a String>>,
-    state: &mut BTreeMap<&'a String, u8>,
-    order: &mut Vec<&'a String>,
-    path: &mut Vec<&'a String>,
-    raw: &RawFile,
+    name: &'a str,
+    uses: &BTreeMap<&'a str, Vec<&'a str>>,
+    state: &mut BTreeMap<&'a str, u8>,
+    order: &mut Vec<&'a str>,
+    path: &mut Vec<&'a str>,
+    raw: &RawFile<'_>,
     problems: &mut Vec<Problem>,
 ) {
     match state.get(name) {
         Some(2) => return,
         Some(1) => {
             let span = raw.definitions.keys().find(|k| k.get_ref() == name).map(|k| k.span());
-            let cycle: Vec<&str> = path.iter().map(|s| s.as_str()).collect();
-            problems.push(Problem { span, message: BuildError::Cycle(name.clone(), cycle.join(" → ")).to_string() });
+            problems
+                .push(Problem { span, message: BuildError::Cycle(name.to_string(), path.join(" → ")).to_string() });
             return;
         }
         _ => {}
@@ -390,11 +399,11 @@ fn visit<'a>(
     order.push(name);
 }
 
-fn collect_idents(s: &Syntax, out: &mut Vec<String>) {
+fn collect_idents<'s>(s: &Syntax<'s>, out: &mut Vec<&'s str>) {
     let mut stack = vec![s];
     while let Some(s) = stack.pop() {
         match &s.kind {
-            SyntaxKind::Ident(n) => out.push(n.to_string()),
+            SyntaxKind::Ident(n) => out.push(n),
             SyntaxKind::Number(_) => {}
             SyntaxKind::Sum(ts) => stack.extend(ts.iter().map(|(_, t)| t)),
             SyntaxKind::Product(fs) => stack.extend(fs.iter().map(|(_, f)| f)),

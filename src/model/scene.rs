@@ -8,21 +8,22 @@
 //!
 //! Not here: reading files, the derivation, solving.
 
-use super::file::{Problem, RawValue, locate};
+use super::file::{Problem, RawValue, Text, locate};
 use super::system::{BuildError, System};
 use crate::expr::eval::{Env, EvalError, Value, eval, eval_one};
+use crate::expr::graph::FastMap;
 use crate::expr::{Id, Role, Symbol, Ty};
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 use toml::Spanned;
 
 /// The `[scene]` table as written (read by `model::document`; unknown keys are reported
 /// by `model::keys`).
 #[derive(Debug, Default)]
-pub struct RawScene {
+pub struct RawScene<'a> {
     /// Initial values of positions, velocities and other symbols (`t`, masses).
-    pub initial: BTreeMap<Spanned<String>, Spanned<RawValue>>,
+    pub initial: BTreeMap<Text<'a>, Spanned<RawValue>>,
     /// External force per body: the force symbol (or the body's name) → an expression.
-    pub forces: BTreeMap<Spanned<String>, Spanned<String>>,
+    pub forces: BTreeMap<Text<'a>, Text<'a>>,
     pub dt: Option<Spanned<f64>>,
     pub duration: Option<Spanned<f64>>,
     /// Coefficient of restitution for closing contacts, in [0, 1].
@@ -59,8 +60,10 @@ impl Default for Scene {
 }
 
 /// Resolves a raw scene against `system`; every problem goes to `problems`.
-pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut Vec<Problem>) -> Scene {
+pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &mut Vec<Problem>) -> Scene {
     let mut scene = Scene::default();
+    scene.initial.reserve(raw.initial.len());
+    scene.forces.reserve(raw.forces.len());
     let dim = system.dim();
     for (name, value) in &raw.initial {
         match value_for(system, name.get_ref(), value.get_ref(), dim) {
@@ -71,15 +74,19 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
     // The first body a name denotes, as its name or its force symbol's, looked up by name
     // (a search per force made loading a chain of N links quadratic in N).
     let bodies: Vec<Option<usize>> = {
-        let mut by_name: HashMap<&str, usize> = HashMap::new();
+        let mut by_name: FastMap<&str, usize> = FastMap::default();
         if !raw.forces.is_empty() {
+            by_name.reserve(2 * system.bodies.len());
             for (i, b) in system.bodies.iter().enumerate() {
                 by_name.entry(b.name.as_str()).or_insert(i);
                 by_name.entry(system.graph.symbol(b.force).name.as_str()).or_insert(i);
             }
         }
-        raw.forces.keys().map(|name| by_name.get(name.get_ref().as_str()).copied()).collect()
+        raw.forces.keys().map(|name| by_name.get(name.get_ref().as_ref()).copied()).collect()
     };
+    // Forces written alike (`m*g` on every link of a chain) are one expression: parsed,
+    // lowered and checked once (the same text in the same scope is the same node).
+    let mut resolved: FastMap<&str, Result<Id, ForceError>> = FastMap::default();
     for ((name, expr), body) in raw.forces.iter().zip(bodies) {
         let Some(body) = body else {
             let forces: Vec<&str> = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.as_str()).collect();
@@ -94,7 +101,9 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
             });
             continue;
         };
-        match force_expression(system, expr.get_ref()) {
+        let result =
+            resolved.entry(expr.get_ref().as_ref()).or_insert_with(|| force_expression(system, expr.get_ref()));
+        match result.clone() {
             Ok(id) => scene.forces.push((body, id)),
             Err((inner, message)) => {
                 let span = inner.map_or(expr.span(), |s| locate(text, expr, s));
@@ -133,9 +142,12 @@ pub fn validate(text: &str, raw: &RawScene, system: &mut System, problems: &mut 
     scene
 }
 
+/// Why a force expression was refused: where in its text (when known), and the message.
+type ForceError = (Option<std::ops::Range<usize>>, String);
+
 /// Parses a force expression: a vector that may use positions, velocities, masses,
 /// parameters and `t`, but not accelerations or forces (which it defines).
-fn force_expression(system: &mut System, text: &str) -> Result<Id, (Option<std::ops::Range<usize>>, String)> {
+fn force_expression(system: &mut System, text: &str) -> Result<Id, ForceError> {
     let id = system.expression(text).map_err(|e| {
         let span = match &e {
             BuildError::Parse { error, .. } => Some(error.span.start..error.span.end),

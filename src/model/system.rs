@@ -7,10 +7,11 @@
 //!
 //! Not here: TOML, numbers for solving (`model::file` keeps those), derivation (`derive`).
 
+use crate::expr::graph::FastSet;
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
-use crate::expr::{Graph, Id, Role, Simplifier, Symbol, Ty};
-use std::collections::{HashMap, HashSet};
+use crate::expr::{Graph, Id, Node, Role, Simplifier, Symbol, Ty};
+
 use std::fmt;
 use std::sync::Arc;
 
@@ -100,13 +101,57 @@ pub enum BuildError {
 #[derive(Debug)]
 pub struct SystemBuilder {
     system: System,
-    /// What each name was declared as, for clash messages.
-    /// Looked up by name for every declaration, so a map (a chain of 1000 links declares
-    /// 5000 names; a list made loading quadratic).
-    kinds: HashMap<String, Kind>,
+    /// What each symbol was declared as (by the symbol's index), for clash messages and
+    /// [`SystemBuilder::is_constant`]. Whether a name is taken is the scope's to say (every
+    /// claimed name enters it), so declaring a chain's thousands of names keeps no second
+    /// map of them.
+    symbol_kinds: Vec<Option<Kind>>,
+    /// Names of definitions (whose nodes may be symbols' nodes, so known by name).
+    definitions: FastSet<String>,
     /// Names of bodies and constraints declared so far, for duplicate checks.
-    body_names: HashSet<String>,
-    constraint_names: HashSet<String>,
+    body_names: FastSet<String>,
+    constraint_names: FastSet<String>,
+    /// Scratch of the walk for a constraint's symbols, kept from one constraint to the next.
+    walk: SymbolWalk,
+}
+
+/// The symbols an expression depends on (`Graph::free_symbols`), with its buffers kept: a
+/// mark per node, stamped with the walk's number, instead of a fresh hash set per walk.
+#[derive(Debug, Default)]
+pub(crate) struct SymbolWalk {
+    stamps: Vec<u32>,
+    stamp: u32,
+    stack: Vec<Id>,
+    symbols: Vec<Symbol>,
+}
+
+impl SymbolWalk {
+    /// The free symbols of `root`, sorted, each once.
+    pub(crate) fn free_symbols(&mut self, g: &Graph, root: Id) -> &[Symbol] {
+        if self.stamp == u32::MAX {
+            self.stamps.clear();
+            self.stamp = 0;
+        }
+        self.stamp += 1;
+        self.stamps.resize(g.len(), 0);
+        self.symbols.clear();
+        self.stack.clear();
+        self.stack.push(root);
+        while let Some(id) = self.stack.pop() {
+            let mark = &mut self.stamps[id.index()];
+            if *mark == self.stamp {
+                continue;
+            }
+            *mark = self.stamp;
+            match g.node(id) {
+                Node::Sym(s) => self.symbols.push(*s),
+                node => self.stack.extend_from_slice(node.children()),
+            }
+        }
+        self.symbols.sort_unstable();
+        self.symbols.dedup();
+        &self.symbols
+    }
 }
 
 /// What a name was declared as; written out (`the position of body `bead``) only for a
@@ -173,39 +218,78 @@ impl SystemBuilder {
             time,
             scope,
         };
-        let kinds = HashMap::from([("t".to_string(), Kind::Time)]);
-        Ok(SystemBuilder { system, kinds, body_names: HashSet::new(), constraint_names: HashSet::new() })
+        let mut symbol_kinds = vec![None; time.index() + 1];
+        symbol_kinds[time.index()] = Some(Kind::Time);
+        Ok(SystemBuilder {
+            system,
+            symbol_kinds,
+            definitions: FastSet::default(),
+            body_names: FastSet::default(),
+            constraint_names: FastSet::default(),
+            walk: SymbolWalk::default(),
+        })
     }
 
-    /// Claims `name` for `what`, refusing clashes and reserved names.
-    fn claim(&mut self, name: &str, what: Kind) -> Result<(), BuildError> {
-        let valid = name.chars().next().is_some_and(|c| c.is_ascii_alphabetic())
-            && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+    /// Room for `bodies` bodies, `constraints` constraints and `names` other names
+    /// (parameters, definitions), so that declaring a long chain does not grow (and rehash)
+    /// the name maps step by step. Only a hint: declaring more works all the same.
+    pub fn reserve(&mut self, bodies: usize, constraints: usize, names: usize) {
+        // A body declares up to five names (position, velocity, acceleration, force, mass).
+        let names = names.saturating_add(bodies.saturating_mul(5));
+        self.symbol_kinds.reserve(names);
+        self.system.scope.reserve(names);
+        self.system.bodies.reserve(bodies);
+        self.body_names.reserve(bodies);
+        self.system.constraints.reserve(constraints);
+        self.constraint_names.reserve(constraints);
+    }
+
+    /// Binds `name` in the scope to the node `bind` gives (called only when the name may be
+    /// declared, with what else it made), refusing bad, reserved and taken names, in that
+    /// order. One lookup of the name: the scope is asked whether it is taken and told its
+    /// node at once.
+    fn claim<T>(&mut self, name: &str, what: &Kind, bind: impl FnOnce(&mut Graph) -> (Id, T)) -> Result<T, BuildError> {
+        let valid = name.as_bytes().first().is_some_and(u8::is_ascii_alphabetic)
+            && name.bytes().all(|c| c.is_ascii_alphanumeric() || c == b'_');
         if !valid {
             return Err(BuildError::BadName(name.to_string()));
         }
         if is_function_name(name) {
             return Err(BuildError::Reserved(name.to_string()));
         }
-        if let Some(first) = self.kinds.get(name) {
-            if name == "t" {
-                return Err(BuildError::Reserved(name.to_string()));
-            }
-            return Err(BuildError::Duplicate {
-                name: name.to_string(),
-                first: first.to_string(),
-                second: what.to_string(),
-            });
+        let System { scope, graph, .. } = &mut self.system;
+        if let Some(made) = scope.insert_new(name, || bind(graph)) {
+            return Ok(made);
         }
-        self.kinds.insert(name.to_string(), what);
-        Ok(())
+        if name == "t" {
+            return Err(BuildError::Reserved(name.to_string()));
+        }
+        // Every name in scope was claimed, as a definition or a symbol.
+        let first = self.kind(name).map_or_else(String::new, Kind::to_string);
+        Err(BuildError::Duplicate { name: name.to_string(), first, second: what.to_string() })
+    }
+
+    /// What a declared name was declared as.
+    fn kind(&self, name: &str) -> Option<&Kind> {
+        if self.definitions.contains(name) {
+            return Some(&Kind::Definition);
+        }
+        let Node::Sym(s) = self.system.graph.node(self.system.scope.get(name)?) else {
+            return None;
+        };
+        self.symbol_kinds.get(s.index())?.as_ref()
     }
 
     fn symbol(&mut self, name: &str, ty: Ty, role: Role, what: Kind) -> Result<Symbol, BuildError> {
-        self.claim(name, what)?;
-        let s = self.system.graph.declare(name, ty, role);
-        let node = self.system.graph.sym(s);
-        self.system.scope.insert(name, node);
+        let s = self.claim(name, &what, |g| {
+            let s = g.declare(name, ty, role);
+            (g.sym(s), s)
+        })?;
+        // Symbols are numbered in declaration order, so this is usually a push.
+        if self.symbol_kinds.len() <= s.index() {
+            self.symbol_kinds.resize_with(s.index() + 1, || None);
+        }
+        self.symbol_kinds[s.index()] = Some(what);
         Ok(s)
     }
 
@@ -260,30 +344,31 @@ impl SystemBuilder {
     }
 
     fn is_constant(&self, name: &str) -> bool {
-        self.kinds.get(name).is_some_and(|what| matches!(what, Kind::OfBody { what: "mass", .. } | Kind::Parameter))
+        self.kind(name).is_some_and(|what| matches!(what, Kind::OfBody { what: "mass", .. } | Kind::Parameter))
     }
 
     /// Declares a named expression, substituted wherever the name is used. Definitions may
     /// use earlier ones; order them (see `model::file` for the dependency sort).
     pub fn definition(&mut self, name: &str, text: &str) -> Result<Id, BuildError> {
-        let context = format!("in definition `{name}`: ");
-        let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context.clone(), error })?;
+        let context = || format!("in definition `{name}`: ");
+        let syntax = parse_expr(text).map_err(|error| BuildError::Parse { context: context(), error })?;
         let id = lower(&syntax, &self.system.scope, &mut self.system.graph)
-            .map_err(|error| BuildError::Lower { context, error })?;
-        self.claim(name, Kind::Definition)?;
-        self.system.scope.insert(name, id);
+            .map_err(|error| BuildError::Lower { context: context(), error })?;
+        self.claim(name, &Kind::Definition, |_| (id, ()))?;
+        self.definitions.insert(name.to_string());
         Ok(id)
     }
 
     /// Declares a constraint `lhs = rhs`, `lhs >= rhs`, `lhs <= rhs` or a bare `C`.
     pub fn constraint(&mut self, name: &str, text: &str) -> Result<usize, BuildError> {
-        let context = format!("in constraint `{name}`: ");
-        let relation = parse_relation(text).map_err(|error| BuildError::Parse { context: context.clone(), error })?;
+        // The message's context is written only for a message (most constraints have none).
+        let context = || format!("in constraint `{name}`: ");
+        let relation = parse_relation(text).map_err(|error| BuildError::Parse { context: context(), error })?;
         let LoweredRelation { c, inequality } = lower_relation(&relation, &self.system.scope, &mut self.system.graph)
-            .map_err(|error| BuildError::Lower { context, error })?;
+            .map_err(|error| BuildError::Lower { context: context(), error })?;
         let g = &self.system.graph;
         let mut bodies = Vec::new();
-        for s in g.free_symbols(c) {
+        for &s in self.walk.free_symbols(g, c) {
             let info = g.symbol(s);
             match info.role {
                 Role::Position { body } => bodies.push(body),
