@@ -445,6 +445,13 @@ impl Frac {
         if self.is_zero() || other.is_zero() {
             return Some(Frac::zero());
         }
+        // A constant factor (the 1 a product starts from): scaling keeps a normal form normal.
+        if let Some(c) = self.as_constant() {
+            return Some(other.scale(&c));
+        }
+        if let Some(c) = other.as_constant() {
+            return Some(self.scale(&c));
+        }
         let num = self.num.mul(&other.num)?;
         let mut den = self.den.clone();
         for (f, e) in &other.den {
