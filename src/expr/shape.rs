@@ -56,6 +56,10 @@ pub struct Shaper {
     /// For each node: the call that last numbered it, and its number then.
     seen: Vec<(u32, u32)>,
     call: u32,
+    /// The walk's stack, kept for its room.
+    stack: Vec<(Id, bool)>,
+    /// The length of the last key, the room the next one starts with.
+    last_len: usize,
 }
 
 impl Shaper {
@@ -74,10 +78,12 @@ impl Shaper {
             self.call = 1;
         }
         let call = self.call;
-        let mut key = Vec::with_capacity(64);
+        let mut key = Vec::with_capacity(self.last_len.max(16));
         let mut symbols: Vec<Symbol> = Vec::new();
         let mut count = 0u32;
-        let mut stack: Vec<(Id, bool)> = roots.iter().rev().map(|&r| (r, false)).collect();
+        let mut stack = std::mem::take(&mut self.stack);
+        stack.clear();
+        stack.extend(roots.iter().rev().map(|&r| (r, false)));
         while let Some((id, expanded)) = stack.pop() {
             if self.seen[id.index()].0 == call {
                 continue;
@@ -124,6 +130,7 @@ impl Shaper {
             self.seen[id.index()] = (call, count);
             count += 1;
         }
+        self.stack = stack;
         // Which root is which record.
         key.push(u32::MAX);
         key.extend(roots.iter().map(|r| self.seen[r.index()].1));
@@ -134,6 +141,7 @@ impl Shaper {
         let mut order: Vec<u32> = (0..symbols.len() as u32).collect();
         order.sort_by(|&a, &b| g.cmp_symbols(symbols[a as usize], symbols[b as usize]));
         key.extend(order);
+        self.last_len = key.len();
         Shape { key, symbols }
     }
 }
