@@ -56,6 +56,8 @@ pub struct Shaper {
     /// For each node: the call that last numbered it, and its number then.
     seen: Vec<(u32, u32)>,
     call: u32,
+    /// For each symbol (by index): the call that last gave it a slot, and the slot.
+    slot_of: Vec<(u32, u32)>,
     /// The walk's stack, kept for its room.
     stack: Vec<(Id, bool)>,
     /// The length of the last key, the room the next one starts with.
@@ -75,6 +77,7 @@ impl Shaper {
         if self.call == 0 {
             // After 2³² calls the stamps wrap: start them again.
             self.seen.iter_mut().for_each(|e| *e = (0, 0));
+            self.slot_of.iter_mut().for_each(|e| *e = (0, 0));
             self.call = 1;
         }
         let call = self.call;
@@ -101,14 +104,15 @@ impl Shaper {
                 Node::Num(_) => key.extend([NUM, id.index() as u32]),
                 Node::Sym(s) if fixed(g.symbol(*s).role) => key.extend([FIXED, s.index() as u32]),
                 Node::Sym(s) => {
-                    let slot = match symbols.iter().position(|x| x == s) {
-                        Some(i) => i,
-                        None => {
-                            symbols.push(*s);
-                            symbols.len() - 1
-                        }
-                    };
-                    key.extend([SLOT, slot as u32]);
+                    if self.slot_of.len() <= s.index() {
+                        self.slot_of.resize((s.index() + 1).max(2 * self.slot_of.len()), (0, 0));
+                    }
+                    let entry = &mut self.slot_of[s.index()];
+                    if entry.0 != call {
+                        *entry = (call, symbols.len() as u32);
+                        symbols.push(*s);
+                    }
+                    key.extend([SLOT, entry.1]);
                 }
                 Node::Vector(xs) | Node::Add(xs) | Node::Mul(xs) => {
                     let tag = match node {
