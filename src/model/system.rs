@@ -11,7 +11,6 @@ use crate::expr::graph::FastSet;
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Node, Role, Simplifier, Symbol, Ty};
-
 use std::fmt;
 use std::sync::Arc;
 
