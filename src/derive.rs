@@ -113,9 +113,7 @@ pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
         let s = &mut system.simplifier;
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
-        let minus_b = g.neg(b[0]);
-        let l = g.div(minus_b, a00)?;
-        let l = s.simplify(g, l)?;
+        let l = s.negated_quotient(g, b[0], a00)?;
         let mut f = Vec::with_capacity(only.direction.len());
         for &(body, j) in &only.direction {
             let product = g.mul(vec![l, j])?;

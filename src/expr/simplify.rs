@@ -157,6 +157,30 @@ impl Simplifier {
         })
     }
 
+    /// The simplified `−n / d`, computed from the forms of `n` and `d` (simplified already,
+    /// as b and A are when λ = −b/A), without building the quotient as a graph first.
+    pub fn negated_quotient(&mut self, g: &mut Graph, n: Id, d: Id) -> Result<Id, TypeError> {
+        let cn = self.canon(g, n)?;
+        // 1/d with d's factors kept apart, as `power` does for a written `d^-1`.
+        let inverse =
+            if g.ty(n) == Ty::Scalar && g.ty(d) == Ty::Scalar { self.factored_power(g, d, -1)? } else { None };
+        let form = match (&*cn, inverse) {
+            (Canon::S(f), Some(r)) => f.mul(&r).map(|q| self.reduce_radicals(q).scale(&Rational::int(-1))),
+            _ => None,
+        };
+        let Some(form) = form else {
+            // Too large to expand (or not scalars): the quotient as a graph, simplified.
+            let minus_n = g.neg(n);
+            let q = g.div(minus_n, d)?;
+            return self.simplify(g, q);
+        };
+        let c = Canon::S(form);
+        let s = self.build(g, &c)?;
+        self.built.insert(s, s);
+        self.memo.insert_if_absent(s, Rc::new(c));
+        Ok(s)
+    }
+
     /// The simplified `k · e`.
     pub fn scaled(&mut self, g: &mut Graph, id: Id, k: &Rational) -> Result<Id, TypeError> {
         let c = match &*self.canon(g, id)? {
