@@ -218,6 +218,23 @@ fn emit(args: std::fmt::Arguments<'_>) {
     }
 }
 
+/// Pretty JSON and a line break to standard output, written as it is serialised, with the
+/// failures of [`emit`] treated as there.
+fn emit_json(value: &impl serde::Serialize) {
+    use std::io::Write;
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
+    let written = serde_json::to_writer_pretty(&mut out, value)
+        .map_err(std::io::Error::from)
+        .and_then(|()| out.write_all(b"\n"))
+        .and_then(|()| out.flush());
+    if let Err(e) = written
+        && e.kind() != std::io::ErrorKind::BrokenPipe
+        && !STDOUT_FAILED.swap(true, Ordering::Relaxed)
+    {
+        eprintln!("error: cannot write to standard output: {e}");
+    }
+}
+
 /// `print!` through [`emit`].
 macro_rules! out {
     ($($arg:tt)*) => { emit(format_args!($($arg)*)) };
@@ -299,11 +316,20 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
         FormatArg::Markdown => Format::Markdown,
         FormatArg::Json => Format::Json,
     };
-    let result = if format == Format::Json {
-        derivation::json(&loaded.system, &derivation).map(|v| serde_json::to_string_pretty(&v).unwrap_or_default())
-    } else {
-        derivation::document(&mut loaded.system, &derivation, format, steps)
-    };
+    if format == Format::Json {
+        // Written as it is serialised: a long chain's dense A is never held whole.
+        return match derivation::json(&loaded.system, &derivation) {
+            Ok(doc) => {
+                emit_json(&doc);
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("error: {}: {e}", path.display());
+                ExitCode::from(1)
+            }
+        };
+    }
+    let result = derivation::document(&mut loaded.system, &derivation, format, steps);
     match result {
         Ok(s) => {
             outln!("{s}");

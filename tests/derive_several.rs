@@ -172,3 +172,26 @@ fn json_force_sums_parse_again() {
         assert!(same, "force on {body}: {printed} ≠ {expected}");
     }
 }
+
+/// A long chain's JSON: `A` is written row by row as it is serialised (never held whole), and
+/// is the dense N × N matrix of the contract, tridiagonal, symmetric, `"0"` off the band.
+#[test]
+fn a_long_chains_json_has_the_whole_dense_a() {
+    let n = 300;
+    let path = std::env::temp_dir().join(format!("lagrange_json_chain_{}.toml", std::process::id()));
+    std::fs::write(&path, lagrange::scenario::chain(n)).expect("temporary file");
+    let out = derive(path.to_str().expect("UTF-8 path"), &["--format", "json"]);
+    let _ = std::fs::remove_file(&path);
+    let json: serde_json::Value = serde_json::from_str(&out).expect("valid JSON");
+    let a = json["A"].as_array().expect("A");
+    assert_eq!(a.len(), n);
+    for (k, row) in a.iter().enumerate() {
+        let row = row.as_array().expect("a row");
+        assert_eq!(row.len(), n, "row {k}");
+        for (j, entry) in row.iter().enumerate() {
+            let entry = entry.as_str().expect("a string");
+            assert_eq!(entry == "0", k.abs_diff(j) > 1, "A[{k}][{j}] = {entry}");
+            assert_eq!(Some(entry), a[j][k].as_str(), "A is symmetric at ({k}, {j})");
+        }
+    }
+}

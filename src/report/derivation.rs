@@ -508,8 +508,68 @@ fn chain(raw: &str, done: &str) -> String {
     if raw == done { done.to_string() } else { format!("{raw} = {done}") }
 }
 
+/// The derivation as JSON ([`json`]): serialised as one value, with the dense `A` written
+/// row by row from its non-zero entries as it is serialised, so a long chain's N² entries
+/// (mostly `"0"`) are never all held in memory.
+#[derive(Debug)]
+pub struct JsonDerivation {
+    /// Every entry but `A`.
+    rest: Value,
+    /// `A`'s size and its non-zero entries, by row, in column order.
+    n: usize,
+    rows: Vec<Vec<(usize, String)>>,
+}
+
+impl JsonDerivation {
+    /// Row `k` of A, dense.
+    fn row(&self, k: usize) -> impl Iterator<Item = &str> {
+        let mut entries = self.rows[k].iter().peekable();
+        (0..self.n).map(move |j| match entries.peek() {
+            Some((col, s)) if *col == j => {
+                entries.next();
+                s.as_str()
+            }
+            _ => "0",
+        })
+    }
+}
+
+impl serde::Serialize for JsonDerivation {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::{SerializeMap, SerializeSeq};
+        struct Row<'a>(&'a JsonDerivation, usize);
+        impl serde::Serialize for Row<'_> {
+            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                let mut seq = serializer.serialize_seq(Some(self.0.n))?;
+                for entry in self.0.row(self.1) {
+                    seq.serialize_element(entry)?;
+                }
+                seq.end()
+            }
+        }
+        struct Rows<'a>(&'a JsonDerivation);
+        impl serde::Serialize for Rows<'_> {
+            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+                let mut seq = serializer.serialize_seq(Some(self.0.n))?;
+                for k in 0..self.0.n {
+                    seq.serialize_element(&Row(self.0, k))?;
+                }
+                seq.end()
+            }
+        }
+        let rest = self.rest.as_object();
+        let mut map = serializer.serialize_map(Some(1 + rest.map_or(0, |m| m.len())))?;
+        // Keys in the order a `Value` writes them (sorted): "A" sorts before every other key.
+        map.serialize_entry("A", &Rows(self))?;
+        for (key, value) in rest.into_iter().flatten() {
+            map.serialize_entry(key, value)?;
+        }
+        map.end()
+    }
+}
+
 /// The derivation as JSON: every expression a string in the expression language.
-pub fn json(system: &System, d: &Derivation) -> Result<Value, ReportError> {
+pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportError> {
     let g = &system.graph;
     let e = |id: Id| print(g, id, Style::Source);
     let mut constraints = Vec::new();
@@ -531,11 +591,16 @@ pub fn json(system: &System, d: &Derivation) -> Result<Value, ReportError> {
         }));
     }
     let n = d.constraints.len();
-    let mut a = vec![vec![json!("0"); n]; n];
+    let mut rows: Vec<Vec<(usize, String)>> = vec![Vec::new(); n];
     for &(k, j, id) in &d.a {
         let s = e(id)?;
-        a[k][j] = json!(s.clone());
-        a[j][k] = json!(s);
+        if k != j {
+            rows[j].push((k, s.clone()));
+        }
+        rows[k].push((j, s));
+    }
+    for row in &mut rows {
+        row.sort_by_key(|e| e.0);
     }
     let b: Result<Vec<String>, PrintError> = d.b.iter().map(|&id| e(id)).collect();
     let mut out = json!({
@@ -550,7 +615,6 @@ pub fn json(system: &System, d: &Derivation) -> Result<Value, ReportError> {
             "mass": e(b.mass).unwrap_or_default(),
         })).collect::<Vec<_>>(),
         "constraints": constraints,
-        "A": a,
         "b": b?,
     });
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
@@ -584,7 +648,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<Value, ReportError> {
         out["multipliers"] = Value::Object(multipliers);
         out["force_sums"] = Value::Object(sums);
     }
-    Ok(out)
+    Ok(JsonDerivation { rest: out, n, rows })
 }
 
 /// The symbol of constraint `name`'s multiplier in JSON: `lambda_<name>`, with every
