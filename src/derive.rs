@@ -10,6 +10,11 @@
 //! A is sparse: Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ over the bodies the two constraints share, so an
 //! N-link chain has O(N) entries and the derivation is linear in N.
 //!
+//! Scenes repeat themselves: a constraint of the same shape as an earlier one (equal up to
+//! renaming bodies, `expr::shape`) is the earlier derivation renamed, and so are A and b
+//! entries of a shape seen before (`Simplifier::simplify_alike`). What comes out is what
+//! deriving it alone gives; a chain's link costs a renaming, not a derivation.
+//!
 //! Not here: numbers (`numeric`), layouts of the derivation for people (`report`).
 
 use crate::expr::diff::{DiffError, time_derivative};
