@@ -75,6 +75,15 @@ pub type FastMap<K, V> = HashMap<K, V, BuildHasherDefault<FxHasher>>;
 /// A `HashSet` with [`FxHasher`].
 pub type FastSet<K> = std::collections::HashSet<K, BuildHasherDefault<FxHasher>>;
 
+/// A map keyed by names from the file (symbols, bodies, constraints): a hasher seeded at
+/// random per process (foldhash), not Fx, which is unkeyed, so a file cannot be crafted to
+/// make every name collide and loading quadratic. (std's SipHash would do too, at 2 % of a
+/// derivation.)
+pub type NameMap<K, V> = HashMap<K, V, foldhash::fast::RandomState>;
+
+/// A set of names from the file; see [`NameMap`].
+pub type NameSet<K> = std::collections::HashSet<K, foldhash::fast::RandomState>;
+
 /// A map from node ids to values, stored densely by id: ids are small consecutive
 /// integers, so a vector indexed by id beats hashing them (and stays in cache on large
 /// graphs, where a hash map's random probes made long chains superlinear in wall time).
@@ -333,7 +342,7 @@ pub struct Graph {
     /// Each symbol's node, once made (looked up for every symbol a renaming writes).
     sym_nodes: Vec<Option<Id>>,
     symbols: Vec<SymbolInfo>,
-    by_name: FastMap<String, Symbol>,
+    by_name: NameMap<String, Symbol>,
 }
 
 impl Graph {
@@ -349,7 +358,7 @@ impl Graph {
             same_hash: Vec::new(),
             sym_nodes: Vec::new(),
             symbols: Vec::new(),
-            by_name: FastMap::default(),
+            by_name: NameMap::default(),
         };
         // The article's bead derives in about 200 nodes: room for a small scene at once,
         // instead of growing (and rehashing) through every power of two up to it.

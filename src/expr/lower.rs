@@ -8,17 +8,17 @@
 //! negative number, and a leading `p/q` of number literals is the rational `p/q` (so the
 //! printed `-1/2*x` parses back to the same node). Nothing else is evaluated here.
 
-use super::graph::{FastMap, Func, Graph, Id, Ty, TypeError};
+use super::graph::{Func, Graph, Id, NameMap, Ty, TypeError};
 use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
 use super::syntax::{MulOp, RelOp, Relation, Sign, Span, Syntax, SyntaxKind};
 use std::collections::hash_map::Entry;
 
 /// The names an expression may use, each bound to a graph node (a symbol or a definition).
-/// Hashed like the graph's own names (Fx): looked up for every name of every expression.
+/// Keyed by the file's names, so hashed as [`NameMap`] says.
 #[derive(Clone, Debug, Default)]
 pub struct Scope {
-    names: FastMap<String, Id>,
+    names: NameMap<String, Id>,
 }
 
 impl Scope {

@@ -11,7 +11,7 @@
 use super::file::{Problem, RawValue, Text, locate};
 use super::system::{BuildError, System};
 use crate::expr::eval::{Env, EvalError, Value, eval, eval_one};
-use crate::expr::graph::FastMap;
+use crate::expr::graph::NameMap;
 use crate::expr::{Id, Role, Symbol, Ty};
 use std::collections::BTreeMap;
 use toml::Spanned;
@@ -74,7 +74,7 @@ pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &
     // The first body a name denotes, as its name or its force symbol's, looked up by name
     // (a search per force made loading a chain of N links quadratic in N).
     let bodies: Vec<Option<usize>> = {
-        let mut by_name: FastMap<&str, usize> = FastMap::default();
+        let mut by_name: NameMap<&str, usize> = NameMap::default();
         if !raw.forces.is_empty() {
             by_name.reserve(2 * system.bodies.len());
             for (i, b) in system.bodies.iter().enumerate() {
@@ -86,7 +86,7 @@ pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &
     };
     // Forces written alike (`m*g` on every link of a chain) are one expression: parsed,
     // lowered and checked once (the same text in the same scope is the same node).
-    let mut resolved: FastMap<&str, Result<Id, ForceError>> = FastMap::default();
+    let mut resolved: NameMap<&str, Result<Id, ForceError>> = NameMap::default();
     for ((name, expr), body) in raw.forces.iter().zip(bodies) {
         let Some(body) = body else {
             let forces: Vec<&str> = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.as_str()).collect();

@@ -7,7 +7,7 @@
 //!
 //! Not here: TOML, numbers for solving (`model::file` keeps those), derivation (`derive`).
 
-use crate::expr::graph::FastSet;
+use crate::expr::graph::NameSet;
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Node, Role, Simplifier, Symbol, Ty};
@@ -106,10 +106,10 @@ pub struct SystemBuilder {
     /// map of them.
     symbol_kinds: Vec<Option<Kind>>,
     /// Names of definitions (whose nodes may be symbols' nodes, so known by name).
-    definitions: FastSet<String>,
+    definitions: NameSet<String>,
     /// Names of bodies and constraints declared so far, for duplicate checks.
-    body_names: FastSet<String>,
-    constraint_names: FastSet<String>,
+    body_names: NameSet<String>,
+    constraint_names: NameSet<String>,
     /// Scratch of the walk for a constraint's symbols, kept from one constraint to the next.
     walk: SymbolWalk,
 }
@@ -222,9 +222,9 @@ impl SystemBuilder {
         Ok(SystemBuilder {
             system,
             symbol_kinds,
-            definitions: FastSet::default(),
-            body_names: FastSet::default(),
-            constraint_names: FastSet::default(),
+            definitions: NameSet::default(),
+            body_names: NameSet::default(),
+            constraint_names: NameSet::default(),
             walk: SymbolWalk::default(),
         })
     }
