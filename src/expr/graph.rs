@@ -341,6 +341,9 @@ pub struct Graph {
     same_hash: Vec<Option<Id>>,
     /// Each symbol's node, once made (looked up for every symbol a renaming writes).
     sym_nodes: Vec<Option<Id>>,
+    /// Hashes nodes for `index`, seeded per graph: nodes hold numbers from the file, and an
+    /// unkeyed hash would let a crafted file make them all collide.
+    seed: foldhash::fast::RandomState,
     symbols: Vec<SymbolInfo>,
     by_name: NameMap<String, Symbol>,
 }
@@ -357,6 +360,7 @@ impl Graph {
             index: FastMap::default(),
             same_hash: Vec::new(),
             sym_nodes: Vec::new(),
+            seed: foldhash::fast::RandomState::default(),
             symbols: Vec::new(),
             by_name: NameMap::default(),
         };
@@ -438,7 +442,7 @@ impl Graph {
 
     /// Stores `node` once and returns its id; `ty` must be the node's type.
     fn intern(&mut self, node: Node, ty: Ty) -> Id {
-        let hash = node_hash(&node);
+        let hash = self.seed.hash_one(&node);
         if let Some(id) = self.lookup(hash, &node) {
             return id;
         }
@@ -464,7 +468,7 @@ impl Graph {
 
     /// Looks a node up without adding it.
     pub fn find(&self, node: &Node) -> Option<Id> {
-        self.lookup(node_hash(node), node)
+        self.lookup(self.seed.hash_one(node), node)
     }
 
     // ---- typed constructors ------------------------------------------------------------
@@ -805,11 +809,6 @@ impl Graph {
         let (sa, sb) = (self.symbol(a), self.symbol(b));
         sa.role.rank().cmp(&sb.role.rank()).then_with(|| natural_cmp(&sa.name, &sb.name))
     }
-}
-
-fn node_hash(node: &Node) -> u64 {
-    use std::hash::BuildHasher;
-    BuildHasherDefault::<FxHasher>::default().hash_one(node)
 }
 
 /// Compares names with digit runs as numbers, so `l2 < l10`.
