@@ -19,8 +19,9 @@ use std::collections::HashMap;
 use std::fmt;
 use std::hash::{BuildHasher, BuildHasherDefault, Hasher};
 
-/// FxHash (as in rustc and Firefox): a fast hasher for maps keyed by ids and nodes. The
-/// default SipHash was a tenth of the derivation's time; keys here are small integers.
+/// FxHash (as in rustc and Firefox): a fast hasher for maps keyed by ids (and by nodes'
+/// hashes, which are seeded). The default SipHash was a tenth of the derivation's time;
+/// keys here are small integers the file does not choose. Names use [`NameMap`].
 #[derive(Clone, Copy, Default, Debug)]
 pub struct FxHasher {
     hash: u64,
