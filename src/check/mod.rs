@@ -2,7 +2,7 @@
 //! (`lagrange check`, `tests/constraint_files.rs`) and an API for users' own tests.
 //!
 //! A formula check passes at once when the derived and the expected formula have the same
-//! canonical form ([`Simplifier::equivalent`]). Otherwise both are evaluated at
+//! canonical form ([`Simplifier::equivalent`](crate::expr::Simplifier::equivalent)). Otherwise both are evaluated at
 //! [`STATES`] random states that satisfy the constraints ([`states`]: positions on C = 0,
 //! velocities on Ċ = 0, random forces, parameters from the file) and must agree within the
 //! relative tolerance [`FORMULA_TOLERANCE`]: a person may write `l^2` where lagrange has

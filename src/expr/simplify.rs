@@ -92,7 +92,7 @@ impl Simplifier {
     }
 
     /// [`Simplifier::simplify`], reusing the work done on an expression of the same shape
-    /// (equal up to renaming bodies' symbols, [`Shape`]): the earlier result, renamed.
+    /// (equal up to renaming bodies' symbols, [`Shape`](super::shape::Shape)): the earlier result, renamed.
     ///
     /// For the many entries of a scene that repeat one pattern (A and b of a chain); the
     /// cost of a repeat is a walk over the expression and the result.
