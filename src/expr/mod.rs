@@ -1,7 +1,7 @@
 //! The symbolic core: expression graph, parser, type checker, simplifier, d/dt, ∇, printers.
 //!
 //! Text goes in through [`parse`] and [`lower`]; derivatives come out of [`diff`] and
-//! [`grad`]; [`simplify`] brings any expression to its readable canonical form; [`print`]
+//! [`grad`]; [`simplify`] brings any expression to its readable canonical form; [`print`](mod@print)
 //! writes it back as the expression language, Unicode text or LaTeX.
 //!
 //! This module knows nothing of files, serde, nalgebra or the terminal (a test checks it).

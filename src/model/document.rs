@@ -36,7 +36,7 @@ const MAX_SYNTAX_ERRORS: usize = 8;
 
 /// Parses `text` and reads it into a [`RawFile`]; every problem goes to `problems`.
 /// `None` when the text is not TOML: then the syntax errors (toml's recovering parser finds
-/// them all; the first [`MAX_SYNTAX_ERRORS`] are kept) are the problems, and nothing else is
+/// them all; the first `MAX_SYNTAX_ERRORS` are kept) are the problems, and nothing else is
 /// judged — the tree after a syntax error is the parser's guess, and complaints about it
 /// would mislead.
 pub fn read<'i>(text: &'i str, problems: &mut Vec<Problem>) -> Option<RawFile<'i>> {

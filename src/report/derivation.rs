@@ -508,7 +508,7 @@ fn chain(raw: &str, done: &str) -> String {
     if raw == done { done.to_string() } else { format!("{raw} = {done}") }
 }
 
-/// The derivation as JSON ([`json`]): serialised as one value, with the dense `A` written
+/// The derivation as JSON ([`json`](fn@json)): serialised as one value, with the dense `A` written
 /// row by row from its non-zero entries as it is serialised, so a long chain's N² entries
 /// (mostly `"0"`) are never all held in memory.
 #[derive(Debug)]
