@@ -210,16 +210,21 @@ static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
 /// Any other failure is reported once and makes the exit code 1.
 fn emit(args: std::fmt::Arguments<'_>) {
     use std::io::Write;
-    if let Err(e) = std::io::stdout().lock().write_fmt(args)
-        && e.kind() != std::io::ErrorKind::BrokenPipe
-        && !STDOUT_FAILED.swap(true, Ordering::Relaxed)
-    {
+    if let Err(e) = std::io::stdout().lock().write_fmt(args) {
+        stdout_failed(&e);
+    }
+}
+
+/// Reports a failure to write standard output once, and makes the exit code 1; a closed
+/// pipe is not a failure.
+fn stdout_failed(e: &std::io::Error) {
+    if e.kind() != std::io::ErrorKind::BrokenPipe && !STDOUT_FAILED.swap(true, Ordering::Relaxed) {
         eprintln!("error: cannot write to standard output: {e}");
     }
 }
 
-/// Pretty JSON and a line break to standard output, written as it is serialised, with the
-/// failures of [`emit`] treated as there.
+/// Pretty JSON and a line break to standard output, written as it is serialised; failures as
+/// in [`emit`].
 fn emit_json(value: &impl serde::Serialize) {
     use std::io::Write;
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
@@ -227,11 +232,8 @@ fn emit_json(value: &impl serde::Serialize) {
         .map_err(std::io::Error::from)
         .and_then(|()| out.write_all(b"\n"))
         .and_then(|()| out.flush());
-    if let Err(e) = written
-        && e.kind() != std::io::ErrorKind::BrokenPipe
-        && !STDOUT_FAILED.swap(true, Ordering::Relaxed)
-    {
-        eprintln!("error: cannot write to standard output: {e}");
+    if let Err(e) = written {
+        stdout_failed(&e);
     }
 }
 

@@ -247,7 +247,7 @@ pub enum Role {
 impl Role {
     /// Sort rank: forces, then positions, velocities, accelerations, then the rest, so that
     /// `dot(v, r)` is written `r·v` and `F·r` reads as in the article.
-    fn rank(self) -> (u8, usize) {
+    pub(super) fn rank(self) -> (u8, usize) {
         match self {
             Role::Force { body } => (0, body),
             Role::Position { body } => (1, body),

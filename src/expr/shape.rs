@@ -140,25 +140,14 @@ impl Shaper {
         key.extend(roots.iter().map(|r| self.seen[r.index()].1));
         // What each slot is, and the order the slots' symbols sort in.
         for &s in &symbols {
-            key.push(role_code(g.symbol(s).role));
+            // The kind of role (its sort rank without the body).
+            key.push(u32::from(g.symbol(s).role.rank().0));
         }
         let mut order: Vec<u32> = (0..symbols.len() as u32).collect();
         order.sort_by(|&a, &b| g.cmp_symbols(symbols[a as usize], symbols[b as usize]));
         key.extend(order);
         self.last_len = key.len();
         Shape { key, symbols }
-    }
-}
-
-fn role_code(role: Role) -> u32 {
-    match role {
-        Role::Time => 0,
-        Role::Parameter => 1,
-        Role::Position { .. } => 2,
-        Role::Velocity { .. } => 3,
-        Role::Acceleration { .. } => 4,
-        Role::Force { .. } => 5,
-        Role::Mass { .. } => 6,
     }
 }
 

@@ -82,12 +82,8 @@ impl Simplifier {
             return Ok(s);
         }
         let c = self.canon(g, id)?;
-        let s = self.build(g, &c)?;
+        let s = self.laid_out(g, c)?;
         self.built.insert(id, s);
-        self.built.insert(s, s);
-        // What `build` lays out has the canonical form it came from (the round trip is
-        // tested), so `is_zero`, `content` and `scaled` on the result need not redo it.
-        self.memo.insert_if_absent(s, c);
         Ok(s)
     }
 
@@ -174,10 +170,16 @@ impl Simplifier {
             let q = g.div(minus_n, d)?;
             return self.simplify(g, q);
         };
-        let c = Canon::S(form);
+        self.laid_out(g, Rc::new(Canon::S(form)))
+    }
+
+    /// The readable graph of the form `c`, remembered as simplified. What `build` lays out
+    /// has the canonical form it came from (the round trip is tested), so `is_zero`,
+    /// `content` and `scaled` on the result need not redo it.
+    fn laid_out(&mut self, g: &mut Graph, c: Rc<Canon>) -> Result<Id, TypeError> {
         let s = self.build(g, &c)?;
         self.built.insert(s, s);
-        self.memo.insert_if_absent(s, Rc::new(c));
+        self.memo.insert_if_absent(s, c);
         Ok(s)
     }
 
