@@ -2,6 +2,8 @@
 //! denied) and compute what the reference interpreter computes, for every file in
 //! `constraints/` and for a file of hostile names, plain and specialised.
 
+mod common;
+
 use lagrange::codegen::{Module, Options, module};
 use lagrange::derive::{Derivation, derive};
 use lagrange::expr::eval::{Env, Value, eval_one};
@@ -201,6 +203,9 @@ fn compile_and_run(dir: &Path, main: &str, opt_level: u8) -> String {
 
 #[test]
 fn generated_rust_compiles_and_agrees_with_the_interpreter() {
+    if common::skip_slow("generated_rust_compiles_and_agrees_with_the_interpreter") {
+        return;
+    }
     let mut cases = Vec::new();
     let mut rng = Rng(0x5eed_1234_abcd_0001);
     for path in files() {
@@ -362,6 +367,9 @@ fn chain_file_in_order(n: usize, links: impl Iterator<Item = usize>) -> String {
 /// of A λ + b = 0 with the interpreter's A.
 #[test]
 fn big_chains_get_a_banded_a_that_compiles_and_agrees() {
+    if common::skip_slow("big_chains_get_a_banded_a_that_compiles_and_agrees") {
+        return;
+    }
     const LINKS: usize = 40;
     let text = chain_file(LINKS);
     let mut l = load(&text).expect("chain loads");
@@ -433,6 +441,9 @@ fn numbers(line: &str) -> Vec<f64> {
 /// with the interpreter's A, and the forces as Σₖ λₖ Jₖᵢ with the interpreter's J.
 #[test]
 fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
+    if common::skip_slow("a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees") {
+        return;
+    }
     const STATES: usize = 2;
     let text = lagrange::scenario::chain(BIG_LINKS);
     let mut l = load(&text).expect("chain loads");
@@ -544,6 +555,9 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
 /// Gaussian elimination on the heap, and J is `jacobian_blocks`.
 #[test]
 fn a_big_unbanded_system_gets_a_heap_a_that_compiles_and_agrees() {
+    if common::skip_slow("a_big_unbanded_system_gets_a_heap_a_that_compiles_and_agrees") {
+        return;
+    }
     const LINKS: usize = 100;
     let text = chain_file_in_order(LINKS, (1..=LINKS).step_by(2).chain((2..=LINKS).step_by(2)));
     let code = sparse_j_agrees("heap_a", &text, 0x0dd5_e7e0_0000_0100);
@@ -555,6 +569,9 @@ fn a_big_unbanded_system_gets_a_heap_a_that_compiles_and_agrees() {
 /// A stays a small dense array, but J (11 × 420 entries) is written as its 20 blocks.
 #[test]
 fn few_constraints_on_many_bodies_get_a_sparse_j() {
+    if common::skip_slow("few_constraints_on_many_bodies_get_a_sparse_j") {
+        return;
+    }
     let mut text = chain_file(10);
     let bodies = text.find("\n[[constraints]]").expect("constraints");
     let free: String = (11..=210)

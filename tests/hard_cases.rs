@@ -151,6 +151,9 @@ fn bead_at_speed_1e8_keeps_the_wire_and_its_speed() {
 
 #[test]
 fn chain_of_100_links_keeps_bounded_drift_for_1e5_steps() {
+    if common::skip_slow("chain_of_100_links_keeps_bounded_drift_for_1e5_steps") {
+        return;
+    }
     // 1e5 steps (100 s, 20 times the scene's 5 s; 2 000 in debug builds): with the compiled
     // tape and the band solve a step costs O(N), ~0.2 ms here. Measured in release:
     // max |C| 3.5e-12, max |Ċ| 1.1e-14, energy balance 6.2e-3 of the largest kinetic energy.
@@ -241,6 +244,9 @@ fn ball_bounces_with_restitution() {
 
 #[test]
 fn pendulum_1e6_verlet_steps_have_bounded_energy_error() {
+    if common::skip_slow("pendulum_1e6_verlet_steps_have_bounded_energy_error") {
+        return;
+    }
     // A million steps (1 000 s, ~450 periods; 1e5 in debug builds): RATTLE keeps the energy
     // error bounded — the same size in the last tenth as in the first.
     let steps: u64 = if cfg!(debug_assertions) { 100_000 } else { 1_000_000 };

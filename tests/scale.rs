@@ -11,6 +11,9 @@ use lagrange::scenario::{Scenario, chain};
 
 #[test]
 fn a_thousand_body_chain_simulates() {
+    if common::skip_slow("a_thousand_body_chain_simulates") {
+        return;
+    }
     let loaded = load(&chain(1000)).expect("valid");
     let s = Scenario::new(loaded, &[]).expect("derives");
     assert_eq!((s.system.bodies.len(), s.system.constraints.len()), (1000, 1000));

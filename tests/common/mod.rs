@@ -13,6 +13,21 @@ use lagrange::numeric::simulate::{Failure, Frame, Settings, Summary};
 use lagrange::numeric::stabilize::Stabilize;
 use lagrange::scenario::Scenario;
 
+/// The environment variable that makes the slow tests (the 10⁵-step chain, the 10⁶-step
+/// pendulum, the rustc compiles of generated modules, the 1000-body chain) return at once:
+/// `LAGRANGE_QUICK_TESTS=1 cargo test --release` is the fast suite for a developer. The
+/// README's `cargo test --release`, and CI (which unsets it), run everything.
+pub const QUICK: &str = "LAGRANGE_QUICK_TESTS";
+
+/// Whether the slow test `name` is to be skipped (see [`QUICK`]); says so on stderr.
+pub fn skip_slow(name: &str) -> bool {
+    let skip = std::env::var_os(QUICK).is_some();
+    if skip {
+        eprintln!("{name}: skipped ({QUICK} is set)");
+    }
+    skip
+}
+
 /// A small deterministic generator (SplitMix64): tests must be reproducible.
 pub struct Rng(u64);
 
