@@ -239,3 +239,20 @@ fn closed_standard_output_is_not_a_failure() {
     assert!(out.status.success(), "exit {:?}, stderr: {stderr}", out.status.code());
     assert!(stderr.is_empty(), "a closed pipe printed: {stderr}");
 }
+
+/// An endless input (`/dev/zero`) and a file past the size limit are refused after reading
+/// at most one byte more than the limit: at once, with a bounded amount of memory (before,
+/// `/dev/zero` was read until memory ran out).
+#[test]
+fn endless_and_oversized_inputs_are_refused_while_reading() {
+    let started = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).args(["derive", "/dev/zero"]).output().expect("binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("too large"), "{stderr}");
+    // Generous: reading 16 MiB takes milliseconds; what this excludes is reading forever.
+    assert!(started.elapsed().as_secs() < 30, "took {:?}", started.elapsed());
+
+    let big = vec![b'#'; (16 << 20) + 1];
+    refused("oversized", &big, "too large");
+}
