@@ -15,14 +15,25 @@
 //! entries of a shape seen before (`Simplifier::simplify_alike`). What comes out is what
 //! deriving it alone gives; a chain's link costs a renaming, not a derivation.
 //!
+//! The model stays as it was loaded: [`derive`] reads a `&System` and the [`Derivation`]
+//! owns everything it adds. Its graph is the system's graph, copied once and extended
+//! (nodes are appended, never changed), so every id of the system — constraints, masses,
+//! the bodies' symbol nodes, expectations — means the same node in the derivation's graph,
+//! and one graph answers every lookup afterwards. The copy is a few flat vectors and an
+//! index, small next to the nodes a derivation adds; a layered graph (the system's nodes
+//! below, the derivation's above) would make every lookup ask which layer. Beside the
+//! formulas the derivation owns what the documents show that is not a number: the
+//! multiplier symbols `lambda_<name>` and the force sums Σₖ λₖ Jₖᵢ of several constraints,
+//! and, derived [`with steps`](Options::steps), each C̈ with Newton's law substituted.
+//!
 //! Not here: numbers (`numeric`), layouts of the derivation for people (`report`).
 
 use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
 use crate::expr::graph::FastMap;
 use crate::expr::shape::{Reuse, Shaper};
-use crate::expr::{Id, Rational, Role, Symbol, TypeError};
-use crate::model::system::System;
+use crate::expr::{Graph, Id, Rational, Role, Simplifier, Symbol, Ty, TypeError};
+use crate::model::system::{BuildError, System};
 use std::collections::HashMap;
 
 /// Everything derived for one constraint.
@@ -47,8 +58,13 @@ pub struct DerivedConstraint {
 }
 
 /// The derivation of a whole system.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Derivation {
+    /// The system's graph with every node the derivation built: each id of the system is
+    /// valid here and means the same node.
+    pub graph: Graph,
+    /// The simplifier of `graph`, with what it remembers of the derivation.
+    pub simplifier: Simplifier,
     pub constraints: Vec<DerivedConstraint>,
     /// Non-zero entries `(k, j, Aₖⱼ)` with `k ≤ j` (A is symmetric).
     pub a: Vec<(usize, usize, Id)>,
@@ -57,9 +73,34 @@ pub struct Derivation {
     pub lambda: Option<Id>,
     /// `(body, force)` in closed form, when there is a single constraint.
     pub forces: Option<Vec<(usize, Id)>>,
+    /// Several constraints: each one's multiplier λₖ, the node of the scalar symbol
+    /// `lambda_<name>`, by constraint. Empty for a single constraint (λ has a closed form).
+    pub multipliers: Vec<Id>,
+    /// Several constraints: `(body, Σₖ λₖ Jₖᵢ)` in the multiplier symbols, for each body some
+    /// constraint acts on, in body order. Empty for a single constraint.
+    pub force_sums: Vec<(usize, Id)>,
+    /// With [`Options::steps`]: each C̈ with Newton's law aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ substituted
+    /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`.
+    pub newton: Option<Vec<Id>>,
+}
+
+/// What [`derive_with`] derives beyond the formulas.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Options {
+    /// Newton's law substituted into each C̈ (`derive --steps` shows it).
+    pub steps: bool,
 }
 
 impl Derivation {
+    /// Parses and type-checks `text` in `system`'s scope into the derivation's graph (an
+    /// expected formula to compare with a derived one).
+    pub fn expression(&mut self, system: &System, text: &str) -> Result<Id, BuildError> {
+        let syntax = crate::expr::parse::parse_expr(text)
+            .map_err(|error| BuildError::Parse { context: String::new(), error })?;
+        crate::expr::lower::lower(&syntax, &system.scope, &mut self.graph)
+            .map_err(|error| BuildError::Lower { context: String::new(), error })
+    }
+
     /// `Aₖⱼ` (either order), if non-zero.
     pub fn a_entry(&self, k: usize, j: usize) -> Option<Id> {
         let (k, j) = if k <= j { (k, j) } else { (j, k) };
@@ -79,7 +120,15 @@ pub enum DeriveError {
 }
 
 /// Runs DESIGN.md steps 1–5 on every constraint of `system`.
-pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
+pub fn derive(system: &System) -> Result<Derivation, DeriveError> {
+    derive_with(system, Options::default())
+}
+
+/// [`derive`], and what `options` asks for beyond the formulas.
+pub fn derive_with(system: &System, options: Options) -> Result<Derivation, DeriveError> {
+    let mut graph = system.graph.clone();
+    let mut simplifier = Simplifier::new();
+    let (g, s) = (&mut graph, &mut simplifier);
     let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
     // Constraints already derived, by shape: a repeat (the next link of a chain) is the
     // earlier derivation with the bodies renamed.
@@ -87,35 +136,31 @@ pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
     let mut shaper = Shaper::default();
     // With one constraint nothing repeats: shapes would be work for nothing.
     let repeats = system.constraints.len() > 1;
-    if repeats {
-        // A link of a chain adds about 60 nodes to the graph.
-        system.graph.reserve(64 * system.constraints.len());
-    }
+    // A link of a chain adds about 60 nodes to the graph; the article's bead about 200.
+    g.reserve(if repeats { 64 * system.constraints.len() } else { 256 });
     for k in 0..system.constraints.len() {
         if !repeats {
-            constraints.push(derive_constraint(system, k)?);
+            constraints.push(derive_constraint(system, g, s, k)?);
             continue;
         }
-        let shape = shaper.shape(&system.graph, &[system.constraints[k].c]);
+        let shape = shaper.shape(g, &[system.constraints[k].c]);
         let repeat = match derived.get_mut(&shape.key) {
-            Some((earlier, reuse)) => renamed(system, &constraints[*earlier], reuse, &shape.symbols, k),
+            Some((earlier, reuse)) => renamed(system, g, s, &constraints[*earlier], reuse, &shape.symbols, k),
             None => None,
         };
         let dc = match repeat {
             Some(dc) => dc,
             None => {
-                let dc = derive_constraint(system, k)?;
+                let dc = derive_constraint(system, g, s, k)?;
                 derived.insert(shape.key, (k, Reuse::new(roots(&dc), shape.symbols, true)));
                 dc
             }
         };
         constraints.push(dc);
     }
-    let (a, b) = assemble(system, &constraints, repeats)?;
+    let (a, b) = assemble(system, g, s, &constraints, repeats)?;
     let (mut lambda, mut forces) = (None, None);
     if let [only] = constraints.as_slice() {
-        let g = &mut system.graph;
-        let s = &mut system.simplifier;
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
         let l = s.negated_quotient(g, b[0], a00)?;
@@ -127,16 +172,72 @@ pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
         lambda = Some(l);
         forces = Some(f);
     }
-    Ok(Derivation { constraints, a, b, lambda, forces })
+    let newton = if options.steps { Some(newton(system, g, &constraints)?) } else { None };
+    let (multipliers, force_sums) = if repeats { force_sums(system, g, &constraints)? } else { Default::default() };
+    Ok(Derivation { graph, simplifier, constraints, a, b, lambda, forces, multipliers, force_sums, newton })
 }
 
-fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint, DeriveError> {
-    let name = system.constraints[k].name.clone();
+/// Each C̈ with aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ for every body it involves, in new vector symbols F_c,ᵢ.
+fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> Result<Vec<Id>, TypeError> {
+    let mut fc_nodes = Vec::with_capacity(system.bodies.len());
+    for body in &system.bodies {
+        let name = if system.bodies.len() == 1 { "F_c".to_string() } else { format!("F_c_{}", body.name) };
+        let s = g.declare(&name, Ty::Vector, Role::Parameter);
+        fc_nodes.push(g.sym(s));
+    }
+    let mut out = Vec::with_capacity(constraints.len());
+    for (k, dc) in constraints.iter().enumerate() {
+        let mut map = HashMap::new();
+        for &body in &system.constraints[k].bodies {
+            let b = &system.bodies[body];
+            let total = g.add(vec![b.nodes.force, fc_nodes[body]])?;
+            let inv_m = g.powi(b.mass, -1)?;
+            let accel = g.mul(vec![inv_m, total])?;
+            map.insert(b.nodes.acceleration, accel);
+        }
+        out.push(g.substitute(dc.c_ddot, &map)?);
+    }
+    Ok(out)
+}
+
+/// The multiplier symbols `lambda_<name>` of several constraints, and the force on each body
+/// as Σₖ λₖ Jₖᵢ in them.
+#[allow(clippy::type_complexity)]
+fn force_sums(
+    system: &System,
+    g: &mut Graph,
+    constraints: &[DerivedConstraint],
+) -> Result<(Vec<Id>, Vec<(usize, Id)>), TypeError> {
+    let mut multipliers = Vec::with_capacity(constraints.len());
+    for c in &system.constraints {
+        let s = g.declare(&format!("lambda_{}", c.name), Ty::Scalar, Role::Parameter);
+        multipliers.push(g.sym(s));
+    }
+    let mut sums = Vec::new();
+    for body in 0..system.bodies.len() {
+        let mut terms = Vec::new();
+        for (k, dc) in constraints.iter().enumerate() {
+            if let Some(&(_, j)) = dc.direction.iter().find(|(b, _)| *b == body) {
+                terms.push(g.mul(vec![multipliers[k], j])?);
+            }
+        }
+        if !terms.is_empty() {
+            sums.push((body, g.add(terms)?));
+        }
+    }
+    Ok((multipliers, sums))
+}
+
+fn derive_constraint(
+    system: &System,
+    g: &mut Graph,
+    s: &mut Simplifier,
+    k: usize,
+) -> Result<DerivedConstraint, DeriveError> {
+    let name = &system.constraints[k].name;
     let diff_error = |error| DeriveError::Diff { name: name.clone(), error };
     let c_raw = system.constraints[k].c;
-    let involved = system.constraints[k].bodies.clone();
-    let g = &mut system.graph;
-    let s = &mut system.simplifier;
+    let involved = &system.constraints[k].bodies;
     let c = s.simplify(g, c_raw)?;
     let c_dot_raw = time_derivative(g, c).map_err(diff_error)?;
     let c_dot = s.simplify(g, c_dot_raw)?;
@@ -144,7 +245,7 @@ fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint,
     let c_ddot = s.simplify(g, c_ddot_raw)?;
     let mut gradient_parts = Vec::with_capacity(involved.len());
     let mut scale: Option<Rational> = None;
-    for &body in &involved {
+    for &body in involved {
         let r = system.bodies[body].position;
         let grad = gradient(g, c, r)?;
         let grad = s.simplify(g, grad)?;
@@ -168,8 +269,7 @@ fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint,
     let zero = g.zero_vector();
     let mut to_zero = FastMap::default();
     for &(body, _) in &gradient_parts {
-        let a = g.sym(system.bodies[body].acceleration);
-        to_zero.insert(a, zero);
+        to_zero.insert(system.bodies[body].nodes.acceleration, zero);
     }
     let at_rest = g.substitute(c_ddot, &to_zero)?;
     let c_term = s.scaled(g, at_rest, &inv)?;
@@ -197,13 +297,14 @@ fn roots(dc: &DerivedConstraint) -> Vec<Id> {
 /// `earlier`'s derivation (kept in `reuse`) renamed to constraint `k`, of the same shape,
 /// whose symbols are `to`; `None` if the bodies do not correspond.
 fn renamed(
-    system: &mut System,
+    system: &System,
+    g: &mut Graph,
+    s: &mut Simplifier,
     earlier: &DerivedConstraint,
     reuse: &mut Reuse,
     to: &[Symbol],
     k: usize,
 ) -> Option<DerivedConstraint> {
-    let g = &mut system.graph;
     let new = reuse.renamed(g, to)?;
     let from = reuse.slots();
     // Bodies correspond through their positions' slots.
@@ -217,7 +318,6 @@ fn renamed(
         parts.push((involved.iter().position(|&b| b == body)?, body, new[6 + j], new[6 + n + j]));
     }
     parts.sort_by_key(|e| e.0);
-    let s = &mut system.simplifier;
     for &id in [new[0], new[2], new[4], new[5]].iter().chain(&new[6..]) {
         s.adopt(id);
     }
@@ -238,7 +338,9 @@ fn renamed(
 /// entries of the same shape as earlier ones are renamed from them.
 #[allow(clippy::type_complexity)]
 fn assemble(
-    system: &mut System,
+    system: &System,
+    g: &mut Graph,
+    s: &mut Simplifier,
     constraints: &[DerivedConstraint],
     repeats: bool,
 ) -> Result<(Vec<(usize, usize, Id)>, Vec<Id>), TypeError> {
@@ -249,8 +351,6 @@ fn assemble(
             on_body[body].push((k, j));
         }
     }
-    let g = &mut system.graph;
-    let s = &mut system.simplifier;
     let mut inv_mass = Vec::with_capacity(system.bodies.len());
     for body in &system.bodies {
         inv_mass.push(g.powi(body.mass, -1)?);
@@ -287,8 +387,7 @@ fn assemble(
     for dc in constraints {
         let mut terms = Vec::with_capacity(dc.direction.len() + 1);
         for &(body, j) in &dc.direction {
-            let f = g.sym(system.bodies[body].force);
-            let dot = g.dot(j, f)?;
+            let dot = g.dot(j, system.bodies[body].nodes.force)?;
             terms.push(g.mul(vec![dot, inv_mass[body]])?);
         }
         terms.push(dc.c_term);

@@ -63,7 +63,7 @@ fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
     match &s.derivation.forces {
         Some(closed) => {
             let ids: Vec<_> = closed.iter().map(|&(_, id)| id).collect();
-            let values = eval(&s.system.graph, &ids, env).ok()?;
+            let values = eval(&s.derivation.graph, &ids, env).ok()?;
             let mut out = vec![[0.0; 3]; s.system.bodies.len()];
             for (&(b, _), v) in closed.iter().zip(values) {
                 out[b] = v.vector()?;
@@ -80,7 +80,7 @@ fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
 
 /// The same forces in double-double (None where the reference is undefined there).
 fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
-    let graph = &s.system.graph;
+    let graph = &s.derivation.graph;
     let n = s.system.bodies.len();
     let zero = TwoFloat::from(0.0);
     if let Some(closed) = &s.derivation.forces {

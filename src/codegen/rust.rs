@@ -130,14 +130,15 @@ pub struct Module {
 }
 
 /// Generates the Rust module for a loaded file (the source text).
-pub fn generate(loaded: &mut Loaded, options: &Options) -> Result<String, GenerateError> {
+pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateError> {
     Ok(module(loaded, options)?.code)
 }
 
 /// Generates the Rust module for a loaded file, with its `State` layout.
-pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, GenerateError> {
-    let d = derive(&mut loaded.system)?;
-    let system = &mut loaded.system;
+pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
+    // The module's own derivation: `--specialize` extends its graph.
+    let mut d = derive(&loaded.system)?;
+    let system = &loaded.system;
     let mut formulas = Formulas {
         c: d.constraints.iter().map(|c| c.c).collect(),
         a: d.a.clone(),
@@ -150,7 +151,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     let mut substituted = HashSet::new();
     let mut map = HashMap::new();
     if options.specialize {
-        let g = &mut system.graph;
+        let g = &mut d.graph;
         for (name, value) in &loaded.values {
             let Some(s) = g.symbol_named(name) else { continue };
             let bad = || GenerateError::BadValue(name.clone());
@@ -175,7 +176,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             map.insert(sym, node);
             substituted.insert(s);
         }
-        let simplifier = &mut system.simplifier;
+        let simplifier = &mut d.simplifier;
         formulas = formulas.map(|id| {
             let replaced = g.substitute(id, &map)?;
             let simplified = simplifier.simplify(g, replaced)?;
@@ -188,12 +189,13 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     // canonical Aₖⱼ expands each dot bilinearly (a chain's (r₁ − r₂)·(r₂ − r₃) becomes four dot
     // products), which costs more operations and loses digits to cancellation. The doc
     // comments keep the canonical form.
-    let masses = system.bodies.iter().map(|b| system.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
-    let a_code = assembled_a(&mut system.graph, &formulas, &masses)?;
-    let g = &system.graph;
+    let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
+    let a_code = assembled_a(&mut d.graph, &formulas, &masses)?;
+    let g = &d.graph;
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
-    let fields = state_fields(g, &body_names, &substituted);
+    // The state holds the file's symbols, not those the derivation declared (the multipliers).
+    let fields = state_fields(&system.graph, &body_names, &substituted);
     let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
     let slots = slot_exprs(g, &fields);
     let (dim, n, k) = (g.dim(), system.bodies.len(), system.constraints.len());

@@ -72,15 +72,15 @@ impl RowProgram {
     /// Gathers the rows of `derivation`. The external force on body i is `forces`' expression
     /// for i when it has one (so a simulation re-evaluates `F = m*g - k*v` at every state),
     /// else the body's force symbol, whose value the state gives.
-    pub fn new(system: &mut System, derivation: &Derivation, forces: &[(usize, Id)]) -> RowProgram {
+    pub fn new(system: &System, derivation: &Derivation, forces: &[(usize, Id)]) -> RowProgram {
+        let graph = &derivation.graph;
         let mut roots = Vec::new();
         for (i, body) in system.bodies.iter().enumerate() {
-            let v = system.graph.sym(body.velocity);
             let f = match forces.iter().find(|(b, _)| *b == i) {
                 Some(&(_, expr)) => expr,
-                None => system.graph.sym(body.force),
+                None => body.nodes.force,
             };
-            roots.extend([body.mass, v, f]);
+            roots.extend([body.mass, body.nodes.velocity, f]);
         }
         let mut inverse_scale = Vec::new();
         let mut shape = Vec::new();
@@ -90,11 +90,10 @@ impl RowProgram {
             inverse_scale.push(d.scale.recip().unwrap_or(Rational::ONE).to_f64());
             shape.push((system.constraints[k].inequality, d.direction.iter().map(|&(b, _)| b).collect()));
         }
-        let inputs: Vec<Symbol> = system
-            .graph
+        let inputs: Vec<Symbol> = graph
             .reachable(&roots)
             .into_iter()
-            .filter_map(|id| match system.graph.node(id) {
+            .filter_map(|id| match graph.node(id) {
                 Node::Sym(s) => Some(*s),
                 _ => None,
             })
@@ -102,7 +101,7 @@ impl RowProgram {
             .into_iter()
             .collect();
         // Every symbol a root reads is an input and each is listed once, so lowering cannot fail.
-        let tape = Tape::compile(&system.graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
+        let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
         RowProgram { roots, inverse_scale, shape, tape, inputs }
     }
 
@@ -110,12 +109,12 @@ impl RowProgram {
     /// `--set F=…`): a body whose force symbol is named in `given` keeps that symbol, so the
     /// state's value replaces the scene's expression.
     pub fn with_given_forces(
-        system: &mut System,
+        system: &System,
         derivation: &Derivation,
         forces: &[(usize, Id)],
         given: &[&str],
     ) -> RowProgram {
-        let named = |b: usize| given.contains(&system.graph.symbol(system.bodies[b].force).name.as_str());
+        let named = |b: usize| given.contains(&derivation.graph.symbol(system.bodies[b].force).name.as_str());
         let forces: Vec<(usize, Id)> = forces.iter().copied().filter(|&(b, _)| !named(b)).collect();
         RowProgram::new(system, derivation, &forces)
     }
@@ -190,9 +189,9 @@ impl RowProgram {
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of
-    /// the compiled path.
-    pub fn evaluate_interpreted(&self, system: &System, env: &Env) -> Result<Rows, EvalError> {
-        let values = eval(&system.graph, &self.roots, env)?;
+    /// the compiled path; `derivation` is the one the program was gathered from.
+    pub fn evaluate_interpreted(&self, system: &System, derivation: &Derivation, env: &Env) -> Result<Rows, EvalError> {
+        let values = eval(&derivation.graph, &self.roots, env)?;
         let n = system.bodies.len();
         let vector = |v: Value| v.vector().unwrap_or([f64::NAN; 3]);
         let scalar = |v: Value| v.scalar().unwrap_or(f64::NAN);

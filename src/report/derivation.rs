@@ -14,7 +14,7 @@
 
 use crate::derive::Derivation;
 use crate::expr::print::{PrintError, Style, print};
-use crate::expr::{Graph, Id, Role, Ty, TypeError};
+use crate::expr::{Graph, Id, TypeError};
 use crate::model::system::System;
 use serde_json::{Value, json};
 use std::fmt::Write;
@@ -34,6 +34,9 @@ pub enum ReportError {
     Print(#[from] PrintError),
     #[error(transparent)]
     Type(#[from] TypeError),
+    /// `--steps` of a derivation made without them ([`derive_with`](crate::derive::derive_with)).
+    #[error("the derivation was made without steps (Options::steps)")]
+    NoSteps,
 }
 
 /// How expressions look in one document format.
@@ -258,7 +261,7 @@ fn latex_escape(s: &str) -> String {
 }
 
 /// The derivation as a document (text, LaTeX or Markdown).
-pub fn document(system: &mut System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
+pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
     let doc = Doc::new(format);
     let mut out = String::new();
     let title = if system.title.is_empty() { "Constraint forces".to_string() } else { system.title.clone() };
@@ -285,8 +288,8 @@ fn kind(system: &System, k: usize) -> &'static str {
     if system.constraints[k].inequality { "inequality C ≥ 0" } else { "equality C = 0" }
 }
 
-fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
-    let g = &system.graph;
+fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    let g = &d.graph;
     let many = d.constraints.len() > 1;
     for (k, dc) in d.constraints.iter().enumerate() {
         let c = &system.constraints[k];
@@ -323,7 +326,7 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
 
 /// The entries of A (upper triangle, non-zero) and b, named by constraints when several.
 fn a_and_b(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
-    let g = &system.graph;
+    let g = &d.graph;
     let many = d.constraints.len() > 1;
     let name = |k: usize| system.constraints[k].name.as_str();
     for &(k, j, a) in &d.a {
@@ -366,36 +369,21 @@ fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
 }
 
 /// For several constraints: the force on each body as Σₖ λₖ Jₖᵢ, with named multipliers.
-fn forces_as_sums(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+fn forces_as_sums(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
     doc.heading(out, "Constraint forces (λ solves A λ = −b at a state: lagrange solve)");
-    let mut lambdas = Vec::with_capacity(d.constraints.len());
-    for c in &system.constraints {
-        let s = system.graph.declare(&format!("lambda_{}", c.name), Ty::Scalar, Role::Parameter);
-        lambdas.push(system.graph.sym(s));
-    }
-    for body in 0..system.bodies.len() {
-        let mut terms = Vec::new();
-        for (k, dc) in d.constraints.iter().enumerate() {
-            if let Some(&(_, j)) = dc.direction.iter().find(|(b, _)| *b == body) {
-                terms.push(system.graph.mul(vec![lambdas[k], j])?);
-            }
-        }
-        if terms.is_empty() {
-            continue;
-        }
-        let sum = system.graph.add(terms)?;
-        let name = system.bodies[body].name.clone();
-        doc.line(out, &doc.sym("force", &name), &doc.expr(&system.graph, sum)?);
+    for &(body, sum) in &d.force_sums {
+        doc.line(out, &doc.sym("force", &system.bodies[body].name), &doc.expr(&d.graph, sum)?);
     }
     Ok(())
 }
 
-fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    let newton = d.newton.as_ref().ok_or(ReportError::NoSteps)?;
     let many = d.constraints.len() > 1;
     for (k, dc) in d.constraints.iter().enumerate() {
-        let (name, text) = (system.constraints[k].name.clone(), system.constraints[k].text.clone());
+        let (name, text) = (&system.constraints[k].name, &system.constraints[k].text);
         let sub = if many { name.as_str() } else { "" };
-        let g = &system.graph;
+        let g = &d.graph;
         doc.heading(out, &format!("Constraint {name}: {text}"));
         doc.para(out, &format!("Step 1. The position constraint, written as C = 0 ({}):", kind(system, k)));
         doc.line(out, &doc.sym("C", sub), &doc.expr(g, dc.c)?);
@@ -409,27 +397,9 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
     // Newton: aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ, substituted into each C̈.
     doc.heading(out, "Newton's law");
     doc.para(out, "Step 4. Each body obeys m a = F + F_c, so a = (F + F_c)/m. Substituted into C̈ = 0:");
-    let mut fc_nodes = Vec::with_capacity(system.bodies.len());
-    for body in &system.bodies {
-        let name = if system.bodies.len() == 1 { "F_c".to_string() } else { format!("F_c_{}", body.name) };
-        let s = system.graph.declare(&name, Ty::Vector, Role::Parameter);
-        fc_nodes.push(system.graph.sym(s));
-    }
-    for (k, dc) in d.constraints.iter().enumerate() {
-        let mut map = std::collections::HashMap::new();
-        for &body in &system.constraints[k].bodies {
-            let b = &system.bodies[body];
-            let g = &mut system.graph;
-            let a = g.sym(b.acceleration);
-            let f = g.sym(b.force);
-            let total = g.add(vec![f, fc_nodes[body]])?;
-            let inv_m = g.powi(b.mass, -1)?;
-            let accel = g.mul(vec![inv_m, total])?;
-            map.insert(a, accel);
-        }
-        let substituted = system.graph.substitute(dc.c_ddot, &map)?;
-        let sub = if many { system.constraints[k].name.clone() } else { String::new() };
-        doc.line(out, &doc.sym("Cddot", &sub), &format!("{} = 0", doc.expr(&system.graph, substituted)?));
+    for (k, &substituted) in newton.iter().enumerate() {
+        let sub = if many { system.constraints[k].name.as_str() } else { "" };
+        doc.line(out, &doc.sym("Cddot", sub), &format!("{} = 0", doc.expr(&d.graph, substituted)?));
     }
     doc.heading(out, "The direction of the force");
     doc.para(
@@ -441,7 +411,7 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
     for (k, dc) in d.constraints.iter().enumerate() {
         let sub = if many { system.constraints[k].name.clone() } else { String::new() };
         for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
-            let g = &system.graph;
+            let g = &d.graph;
             let name = &system.bodies[body].name;
             let lhs = doc.label(&doc.sym("grad", &sub), &format!("on {name}"));
             let rhs = if dc.scale.is_one() {
@@ -466,11 +436,7 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
              C̈ₖ/κₖ = Σᵢ Jₖᵢ·aᵢ + cₖ, with cₖ = C̈ₖ/κₖ at a = 0:",
         );
         for (k, dc) in d.constraints.iter().enumerate() {
-            doc.line(
-                out,
-                &doc.entry("c", &[system.constraints[k].name.as_str()]),
-                &doc.expr(&system.graph, dc.c_term)?,
-            );
+            doc.line(out, &doc.entry("c", &[system.constraints[k].name.as_str()]), &doc.expr(&d.graph, dc.c_term)?);
         }
         doc.para(
             out,
@@ -480,7 +446,7 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
     } else {
         doc.para(out, "Step 6. With F_c = Σ λ J, the conditions C̈ = 0 are linear in λ: A λ + b = 0, where");
     }
-    let g = &system.graph;
+    let g = &d.graph;
     a_and_b(system, d, doc, out)?;
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
         doc.para(out, "so λ = −b/A:");
@@ -570,7 +536,7 @@ impl serde::Serialize for JsonDerivation {
 
 /// The derivation as JSON: every expression a string in the expression language.
 pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportError> {
-    let g = &system.graph;
+    let g = &d.graph;
     let e = |id: Id| print(g, id, Style::Source);
     let mut constraints = Vec::new();
     for (k, dc) in d.constraints.iter().enumerate() {
