@@ -26,6 +26,12 @@
 //! multiplier symbols `lambda_<name>` and the force sums Σₖ λₖ Jₖᵢ of several constraints,
 //! and, derived [`with steps`](Options::steps), each C̈ with Newton's law substituted.
 //!
+//! Names: ∇C is `gradient`, J = ∇C/κ is `jacobian` and c is `bias` here and in
+//! `numeric::rows`; the user-facing names stay (`derive --format json` calls J `"gradient"`
+//! and c `"c"`, the generated Rust has `jacobian` and `c_term`; ARCHITECTURE.md has the
+//! table). A renamed derivation comes back as one list whose layout is named once
+//! (`Scalars`, then ∇C and J per body).
+//!
 //! Not here: numbers (`numeric`), layouts of the derivation for people (`report`).
 
 use crate::expr::diff::{DiffError, time_derivative};
@@ -52,9 +58,9 @@ pub struct DerivedConstraint {
     /// κ: the positive constant content taken out of ∇C.
     pub scale: Rational,
     /// `(body, J = ∇C / κ)`.
-    pub direction: Vec<(usize, Id)>,
+    pub jacobian: Vec<(usize, Id)>,
     /// `c = C̈|ₐ₌₀ / κ`, so that C̈/κ = Σᵢ Jᵢ·aᵢ + c.
-    pub c_term: Id,
+    pub bias: Id,
 }
 
 /// The derivation of a whole system.
@@ -152,7 +158,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
             Some(dc) => dc,
             None => {
                 let dc = derive_constraint(system, g, s, k)?;
-                derived.insert(shape.key, (k, Reuse::new(roots(&dc), shape.symbols, true)));
+                derived.insert(shape.key, (k, Reuse::new(Roots::of(&dc), shape.symbols, true)));
                 dc
             }
         };
@@ -164,8 +170,8 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
         let l = s.negated_quotient(g, b[0], a00)?;
-        let mut f = Vec::with_capacity(only.direction.len());
-        for &(body, j) in &only.direction {
+        let mut f = Vec::with_capacity(only.jacobian.len());
+        for &(body, j) in &only.jacobian {
             let product = g.mul(vec![l, j])?;
             f.push((body, s.simplify(g, product)?));
         }
@@ -217,7 +223,7 @@ fn force_sums(
     for body in 0..system.bodies.len() {
         let mut terms = Vec::new();
         for (k, dc) in constraints.iter().enumerate() {
-            if let Some(&(_, j)) = dc.direction.iter().find(|(b, _)| *b == body) {
+            if let Some(&(_, j)) = dc.jacobian.iter().find(|(b, _)| *b == body) {
                 terms.push(g.mul(vec![multipliers[k], j])?);
             }
         }
@@ -261,9 +267,9 @@ fn derive_constraint(
     }
     let scale = scale.ok_or_else(|| DeriveError::ZeroGradient(name.clone()))?;
     let inv = scale.recip().unwrap_or(Rational::ONE);
-    let mut direction = Vec::with_capacity(gradient_parts.len());
+    let mut jacobian = Vec::with_capacity(gradient_parts.len());
     for &(body, grad) in &gradient_parts {
-        direction.push((body, s.scaled(g, grad, &inv)?));
+        jacobian.push((body, s.scaled(g, grad, &inv)?));
     }
     // c = C̈ with every acceleration set to zero, over κ.
     let zero = g.zero_vector();
@@ -272,26 +278,69 @@ fn derive_constraint(
         to_zero.insert(system.bodies[body].nodes.acceleration, zero);
     }
     let at_rest = g.substitute(c_ddot, &to_zero)?;
-    let c_term = s.scaled(g, at_rest, &inv)?;
-    Ok(DerivedConstraint {
-        c,
-        c_dot_raw,
-        c_dot,
-        c_ddot_raw,
-        c_ddot,
-        gradient: gradient_parts,
-        scale,
-        direction,
-        c_term,
-    })
+    let bias = s.scaled(g, at_rest, &inv)?;
+    Ok(DerivedConstraint { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, gradient: gradient_parts, scale, jacobian, bias })
 }
 
-/// Every expression of a derived constraint, in the order [`renamed`] reads them back.
-fn roots(dc: &DerivedConstraint) -> Vec<Id> {
-    let mut roots = vec![dc.c, dc.c_dot_raw, dc.c_dot, dc.c_ddot_raw, dc.c_ddot, dc.c_term];
-    roots.extend(dc.gradient.iter().map(|e| e.1));
-    roots.extend(dc.direction.iter().map(|e| e.1));
-    roots
+/// The expressions of a derived constraint that do not depend on the bodies it acts on.
+#[derive(Clone, Copy)]
+struct Scalars {
+    c: Id,
+    c_dot_raw: Id,
+    c_dot: Id,
+    c_ddot_raw: Id,
+    c_ddot: Id,
+    bias: Id,
+}
+
+impl Scalars {
+    const LEN: usize = 6;
+
+    fn of(dc: &DerivedConstraint) -> Scalars {
+        let DerivedConstraint { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias, .. } = *dc;
+        Scalars { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias }
+    }
+
+    fn ids(self) -> [Id; Scalars::LEN] {
+        [self.c, self.c_dot_raw, self.c_dot, self.c_ddot_raw, self.c_ddot, self.bias]
+    }
+
+    fn from_ids(ids: [Id; Scalars::LEN]) -> Scalars {
+        let [c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias] = ids;
+        Scalars { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias }
+    }
+
+    /// The simplified ones, which the simplifier may take as canonical when renamed (the
+    /// product rule's raw forms are not).
+    fn simplified(self) -> [Id; 4] {
+        [self.c, self.c_dot, self.c_ddot, self.bias]
+    }
+}
+
+/// A derived constraint's expressions as one list, as a [`Reuse`] keeps and renames them:
+/// the [`Scalars`], then ∇C of each of its bodies, then J of each, in its body order.
+struct Roots {
+    /// How many bodies ∇C and J have.
+    bodies: usize,
+}
+
+impl Roots {
+    fn of(dc: &DerivedConstraint) -> Vec<Id> {
+        let mut roots = Scalars::of(dc).ids().to_vec();
+        roots.extend(dc.gradient.iter().map(|e| e.1));
+        roots.extend(dc.jacobian.iter().map(|e| e.1));
+        roots
+    }
+
+    /// The scalars, ∇C per body and J per body of `ids`; `None` if it is not of this layout.
+    fn split<'a>(&self, ids: &'a [Id]) -> Option<(Scalars, &'a [Id], &'a [Id])> {
+        let (scalars, per_body) = ids.split_first_chunk::<{ Scalars::LEN }>()?;
+        if per_body.len() != 2 * self.bodies {
+            return None;
+        }
+        let (gradient, jacobian) = per_body.split_at(self.bodies);
+        Some((Scalars::from_ids(*scalars), gradient, jacobian))
+    }
 }
 
 /// `earlier`'s derivation (kept in `reuse`) renamed to constraint `k`, of the same shape,
@@ -306,31 +355,32 @@ fn renamed(
     k: usize,
 ) -> Option<DerivedConstraint> {
     let new = reuse.renamed(g, to)?;
+    let (scalars, gradient, jacobian) = Roots { bodies: earlier.gradient.len() }.split(&new)?;
     let from = reuse.slots();
     // Bodies correspond through their positions' slots.
-    let n = earlier.gradient.len();
     let involved = &system.constraints[k].bodies;
-    let mut parts = Vec::with_capacity(n);
-    for (j, &(body, _)) in earlier.gradient.iter().enumerate() {
+    let mut parts = Vec::with_capacity(gradient.len());
+    for ((&(body, _), &grad), &j) in earlier.gradient.iter().zip(gradient).zip(jacobian) {
         let position = system.bodies[body].position;
         let slot = from.iter().position(|&s| s == position)?;
         let Role::Position { body } = g.symbol(*to.get(slot)?).role else { return None };
-        parts.push((involved.iter().position(|&b| b == body)?, body, new[6 + j], new[6 + n + j]));
+        parts.push((involved.iter().position(|&b| b == body)?, body, grad, j));
     }
     parts.sort_by_key(|e| e.0);
-    for &id in [new[0], new[2], new[4], new[5]].iter().chain(&new[6..]) {
+    for &id in scalars.simplified().iter().chain(gradient).chain(jacobian) {
         s.adopt(id);
     }
+    let Scalars { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias } = scalars;
     Some(DerivedConstraint {
-        c: new[0],
-        c_dot_raw: new[1],
-        c_dot: new[2],
-        c_ddot_raw: new[3],
-        c_ddot: new[4],
+        c,
+        c_dot_raw,
+        c_dot,
+        c_ddot_raw,
+        c_ddot,
         gradient: parts.iter().map(|e| (e.1, e.2)).collect(),
         scale: earlier.scale.clone(),
-        direction: parts.iter().map(|e| (e.1, e.3)).collect(),
-        c_term: new[5],
+        jacobian: parts.iter().map(|e| (e.1, e.3)).collect(),
+        bias,
     })
 }
 
@@ -347,7 +397,7 @@ fn assemble(
     // Which constraints act on each body.
     let mut on_body: Vec<Vec<(usize, Id)>> = vec![Vec::new(); system.bodies.len()];
     for (k, dc) in constraints.iter().enumerate() {
-        for &(body, j) in &dc.direction {
+        for &(body, j) in &dc.jacobian {
             on_body[body].push((k, j));
         }
     }
@@ -385,12 +435,12 @@ fn assemble(
     // bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ
     let mut b = Vec::with_capacity(constraints.len());
     for dc in constraints {
-        let mut terms = Vec::with_capacity(dc.direction.len() + 1);
-        for &(body, j) in &dc.direction {
+        let mut terms = Vec::with_capacity(dc.jacobian.len() + 1);
+        for &(body, j) in &dc.jacobian {
             let dot = g.dot(j, system.bodies[body].nodes.force)?;
             terms.push(g.mul(vec![dot, inv_mass[body]])?);
         }
-        terms.push(dc.c_term);
+        terms.push(dc.bias);
         let sum = g.add(terms)?;
         b.push(if repeats { s.simplify_alike(g, sum)? } else { s.simplify(g, sum)? });
     }

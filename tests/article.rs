@@ -55,8 +55,8 @@ fn bead_in_2d_and_3d_gives_the_articles_formulas() {
             assert_equivalent(system, &mut d, dc.gradient[0].1, "2*r", "∇C");
             // The direction is ∇C over its constant content: r, not 2r.
             assert_eq!(dc.scale, Rational::int(2), "κ");
-            assert_equivalent(system, &mut d, dc.direction[0].1, "r", "J");
-            assert_equivalent(system, &mut d, dc.c_term, "dot(v,v)", "c");
+            assert_equivalent(system, &mut d, dc.jacobian[0].1, "r", "J");
+            assert_equivalent(system, &mut d, dc.bias, "dot(v,v)", "c");
             let (a, b) = (d.a[0].2, d.b[0]);
             assert_equivalent(system, &mut d, a, "dot(r,r)/m", "A");
             assert_equivalent(system, &mut d, b, "dot(v,v) + dot(F,r)/m", "b");
@@ -81,7 +81,7 @@ fn bead_prints_as_the_article_writes_it() {
         let text = |id| print(g, id, Style::Text).expect("prints");
         let dc = &d.constraints[0];
         assert_eq!(text(dc.c_dot), "2 r·v");
-        assert_eq!(text(dc.direction[0].1), "r");
+        assert_eq!(text(dc.jacobian[0].1), "r");
         assert_eq!(text(d.lambda.expect("λ")), "−(m v·v + F·r)/(r·r)");
         assert_eq!(text(d.forces.as_ref().expect("forces")[0].1), "−(m v·v + F·r)/(r·r) r");
         let latex = print(g, d.lambda.expect("λ"), Style::Latex).expect("prints");

@@ -133,11 +133,11 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
     let b: Vec<f64> = d.b.iter().map(|&id| scalar(g, id, env)).collect();
     let mut j = vec![0.0; k * n * dim];
     for (r, dc) in d.constraints.iter().enumerate() {
-        for &(body, id) in &dc.direction {
+        for &(body, id) in &dc.jacobian {
             j[r * n * dim + body * dim..][..dim].copy_from_slice(&vector(g, id, env));
         }
     }
-    let c_term: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c_term, env)).collect();
+    let c_term: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.bias, env)).collect();
     let lambda: Vec<f64> = match d.lambda {
         Some(id) => vec![scalar(g, id, env)],
         None => {
@@ -494,7 +494,7 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
         agree("C", &c, &want(&mut d.constraints.iter().map(|c| c.c)));
         let b_want = want(&mut d.b.iter().copied());
         agree("b", &b, &b_want);
-        agree("c", &c_term, &want(&mut d.constraints.iter().map(|c| c.c_term)));
+        agree("c", &c_term, &want(&mut d.constraints.iter().map(|c| c.bias)));
         // A: the interpreter's upper triangle, as band rows.
         let mut band_want = vec![0.0; 2 * k];
         for &(r, col, id) in &d.a {
@@ -506,7 +506,7 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
         // J: (k, i, d) blocks in the derivation's order.
         let mut j_want = Vec::new();
         for (r, dc) in d.constraints.iter().enumerate() {
-            for &(body, id) in &dc.direction {
+            for &(body, id) in &dc.jacobian {
                 j_want.extend([r as f64, body as f64]);
                 j_want.extend(vector(g, id, env));
             }

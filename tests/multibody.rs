@@ -31,7 +31,7 @@ fn lagrange_forces(system: &System, d: &Derivation, env: &Env) -> Vec<[f64; 3]> 
     let lambda = solve(a, minus_b);
     let mut forces = vec![[0.0; 3]; system.bodies.len()];
     for (k, dc) in d.constraints.iter().enumerate() {
-        for &(body, j) in &dc.direction {
+        for &(body, j) in &dc.jacobian {
             forces[body] = add3(forces[body], scale3(lambda[k], vector(d, j, env)));
         }
     }

@@ -481,7 +481,7 @@ fn derived_constraints_satisfy_the_velocity_and_acceleration_identities() {
                 value_in(&d.graph, dc.c_dot, &env),
                 value_in(&d.graph, dc.c_ddot, &env),
                 value_in(&d.graph, dc_dt, &env),
-                value_in(&d.graph, dc.c_term, &env),
+                value_in(&d.graph, dc.bias, &env),
             ) else {
                 tally.record(Verdict::Skip);
                 continue;
@@ -490,7 +490,7 @@ fn derived_constraints_satisfy_the_velocity_and_acceleration_identities() {
             let (mut velocity_sum, mut accel_sum) = (partial_t[0], c_term[0]);
             let mut scale = c_dot[0].abs().max(c_ddot[0].abs() / kappa).max(1.0);
             let mut finite = true;
-            for (&(body, grad), &(_, j)) in dc.gradient.iter().zip(&dc.direction) {
+            for (&(body, grad), &(_, j)) in dc.gradient.iter().zip(&dc.jacobian) {
                 let (Some(grad), Some(j)) = (value_in(&d.graph, grad, &env), value_in(&d.graph, j, &env)) else {
                     finite = false;
                     break;
@@ -565,12 +565,12 @@ fn a_repeated_constraint_derives_as_if_it_were_alone() {
                     show(d, dc.c_dot),
                     show(d, dc.c_ddot_raw),
                     show(d, dc.c_ddot),
-                    show(d, dc.c_term),
+                    show(d, dc.bias),
                     dc.scale.to_string(),
                     d.a_entry(k, k).map(|a| show(d, a)).unwrap_or_default(),
                     show(d, d.b[k]),
                 ];
-                for (&(body, grad), &(_, j)) in dc.gradient.iter().zip(&dc.direction) {
+                for (&(body, grad), &(_, j)) in dc.gradient.iter().zip(&dc.jacobian) {
                     out.push(format!("{body}: {} / {}", show(d, grad), show(d, j)));
                 }
                 out

@@ -120,8 +120,8 @@ fn tape_agrees_with_eval_on_every_derived_expression() {
         let d = derive(&loaded.system).expect("derives");
         let mut roots = Vec::new();
         for dc in &d.constraints {
-            roots.extend([dc.c, dc.c_dot, dc.c_ddot, dc.c_dot_raw, dc.c_ddot_raw, dc.c_term]);
-            roots.extend(dc.direction.iter().map(|x| x.1));
+            roots.extend([dc.c, dc.c_dot, dc.c_ddot, dc.c_dot_raw, dc.c_ddot_raw, dc.bias]);
+            roots.extend(dc.jacobian.iter().map(|x| x.1));
         }
         roots.extend(d.a.iter().map(|x| x.2));
         roots.extend(&d.b);

@@ -98,8 +98,8 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
         (0..n).map(|i| s.scene.forces.iter().find(|(b, _)| *b == i).map(|&(_, id)| id)).collect();
     roots.extend(force_expr.iter().flatten());
     for d in &s.derivation.constraints {
-        roots.push(d.c_term);
-        roots.extend(d.direction.iter().map(|&(_, j)| j));
+        roots.push(d.bias);
+        roots.extend(d.jacobian.iter().map(|&(_, j)| j));
     }
     let values = eval_dd(graph, &roots, env).ok()?;
     let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar()).collect();
@@ -123,8 +123,8 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     for d in &s.derivation.constraints {
         c.push(values[at].scalar());
         at += 1;
-        jac.push(d.direction.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector())).collect());
-        at += d.direction.len();
+        jac.push(d.jacobian.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector())).collect());
+        at += d.jacobian.len();
     }
     // A λ = −b with Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ/mᵢ, bₖ = Σᵢ Jₖᵢ·Fᵢ/mᵢ + cₖ.
     let k = c.len();

@@ -19,6 +19,10 @@
 //! Comparison rule, for values x (derived) and y (expected): pass when
 //! ‖x − y‖ ≤ tol · max(‖x‖, ‖y‖, 10⁻³).
 //!
+//! The loaded system is not changed: an expected formula given to the API is parsed in the
+//! system's scope into the checked file's own derivation ([`Derivation::expression`]), where
+//! derived and expected formulas share one graph.
+//!
 //! Not here: printing (the CLI prints [`Outcome`]s), reading files except in
 //! [`Checked::load`] (`read.rs`, the one file access of the user-test API).
 //!

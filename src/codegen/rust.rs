@@ -88,8 +88,8 @@ struct Formulas {
     /// `(k, j, Aₖⱼ)`, upper triangle.
     a: Vec<(usize, usize, Id)>,
     b: Vec<Id>,
-    direction: Vec<Vec<(usize, Id)>>,
-    c_term: Vec<Id>,
+    jacobian: Vec<Vec<(usize, Id)>>,
+    bias: Vec<Id>,
     lambda: Option<Id>,
     forces: Option<Vec<(usize, Id)>>,
 }
@@ -99,10 +99,10 @@ impl Formulas {
         let mut each = |xs: Vec<Id>| xs.into_iter().map(&mut f).collect::<Result<Vec<_>, _>>();
         let c = each(self.c)?;
         let b = each(self.b)?;
-        let c_term = each(self.c_term)?;
+        let bias = each(self.bias)?;
         let a = self.a.into_iter().map(|(k, j, x)| Ok((k, j, f(x)?))).collect::<Result<_, GenerateError>>()?;
-        let direction = self
-            .direction
+        let jacobian = self
+            .jacobian
             .into_iter()
             .map(|d| d.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>())
             .collect::<Result<_, _>>()?;
@@ -111,7 +111,7 @@ impl Formulas {
             Some(fs) => Some(fs.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>()?),
             None => None,
         };
-        Ok(Formulas { c, a, b, direction, c_term, lambda, forces })
+        Ok(Formulas { c, a, b, jacobian, bias, lambda, forces })
     }
 }
 
@@ -143,8 +143,8 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         c: d.constraints.iter().map(|c| c.c).collect(),
         a: d.a.clone(),
         b: d.b.clone(),
-        direction: d.constraints.iter().map(|c| c.direction.clone()).collect(),
-        c_term: d.constraints.iter().map(|c| c.c_term).collect(),
+        jacobian: d.constraints.iter().map(|c| c.jacobian.clone()).collect(),
+        bias: d.constraints.iter().map(|c| c.bias).collect(),
         lambda: d.lambda,
         forces: d.forces.clone(),
     };
@@ -237,7 +237,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
              constraint k's direction d on body i, sorted by k. Σₖ λₖ·d over the blocks of body i is its force."
         );
     }
-    let blocks = formulas.direction.iter().map(Vec::len).sum::<usize>();
+    let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
     let parted = k > PART || (k > DENSE_MAX && formulas.a.len() > PART) || (sparse_j && blocks > PART);
     if parted {
         let _ = writeln!(
@@ -360,7 +360,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     )];
     let mut roots = Vec::new();
     let mut at: HashMap<(usize, usize), usize> = HashMap::new();
-    for (r, dirs) in formulas.direction.iter().enumerate() {
+    for (r, dirs) in formulas.jacobian.iter().enumerate() {
         for &(body, id) in dirs {
             doc.push(format!("- J[{r}], body `{}`: {}", comment_text(body_names[body]), formula(g, id)));
             at.insert((r, body), roots.len());
@@ -370,7 +370,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     if sparse_j {
         // Block triplets by constraint, each constraint's bodies as the derivation lists them.
         let blocks: Vec<(usize, usize, Id)> = formulas
-            .direction
+            .jacobian
             .iter()
             .enumerate()
             .flat_map(|(r, dirs)| dirs.iter().map(move |&(body, id)| (r, body, id)))
@@ -416,10 +416,10 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
 
     // c
     let mut doc = vec!["c: the part of C̈ (over the same constant) without accelerations, C̈ = J·a + c.".to_string()];
-    for (i, &c) in formulas.c_term.iter().enumerate() {
+    for (i, &c) in formulas.bias.iter().enumerate() {
         doc.push(format!("- c[{i}] = {}", formula(g, c)));
     }
-    ctx.emit_scalars(&mut out, &doc, "c_term", &formulas.c_term)?;
+    ctx.emit_scalars(&mut out, &doc, "c_term", &formulas.bias)?;
 
     // λ and the forces.
     let mut namer = Namer::new(&[
@@ -531,8 +531,8 @@ fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, Ge
     for &(k, j, _) in &f.a {
         // (mass, dots over the bodies of that mass), in body order.
         let mut by_mass: Vec<(Id, Vec<Id>)> = Vec::new();
-        for &(body, jk) in &f.direction[k] {
-            let Some(&(_, jj)) = f.direction[j].iter().find(|d| d.0 == body) else { continue };
+        for &(body, jk) in &f.jacobian[k] {
+            let Some(&(_, jj)) = f.jacobian[j].iter().find(|d| d.0 == body) else { continue };
             // Signs out of the dot: (−u)·w = −(u·w) exactly, and u is then shared with the
             // other constraint on this body (a chain's link k − 1 and k both see r₍ₖ₋₁₎ − rₖ).
             let ((nk, uk), (nj, uj)) = (split_sign(g, jk), split_sign(g, jj));

@@ -10,6 +10,10 @@
 //! Σₖ λₖ Jₖᵢ, and `--steps` adds each Jₖᵢ and cₖ and the system A λ = −b row by row. The
 //! JSON then carries `multipliers` (constraint → symbol) and `force_sums` (body → Σ λ J).
 //!
+//! Everything shown is a node the derivation owns (its graph extends the system's: the force
+//! sums, the multiplier symbols and the Newton step of `--steps` are built by `derive`), so
+//! this module reads `&System` and `&Derivation` and builds no node.
+//!
 //! Not here: deriving (`derive`), expression printing rules (`expr::print`).
 
 use crate::derive::Derivation;
@@ -298,7 +302,7 @@ fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Resu
         doc.line(out, &doc.sym("C", sub), &doc.expr(g, dc.c)?);
         doc.line(out, &doc.sym("Cdot", sub), &doc.expr(g, dc.c_dot)?);
         doc.line(out, &doc.sym("Cddot", sub), &doc.expr(g, dc.c_ddot)?);
-        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
+        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.jacobian) {
             let name = &system.bodies[body].name;
             let r = &g.symbol(system.bodies[body].position).name;
             doc.line(out, &doc.label(&doc.sym("grad", sub), &format!("∇ wrt {r}, body {name}")), &doc.expr(g, grad)?);
@@ -307,7 +311,7 @@ fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Resu
             }
         }
         let note = format!("C̈ at a = 0{}", scale_note(dc.scale.is_one(), &dc.scale));
-        doc.line(out, &doc.label("c", &note), &doc.expr(g, dc.c_term)?);
+        doc.line(out, &doc.label("c", &note), &doc.expr(g, dc.bias)?);
     }
     doc.heading(out, "The multiplier equation  A λ + b = 0");
     a_and_b(system, d, doc, out)?;
@@ -410,7 +414,7 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     );
     for (k, dc) in d.constraints.iter().enumerate() {
         let sub = if many { system.constraints[k].name.clone() } else { String::new() };
-        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
+        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.jacobian) {
             let g = &d.graph;
             let name = &system.bodies[body].name;
             let lhs = doc.label(&doc.sym("grad", &sub), &format!("on {name}"));
@@ -436,7 +440,7 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
              C̈ₖ/κₖ = Σᵢ Jₖᵢ·aᵢ + cₖ, with cₖ = C̈ₖ/κₖ at a = 0:",
         );
         for (k, dc) in d.constraints.iter().enumerate() {
-            doc.line(out, &doc.entry("c", &[system.constraints[k].name.as_str()]), &doc.expr(&d.graph, dc.c_term)?);
+            doc.line(out, &doc.entry("c", &[system.constraints[k].name.as_str()]), &doc.expr(&d.graph, dc.bias)?);
         }
         doc.para(
             out,
@@ -542,7 +546,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
     for (k, dc) in d.constraints.iter().enumerate() {
         let c = &system.constraints[k];
         let mut gradient = serde_json::Map::new();
-        for &(body, j) in &dc.direction {
+        for &(body, j) in &dc.jacobian {
             gradient.insert(system.bodies[body].name.clone(), json!(e(j)?));
         }
         constraints.push(json!({
@@ -553,7 +557,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             "C_ddot": e(dc.c_ddot)?,
             "scale": dc.scale.to_string(),
             "gradient": gradient,
-            "c": e(dc.c_term)?,
+            "c": e(dc.bias)?,
         }));
     }
     let n = d.constraints.len();
@@ -599,7 +603,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
         for (body, b) in system.bodies.iter().enumerate() {
             let mut terms = Vec::new();
             for (k, dc) in d.constraints.iter().enumerate() {
-                if let Some(&(_, j)) = dc.direction.iter().find(|(i, _)| *i == body) {
+                if let Some(&(_, j)) = dc.jacobian.iter().find(|(i, _)| *i == body) {
                     let j = e(j)?;
                     let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
                     terms.push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
