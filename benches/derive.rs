@@ -17,7 +17,7 @@
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use divan::{Bencher, black_box};
-use lagrange::derive::derive;
+use lagrange::derive::{Options, derive, derive_with};
 use lagrange::expr::Ty;
 use lagrange::expr::print::{Style, print};
 use lagrange::model::file::load;
@@ -41,7 +41,7 @@ fn load_and_derive(text: &str) -> usize {
 /// What `lagrange derive FILE` does for the text output: load, derive, lay out.
 fn load_derive_and_print(text: &str) -> usize {
     let loaded = load(text).expect("the file loads");
-    let d = derive(&loaded.system).expect("the file derives");
+    let d = derive_with(&loaded.system, Options { document: true, steps: false }).expect("the file derives");
     document(&loaded.system, &d, Format::Text, false).expect("the document builds").len()
 }
 

@@ -19,12 +19,13 @@
 //! owns everything it adds. Its graph is the system's graph, copied once and extended
 //! (nodes are appended, never changed), so every id of the system — constraints, masses,
 //! the bodies' symbol nodes, expectations — means the same node in the derivation's graph,
-//! and one graph answers every lookup afterwards. The copy is a few flat vectors and an
-//! index, small next to the nodes a derivation adds; a layered graph (the system's nodes
-//! below, the derivation's above) would make every lookup ask which layer. Beside the
-//! formulas the derivation owns what the documents show that is not a number: the
-//! multiplier symbols `lambda_<name>` and the force sums Σₖ λₖ Jₖᵢ of several constraints,
-//! and, derived [`with steps`](Options::steps), each C̈ with Newton's law substituted.
+//! and one graph answers every lookup afterwards. The copy costs one pass over the system's
+//! nodes and symbols per derivation; a graph layered over the system's (its nodes below,
+//! the derivation's above) would avoid it, at the price of every lookup asking which layer,
+//! and belongs to `expr`. Beside the formulas the derivation owns what the documents show
+//! that is not a number, built only when asked ([`Options`]): the multiplier symbols
+//! `lambda_<name>` and the force sums Σₖ λₖ Jₖᵢ of several constraints, and each C̈ with
+//! Newton's law substituted (`--steps`).
 //!
 //! Names: ∇C is `gradient`, J = ∇C/κ is `jacobian` and c is `bias` here and in
 //! `numeric::rows`; the user-facing names stay (`derive --format json` calls J `"gradient"`
@@ -79,20 +80,24 @@ pub struct Derivation {
     pub lambda: Option<Id>,
     /// `(body, force)` in closed form, when there is a single constraint.
     pub forces: Option<Vec<(usize, Id)>>,
-    /// Several constraints: each one's multiplier λₖ, the node of the scalar symbol
-    /// `lambda_<name>`, by constraint. Empty for a single constraint (λ has a closed form).
-    pub multipliers: Vec<Id>,
-    /// Several constraints: `(body, Σₖ λₖ Jₖᵢ)` in the multiplier symbols, for each body some
-    /// constraint acts on, in body order. Empty for a single constraint.
-    pub force_sums: Vec<(usize, Id)>,
+    /// With [`Options::document`] and several constraints: each one's multiplier λₖ, the
+    /// node of the scalar symbol `lambda_<name>`, by constraint (one constraint has λ in
+    /// closed form).
+    pub multipliers: Option<Vec<Id>>,
+    /// With [`Options::document`] and several constraints: `(body, Σₖ λₖ Jₖᵢ)` in the
+    /// multiplier symbols, for each body some constraint acts on, in body order.
+    pub force_sums: Option<Vec<(usize, Id)>>,
     /// With [`Options::steps`]: each C̈ with Newton's law aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ substituted
     /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`.
     pub newton: Option<Vec<Id>>,
 }
 
-/// What [`derive_with`] derives beyond the formulas.
+/// What [`derive_with`] derives beyond the formulas (the numbers need none of it).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Options {
+    /// The multiplier symbols and force sums of several constraints (the text, LaTeX and
+    /// Markdown documents show them).
+    pub document: bool,
     /// Newton's law substituted into each C̈ (`derive --steps` shows it).
     pub steps: bool,
 }
@@ -142,8 +147,10 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     let mut shaper = Shaper::default();
     // With one constraint nothing repeats: shapes would be work for nothing.
     let repeats = system.constraints.len() > 1;
-    // A link of a chain adds about 60 nodes to the graph; the article's bead about 200.
-    g.reserve(if repeats { 64 * system.constraints.len() } else { 256 });
+    if repeats {
+        // A link of a chain adds about 60 nodes to the graph.
+        g.reserve(64 * system.constraints.len());
+    }
     for k in 0..system.constraints.len() {
         if !repeats {
             constraints.push(derive_constraint(system, g, s, k)?);
@@ -179,7 +186,12 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         forces = Some(f);
     }
     let newton = if options.steps { Some(newton(system, g, &constraints)?) } else { None };
-    let (multipliers, force_sums) = if repeats { force_sums(system, g, &constraints)? } else { Default::default() };
+    let (multipliers, force_sums) = if repeats && options.document {
+        let (multipliers, sums) = force_sums(system, g, &constraints)?;
+        (Some(multipliers), Some(sums))
+    } else {
+        (None, None)
+    };
     Ok(Derivation { graph, simplifier, constraints, a, b, lambda, forces, multipliers, force_sums, newton })
 }
 

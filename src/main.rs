@@ -305,13 +305,14 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
         Ok(l) => l,
         Err(code) => return code,
     };
-    let derivation = match derive_with(&loaded.system, DeriveOptions { steps }) {
-        Ok(d) => d,
-        Err(e) => {
-            eprintln!("error: {}: {e}", path.display());
-            return ExitCode::from(1);
-        }
-    };
+    let derivation =
+        match derive_with(&loaded.system, DeriveOptions { document: !matches!(format, FormatArg::Json), steps }) {
+            Ok(d) => d,
+            Err(e) => {
+                eprintln!("error: {}: {e}", path.display());
+                return ExitCode::from(1);
+            }
+        };
     let format = match format {
         FormatArg::Text => Format::Text,
         FormatArg::Latex => Format::Latex,

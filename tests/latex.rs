@@ -27,7 +27,7 @@ fn files() -> Vec<PathBuf> {
 fn latex(path: &Path, steps: bool) -> String {
     let text = std::fs::read_to_string(path).expect("file reads");
     let loaded = load(&text).unwrap_or_else(|_| panic!("{} loads", path.display()));
-    let d = derive_with(&loaded.system, Options { steps }).expect("derives");
+    let d = derive_with(&loaded.system, Options { document: true, steps }).expect("derives");
     document(&loaded.system, &d, Format::Latex, steps).expect("document builds")
 }
 

@@ -38,9 +38,10 @@ pub enum ReportError {
     Print(#[from] PrintError),
     #[error(transparent)]
     Type(#[from] TypeError),
-    /// `--steps` of a derivation made without them ([`derive_with`](crate::derive::derive_with)).
-    #[error("the derivation was made without steps (Options::steps)")]
-    NoSteps,
+    /// A document needs what the derivation was made without
+    /// ([`derive_with`](crate::derive::derive_with) with `Options { document, steps }`).
+    #[error("the derivation was made without {0} (derive_with and Options)")]
+    NotDerived(&'static str),
 }
 
 /// How expressions look in one document format.
@@ -375,14 +376,15 @@ fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
 /// For several constraints: the force on each body as Σₖ λₖ Jₖᵢ, with named multipliers.
 fn forces_as_sums(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
     doc.heading(out, "Constraint forces (λ solves A λ = −b at a state: lagrange solve)");
-    for &(body, sum) in &d.force_sums {
+    let sums = d.force_sums.as_ref().ok_or(ReportError::NotDerived("force sums"))?;
+    for &(body, sum) in sums {
         doc.line(out, &doc.sym("force", &system.bodies[body].name), &doc.expr(&d.graph, sum)?);
     }
     Ok(())
 }
 
 fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
-    let newton = d.newton.as_ref().ok_or(ReportError::NoSteps)?;
+    let newton = d.newton.as_ref().ok_or(ReportError::NotDerived("steps"))?;
     let many = d.constraints.len() > 1;
     for (k, dc) in d.constraints.iter().enumerate() {
         let (name, text) = (&system.constraints[k].name, &system.constraints[k].text);
