@@ -15,7 +15,7 @@
 //! entries of a shape seen before (`Simplifier::simplify_alike`). What comes out is what
 //! deriving it alone gives; a chain's link costs a renaming, not a derivation.
 //!
-//! The model stays as it was loaded: [`derive`] reads a `&System` and the [`Derivation`]
+//! The model stays as it was loaded: [`derive()`] reads a `&System` and the [`Derivation`]
 //! owns everything it adds. Its graph is the system's graph, copied once and extended
 //! (nodes are appended, never changed), so every id of the system — constraints, masses,
 //! the bodies' symbol nodes, expectations — means the same node in the derivation's graph,
@@ -135,7 +135,7 @@ pub fn derive(system: &System) -> Result<Derivation, DeriveError> {
     derive_with(system, Options::default())
 }
 
-/// [`derive`], and what `options` asks for beyond the formulas.
+/// [`derive()`], and what `options` asks for beyond the formulas.
 pub fn derive_with(system: &System, options: Options) -> Result<Derivation, DeriveError> {
     let mut graph = system.graph.clone();
     let mut simplifier = Simplifier::new();
