@@ -64,12 +64,12 @@ fn bead_generated(s: &bead::State) -> [f64; 2] {
 
 /// The bead's force as a tape over the inputs [r, v, F, m] (7 slots).
 fn bead_tape() -> Tape {
-    let mut l = load(include_str!("../constraints/bead_on_wire.toml")).expect("bead file");
-    let d = derive(&mut l.system).expect("derives");
-    let force = d.forces.expect("one constraint")[0].1;
+    let l = load(include_str!("../constraints/bead_on_wire.toml")).expect("bead file");
+    let d = derive(&l.system).expect("derives");
+    let force = d.forces.as_ref().expect("one constraint")[0].1;
     let b = &l.system.bodies[0];
     let m = l.system.graph.symbol_named("m").expect("m");
-    Tape::compile(&l.system.graph, &[force], &[b.position, b.velocity, b.force, m]).expect("compiles")
+    Tape::compile(&d.graph, &[force], &[b.position, b.velocity, b.force, m]).expect("compiles")
 }
 
 const R: [f64; 2] = [1.2, -1.6];
@@ -269,8 +269,8 @@ fn chain_generated_state() -> chain::State {
 
 /// A tape of the chain's non-zero A entries and b over the inputs [r₁…r₁₀, v₁…v₁₀, F₁…F₁₀, m].
 fn chain_tape() -> Tape {
-    let mut l = load(include_str!("data/chain_10.toml")).expect("chain file");
-    let d = derive(&mut l.system).expect("derives");
+    let l = load(include_str!("data/chain_10.toml")).expect("chain file");
+    let d = derive(&l.system).expect("derives");
     let mut roots: Vec<Id> = d.a.iter().map(|e| e.2).collect();
     roots.extend(&d.b);
     let s = &l.system;
@@ -278,7 +278,7 @@ fn chain_tape() -> Tape {
     inputs.extend(s.bodies.iter().map(|b| b.velocity));
     inputs.extend(s.bodies.iter().map(|b| b.force));
     inputs.push(s.graph.symbol_named("m").expect("m"));
-    Tape::compile(&s.graph, &roots, &inputs).expect("compiles")
+    Tape::compile(&d.graph, &roots, &inputs).expect("compiles")
 }
 
 fn chain_inputs() -> Vec<f64> {

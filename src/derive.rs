@@ -15,14 +15,32 @@
 //! entries of a shape seen before (`Simplifier::simplify_alike`). What comes out is what
 //! deriving it alone gives; a chain's link costs a renaming, not a derivation.
 //!
+//! The model stays as it was loaded: [`derive()`] reads a `&System` and the [`Derivation`]
+//! owns everything it adds. Its graph is the system's graph, copied once and extended
+//! (nodes are appended, never changed), so every id of the system — constraints, masses,
+//! the bodies' symbol nodes, expectations — means the same node in the derivation's graph,
+//! and one graph answers every lookup afterwards. The copy costs one pass over the system's
+//! nodes and symbols per derivation; a graph layered over the system's (its nodes below,
+//! the derivation's above) would avoid it, at the price of every lookup asking which layer,
+//! and belongs to `expr`. Beside the formulas the derivation owns what the documents show
+//! that is not a number, built only when asked ([`Options`]): the multiplier symbols
+//! `lambda_<name>` and the force sums Σₖ λₖ Jₖᵢ of several constraints, and each C̈ with
+//! Newton's law substituted (`--steps`).
+//!
+//! Names: ∇C is `gradient`, J = ∇C/κ is `jacobian` and c is `bias` here and in
+//! `numeric::rows`; the user-facing names stay (`derive --format json` calls J `"gradient"`
+//! and c `"c"`, the generated Rust has `jacobian` and `c_term`; ARCHITECTURE.md has the
+//! table). A renamed derivation comes back as one list whose layout is named once
+//! (`Scalars`, then ∇C and J per body).
+//!
 //! Not here: numbers (`numeric`), layouts of the derivation for people (`report`).
 
 use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
 use crate::expr::graph::FastMap;
 use crate::expr::shape::{Reuse, Shaper};
-use crate::expr::{Id, Rational, Role, Symbol, TypeError};
-use crate::model::system::System;
+use crate::expr::{Graph, Id, Rational, Role, Simplifier, Symbol, Ty, TypeError};
+use crate::model::system::{BuildError, System};
 use std::collections::HashMap;
 
 /// Everything derived for one constraint.
@@ -41,14 +59,19 @@ pub struct DerivedConstraint {
     /// κ: the positive constant content taken out of ∇C.
     pub scale: Rational,
     /// `(body, J = ∇C / κ)`.
-    pub direction: Vec<(usize, Id)>,
+    pub jacobian: Vec<(usize, Id)>,
     /// `c = C̈|ₐ₌₀ / κ`, so that C̈/κ = Σᵢ Jᵢ·aᵢ + c.
-    pub c_term: Id,
+    pub bias: Id,
 }
 
 /// The derivation of a whole system.
-#[derive(Clone, Debug)]
+#[derive(Debug)]
 pub struct Derivation {
+    /// The system's graph with every node the derivation built: each id of the system is
+    /// valid here and means the same node.
+    pub graph: Graph,
+    /// The simplifier of `graph`, with what it remembers of the derivation.
+    pub simplifier: Simplifier,
     pub constraints: Vec<DerivedConstraint>,
     /// Non-zero entries `(k, j, Aₖⱼ)` with `k ≤ j` (A is symmetric).
     pub a: Vec<(usize, usize, Id)>,
@@ -57,9 +80,38 @@ pub struct Derivation {
     pub lambda: Option<Id>,
     /// `(body, force)` in closed form, when there is a single constraint.
     pub forces: Option<Vec<(usize, Id)>>,
+    /// With [`Options::document`] and several constraints: each one's multiplier λₖ, the
+    /// node of the scalar symbol `lambda_<name>`, by constraint (one constraint has λ in
+    /// closed form).
+    pub multipliers: Option<Vec<Id>>,
+    /// With [`Options::document`] and several constraints: `(body, Σₖ λₖ Jₖᵢ)` in the
+    /// multiplier symbols, for each body some constraint acts on, in body order.
+    pub force_sums: Option<Vec<(usize, Id)>>,
+    /// With [`Options::steps`]: each C̈ with Newton's law aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ substituted
+    /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`.
+    pub newton: Option<Vec<Id>>,
+}
+
+/// What [`derive_with`] derives beyond the formulas (the numbers need none of it).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Options {
+    /// The multiplier symbols and force sums of several constraints (the text, LaTeX and
+    /// Markdown documents show them).
+    pub document: bool,
+    /// Newton's law substituted into each C̈ (`derive --steps` shows it).
+    pub steps: bool,
 }
 
 impl Derivation {
+    /// Parses and type-checks `text` in `system`'s scope into the derivation's graph (an
+    /// expected formula to compare with a derived one).
+    pub fn expression(&mut self, system: &System, text: &str) -> Result<Id, BuildError> {
+        let syntax = crate::expr::parse::parse_expr(text)
+            .map_err(|error| BuildError::Parse { context: String::new(), error })?;
+        crate::expr::lower::lower(&syntax, &system.scope, &mut self.graph)
+            .map_err(|error| BuildError::Lower { context: String::new(), error })
+    }
+
     /// `Aₖⱼ` (either order), if non-zero.
     pub fn a_entry(&self, k: usize, j: usize) -> Option<Id> {
         let (k, j) = if k <= j { (k, j) } else { (j, k) };
@@ -79,7 +131,15 @@ pub enum DeriveError {
 }
 
 /// Runs DESIGN.md steps 1–5 on every constraint of `system`.
-pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
+pub fn derive(system: &System) -> Result<Derivation, DeriveError> {
+    derive_with(system, Options::default())
+}
+
+/// [`derive()`], and what `options` asks for beyond the formulas.
+pub fn derive_with(system: &System, options: Options) -> Result<Derivation, DeriveError> {
+    let mut graph = system.graph.clone();
+    let mut simplifier = Simplifier::new();
+    let (g, s) = (&mut graph, &mut simplifier);
     let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
     // Constraints already derived, by shape: a repeat (the next link of a chain) is the
     // earlier derivation with the bodies renamed.
@@ -89,54 +149,113 @@ pub fn derive(system: &mut System) -> Result<Derivation, DeriveError> {
     let repeats = system.constraints.len() > 1;
     if repeats {
         // A link of a chain adds about 60 nodes to the graph.
-        system.graph.reserve(64 * system.constraints.len());
+        g.reserve(64 * system.constraints.len());
     }
     for k in 0..system.constraints.len() {
         if !repeats {
-            constraints.push(derive_constraint(system, k)?);
+            constraints.push(derive_constraint(system, g, s, k)?);
             continue;
         }
-        let shape = shaper.shape(&system.graph, &[system.constraints[k].c]);
+        let shape = shaper.shape(g, &[system.constraints[k].c]);
         let repeat = match derived.get_mut(&shape.key) {
-            Some((earlier, reuse)) => renamed(system, &constraints[*earlier], reuse, &shape.symbols, k),
+            Some((earlier, reuse)) => renamed(system, g, s, &constraints[*earlier], reuse, &shape.symbols, k),
             None => None,
         };
         let dc = match repeat {
             Some(dc) => dc,
             None => {
-                let dc = derive_constraint(system, k)?;
-                derived.insert(shape.key, (k, Reuse::new(roots(&dc), shape.symbols, true)));
+                let dc = derive_constraint(system, g, s, k)?;
+                derived.insert(shape.key, (k, Reuse::new(Roots::of(&dc), shape.symbols, true)));
                 dc
             }
         };
         constraints.push(dc);
     }
-    let (a, b) = assemble(system, &constraints, repeats)?;
+    let (a, b) = assemble(system, g, s, &constraints, repeats)?;
     let (mut lambda, mut forces) = (None, None);
     if let [only] = constraints.as_slice() {
-        let g = &mut system.graph;
-        let s = &mut system.simplifier;
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
         let l = s.negated_quotient(g, b[0], a00)?;
-        let mut f = Vec::with_capacity(only.direction.len());
-        for &(body, j) in &only.direction {
+        let mut f = Vec::with_capacity(only.jacobian.len());
+        for &(body, j) in &only.jacobian {
             let product = g.mul(vec![l, j])?;
             f.push((body, s.simplify(g, product)?));
         }
         lambda = Some(l);
         forces = Some(f);
     }
-    Ok(Derivation { constraints, a, b, lambda, forces })
+    let newton = if options.steps { Some(newton(system, g, &constraints)?) } else { None };
+    let (multipliers, force_sums) = if repeats && options.document {
+        let (multipliers, sums) = force_sums(system, g, &constraints)?;
+        (Some(multipliers), Some(sums))
+    } else {
+        (None, None)
+    };
+    Ok(Derivation { graph, simplifier, constraints, a, b, lambda, forces, multipliers, force_sums, newton })
 }
 
-fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint, DeriveError> {
-    let name = system.constraints[k].name.clone();
+/// Each C̈ with aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ for every body it involves, in new vector symbols F_c,ᵢ.
+fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> Result<Vec<Id>, TypeError> {
+    let mut fc_nodes = Vec::with_capacity(system.bodies.len());
+    for body in &system.bodies {
+        let name = if system.bodies.len() == 1 { "F_c".to_string() } else { format!("F_c_{}", body.name) };
+        let s = g.declare(&name, Ty::Vector, Role::Parameter);
+        fc_nodes.push(g.sym(s));
+    }
+    let mut out = Vec::with_capacity(constraints.len());
+    for (k, dc) in constraints.iter().enumerate() {
+        let mut map = HashMap::new();
+        for &body in &system.constraints[k].bodies {
+            let b = &system.bodies[body];
+            let total = g.add(vec![b.nodes.force, fc_nodes[body]])?;
+            let inv_m = g.powi(b.mass, -1)?;
+            let accel = g.mul(vec![inv_m, total])?;
+            map.insert(b.nodes.acceleration, accel);
+        }
+        out.push(g.substitute(dc.c_ddot, &map)?);
+    }
+    Ok(out)
+}
+
+/// The multiplier symbols `lambda_<name>` of several constraints, and the force on each body
+/// as Σₖ λₖ Jₖᵢ in them.
+#[allow(clippy::type_complexity)]
+fn force_sums(
+    system: &System,
+    g: &mut Graph,
+    constraints: &[DerivedConstraint],
+) -> Result<(Vec<Id>, Vec<(usize, Id)>), TypeError> {
+    let mut multipliers = Vec::with_capacity(constraints.len());
+    for c in &system.constraints {
+        let s = g.declare(&format!("lambda_{}", c.name), Ty::Scalar, Role::Parameter);
+        multipliers.push(g.sym(s));
+    }
+    let mut sums = Vec::new();
+    for body in 0..system.bodies.len() {
+        let mut terms = Vec::new();
+        for (k, dc) in constraints.iter().enumerate() {
+            if let Some(&(_, j)) = dc.jacobian.iter().find(|(b, _)| *b == body) {
+                terms.push(g.mul(vec![multipliers[k], j])?);
+            }
+        }
+        if !terms.is_empty() {
+            sums.push((body, g.add(terms)?));
+        }
+    }
+    Ok((multipliers, sums))
+}
+
+fn derive_constraint(
+    system: &System,
+    g: &mut Graph,
+    s: &mut Simplifier,
+    k: usize,
+) -> Result<DerivedConstraint, DeriveError> {
+    let name = &system.constraints[k].name;
     let diff_error = |error| DeriveError::Diff { name: name.clone(), error };
     let c_raw = system.constraints[k].c;
-    let involved = system.constraints[k].bodies.clone();
-    let g = &mut system.graph;
-    let s = &mut system.simplifier;
+    let involved = &system.constraints[k].bodies;
     let c = s.simplify(g, c_raw)?;
     let c_dot_raw = time_derivative(g, c).map_err(diff_error)?;
     let c_dot = s.simplify(g, c_dot_raw)?;
@@ -144,7 +263,7 @@ fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint,
     let c_ddot = s.simplify(g, c_ddot_raw)?;
     let mut gradient_parts = Vec::with_capacity(involved.len());
     let mut scale: Option<Rational> = None;
-    for &body in &involved {
+    for &body in involved {
         let r = system.bodies[body].position;
         let grad = gradient(g, c, r)?;
         let grad = s.simplify(g, grad)?;
@@ -160,77 +279,120 @@ fn derive_constraint(system: &mut System, k: usize) -> Result<DerivedConstraint,
     }
     let scale = scale.ok_or_else(|| DeriveError::ZeroGradient(name.clone()))?;
     let inv = scale.recip().unwrap_or(Rational::ONE);
-    let mut direction = Vec::with_capacity(gradient_parts.len());
+    let mut jacobian = Vec::with_capacity(gradient_parts.len());
     for &(body, grad) in &gradient_parts {
-        direction.push((body, s.scaled(g, grad, &inv)?));
+        jacobian.push((body, s.scaled(g, grad, &inv)?));
     }
     // c = C̈ with every acceleration set to zero, over κ.
     let zero = g.zero_vector();
     let mut to_zero = FastMap::default();
     for &(body, _) in &gradient_parts {
-        let a = g.sym(system.bodies[body].acceleration);
-        to_zero.insert(a, zero);
+        to_zero.insert(system.bodies[body].nodes.acceleration, zero);
     }
     let at_rest = g.substitute(c_ddot, &to_zero)?;
-    let c_term = s.scaled(g, at_rest, &inv)?;
-    Ok(DerivedConstraint {
-        c,
-        c_dot_raw,
-        c_dot,
-        c_ddot_raw,
-        c_ddot,
-        gradient: gradient_parts,
-        scale,
-        direction,
-        c_term,
-    })
+    let bias = s.scaled(g, at_rest, &inv)?;
+    Ok(DerivedConstraint { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, gradient: gradient_parts, scale, jacobian, bias })
 }
 
-/// Every expression of a derived constraint, in the order [`renamed`] reads them back.
-fn roots(dc: &DerivedConstraint) -> Vec<Id> {
-    let mut roots = vec![dc.c, dc.c_dot_raw, dc.c_dot, dc.c_ddot_raw, dc.c_ddot, dc.c_term];
-    roots.extend(dc.gradient.iter().map(|e| e.1));
-    roots.extend(dc.direction.iter().map(|e| e.1));
-    roots
+/// The expressions of a derived constraint that do not depend on the bodies it acts on.
+#[derive(Clone, Copy)]
+struct Scalars {
+    c: Id,
+    c_dot_raw: Id,
+    c_dot: Id,
+    c_ddot_raw: Id,
+    c_ddot: Id,
+    bias: Id,
+}
+
+impl Scalars {
+    const LEN: usize = 6;
+
+    fn of(dc: &DerivedConstraint) -> Scalars {
+        let DerivedConstraint { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias, .. } = *dc;
+        Scalars { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias }
+    }
+
+    fn ids(self) -> [Id; Scalars::LEN] {
+        [self.c, self.c_dot_raw, self.c_dot, self.c_ddot_raw, self.c_ddot, self.bias]
+    }
+
+    fn from_ids(ids: [Id; Scalars::LEN]) -> Scalars {
+        let [c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias] = ids;
+        Scalars { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias }
+    }
+
+    /// The simplified ones, which the simplifier may take as canonical when renamed (the
+    /// product rule's raw forms are not).
+    fn simplified(self) -> [Id; 4] {
+        [self.c, self.c_dot, self.c_ddot, self.bias]
+    }
+}
+
+/// A derived constraint's expressions as one list, as a [`Reuse`] keeps and renames them:
+/// the [`Scalars`], then ∇C of each of its bodies, then J of each, in its body order.
+struct Roots {
+    /// How many bodies ∇C and J have.
+    bodies: usize,
+}
+
+impl Roots {
+    fn of(dc: &DerivedConstraint) -> Vec<Id> {
+        let mut roots = Scalars::of(dc).ids().to_vec();
+        roots.extend(dc.gradient.iter().map(|e| e.1));
+        roots.extend(dc.jacobian.iter().map(|e| e.1));
+        roots
+    }
+
+    /// The scalars, ∇C per body and J per body of `ids`; `None` if it is not of this layout.
+    fn split<'a>(&self, ids: &'a [Id]) -> Option<(Scalars, &'a [Id], &'a [Id])> {
+        let (scalars, per_body) = ids.split_first_chunk::<{ Scalars::LEN }>()?;
+        if per_body.len() != 2 * self.bodies {
+            return None;
+        }
+        let (gradient, jacobian) = per_body.split_at(self.bodies);
+        Some((Scalars::from_ids(*scalars), gradient, jacobian))
+    }
 }
 
 /// `earlier`'s derivation (kept in `reuse`) renamed to constraint `k`, of the same shape,
 /// whose symbols are `to`; `None` if the bodies do not correspond.
 fn renamed(
-    system: &mut System,
+    system: &System,
+    g: &mut Graph,
+    s: &mut Simplifier,
     earlier: &DerivedConstraint,
     reuse: &mut Reuse,
     to: &[Symbol],
     k: usize,
 ) -> Option<DerivedConstraint> {
-    let g = &mut system.graph;
     let new = reuse.renamed(g, to)?;
+    let (scalars, gradient, jacobian) = Roots { bodies: earlier.gradient.len() }.split(&new)?;
     let from = reuse.slots();
     // Bodies correspond through their positions' slots.
-    let n = earlier.gradient.len();
     let involved = &system.constraints[k].bodies;
-    let mut parts = Vec::with_capacity(n);
-    for (j, &(body, _)) in earlier.gradient.iter().enumerate() {
+    let mut parts = Vec::with_capacity(gradient.len());
+    for ((&(body, _), &grad), &j) in earlier.gradient.iter().zip(gradient).zip(jacobian) {
         let position = system.bodies[body].position;
         let slot = from.iter().position(|&s| s == position)?;
         let Role::Position { body } = g.symbol(*to.get(slot)?).role else { return None };
-        parts.push((involved.iter().position(|&b| b == body)?, body, new[6 + j], new[6 + n + j]));
+        parts.push((involved.iter().position(|&b| b == body)?, body, grad, j));
     }
     parts.sort_by_key(|e| e.0);
-    let s = &mut system.simplifier;
-    for &id in [new[0], new[2], new[4], new[5]].iter().chain(&new[6..]) {
+    for &id in scalars.simplified().iter().chain(gradient).chain(jacobian) {
         s.adopt(id);
     }
+    let Scalars { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias } = scalars;
     Some(DerivedConstraint {
-        c: new[0],
-        c_dot_raw: new[1],
-        c_dot: new[2],
-        c_ddot_raw: new[3],
-        c_ddot: new[4],
+        c,
+        c_dot_raw,
+        c_dot,
+        c_ddot_raw,
+        c_ddot,
         gradient: parts.iter().map(|e| (e.1, e.2)).collect(),
         scale: earlier.scale.clone(),
-        direction: parts.iter().map(|e| (e.1, e.3)).collect(),
-        c_term: new[5],
+        jacobian: parts.iter().map(|e| (e.1, e.3)).collect(),
+        bias,
     })
 }
 
@@ -238,19 +400,19 @@ fn renamed(
 /// entries of the same shape as earlier ones are renamed from them.
 #[allow(clippy::type_complexity)]
 fn assemble(
-    system: &mut System,
+    system: &System,
+    g: &mut Graph,
+    s: &mut Simplifier,
     constraints: &[DerivedConstraint],
     repeats: bool,
 ) -> Result<(Vec<(usize, usize, Id)>, Vec<Id>), TypeError> {
     // Which constraints act on each body.
     let mut on_body: Vec<Vec<(usize, Id)>> = vec![Vec::new(); system.bodies.len()];
     for (k, dc) in constraints.iter().enumerate() {
-        for &(body, j) in &dc.direction {
+        for &(body, j) in &dc.jacobian {
             on_body[body].push((k, j));
         }
     }
-    let g = &mut system.graph;
-    let s = &mut system.simplifier;
     let mut inv_mass = Vec::with_capacity(system.bodies.len());
     for body in &system.bodies {
         inv_mass.push(g.powi(body.mass, -1)?);
@@ -285,13 +447,12 @@ fn assemble(
     // bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ
     let mut b = Vec::with_capacity(constraints.len());
     for dc in constraints {
-        let mut terms = Vec::with_capacity(dc.direction.len() + 1);
-        for &(body, j) in &dc.direction {
-            let f = g.sym(system.bodies[body].force);
-            let dot = g.dot(j, f)?;
+        let mut terms = Vec::with_capacity(dc.jacobian.len() + 1);
+        for &(body, j) in &dc.jacobian {
+            let dot = g.dot(j, system.bodies[body].nodes.force)?;
             terms.push(g.mul(vec![dot, inv_mass[body]])?);
         }
-        terms.push(dc.c_term);
+        terms.push(dc.bias);
         let sum = g.add(terms)?;
         b.push(if repeats { s.simplify_alike(g, sum)? } else { s.simplify(g, sum)? });
     }

@@ -7,7 +7,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::codegen::{Options, generate};
-use lagrange::derive::derive;
+use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
 use lagrange::model::file::RawValue;
 use lagrange::model::file::{Loaded, Problem, load};
 use lagrange::model::scene::environment;
@@ -301,17 +301,18 @@ fn load_file(path: &Path) -> Result<Loaded, ExitCode> {
 }
 
 fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
-    let mut loaded = match load_file(path) {
+    let loaded = match load_file(path) {
         Ok(l) => l,
         Err(code) => return code,
     };
-    let derivation = match derive(&mut loaded.system) {
-        Ok(d) => d,
-        Err(e) => {
-            eprintln!("error: {}: {e}", path.display());
-            return ExitCode::from(1);
-        }
-    };
+    let derivation =
+        match derive_with(&loaded.system, DeriveOptions { document: !matches!(format, FormatArg::Json), steps }) {
+            Ok(d) => d,
+            Err(e) => {
+                eprintln!("error: {}: {e}", path.display());
+                return ExitCode::from(1);
+            }
+        };
     let format = match format {
         FormatArg::Text => Format::Text,
         FormatArg::Latex => Format::Latex,
@@ -331,7 +332,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
             }
         };
     }
-    let result = derivation::document(&mut loaded.system, &derivation, format, steps);
+    let result = derivation::document(&loaded.system, &derivation, format, steps);
     match result {
         Ok(s) => {
             outln!("{s}");
@@ -345,11 +346,11 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
 }
 
 fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCode {
-    let mut loaded = match load_file(path) {
+    let loaded = match load_file(path) {
         Ok(l) => l,
         Err(code) => return code,
     };
-    let code = match generate(&mut loaded, &Options { specialize }) {
+    let code = match generate(&loaded, &Options { specialize }) {
         Ok(code) => code,
         Err(e) => {
             eprintln!("error: {}: {e}", path.display());
@@ -408,8 +409,8 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         eprintln!("{message}");
         ExitCode::from(1)
     };
-    let mut loaded = load_file(path)?;
-    let derivation = derive(&mut loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let loaded = load_file(path)?;
+    let derivation = derive(&loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     let mut overrides = match at {
         Some(p) => read_state(p).map_err(fail)?,
         None => Vec::new(),
@@ -422,8 +423,7 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     // A force given in the state replaces the scene's expression for that body.
     let given: Vec<&str> = overrides.iter().map(|(n, _)| n.as_str()).collect();
-    let program = RowProgram::with_given_forces(&mut loaded.system, &derivation, &loaded.scene.forces, &given);
-    let system = &loaded.system;
+    let program = RowProgram::with_given_forces(system, &derivation, &loaded.scene.forces, &given);
 
     // Contact distances count as zero relative to the size of the scene.
     let length = system

@@ -43,9 +43,9 @@ pub struct Scenario {
 
 impl Scenario {
     /// Derives `loaded` and evaluates its initial state, with `overrides` (`NAME = value`).
-    pub fn new(mut loaded: Loaded, overrides: &[(String, RawValue)]) -> Result<Scenario, ScenarioError> {
-        let derivation = derive(&mut loaded.system)?;
-        let program = RowProgram::new(&mut loaded.system, &derivation, &loaded.scene.forces);
+    pub fn new(loaded: Loaded, overrides: &[(String, RawValue)]) -> Result<Scenario, ScenarioError> {
+        let derivation = derive(&loaded.system)?;
+        let program = RowProgram::new(&loaded.system, &derivation, &loaded.scene.forces);
         let env = environment(&loaded.system, &loaded.values, &loaded.scene, overrides)?;
         Ok(Scenario { system: loaded.system, derivation, program, env, scene: loaded.scene, values: loaded.values })
     }

@@ -18,6 +18,16 @@ struct Rule {
 
 const PRINTING: &[&str] = &["println!", "print!", "eprintln!", "eprint!", "dbg!", "stdout(", "stderr("];
 const FILES: &[&str] = &["std::fs", "fs::", "File::", "OpenOptions"];
+/// Ways to hold a loaded model mutably: the type, and the places a `System` lives.
+const MUT_SYSTEM: &[&str] = &[
+    "&mut System",
+    "&mut loaded.system",
+    "&mut self.loaded.system",
+    "&mut self.system",
+    "&mut scenario.system",
+    "&mut l.system",
+    "&mut s.system",
+];
 
 fn rules() -> Vec<Rule> {
     vec![
@@ -64,6 +74,13 @@ fn rules() -> Vec<Rule> {
             exempt: &["src/main.rs", "src/report", "src/check/read.rs"],
             forbidden: FILES,
             why: "only main.rs (and the report writers it calls) touches files",
+        },
+        Rule {
+            scope: "src",
+            exempt: &["src/model", "src/derive.rs"],
+            forbidden: MUT_SYSTEM,
+            why: "the model is frozen after load: only model builds a System and derive reads it; \
+                  what derive adds lives in the Derivation",
         },
     ]
 }
@@ -257,6 +274,13 @@ fn the_core_exists_where_the_rules_look() {
     for path in ["src/expr", "src/expr/parse.rs", "src/main.rs", "src/report"] {
         assert!(root().join(path).exists(), "{path} is gone: update tests/architecture.rs and ARCHITECTURE.md");
     }
+}
+
+#[test]
+fn the_frozen_model_rule_sees_a_mutable_system() {
+    let text = "fn f(s: &mut System) {}\nlet d = derive(&mut loaded.system);\n// &mut System in a comment\nfn g(s: &System) {}";
+    let found: Vec<usize> = violations(text, MUT_SYSTEM).into_iter().map(|(line, _)| line).collect();
+    assert_eq!(found, [1, 2]);
 }
 
 #[test]

@@ -123,7 +123,7 @@ fn vector(g: &Graph, id: lagrange::expr::Id, env: &Env) -> Vec<f64> {
 
 /// What the generated functions must return, from the interpreter.
 fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
-    let g = &l.system.graph;
+    let g = &d.graph;
     let (dim, n, k) = (g.dim(), l.system.bodies.len(), d.constraints.len());
     let c: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c, env)).collect();
     let mut a = vec![0.0; k * k];
@@ -135,11 +135,11 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
     let b: Vec<f64> = d.b.iter().map(|&id| scalar(g, id, env)).collect();
     let mut j = vec![0.0; k * n * dim];
     for (r, dc) in d.constraints.iter().enumerate() {
-        for &(body, id) in &dc.direction {
+        for &(body, id) in &dc.jacobian {
             j[r * n * dim + body * dim..][..dim].copy_from_slice(&vector(g, id, env));
         }
     }
-    let c_term: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c_term, env)).collect();
+    let c_term: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.bias, env)).collect();
     let lambda: Vec<f64> = match d.lambda {
         Some(id) => vec![scalar(g, id, env)],
         None => {
@@ -210,11 +210,11 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
     let mut rng = Rng(0x5eed_1234_abcd_0001);
     for path in files() {
         for specialize in [false, true] {
-            let mut l = loaded(&path);
-            let m = module(&mut l, &Options { specialize }).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let l = loaded(&path);
+            let m = module(&l, &Options { specialize }).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             // The reference derivation, on a fresh load (the generator may have grown the graph).
-            let mut reference = loaded(&path);
-            let d = derive(&mut reference.system).expect("derives");
+            let reference = loaded(&path);
+            let d = derive(&reference.system).expect("derives");
             let mut states = Vec::new();
             for _ in 0..STATES {
                 let (env, literal) = random_state(&reference, &m, &mut rng, specialize);
@@ -279,8 +279,8 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
 
 #[test]
 fn hostile_names_become_safe_identifiers_and_comments() {
-    let mut l = loaded(Path::new("tests/data/hostile_names.toml"));
-    let m = module(&mut l, &Options::default()).expect("generates");
+    let l = loaded(Path::new("tests/data/hostile_names.toml"));
+    let m = module(&l, &Options::default()).expect("generates");
     let fields: Vec<&str> = m.fields.iter().map(|f| f.1.as_str()).collect();
     // Distinct, valid, not keywords.
     let mut sorted = fields.clone();
@@ -304,8 +304,8 @@ fn hostile_names_become_safe_identifiers_and_comments() {
 
 #[test]
 fn specialised_code_carries_no_parameters() {
-    let mut l = loaded(Path::new("constraints/bead_on_wire.toml"));
-    let m = module(&mut l, &Options { specialize: true }).expect("generates");
+    let l = loaded(Path::new("constraints/bead_on_wire.toml"));
+    let m = module(&l, &Options { specialize: true }).expect("generates");
     let g = &l.system.graph;
     let names: Vec<&str> = m.fields.iter().map(|(s, _)| g.symbol(*s).name.as_str()).collect();
     assert!(!names.contains(&"l") && !names.contains(&"m") && !names.contains(&"g"), "{names:?}");
@@ -320,8 +320,8 @@ fn checked_in_generated_code_is_current() {
         ("constraints/bead_on_wire.toml", "benches/generated/bead_on_wire.rs"),
         ("benches/data/chain_10.toml", "benches/generated/chain_10.rs"),
     ] {
-        let mut l = loaded(Path::new(file));
-        let code = lagrange::codegen::generate(&mut l, &Options::default()).expect("generates");
+        let l = loaded(Path::new(file));
+        let code = lagrange::codegen::generate(&l, &Options::default()).expect("generates");
         let on_disk = std::fs::read_to_string(generated).expect("checked-in module");
         assert!(code == on_disk, "{generated} is stale: run `cargo run --release -- generate {file} -o {generated}`");
     }
@@ -334,8 +334,8 @@ fn specialising_extreme_values_keeps_formulas_finite() {
     let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("bead");
     let text = text.replace("l = 2.0", "l = 1e-200");
     assert!(text.contains("l = 1e-200"));
-    let mut l = load(&text).expect("loads");
-    let code = lagrange::codegen::generate(&mut l, &Options { specialize: true }).expect("generates");
+    let l = load(&text).expect("loads");
+    let code = lagrange::codegen::generate(&l, &Options { specialize: true }).expect("generates");
     assert!(!code.contains("INFINITY") && !code.contains("NAN"), "{code}");
 }
 
@@ -372,13 +372,13 @@ fn big_chains_get_a_banded_a_that_compiles_and_agrees() {
     }
     const LINKS: usize = 40;
     let text = chain_file(LINKS);
-    let mut l = load(&text).expect("chain loads");
-    let m = module(&mut l, &Options::default()).expect("generates");
+    let l = load(&text).expect("chain loads");
+    let m = module(&l, &Options::default()).expect("generates");
     assert!(m.code.contains("pub const A_BANDWIDTH: usize = 1;"), "a chain is tridiagonal");
     assert!(m.code.contains("pub fn a_band(s: &State) -> [[f64; 2]; 40]"));
     assert!(!m.code.contains("fn a_matrix") && !m.code.contains("[[f64; 40]; 40]"), "no dense A");
-    let mut reference = load(&text).expect("chain loads");
-    let d = derive(&mut reference.system).expect("derives");
+    let reference = load(&text).expect("chain loads");
+    let d = derive(&reference.system).expect("derives");
     let mut rng = Rng(0x0c4a_1150_0000_0040);
     let states: Vec<(Env, String)> = (0..STATES).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
 
@@ -446,8 +446,8 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
     }
     const STATES: usize = 2;
     let text = lagrange::scenario::chain(BIG_LINKS);
-    let mut l = load(&text).expect("chain loads");
-    let m = module(&mut l, &Options::default()).expect("generates");
+    let l = load(&text).expect("chain loads");
+    let m = module(&l, &Options::default()).expect("generates");
     let code = &m.code;
     assert!(code.contains("pub fn jacobian_blocks(s: &State) -> Vec<(usize, usize, [f64; 2])>"));
     assert!(code.contains(&format!("pub const JACOBIAN_BLOCKS: usize = {};", 2 * BIG_LINKS - 1)));
@@ -462,8 +462,8 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
         }
     }
 
-    let mut reference = load(&text).expect("chain loads");
-    let d = derive(&mut reference.system).expect("derives");
+    let reference = load(&text).expect("chain loads");
+    let d = derive(&reference.system).expect("derives");
     let mut rng = Rng(0xb16c_4a11_0000_0500);
     let states: Vec<(Env, String)> = (0..STATES).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
 
@@ -484,7 +484,7 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
     let stdout = compile_and_run(&dir, &main, 0);
     let mut lines = stdout.lines().map(numbers);
 
-    let g = &reference.system.graph;
+    let g = &d.graph;
     let k = BIG_LINKS;
     let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-9 * scale.max(1.0);
     let max_abs = |xs: &[f64]| xs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
@@ -505,7 +505,7 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
         agree("C", &c, &want(&mut d.constraints.iter().map(|c| c.c)));
         let b_want = want(&mut d.b.iter().copied());
         agree("b", &b, &b_want);
-        agree("c", &c_term, &want(&mut d.constraints.iter().map(|c| c.c_term)));
+        agree("c", &c_term, &want(&mut d.constraints.iter().map(|c| c.bias)));
         // A: the interpreter's upper triangle, as band rows.
         let mut band_want = vec![0.0; 2 * k];
         for &(r, col, id) in &d.a {
@@ -517,7 +517,7 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
         // J: (k, i, d) blocks in the derivation's order.
         let mut j_want = Vec::new();
         for (r, dc) in d.constraints.iter().enumerate() {
-            for &(body, id) in &dc.direction {
+            for &(body, id) in &dc.jacobian {
                 j_want.extend([r as f64, body as f64]);
                 j_want.extend(vector(g, id, env));
             }
@@ -594,11 +594,11 @@ fn few_constraints_on_many_bodies_get_a_sparse_j() {
 /// C, b, c, λ, A, J (made dense from its blocks) and the forces with the interpreter, entry by
 /// entry. Returns the module's code.
 fn sparse_j_agrees(name: &str, text: &str, seed: u64) -> String {
-    let mut l = load(text).expect("loads");
-    let m = module(&mut l, &Options::default()).expect("generates");
+    let l = load(text).expect("loads");
+    let m = module(&l, &Options::default()).expect("generates");
     assert!(m.code.contains("pub fn jacobian_blocks") && !m.code.contains("fn jacobian("), "a sparse J");
-    let mut reference = load(text).expect("loads");
-    let d = derive(&mut reference.system).expect("derives");
+    let reference = load(text).expect("loads");
+    let d = derive(&reference.system).expect("derives");
     let mut rng = Rng(seed);
     let states: Vec<(Env, String)> = (0..2).map(|_| random_state(&reference, &m, &mut rng, false)).collect();
 

@@ -4,7 +4,7 @@
 //! constraint file, with and without `--steps`. (Compiled with pdflatex by hand: every
 //! document of `constraints/` and `constraints/hard/`, wrapped in `article` + `amsmath`.)
 
-use lagrange::derive::derive;
+use lagrange::derive::{Options, derive_with};
 use lagrange::model::file::load;
 use lagrange::report::derivation::{Format, document};
 use std::path::{Path, PathBuf};
@@ -26,9 +26,9 @@ fn files() -> Vec<PathBuf> {
 
 fn latex(path: &Path, steps: bool) -> String {
     let text = std::fs::read_to_string(path).expect("file reads");
-    let mut loaded = load(&text).unwrap_or_else(|_| panic!("{} loads", path.display()));
-    let d = derive(&mut loaded.system).expect("derives");
-    document(&mut loaded.system, &d, Format::Latex, steps).expect("document builds")
+    let loaded = load(&text).unwrap_or_else(|_| panic!("{} loads", path.display()));
+    let d = derive_with(&loaded.system, Options { document: true, steps }).expect("derives");
+    document(&loaded.system, &d, Format::Latex, steps).expect("document builds")
 }
 
 /// The problems of one line of LaTeX, outside display math: what would stop pdflatex.

@@ -25,8 +25,8 @@ fn setup(text: &str) -> Setup {
 /// A setup where the bodies with these force symbols take the force from the state, not
 /// from `[scene] forces` (as `lagrange solve --set F=…` does).
 fn setup_given_forces(text: &str, given: &[&str]) -> Setup {
-    let mut loaded = load(text).expect("valid file");
-    let derivation = derive(&mut loaded.system).expect("derives");
+    let loaded = load(text).expect("valid file");
+    let derivation = derive(&loaded.system).expect("derives");
     let system = &loaded.system;
     let forces: Vec<_> = loaded
         .scene
@@ -35,7 +35,7 @@ fn setup_given_forces(text: &str, given: &[&str]) -> Setup {
         .copied()
         .filter(|&(b, _)| !given.contains(&system.graph.symbol(system.bodies[b].force).name.as_str()))
         .collect();
-    let program = RowProgram::new(&mut loaded.system, &derivation, &forces);
+    let program = RowProgram::new(system, &derivation, &forces);
     Setup { loaded, program, _derivation: derivation }
 }
 

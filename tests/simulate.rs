@@ -167,7 +167,7 @@ fn compiled_rows_agree_with_the_interpreter_on_every_file() {
         for _ in 0..20 {
             let env = common::random_env(&s.system, &mut rng);
             let compiled = s.program.evaluate(&s.system, &env).expect("rows");
-            let reference = s.program.evaluate_interpreted(&s.system, &env).expect("rows");
+            let reference = s.program.evaluate_interpreted(&s.system, &s.derivation, &env).expect("rows");
             let close =
                 |a: f64, b: f64| a == b || (a - b).abs() <= 1e-12 * a.abs().max(b.abs()) || (a.is_nan() && b.is_nan());
             let close3 = |a: &[f64; 3], b: &[f64; 3]| (0..3).all(|d| close(a[d], b[d]));

@@ -9,9 +9,9 @@ use lagrange::numeric::solve::solve;
 #[test]
 fn bead_force_matches_the_article_at_states_on_the_wire() {
     let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
-    let mut loaded = load(&text).expect("valid file");
-    let derivation = derive(&mut loaded.system).expect("derives");
-    let program = RowProgram::new(&mut loaded.system, &derivation, &loaded.scene.forces);
+    let loaded = load(&text).expect("valid file");
+    let derivation = derive(&loaded.system).expect("derives");
+    let program = RowProgram::new(&loaded.system, &derivation, &loaded.scene.forces);
     let (l, m, g) = (2.0, 1.0, -9.81);
     for step in 0..50 {
         let theta = 0.37 * step as f64;

@@ -63,7 +63,7 @@ fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
     match &s.derivation.forces {
         Some(closed) => {
             let ids: Vec<_> = closed.iter().map(|&(_, id)| id).collect();
-            let values = eval(&s.system.graph, &ids, env).ok()?;
+            let values = eval(&s.derivation.graph, &ids, env).ok()?;
             let mut out = vec![[0.0; 3]; s.system.bodies.len()];
             for (&(b, _), v) in closed.iter().zip(values) {
                 out[b] = v.vector()?;
@@ -80,7 +80,7 @@ fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
 
 /// The same forces in double-double (None where the reference is undefined there).
 fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
-    let graph = &s.system.graph;
+    let graph = &s.derivation.graph;
     let n = s.system.bodies.len();
     let zero = TwoFloat::from(0.0);
     if let Some(closed) = &s.derivation.forces {
@@ -98,8 +98,8 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
         (0..n).map(|i| s.scene.forces.iter().find(|(b, _)| *b == i).map(|&(_, id)| id)).collect();
     roots.extend(force_expr.iter().flatten());
     for d in &s.derivation.constraints {
-        roots.push(d.c_term);
-        roots.extend(d.direction.iter().map(|&(_, j)| j));
+        roots.push(d.bias);
+        roots.extend(d.jacobian.iter().map(|&(_, j)| j));
     }
     let values = eval_dd(graph, &roots, env).ok()?;
     let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar()).collect();
@@ -123,8 +123,8 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     for d in &s.derivation.constraints {
         c.push(values[at].scalar());
         at += 1;
-        jac.push(d.direction.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector())).collect());
-        at += d.direction.len();
+        jac.push(d.jacobian.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector())).collect());
+        at += d.jacobian.len();
     }
     // A λ = −b with Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ/mᵢ, bₖ = Σᵢ Jₖᵢ·Fᵢ/mᵢ + cₖ.
     let k = c.len();

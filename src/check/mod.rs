@@ -19,6 +19,10 @@
 //! Comparison rule, for values x (derived) and y (expected): pass when
 //! ‖x − y‖ ≤ tol · max(‖x‖, ‖y‖, 10⁻³).
 //!
+//! The loaded system is not changed: an expected formula given to the API is parsed in the
+//! system's scope into the checked file's own derivation ([`Derivation::expression`]), where
+//! derived and expected formulas share one graph.
+//!
 //! Not here: printing (the CLI prints [`Outcome`]s), reading files except in
 //! [`Checked::load`] (`read.rs`, the one file access of the user-test API).
 //!
@@ -123,13 +127,13 @@ impl Checked {
 
     /// Validates and derives a constraint file's text; `name` is used in messages.
     pub fn from_text(name: &str, text: &str) -> Result<Checked, CheckError> {
-        let mut loaded = load(text).map_err(|problems| CheckError::Invalid {
+        let loaded = load(text).map_err(|problems| CheckError::Invalid {
             path: name.to_string(),
             rendered: render(name, text, &problems),
             count: problems.len(),
         })?;
         let derivation =
-            derive(&mut loaded.system).map_err(|error| CheckError::Derive { path: name.to_string(), error })?;
+            derive(&loaded.system).map_err(|error| CheckError::Derive { path: name.to_string(), error })?;
         Ok(Checked { name: name.to_string(), loaded, derivation, program: None, states: None })
     }
 
@@ -268,14 +272,14 @@ impl Checked {
 
     /// Parses `expected` in the file's scope and judges it against `quantity`.
     fn check(&mut self, quantity: Quantity, expected: &str) -> Result<Outcome, CheckError> {
-        let system = &mut self.loaded.system;
-        let id = system.expression(expected).map_err(|e| CheckError::Expected(format!("in `{expected}`: {e}")))?;
+        // Into the derivation's graph, where it can be compared with what was derived.
+        let d = &mut self.derivation;
+        let id = d
+            .expression(&self.loaded.system, expected)
+            .map_err(|e| CheckError::Expected(format!("in `{expected}`: {e}")))?;
         let want = if matches!(quantity, Quantity::Force(_)) { Ty::Vector } else { Ty::Scalar };
-        if system.graph.ty(id) != want {
-            return Err(CheckError::Expected(format!(
-                "`{expected}` must be a {want:?}, found a {:?}",
-                system.graph.ty(id)
-            )));
+        if d.graph.ty(id) != want {
+            return Err(CheckError::Expected(format!("`{expected}` must be a {want:?}, found a {:?}", d.graph.ty(id))));
         }
         let mut outcome = self.judge_formula(quantity, id)?;
         outcome.label = self.label(quantity, &Expectation::default_for_api());
@@ -305,14 +309,13 @@ impl Checked {
     /// The derived formula of `q` for C as written; `None` for forces and λ of several
     /// constraints (no closed form).
     fn derived(&mut self, q: Quantity) -> Result<Option<Id>, TypeError> {
-        let d = &self.derivation;
-        let system = &mut self.loaded.system;
+        let d = &mut self.derivation;
         let kappa = |k: usize| d.constraints[k].scale.clone();
         let (id, factor) = match q {
             Quantity::Force(i) => match &d.forces {
                 Some(forces) => match forces.iter().find(|(b, _)| *b == i) {
                     Some(&(_, f)) => (f, Rational::ONE),
-                    None => (system.graph.zero_vector(), Rational::ONE),
+                    None => (d.graph.zero_vector(), Rational::ONE),
                 },
                 None => return Ok(None),
             },
@@ -324,22 +327,22 @@ impl Checked {
             Quantity::CDdot(k) => (d.constraints[k].c_ddot, Rational::ONE),
             Quantity::A(k, j) => match d.a_entry(k, j) {
                 Some(a) => (a, kappa(k).mul(&kappa(j))),
-                None => (system.graph.int(0), Rational::ONE),
+                None => (d.graph.int(0), Rational::ONE),
             },
             Quantity::B(k) => (d.b[k], kappa(k)),
         };
         if factor.is_one() {
             return Ok(Some(id));
         }
-        Ok(Some(system.simplifier.scaled(&mut system.graph, id, &factor)?))
+        Ok(Some(d.simplifier.scaled(&mut d.graph, id, &factor)?))
     }
 
     /// Judges `expected` against the derived `q`: canonical form first, then states.
     fn judge_formula(&mut self, q: Quantity, expected: Id) -> Result<Outcome, CheckError> {
         let derived = self.derived(q)?;
         if let Some(d) = derived {
-            let system = &mut self.loaded.system;
-            if system.simplifier.equivalent(&mut system.graph, d, expected)? {
+            let derivation = &mut self.derivation;
+            if derivation.simplifier.equivalent(&mut derivation.graph, d, expected)? {
                 return Ok(outcome(true, "equal in canonical form", String::new()));
             }
         }
@@ -349,10 +352,10 @@ impl Checked {
         };
         for env in &states {
             let got = match derived {
-                Some(d) => eval(&self.loaded.system, d, env),
+                Some(d) => self.eval(d, env),
                 None => self.solved(q, env, true),
             };
-            let want = eval(&self.loaded.system, expected, env);
+            let want = self.eval(expected, env);
             let verdict = compare(&got, &want, FORMULA_TOLERANCE);
             if !verdict.0 {
                 let detail = self.failure(env, &got, &want, verdict.1, derived, expected);
@@ -380,7 +383,7 @@ impl Checked {
         let got = self.solved(item.quantity, &env, false);
         let want = match &item.expected {
             Expected::Numbers(xs) => Ok(xs.clone()),
-            Expected::Formula { id, .. } => eval(&self.loaded.system, *id, &env),
+            Expected::Formula { id, .. } => self.eval(*id, &env),
         };
         let (passed, diff) = compare(&got, &want, e.tolerance);
         let how = format!("at the state, tolerance {:e}", e.tolerance);
@@ -401,7 +404,7 @@ impl Checked {
     fn solved(&mut self, q: Quantity, env: &Env, all_active: bool) -> Result<Vec<f64>, String> {
         let program = match &self.program {
             Some(p) => p,
-            None => self.program.insert(RowProgram::new(&mut self.loaded.system, &self.derivation, &[])),
+            None => self.program.insert(RowProgram::new(&self.loaded.system, &self.derivation, &[])),
         };
         let system = &self.loaded.system;
         let mut rows = program.evaluate(system, env).map_err(|e| e.to_string())?;
@@ -415,7 +418,7 @@ impl Checked {
             Quantity::Lambda(k) => Ok(vec![solution.lambda[k] / self.derivation.constraints[k].scale.to_f64()]),
             _ => {
                 let id = self.derived(q).map_err(|e| e.to_string())?.ok_or("no formula")?;
-                eval(&self.loaded.system, id, env)
+                self.eval(id, env)
             }
         }
     }
@@ -424,8 +427,8 @@ impl Checked {
         if let Some(s) = self.states.take() {
             return s;
         }
-        let l = &mut self.loaded;
-        states::sample(&mut l.system, &self.derivation, &l.values, &l.scene, STATES)
+        let l = &self.loaded;
+        states::sample(&l.system, &self.derivation, &l.values, &l.scene, STATES)
     }
 
     /// The state, both values and their difference, for a failed formula check.
@@ -438,7 +441,7 @@ impl Checked {
         derived: Option<Id>,
         expected: Id,
     ) -> String {
-        let g = &self.loaded.system.graph;
+        let g = &self.derivation.graph;
         let mut state = Vec::new();
         for (s, info) in g.symbols() {
             if matches!(info.role, Role::Parameter) {
@@ -460,6 +463,14 @@ impl Checked {
     }
 }
 
+impl Checked {
+    /// A formula of the derivation's graph at `env`, as components.
+    fn eval(&self, id: Id, env: &Env) -> Result<Vec<f64>, String> {
+        let dim = self.loaded.system.dim();
+        eval_one(&self.derivation.graph, id, env).map(|v| v.components(dim)).map_err(|e| e.to_string())
+    }
+}
+
 impl Expectation {
     fn default_for_api() -> Expectation {
         Expectation { span: 0..0, at: None, tolerance: FORMULA_TOLERANCE, items: Vec::new(), note: None }
@@ -468,10 +479,6 @@ impl Expectation {
 
 fn outcome(passed: bool, how: &str, detail: String) -> Outcome {
     Outcome { label: String::new(), span: None, passed, how: how.to_string(), detail }
-}
-
-fn eval(system: &crate::model::system::System, id: Id, env: &Env) -> Result<Vec<f64>, String> {
-    eval_one(&system.graph, id, env).map(|v| v.components(system.dim())).map_err(|e| e.to_string())
 }
 
 /// `(passed, ‖x − y‖)`: ‖x − y‖ ≤ tol · max(‖x‖, ‖y‖, 10⁻³), every value finite.

@@ -74,14 +74,13 @@ impl Rng {
 
 /// `count` states on the constraint manifold, or why they could not be found.
 pub fn sample(
-    system: &mut System,
+    system: &System,
     derivation: &Derivation,
     parameters: &BTreeMap<String, RawValue>,
     scene: &Scene,
     count: usize,
 ) -> Result<Vec<Env>, String> {
     let program = RowProgram::new(system, derivation, &[]);
-    let system: &System = system;
     let dim = system.dim();
     let mut base = Env::new();
     for (name, value) in parameters {

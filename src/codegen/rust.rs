@@ -88,8 +88,8 @@ struct Formulas {
     /// `(k, j, Aₖⱼ)`, upper triangle.
     a: Vec<(usize, usize, Id)>,
     b: Vec<Id>,
-    direction: Vec<Vec<(usize, Id)>>,
-    c_term: Vec<Id>,
+    jacobian: Vec<Vec<(usize, Id)>>,
+    bias: Vec<Id>,
     lambda: Option<Id>,
     forces: Option<Vec<(usize, Id)>>,
 }
@@ -99,10 +99,10 @@ impl Formulas {
         let mut each = |xs: Vec<Id>| xs.into_iter().map(&mut f).collect::<Result<Vec<_>, _>>();
         let c = each(self.c)?;
         let b = each(self.b)?;
-        let c_term = each(self.c_term)?;
+        let bias = each(self.bias)?;
         let a = self.a.into_iter().map(|(k, j, x)| Ok((k, j, f(x)?))).collect::<Result<_, GenerateError>>()?;
-        let direction = self
-            .direction
+        let jacobian = self
+            .jacobian
             .into_iter()
             .map(|d| d.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>())
             .collect::<Result<_, _>>()?;
@@ -111,7 +111,7 @@ impl Formulas {
             Some(fs) => Some(fs.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>()?),
             None => None,
         };
-        Ok(Formulas { c, a, b, direction, c_term, lambda, forces })
+        Ok(Formulas { c, a, b, jacobian, bias, lambda, forces })
     }
 }
 
@@ -130,27 +130,28 @@ pub struct Module {
 }
 
 /// Generates the Rust module for a loaded file (the source text).
-pub fn generate(loaded: &mut Loaded, options: &Options) -> Result<String, GenerateError> {
+pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateError> {
     Ok(module(loaded, options)?.code)
 }
 
 /// Generates the Rust module for a loaded file, with its `State` layout.
-pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, GenerateError> {
-    let d = derive(&mut loaded.system)?;
-    let system = &mut loaded.system;
+pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
+    // The module's own derivation: `--specialize` extends its graph.
+    let mut d = derive(&loaded.system)?;
+    let system = &loaded.system;
     let mut formulas = Formulas {
         c: d.constraints.iter().map(|c| c.c).collect(),
         a: d.a.clone(),
         b: d.b.clone(),
-        direction: d.constraints.iter().map(|c| c.direction.clone()).collect(),
-        c_term: d.constraints.iter().map(|c| c.c_term).collect(),
+        jacobian: d.constraints.iter().map(|c| c.jacobian.clone()).collect(),
+        bias: d.constraints.iter().map(|c| c.bias).collect(),
         lambda: d.lambda,
         forces: d.forces.clone(),
     };
     let mut substituted = HashSet::new();
     let mut map = HashMap::new();
     if options.specialize {
-        let g = &mut system.graph;
+        let g = &mut d.graph;
         for (name, value) in &loaded.values {
             let Some(s) = g.symbol_named(name) else { continue };
             let bad = || GenerateError::BadValue(name.clone());
@@ -175,7 +176,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
             map.insert(sym, node);
             substituted.insert(s);
         }
-        let simplifier = &mut system.simplifier;
+        let simplifier = &mut d.simplifier;
         formulas = formulas.map(|id| {
             let replaced = g.substitute(id, &map)?;
             let simplified = simplifier.simplify(g, replaced)?;
@@ -188,12 +189,13 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     // canonical Aₖⱼ expands each dot bilinearly (a chain's (r₁ − r₂)·(r₂ − r₃) becomes four dot
     // products), which costs more operations and loses digits to cancellation. The doc
     // comments keep the canonical form.
-    let masses = system.bodies.iter().map(|b| system.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
-    let a_code = assembled_a(&mut system.graph, &formulas, &masses)?;
-    let g = &system.graph;
+    let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
+    let a_code = assembled_a(&mut d.graph, &formulas, &masses)?;
+    let g = &d.graph;
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
-    let fields = state_fields(g, &body_names, &substituted);
+    // The state holds the file's symbols, not those the derivation declared (the multipliers).
+    let fields = state_fields(&system.graph, &body_names, &substituted);
     let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
     let slots = slot_exprs(g, &fields);
     let (dim, n, k) = (g.dim(), system.bodies.len(), system.constraints.len());
@@ -235,7 +237,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
              constraint k's direction d on body i, sorted by k. Σₖ λₖ·d over the blocks of body i is its force."
         );
     }
-    let blocks = formulas.direction.iter().map(Vec::len).sum::<usize>();
+    let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
     let parted = k > PART || (k > DENSE_MAX && formulas.a.len() > PART) || (sparse_j && blocks > PART);
     if parted {
         let _ = writeln!(
@@ -358,7 +360,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     )];
     let mut roots = Vec::new();
     let mut at: HashMap<(usize, usize), usize> = HashMap::new();
-    for (r, dirs) in formulas.direction.iter().enumerate() {
+    for (r, dirs) in formulas.jacobian.iter().enumerate() {
         for &(body, id) in dirs {
             doc.push(format!("- J[{r}], body `{}`: {}", comment_text(body_names[body]), formula(g, id)));
             at.insert((r, body), roots.len());
@@ -368,7 +370,7 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     if sparse_j {
         // Block triplets by constraint, each constraint's bodies as the derivation lists them.
         let blocks: Vec<(usize, usize, Id)> = formulas
-            .direction
+            .jacobian
             .iter()
             .enumerate()
             .flat_map(|(r, dirs)| dirs.iter().map(move |&(body, id)| (r, body, id)))
@@ -414,10 +416,10 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
 
     // c
     let mut doc = vec!["c: the part of C̈ (over the same constant) without accelerations, C̈ = J·a + c.".to_string()];
-    for (i, &c) in formulas.c_term.iter().enumerate() {
+    for (i, &c) in formulas.bias.iter().enumerate() {
         doc.push(format!("- c[{i}] = {}", formula(g, c)));
     }
-    ctx.emit_scalars(&mut out, &doc, "c_term", &formulas.c_term)?;
+    ctx.emit_scalars(&mut out, &doc, "c_term", &formulas.bias)?;
 
     // λ and the forces.
     let mut namer = Namer::new(&[
@@ -529,8 +531,8 @@ fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, Ge
     for &(k, j, _) in &f.a {
         // (mass, dots over the bodies of that mass), in body order.
         let mut by_mass: Vec<(Id, Vec<Id>)> = Vec::new();
-        for &(body, jk) in &f.direction[k] {
-            let Some(&(_, jj)) = f.direction[j].iter().find(|d| d.0 == body) else { continue };
+        for &(body, jk) in &f.jacobian[k] {
+            let Some(&(_, jj)) = f.jacobian[j].iter().find(|d| d.0 == body) else { continue };
             // Signs out of the dot: (−u)·w = −(u·w) exactly, and u is then shared with the
             // other constraint on this body (a chain's link k − 1 and k both see r₍ₖ₋₁₎ − rₖ).
             let ((nk, uk), (nj, uj)) = (split_sign(g, jk), split_sign(g, jj));

@@ -24,6 +24,18 @@ pub struct Body {
     pub force: Symbol,
     /// A mass symbol or a number.
     pub mass: Id,
+    /// The nodes of the body's symbols, made when they were declared: valid in the system's
+    /// graph and in every graph that extends it (a derivation's), so no one needs to make them.
+    pub nodes: BodyNodes,
+}
+
+/// The nodes of a body's symbols.
+#[derive(Clone, Copy, Debug)]
+pub struct BodyNodes {
+    pub position: Id,
+    pub velocity: Id,
+    pub acceleration: Id,
+    pub force: Id,
 }
 
 /// A position constraint `C = 0` or `C ≥ 0`.
@@ -337,8 +349,24 @@ impl SystemBuilder {
                 self.system.graph.num(q)
             }
         };
+        let g = &mut self.system.graph;
+        // Each symbol's node exists since it was bound in the scope: these make none.
+        let nodes = BodyNodes {
+            position: g.sym(position),
+            velocity: g.sym(velocity),
+            acceleration: g.sym(acceleration),
+            force: g.sym(force),
+        };
         self.body_names.insert(spec.name.to_string());
-        self.system.bodies.push(Body { name: spec.name.to_string(), position, velocity, acceleration, force, mass });
+        self.system.bodies.push(Body {
+            name: spec.name.to_string(),
+            position,
+            velocity,
+            acceleration,
+            force,
+            mass,
+            nodes,
+        });
         Ok(body)
     }
 

@@ -6,6 +6,12 @@
 //! `value` = C/κ, `rate` = Ċ/κ, `jacobian` = ∇C/κ, `bias` = c, so C̈/κ = Σᵢ Jᵢ·aᵢ + c and a
 //! Newton step on `value` along `jacobian` is consistent.
 //!
+//! The roots are nodes of the derivation's graph, gathered from `&System` and `&Derivation`
+//! without adding any (the bodies' velocity and force nodes are `Body::nodes`). Where each
+//! body's and each row's numbers sit among them is recorded as they are gathered
+//! (`BodySlots`, `RowLayout`), so adding a quantity (an angular J, a torque) means adding
+//! a slot, not recounting offsets.
+//!
 //! Evaluation goes through one compiled [`Tape`] of every root (`evaluate`, `evaluate_into`);
 //! the interpreter (`expr::eval`, the reference semantics) stays available as
 //! `evaluate_interpreted`, and a test holds the two together on every constraint file.
@@ -18,6 +24,7 @@ use crate::expr::{Id, Node, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::tape::{Scratch, Tape};
 use std::collections::BTreeSet;
+use std::ops::Range;
 
 /// One constraint row at a state.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -49,15 +56,45 @@ pub struct Rows {
 /// [`Tape`] (the interpreter of `expr::eval` is the reference semantics, not the hot path).
 #[derive(Clone, Debug)]
 pub struct RowProgram {
-    /// Roots in this order: per body mass, velocity, force; then per constraint C, Ċ, c, J….
+    /// Every root, in the order the slots of `bodies` and `rows` say.
     roots: Vec<Id>,
-    /// 1/κ per constraint.
-    inverse_scale: Vec<f64>,
-    shape: Vec<(bool, Vec<usize>)>,
+    /// Where each body's numbers are among the roots.
+    bodies: Vec<BodySlots>,
+    /// What each constraint row is and where its numbers are among the roots.
+    rows: Vec<RowLayout>,
     /// Every root, compiled over `inputs`.
     tape: Tape,
     /// The free symbols of the roots, in the tape's input order.
     inputs: Vec<Symbol>,
+}
+
+/// Where one body's numbers are among a [`RowProgram`]'s roots (and the tape's outputs).
+#[derive(Clone, Copy, Debug)]
+struct BodySlots {
+    mass: usize,
+    velocity: usize,
+    force: usize,
+}
+
+/// One constraint row of a [`RowProgram`]: its kind, its bodies, 1/κ, and where its
+/// numbers are among the roots.
+#[derive(Clone, Debug)]
+struct RowLayout {
+    inequality: bool,
+    inverse_scale: f64,
+    /// The bodies of J, in the order of `jacobian`'s slots.
+    bodies: Vec<usize>,
+    value: usize,
+    rate: usize,
+    bias: usize,
+    /// J of `bodies[q]` is root `jacobian.start + q`.
+    jacobian: Range<usize>,
+}
+
+/// Adds `id` to `roots`; returns its slot.
+fn push(roots: &mut Vec<Id>, id: Id) -> usize {
+    roots.push(id);
+    roots.len() - 1
 }
 
 /// Input and output buffers of [`RowProgram::evaluate_into`], reused across evaluations.
@@ -72,29 +109,40 @@ impl RowProgram {
     /// Gathers the rows of `derivation`. The external force on body i is `forces`' expression
     /// for i when it has one (so a simulation re-evaluates `F = m*g - k*v` at every state),
     /// else the body's force symbol, whose value the state gives.
-    pub fn new(system: &mut System, derivation: &Derivation, forces: &[(usize, Id)]) -> RowProgram {
+    pub fn new(system: &System, derivation: &Derivation, forces: &[(usize, Id)]) -> RowProgram {
+        let graph = &derivation.graph;
         let mut roots = Vec::new();
+        let mut bodies = Vec::with_capacity(system.bodies.len());
         for (i, body) in system.bodies.iter().enumerate() {
-            let v = system.graph.sym(body.velocity);
             let f = match forces.iter().find(|(b, _)| *b == i) {
                 Some(&(_, expr)) => expr,
-                None => system.graph.sym(body.force),
+                None => body.nodes.force,
             };
-            roots.extend([body.mass, v, f]);
+            bodies.push(BodySlots {
+                mass: push(&mut roots, body.mass),
+                velocity: push(&mut roots, body.nodes.velocity),
+                force: push(&mut roots, f),
+            });
         }
-        let mut inverse_scale = Vec::new();
-        let mut shape = Vec::new();
+        let mut rows = Vec::with_capacity(derivation.constraints.len());
         for (k, d) in derivation.constraints.iter().enumerate() {
-            roots.extend([d.c, d.c_dot, d.c_term]);
-            roots.extend(d.direction.iter().map(|&(_, j)| j));
-            inverse_scale.push(d.scale.recip().unwrap_or(Rational::ONE).to_f64());
-            shape.push((system.constraints[k].inequality, d.direction.iter().map(|&(b, _)| b).collect()));
+            let (value, rate, bias) = (push(&mut roots, d.c), push(&mut roots, d.c_dot), push(&mut roots, d.bias));
+            let start = roots.len();
+            roots.extend(d.jacobian.iter().map(|&(_, j)| j));
+            rows.push(RowLayout {
+                inequality: system.constraints[k].inequality,
+                inverse_scale: d.scale.recip().unwrap_or(Rational::ONE).to_f64(),
+                bodies: d.jacobian.iter().map(|&(b, _)| b).collect(),
+                value,
+                rate,
+                bias,
+                jacobian: start..roots.len(),
+            });
         }
-        let inputs: Vec<Symbol> = system
-            .graph
+        let inputs: Vec<Symbol> = graph
             .reachable(&roots)
             .into_iter()
-            .filter_map(|id| match system.graph.node(id) {
+            .filter_map(|id| match graph.node(id) {
                 Node::Sym(s) => Some(*s),
                 _ => None,
             })
@@ -102,20 +150,20 @@ impl RowProgram {
             .into_iter()
             .collect();
         // Every symbol a root reads is an input and each is listed once, so lowering cannot fail.
-        let tape = Tape::compile(&system.graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
-        RowProgram { roots, inverse_scale, shape, tape, inputs }
+        let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
+        RowProgram { roots, bodies, rows, tape, inputs }
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
     /// `--set F=…`): a body whose force symbol is named in `given` keeps that symbol, so the
     /// state's value replaces the scene's expression.
     pub fn with_given_forces(
-        system: &mut System,
+        system: &System,
         derivation: &Derivation,
         forces: &[(usize, Id)],
         given: &[&str],
     ) -> RowProgram {
-        let named = |b: usize| given.contains(&system.graph.symbol(system.bodies[b].force).name.as_str());
+        let named = |b: usize| given.contains(&derivation.graph.symbol(system.bodies[b].force).name.as_str());
         let forces: Vec<(usize, Id)> = forces.iter().copied().filter(|&(b, _)| !named(b)).collect();
         RowProgram::new(system, derivation, &forces)
     }
@@ -167,53 +215,47 @@ impl RowProgram {
             x[..n].copy_from_slice(&out[range]);
             x
         };
-        let n = system.bodies.len();
         rows.dim = system.dim();
         rows.inverse_mass.clear();
-        rows.inverse_mass.extend((0..n).map(|i| 1.0 / scalar(3 * i)));
+        rows.inverse_mass.extend(self.bodies.iter().map(|b| 1.0 / scalar(b.mass)));
         rows.velocity.clear();
-        rows.velocity.extend((0..n).map(|i| vector(3 * i + 1)));
+        rows.velocity.extend(self.bodies.iter().map(|b| vector(b.velocity)));
         rows.force.clear();
-        rows.force.extend((0..n).map(|i| vector(3 * i + 2)));
-        rows.rows.resize_with(self.shape.len(), Row::default);
-        let mut at = 3 * n;
-        for (((inequality, bodies), &s), row) in self.shape.iter().zip(&self.inverse_scale).zip(&mut rows.rows) {
-            row.value = scalar(at) * s;
-            row.rate = scalar(at + 1) * s;
-            row.bias = scalar(at + 2);
-            row.inequality = *inequality;
+        rows.force.extend(self.bodies.iter().map(|b| vector(b.force)));
+        rows.rows.resize_with(self.rows.len(), Row::default);
+        for (layout, row) in self.rows.iter().zip(&mut rows.rows) {
+            row.value = scalar(layout.value) * layout.inverse_scale;
+            row.rate = scalar(layout.rate) * layout.inverse_scale;
+            row.bias = scalar(layout.bias);
+            row.inequality = layout.inequality;
             row.jacobian.clear();
-            row.jacobian.extend(bodies.iter().enumerate().map(|(q, &b)| (b, vector(at + 3 + q))));
-            at += 3 + bodies.len();
+            row.jacobian.extend(layout.bodies.iter().zip(layout.jacobian.clone()).map(|(&b, at)| (b, vector(at))));
         }
         Ok(())
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of
-    /// the compiled path.
-    pub fn evaluate_interpreted(&self, system: &System, env: &Env) -> Result<Rows, EvalError> {
-        let values = eval(&system.graph, &self.roots, env)?;
-        let n = system.bodies.len();
-        let vector = |v: Value| v.vector().unwrap_or([f64::NAN; 3]);
-        let scalar = |v: Value| v.scalar().unwrap_or(f64::NAN);
+    /// the compiled path; `derivation` is the one the program was gathered from.
+    pub fn evaluate_interpreted(&self, system: &System, derivation: &Derivation, env: &Env) -> Result<Rows, EvalError> {
+        let values = eval(&derivation.graph, &self.roots, env)?;
+        let vector = |at: usize| values[at].vector().unwrap_or([f64::NAN; 3]);
+        let scalar = |at: usize| values[at].scalar().unwrap_or(f64::NAN);
         let mut rows = Rows {
             dim: system.dim(),
-            inverse_mass: (0..n).map(|i| 1.0 / scalar(values[3 * i])).collect(),
-            velocity: (0..n).map(|i| vector(values[3 * i + 1])).collect(),
-            force: (0..n).map(|i| vector(values[3 * i + 2])).collect(),
-            rows: Vec::with_capacity(self.shape.len()),
+            inverse_mass: self.bodies.iter().map(|b| 1.0 / scalar(b.mass)).collect(),
+            velocity: self.bodies.iter().map(|b| vector(b.velocity)).collect(),
+            force: self.bodies.iter().map(|b| vector(b.force)).collect(),
+            rows: Vec::with_capacity(self.rows.len()),
         };
-        let mut at = 3 * n;
-        for ((inequality, bodies), &s) in self.shape.iter().zip(&self.inverse_scale) {
-            let jacobian = bodies.iter().enumerate().map(|(q, &b)| (b, vector(values[at + 3 + q]))).collect();
+        for layout in &self.rows {
+            let jacobian = layout.bodies.iter().zip(layout.jacobian.clone()).map(|(&b, at)| (b, vector(at))).collect();
             rows.rows.push(Row {
-                value: scalar(values[at]) * s,
-                rate: scalar(values[at + 1]) * s,
-                bias: scalar(values[at + 2]),
-                inequality: *inequality,
+                value: scalar(layout.value) * layout.inverse_scale,
+                rate: scalar(layout.rate) * layout.inverse_scale,
+                bias: scalar(layout.bias),
+                inequality: layout.inequality,
                 jacobian,
             });
-            at += 3 + bodies.len();
         }
         Ok(rows)
     }

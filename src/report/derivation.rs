@@ -10,11 +10,15 @@
 //! Σₖ λₖ Jₖᵢ, and `--steps` adds each Jₖᵢ and cₖ and the system A λ = −b row by row. The
 //! JSON then carries `multipliers` (constraint → symbol) and `force_sums` (body → Σ λ J).
 //!
+//! Everything shown is a node the derivation owns (its graph extends the system's: the force
+//! sums, the multiplier symbols and the Newton step of `--steps` are built by `derive`), so
+//! this module reads `&System` and `&Derivation` and builds no node.
+//!
 //! Not here: deriving (`derive`), expression printing rules (`expr::print`).
 
 use crate::derive::Derivation;
 use crate::expr::print::{PrintError, Style, print};
-use crate::expr::{Graph, Id, Role, Ty, TypeError};
+use crate::expr::{Graph, Id, TypeError};
 use crate::model::system::System;
 use serde_json::{Value, json};
 use std::fmt::Write;
@@ -34,6 +38,10 @@ pub enum ReportError {
     Print(#[from] PrintError),
     #[error(transparent)]
     Type(#[from] TypeError),
+    /// A document needs what the derivation was made without
+    /// ([`derive_with`](crate::derive::derive_with) with `Options { document, steps }`).
+    #[error("the derivation was made without {0} (derive_with and Options)")]
+    NotDerived(&'static str),
 }
 
 /// How expressions look in one document format.
@@ -258,7 +266,7 @@ fn latex_escape(s: &str) -> String {
 }
 
 /// The derivation as a document (text, LaTeX or Markdown).
-pub fn document(system: &mut System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
+pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
     let doc = Doc::new(format);
     let mut out = String::new();
     let title = if system.title.is_empty() { "Constraint forces".to_string() } else { system.title.clone() };
@@ -285,8 +293,8 @@ fn kind(system: &System, k: usize) -> &'static str {
     if system.constraints[k].inequality { "inequality C ≥ 0" } else { "equality C = 0" }
 }
 
-fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
-    let g = &system.graph;
+fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    let g = &d.graph;
     let many = d.constraints.len() > 1;
     for (k, dc) in d.constraints.iter().enumerate() {
         let c = &system.constraints[k];
@@ -295,7 +303,7 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
         doc.line(out, &doc.sym("C", sub), &doc.expr(g, dc.c)?);
         doc.line(out, &doc.sym("Cdot", sub), &doc.expr(g, dc.c_dot)?);
         doc.line(out, &doc.sym("Cddot", sub), &doc.expr(g, dc.c_ddot)?);
-        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
+        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.jacobian) {
             let name = &system.bodies[body].name;
             let r = &g.symbol(system.bodies[body].position).name;
             doc.line(out, &doc.label(&doc.sym("grad", sub), &format!("∇ wrt {r}, body {name}")), &doc.expr(g, grad)?);
@@ -304,7 +312,7 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
             }
         }
         let note = format!("C̈ at a = 0{}", scale_note(dc.scale.is_one(), &dc.scale));
-        doc.line(out, &doc.label("c", &note), &doc.expr(g, dc.c_term)?);
+        doc.line(out, &doc.label("c", &note), &doc.expr(g, dc.bias)?);
     }
     doc.heading(out, "The multiplier equation  A λ + b = 0");
     a_and_b(system, d, doc, out)?;
@@ -323,7 +331,7 @@ fn summary(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> 
 
 /// The entries of A (upper triangle, non-zero) and b, named by constraints when several.
 fn a_and_b(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
-    let g = &system.graph;
+    let g = &d.graph;
     let many = d.constraints.len() > 1;
     let name = |k: usize| system.constraints[k].name.as_str();
     for &(k, j, a) in &d.a {
@@ -366,36 +374,22 @@ fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
 }
 
 /// For several constraints: the force on each body as Σₖ λₖ Jₖᵢ, with named multipliers.
-fn forces_as_sums(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+fn forces_as_sums(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
     doc.heading(out, "Constraint forces (λ solves A λ = −b at a state: lagrange solve)");
-    let mut lambdas = Vec::with_capacity(d.constraints.len());
-    for c in &system.constraints {
-        let s = system.graph.declare(&format!("lambda_{}", c.name), Ty::Scalar, Role::Parameter);
-        lambdas.push(system.graph.sym(s));
-    }
-    for body in 0..system.bodies.len() {
-        let mut terms = Vec::new();
-        for (k, dc) in d.constraints.iter().enumerate() {
-            if let Some(&(_, j)) = dc.direction.iter().find(|(b, _)| *b == body) {
-                terms.push(system.graph.mul(vec![lambdas[k], j])?);
-            }
-        }
-        if terms.is_empty() {
-            continue;
-        }
-        let sum = system.graph.add(terms)?;
-        let name = system.bodies[body].name.clone();
-        doc.line(out, &doc.sym("force", &name), &doc.expr(&system.graph, sum)?);
+    let sums = d.force_sums.as_ref().ok_or(ReportError::NotDerived("force sums"))?;
+    for &(body, sum) in sums {
+        doc.line(out, &doc.sym("force", &system.bodies[body].name), &doc.expr(&d.graph, sum)?);
     }
     Ok(())
 }
 
-fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    let newton = d.newton.as_ref().ok_or(ReportError::NotDerived("steps"))?;
     let many = d.constraints.len() > 1;
     for (k, dc) in d.constraints.iter().enumerate() {
-        let (name, text) = (system.constraints[k].name.clone(), system.constraints[k].text.clone());
+        let (name, text) = (&system.constraints[k].name, &system.constraints[k].text);
         let sub = if many { name.as_str() } else { "" };
-        let g = &system.graph;
+        let g = &d.graph;
         doc.heading(out, &format!("Constraint {name}: {text}"));
         doc.para(out, &format!("Step 1. The position constraint, written as C = 0 ({}):", kind(system, k)));
         doc.line(out, &doc.sym("C", sub), &doc.expr(g, dc.c)?);
@@ -409,27 +403,9 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
     // Newton: aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ, substituted into each C̈.
     doc.heading(out, "Newton's law");
     doc.para(out, "Step 4. Each body obeys m a = F + F_c, so a = (F + F_c)/m. Substituted into C̈ = 0:");
-    let mut fc_nodes = Vec::with_capacity(system.bodies.len());
-    for body in &system.bodies {
-        let name = if system.bodies.len() == 1 { "F_c".to_string() } else { format!("F_c_{}", body.name) };
-        let s = system.graph.declare(&name, Ty::Vector, Role::Parameter);
-        fc_nodes.push(system.graph.sym(s));
-    }
-    for (k, dc) in d.constraints.iter().enumerate() {
-        let mut map = std::collections::HashMap::new();
-        for &body in &system.constraints[k].bodies {
-            let b = &system.bodies[body];
-            let g = &mut system.graph;
-            let a = g.sym(b.acceleration);
-            let f = g.sym(b.force);
-            let total = g.add(vec![f, fc_nodes[body]])?;
-            let inv_m = g.powi(b.mass, -1)?;
-            let accel = g.mul(vec![inv_m, total])?;
-            map.insert(a, accel);
-        }
-        let substituted = system.graph.substitute(dc.c_ddot, &map)?;
-        let sub = if many { system.constraints[k].name.clone() } else { String::new() };
-        doc.line(out, &doc.sym("Cddot", &sub), &format!("{} = 0", doc.expr(&system.graph, substituted)?));
+    for (k, &substituted) in newton.iter().enumerate() {
+        let sub = if many { system.constraints[k].name.as_str() } else { "" };
+        doc.line(out, &doc.sym("Cddot", sub), &format!("{} = 0", doc.expr(&d.graph, substituted)?));
     }
     doc.heading(out, "The direction of the force");
     doc.para(
@@ -440,8 +416,8 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
     );
     for (k, dc) in d.constraints.iter().enumerate() {
         let sub = if many { system.constraints[k].name.clone() } else { String::new() };
-        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.direction) {
-            let g = &system.graph;
+        for (&(body, grad), &(_, dir)) in dc.gradient.iter().zip(&dc.jacobian) {
+            let g = &d.graph;
             let name = &system.bodies[body].name;
             let lhs = doc.label(&doc.sym("grad", &sub), &format!("on {name}"));
             let rhs = if dc.scale.is_one() {
@@ -466,11 +442,7 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
              C̈ₖ/κₖ = Σᵢ Jₖᵢ·aᵢ + cₖ, with cₖ = C̈ₖ/κₖ at a = 0:",
         );
         for (k, dc) in d.constraints.iter().enumerate() {
-            doc.line(
-                out,
-                &doc.entry("c", &[system.constraints[k].name.as_str()]),
-                &doc.expr(&system.graph, dc.c_term)?,
-            );
+            doc.line(out, &doc.entry("c", &[system.constraints[k].name.as_str()]), &doc.expr(&d.graph, dc.bias)?);
         }
         doc.para(
             out,
@@ -480,7 +452,7 @@ fn steps_document(system: &mut System, d: &Derivation, doc: &Doc, out: &mut Stri
     } else {
         doc.para(out, "Step 6. With F_c = Σ λ J, the conditions C̈ = 0 are linear in λ: A λ + b = 0, where");
     }
-    let g = &system.graph;
+    let g = &d.graph;
     a_and_b(system, d, doc, out)?;
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
         doc.para(out, "so λ = −b/A:");
@@ -570,13 +542,13 @@ impl serde::Serialize for JsonDerivation {
 
 /// The derivation as JSON: every expression a string in the expression language.
 pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportError> {
-    let g = &system.graph;
+    let g = &d.graph;
     let e = |id: Id| print(g, id, Style::Source);
     let mut constraints = Vec::new();
     for (k, dc) in d.constraints.iter().enumerate() {
         let c = &system.constraints[k];
         let mut gradient = serde_json::Map::new();
-        for &(body, j) in &dc.direction {
+        for &(body, j) in &dc.jacobian {
             gradient.insert(system.bodies[body].name.clone(), json!(e(j)?));
         }
         constraints.push(json!({
@@ -587,7 +559,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             "C_ddot": e(dc.c_ddot)?,
             "scale": dc.scale.to_string(),
             "gradient": gradient,
-            "c": e(dc.c_term)?,
+            "c": e(dc.bias)?,
         }));
     }
     let n = d.constraints.len();
@@ -633,7 +605,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
         for (body, b) in system.bodies.iter().enumerate() {
             let mut terms = Vec::new();
             for (k, dc) in d.constraints.iter().enumerate() {
-                if let Some(&(_, j)) = dc.direction.iter().find(|(i, _)| *i == body) {
+                if let Some(&(_, j)) = dc.jacobian.iter().find(|(i, _)| *i == body) {
                     let j = e(j)?;
                     let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
                     terms.push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
