@@ -323,80 +323,99 @@ pub fn locate<S: AsRef<str>>(text: &str, value: &Spanned<S>, inner: Range<usize>
     outer
 }
 
-/// Definitions ordered so that each comes after those it uses; cycles are reported.
+/// Definitions ordered so that each comes after those it uses (Kahn's algorithm: linear in
+/// the definitions and their uses, no recursion); cycles are reported.
+///
+/// Independent definitions keep the file's (key) order. A definition on a cycle is reported
+/// once per cycle closed, as a depth-first walk in key order meets it, naming the path
+/// that walk took; it is then left out with every definition that uses it, so none of
+/// them is reported again as an unknown symbol.
 fn definitions_in_order<'a, 'b>(
     raw: &'a RawFile<'b>,
     problems: &mut Vec<Problem>,
 ) -> Vec<(&'a Text<'b>, &'a Text<'b>)> {
-    let names: Vec<&str> = raw.definitions.keys().map(|k| k.get_ref().as_ref()).collect();
-    let mut uses: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
-    for (name, def_text) in &raw.definitions {
-        let mut idents = Vec::new();
-        if let Ok(syntax) = crate::expr::parse::parse_expr(def_text.get_ref()) {
-            collect_idents(&syntax, &mut idents);
+    let defs: Vec<(&'a Text<'b>, &'a Text<'b>)> = raw.definitions.iter().collect();
+    let index: HashMap<&str, usize> = defs.iter().enumerate().map(|(i, (k, _))| (k.get_ref().as_ref(), i)).collect();
+    // uses[i]: the definitions definition i names, in key order, each once.
+    let mut idents = Vec::new();
+    let uses: Vec<Vec<usize>> = defs
+        .iter()
+        .map(|(_, def_text)| {
+            idents.clear();
+            if let Ok(syntax) = crate::expr::parse::parse_expr(def_text.get_ref()) {
+                collect_idents(&syntax, &mut idents);
+            }
+            let mut deps: Vec<usize> = idents.iter().filter_map(|n| index.get(n).copied()).collect();
+            deps.sort_unstable();
+            deps.dedup();
+            deps
+        })
+        .collect();
+    // Kahn: a definition is ready once every definition it uses is placed.
+    let mut waiting: Vec<usize> = uses.iter().map(Vec::len).collect();
+    let mut users: Vec<Vec<usize>> = vec![Vec::new(); defs.len()];
+    for (i, deps) in uses.iter().enumerate() {
+        for &d in deps {
+            users[d].push(i);
         }
-        uses.insert(name.get_ref().as_ref(), names.iter().copied().filter(|n| idents.contains(n)).collect());
     }
-    let mut order = Vec::new();
-    let mut state: BTreeMap<&str, u8> = BTreeMap::new();
-    for name in raw.definitions.keys() {
-        visit(name.get_ref().as_ref(), &uses, &mut state, &mut order, &mut Vec::new(), raw, problems);
-    }
-    // A definition on a cycle is reported once (in `visit`), not again as an unknown symbol
-    // of the others: leave out every definition on a cycle or using one.
-    let mut bad: Vec<&str> = Vec::new();
-    for name in &order {
-        if is_on_cycle(name, &uses) || uses.get(name).is_some_and(|deps| deps.iter().any(|d| bad.contains(d))) {
-            bad.push(name);
+    let mut order: Vec<usize> = (0..defs.len()).filter(|&i| waiting[i] == 0).collect();
+    let mut next = 0;
+    while let Some(&i) = order.get(next) {
+        next += 1;
+        for &u in &users[i] {
+            waiting[u] -= 1;
+            if waiting[u] == 0 {
+                order.push(u);
+            }
         }
     }
-    order.retain(|n| !bad.contains(n));
-    order.into_iter().filter_map(|n| raw.definitions.iter().find(|(k, _)| k.get_ref() == n)).collect()
+    if order.len() < defs.len() {
+        report_cycles(&defs, &uses, &waiting, problems);
+    }
+    order.into_iter().map(|i| defs[i]).collect()
 }
 
-/// Whether `name` can reach itself through the definitions it uses.
-fn is_on_cycle(name: &str, uses: &BTreeMap<&str, Vec<&str>>) -> bool {
-    let mut seen: Vec<&str> = Vec::new();
-    let mut stack: Vec<&str> = uses.get(name).cloned().unwrap_or_default();
-    while let Some(n) = stack.pop() {
-        if n == name {
-            return true;
+/// Reports each cycle among the definitions Kahn's algorithm could not place (`waiting`
+/// not zero: on a cycle or using one): a depth-first walk in key order, with an explicit
+/// stack, reports the definition that closes a cycle and the path that led to it.
+fn report_cycles(defs: &[(&Text<'_>, &Text<'_>)], uses: &[Vec<usize>], waiting: &[usize], problems: &mut Vec<Problem>) {
+    const NEW: u8 = 0;
+    const ON_PATH: u8 = 1;
+    const DONE: u8 = 2;
+    let mut state = vec![NEW; defs.len()];
+    // The walk's path: each definition with the position of the next use to follow.
+    let mut path: Vec<(usize, usize)> = Vec::new();
+    let name = |i: usize| defs[i].0.get_ref().as_ref();
+    for root in (0..defs.len()).filter(|&i| waiting[i] > 0) {
+        if state[root] != NEW {
+            continue;
         }
-        if !seen.contains(&n) {
-            seen.push(n);
-            stack.extend(uses.get(n).into_iter().flatten().copied());
+        state[root] = ON_PATH;
+        path.push((root, 0));
+        while let Some(&mut (i, ref mut at)) = path.last_mut() {
+            let Some(&dep) = uses[i].get(*at) else {
+                state[i] = DONE;
+                path.pop();
+                continue;
+            };
+            *at += 1;
+            match state[dep] {
+                DONE => {}
+                ON_PATH => {
+                    let through: Vec<&str> = path.iter().map(|&(p, _)| name(p)).collect();
+                    problems.push(Problem {
+                        span: Some(defs[dep].0.span()),
+                        message: BuildError::Cycle(name(dep).to_string(), through.join(" → ")).to_string(),
+                    });
+                }
+                _ => {
+                    state[dep] = ON_PATH;
+                    path.push((dep, 0));
+                }
+            }
         }
     }
-    false
-}
-
-fn visit<'a>(
-    name: &'a str,
-    uses: &BTreeMap<&'a str, Vec<&'a str>>,
-    state: &mut BTreeMap<&'a str, u8>,
-    order: &mut Vec<&'a str>,
-    path: &mut Vec<&'a str>,
-    raw: &RawFile<'_>,
-    problems: &mut Vec<Problem>,
-) {
-    match state.get(name) {
-        Some(2) => return,
-        Some(1) => {
-            let span = raw.definitions.keys().find(|k| k.get_ref() == name).map(|k| k.span());
-            problems
-                .push(Problem { span, message: BuildError::Cycle(name.to_string(), path.join(" → ")).to_string() });
-            return;
-        }
-        _ => {}
-    }
-    state.insert(name, 1);
-    path.push(name);
-    for dep in uses.get(name).into_iter().flatten() {
-        visit(dep, uses, state, order, path, raw, problems);
-    }
-    path.pop();
-    state.insert(name, 2);
-    order.push(name);
 }
 
 fn collect_idents<'s>(s: &Syntax<'s>, out: &mut Vec<&'s str>) {
