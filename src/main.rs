@@ -8,9 +8,12 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::codegen::{Options, generate};
 use lagrange::derive::derive;
-use lagrange::model::file::RawValue;
+use lagrange::expr::Symbol;
+use lagrange::expr::eval::Value;
 use lagrange::model::file::{Loaded, Problem, load};
 use lagrange::model::scene::environment;
+use lagrange::model::state;
+use lagrange::model::system::System;
 use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::rows::RowProgram;
 use lagrange::numeric::solve::{Settings, safe_norm};
@@ -371,36 +374,25 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
     }
 }
 
-/// The symbol values of a `--at` file: a flat TOML or JSON table.
-fn read_state(path: &Path) -> Result<Vec<(String, RawValue)>, String> {
+/// The symbol values of a `--at` file (a flat TOML or JSON table), checked against
+/// `system`; a value that does not fit is said of the constraint file `file`.
+fn read_state(system: &System, file: &Path, path: &Path) -> Result<Vec<(Symbol, Value)>, String> {
     let text = read_text(path)?;
-    let table: std::collections::BTreeMap<String, RawValue> = match path.extension().and_then(|e| e.to_str()) {
-        Some("toml") => toml::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
-        Some("json") => serde_json::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
-        _ => return Err(format!("error: {}: a state file must end in .toml or .json", path.display())),
+    let Some(format) = state::Format::of(path) else {
+        return Err(format!("error: {}: a state file must end in .toml or .json", path.display()));
     };
-    Ok(table.into_iter().collect())
+    state::state_file(system, &text, format).map_err(|e| match e {
+        state::StateInputError::Value(e) => format!("error: {}: {e}", file.display()),
+        e => format!("error: {}: {e}", path.display()),
+    })
 }
 
-/// `NAME=VALUE` with VALUE a finite number or `[x, y]`.
-fn parse_set(arg: &str) -> Result<(String, RawValue), String> {
-    let Some((name, value)) = arg.split_once('=') else {
-        return Err(format!("error: --set {arg}: expected NAME=VALUE, e.g. --set r=[1,0] or --set m=2"));
-    };
-    let (name, value) = (name.trim(), value.trim());
-    let parsed = match value.parse::<f64>() {
-        Ok(x) => RawValue::Number(x),
-        Err(_) => serde_json::from_str::<RawValue>(value)
-            .map_err(|_| format!("error: --set {arg}: `{value}` is not a number or a vector [x, y]"))?,
-    };
-    let finite = match &parsed {
-        RawValue::Number(x) => x.is_finite(),
-        RawValue::Vector(v) => v.iter().all(|x| x.is_finite()),
-    };
-    if !finite {
-        return Err(format!("error: --set {arg}: `{name}` must be finite"));
-    }
-    Ok((name.to_string(), parsed))
+/// `NAME=VALUE` with VALUE a finite number or `[x, y]`, checked against `system`.
+fn parse_set(system: &System, file: &Path, arg: &str) -> Result<(Symbol, Value), String> {
+    state::assignment(system, arg).map_err(|e| match e {
+        state::StateInputError::Value(e) => format!("error: {}: {e}", file.display()),
+        e => format!("error: --set {arg}: {e}"),
+    })
 }
 
 fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat) -> Result<(), ExitCode> {
@@ -410,18 +402,19 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     };
     let mut loaded = load_file(path)?;
     let derivation = derive(&mut loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let system = &loaded.system;
     let mut overrides = match at {
-        Some(p) => read_state(p).map_err(fail)?,
+        Some(p) => read_state(system, path, p).map_err(fail)?,
         None => Vec::new(),
     };
     for arg in set {
-        overrides.push(parse_set(arg).map_err(fail)?);
+        overrides.push(parse_set(system, path, arg).map_err(fail)?);
     }
-    let system = &loaded.system;
     let env = environment(system, &loaded.values, &loaded.scene, &overrides)
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     // A force given in the state replaces the scene's expression for that body.
-    let given: Vec<&str> = overrides.iter().map(|(n, _)| n.as_str()).collect();
+    let given: Vec<String> = overrides.iter().map(|&(s, _)| system.graph.symbol(s).name.clone()).collect();
+    let given: Vec<&str> = given.iter().map(String::as_str).collect();
     let program = RowProgram::with_given_forces(&mut loaded.system, &derivation, &loaded.scene.forces, &given);
     let system = &loaded.system;
 

@@ -1,12 +1,16 @@
 //! Loading a constraint file: what `lagrange::model` promises a user of the library.
 //!
 //! Definitions are ordered however long their chain of uses; cycles are reported once and
-//! nothing that depends on them is reported again.
+//! nothing that depends on them is reported again. States given on the command line come
+//! out as checked values of the file's symbols. The model's modules import in one order.
 //!
 //! Not here: the messages of invalid files (snapshots in `tests/constraint_files.rs`).
 
-use lagrange::model::file::load;
+use lagrange::expr::eval::Value;
+use lagrange::model::file::{Problem, load};
+use lagrange::model::state::{self, Format, StateInputError, ValueError};
 use std::fmt::Write;
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 /// A bead on a wire whose radius is the last of `n` definitions, each using the one before.
@@ -42,9 +46,64 @@ fn a_cycle_at_the_end_of_a_long_chain_is_reported_once() {
     // d_n uses d_{n-1} (so the whole chain) and itself.
     let text = chain_of_definitions(n, &format!("d_{} + d_{n}", n - 1));
     let problems = load(&text).expect_err("a definition refers to itself");
-    assert_eq!(problems.len(), 1, "{problems:?}");
-    assert!(
-        problems[0].message.contains(&format!("definition `d_{n}` refers to itself (through d_{n})")),
-        "{problems:?}"
+    let [Problem::Cycle { name, through, .. }] = problems.as_slice() else {
+        panic!("one cycle, found {problems:?}");
+    };
+    assert_eq!((name.as_str(), through.as_str()), (format!("d_{n}").as_str(), format!("d_{n}").as_str()));
+}
+
+#[test]
+fn the_model_modules_import_in_one_order() {
+    // Each module may use only the modules listed before it (the order drawn in
+    // `src/model/mod.rs`), so no two import each other, even through a third.
+    let order = ["raw", "system", "state", "problem", "keys", "scene", "expect", "document", "file"];
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/model");
+    for (at, module) in order.iter().enumerate() {
+        let text = std::fs::read_to_string(dir.join(format!("{module}.rs"))).expect("a model module");
+        for line in text.lines().filter(|l| l.trim_start().starts_with("use super::") || l.contains("pub use super::"))
+        {
+            let used = line.split("super::").nth(1).and_then(|r| r.split([':', ';']).next()).unwrap_or("");
+            let before =
+                order[..at].contains(&used) && !matches!((*module, used), ("scene", "expect") | ("expect", "scene"));
+            assert!(before, "`{module}` uses `{used}`, which is not listed before it: {line}");
+        }
+    }
+}
+
+#[test]
+fn states_from_the_command_line_are_validated_values() {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/bead_on_wire.toml"))
+        .expect("the bead");
+    let loaded = load(&text).expect("valid");
+    let system = &loaded.system;
+    let r = system.graph.symbol_named("r").expect("r");
+    let (s, v) = state::assignment(system, "r=[1, -2]").expect("a vector of two");
+    assert_eq!((s, v), (r, Value::Vector([1.0, -2.0, 0.0])));
+    let m = system.graph.symbol_named("m").expect("m");
+    assert_eq!(state::assignment(system, " m = 2.5 "), Ok((m, Value::Scalar(2.5))));
+    assert_eq!(state::assignment(system, "m"), Err(StateInputError::NoEquals));
+    assert_eq!(state::assignment(system, "m=two"), Err(StateInputError::NotAValue("two".into())));
+    assert_eq!(state::assignment(system, "v=[1, inf]"), Err(StateInputError::NotAValue("[1, inf]".into())));
+    assert_eq!(state::assignment(system, "l=1e999"), Err(StateInputError::NotFinite("l".into())));
+    assert_eq!(
+        state::assignment(system, "r=[1, 2, 3]"),
+        Err(StateInputError::Value(ValueError::Components { name: "r".into(), dim: 2, found: 3 }))
+    );
+    assert_eq!(
+        state::assignment(system, "a=[0, 0]"),
+        Err(StateInputError::Value(ValueError::Acceleration("a".into())))
+    );
+    assert!(matches!(
+        state::assignment(system, "rr=1"),
+        Err(StateInputError::Value(ValueError::NotASymbol { suggestion: Some(s), .. })) if s == "r"
+    ));
+    let toml = state::state_file(system, "r = [0.0, -2.0]\nt = 1.5\n", Format::Toml).expect("a TOML state");
+    let json = state::state_file(system, r#"{"t": 1.5, "r": [0.0, -2.0]}"#, Format::Json).expect("a JSON state");
+    assert_eq!(toml, json);
+    assert_eq!(toml, vec![(r, Value::Vector([0.0, -2.0, 0.0])), (system.time, Value::Scalar(1.5))]);
+    assert!(matches!(state::state_file(system, "r = [0.0,", Format::Toml), Err(StateInputError::Syntax(_))));
+    assert_eq!(
+        state::state_file(system, "m = nan", Format::Toml),
+        Err(StateInputError::Value(ValueError::NotFinite("m".into())))
     );
 }

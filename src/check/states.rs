@@ -20,12 +20,10 @@
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, Value};
 use crate::expr::{Role, Symbol};
-use crate::model::file::RawValue;
 use crate::model::scene::Scene;
 use crate::model::system::System;
 use crate::numeric::rows::{RowProgram, Rows};
 use nalgebra::{DMatrix, DVector};
-use std::collections::BTreeMap;
 
 /// Newton iterations per attempt.
 const NEWTON_STEPS: usize = 60;
@@ -76,7 +74,7 @@ impl Rng {
 pub fn sample(
     system: &mut System,
     derivation: &Derivation,
-    parameters: &BTreeMap<String, RawValue>,
+    parameters: &[(Symbol, Value)],
     scene: &Scene,
     count: usize,
 ) -> Result<Vec<Env>, String> {
@@ -84,8 +82,7 @@ pub fn sample(
     let system: &System = system;
     let dim = system.dim();
     let mut base = Env::new();
-    for (name, value) in parameters {
-        let (s, v) = crate::model::scene::value_for(system, name, value, dim)?;
+    for &(s, v) in parameters {
         base.set(s, v);
     }
     let mut start = vec![[0.0; 3]; system.bodies.len()];

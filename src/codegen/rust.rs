@@ -39,9 +39,10 @@ use super::names::Namer;
 pub use super::names::{comment_text, snake};
 use super::support::{HELPERS, SOLVE, SOLVE_BAND};
 use crate::derive::{DeriveError, derive};
+use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
-use crate::model::file::{Loaded, RawValue};
+use crate::model::file::Loaded;
 use crate::numeric::program::{LowerError, Op, Program};
 use std::collections::{HashMap, HashSet};
 use std::fmt::Write;
@@ -151,18 +152,19 @@ pub fn module(loaded: &mut Loaded, options: &Options) -> Result<Module, Generate
     let mut map = HashMap::new();
     if options.specialize {
         let g = &mut system.graph;
-        for (name, value) in &loaded.values {
-            let Some(s) = g.symbol_named(name) else { continue };
+        let dim = g.dim();
+        for &(s, value) in &loaded.values {
+            let name = g.symbol(s).name.clone();
             let bad = || GenerateError::BadValue(name.clone());
             let node = match value {
-                RawValue::Number(x) => {
-                    let q = exact(*x).ok_or_else(bad)?;
+                Value::Scalar(x) => {
+                    let q = exact(x).ok_or_else(bad)?;
                     g.num(q)
                 }
-                RawValue::Vector(xs) => {
-                    let mut entries = Vec::with_capacity(xs.len());
-                    for x in xs {
-                        let q = exact(*x).ok_or_else(bad)?;
+                Value::Vector(_) => {
+                    let mut entries = Vec::new();
+                    for &x in value.components(dim).iter() {
+                        let q = exact(x).ok_or_else(bad)?;
                         entries.push(g.num(q));
                     }
                     g.vector(entries)?

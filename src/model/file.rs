@@ -1,99 +1,39 @@
-//! Constraint definition files (TOML, DESIGN.md): raw serde structs and their validation.
+//! Constraint definition files (TOML, DESIGN.md): validation of the raw file into the model.
 //!
-//! [`RawFile`] mirrors the TOML exactly, with spans; [`load`] validates it into a
-//! [`System`] and the numbers `solve` and `simulate` need. Only validation builds the
-//! model (the raw structs never leave this module's callers half-checked). Every problem
-//! carries a byte span into the file text, so messages point at the fault.
+//! [`load`] reads the text into a [`RawFile`] (`model::document`) and validates it into a
+//! [`System`], the parameters' values, the scene and the expectations ([`Loaded`]). Only
+//! validation builds the model: nothing in a [`Loaded`] is raw. Every problem carries a
+//! byte span into the file text, so messages point at the fault. `[definitions]` are
+//! ordered by Kahn's algorithm (linear, no recursion), cycles reported once.
 //!
-//! Not here: printing or rendering messages (the caller renders [`Problem`]s).
+//! Not here: the raw types (`model::raw`), printing or rendering messages (the caller
+//! renders [`Problem`]s).
 
 use super::document::read;
-use super::expect::{Expectation, RawExpect, resolve};
-use super::scene::{RawScene, Scene, validate};
+use super::expect::{Expectation, resolve};
+pub use super::problem::Problem;
+use super::problem::{locate, shown, sort};
+use super::raw::{RawFile, RawMass, RawValue, Text};
+use super::scene::{Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
+use crate::expr::eval::Value;
 use crate::expr::lower::LowerError;
 use crate::expr::parse::ParseError;
 use crate::expr::syntax::{Syntax, SyntaxKind};
 use crate::expr::{Symbol, Ty};
-use serde::Deserialize;
-use std::borrow::Cow;
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{HashMap, HashSet};
 use std::ops::Range;
-use toml::Spanned;
 
 /// The largest constraint file read, in bytes.
 pub const MAX_FILE_BYTES: usize = 16 << 20;
-
-/// A string as written, with its span: borrowed from the file text unless TOML escapes
-/// made it differ (a file of a thousand bodies holds thousands of them, and allocating
-/// each was a tenth of loading it).
-pub type Text<'a> = Spanned<Cow<'a, str>>;
-
-/// A file as written, read field by field from the spanned TOML tree by `model::document`
-/// (every missing field and wrong type is a problem there; what could not be read is left
-/// out here). Unknown keys are reported, all of them, by `model::keys`.
-#[derive(Debug, Default)]
-pub struct RawFile<'a> {
-    pub title: Option<Text<'a>>,
-    /// `None` when missing or not an integer (already reported).
-    pub dimension: Option<Spanned<i64>>,
-    pub parameters: BTreeMap<Text<'a>, Spanned<RawValue>>,
-    pub definitions: BTreeMap<Text<'a>, Text<'a>>,
-    pub bodies: Vec<Spanned<RawBody<'a>>>,
-    pub constraints: Vec<Spanned<RawConstraint<'a>>>,
-    pub scene: Option<Spanned<RawScene<'a>>>,
-    pub expect: Vec<Spanned<RawExpect<'a>>>,
-}
-
-/// A parameter value: a number or a vector of numbers (finite, when read from a file).
-/// `Deserialize` serves `solve --at STATE` files.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(untagged)]
-pub enum RawValue {
-    Number(f64),
-    Vector(Vec<f64>),
-}
-
-/// A body as written. A symbol field that is missing or not a string (reported by
-/// `model::document`) holds a placeholder name, `unread_<field>_<n>`, and a mass that is not
-/// a number or a string holds 1: the body stays declared, so its other symbols are not
-/// reported again as unknown wherever they are used. (A file with a problem derives nothing.)
-#[derive(Debug)]
-pub struct RawBody<'a> {
-    pub name: Text<'a>,
-    pub position: Text<'a>,
-    pub velocity: Text<'a>,
-    pub acceleration: Text<'a>,
-    pub mass: Spanned<RawMass<'a>>,
-    pub force: Text<'a>,
-}
-
-#[derive(Clone, Debug)]
-pub enum RawMass<'a> {
-    Number(f64),
-    Symbol(Cow<'a, str>),
-}
-
-#[derive(Debug)]
-pub struct RawConstraint<'a> {
-    pub name: Text<'a>,
-    /// `None` when missing or not a string (reported by `model::document`).
-    pub expr: Option<Text<'a>>,
-}
-
-/// One problem in a file: where (a byte range of the file text) and what.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Problem {
-    pub span: Option<Range<usize>>,
-    pub message: String,
-}
 
 /// A validated file: the system, the parameter values, the scene and the expectations.
 /// (The raw file is not kept: it borrows the text, and all it said is in these.)
 #[derive(Debug)]
 pub struct Loaded {
     pub system: System,
-    pub values: BTreeMap<String, RawValue>,
+    /// The `[parameters]` values, by symbol, in name order.
+    pub values: Vec<(Symbol, Value)>,
     pub scene: Scene,
     pub expect: Vec<Expectation>,
 }
@@ -101,10 +41,7 @@ pub struct Loaded {
 /// Parses and validates a constraint file's text. Every problem found is returned.
 pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
     if text.len() > MAX_FILE_BYTES {
-        return Err(vec![Problem {
-            span: None,
-            message: format!("file is too large ({} bytes; the limit is {MAX_FILE_BYTES})", text.len()),
-        }]);
+        return Err(vec![Problem::TooLarge { bytes: text.len(), limit: MAX_FILE_BYTES }]);
     }
     let mut problems = Vec::new();
     let Some(raw) = read(text, &mut problems) else {
@@ -128,8 +65,7 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         .chain(raw.constraints.iter().map(|c| c.get_ref().name.get_ref().as_ref()))
         .collect();
     let expect = resolve(text, &raw.expect, &written, &mut system, &mut problems);
-    let values: BTreeMap<String, RawValue> =
-        raw.parameters.iter().map(|(k, v)| (k.get_ref().to_string(), v.get_ref().clone())).collect();
+    let values = parameter_values(&raw, &system);
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
         sort(&mut problems);
@@ -138,11 +74,13 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
     Ok(Loaded { system, values, scene, expect })
 }
 
-/// In file order, so the messages read top to bottom (unlocated ones first); a problem
-/// found twice (by two passes over the same value) is shown once.
-fn sort(problems: &mut Vec<Problem>) {
-    problems.sort_by_key(|p| p.span.as_ref().map_or((0, 0), |s| (s.start, s.end)));
-    problems.dedup();
+/// The parameters' values, by symbol: each was checked against its symbol when declared,
+/// so only a parameter the builder refused (reported) has none.
+fn parameter_values(raw: &RawFile<'_>, system: &System) -> Vec<(Symbol, Value)> {
+    raw.parameters
+        .iter()
+        .filter_map(|(name, v)| super::state::value(system, name.get_ref(), v.get_ref()).ok())
+        .collect()
 }
 
 /// A mass symbol that is not a parameter needs a value wherever numbers are computed: from
@@ -178,25 +116,15 @@ fn masses_have_values(
         };
         let raw_body = &raw.bodies[raw_body];
         let name = &system.graph.symbol(*s).name;
-        let span = Some(raw_body.get_ref().mass.span());
+        let span = raw_body.get_ref().mass.span();
         if raw.scene.is_some() && !initial.contains(s) {
-            problems.push(Problem {
-                span,
-                message: format!(
-                    "the mass `{name}` has no value, and the [scene] needs one: give it in [parameters] or in [scene] initial"
-                ),
-            });
+            problems.push(Problem::MassWithoutValue { span: span.clone(), name: name.clone() });
         }
         for e in expect {
             if let Some(at) = &e.at
-                && !at.iter().any(|(x, _)| x == name)
+                && !at.iter().any(|(x, _)| x == s)
             {
-                problems.push(Problem {
-                    span: Some(e.span.clone()),
-                    message: format!(
-                        "this [[expect]] is checked at a state (`at`), which gives no value to the mass `{name}`: add it to `at` or to [parameters]"
-                    ),
-                });
+                problems.push(Problem::MassWithoutValueAt { span: e.span.clone(), name: name.clone() });
             }
         }
     }
@@ -208,7 +136,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
     let mut b = match SystemBuilder::new(title, *dimension.get_ref()) {
         Ok(b) => b,
         Err(e) => {
-            problems.push(Problem { span: Some(dimension.span()), message: e.to_string() });
+            problems.push(Problem::Build { span: dimension.span(), error: e });
             return None;
         }
     };
@@ -219,15 +147,17 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
             RawValue::Number(_) => Ty::Scalar,
             RawValue::Vector(v) if v.len() == dim => Ty::Vector,
             RawValue::Vector(v) => {
-                problems.push(Problem {
-                    span: Some(value.span()),
-                    message: format!("parameter `{}` has {} components in a {dim}D file", name.get_ref(), v.len()),
+                problems.push(Problem::ParameterComponents {
+                    span: value.span(),
+                    name: name.get_ref().to_string(),
+                    found: v.len(),
+                    dim,
                 });
                 continue;
             }
         };
         if let Err(e) = b.parameter(name.get_ref(), ty) {
-            problems.push(Problem { span: Some(name.span()), message: e.to_string() });
+            problems.push(Problem::Build { span: name.span(), error: e });
         }
     }
     for body in &raw.bodies {
@@ -235,11 +165,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
         let mass = match body.mass.get_ref() {
             RawMass::Number(x) if x.is_finite() && *x > 0.0 => MassSpec::Number(*x),
             RawMass::Number(x) => {
-                let shown = if x.is_nan() { "nan".to_string() } else { x.to_string() };
-                problems.push(Problem {
-                    span: Some(body.mass.span()),
-                    message: format!("a mass must be a positive finite number, found {shown}"),
-                });
+                problems.push(Problem::Mass { span: body.mass.span(), shown: shown(*x) });
                 // Declared all the same, so the body's symbols are known where used.
                 MassSpec::Number(1.0)
             }
@@ -268,7 +194,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
                 }
                 _ => span,
             };
-            problems.push(Problem { span: Some(span), message: e.to_string() });
+            problems.push(Problem::Build { span, error: e });
         }
     }
     for (name, def_text) in definitions_in_order(raw, problems) {
@@ -287,7 +213,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
         }
     }
     if raw.constraints.is_empty() {
-        problems.push(Problem { span: None, message: "the file has no [[constraints]]".into() });
+        problems.push(Problem::NoConstraints);
     }
     Some(b.finish())
 }
@@ -303,24 +229,7 @@ fn build_problem(text: &str, expr: &Text<'_>, e: &BuildError, fallback: Range<us
         Some(s) => locate(text, expr, s.start..s.end.max(s.start)),
         None => fallback,
     };
-    Problem { span: Some(span), message: e.to_string() }
-}
-
-/// Maps a byte range inside a string value to the file: exact when the string is written
-/// without escapes (the common case), else the whole string.
-pub fn locate<S: AsRef<str>>(text: &str, value: &Spanned<S>, inner: Range<usize>) -> Range<usize> {
-    let outer = value.span();
-    let written = text.get(outer.clone()).unwrap_or("");
-    let content = value.get_ref().as_ref();
-    for quote in ["\"\"\"", "'''", "\"", "'"] {
-        if let Some(body) = written.strip_prefix(quote).and_then(|w| w.strip_suffix(quote))
-            && body == content
-        {
-            let start = outer.start + quote.len();
-            return (start + inner.start).min(outer.end)..(start + inner.end).min(outer.end);
-        }
-    }
-    outer
+    Problem::Build { span, error: e.clone() }
 }
 
 /// Definitions ordered so that each comes after those it uses (Kahn's algorithm: linear in
@@ -404,9 +313,10 @@ fn report_cycles(defs: &[(&Text<'_>, &Text<'_>)], uses: &[Vec<usize>], waiting: 
                 DONE => {}
                 ON_PATH => {
                     let through: Vec<&str> = path.iter().map(|&(p, _)| name(p)).collect();
-                    problems.push(Problem {
-                        span: Some(defs[dep].0.span()),
-                        message: BuildError::Cycle(name(dep).to_string(), through.join(" → ")).to_string(),
+                    problems.push(Problem::Cycle {
+                        span: defs[dep].0.span(),
+                        name: name(dep).to_string(),
+                        through: through.join(" → "),
                     });
                 }
                 _ => {

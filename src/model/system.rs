@@ -92,8 +92,6 @@ pub enum BuildError {
     NoBody(String),
     #[error("constraint `{name}` uses `{symbol}`: constraints may depend on positions, parameters and t only")]
     NotPositional { name: String, symbol: String },
-    #[error("definition `{0}` refers to itself (through {1})")]
-    Cycle(String, String),
 }
 
 /// Fills a [`System`] one declaration at a time.
