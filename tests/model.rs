@@ -94,7 +94,7 @@ fn states_from_the_command_line_are_validated_values() {
         Err(StateInputError::Value(ValueError::Acceleration("a".into())))
     );
     assert!(matches!(
-        state::assignment(system, "rr=1"),
+        state::assignment(system, "R=[1, 0]"),
         Err(StateInputError::Value(ValueError::NotASymbol { suggestion: Some(s), .. })) if s == "r"
     ));
     let toml = state::state_file(system, "r = [0.0, -2.0]\nt = 1.5\n", Format::Toml).expect("a TOML state");
