@@ -9,6 +9,8 @@
 //!
 //! Codegen may print text (it writes source), but it never touches files or stdout:
 //! `main.rs` decides where the text goes.
+//!
+//! Not here: files, stdout, evaluation of the formulas (`numeric`).
 
 pub mod layout;
 mod names;

@@ -571,7 +571,7 @@ impl Ctx<'_> {
 /// Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ for every non-zero entry of `f.a`, unsimplified: the sum over the
 /// bodies both constraints act on, terms with the same mass summed before one division.
 fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, GenerateError> {
-    let mut entries = Vec::with_capacity(f.a.len());
+    let mut entries = Vec::new();
     for &(k, j, _) in &f.a {
         // (mass, dots over the bodies of that mass), in body order.
         let mut by_mass: Vec<(Id, Vec<Id>)> = Vec::new();
@@ -587,7 +587,7 @@ fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, Ge
                 None => by_mass.push((masses[body], vec![dot])),
             }
         }
-        let mut terms = Vec::with_capacity(by_mass.len());
+        let mut terms = Vec::new();
         for (m, dots) in by_mass {
             let sum = g.add(dots)?;
             let inv = g.powi(m, -1)?;
@@ -774,7 +774,7 @@ impl Ctx<'_> {
         let p = Program::lower(self.g, roots, self.inputs)?;
         let uses = p.use_counts();
         // Each value: its text, precedence and inline depth.
-        let mut text: Vec<(String, Prec, u32)> = Vec::with_capacity(p.ops.len());
+        let mut text: Vec<(String, Prec, u32)> = Vec::new();
         let mut lets = Vec::new();
         for (i, op) in p.ops.iter().enumerate() {
             let arg = |v: u32, min: Prec| -> (String, u32) {

@@ -91,7 +91,7 @@ pub fn resolve(
     system: &mut System,
     problems: &mut Vec<Problem>,
 ) -> Vec<Expectation> {
-    let mut out = Vec::with_capacity(raw.len());
+    let mut out = Vec::new();
     let mut walk = SymbolWalk::default();
     for entry in raw {
         let e = entry.get_ref();

@@ -140,7 +140,6 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
             return None;
         }
     };
-    b.reserve(raw.bodies.len(), raw.constraints.len(), raw.parameters.len() + raw.definitions.len());
     let dim = *dimension.get_ref() as usize;
     for (name, value) in &raw.parameters {
         let ty = match value.get_ref() {

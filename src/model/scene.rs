@@ -49,8 +49,6 @@ impl Default for Scene {
 /// Resolves a raw scene against `system`; every problem goes to `problems`.
 pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &mut Vec<Problem>) -> Scene {
     let mut scene = Scene::default();
-    scene.initial.reserve(raw.initial.len());
-    scene.forces.reserve(raw.forces.len());
     for (name, v) in &raw.initial {
         match value(system, name.get_ref(), v.get_ref()) {
             Ok((s, v)) => scene.initial.push((s, v)),
@@ -62,7 +60,6 @@ pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &
     let bodies: Vec<Option<usize>> = {
         let mut by_name: NameMap<&str, usize> = NameMap::default();
         if !raw.forces.is_empty() {
-            by_name.reserve(2 * system.bodies.len());
             for (i, b) in system.bodies.iter().enumerate() {
                 by_name.entry(b.name.as_str()).or_insert(i);
                 by_name.entry(system.graph.symbol(b.force).name.as_str()).or_insert(i);
