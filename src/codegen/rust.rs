@@ -11,7 +11,7 @@
 //! is written; this file writes the text it decides. The entries of A are computed from the
 //! directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the canonical, bilinearly expanded
 //! form the doc comments show: fewer operations and no cancellation. The solve a module
-//! carries is one of the helper files of [`super::support`], included as it is written.
+//! carries is one of the helper files of `codegen::support`, included as it is written.
 //!
 //! Each function body is the scalar [`Program`] of its formulas: values used more than once
 //! become `let` bindings, values used once are written inline. `--specialize` substitutes
