@@ -374,25 +374,19 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
     }
 }
 
-/// The symbol values of a `--at` file (a flat TOML or JSON table), checked against
-/// `system`; a value that does not fit is said of the constraint file `file`.
-fn read_state(system: &System, file: &Path, path: &Path) -> Result<Vec<(Symbol, Value)>, String> {
+/// The symbol values of a `--at` file: a flat TOML or JSON table, each checked against
+/// `system` (a misfit is kept, to be reported after every syntax error).
+fn read_state(system: &System, path: &Path) -> Result<Vec<state::Given>, String> {
     let text = read_text(path)?;
     let Some(format) = state::Format::of(path) else {
         return Err(format!("error: {}: a state file must end in .toml or .json", path.display()));
     };
-    state::state_file(system, &text, format).map_err(|e| match e {
-        state::StateInputError::Value(e) => format!("error: {}: {e}", file.display()),
-        e => format!("error: {}: {e}", path.display()),
-    })
+    state::state_file(system, &text, format).map_err(|e| format!("error: {}: {e}", path.display()))
 }
 
 /// `NAME=VALUE` with VALUE a finite number or `[x, y]`, checked against `system`.
-fn parse_set(system: &System, file: &Path, arg: &str) -> Result<(Symbol, Value), String> {
-    state::assignment(system, arg).map_err(|e| match e {
-        state::StateInputError::Value(e) => format!("error: {}: {e}", file.display()),
-        e => format!("error: --set {arg}: {e}"),
-    })
+fn parse_set(system: &System, arg: &str) -> Result<state::Given, String> {
+    state::assignment(system, arg).map_err(|e| format!("error: --set {arg}: {e}"))
 }
 
 fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat) -> Result<(), ExitCode> {
@@ -403,13 +397,16 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     let mut loaded = load_file(path)?;
     let derivation = derive(&mut loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     let system = &loaded.system;
-    let mut overrides = match at {
-        Some(p) => read_state(system, path, p).map_err(fail)?,
+    let mut given = match at {
+        Some(p) => read_state(system, p).map_err(fail)?,
         None => Vec::new(),
     };
     for arg in set {
-        overrides.push(parse_set(system, path, arg).map_err(fail)?);
+        given.push(parse_set(system, arg).map_err(fail)?);
     }
+    // A value that does not fit its symbol is said of the constraint file.
+    let overrides: Vec<(Symbol, Value)> =
+        given.into_iter().collect::<Result<_, _>>().map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     let env = environment(system, &loaded.values, &loaded.scene, &overrides)
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     // A force given in the state replaces the scene's expression for that body.

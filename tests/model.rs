@@ -77,33 +77,48 @@ fn states_from_the_command_line_are_validated_values() {
     let loaded = load(&text).expect("valid");
     let system = &loaded.system;
     let r = system.graph.symbol_named("r").expect("r");
-    let (s, v) = state::assignment(system, "r=[1, -2]").expect("a vector of two");
-    assert_eq!((s, v), (r, Value::Vector([1.0, -2.0, 0.0])));
+    let given = state::assignment(system, "r=[1, -2]").expect("a vector of two");
+    assert_eq!(given, Ok((r, Value::Vector([1.0, -2.0, 0.0]))));
     let m = system.graph.symbol_named("m").expect("m");
-    assert_eq!(state::assignment(system, " m = 2.5 "), Ok((m, Value::Scalar(2.5))));
+    assert_eq!(state::assignment(system, " m = 2.5 "), Ok(Ok((m, Value::Scalar(2.5)))));
     assert_eq!(state::assignment(system, "m"), Err(StateInputError::NoEquals));
     assert_eq!(state::assignment(system, "m=two"), Err(StateInputError::NotAValue("two".into())));
     assert_eq!(state::assignment(system, "v=[1, inf]"), Err(StateInputError::NotAValue("[1, inf]".into())));
     assert_eq!(state::assignment(system, "l=1e999"), Err(StateInputError::NotFinite("l".into())));
     assert_eq!(
         state::assignment(system, "r=[1, 2, 3]"),
-        Err(StateInputError::Value(ValueError::Components { name: "r".into(), dim: 2, found: 3 }))
+        Ok(Err(ValueError::Components { name: "r".into(), dim: 2, found: 3 }))
     );
-    assert_eq!(
-        state::assignment(system, "a=[0, 0]"),
-        Err(StateInputError::Value(ValueError::Acceleration("a".into())))
-    );
+    assert_eq!(state::assignment(system, "a=[0, 0]"), Ok(Err(ValueError::Acceleration("a".into()))));
     assert!(matches!(
         state::assignment(system, "R=[1, 0]"),
-        Err(StateInputError::Value(ValueError::NotASymbol { suggestion: Some(s), .. })) if s == "r"
+        Ok(Err(ValueError::NotASymbol { suggestion: Some(s), .. })) if s == "r"
     ));
     let toml = state::state_file(system, "r = [0.0, -2.0]\nt = 1.5\n", Format::Toml).expect("a TOML state");
     let json = state::state_file(system, r#"{"t": 1.5, "r": [0.0, -2.0]}"#, Format::Json).expect("a JSON state");
     assert_eq!(toml, json);
-    assert_eq!(toml, vec![(r, Value::Vector([0.0, -2.0, 0.0])), (system.time, Value::Scalar(1.5))]);
+    assert_eq!(toml, vec![Ok((r, Value::Vector([0.0, -2.0, 0.0]))), Ok((system.time, Value::Scalar(1.5)))]);
     assert!(matches!(state::state_file(system, "r = [0.0,", Format::Toml), Err(StateInputError::Syntax(_))));
-    assert_eq!(
-        state::state_file(system, "m = nan", Format::Toml),
-        Err(StateInputError::Value(ValueError::NotFinite("m".into())))
-    );
+    assert_eq!(state::state_file(system, "m = nan", Format::Toml), Ok(vec![Err(ValueError::NotFinite("m".into()))]));
+}
+
+#[test]
+fn solve_reports_every_syntax_error_of_a_state_before_a_value_that_does_not_fit() {
+    let dir = std::env::temp_dir().join(format!("lagrange-model-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary directory");
+    let at = dir.join("state.toml");
+    std::fs::write(&at, "x = 1.0\n").expect("writes the state");
+    let solve = |set: &str| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_lagrange"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(["solve", "constraints/bead_on_wire.toml", "--at", at.to_str().expect("utf-8"), "--set", set])
+            .output()
+            .expect("runs lagrange");
+        assert_eq!(out.status.code(), Some(1), "{set}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    // `x` in the state file does not fit (no such symbol), but `--set`'s syntax comes first.
+    assert_eq!(solve("v=nan"), "error: --set v=nan: `v` must be finite\n");
+    assert_eq!(solve("v=[0, 0]"), "error: constraints/bead_on_wire.toml: `x` is not a symbol of this file\n");
+    std::fs::remove_dir_all(&dir).expect("removes the temporary directory");
 }

@@ -5,7 +5,10 @@
 //! [`value`] checks a [`RawValue`] against the symbol it is given to (known, not an
 //! acceleration, scalar or vector of the file's dimension, finite); [`state_file`] and
 //! [`assignment`] read the command line's forms of a state and check each entry the same
-//! way, so a caller holds `(Symbol, Value)` pairs and never a raw value.
+//! way, so a caller holds `(Symbol, Value)` pairs and never a raw value. Each entry comes
+//! out [`Given`]: checked, its misfit kept rather than returned at once, so that a command
+//! line's syntax errors are all reported before any value that does not fit (the order
+//! `lagrange solve` has always reported them in).
 //!
 //! Not here: reading files (the caller passes the text), the scene's forces and the full
 //! environment of a state (`model::scene::environment`).
@@ -119,22 +122,25 @@ pub enum StateInputError {
     /// `--set NAME=VALUE` whose VALUE is not finite.
     #[error("`{0}` must be finite")]
     NotFinite(String),
-    /// A value that does not fit its symbol (said of the constraint file, not the input).
-    #[error(transparent)]
-    Value(#[from] ValueError),
 }
 
-/// The symbol values of a `--at` state file: a flat table `name = value`, in name order.
-pub fn state_file(system: &System, text: &str, format: Format) -> Result<Vec<(Symbol, Value)>, StateInputError> {
+/// One entry of a state given on the command line, checked against its symbol: the
+/// symbol and its value, or why the value does not fit (said of the constraint file).
+pub type Given = Result<(Symbol, Value), ValueError>;
+
+/// The symbol values of a `--at` state file: a flat table `name = value`, in name order,
+/// each checked by [`value`]; the file's syntax is the error.
+pub fn state_file(system: &System, text: &str, format: Format) -> Result<Vec<Given>, StateInputError> {
     let table: BTreeMap<String, RawValue> = match format {
         Format::Toml => toml::from_str(text).map_err(|e| StateInputError::Syntax(e.to_string()))?,
         Format::Json => serde_json::from_str(text).map_err(|e| StateInputError::Syntax(e.to_string()))?,
     };
-    Ok(table.iter().map(|(name, v)| value(system, name, v)).collect::<Result<_, _>>()?)
+    Ok(table.iter().map(|(name, v)| value(system, name, v)).collect())
 }
 
-/// `NAME=VALUE` (`--set`), VALUE a finite number or a vector `[x, y]`.
-pub fn assignment(system: &System, arg: &str) -> Result<(Symbol, Value), StateInputError> {
+/// `NAME=VALUE` (`--set`), VALUE a finite number or a vector `[x, y]`, checked by [`value`];
+/// the syntax is the error.
+pub fn assignment(system: &System, arg: &str) -> Result<Given, StateInputError> {
     let Some((name, text)) = arg.split_once('=') else {
         return Err(StateInputError::NoEquals);
     };
@@ -150,5 +156,5 @@ pub fn assignment(system: &System, arg: &str) -> Result<(Symbol, Value), StateIn
     if !finite {
         return Err(StateInputError::NotFinite(name.to_string()));
     }
-    Ok(value(system, name, &parsed)?)
+    Ok(value(system, name, &parsed))
 }
