@@ -24,7 +24,9 @@ use crate::expr::{Symbol, Ty};
 use std::collections::{HashMap, HashSet};
 use std::ops::Range;
 
-/// The largest constraint file read, in bytes.
+/// The largest constraint file read, in bytes (16 MiB): a chain of tens of thousands of
+/// links fits, while a file that is not a constraint file (or is hostile) is refused before
+/// its text is parsed or held in a tree.
 pub const MAX_FILE_BYTES: usize = 16 << 20;
 
 /// A validated file: the system, the parameter values, the scene and the expectations.
