@@ -8,9 +8,12 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::codegen::{Options, generate};
 use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
-use lagrange::model::file::RawValue;
+use lagrange::expr::Symbol;
+use lagrange::expr::eval::Value;
 use lagrange::model::file::{Loaded, Problem, load};
 use lagrange::model::scene::environment;
+use lagrange::model::state;
+use lagrange::model::system::System;
 use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::rows::RowProgram;
 use lagrange::numeric::solve::{Settings, safe_norm};
@@ -372,36 +375,19 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
     }
 }
 
-/// The symbol values of a `--at` file: a flat TOML or JSON table.
-fn read_state(path: &Path) -> Result<Vec<(String, RawValue)>, String> {
+/// The symbol values of a `--at` file: a flat TOML or JSON table, each checked against
+/// `system` (a misfit is kept, to be reported after every syntax error).
+fn read_state(system: &System, path: &Path) -> Result<Vec<state::Given>, String> {
     let text = read_text(path)?;
-    let table: std::collections::BTreeMap<String, RawValue> = match path.extension().and_then(|e| e.to_str()) {
-        Some("toml") => toml::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
-        Some("json") => serde_json::from_str(&text).map_err(|e| format!("error: {}: {e}", path.display()))?,
-        _ => return Err(format!("error: {}: a state file must end in .toml or .json", path.display())),
+    let Some(format) = state::Format::of(path) else {
+        return Err(format!("error: {}: a state file must end in .toml or .json", path.display()));
     };
-    Ok(table.into_iter().collect())
+    state::state_file(system, &text, format).map_err(|e| format!("error: {}: {e}", path.display()))
 }
 
-/// `NAME=VALUE` with VALUE a finite number or `[x, y]`.
-fn parse_set(arg: &str) -> Result<(String, RawValue), String> {
-    let Some((name, value)) = arg.split_once('=') else {
-        return Err(format!("error: --set {arg}: expected NAME=VALUE, e.g. --set r=[1,0] or --set m=2"));
-    };
-    let (name, value) = (name.trim(), value.trim());
-    let parsed = match value.parse::<f64>() {
-        Ok(x) => RawValue::Number(x),
-        Err(_) => serde_json::from_str::<RawValue>(value)
-            .map_err(|_| format!("error: --set {arg}: `{value}` is not a number or a vector [x, y]"))?,
-    };
-    let finite = match &parsed {
-        RawValue::Number(x) => x.is_finite(),
-        RawValue::Vector(v) => v.iter().all(|x| x.is_finite()),
-    };
-    if !finite {
-        return Err(format!("error: --set {arg}: `{name}` must be finite"));
-    }
-    Ok((name.to_string(), parsed))
+/// `NAME=VALUE` with VALUE a finite number or `[x, y]`, checked against `system`.
+fn parse_set(system: &System, arg: &str) -> Result<state::Given, String> {
+    state::assignment(system, arg).map_err(|e| format!("error: --set {arg}: {e}"))
 }
 
 fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat) -> Result<(), ExitCode> {
@@ -411,18 +397,22 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     };
     let loaded = load_file(path)?;
     let derivation = derive(&loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
-    let mut overrides = match at {
-        Some(p) => read_state(p).map_err(fail)?,
+    let system = &loaded.system;
+    let mut given = match at {
+        Some(p) => read_state(system, p).map_err(fail)?,
         None => Vec::new(),
     };
     for arg in set {
-        overrides.push(parse_set(arg).map_err(fail)?);
+        given.push(parse_set(system, arg).map_err(fail)?);
     }
-    let system = &loaded.system;
+    // A value that does not fit its symbol is said of the constraint file.
+    let overrides: Vec<(Symbol, Value)> =
+        given.into_iter().collect::<Result<_, _>>().map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     let env = environment(system, &loaded.values, &loaded.scene, &overrides)
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     // A force given in the state replaces the scene's expression for that body.
-    let given: Vec<&str> = overrides.iter().map(|(n, _)| n.as_str()).collect();
+    let given: Vec<String> = overrides.iter().map(|&(s, _)| system.graph.symbol(s).name.clone()).collect();
+    let given: Vec<&str> = given.iter().map(String::as_str).collect();
     let program = RowProgram::with_given_forces(system, &derivation, &loaded.scene.forces, &given);
 
     // Contact distances count as zero relative to the size of the scene.

@@ -10,15 +10,14 @@
 //! Not here: reading files (the caller passes a [`Loaded`]), printing.
 
 use crate::derive::{Derivation, DeriveError, derive};
-use crate::expr::Role;
-use crate::expr::eval::Env;
-use crate::model::file::{Loaded, RawValue};
+use crate::expr::eval::{Env, Value};
+use crate::expr::{Role, Symbol};
+use crate::model::file::Loaded;
 use crate::model::scene::{Scene, StateError, environment};
 use crate::model::system::System;
 use crate::numeric::dynamics::Dynamics;
 use crate::numeric::rows::RowProgram;
 use crate::numeric::simulate::{Failure, Frame, Settings, Simulation, Summary};
-use std::collections::BTreeMap;
 use std::fmt::Write;
 
 /// Why a file cannot be run.
@@ -38,12 +37,14 @@ pub struct Scenario {
     /// The initial state (parameters, masses, positions, velocities, t).
     pub env: Env,
     pub scene: Scene,
-    pub values: BTreeMap<String, RawValue>,
+    /// The `[parameters]` values, by symbol.
+    pub values: Vec<(Symbol, Value)>,
 }
 
 impl Scenario {
-    /// Derives `loaded` and evaluates its initial state, with `overrides` (`NAME = value`).
-    pub fn new(loaded: Loaded, overrides: &[(String, RawValue)]) -> Result<Scenario, ScenarioError> {
+    /// Derives `loaded` and evaluates its initial state, with `overrides` (values checked
+    /// by `model::state`).
+    pub fn new(loaded: Loaded, overrides: &[(Symbol, Value)]) -> Result<Scenario, ScenarioError> {
         let derivation = derive(&loaded.system)?;
         let program = RowProgram::new(&loaded.system, &derivation, &loaded.scene.forces);
         let env = environment(&loaded.system, &loaded.values, &loaded.scene, overrides)?;

@@ -8,7 +8,7 @@ use lagrange::codegen::{Module, Options, module};
 use lagrange::derive::{Derivation, derive};
 use lagrange::expr::eval::{Env, Value, eval_one};
 use lagrange::expr::{Graph, Role, Symbol, Ty};
-use lagrange::model::file::{Loaded, RawValue, load};
+use lagrange::model::file::{Loaded, load};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -57,17 +57,6 @@ fn loaded(path: &Path) -> Loaded {
     load(&text).unwrap_or_else(|e| panic!("{}: {e:?}", path.display()))
 }
 
-fn value_of(raw: &RawValue) -> Value {
-    match raw {
-        RawValue::Number(x) => Value::Scalar(*x),
-        RawValue::Vector(v) => {
-            let mut out = [0.0; 3];
-            out[..v.len()].copy_from_slice(v);
-            Value::Vector(out)
-        }
-    }
-}
-
 /// A random state of the system: the interpreter's environment (with parameter values from
 /// the file when `file_parameters`) and the generated `State` literal.
 fn random_state(l: &Loaded, m: &Module, rng: &mut Rng, file_parameters: bool) -> (Env, String) {
@@ -91,10 +80,8 @@ fn random_state(l: &Loaded, m: &Module, rng: &mut Rng, file_parameters: bool) ->
         env.set(s, value);
     }
     if file_parameters {
-        for (name, raw) in &l.values {
-            if let Some(s) = g.symbol_named(name) {
-                env.set(s, value_of(raw));
-            }
+        for &(s, v) in &l.values {
+            env.set(s, v);
         }
     }
     let mut literal = String::from("State { ");

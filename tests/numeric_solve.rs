@@ -4,8 +4,10 @@
 //! Solver tests check the status first, then the numbers.
 
 use lagrange::derive::{Derivation, derive};
-use lagrange::model::file::{Loaded, RawValue, load};
+use lagrange::model::file::{Loaded, load};
+use lagrange::model::raw::RawValue;
 use lagrange::model::scene::environment;
+use lagrange::model::state;
 use lagrange::numeric::contact::{ContactState, impulse, impulses};
 use lagrange::numeric::qp::{QpStatus, solve_qp};
 use lagrange::numeric::rows::{Row, RowProgram, Rows};
@@ -49,7 +51,7 @@ fn s(x: f64) -> RawValue {
 
 impl Setup {
     fn rows(&self, overrides: &[(&str, RawValue)]) -> Rows {
-        let o: Vec<(String, RawValue)> = overrides.iter().map(|(n, x)| (n.to_string(), x.clone())).collect();
+        let o = state::values(&self.loaded.system, overrides).expect("values of the file's symbols");
         let env = environment(&self.loaded.system, &self.loaded.values, &self.loaded.scene, &o).expect("state");
         self.program.evaluate(&self.loaded.system, &env).expect("rows")
     }
@@ -715,7 +717,7 @@ fn overflowing_rows_are_solved_in_a_rescaled_unit() {
         let (theta, g) = (0.9f64, [0.0, -9.81]);
         let r = [l * theta.cos(), l * theta.sin()];
         let vel = [-speed * theta.sin(), speed * theta.cos()];
-        let o = vec![("l".to_string(), s(l)), ("r".to_string(), v(&r)), ("v".to_string(), v(&vel))];
+        let o = state::values(system, &[("l", s(l)), ("r", v(&r)), ("v", v(&vel))]).expect("values");
         let env = environment(system, &setup.loaded.values, &setup.loaded.scene, &o).expect("state");
         let (rows, sol) = solve_at(&setup.program, system, &env, &Settings::default()).expect("rows");
         assert_eq!(sol.status, Status::Solved, "l = {l:e}: {:?}", sol.diagnostics);
@@ -728,7 +730,8 @@ fn overflowing_rows_are_solved_in_a_rescaled_unit() {
     let text = BEAD.replace("expr = \"dot(r,r) = l^2\"", "expr = \"dot(r,r) = l^2 + 1\"");
     let setup = self::setup(&text);
     let system = &setup.loaded.system;
-    let o = vec![("l".to_string(), s(1e155)), ("r".to_string(), v(&[1e155, 0.0])), ("v".to_string(), v(&[0.0, 1e155]))];
+    let o =
+        state::values(system, &[("l", s(1e155)), ("r", v(&[1e155, 0.0])), ("v", v(&[0.0, 1e155]))]).expect("values");
     let env = environment(system, &setup.loaded.values, &setup.loaded.scene, &o).expect("state");
     let (_, sol) = solve_at(&setup.program, system, &env, &Settings::default()).expect("rows");
     assert_eq!(sol.status, Status::Failed);

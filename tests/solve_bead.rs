@@ -1,8 +1,10 @@
 //! The numeric solve against the article's closed form for the bead, at states on the wire.
 
 use lagrange::derive::derive;
-use lagrange::model::file::{RawValue, load};
+use lagrange::model::file::load;
+use lagrange::model::raw::RawValue;
 use lagrange::model::scene::environment;
+use lagrange::model::state;
 use lagrange::numeric::rows::RowProgram;
 use lagrange::numeric::solve::solve;
 
@@ -20,6 +22,7 @@ fn bead_force_matches_the_article_at_states_on_the_wire() {
         let v = [-speed * theta.sin(), speed * theta.cos()];
         let overrides =
             vec![("r".to_string(), RawValue::Vector(r.to_vec())), ("v".to_string(), RawValue::Vector(v.to_vec()))];
+        let overrides = state::values(&loaded.system, &overrides).expect("values of the file's symbols");
         let env = environment(&loaded.system, &loaded.values, &loaded.scene, &overrides).expect("state");
         let rows = program.evaluate(&loaded.system, &env).expect("rows");
         let solution = solve(&rows);

@@ -299,7 +299,11 @@ impl Checked {
         };
         match &e.at {
             Some(at) => {
-                let values: Vec<String> = at.iter().map(|(n, v)| format!("{n} = {}", raw_value(v))).collect();
+                let dim = s.dim();
+                let values: Vec<String> = at
+                    .iter()
+                    .map(|&(n, v)| format!("{} = {}", s.graph.symbol(n).name, crate::model::state::written(v, dim)))
+                    .collect();
                 format!("{base} at {}", values.join(", "))
             }
             None => base,
@@ -505,13 +509,4 @@ fn show(v: &Result<Vec<f64>, String>) -> String {
 
 fn show_value(v: Value, dim: usize) -> String {
     show(&Ok(v.components(dim)))
-}
-
-fn raw_value(v: &crate::model::file::RawValue) -> String {
-    match v {
-        crate::model::file::RawValue::Number(x) => x.to_string(),
-        crate::model::file::RawValue::Vector(xs) => {
-            format!("[{}]", xs.iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", "))
-        }
-    }
 }

@@ -20,12 +20,10 @@
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, Value};
 use crate::expr::{Role, Symbol};
-use crate::model::file::RawValue;
 use crate::model::scene::Scene;
 use crate::model::system::System;
 use crate::numeric::rows::{RowProgram, Rows};
 use nalgebra::{DMatrix, DVector};
-use std::collections::BTreeMap;
 
 /// Newton iterations per attempt.
 const NEWTON_STEPS: usize = 60;
@@ -76,15 +74,14 @@ impl Rng {
 pub fn sample(
     system: &System,
     derivation: &Derivation,
-    parameters: &BTreeMap<String, RawValue>,
+    parameters: &[(Symbol, Value)],
     scene: &Scene,
     count: usize,
 ) -> Result<Vec<Env>, String> {
     let program = RowProgram::new(system, derivation, &[]);
     let dim = system.dim();
     let mut base = Env::new();
-    for (name, value) in parameters {
-        let (s, v) = crate::model::scene::value_for(system, name, value, dim)?;
+    for &(s, v) in parameters {
         base.set(s, v);
     }
     let mut start = vec![[0.0; 3]; system.bodies.len()];

@@ -1,12 +1,18 @@
 //! Source code for the derived formulas, for people who want the numbers in their own program.
 //!
-//! [`rust`] writes a self-contained Rust module (no dependency on lagrange or any crate).
+//! [`layout`] decides how a system's outputs are laid out (dense or banded A, dense or block
+//! J, parts of at most 64 formulas); [`rust`] writes a self-contained Rust module (no
+//! dependency on lagrange or any crate) following it, with the helper functions of
+//! `support` (real Rust files, included as text).
 //! The code is generated from the same scalar program the tape evaluates
 //! ([`crate::numeric::program`]), so codegen and the tape share one lowering.
 //!
 //! Codegen may print text (it writes source), but it never touches files or stdout:
 //! `main.rs` decides where the text goes.
+//!
+//! Not here: files, stdout, evaluation of the formulas (`numeric`).
 
+pub mod layout;
 mod names;
 pub mod rust;
 mod support;

@@ -10,7 +10,7 @@ use std::fmt::Write;
 /// Text safe inside a `//` or `///` comment: one line, no control or bidirectional
 /// characters (those are written as `\u{…}`).
 pub fn comment_text(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
+    let mut out = String::new();
     for ch in s.chars() {
         let bidi = matches!(ch, '\u{200e}' | '\u{200f}' | '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}');
         if ch.is_control() || bidi || ch == '\u{2028}' || ch == '\u{2029}' || ch == '\u{feff}' {

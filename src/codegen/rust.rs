@@ -6,23 +6,12 @@
 //! each body. With one constraint λ and the forces are closed formulas; with several, λ
 //! comes from a small Gaussian elimination in the module (A λ = −b).
 //!
-//! A is a dense `[[f64; K]; K]` (`a_matrix`) up to `DENSE_MAX` (16) constraints; past that, when
-//! A is banded (a chain listed in order), only its band is written (`a_band`, row k holding
-//! A[k][k..=k + w], with `A_BANDWIDTH` = w) and λ comes from a band Cholesky in the module,
-//! so code size and work grow linearly with a chain's length. A big A that is not banded is
-//! a `Vec<[f64; K]>` on the heap (`a_matrix`), solved by the same elimination. The entries
-//! of A are computed from the directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the
-//! canonical, bilinearly expanded form the doc comments show: fewer operations and no
-//! cancellation.
-//!
-//! Big systems must not need a big stack (a 1000-link chain's dense J alone is 16 MB). Up to
-//! `DENSE_J_MAX` (4096) entries J is a dense `[[f64; N·DIM]; K]` (`jacobian`); past that it
-//! is `jacobian_blocks`, a `Vec` of its non-zero blocks `(k, i, d)`: constraint k's direction
-//! d on body i, sorted by k — what an engine iterates to form Jᵀλ, J v or J M⁻¹ Jᵀ. And an
-//! output of more than `PART` (64) formulas is filled by private `#[inline(never)]`
-//! functions of at most 64 formulas each: an unoptimised build gives every value its own
-//! stack slot, so one function for the whole output would grow with the system. What stays
-//! on the stack is O(K + N): the `State`, the returned vectors, the band.
+//! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
+//! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
+//! is written; this file writes the text it decides. The entries of A are computed from the
+//! directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the canonical, bilinearly expanded
+//! form the doc comments show: fewer operations and no cancellation. The solve a module
+//! carries is one of the helper files of `codegen::support`, included as it is written.
 //!
 //! Each function body is the scalar [`Program`] of its formulas: values used more than once
 //! become `let` bindings, values used once are written inline. `--specialize` substitutes
@@ -33,15 +22,18 @@
 //! (keywords get a trailing `_`, clashes a numeric suffix), and text in comments is one line
 //! per comment with control and bidirectional characters escaped.
 //!
-//! Not here: files or stdout (`main.rs`), evaluation (`numeric`).
+//! Not here: layout decisions (`codegen::layout`), the helpers' text (`codegen::support`),
+//! files or stdout (`main.rs`), evaluation (`numeric`).
 
+use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{HELPERS, SOLVE, SOLVE_BAND};
+use super::support::{HELPERS, SOLVE, SOLVE_BAND, SOLVE_HEAP};
 use crate::derive::{DeriveError, derive};
+use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
-use crate::model::file::{Loaded, RawValue};
+use crate::model::file::Loaded;
 use crate::numeric::program::{LowerError, Op, Program};
 use std::collections::{HashMap, HashSet};
 use std::fmt::Write;
@@ -68,16 +60,6 @@ pub enum GenerateError {
 
 /// Longest formula quoted in a doc comment, in characters.
 const MAX_DOC_FORMULA: usize = 400;
-/// Most constraints for which A is written as a dense K×K array; past this, a banded A
-/// (a chain's) is written as its band only and solved by band Cholesky.
-const DENSE_MAX: usize = 16;
-/// Most entries (K · N · DIM) of a Jacobian written as a dense array (32 KiB); past this J
-/// is written as its non-zero blocks, `(constraint, body, direction)`.
-const DENSE_J_MAX: usize = 4096;
-/// Most formulas (entries of C, b or c, of A, blocks of J) an output computes in one
-/// function; a bigger output is filled by private functions of at most `PART` formulas each,
-/// so no stack frame grows with the system's size.
-const PART: usize = 64;
 /// Deepest expression written inline; deeper values get a `let`, so rustc never sees a
 /// pathologically nested expression.
 const MAX_INLINE_DEPTH: u32 = 24;
@@ -152,18 +134,19 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let mut map = HashMap::new();
     if options.specialize {
         let g = &mut d.graph;
-        for (name, value) in &loaded.values {
-            let Some(s) = g.symbol_named(name) else { continue };
+        let dim = g.dim();
+        for &(s, value) in &loaded.values {
+            let name = g.symbol(s).name.clone();
             let bad = || GenerateError::BadValue(name.clone());
             let node = match value {
-                RawValue::Number(x) => {
-                    let q = exact(*x).ok_or_else(bad)?;
+                Value::Scalar(x) => {
+                    let q = exact(x).ok_or_else(bad)?;
                     g.num(q)
                 }
-                RawValue::Vector(xs) => {
-                    let mut entries = Vec::with_capacity(xs.len());
-                    for x in xs {
-                        let q = exact(*x).ok_or_else(bad)?;
+                Value::Vector(_) => {
+                    let mut entries = Vec::new();
+                    for &x in value.components(dim).iter() {
+                        let q = exact(x).ok_or_else(bad)?;
                         entries.push(g.num(q));
                     }
                     g.vector(entries)?
@@ -198,14 +181,40 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let fields = state_fields(&system.graph, &body_names, &substituted);
     let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
     let slots = slot_exprs(g, &fields);
-    let (dim, n, k) = (g.dim(), system.bodies.len(), system.constraints.len());
+    let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
+    let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
+    let closed_form = formulas.lambda.is_some() && formulas.forces.is_some();
+    let layout = Layout::of(g.dim(), system.bodies.len(), system.constraints.len(), &a_entries, blocks, closed_form);
 
     let mut out = String::new();
     let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
+    header(&mut out, title, options.specialize, &layout);
+    state(&mut out, g, &fields, &layout);
+    let ctx = Ctx { g, inputs: &inputs, slots: &slots };
+    let names = Names { bodies: &body_names, constraints: &constraint_names };
+    ctx.constraints(&mut out, &formulas, &names)?;
+    ctx.a(&mut out, &formulas, &a_code, &layout)?;
+    ctx.b(&mut out, &formulas)?;
+    ctx.jacobian(&mut out, &formulas, &names, &layout)?;
+    ctx.c_term(&mut out, &formulas)?;
+    ctx.solution(&mut out, &formulas, &names, &layout)?;
+    out.push_str(HELPERS);
+    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
+}
+
+/// The names of the file's bodies and constraints, in file order.
+struct Names<'a> {
+    bodies: &'a [&'a str],
+    constraints: &'a [&'a str],
+}
+
+/// The module's opening comment: what it is and how it is laid out.
+fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout) {
+    let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
     let _ = writeln!(
         out,
         "// Generated by `lagrange generate --lang rust{}`.",
-        if options.specialize { " --specialize" } else { "" }
+        if specialize { " --specialize" } else { "" }
     );
     let _ = writeln!(out, "// Scene: {}", comment_text(title));
     let _ = writeln!(out, "// Do not edit: regenerate. Self-contained: no dependency on lagrange or any crate.");
@@ -215,44 +224,46 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         if n == 1 { "y" } else { "ies" },
         if k == 1 { "" } else { "s" }
     );
-    if options.specialize {
+    if specialize {
         let _ = writeln!(out, "// Specialised: the file's parameter values are written into the formulas.");
     }
     // How a big system is laid out, so that none of its functions needs a big stack.
-    let bandwidth = formulas.a.iter().map(|&(r, c, _)| r.abs_diff(c)).max().unwrap_or(0);
-    let banded = k > DENSE_MAX && 2 * (bandwidth + 1) <= k;
-    let sparse_j = k * n * dim > DENSE_J_MAX;
-    if banded {
-        let _ = writeln!(
-            out,
-            "// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = {bandwidth}; λ by band Cholesky."
-        );
-    } else if k > DENSE_MAX {
-        let _ = writeln!(out, "// A is dense and not banded: `a_matrix` returns its {k} rows on the heap (Vec).");
+    match layout.a {
+        AStorage::Band { bandwidth } => {
+            let _ = writeln!(
+                out,
+                "// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = {bandwidth}; λ by band Cholesky."
+            );
+        }
+        AStorage::Heap => {
+            let _ = writeln!(out, "// A is dense and not banded: `a_matrix` returns its {k} rows on the heap (Vec).");
+        }
+        AStorage::Dense => {}
     }
-    if sparse_j {
+    if matches!(layout.j, JStorage::Blocks { .. }) {
         let _ = writeln!(
             out,
             "// J is sparse: `jacobian_blocks(s)` is a Vec of its JACOBIAN_BLOCKS non-zero blocks (k, i, d): \
              constraint k's direction d on body i, sorted by k. Σₖ λₖ·d over the blocks of body i is its force."
         );
     }
-    let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
-    let parted = k > PART || (k > DENSE_MAX && formulas.a.len() > PART) || (sparse_j && blocks > PART);
-    if parted {
+    if layout.parted {
         let _ = writeln!(
             out,
-            "// Outputs of more than {PART} formulas are filled by private parts of at most {PART}: no function's \
+            "// Outputs of more than {MAX_PART} formulas are filled by private parts of at most {MAX_PART}: no function's \
              stack grows with the system's size beyond its own O(K) arrays."
         );
     }
     let _ = writeln!(out);
+}
 
-    // The state.
+/// The `State` struct and the size constants.
+fn state(out: &mut String, g: &Graph, fields: &[Field], layout: &Layout) {
+    let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
     let _ = writeln!(out, "/// A state of the scene: every input of the formulas below.");
     let _ = writeln!(out, "#[derive(Clone, Copy, Debug, Default, PartialEq)]");
     let _ = writeln!(out, "pub struct State {{");
-    for f in &fields {
+    for f in fields {
         let ty = if g.symbol(f.symbol).ty == Ty::Vector { format!("[f64; {dim}]") } else { "f64".into() };
         let _ = writeln!(out, "    /// {}", f.doc);
         let _ = writeln!(out, "    pub {}: {ty},", f.ident);
@@ -261,145 +272,172 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let _ = writeln!(out, "/// Space dimension.\npub const DIM: usize = {dim};");
     let _ = writeln!(out, "/// Number of bodies (in file order).\npub const BODIES: usize = {n};");
     let _ = writeln!(out, "/// Number of constraints (in file order).\npub const CONSTRAINTS: usize = {k};\n");
+}
 
-    let ctx = Ctx { g, inputs: &inputs, slots: &slots };
-
-    // C
-    let mut doc = vec!["The constraint values C (zero on the constraint):".to_string()];
-    for (i, &c) in formulas.c.iter().enumerate() {
-        doc.push(format!("- `{}`: {}", comment_text(constraint_names[i]), formula(g, c)));
-    }
-    ctx.emit_scalars(&mut out, &doc, "constraints", &formulas.c)?;
-
-    // A
-    let mut doc = vec![
-        "A of A λ + b = 0: Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ (symmetric, positive semidefinite). Non-zero entries:".to_string(),
-    ];
-    let mut roots = Vec::new();
-    let mut where_: HashMap<(usize, usize), usize> = HashMap::new();
-    for (&(r, c, shown), &id) in formulas.a.iter().zip(&a_code) {
-        doc.push(format!("- A[{r}][{c}] = {}", formula(g, shown)));
-        // Off the diagonal the entry is used twice (A is symmetric): listing it twice makes
-        // its value a `let`.
-        where_.insert((r, c), roots.len());
-        roots.push(id);
-        if r != c {
-            where_.insert((c, r), roots.len());
-            roots.push(id);
+impl Ctx<'_> {
+    /// `constraints`: the values C.
+    fn constraints(&self, out: &mut String, formulas: &Formulas, names: &Names<'_>) -> Result<(), GenerateError> {
+        let g = self.g;
+        let mut doc = vec!["The constraint values C (zero on the constraint):".to_string()];
+        for (i, &c) in formulas.c.iter().enumerate() {
+            doc.push(format!("- `{}`: {}", comment_text(names.constraints[i]), formula(g, c)));
         }
+        self.emit_scalars(out, &doc, "constraints", &formulas.c)
     }
-    if banded && formulas.a.len() > PART {
-        // One item per band row, each entry once: the parts need no shared `let`s.
-        band_header(&mut out, &mut doc, bandwidth);
-        let present = |r: usize| (r..=r + bandwidth).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
-        let items: Vec<Vec<Id>> =
-            (0..k).map(|r| present(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
-        let store = |r: usize, exprs: &[String]| {
-            let mut values = vec!["0.0".to_string(); bandwidth + 1];
-            for (c, e) in present(r).into_iter().zip(exprs) {
-                values[c - r] = e.clone();
+
+    /// `a_matrix` or `a_band`: A, as the layout stores it, from the assembled entries
+    /// `a_code` (the doc comments show the canonical ones, `formulas.a`).
+    fn a(&self, out: &mut String, formulas: &Formulas, a_code: &[Id], layout: &Layout) -> Result<(), GenerateError> {
+        let (g, k) = (self.g, layout.constraints);
+        let mut doc = vec![
+            "A of A λ + b = 0: Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ (symmetric, positive semidefinite). Non-zero entries:".to_string(),
+        ];
+        let mut roots = Vec::new();
+        let mut where_: HashMap<(usize, usize), usize> = HashMap::new();
+        for (&(r, c, shown), &id) in formulas.a.iter().zip(a_code) {
+            doc.push(format!("- A[{r}][{c}] = {}", formula(g, shown)));
+            // Off the diagonal the entry is used twice (A is symmetric): listing it twice makes
+            // its value a `let`.
+            where_.insert((r, c), roots.len());
+            roots.push(id);
+            if r != c {
+                where_.insert((c, r), roots.len());
+                roots.push(id);
             }
-            format!("out[{r}] = {};", array(&values))
-        };
-        let ret = format!("[[f64; {}]; {k}]", bandwidth + 1);
-        let init = format!("[[0.0; {}]; {k}]", bandwidth + 1);
-        ctx.emit_items(&mut out, &doc, "a_band", &ret, &init, &format!("[f64; {}]", bandwidth + 1), &items, store)?;
-    } else if k > DENSE_MAX && !banded {
-        // K² numbers: on the heap, written entry by entry (an array literal would be built on
-        // the stack first). Only the non-zero entries are stored, row by row.
-        let row = |r: usize| (0..k).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
-        let items: Vec<Vec<Id>> = (0..k).map(|r| row(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
-        let store = |r: usize, exprs: &[String]| {
-            let stores: Vec<String> =
-                row(r).into_iter().zip(exprs).map(|(c, e)| format!("out[{r}][{c}] = {e};")).collect();
-            stores.join("\n    ")
-        };
-        doc.push(String::new());
-        doc.push(format!("On the heap ({k} rows of {k}): A is not banded and too big for the stack."));
-        let ret = format!("Vec<[f64; {k}]>");
-        let init = format!("vec![[0.0; {k}]; {k}]");
-        ctx.emit_items(&mut out, &doc, "a_matrix", &ret, &init, &format!("[f64; {k}]"), &items, store)?;
-    } else if banded {
-        let (lets, exprs) = ctx.body(&roots)?;
-        // Only the band: row r holds A[r][r], A[r][r + 1], …, A[r][r + w] (zeros past the end).
-        let rows: Vec<String> = (0..k)
-            .map(|r| {
-                let band: Vec<String> = (r..=r + bandwidth)
-                    .map(|c| where_.get(&(r, c)).map_or("0.0".to_string(), |&i| exprs[i].clone()))
+        }
+        match layout.a {
+            AStorage::Band { bandwidth } if layout::parted(formulas.a.len()) => {
+                // One item per band row, each entry once: the parts need no shared `let`s.
+                band_header(out, &mut doc, bandwidth);
+                let present =
+                    |r: usize| (r..=r + bandwidth).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
+                let items: Vec<Vec<Id>> =
+                    (0..k).map(|r| present(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
+                let store = |r: usize, exprs: &[String]| {
+                    let mut values = vec!["0.0".to_string(); bandwidth + 1];
+                    for (c, e) in present(r).into_iter().zip(exprs) {
+                        values[c - r] = e.clone();
+                    }
+                    format!("out[{r}] = {};", array(&values))
+                };
+                let ret = format!("[[f64; {}]; {k}]", bandwidth + 1);
+                let init = format!("[[0.0; {}]; {k}]", bandwidth + 1);
+                let elem = format!("[f64; {}]", bandwidth + 1);
+                self.emit_items(out, &doc, "a_band", &ret, &init, &elem, &items, store)
+            }
+            AStorage::Heap => {
+                // K² numbers: on the heap, written entry by entry (an array literal would be
+                // built on the stack first). Only the non-zero entries are stored, row by row.
+                let row = |r: usize| (0..k).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
+                let items: Vec<Vec<Id>> =
+                    (0..k).map(|r| row(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
+                let store = |r: usize, exprs: &[String]| {
+                    let stores: Vec<String> =
+                        row(r).into_iter().zip(exprs).map(|(c, e)| format!("out[{r}][{c}] = {e};")).collect();
+                    stores.join("\n    ")
+                };
+                doc.push(String::new());
+                doc.push(format!("On the heap ({k} rows of {k}): A is not banded and too big for the stack."));
+                let ret = format!("Vec<[f64; {k}]>");
+                let init = format!("vec![[0.0; {k}]; {k}]");
+                self.emit_items(out, &doc, "a_matrix", &ret, &init, &format!("[f64; {k}]"), &items, store)
+            }
+            AStorage::Band { bandwidth } => {
+                let (lets, exprs) = self.body(&roots)?;
+                // Only the band: row r holds A[r][r], A[r][r + 1], …, A[r][r + w] (zeros past the end).
+                let rows: Vec<String> = (0..k)
+                    .map(|r| {
+                        let band: Vec<String> = (r..=r + bandwidth)
+                            .map(|c| where_.get(&(r, c)).map_or("0.0".to_string(), |&i| exprs[i].clone()))
+                            .collect();
+                        array(&band)
+                    })
                     .collect();
-                array(&band)
-            })
-            .collect();
-        band_header(&mut out, &mut doc, bandwidth);
-        emit_fn(&mut out, &doc, "a_band", &format!("[[f64; {}]; {k}]", bandwidth + 1), &lets, &array(&rows));
-    } else {
-        let (lets, exprs) = ctx.body(&roots)?;
-        let rows: Vec<String> = (0..k)
-            .map(|r| {
-                array(
-                    &(0..k)
-                        .map(|c| where_.get(&(r, c)).map_or("0.0".to_string(), |&i| exprs[i].clone()))
-                        .collect::<Vec<_>>(),
-                )
-            })
-            .collect();
-        emit_fn(&mut out, &doc, "a_matrix", &format!("[[f64; {k}]; {k}]"), &lets, &array(&rows));
-    }
-
-    // b
-    let mut doc = vec!["b of A λ + b = 0: bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ.".to_string()];
-    for (i, &b) in formulas.b.iter().enumerate() {
-        doc.push(format!("- b[{i}] = {}", formula(g, b)));
-    }
-    ctx.emit_scalars(&mut out, &doc, "b_vector", &formulas.b)?;
-
-    // J
-    let mut doc = vec![format!(
-        "J: row k is the force direction of constraint k (∇C over its constant content), body i's \
-         components at columns i·{dim} .. i·{dim} + {dim}."
-    )];
-    let mut roots = Vec::new();
-    let mut at: HashMap<(usize, usize), usize> = HashMap::new();
-    for (r, dirs) in formulas.jacobian.iter().enumerate() {
-        for &(body, id) in dirs {
-            doc.push(format!("- J[{r}], body `{}`: {}", comment_text(body_names[body]), formula(g, id)));
-            at.insert((r, body), roots.len());
-            roots.push(id);
+                band_header(out, &mut doc, bandwidth);
+                emit_fn(out, &doc, "a_band", &format!("[[f64; {}]; {k}]", bandwidth + 1), &lets, &array(&rows));
+                Ok(())
+            }
+            AStorage::Dense => {
+                let (lets, exprs) = self.body(&roots)?;
+                let rows: Vec<String> = (0..k)
+                    .map(|r| {
+                        array(
+                            &(0..k)
+                                .map(|c| where_.get(&(r, c)).map_or("0.0".to_string(), |&i| exprs[i].clone()))
+                                .collect::<Vec<_>>(),
+                        )
+                    })
+                    .collect();
+                emit_fn(out, &doc, "a_matrix", &format!("[[f64; {k}]; {k}]"), &lets, &array(&rows));
+                Ok(())
+            }
         }
     }
-    if sparse_j {
-        // Block triplets by constraint, each constraint's bodies as the derivation lists them.
-        let blocks: Vec<(usize, usize, Id)> = formulas
-            .jacobian
-            .iter()
-            .enumerate()
-            .flat_map(|(r, dirs)| dirs.iter().map(move |&(body, id)| (r, body, id)))
-            .collect();
-        let _ = writeln!(
-            out,
-            "/// Number of non-zero blocks of J: the entries `jacobian_blocks` returns.\n\
-             pub const JACOBIAN_BLOCKS: usize = {};\n",
-            blocks.len()
-        );
-        doc[0] = format!(
-            "J, sparse: every non-zero block `(k, i, d)`, where d is the force direction of constraint k \
-             (∇C over its constant content) on body i, so Jₖ at columns i·{dim} .. i·{dim} + {dim} is d. \
-             Sorted by k; a body a constraint does not involve has no block in its row."
-        );
-        let items: Vec<Vec<Id>> = blocks.iter().map(|b| vec![b.2]).collect();
-        let store =
-            |i: usize, exprs: &[String]| format!("out[{i}] = ({}, {}, {});", blocks[i].0, blocks[i].1, array(exprs));
-        // On the heap: a block is 2 + DIM words, and an unoptimised build copies a returned
-        // array several times on its way out.
-        let ret = format!("Vec<(usize, usize, [f64; {dim}])>");
-        let init = format!("vec![(0, 0, [0.0; {dim}]); {}]", blocks.len());
-        let elem = format!("(usize, usize, [f64; {dim}])");
-        ctx.emit_items(&mut out, &doc, "jacobian_blocks", &ret, &init, &elem, &items, store)?;
-    } else {
-        let (lets, exprs) = ctx.body(&roots)?;
+
+    /// `b_vector`: b.
+    fn b(&self, out: &mut String, formulas: &Formulas) -> Result<(), GenerateError> {
+        let mut doc = vec!["b of A λ + b = 0: bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ.".to_string()];
+        for (i, &b) in formulas.b.iter().enumerate() {
+            doc.push(format!("- b[{i}] = {}", formula(self.g, b)));
+        }
+        self.emit_scalars(out, &doc, "b_vector", &formulas.b)
+    }
+
+    /// `jacobian` or `jacobian_blocks`: J, as the layout stores it.
+    fn jacobian(
+        &self,
+        out: &mut String,
+        formulas: &Formulas,
+        names: &Names<'_>,
+        layout: &Layout,
+    ) -> Result<(), GenerateError> {
+        let (g, dim, n, k) = (self.g, layout.dim, layout.bodies, layout.constraints);
+        let mut doc = vec![format!(
+            "J: row k is the force direction of constraint k (∇C over its constant content), body i's \
+             components at columns i·{dim} .. i·{dim} + {dim}."
+        )];
+        let mut roots = Vec::new();
+        let mut at: HashMap<(usize, usize), usize> = HashMap::new();
+        for (r, dirs) in formulas.jacobian.iter().enumerate() {
+            for &(body, id) in dirs {
+                doc.push(format!("- J[{r}], body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
+                at.insert((r, body), roots.len());
+                roots.push(id);
+            }
+        }
+        if let JStorage::Blocks { count } = layout.j {
+            // Block triplets by constraint, each constraint's bodies as the derivation lists them.
+            let blocks: Vec<(usize, usize, Id)> = formulas
+                .jacobian
+                .iter()
+                .enumerate()
+                .flat_map(|(r, dirs)| dirs.iter().map(move |&(body, id)| (r, body, id)))
+                .collect();
+            let _ = writeln!(
+                out,
+                "/// Number of non-zero blocks of J: the entries `jacobian_blocks` returns.\n\
+                 pub const JACOBIAN_BLOCKS: usize = {count};\n"
+            );
+            doc[0] = format!(
+                "J, sparse: every non-zero block `(k, i, d)`, where d is the force direction of constraint k \
+                 (∇C over its constant content) on body i, so Jₖ at columns i·{dim} .. i·{dim} + {dim} is d. \
+                 Sorted by k; a body a constraint does not involve has no block in its row."
+            );
+            let items: Vec<Vec<Id>> = blocks.iter().map(|b| vec![b.2]).collect();
+            let store = |i: usize, exprs: &[String]| {
+                format!("out[{i}] = ({}, {}, {});", blocks[i].0, blocks[i].1, array(exprs))
+            };
+            // On the heap: a block is 2 + DIM words, and an unoptimised build copies a returned
+            // array several times on its way out.
+            let ret = format!("Vec<(usize, usize, [f64; {dim}])>");
+            let init = format!("vec![(0, 0, [0.0; {dim}]); {count}]");
+            let elem = format!("(usize, usize, [f64; {dim}])");
+            return self.emit_items(out, &doc, "jacobian_blocks", &ret, &init, &elem, &items, store);
+        }
+        let (lets, exprs) = self.body(&roots)?;
         let rows: Vec<String> = (0..k)
             .map(|r| {
-                let mut row = Vec::with_capacity(n * dim);
+                let mut row = Vec::new();
                 for body in 0..n {
                     for axis in 0..dim {
                         row.push(match at.get(&(r, body)) {
@@ -411,123 +449,131 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
                 array(&row)
             })
             .collect();
-        emit_fn(&mut out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, &array(&rows));
+        emit_fn(out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, &array(&rows));
+        Ok(())
     }
 
-    // c
-    let mut doc = vec!["c: the part of C̈ (over the same constant) without accelerations, C̈ = J·a + c.".to_string()];
-    for (i, &c) in formulas.bias.iter().enumerate() {
-        doc.push(format!("- c[{i}] = {}", formula(g, c)));
+    /// `c_term`: c.
+    fn c_term(&self, out: &mut String, formulas: &Formulas) -> Result<(), GenerateError> {
+        let mut doc = vec!["c: the part of C̈ (over the same constant) without accelerations, C̈ = J·a + c.".to_string()];
+        for (i, &c) in formulas.bias.iter().enumerate() {
+            doc.push(format!("- c[{i}] = {}", formula(self.g, c)));
+        }
+        self.emit_scalars(out, &doc, "c_term", &formulas.bias)
     }
-    ctx.emit_scalars(&mut out, &doc, "c_term", &formulas.bias)?;
 
-    // λ and the forces.
-    let mut namer = Namer::new(&[
-        "constraints",
-        "a_matrix",
-        "a_band",
-        "b_vector",
-        "jacobian",
-        "jacobian_blocks",
-        "c_term",
-        "lambda",
-        "forces",
-    ]);
-    let force_fns: Vec<String> = body_names.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
-    match (formulas.lambda, &formulas.forces) {
-        (Some(lambda), Some(forces)) => {
+    /// `lambda`, `forces` and `force_<body>`: closed formulas for one constraint, else a solve
+    /// of A λ = −b (and the helper that solves A as the layout stores it).
+    fn solution(
+        &self,
+        out: &mut String,
+        formulas: &Formulas,
+        names: &Names<'_>,
+        layout: &Layout,
+    ) -> Result<(), GenerateError> {
+        let (g, dim, n, k) = (self.g, layout.dim, layout.bodies, layout.constraints);
+        let mut namer = Namer::new(&[
+            "constraints",
+            "a_matrix",
+            "a_band",
+            "b_vector",
+            "jacobian",
+            "jacobian_blocks",
+            "c_term",
+            "lambda",
+            "forces",
+        ]);
+        let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
+        if let (Lambda::ClosedForm, Some(lambda), Some(forces)) = (layout.lambda, formulas.lambda, &formulas.forces) {
             let doc = vec!["The multiplier λ, in closed form:".to_string(), format!("λ = {}", formula(g, lambda))];
-            let (lets, exprs) = ctx.body(&[lambda])?;
-            emit_fn(&mut out, &doc, "lambda", "[f64; 1]", &lets, &array(&exprs));
+            let (lets, exprs) = self.body(&[lambda])?;
+            emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &array(&exprs));
             for (body, name) in force_fns.iter().enumerate() {
                 let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
-                let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(body_names[body]))];
+                let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
                 let (lets, exprs) = match found {
                     Some(id) => {
                         doc.push(formula(g, id));
-                        ctx.body(&[id])?
+                        self.body(&[id])?
                     }
                     None => {
                         doc.push("zero: no constraint involves this body.".into());
                         (Vec::new(), vec!["0.0".to_string(); dim])
                     }
                 };
-                emit_fn(&mut out, &doc, name, &format!("[f64; {dim}]"), &lets, &array(&exprs));
+                emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &array(&exprs));
             }
             let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
             let doc = vec!["The constraint force on every body (in file order).".to_string()];
-            emit_fn(&mut out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+            emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+            return Ok(());
         }
-        _ => {
-            if banded {
-                let _ = writeln!(
-                    out,
-                    "/// The multipliers λ: the solution of A λ = −b (band Cholesky, O(K w²); NaN when A\n\
-                     /// is singular, e.g. redundant constraints).\n\
-                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                     let mut b = b_vector(s);\n    \
-                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
-                     solve_band(a_band(s), b)\n}}\n"
-                );
-            } else {
-                let _ = writeln!(
-                    out,
-                    "/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial\n\
-                     /// pivoting; NaN when A is singular, e.g. redundant constraints).\n\
-                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                     let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
-                );
-            }
-            if sparse_j {
-                let _ = writeln!(
-                    out,
-                    "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-                     pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                     let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
-                     let mut f = [[0.0; {dim}]; {n}];\n    \
-                     for (k, i, d) in j {{\n        \
-                     for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
-                     f\n}}\n"
-                );
-            } else {
-                let _ = writeln!(
-                    out,
-                    "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+        if matches!(layout.a, AStorage::Band { .. }) {
+            let _ = writeln!(
+                out,
+                "/// The multipliers λ: the solution of A λ = −b (band Cholesky, O(K w²); NaN when A\n\
+                 /// is singular, e.g. redundant constraints).\n\
+                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                 let mut b = b_vector(s);\n    \
+                 for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
+                 solve_band(a_band(s), b)\n}}\n"
+            );
+        } else {
+            let _ = writeln!(
+                out,
+                "/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial\n\
+                 /// pivoting; NaN when A is singular, e.g. redundant constraints).\n\
+                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                 let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
+            );
+        }
+        if matches!(layout.j, JStorage::Blocks { .. }) {
+            let _ = writeln!(
+                out,
+                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
                  pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                 let (l, j) = (lambda(s), jacobian(s));\n    \
+                 let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
                  let mut f = [[0.0; {dim}]; {n}];\n    \
-                 for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
-                 for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
-                 for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
+                 for (k, i, d) in j {{\n        \
+                 for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
                  f\n}}\n"
-                );
-            }
-            for (body, name) in force_fns.iter().enumerate() {
-                let _ = writeln!(
-                    out,
-                    "/// The constraint force on body `{}`.\npub fn {name}(s: &State) -> [f64; {dim}] {{\n    forces(s)[{body}]\n}}\n",
-                    comment_text(body_names[body])
-                );
-            }
-            if banded {
-                out.push_str(SOLVE_BAND);
-            } else if k > DENSE_MAX {
-                // The same elimination on the heap matrix `a_matrix` returns (the code indexes
-                // rows alike).
-                out.push_str(&SOLVE.replace("mut a: [[f64; K]; K]", "mut a: Vec<[f64; K]>"));
-            } else {
-                out.push_str(SOLVE);
-            }
+            );
+        } else {
+            let _ = writeln!(
+                out,
+                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+             pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+             let (l, j) = (lambda(s), jacobian(s));\n    \
+             let mut f = [[0.0; {dim}]; {n}];\n    \
+             for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
+             for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
+             for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
+             f\n}}\n"
+            );
         }
+        for (body, name) in force_fns.iter().enumerate() {
+            let _ = writeln!(
+                out,
+                "/// The constraint force on body `{}`.\npub fn {name}(s: &State) -> [f64; {dim}] {{\n    forces(s)[{body}]\n}}\n",
+                comment_text(names.bodies[body])
+            );
+        }
+        // The solve A's storage needs (each helper file ends its last item with `}`; a blank
+        // line follows it).
+        out.push_str(match layout.a {
+            AStorage::Band { .. } => SOLVE_BAND,
+            AStorage::Heap => SOLVE_HEAP,
+            AStorage::Dense => SOLVE,
+        });
+        out.push('\n');
+        Ok(())
     }
-    out.push_str(HELPERS);
-    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
 }
 
 /// Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ for every non-zero entry of `f.a`, unsimplified: the sum over the
 /// bodies both constraints act on, terms with the same mass summed before one division.
 fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, GenerateError> {
-    let mut entries = Vec::with_capacity(f.a.len());
+    let mut entries = Vec::new();
     for &(k, j, _) in &f.a {
         // (mass, dots over the bodies of that mass), in body order.
         let mut by_mass: Vec<(Id, Vec<Id>)> = Vec::new();
@@ -543,7 +589,7 @@ fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, Ge
                 None => by_mass.push((masses[body], vec![dot])),
             }
         }
-        let mut terms = Vec::with_capacity(by_mass.len());
+        let mut terms = Vec::new();
         for (m, dots) in by_mass {
             let sum = g.add(dots)?;
             let inv = g.powi(m, -1)?;
@@ -640,10 +686,10 @@ enum Prec {
 
 impl Ctx<'_> {
     /// `pub fn name(s: &State) -> [f64; K]` for one scalar formula per entry: an array literal,
-    /// or entry by entry ([`Ctx::emit_items`]) past [`PART`] entries.
+    /// or entry by entry ([`Ctx::emit_items`]) past [`MAX_PART`] entries.
     fn emit_scalars(&self, out: &mut String, doc: &[String], name: &str, roots: &[Id]) -> Result<(), GenerateError> {
         let k = roots.len();
-        if k > PART {
+        if layout::parted(k) {
             let items: Vec<Vec<Id>> = roots.iter().map(|&r| vec![r]).collect();
             let store = |i: usize, e: &[String]| format!("out[{i}] = {};", e[0]);
             self.emit_items(out, doc, name, &format!("[f64; {k}]"), &format!("[0.0; {k}]"), "f64", &items, store)
@@ -656,8 +702,8 @@ impl Ctx<'_> {
 
     /// `pub fn name(s: &State) -> ret` that starts from `init` and stores every item:
     /// `store(i, exprs)` is the statement storing item i from the expressions of its roots'
-    /// components. Past [`PART`] formulas (roots) the work is split into private
-    /// `#[inline(never)]` functions of consecutive items, at most [`PART`] formulas each
+    /// components. Past [`MAX_PART`] formulas (roots) the work is split into private
+    /// `#[inline(never)]` functions of consecutive items, at most [`MAX_PART`] formulas each
     /// unless one item has more, called in turn on `&mut out` (a slice of `elem`):
     /// an unoptimised build gives every value of a function its own stack slot, so one
     /// function for a whole chain of thousands of links would need megabytes of stack. Values
@@ -692,7 +738,7 @@ impl Ctx<'_> {
         }
         let _ = writeln!(out, "pub fn {name}(s: &State) -> {ret} {{");
         let _ = writeln!(out, "    let mut out = {init};");
-        if items.iter().map(Vec::len).sum::<usize>() <= PART {
+        if !layout::parted(items.iter().map(Vec::len).sum::<usize>()) {
             let lines = statements(0, items.len())?;
             if !lines.iter().any(|l| l.contains("s.")) {
                 let _ = writeln!(out, "    let _ = s;");
@@ -703,22 +749,14 @@ impl Ctx<'_> {
             let _ = writeln!(out, "    out\n}}\n");
             return Ok(());
         }
-        // Consecutive items up to PART formulas a part (at least one item each).
-        let mut parts: Vec<(usize, usize)> = Vec::new();
-        let (mut lo, mut roots) = (0, 0);
-        for (i, item) in items.iter().enumerate() {
-            if i > lo && roots + item.len() > PART {
-                parts.push((lo, i));
-                (lo, roots) = (i, 0);
-            }
-            roots += item.len();
-        }
-        parts.push((lo, items.len()));
-        for &(lo, _) in &parts {
-            let _ = writeln!(out, "    {name}_from_{lo}(s, &mut out);");
+        // Consecutive items up to MAX_PART formulas a part (at least one item each).
+        let parts = layout::parts(items.iter().map(Vec::len));
+        for part in &parts {
+            let _ = writeln!(out, "    {name}_from_{}(s, &mut out);", part.start);
         }
         let _ = writeln!(out, "    out\n}}\n");
-        for (lo, hi) in parts {
+        for part in parts {
+            let (lo, hi) = (part.start, part.end);
             let lines = statements(lo, hi)?;
             let _ = writeln!(out, "/// Items {lo}..{hi} of [`{name}`].\n#[inline(never)]");
             let _ = writeln!(out, "fn {name}_from_{lo}(s: &State, out: &mut [{elem}]) {{");
@@ -738,7 +776,7 @@ impl Ctx<'_> {
         let p = Program::lower(self.g, roots, self.inputs)?;
         let uses = p.use_counts();
         // Each value: its text, precedence and inline depth.
-        let mut text: Vec<(String, Prec, u32)> = Vec::with_capacity(p.ops.len());
+        let mut text: Vec<(String, Prec, u32)> = Vec::new();
         let mut lets = Vec::new();
         for (i, op) in p.ops.iter().enumerate() {
             let arg = |v: u32, min: Prec| -> (String, u32) {

@@ -19,10 +19,9 @@
 //!
 //! Not here: meaning (symbols, dimensions, expressions — `model::file`, `scene`, `expect`).
 
-use super::expect::{RawExpect, RawExpected};
-use super::file::{Problem, RawBody, RawConstraint, RawFile, RawMass, RawValue, Text};
 use super::keys::unknown_keys;
-use super::scene::RawScene;
+use super::problem::{Problem, shown};
+use super::raw::{RawBody, RawConstraint, RawExpect, RawExpected, RawFile, RawMass, RawScene, RawValue, Text};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt::{self, Display};
@@ -43,7 +42,7 @@ pub fn read<'i>(text: &'i str, problems: &mut Vec<Problem>) -> Option<RawFile<'i
     let (root, errors) = DeTable::parse_recoverable(text);
     if !errors.is_empty() {
         for e in errors.iter().take(MAX_SYNTAX_ERRORS) {
-            problems.push(Problem { span: e.span(), message: syntax_message(e.message()) });
+            problems.push(Problem::Syntax { span: e.span(), message: syntax_message(e.message()) });
         }
         return None;
     }
@@ -53,10 +52,7 @@ pub fn read<'i>(text: &'i str, problems: &mut Vec<Problem>) -> Option<RawFile<'i
     let dimension = match table.get("dimension") {
         Some(v) => r.integer(v, "`dimension`"),
         None => {
-            r.problems.push(Problem {
-                span: Some(0..0),
-                message: "the file has no `dimension`: add `dimension = 2` or `dimension = 3` at the top".into(),
-            });
+            r.problems.push(Problem::NoDimension { span: 0..0 });
             None
         }
     };
@@ -119,16 +115,20 @@ struct Reader<'p> {
 
 impl Reader<'_> {
     fn wrong<W: Display + ?Sized>(&mut self, v: &Value<'_>, what: &W, expected: &str) {
-        self.problems.push(Problem {
-            span: Some(v.span()),
-            message: format!("{what} must be {expected}, found {}", kind(v.get_ref())),
+        self.problems.push(Problem::WrongType {
+            span: v.span(),
+            what: what.to_string(),
+            expected: expected.to_string(),
+            found: kind(v.get_ref()),
         });
     }
 
-    fn missing<W: Display + ?Sized>(&mut self, table: &Value<'_>, what: &W, key: &str, example: &str) {
-        self.problems.push(Problem {
-            span: Some(table.span()),
-            message: format!("{what} has no `{key}` (e.g. `{key} = {example}`)"),
+    fn missing<W: Display + ?Sized>(&mut self, table: &Value<'_>, what: &W, key: &str, example: &'static str) {
+        self.problems.push(Problem::MissingField {
+            span: table.span(),
+            what: what.to_string(),
+            key: key.to_string(),
+            example,
         });
     }
 
@@ -157,11 +157,7 @@ impl Reader<'_> {
             Some(x) if x.is_finite() => Some(Spanned::new(v.span(), x)),
             Some(x) => {
                 // As TOML spells it (`nan`, `inf`, `-inf`).
-                let shown = if x.is_nan() { "nan".to_string() } else { x.to_string() };
-                self.problems.push(Problem {
-                    span: Some(v.span()),
-                    message: format!("{what} must be a finite number, found {shown}"),
-                });
+                self.problems.push(Problem::NotFinite { span: v.span(), what: what.to_string(), shown: shown(x) });
                 None
             }
             None => {
@@ -297,7 +293,7 @@ impl Reader<'_> {
         t: &DeTable<'i>,
         what: &W,
         key: &str,
-        example: &str,
+        example: &'static str,
     ) -> Option<Text<'i>> {
         match t.get(key) {
             Some(v) => self.string(v, &format_args!("`{key}` of {what}")),
@@ -318,7 +314,7 @@ impl Reader<'_> {
         // body stays declared.
         self.bodies_read += 1;
         let n = self.bodies_read;
-        let symbol = |r: &mut Self, key: &str, example: &str| {
+        let symbol = |r: &mut Self, key: &str, example: &'static str| {
             r.field(at, t, &label, key, example)
                 .unwrap_or_else(|| Spanned::new(at.span(), Cow::Owned(format!("unread_{key}_{n}"))))
         };

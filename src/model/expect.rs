@@ -1,4 +1,5 @@
-//! The `[[expect]]` entries of a constraint file: raw serde shape and their validation.
+//! The `[[expect]]` entries of a constraint file: their validation (the raw entries are
+//! `model::raw::RawExpect`).
 //!
 //! One entry is one check. Without `at` it holds formulas, in the file's symbols, that the
 //! derived ones must equal (`lagrange check` judges equality on the constraint manifold):
@@ -24,50 +25,18 @@
 //!
 //! Not here: judging the entries (`check`).
 
-use super::file::{Problem, RawValue, Text, locate};
-use super::scene::value_for;
+use super::problem::{Problem, locate, shown};
+use super::raw::{Entries, RawExpect, RawExpected, Text};
+use super::state::value;
 use super::system::{BuildError, SymbolWalk, System};
+use crate::expr::eval::Value;
 use crate::expr::lower::suggest;
-use crate::expr::{Id, Role, Ty};
-use std::borrow::Cow;
-use std::collections::BTreeMap;
+use crate::expr::{Id, Role, Symbol, Ty};
 use std::ops::Range;
 use toml::Spanned;
 
 /// The relative tolerance of numeric (`at`) checks unless the entry gives one.
 pub const DEFAULT_TOLERANCE: f64 = 1e-9;
-
-type Entries<'a> = BTreeMap<Text<'a>, Spanned<RawExpected<'a>>>;
-
-/// One `[[expect]]` entry as written (read by `model::document`; unknown keys are
-/// reported by `model::keys`).
-#[derive(Debug, Default)]
-pub struct RawExpect<'a> {
-    pub force: Entries<'a>,
-    pub lambda: Entries<'a>,
-    /// `C_dot` in the file.
-    pub c_dot: Entries<'a>,
-    /// `C_ddot` in the file.
-    pub c_ddot: Entries<'a>,
-    /// `A` in the file.
-    pub a: Entries<'a>,
-    pub b: Entries<'a>,
-    pub at: Option<Spanned<BTreeMap<Text<'a>, Spanned<RawValue>>>>,
-    pub tolerance: Option<Spanned<f64>>,
-    /// How many of `force`, `lambda`, `C_dot`, `C_ddot`, `A`, `b` the entry writes, read or
-    /// not (an entry whose quantities were all unreadable is not also "checking nothing").
-    pub written: usize,
-    /// Free text, shown with the result.
-    pub note: Option<String>,
-}
-
-/// An expected value as written: a formula, a number or a vector.
-#[derive(Clone, Debug)]
-pub enum RawExpected<'a> {
-    Formula(Cow<'a, str>),
-    Number(f64),
-    Vector(Vec<f64>),
-}
 
 /// What an item checks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -104,8 +73,8 @@ pub struct Item {
 #[derive(Clone, Debug)]
 pub struct Expectation {
     pub span: Range<usize>,
-    /// The state of a numeric check: values by symbol name (each checked against its symbol).
-    pub at: Option<Vec<(String, RawValue)>>,
+    /// The state of a numeric check: values by symbol, in name order.
+    pub at: Option<Vec<(Symbol, Value)>>,
     pub tolerance: f64,
     pub items: Vec<Item>,
     pub note: Option<String>,
@@ -122,37 +91,29 @@ pub fn resolve(
     system: &mut System,
     problems: &mut Vec<Problem>,
 ) -> Vec<Expectation> {
-    let mut out = Vec::with_capacity(raw.len());
+    let mut out = Vec::new();
     let mut walk = SymbolWalk::default();
     for entry in raw {
         let e = entry.get_ref();
         let mut at = None;
         if let Some(state) = &e.at {
             let mut values = Vec::new();
-            for (name, value) in state.get_ref() {
-                match value_for(system, name.get_ref(), value.get_ref(), system.dim()) {
-                    Ok(_) => values.push((name.get_ref().to_string(), value.get_ref().clone())),
-                    Err(message) => problems.push(Problem { span: Some(name.span()), message }),
+            for (name, v) in state.get_ref() {
+                match value(system, name.get_ref(), v.get_ref()) {
+                    Ok(given) => values.push(given),
+                    Err(error) => problems.push(Problem::Value { span: name.span(), error }),
                 }
             }
             at = Some(values);
         }
         if let (Some(t), None) = (&e.tolerance, &e.at) {
-            problems.push(Problem {
-                span: Some(t.span()),
-                message: "`tolerance` applies to checks at a state (`at = { … }`); formula checks use a fixed relative tolerance of 1e-9"
-                    .into(),
-            });
+            problems.push(Problem::ToleranceWithoutAt { span: t.span() });
         }
         let tolerance = match &e.tolerance {
             None => DEFAULT_TOLERANCE,
             Some(t) if t.get_ref().is_finite() && *t.get_ref() > 0.0 => *t.get_ref(),
             Some(t) => {
-                let shown = if t.get_ref().is_nan() { "nan".to_string() } else { t.get_ref().to_string() };
-                problems.push(Problem {
-                    span: Some(t.span()),
-                    message: format!("`tolerance` must be a positive finite number, found {shown}"),
-                });
+                problems.push(Problem::Tolerance { span: t.span(), shown: shown(*t.get_ref()) });
                 DEFAULT_TOLERANCE
             }
         };
@@ -167,11 +128,7 @@ pub fn resolve(
         let items = r.items;
         walk = r.walk;
         if nothing {
-            problems.push(Problem {
-                span: Some(entry.span()),
-                message: "this [[expect]] entry checks nothing: give `force`, `lambda`, `C_dot`, `C_ddot`, `A` or `b`"
-                    .into(),
-            });
+            problems.push(Problem::ChecksNothing { span: entry.span() });
         }
         out.push(Expectation { span: entry.span(), at, tolerance, items, note: e.note.clone() });
     }
@@ -197,8 +154,8 @@ struct Resolver<'a> {
 }
 
 impl Resolver<'_> {
-    fn problem(&mut self, span: Range<usize>, message: String) {
-        self.problems.push(Problem { span: Some(span), message });
+    fn problem(&mut self, problem: Problem) {
+        self.problems.push(problem);
     }
 
     fn table(&mut self, entries: &Entries<'_>, what: &str, target: Target) {
@@ -207,10 +164,7 @@ impl Resolver<'_> {
                 continue;
             };
             if self.numeric && !matches!(quantity, Quantity::Force(_) | Quantity::Lambda(_)) {
-                self.problem(
-                    key.span(),
-                    format!("only `force` and `lambda` can be checked at a state (`at`); `{what}` needs a formula check without `at`"),
-                );
+                self.problem(Problem::NotAtState { span: key.span(), what: what.to_string() });
                 continue;
             }
             if let Some(expected) = self.expected(quantity, what, value) {
@@ -236,10 +190,7 @@ impl Resolver<'_> {
             Target::Pair => {
                 let parts: Vec<&str> = name.split(',').map(str::trim).collect();
                 let [k, j] = parts.as_slice() else {
-                    self.problem(
-                        key.span(),
-                        format!("an `A` key names two constraints as \"k,j\" (e.g. \"rod1,rod2\"), found \"{name}\""),
-                    );
+                    self.problem(Problem::PairKey { span: key.span(), key: name.to_string() });
                     return None;
                 };
                 let k = self.constraint(k, key.span());
@@ -253,8 +204,7 @@ impl Resolver<'_> {
         let found = self.system.body_named(name);
         if found.is_none() && !self.written.contains(&name) {
             let names: Vec<&str> = self.system.bodies.iter().map(|b| b.name.as_str()).collect();
-            let message = unknown("body", name, &names);
-            self.problem(span, message);
+            self.problem(unknown(span, "body", name, &names));
         }
         found
     }
@@ -263,8 +213,7 @@ impl Resolver<'_> {
         let found = self.system.constraint_named(name);
         if found.is_none() && !self.written.contains(&name) {
             let names: Vec<&str> = self.system.constraints.iter().map(|c| c.name.as_str()).collect();
-            let message = unknown("constraint", name, &names);
-            self.problem(span, message);
+            self.problem(unknown(span, "constraint", name, &names));
         }
         found
     }
@@ -284,24 +233,22 @@ impl Resolver<'_> {
                         };
                         let written = Spanned::new(value.span(), text.as_ref());
                         let span = inner.map_or(value.span(), |s| locate(self.text, &written, s));
-                        self.problem(span, format!("in the expected `{what}`: {e}"));
+                        self.problem(Problem::ExpectedFormula { span, what: what.to_string(), error: e });
                         return None;
                     }
                 };
                 if self.system.graph.ty(id) != want {
                     let (w, f) = if want == Ty::Vector { ("a vector", "a scalar") } else { ("a scalar", "a vector") };
-                    self.problem(value.span(), format!("the expected `{what}` must be {w}, found {f}"));
+                    let (span, what) = (value.span(), what.to_string());
+                    self.problem(Problem::ExpectedType { span, what, want: w, found: f });
                     return None;
                 }
                 if !matches!(quantity, Quantity::CDdot(_)) {
                     for &s in self.walk.free_symbols(&self.system.graph, id) {
                         let info = self.system.graph.symbol(s);
                         if matches!(info.role, Role::Acceleration { .. }) {
-                            let message = format!(
-                                "the expected `{what}` uses the acceleration `{}`; only `C_ddot` may (forces and λ do not depend on it)",
-                                info.name
-                            );
-                            self.problem(value.span(), message);
+                            let (span, what, name) = (value.span(), what.to_string(), info.name.clone());
+                            self.problem(Problem::ExpectedAcceleration { span, what, name });
                             return None;
                         }
                     }
@@ -310,35 +257,27 @@ impl Resolver<'_> {
             }
             numbers if !self.numeric => {
                 let _ = numbers;
-                self.problem(
-                    value.span(),
-                    format!("the expected `{what}` is a number: give the state it holds at with `at = {{ … }}`, or write a formula"),
-                );
+                self.problem(Problem::NumberWithoutAt { span: value.span(), what: what.to_string() });
                 None
             }
             RawExpected::Number(x) if want == Ty::Scalar => Some(Expected::Numbers(vec![*x])),
             RawExpected::Vector(xs) if want == Ty::Vector && xs.len() == dim => Some(Expected::Numbers(xs.clone())),
             RawExpected::Vector(xs) if want == Ty::Vector => {
-                self.problem(
-                    value.span(),
-                    format!("the expected `{what}` has {} components in a {dim}D file", xs.len()),
-                );
+                let (span, what, found) = (value.span(), what.to_string(), xs.len());
+                self.problem(Problem::ExpectedComponents { span, what, found, dim });
                 None
             }
             _ => {
-                let w = if want == Ty::Vector { format!("a vector of {dim} numbers") } else { "a number".into() };
-                self.problem(value.span(), format!("the expected `{what}` must be {w}"));
+                let (span, what, vector) = (value.span(), what.to_string(), want == Ty::Vector);
+                self.problem(Problem::ExpectedShape { span, what, vector, dim });
                 None
             }
         }
     }
 }
 
-fn unknown(kind: &str, name: &str, names: &[&str]) -> String {
-    let kinds = if kind == "body" { "bodies" } else { "constraints" };
-    match suggest(name, names.iter().copied()) {
-        Some(s) => format!("`{name}` is not a {kind} of this file; did you mean `{s}`?"),
-        None if names.is_empty() => format!("`{name}` is not a {kind} of this file (it declares no {kinds})"),
-        None => format!("`{name}` is not a {kind} of this file ({kinds}: {})", names.join(", ")),
-    }
+fn unknown(span: Range<usize>, kind: &'static str, name: &str, names: &[&str]) -> Problem {
+    let suggestion = suggest(name, names.iter().copied());
+    let names = if suggestion.is_some() { Vec::new() } else { names.iter().map(|n| n.to_string()).collect() };
+    Problem::UnknownName { span, kind, name: name.to_string(), suggestion, names }
 }

@@ -1,99 +1,41 @@
-//! Constraint definition files (TOML, DESIGN.md): raw serde structs and their validation.
+//! Constraint definition files (TOML, DESIGN.md): validation of the raw file into the model.
 //!
-//! [`RawFile`] mirrors the TOML exactly, with spans; [`load`] validates it into a
-//! [`System`] and the numbers `solve` and `simulate` need. Only validation builds the
-//! model (the raw structs never leave this module's callers half-checked). Every problem
-//! carries a byte span into the file text, so messages point at the fault.
+//! [`load`] reads the text into a [`RawFile`] (`model::document`) and validates it into a
+//! [`System`], the parameters' values, the scene and the expectations ([`Loaded`]). Only
+//! validation builds the model: nothing in a [`Loaded`] is raw. Every problem carries a
+//! byte span into the file text, so messages point at the fault. `[definitions]` are
+//! ordered by Kahn's algorithm (linear, no recursion), cycles reported once.
 //!
-//! Not here: printing or rendering messages (the caller renders [`Problem`]s).
+//! Not here: the raw types (`model::raw`), printing or rendering messages (the caller
+//! renders [`Problem`]s).
 
 use super::document::read;
-use super::expect::{Expectation, RawExpect, resolve};
-use super::scene::{RawScene, Scene, validate};
+use super::expect::{Expectation, resolve};
+pub use super::problem::Problem;
+use super::problem::{locate, shown, sort};
+use super::raw::{RawFile, RawMass, RawValue, Text};
+use super::scene::{Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
+use crate::expr::eval::Value;
 use crate::expr::lower::LowerError;
 use crate::expr::parse::ParseError;
 use crate::expr::syntax::{Syntax, SyntaxKind};
 use crate::expr::{Symbol, Ty};
-use serde::Deserialize;
-use std::borrow::Cow;
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{HashMap, HashSet};
 use std::ops::Range;
-use toml::Spanned;
 
-/// The largest constraint file read, in bytes.
+/// The largest constraint file read, in bytes (16 MiB): a chain of tens of thousands of
+/// links fits, while a file that is not a constraint file (or is hostile) is refused before
+/// its text is parsed or held in a tree.
 pub const MAX_FILE_BYTES: usize = 16 << 20;
-
-/// A string as written, with its span: borrowed from the file text unless TOML escapes
-/// made it differ (a file of a thousand bodies holds thousands of them, and allocating
-/// each was a tenth of loading it).
-pub type Text<'a> = Spanned<Cow<'a, str>>;
-
-/// A file as written, read field by field from the spanned TOML tree by `model::document`
-/// (every missing field and wrong type is a problem there; what could not be read is left
-/// out here). Unknown keys are reported, all of them, by `model::keys`.
-#[derive(Debug, Default)]
-pub struct RawFile<'a> {
-    pub title: Option<Text<'a>>,
-    /// `None` when missing or not an integer (already reported).
-    pub dimension: Option<Spanned<i64>>,
-    pub parameters: BTreeMap<Text<'a>, Spanned<RawValue>>,
-    pub definitions: BTreeMap<Text<'a>, Text<'a>>,
-    pub bodies: Vec<Spanned<RawBody<'a>>>,
-    pub constraints: Vec<Spanned<RawConstraint<'a>>>,
-    pub scene: Option<Spanned<RawScene<'a>>>,
-    pub expect: Vec<Spanned<RawExpect<'a>>>,
-}
-
-/// A parameter value: a number or a vector of numbers (finite, when read from a file).
-/// `Deserialize` serves `solve --at STATE` files.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(untagged)]
-pub enum RawValue {
-    Number(f64),
-    Vector(Vec<f64>),
-}
-
-/// A body as written. A symbol field that is missing or not a string (reported by
-/// `model::document`) holds a placeholder name, `unread_<field>_<n>`, and a mass that is not
-/// a number or a string holds 1: the body stays declared, so its other symbols are not
-/// reported again as unknown wherever they are used. (A file with a problem derives nothing.)
-#[derive(Debug)]
-pub struct RawBody<'a> {
-    pub name: Text<'a>,
-    pub position: Text<'a>,
-    pub velocity: Text<'a>,
-    pub acceleration: Text<'a>,
-    pub mass: Spanned<RawMass<'a>>,
-    pub force: Text<'a>,
-}
-
-#[derive(Clone, Debug)]
-pub enum RawMass<'a> {
-    Number(f64),
-    Symbol(Cow<'a, str>),
-}
-
-#[derive(Debug)]
-pub struct RawConstraint<'a> {
-    pub name: Text<'a>,
-    /// `None` when missing or not a string (reported by `model::document`).
-    pub expr: Option<Text<'a>>,
-}
-
-/// One problem in a file: where (a byte range of the file text) and what.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Problem {
-    pub span: Option<Range<usize>>,
-    pub message: String,
-}
 
 /// A validated file: the system, the parameter values, the scene and the expectations.
 /// (The raw file is not kept: it borrows the text, and all it said is in these.)
 #[derive(Debug)]
 pub struct Loaded {
     pub system: System,
-    pub values: BTreeMap<String, RawValue>,
+    /// The `[parameters]` values, by symbol, in name order.
+    pub values: Vec<(Symbol, Value)>,
     pub scene: Scene,
     pub expect: Vec<Expectation>,
 }
@@ -101,10 +43,7 @@ pub struct Loaded {
 /// Parses and validates a constraint file's text. Every problem found is returned.
 pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
     if text.len() > MAX_FILE_BYTES {
-        return Err(vec![Problem {
-            span: None,
-            message: format!("file is too large ({} bytes; the limit is {MAX_FILE_BYTES})", text.len()),
-        }]);
+        return Err(vec![Problem::TooLarge { bytes: text.len(), limit: MAX_FILE_BYTES }]);
     }
     let mut problems = Vec::new();
     let Some(raw) = read(text, &mut problems) else {
@@ -128,8 +67,7 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         .chain(raw.constraints.iter().map(|c| c.get_ref().name.get_ref().as_ref()))
         .collect();
     let expect = resolve(text, &raw.expect, &written, &mut system, &mut problems);
-    let values: BTreeMap<String, RawValue> =
-        raw.parameters.iter().map(|(k, v)| (k.get_ref().to_string(), v.get_ref().clone())).collect();
+    let values = parameter_values(&raw, &system);
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
         sort(&mut problems);
@@ -138,11 +76,13 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
     Ok(Loaded { system, values, scene, expect })
 }
 
-/// In file order, so the messages read top to bottom (unlocated ones first); a problem
-/// found twice (by two passes over the same value) is shown once.
-fn sort(problems: &mut Vec<Problem>) {
-    problems.sort_by_key(|p| p.span.as_ref().map_or((0, 0), |s| (s.start, s.end)));
-    problems.dedup();
+/// The parameters' values, by symbol: each was checked against its symbol when declared,
+/// so only a parameter the builder refused (reported) has none.
+fn parameter_values(raw: &RawFile<'_>, system: &System) -> Vec<(Symbol, Value)> {
+    raw.parameters
+        .iter()
+        .filter_map(|(name, v)| super::state::value(system, name.get_ref(), v.get_ref()).ok())
+        .collect()
 }
 
 /// A mass symbol that is not a parameter needs a value wherever numbers are computed: from
@@ -178,25 +118,15 @@ fn masses_have_values(
         };
         let raw_body = &raw.bodies[raw_body];
         let name = &system.graph.symbol(*s).name;
-        let span = Some(raw_body.get_ref().mass.span());
+        let span = raw_body.get_ref().mass.span();
         if raw.scene.is_some() && !initial.contains(s) {
-            problems.push(Problem {
-                span,
-                message: format!(
-                    "the mass `{name}` has no value, and the [scene] needs one: give it in [parameters] or in [scene] initial"
-                ),
-            });
+            problems.push(Problem::MassWithoutValue { span: span.clone(), name: name.clone() });
         }
         for e in expect {
             if let Some(at) = &e.at
-                && !at.iter().any(|(x, _)| x == name)
+                && !at.iter().any(|(x, _)| x == s)
             {
-                problems.push(Problem {
-                    span: Some(e.span.clone()),
-                    message: format!(
-                        "this [[expect]] is checked at a state (`at`), which gives no value to the mass `{name}`: add it to `at` or to [parameters]"
-                    ),
-                });
+                problems.push(Problem::MassWithoutValueAt { span: e.span.clone(), name: name.clone() });
             }
         }
     }
@@ -208,26 +138,27 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
     let mut b = match SystemBuilder::new(title, *dimension.get_ref()) {
         Ok(b) => b,
         Err(e) => {
-            problems.push(Problem { span: Some(dimension.span()), message: e.to_string() });
+            problems.push(Problem::Build { span: dimension.span(), error: e });
             return None;
         }
     };
-    b.reserve(raw.bodies.len(), raw.constraints.len(), raw.parameters.len() + raw.definitions.len());
     let dim = *dimension.get_ref() as usize;
     for (name, value) in &raw.parameters {
         let ty = match value.get_ref() {
             RawValue::Number(_) => Ty::Scalar,
             RawValue::Vector(v) if v.len() == dim => Ty::Vector,
             RawValue::Vector(v) => {
-                problems.push(Problem {
-                    span: Some(value.span()),
-                    message: format!("parameter `{}` has {} components in a {dim}D file", name.get_ref(), v.len()),
+                problems.push(Problem::ParameterComponents {
+                    span: value.span(),
+                    name: name.get_ref().to_string(),
+                    found: v.len(),
+                    dim,
                 });
                 continue;
             }
         };
         if let Err(e) = b.parameter(name.get_ref(), ty) {
-            problems.push(Problem { span: Some(name.span()), message: e.to_string() });
+            problems.push(Problem::Build { span: name.span(), error: e });
         }
     }
     for body in &raw.bodies {
@@ -235,11 +166,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
         let mass = match body.mass.get_ref() {
             RawMass::Number(x) if x.is_finite() && *x > 0.0 => MassSpec::Number(*x),
             RawMass::Number(x) => {
-                let shown = if x.is_nan() { "nan".to_string() } else { x.to_string() };
-                problems.push(Problem {
-                    span: Some(body.mass.span()),
-                    message: format!("a mass must be a positive finite number, found {shown}"),
-                });
+                problems.push(Problem::Mass { span: body.mass.span(), shown: shown(*x) });
                 // Declared all the same, so the body's symbols are known where used.
                 MassSpec::Number(1.0)
             }
@@ -268,7 +195,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
                 }
                 _ => span,
             };
-            problems.push(Problem { span: Some(span), message: e.to_string() });
+            problems.push(Problem::Build { span, error: e });
         }
     }
     for (name, def_text) in definitions_in_order(raw, problems) {
@@ -287,7 +214,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
         }
     }
     if raw.constraints.is_empty() {
-        problems.push(Problem { span: None, message: "the file has no [[constraints]]".into() });
+        problems.push(Problem::NoConstraints);
     }
     Some(b.finish())
 }
@@ -303,100 +230,103 @@ fn build_problem(text: &str, expr: &Text<'_>, e: &BuildError, fallback: Range<us
         Some(s) => locate(text, expr, s.start..s.end.max(s.start)),
         None => fallback,
     };
-    Problem { span: Some(span), message: e.to_string() }
+    Problem::Build { span, error: e.clone() }
 }
 
-/// Maps a byte range inside a string value to the file: exact when the string is written
-/// without escapes (the common case), else the whole string.
-pub fn locate<S: AsRef<str>>(text: &str, value: &Spanned<S>, inner: Range<usize>) -> Range<usize> {
-    let outer = value.span();
-    let written = text.get(outer.clone()).unwrap_or("");
-    let content = value.get_ref().as_ref();
-    for quote in ["\"\"\"", "'''", "\"", "'"] {
-        if let Some(body) = written.strip_prefix(quote).and_then(|w| w.strip_suffix(quote))
-            && body == content
-        {
-            let start = outer.start + quote.len();
-            return (start + inner.start).min(outer.end)..(start + inner.end).min(outer.end);
-        }
-    }
-    outer
-}
-
-/// Definitions ordered so that each comes after those it uses; cycles are reported.
+/// Definitions ordered so that each comes after those it uses (Kahn's algorithm: linear in
+/// the definitions and their uses, no recursion); cycles are reported.
+///
+/// Independent definitions keep the file's (key) order. A definition on a cycle is reported
+/// once per cycle closed, as a depth-first walk in key order meets it, naming the path
+/// that walk took; it is then left out with every definition that uses it, so none of
+/// them is reported again as an unknown symbol.
 fn definitions_in_order<'a, 'b>(
     raw: &'a RawFile<'b>,
     problems: &mut Vec<Problem>,
 ) -> Vec<(&'a Text<'b>, &'a Text<'b>)> {
-    let names: Vec<&str> = raw.definitions.keys().map(|k| k.get_ref().as_ref()).collect();
-    let mut uses: BTreeMap<&str, Vec<&str>> = BTreeMap::new();
-    for (name, def_text) in &raw.definitions {
-        let mut idents = Vec::new();
-        if let Ok(syntax) = crate::expr::parse::parse_expr(def_text.get_ref()) {
-            collect_idents(&syntax, &mut idents);
+    let defs: Vec<(&'a Text<'b>, &'a Text<'b>)> = raw.definitions.iter().collect();
+    let index: HashMap<&str, usize> = defs.iter().enumerate().map(|(i, (k, _))| (k.get_ref().as_ref(), i)).collect();
+    // uses[i]: the definitions definition i names, in key order, each once.
+    let mut idents = Vec::new();
+    let uses: Vec<Vec<usize>> = defs
+        .iter()
+        .map(|(_, def_text)| {
+            idents.clear();
+            if let Ok(syntax) = crate::expr::parse::parse_expr(def_text.get_ref()) {
+                collect_idents(&syntax, &mut idents);
+            }
+            let mut deps: Vec<usize> = idents.iter().filter_map(|n| index.get(n).copied()).collect();
+            deps.sort_unstable();
+            deps.dedup();
+            deps
+        })
+        .collect();
+    // Kahn: a definition is ready once every definition it uses is placed.
+    let mut waiting: Vec<usize> = uses.iter().map(Vec::len).collect();
+    let mut users: Vec<Vec<usize>> = vec![Vec::new(); defs.len()];
+    for (i, deps) in uses.iter().enumerate() {
+        for &d in deps {
+            users[d].push(i);
         }
-        uses.insert(name.get_ref().as_ref(), names.iter().copied().filter(|n| idents.contains(n)).collect());
     }
-    let mut order = Vec::new();
-    let mut state: BTreeMap<&str, u8> = BTreeMap::new();
-    for name in raw.definitions.keys() {
-        visit(name.get_ref().as_ref(), &uses, &mut state, &mut order, &mut Vec::new(), raw, problems);
-    }
-    // A definition on a cycle is reported once (in `visit`), not again as an unknown symbol
-    // of the others: leave out every definition on a cycle or using one.
-    let mut bad: Vec<&str> = Vec::new();
-    for name in &order {
-        if is_on_cycle(name, &uses) || uses.get(name).is_some_and(|deps| deps.iter().any(|d| bad.contains(d))) {
-            bad.push(name);
+    let mut order: Vec<usize> = (0..defs.len()).filter(|&i| waiting[i] == 0).collect();
+    let mut next = 0;
+    while let Some(&i) = order.get(next) {
+        next += 1;
+        for &u in &users[i] {
+            waiting[u] -= 1;
+            if waiting[u] == 0 {
+                order.push(u);
+            }
         }
     }
-    order.retain(|n| !bad.contains(n));
-    order.into_iter().filter_map(|n| raw.definitions.iter().find(|(k, _)| k.get_ref() == n)).collect()
+    if order.len() < defs.len() {
+        report_cycles(&defs, &uses, &waiting, problems);
+    }
+    order.into_iter().map(|i| defs[i]).collect()
 }
 
-/// Whether `name` can reach itself through the definitions it uses.
-fn is_on_cycle(name: &str, uses: &BTreeMap<&str, Vec<&str>>) -> bool {
-    let mut seen: Vec<&str> = Vec::new();
-    let mut stack: Vec<&str> = uses.get(name).cloned().unwrap_or_default();
-    while let Some(n) = stack.pop() {
-        if n == name {
-            return true;
+/// Reports each cycle among the definitions Kahn's algorithm could not place (`waiting`
+/// not zero: on a cycle or using one): a depth-first walk in key order, with an explicit
+/// stack, reports the definition that closes a cycle and the path that led to it.
+fn report_cycles(defs: &[(&Text<'_>, &Text<'_>)], uses: &[Vec<usize>], waiting: &[usize], problems: &mut Vec<Problem>) {
+    const NEW: u8 = 0;
+    const ON_PATH: u8 = 1;
+    const DONE: u8 = 2;
+    let mut state = vec![NEW; defs.len()];
+    // The walk's path: each definition with the position of the next use to follow.
+    let mut path: Vec<(usize, usize)> = Vec::new();
+    let name = |i: usize| defs[i].0.get_ref().as_ref();
+    for root in (0..defs.len()).filter(|&i| waiting[i] > 0) {
+        if state[root] != NEW {
+            continue;
         }
-        if !seen.contains(&n) {
-            seen.push(n);
-            stack.extend(uses.get(n).into_iter().flatten().copied());
+        state[root] = ON_PATH;
+        path.push((root, 0));
+        while let Some(&mut (i, ref mut at)) = path.last_mut() {
+            let Some(&dep) = uses[i].get(*at) else {
+                state[i] = DONE;
+                path.pop();
+                continue;
+            };
+            *at += 1;
+            match state[dep] {
+                DONE => {}
+                ON_PATH => {
+                    let through: Vec<&str> = path.iter().map(|&(p, _)| name(p)).collect();
+                    problems.push(Problem::Cycle {
+                        span: defs[dep].0.span(),
+                        name: name(dep).to_string(),
+                        through: through.join(" → "),
+                    });
+                }
+                _ => {
+                    state[dep] = ON_PATH;
+                    path.push((dep, 0));
+                }
+            }
         }
     }
-    false
-}
-
-fn visit<'a>(
-    name: &'a str,
-    uses: &BTreeMap<&'a str, Vec<&'a str>>,
-    state: &mut BTreeMap<&'a str, u8>,
-    order: &mut Vec<&'a str>,
-    path: &mut Vec<&'a str>,
-    raw: &RawFile<'_>,
-    problems: &mut Vec<Problem>,
-) {
-    match state.get(name) {
-        Some(2) => return,
-        Some(1) => {
-            let span = raw.definitions.keys().find(|k| k.get_ref() == name).map(|k| k.span());
-            problems
-                .push(Problem { span, message: BuildError::Cycle(name.to_string(), path.join(" → ")).to_string() });
-            return;
-        }
-        _ => {}
-    }
-    state.insert(name, 1);
-    path.push(name);
-    for dep in uses.get(name).into_iter().flatten() {
-        visit(dep, uses, state, order, path, raw, problems);
-    }
-    path.pop();
-    state.insert(name, 2);
-    order.push(name);
 }
 
 fn collect_idents<'s>(s: &Syntax<'s>, out: &mut Vec<&'s str>) {

@@ -2,12 +2,13 @@
 //!
 //! serde's `deny_unknown_fields` stops at the first unknown key; a person who misspells
 //! three keys wants three messages. So the file is first read as a spanned TOML tree
-//! (`toml::de::DeTable`) and walked against the schema below; the typed serde pass then
+//! (`toml::de::DeTable`) and walked against the schema below; `model::document` then
 //! ignores unknown keys (they have been reported here).
 //!
-//! Not here: the types of values (serde checks those), meaning (validation in `file`).
+//! Not here: the types of values (`model::document` checks those), meaning (validation in
+//! `file`).
 
-use super::file::Problem;
+use super::problem::Problem;
 use crate::expr::lower::suggest;
 use toml::Spanned;
 use toml::de::{DeTable, DeValue};
@@ -28,19 +29,21 @@ pub fn unknown_keys(root: &DeTable<'_>) -> Vec<Problem> {
     problems
 }
 
-fn walk(path: &str, table: &DeTable<'_>, problems: &mut Vec<Problem>) {
+fn walk(path: &'static str, table: &DeTable<'_>, problems: &mut Vec<Problem>) {
     let Some(&(_, known)) = SCHEMA.iter().find(|(p, _)| *p == path) else {
         return;
     };
     for (key, value) in table.iter() {
         let name: &str = key.get_ref();
         if !known.contains(&name) {
-            let hint = match suggest(name, known.iter().copied()).or_else(|| swapped(name, known)) {
-                Some(s) => format!("; did you mean `{s}`?"),
-                None => format!(" (expected one of: {})", known.join(", ")),
-            };
-            let place = if path.is_empty() { "at the top level".to_string() } else { format!("in `{path}`") };
-            problems.push(Problem { span: Some(key.span()), message: format!("unknown key `{name}` {place}{hint}") });
+            let suggestion = suggest(name, known.iter().copied()).or_else(|| swapped(name, known));
+            problems.push(Problem::UnknownKey {
+                span: key.span(),
+                key: name.to_string(),
+                table: path,
+                suggestion,
+                known,
+            });
             continue;
         }
         descend(path, name, value, problems);
@@ -50,7 +53,7 @@ fn walk(path: &str, table: &DeTable<'_>, problems: &mut Vec<Problem>) {
 /// Walks a known key's value if the schema describes it: a table at `parent.name`, or the
 /// tables of an array at `parent.name[]`. The path is the schema's own string, so no path
 /// is built for the many values (strings, numbers, tables without a schema) that have none.
-fn descend(parent: &str, name: &str, value: &Spanned<DeValue<'_>>, problems: &mut Vec<Problem>) {
+fn descend(parent: &'static str, name: &str, value: &Spanned<DeValue<'_>>, problems: &mut Vec<Problem>) {
     match value.get_ref() {
         DeValue::Table(t) => {
             if let Some(path) = schema_path(parent, name, false) {

@@ -104,8 +104,6 @@ pub enum BuildError {
     NoBody(String),
     #[error("constraint `{name}` uses `{symbol}`: constraints may depend on positions, parameters and t only")]
     NotPositional { name: String, symbol: String },
-    #[error("definition `{0}` refers to itself (through {1})")]
-    Cycle(String, String),
 }
 
 /// Fills a [`System`] one declaration at a time.
@@ -239,20 +237,6 @@ impl SystemBuilder {
             constraint_names: NameSet::default(),
             walk: SymbolWalk::default(),
         })
-    }
-
-    /// Room for `bodies` bodies, `constraints` constraints and `names` other names
-    /// (parameters, definitions), so that declaring a long chain does not grow (and rehash)
-    /// the name maps step by step. Only a hint: declaring more works all the same.
-    pub fn reserve(&mut self, bodies: usize, constraints: usize, names: usize) {
-        // A body declares up to five names (position, velocity, acceleration, force, mass).
-        let names = names.saturating_add(bodies.saturating_mul(5));
-        self.symbol_kinds.reserve(names);
-        self.system.scope.reserve(names);
-        self.system.bodies.reserve(bodies);
-        self.body_names.reserve(bodies);
-        self.system.constraints.reserve(constraints);
-        self.constraint_names.reserve(constraints);
     }
 
     /// Binds `name` in the scope to the node `bind` gives (called only when the name may be

@@ -1,7 +1,10 @@
 //! Renders file problems as `file:line:col: message` with the source line and a caret.
 //!
 //! codespan-reporting draws the rustc-style `^^^` under the fault. Plain text, no colour,
-//! so the same bytes go to a terminal, a pipe and a snapshot.
+//! so the same bytes go to a terminal, a pipe and a snapshot. The message is the problem's
+//! `Display` (`model::problem`); this file adds only the layout.
+//!
+//! Not here: the wording of messages (`model::problem`), choosing where output goes.
 
 use crate::model::file::Problem;
 use codespan_reporting::diagnostic::{Diagnostic, Label};
@@ -14,14 +17,15 @@ pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
     let config = Config::default();
     let mut out = String::new();
     for p in problems {
-        if let Some(span) = &p.span
-            && let Some(clipped) = render_long_line(path, text, &p.message, span)
+        let message = p.to_string();
+        if let Some(span) = &p.span()
+            && let Some(clipped) = render_long_line(path, text, &message, span)
         {
             out.push_str(&clipped);
             continue;
         }
-        let mut d = Diagnostic::error().with_message(&p.message);
-        match &p.span {
+        let mut d = Diagnostic::error().with_message(&message);
+        match &p.span() {
             Some(span) => {
                 let start = floor_char(text, span.start.min(text.len()));
                 let end = floor_char(text, span.end.clamp(start, text.len()));
@@ -31,7 +35,7 @@ pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
         }
         match term::emit_into_string(&config, &file, &d) {
             Ok(s) => out.push_str(&s),
-            Err(_) => out.push_str(&format!("error: {path}: {}\n", p.message)),
+            Err(_) => out.push_str(&format!("error: {path}: {message}\n")),
         }
     }
     out

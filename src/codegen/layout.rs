@@ -1,0 +1,157 @@
+//! How a generated module lays out a system: dense or banded A, on the stack or the heap,
+//! dense J or its blocks, outputs in one function or in parts. Decided once, from the
+//! derivation's sizes, before any text is written; every emitter (Rust today) follows it.
+//!
+//! Big systems must not need a big stack (a 1000-link chain's dense J alone is 16 MB), and
+//! code size should grow linearly with a chain's length. So A is a dense K×K array only up
+//! to [`MAX_DENSE_A`] constraints; past that a banded A (a chain listed in order) is written
+//! as its band and solved by band Cholesky, and an A that is not banded lives on the heap.
+//! J is a dense array up to [`MAX_DENSE_J`] entries, past that the list of its non-zero
+//! blocks. An output of more than [`MAX_PART`] formulas is filled by parts of at most that
+//! many ([`parts`]). What stays on the stack is O(K + N).
+//!
+//! Not here: the text of any language (`codegen::rust`), the formulas themselves.
+
+use std::ops::Range;
+
+/// Most constraints for which A is written as a dense K×K array of formulas: 16² = 256
+/// entries (2 KiB of stack). Past this, a banded A (a chain's) is written as its band only,
+/// and a dense one as rows on the heap.
+pub const MAX_DENSE_A: usize = 16;
+
+/// Most entries (K · N · DIM) of a Jacobian written as a dense array: 4096 numbers, 32 KiB
+/// of stack, a fraction of a thread's smallest default stack. Past this J is written as its
+/// non-zero blocks `(constraint, body, direction)`, on the heap.
+pub const MAX_DENSE_J: usize = 4096;
+
+/// Most formulas an output computes in one function. An unoptimised build gives every value
+/// of a function its own stack slot, so one function for a chain of thousands of links would
+/// need megabytes of stack; 64 formulas keep a frame to a few KiB while a small system's
+/// outputs stay one function each.
+pub const MAX_PART: usize = 64;
+
+/// How A is stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AStorage {
+    /// A K×K array on the stack (`a_matrix`), at most [`MAX_DENSE_A`] constraints.
+    Dense,
+    /// Its band (`a_band`, row k holding A[k][k..=k + bandwidth]), past [`MAX_DENSE_A`]
+    /// constraints when A is banded.
+    Band { bandwidth: usize },
+    /// K rows on the heap (`a_matrix` as a `Vec`), past [`MAX_DENSE_A`] when not banded.
+    Heap,
+}
+
+/// How J is stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum JStorage {
+    /// A K × N·DIM array (`jacobian`), at most [`MAX_DENSE_J`] entries.
+    Dense,
+    /// Its non-zero blocks on the heap (`jacobian_blocks`), past [`MAX_DENSE_J`] entries.
+    Blocks { count: usize },
+}
+
+/// How λ is found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lambda {
+    /// One constraint: λ and the forces are closed formulas.
+    ClosedForm,
+    /// Several: A λ = −b solved in the module, by the solve A's storage needs.
+    Solved,
+}
+
+/// The layout of one module.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Layout {
+    pub dim: usize,
+    pub bodies: usize,
+    pub constraints: usize,
+    pub a: AStorage,
+    pub j: JStorage,
+    pub lambda: Lambda,
+    /// Whether some output is filled by parts (said in the module's header).
+    pub parted: bool,
+}
+
+impl Layout {
+    /// The layout for `constraints` constraints on `bodies` bodies in `dim` dimensions, with
+    /// the non-zero entries `a` (upper triangle, `(k, j)`) and `blocks` non-zero blocks of J;
+    /// `closed_form` when the derivation gives λ as a formula.
+    pub fn of(
+        dim: usize,
+        bodies: usize,
+        constraints: usize,
+        a: &[(usize, usize)],
+        blocks: usize,
+        closed_form: bool,
+    ) -> Layout {
+        let k = constraints;
+        let bandwidth = a.iter().map(|&(r, c)| r.abs_diff(c)).max().unwrap_or(0);
+        // Banded: the band (w + 1 per row) is at most half of a row.
+        let a_storage = if k <= MAX_DENSE_A {
+            AStorage::Dense
+        } else if 2 * (bandwidth + 1) <= k {
+            AStorage::Band { bandwidth }
+        } else {
+            AStorage::Heap
+        };
+        let j = if k * bodies * dim > MAX_DENSE_J { JStorage::Blocks { count: blocks } } else { JStorage::Dense };
+        let parted = k > MAX_PART
+            || (k > MAX_DENSE_A && a.len() > MAX_PART)
+            || (matches!(j, JStorage::Blocks { .. }) && blocks > MAX_PART);
+        let lambda = if closed_form { Lambda::ClosedForm } else { Lambda::Solved };
+        Layout { dim, bodies, constraints, a: a_storage, j, lambda, parted }
+    }
+}
+
+/// Whether an output of `formulas` formulas is filled by parts.
+pub fn parted(formulas: usize) -> bool {
+    formulas > MAX_PART
+}
+
+/// Consecutive items grouped into parts of at most [`MAX_PART`] formulas (an item of more
+/// is a part alone): `sizes` gives each item's formula count, the result each part's items.
+pub fn parts(sizes: impl IntoIterator<Item = usize>) -> Vec<Range<usize>> {
+    let mut parts = Vec::new();
+    let (mut lo, mut formulas, mut n) = (0, 0, 0);
+    for (i, size) in sizes.into_iter().enumerate() {
+        if i > lo && formulas + size > MAX_PART {
+            parts.push(lo..i);
+            (lo, formulas) = (i, 0);
+        }
+        formulas += size;
+        n = i + 1;
+    }
+    parts.push(lo..n);
+    parts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_chain_is_banded_past_the_dense_limit_and_a_full_a_goes_to_the_heap() {
+        let chain = |k: usize| (0..k).flat_map(|i| [(i, i), (i, (i + 1).min(k - 1))]).collect::<Vec<_>>();
+        assert_eq!(Layout::of(2, 16, 16, &chain(16), 31, false).a, AStorage::Dense);
+        assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false).a, AStorage::Band { bandwidth: 1 });
+        let full: Vec<(usize, usize)> = (0..17).flat_map(|i| (i..17).map(move |j| (i, j))).collect();
+        assert_eq!(Layout::of(2, 17, 17, &full, 17, false).a, AStorage::Heap);
+    }
+
+    #[test]
+    fn j_is_blocks_past_its_dense_limit() {
+        assert_eq!(Layout::of(2, 32, 64, &[], 10, false).j, JStorage::Dense);
+        assert_eq!(Layout::of(2, 33, 64, &[], 10, false).j, JStorage::Blocks { count: 10 });
+    }
+
+    #[test]
+    #[allow(clippy::single_range_in_vec_init)] // one part, a range of items
+    fn parts_hold_at_most_the_limit_unless_one_item_is_bigger() {
+        assert_eq!(parts([1; 64]), vec![0..64]);
+        assert_eq!(parts([1; 65]), [0..64, 64..65]);
+        assert_eq!(parts([3; 43]), [0..21, 21..42, 42..43]);
+        assert_eq!(parts([100, 1]), [0..1, 1..2]);
+        assert_eq!(parts([]), vec![0..0]);
+    }
+}

@@ -1,0 +1,95 @@
+//! The helper functions a generated module carries: Gaussian elimination (dense A, on the
+//! stack or the heap), band Cholesky (banded A), and the range-safe norms and powers the
+//! formulas call.
+//!
+//! Each lives in a real Rust file beside this one, included as text with `include_str!`
+//! and written into a module as it is: from the file's first item on, its `//!` note left
+//! out ([`text`]). The crate's tests compile the same files as modules, so a helper that
+//! does not compile fails `cargo test`, not a user's build. They are written into every
+//! module that needs them, so the module stays self-contained (no dependency on lagrange or
+//! any crate).
+//!
+//! Not here: anything generated from a formula ([`super::rust`]), choosing which helpers a
+//! module needs ([`super::layout`]).
+
+/// Dense A λ = −b for several constraints, A a `[[f64; K]; K]`.
+pub(super) const SOLVE: &str = text(include_str!("solve.rs"));
+
+/// Dense A λ = −b, A a `Vec<[f64; K]>` (big, not banded).
+pub(super) const SOLVE_HEAP: &str = text(include_str!("solve_heap.rs"));
+
+/// Banded A λ = −b (a chain listed in order): Cholesky on the band, O(K w²).
+pub(super) const SOLVE_BAND: &str = text(include_str!("solve_band.rs"));
+
+/// What the formulas may call: `norm2`, `norm3`, `powf`; every module carries them.
+pub(super) const HELPERS: &str = text(include_str!("helpers.rs"));
+
+/// A helper file's text from its first item on: the leading `//!` lines and the blank line
+/// after them are the file's own note, not part of what a module carries.
+const fn text(file: &'static str) -> &'static str {
+    let bytes = file.as_bytes();
+    let mut at = 0;
+    // Skip lines that start with `//!`, then one empty line.
+    while at + 3 <= bytes.len() && bytes[at] == b'/' && bytes[at + 1] == b'/' && bytes[at + 2] == b'!' {
+        while at < bytes.len() && bytes[at] != b'\n' {
+            at += 1;
+        }
+        at += 1;
+    }
+    if at < bytes.len() && bytes[at] == b'\n' {
+        at += 1;
+    }
+    match file.split_at_checked(at) {
+        Some((_, rest)) => rest,
+        None => file,
+    }
+}
+
+// The helper files, compiled as modules (a helper that does not compile fails here). Their
+// functions are private: what they compute is tested through generated modules
+// (`tests/generate.rs` compiles and runs them).
+#[cfg(test)]
+#[allow(dead_code)]
+mod helpers;
+#[cfg(test)]
+#[allow(dead_code)]
+mod solve;
+#[cfg(test)]
+#[allow(dead_code)]
+mod solve_band;
+#[cfg(test)]
+#[allow(dead_code)]
+mod solve_heap;
+
+#[cfg(test)]
+mod tests {
+    use super::{HELPERS, SOLVE, SOLVE_BAND, SOLVE_HEAP};
+
+    #[test]
+    fn a_helper_is_its_file_without_the_note() {
+        for (text, first) in [
+            (SOLVE, "/// Solves `a x = b`"),
+            (SOLVE_HEAP, "/// Solves `a x = b`"),
+            (SOLVE_BAND, "/// Solves `a x = b` for a symmetric"),
+            (HELPERS, "/// |(x, y)|"),
+        ] {
+            assert!(text.starts_with(first), "{text}");
+            assert!(!text.contains("//!") && text.ends_with("}\n"), "{text}");
+        }
+    }
+
+    #[test]
+    fn the_heap_solve_is_the_stack_solve_but_for_the_type_of_a() {
+        let stack: Vec<&str> = SOLVE.lines().collect();
+        let heap: Vec<&str> = SOLVE_HEAP.lines().collect();
+        assert_eq!(stack.len(), heap.len());
+        let differ: Vec<(&&str, &&str)> = stack.iter().zip(&heap).filter(|(a, b)| a != b).collect();
+        assert_eq!(
+            differ,
+            [(
+                &"fn solve<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> [f64; K] {",
+                &"fn solve<const K: usize>(mut a: Vec<[f64; K]>, mut b: [f64; K]) -> [f64; K] {"
+            )]
+        );
+    }
+}

@@ -1,0 +1,124 @@
+//! Loading a constraint file: what `lagrange::model` promises a user of the library.
+//!
+//! Definitions are ordered however long their chain of uses; cycles are reported once and
+//! nothing that depends on them is reported again. States given on the command line come
+//! out as checked values of the file's symbols. The model's modules import in one order.
+//!
+//! Not here: the messages of invalid files (snapshots in `tests/constraint_files.rs`).
+
+use lagrange::expr::eval::Value;
+use lagrange::model::file::{Problem, load};
+use lagrange::model::state::{self, Format, StateInputError, ValueError};
+use std::fmt::Write;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// A bead on a wire whose radius is the last of `n` definitions, each using the one before.
+fn chain_of_definitions(n: usize, last: &str) -> String {
+    let mut text = String::from("dimension = 2\n[definitions]\nd_0 = \"1\"\n");
+    for i in 1..n {
+        writeln!(text, "d_{i} = \"d_{} + 1\"", i - 1).expect("writes to a string");
+    }
+    writeln!(text, "d_{n} = \"{last}\"").expect("writes to a string");
+    text.push_str(
+        "[[bodies]]\nname = \"bead\"\nposition = \"r\"\nvelocity = \"v\"\nacceleration = \"a\"\nmass = 1.0\nforce = \"F\"\n\
+         [[constraints]]\nname = \"wire\"\nexpr = \"dot(r, r) = d_0^2\"\n",
+    );
+    text
+}
+
+#[test]
+fn a_long_chain_of_definitions_loads_in_linear_time() {
+    // Keys sort as text (d_1, d_10, d_100, …), so the file's order is far from the order of
+    // use: every definition waits for one written elsewhere.
+    let n = 20_000;
+    let text = chain_of_definitions(n, &format!("d_{} + 1", n - 1));
+    let start = Instant::now();
+    let loaded = load(&text).expect("a chain of definitions is a valid file");
+    assert!(start.elapsed() < Duration::from_secs(20), "took {:?}", start.elapsed());
+    assert!(loaded.system.graph.symbol_named("d_0").is_none(), "a definition is not a symbol");
+    assert_eq!(loaded.system.constraints.len(), 1);
+}
+
+#[test]
+fn a_cycle_at_the_end_of_a_long_chain_is_reported_once() {
+    let n = 20_000;
+    // d_n uses d_{n-1} (so the whole chain) and itself.
+    let text = chain_of_definitions(n, &format!("d_{} + d_{n}", n - 1));
+    let problems = load(&text).expect_err("a definition refers to itself");
+    let [Problem::Cycle { name, through, .. }] = problems.as_slice() else {
+        panic!("one cycle, found {problems:?}");
+    };
+    assert_eq!((name.as_str(), through.as_str()), (format!("d_{n}").as_str(), format!("d_{n}").as_str()));
+}
+
+#[test]
+fn the_model_modules_import_in_one_order() {
+    // Each module may use only the modules listed before it (the order drawn in
+    // `src/model/mod.rs`), so no two import each other, even through a third.
+    let order = ["raw", "system", "state", "problem", "keys", "scene", "expect", "document", "file"];
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/model");
+    for (at, module) in order.iter().enumerate() {
+        let text = std::fs::read_to_string(dir.join(format!("{module}.rs"))).expect("a model module");
+        for line in text.lines().filter(|l| l.trim_start().starts_with("use super::") || l.contains("pub use super::"))
+        {
+            let used = line.split("super::").nth(1).and_then(|r| r.split([':', ';']).next()).unwrap_or("");
+            let before =
+                order[..at].contains(&used) && !matches!((*module, used), ("scene", "expect") | ("expect", "scene"));
+            assert!(before, "`{module}` uses `{used}`, which is not listed before it: {line}");
+        }
+    }
+}
+
+#[test]
+fn states_from_the_command_line_are_validated_values() {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/bead_on_wire.toml"))
+        .expect("the bead");
+    let loaded = load(&text).expect("valid");
+    let system = &loaded.system;
+    let r = system.graph.symbol_named("r").expect("r");
+    let given = state::assignment(system, "r=[1, -2]").expect("a vector of two");
+    assert_eq!(given, Ok((r, Value::Vector([1.0, -2.0, 0.0]))));
+    let m = system.graph.symbol_named("m").expect("m");
+    assert_eq!(state::assignment(system, " m = 2.5 "), Ok(Ok((m, Value::Scalar(2.5)))));
+    assert_eq!(state::assignment(system, "m"), Err(StateInputError::NoEquals));
+    assert_eq!(state::assignment(system, "m=two"), Err(StateInputError::NotAValue("two".into())));
+    assert_eq!(state::assignment(system, "v=[1, inf]"), Err(StateInputError::NotAValue("[1, inf]".into())));
+    assert_eq!(state::assignment(system, "l=1e999"), Err(StateInputError::NotFinite("l".into())));
+    assert_eq!(
+        state::assignment(system, "r=[1, 2, 3]"),
+        Ok(Err(ValueError::Components { name: "r".into(), dim: 2, found: 3 }))
+    );
+    assert_eq!(state::assignment(system, "a=[0, 0]"), Ok(Err(ValueError::Acceleration("a".into()))));
+    assert!(matches!(
+        state::assignment(system, "R=[1, 0]"),
+        Ok(Err(ValueError::NotASymbol { suggestion: Some(s), .. })) if s == "r"
+    ));
+    let toml = state::state_file(system, "r = [0.0, -2.0]\nt = 1.5\n", Format::Toml).expect("a TOML state");
+    let json = state::state_file(system, r#"{"t": 1.5, "r": [0.0, -2.0]}"#, Format::Json).expect("a JSON state");
+    assert_eq!(toml, json);
+    assert_eq!(toml, vec![Ok((r, Value::Vector([0.0, -2.0, 0.0]))), Ok((system.time, Value::Scalar(1.5)))]);
+    assert!(matches!(state::state_file(system, "r = [0.0,", Format::Toml), Err(StateInputError::Syntax(_))));
+    assert_eq!(state::state_file(system, "m = nan", Format::Toml), Ok(vec![Err(ValueError::NotFinite("m".into()))]));
+}
+
+#[test]
+fn solve_reports_every_syntax_error_of_a_state_before_a_value_that_does_not_fit() {
+    let dir = std::env::temp_dir().join(format!("lagrange-model-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary directory");
+    let at = dir.join("state.toml");
+    std::fs::write(&at, "x = 1.0\n").expect("writes the state");
+    let solve = |set: &str| {
+        let out = std::process::Command::new(env!("CARGO_BIN_EXE_lagrange"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .args(["solve", "constraints/bead_on_wire.toml", "--at", at.to_str().expect("utf-8"), "--set", set])
+            .output()
+            .expect("runs lagrange");
+        assert_eq!(out.status.code(), Some(1), "{set}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    // `x` in the state file does not fit (no such symbol), but `--set`'s syntax comes first.
+    assert_eq!(solve("v=nan"), "error: --set v=nan: `v` must be finite\n");
+    assert_eq!(solve("v=[0, 0]"), "error: constraints/bead_on_wire.toml: `x` is not a symbol of this file\n");
+    std::fs::remove_dir_all(&dir).expect("removes the temporary directory");
+}
