@@ -556,7 +556,7 @@ impl Simplifier {
             let mut general = false;
             'pairs: for (u, s) in &a.0 {
                 for (w, t) in &b.0 {
-                    let atom = self.dot_atoms(g, *u, *w)?;
+                    let Some(atom) = self.dot_atoms(g, *u, *w)? else { return Ok(None) };
                     if !atom.den.is_empty() {
                         general = true;
                         break 'pairs;
@@ -581,7 +581,7 @@ impl Simplifier {
         let mut acc = Frac::zero();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
-                let atom = self.dot_atoms(g, *u, *w)?;
+                let Some(atom) = self.dot_atoms(g, *u, *w)? else { return Ok(None) };
                 let Some(term) = s.mul(t).and_then(|st| st.mul(&atom)) else { return Ok(None) };
                 let Some(sum) = acc.add(&term) else { return Ok(None) };
                 acc = sum;
@@ -590,9 +590,12 @@ impl Simplifier {
         Ok(Some(self.reduce_radicals(acc)))
     }
 
-    fn dot_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Frac, TypeError> {
+    /// `u·w` of two vector atoms; `None` when it is too large to expand ([`super::poly::MAX_TERMS`]).
+    fn dot_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Option<Frac>, TypeError> {
         Ok(match (u, w) {
-            (VAtom::Basis(x), VAtom::Basis(y)) => Frac::constant(if x == y { Rational::ONE } else { Rational::ZERO }),
+            (VAtom::Basis(x), VAtom::Basis(y)) => {
+                Some(Frac::constant(if x == y { Rational::ONE } else { Rational::ZERO }))
+            }
             (VAtom::Atom(a), VAtom::Basis(x)) | (VAtom::Basis(x), VAtom::Atom(a)) => self.component(g, a, x)?,
             (VAtom::Atom(a), VAtom::Atom(b)) => {
                 match (g.node(a).clone(), g.node(b).clone()) {
@@ -602,15 +605,13 @@ impl Simplifier {
                         let qt = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(t))?;
                         let pt = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(t))?;
                         let qs = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(s))?;
-                        let first = ps.mul(&qt).unwrap_or_default();
-                        let second = pt.mul(&qs).unwrap_or_default();
-                        first.sub(&second).unwrap_or_default()
+                        difference_of_products([ps, qt, pt, qs])
                     }
-                    (Node::Cross([p, q]), _) => self.triple(g, b, p, q)?,
-                    (_, Node::Cross([p, q])) => self.triple(g, a, p, q)?,
+                    (Node::Cross([p, q]), _) => Some(self.triple(g, b, p, q)?),
+                    (_, Node::Cross([p, q])) => Some(self.triple(g, a, p, q)?),
                     _ => {
                         let (x, y) = if g.cmp_nodes(a, b).is_le() { (a, b) } else { (b, a) };
-                        Frac::atom(g.dot(x, y)?)
+                        Some(Frac::atom(g.dot(x, y)?))
                     }
                 }
             }
@@ -638,8 +639,8 @@ impl Simplifier {
         Ok(Frac::atom(atom).scale(&Rational::int(sign)))
     }
 
-    /// The component `axis` of a vector atom.
-    fn component(&mut self, g: &mut Graph, a: Id, axis: Axis) -> Result<Frac, TypeError> {
+    /// The component `axis` of a vector atom; `None` when it is too large to expand.
+    fn component(&mut self, g: &mut Graph, a: Id, axis: Axis) -> Result<Option<Frac>, TypeError> {
         if let Node::Cross([p, q]) = g.node(a).clone() {
             // (p×q)ₓ = p_y q_z − p_z q_y, cyclically.
             let (i, j) = match axis {
@@ -649,11 +650,9 @@ impl Simplifier {
             };
             let (pi, pj) = (self.component(g, p, i)?, self.component(g, p, j)?);
             let (qi, qj) = (self.component(g, q, i)?, self.component(g, q, j)?);
-            let first = pi.mul(&qj).unwrap_or_default();
-            let second = pj.mul(&qi).unwrap_or_default();
-            return Ok(first.sub(&second).unwrap_or_default());
+            return Ok(difference_of_products([pi, qj, pj, qi]));
         }
-        Ok(Frac::atom(g.comp(a, axis)?))
+        Ok(Some(Frac::atom(g.comp(a, axis)?)))
     }
 
     /// `a×b` in 3D, bilinear.
@@ -661,7 +660,7 @@ impl Simplifier {
         let mut acc = VecForm::default();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
-                let atom = self.cross_atoms(g, *u, *w)?;
+                let Some(atom) = self.cross_atoms(g, *u, *w)? else { return Ok(None) };
                 let Some(st) = s.mul(t) else { return Ok(None) };
                 let Some(term) = atom.scale(&st) else { return Ok(None) };
                 let Some(sum) = acc.add(&term) else { return Ok(None) };
@@ -671,9 +670,10 @@ impl Simplifier {
         Ok(Some(acc))
     }
 
-    fn cross_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<VecForm, TypeError> {
+    /// `u×w` of two vector atoms in 3D; `None` when it is too large to expand.
+    fn cross_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Option<VecForm>, TypeError> {
         let one = || Frac::constant(Rational::ONE);
-        Ok(match (u, w) {
+        Ok(Some(match (u, w) {
             (VAtom::Basis(x), VAtom::Basis(y)) => {
                 let (i, j) = (x.index(), y.index());
                 if i == j {
@@ -691,35 +691,38 @@ impl Simplifier {
                     for j in Axis::ALL {
                         let sign = levi_civita(i.index(), j.index(), e.index());
                         if sign != 0 {
-                            let aj = self.component(g, a, j)?.scale(&Rational::int(sign));
-                            let basis = VecForm::term(VAtom::Basis(i), aj);
-                            terms = terms.add(&basis).unwrap_or_default();
+                            let Some(aj) = self.component(g, a, j)? else { return Ok(None) };
+                            let basis = VecForm::term(VAtom::Basis(i), aj.scale(&Rational::int(sign)));
+                            let Some(sum) = terms.add(&basis) else { return Ok(None) };
+                            terms = sum;
                         }
                     }
                 }
                 terms
             }
-            (VAtom::Basis(_), VAtom::Atom(_)) => self.cross_atoms(g, w, u)?.negated(),
+            (VAtom::Basis(_), VAtom::Atom(_)) => return Ok(self.cross_atoms(g, w, u)?.map(|v| v.negated())),
             (VAtom::Atom(a), VAtom::Atom(b)) => {
                 if a == b {
-                    return Ok(VecForm::default());
+                    return Ok(Some(VecForm::default()));
                 }
                 match (g.node(a).clone(), g.node(b).clone()) {
                     // (p×q)×w = q(p·w) − p(q·w)
                     (Node::Cross([p, q]), _) => {
                         let pw = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(b))?;
                         let qw = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(b))?;
+                        let (Some(pw), Some(qw)) = (pw, qw) else { return Ok(None) };
                         let first = VecForm::term(VAtom::Atom(q), pw);
                         let second = VecForm::term(VAtom::Atom(p), qw);
-                        first.add(&second.negated()).unwrap_or_default()
+                        return Ok(first.add(&second.negated()));
                     }
                     // u×(p×q) = p(u·q) − q(u·p)
                     (_, Node::Cross([p, q])) => {
                         let uq = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(q))?;
                         let up = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(p))?;
+                        let (Some(uq), Some(up)) = (uq, up) else { return Ok(None) };
                         let first = VecForm::term(VAtom::Atom(p), uq);
                         let second = VecForm::term(VAtom::Atom(q), up);
-                        first.add(&second.negated()).unwrap_or_default()
+                        return Ok(first.add(&second.negated()));
                     }
                     _ => {
                         let (x, y, sign) = if g.cmp_nodes(a, b).is_lt() { (a, b, 1) } else { (b, a, -1) };
@@ -728,7 +731,7 @@ impl Simplifier {
                     }
                 }
             }
-        })
+        }))
     }
 
     /// `a×b` in 2D: the scalar `a.x b.y − a.y b.x`, bilinear.
@@ -745,11 +748,13 @@ impl Simplifier {
                     // u × eₓ = −u.y, u × e_y = u.x
                     (VAtom::Atom(p), VAtom::Basis(x)) => {
                         let (axis, sign) = if x == Axis::X { (Axis::Y, -1) } else { (Axis::X, 1) };
-                        self.component(g, p, axis)?.scale(&Rational::int(sign))
+                        let Some(c) = self.component(g, p, axis)? else { return Ok(None) };
+                        c.scale(&Rational::int(sign))
                     }
                     (VAtom::Basis(x), VAtom::Atom(p)) => {
                         let (axis, sign) = if x == Axis::X { (Axis::Y, 1) } else { (Axis::X, -1) };
-                        self.component(g, p, axis)?.scale(&Rational::int(sign))
+                        let Some(c) = self.component(g, p, axis)? else { return Ok(None) };
+                        c.scale(&Rational::int(sign))
                     }
                     (VAtom::Atom(p), VAtom::Atom(q)) if p == q => Frac::zero(),
                     (VAtom::Atom(p), VAtom::Atom(q)) => {
@@ -833,6 +838,12 @@ fn sum_terms(mut terms: Vec<(Mono, Rational)>) -> Poly {
     Poly(out)
 }
 
+/// `p q − r s`, or `None` when a factor or a product is too large to expand: the caller
+/// then keeps its piece unexpanded (never zero).
+fn difference_of_products([p, q, r, s]: [Option<Frac>; 4]) -> Option<Frac> {
+    p?.mul(&q?)?.sub(&r?.mul(&s?)?)
+}
+
 fn levi_civita(i: usize, j: usize, k: usize) -> i64 {
     match (i, j, k) {
         (0, 1, 2) | (1, 2, 0) | (2, 0, 1) => 1,
@@ -893,5 +904,35 @@ impl VecForm {
 
     fn negated(&self) -> VecForm {
         VecForm(self.0.iter().map(|(u, s)| (*u, s.neg())).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::expr::graph::Role;
+
+    /// A component of `(((a₀×a₁)×a₂)×…)×a₁₂` has 2¹² terms, past `MAX_TERMS`: the form is
+    /// too large to expand, which means "keep it unexpanded", never zero.
+    #[test]
+    fn a_component_too_large_to_expand_is_not_zero() {
+        let mut g = Graph::new(3);
+        let vectors: Vec<Id> = (0..13)
+            .map(|i| {
+                let s = g.declare(&format!("a{i}"), Ty::Vector, Role::Parameter);
+                g.sym(s)
+            })
+            .collect();
+        let mut nested = vectors[0];
+        for &v in &vectors[1..] {
+            nested = g.cross(nested, v).expect("vectors");
+        }
+        let mut simplifier = Simplifier::new();
+        let component = simplifier.component(&mut g, nested, Axis::X).expect("well typed");
+        assert!(!component.is_some_and(|f| f.is_zero()), "a form too large to expand became zero");
+        // One level less fits, and is expanded.
+        let Node::Cross([smaller, _]) = g.node(nested).clone() else { panic!("a cross product") };
+        let expanded = simplifier.component(&mut g, smaller, Axis::X).expect("well typed");
+        assert_eq!(expanded.map(|f| f.num.len()), Some(1 << 11));
     }
 }
