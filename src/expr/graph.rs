@@ -326,9 +326,6 @@ pub enum TypeError {
     MixedRelation,
 }
 
-/// The deepest a node may sit above the leaves; keeps every recursive walk shallow.
-pub const MAX_DEPTH: u32 = 20_000;
-
 /// The arena. `dim` is the dimension of every vector in it (2 or 3).
 #[derive(Clone, Debug)]
 pub struct Graph {
@@ -465,11 +462,6 @@ impl Graph {
             next = self.same_hash[id.index()];
         }
         None
-    }
-
-    /// Looks a node up without adding it.
-    pub fn find(&self, node: &Node) -> Option<Id> {
-        self.lookup(self.seed.hash_one(node), node)
     }
 
     // ---- typed constructors ------------------------------------------------------------

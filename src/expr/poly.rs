@@ -181,12 +181,9 @@ impl Poly {
         self.0.is_empty()
     }
 
-    pub fn len(&self) -> usize {
+    /// The number of terms (no `is_empty`: that is [`Poly::is_zero`]).
+    pub(crate) fn len(&self) -> usize {
         self.0.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.0.is_empty()
     }
 
     pub fn as_constant(&self) -> Option<Rational> {
@@ -403,11 +400,6 @@ impl Frac {
 
     pub fn as_constant(&self) -> Option<Rational> {
         if self.den.is_empty() { self.num.as_constant() } else { None }
-    }
-
-    /// The number of terms in numerator and denominator, a measure of size.
-    pub fn size(&self) -> usize {
-        self.num.len() + self.den.iter().map(|(p, _)| p.len()).sum::<usize>()
     }
 
     pub fn neg(&self) -> Frac {

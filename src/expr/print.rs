@@ -52,11 +52,6 @@ pub fn print(g: &Graph, id: Id, style: Style) -> Result<String, PrintError> {
     Ok(p.out)
 }
 
-/// Prints with the source style; for `Display`-like use where errors cannot occur in practice.
-pub fn source(g: &Graph, id: Id) -> String {
-    print(g, id, Style::Source).unwrap_or_else(|e| format!("<{e}>"))
-}
-
 struct Printer<'g> {
     g: &'g Graph,
     out: String,
