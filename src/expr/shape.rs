@@ -28,20 +28,10 @@ pub struct Shape {
     pub symbols: Vec<Symbol>,
 }
 
-// Tags of the key's node records.
-const NUM: u32 = 0;
-const FIXED: u32 = 1;
-const SLOT: u32 = 2;
-const VECTOR: u32 = 3;
-const ADD: u32 = 4;
-const MUL: u32 = 5;
-const POW: u32 = 6;
-const DOT: u32 = 7;
-const CROSS: u32 = 8;
-const NORM: u32 = 9;
-const COMP: u32 = 10;
-const CALL: u32 = 11;
-const ATAN2: u32 = 12;
+// Tags of the key's records: a node kind's rank ([`Node::rank`]), and for symbols whether
+// the symbol is fixed or a slot (a rank is a `u8`, so these do not collide with one).
+const FIXED: u32 = 1 << 8;
+const SLOT: u32 = FIXED + 1;
 
 /// Whether a symbol keeps its identity in a shape (parameters and time are shared by the
 /// whole scene; bodies' symbols are renamed).
@@ -101,7 +91,7 @@ impl Shaper {
             let kid = |c: &Id| seen[c.index()].1;
             match node {
                 // Equal numbers are one node of the graph (hash-consing), so the id is the value.
-                Node::Num(_) => key.extend([NUM, id.index() as u32]),
+                Node::Num(_) => key.extend([u32::from(node.rank()), id.index() as u32]),
                 Node::Sym(s) if fixed(g.symbol(*s).role) => key.extend([FIXED, s.index() as u32]),
                 Node::Sym(s) => {
                     if self.slot_of.len() <= s.index() {
@@ -114,22 +104,17 @@ impl Shaper {
                     }
                     key.extend([SLOT, entry.1]);
                 }
-                Node::Vector(xs) | Node::Add(xs) | Node::Mul(xs) => {
-                    let tag = match node {
-                        Node::Vector(_) => VECTOR,
-                        Node::Add(_) => ADD,
-                        _ => MUL,
+                // Any other node: its kind, what it holds besides its children (how many,
+                // which axis, which function), and its children's records.
+                _ => {
+                    let label = match node {
+                        Node::Comp(_, axis) => axis.index() as u32,
+                        Node::Call(f, _) => *f as u32,
+                        _ => node.children().len() as u32,
                     };
-                    key.extend([tag, xs.len() as u32]);
-                    key.extend(xs.iter().map(kid));
+                    key.extend([u32::from(node.rank()), label]);
+                    key.extend(node.children().iter().map(kid));
                 }
-                Node::Pow([a, b]) => key.extend([POW, kid(a), kid(b)]),
-                Node::Dot([a, b]) => key.extend([DOT, kid(a), kid(b)]),
-                Node::Cross([a, b]) => key.extend([CROSS, kid(a), kid(b)]),
-                Node::Atan2([a, b]) => key.extend([ATAN2, kid(a), kid(b)]),
-                Node::Norm(a) => key.extend([NORM, kid(a)]),
-                Node::Comp(a, axis) => key.extend([COMP, axis.index() as u32, kid(a)]),
-                Node::Call(f, a) => key.extend([CALL, *f as u32, kid(a)]),
             }
             self.seen[id.index()] = (call, count);
             count += 1;

@@ -30,7 +30,8 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::{Axis, FastMap, Func, Graph, Id, IdMap, Node, Ty, TypeError};
+use super::func::Func;
+use super::graph::{Axis, FastMap, Graph, Id, IdMap, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
 use super::shape::{Reuse, Shaper};
@@ -346,13 +347,7 @@ impl Simplifier {
                 let e = VecForm(vec![(VAtom::Basis(*axis), Frac::constant(Rational::ONE))]);
                 self.dot(g, &a, &e)?.map(Canon::S)
             }
-            Node::Call(f, a) => self.call(g, *f, *a)?.map(Canon::S),
-            Node::Atan2([y, x]) => {
-                let (sy, sx) = (self.memo[y].clone(), self.memo[x].clone());
-                let (sy, sx) = (self.build(g, &sy)?, self.build(g, &sx)?);
-                let atom = g.atan2(sy, sx)?;
-                Some(Canon::S(Frac::atom(atom)))
-            }
+            Node::Call(f, _) => self.call(g, *f, node.children())?.map(Canon::S),
         };
         // Sums and products of sums (common denominators, bilinear dot) can create
         // `sqrt(x)²` anew; reduce them in every form, not only after products and powers.
@@ -448,41 +443,40 @@ impl Simplifier {
             _ => (Rational::ONE, f.clone()),
         };
         let arg = self.build(g, &Canon::S(inside.clone()))?;
-        let atom = g.call(Func::Sqrt, arg)?;
+        let atom = g.call(Func::Sqrt, &[arg])?;
         self.radicals.insert(atom, Rc::new(inside));
         Ok(Some(Frac::atom(atom).scale(&outside)))
     }
 
-    fn call(&mut self, g: &mut Graph, f: Func, a: Id) -> Result<Option<Frac>, TypeError> {
-        let arg = self.scalar_of(a);
+    /// `f(args)`: `sqrt` through [`Self::sqrt`]; otherwise the table's exact value at
+    /// rational arguments, `f(f⁻¹(x)) = x`, or the call over simplified arguments as an atom.
+    fn call(&mut self, g: &mut Graph, f: Func, args: &[Id]) -> Result<Option<Frac>, TypeError> {
         if f == Func::Sqrt {
+            let arg = self.scalar_of(args[0]);
             return self.sqrt(g, &arg);
         }
-        if let Some(q) = arg.as_constant() {
-            // Exact values only: sin(0) = 0, cos(0) = 1, exp(0) = 1, ln(1) = 0, …
-            let exact = match f {
-                Func::Sin | Func::Tan | Func::Asin | Func::Atan if q.is_zero() => Some(Rational::ZERO),
-                Func::Cos | Func::Exp if q.is_zero() => Some(Rational::ONE),
-                Func::Ln | Func::Acos if q.is_one() => Some(Rational::ZERO),
-                _ => None,
-            };
-            if let Some(v) = exact {
-                return Ok(Some(Frac::constant(v)));
+        let constants: Option<Vec<Rational>> = args.iter().map(|&a| self.scalar_of(a).as_constant()).collect();
+        if let Some(v) = constants.and_then(|qs| f.exact(&qs)) {
+            return Ok(Some(Frac::constant(v)));
+        }
+        if let (Some(h), [a]) = (f.inverse(), args) {
+            let arg = self.scalar_of(*a);
+            if let Some(inner) = arg.num.as_atom().filter(|_| arg.den.is_empty())
+                && let Node::Call(k, [x, _]) = g.node(inner).clone()
+                && k == h
+            {
+                let c = self.canon(g, x)?;
+                if let Canon::S(s) = &*c {
+                    return Ok(Some(s.clone()));
+                }
             }
         }
-        // ln(exp x) = x and exp(ln x) = x.
-        if let Some(inner) = arg.num.as_atom().filter(|_| arg.den.is_empty())
-            && let Node::Call(h, x) = g.node(inner).clone()
-            && ((f == Func::Ln && h == Func::Exp) || (f == Func::Exp && h == Func::Ln))
-        {
-            let c = self.canon(g, x)?;
-            if let Canon::S(s) = &*c {
-                return Ok(Some(s.clone()));
-            }
+        let mut built = Vec::with_capacity(args.len());
+        for a in args {
+            let form = self.memo[a].clone();
+            built.push(self.build(g, &form)?);
         }
-        let built = self.memo[&a].clone();
-        let arg_node = self.build(g, &built)?;
-        let atom = g.call(f, arg_node)?;
+        let atom = g.call(f, &built)?;
         Ok(Some(Frac::atom(atom)))
     }
 
