@@ -133,6 +133,106 @@ impl<V> std::ops::Index<&Id> for IdMap<V> {
     }
 }
 
+/// A set of indices (of nodes or symbols) with a value each, emptied in O(1): every entry
+/// is stamped with the walk that wrote it, and [`Marks::clear`] starts a new walk. The
+/// one mark-per-node implementation of the crate (the simplifier's walk, shapes, symbol
+/// walks): a flag per node reused from walk to walk, instead of a fresh set per walk.
+#[derive(Clone, Debug, Default)]
+pub struct Marks<V = ()> {
+    entries: Vec<(u32, V)>,
+    /// The current walk; entries of other walks are absent. 0 before the first `clear`.
+    stamp: u32,
+}
+
+impl<V: Copy + Default> Marks<V> {
+    /// Empties the set: the start of a walk.
+    pub fn clear(&mut self) {
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            // After 2³² walks the stamps wrap: start them again.
+            self.entries.iter_mut().for_each(|e| *e = (0, V::default()));
+            self.stamp = 1;
+        }
+    }
+
+    /// The value at `i`, if `i` was set in this walk.
+    #[inline]
+    pub fn get(&self, i: usize) -> Option<V> {
+        match self.entries.get(i) {
+            Some(&(stamp, v)) if stamp == self.stamp && stamp != 0 => Some(v),
+            _ => None,
+        }
+    }
+
+    #[inline]
+    pub fn contains(&self, i: usize) -> bool {
+        self.get(i).is_some()
+    }
+
+    /// Sets `i` to `v` in this walk.
+    #[inline]
+    pub fn set(&mut self, i: usize, v: V) {
+        if i >= self.entries.len() {
+            self.entries.resize((i + 1).max(2 * self.entries.len()), (0, V::default()));
+        }
+        self.entries[i] = (self.stamp, v);
+    }
+
+    /// Sets `i` (to the default value) unless it is set; whether it was new.
+    #[inline]
+    pub fn insert(&mut self, i: usize) -> bool {
+        let new = !self.contains(i);
+        if new {
+            self.set(i, V::default());
+        }
+        new
+    }
+}
+
+/// The symbols expressions depend on, with the walk's buffers kept from call to call, so
+/// many calls on one graph cost their expressions' sizes and no hashing.
+#[derive(Debug, Default)]
+pub struct SymbolWalk {
+    marks: Marks,
+    stack: Vec<Id>,
+    symbols: Vec<Symbol>,
+}
+
+impl SymbolWalk {
+    /// The free symbols of `root`, sorted, each once.
+    pub fn free_symbols(&mut self, g: &Graph, root: Id) -> &[Symbol] {
+        self.free_symbols_of(g, &[root])
+    }
+
+    /// The free symbols of `roots` together, sorted, each once.
+    pub fn free_symbols_of(&mut self, g: &Graph, roots: &[Id]) -> &[Symbol] {
+        self.marks.clear();
+        self.symbols.clear();
+        self.stack.clear();
+        self.stack.extend_from_slice(roots);
+        let marks = &mut self.marks;
+        walk_symbols(g, &mut self.stack, |id| marks.insert(id.index()), &mut self.symbols);
+        &self.symbols
+    }
+}
+
+/// The one walk for free symbols: every node reachable from `stack` that `first_visit`
+/// lets through (it returns whether the node is new), its symbols into `out`, sorted and
+/// each once.
+fn walk_symbols(g: &Graph, stack: &mut Vec<Id>, mut first_visit: impl FnMut(Id) -> bool, out: &mut Vec<Symbol>) {
+    while let Some(id) = stack.pop() {
+        if !first_visit(id) {
+            continue;
+        }
+        match g.node(id) {
+            Node::Sym(s) => out.push(*s),
+            node => stack.extend_from_slice(node.children()),
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+}
+
 /// A handle to a node of a [`Graph`]. Children always have smaller ids than parents.
 #[derive(Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Debug)]
 pub struct Id(u32);
@@ -726,24 +826,15 @@ impl Graph {
         out
     }
 
-    /// The symbols that `root` depends on.
+    /// The symbols that `root` depends on, sorted, each once.
+    ///
+    /// The visited set is a hash set, so one call costs the size of the expression, not of
+    /// the graph; [`SymbolWalk`] keeps its buffers for many calls.
     pub fn free_symbols(&self, root: Id) -> Vec<Symbol> {
-        // The walk of `reachable`, keeping only the symbols (no sort of every node).
         // Room for a small formula's nodes up front: growing the set rehashes it each time.
         let mut seen: FastSet<Id> = FastSet::with_capacity_and_hasher(32, Default::default());
-        let mut stack = vec![root];
         let mut syms = Vec::new();
-        while let Some(id) = stack.pop() {
-            if !seen.insert(id) {
-                continue;
-            }
-            match self.node(id) {
-                Node::Sym(s) => syms.push(*s),
-                node => stack.extend_from_slice(node.children()),
-            }
-        }
-        syms.sort_unstable();
-        syms.dedup();
+        walk_symbols(self, &mut vec![root], |id| seen.insert(id), &mut syms);
         syms
     }
 

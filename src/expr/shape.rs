@@ -15,7 +15,7 @@
 //!
 //! Not here: what is reused (`derive`, [`super::Simplifier::simplify_alike`]).
 
-use super::graph::{FastMap, Graph, Id, Node, Role, Symbol};
+use super::graph::{FastMap, Graph, Id, Marks, Node, Role, Symbol};
 use smallvec::SmallVec;
 
 /// An expression with its renameable symbols numbered by first appearance.
@@ -43,11 +43,10 @@ fn fixed(role: Role) -> bool {
 /// so that a shape costs its expression's size and no hashing.
 #[derive(Debug, Default)]
 pub struct Shaper {
-    /// For each node: the call that last numbered it, and its number then.
-    seen: Vec<(u32, u32)>,
-    call: u32,
-    /// For each symbol (by index): the call that last gave it a slot, and the slot.
-    slot_of: Vec<(u32, u32)>,
+    /// Each node's number in this call's key.
+    seen: Marks<u32>,
+    /// Each symbol's slot (by symbol index) in this call's shape.
+    slot_of: Marks<u32>,
     /// The walk's stack, kept for its room.
     stack: Vec<(Id, bool)>,
     /// The length of the last key, the room the next one starts with.
@@ -60,17 +59,8 @@ impl Shaper {
     /// Linear in the number of distinct nodes: shared subexpressions are recorded once and
     /// referred to by their index, so a deeply shared graph cannot blow the key up.
     pub fn shape(&mut self, g: &Graph, roots: &[Id]) -> Shape {
-        if self.seen.len() < g.len() {
-            self.seen.resize(g.len().max(2 * self.seen.len()), (0, 0));
-        }
-        self.call = self.call.wrapping_add(1);
-        if self.call == 0 {
-            // After 2³² calls the stamps wrap: start them again.
-            self.seen.iter_mut().for_each(|e| *e = (0, 0));
-            self.slot_of.iter_mut().for_each(|e| *e = (0, 0));
-            self.call = 1;
-        }
-        let call = self.call;
+        self.seen.clear();
+        self.slot_of.clear();
         let mut key = Vec::with_capacity(self.last_len.max(16));
         let mut symbols: Vec<Symbol> = Vec::new();
         let mut count = 0u32;
@@ -78,7 +68,7 @@ impl Shaper {
         stack.clear();
         stack.extend(roots.iter().rev().map(|&r| (r, false)));
         while let Some((id, expanded)) = stack.pop() {
-            if self.seen[id.index()].0 == call {
+            if self.seen.contains(id.index()) {
                 continue;
             }
             let node = g.node(id);
@@ -88,21 +78,22 @@ impl Shaper {
                 continue;
             }
             let seen = &self.seen;
-            let kid = |c: &Id| seen[c.index()].1;
+            let kid = |c: &Id| seen.get(c.index()).unwrap_or(u32::MAX);
             match node {
                 // Equal numbers are one node of the graph (hash-consing), so the id is the value.
                 Node::Num(_) => key.extend([u32::from(node.rank()), id.index() as u32]),
                 Node::Sym(s) if fixed(g.symbol(*s).role) => key.extend([FIXED, s.index() as u32]),
                 Node::Sym(s) => {
-                    if self.slot_of.len() <= s.index() {
-                        self.slot_of.resize((s.index() + 1).max(2 * self.slot_of.len()), (0, 0));
-                    }
-                    let entry = &mut self.slot_of[s.index()];
-                    if entry.0 != call {
-                        *entry = (call, symbols.len() as u32);
-                        symbols.push(*s);
-                    }
-                    key.extend([SLOT, entry.1]);
+                    let slot = match self.slot_of.get(s.index()) {
+                        Some(slot) => slot,
+                        None => {
+                            let slot = symbols.len() as u32;
+                            self.slot_of.set(s.index(), slot);
+                            symbols.push(*s);
+                            slot
+                        }
+                    };
+                    key.extend([SLOT, slot]);
                 }
                 // Any other node: its kind, what it holds besides its children (how many,
                 // which axis, which function), and its children's records.
@@ -116,13 +107,13 @@ impl Shaper {
                     key.extend(node.children().iter().map(kid));
                 }
             }
-            self.seen[id.index()] = (call, count);
+            self.seen.set(id.index(), count);
             count += 1;
         }
         self.stack = stack;
         // Which root is which record.
         key.push(u32::MAX);
-        key.extend(roots.iter().map(|r| self.seen[r.index()].1));
+        key.extend(roots.iter().map(|r| self.seen.get(r.index()).unwrap_or(u32::MAX)));
         // What each slot is, and the order the slots' symbols sort in.
         for &s in &symbols {
             // The kind of role (its sort rank without the body).

@@ -31,7 +31,7 @@
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
 use super::func::Func;
-use super::graph::{Axis, FastMap, Graph, Id, IdMap, Node, Ty, TypeError};
+use super::graph::{Axis, FastMap, Graph, Id, IdMap, Marks, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
 use super::shape::{Reuse, Shaper};
@@ -67,9 +67,8 @@ pub struct Simplifier {
     /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
     alike: FastMap<Vec<u32>, Reuse>,
     shaper: Shaper,
-    /// `canon`'s marks of the nodes queued in its current walk (`walk`), by node.
-    queued: Vec<u32>,
-    walk: u32,
+    /// `canon`'s marks of the nodes queued in its current walk.
+    queued: Marks,
 }
 
 impl Simplifier {
@@ -202,21 +201,13 @@ impl Simplifier {
         // a new expression over old ones costs the size of what is new.
         let mut todo = Vec::with_capacity(16);
         // Nodes already queued in this walk: a mark per node, reused from walk to walk.
-        if self.queued.len() < g.len() {
-            self.queued.resize(g.len().max(2 * self.queued.len()), 0);
-        }
-        self.walk = self.walk.wrapping_add(1);
-        if self.walk == 0 {
-            self.queued.iter_mut().for_each(|m| *m = 0);
-            self.walk = 1;
-        }
+        self.queued.clear();
         let mut stack = Vec::with_capacity(16);
         stack.push(id);
         while let Some(n) = stack.pop() {
-            if self.memo.contains_key(&n) || self.queued[n.index()] == self.walk {
+            if self.memo.contains_key(&n) || !self.queued.insert(n.index()) {
                 continue;
             }
-            self.queued[n.index()] = self.walk;
             todo.push(n);
             stack.extend_from_slice(g.node(n).children());
         }

@@ -26,7 +26,8 @@
 
 use super::file::{Problem, RawValue, Text, locate};
 use super::scene::value_for;
-use super::system::{BuildError, SymbolWalk, System};
+use super::system::{BuildError, System};
+use crate::expr::graph::SymbolWalk;
 use crate::expr::lower::suggest;
 use crate::expr::{Id, Role, Ty};
 use std::borrow::Cow;

@@ -14,10 +14,10 @@
 
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
-use crate::expr::{Id, Node, Rational, Symbol};
+use crate::expr::graph::SymbolWalk;
+use crate::expr::{Id, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::tape::{Scratch, Tape};
-use std::collections::BTreeSet;
 
 /// One constraint row at a state.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -90,17 +90,7 @@ impl RowProgram {
             inverse_scale.push(d.scale.recip().unwrap_or(Rational::ONE).to_f64());
             shape.push((system.constraints[k].inequality, d.direction.iter().map(|&(b, _)| b).collect()));
         }
-        let inputs: Vec<Symbol> = system
-            .graph
-            .reachable(&roots)
-            .into_iter()
-            .filter_map(|id| match system.graph.node(id) {
-                Node::Sym(s) => Some(*s),
-                _ => None,
-            })
-            .collect::<BTreeSet<Symbol>>()
-            .into_iter()
-            .collect();
+        let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(&system.graph, &roots).to_vec();
         // Every symbol a root reads is an input and each is listed once, so lowering cannot fail.
         let tape = Tape::compile(&system.graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
         RowProgram { roots, inverse_scale, shape, tape, inputs }
