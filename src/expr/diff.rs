@@ -28,6 +28,7 @@ pub enum DiffError {
 pub fn time_derivative(graph: &mut Graph, root: Id) -> Result<Id, DiffError> {
     let order = graph.reachable(&[root]);
     let mut d: FastMap<Id, Id> = FastMap::default();
+    // Sized once: growing a hash map rehashes it (measured with `reachable`'s set).
     d.reserve(order.len());
     for id in order {
         let node = graph.node(id).clone();

@@ -22,6 +22,7 @@ pub fn gradient(graph: &mut Graph, root: Id, wrt: Symbol) -> Result<Id, TypeErro
     let order = graph.reachable(&[root]);
     // Which nodes depend on the symbol at all (children come first in `order`).
     let mut depends: FastMap<Id, bool> = FastMap::default();
+    // Sized once: growing a hash map rehashes it (measured with `reachable`'s set).
     depends.reserve(order.len());
     for &id in &order {
         let dep = id == target || graph.node(id).children().iter().any(|c| depends[c]);

@@ -114,7 +114,7 @@ impl Program {
         let mut b = Builder::default();
         // Input layout: symbol → its slot values.
         let mut slots: HashMap<Symbol, [Val; 3]> = HashMap::new();
-        let mut input_ranges = Vec::with_capacity(inputs.len());
+        let mut input_ranges = Vec::new();
         let mut n = 0u32;
         for &s in inputs {
             let width = if g.symbol(s).ty == Ty::Vector { dim } else { 1 };
@@ -197,7 +197,7 @@ impl Program {
             vals.insert(id, v);
         }
         let mut outputs = Vec::new();
-        let mut output_ranges = Vec::with_capacity(roots.len());
+        let mut output_ranges = Vec::new();
         for r in roots {
             let width = if g.ty(*r) == Ty::Vector { dim } else { 1 };
             let start = outputs.len();
@@ -224,7 +224,7 @@ impl Program {
             return;
         }
         let mut b = Builder::default();
-        let mut map: Vec<Val> = Vec::with_capacity(self.ops.len());
+        let mut map: Vec<Val> = Vec::new();
         for op in &self.ops {
             let m = |v: Val| map[v as usize];
             let v = match *op {
@@ -259,7 +259,7 @@ impl Program {
             }
         }
         let mut new_index = vec![0; self.ops.len()];
-        let mut ops = Vec::with_capacity(self.ops.len());
+        let mut ops = Vec::new();
         for (i, op) in self.ops.iter().enumerate() {
             if live[i] {
                 new_index[i] = ops.len() as Val;

@@ -169,7 +169,7 @@ impl Tape {
         // Instructions over values: (value, code, imm, operands). Products read only by one
         // sum are absorbed into it.
         let mut absorbed = vec![false; n];
-        let mut virt: Vec<(usize, Code, i32, [Val; 4])> = Vec::with_capacity(n);
+        let mut virt: Vec<(usize, Code, i32, [Val; 4])> = Vec::new();
         for (i, op) in p.ops.iter().enumerate() {
             let (code, imm, args) = match *op {
                 Op::Input(_) | Op::Const(_) => continue,
@@ -251,7 +251,7 @@ impl Tape {
         let first_temp = (p.n_inputs + consts.len()) as u32;
         let mut n_regs = first_temp;
         let mut free: Vec<u32> = Vec::new();
-        let mut code = Vec::with_capacity(virt.len());
+        let mut code = Vec::new();
         for (k, &(i, kind, imm, args)) in virt.iter().enumerate() {
             // The destination is taken before the operands are freed, so it is never one of them.
             let d = free.pop().unwrap_or_else(|| {
