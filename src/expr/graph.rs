@@ -608,7 +608,12 @@ impl Graph {
         match factors.len() {
             0 => Ok(self.int(1)),
             1 => Ok(factors[0]),
-            _ => self.make(Node::Mul(factors.into())),
+            // `type_of`'s rule for products, already checked by the count above (products
+            // are the commonest node a derivation builds: one pass over them, not two).
+            _ => {
+                let ty = if vectors == 1 { Ty::Vector } else { Ty::Scalar };
+                Ok(self.intern(Node::Mul(factors.into()), ty))
+            }
         }
     }
 
@@ -767,7 +772,7 @@ impl Graph {
         // (without it, 4 % more instructions in the bead's derivation, callgrind).
         let mut seen: FastSet<Id> = FastSet::with_capacity_and_hasher(64, Default::default());
         let mut stack: Vec<Id> = roots.to_vec();
-        let mut out = Vec::new();
+        let mut out = Vec::with_capacity(64);
         while let Some(id) = stack.pop() {
             if !seen.insert(id) {
                 continue;

@@ -246,7 +246,7 @@ impl Poly {
     pub fn sum<'a>(polys: impl IntoIterator<Item = &'a Poly>) -> Poly {
         let mut terms: Vec<(Mono, Rational)> = polys.into_iter().flat_map(|p| p.0.iter().cloned()).collect();
         terms.sort_by(|a, b| a.0.cmp(&b.0));
-        let mut out: Vec<(Mono, Rational)> = Vec::new();
+        let mut out: Vec<(Mono, Rational)> = Vec::with_capacity(terms.len());
         for (m, q) in terms {
             match out.last_mut() {
                 Some((last, sum)) if *last == m => *sum = sum.add(&q),
