@@ -285,7 +285,7 @@ fn a_malformed_program_is_refused_not_run() {
     use lagrange::numeric::program::{Op, Program};
     // Value 1 reads value 2 before it exists.
     let p = Program {
-        ops: vec![Op::Input(0), Op::Add(0, 2), Op::Call(lagrange::expr::Func::Sqrt, 0)],
+        ops: vec![Op::Input(0), Op::Add(0, 2), Op::Call(lagrange::expr::Func::Sqrt, [0, 0])],
         n_inputs: 1,
         input_ranges: std::iter::once(0..1).collect(),
         outputs: vec![1],

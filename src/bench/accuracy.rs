@@ -88,7 +88,7 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
         let values = eval_dd(graph, &ids, env).ok()?;
         let mut out = vec![[zero; 3]; n];
         for (&(b, _), v) in closed.iter().zip(values) {
-            out[b] = v.vector();
+            out[b] = v.vector_or_nan();
         }
         return Some(out);
     }
@@ -102,14 +102,14 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
         roots.extend(d.jacobian.iter().map(|&(_, j)| j));
     }
     let values = eval_dd(graph, &roots, env).ok()?;
-    let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar()).collect();
+    let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar_or_nan()).collect();
     let mut at = n;
     let mut force = Vec::with_capacity(n);
     for (i, f) in force_expr.iter().enumerate() {
         force.push(match f {
             Some(_) => {
                 at += 1;
-                values[at - 1].vector()
+                values[at - 1].vector_or_nan()
             }
             None => match env.get(s.system.bodies[i].force) {
                 Some(Value::Vector(v)) => v.map(TwoFloat::from),
@@ -121,9 +121,9 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     let mut c = Vec::new();
     let mut jac: Vec<Vec<(usize, [TwoFloat; 3])>> = Vec::new();
     for d in &s.derivation.constraints {
-        c.push(values[at].scalar());
+        c.push(values[at].scalar_or_nan());
         at += 1;
-        jac.push(d.jacobian.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector())).collect());
+        jac.push(d.jacobian.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector_or_nan())).collect());
         at += d.jacobian.len();
     }
     // A λ = −b with Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ/mᵢ, bₖ = Σᵢ Jₖᵢ·Fᵢ/mᵢ + cₖ.

@@ -816,14 +816,13 @@ impl Ctx<'_> {
                     let (x, d) = receiver(a);
                     (format!("{x}.powi({n})"), Prec::Atom, d + 1)
                 }
-                Op::Call(f, a) => {
-                    let (x, d) = receiver(a);
-                    (format!("{x}.{}()", f.name()), Prec::Atom, d + 1)
-                }
-                Op::Atan2(y, x) => {
-                    let (y, dy) = receiver(y);
-                    let (x, dx) = arg(x, Prec::Sum);
-                    (format!("{y}.atan2({x})"), Prec::Atom, dx.max(dy) + 1)
+                // `f64`'s method of the function's name: `x.sin()`, `y.atan2(x)`.
+                Op::Call(f, args) => {
+                    let (x, d) = receiver(args[0]);
+                    let rest: Vec<(String, u32)> = args[1..f.arity()].iter().map(|&a| arg(a, Prec::Sum)).collect();
+                    let list = rest.iter().map(|(t, _)| t.as_str()).collect::<Vec<_>>().join(", ");
+                    let depth = rest.iter().map(|(_, d)| *d).fold(d, u32::max);
+                    (format!("{x}.{}({list})", f.name()), Prec::Atom, depth + 1)
                 }
                 Op::Powf(a, b) | Op::Norm2(a, b) => {
                     let name = if matches!(op, Op::Powf(..)) { "powf" } else { "norm2" };

@@ -1,6 +1,7 @@
 //! d/dt at the vector level: forward mode over the graph, with the product and chain rules.
 //!
-//! d(a·b)/dt = ȧ·b + a·ḃ, d(a×b)/dt = ȧ×b + a×ḃ, d|a|/dt = a·ȧ/|a|, d f(u)/dt = f'(u) u̇;
+//! d(a·b)/dt = ȧ·b + a·ḃ, d(a×b)/dt = ȧ×b + a×ḃ, d|a|/dt = a·ȧ/|a|, d f(u)/dt = Σ ∂f/∂uᵢ u̇ᵢ
+//! (the partials are the function table's, [`Func::partial`]);
 //! a position's derivative is its body's velocity symbol, a velocity's is the acceleration,
 //! `t` has derivative 1 and parameters are constant. The result is written the way a person
 //! applies the rules (`d(r·r)/dt = v·r + r·v`): only zero terms and unit factors are
@@ -9,8 +10,9 @@
 //! The walk is iterative in id order (children first), so deep graphs cannot overflow the
 //! stack, and each shared subexpression is differentiated once.
 
+use super::func::Func;
 use super::graph::FastMap;
-use super::graph::{Func, Graph, Id, Node, Role, Ty, TypeError};
+use super::graph::{Graph, Id, Node, Role, Ty, TypeError};
 use super::num::Rational;
 
 /// Why a derivative could not be taken.
@@ -26,6 +28,7 @@ pub enum DiffError {
 pub fn time_derivative(graph: &mut Graph, root: Id) -> Result<Id, DiffError> {
     let order = graph.reachable(&[root]);
     let mut d: FastMap<Id, Id> = FastMap::default();
+    // Sized once: growing a hash map rehashes it (measured with `reachable`'s set).
     d.reserve(order.len());
     for id in order {
         let node = graph.node(id).clone();
@@ -89,7 +92,7 @@ fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &FastMap<Id, Id>) -> Resul
             }
             if !g.is_zero(de) {
                 // d(b^e) = b^e ln(b) ė for the exponent's part.
-                let ln_b = g.call(Func::Ln, *b)?;
+                let ln_b = g.call(Func::Ln, &[*b])?;
                 terms.push(mul(g, vec![id, ln_b, de], Ty::Scalar)?);
             }
             add(g, terms, Ty::Scalar)?
@@ -129,71 +132,19 @@ fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &FastMap<Id, Id>) -> Resul
                 g.comp(d[a], *axis)?
             }
         }
-        Node::Call(f, a) => {
-            if g.is_zero(d[a]) {
-                return Ok(g.int(0));
+        Node::Call(f, _) => {
+            // Chain rule: Σᵢ ∂f/∂uᵢ u̇ᵢ over the arguments that move.
+            let args = node.children();
+            let mut terms = Vec::new();
+            for (i, u) in args.iter().enumerate() {
+                if g.is_zero(d[u]) {
+                    continue;
+                }
+                let outer = f.partial(g, i, args, id)?;
+                terms.push(mul(g, vec![outer, d[u]], Ty::Scalar)?);
             }
-            let outer = chain_factor(g, *f, *a, id)?;
-            mul(g, vec![outer, d[a]], Ty::Scalar)?
+            add(g, terms, Ty::Scalar)?
         }
-        Node::Atan2([y, x]) => {
-            if g.is_zero(d[y]) && g.is_zero(d[x]) {
-                return Ok(g.int(0));
-            }
-            // d atan2(y, x) = (x ẏ − y ẋ) / (x² + y²)
-            let x_dy = mul(g, vec![*x, d[y]], Ty::Scalar)?;
-            let y_dx = mul(g, vec![*y, d[x]], Ty::Scalar)?;
-            let minus_y_dx = g.neg(y_dx);
-            let num = add(g, vec![x_dy, minus_y_dx], Ty::Scalar)?;
-            let den = atan2_denominator(g, *y, *x)?;
-            g.div(num, den)?
-        }
-    })
-}
-
-/// `x² + y²`, the denominator of atan2's derivatives.
-pub(super) fn atan2_denominator(g: &mut Graph, y: Id, x: Id) -> Result<Id, TypeError> {
-    let x2 = g.powi(x, 2)?;
-    let y2 = g.powi(y, 2)?;
-    g.add(vec![x2, y2])
-}
-
-/// f'(u) for f(u) = `fu` (the node itself, reused where f' is f, as for exp).
-pub(super) fn chain_factor(g: &mut Graph, f: Func, u: Id, fu: Id) -> Result<Id, TypeError> {
-    let one = g.int(1);
-    Ok(match f {
-        // 1 / (2 sqrt u)
-        Func::Sqrt => {
-            let half = g.num(Rational::new(1, 2));
-            let inv = g.powi(fu, -1)?;
-            g.mul(vec![half, inv])?
-        }
-        Func::Sin => g.call(Func::Cos, u)?,
-        Func::Cos => {
-            let s = g.call(Func::Sin, u)?;
-            g.neg(s)
-        }
-        // 1 + tan² u
-        Func::Tan => {
-            let t2 = g.powi(fu, 2)?;
-            g.add(vec![one, t2])?
-        }
-        // ±1 / sqrt(1 − u²)
-        Func::Asin | Func::Acos => {
-            let u2 = g.powi(u, 2)?;
-            let diff = g.sub(one, u2)?;
-            let root = g.call(Func::Sqrt, diff)?;
-            let inv = g.powi(root, -1)?;
-            if f == Func::Acos { g.neg(inv) } else { inv }
-        }
-        // 1 / (1 + u²)
-        Func::Atan => {
-            let u2 = g.powi(u, 2)?;
-            let den = g.add(vec![one, u2])?;
-            g.powi(den, -1)?
-        }
-        Func::Exp => fu,
-        Func::Ln => g.powi(u, -1)?,
     })
 }
 

@@ -10,7 +10,7 @@
 //! Nodes that do not depend on the symbol get no adjoint, so the work is proportional to
 //! the part of the expression that involves it.
 
-use super::diff::{add, atan2_denominator, chain_factor, mul, zero};
+use super::diff::{add, mul, zero};
 use super::graph::FastMap;
 use super::graph::{Axis, Graph, Id, Node, Symbol, Ty, TypeError};
 use super::num::Rational;
@@ -22,6 +22,7 @@ pub fn gradient(graph: &mut Graph, root: Id, wrt: Symbol) -> Result<Id, TypeErro
     let order = graph.reachable(&[root]);
     // Which nodes depend on the symbol at all (children come first in `order`).
     let mut depends: FastMap<Id, bool> = FastMap::default();
+    // Sized once: growing a hash map rehashes it (measured with `reachable`'s set).
     depends.reserve(order.len());
     for &id in &order {
         let dep = id == target || graph.node(id).children().iter().any(|c| depends[c]);
@@ -99,7 +100,7 @@ fn propagate(g: &mut Graph, id: Id, node: &Node, w: Id) -> Result<Vec<(Id, Id)>,
             let power = super::diff::pow(g, *b, e_minus_one)?;
             let db = mul(g, vec![w, *e, power], Ty::Scalar)?;
             out.push((*b, db));
-            let ln_b = g.call(super::graph::Func::Ln, *b)?;
+            let ln_b = g.call(super::func::Func::Ln, &[*b])?;
             let de = mul(g, vec![w, id, ln_b], Ty::Scalar)?;
             out.push((*e, de));
         }
@@ -143,20 +144,13 @@ fn propagate(g: &mut Graph, id: Id, node: &Node, w: Id) -> Result<Vec<(Id, Id)>,
             let ga = g.vector(entries)?;
             out.push((*a, ga));
         }
-        Node::Call(f, a) => {
-            let outer = chain_factor(g, *f, *a, id)?;
-            let ga = mul(g, vec![w, outer], Ty::Scalar)?;
-            out.push((*a, ga));
-        }
-        Node::Atan2([y, x]) => {
-            // ∂/∂y = x/(x²+y²), ∂/∂x = −y/(x²+y²)
-            let den = atan2_denominator(g, *y, *x)?;
-            let inv = g.powi(den, -1)?;
-            let gy = mul(g, vec![w, *x, inv], Ty::Scalar)?;
-            let minus_y = g.neg(*y);
-            let gx = mul(g, vec![w, minus_y, inv], Ty::Scalar)?;
-            out.push((*y, gy));
-            out.push((*x, gx));
+        Node::Call(f, _) => {
+            let args = node.children();
+            for (i, &u) in args.iter().enumerate() {
+                let outer = f.partial(g, i, args, id)?;
+                let gu = mul(g, vec![w, outer], Ty::Scalar)?;
+                out.push((u, gu));
+            }
         }
     }
     Ok(out)

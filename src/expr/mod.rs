@@ -8,6 +8,7 @@
 
 pub mod diff;
 pub mod eval;
+pub mod func;
 pub mod grad;
 pub mod graph;
 pub mod lower;
@@ -20,7 +21,8 @@ pub mod shape;
 pub mod simplify;
 pub mod syntax;
 
-pub use graph::{Axis, Func, Graph, Id, Node, Role, Symbol, Ty, TypeError};
+pub use func::Func;
+pub use graph::{Axis, Graph, Id, Node, Role, Symbol, Ty, TypeError};
 pub use num::Rational;
 pub use print::Style;
 pub use simplify::Simplifier;

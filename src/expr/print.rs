@@ -10,6 +10,7 @@
 //!
 //! Not here: documents (derivation layouts live in `report`), numbers' evaluation.
 
+use super::func::Notation;
 use super::graph::{Graph, Id, Node, Ty};
 use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
@@ -50,11 +51,6 @@ pub fn print(g: &Graph, id: Id, style: Style) -> Result<String, PrintError> {
         Style::Text | Style::Latex => p.human(id, style, 0)?,
     }
     Ok(p.out)
-}
-
-/// Prints with the source style; for `Display`-like use where errors cannot occur in practice.
-pub fn source(g: &Graph, id: Id) -> String {
-    print(g, id, Style::Source).unwrap_or_else(|e| format!("<{e}>"))
 }
 
 struct Printer<'g> {
@@ -126,8 +122,7 @@ impl Printer<'_> {
             Node::Dot([a, b]) => self.call_source("dot", &[a, b], "(", ")"),
             Node::Cross([a, b]) => self.call_source("cross", &[a, b], "(", ")"),
             Node::Norm(a) => self.call_source("norm", &[a], "(", ")"),
-            Node::Call(f, a) => self.call_source(f.name(), &[a], "(", ")"),
-            Node::Atan2([y, x]) => self.call_source("atan2", &[y, x], "(", ")"),
+            Node::Call(f, args) => self.call_source(f.name(), &args[..f.arity()], "(", ")"),
             Node::Comp(a, axis) => {
                 let plain = matches!(self.node(a), Node::Sym(_) | Node::Vector(_) | Node::Call(..));
                 self.source_wrapped(a, !plain)?;
@@ -402,40 +397,28 @@ impl Printer<'_> {
                     self.push(&format!(".{}", axis.name()))
                 }
             }
-            &Node::Call(f, a) => {
-                if latex {
-                    if f.name() == "sqrt" {
-                        self.push("\\sqrt{")?;
-                        self.human(a, style, 0)?;
-                        return self.push("}");
-                    }
-                    let name = if f.name() == "asin" || f.name() == "acos" || f.name() == "atan" {
-                        format!("\\operatorname{{{}}}", f.name())
-                    } else {
-                        format!("\\{}", f.name())
-                    };
-                    self.push(&name)?;
-                    self.push("\\left(")?;
-                    self.human(a, style, 0)?;
-                    self.push("\\right)")
-                } else {
-                    if f.name() == "sqrt" {
-                        self.push("√")?;
-                        return self.human(a, style, 5);
-                    }
-                    self.push(f.name())?;
-                    self.push("(")?;
-                    self.human(a, style, 0)?;
-                    self.push(")")
+            Node::Call(f, args) => match f.notation() {
+                Notation::Radical if latex => {
+                    self.push("\\sqrt{")?;
+                    self.human(args[0], style, 0)?;
+                    self.push("}")
                 }
-            }
-            &Node::Atan2([y, x]) => {
-                self.push(if latex { "\\operatorname{atan2}\\left(" } else { "atan2(" })?;
-                self.human(y, style, 0)?;
-                self.push(", ")?;
-                self.human(x, style, 0)?;
-                self.push(if latex { "\\right)" } else { ")" })
-            }
+                Notation::Radical => {
+                    self.push("√")?;
+                    self.human(args[0], style, 5)
+                }
+                Notation::Call { latex: command } => {
+                    self.push(if latex { command } else { f.name() })?;
+                    self.push(if latex { "\\left(" } else { "(" })?;
+                    for (k, &a) in args[..f.arity()].iter().enumerate() {
+                        if k > 0 {
+                            self.push(", ")?;
+                        }
+                        self.human(a, style, 0)?;
+                    }
+                    self.push(if latex { "\\right)" } else { ")" })
+                }
+            },
         }
     }
 

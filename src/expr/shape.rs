@@ -15,7 +15,7 @@
 //!
 //! Not here: what is reused (`derive`, [`super::Simplifier::simplify_alike`]).
 
-use super::graph::{FastMap, Graph, Id, Node, Role, Symbol};
+use super::graph::{FastMap, Graph, Id, Marks, Node, Role, Symbol};
 use smallvec::SmallVec;
 
 /// An expression with its renameable symbols numbered by first appearance.
@@ -28,20 +28,10 @@ pub struct Shape {
     pub symbols: Vec<Symbol>,
 }
 
-// Tags of the key's node records.
-const NUM: u32 = 0;
-const FIXED: u32 = 1;
-const SLOT: u32 = 2;
-const VECTOR: u32 = 3;
-const ADD: u32 = 4;
-const MUL: u32 = 5;
-const POW: u32 = 6;
-const DOT: u32 = 7;
-const CROSS: u32 = 8;
-const NORM: u32 = 9;
-const COMP: u32 = 10;
-const CALL: u32 = 11;
-const ATAN2: u32 = 12;
+// Tags of the key's records: a node kind's rank ([`Node::rank`]), and for symbols whether
+// the symbol is fixed or a slot (a rank is a `u8`, so these do not collide with one).
+const FIXED: u32 = 1 << 8;
+const SLOT: u32 = FIXED + 1;
 
 /// Whether a symbol keeps its identity in a shape (parameters and time are shared by the
 /// whole scene; bodies' symbols are renamed).
@@ -53,14 +43,15 @@ fn fixed(role: Role) -> bool {
 /// so that a shape costs its expression's size and no hashing.
 #[derive(Debug, Default)]
 pub struct Shaper {
-    /// For each node: the call that last numbered it, and its number then.
-    seen: Vec<(u32, u32)>,
-    call: u32,
-    /// For each symbol (by index): the call that last gave it a slot, and the slot.
-    slot_of: Vec<(u32, u32)>,
+    /// Each node's number in this call's key.
+    seen: Marks<u32>,
+    /// Each symbol's slot (by symbol index) in this call's shape.
+    slot_of: Marks<u32>,
     /// The walk's stack, kept for its room.
     stack: Vec<(Id, bool)>,
-    /// The length of the last key, the room the next one starts with.
+    /// The length of the last key, the room the next one starts with: a chain's keys come
+    /// one per link and alike, and growing each from empty was 2 % of its derivation
+    /// (callgrind, a 50-link chain).
     last_len: usize,
 }
 
@@ -70,17 +61,8 @@ impl Shaper {
     /// Linear in the number of distinct nodes: shared subexpressions are recorded once and
     /// referred to by their index, so a deeply shared graph cannot blow the key up.
     pub fn shape(&mut self, g: &Graph, roots: &[Id]) -> Shape {
-        if self.seen.len() < g.len() {
-            self.seen.resize(g.len().max(2 * self.seen.len()), (0, 0));
-        }
-        self.call = self.call.wrapping_add(1);
-        if self.call == 0 {
-            // After 2³² calls the stamps wrap: start them again.
-            self.seen.iter_mut().for_each(|e| *e = (0, 0));
-            self.slot_of.iter_mut().for_each(|e| *e = (0, 0));
-            self.call = 1;
-        }
-        let call = self.call;
+        self.seen.clear();
+        self.slot_of.clear();
         let mut key = Vec::with_capacity(self.last_len.max(16));
         let mut symbols: Vec<Symbol> = Vec::new();
         let mut count = 0u32;
@@ -88,7 +70,7 @@ impl Shaper {
         stack.clear();
         stack.extend(roots.iter().rev().map(|&r| (r, false)));
         while let Some((id, expanded)) = stack.pop() {
-            if self.seen[id.index()].0 == call {
+            if self.seen.contains(id.index()) {
                 continue;
             }
             let node = g.node(id);
@@ -98,46 +80,42 @@ impl Shaper {
                 continue;
             }
             let seen = &self.seen;
-            let kid = |c: &Id| seen[c.index()].1;
+            let kid = |c: &Id| seen.get(c.index()).unwrap_or(u32::MAX);
             match node {
                 // Equal numbers are one node of the graph (hash-consing), so the id is the value.
-                Node::Num(_) => key.extend([NUM, id.index() as u32]),
+                Node::Num(_) => key.extend([u32::from(node.rank()), id.index() as u32]),
                 Node::Sym(s) if fixed(g.symbol(*s).role) => key.extend([FIXED, s.index() as u32]),
                 Node::Sym(s) => {
-                    if self.slot_of.len() <= s.index() {
-                        self.slot_of.resize((s.index() + 1).max(2 * self.slot_of.len()), (0, 0));
-                    }
-                    let entry = &mut self.slot_of[s.index()];
-                    if entry.0 != call {
-                        *entry = (call, symbols.len() as u32);
-                        symbols.push(*s);
-                    }
-                    key.extend([SLOT, entry.1]);
-                }
-                Node::Vector(xs) | Node::Add(xs) | Node::Mul(xs) => {
-                    let tag = match node {
-                        Node::Vector(_) => VECTOR,
-                        Node::Add(_) => ADD,
-                        _ => MUL,
+                    let slot = match self.slot_of.get(s.index()) {
+                        Some(slot) => slot,
+                        None => {
+                            let slot = symbols.len() as u32;
+                            self.slot_of.set(s.index(), slot);
+                            symbols.push(*s);
+                            slot
+                        }
                     };
-                    key.extend([tag, xs.len() as u32]);
-                    key.extend(xs.iter().map(kid));
+                    key.extend([SLOT, slot]);
                 }
-                Node::Pow([a, b]) => key.extend([POW, kid(a), kid(b)]),
-                Node::Dot([a, b]) => key.extend([DOT, kid(a), kid(b)]),
-                Node::Cross([a, b]) => key.extend([CROSS, kid(a), kid(b)]),
-                Node::Atan2([a, b]) => key.extend([ATAN2, kid(a), kid(b)]),
-                Node::Norm(a) => key.extend([NORM, kid(a)]),
-                Node::Comp(a, axis) => key.extend([COMP, axis.index() as u32, kid(a)]),
-                Node::Call(f, a) => key.extend([CALL, *f as u32, kid(a)]),
+                // Any other node: its kind, what it holds besides its children (how many,
+                // which axis, which function), and its children's records.
+                _ => {
+                    let label = match node {
+                        Node::Comp(_, axis) => axis.index() as u32,
+                        Node::Call(f, _) => *f as u32,
+                        _ => node.children().len() as u32,
+                    };
+                    key.extend([u32::from(node.rank()), label]);
+                    key.extend(node.children().iter().map(kid));
+                }
             }
-            self.seen[id.index()] = (call, count);
+            self.seen.set(id.index(), count);
             count += 1;
         }
         self.stack = stack;
         // Which root is which record.
         key.push(u32::MAX);
-        key.extend(roots.iter().map(|r| self.seen[r.index()].1));
+        key.extend(roots.iter().map(|r| self.seen.get(r.index()).unwrap_or(u32::MAX)));
         // What each slot is, and the order the slots' symbols sort in.
         for &s in &symbols {
             // The kind of role (its sort rank without the body).
@@ -229,7 +207,7 @@ impl Template {
         }
         let order = g.reachable(roots);
         let mut place: FastMap<Id, u32> = FastMap::default();
-        let mut ops = Vec::with_capacity(order.len());
+        let mut ops = Vec::new();
         for id in order {
             let node = g.node(id);
             let op = match node {
@@ -257,6 +235,8 @@ impl Template {
     /// as the template's), or `None` if a renamed symbol has no counterpart (a slot without
     /// the time derivatives the template's has).
     pub fn instantiate(&self, g: &mut Graph, slots: &[Symbol]) -> Option<Vec<Id>> {
+        // Sized up front: a chain instantiates a template per link, and growing these
+        // vectors was a tenth of the work (callgrind, a 50-link chain).
         let mut symbols = Vec::with_capacity(self.symbols.len());
         for &(slot, depth) in &self.symbols {
             let mut s = *slots.get(slot as usize)?;

@@ -30,11 +30,19 @@
 //!
 //! Not here: the readable layout of the result (`present`), derivatives (`diff`, `grad`).
 
-use super::graph::{Axis, FastMap, Func, Graph, Id, IdMap, Node, Ty, TypeError};
+use super::func::Func;
+use super::graph::{Axis, FastMap, Graph, Id, IdMap, Marks, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
 use super::shape::{Reuse, Shaper};
 use std::rc::Rc;
+
+/// A sum of more than two polynomials with more than this many terms in all is merged in
+/// one pass ([`Poly::sum`]: one sort of every term) instead of operand by operand. Both give
+/// the same polynomial, so the value moves only time: below it a pairwise merge of a few
+/// short operands is cheaper than collecting and sorting them; above it, pairwise merging
+/// passes over the growing total once per operand (quadratic in a long chain's sums).
+const MERGE_MIN_TERMS: usize = 64;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
@@ -66,9 +74,8 @@ pub struct Simplifier {
     /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
     alike: FastMap<Vec<u32>, Reuse>,
     shaper: Shaper,
-    /// `canon`'s marks of the nodes queued in its current walk (`walk`), by node.
-    queued: Vec<u32>,
-    walk: u32,
+    /// `canon`'s marks of the nodes queued in its current walk.
+    queued: Marks,
 }
 
 impl Simplifier {
@@ -199,23 +206,17 @@ impl Simplifier {
         }
         // The nodes below `id` without a form yet; the walk stops at memoised nodes, so
         // a new expression over old ones costs the size of what is new.
+        // Room for a small walk up front (with the stack's, the room below and the merges'
+        // in `poly`: 3 % of the bead's derivation, callgrind).
         let mut todo = Vec::with_capacity(16);
         // Nodes already queued in this walk: a mark per node, reused from walk to walk.
-        if self.queued.len() < g.len() {
-            self.queued.resize(g.len().max(2 * self.queued.len()), 0);
-        }
-        self.walk = self.walk.wrapping_add(1);
-        if self.walk == 0 {
-            self.queued.iter_mut().for_each(|m| *m = 0);
-            self.walk = 1;
-        }
+        self.queued.clear();
         let mut stack = Vec::with_capacity(16);
         stack.push(id);
         while let Some(n) = stack.pop() {
-            if self.memo.contains_key(&n) || self.queued[n.index()] == self.walk {
+            if self.memo.contains_key(&n) || !self.queued.insert(n.index()) {
                 continue;
             }
-            self.queued[n.index()] = self.walk;
             todo.push(n);
             stack.extend_from_slice(g.node(n).children());
         }
@@ -285,7 +286,7 @@ impl Simplifier {
                         terms += f.num.len();
                         polynomials &= f.den.is_empty();
                     }
-                    if count > 2 && terms > 64 && polynomials {
+                    if count > 2 && terms > MERGE_MIN_TERMS && polynomials {
                         // Large sums of polynomials: one merge of all the terms (pairwise sums
                         // would pass over the growing total once per operand); small ones
                         // are cheaper pairwise.
@@ -346,13 +347,7 @@ impl Simplifier {
                 let e = VecForm(vec![(VAtom::Basis(*axis), Frac::constant(Rational::ONE))]);
                 self.dot(g, &a, &e)?.map(Canon::S)
             }
-            Node::Call(f, a) => self.call(g, *f, *a)?.map(Canon::S),
-            Node::Atan2([y, x]) => {
-                let (sy, sx) = (self.memo[y].clone(), self.memo[x].clone());
-                let (sy, sx) = (self.build(g, &sy)?, self.build(g, &sx)?);
-                let atom = g.atan2(sy, sx)?;
-                Some(Canon::S(Frac::atom(atom)))
-            }
+            Node::Call(f, _) => self.call(g, *f, node.children())?.map(Canon::S),
         };
         // Sums and products of sums (common denominators, bilinear dot) can create
         // `sqrt(x)²` anew; reduce them in every form, not only after products and powers.
@@ -448,41 +443,40 @@ impl Simplifier {
             _ => (Rational::ONE, f.clone()),
         };
         let arg = self.build(g, &Canon::S(inside.clone()))?;
-        let atom = g.call(Func::Sqrt, arg)?;
+        let atom = g.call(Func::Sqrt, &[arg])?;
         self.radicals.insert(atom, Rc::new(inside));
         Ok(Some(Frac::atom(atom).scale(&outside)))
     }
 
-    fn call(&mut self, g: &mut Graph, f: Func, a: Id) -> Result<Option<Frac>, TypeError> {
-        let arg = self.scalar_of(a);
+    /// `f(args)`: `sqrt` through [`Self::sqrt`]; otherwise the table's exact value at
+    /// rational arguments, `f(f⁻¹(x)) = x`, or the call over simplified arguments as an atom.
+    fn call(&mut self, g: &mut Graph, f: Func, args: &[Id]) -> Result<Option<Frac>, TypeError> {
         if f == Func::Sqrt {
+            let arg = self.scalar_of(args[0]);
             return self.sqrt(g, &arg);
         }
-        if let Some(q) = arg.as_constant() {
-            // Exact values only: sin(0) = 0, cos(0) = 1, exp(0) = 1, ln(1) = 0, …
-            let exact = match f {
-                Func::Sin | Func::Tan | Func::Asin | Func::Atan if q.is_zero() => Some(Rational::ZERO),
-                Func::Cos | Func::Exp if q.is_zero() => Some(Rational::ONE),
-                Func::Ln | Func::Acos if q.is_one() => Some(Rational::ZERO),
-                _ => None,
-            };
-            if let Some(v) = exact {
-                return Ok(Some(Frac::constant(v)));
+        let constants: Option<Vec<Rational>> = args.iter().map(|&a| self.scalar_of(a).as_constant()).collect();
+        if let Some(v) = constants.and_then(|qs| f.exact(&qs)) {
+            return Ok(Some(Frac::constant(v)));
+        }
+        if let (Some(h), [a]) = (f.inverse(), args) {
+            let arg = self.scalar_of(*a);
+            if let Some(inner) = arg.num.as_atom().filter(|_| arg.den.is_empty())
+                && let Node::Call(k, [x, _]) = g.node(inner).clone()
+                && k == h
+            {
+                let c = self.canon(g, x)?;
+                if let Canon::S(s) = &*c {
+                    return Ok(Some(s.clone()));
+                }
             }
         }
-        // ln(exp x) = x and exp(ln x) = x.
-        if let Some(inner) = arg.num.as_atom().filter(|_| arg.den.is_empty())
-            && let Node::Call(h, x) = g.node(inner).clone()
-            && ((f == Func::Ln && h == Func::Exp) || (f == Func::Exp && h == Func::Ln))
-        {
-            let c = self.canon(g, x)?;
-            if let Canon::S(s) = &*c {
-                return Ok(Some(s.clone()));
-            }
+        let mut built = Vec::new();
+        for a in args {
+            let form = self.memo[a].clone();
+            built.push(self.build(g, &form)?);
         }
-        let built = self.memo[&a].clone();
-        let arg_node = self.build(g, &built)?;
-        let atom = g.call(f, arg_node)?;
+        let atom = g.call(f, &built)?;
         Ok(Some(Frac::atom(atom)))
     }
 
@@ -556,7 +550,7 @@ impl Simplifier {
             let mut general = false;
             'pairs: for (u, s) in &a.0 {
                 for (w, t) in &b.0 {
-                    let atom = self.dot_atoms(g, *u, *w)?;
+                    let Some(atom) = self.dot_atoms(g, *u, *w)? else { return Ok(None) };
                     if !atom.den.is_empty() {
                         general = true;
                         break 'pairs;
@@ -581,7 +575,7 @@ impl Simplifier {
         let mut acc = Frac::zero();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
-                let atom = self.dot_atoms(g, *u, *w)?;
+                let Some(atom) = self.dot_atoms(g, *u, *w)? else { return Ok(None) };
                 let Some(term) = s.mul(t).and_then(|st| st.mul(&atom)) else { return Ok(None) };
                 let Some(sum) = acc.add(&term) else { return Ok(None) };
                 acc = sum;
@@ -590,9 +584,12 @@ impl Simplifier {
         Ok(Some(self.reduce_radicals(acc)))
     }
 
-    fn dot_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Frac, TypeError> {
+    /// `u·w` of two vector atoms; `None` when it is too large to expand ([`super::poly::MAX_TERMS`]).
+    fn dot_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Option<Frac>, TypeError> {
         Ok(match (u, w) {
-            (VAtom::Basis(x), VAtom::Basis(y)) => Frac::constant(if x == y { Rational::ONE } else { Rational::ZERO }),
+            (VAtom::Basis(x), VAtom::Basis(y)) => {
+                Some(Frac::constant(if x == y { Rational::ONE } else { Rational::ZERO }))
+            }
             (VAtom::Atom(a), VAtom::Basis(x)) | (VAtom::Basis(x), VAtom::Atom(a)) => self.component(g, a, x)?,
             (VAtom::Atom(a), VAtom::Atom(b)) => {
                 match (g.node(a).clone(), g.node(b).clone()) {
@@ -602,15 +599,13 @@ impl Simplifier {
                         let qt = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(t))?;
                         let pt = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(t))?;
                         let qs = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(s))?;
-                        let first = ps.mul(&qt).unwrap_or_default();
-                        let second = pt.mul(&qs).unwrap_or_default();
-                        first.sub(&second).unwrap_or_default()
+                        difference_of_products([ps, qt, pt, qs])
                     }
-                    (Node::Cross([p, q]), _) => self.triple(g, b, p, q)?,
-                    (_, Node::Cross([p, q])) => self.triple(g, a, p, q)?,
+                    (Node::Cross([p, q]), _) => Some(self.triple(g, b, p, q)?),
+                    (_, Node::Cross([p, q])) => Some(self.triple(g, a, p, q)?),
                     _ => {
                         let (x, y) = if g.cmp_nodes(a, b).is_le() { (a, b) } else { (b, a) };
-                        Frac::atom(g.dot(x, y)?)
+                        Some(Frac::atom(g.dot(x, y)?))
                     }
                 }
             }
@@ -638,8 +633,8 @@ impl Simplifier {
         Ok(Frac::atom(atom).scale(&Rational::int(sign)))
     }
 
-    /// The component `axis` of a vector atom.
-    fn component(&mut self, g: &mut Graph, a: Id, axis: Axis) -> Result<Frac, TypeError> {
+    /// The component `axis` of a vector atom; `None` when it is too large to expand.
+    fn component(&mut self, g: &mut Graph, a: Id, axis: Axis) -> Result<Option<Frac>, TypeError> {
         if let Node::Cross([p, q]) = g.node(a).clone() {
             // (p×q)ₓ = p_y q_z − p_z q_y, cyclically.
             let (i, j) = match axis {
@@ -649,11 +644,9 @@ impl Simplifier {
             };
             let (pi, pj) = (self.component(g, p, i)?, self.component(g, p, j)?);
             let (qi, qj) = (self.component(g, q, i)?, self.component(g, q, j)?);
-            let first = pi.mul(&qj).unwrap_or_default();
-            let second = pj.mul(&qi).unwrap_or_default();
-            return Ok(first.sub(&second).unwrap_or_default());
+            return Ok(difference_of_products([pi, qj, pj, qi]));
         }
-        Ok(Frac::atom(g.comp(a, axis)?))
+        Ok(Some(Frac::atom(g.comp(a, axis)?)))
     }
 
     /// `a×b` in 3D, bilinear.
@@ -661,7 +654,7 @@ impl Simplifier {
         let mut acc = VecForm::default();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
-                let atom = self.cross_atoms(g, *u, *w)?;
+                let Some(atom) = self.cross_atoms(g, *u, *w)? else { return Ok(None) };
                 let Some(st) = s.mul(t) else { return Ok(None) };
                 let Some(term) = atom.scale(&st) else { return Ok(None) };
                 let Some(sum) = acc.add(&term) else { return Ok(None) };
@@ -671,9 +664,10 @@ impl Simplifier {
         Ok(Some(acc))
     }
 
-    fn cross_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<VecForm, TypeError> {
+    /// `u×w` of two vector atoms in 3D; `None` when it is too large to expand.
+    fn cross_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Option<VecForm>, TypeError> {
         let one = || Frac::constant(Rational::ONE);
-        Ok(match (u, w) {
+        Ok(Some(match (u, w) {
             (VAtom::Basis(x), VAtom::Basis(y)) => {
                 let (i, j) = (x.index(), y.index());
                 if i == j {
@@ -691,35 +685,38 @@ impl Simplifier {
                     for j in Axis::ALL {
                         let sign = levi_civita(i.index(), j.index(), e.index());
                         if sign != 0 {
-                            let aj = self.component(g, a, j)?.scale(&Rational::int(sign));
-                            let basis = VecForm::term(VAtom::Basis(i), aj);
-                            terms = terms.add(&basis).unwrap_or_default();
+                            let Some(aj) = self.component(g, a, j)? else { return Ok(None) };
+                            let basis = VecForm::term(VAtom::Basis(i), aj.scale(&Rational::int(sign)));
+                            let Some(sum) = terms.add(&basis) else { return Ok(None) };
+                            terms = sum;
                         }
                     }
                 }
                 terms
             }
-            (VAtom::Basis(_), VAtom::Atom(_)) => self.cross_atoms(g, w, u)?.negated(),
+            (VAtom::Basis(_), VAtom::Atom(_)) => return Ok(self.cross_atoms(g, w, u)?.map(|v| v.negated())),
             (VAtom::Atom(a), VAtom::Atom(b)) => {
                 if a == b {
-                    return Ok(VecForm::default());
+                    return Ok(Some(VecForm::default()));
                 }
                 match (g.node(a).clone(), g.node(b).clone()) {
                     // (p×q)×w = q(p·w) − p(q·w)
                     (Node::Cross([p, q]), _) => {
                         let pw = self.dot_atoms(g, VAtom::Atom(p), VAtom::Atom(b))?;
                         let qw = self.dot_atoms(g, VAtom::Atom(q), VAtom::Atom(b))?;
+                        let (Some(pw), Some(qw)) = (pw, qw) else { return Ok(None) };
                         let first = VecForm::term(VAtom::Atom(q), pw);
                         let second = VecForm::term(VAtom::Atom(p), qw);
-                        first.add(&second.negated()).unwrap_or_default()
+                        return Ok(first.add(&second.negated()));
                     }
                     // u×(p×q) = p(u·q) − q(u·p)
                     (_, Node::Cross([p, q])) => {
                         let uq = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(q))?;
                         let up = self.dot_atoms(g, VAtom::Atom(a), VAtom::Atom(p))?;
+                        let (Some(uq), Some(up)) = (uq, up) else { return Ok(None) };
                         let first = VecForm::term(VAtom::Atom(p), uq);
                         let second = VecForm::term(VAtom::Atom(q), up);
-                        first.add(&second.negated()).unwrap_or_default()
+                        return Ok(first.add(&second.negated()));
                     }
                     _ => {
                         let (x, y, sign) = if g.cmp_nodes(a, b).is_lt() { (a, b, 1) } else { (b, a, -1) };
@@ -728,7 +725,7 @@ impl Simplifier {
                     }
                 }
             }
-        })
+        }))
     }
 
     /// `a×b` in 2D: the scalar `a.x b.y − a.y b.x`, bilinear.
@@ -745,11 +742,13 @@ impl Simplifier {
                     // u × eₓ = −u.y, u × e_y = u.x
                     (VAtom::Atom(p), VAtom::Basis(x)) => {
                         let (axis, sign) = if x == Axis::X { (Axis::Y, -1) } else { (Axis::X, 1) };
-                        self.component(g, p, axis)?.scale(&Rational::int(sign))
+                        let Some(c) = self.component(g, p, axis)? else { return Ok(None) };
+                        c.scale(&Rational::int(sign))
                     }
                     (VAtom::Basis(x), VAtom::Atom(p)) => {
                         let (axis, sign) = if x == Axis::X { (Axis::Y, 1) } else { (Axis::X, -1) };
-                        self.component(g, p, axis)?.scale(&Rational::int(sign))
+                        let Some(c) = self.component(g, p, axis)? else { return Ok(None) };
+                        c.scale(&Rational::int(sign))
                     }
                     (VAtom::Atom(p), VAtom::Atom(q)) if p == q => Frac::zero(),
                     (VAtom::Atom(p), VAtom::Atom(q)) => {
@@ -833,6 +832,12 @@ fn sum_terms(mut terms: Vec<(Mono, Rational)>) -> Poly {
     Poly(out)
 }
 
+/// `p q − r s`, or `None` when a factor or a product is too large to expand: the caller
+/// then keeps its piece unexpanded (never zero).
+fn difference_of_products([p, q, r, s]: [Option<Frac>; 4]) -> Option<Frac> {
+    p?.mul(&q?)?.sub(&r?.mul(&s?)?)
+}
+
 fn levi_civita(i: usize, j: usize, k: usize) -> i64 {
     match (i, j, k) {
         (0, 1, 2) | (1, 2, 0) | (2, 0, 1) => 1,
@@ -849,6 +854,8 @@ impl VecForm {
     }
 
     pub(super) fn add(&self, other: &VecForm) -> Option<VecForm> {
+        // Merges: the result's size is bounded by the operands', and growing it was 3 % of the
+        // bead's derivation (callgrind).
         let mut out: Vec<(VAtom, Frac)> = Vec::with_capacity(self.0.len() + other.0.len());
         let (a, b) = (&self.0, &other.0);
         let (mut i, mut j) = (0, 0);
@@ -893,5 +900,35 @@ impl VecForm {
 
     fn negated(&self) -> VecForm {
         VecForm(self.0.iter().map(|(u, s)| (*u, s.neg())).collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::expr::graph::Role;
+
+    /// A component of `(((a₀×a₁)×a₂)×…)×a₁₂` has 2¹² terms, past `MAX_TERMS`: the form is
+    /// too large to expand, which means "keep it unexpanded", never zero.
+    #[test]
+    fn a_component_too_large_to_expand_is_not_zero() {
+        let mut g = Graph::new(3);
+        let vectors: Vec<Id> = (0..13)
+            .map(|i| {
+                let s = g.declare(&format!("a{i}"), Ty::Vector, Role::Parameter);
+                g.sym(s)
+            })
+            .collect();
+        let mut nested = vectors[0];
+        for &v in &vectors[1..] {
+            nested = g.cross(nested, v).expect("vectors");
+        }
+        let mut simplifier = Simplifier::new();
+        let component = simplifier.component(&mut g, nested, Axis::X).expect("well typed");
+        assert!(!component.is_some_and(|f| f.is_zero()), "a form too large to expand became zero");
+        // One level less fits, and is expanded.
+        let Node::Cross([smaller, _]) = g.node(nested).clone() else { panic!("a cross product") };
+        let expanded = simplifier.component(&mut g, smaller, Axis::X).expect("well typed");
+        assert_eq!(expanded.map(|f| f.num.len()), Some(1 << 11));
     }
 }

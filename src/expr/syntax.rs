@@ -80,16 +80,6 @@ pub enum RelOp {
     Le,
 }
 
-impl RelOp {
-    pub fn symbol(self) -> &'static str {
-        match self {
-            RelOp::Eq => "=",
-            RelOp::Ge => ">=",
-            RelOp::Le => "<=",
-        }
-    }
-}
-
 /// `lhs op rhs`, or a bare expression meaning `expr = 0`.
 #[derive(Clone, PartialEq, Debug)]
 pub struct Relation<'a> {

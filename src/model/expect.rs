@@ -28,8 +28,9 @@
 use super::problem::{Problem, locate, shown};
 use super::raw::{Entries, RawExpect, RawExpected, Text};
 use super::state::value;
-use super::system::{BuildError, SymbolWalk, System};
+use super::system::{BuildError, System};
 use crate::expr::eval::Value;
+use crate::expr::graph::SymbolWalk;
 use crate::expr::lower::suggest;
 use crate::expr::{Id, Role, Symbol, Ty};
 use std::ops::Range;

@@ -7,7 +7,7 @@
 //!
 //! Not here: TOML, numbers for solving (`model::file` keeps those), derivation (`derive`).
 
-use crate::expr::graph::NameSet;
+use crate::expr::graph::{NameSet, SymbolWalk};
 use crate::expr::lower::{LowerError, LoweredRelation, Scope, is_function_name, lower, lower_relation};
 use crate::expr::parse::{ParseError, parse_expr, parse_relation};
 use crate::expr::{Graph, Id, Node, Role, Simplifier, Symbol, Ty};
@@ -122,45 +122,6 @@ pub struct SystemBuilder {
     constraint_names: NameSet<String>,
     /// Scratch of the walk for a constraint's symbols, kept from one constraint to the next.
     walk: SymbolWalk,
-}
-
-/// The symbols an expression depends on (`Graph::free_symbols`), with its buffers kept: a
-/// mark per node, stamped with the walk's number, instead of a fresh hash set per walk.
-#[derive(Debug, Default)]
-pub(crate) struct SymbolWalk {
-    stamps: Vec<u32>,
-    stamp: u32,
-    stack: Vec<Id>,
-    symbols: Vec<Symbol>,
-}
-
-impl SymbolWalk {
-    /// The free symbols of `root`, sorted, each once.
-    pub(crate) fn free_symbols(&mut self, g: &Graph, root: Id) -> &[Symbol] {
-        if self.stamp == u32::MAX {
-            self.stamps.clear();
-            self.stamp = 0;
-        }
-        self.stamp += 1;
-        self.stamps.resize(g.len(), 0);
-        self.symbols.clear();
-        self.stack.clear();
-        self.stack.push(root);
-        while let Some(id) = self.stack.pop() {
-            let mark = &mut self.stamps[id.index()];
-            if *mark == self.stamp {
-                continue;
-            }
-            *mark = self.stamp;
-            match g.node(id) {
-                Node::Sym(s) => self.symbols.push(*s),
-                node => self.stack.extend_from_slice(node.children()),
-            }
-        }
-        self.symbols.sort_unstable();
-        self.symbols.dedup();
-        &self.symbols
-    }
 }
 
 /// What a name was declared as; written out (`the position of body `bead``) only for a

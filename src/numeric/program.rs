@@ -15,6 +15,7 @@
 //! Not here: register allocation and evaluation (`tape.rs`), text of any kind (`codegen`).
 
 use crate::expr::eval;
+use crate::expr::func::MAX_ARITY;
 use crate::expr::{Func, Graph, Id, Node, Symbol, Ty};
 use std::collections::HashMap;
 use std::ops::Range;
@@ -38,9 +39,9 @@ pub enum Op {
     Powi(Val, i32),
     /// `b^e` with the semantics of [`eval::pow`] (integer exponents by `powi`).
     Powf(Val, Val),
-    Call(Func, Val),
-    /// `atan2(y, x)`.
-    Atan2(Val, Val),
+    /// A function of the table over its arguments (the first `arity` slots; the others
+    /// repeat the first, so equal calls hash equal).
+    Call(Func, [Val; MAX_ARITY]),
     /// `|(x, y)|`, overflow-safe ([`norm2`]).
     Norm2(Val, Val),
     /// `|(x, y, z)|`, overflow-safe ([`norm3`]).
@@ -60,33 +61,27 @@ impl Op {
     pub fn operands(self) -> impl Iterator<Item = Val> {
         let (list, n): ([Val; 3], usize) = match self {
             Op::Input(_) | Op::Const(_) => ([0; 3], 0),
-            Op::Neg(a) | Op::Powi(a, _) | Op::Call(_, a) => ([a, 0, 0], 1),
-            Op::Add(a, b)
-            | Op::Sub(a, b)
-            | Op::Mul(a, b)
-            | Op::Div(a, b)
-            | Op::Powf(a, b)
-            | Op::Atan2(a, b)
-            | Op::Norm2(a, b) => ([a, b, 0], 2),
+            Op::Neg(a) | Op::Powi(a, _) => ([a, 0, 0], 1),
+            Op::Call(f, [a, b]) => ([a, b, 0], f.arity()),
+            Op::Add(a, b) | Op::Sub(a, b) | Op::Mul(a, b) | Op::Div(a, b) | Op::Powf(a, b) | Op::Norm2(a, b) => {
+                ([a, b, 0], 2)
+            }
             Op::Norm3(a, b, c) => ([a, b, c], 3),
         };
         list.into_iter().take(n)
     }
 }
 
-/// `sqrt(x² + y²)` without overflow or underflow: the plain formula when its square is a
-/// normal number, `hypot` (scaled) otherwise, so |r| ≈ 1e155 or 1e−160 still comes out right.
+/// `|(x, y)|`: [`eval::norm`], the one overflow-safe norm.
 #[inline]
 pub fn norm2(x: f64, y: f64) -> f64 {
-    let s = x * x + y * y;
-    if s.is_finite() && s >= f64::MIN_POSITIVE { s.sqrt() } else { x.hypot(y) }
+    eval::norm([x, y])
 }
 
-/// `sqrt(x² + y² + z²)`, overflow-safe like [`norm2`].
+/// `|(x, y, z)|`: [`eval::norm`], the one overflow-safe norm.
 #[inline]
 pub fn norm3(x: f64, y: f64, z: f64) -> f64 {
-    let s = x * x + y * y + z * z;
-    if s.is_finite() && s >= f64::MIN_POSITIVE { s.sqrt() } else { x.hypot(y).hypot(z) }
+    eval::norm([x, y, z])
 }
 
 /// Why expressions could not be lowered.
@@ -119,7 +114,7 @@ impl Program {
         let mut b = Builder::default();
         // Input layout: symbol → its slot values.
         let mut slots: HashMap<Symbol, [Val; 3]> = HashMap::new();
-        let mut input_ranges = Vec::with_capacity(inputs.len());
+        let mut input_ranges = Vec::new();
         let mut n = 0u32;
         for &s in inputs {
             let width = if g.symbol(s).ty == Ty::Vector { dim } else { 1 };
@@ -194,13 +189,15 @@ impl Program {
                     [b.norm(&x[..dim]), 0, 0]
                 }
                 Node::Comp(x, axis) => [get(x)[axis.index()], 0, 0],
-                Node::Call(f, x) => [b.call(*f, get(x)[0]), 0, 0],
-                Node::Atan2([y, x]) => [b.atan2(get(y)[0], get(x)[0]), 0, 0],
+                Node::Call(f, args) => {
+                    let args: Vec<Val> = args[..f.arity()].iter().map(|a| get(a)[0]).collect();
+                    [b.call(*f, &args), 0, 0]
+                }
             };
             vals.insert(id, v);
         }
         let mut outputs = Vec::new();
-        let mut output_ranges = Vec::with_capacity(roots.len());
+        let mut output_ranges = Vec::new();
         for r in roots {
             let width = if g.ty(*r) == Ty::Vector { dim } else { 1 };
             let start = outputs.len();
@@ -227,7 +224,7 @@ impl Program {
             return;
         }
         let mut b = Builder::default();
-        let mut map: Vec<Val> = Vec::with_capacity(self.ops.len());
+        let mut map: Vec<Val> = Vec::new();
         for op in &self.ops {
             let m = |v: Val| map[v as usize];
             let v = match *op {
@@ -262,7 +259,7 @@ impl Program {
             }
         }
         let mut new_index = vec![0; self.ops.len()];
-        let mut ops = Vec::with_capacity(self.ops.len());
+        let mut ops = Vec::new();
         for (i, op) in self.ops.iter().enumerate() {
             if live[i] {
                 new_index[i] = ops.len() as Val;
@@ -301,8 +298,7 @@ fn renumber(op: Op, m: &[Val]) -> Op {
         Op::Neg(a) => Op::Neg(r(a)),
         Op::Powi(a, n) => Op::Powi(r(a), n),
         Op::Powf(a, b) => Op::Powf(r(a), r(b)),
-        Op::Call(f, a) => Op::Call(f, r(a)),
-        Op::Atan2(a, b) => Op::Atan2(r(a), r(b)),
+        Op::Call(f, args) => Op::Call(f, args.map(r)),
         Op::Norm2(a, b) => Op::Norm2(r(a), r(b)),
         Op::Norm3(a, b, c) => Op::Norm3(r(a), r(b), r(c)),
     }
@@ -462,11 +458,11 @@ impl Builder {
             };
         }
         if e == 0.5 {
-            return self.call(Func::Sqrt, a);
+            return self.call(Func::Sqrt, &[a]);
         }
         if e == -0.5 {
             let one = self.constant(1.0);
-            let r = self.call(Func::Sqrt, a);
+            let r = self.call(Func::Sqrt, &[a]);
             return self.div(one, r);
         }
         let e = self.constant(e);
@@ -480,17 +476,12 @@ impl Builder {
         }
     }
 
-    fn call(&mut self, f: Func, a: Val) -> Val {
-        match self.k(a) {
-            Some(x) => self.constant(eval::apply(f, x)),
-            None => self.push(Op::Call(f, a)),
-        }
-    }
-
-    fn atan2(&mut self, y: Val, x: Val) -> Val {
-        match (self.k(y), self.k(x)) {
-            (Some(p), Some(q)) => self.constant(p.atan2(q)),
-            _ => self.push(Op::Atan2(y, x)),
+    /// `f(args)`, folded when every argument is a constant.
+    fn call(&mut self, f: Func, args: &[Val]) -> Val {
+        let constants: Option<Vec<f64>> = args.iter().map(|&a| self.k(a)).collect();
+        match constants {
+            Some(xs) => self.constant(f.apply(&xs)),
+            None => self.push(Op::Call(f, f.slots(args, 0))),
         }
     }
 
@@ -508,7 +499,7 @@ impl Builder {
                     let sq = self.mul(x, x);
                     acc = self.add(acc, sq);
                 }
-                self.call(Func::Sqrt, acc)
+                self.call(Func::Sqrt, &[acc])
             }
         }
     }

@@ -20,10 +20,10 @@
 
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
-use crate::expr::{Id, Node, Rational, Symbol};
+use crate::expr::graph::SymbolWalk;
+use crate::expr::{Id, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::tape::{Scratch, Tape};
-use std::collections::BTreeSet;
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -139,16 +139,7 @@ impl RowProgram {
                 jacobian: start..roots.len(),
             });
         }
-        let inputs: Vec<Symbol> = graph
-            .reachable(&roots)
-            .into_iter()
-            .filter_map(|id| match graph.node(id) {
-                Node::Sym(s) => Some(*s),
-                _ => None,
-            })
-            .collect::<BTreeSet<Symbol>>()
-            .into_iter()
-            .collect();
+        let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
         // Every symbol a root reads is an input and each is listed once, so lowering cannot fail.
         let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
         RowProgram { roots, bodies, rows, tape, inputs }

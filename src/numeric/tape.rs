@@ -62,16 +62,11 @@ enum Code {
     /// `a^imm`.
     Powi,
     Powf,
+    /// `sqrt(a)`: the one function with a machine instruction (and the commonest, from
+    /// norms and half powers), so it gets its own code and vectorises in lanes.
     Sqrt,
-    Sin,
-    Cos,
-    Tan,
-    Asin,
-    Acos,
-    Atan,
-    Exp,
-    Ln,
-    Atan2,
+    /// `f(a, b)`, a function of the table ([`Func::apply`]; `b` is read by binary ones).
+    Call(Func),
     Norm2,
     Norm3,
     /// `a·a`.
@@ -92,22 +87,6 @@ enum Code {
     NegMul,
     /// `−(a/b)`.
     NegDiv,
-}
-
-impl Code {
-    fn call(f: Func) -> Code {
-        match f {
-            Func::Sqrt => Code::Sqrt,
-            Func::Sin => Code::Sin,
-            Func::Cos => Code::Cos,
-            Func::Tan => Code::Tan,
-            Func::Asin => Code::Asin,
-            Func::Acos => Code::Acos,
-            Func::Atan => Code::Atan,
-            Func::Exp => Code::Exp,
-            Func::Ln => Code::Ln,
-        }
-    }
 }
 
 /// `r[d] = code(r[a], r[b], r[c], r[e])`. Unused operands repeat `a`; `d` is never an operand.
@@ -190,7 +169,7 @@ impl Tape {
         // Instructions over values: (value, code, imm, operands). Products read only by one
         // sum are absorbed into it.
         let mut absorbed = vec![false; n];
-        let mut virt: Vec<(usize, Code, i32, [Val; 4])> = Vec::with_capacity(n);
+        let mut virt: Vec<(usize, Code, i32, [Val; 4])> = Vec::new();
         for (i, op) in p.ops.iter().enumerate() {
             let (code, imm, args) = match *op {
                 Op::Input(_) | Op::Const(_) => continue,
@@ -235,8 +214,9 @@ impl Tape {
                 },
                 Op::Powi(a, k) => (Code::Powi, k, [a; 4]),
                 Op::Powf(a, b) => (Code::Powf, 0, [a, b, a, a]),
-                Op::Call(f, a) => (Code::call(f), 0, [a; 4]),
-                Op::Atan2(a, b) => (Code::Atan2, 0, [a, b, a, a]),
+                Op::Call(Func::Sqrt, [a, _]) => (Code::Sqrt, 0, [a; 4]),
+                // Unary calls' second slot repeats `a`, as unused operands do.
+                Op::Call(f, [a, b]) => (Code::Call(f), 0, [a, b, a, a]),
                 Op::Norm2(a, b) => (Code::Norm2, 0, [a, b, a, a]),
                 Op::Norm3(a, b, c) => (Code::Norm3, 0, [a, b, c, a]),
             };
@@ -271,7 +251,7 @@ impl Tape {
         let first_temp = (p.n_inputs + consts.len()) as u32;
         let mut n_regs = first_temp;
         let mut free: Vec<u32> = Vec::new();
-        let mut code = Vec::with_capacity(virt.len());
+        let mut code = Vec::new();
         for (k, &(i, kind, imm, args)) in virt.iter().enumerate() {
             // The destination is taken before the operands are freed, so it is never one of them.
             let d = free.pop().unwrap_or_else(|| {
@@ -387,15 +367,7 @@ impl Tape {
                 Code::Powi => a.powi(i.imm),
                 Code::Powf => eval::pow(a, b),
                 Code::Sqrt => a.sqrt(),
-                Code::Sin => a.sin(),
-                Code::Cos => a.cos(),
-                Code::Tan => a.tan(),
-                Code::Asin => a.asin(),
-                Code::Acos => a.acos(),
-                Code::Atan => a.atan(),
-                Code::Exp => a.exp(),
-                Code::Ln => a.ln(),
-                Code::Atan2 => a.atan2(b),
+                Code::Call(f) => f.apply(&[a, b]),
                 Code::Norm2 => norm2(a, b),
                 Code::Norm3 => norm3(a, b, reg(i.c)),
                 Code::Sq => a * a,
@@ -539,15 +511,7 @@ impl Tape {
                 Code::Powi => zip1(out, a, |x| x.powi(i.imm)),
                 Code::Powf => zip2(out, a, b, eval::pow),
                 Code::Sqrt => zip1(out, a, f64::sqrt),
-                Code::Sin => zip1(out, a, f64::sin),
-                Code::Cos => zip1(out, a, f64::cos),
-                Code::Tan => zip1(out, a, f64::tan),
-                Code::Asin => zip1(out, a, f64::asin),
-                Code::Acos => zip1(out, a, f64::acos),
-                Code::Atan => zip1(out, a, f64::atan),
-                Code::Exp => zip1(out, a, f64::exp),
-                Code::Ln => zip1(out, a, f64::ln),
-                Code::Atan2 => zip2(out, a, b, f64::atan2),
+                Code::Call(f) => zip2(out, a, b, |x, y| f.apply(&[x, y])),
                 Code::MulMulAdd => zip4(out, a, b, c, e, |w, x, y, z| w * x + y * z),
                 Code::MulMulSub => zip4(out, a, b, c, e, |w, x, y, z| w * x - y * z),
                 Code::MulAdd => zip3(out, a, b, c, |x, y, z| x * y + z),
