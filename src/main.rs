@@ -530,7 +530,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         StabilizeArg::Projection => Stabilize::Projection { tolerance: args.tolerance, max_iterations: 20 },
     };
     if let Err(e) = settings.validate() {
-        eprintln!("error: {e}");
+        eprintln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
         return ExitCode::from(2);
     }
     let mut csv = match &args.csv {

@@ -143,6 +143,8 @@ fn text_table_and_diagnostics_for_a_singular_state() {
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("status: singular") && text.contains("wire") && text.contains("gradient"), "{text}");
+    // The diagnostic names the constraint, not its index.
+    assert!(text.contains("- [wire] singular configuration: the gradient of constraint `wire` is zero here"), "{text}");
     let out = lagrange(&["solve", "constraints/floor_rest.toml", "--format", "json"]);
     let v = stdout_json(&out);
     assert_eq!(v["constraints"][0]["contact"], "resting");

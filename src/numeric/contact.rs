@@ -136,10 +136,7 @@ pub fn impulses(rows: &Rows, restitution: f64, settings: &Settings) -> Impulses 
     let e = if (0.0..=1.0).contains(&restitution) {
         restitution
     } else {
-        out.diagnostics.push(Diagnostic {
-            constraints: Vec::new(),
-            message: format!("restitution must lie in [0, 1], found {restitution}; 0 is used"),
-        });
+        out.diagnostics.push(Diagnostic::Restitution { value: restitution });
         out.status = Status::Failed;
         0.0
     };

@@ -13,6 +13,7 @@
 use super::integrate::{Field, Vectors};
 use super::rescale::Unit;
 use super::rows::{RowProgram, RowScratch, Rows};
+use super::simulate::SettingsError;
 use super::solve::{Solution, solve};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -35,7 +36,7 @@ pub enum SimError {
     #[error("cannot write the output: {0}")]
     Output(String),
     #[error("invalid settings: {0}")]
-    Settings(String),
+    Settings(#[from] SettingsError),
 }
 
 /// Baumgarte's terms b += 2αĊ + β²C, stored as (2α, β²).

@@ -232,21 +232,10 @@ pub fn solve_at(
         let scaled = *l;
         *l = unit.lambda(q, scaled);
         if scaled != 0.0 && !l.is_normal() {
-            solution.diagnostics.push(Diagnostic {
-                constraints: vec![q],
-                message: format!(
-                    "λ of constraint {q} is outside the normal f64 range at this scale ({l:e}); the forces and accelerations are exact"
-                ),
-            });
+            solution.diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: *l });
         }
     }
-    solution.diagnostics.push(Diagnostic {
-        constraints: Vec::new(),
-        message: format!(
-            "the numbers overflow at this state; solved in a length unit scaled by 2^{} (verified homogeneous) and scaled back",
-            -k
-        ),
-    });
+    solution.diagnostics.push(Diagnostic::Rescaled { exponent: -k });
     unit.rows(&mut rows);
     Ok((rows, solution))
 }

@@ -21,7 +21,9 @@ use super::dynamics::{Dynamics, SimError};
 use super::integrate::{Integrator, Stepper, Vectors};
 use super::rescale::Unit;
 use super::rows::Rows;
-use super::stabilize::{Stabilize, distance, project_positions, shake_positions, update_rates, velocity_step};
+use super::stabilize::{
+    Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
+};
 use crate::expr::eval::{Env, Value};
 use crate::model::system::System;
 use std::time::Instant;
@@ -56,19 +58,35 @@ impl Settings {
     }
 
     /// Bad settings, before any loop runs.
-    pub fn validate(&self) -> Result<(), SimError> {
-        let bad = |m: String| Err(SimError::Settings(m));
+    pub fn validate(&self) -> Result<(), SettingsError> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return bad(format!("the step must be finite and positive, found {}", self.dt));
+            return Err(SettingsError::Step(self.dt));
         }
         if !(0.0..=1.0).contains(&self.restitution) {
-            return bad(format!("the restitution must lie in [0, 1], found {}", self.restitution));
+            return Err(SettingsError::Restitution(self.restitution));
         }
         if !(self.blowup.is_finite() && self.blowup > 0.0) {
-            return bad(format!("the blow-up bound must be positive, found {}", self.blowup));
+            return Err(SettingsError::Blowup(self.blowup));
         }
-        self.stabilize.validate().map_err(SimError::Settings)
+        Ok(self.stabilize.validate()?)
     }
+}
+
+/// A run setting out of range (`Settings::validate`).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum SettingsError {
+    /// The step dt is not a finite positive number.
+    #[error("the step must be finite and positive, found {0}")]
+    Step(f64),
+    /// The restitution is outside [0, 1].
+    #[error("the restitution must lie in [0, 1], found {0}")]
+    Restitution(f64),
+    /// The blow-up bound is not a finite positive number.
+    #[error("the blow-up bound must be positive, found {0}")]
+    Blowup(f64),
+    /// A drift-control setting is out of range.
+    #[error(transparent)]
+    Stabilize(#[from] StabilizeError),
 }
 
 /// One recorded state, as the observer sees it.
@@ -179,7 +197,7 @@ struct Shown {
 
 impl<'s> Simulation<'s> {
     pub fn new(mut dynamics: Dynamics<'s>, env: &Env, settings: Settings) -> Result<Simulation<'s>, SimError> {
-        settings.validate()?;
+        settings.validate().map_err(SimError::Settings)?;
         let unit = dynamics.choose_unit(env)?;
         let (q, v, t0) = match &unit {
             Some(unit) => initial_state(dynamics.system(), &unit.to_unit(env)),

@@ -30,7 +30,7 @@
 
 use super::banded::Banded;
 use super::contact::{ContactState, classify};
-use super::qp::{QpStatus, kkt, solve_qp};
+use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use nalgebra::{DMatrix, DVector};
 
@@ -123,12 +123,65 @@ impl Status {
     }
 }
 
-/// Something the caller should know about a solve.
+/// Something the caller should know about a solve: one variant per cause, carrying the
+/// constraints involved (indices into the system's constraints) and the numbers that
+/// describe it. `report::solution` turns them into sentences with the constraints' names.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Diagnostic {
-    /// The constraints involved (indices).
-    pub constraints: Vec<usize>,
-    pub message: String,
+pub enum Diagnostic {
+    /// The row has non-finite numbers (its gradient or c term, C or Ċ of an inequality, or
+    /// the mass, velocity or force of a body it acts on); it is left out (`Failed`).
+    NonFiniteRow { constraint: usize },
+    /// The gradient is zero here (a singular configuration): the row carries no force.
+    /// `unsatisfiable`: its c term is not zero, so its C̈ = 0 cannot hold.
+    ZeroGradient { constraint: usize, unsatisfiable: bool },
+    /// The row acts only on bodies of infinite mass: it carries no force.
+    InfiniteMass { constraint: usize },
+    /// An inequality row is closing (Ċ < 0): it needs an impulse; the force holds it as if
+    /// resting.
+    Closing { constraint: usize },
+    /// An inequality row is violated beyond the tolerance; it is treated as touching.
+    Penetrating { constraint: usize },
+    /// λ is outside the normal f64 range at this scale although the forces are exact.
+    LambdaOutOfRange { constraint: usize, lambda: f64 },
+    /// λ came out non-finite and was set to 0 (`Failed`).
+    NonFiniteLambda { constraint: usize },
+    /// Ã is singular on these rows (redundant constraints or a singular configuration) and
+    /// the system is consistent: the minimum-norm λ. `rank` of `size` rows; `condition`
+    /// estimates σ_max/σ_min of the rest.
+    Redundant { constraints: Vec<usize>, rank: usize, size: usize, condition: f64 },
+    /// As [`Diagnostic::Redundant`], but the rows contradict each other: the least-squares
+    /// minimum-norm λ, with the relative residual left.
+    Inconsistent { constraints: Vec<usize>, rank: usize, size: usize, condition: f64, residual: f64 },
+    /// The contact QP over these rows gave no answer (`status` is neither solved nor almost
+    /// solved); λ is 0 on them.
+    QpFailed { constraints: Vec<usize>, status: QpStatus },
+    /// The contact QP's answer has poor KKT residuals (`Inaccurate`).
+    QpInaccurate { constraints: Vec<usize>, status: QpStatus, iterations: u32, residuals: Kkt },
+    /// A restitution outside [0, 1] was asked for; 0 is used.
+    Restitution { value: f64 },
+    /// The numbers overflow at this state; the solve ran in a length unit of 2^`exponent`
+    /// (verified homogeneous) and was scaled back.
+    Rescaled { exponent: i64 },
+}
+
+impl Diagnostic {
+    /// The constraints involved (indices; empty when the whole solve is meant).
+    pub fn constraints(&self) -> &[usize] {
+        match self {
+            Diagnostic::NonFiniteRow { constraint }
+            | Diagnostic::ZeroGradient { constraint, .. }
+            | Diagnostic::InfiniteMass { constraint }
+            | Diagnostic::Closing { constraint }
+            | Diagnostic::Penetrating { constraint }
+            | Diagnostic::LambdaOutOfRange { constraint, .. }
+            | Diagnostic::NonFiniteLambda { constraint } => std::slice::from_ref(constraint),
+            Diagnostic::Redundant { constraints, .. }
+            | Diagnostic::Inconsistent { constraints, .. }
+            | Diagnostic::QpFailed { constraints, .. }
+            | Diagnostic::QpInaccurate { constraints, .. } => constraints,
+            Diagnostic::Restitution { .. } | Diagnostic::Rescaled { .. } => &[],
+        }
+    }
 }
 
 /// The answer at one state.
@@ -213,23 +266,12 @@ impl Scaled {
                 && !row.jacobian.iter().any(|(b, _)| bad_body[*b])
                 && (!row.inequality || (row.value.is_finite() && row.rate.is_finite()));
             if !finite {
-                diagnostics.push(Diagnostic {
-                    constraints: vec![q],
-                    message: format!(
-                        "constraint {q} has non-finite numbers here (gradient, c term, C or Ċ of an inequality, or a body's mass, velocity or force); it is left out"
-                    ),
-                });
+                diagnostics.push(Diagnostic::NonFiniteRow { constraint: q });
                 *status = (*status).max(Status::Failed);
                 continue;
             }
             if norm == 0.0 {
-                diagnostics.push(Diagnostic {
-                    constraints: vec![q],
-                    message: format!(
-                        "singular configuration: the gradient of constraint {q} is zero here, so it carries no force (λ = 0){}",
-                        if row.bias == 0.0 { "" } else { "; its C̈ = 0 cannot hold" }
-                    ),
-                });
+                diagnostics.push(Diagnostic::ZeroGradient { constraint: q, unsatisfiable: row.bias != 0.0 });
                 *status = (*status).max(Status::Singular);
                 continue;
             }
@@ -244,10 +286,7 @@ impl Scaled {
                 })
                 .sum();
             if !(a_kk > 0.0 && a_kk.is_finite()) {
-                diagnostics.push(Diagnostic {
-                    constraints: vec![q],
-                    message: format!("constraint {q} acts only on bodies of infinite mass; it carries no force"),
-                });
+                diagnostics.push(Diagnostic::InfiniteMass { constraint: q });
                 *status = (*status).max(Status::Singular);
                 continue;
             }
@@ -349,18 +388,10 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
         .collect();
     for (q, contact) in contacts.iter().enumerate() {
         if let Some(ContactState::Closing) = contact {
-            diagnostics.push(Diagnostic {
-                constraints: vec![q],
-                message: format!(
-                    "contact {q} is closing (Ċ < 0): it needs an impulse P = −(1+e) J v / (J M⁻¹ Jᵀ) (numeric::contact::impulses); the force shown holds it as if resting"
-                ),
-            });
+            diagnostics.push(Diagnostic::Closing { constraint: q });
         }
         if let Some(ContactState::Penetrating) = contact {
-            diagnostics.push(Diagnostic {
-                constraints: vec![q],
-                message: format!("contact {q} is violated (C < 0 beyond the tolerance); it is treated as touching"),
-            });
+            diagnostics.push(Diagnostic::Penetrating { constraint: q });
         }
     }
     // b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ
@@ -383,13 +414,7 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
         // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
         // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
         if mu[p] != 0.0 && !lambda[q].is_normal() {
-            diagnostics.push(Diagnostic {
-                constraints: vec![q],
-                message: format!(
-                    "λ of constraint {q} is outside the normal f64 range at this scale ({:e}); the forces and accelerations are exact",
-                    lambda[q]
-                ),
-            });
+            diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: lambda[q] });
         }
     }
     // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
@@ -456,18 +481,11 @@ pub(crate) fn multipliers(
         return x;
     }
     if !clarabel_ok {
-        let (message, worst) = match qp.status {
-            QpStatus::Infeasible => {
-                ("the contact QP is infeasible: the constraints contradict each other", Status::Inconsistent)
-            }
-            QpStatus::Unbounded => {
-                ("the contact QP is unbounded: the rows are inconsistent (no λ ≥ 0 balances b)", Status::Inconsistent)
-            }
-            QpStatus::MaxIterations => ("the contact QP reached its iteration limit", Status::Failed),
-            QpStatus::NumericalError => ("the contact QP stopped on a numerical error", Status::Failed),
-            _ => ("the contact QP was rejected by Clarabel (an internal error)", Status::Failed),
+        let worst = match qp.status {
+            QpStatus::Infeasible | QpStatus::Unbounded => Status::Inconsistent,
+            _ => Status::Failed,
         };
-        diagnostics.push(Diagnostic { constraints: all, message: message.into() });
+        diagnostics.push(Diagnostic::QpFailed { constraints: all, status: qp.status });
         *status = (*status).max(worst);
         return vec![0.0; block.n];
     }
@@ -479,12 +497,11 @@ pub(crate) fn multipliers(
         (qp.lambda.clone(), qp.residuals)
     };
     if qp.status == QpStatus::AlmostSolved || residuals.worst() > tol.sqrt() {
-        diagnostics.push(Diagnostic {
+        diagnostics.push(Diagnostic::QpInaccurate {
             constraints: all,
-            message: format!(
-                "the contact QP ({:?}, {} iterations) has poor KKT residuals: stationarity {:.1e}, feasibility {:.1e}, complementarity {:.1e}",
-                qp.status, qp.iterations, residuals.stationarity, residuals.feasibility, residuals.complementarity
-            ),
+            status: qp.status,
+            iterations: qp.iterations,
+            residuals,
         });
         *status = (*status).max(Status::Inaccurate);
     }
@@ -664,10 +681,7 @@ fn finite_or_zero(
 ) -> Vec<f64> {
     for (p, v) in x.iter_mut().enumerate() {
         if !v.is_finite() {
-            diagnostics.push(Diagnostic {
-                constraints: vec![index[p]],
-                message: format!("λ of constraint {} came out non-finite; it is set to 0", index[p]),
-            });
+            diagnostics.push(Diagnostic::NonFiniteLambda { constraint: index[p] });
             *status = (*status).max(Status::Failed);
             *v = 0.0;
         }
@@ -709,19 +723,12 @@ fn minimum_norm(
             }
         }
     }
-    let involved: Vec<usize> = (0..n).filter(|&p| involved[p]).map(|p| index[p]).collect();
-    let named = involved.iter().map(|q| q.to_string()).collect::<Vec<_>>().join(", ");
-    diagnostics.push(Diagnostic {
-        constraints: involved.clone(),
-        message: format!(
-            "redundant or singular constraints ({named}): rank {rank} of {n}, condition of the rest ≈ {:.1e}; {}",
-            largest / smallest,
-            if consistent {
-                "consistent, minimum-norm λ".to_string()
-            } else {
-                format!("inconsistent (relative residual {:.1e}), least-squares minimum-norm λ", residual / size)
-            }
-        ),
+    let constraints: Vec<usize> = (0..n).filter(|&p| involved[p]).map(|p| index[p]).collect();
+    let condition = largest / smallest;
+    diagnostics.push(if consistent {
+        Diagnostic::Redundant { constraints, rank, size: n, condition }
+    } else {
+        Diagnostic::Inconsistent { constraints, rank, size: n, condition, residual: residual / size }
     });
     *status = (*status).max(if consistent { Status::MinimumNorm } else { Status::Inconsistent });
     mu.iter().copied().collect()

@@ -75,29 +75,46 @@ impl Stabilize {
     }
 
     /// Bad settings, before any loop runs.
-    pub fn validate(self) -> Result<(), String> {
+    pub fn validate(self) -> Result<(), StabilizeError> {
         match self {
             Stabilize::None => Ok(()),
             Stabilize::Baumgarte { zeta, omega_dt } => {
                 if !(zeta.is_finite() && zeta >= 0.0) {
-                    return Err(format!("the Baumgarte damping ratio must be finite and ≥ 0, found {zeta}"));
+                    return Err(StabilizeError::Damping(zeta));
                 }
                 if !(omega_dt.is_finite() && omega_dt > 0.0 && omega_dt <= 1.0) {
-                    return Err(format!("the Baumgarte frequency ω·dt must lie in (0, 1], found {omega_dt}"));
+                    return Err(StabilizeError::Frequency(omega_dt));
                 }
                 Ok(())
             }
             Stabilize::Projection { tolerance, max_iterations } => {
                 if !(tolerance.is_finite() && tolerance > 0.0) {
-                    return Err(format!("the projection tolerance must be positive, found {tolerance}"));
+                    return Err(StabilizeError::Tolerance(tolerance));
                 }
                 if max_iterations == 0 {
-                    return Err("the projection needs at least one iteration".into());
+                    return Err(StabilizeError::NoIterations);
                 }
                 Ok(())
             }
         }
     }
+}
+
+/// A drift-control setting out of range.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum StabilizeError {
+    /// Baumgarte's ζ is negative or not finite.
+    #[error("the Baumgarte damping ratio must be finite and ≥ 0, found {0}")]
+    Damping(f64),
+    /// Baumgarte's ω·dt is outside (0, 1].
+    #[error("the Baumgarte frequency ω·dt must lie in (0, 1], found {0}")]
+    Frequency(f64),
+    /// The projection tolerance is not a finite positive number.
+    #[error("the projection tolerance must be positive, found {0}")]
+    Tolerance(f64),
+    /// The projection may take no Newton iteration.
+    #[error("the projection needs at least one iteration")]
+    NoIterations,
 }
 
 /// ‖Jₖ‖ over all bodies of a row.
