@@ -87,7 +87,7 @@ fn diagnostics(system: &System, rows: &Rows, solution: &Solution) -> Vec<(Vec<St
 /// the system does not have stays a number.
 pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
     let name = |k: usize| system.constraints.get(k).map_or_else(|| k.to_string(), |c| format!("`{}`", c.name));
-    let list = |ks: &[usize]| ks.iter().map(|k| k.to_string()).collect::<Vec<_>>().join(", ");
+    let list = |ks: &[usize]| ks.iter().map(|&k| name(k)).collect::<Vec<_>>().join(", ");
     match diagnostic {
         Diagnostic::NonFiniteRow { constraint } => format!(
             "constraint {} has non-finite numbers here (gradient, c term, C or Ċ of an inequality, or a body's mass, velocity or force); it is left out",
