@@ -13,7 +13,9 @@ use lagrange::model::file::{Loaded, Problem, load};
 use lagrange::model::scene::environment;
 use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::rows::RowProgram;
-use lagrange::numeric::solve::{Settings, safe_norm};
+use lagrange::numeric::simulate::initial_state;
+use lagrange::numeric::solve::Settings;
+use lagrange::numeric::vector::length_scale;
 use lagrange::report::derivation::{self, Format};
 use lagrange::report::diagnostic::render;
 use lagrange::report::solution;
@@ -426,17 +428,10 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     let system = &loaded.system;
 
     // Contact distances count as zero relative to the size of the scene.
-    let length = system
-        .bodies
-        .iter()
-        .filter_map(|b| env.get(b.position).and_then(|v| v.vector()))
-        .map(|r| safe_norm(&r))
-        .fold(0.0, f64::max);
-    let settings =
-        Settings { length_scale: if length > 0.0 && length.is_finite() { length } else { 1.0 }, ..Settings::default() };
+    let (positions, _, t) = initial_state(system, &env);
+    let settings = Settings { length_scale: length_scale(&positions), ..Settings::default() };
     let (rows, solution) =
         solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
-    let t = env.get(system.time).and_then(|v| v.scalar()).unwrap_or(0.0);
     match format {
         SolveFormat::Json => {
             let v = solution::json(system, &derivation, &rows, &solution, t);

@@ -15,6 +15,7 @@
 
 use super::reference::{Dd, eval_dd, solve_dense};
 use crate::expr::eval::{Env, Value, eval};
+use crate::numeric::random::Rng;
 use crate::numeric::solve::solve;
 use crate::scenario::Scenario;
 use std::time::Instant;
@@ -35,28 +36,7 @@ pub struct AccuracyRow {
     pub nanos_per_eval: f64,
 }
 
-/// A small deterministic generator (SplitMix64), so a bench is reproducible.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    /// Uniform in [−0.5, 0.5).
-    pub fn centred(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    }
-}
-
-fn norm(x: &[f64; 3]) -> f64 {
-    crate::numeric::solve::safe_norm(x)
-}
+use crate::numeric::vector::safe_norm as norm;
 
 /// The forces on every body at `env`, in f64, by the path the library uses.
 fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
@@ -180,8 +160,8 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
                 let mut q = [0.0; 3];
                 let mut v = [0.0; 3];
                 for d in 0..dim {
-                    q[d] = qs * (q0[i][d] + length * rng.centred());
-                    v[d] = vs * (v0[i][d] + speed * rng.centred());
+                    q[d] = qs * (q0[i][d] + length * rng.uniform(-0.5, 0.5));
+                    v[d] = vs * (v0[i][d] + speed * rng.uniform(-0.5, 0.5));
                 }
                 env.set(body.position, Value::Vector(q));
                 env.set(body.velocity, Value::Vector(v));

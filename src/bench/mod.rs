@@ -17,6 +17,7 @@ pub mod reference;
 use crate::numeric::integrate::Integrator;
 use crate::numeric::simulate::Summary;
 use crate::numeric::stabilize::Stabilize;
+use crate::numeric::vector::length_scale;
 use crate::scenario::Scenario;
 
 /// What to sweep.
@@ -113,8 +114,7 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
         Err(e) => (None, Some(format!("the reference run (RK4 + projection, dt = {reference_dt:e}) failed: {e}"))),
     };
     let reference_position = reference.as_ref().map(|r| r.final_position.clone());
-    let length = reference_position.iter().flatten().map(crate::numeric::solve::safe_norm).fold(0.0, f64::max);
-    let length = if length > 0.0 { length } else { 1.0 };
+    let length = length_scale(reference_position.iter().flatten());
     let mut rows = Vec::new();
     for &integrator in &sweep.integrators {
         for &stabilize in &sweep.stabilizers {

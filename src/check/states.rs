@@ -23,6 +23,7 @@ use crate::expr::{Role, Symbol};
 use crate::model::file::RawValue;
 use crate::model::scene::Scene;
 use crate::model::system::System;
+use crate::numeric::random::Rng;
 use crate::numeric::rows::{RowProgram, Rows};
 use nalgebra::{DMatrix, DVector};
 use std::collections::BTreeMap;
@@ -33,44 +34,6 @@ const NEWTON_STEPS: usize = 60;
 const ATTEMPTS_PER_STATE: usize = 20;
 /// Smallest accepted σ_min/σ_max of J M⁻¹ Jᵀ.
 const MIN_CONDITION: f64 = 1e-6;
-
-/// A small deterministic generator (SplitMix64) with uniform and Gaussian draws.
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Standard normal (Box–Muller).
-    pub fn normal(&mut self) -> f64 {
-        let u = 1.0 - self.uniform();
-        let v = self.uniform();
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
-
-    fn vector(&mut self, dim: usize, scale: f64) -> [f64; 3] {
-        let mut x = [0.0; 3];
-        for c in x.iter_mut().take(dim) {
-            *c = scale * self.normal();
-        }
-        x
-    }
-}
 
 /// `count` states on the constraint manifold, or why they could not be found.
 pub fn sample(
@@ -117,19 +80,19 @@ pub fn sample(
             ));
         }
         let mut env = base.clone();
-        env.set(system.time, Value::Scalar(2.0 * rng.uniform()));
+        env.set(system.time, Value::Scalar(rng.uniform(0.0, 2.0)));
         for &m in &masses {
-            env.set(m, Value::Scalar(0.5 + 1.5 * rng.uniform()));
+            env.set(m, Value::Scalar(rng.uniform(0.5, 2.0)));
         }
         for (i, body) in system.bodies.iter().enumerate() {
-            let mut r = rng.vector(dim, 0.5 * size);
+            let mut r = rng.normal_vector(dim, 0.5 * size);
             for (c, s) in r.iter_mut().zip(start[i]) {
                 *c += s;
             }
             env.set(body.position, Value::Vector(r));
-            env.set(body.velocity, Value::Vector(rng.vector(dim, size)));
-            env.set(body.force, Value::Vector(rng.vector(dim, 10.0)));
-            env.set(body.acceleration, Value::Vector(rng.vector(dim, 10.0)));
+            env.set(body.velocity, Value::Vector(rng.normal_vector(dim, size)));
+            env.set(body.force, Value::Vector(rng.normal_vector(dim, 10.0)));
+            env.set(body.acceleration, Value::Vector(rng.normal_vector(dim, 10.0)));
         }
         if project(system, &program, &mut env, size).is_some() {
             states.push(env);

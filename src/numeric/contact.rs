@@ -17,7 +17,8 @@
 //! Not here: the QP itself (`numeric::qp`), integrating (the simulator applies Δv).
 
 use super::rows::Rows;
-use super::solve::{Diagnostic, Scaled, Settings, Status, assemble, multipliers, row_norm, safe_norm};
+use super::solve::{Diagnostic, Scaled, Settings, Status, assemble, multipliers};
+use super::vector::{row_norm, safe_norm};
 
 /// Where an inequality row stands at a state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -24,6 +24,7 @@ use super::rows::Rows;
 use super::stabilize::{
     Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
 };
+use super::vector::{dot, length_scale, safe_norm};
 use crate::expr::eval::{Env, Value};
 use crate::model::system::System;
 use std::time::Instant;
@@ -165,10 +166,6 @@ pub fn time_dependent(system: &System) -> bool {
     system.constraints.iter().any(|c| system.graph.free_symbols(c.c).contains(&system.time))
 }
 
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 /// A simulation in progress: the state and its scratch.
 pub struct Simulation<'s> {
     dynamics: Dynamics<'s>,
@@ -281,9 +278,8 @@ impl<'s> Simulation<'s> {
         let vector_back = |x: &[f64; 3]| unit.as_ref().map_or(*x, |u| u.vector(*x));
         let has_inequalities = system.constraints.iter().any(|c| c.inequality);
         let energy_reported = !time_dependent(system);
-        // The scene's length scale: the largest initial |rᵢ| (1 when every body is at 0).
-        let length = self.q.iter().map(super::solve::safe_norm).fold(0.0, f64::max);
-        let length = if length > 0.0 { length } else { 1.0 };
+        // The scene's length scale (in the run's unit).
+        let length = length_scale(&self.q);
         let bound = s.blowup * length;
         let touch = 1e-9 * length;
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
@@ -334,11 +330,11 @@ impl<'s> Simulation<'s> {
                 let w = rows.inverse_mass[i];
                 kinetic += 0.5 * dot(&self.v[i], &self.v[i]) / w;
                 power += dot(&rows.force[i], &self.v[i]);
-                accel = accel.max(super::solve::safe_norm(&rows.force[i]) * w);
+                accel = accel.max(safe_norm(&rows.force[i]) * w);
             }
             if n == 0 {
                 kinetic0 = kinetic;
-                let speed = self.v.iter().map(super::solve::safe_norm).fold(0.0, f64::max);
+                let speed = self.v.iter().map(safe_norm).fold(0.0, f64::max);
                 // Approaches slower than what ten steps of the external forces build up do not bounce.
                 bounce_speed = 10.0 * s.dt * accel + 1e-6 * speed;
             } else {

@@ -203,24 +203,9 @@ pub struct Solution {
     pub contacts: Vec<Option<ContactState>>,
 }
 
-/// ‖x‖ without overflow or underflow for any finite components.
-pub fn safe_norm(x: &[f64; 3]) -> f64 {
-    let big = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if big == 0.0 || !big.is_finite() {
-        return big;
-    }
-    let s: f64 = x.iter().map(|v| (v / big) * (v / big)).sum();
-    big * s.sqrt()
-}
-
-/// ‖J‖ of a whole row (all bodies' parts), without overflow.
-pub fn row_norm(jacobian: &[(usize, [f64; 3])]) -> f64 {
-    jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0f64, |a, b| safe_norm(&[a, b, 0.0]))
-}
-
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
+use super::vector::dot;
+/// Re-exported where callers have always found them; they live in `numeric::vector`.
+pub use super::vector::{row_norm, safe_norm};
 
 /// The rows rescaled to a unit-diagonal Ã (see the design note).
 #[derive(Clone, Debug)]

@@ -33,7 +33,8 @@
 use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rows::{Row, Rows};
-use super::solve::{safe_norm, solve};
+use super::solve::solve;
+use super::vector::row_norm;
 
 /// How drift is controlled.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -117,15 +118,10 @@ pub enum StabilizeError {
     NoIterations,
 }
 
-/// ‖Jₖ‖ over all bodies of a row.
-pub fn row_norm(row: &Row) -> f64 {
-    row.jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0f64, |a, b| safe_norm(&[a, b, 0.0]))
-}
-
 /// The first-order distance of a row to its surface, C/‖J‖ (signed). Where J = 0 (a
 /// singular configuration) it is 0 on the surface and ±∞ off it: no step along J reaches it.
 pub fn distance(row: &Row) -> f64 {
-    let n = row_norm(row);
+    let n = row_norm(&row.jacobian);
     if n > 0.0 && n.is_finite() {
         row.value / n
     } else if row.value == 0.0 {
@@ -137,7 +133,7 @@ pub fn distance(row: &Row) -> f64 {
 
 /// The normal speed of a row, Ċ/‖J‖ (signed; 0 when J = 0).
 pub fn normal_speed(row: &Row) -> f64 {
-    let n = row_norm(row);
+    let n = row_norm(&row.jacobian);
     if n > 0.0 && n.is_finite() { row.rate / n } else { 0.0 }
 }
 
