@@ -90,6 +90,12 @@ impl<'s> Dynamics<'s> {
         }
     }
 
+    /// Starts again from `env` (every parameter and mass) in the scene's own unit; the
+    /// evaluation count and scratch are kept.
+    pub fn reset(&mut self, env: Env) {
+        self.env = env;
+    }
+
     pub fn system(&self) -> &'s System {
         self.system
     }

@@ -22,7 +22,7 @@ use super::integrate::{Integrator, Stepper, Vectors};
 use super::rescale::Unit;
 use super::rows::Rows;
 use super::stabilize::{
-    Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
+    Inequalities, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
 };
 use super::vector::{dot, length_scale, safe_norm};
 use crate::expr::eval::{Env, Value};
@@ -258,8 +258,15 @@ impl<'s> Simulation<'s> {
 
     /// Newton onto C = 0 at `t` (`stabilize::project_positions`): the rows at the result.
     fn project(&mut self, t: f64, length: f64, tolerance: f64, max_iterations: usize) -> Result<Rows, SimError> {
-        let (rows, _) =
-            project_positions(&mut self.dynamics, t, &mut self.q, &self.v, length, tolerance, max_iterations)?;
+        let (rows, _) = project_positions(
+            &mut self.dynamics,
+            t,
+            &mut self.q,
+            &self.v,
+            tolerance * length,
+            max_iterations,
+            Inequalities::Violated,
+        )?;
         Ok(rows)
     }
 

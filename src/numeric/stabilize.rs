@@ -168,24 +168,35 @@ fn apply_correction(rows: &mut Rows, x: &mut Vectors) -> f64 {
     largest
 }
 
-/// Newton onto C = 0 (equalities, and violated inequalities) at time t; `length` is the
-/// scene's length scale for the relative tolerance. Returns the rows at the final positions
-/// and the iterations taken.
+/// Which inequality rows a projection holds on their surface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inequalities {
+    /// Only violated ones (C < 0), with μ ≥ 0 so a contact only pushes: a simulation.
+    Violated,
+    /// Every one, as an equality (μ of either sign): states on every constraint's surface,
+    /// as `check` needs to judge formulas that hold only there.
+    AsEqualities,
+}
+
+/// Newton onto C = 0 (equalities, and the inequalities `inequalities` says) at time t, until
+/// every enforced row's distance |C|/‖J‖ is at most `bound` (the relative tolerance times the
+/// scene's length scale) or `max_iterations` are spent. Returns the rows at the final
+/// positions and the iterations taken.
 pub fn project_positions(
     dynamics: &mut Dynamics<'_>,
     t: f64,
     q: &mut Vectors,
     v: &Vectors,
-    length: f64,
-    tolerance: f64,
+    bound: f64,
     max_iterations: usize,
+    inequalities: Inequalities,
 ) -> Result<(Rows, usize), SimError> {
-    let bound = tolerance * length;
     let mut iterations = 0;
     loop {
         let mut rows = dynamics.rows(t, q, v)?;
         // Residual: the largest first-order distance to a surface that is to be enforced.
-        let enforced = |row: &Row, s: f64| !row.inequality || s < 0.0;
+        let all = inequalities == Inequalities::AsEqualities;
+        let enforced = |row: &Row, s: f64| !row.inequality || all || s < 0.0;
         let mut residual = 0.0f64;
         for row in &rows.rows {
             let s = distance(row);
@@ -199,6 +210,7 @@ pub fn project_positions(
         for row in &mut rows.rows {
             if enforced(row, distance(row)) {
                 // (J M⁻¹ Jᵀ) μ = −C: c = C.
+                row.inequality &= !all;
                 enforce(row, row.value);
             } else {
                 leave_out(row);
@@ -280,6 +292,16 @@ pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {
             row.rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
         }
     }
+}
+
+/// Velocities onto Ċ = 0 for every row, inequalities as equalities, in one step (Ċ is
+/// affine in v: Δv = M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −Ċ). `rows` is spent.
+pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
+    for row in &mut rows.rows {
+        row.inequality = false;
+        enforce(row, row.rate);
+    }
+    apply_correction(rows, v);
 }
 
 /// The velocity solve at the rows of the current positions: closing contacts (touching
