@@ -592,23 +592,23 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
 }
 
 fn cmd_bench(args: &BenchArgs) -> ExitCode {
-    use lagrange::report::bench as table;
+    use lagrange::report::precision as table;
     let scenario = match scenario(&args.file) {
         Ok(s) => s,
         Err(code) => return code,
     };
-    let sweep = lagrange::bench::Sweep::new(
+    let sweep = lagrange::precision::Sweep::new(
         args.dt.unwrap_or(scenario.scene.dt),
         args.duration.unwrap_or(scenario.scene.duration),
     );
-    let wp = match lagrange::bench::work_precision(&scenario, &sweep) {
+    let wp = match lagrange::precision::work_precision(&scenario, &sweep) {
         Ok(wp) => wp,
         Err(e) => {
             eprintln!("error: {}: {e}", args.file.display());
             return ExitCode::from(2);
         }
     };
-    let accuracy = lagrange::bench::accuracy::formula_accuracy(&scenario, args.states, 1);
+    let accuracy = lagrange::precision::accuracy::formula_accuracy(&scenario, args.states, 1);
     match args.format {
         OutArg::Text => outln!("{}", table::text(&wp, &accuracy)),
         OutArg::Json => outln!("{}", serde_json::to_string_pretty(&table::json(&wp, &accuracy)).unwrap_or_default()),

@@ -3,7 +3,7 @@
 //! states of `check`, the accuracy sweep of `lagrange bench` and the tests are the same on
 //! every run and every machine.
 //!
-//! Not here: what the draws are used for (`check::states`, `bench::accuracy`), anything
+//! Not here: what the draws are used for (`check::states`, `precision::accuracy`), anything
 //! cryptographic.
 
 /// A small deterministic generator with uniform and Gaussian draws.

@@ -9,7 +9,10 @@
 //! scene's size. Plotted as error against time (log-log), a method further down-left is
 //! better: less error for the same time.
 //!
-//! Not here: printing or files (`report::bench`, `main.rs`).
+//! The module is named for what it measures (work against precision); "bench" names the
+//! command and the timing benchmarks in `benches/`.
+//!
+//! Not here: printing or files (`report::precision`, `main.rs`).
 
 pub mod accuracy;
 pub mod reference;
@@ -63,7 +66,7 @@ impl Sweep {
 
 /// One run of the sweep.
 #[derive(Clone, Debug, PartialEq)]
-pub struct BenchRow {
+pub struct SweepRow {
     pub integrator: String,
     pub stabilize: String,
     pub dt: f64,
@@ -87,7 +90,7 @@ pub struct WorkPrecision {
     pub reference_wall_seconds: f64,
     /// Why the reference run failed, if it did (the final-state errors are then unknown).
     pub reference_error: Option<String>,
-    pub rows: Vec<BenchRow>,
+    pub rows: Vec<SweepRow>,
 }
 
 fn steps_for(duration: f64, dt: f64) -> u64 {
@@ -130,7 +133,7 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
                                 .fold(0.0, f64::max)
                                 / length
                         });
-                        BenchRow {
+                        SweepRow {
                             integrator: integrator.name().into(),
                             stabilize: stabilize.name().into(),
                             dt: s.dt,
@@ -143,7 +146,7 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
                             status: "ok".into(),
                         }
                     }
-                    Err(e) => BenchRow {
+                    Err(e) => SweepRow {
                         integrator: integrator.name().into(),
                         stabilize: stabilize.name().into(),
                         dt: sweep.duration / steps as f64,

@@ -11,7 +11,7 @@
 //! from it (1e7: large cancelling terms). Formulas are compared as formulas: the states need
 //! not satisfy the constraints.
 //!
-//! Not here: the simulation error (`bench::work_precision`).
+//! Not here: the simulation error (`precision::work_precision`).
 
 use super::reference::{Dd, eval_dd, solve_dense};
 use crate::expr::eval::{Env, Value, eval};
