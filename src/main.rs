@@ -29,7 +29,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// constraints such as `dot(r,r) = l^2`. lagrange differentiates each constraint twice in
 /// time, finds the force directions ∇C, and solves for the Lagrange multipliers λ.
 #[derive(Parser, Debug)]
-#[command(name = "lagrange", version, about, long_about)]
+#[command(name = "lagrange", version, about, long_about, after_long_help = EXIT_CODES)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -203,6 +203,18 @@ enum FormatArg {
     Markdown,
     Json,
 }
+
+/// The exit codes, for `--help` (the README's Commands section has the same table).
+const EXIT_CODES: &str = "\
+Exit codes:
+  0  success
+  1  bad input or a failed check: an unreadable or invalid file, a bad --at or --set value,
+     a derivation or solve that cannot be done, an expectation that failed, or a failure to
+     write an output (standard output, -o, --plot, or creating the --csv file)
+  2  bad settings or a run that stopped: simulate's settings out of range, a simulation or
+     bench sweep that stopped (its summary is still printed; a CSV row that cannot be written
+     stops the run too), or arguments the command line refuses
+  3  internal failure (please report it with the input file)";
 
 /// Set when standard output failed for a reason other than its reader going away.
 static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
@@ -434,8 +446,7 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     match format {
         SolveFormat::Json => {
-            let v = solution::json(system, &derivation, &rows, &solution, t);
-            outln!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+            emit_json(&solution::json(system, &derivation, &rows, &solution, t));
         }
         SolveFormat::Text => out!("{}", solution::text(system, &derivation, &rows, &solution, t)),
     }
@@ -505,6 +516,7 @@ fn scenario(path: &Path) -> Result<lagrange::scenario::Scenario, ExitCode> {
 
 fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     use lagrange::numeric::integrate::Integrator;
+    use lagrange::numeric::simulate::steps_for;
     use lagrange::numeric::stabilize::Stabilize;
     let scenario = match scenario(&args.file) {
         Ok(s) => s,
@@ -513,7 +525,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     let mut settings = scenario.settings();
     settings.dt = args.dt.unwrap_or(settings.dt);
     let duration = args.duration.unwrap_or(scenario.scene.duration);
-    settings.steps = args.steps.unwrap_or((duration / settings.dt).round().max(0.0) as u64);
+    settings.steps = args.steps.unwrap_or_else(|| steps_for(duration, settings.dt));
     settings.integrator = match args.integrator {
         IntegratorArg::Euler => Integrator::Euler,
         IntegratorArg::Verlet => Integrator::Verlet,
@@ -572,10 +584,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     };
     let dim = scenario.system.dim();
     if args.format == SummaryArg::Json {
-        outln!(
-            "{}",
-            serde_json::to_string_pretty(&lagrange::report::simulation::json(&summary, dim)).unwrap_or_default()
-        );
+        emit_json(&lagrange::report::simulation::json(&summary, dim));
     } else {
         outln!("{}", lagrange::report::simulation::text(&summary, dim));
     }
@@ -611,7 +620,7 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
     let accuracy = lagrange::precision::accuracy::formula_accuracy(&scenario, args.states, 1);
     match args.format {
         OutArg::Text => outln!("{}", table::text(&wp, &accuracy)),
-        OutArg::Json => outln!("{}", serde_json::to_string_pretty(&table::json(&wp, &accuracy)).unwrap_or_default()),
+        OutArg::Json => emit_json(&table::json(&wp, &accuracy)),
         OutArg::Csv => out!("{}", table::csv(&wp, &accuracy)),
     }
     if let Some(path) = &args.plot {

@@ -51,7 +51,7 @@ impl Settings {
             integrator: Integrator::Verlet,
             stabilize: Stabilize::PROJECTION,
             dt,
-            steps: (duration / dt).round().max(0.0) as u64,
+            steps: steps_for(duration, dt),
             restitution: 0.0,
             blowup: 1.0,
             samples: 4000,
@@ -88,6 +88,11 @@ pub enum SettingsError {
     /// A drift-control setting is out of range.
     #[error(transparent)]
     Stabilize(#[from] StabilizeError),
+}
+
+/// The number of steps of `dt` that cover `duration` (rounded; 0 for a negative duration).
+pub fn steps_for(duration: f64, dt: f64) -> u64 {
+    (duration / dt).round().max(0.0) as u64
 }
 
 /// One recorded state, as the observer sees it.
