@@ -144,7 +144,7 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 0.1)]
     omega_dt: f64,
     /// Projection tolerance, relative to the scene's size.
-    #[arg(long, default_value_t = 1e-13)]
+    #[arg(long, default_value_t = lagrange::numeric::stabilize::PROJECTION_TOLERANCE)]
     tolerance: f64,
     /// Time step (overrides the scene's).
     #[arg(long)]
@@ -215,6 +215,12 @@ Exit codes:
      bench sweep that stopped (its summary is still printed; a CSV row that cannot be written
      stops the run too), or arguments the command line refuses
   3  internal failure (please report it with the input file)";
+
+/// Runs of at least this many steps show a progress bar (on a terminal): shorter ones end
+/// within about a second.
+const PROGRESS_MIN_STEPS: u64 = 20_000;
+/// The progress bar moves every this many steps, so drawing it costs nothing measurable.
+const PROGRESS_EVERY: u64 = 1000;
 
 /// Set when standard output failed for a reason other than its reader going away.
 static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
@@ -534,7 +540,10 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     settings.stabilize = match args.stabilize {
         StabilizeArg::None => Stabilize::None,
         StabilizeArg::Baumgarte => Stabilize::Baumgarte { zeta: args.zeta, omega_dt: args.omega_dt },
-        StabilizeArg::Projection => Stabilize::Projection { tolerance: args.tolerance, max_iterations: 20 },
+        StabilizeArg::Projection => Stabilize::Projection {
+            tolerance: args.tolerance,
+            max_iterations: lagrange::numeric::stabilize::PROJECTION_ITERATIONS,
+        },
     };
     if let Err(e) = settings.validate() {
         eprintln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
@@ -559,11 +568,11 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         }
     };
     use std::io::IsTerminal;
-    let bar = (std::io::stderr().is_terminal() && settings.steps >= 20_000)
+    let bar = (std::io::stderr().is_terminal() && settings.steps >= PROGRESS_MIN_STEPS)
         .then(|| indicatif::ProgressBar::new(settings.steps));
     let result = scenario.simulate(settings, &mut |frame| {
         if let Some(bar) = &bar
-            && frame.step.is_multiple_of(1000)
+            && frame.step.is_multiple_of(PROGRESS_EVERY)
         {
             bar.set_position(frame.step);
         }

@@ -51,6 +51,10 @@ pub struct BaumgarteTerms {
 /// thresholds (a contact's `length_scale` of 1) still mean something.
 pub const NATURAL_RANGE: i64 = 32;
 
+/// Rows kept for reuse: a step holds at most three at once (RATTLE's start, SHAKE's end and
+/// the projection's), so a fourth spare is never short and memory stays bounded.
+const SPARE_ROWS: usize = 4;
+
 /// The equations of motion of a system at any state.
 pub struct Dynamics<'s> {
     system: &'s System,
@@ -151,7 +155,7 @@ impl<'s> Dynamics<'s> {
     /// Gives rows back for reuse by the next [`rows`](Dynamics::rows) (optional: dropping
     /// them is correct, only slower).
     pub fn recycle(&mut self, rows: Rows) {
-        if self.spare.len() < 4 {
+        if self.spare.len() < SPARE_ROWS {
             self.spare.push(rows);
         }
     }

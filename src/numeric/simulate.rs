@@ -21,6 +21,7 @@ use super::dynamics::{Dynamics, SimError};
 use super::integrate::{Integrator, Stepper, Vectors};
 use super::rescale::Unit;
 use super::rows::Rows;
+use super::solve::CONTACT_TOLERANCE;
 use super::stabilize::{
     Inequalities, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
 };
@@ -28,6 +29,17 @@ use super::vector::{dot, length_scale, safe_norm};
 use crate::expr::eval::{Env, Value};
 use crate::model::system::System;
 use std::time::Instant;
+
+/// Samples kept for plots by default: 4000 points draw a smooth curve on any screen and keep
+/// the SVG small.
+pub const SAMPLES: usize = 4000;
+/// Bodies whose trajectories are plotted (the first ones): more lines would not be readable.
+const PLOTTED_BODIES: usize = 8;
+/// A closing contact bounces only when faster than what `BOUNCE_STEPS` steps of the external
+/// forces build up, plus `BOUNCE_SPEED_SHARE` of the initial top speed: a body at rest on a
+/// floor (or a taut rope) gains one step's worth per step and must not bounce on it.
+const BOUNCE_STEPS: f64 = 10.0;
+const BOUNCE_SPEED_SHARE: f64 = 1e-6;
 
 /// How a run goes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,7 +66,7 @@ impl Settings {
             steps: steps_for(duration, dt),
             restitution: 0.0,
             blowup: 1.0,
-            samples: 4000,
+            samples: SAMPLES,
         }
     }
 
@@ -293,9 +305,9 @@ impl<'s> Simulation<'s> {
         // The scene's length scale (in the run's unit).
         let length = length_scale(&self.q);
         let bound = s.blowup * length;
-        let touch = 1e-9 * length;
+        let touch = CONTACT_TOLERANCE * length;
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
-        let plotted = self.q.len().min(8);
+        let plotted = self.q.len().min(PLOTTED_BODIES);
         let (mut kinetic0, mut work, mut max_energy_error, mut max_kinetic) = (0.0, 0.0, 0.0f64, 0.0f64);
         // P at steps n−2, n−1 and dP/dt at step 0, for the end correction of the trapezoid.
         let (mut power_2, mut power_1, mut power_rate0) = (0.0, 0.0, 0.0);
@@ -348,7 +360,7 @@ impl<'s> Simulation<'s> {
                 kinetic0 = kinetic;
                 let speed = self.v.iter().map(safe_norm).fold(0.0, f64::max);
                 // Approaches slower than what ten steps of the external forces build up do not bounce.
-                bounce_speed = 10.0 * s.dt * accel + 1e-6 * speed;
+                bounce_speed = BOUNCE_STEPS * s.dt * accel + BOUNCE_SPEED_SHARE * speed;
             } else {
                 work += 0.5 * (power_1 + power) * s.dt;
             }

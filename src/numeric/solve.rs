@@ -34,6 +34,37 @@ use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use nalgebra::{DMatrix, DVector};
 
+/// Default of [`Settings::rank_tolerance`]: a pivot of the unit-diagonal Ã at 1e-10 means a
+/// row is dependent on the others to about five digits of a double's sixteen, so the rows are
+/// redundant rather than merely close, and rounding (≈1e-16 per entry) stays far below it.
+pub const RANK_TOLERANCE: f64 = 1e-10;
+/// Default of [`Settings::contact_tolerance`]: about 1e7 ulps, so the rounding of C and Ċ at
+/// a resting contact is inside it, while a contact 1e-9 of the scene's size apart is apart.
+pub const CONTACT_TOLERANCE: f64 = 1e-9;
+/// The band solve is used when `BAND_FRACTION` · bandwidth < n: the band factor costs n w²
+/// against dense n³/3, and below a quarter of the size the band path wins even against
+/// nalgebra's faster dense kernels (the `solve` benchmark's crossover).
+const BAND_FRACTION: usize = 4;
+/// Blocks smaller than this are not renumbered (reverse Cuthill–McKee): their dense solve
+/// takes microseconds, which the renumbering would not win back.
+const RENUMBER_MIN_ROWS: usize = 16;
+/// Murty's pivoting gives up after `FLIPS_PER_ROW` · n + `FLIPS_BASE` flips: the least-index
+/// rule needs a few flips per row on a positive definite Ã, so the bound only stops a cycle
+/// that rounding causes on a degenerate block.
+const FLIPS_PER_ROW: usize = 200;
+const FLIPS_BASE: usize = 1000;
+/// Murty's pivoting runs on blocks of at most this many rows (each flip is an equality solve;
+/// larger blocks are left to Clarabel's answer).
+const PIVOTING_MAX_ROWS: usize = 64;
+/// A least-squares λ counts as consistent when its residual is within
+/// √`contact_tolerance` · `CONSISTENCY` of the system's size (3e-7 at the default): the
+/// rounding of an ill-conditioned but consistent system stays below, rows that contradict
+/// each other by more than that are reported inconsistent.
+const CONSISTENCY: f64 = 1e-2;
+/// A row takes part in a null vector of Ã (it is named as redundant) when its component is
+/// above `NULL_SHARE` of the vector's largest: smaller ones are the SVD's rounding.
+const NULL_SHARE: f64 = 1e-6;
+
 /// Which factorisation the equality solve uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Method {
@@ -64,7 +95,12 @@ pub struct Settings {
 
 impl Default for Settings {
     fn default() -> Settings {
-        Settings { rank_tolerance: 1e-10, contact_tolerance: 1e-9, length_scale: 1.0, method: Method::Auto }
+        Settings {
+            rank_tolerance: RANK_TOLERANCE,
+            contact_tolerance: CONTACT_TOLERANCE,
+            length_scale: 1.0,
+            method: Method::Auto,
+        }
     }
 }
 
@@ -449,6 +485,8 @@ pub(crate) fn multipliers(
     let clarabel_ok = matches!(qp.status, QpStatus::Solved | QpStatus::AlmostSolved);
     // Polish: the equality solve on the rows the QP keeps (free rows and λ > 0).
     let big = qp.lambda.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    // Interior-point λ of an inactive row decays towards tol·big, an active one stays O(big):
+    // √tol·big lies between the two, so it separates them without knowing the answer.
     let keep: Vec<bool> = (0..block.n).map(|p| !nonnegative[p] || qp.lambda[p] > tol.sqrt() * big).collect();
     let (polished, d1, s1) = solve_subset(block, b, &keep, index, settings);
     let polished: Vec<f64> =
@@ -481,6 +519,7 @@ pub(crate) fn multipliers(
     } else {
         (qp.lambda.clone(), qp.residuals)
     };
+    // KKT residuals beyond √tol mean λ is good to fewer than half the digits asked for.
     if qp.status == QpStatus::AlmostSolved || residuals.worst() > tol.sqrt() {
         diagnostics.push(Diagnostic::QpInaccurate {
             constraints: all,
@@ -540,14 +579,13 @@ fn pivoting(
     index: &[usize],
     settings: &Settings,
 ) -> Option<(Vec<f64>, Vec<Diagnostic>, Status)> {
-    const MAX_ROWS: usize = 64;
     let n = block.n;
-    if n > MAX_ROWS {
+    if n > PIVOTING_MAX_ROWS {
         return None;
     }
     let tol = settings.contact_tolerance;
     let mut in_set: Vec<bool> = (0..n).map(|p| !nonnegative[p] || start[p]).collect();
-    for _ in 0..(200 * n + 1000) {
+    for _ in 0..(FLIPS_PER_ROW * n + FLIPS_BASE) {
         let (x, d, s) = solve_subset(block, b, &in_set, index, settings);
         if s > Status::MinimumNorm {
             return None;
@@ -585,7 +623,7 @@ pub(crate) fn equality(
     // Renumber by reverse Cuthill–McKee when the given order is not already narrow.
     let mut order: Option<Vec<usize>> = None;
     let mut bandwidth = block.bandwidth;
-    if settings.method != Method::Dense && 4 * bandwidth >= n && n >= 16 {
+    if settings.method != Method::Dense && BAND_FRACTION * bandwidth >= n && n >= RENUMBER_MIN_ROWS {
         let rcm = super::banded::reverse_cuthill_mckee(n, block.a.iter().map(|&(p, q, _)| (p, q)));
         let mut position = vec![0; n];
         for (new, &old) in rcm.iter().enumerate() {
@@ -600,7 +638,7 @@ pub(crate) fn equality(
     let banded = match settings.method {
         Method::Banded => true,
         Method::Dense => false,
-        Method::Auto => 4 * bandwidth < n,
+        Method::Auto => BAND_FRACTION * bandwidth < n,
     };
     let floor = settings.rank_tolerance;
     if banded {
@@ -693,7 +731,7 @@ fn minimum_norm(
     let mu = svd.solve(&rhs, threshold).unwrap_or_else(|_| DVector::zeros(n));
     let residual = (a * &mu - &rhs).amax();
     let size = rhs.amax() + a.amax() * mu.amax();
-    let consistent = residual <= settings.contact_tolerance.sqrt() * 1e-2 * size || size == 0.0;
+    let consistent = residual <= settings.contact_tolerance.sqrt() * CONSISTENCY * size || size == 0.0;
     let smallest = svd.singular_values.iter().copied().filter(|s| *s > threshold).fold(f64::INFINITY, f64::min);
     // Rows with a visible part in a null vector are the redundant ones.
     let mut involved = vec![false; n];
@@ -703,7 +741,7 @@ fn minimum_norm(
                 let row = v_t.row(s);
                 let top = row.amax();
                 for p in 0..n {
-                    involved[p] |= row[p].abs() > 1e-6 * top;
+                    involved[p] |= row[p].abs() > NULL_SHARE * top;
                 }
             }
         }

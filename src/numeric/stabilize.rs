@@ -36,6 +36,16 @@ use super::rows::{Row, Rows};
 use super::solve::solve;
 use super::vector::row_norm;
 
+/// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
+/// a few ulps of positions of that size, so a projected run keeps |C| at round-off.
+pub const PROJECTION_TOLERANCE: f64 = 1e-13;
+/// The projection's default iteration limit: Newton from one step's drift converges in two or
+/// three iterations; 20 leaves room for a large step and still bounds a step's cost.
+pub const PROJECTION_ITERATIONS: usize = 20;
+/// SHAKE stops when the residual more than doubles from one iteration to the next: the step
+/// was too large for the quasi-Newton iteration, which then diverges.
+const DIVERGENCE: f64 = 2.0;
+
 /// How drift is controlled.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Stabilize {
@@ -54,7 +64,8 @@ pub enum Stabilize {
 
 impl Stabilize {
     pub const BAUMGARTE: Stabilize = Stabilize::Baumgarte { zeta: 1.0, omega_dt: 0.1 };
-    pub const PROJECTION: Stabilize = Stabilize::Projection { tolerance: 1e-13, max_iterations: 20 };
+    pub const PROJECTION: Stabilize =
+        Stabilize::Projection { tolerance: PROJECTION_TOLERANCE, max_iterations: PROJECTION_ITERATIONS };
 
     pub fn name(self) -> &'static str {
         match self {
@@ -255,7 +266,7 @@ pub fn shake_positions(
         }
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
-        if residual <= bound || iterations >= max_iterations || residual > 2.0 * previous {
+        if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
             return Ok((rows, iterations));
         }
         previous = residual;
