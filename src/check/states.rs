@@ -86,7 +86,7 @@ pub fn sample(
         .map(|(s, _)| s)
         .collect();
     let mut rng = Rng::new(0x5eed_1a94_a27e);
-    let mut states = Vec::with_capacity(count);
+    let mut states = Vec::new();
     let mut attempts = 0;
     while states.len() < count {
         attempts += 1;
@@ -131,7 +131,8 @@ fn project(dynamics: &mut Dynamics<'_>, env: &mut Env, size: f64) -> Option<()> 
     let (mut rows, _) =
         project_positions(dynamics, t, &mut q, &v, bound, NEWTON_STEPS, Inequalities::AsEqualities).ok()?;
     let residual = rows.rows.iter().map(|r| distance(r).abs()).fold(0.0f64, f64::max);
-    if !(residual <= bound) || !well_conditioned(&rows) {
+    let converged = residual <= bound;
+    if !converged || !well_conditioned(&rows) {
         return None;
     }
     // Ċ = J v + ∂C/∂t is affine in v: one minimum-norm step makes it zero.

@@ -79,7 +79,7 @@ fn degrees(at: &Rows, half: &Rows) -> Option<Vec<i64>> {
     if !body_ok {
         return None;
     }
-    let mut out = Vec::with_capacity(at.rows.len());
+    let mut out = Vec::new();
     for (a, b) in at.rows.iter().zip(&half.rows) {
         // The degree from the first non-zero number: scalars have degree p, J has p − 1.
         let scalars = [(a.value, b.value), (a.rate, b.rate), (a.bias, b.bias)];

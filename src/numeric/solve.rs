@@ -270,6 +270,7 @@ impl Scaled {
                     || rows.velocity[i].iter().any(|x| !x.is_finite())
             })
             .collect();
+        // Sized up front: 1 % of a chain's simulation (see `assemble`).
         let parts = rows.rows.iter().map(|r| r.jacobian.len()).sum();
         let mut s = Scaled {
             norm: vec![0.0; k],
@@ -368,6 +369,9 @@ pub(crate) fn assemble(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -
             fill[b] += 1;
         }
     }
+    // Sized up front: growing it instead costs 1 % more instructions in a 100-link chain's
+    // simulation (callgrind, 300 steps: 352.5 M with both hints of this file, 356.1 M without
+    // `Scaled`'s, 359.6 M without either).
     let mut a = Vec::with_capacity(acting_on.len() * 2);
     let mut bandwidth = 0;
     for b in 0..n_bodies {

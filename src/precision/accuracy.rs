@@ -84,7 +84,7 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     let values = eval_dd(graph, &roots, env).ok()?;
     let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar()).collect();
     let mut at = n;
-    let mut force = Vec::with_capacity(n);
+    let mut force = Vec::new();
     for (i, f) in force_expr.iter().enumerate() {
         force.push(match f {
             Some(_) => {
