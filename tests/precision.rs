@@ -69,3 +69,19 @@ fn pendulum_work_precision_ranks_the_methods() {
     let accuracy = formula_accuracy(&s, 100, 3);
     assert!(accuracy.iter().all(|a| a.median_rel_error <= 1e-15 && a.max_rel_error <= 1e-13), "{accuracy:?}");
 }
+
+#[test]
+fn a_sweep_that_cannot_run_is_refused_by_cause() {
+    use lagrange::precision::SweepError;
+    let s = common::scenario("constraints/pendulum.toml");
+    let mut sweep = Sweep::new(1e-3, 1.0);
+    sweep.steps.truncate(3);
+    assert_eq!(work_precision(&s, &sweep).err(), Some(SweepError::TooFewSteps(3)));
+    let mut sweep = Sweep::new(1e-3, 1.0);
+    sweep.steps[0] = f64::NAN;
+    assert_eq!(sweep.validate(), Err(SweepError::Step));
+    assert_eq!(Sweep::new(1e-3, -1.0).validate(), Err(SweepError::Duration(-1.0)));
+    let mut sweep = Sweep::new(1e-3, 1.0);
+    sweep.integrators.clear();
+    assert_eq!(sweep.validate(), Err(SweepError::Empty));
+}

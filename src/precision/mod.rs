@@ -47,21 +47,38 @@ impl Sweep {
         }
     }
 
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SweepError> {
         if self.steps.len() < 4 {
-            return Err(format!("a sweep needs at least 4 step sizes, found {}", self.steps.len()));
+            return Err(SweepError::TooFewSteps(self.steps.len()));
         }
         if self.steps.iter().any(|dt| !(dt.is_finite() && *dt > 0.0)) {
-            return Err("step sizes must be finite and positive".into());
+            return Err(SweepError::Step);
         }
         if !(self.duration.is_finite() && self.duration > 0.0) {
-            return Err(format!("the duration must be positive, found {}", self.duration));
+            return Err(SweepError::Duration(self.duration));
         }
         if self.integrators.is_empty() || self.stabilizers.is_empty() {
-            return Err("nothing to sweep".into());
+            return Err(SweepError::Empty);
         }
         Ok(())
     }
+}
+
+/// A sweep that cannot run, before any run starts.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum SweepError {
+    /// Fewer than 4 step sizes (a slope needs a few points).
+    #[error("a sweep needs at least 4 step sizes, found {0}")]
+    TooFewSteps(usize),
+    /// A step size is zero, negative or not finite.
+    #[error("step sizes must be finite and positive")]
+    Step,
+    /// The simulated time is not a finite positive number.
+    #[error("the duration must be positive, found {0}")]
+    Duration(f64),
+    /// No integrator or no stabilisation to run.
+    #[error("nothing to sweep")]
+    Empty,
 }
 
 /// One run of the sweep.
@@ -98,7 +115,7 @@ fn steps_for(duration: f64, dt: f64) -> u64 {
 }
 
 /// Runs the sweep over `scenario`.
-pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecision, String> {
+pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecision, SweepError> {
     sweep.validate()?;
     let run = |integrator, stabilize, dt: f64| -> Result<Summary, String> {
         let mut settings = scenario.settings();
