@@ -25,15 +25,19 @@ use crate::expr::Symbol;
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
+/// `pow2` applies its factor in chunks of 2^±`POW2_CHUNK`: a normal f64 (the range ends near
+/// 2^±1022), so every partial product is exact and none overflows on the way.
+const POW2_CHUNK: i64 = 1000;
+
 /// x · 2ᵉ without an intermediate overflow or underflow of the factor.
 pub fn pow2(mut x: f64, mut e: i64) -> f64 {
-    while e > 1000 {
-        x *= 2f64.powi(1000);
-        e -= 1000;
+    while e > POW2_CHUNK {
+        x *= 2f64.powi(POW2_CHUNK as i32);
+        e -= POW2_CHUNK;
     }
-    while e < -1000 {
-        x *= 2f64.powi(-1000);
-        e += 1000;
+    while e < -POW2_CHUNK {
+        x *= 2f64.powi(-POW2_CHUNK as i32);
+        e += POW2_CHUNK;
     }
     x * 2f64.powi(e as i32)
 }

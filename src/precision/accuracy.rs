@@ -21,6 +21,10 @@ use crate::scenario::Scenario;
 use std::time::Instant;
 use twofloat::TwoFloat;
 
+/// The hard states scale positions and velocities by these (position, velocity) factors in
+/// turn: seven decades small or large, alone and together, where cancellation in f64 shows.
+const HARD_SCALES: [(f64, f64); 4] = [(1e-7, 1.0), (1.0, 1e7), (1e7, 1e7), (1e-7, 1e-7)];
+
 /// The error of one body's force over a class of states.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AccuracyRow {
@@ -153,8 +157,7 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
         let mut errors: Vec<Vec<f64>> = vec![Vec::new(); n];
         let mut envs = Vec::new();
         for k in 0..count {
-            let (qs, vs) =
-                if class == "random" { (1.0, 1.0) } else { [(1e-7, 1.0), (1.0, 1e7), (1e7, 1e7), (1e-7, 1e-7)][k % 4] };
+            let (qs, vs) = if class == "random" { (1.0, 1.0) } else { HARD_SCALES[k % HARD_SCALES.len()] };
             let mut env = s.env.clone();
             for (i, body) in system.bodies.iter().enumerate() {
                 let mut q = [0.0; 3];

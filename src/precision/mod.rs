@@ -31,7 +31,9 @@ pub struct Sweep {
     /// Step sizes, at least 4.
     pub steps: Vec<f64>,
     pub duration: f64,
-    /// The reference step is the finest step divided by this.
+    /// The reference step is the finest step divided by this; 16 by default, so the RK4
+    /// reference's error is 16⁴ ≈ 6.5·10⁴ times below what RK4 makes at the finest step and
+    /// does not show in any method's error.
     pub refinement: f64,
 }
 
