@@ -6,12 +6,12 @@
 //! [`numeric`] compiles formulas to a flat tape for numbers (one state or a batch), and
 //! [`codegen`] writes them as source code, both from one scalar lowering.
 
-pub mod bench;
 pub mod check;
 pub mod codegen;
 pub mod derive;
 pub mod expr;
 pub mod model;
 pub mod numeric;
+pub mod precision;
 pub mod report;
 pub mod scenario;

@@ -16,7 +16,9 @@ use lagrange::model::state;
 use lagrange::model::system::System;
 use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::rows::RowProgram;
-use lagrange::numeric::solve::{Settings, safe_norm};
+use lagrange::numeric::simulate::initial_state;
+use lagrange::numeric::solve::Settings;
+use lagrange::numeric::vector::length_scale;
 use lagrange::report::derivation::{self, Format};
 use lagrange::report::diagnostic::render;
 use lagrange::report::solution;
@@ -30,7 +32,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 /// constraints such as `dot(r,r) = l^2`. lagrange differentiates each constraint twice in
 /// time, finds the force directions ∇C, and solves for the Lagrange multipliers λ.
 #[derive(Parser, Debug)]
-#[command(name = "lagrange", version, about, long_about)]
+#[command(name = "lagrange", version, about, long_about, after_long_help = EXIT_CODES)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -145,7 +147,7 @@ struct SimulateArgs {
     #[arg(long, default_value_t = 0.1)]
     omega_dt: f64,
     /// Projection tolerance, relative to the scene's size.
-    #[arg(long, default_value_t = 1e-13)]
+    #[arg(long, default_value_t = lagrange::numeric::stabilize::PROJECTION_TOLERANCE)]
     tolerance: f64,
     /// Time step (overrides the scene's).
     #[arg(long)]
@@ -204,6 +206,24 @@ enum FormatArg {
     Markdown,
     Json,
 }
+
+/// The exit codes, for `--help` (the README's Commands section has the same table).
+const EXIT_CODES: &str = "\
+Exit codes:
+  0  success
+  1  bad input or a failed check: an unreadable or invalid file, a bad --at or --set value,
+     a derivation or solve that cannot be done, an expectation that failed, or a failure to
+     write an output (standard output, -o, --plot, or creating the --csv file)
+  2  bad settings or a run that stopped: simulate's settings out of range, a simulation or
+     bench sweep that stopped (its summary is still printed; a CSV row that cannot be written
+     stops the run too), or arguments the command line refuses
+  3  internal failure (please report it with the input file)";
+
+/// Runs of at least this many steps show a progress bar (on a terminal): shorter ones end
+/// within about a second.
+const PROGRESS_MIN_STEPS: u64 = 20_000;
+/// The progress bar moves every this many steps, so drawing it costs nothing measurable.
+const PROGRESS_EVERY: u64 = 1000;
 
 /// Set when standard output failed for a reason other than its reader going away.
 static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
@@ -416,21 +436,13 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
     let program = RowProgram::with_given_forces(system, &derivation, &loaded.scene.forces, &given);
 
     // Contact distances count as zero relative to the size of the scene.
-    let length = system
-        .bodies
-        .iter()
-        .filter_map(|b| env.get(b.position).and_then(|v| v.vector()))
-        .map(|r| safe_norm(&r))
-        .fold(0.0, f64::max);
-    let settings =
-        Settings { length_scale: if length > 0.0 && length.is_finite() { length } else { 1.0 }, ..Settings::default() };
+    let (positions, _, t) = initial_state(system, &env);
+    let settings = Settings { length_scale: length_scale(&positions), ..Settings::default() };
     let (rows, solution) =
         solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
-    let t = env.get(system.time).and_then(|v| v.scalar()).unwrap_or(0.0);
     match format {
         SolveFormat::Json => {
-            let v = solution::json(system, &derivation, &rows, &solution, t);
-            outln!("{}", serde_json::to_string_pretty(&v).unwrap_or_default());
+            emit_json(&solution::json(system, &derivation, &rows, &solution, t));
         }
         SolveFormat::Text => out!("{}", solution::text(system, &derivation, &rows, &solution, t)),
     }
@@ -500,6 +512,7 @@ fn scenario(path: &Path) -> Result<lagrange::scenario::Scenario, ExitCode> {
 
 fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     use lagrange::numeric::integrate::Integrator;
+    use lagrange::numeric::simulate::steps_for;
     use lagrange::numeric::stabilize::Stabilize;
     let scenario = match scenario(&args.file) {
         Ok(s) => s,
@@ -508,7 +521,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     let mut settings = scenario.settings();
     settings.dt = args.dt.unwrap_or(settings.dt);
     let duration = args.duration.unwrap_or(scenario.scene.duration);
-    settings.steps = args.steps.unwrap_or((duration / settings.dt).round().max(0.0) as u64);
+    settings.steps = args.steps.unwrap_or_else(|| steps_for(duration, settings.dt));
     settings.integrator = match args.integrator {
         IntegratorArg::Euler => Integrator::Euler,
         IntegratorArg::Verlet => Integrator::Verlet,
@@ -517,10 +530,13 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     settings.stabilize = match args.stabilize {
         StabilizeArg::None => Stabilize::None,
         StabilizeArg::Baumgarte => Stabilize::Baumgarte { zeta: args.zeta, omega_dt: args.omega_dt },
-        StabilizeArg::Projection => Stabilize::Projection { tolerance: args.tolerance, max_iterations: 20 },
+        StabilizeArg::Projection => Stabilize::Projection {
+            tolerance: args.tolerance,
+            max_iterations: lagrange::numeric::stabilize::PROJECTION_ITERATIONS,
+        },
     };
     if let Err(e) = settings.validate() {
-        eprintln!("error: {e}");
+        eprintln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
         return ExitCode::from(2);
     }
     let mut csv = match &args.csv {
@@ -542,11 +558,11 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         }
     };
     use std::io::IsTerminal;
-    let bar = (std::io::stderr().is_terminal() && settings.steps >= 20_000)
+    let bar = (std::io::stderr().is_terminal() && settings.steps >= PROGRESS_MIN_STEPS)
         .then(|| indicatif::ProgressBar::new(settings.steps));
     let result = scenario.simulate(settings, &mut |frame| {
         if let Some(bar) = &bar
-            && frame.step.is_multiple_of(1000)
+            && frame.step.is_multiple_of(PROGRESS_EVERY)
         {
             bar.set_position(frame.step);
         }
@@ -567,10 +583,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     };
     let dim = scenario.system.dim();
     if args.format == SummaryArg::Json {
-        outln!(
-            "{}",
-            serde_json::to_string_pretty(&lagrange::report::simulation::json(&summary, dim)).unwrap_or_default()
-        );
+        emit_json(&lagrange::report::simulation::json(&summary, dim));
     } else {
         outln!("{}", lagrange::report::simulation::text(&summary, dim));
     }
@@ -587,26 +600,26 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
 }
 
 fn cmd_bench(args: &BenchArgs) -> ExitCode {
-    use lagrange::report::bench as table;
+    use lagrange::report::precision as table;
     let scenario = match scenario(&args.file) {
         Ok(s) => s,
         Err(code) => return code,
     };
-    let sweep = lagrange::bench::Sweep::new(
+    let sweep = lagrange::precision::Sweep::new(
         args.dt.unwrap_or(scenario.scene.dt),
         args.duration.unwrap_or(scenario.scene.duration),
     );
-    let wp = match lagrange::bench::work_precision(&scenario, &sweep) {
+    let wp = match lagrange::precision::work_precision(&scenario, &sweep) {
         Ok(wp) => wp,
         Err(e) => {
             eprintln!("error: {}: {e}", args.file.display());
             return ExitCode::from(2);
         }
     };
-    let accuracy = lagrange::bench::accuracy::formula_accuracy(&scenario, args.states, 1);
+    let accuracy = lagrange::precision::accuracy::formula_accuracy(&scenario, args.states, 1);
     match args.format {
         OutArg::Text => outln!("{}", table::text(&wp, &accuracy)),
-        OutArg::Json => outln!("{}", serde_json::to_string_pretty(&table::json(&wp, &accuracy)).unwrap_or_default()),
+        OutArg::Json => emit_json(&table::json(&wp, &accuracy)),
         OutArg::Csv => out!("{}", table::csv(&wp, &accuracy)),
     }
     if let Some(path) = &args.plot {

@@ -143,8 +143,21 @@ fn text_table_and_diagnostics_for_a_singular_state() {
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("status: singular") && text.contains("wire") && text.contains("gradient"), "{text}");
+    // The diagnostic names the constraint, not its index.
+    assert!(text.contains("- [wire] singular configuration: the gradient of constraint `wire` is zero here"), "{text}");
     let out = lagrange(&["solve", "constraints/floor_rest.toml", "--format", "json"]);
     let v = stdout_json(&out);
     assert_eq!(v["constraints"][0]["contact"], "resting");
     assert!((v["constraints"][0]["lambda"].as_f64().expect("number") - 19.62).abs() < 1e-12);
+}
+
+#[test]
+fn long_help_documents_every_exit_code() {
+    let out = lagrange(&["--help"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let table = text.split("Exit codes:").nth(1).expect("an exit-code table in --help");
+    for code in ["0  success", "1  bad input", "2  bad settings", "3  internal failure"] {
+        assert!(table.contains(code), "{code} missing from {table}");
+    }
 }

@@ -69,7 +69,7 @@ fn double_pendulum_matches_lagranges_equations_in_angles() {
         let (m1, m2) = (rng.uniform(0.2, 5.0), rng.uniform(0.2, 5.0));
         let (t1, t2) = (rng.uniform(-3.2, 3.2), rng.uniform(-3.2, 3.2));
         let (w1, w2) = (rng.uniform(-3.0, 3.0), rng.uniform(-3.0, 3.0));
-        let (f1, f2) = (scale3(10.0, rng.vector(2)), scale3(10.0, rng.vector(2)));
+        let (f1, f2) = (scale3(10.0, rng.uniform_vector(2, -1.0, 1.0)), scale3(10.0, rng.uniform_vector(2, -1.0, 1.0)));
 
         // Minimal coordinates: r1 = l1 n(θ1), r2 = r1 + l2 n(θ2), n(θ) = (sin θ, −cos θ),
         // e(θ) = dn/dθ = (cos θ, sin θ), de/dθ = −n.
@@ -116,16 +116,17 @@ fn rod_between_two_free_masses_matches_centre_of_mass_and_relative_motion() {
             let l = rng.uniform(0.3, 3.0);
             let (m1, m2) = (rng.uniform(0.2, 5.0), rng.uniform(0.2, 5.0));
             let total = m1 + m2;
-            let (f1, f2) = (scale3(10.0, rng.vector(dim)), scale3(10.0, rng.vector(dim)));
+            let (f1, f2) =
+                (scale3(10.0, rng.uniform_vector(dim, -1.0, 1.0)), scale3(10.0, rng.uniform_vector(dim, -1.0, 1.0)));
             // Centre of mass R, relative vector d = r1 − r2 with |d| = l, ḋ ⟂ d.
-            let centre = rng.vector(dim);
-            let centre_velocity = rng.vector(dim);
-            let mut rel = rng.vector(dim);
+            let centre = rng.uniform_vector(dim, -1.0, 1.0);
+            let centre_velocity = rng.uniform_vector(dim, -1.0, 1.0);
+            let mut rel = rng.uniform_vector(dim, -1.0, 1.0);
             while dot3(rel, rel) < 0.01 {
-                rel = rng.vector(dim);
+                rel = rng.uniform_vector(dim, -1.0, 1.0);
             }
             let rel = scale3(l / dot3(rel, rel).sqrt(), rel);
-            let u = rng.vector(dim);
+            let u = rng.uniform_vector(dim, -1.0, 1.0);
             let rel_velocity = scale3(2.0, add3(u, scale3(-dot3(u, rel) / (l * l), rel)));
             let r1 = add3(centre, scale3(m2 / total, rel));
             let r2 = add3(centre, scale3(-m1 / total, rel));

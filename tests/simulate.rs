@@ -188,3 +188,35 @@ fn compiled_rows_agree_with_the_interpreter_on_every_file() {
     }
     assert!(checked >= 20, "only {checked} files checked");
 }
+
+#[test]
+fn bad_settings_are_refused_by_cause_before_any_step() {
+    use lagrange::numeric::simulate::{Settings, SettingsError};
+    use lagrange::numeric::stabilize::StabilizeError;
+    let good = Settings::new(1e-3, 1.0);
+    assert_eq!(good.validate(), Ok(()));
+    let refused = |change: fn(&mut Settings)| {
+        let mut s = good;
+        change(&mut s);
+        s.validate().expect_err("refused")
+    };
+    assert_eq!(refused(|s| s.dt = -1.0), SettingsError::Step(-1.0));
+    assert_eq!(refused(|s| s.restitution = 1.5), SettingsError::Restitution(1.5));
+    assert_eq!(refused(|s| s.blowup = 0.0), SettingsError::Blowup(0.0));
+    assert_eq!(
+        refused(|s| s.stabilize = Stabilize::Baumgarte { zeta: -1.0, omega_dt: 0.1 }),
+        SettingsError::Stabilize(StabilizeError::Damping(-1.0))
+    );
+    assert_eq!(
+        refused(|s| s.stabilize = Stabilize::Baumgarte { zeta: 1.0, omega_dt: 2.0 }),
+        SettingsError::Stabilize(StabilizeError::Frequency(2.0))
+    );
+    assert_eq!(
+        refused(|s| s.stabilize = Stabilize::Projection { tolerance: 0.0, max_iterations: 20 }),
+        SettingsError::Stabilize(StabilizeError::Tolerance(0.0))
+    );
+    assert_eq!(
+        refused(|s| s.stabilize = Stabilize::Projection { tolerance: 1e-13, max_iterations: 0 }),
+        SettingsError::Stabilize(StabilizeError::NoIterations)
+    );
+}

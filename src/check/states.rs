@@ -6,7 +6,11 @@
 //!    taken as active), each step the mass-weighted minimum-norm correction
 //!    Δq = −M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁺ C, until |Cₖ|/‖Jₖ‖ is at rounding level;
 //! 2. velocities: random, then projected onto Ċ = 0 in one exact step (Ċ is affine in v):
-//!    Δv = −M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁺ Ċ, so J v = −∂C/∂t;
+//!    Δv = −M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁺ Ċ, so J v = −∂C/∂t.
+//!
+//!    Both are the simulation's projection (`numeric::stabilize::project_positions` with
+//!    [`Inequalities::AsEqualities`], `project_velocities`), so J M⁻¹ Jᵀ is assembled and
+//!    factored by `numeric::solve` and nowhere else;
 //! 3. forces and accelerations: random; `t` uniform in [0, 2]; parameters from the file;
 //!    masses from the file, or uniform in [0.5, 2] when the file gives none.
 //!
@@ -15,60 +19,37 @@
 //!
 //! The generator is a fixed-seed SplitMix64, so a check gives the same states every run.
 //!
-//! Not here: comparing values (`check`), files or text.
+//! Not here: comparing values (`check`), a projection or linear algebra of its own, files or
+//! text.
 
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, Value};
 use crate::expr::{Role, Symbol};
 use crate::model::scene::Scene;
 use crate::model::system::System;
+use crate::numeric::dynamics::Dynamics;
+use crate::numeric::random::Rng;
 use crate::numeric::rows::{RowProgram, Rows};
-use nalgebra::{DMatrix, DVector};
+use crate::numeric::simulate::initial_state;
+use crate::numeric::solve::{Settings, Status, solve_with};
+use crate::numeric::stabilize::{Inequalities, distance, project_positions, project_velocities};
+use crate::numeric::vector::{row_norm, safe_norm};
 
-/// Newton iterations per attempt.
+/// Newton iterations per attempt: from a start half the scene's size away, Newton takes a
+/// handful of steps once quadratic; 60 leaves room for slow first steps near a fold.
 const NEWTON_STEPS: usize = 60;
+/// Newton stops when every |Cₖ|/‖Jₖ‖ is within this times the scene's size: rounding level
+/// of positions of that size, so formulas equal only on the surface agree to ~1e-13.
+const NEWTON_TOLERANCE: f64 = 1e-13;
+/// After the velocity projection every |Ċₖ|/‖Jₖ‖ must be within this times the fastest
+/// speed (rounding level of one linear solve).
+const RATE_TOLERANCE: f64 = 1e-12;
 /// Attempts per wanted state before giving up.
 const ATTEMPTS_PER_STATE: usize = 20;
-/// Smallest accepted σ_min/σ_max of J M⁻¹ Jᵀ.
+/// Smallest accepted squared pivot of the unit-diagonal J M⁻¹ Jᵀ (about σ_min/σ_max): states
+/// closer to a singular configuration make the formulas' 1/det terms amplify rounding past
+/// the check's relative 1e-9.
 const MIN_CONDITION: f64 = 1e-6;
-
-/// A small deterministic generator (SplitMix64) with uniform and Gaussian draws.
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Standard normal (Box–Muller).
-    pub fn normal(&mut self) -> f64 {
-        let u = 1.0 - self.uniform();
-        let v = self.uniform();
-        (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
-    }
-
-    fn vector(&mut self, dim: usize, scale: f64) -> [f64; 3] {
-        let mut x = [0.0; 3];
-        for c in x.iter_mut().take(dim) {
-            *c = scale * self.normal();
-        }
-        x
-    }
-}
 
 /// `count` states on the constraint manifold, or why they could not be found.
 pub fn sample(
@@ -79,6 +60,7 @@ pub fn sample(
     count: usize,
 ) -> Result<Vec<Env>, String> {
     let program = RowProgram::new(system, derivation, &[]);
+    let mut dynamics = Dynamics::new(system, program, Env::new());
     let dim = system.dim();
     let mut base = Env::new();
     for &(s, v) in parameters {
@@ -92,7 +74,7 @@ pub fn sample(
             _ => {}
         }
     }
-    let size = start.iter().map(norm).fold(1.0f64, f64::max);
+    let size = start.iter().map(safe_norm).fold(1.0f64, f64::max);
     let masses: Vec<Symbol> = system
         .graph
         .symbols()
@@ -100,7 +82,7 @@ pub fn sample(
         .map(|(s, _)| s)
         .collect();
     let mut rng = Rng::new(0x5eed_1a94_a27e);
-    let mut states = Vec::with_capacity(count);
+    let mut states = Vec::new();
     let mut attempts = 0;
     while states.len() < count {
         attempts += 1;
@@ -113,105 +95,61 @@ pub fn sample(
             ));
         }
         let mut env = base.clone();
-        env.set(system.time, Value::Scalar(2.0 * rng.uniform()));
+        env.set(system.time, Value::Scalar(rng.uniform(0.0, 2.0)));
         for &m in &masses {
-            env.set(m, Value::Scalar(0.5 + 1.5 * rng.uniform()));
+            env.set(m, Value::Scalar(rng.uniform(0.5, 2.0)));
         }
         for (i, body) in system.bodies.iter().enumerate() {
-            let mut r = rng.vector(dim, 0.5 * size);
+            let mut r = rng.normal_vector(dim, 0.5 * size);
             for (c, s) in r.iter_mut().zip(start[i]) {
                 *c += s;
             }
             env.set(body.position, Value::Vector(r));
-            env.set(body.velocity, Value::Vector(rng.vector(dim, size)));
-            env.set(body.force, Value::Vector(rng.vector(dim, 10.0)));
-            env.set(body.acceleration, Value::Vector(rng.vector(dim, 10.0)));
+            env.set(body.velocity, Value::Vector(rng.normal_vector(dim, size)));
+            env.set(body.force, Value::Vector(rng.normal_vector(dim, 10.0)));
+            env.set(body.acceleration, Value::Vector(rng.normal_vector(dim, 10.0)));
         }
-        if project(system, &program, &mut env, size).is_some() {
+        if project(&mut dynamics, &mut env, size).is_some() {
             states.push(env);
         }
     }
     Ok(states)
 }
 
-/// Projects `env`'s positions onto C = 0 and velocities onto Ċ = 0; `None` if it fails.
-fn project(system: &System, program: &RowProgram, env: &mut Env, size: f64) -> Option<()> {
-    let mut converged = false;
-    for _ in 0..NEWTON_STEPS {
-        let rows = program.evaluate(system, env).ok()?;
-        let residual = rows.rows.iter().map(|r| r.value.abs() / row_norm(r)).fold(0.0f64, f64::max);
-        if !residual.is_finite() {
-            return None;
-        }
-        if residual <= 1e-13 * size {
-            converged = true;
-            break;
-        }
-        let c: Vec<f64> = rows.rows.iter().map(|r| r.value).collect();
-        let step = correction(&rows, &c)?;
-        for (body, dq) in system.bodies.iter().zip(step) {
-            let r = env.get(body.position)?.vector()?;
-            env.set(body.position, Value::Vector([r[0] - dq[0], r[1] - dq[1], r[2] - dq[2]]));
-        }
-    }
-    if !converged {
+/// Projects `env`'s positions onto C = 0 and velocities onto Ċ = 0 with the simulation's
+/// projection (`numeric::stabilize`, every inequality held as an equality); `None` if Newton
+/// does not converge or J M⁻¹ Jᵀ is ill-conditioned at the result.
+fn project(dynamics: &mut Dynamics<'_>, env: &mut Env, size: f64) -> Option<()> {
+    let system = dynamics.system();
+    let (mut q, mut v, t) = initial_state(system, env);
+    dynamics.reset(env.clone());
+    let bound = NEWTON_TOLERANCE * size;
+    let (mut rows, _) =
+        project_positions(dynamics, t, &mut q, &v, bound, NEWTON_STEPS, Inequalities::AsEqualities).ok()?;
+    let residual = rows.rows.iter().map(|r| distance(r).abs()).fold(0.0f64, f64::max);
+    let converged = residual <= bound;
+    if !converged || !well_conditioned(&rows) {
         return None;
     }
     // Ċ = J v + ∂C/∂t is affine in v: one minimum-norm step makes it zero.
-    let rows = program.evaluate(system, env).ok()?;
-    let rate: Vec<f64> = rows.rows.iter().map(|r| r.rate).collect();
-    let step = correction(&rows, &rate)?;
-    for (body, dv) in system.bodies.iter().zip(step) {
-        let v = env.get(body.velocity)?.vector()?;
-        env.set(body.velocity, Value::Vector([v[0] - dv[0], v[1] - dv[1], v[2] - dv[2]]));
-    }
-    let rows = program.evaluate(system, env).ok()?;
-    let speed =
-        system.bodies.iter().filter_map(|b| env.get(b.velocity)?.vector()).map(|v| norm(&v)).fold(1.0, f64::max);
-    rows.rows.iter().all(|r| r.rate.abs() / row_norm(r) <= 1e-12 * speed).then_some(())
-}
-
-/// Δ per body = M⁻¹Jᵀ (J M⁻¹ Jᵀ)⁺ e, or `None` when J M⁻¹ Jᵀ is ill-conditioned.
-fn correction(rows: &Rows, e: &[f64]) -> Option<Vec<[f64; 3]>> {
-    let k = rows.rows.len();
-    let mut g = DMatrix::<f64>::zeros(k, k);
-    for (p, rp) in rows.rows.iter().enumerate() {
-        for (q, rq) in rows.rows.iter().enumerate() {
-            for (bp, jp) in &rp.jacobian {
-                for (bq, jq) in &rq.jacobian {
-                    if bp == bq {
-                        g[(p, q)] += dot(jp, jq) * rows.inverse_mass[*bp];
-                    }
-                }
-            }
-        }
-    }
-    let svd = g.svd(true, true);
-    let largest = svd.singular_values.max();
-    let smallest = svd.singular_values.min();
-    if !(largest > 0.0 && smallest >= MIN_CONDITION * largest) {
+    project_velocities(&mut rows, &mut v);
+    let rows = dynamics.rows(t, &q, &v).ok()?;
+    let speed = v.iter().map(safe_norm).fold(1.0, f64::max);
+    if !rows.rows.iter().all(|r| (r.rate / row_norm(&r.jacobian)).abs() <= RATE_TOLERANCE * speed) {
         return None;
     }
-    let mu = svd.solve(&DVector::from_column_slice(e), 0.0).ok()?;
-    let mut delta = vec![[0.0; 3]; rows.inverse_mass.len()];
-    for (p, row) in rows.rows.iter().enumerate() {
-        for (b, j) in &row.jacobian {
-            for d in 0..3 {
-                delta[*b][d] += rows.inverse_mass[*b] * mu[p] * j[d];
-            }
-        }
+    for (body, (q, v)) in system.bodies.iter().zip(q.into_iter().zip(v)) {
+        env.set(body.position, Value::Vector(q));
+        env.set(body.velocity, Value::Vector(v));
     }
-    Some(delta)
+    Some(())
 }
 
-fn row_norm(r: &crate::numeric::rows::Row) -> f64 {
-    r.jacobian.iter().map(|(_, j)| dot(j, j)).sum::<f64>().sqrt().max(f64::MIN_POSITIVE)
-}
-
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn norm(a: &[f64; 3]) -> f64 {
-    dot(a, a).sqrt()
+/// Whether J M⁻¹ Jᵀ at `rows`, scaled to a unit diagonal as the solve scales it, factors with
+/// every pivot above [`MIN_CONDITION`] (all rows taken as equalities): the solve's own test
+/// of a singular configuration, with a stricter threshold.
+fn well_conditioned(rows: &Rows) -> bool {
+    let mut rows = rows.clone();
+    rows.rows.iter_mut().for_each(|r| r.inequality = false);
+    solve_with(&rows, &Settings { rank_tolerance: MIN_CONDITION, ..Settings::default() }).status == Status::Solved
 }

@@ -161,7 +161,7 @@ pub fn reverse_cuthill_mckee(n: usize, edges: impl Iterator<Item = (usize, usize
     let mut by_degree: Vec<usize> = (0..n).collect();
     by_degree.sort_by_key(|&i| degree[i]);
     let mut seen = vec![false; n];
-    let mut order = Vec::with_capacity(n);
+    let mut order = Vec::new();
     for &start in &by_degree {
         if seen[start] {
             continue;

@@ -17,7 +17,8 @@
 //! Not here: the QP itself (`numeric::qp`), integrating (the simulator applies Δv).
 
 use super::rows::Rows;
-use super::solve::{Diagnostic, Scaled, Settings, Status, assemble, multipliers, row_norm, safe_norm};
+use super::solve::{Diagnostic, Scaled, Settings, Status, assemble, multipliers};
+use super::vector::{row_norm, safe_norm};
 
 /// Where an inequality row stands at a state.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -136,10 +137,7 @@ pub fn impulses(rows: &Rows, restitution: f64, settings: &Settings) -> Impulses 
     let e = if (0.0..=1.0).contains(&restitution) {
         restitution
     } else {
-        out.diagnostics.push(Diagnostic {
-            constraints: Vec::new(),
-            message: format!("restitution must lie in [0, 1], found {restitution}; 0 is used"),
-        });
+        out.diagnostics.push(Diagnostic::Restitution { value: restitution });
         out.status = Status::Failed;
         0.0
     };

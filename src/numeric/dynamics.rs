@@ -13,6 +13,7 @@
 use super::integrate::{Field, Vectors};
 use super::rescale::Unit;
 use super::rows::{RowProgram, RowScratch, Rows};
+use super::simulate::SettingsError;
 use super::solve::{Solution, solve};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -35,7 +36,7 @@ pub enum SimError {
     #[error("cannot write the output: {0}")]
     Output(String),
     #[error("invalid settings: {0}")]
-    Settings(String),
+    Settings(#[from] SettingsError),
 }
 
 /// Baumgarte's terms b += 2αĊ + β²C, stored as (2α, β²).
@@ -49,6 +50,10 @@ pub struct BaumgarteTerms {
 /// a few such numbers stay far from the ends of the f64 range, and the solve's absolute
 /// thresholds (a contact's `length_scale` of 1) still mean something.
 pub const NATURAL_RANGE: i64 = 32;
+
+/// Rows kept for reuse: a step holds at most three at once (RATTLE's start, SHAKE's end and
+/// the projection's), so a fourth spare is never short and memory stays bounded.
+const SPARE_ROWS: usize = 4;
 
 /// The equations of motion of a system at any state.
 pub struct Dynamics<'s> {
@@ -87,6 +92,12 @@ impl<'s> Dynamics<'s> {
             evaluations: 0,
             step: 0,
         }
+    }
+
+    /// Starts again from `env` (every parameter and mass) in the scene's own unit; the
+    /// evaluation count and scratch are kept.
+    pub fn reset(&mut self, env: Env) {
+        self.env = env;
     }
 
     pub fn system(&self) -> &'s System {
@@ -144,7 +155,7 @@ impl<'s> Dynamics<'s> {
     /// Gives rows back for reuse by the next [`rows`](Dynamics::rows) (optional: dropping
     /// them is correct, only slower).
     pub fn recycle(&mut self, rows: Rows) {
-        if self.spare.len() < 4 {
+        if self.spare.len() < SPARE_ROWS {
             self.spare.push(rows);
         }
     }

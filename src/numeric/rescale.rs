@@ -25,15 +25,19 @@ use crate::expr::Symbol;
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
+/// `pow2` applies its factor in chunks of 2^±`POW2_CHUNK`: a normal f64 (the range ends near
+/// 2^±1022), so every partial product is exact and none overflows on the way.
+const POW2_CHUNK: i64 = 1000;
+
 /// x · 2ᵉ without an intermediate overflow or underflow of the factor.
 pub fn pow2(mut x: f64, mut e: i64) -> f64 {
-    while e > 1000 {
-        x *= 2f64.powi(1000);
-        e -= 1000;
+    while e > POW2_CHUNK {
+        x *= 2f64.powi(POW2_CHUNK as i32);
+        e -= POW2_CHUNK;
     }
-    while e < -1000 {
-        x *= 2f64.powi(-1000);
-        e += 1000;
+    while e < -POW2_CHUNK {
+        x *= 2f64.powi(-POW2_CHUNK as i32);
+        e += POW2_CHUNK;
     }
     x * 2f64.powi(e as i32)
 }
@@ -79,7 +83,7 @@ fn degrees(at: &Rows, half: &Rows) -> Option<Vec<i64>> {
     if !body_ok {
         return None;
     }
-    let mut out = Vec::with_capacity(at.rows.len());
+    let mut out = Vec::new();
     for (a, b) in at.rows.iter().zip(&half.rows) {
         // The degree from the first non-zero number: scalars have degree p, J has p − 1.
         let scalars = [(a.value, b.value), (a.rate, b.rate), (a.bias, b.bias)];
@@ -232,21 +236,10 @@ pub fn solve_at(
         let scaled = *l;
         *l = unit.lambda(q, scaled);
         if scaled != 0.0 && !l.is_normal() {
-            solution.diagnostics.push(Diagnostic {
-                constraints: vec![q],
-                message: format!(
-                    "λ of constraint {q} is outside the normal f64 range at this scale ({l:e}); the forces and accelerations are exact"
-                ),
-            });
+            solution.diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: *l });
         }
     }
-    solution.diagnostics.push(Diagnostic {
-        constraints: Vec::new(),
-        message: format!(
-            "the numbers overflow at this state; solved in a length unit scaled by 2^{} (verified homogeneous) and scaled back",
-            -k
-        ),
-    });
+    solution.diagnostics.push(Diagnostic::Rescaled { exponent: -k });
     unit.rows(&mut rows);
     Ok((rows, solution))
 }

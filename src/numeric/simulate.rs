@@ -21,10 +21,25 @@ use super::dynamics::{Dynamics, SimError};
 use super::integrate::{Integrator, Stepper, Vectors};
 use super::rescale::Unit;
 use super::rows::Rows;
-use super::stabilize::{Stabilize, distance, project_positions, shake_positions, update_rates, velocity_step};
+use super::solve::CONTACT_TOLERANCE;
+use super::stabilize::{
+    Inequalities, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
+};
+use super::vector::{dot, length_scale, safe_norm};
 use crate::expr::eval::{Env, Value};
 use crate::model::system::System;
 use std::time::Instant;
+
+/// Samples kept for plots by default: 4000 points draw a smooth curve on any screen and keep
+/// the SVG small.
+pub const SAMPLES: usize = 4000;
+/// Bodies whose trajectories are plotted (the first ones): more lines would not be readable.
+const PLOTTED_BODIES: usize = 8;
+/// A closing contact bounces only when faster than what `BOUNCE_STEPS` steps of the external
+/// forces build up, plus `BOUNCE_SPEED_SHARE` of the initial top speed: a body at rest on a
+/// floor (or a taut rope) gains one step's worth per step and must not bounce on it.
+const BOUNCE_STEPS: f64 = 10.0;
+const BOUNCE_SPEED_SHARE: f64 = 1e-6;
 
 /// How a run goes.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,27 +63,48 @@ impl Settings {
             integrator: Integrator::Verlet,
             stabilize: Stabilize::PROJECTION,
             dt,
-            steps: (duration / dt).round().max(0.0) as u64,
+            steps: steps_for(duration, dt),
             restitution: 0.0,
             blowup: 1.0,
-            samples: 4000,
+            samples: SAMPLES,
         }
     }
 
     /// Bad settings, before any loop runs.
-    pub fn validate(&self) -> Result<(), SimError> {
-        let bad = |m: String| Err(SimError::Settings(m));
+    pub fn validate(&self) -> Result<(), SettingsError> {
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return bad(format!("the step must be finite and positive, found {}", self.dt));
+            return Err(SettingsError::Step(self.dt));
         }
         if !(0.0..=1.0).contains(&self.restitution) {
-            return bad(format!("the restitution must lie in [0, 1], found {}", self.restitution));
+            return Err(SettingsError::Restitution(self.restitution));
         }
         if !(self.blowup.is_finite() && self.blowup > 0.0) {
-            return bad(format!("the blow-up bound must be positive, found {}", self.blowup));
+            return Err(SettingsError::Blowup(self.blowup));
         }
-        self.stabilize.validate().map_err(SimError::Settings)
+        Ok(self.stabilize.validate()?)
     }
+}
+
+/// A run setting out of range (`Settings::validate`).
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum SettingsError {
+    /// The step dt is not a finite positive number.
+    #[error("the step must be finite and positive, found {0}")]
+    Step(f64),
+    /// The restitution is outside [0, 1].
+    #[error("the restitution must lie in [0, 1], found {0}")]
+    Restitution(f64),
+    /// The blow-up bound is not a finite positive number.
+    #[error("the blow-up bound must be positive, found {0}")]
+    Blowup(f64),
+    /// A drift-control setting is out of range.
+    #[error(transparent)]
+    Stabilize(#[from] StabilizeError),
+}
+
+/// The number of steps of `dt` that cover `duration` (rounded; 0 for a negative duration).
+pub fn steps_for(duration: f64, dt: f64) -> u64 {
+    (duration / dt).round().max(0.0) as u64
 }
 
 /// One recorded state, as the observer sees it.
@@ -147,10 +183,6 @@ pub fn time_dependent(system: &System) -> bool {
     system.constraints.iter().any(|c| system.graph.free_symbols(c.c).contains(&system.time))
 }
 
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 /// A simulation in progress: the state and its scratch.
 pub struct Simulation<'s> {
     dynamics: Dynamics<'s>,
@@ -179,7 +211,7 @@ struct Shown {
 
 impl<'s> Simulation<'s> {
     pub fn new(mut dynamics: Dynamics<'s>, env: &Env, settings: Settings) -> Result<Simulation<'s>, SimError> {
-        settings.validate()?;
+        settings.validate().map_err(SimError::Settings)?;
         let unit = dynamics.choose_unit(env)?;
         let (q, v, t0) = match &unit {
             Some(unit) => initial_state(dynamics.system(), &unit.to_unit(env)),
@@ -243,8 +275,15 @@ impl<'s> Simulation<'s> {
 
     /// Newton onto C = 0 at `t` (`stabilize::project_positions`): the rows at the result.
     fn project(&mut self, t: f64, length: f64, tolerance: f64, max_iterations: usize) -> Result<Rows, SimError> {
-        let (rows, _) =
-            project_positions(&mut self.dynamics, t, &mut self.q, &self.v, length, tolerance, max_iterations)?;
+        let (rows, _) = project_positions(
+            &mut self.dynamics,
+            t,
+            &mut self.q,
+            &self.v,
+            tolerance * length,
+            max_iterations,
+            Inequalities::Violated,
+        )?;
         Ok(rows)
     }
 
@@ -263,13 +302,12 @@ impl<'s> Simulation<'s> {
         let vector_back = |x: &[f64; 3]| unit.as_ref().map_or(*x, |u| u.vector(*x));
         let has_inequalities = system.constraints.iter().any(|c| c.inequality);
         let energy_reported = !time_dependent(system);
-        // The scene's length scale: the largest initial |rᵢ| (1 when every body is at 0).
-        let length = self.q.iter().map(super::solve::safe_norm).fold(0.0, f64::max);
-        let length = if length > 0.0 { length } else { 1.0 };
+        // The scene's length scale (in the run's unit).
+        let length = length_scale(&self.q);
         let bound = s.blowup * length;
-        let touch = 1e-9 * length;
+        let touch = CONTACT_TOLERANCE * length;
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
-        let plotted = self.q.len().min(8);
+        let plotted = self.q.len().min(PLOTTED_BODIES);
         let (mut kinetic0, mut work, mut max_energy_error, mut max_kinetic) = (0.0, 0.0, 0.0f64, 0.0f64);
         // P at steps n−2, n−1 and dP/dt at step 0, for the end correction of the trapezoid.
         let (mut power_2, mut power_1, mut power_rate0) = (0.0, 0.0, 0.0);
@@ -316,13 +354,13 @@ impl<'s> Simulation<'s> {
                 let w = rows.inverse_mass[i];
                 kinetic += 0.5 * dot(&self.v[i], &self.v[i]) / w;
                 power += dot(&rows.force[i], &self.v[i]);
-                accel = accel.max(super::solve::safe_norm(&rows.force[i]) * w);
+                accel = accel.max(safe_norm(&rows.force[i]) * w);
             }
             if n == 0 {
                 kinetic0 = kinetic;
-                let speed = self.v.iter().map(super::solve::safe_norm).fold(0.0, f64::max);
+                let speed = self.v.iter().map(safe_norm).fold(0.0, f64::max);
                 // Approaches slower than what ten steps of the external forces build up do not bounce.
-                bounce_speed = 10.0 * s.dt * accel + 1e-6 * speed;
+                bounce_speed = BOUNCE_STEPS * s.dt * accel + BOUNCE_SPEED_SHARE * speed;
             } else {
                 work += 0.5 * (power_1 + power) * s.dt;
             }

@@ -33,7 +33,18 @@
 use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rows::{Row, Rows};
-use super::solve::{safe_norm, solve};
+use super::solve::solve;
+use super::vector::row_norm;
+
+/// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
+/// a few ulps of positions of that size, so a projected run keeps |C| at round-off.
+pub const PROJECTION_TOLERANCE: f64 = 1e-13;
+/// The projection's default iteration limit: Newton from one step's drift converges in two or
+/// three iterations; 20 leaves room for a large step and still bounds a step's cost.
+pub const PROJECTION_ITERATIONS: usize = 20;
+/// SHAKE stops when the residual more than doubles from one iteration to the next: the step
+/// was too large for the quasi-Newton iteration, which then diverges.
+const DIVERGENCE: f64 = 2.0;
 
 /// How drift is controlled.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -53,7 +64,8 @@ pub enum Stabilize {
 
 impl Stabilize {
     pub const BAUMGARTE: Stabilize = Stabilize::Baumgarte { zeta: 1.0, omega_dt: 0.1 };
-    pub const PROJECTION: Stabilize = Stabilize::Projection { tolerance: 1e-13, max_iterations: 20 };
+    pub const PROJECTION: Stabilize =
+        Stabilize::Projection { tolerance: PROJECTION_TOLERANCE, max_iterations: PROJECTION_ITERATIONS };
 
     pub fn name(self) -> &'static str {
         match self {
@@ -75,24 +87,24 @@ impl Stabilize {
     }
 
     /// Bad settings, before any loop runs.
-    pub fn validate(self) -> Result<(), String> {
+    pub fn validate(self) -> Result<(), StabilizeError> {
         match self {
             Stabilize::None => Ok(()),
             Stabilize::Baumgarte { zeta, omega_dt } => {
                 if !(zeta.is_finite() && zeta >= 0.0) {
-                    return Err(format!("the Baumgarte damping ratio must be finite and ≥ 0, found {zeta}"));
+                    return Err(StabilizeError::Damping(zeta));
                 }
                 if !(omega_dt.is_finite() && omega_dt > 0.0 && omega_dt <= 1.0) {
-                    return Err(format!("the Baumgarte frequency ω·dt must lie in (0, 1], found {omega_dt}"));
+                    return Err(StabilizeError::Frequency(omega_dt));
                 }
                 Ok(())
             }
             Stabilize::Projection { tolerance, max_iterations } => {
                 if !(tolerance.is_finite() && tolerance > 0.0) {
-                    return Err(format!("the projection tolerance must be positive, found {tolerance}"));
+                    return Err(StabilizeError::Tolerance(tolerance));
                 }
                 if max_iterations == 0 {
-                    return Err("the projection needs at least one iteration".into());
+                    return Err(StabilizeError::NoIterations);
                 }
                 Ok(())
             }
@@ -100,15 +112,27 @@ impl Stabilize {
     }
 }
 
-/// ‖Jₖ‖ over all bodies of a row.
-pub fn row_norm(row: &Row) -> f64 {
-    row.jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0f64, |a, b| safe_norm(&[a, b, 0.0]))
+/// A drift-control setting out of range.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum StabilizeError {
+    /// Baumgarte's ζ is negative or not finite.
+    #[error("the Baumgarte damping ratio must be finite and ≥ 0, found {0}")]
+    Damping(f64),
+    /// Baumgarte's ω·dt is outside (0, 1].
+    #[error("the Baumgarte frequency ω·dt must lie in (0, 1], found {0}")]
+    Frequency(f64),
+    /// The projection tolerance is not a finite positive number.
+    #[error("the projection tolerance must be positive, found {0}")]
+    Tolerance(f64),
+    /// The projection may take no Newton iteration.
+    #[error("the projection needs at least one iteration")]
+    NoIterations,
 }
 
 /// The first-order distance of a row to its surface, C/‖J‖ (signed). Where J = 0 (a
 /// singular configuration) it is 0 on the surface and ±∞ off it: no step along J reaches it.
 pub fn distance(row: &Row) -> f64 {
-    let n = row_norm(row);
+    let n = row_norm(&row.jacobian);
     if n > 0.0 && n.is_finite() {
         row.value / n
     } else if row.value == 0.0 {
@@ -120,7 +144,7 @@ pub fn distance(row: &Row) -> f64 {
 
 /// The normal speed of a row, Ċ/‖J‖ (signed; 0 when J = 0).
 pub fn normal_speed(row: &Row) -> f64 {
-    let n = row_norm(row);
+    let n = row_norm(&row.jacobian);
     if n > 0.0 && n.is_finite() { row.rate / n } else { 0.0 }
 }
 
@@ -155,24 +179,35 @@ fn apply_correction(rows: &mut Rows, x: &mut Vectors) -> f64 {
     largest
 }
 
-/// Newton onto C = 0 (equalities, and violated inequalities) at time t; `length` is the
-/// scene's length scale for the relative tolerance. Returns the rows at the final positions
-/// and the iterations taken.
+/// Which inequality rows a projection holds on their surface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Inequalities {
+    /// Only violated ones (C < 0), with μ ≥ 0 so a contact only pushes: a simulation.
+    Violated,
+    /// Every one, as an equality (μ of either sign): states on every constraint's surface,
+    /// as `check` needs to judge formulas that hold only there.
+    AsEqualities,
+}
+
+/// Newton onto C = 0 (equalities, and the inequalities `inequalities` says) at time t, until
+/// every enforced row's distance |C|/‖J‖ is at most `bound` (the relative tolerance times the
+/// scene's length scale) or `max_iterations` are spent. Returns the rows at the final
+/// positions and the iterations taken.
 pub fn project_positions(
     dynamics: &mut Dynamics<'_>,
     t: f64,
     q: &mut Vectors,
     v: &Vectors,
-    length: f64,
-    tolerance: f64,
+    bound: f64,
     max_iterations: usize,
+    inequalities: Inequalities,
 ) -> Result<(Rows, usize), SimError> {
-    let bound = tolerance * length;
     let mut iterations = 0;
     loop {
         let mut rows = dynamics.rows(t, q, v)?;
         // Residual: the largest first-order distance to a surface that is to be enforced.
-        let enforced = |row: &Row, s: f64| !row.inequality || s < 0.0;
+        let all = inequalities == Inequalities::AsEqualities;
+        let enforced = |row: &Row, s: f64| !row.inequality || all || s < 0.0;
         let mut residual = 0.0f64;
         for row in &rows.rows {
             let s = distance(row);
@@ -186,6 +221,7 @@ pub fn project_positions(
         for row in &mut rows.rows {
             if enforced(row, distance(row)) {
                 // (J M⁻¹ Jᵀ) μ = −C: c = C.
+                row.inequality &= !all;
                 enforce(row, row.value);
             } else {
                 leave_out(row);
@@ -230,7 +266,7 @@ pub fn shake_positions(
         }
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
-        if residual <= bound || iterations >= max_iterations || residual > 2.0 * previous {
+        if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
             return Ok((rows, iterations));
         }
         previous = residual;
@@ -267,6 +303,16 @@ pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {
             row.rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
         }
     }
+}
+
+/// Velocities onto Ċ = 0 for every row, inequalities as equalities, in one step (Ċ is
+/// affine in v: Δv = M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −Ċ). `rows` is spent.
+pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
+    for row in &mut rows.rows {
+        row.inequality = false;
+        enforce(row, row.rate);
+    }
+    apply_correction(rows, v);
 }
 
 /// The velocity solve at the rows of the current positions: closing contacts (touching

@@ -2,10 +2,10 @@
 //!
 //! Everything here returns strings or JSON values; only `main.rs` writes them out.
 
-pub mod bench;
 pub mod csv;
 pub mod derivation;
 pub mod diagnostic;
 pub mod plot;
+pub mod precision;
 pub mod simulation;
 pub mod solution;

@@ -5,12 +5,16 @@
 //! Σₖ λₖ·gradientₖ, with both taken from the same C/κ. Multiply `value` and `rate` by κ, and
 //! divide `lambda` by κ, for C as written.
 //!
+//! Diagnostics arrive as typed causes with constraint indices ([`Diagnostic`]); [`sentence`]
+//! is where they become sentences naming the constraints.
+//!
 //! Not here: solving (`numeric::solve`), writing anything out.
 
 use crate::derive::Derivation;
 use crate::model::system::System;
+use crate::numeric::qp::QpStatus;
 use crate::numeric::rows::Rows;
-use crate::numeric::solve::Solution;
+use crate::numeric::solve::{Diagnostic, Solution};
 use serde_json::{Value, json};
 use std::fmt::Write;
 
@@ -63,21 +67,8 @@ pub fn json(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
 
 /// The solver's diagnostics with constraint names, plus one per non-finite row number.
 fn diagnostics(system: &System, rows: &Rows, solution: &Solution) -> Vec<(Vec<String>, String)> {
-    let mut out: Vec<(Vec<String>, String)> = solution
-        .diagnostics
-        .iter()
-        .map(|d| {
-            let mut message = d.message.clone();
-            // Indices in messages are for programs; people get names.
-            for &k in &d.constraints {
-                if let Some(c) = system.constraints.get(k) {
-                    message = message.replace(&format!("constraint {k} "), &format!("constraint `{}` ", c.name));
-                    message = message.replace(&format!("contact {k} "), &format!("contact `{}` ", c.name));
-                }
-            }
-            (names(system, &d.constraints), message)
-        })
-        .collect();
+    let mut out: Vec<(Vec<String>, String)> =
+        solution.diagnostics.iter().map(|d| (names(system, d.constraints()), sentence(system, d))).collect();
     for (k, row) in rows.rows.iter().enumerate() {
         if !row.value.is_finite() || !row.rate.is_finite() {
             out.push((
@@ -90,6 +81,67 @@ fn diagnostics(system: &System, rows: &Rows, solution: &Solution) -> Vec<(Vec<St
         }
     }
     out
+}
+
+/// A solver diagnostic as a sentence for people, constraints by name (`wire`); an index
+/// the system does not have stays a number.
+pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
+    let name = |k: usize| system.constraints.get(k).map_or_else(|| k.to_string(), |c| format!("`{}`", c.name));
+    let list = |ks: &[usize]| ks.iter().map(|&k| name(k)).collect::<Vec<_>>().join(", ");
+    match diagnostic {
+        Diagnostic::NonFiniteRow { constraint } => format!(
+            "constraint {} has non-finite numbers here (gradient, c term, C or Ċ of an inequality, or a body's mass, velocity or force); it is left out",
+            name(*constraint)
+        ),
+        Diagnostic::ZeroGradient { constraint, unsatisfiable } => format!(
+            "singular configuration: the gradient of constraint {} is zero here, so it carries no force (λ = 0){}",
+            name(*constraint),
+            if *unsatisfiable { "; its C̈ = 0 cannot hold" } else { "" }
+        ),
+        Diagnostic::InfiniteMass { constraint } => {
+            format!("constraint {} acts only on bodies of infinite mass; it carries no force", name(*constraint))
+        }
+        Diagnostic::Closing { constraint } => format!(
+            "contact {} is closing (Ċ < 0): it needs an impulse P = −(1+e) J v / (J M⁻¹ Jᵀ) (numeric::contact::impulses); the force shown holds it as if resting",
+            name(*constraint)
+        ),
+        Diagnostic::Penetrating { constraint } => {
+            format!("contact {} is violated (C < 0 beyond the tolerance); it is treated as touching", name(*constraint))
+        }
+        Diagnostic::LambdaOutOfRange { constraint, lambda } => format!(
+            "λ of constraint {} is outside the normal f64 range at this scale ({lambda:e}); the forces and accelerations are exact",
+            name(*constraint)
+        ),
+        Diagnostic::NonFiniteLambda { constraint } => {
+            format!("λ of constraint {} came out non-finite; it is set to 0", name(*constraint))
+        }
+        Diagnostic::Redundant { constraints, rank, size, condition } => format!(
+            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; consistent, minimum-norm λ",
+            list(constraints)
+        ),
+        Diagnostic::Inconsistent { constraints, rank, size, condition, residual } => format!(
+            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; inconsistent (relative residual {residual:.1e}), least-squares minimum-norm λ",
+            list(constraints)
+        ),
+        Diagnostic::QpFailed { status, .. } => match status {
+            QpStatus::Infeasible => "the contact QP is infeasible: the constraints contradict each other",
+            QpStatus::Unbounded => "the contact QP is unbounded: the rows are inconsistent (no λ ≥ 0 balances b)",
+            QpStatus::MaxIterations => "the contact QP reached its iteration limit",
+            QpStatus::NumericalError => "the contact QP stopped on a numerical error",
+            QpStatus::Solved | QpStatus::AlmostSolved | QpStatus::Rejected => {
+                "the contact QP was rejected by Clarabel (an internal error)"
+            }
+        }
+        .to_string(),
+        Diagnostic::QpInaccurate { status, iterations, residuals, .. } => format!(
+            "the contact QP ({status:?}, {iterations} iterations) has poor KKT residuals: stationarity {:.1e}, feasibility {:.1e}, complementarity {:.1e}",
+            residuals.stationarity, residuals.feasibility, residuals.complementarity
+        ),
+        Diagnostic::Restitution { value } => format!("restitution must lie in [0, 1], found {value}; 0 is used"),
+        Diagnostic::Rescaled { exponent } => format!(
+            "the numbers overflow at this state; solved in a length unit scaled by 2^{exponent} (verified homogeneous) and scaled back"
+        ),
+    }
 }
 
 fn number(x: f64) -> String {

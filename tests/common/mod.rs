@@ -28,37 +28,8 @@ pub fn skip_slow(name: &str) -> bool {
     skip
 }
 
-/// A small deterministic generator (SplitMix64): tests must be reproducible.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        let unit = (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
-        lo + (hi - lo) * unit
-    }
-
-    /// A vector with `dim` components uniform in `[-1, 1)` (trailing components zero).
-    pub fn vector(&mut self, dim: usize) -> [f64; 3] {
-        let mut v = [0.0; 3];
-        for x in v.iter_mut().take(dim) {
-            *x = self.uniform(-1.0, 1.0);
-        }
-        v
-    }
-}
+/// The crate's deterministic generator (SplitMix64): tests must be reproducible.
+pub use lagrange::numeric::random::Rng;
 
 /// A body named `name` with symbols `r{i} v{i} a{i} F{i}` and mass `m{i}` (or without the
 /// suffix when `i` is empty).
@@ -97,7 +68,7 @@ pub fn random_env(system: &System, rng: &mut Rng) -> Env {
     let mut env = Env::new();
     for (s, info) in system.graph.symbols() {
         let value = match (info.ty, info.role) {
-            (Ty::Vector, _) => Value::Vector(rng.vector(dim)),
+            (Ty::Vector, _) => Value::Vector(rng.uniform_vector(dim, -1.0, 1.0)),
             (Ty::Scalar, Role::Time) => Value::Scalar(rng.uniform(-1.0, 1.0)),
             (Ty::Scalar, _) => Value::Scalar(rng.uniform(0.5, 2.0)),
         };

@@ -1,8 +1,8 @@
-//! `bench` results as a text table, JSON (`{"rows": [...], "accuracy": [...]}`) or CSV, and
-//! the lines of the work-precision plot.
+//! `lagrange bench`'s results (`precision`) as a text table, JSON (`{"rows": [...],
+//! "accuracy": [...]}`) or CSV, and the lines of the work-precision plot.
 
-use crate::bench::WorkPrecision;
-use crate::bench::accuracy::AccuracyRow;
+use crate::precision::WorkPrecision;
+use crate::precision::accuracy::AccuracyRow;
 use crate::report::plot::Line;
 use serde_json::{Value as Json, json};
 

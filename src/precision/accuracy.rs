@@ -11,14 +11,19 @@
 //! from it (1e7: large cancelling terms). Formulas are compared as formulas: the states need
 //! not satisfy the constraints.
 //!
-//! Not here: the simulation error (`bench::work_precision`).
+//! Not here: the simulation error (`precision::work_precision`).
 
 use super::reference::{Dd, eval_dd, solve_dense};
 use crate::expr::eval::{Env, Value, eval};
+use crate::numeric::random::Rng;
 use crate::numeric::solve::solve;
 use crate::scenario::Scenario;
 use std::time::Instant;
 use twofloat::TwoFloat;
+
+/// The hard states scale positions and velocities by these (position, velocity) factors in
+/// turn: seven decades small or large, alone and together, where cancellation in f64 shows.
+const HARD_SCALES: [(f64, f64); 4] = [(1e-7, 1.0), (1.0, 1e7), (1e7, 1e7), (1e-7, 1e-7)];
 
 /// The error of one body's force over a class of states.
 #[derive(Clone, Debug, PartialEq)]
@@ -35,28 +40,7 @@ pub struct AccuracyRow {
     pub nanos_per_eval: f64,
 }
 
-/// A small deterministic generator (SplitMix64), so a bench is reproducible.
-pub struct Rng(u64);
-
-impl Rng {
-    pub fn new(seed: u64) -> Rng {
-        Rng(seed)
-    }
-
-    /// Uniform in [−0.5, 0.5).
-    pub fn centred(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-    }
-}
-
-fn norm(x: &[f64; 3]) -> f64 {
-    crate::numeric::solve::safe_norm(x)
-}
+use crate::numeric::vector::safe_norm as norm;
 
 /// The forces on every body at `env`, in f64, by the path the library uses.
 fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
@@ -104,7 +88,7 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     let values = eval_dd(graph, &roots, env).ok()?;
     let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar_or_nan()).collect();
     let mut at = n;
-    let mut force = Vec::with_capacity(n);
+    let mut force = Vec::new();
     for (i, f) in force_expr.iter().enumerate() {
         force.push(match f {
             Some(_) => {
@@ -173,15 +157,14 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
         let mut errors: Vec<Vec<f64>> = vec![Vec::new(); n];
         let mut envs = Vec::new();
         for k in 0..count {
-            let (qs, vs) =
-                if class == "random" { (1.0, 1.0) } else { [(1e-7, 1.0), (1.0, 1e7), (1e7, 1e7), (1e-7, 1e-7)][k % 4] };
+            let (qs, vs) = if class == "random" { (1.0, 1.0) } else { HARD_SCALES[k % HARD_SCALES.len()] };
             let mut env = s.env.clone();
             for (i, body) in system.bodies.iter().enumerate() {
                 let mut q = [0.0; 3];
                 let mut v = [0.0; 3];
                 for d in 0..dim {
-                    q[d] = qs * (q0[i][d] + length * rng.centred());
-                    v[d] = vs * (v0[i][d] + speed * rng.centred());
+                    q[d] = qs * (q0[i][d] + length * rng.uniform(-0.5, 0.5));
+                    v[d] = vs * (v0[i][d] + speed * rng.uniform(-0.5, 0.5));
                 }
                 env.set(body.position, Value::Vector(q));
                 env.set(body.velocity, Value::Vector(v));

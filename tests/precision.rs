@@ -1,10 +1,11 @@
-//! `bench` on every scene file: a table of 12+ rows, an SVG, and formula accuracy.
+//! `lagrange bench` on every scene file (the `precision` module): a table of 12+ rows, an
+//! SVG, and formula accuracy.
 
 mod common;
 
-use lagrange::bench::accuracy::formula_accuracy;
-use lagrange::bench::{Sweep, work_precision};
-use lagrange::report::{bench, plot};
+use lagrange::precision::accuracy::formula_accuracy;
+use lagrange::precision::{Sweep, work_precision};
+use lagrange::report::{plot, precision};
 
 fn scene_files() -> Vec<String> {
     let mut files = Vec::new();
@@ -39,11 +40,11 @@ fn bench_writes_a_table_and_a_plot_for_every_scene_file() {
         assert!(wp.rows.len() >= 12, "{path}: {} rows", wp.rows.len());
         let accuracy = formula_accuracy(&s, 8, 7);
         assert!(!accuracy.is_empty(), "{path}");
-        let json = bench::json(&wp, &accuracy);
+        let json = precision::json(&wp, &accuracy);
         assert_eq!(json["rows"].as_array().map(Vec::len), Some(wp.rows.len()));
-        assert!(bench::text(&wp, &accuracy).lines().count() >= 12);
-        assert!(bench::csv(&wp, &accuracy).lines().count() >= 13);
-        let svg = plot::work_precision(&path, "time", "error", &bench::lines(&wp)).expect("svg");
+        assert!(precision::text(&wp, &accuracy).lines().count() >= 12);
+        assert!(precision::csv(&wp, &accuracy).lines().count() >= 13);
+        let svg = plot::work_precision(&path, "time", "error", &precision::lines(&wp)).expect("svg");
         assert!(svg.starts_with("<svg") && svg.contains("</svg>"), "{path}");
     }
     assert!(benched >= 15, "only {benched} scene files");
@@ -67,4 +68,20 @@ fn pendulum_work_precision_ranks_the_methods() {
     assert!(error("verlet", 5e-4) < error("verlet", 4e-3) / 16.0);
     let accuracy = formula_accuracy(&s, 100, 3);
     assert!(accuracy.iter().all(|a| a.median_rel_error <= 1e-15 && a.max_rel_error <= 1e-13), "{accuracy:?}");
+}
+
+#[test]
+fn a_sweep_that_cannot_run_is_refused_by_cause() {
+    use lagrange::precision::SweepError;
+    let s = common::scenario("constraints/pendulum.toml");
+    let mut sweep = Sweep::new(1e-3, 1.0);
+    sweep.steps.truncate(3);
+    assert_eq!(work_precision(&s, &sweep).err(), Some(SweepError::TooFewSteps(3)));
+    let mut sweep = Sweep::new(1e-3, 1.0);
+    sweep.steps[0] = f64::NAN;
+    assert_eq!(sweep.validate(), Err(SweepError::Step));
+    assert_eq!(Sweep::new(1e-3, -1.0).validate(), Err(SweepError::Duration(-1.0)));
+    let mut sweep = Sweep::new(1e-3, 1.0);
+    sweep.integrators.clear();
+    assert_eq!(sweep.validate(), Err(SweepError::Empty));
 }
