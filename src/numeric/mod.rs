@@ -23,5 +23,6 @@ pub mod simulate;
 pub mod solve;
 pub mod stabilize;
 pub mod tape;
+pub mod velocity;
 
 pub use tape::{BatchScratch, Scratch, Tape, TapeError};
