@@ -165,6 +165,78 @@ struct SimulateArgs {
     /// The summary as text or as JSON.
     #[arg(long, value_enum, default_value_t = SummaryArg::Text)]
     format: SummaryArg,
+    #[command(flatten)]
+    velocity: VelocityArgs,
+}
+
+/// The velocity-level solver and its settings (`simulate`, `bench --solvers`).
+#[derive(clap::Args, Debug)]
+struct VelocityArgs {
+    /// exact: the acceleration-level solve with --integrator and --stabilize (the default);
+    /// soft-step, pgs, xpbd, exact-velocity: impulses on velocities, the step an engine runs.
+    #[arg(long, value_enum, default_value_t = SolverArg::Exact)]
+    solver: SolverArg,
+    /// Substeps per step of the velocity-level solvers.
+    #[arg(long, default_value_t = 4)]
+    substeps: usize,
+    /// Iterations per substep (default: soft-step, xpbd 1; pgs 8).
+    #[arg(long)]
+    iterations: Option<usize>,
+    /// Stiffness of the soft step's joints (Box2D: 60 Hz, capped at a quarter of the substep rate).
+    #[arg(long, default_value_t = 60.0)]
+    hertz: f64,
+    /// Damping ratio ζ of the soft step's joints (Box2D: 2).
+    #[arg(long, default_value_t = 2.0)]
+    damping_ratio: f64,
+    /// XPBD compliance α of every row (0: rigid).
+    #[arg(long, default_value_t = 0.0)]
+    compliance: f64,
+    /// Skip the soft step's relax pass.
+    #[arg(long)]
+    no_relax: bool,
+    /// Start every step from zero impulses.
+    #[arg(long)]
+    no_warm_start: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
+enum SolverArg {
+    Exact,
+    SoftStep,
+    Pgs,
+    Xpbd,
+    ExactVelocity,
+}
+
+impl VelocityArgs {
+    /// The velocity-level settings (`None` for the acceleration-level `exact`), validated.
+    fn settings(
+        &self,
+        dt: f64,
+        steps: u64,
+        restitution: f64,
+    ) -> Result<Option<lagrange::numeric::velocity::Settings>, String> {
+        use lagrange::numeric::velocity::{Settings, Solver};
+        let solver = match self.solver {
+            SolverArg::SoftStep => Solver::SoftStep,
+            SolverArg::Pgs => Solver::Pgs,
+            SolverArg::Xpbd => Solver::Xpbd,
+            SolverArg::ExactVelocity | SolverArg::Exact => Solver::Exact,
+        };
+        let mut s = Settings::new(solver, dt, 0.0);
+        s.steps = steps;
+        s.substeps = self.substeps;
+        s.iterations = self.iterations;
+        s.hertz = self.hertz;
+        s.damping_ratio = self.damping_ratio;
+        s.compliance = self.compliance;
+        s.relax = !self.no_relax;
+        s.warm_start = !self.no_warm_start;
+        s.restitution = restitution;
+        // The flags are checked whichever solver runs, so a typo never passes silently.
+        s.validate().map_err(|e| e.to_string())?;
+        Ok((self.solver != SolverArg::Exact).then_some(s))
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
@@ -533,6 +605,13 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         eprintln!("error: {e}");
         return ExitCode::from(2);
     }
+    let velocity = match args.velocity.settings(settings.dt, settings.steps, settings.restitution) {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let mut csv = match &args.csv {
         None => None,
         Some(path) => {
@@ -554,14 +633,18 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     use std::io::IsTerminal;
     let bar = (std::io::stderr().is_terminal() && settings.steps >= 20_000)
         .then(|| indicatif::ProgressBar::new(settings.steps));
-    let result = scenario.simulate(settings, &mut |frame| {
+    let mut observe = |frame: &lagrange::numeric::simulate::Frame| {
         if let Some(bar) = &bar
             && frame.step.is_multiple_of(1000)
         {
             bar.set_position(frame.step);
         }
         csv.as_mut().map_or(Ok(()), |w| w.frame(frame)).map_err(|e| e.to_string())
-    });
+    };
+    let result = match velocity {
+        None => scenario.simulate(settings, &mut observe),
+        Some(v) => scenario.simulate_velocity(v, &mut observe),
+    };
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
