@@ -123,6 +123,11 @@ struct BenchArgs {
     /// Write the work-precision plot (error against time, log-log) to this SVG file.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Bench the velocity-level solvers instead: each solver × substeps 1, 2, 4, 8 (× 15,
+    /// 30, 60 Hz for the soft step) against the exact velocity solve, at the scene's dt (or
+    /// --dt) for its duration (or --duration), with the soft step's largest stable hertz.
+    #[arg(long)]
+    solvers: bool,
 }
 
 /// Options of `simulate`.
@@ -685,6 +690,9 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
+    if args.solvers {
+        return cmd_bench_solvers(args, &scenario);
+    }
     let sweep = lagrange::bench::Sweep::new(
         args.dt.unwrap_or(scenario.scene.dt),
         args.duration.unwrap_or(scenario.scene.duration),
@@ -711,6 +719,48 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
             &table::lines(&wp),
         )
         .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
+        if let Err(e) = written {
+            eprintln!("error: {}: {e}", path.display());
+            return ExitCode::from(1);
+        }
+    }
+    ExitCode::SUCCESS
+}
+
+/// `bench --solvers`: the velocity-level solver bench of `numeric::velocity::bench`.
+fn cmd_bench_solvers(args: &BenchArgs, scenario: &lagrange::scenario::Scenario) -> ExitCode {
+    use lagrange::numeric::velocity::bench::{Plan, Scene, solver_bench};
+    use lagrange::report::solvers as table;
+    let dt = args.dt.unwrap_or(scenario.scene.dt);
+    let duration = args.duration.unwrap_or(scenario.scene.duration);
+    if !(dt.is_finite() && dt > 0.0 && duration.is_finite() && duration >= 0.0) {
+        eprintln!("error: --dt must be positive and --duration at least 0, found {dt} and {duration}");
+        return ExitCode::from(2);
+    }
+    let plan = Plan::new(dt, (duration / dt).round() as u64);
+    let scene = Scene {
+        system: &scenario.system,
+        program: &scenario.program,
+        env: &scenario.env,
+        restitution: scenario.scene.restitution,
+    };
+    let bench = match solver_bench(scene, &plan) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("error: {}: {e}", args.file.display());
+            return ExitCode::from(2);
+        }
+    };
+    match args.format {
+        OutArg::Text => out!("{}", table::text(&bench)),
+        OutArg::Json => outln!("{}", serde_json::to_string_pretty(&table::json(&bench)).unwrap_or_default()),
+        OutArg::Csv => out!("{}", table::csv(&bench)),
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{}: velocity-level solvers, max |C| against time per step", bench.title);
+        let written =
+            lagrange::report::plot::work_precision(&title, "seconds per step", "max |C|", &table::lines(&bench))
+                .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
         if let Err(e) = written {
             eprintln!("error: {}: {e}", path.display());
             return ExitCode::from(1);

@@ -336,3 +336,32 @@ fn the_command_line_refuses_bad_flags_and_reports_a_divergence() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("soft-step + 4 substeps × 1 iterations, 60 Hz, ζ = 2"), "{stdout}");
 }
+
+#[test]
+fn the_solver_bench_reports_every_solver_and_the_stable_hertz() {
+    use lagrange::numeric::velocity::bench::{Plan, Scene, solver_bench};
+    let s = scenario("constraints/solvers/two_particles.toml");
+    let scene = Scene { system: &s.system, program: &s.program, env: &s.env, restitution: 0.0 };
+    let mut plan = Plan::new(1.0 / 60.0, 120);
+    plan.substeps = vec![1, 4];
+    plan.damping_ratio = 0.0;
+    plan.iterations = Some(1);
+    let bench = solver_bench(scene, &plan).expect("runs");
+    assert!(bench.reference.failure.is_none() && bench.reference.max_abs_c < 1e-9);
+    for solver in Solver::ALL {
+        assert!(bench.entries.iter().any(|e| e.solver == solver), "{}", solver.name());
+    }
+    // The soft step with one substep at ζ = 0: Catto's limits.
+    let one = bench.stable_hertz.iter().find(|h| h.substeps == 1).expect("analysed");
+    assert!((one.no_relax.expect("a limit") - 13.565).abs() < 5e-4, "{one:?}");
+    assert!((one.relax.expect("a limit") - 20.943).abs() < 5e-4, "{one:?}");
+    // Every format carries every run.
+    let text = lagrange::report::solvers::text(&bench);
+    assert!(text.contains("13.565 Hz") && text.contains("20.943 Hz"), "{text}");
+    let csv = lagrange::report::solvers::csv(&bench);
+    assert_eq!(csv.lines().count(), 2 + bench.entries.len(), "{csv}");
+    let json = lagrange::report::solvers::json(&bench);
+    assert_eq!(json["runs"].as_array().map(Vec::len), Some(bench.entries.len()));
+    let svg = lagrange::report::plot::work_precision("t", "x", "y", &lagrange::report::solvers::lines(&bench));
+    assert!(svg.expect("draws").contains("<svg"));
+}

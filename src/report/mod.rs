@@ -9,3 +9,4 @@ pub mod diagnostic;
 pub mod plot;
 pub mod simulation;
 pub mod solution;
+pub mod solvers;

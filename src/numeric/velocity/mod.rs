@@ -22,6 +22,7 @@
 //! Not here: files or text; the acceleration-level run (`numeric::simulate`, the default
 //! `exact` of the command line); rigid bodies (angular rows come with them).
 
+pub mod bench;
 pub mod exact;
 pub mod pgs;
 pub mod run;

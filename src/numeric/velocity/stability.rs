@@ -110,8 +110,12 @@ pub fn radius_at(
     Ok(spectral_radius(&step_jacobian(dynamics, t, q, v, &impulse, &settings)?))
 }
 
+/// Stiffnesses searched up to this (Hz): far beyond any substep rate an engine runs.
+pub const MAX_HERTZ: f64 = 1e4;
+
 /// The largest stiffness (Hz, uncapped) at which the step of `s` is stable at (t, q, v), to
-/// 1e-6 relative: `None` when it is unstable already at 10⁻³ Hz or still stable at 10⁶ Hz.
+/// 1e-6 relative: `None` when it is unstable already at 10⁻³ Hz or still stable at
+/// [`MAX_HERTZ`].
 pub fn largest_stable_hertz(
     dynamics: &mut Dynamics<'_>,
     t: f64,
@@ -130,7 +134,7 @@ pub fn largest_stable_hertz(
     while stable(hi, dynamics)? {
         lo = hi;
         hi *= 2.0;
-        if hi > 1e6 {
+        if hi > MAX_HERTZ {
             return Ok(None);
         }
     }
