@@ -128,6 +128,11 @@ struct BenchArgs {
     /// Write the work-precision plot (error against time, log-log) to this SVG file.
     #[arg(long)]
     plot: Option<PathBuf>,
+    /// Bench the velocity-level solvers instead: each solver × substeps 1, 2, 4, 8 (× 15,
+    /// 30, 60 Hz for the soft step) against the exact velocity solve, at the scene's dt (or
+    /// --dt) for its duration (or --duration), with the soft step's largest stable hertz.
+    #[arg(long)]
+    solvers: bool,
 }
 
 /// Options of `simulate`.
@@ -170,6 +175,78 @@ struct SimulateArgs {
     /// The summary as text or as JSON.
     #[arg(long, value_enum, default_value_t = SummaryArg::Text)]
     format: SummaryArg,
+    #[command(flatten)]
+    velocity: VelocityArgs,
+}
+
+/// The velocity-level solver and its settings (`simulate`, `bench --solvers`).
+#[derive(clap::Args, Debug)]
+struct VelocityArgs {
+    /// exact: the acceleration-level solve with --integrator and --stabilize (the default);
+    /// soft-step, pgs, xpbd, exact-velocity: impulses on velocities, the step an engine runs.
+    #[arg(long, value_enum, default_value_t = SolverArg::Exact)]
+    solver: SolverArg,
+    /// Substeps per step of the velocity-level solvers.
+    #[arg(long, default_value_t = 4)]
+    substeps: usize,
+    /// Iterations per substep (default: soft-step, xpbd 1; pgs 8).
+    #[arg(long)]
+    iterations: Option<usize>,
+    /// Stiffness of the soft step's joints (Box2D: 60 Hz, capped at a quarter of the substep rate).
+    #[arg(long, default_value_t = 60.0)]
+    hertz: f64,
+    /// Damping ratio ζ of the soft step's joints (Box2D: 2).
+    #[arg(long, default_value_t = 2.0)]
+    damping_ratio: f64,
+    /// XPBD compliance α of every row (0: rigid).
+    #[arg(long, default_value_t = 0.0)]
+    compliance: f64,
+    /// Skip the soft step's relax pass.
+    #[arg(long)]
+    no_relax: bool,
+    /// Start every step from zero impulses.
+    #[arg(long)]
+    no_warm_start: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
+enum SolverArg {
+    Exact,
+    SoftStep,
+    Pgs,
+    Xpbd,
+    ExactVelocity,
+}
+
+impl VelocityArgs {
+    /// The velocity-level settings (`None` for the acceleration-level `exact`), validated.
+    fn settings(
+        &self,
+        dt: f64,
+        steps: u64,
+        restitution: f64,
+    ) -> Result<Option<lagrange::numeric::velocity::Settings>, String> {
+        use lagrange::numeric::velocity::{Settings, Solver};
+        let solver = match self.solver {
+            SolverArg::SoftStep => Solver::SoftStep,
+            SolverArg::Pgs => Solver::Pgs,
+            SolverArg::Xpbd => Solver::Xpbd,
+            SolverArg::ExactVelocity | SolverArg::Exact => Solver::Exact,
+        };
+        let mut s = Settings::new(solver, dt, 0.0);
+        s.steps = steps;
+        s.substeps = self.substeps;
+        s.iterations = self.iterations;
+        s.hertz = self.hertz;
+        s.damping_ratio = self.damping_ratio;
+        s.compliance = self.compliance;
+        s.relax = !self.no_relax;
+        s.warm_start = !self.no_warm_start;
+        s.restitution = restitution;
+        // The flags are checked whichever solver runs, so a typo never passes silently.
+        s.validate().map_err(|e| e.to_string())?;
+        Ok((self.solver != SolverArg::Exact).then_some(s))
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
@@ -539,6 +616,13 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         eprintln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
         return ExitCode::from(2);
     }
+    let velocity = match args.velocity.settings(settings.dt, settings.steps, settings.restitution) {
+        Ok(v) => v,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let mut csv = match &args.csv {
         None => None,
         Some(path) => {
@@ -560,14 +644,18 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     use std::io::IsTerminal;
     let bar = (std::io::stderr().is_terminal() && settings.steps >= PROGRESS_MIN_STEPS)
         .then(|| indicatif::ProgressBar::new(settings.steps));
-    let result = scenario.simulate(settings, &mut |frame| {
+    let mut observe = |frame: &lagrange::numeric::simulate::Frame| {
         if let Some(bar) = &bar
             && frame.step.is_multiple_of(PROGRESS_EVERY)
         {
             bar.set_position(frame.step);
         }
         csv.as_mut().map_or(Ok(()), |w| w.frame(frame)).map_err(|e| e.to_string())
-    });
+    };
+    let result = match velocity {
+        None => scenario.simulate(settings, &mut observe),
+        Some(v) => scenario.simulate_velocity(v, &mut observe),
+    };
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
@@ -605,6 +693,9 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
+    if args.solvers {
+        return cmd_bench_solvers(args, &scenario);
+    }
     let sweep = lagrange::precision::Sweep::new(
         args.dt.unwrap_or(scenario.scene.dt),
         args.duration.unwrap_or(scenario.scene.duration),
@@ -631,6 +722,48 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
             &table::lines(&wp),
         )
         .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
+        if let Err(e) = written {
+            eprintln!("error: {}: {e}", path.display());
+            return ExitCode::from(1);
+        }
+    }
+    ExitCode::SUCCESS
+}
+
+/// `bench --solvers`: the velocity-level solver bench of `numeric::velocity::bench`.
+fn cmd_bench_solvers(args: &BenchArgs, scenario: &lagrange::scenario::Scenario) -> ExitCode {
+    use lagrange::numeric::velocity::bench::{Plan, Scene, solver_bench};
+    use lagrange::report::solvers as table;
+    let dt = args.dt.unwrap_or(scenario.scene.dt);
+    let duration = args.duration.unwrap_or(scenario.scene.duration);
+    if !(dt.is_finite() && dt > 0.0 && duration.is_finite() && duration >= 0.0) {
+        eprintln!("error: --dt must be positive and --duration at least 0, found {dt} and {duration}");
+        return ExitCode::from(2);
+    }
+    let plan = Plan::new(dt, (duration / dt).round() as u64);
+    let scene = Scene {
+        system: &scenario.system,
+        program: &scenario.program,
+        env: &scenario.env,
+        restitution: scenario.scene.restitution,
+    };
+    let bench = match solver_bench(scene, &plan) {
+        Ok(b) => b,
+        Err(e) => {
+            eprintln!("error: {}: {e}", args.file.display());
+            return ExitCode::from(2);
+        }
+    };
+    match args.format {
+        OutArg::Text => out!("{}", table::text(&bench)),
+        OutArg::Json => outln!("{}", serde_json::to_string_pretty(&table::json(&bench)).unwrap_or_default()),
+        OutArg::Csv => out!("{}", table::csv(&bench)),
+    }
+    if let Some(path) = &args.plot {
+        let title = format!("{}: velocity-level solvers, max |C| against time per step", bench.title);
+        let written =
+            lagrange::report::plot::work_precision(&title, "seconds per step", "max |C|", &table::lines(&bench))
+                .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
         if let Err(e) = written {
             eprintln!("error: {}: {e}", path.display());
             return ExitCode::from(1);

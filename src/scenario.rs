@@ -73,6 +73,16 @@ impl Scenario {
             .map_err(|error| Box::new(Failure { error, summary: Summary::default() }))?;
         simulation.run(observe)
     }
+
+    /// Runs from the initial state with a velocity-level solver (`numeric::velocity`).
+    pub fn simulate_velocity(
+        &self,
+        settings: crate::numeric::velocity::Settings,
+        observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
+    ) -> Result<Summary, Box<Failure>> {
+        let dynamics = Dynamics::new(&self.system, self.program.clone(), self.env.clone());
+        crate::numeric::velocity::run::run(dynamics, &self.env, settings, observe)
+    }
 }
 
 /// The TOML text of an `n`-link chain hanging from the origin: point masses `p1…pn` of mass

@@ -33,6 +33,20 @@ pub enum SimError {
         "step {step} (t = {time}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt (and --stabilize projection if it is off)"
     )]
     Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
+    #[error(
+        "step {step} (t = {time}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){hint}"
+    )]
+    Diverged {
+        step: u64,
+        time: f64,
+        solver: String,
+        constraint: String,
+        value: f64,
+        distance: f64,
+        bound: f64,
+        /// What would have helped, as a sentence starting with "; " (or empty).
+        hint: String,
+    },
     #[error("cannot write the output: {0}")]
     Output(String),
     #[error("invalid settings: {0}")]

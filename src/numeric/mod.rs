@@ -26,5 +26,6 @@ pub mod solve;
 pub mod stabilize;
 pub mod tape;
 pub mod vector;
+pub mod velocity;
 
 pub use tape::{BatchScratch, Scratch, Tape, TapeError};

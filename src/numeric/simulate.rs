@@ -100,6 +100,24 @@ pub enum SettingsError {
     /// A drift-control setting is out of range.
     #[error(transparent)]
     Stabilize(#[from] StabilizeError),
+    /// A velocity-level run with no substeps.
+    #[error("--substeps must be at least 1, found 0")]
+    Substeps,
+    /// A velocity-level run with zero iterations per substep.
+    #[error("--iterations must be at least 1, found 0")]
+    Iterations,
+    /// The soft step's stiffness is not a finite positive frequency.
+    #[error("--hertz must be finite and positive, found {0}")]
+    Hertz(f64),
+    /// The soft step's damping ratio is negative or not finite.
+    #[error("--damping-ratio must be finite and at least 0, found {0}")]
+    DampingRatio(f64),
+    /// XPBD's compliance is negative or not finite.
+    #[error("--compliance must be finite and at least 0, found {0}")]
+    Compliance(f64),
+    /// PGS's Baumgarte factor is outside [0, 1].
+    #[error("the Baumgarte factor must lie in [0, 1], found {0}")]
+    Baumgarte(f64),
 }
 
 /// The number of steps of `dt` that cover `duration` (rounded; 0 for a negative duration).

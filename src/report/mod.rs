@@ -9,3 +9,4 @@ pub mod plot;
 pub mod precision;
 pub mod simulation;
 pub mod solution;
+pub mod solvers;

@@ -1,0 +1,85 @@
+//! The exact velocity-level solve, the impulse twin of DESIGN step 6: per substep of
+//! h = dt/substeps, with u = v + h M⁻¹F the velocities after the external forces,
+//!
+//!   A P = −(J u + ∂C/∂t + C/h),   A = J M⁻¹ Jᵀ,   then u ← u + M⁻¹Jᵀ P,  q ← q + h u,
+//!
+//! so every equality row ends the substep with Ċ = −C/h (a full position correction, the
+//! limit of Baumgarte's bias at β = 1) and inequality rows solve the complementarity problem
+//! P ≥ 0, J u + C/h ≥ 0, P·(J u + C/h) = 0 (rows already heading apart with the bias are
+//! left out). The solve is `numeric::solve`'s (band Cholesky on chains, dense otherwise,
+//! Clarabel and Murty for inequality rows): the rows get F = 0 and the bias c set to the
+//! right-hand side, as `numeric::stabilize` does for its projections, so its "accelerations"
+//! M⁻¹JᵀP are the velocity changes. After each substep the positions are projected onto
+//! C = 0 (Newton with the mass-weighted minimum-norm step, `stabilize::project_positions`,
+//! to 10⁻¹³ of the scene's size): the bias C/h alone leaves the O(h²) curvature error of
+//! the linearised step, the projection makes the joints exact.
+//!
+//! Not here: the iterative solvers; the acceleration-level run (`numeric::simulate`).
+
+use super::{Stepper, drift};
+use crate::numeric::dynamics::{Dynamics, SimError};
+use crate::numeric::integrate::Vectors;
+use crate::numeric::rows::Rows;
+use crate::numeric::solve::solve;
+use crate::numeric::stabilize::{Inequalities, project_positions};
+use crate::numeric::vector::length_scale;
+
+/// Relative tolerance and iteration cap of the projection after each substep.
+const PROJECTION_TOLERANCE: f64 = 1e-13;
+const PROJECTION_ITERATIONS: usize = 20;
+
+/// One exact velocity-level step (see the file's note).
+pub fn step(
+    s: &mut Stepper,
+    dynamics: &mut Dynamics<'_>,
+    t: f64,
+    q: &mut Vectors,
+    v: &mut Vectors,
+    mut rows: Rows,
+) -> Result<(), SimError> {
+    let h = s.settings.substep();
+    let length = length_scale(q.iter());
+    for sub in 0..s.settings.substeps {
+        s.prepared.load(&rows);
+        let p = &s.prepared;
+        p.kick(v, h);
+        for (k, row) in rows.rows.iter_mut().enumerate() {
+            // Target: ΔĊ = −(J u + ∂C/∂t + C/h), i.e. c = J u + ∂C/∂t + C/h.
+            let bias = p.rate(k, v) + p.value[k] / h;
+            if row.inequality && bias >= 0.0 {
+                // Heading apart with the bias: P = 0 (left out of the solve).
+                row.value = f64::MAX;
+                row.rate = f64::MAX;
+                row.bias = 0.0;
+            } else {
+                row.value = 0.0;
+                row.rate = 0.0;
+                row.bias = bias;
+            }
+        }
+        rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        let solution = solve(&rows);
+        for (u, du) in v.iter_mut().zip(&solution.acceleration) {
+            for d in 0..3 {
+                if du[d].is_finite() {
+                    u[d] += du[d];
+                }
+            }
+        }
+        s.impulse.copy_from_slice(&solution.lambda);
+        drift(q, v, h);
+        dynamics.recycle(rows);
+        let t1 = t + (sub + 1) as f64 * h;
+        (rows, _) = project_positions(
+            dynamics,
+            t1,
+            q,
+            v,
+            PROJECTION_TOLERANCE * length,
+            PROJECTION_ITERATIONS,
+            Inequalities::Violated,
+        )?;
+    }
+    dynamics.recycle(rows);
+    Ok(())
+}

@@ -1,0 +1,432 @@
+//! The velocity-level step an engine runs: impulses on velocities, one solver per file —
+//! Box2D v3's soft step ([`soft_step`]), sequential impulses with Baumgarte bias ([`pgs`]),
+//! XPBD ([`xpbd`]) and the exact velocity solve A P = −(J u + bias) ([`exact`]) — with the
+//! run loop that records the same [`Frame`](super::simulate::Frame)s and
+//! [`Summary`](super::simulate::Summary) as the acceleration-level simulation ([`run`]) and
+//! the stability analysis of the soft step ([`stability`]).
+//!
+//! Every solver reads the rows of `numeric::rows` through [`Dynamics::rows`]: per constraint
+//! C/κ, Ċ/κ and J = ∇C/κ per body, per body 1/m, v and F. The rows are evaluated at the
+//! positions each substep starts from and held fixed within the substep, as Box2D holds a
+//! joint's anchors between position updates. Ċ at any velocity u is J·u + ∂C/∂t, with
+//! ∂C/∂t = Ċ − J·v taken from the rows (so moving constraints work). A row's impulse P acts
+//! as Δvᵢ = (1/mᵢ) Jᵢ P; with J = ∇C/κ, P refers to C/κ as λ does, and P/h ≈ λ.
+//!
+//! Design note. [`Stepper`] holds the solver's state between steps (accumulated impulses
+//! for warm starting) and its scratch (the rows flattened into [`Prepared`]), so a step of
+//! the iterative solvers allocates nothing once warm. The soft step and PGS share the
+//! sequential-impulse loop ([`Prepared::sweep`]); they differ in the bias, the softness and
+//! the relax pass. The exact velocity solve goes through `numeric::solve` (banded or dense,
+//! Clarabel for inequality rows), like the projections of `numeric::stabilize`.
+//!
+//! Not here: files or text; the acceleration-level run (`numeric::simulate`, the default
+//! `exact` of the command line); rigid bodies (angular rows come with them).
+
+pub mod bench;
+pub mod exact;
+pub mod pgs;
+pub mod run;
+pub mod soft_step;
+pub mod stability;
+pub mod xpbd;
+
+use super::dynamics::{Dynamics, SimError};
+use super::integrate::Vectors;
+use super::rows::Rows;
+use super::simulate::SettingsError;
+
+/// Which velocity-level solver a run uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Solver {
+    /// Box2D v3's soft step: substeps, soft bias, warm start, relax, restitution.
+    SoftStep,
+    /// Sequential impulses (projected Gauss–Seidel) with Baumgarte bias.
+    Pgs,
+    /// Extended position-based dynamics with compliance (Macklin et al. 2016).
+    Xpbd,
+    /// The exact velocity solve A P = −(J u + C/h) per substep, through `numeric::solve`.
+    Exact,
+}
+
+impl Solver {
+    pub const ALL: [Solver; 4] = [Solver::SoftStep, Solver::Pgs, Solver::Xpbd, Solver::Exact];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Solver::SoftStep => "soft-step",
+            Solver::Pgs => "pgs",
+            Solver::Xpbd => "xpbd",
+            Solver::Exact => "exact-velocity",
+        }
+    }
+
+    /// Iterations per substep when none are asked for: Box2D v3 runs one per substep; PGS
+    /// without substeps needs more to converge on a chain; XPBD with small steps one.
+    pub fn default_iterations(self) -> usize {
+        match self {
+            Solver::SoftStep | Solver::Xpbd | Solver::Exact => 1,
+            Solver::Pgs => 8,
+        }
+    }
+}
+
+/// Box2D's `b2Softness`: the soft constraint of stiffness `hertz` and damping ratio ζ at step
+/// h, as a bias rate on C, a scale on the effective mass and a scale on the accumulated impulse.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Softness {
+    pub bias_rate: f64,
+    pub mass_scale: f64,
+    pub impulse_scale: f64,
+}
+
+impl Softness {
+    /// A rigid row without bias (the relax pass, Box2D's `useBias = false`).
+    pub const RIGID: Softness = Softness { bias_rate: 0.0, mass_scale: 1.0, impulse_scale: 0.0 };
+
+    /// `b2MakeSoft` (Box2D v3 `src/solver.h`; Catto, "Solver2D", 2024): ω = 2π·hertz,
+    /// a₁ = 2ζ + hω, a₂ = hω·a₁, a₃ = 1/(1 + a₂); bias rate ω/a₁, mass scale a₂a₃, impulse
+    /// scale a₃. Zero hertz is a rigid row.
+    pub fn new(hertz: f64, zeta: f64, h: f64) -> Softness {
+        if hertz == 0.0 {
+            return Softness::RIGID;
+        }
+        let omega = 2.0 * std::f64::consts::PI * hertz;
+        let a1 = 2.0 * zeta + h * omega;
+        let a2 = h * omega * a1;
+        let a3 = 1.0 / (1.0 + a2);
+        Softness { bias_rate: omega / a1, mass_scale: a2 * a3, impulse_scale: a3 }
+    }
+}
+
+/// How a velocity-level run goes. Build with [`Settings::new`] and field updates, then
+/// [`Settings::validate`] (the run does it before any step).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    pub solver: Solver,
+    pub dt: f64,
+    pub steps: u64,
+    /// Substeps per step (Box2D v3: 4).
+    pub substeps: usize,
+    /// Iterations per substep (None: [`Solver::default_iterations`]).
+    pub iterations: Option<usize>,
+    /// Stiffness of the soft step's equality rows (Box2D `jointHertz`: 60 Hz).
+    pub hertz: f64,
+    /// Damping ratio of the soft step's equality rows (Box2D `jointDampingRatio`: 2).
+    pub damping_ratio: f64,
+    /// Cap `hertz` at a quarter of the substep rate, as Box2D does (the stability analysis
+    /// turns it off to search beyond it).
+    pub cap_hertz: bool,
+    /// The soft step's relax pass (a rigid pass without bias after the positions move).
+    pub relax: bool,
+    /// Start each step from the last step's impulses.
+    pub warm_start: bool,
+    /// Coefficient of restitution of closing contacts, in [0, 1].
+    pub restitution: f64,
+    /// Approaches slower than this (in Ċ/κ units) do not bounce (Box2D's
+    /// `restitutionThreshold`, 1 m/s).
+    pub restitution_threshold: f64,
+    /// PGS's Baumgarte factor β: bias β·C/h (Box2D v2.4's `b2_baumgarte`, 0.2).
+    pub baumgarte: f64,
+    /// XPBD's compliance α (inverse stiffness of C/κ; 0 is a rigid row).
+    pub compliance: f64,
+    /// The run stops when a constraint is farther than `blowup` × the scene's length from
+    /// its surface.
+    pub blowup: f64,
+    /// Samples kept for plots.
+    pub samples: usize,
+}
+
+/// Box2D v3's contact softness: 30 Hz (capped like the joints), ζ = 10, and the push-out
+/// speed limit of penetrating contacts (`contactSpeed`, 3 m/s).
+const CONTACT_HERTZ: f64 = 30.0;
+const CONTACT_DAMPING_RATIO: f64 = 10.0;
+const CONTACT_SPEED: f64 = 3.0;
+
+impl Settings {
+    /// Box2D's defaults: 4 substeps, joints at 60 Hz with ζ = 2, relax and warm start on.
+    pub fn new(solver: Solver, dt: f64, duration: f64) -> Settings {
+        Settings {
+            solver,
+            dt,
+            steps: (duration / dt).round().max(0.0) as u64,
+            substeps: 4,
+            iterations: None,
+            hertz: 60.0,
+            damping_ratio: 2.0,
+            cap_hertz: true,
+            relax: true,
+            warm_start: true,
+            restitution: 0.0,
+            restitution_threshold: 1.0,
+            baumgarte: 0.2,
+            compliance: 0.0,
+            blowup: 1.0,
+            samples: 4000,
+        }
+    }
+
+    /// Bad settings, before any step runs.
+    pub fn validate(&self) -> Result<(), SimError> {
+        use SettingsError as E;
+        let bad = |e: SettingsError| Err(SimError::Settings(e));
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return bad(E::Step(self.dt));
+        }
+        if self.substeps == 0 {
+            return bad(E::Substeps);
+        }
+        if self.iterations == Some(0) {
+            return bad(E::Iterations);
+        }
+        if !(self.hertz.is_finite() && self.hertz > 0.0) {
+            return bad(E::Hertz(self.hertz));
+        }
+        if !(self.damping_ratio.is_finite() && self.damping_ratio >= 0.0) {
+            return bad(E::DampingRatio(self.damping_ratio));
+        }
+        if !(0.0..=1.0).contains(&self.restitution) {
+            return bad(E::Restitution(self.restitution));
+        }
+        if !(self.compliance.is_finite() && self.compliance >= 0.0) {
+            return bad(E::Compliance(self.compliance));
+        }
+        if !(self.baumgarte.is_finite() && (0.0..=1.0).contains(&self.baumgarte)) {
+            return bad(E::Baumgarte(self.baumgarte));
+        }
+        if !(self.blowup.is_finite() && self.blowup > 0.0) {
+            return bad(E::Blowup(self.blowup));
+        }
+        Ok(())
+    }
+
+    /// The substep h = dt / substeps.
+    pub fn substep(&self) -> f64 {
+        self.dt / self.substeps as f64
+    }
+
+    pub fn iterations(&self) -> usize {
+        self.iterations.unwrap_or(self.solver.default_iterations())
+    }
+
+    /// The stiffness the equality rows get: `hertz`, capped at a quarter of the substep rate.
+    pub fn joint_hertz(&self) -> f64 {
+        if self.cap_hertz { self.hertz.min(0.25 / self.substep()) } else { self.hertz }
+    }
+
+    /// The soft step's softness of equality rows.
+    pub fn joint_softness(&self) -> Softness {
+        Softness::new(self.joint_hertz(), self.damping_ratio, self.substep())
+    }
+
+    /// The soft step's softness of penetrating inequality rows (Box2D's contact softness).
+    pub fn contact_softness(&self) -> Softness {
+        let hertz = if self.cap_hertz { CONTACT_HERTZ.min(0.25 / self.substep()) } else { CONTACT_HERTZ };
+        Softness::new(hertz, CONTACT_DAMPING_RATIO, self.substep())
+    }
+
+    /// A one-line description for summaries: solver, substeps, iterations, stiffness.
+    pub fn describe(&self) -> String {
+        let base = format!("{} substeps × {} iterations", self.substeps, self.iterations());
+        match self.solver {
+            Solver::SoftStep => format!(
+                "{base}, {} Hz, ζ = {}{}{}",
+                self.joint_hertz(),
+                self.damping_ratio,
+                if self.relax { "" } else { ", no relax" },
+                if self.warm_start { "" } else { ", no warm start" }
+            ),
+            Solver::Pgs => {
+                format!("{base}, β = {}{}", self.baumgarte, if self.warm_start { "" } else { ", no warm start" })
+            }
+            Solver::Xpbd => format!("{base}, compliance {}", self.compliance),
+            Solver::Exact => base,
+        }
+    }
+}
+
+/// The rows of one substep, flattened for the sequential-impulse loops: per row its C/κ,
+/// ∂C/∂t, effective mass 1/(J M⁻¹ Jᵀ) and its Jacobian entries (body, Jᵢ); per body 1/m and F.
+#[derive(Clone, Debug, Default)]
+pub struct Prepared {
+    /// Entries of row k: `start[k]..start[k + 1]`.
+    pub start: Vec<usize>,
+    pub body: Vec<usize>,
+    pub jacobian: Vec<[f64; 3]>,
+    pub value: Vec<f64>,
+    /// ∂C/∂t = Ċ − J·v at the evaluated state.
+    pub time_rate: Vec<f64>,
+    /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
+    pub effective_mass: Vec<f64>,
+    pub inequality: Vec<bool>,
+    pub inverse_mass: Vec<f64>,
+    pub force: Vec<[f64; 3]>,
+}
+
+fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+impl Prepared {
+    /// Fills from `rows`, evaluated at velocities `v`, reusing the buffers.
+    pub fn load(&mut self, rows: &Rows) {
+        self.start.clear();
+        self.body.clear();
+        self.jacobian.clear();
+        self.value.clear();
+        self.time_rate.clear();
+        self.effective_mass.clear();
+        self.inequality.clear();
+        self.inverse_mass.clone_from(&rows.inverse_mass);
+        self.force.clone_from(&rows.force);
+        for row in &rows.rows {
+            self.start.push(self.body.len());
+            let (mut k, mut jv) = (0.0, 0.0);
+            for (b, j) in &row.jacobian {
+                self.body.push(*b);
+                self.jacobian.push(*j);
+                k += rows.inverse_mass[*b] * dot(j, j);
+                jv += dot(j, &rows.velocity[*b]);
+            }
+            self.value.push(row.value);
+            self.time_rate.push(row.rate - jv);
+            self.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
+            self.inequality.push(row.inequality);
+        }
+        self.start.push(self.body.len());
+    }
+
+    pub fn len(&self) -> usize {
+        self.value.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.value.is_empty()
+    }
+
+    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    pub fn rate(&self, k: usize, u: &Vectors) -> f64 {
+        let mut c = self.time_rate[k];
+        for e in self.start[k]..self.start[k + 1] {
+            c += dot(&self.jacobian[e], &u[self.body[e]]);
+        }
+        c
+    }
+
+    /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p.
+    pub fn apply(&self, k: usize, u: &mut Vectors, p: f64) {
+        for e in self.start[k]..self.start[k + 1] {
+            let (b, j) = (self.body[e], &self.jacobian[e]);
+            let s = self.inverse_mass[b] * p;
+            for d in 0..3 {
+                u[b][d] += s * j[d];
+            }
+        }
+    }
+
+    /// u += h M⁻¹ F: the external forces over one substep.
+    pub fn kick(&self, u: &mut Vectors, h: f64) {
+        for ((u, f), w) in u.iter_mut().zip(&self.force).zip(&self.inverse_mass) {
+            for d in 0..3 {
+                u[d] += h * w * f[d];
+            }
+        }
+    }
+
+    /// Warm start: every row's accumulated impulse applied again.
+    pub fn warm_start(&self, u: &mut Vectors, impulse: &[f64]) {
+        for (k, &p) in impulse.iter().enumerate() {
+            if p != 0.0 {
+                self.apply(k, u, p);
+            }
+        }
+    }
+
+    /// One Gauss–Seidel sweep over the rows in file order: row k of value C, with the bias b
+    /// and softness s that `law(k, C)` gives, takes ΔP = −s_m·m_eff·(Ċ + bias) − s_i·P (Box2D
+    /// `b2SolveDistanceJoint`), an inequality row clamping the accumulated impulse at P ≥ 0
+    /// (Box2D `b2SolveContact`; Catto, "Iterative Dynamics with Temporal Coherence", 2005).
+    pub fn sweep(&self, u: &mut Vectors, impulse: &mut [f64], mut law: impl FnMut(usize, f64) -> (f64, Softness)) {
+        for (k, impulse) in impulse.iter_mut().enumerate() {
+            let m = self.effective_mass[k];
+            if m == 0.0 {
+                continue;
+            }
+            let (bias, soft) = law(k, self.value[k]);
+            let rate = self.rate(k, u);
+            let old = *impulse;
+            let mut delta = -soft.mass_scale * m * (rate + bias) - soft.impulse_scale * old;
+            if self.inequality[k] {
+                delta = (old + delta).max(0.0) - old;
+            }
+            *impulse = old + delta;
+            self.apply(k, u, delta);
+        }
+    }
+}
+
+/// q += h u.
+pub fn drift(q: &mut Vectors, u: &Vectors, h: f64) {
+    for (q, u) in q.iter_mut().zip(u) {
+        for d in 0..3 {
+            q[d] += h * u[d];
+        }
+    }
+}
+
+/// A velocity-level solver with its state between steps and its scratch.
+pub struct Stepper {
+    pub settings: Settings,
+    /// Accumulated impulse per row (the warm-start storage); XPBD: its λ of the last substep.
+    pub impulse: Vec<f64>,
+    prepared: Prepared,
+    /// The velocities at the start of the step (restitution), the positions before a
+    /// substep (XPBD).
+    saved: Vec<[f64; 3]>,
+    /// The positions the rows were evaluated at (XPBD).
+    evaluated: Vec<[f64; 3]>,
+    /// Ċ per row at the start of the step (restitution's relative velocity).
+    start_rate: Vec<f64>,
+}
+
+impl Stepper {
+    pub fn new(settings: Settings, rows: usize, bodies: usize) -> Stepper {
+        Stepper {
+            settings,
+            impulse: vec![0.0; rows],
+            prepared: Prepared::default(),
+            saved: vec![[0.0; 3]; bodies],
+            evaluated: vec![[0.0; 3]; bodies],
+            start_rate: vec![0.0; rows],
+        }
+    }
+
+    /// The constraint force per row that the last step applied, P/h (XPBD: λ/h²): what the
+    /// CSV shows as λ.
+    pub fn lambda(&self, out: &mut Vec<f64>) {
+        let h = self.settings.substep();
+        let scale = match self.settings.solver {
+            Solver::Xpbd => 1.0 / (h * h),
+            _ => 1.0 / h,
+        };
+        out.clear();
+        out.extend(self.impulse.iter().map(|p| p * scale));
+    }
+
+    /// One step of `settings.dt` from (t, q, v), whose rows `rows` are (the run loop has them
+    /// from recording the state; they are recycled).
+    pub fn step(
+        &mut self,
+        dynamics: &mut Dynamics<'_>,
+        t: f64,
+        q: &mut Vectors,
+        v: &mut Vectors,
+        rows: Rows,
+    ) -> Result<(), SimError> {
+        match self.settings.solver {
+            Solver::SoftStep => soft_step::step(self, dynamics, t, q, v, rows),
+            Solver::Pgs => pgs::step(self, dynamics, t, q, v, rows),
+            Solver::Xpbd => xpbd::step(self, dynamics, t, q, v, rows),
+            Solver::Exact => exact::step(self, dynamics, t, q, v, rows),
+        }
+    }
+}
