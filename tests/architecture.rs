@@ -65,15 +65,16 @@ fn rules() -> Vec<Rule> {
         },
         Rule {
             scope: "src",
-            exempt: &["src/main.rs", "src/report"],
+            exempt: &["src/main.rs"],
             forbidden: PRINTING,
-            why: "only main.rs (and the report writers it calls) prints",
+            why: "only main.rs prints: report writers build strings and values, main.rs writes them",
         },
         Rule {
             scope: "src",
-            exempt: &["src/main.rs", "src/report", "src/check/read.rs"],
+            exempt: &["src/main.rs", "src/check/read.rs"],
             forbidden: FILES,
-            why: "only main.rs (and the report writers it calls) touches files",
+            why: "only main.rs touches files (and check/read.rs, the one size-limited read that \
+                  users' tests share with the command line)",
         },
         Rule {
             scope: "src",

@@ -38,14 +38,6 @@ impl Banded {
         Banded { n, w, data: vec![0.0; n * (w + 1)] }
     }
 
-    pub fn size(&self) -> usize {
-        self.n
-    }
-
-    pub fn bandwidth(&self) -> usize {
-        self.w
-    }
-
     fn at(&self, i: usize, j: usize) -> usize {
         i * (self.w + 1) + self.w + j - i
     }
@@ -58,12 +50,6 @@ impl Banded {
             let at = self.at(i, j);
             self.data[at] += x;
         }
-    }
-
-    /// Aᵢⱼ.
-    pub fn get(&self, i: usize, j: usize) -> f64 {
-        let (i, j) = if i >= j { (i, j) } else { (j, i) };
-        if i - j > self.w { 0.0 } else { self.data[self.at(i, j)] }
     }
 
     /// y = A x.
@@ -129,16 +115,6 @@ impl BandedCholesky {
                 *xk -= self.l[at(i, k)] * xi;
             }
         }
-    }
-
-    /// The smallest pivot Lᵢᵢ² (a lower bound on the smallest eigenvalue's order).
-    pub fn smallest_pivot(&self) -> f64 {
-        (0..self.n).map(|i| self.l[i * (self.w + 1) + self.w].powi(2)).fold(f64::INFINITY, f64::min)
-    }
-
-    /// The largest pivot Lᵢᵢ².
-    pub fn largest_pivot(&self) -> f64 {
-        (0..self.n).map(|i| self.l[i * (self.w + 1) + self.w].powi(2)).fold(0.0, f64::max)
     }
 }
 
