@@ -314,10 +314,19 @@ fn every_solver_runs_every_scene_and_the_exact_one_keeps_its_joints() {
     for entry in std::fs::read_dir("constraints/solvers").expect("the scenes") {
         let path = entry.expect("entry").path();
         let name = path.display().to_string();
+        if name.contains("grid_100") && common::skip_slow("the 100 x 100 grid") {
+            continue;
+        }
         let s = scenario(&name);
         for solver in Solver::ALL {
             let mut settings = Settings::new(solver, 1.0 / 60.0, 1.0);
-            settings.steps = if name.contains("grid") { 30 } else { 120 };
+            settings.steps = if name.contains("grid_100") {
+                2
+            } else if name.contains("grid") {
+                30
+            } else {
+                120
+            };
             let pgs_diverges = ["hanging_chain", "joint_grid", "two_particles"].iter().any(|n| name.contains(n));
             if solver == Solver::Pgs && pgs_diverges {
                 settings.warm_start = false;
