@@ -6,14 +6,18 @@
 //! cargo run --example solver_scenes -- stretched_chain  > constraints/solvers/stretched_chain.toml
 //! cargo run --example solver_scenes -- hanging_chain    > constraints/solvers/hanging_chain.toml
 //! cargo run --example solver_scenes -- joint_grid 30    > constraints/solvers/joint_grid_30.toml
+//! cargo run --example solver_scenes -- joint_grid 100   > constraints/solvers/joint_grid_100.toml
 //! cargo run --example solver_scenes -- two_particles    > constraints/solvers/two_particles.toml
+//! cargo run --example solver_scenes -- stack            > constraints/solvers/stack.toml
 //! ```
 //!
 //! Point masses joined by distance constraints `norm(rᵢ − rⱼ) = l` (C = |d| − l, the
 //! separation Box2D's distance joint solves for), under g = 10 m/s² as in Solver2D, stepped
 //! at 60 Hz. Each file carries `[[expect]]` statics: hanging straight down at rest, a link
 //! carries the weight below it (C as written, ∇C = unit vector along the link, so
-//! λ = −T).
+//! λ = −T). The stack is discs as point masses on contacts instead: `r.y >= radius` on the
+//! floor and `norm(rⱼ − rᵢ) >= 2·radius` between neighbours, each carrying the weight above
+//! it (λ = +W).
 //!
 //! Not here: running the scenes (`lagrange simulate --solver …`, `lagrange bench --solvers`).
 
@@ -26,19 +30,30 @@ struct Scene {
     bodies: Vec<(String, f64, [f64; 2])>,
     /// (name, from, to, length): from/to index bodies, or an anchor parameter when negative.
     links: Vec<(String, Link, usize, f64)>,
+    /// Links are contacts (`>=`) rather than distance constraints (`=`).
+    contact: bool,
     anchors: Vec<[f64; 2]>,
     duration_steps: u64,
     /// Expected λ per link at the hanging state (positions per body), if any.
     statics: Option<(Vec<[f64; 2]>, Vec<f64>)>,
+    /// The comment above the statics.
+    statics_comment: &'static str,
 }
+
+const HANGING: &str = "Statics, hanging straight down at rest: every link carries the weight below it,\nT = (mass below)·g, and with ∇C the unit vector along the link λ = −T (by hand).";
 
 #[derive(Clone, Copy)]
 enum Link {
     Body(usize),
     Anchor(usize),
+    /// The floor y = 0: the link's length is the body's height above it.
+    Floor,
 }
 
 const G: f64 = 10.0;
+
+/// Grids up to this size get `[[expect]]` statics.
+const MAX_CHECKED_GRID: usize = 30;
 
 fn number(x: f64) -> String {
     if x == x.trunc() && x.abs() < 1e15 { format!("{x:.1}") } else { format!("{x}") }
@@ -64,17 +79,15 @@ impl Scene {
                 number(*mass)
             );
         }
+        let relation = if self.contact { ">=" } else { "=" };
         for (name, from, to, length) in &self.links {
-            let from = match from {
-                Link::Body(b) => format!("r_{}", self.bodies[*b].0),
-                Link::Anchor(a) => format!("a{}", a + 1),
-            };
             let to = format!("r_{}", self.bodies[*to].0);
-            let _ = writeln!(
-                s,
-                "[[constraints]]\nname = \"{name}\"\nexpr = \"norm({to} - {from}) = {}\"\n",
-                number(*length)
-            );
+            let expr = match from {
+                Link::Body(b) => format!("norm({to} - r_{}) {relation} {}", self.bodies[*b].0, number(*length)),
+                Link::Anchor(a) => format!("norm({to} - a{}) {relation} {}", a + 1, number(*length)),
+                Link::Floor => format!("{to}.y {relation} {}", number(*length)),
+            };
+            let _ = writeln!(s, "[[constraints]]\nname = \"{name}\"\nexpr = \"{expr}\"\n");
         }
         let state = |positions: &[[f64; 2]]| -> String {
             let parts: Vec<String> = self
@@ -91,10 +104,10 @@ impl Scene {
         let _ = writeln!(s, "forces = {{ {} }}", forces.join(", "));
         let _ = writeln!(s, "dt = 0.016666666666666666\nduration = {}", number(self.duration_steps as f64 / 60.0));
         if let Some((positions, lambda)) = &self.statics {
-            let _ = writeln!(
-                s,
-                "\n# Statics, hanging straight down at rest: every link carries the weight below it,\n# T = (mass below)·g, and with ∇C the unit vector along the link λ = −T (by hand)."
-            );
+            let _ = writeln!(s);
+            for line in self.statics_comment.lines() {
+                let _ = writeln!(s, "# {line}");
+            }
             let _ = writeln!(s, "[[expect]]\nat = {{ {} }}", state(positions));
             let entries: Vec<String> =
                 self.links.iter().zip(lambda).map(|((n, _, _, _), l)| format!("{n} = {}", number(*l))).collect();
@@ -121,8 +134,10 @@ fn chain(title: &str, comment: &str, masses: &[f64], l: f64, at: impl Fn(usize) 
         bodies,
         links,
         anchors: vec![[0.0, 0.0]],
+        contact: false,
         duration_steps: steps,
         statics: Some((hanging, lambda)),
+        statics_comment: HANGING,
     }
 }
 
@@ -152,18 +167,58 @@ fn grid(n: usize) -> Scene {
         }
     }
     let positions = bodies.iter().map(|b| b.2).collect();
+    // `check` solves the whole system again for every λ it compares and writes the full
+    // state into every label: quadratic in the rows, past 9 CPU minutes at 100 x 100.
+    let checked = n <= MAX_CHECKED_GRID;
+    let mut comment = format!(
+        "Solver2D's joint grid as point masses: {n} x {n} points of 1 kg, 1 m apart in the vertical\nplane, the top row fixed (the anchors a1…a{n}), each point joined to its right and lower\nneighbours by a distance constraint ({} bodies, {} constraints). At rest the columns hang\nstraight and the rows carry nothing: exact solvers keep it still, soft ones sag.",
+        bodies.len(),
+        links.len()
+    );
+    if !checked {
+        comment.push_str(&format!(
+            "\nNo [[expect]] statics (the 30 x 30 grid has them): `lagrange check` solves the whole\nsystem again for each λ it compares, so {} entries would take hours.",
+            links.len()
+        ));
+    }
     Scene {
         title: format!("Joint grid {n} x {n}"),
-        comment: format!(
-            "Solver2D's joint grid as point masses: {n} x {n} points of 1 kg, 1 m apart in the vertical\nplane, the top row fixed (the anchors a1…a{n}), each point joined to its right and lower\nneighbours by a distance constraint ({} bodies, {} constraints). At rest the columns hang\nstraight and the rows carry nothing: exact solvers keep it still, soft ones sag.",
-            bodies.len(),
-            links.len()
-        ),
+        comment,
         bodies,
         links,
         anchors,
+        contact: false,
         duration_steps: 500,
+        statics: checked.then_some((positions, lambda)),
+        statics_comment: HANGING,
+    }
+}
+
+/// Catto's warm-start energy scene: three discs of radius 1/2 stacked on the floor as point
+/// masses on contacts, the top one 100 × the others.
+fn stack() -> Scene {
+    let bodies = vec![
+        ("bottom".to_string(), 1.0, [0.0, 0.5]),
+        ("middle".to_string(), 1.0, [0.0, 1.5]),
+        ("top".to_string(), 100.0, [0.0, 2.5]),
+    ];
+    let links = vec![
+        ("floor".to_string(), Link::Floor, 0, 0.5),
+        ("lower".to_string(), Link::Body(0), 1, 1.0),
+        ("upper".to_string(), Link::Body(1), 2, 1.0),
+    ];
+    let lambda = vec![G * 102.0, G * 101.0, G * 100.0];
+    let positions = bodies.iter().map(|b| b.2).collect();
+    Scene {
+        title: "Warm-start energy: three stacked discs".into(),
+        comment: "Catto's warm-start energy test as point masses: three discs of radius 0.5 stacked on the\nfloor y = 0 (contacts `>=`), the bottom and middle ones 1 kg, the top one 100 kg. Removing\nthe top one after the stack has settled must not make the lower ones jump: a warm start\nthat applies the impulses that held 100 kg to 2 kg launches them. tests/velocity.rs removes\nit at step 120 and measures the jump for every solver with and without warm starting.".into(),
+        bodies,
+        links,
+        anchors: Vec::new(),
+        contact: true,
+        duration_steps: 240,
         statics: Some((positions, lambda)),
+        statics_comment: "Statics, stacked at rest: every contact carries the weight above it, W = (mass above)·g,\nand with ∇C the unit vector upwards λ = +W (by hand).",
     }
 }
 
@@ -199,6 +254,7 @@ fn main() {
             500,
         ),
         Some("joint_grid") => grid(args.get(1).and_then(|a| a.parse().ok()).unwrap_or(30).max(2)),
+        Some("stack") => stack(),
         Some("two_particles") => chain(
             "Catto's two particles",
             "Catto's two-particle test of the soft step: inverse masses 0.167 and 0.000995 hanging in a\nline from the origin, 1 m apart, rows in file order. At h = 1/60, ζ = 0, one substep and one\niteration the soft step is stable up to 13.565 Hz without relax and 20.943 Hz with it\n(spectral radius of the step's linear part; tests/velocity.rs).",
@@ -208,7 +264,9 @@ fn main() {
             600,
         ),
         _ => {
-            eprintln!("usage: solver_scenes ball_and_chain|stretched_chain|hanging_chain|joint_grid [N]|two_particles");
+            eprintln!(
+                "usage: solver_scenes ball_and_chain|stretched_chain|hanging_chain|joint_grid [N]|two_particles|stack"
+            );
             std::process::exit(2);
         }
     };

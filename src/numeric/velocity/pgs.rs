@@ -11,6 +11,20 @@
 //! row clamping its accumulated impulse at P ≥ 0; then q ← q + h u. No softness and no relax
 //! pass: the bias velocity stays in the bodies, which is what the soft step's relax removes.
 //!
+//! This is the solver of box2d_lite and of Solver2D's `s2Solve_PGS`, where the Baumgarte
+//! bias goes into the accumulated impulse. With warm starting that is unstable on the long
+//! chain, the joint grid and Catto's two particles, and it is the method, not a slip: the
+//! accumulated impulse carries last step's bias impulse β·m_eff·C/h, the warm start applies
+//! it again, and a Gauss–Seidel sweep that has not converged does not take it back (the two
+//! particles' rows couple with cosine (w₁/(w₁ + w₂))^½ ≈ 0.997: a sweep removes 0.6 % of the
+//! error), so the correction is summed over the steps and overshoots. The spectral radius of the step at the two particles' rest state
+//! (`velocity::stability`, `tests/velocity.rs`) measures it: 1.21 with warm starting at 4
+//! substeps × 8 iterations (1.05 at 1 × 8), exactly 1 (a neutral mode) without warm starting,
+//! with β = 0, or with 32 iterations. Box2D v2.4 keeps the bias out of the accumulated impulse
+//! (its joints and contacts correct positions in a separate pass, `SolvePositionConstraints`)
+//! and v3 softens it and removes it with the relax pass; here `--no-warm-start` or more
+//! `--iterations` run those scenes.
+//!
 //! Not here: the run loop (`velocity::run`).
 
 use super::{Softness, Stepper, drift};
