@@ -17,7 +17,7 @@
 //! Not here: deriving (`derive`), expression printing rules (`expr::print`).
 
 use crate::derive::Derivation;
-use crate::expr::print::{PrintError, Style, print};
+use crate::expr::print::{PrintError, Style, print, rational_operand};
 use crate::expr::{Graph, Id, TypeError};
 use crate::model::system::System;
 use serde_json::{Value, json};
@@ -308,7 +308,11 @@ fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Resu
             let r = &g.symbol(system.bodies[body].position).name;
             doc.line(out, &doc.label(&doc.sym("grad", sub), &format!("∇ wrt {r}, body {name}")), &doc.expr(g, grad)?);
             if !dc.scale.is_one() {
-                doc.line(out, &doc.label("J", &format!("direction, ∇C/{}, body {name}", dc.scale)), &doc.expr(g, dir)?);
+                doc.line(
+                    out,
+                    &doc.label("J", &format!("direction, ∇C/{}, body {name}", rational_operand(&dc.scale))),
+                    &doc.expr(g, dir)?,
+                );
             }
         }
         let note = format!("C̈ at a = 0{}", scale_note(dc.scale.is_one(), &dc.scale));
@@ -370,7 +374,7 @@ fn system_rows(system: &System, d: &Derivation, doc: &Doc, out: &mut String) {
 }
 
 fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
-    if one { String::new() } else { format!(", over {scale}") }
+    if one { String::new() } else { format!(", over {}", rational_operand(scale)) }
 }
 
 /// For several constraints: the force on each body as Σₖ λₖ Jₖᵢ, with named multipliers.
@@ -424,7 +428,7 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
                 doc.expr(g, grad)?
             } else {
                 let times = if doc.style == Style::Latex { "\\cdot" } else { "·" };
-                format!("{} = {} {times} ({})", doc.expr(g, grad)?, dc.scale, doc.expr(g, dir)?)
+                format!("{} = {} {times} ({})", doc.expr(g, grad)?, rational_operand(&dc.scale), doc.expr(g, dir)?)
             };
             doc.line(out, &lhs, &rhs);
             if many {
