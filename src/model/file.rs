@@ -14,7 +14,7 @@ use super::expect::{Expectation, resolve};
 pub use super::problem::Problem;
 use super::problem::{locate, shown, sort};
 use super::raw::{RawFile, RawMass, RawValue, Text};
-use super::scene::{Scene, validate};
+use super::scene::{RefusedBodies, Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
 use crate::expr::eval::Value;
 use crate::expr::lower::LowerError;
@@ -50,12 +50,13 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         sort(&mut problems);
         return Err(problems);
     };
-    let Some(mut system) = build(text, &raw, &mut problems) else {
+    let mut refused = RefusedBodies::default();
+    let Some(mut system) = build(text, &raw, &mut refused, &mut problems) else {
         sort(&mut problems);
         return Err(problems);
     };
     let scene = match &raw.scene {
-        Some(s) => validate(text, s.get_ref(), &mut system, &mut problems),
+        Some(s) => validate(text, s.get_ref(), &mut system, &refused, &mut problems),
         None => Scene::default(),
     };
     // Names the file writes, valid or not: an expectation naming a body or constraint that
@@ -132,7 +133,12 @@ fn masses_have_values(
     }
 }
 
-fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<System> {
+fn build<'t>(
+    text: &str,
+    raw: &'t RawFile<'_>,
+    refused: &mut RefusedBodies<'t>,
+    problems: &mut Vec<Problem>,
+) -> Option<System> {
     let title = raw.title.as_ref().map_or("", |t| t.get_ref().as_ref());
     let dimension = raw.dimension.as_ref()?;
     let mut b = match SystemBuilder::new(title, *dimension.get_ref()) {
@@ -170,6 +176,11 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
                 // Declared all the same, so the body's symbols are known where used.
                 MassSpec::Number(1.0)
             }
+            // `mass = "0.5"`: a number in quotes, not a name.
+            RawMass::Symbol(s) if s.trim().parse::<f64>().is_ok() => {
+                problems.push(Problem::QuotedMass { span: body.mass.span(), written: s.to_string() });
+                MassSpec::Number(1.0)
+            }
             RawMass::Symbol(s) => MassSpec::Symbol(s),
         };
         let spec = BodySpec {
@@ -181,20 +192,30 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
             mass,
         };
         if let Err(e) = b.body(&spec) {
-            // Point at the field whose symbol clashes, not just at the body.
-            let span = match &e {
-                BuildError::Duplicate { name, .. } => [&body.position, &body.velocity, &body.acceleration, &body.force]
-                    .into_iter()
-                    .find(|f| f.get_ref().as_ref() == name.as_str())
-                    .map_or_else(|| body.name.span(), |f| f.span()),
-                _ => body.name.span(),
-            };
-            let span = match (&e, body.mass.get_ref()) {
-                (BuildError::Duplicate { name, .. }, RawMass::Symbol(m)) if m.as_ref() == name.as_str() => {
-                    body.mass.span()
+            // Point at the field whose symbol is refused, not just at the body: the last
+            // field that writes it (`velocity = "r"` after `position = "r"` is the clash).
+            let named = match &e {
+                BuildError::Duplicate { name, .. } | BuildError::BadName(name) | BuildError::Reserved(name) => {
+                    Some(name.as_str())
                 }
-                _ => span,
+                _ => None,
             };
+            let fields = [&body.position, &body.velocity, &body.acceleration, &body.force];
+            let span = match (named, body.mass.get_ref()) {
+                (Some(n), RawMass::Symbol(m)) if m.as_ref() == n => body.mass.span(),
+                (Some(n), _) => fields
+                    .into_iter()
+                    .rfind(|f| f.get_ref().as_ref() == n)
+                    .map_or_else(|| body.name.span(), |f| f.span()),
+                (None, _) => body.name.span(),
+            };
+            // Everything the body writes: its later uses are not reported again.
+            refused.names.extend(fields.iter().map(|f| f.get_ref().as_ref()));
+            refused.names.push(body.name.get_ref().as_ref());
+            if let RawMass::Symbol(m) = body.mass.get_ref() {
+                refused.names.push(m.as_ref());
+            }
+            refused.forces.push(body.force.get_ref().as_ref());
             problems.push(Problem::Build { span, error: e });
         }
     }
@@ -213,7 +234,7 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
             problems.push(build_problem(text, expr, &e, c.name.span()));
         }
     }
-    if raw.constraints.is_empty() {
+    if raw.constraints.is_empty() && !raw.constraints_written {
         problems.push(Problem::NoConstraints);
     }
     Some(b.finish())

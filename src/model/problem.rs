@@ -58,6 +58,11 @@ pub enum Problem {
     /// A mass written as a number that is not positive and finite.
     #[error("a mass must be a positive finite number, found {shown}")]
     Mass { span: Range<usize>, shown: String },
+    /// A mass written as a string that is a number (`mass = "0.5"`).
+    #[error(
+        "the mass \"{written}\" is a number in quotes: write it without them (`mass = {written}`), or give the name of a mass symbol"
+    )]
+    QuotedMass { span: Range<usize>, written: String },
     /// A definition that uses itself, directly or `through` others.
     #[error("definition `{name}` refers to itself (through {through})")]
     Cycle { span: Range<usize>, name: String, through: String },
@@ -167,6 +172,7 @@ impl Problem {
             | Build { span, .. }
             | ParameterComponents { span, .. }
             | Mass { span, .. }
+            | QuotedMass { span, .. }
             | Cycle { span, .. }
             | MassWithoutValue { span, .. }
             | MassWithoutValueAt { span, .. }
