@@ -69,6 +69,7 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         .collect();
     let expect = resolve(text, &raw.expect, &written, &mut system, &mut problems);
     let values = parameter_values(&raw, &system);
+    masses_are_positive(&raw, &system, &mut problems);
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
         sort(&mut problems);
@@ -84,6 +85,34 @@ fn parameter_values(raw: &RawFile<'_>, system: &System) -> Vec<(Symbol, Value)> 
         .iter()
         .filter_map(|(name, v)| super::state::value(system, name.get_ref(), v.get_ref()).ok())
         .collect()
+}
+
+/// A mass symbol's value, written in [parameters] or [scene] initial, is a positive normal
+/// number: located at the value, so `derive` refuses `m = 0.0` as `solve` would.
+fn masses_are_positive(raw: &RawFile<'_>, system: &System, problems: &mut Vec<Problem>) {
+    let mut seen = HashSet::new();
+    for body in &system.bodies {
+        let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
+            continue;
+        };
+        if !seen.insert(*s) {
+            continue;
+        }
+        let name = system.graph.symbol(*s).name.as_str();
+        let initial = raw.scene.as_ref().and_then(|sc| sc.get_ref().initial.get(name));
+        for v in raw.parameters.get(name).into_iter().chain(initial) {
+            if let RawValue::Number(x) = v.get_ref()
+                && !(x.is_normal() && *x > 0.0)
+            {
+                problems.push(Problem::MassValue {
+                    span: v.span(),
+                    name: name.to_string(),
+                    body: body.name.clone(),
+                    shown: shown(*x),
+                });
+            }
+        }
+    }
 }
 
 /// A mass symbol that is not a parameter needs a value wherever numbers are computed: from
@@ -170,7 +199,8 @@ fn build<'t>(
     for body in &raw.bodies {
         let body = body.get_ref();
         let mass = match body.mass.get_ref() {
-            RawMass::Number(x) if x.is_finite() && *x > 0.0 => MassSpec::Number(*x),
+            // A subnormal mass (5e-324) makes 1/m infinite: refused with zero and negatives.
+            RawMass::Number(x) if x.is_normal() && *x > 0.0 => MassSpec::Number(*x),
             RawMass::Number(x) => {
                 problems.push(Problem::Mass { span: body.mass.span(), shown: shown(*x) });
                 // Declared all the same, so the body's symbols are known where used.
@@ -234,7 +264,10 @@ fn build<'t>(
             problems.push(build_problem(text, expr, &e, c.name.span()));
         }
     }
-    if raw.constraints.is_empty() && !raw.constraints_written {
+    // `[[constraint]]` is reported as an unknown key with its "did you mean": not again here.
+    let misspelt =
+        problems.iter().any(|p| matches!(p, Problem::UnknownKey { suggestion: Some(s), .. } if s == "constraints"));
+    if raw.constraints.is_empty() && !raw.constraints_written && !misspelt {
         problems.push(Problem::NoConstraints);
     }
     Some(b.finish())
