@@ -69,7 +69,7 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         .collect();
     let expect = resolve(text, &raw.expect, &written, &mut system, &mut problems);
     let values = parameter_values(&raw, &system);
-    masses_are_positive(&raw, &system, &mut problems);
+    masses_are_positive(text, &raw, &system, &mut problems);
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
         sort(&mut problems);
@@ -89,7 +89,10 @@ fn parameter_values(raw: &RawFile<'_>, system: &System) -> Vec<(Symbol, Value)> 
 
 /// A mass symbol's value, written in [parameters] or [scene] initial, is a positive normal
 /// number: located at the value, so `derive` refuses `m = 0.0` as `solve` would.
-fn masses_are_positive(raw: &RawFile<'_>, system: &System, problems: &mut Vec<Problem>) {
+///
+/// Only numbers written as numbers are judged: a value of the wrong type (reported, held as
+/// a placeholder) or not finite (reported) is not reported again.
+fn masses_are_positive(text: &str, raw: &RawFile<'_>, system: &System, problems: &mut Vec<Problem>) {
     let mut seen = HashSet::new();
     for body in &system.bodies {
         let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
@@ -101,7 +104,10 @@ fn masses_are_positive(raw: &RawFile<'_>, system: &System, problems: &mut Vec<Pr
         let name = system.graph.symbol(*s).name.as_str();
         let initial = raw.scene.as_ref().and_then(|sc| sc.get_ref().initial.get(name));
         for v in raw.parameters.get(name).into_iter().chain(initial) {
+            let written = text.get(v.span()).is_some_and(|t| t.trim().replace('_', "").parse::<f64>().is_ok());
             if let RawValue::Number(x) = v.get_ref()
+                && written
+                && x.is_finite()
                 && !(x.is_normal() && *x > 0.0)
             {
                 problems.push(Problem::MassValue {

@@ -80,6 +80,7 @@ impl Doc {
     }
 
     fn heading(&self, out: &mut String, text: &str) {
+        let text = &one_line(text);
         match self.format {
             Format::Text => {
                 let _ = writeln!(out, "\n{text}");
@@ -88,7 +89,7 @@ impl Doc {
                 let _ = writeln!(out, "\n\\subsection*{{{}}}", latex_escape(text));
             }
             _ => {
-                let _ = writeln!(out, "\n## {text}\n");
+                let _ = writeln!(out, "\n## {}\n", markdown_text(text));
             }
         }
     }
@@ -156,6 +157,24 @@ impl Doc {
             format!("{base}[{}]", names.join(", "))
         }
     }
+}
+
+/// A title or heading from the file on one line: line breaks and other control characters
+/// become spaces, so a title cannot start a new Markdown block or break `\section*{…}`.
+fn one_line(s: &str) -> String {
+    s.chars().map(|c| if c.is_control() { ' ' } else { c }).collect()
+}
+
+/// Text for a Markdown heading: a `<` that could open an HTML tag or comment (`<b`, `</`,
+/// `<!`, `<?`) as `&lt;`, so no raw HTML passes; `<=` in a constraint stays as written.
+fn markdown_text(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    let mut chars = s.chars().peekable();
+    while let Some(c) = chars.next() {
+        let tag = c == '<' && chars.peek().is_some_and(|n| n.is_ascii_alphabetic() || matches!(n, '/' | '!' | '?'));
+        if tag { out.push_str("&lt;") } else { out.push(c) }
+    }
+    out
 }
 
 /// Text (a title, a heading, a sentence) as LaTeX text: the characters LaTeX treats as
@@ -269,7 +288,7 @@ fn latex_escape(s: &str) -> String {
 pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
     let doc = Doc::new(format);
     let mut out = String::new();
-    let title = if system.title.is_empty() { "Constraint forces".to_string() } else { system.title.clone() };
+    let title = if system.title.is_empty() { "Constraint forces".to_string() } else { one_line(&system.title) };
     match format {
         Format::Text => {
             let _ = writeln!(out, "{title} ({}D)", system.dim());
@@ -278,7 +297,7 @@ pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) ->
             let _ = writeln!(out, "\\section*{{{} ({}D)}}", latex_escape(&title), system.dim());
         }
         _ => {
-            let _ = writeln!(out, "# {title} ({}D)", system.dim());
+            let _ = writeln!(out, "# {} ({}D)", markdown_text(&title), system.dim());
         }
     }
     if steps {
