@@ -87,7 +87,7 @@ fn parameter_values(raw: &RawFile<'_>, system: &System) -> Vec<(Symbol, Value)> 
         .collect()
 }
 
-/// A mass symbol's value, written in [parameters] or [scene] initial, is a positive normal
+/// A mass symbol's value, written in `[parameters]` or `[scene] initial`, is a positive normal
 /// number: located at the value, so `derive` refuses `m = 0.0` as `solve` would.
 ///
 /// Only numbers written as numbers are judged: a value of the wrong type (reported, held as

@@ -58,7 +58,7 @@ pub enum Problem {
     /// A mass written as a number that is not positive, normal and finite.
     #[error("a mass must be a positive finite number, found {shown}{}", subnormal(.shown))]
     Mass { span: Range<usize>, shown: String },
-    /// A mass symbol given a value (in [parameters] or [scene] initial) that is not a
+    /// A mass symbol given a value (in `[parameters]` or `[scene] initial`) that is not a
     /// positive normal number.
     #[error("`{name}` is the mass of body `{body}`: it must be a positive finite number, found {shown}{}", subnormal(.shown))]
     MassValue { span: Range<usize>, name: String, body: String, shown: String },

@@ -1,6 +1,6 @@
 //! The `[scene]` table and the numbers of a state: what `solve` and `simulate` start from.
 //!
-//! [`validate`] resolves the raw `[scene]` (`model::raw::RawScene`) against a [`System`] into a
+//! `validate` resolves the raw `[scene]` (`model::raw::RawScene`) against a [`System`] into a
 //! [`Scene`] (symbols, typed force expressions, timing), reporting every problem with its
 //! span. [`environment`] then gives every symbol a number — parameters, the scene's initial
 //! state, overrides (`--at`, `--set`, validated by `model::state`), masses, and the external forces evaluated last, since
