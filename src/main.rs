@@ -310,16 +310,27 @@ static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
 /// Any other failure is reported once and makes the exit code 1.
 fn emit(args: std::fmt::Arguments<'_>) {
     use std::io::Write;
-    if let Err(e) = std::io::stdout().lock().write_fmt(args) {
+    // Names and titles from a file never reach the terminal raw (escape sequences could
+    // erase a line or fake one); line breaks and tabs stay.
+    let text = std::fmt::format(args);
+    let text = lagrange::report::diagnostic::escape_controls(&text, true);
+    if let Err(e) = std::io::stdout().lock().write_all(text.as_bytes()) {
         stdout_failed(&e);
     }
+}
+
+/// `eprintln!` with control characters escaped, as [`emit`] does for standard output.
+macro_rules! errln {
+    ($($arg:tt)*) => {
+        eprintln!("{}", lagrange::report::diagnostic::escape_controls(&format!($($arg)*), true))
+    };
 }
 
 /// Reports a failure to write standard output once, and makes the exit code 1; a closed
 /// pipe is not a failure.
 fn stdout_failed(e: &std::io::Error) {
     if e.kind() != std::io::ErrorKind::BrokenPipe && !STDOUT_FAILED.swap(true, Ordering::Relaxed) {
-        eprintln!("error: cannot write to standard output: {e}");
+        errln!("error: cannot write to standard output: {e}");
     }
 }
 
@@ -356,7 +367,7 @@ fn main() -> ExitCode {
         Ok(Ok(_)) if STDOUT_FAILED.load(Ordering::Relaxed) => ExitCode::from(1),
         Ok(Ok(code)) => code,
         _ => {
-            eprintln!("error: internal failure (please report it with the input file)");
+            errln!("error: internal failure (please report it with the input file)");
             ExitCode::from(3)
         }
     }
@@ -386,7 +397,7 @@ fn read_text(path: &Path) -> Result<String, String> {
 
 fn report_problems(path: &Path, text: &str, problems: &[Problem]) -> ExitCode {
     eprint!("{}", render(&path.display().to_string(), text, problems));
-    eprintln!("{} problem{} in {}", problems.len(), if problems.len() == 1 { "" } else { "s" }, path.display());
+    errln!("{} problem{} in {}", problems.len(), if problems.len() == 1 { "" } else { "s" }, path.display());
     ExitCode::from(1)
 }
 
@@ -394,7 +405,7 @@ fn report_problems(path: &Path, text: &str, problems: &[Problem]) -> ExitCode {
 /// gives the exit code.
 fn load_file(path: &Path) -> Result<Loaded, ExitCode> {
     let text = read_text(path).map_err(|e| {
-        eprintln!("{e}");
+        errln!("{e}");
         ExitCode::from(1)
     })?;
     load(&text).map_err(|problems| report_problems(path, &text, &problems))
@@ -409,7 +420,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
         match derive_with(&loaded.system, DeriveOptions { document: !matches!(format, FormatArg::Json), steps }) {
             Ok(d) => d,
             Err(e) => {
-                eprintln!("error: {}: {e}", path.display());
+                errln!("error: {}: {e}", path.display());
                 return ExitCode::from(1);
             }
         };
@@ -427,7 +438,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
                 ExitCode::SUCCESS
             }
             Err(e) => {
-                eprintln!("error: {}: {e}", path.display());
+                errln!("error: {}: {e}", path.display());
                 ExitCode::from(1)
             }
         };
@@ -439,7 +450,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => {
-            eprintln!("error: {}: {e}", path.display());
+            errln!("error: {}: {e}", path.display());
             ExitCode::from(1)
         }
     }
@@ -453,7 +464,7 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
     let code = match generate(&loaded, &Options { specialize }) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {}: {e}", path.display());
+            errln!("error: {}: {e}", path.display());
             return ExitCode::from(1);
         }
     };
@@ -461,7 +472,7 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
         Some(out) => match std::fs::write(out, code) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {
-                eprintln!("error: cannot write {}: {e}", out.display());
+                errln!("error: cannot write {}: {e}", out.display());
                 ExitCode::from(1)
             }
         },
@@ -489,7 +500,7 @@ fn parse_set(system: &System, arg: &str) -> Result<state::Given, String> {
 
 fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat) -> Result<(), ExitCode> {
     let fail = |message: String| {
-        eprintln!("{message}");
+        errln!("{message}");
         ExitCode::from(1)
     };
     let loaded = load_file(path)?;
@@ -537,7 +548,7 @@ fn cmd_check(files: &[PathBuf]) -> ExitCode {
         let text = match read_text(path) {
             Ok(t) => t,
             Err(e) => {
-                eprintln!("{e}");
+                errln!("{e}");
                 failed += 1;
                 continue;
             }
@@ -545,7 +556,7 @@ fn cmd_check(files: &[PathBuf]) -> ExitCode {
         let mut checked = match Checked::from_text(&name, &text) {
             Ok(c) => c,
             Err(e) => {
-                eprintln!("{e}");
+                errln!("{e}");
                 failed += 1;
                 continue;
             }
@@ -556,12 +567,14 @@ fn cmd_check(files: &[PathBuf]) -> ExitCode {
         }
         for o in outcomes {
             let place = o.span.as_ref().map_or(name.clone(), |s| location(&name, &text, s.start));
+            // One line each: a name with a line break cannot start a fake `ok` line.
+            let label = lagrange::report::diagnostic::escape_controls(&o.label, false);
             if o.passed {
                 passed += 1;
-                outln!("ok     {place}: {} ({})", o.label, o.how);
+                outln!("ok     {place}: {label} ({})", o.how);
             } else {
                 failed += 1;
-                outln!("FAILED {place}: {} ({})", o.label, o.how);
+                outln!("FAILED {place}: {label} ({})", o.how);
                 outln!("{}", o.detail);
             }
         }
@@ -582,15 +595,50 @@ fn location(name: &str, text: &str, offset: usize) -> String {
 fn scenario(path: &Path) -> Result<lagrange::scenario::Scenario, ExitCode> {
     let loaded = load_file(path)?;
     lagrange::scenario::Scenario::new(loaded, &[]).map_err(|e| {
-        eprintln!("error: {}: {e}", path.display());
+        errln!("error: {}: {e}", path.display());
         ExitCode::from(1)
     })
+}
+
+/// Whether writing `output` would replace `input`: the same file by canonical path, or on
+/// Unix by device and inode (a symlink or a hard link to it).
+fn same_file(input: &Path, output: &Path) -> bool {
+    let (Ok(a), Ok(b)) = (std::fs::canonicalize(input), std::fs::canonicalize(output)) else {
+        return false;
+    };
+    if a == b {
+        return true;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let (Ok(a), Ok(b)) = (std::fs::metadata(&a), std::fs::metadata(&b)) {
+            return a.dev() == b.dev() && a.ino() == b.ino();
+        }
+    }
+    false
+}
+
+/// Refuses, before anything runs, an output (`--csv`, `--plot`) that is the input file.
+fn refuse_overwrite(input: &Path, outputs: &[(&str, Option<&PathBuf>)]) -> Result<(), ExitCode> {
+    for (flag, path) in outputs {
+        if let Some(path) = path
+            && same_file(input, path)
+        {
+            errln!("error: {flag} {} is the input file: lagrange does not overwrite it", path.display());
+            return Err(ExitCode::from(2));
+        }
+    }
+    Ok(())
 }
 
 fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     use lagrange::numeric::integrate::Integrator;
     use lagrange::numeric::simulate::steps_for;
     use lagrange::numeric::stabilize::Stabilize;
+    if let Err(code) = refuse_overwrite(&args.file, &[("--csv", args.csv.as_ref()), ("--plot", args.plot.as_ref())]) {
+        return code;
+    }
     let scenario = match scenario(&args.file) {
         Ok(s) => s,
         Err(code) => return code,
@@ -613,13 +661,13 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         },
     };
     if let Err(e) = settings.validate() {
-        eprintln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
+        errln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
         return ExitCode::from(2);
     }
     let velocity = match args.velocity.settings(settings.dt, settings.steps, settings.restitution) {
         Ok(v) => v,
         Err(e) => {
-            eprintln!("error: {e}");
+            errln!("error: {e}");
             return ExitCode::from(2);
         }
     };
@@ -635,7 +683,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
             match out {
                 Ok(w) => Some(w),
                 Err(e) => {
-                    eprintln!("error: cannot write {}: {e}", path.display());
+                    errln!("error: cannot write {}: {e}", path.display());
                     return ExitCode::from(1);
                 }
             }
@@ -659,13 +707,18 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
-    if let Some(Err(e)) = csv.as_mut().map(|w| w.flush()) {
-        eprintln!("error: cannot write the CSV: {e}");
-    }
+    // A CSV that could not be written whole (`--csv /dev/full`) is a failed write: exit 1.
+    let csv_failed = if let Some(Err(e)) = csv.as_mut().map(|w| w.flush()) {
+        errln!("error: cannot write the CSV: {e}");
+        true
+    } else {
+        false
+    };
     let (summary, code) = match result {
+        Ok(s) if csv_failed => (s, ExitCode::from(1)),
         Ok(s) => (s, ExitCode::SUCCESS),
         Err(failure) => {
-            eprintln!("error: {}: {}", args.file.display(), failure.error);
+            errln!("error: {}: {}", args.file.display(), failure.error);
             (failure.summary, ExitCode::from(2))
         }
     };
@@ -680,7 +733,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         let written = lagrange::report::plot::simulation(&title, &summary)
             .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
         if let Err(e) = written {
-            eprintln!("error: {}: {e}", path.display());
+            errln!("error: {}: {e}", path.display());
             return ExitCode::from(1);
         }
     }
@@ -689,6 +742,9 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
 
 fn cmd_bench(args: &BenchArgs) -> ExitCode {
     use lagrange::report::precision as table;
+    if let Err(code) = refuse_overwrite(&args.file, &[("--plot", args.plot.as_ref())]) {
+        return code;
+    }
     let scenario = match scenario(&args.file) {
         Ok(s) => s,
         Err(code) => return code,
@@ -703,7 +759,7 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
     let wp = match lagrange::precision::work_precision(&scenario, &sweep) {
         Ok(wp) => wp,
         Err(e) => {
-            eprintln!("error: {}: {e}", args.file.display());
+            errln!("error: {}: {e}", args.file.display());
             return ExitCode::from(2);
         }
     };
@@ -723,7 +779,7 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         )
         .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
         if let Err(e) = written {
-            eprintln!("error: {}: {e}", path.display());
+            errln!("error: {}: {e}", path.display());
             return ExitCode::from(1);
         }
     }
@@ -737,7 +793,7 @@ fn cmd_bench_solvers(args: &BenchArgs, scenario: &lagrange::scenario::Scenario) 
     let dt = args.dt.unwrap_or(scenario.scene.dt);
     let duration = args.duration.unwrap_or(scenario.scene.duration);
     if !(dt.is_finite() && dt > 0.0 && duration.is_finite() && duration >= 0.0) {
-        eprintln!("error: --dt must be positive and --duration at least 0, found {dt} and {duration}");
+        errln!("error: --dt must be positive and --duration at least 0, found {dt} and {duration}");
         return ExitCode::from(2);
     }
     let plan = Plan::new(dt, (duration / dt).round() as u64);
@@ -750,7 +806,7 @@ fn cmd_bench_solvers(args: &BenchArgs, scenario: &lagrange::scenario::Scenario) 
     let bench = match solver_bench(scene, &plan) {
         Ok(b) => b,
         Err(e) => {
-            eprintln!("error: {}: {e}", args.file.display());
+            errln!("error: {}: {e}", args.file.display());
             return ExitCode::from(2);
         }
     };
@@ -765,7 +821,7 @@ fn cmd_bench_solvers(args: &BenchArgs, scenario: &lagrange::scenario::Scenario) 
             lagrange::report::plot::work_precision(&title, "seconds per step", "max |C|", &table::lines(&bench))
                 .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
         if let Err(e) = written {
-            eprintln!("error: {}: {e}", path.display());
+            errln!("error: {}: {e}", path.display());
             return ExitCode::from(1);
         }
     }

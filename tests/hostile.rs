@@ -256,3 +256,138 @@ fn endless_and_oversized_inputs_are_refused_while_reading() {
     let big = vec![b'#'; (16 << 20) + 1];
     refused("oversized", &big, "too large");
 }
+
+// ---- files and injection ---------------------------------------------------------------
+
+/// Runs the binary with `args`; returns (exit code, stdout, stderr).
+fn run(args: &[&std::ffi::OsStr]) -> (Option<i32>, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).args(args).output().expect("binary runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn bead_scene() -> String {
+    bead_with("dot(r, r) = l^2") + "[scene]\ninitial = { r = [1.0, 0.0], v = [0.0, 1.0] }\n"
+}
+
+/// `simulate x.toml --csv x.toml` (or `--plot`, or through a symlink to it) is refused
+/// before anything runs, and the constraint file is left as it was.
+#[test]
+fn outputs_never_overwrite_the_input() {
+    let text = bead_scene();
+    let file = TempFile::new("overwrite", text.as_bytes());
+    let path = file.0.as_os_str();
+    for flag in ["--csv", "--plot"] {
+        let (code, stdout, stderr) =
+            run(&["simulate".as_ref(), path, "--steps".as_ref(), "10".as_ref(), flag.as_ref(), path]);
+        assert_eq!(code, Some(2), "{flag}: {stderr}");
+        assert!(stderr.contains("is the input file"), "{flag}: {stderr}");
+        assert!(stdout.is_empty(), "{flag}: nothing runs: {stdout}");
+        assert_eq!(std::fs::read_to_string(&file.0).expect("still there"), text, "{flag}: the input was changed");
+    }
+    #[cfg(unix)]
+    {
+        let link = file.0.with_extension("link.csv");
+        let _ = std::fs::remove_file(&link);
+        std::os::unix::fs::symlink(&file.0, &link).expect("a symlink");
+        let (code, _, stderr) =
+            run(&["simulate".as_ref(), path, "--steps".as_ref(), "10".as_ref(), "--csv".as_ref(), link.as_os_str()]);
+        let _ = std::fs::remove_file(&link);
+        assert_eq!(code, Some(2), "{stderr}");
+        assert_eq!(
+            std::fs::read_to_string(&file.0).expect("still there"),
+            text,
+            "the input was changed through a symlink"
+        );
+    }
+    let (code, _, stderr) = run(&["bench".as_ref(), path, "--plot".as_ref(), path]);
+    assert_eq!(code, Some(2), "bench --plot: {stderr}");
+    assert_eq!(std::fs::read_to_string(&file.0).expect("still there"), text);
+}
+
+/// A CSV that cannot be written is a failed write: exit 1, not 0.
+#[test]
+fn a_csv_that_cannot_be_written_fails_the_command() {
+    if !std::path::Path::new("/dev/full").exists() {
+        return;
+    }
+    let file = TempFile::new("full", bead_scene().as_bytes());
+    let (code, _, stderr) = run(&[
+        "simulate".as_ref(),
+        file.0.as_os_str(),
+        "--steps".as_ref(),
+        "10".as_ref(),
+        "--csv".as_ref(),
+        "/dev/full".as_ref(),
+    ]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("cannot write"), "{stderr}");
+}
+
+/// Names and titles never reach the terminal raw: an ANSI escape and a line break in a
+/// constraint's name cannot erase `check`'s FAILED line or print a fake `ok` line.
+#[test]
+fn names_reach_the_terminal_escaped() {
+    let name = "wire\\u001b[2K\\r\\nok     fake.toml:1:1: all fine";
+    let text = bead_with("dot(r, r) = l^2").replace("name = \"wire\"", &format!("name = \"{name}\""))
+        + &format!("[[expect]]\nlambda = {{ \"{name}\" = \"42\" }}\n");
+    let file = TempFile::new("escape", text.as_bytes());
+    let (code, stdout, stderr) = run(&["check".as_ref(), file.0.as_os_str()]);
+    assert_eq!(code, Some(1), "{stdout}{stderr}");
+    assert!(!stdout.contains('\u{1b}') && !stderr.contains('\u{1b}'), "{stdout:?}");
+    assert!(!stdout.lines().any(|l| l.starts_with("ok")), "a fake ok line:\n{stdout}");
+    assert!(stdout.lines().any(|l| l.starts_with("FAILED") && l.contains("\\u{1b}")), "{stdout}");
+    // The derivation's documents too.
+    let (code, stdout, _) = run(&["derive".as_ref(), file.0.as_os_str()]);
+    assert_eq!(code, Some(0));
+    assert!(!stdout.contains('\u{1b}'), "{stdout:?}");
+}
+
+/// A title with line breaks and HTML stays one heading: no new Markdown block, no raw HTML,
+/// and LaTeX's `\section*{…}` on one line.
+#[test]
+fn a_title_stays_one_heading() {
+    let text = bead_with("dot(r, r) = l^2")
+        .replace("title = \"hostile\"", "title = \"Bead\\n\\n<script>alert(1)</script>\\n# Not a heading\"");
+    let file = TempFile::new("title", text.as_bytes());
+    let (code, md, _) = run(&["derive".as_ref(), file.0.as_os_str(), "--format".as_ref(), "markdown".as_ref()]);
+    assert_eq!(code, Some(0));
+    assert_eq!(md.lines().filter(|l| l.starts_with("# ")).count(), 1, "{md}");
+    assert!(md.lines().next().is_some_and(|l| l.contains("Bead") && l.contains("Not a heading")), "{md}");
+    assert!(!md.contains("<script"), "{md}");
+    let (code, tex, _) = run(&["derive".as_ref(), file.0.as_os_str(), "--format".as_ref(), "latex".as_ref()]);
+    assert_eq!(code, Some(0));
+    let section = tex.lines().find(|l| l.starts_with("\\section*{")).expect("a section");
+    assert!(section.ends_with('}') && section.contains("Not a heading"), "{tex}");
+}
+
+/// CSV headers built from names are one record: a `,`, a quote or a line break in a
+/// constraint's name is quoted, and a field a spreadsheet would run as a formula is defused.
+#[test]
+fn csv_headers_quote_and_defuse_names() {
+    use lagrange::report::csv::field;
+    assert_eq!(field("r.x"), "r.x");
+    assert_eq!(field("a,b"), "\"a,b\"");
+    assert_eq!(field("say \"hi\"\nthere"), "\"say \"\"hi\"\"\nthere\"");
+    for formula in ["=1+2", "+1", "-1", "@SUM(A1)"] {
+        assert_eq!(field(formula), format!("'{formula}"), "{formula}");
+    }
+    let text = bead_scene().replace("name = \"wire\"", "name = \"a,b\\nc\"");
+    let file = TempFile::new("csvname", text.as_bytes());
+    let csv = std::env::temp_dir().join(format!("lagrange-hostile-{}-names.csv", std::process::id()));
+    let (code, _, stderr) = run(&[
+        "simulate".as_ref(),
+        file.0.as_os_str(),
+        "--steps".as_ref(),
+        "2".as_ref(),
+        "--csv".as_ref(),
+        csv.as_os_str(),
+    ]);
+    let written = std::fs::read_to_string(&csv).unwrap_or_default();
+    let _ = std::fs::remove_file(&csv);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(written.starts_with("t,r.x,r.y,v.x,v.y,\"lambda_a,b\nc\",\"C_a,b\nc\",\"Cdot_a,b\nc\"\n"), "{written}");
+}

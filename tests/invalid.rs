@@ -64,6 +64,14 @@ invalid! {
     literal_length: "needs 2 entries, found 3",
     vector_vs_scalar: "cannot compare a vector with a scalar",
     syntax_error: "expected an expression",
+    norm_bars: "write the norm |r| as `norm(r)`",
+    printed_notation: "write `dot(r, r)`",
+    vector_power: "write |r|² as `dot(r, r)`",
+    double_star: "write powers with `^`",
+    missing_times: "a product needs `*`",
+    missing_relation: "a constraint is a relation",
+    strict_inequality: "write `>=` or `<=`",
+    pi_constant: "`pi` is not built in",
 }
 
 /// The file-level invalid files (`file_*.toml`, snapshot-tested through the library by

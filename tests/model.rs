@@ -122,3 +122,59 @@ fn solve_reports_every_syntax_error_of_a_state_before_a_value_that_does_not_fit(
     assert_eq!(solve("v=[0, 0]"), "error: constraints/bead_on_wire.toml: `x` is not a symbol of this file\n");
     std::fs::remove_dir_all(&dir).expect("removes the temporary directory");
 }
+
+/// A mistake is reported once, where it is written, and nothing that follows from it is
+/// reported again or said falsely: a constraint without a name leaves the file with
+/// [[constraints]], a refused body's symbols are not "unknown" in `[scene]`, a clash
+/// inside a body is located at its second field, a mass in quotes at the mass.
+#[test]
+fn a_mistake_causes_no_follow_on_messages() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/invalid/file_follow_on.toml");
+    let text = std::fs::read_to_string(path).expect("the file reads");
+    let Err(problems) = load(&text) else { panic!("the file is refused") };
+    let messages: Vec<String> = problems.iter().map(ToString::to_string).collect();
+    assert_eq!(problems.len(), 4, "{messages:#?}");
+    for m in &messages {
+        assert!(
+            !m.contains("no [[constraints]]") && !m.contains("declares no bodies") && !m.contains("not a symbol"),
+            "{m}"
+        );
+    }
+    let at = |p: &Problem| p.span().map(|s| text[s].to_string());
+    let line = |needle: &str| problems.iter().find(|p| p.to_string().contains(needle)).and_then(at);
+    assert_eq!(line("declared twice (as the position of body `bead` and as the velocity"), Some("\"r\"".into()));
+    let clash = problems.iter().find(|p| p.to_string().contains("`r` is declared twice")).and_then(Problem::span);
+    assert!(clash.is_some_and(|s| text[..s.start].ends_with("velocity = ")), "{messages:#?}");
+    assert_eq!(line("`g` is declared twice"), Some("\"g\"".into()));
+    assert_eq!(line("is a number in quotes"), Some("\"0.5\"".into()));
+    assert!(messages.iter().any(|m| m.contains("a constraint has no `name`")), "{messages:#?}");
+}
+
+/// A state file that is not a flat table of numbers and vectors is refused with a message
+/// naming the key (never serde's "did not match any variant"), and a JSON key written
+/// twice is an error naming it, not a silent last value.
+#[test]
+fn bad_state_files_name_the_key() {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/bead_on_wire.toml"))
+        .expect("the bead");
+    let loaded = load(&text).expect("valid");
+    let system = &loaded.system;
+    assert_eq!(
+        state::state_file(system, r#"{"r": [1, 0], "v": [0, 0, "x"]}"#, Format::Json),
+        Err(StateInputError::NotAComponent { key: "v".into(), index: 3, found: "a string" })
+    );
+    assert_eq!(
+        state::state_file(system, "r = [1.0, 0.0]\nv = \"fast\"\n", Format::Toml),
+        Err(StateInputError::NotANumber { key: "v".into(), found: "a string" })
+    );
+    // A constraint file given to `--at`.
+    let Err(err) = state::state_file(system, &text, Format::Toml) else { panic!("a scene file is not a state") };
+    let message = err.to_string();
+    assert!(message.contains("is this a constraint file?") && !message.contains("variant"), "{message}");
+    let Err(StateInputError::Syntax(message)) =
+        state::state_file(system, r#"{"r": [1, 0], "r": [0, 1]}"#, Format::Json)
+    else {
+        panic!("a duplicate key is refused")
+    };
+    assert!(message.contains("duplicate key `r`"), "{message}");
+}

@@ -584,3 +584,236 @@ fn a_repeated_constraint_derives_as_if_it_were_alone() {
     });
     assert!(reused.get() >= 60, "only {} repeats were compared", reused.get());
 }
+
+/// What `derive --steps` prints — C, Ċ and C̈ as the product rule gives them and collected,
+/// ∇C, J, c, λ and the force of a random constraint — printed in the expression language
+/// parses back to the very same node, and printed in Unicode (`Style::Text`) reads back
+/// (through [`unicode`]) as an expression of the same value at random states.
+#[test]
+fn what_steps_prints_reads_back() {
+    let tally = Tally::new();
+    let strategy = cases(Leaves::Positional, 3, false)
+        .prop_map(|(dim, text, seed)| (dim, format!("{text} + k*dot(r1, r2)"), seed));
+    check("steps print → parse", 120, strategy, |(dim, text, seed)| {
+        let system = system(dim, Some(&text)).map_err(TestCaseError::fail)?;
+        let options = lagrange::derive::Options { document: true, steps: true };
+        let mut d = match lagrange::derive::derive_with(&system, options) {
+            Ok(d) => d,
+            Err(DeriveError::ZeroGradient(_)) => return Ok(()),
+            Err(err) => return Err(TestCaseError::fail(format!("{text}: {err}"))),
+        };
+        let dc = d.constraints[0].clone();
+        let mut roots = vec![dc.c, dc.c_dot_raw, dc.c_dot, dc.c_ddot_raw, dc.c_ddot, dc.bias];
+        roots.extend(dc.gradient.iter().chain(&dc.jacobian).map(|&(_, id)| id));
+        roots.extend(d.lambda);
+        roots.extend(d.forces.iter().flatten().map(|&(_, id)| id));
+        let mut rng = Rng::new(seed);
+        let envs: Vec<Env> = (0..4).map(|_| random_env(&system, &mut rng)).collect();
+        for id in roots {
+            let printed = print(&d.graph, id, Style::Source).map_err(|err| TestCaseError::fail(err.to_string()))?;
+            let back = d
+                .expression(&system, &printed)
+                .map_err(|err| TestCaseError::fail(format!("{text}: {printed} does not parse: {err}")))?;
+            prop_assert_eq!(back, id, "{}: {} parses to another node", text, printed);
+            let human = print(&d.graph, id, Style::Text).map_err(|err| TestCaseError::fail(err.to_string()))?;
+            let source = unicode::to_source(&human)
+                .map_err(|err| TestCaseError::fail(format!("{text}: Unicode {human} does not read: {err}")))?;
+            let again = d
+                .expression(&system, &source)
+                .map_err(|err| TestCaseError::fail(format!("{text}: Unicode {human} read as {source}: {err}")))?;
+            for env in &envs {
+                let (Some(x), Some(y)) = (value_in(&d.graph, id, env), value_in(&d.graph, again, env)) else {
+                    tally.record(Verdict::Skip);
+                    continue;
+                };
+                let scale = x.iter().chain(&y).fold(1.0_f64, |m, v| m.max(v.abs()));
+                let close = x.len() == y.len() && x.iter().zip(&y).all(|(a, b)| (a - b).abs() <= 1e-9 * scale);
+                prop_assert!(close, "{}: Unicode {} (read as {}) is {:?}, not {:?}", text, human, source, y, x);
+                tally.record(Verdict::Agree);
+            }
+        }
+        Ok(())
+    });
+    tally.assert_enough("steps print → parse", 1000);
+}
+
+/// The Unicode notation read back for the test above, by the rules people read it with:
+/// a sum's `+` and `−` have a space on each side; a leading `−` negates what follows up to
+/// the next sum operator; juxtaposition (a space), `·`, `×` and `/` are products read left
+/// to right; `/` takes one operand (an atom or a parenthesised group); superscripts and
+/// `^` bind tighter, components (`.x`) tightest; `|a|` is a norm and `√a` a root.
+mod unicode {
+    pub fn to_source(text: &str) -> Result<String, String> {
+        let mut r = Reader { s: text.chars().collect(), i: 0 };
+        let e = r.sum()?;
+        if r.i != r.s.len() {
+            return Err(format!("unread text at {}: {:?}", r.i, r.s[r.i..].iter().collect::<String>()));
+        }
+        Ok(e)
+    }
+
+    struct Reader {
+        s: Vec<char>,
+        i: usize,
+    }
+
+    impl Reader {
+        fn peek(&self) -> Option<char> {
+            self.s.get(self.i).copied()
+        }
+        fn at(&self, k: usize) -> Option<char> {
+            self.s.get(self.i + k).copied()
+        }
+        fn eat(&mut self, c: char) -> Result<(), String> {
+            if self.peek() == Some(c) {
+                self.i += 1;
+                Ok(())
+            } else {
+                Err(format!("expected {c:?} at {}", self.i))
+            }
+        }
+        /// ` + ` or ` − ` here.
+        fn sum_operator(&self) -> Option<char> {
+            match (self.at(0), self.at(1), self.at(2)) {
+                (Some(' '), Some(op @ ('+' | '−')), Some(' ')) => Some(op),
+                _ => None,
+            }
+        }
+        fn sum(&mut self) -> Result<String, String> {
+            let mut e = self.signed()?;
+            while let Some(op) = self.sum_operator() {
+                self.i += 3;
+                let t = self.signed()?;
+                e = format!("({e}) {} ({t})", if op == '+' { '+' } else { '-' });
+            }
+            Ok(e)
+        }
+        fn signed(&mut self) -> Result<String, String> {
+            if self.peek() == Some('−') {
+                self.i += 1;
+                return Ok(format!("-({})", self.signed()?));
+            }
+            self.product()
+        }
+        fn product(&mut self) -> Result<String, String> {
+            let mut e = self.power()?;
+            loop {
+                match self.peek() {
+                    Some(' ') if self.sum_operator().is_none() => {
+                        self.i += 1;
+                        e = format!("({e})*({})", self.power()?);
+                    }
+                    Some('·') => {
+                        self.i += 1;
+                        e = format!("dot({e}, {})", self.operand()?);
+                    }
+                    Some('×') => {
+                        self.i += 1;
+                        e = format!("cross({e}, {})", self.operand()?);
+                    }
+                    Some('/') => {
+                        self.i += 1;
+                        e = format!("({e})/({})", self.power()?);
+                    }
+                    _ => return Ok(e),
+                }
+            }
+        }
+        /// An operand of `·` or `×`, which may be negated.
+        fn operand(&mut self) -> Result<String, String> {
+            if self.peek() == Some('−') {
+                self.i += 1;
+                return Ok(format!("-({})", self.operand()?));
+            }
+            self.power()
+        }
+        fn power(&mut self) -> Result<String, String> {
+            let mut e = self.atom()?;
+            loop {
+                match self.peek() {
+                    Some('.') => {
+                        self.i += 1;
+                        let axis = self.peek().ok_or("a component")?;
+                        self.i += 1;
+                        e = format!("({e}).{axis}");
+                    }
+                    Some('^') => {
+                        self.i += 1;
+                        e = format!("({e})^({})", self.atom()?);
+                    }
+                    Some(c) if superscript(c).is_some() => {
+                        let mut n = String::new();
+                        while let Some(d) = self.peek().and_then(superscript) {
+                            n.push(d);
+                            self.i += 1;
+                        }
+                        e = format!("({e})^({n})");
+                    }
+                    _ => return Ok(e),
+                }
+            }
+        }
+        fn list(&mut self, close: char) -> Result<String, String> {
+            let mut items = vec![self.sum()?];
+            while self.peek() == Some(',') {
+                self.eat(',')?;
+                self.eat(' ')?;
+                items.push(self.sum()?);
+            }
+            self.eat(close)?;
+            Ok(items.join(", "))
+        }
+        fn atom(&mut self) -> Result<String, String> {
+            match self.peek().ok_or("an atom at the end")? {
+                '(' => {
+                    self.i += 1;
+                    let e = self.sum()?;
+                    self.eat(')')?;
+                    Ok(format!("({e})"))
+                }
+                '[' => {
+                    self.i += 1;
+                    Ok(format!("[{}]", self.list(']')?))
+                }
+                '|' => {
+                    self.i += 1;
+                    let e = self.sum()?;
+                    self.eat('|')?;
+                    Ok(format!("norm({e})"))
+                }
+                '√' => {
+                    self.i += 1;
+                    Ok(format!("sqrt({})", self.power()?))
+                }
+                c if c.is_ascii_digit() => {
+                    let start = self.i;
+                    while self.peek().is_some_and(|c| c.is_ascii_digit()) {
+                        self.i += 1;
+                    }
+                    Ok(self.s[start..self.i].iter().collect())
+                }
+                c if c.is_alphabetic() || c == '_' => {
+                    let start = self.i;
+                    while self.peek().is_some_and(|c| c.is_alphabetic() || c.is_ascii_digit() || c == '_') {
+                        self.i += 1;
+                    }
+                    let name: String = self.s[start..self.i].iter().collect();
+                    if self.peek() == Some('(') {
+                        self.i += 1;
+                        return Ok(format!("{name}({})", self.list(')')?));
+                    }
+                    Ok(name)
+                }
+                c => Err(format!("unexpected {c:?} at {}", self.i)),
+            }
+        }
+    }
+
+    fn superscript(c: char) -> Option<char> {
+        let digits = "⁰¹²³⁴⁵⁶⁷⁸⁹";
+        if c == '⁻' {
+            return Some('-');
+        }
+        digits.chars().position(|d| d == c).and_then(|k| char::from_digit(k as u32, 10))
+    }
+}

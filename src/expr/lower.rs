@@ -84,6 +84,13 @@ pub enum LowerErrorKind {
     Arity { name: String, expected: usize, found: usize },
     #[error("`{function}` needs {expected} here, found {}", found)]
     Argument { function: String, expected: Ty, found: Ty },
+    #[error("`^` needs a scalar base, found a vector: write |r|² as `dot(r, r)` and |r| as `norm(r)`")]
+    VectorPower,
+    /// `pi` used without being declared: the language's numbers are exact, π is not.
+    #[error(
+        "`pi` is not built in (numbers in formulas are exact): give it a value in [parameters], e.g. `pi = 3.141592653589793`"
+    )]
+    Pi,
     #[error("number `{text}` is out of range")]
     NumberRange { text: String },
     #[error("a constraint must be a scalar, found a vector: compare components, e.g. `r.x = 0`")]
@@ -219,7 +226,10 @@ impl Lower<'_> {
             }
             SyntaxKind::Product(factors) => self.product(factors, false),
             SyntaxKind::Pow(base, exponent) => {
-                let b = self.scalar(base, "^")?;
+                let b = self.expr(base)?;
+                if self.graph.ty(b) == Ty::Vector {
+                    return Err(LowerError { span: base.span, kind: LowerErrorKind::VectorPower });
+                }
                 let e = self.scalar(exponent, "^")?;
                 self.graph.pow(b, e).map_err(at)
             }
@@ -259,6 +269,9 @@ impl Lower<'_> {
         }
         if is_function_name(name) {
             return Err(LowerError { span, kind: LowerErrorKind::FunctionAsValue { name: name.to_string() } });
+        }
+        if name == "pi" {
+            return Err(LowerError { span, kind: LowerErrorKind::Pi });
         }
         let suggestion = suggest(name, self.scope.names());
         Err(LowerError { span, kind: LowerErrorKind::UnknownSymbol { name: name.to_string(), suggestion } })

@@ -78,7 +78,7 @@ fn cut<'a, T>(at: &'a str, message: impl Into<Cow<'static, str>>) -> Res<'a, T> 
 pub fn parse_expr(text: &str) -> Result<Syntax<'_>, ParseError> {
     let p = Parse::new(text)?;
     let (rest, e) = p.expr(text, 0).map_err(|e| p.error(e))?;
-    p.finish(rest)?;
+    p.finish(rest, After::Expression)?;
     Ok(e)
 }
 
@@ -88,7 +88,7 @@ pub fn parse_relation(text: &str) -> Result<Relation<'_>, ParseError> {
     let (rest, lhs) = p.expr(text, 0).map_err(|e| p.error(e))?;
     let (rest, _) = ws(rest).map_err(|e| p.error(e))?;
     let rel_op = alt((tag(">="), tag("<="), tag("=="), tag("=")));
-    let (rest, rel) = match opt(rel_op).parse(rest).map_err(|e| p.error(e))? {
+    let (_, rel) = match opt(rel_op).parse(rest).map_err(|e| p.error(e))? {
         (after, Some(op)) => {
             let op_span = p.span(rest, after);
             let op = match op {
@@ -97,16 +97,54 @@ pub fn parse_relation(text: &str) -> Result<Relation<'_>, ParseError> {
                 _ => RelOp::Eq,
             };
             let (after, rhs) = p.expr(after, 0).map_err(|e| p.error(e))?;
+            p.finish(after, After::Rhs)?;
             (after, Some((op, op_span, rhs)))
         }
-        (rest, None) => (rest, None),
+        (rest, None) => {
+            p.finish(rest, After::Lhs)?;
+            (rest, None)
+        }
     };
-    p.finish(rest)?;
     Ok(Relation { lhs, rel })
 }
 
 struct Parse<'s> {
     src: &'s str,
+}
+
+/// What text left over after an expression follows, for the hint of its message.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum After {
+    /// A whole expression (a definition, a force).
+    Expression,
+    /// The left side of a constraint, no relation operator yet.
+    Lhs,
+    /// The right side of a constraint.
+    Rhs,
+}
+
+/// A hint for notation the language does not have, written where someone used to
+/// mathematics (or to how lagrange prints formulas) writes it: `|r|`, `r·r`, `l²`, `−`,
+/// `√`, `**`, and the strict inequalities `>` and `<`.
+fn notation_hint(at: &str) -> Option<&'static str> {
+    let mut chars = at.chars();
+    let first = chars.next()?;
+    let second = chars.next();
+    Some(match first {
+        '|' => ": write the norm |r| as `norm(r)`",
+        '·' => ": `·` is how lagrange prints a dot product; write `dot(r, r)`",
+        '×' => ": `×` is how lagrange prints a cross product; write `cross(a, b)`",
+        '²' | '³' | '⁴' | '⁵' | '⁶' | '⁷' | '⁸' | '⁹' | '⁰' | '¹' | '⁻' => {
+            ": write powers with `^`, e.g. `l^2`"
+        }
+        '−' => ": `−` (the Unicode minus sign) is not `-`; write `-`",
+        '√' => ": write roots as `sqrt(x)`",
+        '*' if second == Some('*') => ": write powers with `^`, e.g. `l^2`, not `l**2`",
+        '>' | '<' if second != Some('=') => {
+            ": a strict inequality is not a constraint (a contact holds at equality); write `>=` or `<=`"
+        }
+        _ => return None,
+    })
 }
 
 /// Spaces, tabs and line breaks (nom's `multispace0`, as a loop over bytes: it runs
@@ -178,16 +216,28 @@ impl<'s> Parse<'s> {
         }
     }
 
-    fn finish(&self, rest: &str) -> Result<(), ParseError> {
+    fn finish(&self, rest: &str, after: After) -> Result<(), ParseError> {
         let rest = rest.trim_start();
         if rest.is_empty() {
             return Ok(());
         }
         let start = self.offset(rest);
         let c = rest.chars().next().unwrap_or(' ');
+        let starts_operand = is_ident_start(c) || c.is_ascii_digit() || c == '(' || c == '[';
+        let hint = match notation_hint(rest) {
+            Some(hint) => hint,
+            // `2 dot(r, r) = l^2`: a relation follows, so what is missing is a `*`.
+            None if starts_operand && (after != After::Lhs || rest.contains(['=', '<', '>'])) => {
+                "; a product needs `*`: write `2*dot(r, r)`, not `2 dot(r, r)`"
+            }
+            None if starts_operand => {
+                "; a constraint is a relation: `lhs = rhs`, `lhs <= rhs` or `lhs >= rhs` (and a product needs `*`)"
+            }
+            None => "",
+        };
         Err(ParseError {
             span: Span::new(start, start + c.len_utf8()),
-            message: format!("unexpected `{c}` after the end of the expression"),
+            message: format!("unexpected `{c}` after the end of the expression{hint}"),
         })
     }
 
@@ -251,6 +301,9 @@ impl<'s> Parse<'s> {
         loop {
             let (j, _) = ws(i)?;
             let op = match j.chars().next() {
+                Some('*') if j[1..].starts_with('*') => {
+                    return cut(&j[1..], "`**` is not an operator: write powers with `^`, e.g. `l^2`");
+                }
                 Some('*') => MulOp::Times,
                 Some('/') => MulOp::Over,
                 _ => break,
@@ -347,7 +400,7 @@ impl<'s> Parse<'s> {
                 let (j, text) = number(i)?;
                 Ok((j, Syntax { kind: SyntaxKind::Number(text), span: self.span(i, j) }))
             }
-            Some(c) => fail(i, format!("expected an expression, found `{c}`")),
+            Some(c) => fail(i, format!("expected an expression, found `{c}`{}", notation_hint(i).unwrap_or(""))),
             None => fail(i, "expected an expression, found the end of the text"),
         }
     }

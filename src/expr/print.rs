@@ -464,7 +464,7 @@ impl Printer<'_> {
         let mut pieces = 0;
         // `(F + F_c)/m` rather than `1/m (F + F_c)`.
         if let Some(v) = vector.filter(|_| has_den && numerator.is_empty() && p.is_one() && !latex) {
-            self.human(v, style, 3)?;
+            self.juxtaposed(v, style, 3, negative)?;
             vector = None;
             pieces += 1;
         }
@@ -492,7 +492,7 @@ impl Printer<'_> {
                 _ if last && !has_den => 2,
                 _ => 3,
             };
-            self.human(f, style, ctx)?;
+            self.juxtaposed(f, style, ctx, pieces > 0 || negative)?;
             pieces += 1;
         }
         if has_den {
@@ -521,7 +521,7 @@ impl Printer<'_> {
                 } else {
                     5
                 };
-                self.human(*b, style, if *n == 1 { ctx } else { 5 })?;
+                self.juxtaposed(*b, style, if *n == 1 { ctx } else { 5 }, parts > 0)?;
                 if *n != 1 {
                     if latex { self.push(&format!("^{{{n}}}"))? } else { self.push(&superscript(*n))? }
                 }
@@ -538,10 +538,34 @@ impl Printer<'_> {
             if pieces > 0 || has_den {
                 self.push(if latex { " \\, " } else { " " })?;
             }
-            self.human(v, style, 3)?;
+            self.juxtaposed(v, style, 3, pieces > 0 || has_den || negative)?;
         }
         Ok(())
     }
+
+    /// A factor of a product printed after another piece (`after`): one whose text would
+    /// begin with a minus is put in parentheses, so `r.y (−sin(w t) w)` never reads as
+    /// `r.y − sin(w t) w` and `−(−x)` never as `−−x`.
+    fn juxtaposed(&mut self, f: Id, style: Style, ctx: u8, after: bool) -> Result<(), PrintError> {
+        let start = self.out.len();
+        self.human(f, style, ctx)?;
+        let minus = if style == Style::Latex { "-" } else { MINUS };
+        if after && self.out[start..].starts_with(minus) {
+            let (open, close) = if style == Style::Latex { ("\\left(", "\\right)") } else { ("(", ")") };
+            if self.out.len() + open.len() + close.len() > MAX_OUTPUT {
+                return Err(PrintError::TooLarge);
+            }
+            self.out.insert_str(start, open);
+            self.out.push_str(close);
+        }
+        Ok(())
+    }
+}
+
+/// A rational written as an operand of `/` or `·` in a label (`∇C/κ`, `over κ`): a
+/// fraction or a negative number in parentheses, so `∇C/(2/3)` never reads as `∇C/6`.
+pub fn rational_operand(q: &Rational) -> String {
+    if is_fraction_or_negative(q) { format!("({q})") } else { q.to_string() }
 }
 
 fn superscript(n: i64) -> String {

@@ -63,6 +63,7 @@ pub fn read<'i>(text: &'i str, problems: &mut Vec<Problem>) -> Option<RawFile<'i
         definitions: table.get("definitions").map(|v| r.strings(v, "[definitions]")).unwrap_or_default(),
         bodies: r.array_of_tables(table.get("bodies"), "bodies", Reader::body),
         constraints: r.array_of_tables(table.get("constraints"), "constraints", Reader::constraint),
+        constraints_written: table.contains_key("constraints"),
         scene: table.get("scene").and_then(|v| r.scene(v)),
         expect: r.array_of_tables(table.get("expect"), "expect", Reader::expect),
     };

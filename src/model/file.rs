@@ -14,7 +14,7 @@ use super::expect::{Expectation, resolve};
 pub use super::problem::Problem;
 use super::problem::{locate, shown, sort};
 use super::raw::{RawFile, RawMass, RawValue, Text};
-use super::scene::{Scene, validate};
+use super::scene::{RefusedBodies, Scene, validate};
 use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
 use crate::expr::eval::Value;
 use crate::expr::lower::LowerError;
@@ -50,12 +50,13 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         sort(&mut problems);
         return Err(problems);
     };
-    let Some(mut system) = build(text, &raw, &mut problems) else {
+    let mut refused = RefusedBodies::default();
+    let Some(mut system) = build(text, &raw, &mut refused, &mut problems) else {
         sort(&mut problems);
         return Err(problems);
     };
     let scene = match &raw.scene {
-        Some(s) => validate(text, s.get_ref(), &mut system, &mut problems),
+        Some(s) => validate(text, s.get_ref(), &mut system, &refused, &mut problems),
         None => Scene::default(),
     };
     // Names the file writes, valid or not: an expectation naming a body or constraint that
@@ -68,6 +69,7 @@ pub fn load(text: &str) -> Result<Loaded, Vec<Problem>> {
         .collect();
     let expect = resolve(text, &raw.expect, &written, &mut system, &mut problems);
     let values = parameter_values(&raw, &system);
+    masses_are_positive(text, &raw, &system, &mut problems);
     masses_have_values(&raw, &system, &scene, &expect, &mut problems);
     if !problems.is_empty() {
         sort(&mut problems);
@@ -83,6 +85,40 @@ fn parameter_values(raw: &RawFile<'_>, system: &System) -> Vec<(Symbol, Value)> 
         .iter()
         .filter_map(|(name, v)| super::state::value(system, name.get_ref(), v.get_ref()).ok())
         .collect()
+}
+
+/// A mass symbol's value, written in `[parameters]` or `[scene] initial`, is a positive normal
+/// number: located at the value, so `derive` refuses `m = 0.0` as `solve` would.
+///
+/// Only numbers written as numbers are judged: a value of the wrong type (reported, held as
+/// a placeholder) or not finite (reported) is not reported again.
+fn masses_are_positive(text: &str, raw: &RawFile<'_>, system: &System, problems: &mut Vec<Problem>) {
+    let mut seen = HashSet::new();
+    for body in &system.bodies {
+        let crate::expr::Node::Sym(s) = system.graph.node(body.mass) else {
+            continue;
+        };
+        if !seen.insert(*s) {
+            continue;
+        }
+        let name = system.graph.symbol(*s).name.as_str();
+        let initial = raw.scene.as_ref().and_then(|sc| sc.get_ref().initial.get(name));
+        for v in raw.parameters.get(name).into_iter().chain(initial) {
+            let written = text.get(v.span()).is_some_and(|t| t.trim().replace('_', "").parse::<f64>().is_ok());
+            if let RawValue::Number(x) = v.get_ref()
+                && written
+                && x.is_finite()
+                && !(x.is_normal() && *x > 0.0)
+            {
+                problems.push(Problem::MassValue {
+                    span: v.span(),
+                    name: name.to_string(),
+                    body: body.name.clone(),
+                    shown: shown(*x),
+                });
+            }
+        }
+    }
 }
 
 /// A mass symbol that is not a parameter needs a value wherever numbers are computed: from
@@ -132,7 +168,12 @@ fn masses_have_values(
     }
 }
 
-fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<System> {
+fn build<'t>(
+    text: &str,
+    raw: &'t RawFile<'_>,
+    refused: &mut RefusedBodies<'t>,
+    problems: &mut Vec<Problem>,
+) -> Option<System> {
     let title = raw.title.as_ref().map_or("", |t| t.get_ref().as_ref());
     let dimension = raw.dimension.as_ref()?;
     let mut b = match SystemBuilder::new(title, *dimension.get_ref()) {
@@ -164,10 +205,16 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
     for body in &raw.bodies {
         let body = body.get_ref();
         let mass = match body.mass.get_ref() {
-            RawMass::Number(x) if x.is_finite() && *x > 0.0 => MassSpec::Number(*x),
+            // A subnormal mass (5e-324) makes 1/m infinite: refused with zero and negatives.
+            RawMass::Number(x) if x.is_normal() && *x > 0.0 => MassSpec::Number(*x),
             RawMass::Number(x) => {
                 problems.push(Problem::Mass { span: body.mass.span(), shown: shown(*x) });
                 // Declared all the same, so the body's symbols are known where used.
+                MassSpec::Number(1.0)
+            }
+            // `mass = "0.5"`: a number in quotes, not a name.
+            RawMass::Symbol(s) if s.trim().parse::<f64>().is_ok() => {
+                problems.push(Problem::QuotedMass { span: body.mass.span(), written: s.to_string() });
                 MassSpec::Number(1.0)
             }
             RawMass::Symbol(s) => MassSpec::Symbol(s),
@@ -181,20 +228,30 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
             mass,
         };
         if let Err(e) = b.body(&spec) {
-            // Point at the field whose symbol clashes, not just at the body.
-            let span = match &e {
-                BuildError::Duplicate { name, .. } => [&body.position, &body.velocity, &body.acceleration, &body.force]
-                    .into_iter()
-                    .find(|f| f.get_ref().as_ref() == name.as_str())
-                    .map_or_else(|| body.name.span(), |f| f.span()),
-                _ => body.name.span(),
-            };
-            let span = match (&e, body.mass.get_ref()) {
-                (BuildError::Duplicate { name, .. }, RawMass::Symbol(m)) if m.as_ref() == name.as_str() => {
-                    body.mass.span()
+            // Point at the field whose symbol is refused, not just at the body: the last
+            // field that writes it (`velocity = "r"` after `position = "r"` is the clash).
+            let named = match &e {
+                BuildError::Duplicate { name, .. } | BuildError::BadName(name) | BuildError::Reserved(name) => {
+                    Some(name.as_str())
                 }
-                _ => span,
+                _ => None,
             };
+            let fields = [&body.position, &body.velocity, &body.acceleration, &body.force];
+            let span = match (named, body.mass.get_ref()) {
+                (Some(n), RawMass::Symbol(m)) if m.as_ref() == n => body.mass.span(),
+                (Some(n), _) => fields
+                    .into_iter()
+                    .rfind(|f| f.get_ref().as_ref() == n)
+                    .map_or_else(|| body.name.span(), |f| f.span()),
+                (None, _) => body.name.span(),
+            };
+            // Everything the body writes: its later uses are not reported again.
+            refused.names.extend(fields.iter().map(|f| f.get_ref().as_ref()));
+            refused.names.push(body.name.get_ref().as_ref());
+            if let RawMass::Symbol(m) = body.mass.get_ref() {
+                refused.names.push(m.as_ref());
+            }
+            refused.forces.push(body.force.get_ref().as_ref());
             problems.push(Problem::Build { span, error: e });
         }
     }
@@ -213,7 +270,10 @@ fn build(text: &str, raw: &RawFile<'_>, problems: &mut Vec<Problem>) -> Option<S
             problems.push(build_problem(text, expr, &e, c.name.span()));
         }
     }
-    if raw.constraints.is_empty() {
+    // `[[constraint]]` is reported as an unknown key with its "did you mean": not again here.
+    let misspelt =
+        problems.iter().any(|p| matches!(p, Problem::UnknownKey { suggestion: Some(s), .. } if s == "constraints"));
+    if raw.constraints.is_empty() && !raw.constraints_written && !misspelt {
         problems.push(Problem::NoConstraints);
     }
     Some(b.finish())

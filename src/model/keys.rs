@@ -36,7 +36,8 @@ fn walk(path: &'static str, table: &DeTable<'_>, problems: &mut Vec<Problem>) {
     for (key, value) in table.iter() {
         let name: &str = key.get_ref();
         if !known.contains(&name) {
-            let suggestion = suggest(name, known.iter().copied()).or_else(|| swapped(name, known));
+            let suggestion =
+                suggest(name, known.iter().copied()).or_else(|| swapped(name, known)).or_else(|| plural(name, known));
             problems.push(Problem::UnknownKey {
                 span: key.span(),
                 key: name.to_string(),
@@ -98,4 +99,11 @@ fn swapped(name: &str, known: &[&str]) -> Option<String> {
             && a[differ[1]] == b[differ[0]];
         one_swap.then(|| k.to_string())
     })
+}
+
+/// The plural a singular key stands for: `[[body]]` → `bodies`, `[[constraint]]` →
+/// `constraints`, `parameter` → `parameters`.
+fn plural(name: &str, known: &[&str]) -> Option<String> {
+    let candidates = [format!("{name}s"), format!("{}ies", name.strip_suffix('y').unwrap_or(name))];
+    known.iter().find(|k| candidates.iter().any(|c| c == *k)).map(|k| k.to_string())
 }

@@ -55,9 +55,18 @@ pub enum Problem {
     /// A vector parameter whose length is not the file's dimension.
     #[error("parameter `{name}` has {found} components in a {dim}D file")]
     ParameterComponents { span: Range<usize>, name: String, found: usize, dim: usize },
-    /// A mass written as a number that is not positive and finite.
-    #[error("a mass must be a positive finite number, found {shown}")]
+    /// A mass written as a number that is not positive, normal and finite.
+    #[error("a mass must be a positive finite number, found {shown}{}", subnormal(.shown))]
     Mass { span: Range<usize>, shown: String },
+    /// A mass symbol given a value (in `[parameters]` or `[scene] initial`) that is not a
+    /// positive normal number.
+    #[error("`{name}` is the mass of body `{body}`: it must be a positive finite number, found {shown}{}", subnormal(.shown))]
+    MassValue { span: Range<usize>, name: String, body: String, shown: String },
+    /// A mass written as a string that is a number (`mass = "0.5"`).
+    #[error(
+        "the mass \"{written}\" is a number in quotes: write it without them (`mass = {written}`), or give the name of a mass symbol"
+    )]
+    QuotedMass { span: Range<usize>, written: String },
     /// A definition that uses itself, directly or `through` others.
     #[error("definition `{name}` refers to itself (through {through})")]
     Cycle { span: Range<usize>, name: String, through: String },
@@ -167,6 +176,8 @@ impl Problem {
             | Build { span, .. }
             | ParameterComponents { span, .. }
             | Mass { span, .. }
+            | QuotedMass { span, .. }
+            | MassValue { span, .. }
             | Cycle { span, .. }
             | MassWithoutValue { span, .. }
             | MassWithoutValueAt { span, .. }
@@ -198,9 +209,24 @@ pub fn sort(problems: &mut Vec<Problem>) {
     problems.dedup_by(|a, b| a.span() == b.span() && a.to_string() == b.to_string());
 }
 
-/// `nan` as TOML spells it, other numbers as Rust prints them.
+/// `nan` as TOML spells it, other numbers as Rust prints them (`5e-324`, not 324 digits,
+/// for the tiny and the huge).
 pub fn shown(x: f64) -> String {
-    if x.is_nan() { "nan".to_string() } else { x.to_string() }
+    if x.is_nan() {
+        "nan".to_string()
+    } else if x != 0.0 && x.is_finite() && !(1e-5..1e16).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        x.to_string()
+    }
+}
+
+/// The hint of a mass that is subnormal (shown in `e` notation, positive, tiny).
+fn subnormal(shown: &str) -> &'static str {
+    match shown.parse::<f64>() {
+        Ok(x) if x > 0.0 && !x.is_normal() => " (a subnormal number: 1/m overflows)",
+        _ => "",
+    }
 }
 
 /// Maps a byte range inside a string value to the file: exact when the string is written

@@ -29,6 +29,10 @@ pub struct RawFile<'a> {
     pub definitions: BTreeMap<Text<'a>, Text<'a>>,
     pub bodies: Vec<Spanned<RawBody<'a>>>,
     pub constraints: Vec<Spanned<RawConstraint<'a>>>,
+    /// Whether the file writes `constraints` at all, readable or not (an entry without a
+    /// `name` is reported and left out of `constraints`; the file is not "without
+    /// constraints" then).
+    pub constraints_written: bool,
     pub scene: Option<Spanned<RawScene<'a>>>,
     pub expect: Vec<Spanned<RawExpect<'a>>>,
 }

@@ -1,6 +1,6 @@
 //! The `[scene]` table and the numbers of a state: what `solve` and `simulate` start from.
 //!
-//! [`validate`] resolves the raw `[scene]` (`model::raw::RawScene`) against a [`System`] into a
+//! `validate` resolves the raw `[scene]` (`model::raw::RawScene`) against a [`System`] into a
 //! [`Scene`] (symbols, typed force expressions, timing), reporting every problem with its
 //! span. [`environment`] then gives every symbol a number — parameters, the scene's initial
 //! state, overrides (`--at`, `--set`, validated by `model::state`), masses, and the external forces evaluated last, since
@@ -46,12 +46,32 @@ impl Default for Scene {
     }
 }
 
+/// What the bodies the builder refused write (reported once, at the refusal): a scene
+/// entry naming one of these is not reported again as naming an unknown symbol or body.
+#[derive(Default)]
+pub(super) struct RefusedBodies<'t> {
+    /// Every name a refused body writes: its own and its symbols'.
+    pub names: Vec<&'t str>,
+    /// The refused bodies' force symbols, for the list of force symbols a message shows.
+    pub forces: Vec<&'t str>,
+}
+
 /// Resolves a raw scene against `system`; every problem goes to `problems`.
-pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &mut Vec<Problem>) -> Scene {
+///
+/// An entry naming what a refused body writes (`refused`, reported where it was refused)
+/// is left out without a second message.
+pub(super) fn validate(
+    text: &str,
+    raw: &RawScene<'_>,
+    system: &mut System,
+    refused: &RefusedBodies<'_>,
+    problems: &mut Vec<Problem>,
+) -> Scene {
     let mut scene = Scene::default();
     for (name, v) in &raw.initial {
         match value(system, name.get_ref(), v.get_ref()) {
             Ok((s, v)) => scene.initial.push((s, v)),
+            Err(_) if refused.names.contains(&name.get_ref().as_ref()) => {}
             Err(error) => problems.push(Problem::Value { span: name.span(), error }),
         }
     }
@@ -72,7 +92,11 @@ pub fn validate(text: &str, raw: &RawScene<'_>, system: &mut System, problems: &
     let mut resolved: NameMap<&str, Result<Id, Refused>> = NameMap::default();
     for ((name, expr), body) in raw.forces.iter().zip(bodies) {
         let Some(body) = body else {
-            let forces = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.clone()).collect();
+            if refused.names.contains(&name.get_ref().as_ref()) {
+                continue;
+            }
+            let declared = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.clone());
+            let forces = declared.chain(refused.forces.iter().map(|f| f.to_string())).collect();
             problems.push(Problem::UnknownForce { span: name.span(), name: name.get_ref().to_string(), forces });
             continue;
         };

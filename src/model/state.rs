@@ -17,7 +17,6 @@ use super::raw::RawValue;
 use super::system::System;
 use crate::expr::eval::Value;
 use crate::expr::{Role, Symbol, Ty};
-use std::collections::BTreeMap;
 
 /// Why a value does not fit the symbol it is given to.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -109,10 +108,16 @@ impl Format {
 /// Why a state given on the command line cannot be used.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum StateInputError {
-    /// The state file is not a flat TOML or JSON table of numbers and vectors (the
-    /// parser's message, with its line).
+    /// The state file is not TOML or JSON (the parser's message, with its line), or a
+    /// JSON key is written twice (serde_json's message, naming the key and its line).
     #[error("{0}")]
     Syntax(String),
+    /// An entry of a state file that is not a number or a vector of numbers.
+    #[error("`{key}` must be a number or a vector of numbers, found {found}{}", table_hint(.found))]
+    NotANumber { key: String, found: &'static str },
+    /// A vector entry of a state file with a component that is not a number.
+    #[error("component {index} of `{key}` must be a number, found {found}")]
+    NotAComponent { key: String, index: usize, found: &'static str },
     /// `--set` without `=`.
     #[error("expected NAME=VALUE, e.g. --set r=[1,0] or --set m=2")]
     NoEquals,
@@ -124,18 +129,124 @@ pub enum StateInputError {
     NotFinite(String),
 }
 
+fn table_hint(found: &str) -> &'static str {
+    if found == "a table" || found == "an array of tables" {
+        " (a state file is one flat table `name = value`, e.g. `r = [1.0, 0.0]`; is this a constraint file?)"
+    } else {
+        ""
+    }
+}
+
 /// One entry of a state given on the command line, checked against its symbol: the
 /// symbol and its value, or why the value does not fit (said of the constraint file).
 pub type Given = Result<(Symbol, Value), ValueError>;
 
 /// The symbol values of a `--at` state file: a flat table `name = value`, in name order,
-/// each checked by [`value`]; the file's syntax is the error.
+/// each checked by [`value`]; the file's syntax, a key written twice, or an entry that is
+/// not a number or a vector of numbers (named) is the error.
 pub fn state_file(system: &System, text: &str, format: Format) -> Result<Vec<Given>, StateInputError> {
-    let table: BTreeMap<String, RawValue> = match format {
-        Format::Toml => toml::from_str(text).map_err(|e| StateInputError::Syntax(e.to_string()))?,
-        Format::Json => serde_json::from_str(text).map_err(|e| StateInputError::Syntax(e.to_string()))?,
+    let mut table: Vec<(String, RawValue)> = match format {
+        Format::Toml => {
+            let t: toml::Table = toml::from_str(text).map_err(|e| StateInputError::Syntax(e.to_string()))?;
+            t.into_iter().map(|(k, v)| Ok((k.clone(), toml_value(&k, &v)?))).collect::<Result<_, _>>()?
+        }
+        Format::Json => {
+            let Entries(entries) = serde_json::from_str(text).map_err(|e| StateInputError::Syntax(e.to_string()))?;
+            entries.into_iter().map(|(k, v)| Ok((k.clone(), json_value(&k, &v)?))).collect::<Result<_, _>>()?
+        }
     };
+    table.sort_by(|a, b| a.0.cmp(&b.0));
     Ok(table.iter().map(|(name, v)| value(system, name, v)).collect())
+}
+
+fn toml_kind(v: &toml::Value) -> &'static str {
+    match v {
+        toml::Value::String(_) => "a string",
+        toml::Value::Integer(_) | toml::Value::Float(_) => "a number",
+        toml::Value::Boolean(_) => "a boolean",
+        toml::Value::Datetime(_) => "a date",
+        toml::Value::Array(_) => "an array",
+        toml::Value::Table(_) => "a table",
+    }
+}
+
+fn toml_number(v: &toml::Value) -> Option<f64> {
+    match v {
+        toml::Value::Integer(i) => Some(*i as f64),
+        toml::Value::Float(x) => Some(*x),
+        _ => None,
+    }
+}
+
+fn toml_value(key: &str, v: &toml::Value) -> Result<RawValue, StateInputError> {
+    if let Some(x) = toml_number(v) {
+        return Ok(RawValue::Number(x));
+    }
+    let toml::Value::Array(xs) = v else {
+        return Err(StateInputError::NotANumber { key: key.to_string(), found: toml_kind(v) });
+    };
+    if xs.iter().any(toml::Value::is_table) {
+        return Err(StateInputError::NotANumber { key: key.to_string(), found: "an array of tables" });
+    }
+    let component = |(i, x): (usize, &toml::Value)| {
+        toml_number(x).ok_or(StateInputError::NotAComponent { key: key.to_string(), index: i + 1, found: toml_kind(x) })
+    };
+    Ok(RawValue::Vector(xs.iter().enumerate().map(component).collect::<Result<_, _>>()?))
+}
+
+fn json_kind(v: &serde_json::Value) -> &'static str {
+    match v {
+        serde_json::Value::Null => "null",
+        serde_json::Value::Bool(_) => "a boolean",
+        serde_json::Value::Number(_) => "a number",
+        serde_json::Value::String(_) => "a string",
+        serde_json::Value::Array(_) => "an array",
+        serde_json::Value::Object(_) => "a table",
+    }
+}
+
+fn json_value(key: &str, v: &serde_json::Value) -> Result<RawValue, StateInputError> {
+    if let Some(x) = v.as_f64() {
+        return Ok(RawValue::Number(x));
+    }
+    let serde_json::Value::Array(xs) = v else {
+        return Err(StateInputError::NotANumber { key: key.to_string(), found: json_kind(v) });
+    };
+    if xs.iter().any(serde_json::Value::is_object) {
+        return Err(StateInputError::NotANumber { key: key.to_string(), found: "an array of tables" });
+    }
+    let component = |(i, x): (usize, &serde_json::Value)| {
+        x.as_f64().ok_or(StateInputError::NotAComponent { key: key.to_string(), index: i + 1, found: json_kind(x) })
+    };
+    Ok(RawValue::Vector(xs.iter().enumerate().map(component).collect::<Result<_, _>>()?))
+}
+
+/// A JSON object's entries in the order written, refusing a key written twice (a map
+/// would keep the last value without a word).
+struct Entries(Vec<(String, serde_json::Value)>);
+
+impl<'de> serde::Deserialize<'de> for Entries {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Entries;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str("a table of symbols' values, e.g. {\"r\": [1.0, 0.0]}")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<Entries, A::Error> {
+                let mut seen = std::collections::HashSet::new();
+                let mut out = Vec::new();
+                while let Some((k, v)) = map.next_entry::<String, serde_json::Value>()? {
+                    if !seen.insert(k.clone()) {
+                        return Err(serde::de::Error::custom(format!("duplicate key `{k}`")));
+                    }
+                    out.push((k, v));
+                }
+                Ok(Entries(out))
+            }
+        }
+        d.deserialize_map(Visitor)
+    }
 }
 
 /// `NAME=VALUE` (`--set`), VALUE a finite number or a vector `[x, y]`, checked by [`value`];

@@ -4,6 +4,9 @@
 //! Numbers are written with Rust's shortest round-trip formatting, so two identical runs
 //! give byte-identical files and a file read back gives the same f64s.
 //!
+//! The header is built from the file's names, so each field is quoted where it needs it
+//! and defused where a spreadsheet would read it as a formula ([`field`]).
+//!
 //! Not here: opening files (the caller passes any `io::Write`), the run loop.
 
 use crate::model::system::System;
@@ -27,6 +30,14 @@ fn number(out: &mut String, x: f64) {
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 
+/// A header field made of a file's names, safe in any reader: quoted (RFC 4180, `"`
+/// doubled) when it holds a `,`, a quote or a line break, and with a `'` in front when it
+/// begins with `=`, `+`, `-` or `@`, which a spreadsheet would run as a formula.
+pub fn field(name: &str) -> String {
+    let defused = if name.starts_with(['=', '+', '-', '@']) { format!("'{name}") } else { name.to_string() };
+    if defused.contains([',', '"', '\n', '\r']) { format!("\"{}\"", defused.replace('"', "\"\"")) } else { defused }
+}
+
 impl<W: Write> CsvWriter<W> {
     /// Writes the header. `last` is the final step, always written.
     pub fn new(system: &System, mut out: W, every: u64, last: u64) -> std::io::Result<CsvWriter<W>> {
@@ -35,12 +46,16 @@ impl<W: Write> CsvWriter<W> {
         for body in &system.bodies {
             for s in [body.position, body.velocity] {
                 for axis in &AXES[..dim] {
-                    let _ = write!(header, ",{}.{axis}", system.graph.symbol(s).name);
+                    header.push(',');
+                    header.push_str(&field(&format!("{}.{axis}", system.graph.symbol(s).name)));
                 }
             }
         }
         for c in &system.constraints {
-            let _ = write!(header, ",lambda_{0},C_{0},Cdot_{0}", c.name);
+            for what in ["lambda", "C", "Cdot"] {
+                header.push(',');
+                header.push_str(&field(&format!("{what}_{}", c.name)));
+            }
         }
         writeln!(out, "{header}")?;
         Ok(CsvWriter { out, every: every.max(1), last, line: String::new() })

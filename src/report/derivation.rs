@@ -17,7 +17,7 @@
 //! Not here: deriving (`derive`), expression printing rules (`expr::print`).
 
 use crate::derive::Derivation;
-use crate::expr::print::{PrintError, Style, print};
+use crate::expr::print::{PrintError, Style, print, rational_operand};
 use crate::expr::{Graph, Id, TypeError};
 use crate::model::system::System;
 use serde_json::{Value, json};
@@ -80,6 +80,7 @@ impl Doc {
     }
 
     fn heading(&self, out: &mut String, text: &str) {
+        let text = &one_line(text);
         match self.format {
             Format::Text => {
                 let _ = writeln!(out, "\n{text}");
@@ -88,7 +89,7 @@ impl Doc {
                 let _ = writeln!(out, "\n\\subsection*{{{}}}", latex_escape(text));
             }
             _ => {
-                let _ = writeln!(out, "\n## {text}\n");
+                let _ = writeln!(out, "\n## {}\n", markdown_text(text));
             }
         }
     }
@@ -156,6 +157,24 @@ impl Doc {
             format!("{base}[{}]", names.join(", "))
         }
     }
+}
+
+/// A title or heading from the file on one line: line breaks and other control characters
+/// become spaces, so a title cannot start a new Markdown block or break `\section*{…}`.
+fn one_line(s: &str) -> String {
+    s.chars().map(|c| if c.is_control() { ' ' } else { c }).collect()
+}
+
+/// Text for a Markdown heading: a `<` that could open an HTML tag or comment (`<b`, `</`,
+/// `<!`, `<?`) as `&lt;`, so no raw HTML passes; `<=` in a constraint stays as written.
+fn markdown_text(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    let mut chars = s.chars().peekable();
+    while let Some(c) = chars.next() {
+        let tag = c == '<' && chars.peek().is_some_and(|n| n.is_ascii_alphabetic() || matches!(n, '/' | '!' | '?'));
+        if tag { out.push_str("&lt;") } else { out.push(c) }
+    }
+    out
 }
 
 /// Text (a title, a heading, a sentence) as LaTeX text: the characters LaTeX treats as
@@ -269,7 +288,7 @@ fn latex_escape(s: &str) -> String {
 pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
     let doc = Doc::new(format);
     let mut out = String::new();
-    let title = if system.title.is_empty() { "Constraint forces".to_string() } else { system.title.clone() };
+    let title = if system.title.is_empty() { "Constraint forces".to_string() } else { one_line(&system.title) };
     match format {
         Format::Text => {
             let _ = writeln!(out, "{title} ({}D)", system.dim());
@@ -278,7 +297,7 @@ pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) ->
             let _ = writeln!(out, "\\section*{{{} ({}D)}}", latex_escape(&title), system.dim());
         }
         _ => {
-            let _ = writeln!(out, "# {title} ({}D)", system.dim());
+            let _ = writeln!(out, "# {} ({}D)", markdown_text(&title), system.dim());
         }
     }
     if steps {
@@ -308,7 +327,11 @@ fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Resu
             let r = &g.symbol(system.bodies[body].position).name;
             doc.line(out, &doc.label(&doc.sym("grad", sub), &format!("∇ wrt {r}, body {name}")), &doc.expr(g, grad)?);
             if !dc.scale.is_one() {
-                doc.line(out, &doc.label("J", &format!("direction, ∇C/{}, body {name}", dc.scale)), &doc.expr(g, dir)?);
+                doc.line(
+                    out,
+                    &doc.label("J", &format!("direction, ∇C/{}, body {name}", rational_operand(&dc.scale))),
+                    &doc.expr(g, dir)?,
+                );
             }
         }
         let note = format!("C̈ at a = 0{}", scale_note(dc.scale.is_one(), &dc.scale));
@@ -370,7 +393,7 @@ fn system_rows(system: &System, d: &Derivation, doc: &Doc, out: &mut String) {
 }
 
 fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
-    if one { String::new() } else { format!(", over {scale}") }
+    if one { String::new() } else { format!(", over {}", rational_operand(scale)) }
 }
 
 /// For several constraints: the force on each body as Σₖ λₖ Jₖᵢ, with named multipliers.
@@ -424,7 +447,7 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
                 doc.expr(g, grad)?
             } else {
                 let times = if doc.style == Style::Latex { "\\cdot" } else { "·" };
-                format!("{} = {} {times} ({})", doc.expr(g, grad)?, dc.scale, doc.expr(g, dir)?)
+                format!("{} = {} {times} ({})", doc.expr(g, grad)?, rational_operand(&dc.scale), doc.expr(g, dir)?)
             };
             doc.line(out, &lhs, &rhs);
             if many {

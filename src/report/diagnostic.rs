@@ -17,7 +17,8 @@ pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
     let config = Config::default();
     let mut out = String::new();
     for p in problems {
-        let message = p.to_string();
+        // A name in a message (`in constraint `…``) never reaches the terminal raw.
+        let message = escape_controls(&p.to_string(), false).into_owned();
         if let Some(span) = &p.span()
             && let Some(clipped) = render_long_line(path, text, &message, span)
         {
@@ -88,4 +89,27 @@ pub fn floor_char(text: &str, mut i: usize) -> usize {
         i -= 1;
     }
     i
+}
+
+/// `s` with every control character (and the bidirectional overrides, which reorder what a
+/// terminal shows) written as an escape, `\u{1b}`: a name or title never reaches a
+/// terminal raw, so it cannot move the cursor, erase a line or fake one. Line breaks are
+/// kept when `keep_newlines` (multi-line text), escaped otherwise (one line).
+pub fn escape_controls(s: &str, keep_newlines: bool) -> std::borrow::Cow<'_, str> {
+    let unsafe_char = |c: char| {
+        (c.is_control() && !(keep_newlines && (c == '\n' || c == '\t')))
+            || matches!(c, '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}')
+    };
+    if !s.contains(unsafe_char) {
+        return std::borrow::Cow::Borrowed(s);
+    }
+    let mut out = String::with_capacity(s.len() + 8);
+    for c in s.chars() {
+        match c {
+            '\n' if !keep_newlines => out.push_str("\\n"),
+            c if unsafe_char(c) => out.extend(c.escape_unicode()),
+            c => out.push(c),
+        }
+    }
+    std::borrow::Cow::Owned(out)
 }

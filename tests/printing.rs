@@ -1,0 +1,67 @@
+//! What `derive` prints reads as what it means: a negative factor of a product keeps its
+//! parentheses (`r.y (−sin(w t) w)`, never `r.y −sin(w t) w`, which reads as a
+//! difference), in the Unicode text and in LaTeX, and a fractional κ is written `∇C/(2/3)`,
+//! never `∇C/2/3` (which reads as ∇C/6). The round trips of the printers over random
+//! expressions are property tests in `properties.rs`.
+//!
+//! Not here: the snapshots of every document (`outputs.rs`), LaTeX's syntax (`latex.rs`).
+
+use lagrange::derive::{Options, derive_with};
+use lagrange::model::file::load;
+use lagrange::report::derivation::{Format, document};
+
+fn doc(text: &str, format: Format, steps: bool) -> String {
+    let loaded = load(text).unwrap_or_else(|p| panic!("loads: {p:?}"));
+    let d = derive_with(&loaded.system, Options { document: true, steps }).expect("derives");
+    document(&loaded.system, &d, format, steps).expect("document builds")
+}
+
+fn spinning_hoop() -> String {
+    std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/constraints/spinning_hoop.toml")).expect("reads")
+}
+
+#[test]
+fn a_negative_factor_keeps_its_parentheses_in_text() {
+    let text = doc(&spinning_hoop(), Format::Text, true);
+    let line = text.lines().find(|l| l.trim_start().starts_with("Ċ[plane]")).expect("a Ċ[plane] line");
+    // A factor juxtaposed after another piece never starts with a minus.
+    assert!(!line.contains(" −sin"), "{line}");
+    assert!(line.contains("r.y (−sin(w t) w)"), "{line}");
+}
+
+#[test]
+fn a_negative_factor_keeps_its_parentheses_in_latex() {
+    let text = doc(&spinning_hoop(), Format::Latex, true);
+    let line = text.lines().find(|l| l.contains("\\dot{C}_{\\mathrm{plane}} =")).expect("a Ċ[plane] line");
+    assert!(!line.contains("\\, -\\sin"), "{line}");
+    assert!(line.contains("\\vec{r}_{y} \\, \\left(-\\sin\\left(w \\, t\\right) \\, w\\right)"), "{line}");
+}
+
+/// A bead on a circle written with C scaled by 1/3: ∇C = (2/3) r, so κ = 2/3.
+const THIRD: &str = r#"
+title = "Scaled bead"
+dimension = 2
+[parameters]
+l = 1.0
+m = 1.0
+[[bodies]]
+name = "bead"
+position = "r"
+velocity = "v"
+acceleration = "a"
+mass = "m"
+force = "F"
+[[constraints]]
+name = "circle"
+expr = "dot(r, r)/3 = l^2"
+"#;
+
+#[test]
+fn a_fractional_scale_is_written_in_parentheses() {
+    let text = doc(THIRD, Format::Text, false);
+    assert!(text.contains("∇C/(2/3)"), "{text}");
+    assert!(!text.contains("∇C/2/3"), "{text}");
+    assert!(text.contains("over (2/3)"), "{text}");
+    let steps = doc(THIRD, Format::Text, true);
+    assert!(steps.contains("= (2/3) · (r)"), "{steps}");
+}
