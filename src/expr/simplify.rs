@@ -480,61 +480,107 @@ impl Simplifier {
         Ok(Some(Frac::atom(atom)))
     }
 
-    /// Replaces `sqrt(x)^k` by `x^(k div 2) sqrt(x)^(k mod 2)`, and `norm(u)^k` likewise.
+    /// Radicals to their normal form: a root or norm in a denominator moves up as a negative
+    /// power (`x/|d|³` is `x |d|⁻³`, so fractions over different roots add without a common
+    /// denominator), `sqrt(x)^k` becomes `x^(k div 2) sqrt(x)^(k mod 2)` for `k ≥ 2` (and
+    /// `norm(u)^k` likewise), and a negative power cancels against its square where the
+    /// square divides exactly (`(u·u) |u|⁻² = 1`).
     pub(super) fn reduce_radicals(&self, f: Frac) -> Frac {
         if self.radicals.is_empty() {
             return f;
         }
-        let heavy = |m: &Mono| m.0.iter().any(|(a, e)| *e >= 2 && self.radicals.contains_key(a));
-        let num_heavy = f.num.0.iter().any(|(m, _)| heavy(m));
-        let den_heavy =
-            f.den.iter().any(|(p, e)| *e >= 2 && p.as_atom().is_some_and(|a| self.radicals.contains_key(&a)));
-        if !num_heavy && !den_heavy {
+        let radical = |a: &Id| self.radicals.contains_key(a);
+        let num_heavy = f.num.0.iter().any(|(m, _)| m.0.iter().any(|(a, e)| (*e >= 2 || *e < 0) && radical(a)));
+        let den_radical = f.den.iter().any(|(p, _)| p.as_atom().is_some_and(|a| radical(&a)));
+        if !num_heavy && !den_radical {
             return f;
         }
-        let reduced = || -> Option<Frac> {
-            // Terms whose replacement is a polynomial (the square has no denominator, the
-            // common case) are summed in one sort; adding them one by one as fractions
-            // tried an exact division per term and took 40 s on `sqrt(1 + (r1·r2/(1+t²))²)`.
-            let mut poly_terms: Vec<(Mono, Rational)> = Vec::new();
-            let mut fractions = Frac::zero();
-            for (m, q) in &f.num.0 {
-                let mut term = Frac::constant(q.clone());
-                let mut rest = Mono::one();
-                for &(a, e) in &m.0 {
-                    match self.radicals.get(&a) {
-                        Some(square) if e >= 2 => {
-                            term = term.mul(&square.powi(i64::from(e / 2))?)?;
-                            if e % 2 == 1 {
-                                rest = rest.mul(&Mono::atom(a));
-                            }
-                        }
-                        _ => rest = rest.mul(&Mono(smallvec::smallvec![(a, e)])),
-                    }
-                }
-                term = term.mul(&Frac::poly(Poly(vec![(rest, Rational::ONE)])))?;
-                if term.den.is_empty() {
-                    poly_terms.extend(term.num.0);
-                } else {
-                    fractions = fractions.add(&term)?;
-                }
+        self.reduced(&f).unwrap_or(f)
+    }
+
+    /// [`Simplifier::reduce_radicals`]; `None` when a step is too large to expand.
+    fn reduced(&self, f: &Frac) -> Option<Frac> {
+        // Radical atoms of the denominator move up; the other factors stay factored.
+        let mut up = Mono::one();
+        let mut kept = Vec::new();
+        for (p, e) in &f.den {
+            match p.as_atom().filter(|a| self.radicals.contains_key(a)) {
+                Some(a) => up = up.mul(&Mono(smallvec::smallvec![(a, -i32::try_from(*e).ok()?)])),
+                None => push_factor(&mut kept, p.clone(), *e),
             }
-            let num = Frac::poly(sum_terms(poly_terms)).add(&fractions)?;
-            // Denominator factors stay factored; only heavy radicals move.
-            let mut kept = Vec::new();
-            let mut extra = Frac::constant(Rational::ONE);
-            for (p, e) in &f.den {
-                match p.as_atom().and_then(|a| self.radicals.get(&a)) {
-                    Some(square) if *e >= 2 => {
-                        push_factor(&mut kept, p.clone(), e % 2);
-                        extra = extra.mul(&square.powi(-i64::from(e / 2))?)?;
-                    }
-                    _ => push_factor(&mut kept, p.clone(), *e),
-                }
-            }
-            num.mul(&Frac { num: Poly::constant(Rational::ONE), den: kept })?.mul(&extra)
+        }
+        let moved;
+        let num = if up.is_one() {
+            &f.num
+        } else {
+            moved = f.num.mul_mono(&up);
+            &moved
         };
-        reduced().unwrap_or(f)
+        // Terms whose replacement is a polynomial (the square has no denominator, the
+        // common case) are summed in one sort; adding them one by one as fractions
+        // tried an exact division per term and took 40 s on `sqrt(1 + (r1·r2/(1+t²))²)`.
+        let mut poly_terms: Vec<(Mono, Rational)> = Vec::new();
+        let mut fractions = Frac::zero();
+        for (m, q) in &num.0 {
+            if !m.0.iter().any(|(a, e)| *e >= 2 && self.radicals.contains_key(a)) {
+                poly_terms.push((m.clone(), q.clone()));
+                continue;
+            }
+            let mut term = Frac::constant(q.clone());
+            let mut rest = Mono::one();
+            for &(a, e) in &m.0 {
+                match self.radicals.get(&a) {
+                    Some(square) if e >= 2 => {
+                        term = term.mul(&square.powi(i64::from(e / 2))?)?;
+                        if e % 2 == 1 {
+                            rest = rest.mul(&Mono::atom(a));
+                        }
+                    }
+                    _ => rest = rest.mul(&Mono(smallvec::smallvec![(a, e)])),
+                }
+            }
+            term = term.mul(&Frac::poly(Poly(vec![(rest, Rational::ONE)])))?;
+            if term.den.is_empty() {
+                poly_terms.extend(term.num.0);
+            } else {
+                fractions = fractions.add(&term)?;
+            }
+        }
+        let mut num = Frac::poly(self.cancel_negative_powers(sum_terms(poly_terms)));
+        if !fractions.is_zero() {
+            num = num.add(&fractions)?;
+        }
+        if kept.is_empty() {
+            return Some(num);
+        }
+        num.mul(&Frac { num: Poly::constant(Rational::ONE), den: kept })
+    }
+
+    /// `Σ cᵢ |u|⁻ᵏ` with `u·u` dividing `Σ cᵢ` exactly becomes `Σ (cᵢ/(u·u)) |u|²⁻ᵏ`, for
+    /// every radical and power `k ≥ 1`, as long as one applies (`(u·u)/|u| = |u|`). Each step
+    /// raises a negative exponent by two, so it ends.
+    fn cancel_negative_powers(&self, mut p: Poly) -> Poly {
+        let mut tried: Vec<(Id, i32)> = Vec::new();
+        loop {
+            let next = p.0.iter().find_map(|(m, _)| {
+                m.0.iter().copied().find(|&(a, e)| {
+                    e < 0
+                        && !tried.contains(&(a, e))
+                        && self.radicals.get(&a).is_some_and(|s| s.den.is_empty() && !s.num.is_zero())
+                })
+            });
+            let Some((a, e)) = next else { return p };
+            tried.push((a, e));
+            let square = &self.radicals[&a].num;
+            let (group, rest): (Vec<_>, Vec<_>) = p.0.iter().cloned().partition(|(m, _)| m.exponent(a) == e);
+            let cofactor = sum_terms(group.into_iter().map(|(m, q)| (m.with_exponent(a, 0), q)).collect());
+            if let Some(quotient) = cofactor.div_exact(square) {
+                let raised = if e == -2 { quotient } else { quotient.mul_mono(&Mono(smallvec::smallvec![(a, e + 2)])) };
+                let mut terms = rest;
+                terms.extend(raised.0);
+                p = sum_terms(terms);
+            }
+        }
     }
 
     // ---- vector algebra ----------------------------------------------------------------
