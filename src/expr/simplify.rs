@@ -22,7 +22,7 @@
 //! | dot           | bilinear; `u·w = w·u`; `u·eₓ = u.x`; `(p×q)·w` is a triple product   |
 //! | cross         | bilinear; `u×u = 0`; `w×u = −u×w`; `(p×q)×w = q(p·w) − p(q·w)`      |
 //! | radicals      | `sqrt(x)² = x`; `norm(u)² = u·u`; `norm(c u) = |c| norm(u)`          |
-//! | functions     | `ln(exp x) = x`, `exp(ln x) = x`                                     |
+//! | functions     | `ln(exp x) = x`, `exp(ln x) = x`; `sin²x + cos²x = 1` (when smaller)  |
 //!
 //! Work is bounded: every expansion is capped by [`super::poly::MAX_TERMS`]; past it the
 //! piece is kept unexpanded as an atom, which is correct, only less simplified. Results are
@@ -71,6 +71,10 @@ pub struct Simplifier {
     pub(super) built: IdMap<Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
+    /// For each `sin(x)` atom, the `cos(x)` atom of the same argument (`sin² + cos² = 1`).
+    trig: Vec<(Id, Id)>,
+    /// The `sin` (`true`) and `cos` atoms met, by argument.
+    trig_seen: FastMap<(bool, Id), Id>,
     /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
     alike: FastMap<Vec<u32>, Reuse>,
     shaper: Shaper,
@@ -352,9 +356,12 @@ impl Simplifier {
         // Sums and products of sums (common denominators, bilinear dot) can create
         // `sqrt(x)²` anew; reduce them in every form, not only after products and powers.
         match result {
-            Some(Canon::S(f)) => Ok(Canon::S(self.reduce_radicals(f))),
+            Some(Canon::S(f)) => Ok(Canon::S(self.reduce_trig(self.reduce_radicals(f)))),
             Some(Canon::V(v)) => {
-                let terms = v.0.into_iter().map(|(u, s)| (u, self.reduce_radicals(s))).filter(|(_, s)| !s.is_zero());
+                let terms =
+                    v.0.into_iter()
+                        .map(|(u, s)| (u, self.reduce_trig(self.reduce_radicals(s))))
+                        .filter(|(_, s)| !s.is_zero());
                 Ok(Canon::V(VecForm(terms.collect())))
             }
             None => self.frozen(g, id, node),
@@ -477,7 +484,57 @@ impl Simplifier {
             built.push(self.build(g, &form)?);
         }
         let atom = g.call(f, &built)?;
+        if let (Some(sine), [arg]) = (
+            match f {
+                Func::Sin => Some(true),
+                Func::Cos => Some(false),
+                _ => None,
+            },
+            built.as_slice(),
+        ) {
+            // Paired when both have been met (no node is made for the other one: a
+            // node the formula does not use would move every later id).
+            self.trig_seen.insert((sine, *arg), atom);
+            if let Some(&other) = self.trig_seen.get(&(!sine, *arg)) {
+                let pair = if sine { (atom, other) } else { (other, atom) };
+                if !self.trig.contains(&pair) {
+                    self.trig.push(pair);
+                }
+            }
+        }
         Ok(Some(Frac::atom(atom)))
+    }
+
+    /// `sin²x + cos²x = 1` for every argument met: a numerator with `sin(x)²` or `cos(x)²`
+    /// takes `sin² = 1 − cos²` (or `cos² = 1 − sin²`) throughout when that leaves fewer
+    /// terms, until neither does. Each step removes terms, so it ends; a form it leaves
+    /// alone is left alone again (idempotence).
+    fn reduce_trig(&self, f: Frac) -> Frac {
+        if self.trig.is_empty() || f.num.len() < 2 {
+            return f;
+        }
+        let mut num = f.num;
+        loop {
+            let mut best: Option<Poly> = None;
+            for &(sin, cos) in &self.trig {
+                let squared = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 2);
+                let present = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 1);
+                if !(squared(sin) && present(cos) || squared(cos) && present(sin)) {
+                    continue;
+                }
+                for (x, y) in [(sin, cos), (cos, sin)] {
+                    if let Some(p) = substitute_square(&num, x, y)
+                        && p.len() < best.as_ref().map_or(num.len(), Poly::len)
+                    {
+                        best = Some(p);
+                    }
+                }
+            }
+            match best {
+                Some(p) => num = p,
+                None => return Frac { num, den: f.den }.normalize(),
+            }
+        }
     }
 
     /// Radicals to their normal form: a root or norm in a denominator moves up as a negative
@@ -849,6 +906,25 @@ impl Simplifier {
     }
 }
 
+/// `p` with `x² = 1 − y²` in every term: `x^e` becomes `x^(e mod 2) (1 − y²)^(e div 2)`;
+/// `None` when a power is too large to expand.
+fn substitute_square(p: &Poly, x: Id, y: Id) -> Option<Poly> {
+    let one_minus =
+        Poly::constant(Rational::ONE).add(&Poly(vec![(Mono(smallvec::smallvec![(y, 2)]), Rational::int(-1))]));
+    let mut terms: Vec<(Mono, Rational)> = Vec::with_capacity(p.len() * 2);
+    for (m, q) in &p.0 {
+        let e = m.exponent(x);
+        if e < 2 {
+            terms.push((m.clone(), q.clone()));
+            continue;
+        }
+        let rest = m.with_exponent(x, e % 2);
+        let factor = one_minus.powi(e.unsigned_abs() / 2)?;
+        terms.extend(factor.mul_mono(&rest).scale(q).0);
+    }
+    Some(sum_terms(terms))
+}
+
 /// The scalar part of a form (zero for a vector).
 fn scalar(c: &Canon) -> Frac {
     match c {
@@ -953,6 +1029,38 @@ impl VecForm {
 mod tests {
     use super::*;
     use crate::expr::graph::Role;
+
+    /// `sin²x + cos²x = 1` for any common argument, inside larger sums and products
+    /// (`k sin²(w t) + k cos²(w t)` is `k`, the tilted plane's `(sin²α + cos²α)/m` is
+    /// `1/m`), and a lone `sin²x` is left as it is (`1 − cos²x` is no smaller).
+    #[test]
+    fn sin_squared_plus_cos_squared_is_one_for_any_argument() {
+        let mut g = Graph::new(3);
+        let k = g.declare("k", Ty::Scalar, Role::Parameter);
+        let w = g.declare("w", Ty::Scalar, Role::Parameter);
+        let t = g.declare("t", Ty::Scalar, Role::Time);
+        let (k, w, t) = (g.sym(k), g.sym(w), g.sym(t));
+        let wt = g.mul(vec![w, t]).expect("scalars");
+        let s = g.call(Func::Sin, &[wt]).expect("scalar");
+        let c = g.call(Func::Cos, &[wt]).expect("scalar");
+        let (s2, c2) = (g.powi(s, 2).expect("scalar"), g.powi(c, 2).expect("scalar"));
+        let ks2 = g.mul(vec![k, s2]).expect("scalars");
+        let kc2 = g.mul(vec![k, c2]).expect("scalars");
+        let sum = g.add(vec![ks2, kc2]).expect("scalars");
+        let mut simplifier = Simplifier::new();
+        let simplified = simplifier.simplify(&mut g, sum).expect("well typed");
+        assert_eq!(simplified, k);
+        let alone = simplifier.simplify(&mut g, s2).expect("well typed");
+        assert_eq!(alone, s2);
+        // sin⁴ + 2 sin² cos² + cos⁴ = (sin² + cos²)² = 1
+        let s4 = g.powi(s, 4).expect("scalar");
+        let c4 = g.powi(c, 4).expect("scalar");
+        let two = g.int(2);
+        let cross = g.mul(vec![two, s2, c2]).expect("scalars");
+        let square = g.add(vec![s4, cross, c4]).expect("scalars");
+        let one = simplifier.simplify(&mut g, square).expect("well typed");
+        assert_eq!(g.as_num(one), Some(&Rational::ONE));
+    }
 
     /// A component of `(((a₀×a₁)×a₂)×…)×a₁₂` has 2¹² terms, past `MAX_TERMS`: the form is
     /// too large to expand, which means "keep it unexpanded", never zero.
