@@ -8,7 +8,9 @@
 //! baseline in the same run: `load` alone (parsing, type checking, building the graph), so
 //! the cost of the derivation itself is the difference. The `*_text` cases add what
 //! `lagrange derive FILE` does after that: the text document (`report::derivation`), so the
-//! whole command is measured too, file reading and stdout aside. Targets (issue 2): bead
+//! whole command is measured too, file reading and stdout aside. `rope_text`: a rope over
+//! pulleys through k = 1…8 segments (sums of norms), whose C̈ is linear in k (asserted).
+//! Targets (issue 2): bead
 //! < 20 µs; chain linear in N, N = 200 < 4 ms, N = 1000 < 20 ms.
 
 /// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
@@ -133,5 +135,40 @@ fn bead_text(bencher: Bencher, dim: usize) {
 #[divan::bench(args = [10, 50, 200, 1000], sample_count = 20)]
 fn chain_text(bencher: Bencher, n: usize) {
     let text = chain(n);
+    bencher.bench(|| load_derive_and_print(black_box(&text)));
+}
+
+/// A rope over pulleys through `k` segments, `norm(r1 - p1) + norm(r2 - p1) + norm(r2 - p2)
+/// + …  = L` (2D, the bodies and pulleys alternating), as the constraint file's text.
+fn rope(k: usize) -> String {
+    let body = |s: usize| s / 2 + 1 + s % 2;
+    let pulley = |s: usize| s.div_ceil(2) + usize::from(s.is_multiple_of(2));
+    let bodies = body(k - 1).max(1);
+    let mut text = String::from("title = \"rope\"\ndimension = 2\n\n[parameters]\nL = 10.0\n");
+    for p in 1..=pulley(k - 1) {
+        text += &format!("p{p} = [{p}.0, 0.0]\n");
+    }
+    for b in 1..=bodies {
+        text += &format!("m{b} = 1.0\n");
+    }
+    for b in 1..=bodies {
+        text += &format!(
+            "\n[[bodies]]\nname = \"b{b}\"\nposition = \"r{b}\"\nvelocity = \"v{b}\"\nacceleration = \"a{b}\"\nmass = \"m{b}\"\nforce = \"F{b}\"\n"
+        );
+    }
+    let terms: Vec<String> = (0..k).map(|s| format!("norm(r{} - p{})", body(s), pulley(s))).collect();
+    text + &format!("\n[[constraints]]\nname = \"rope\"\nexpr = \"{} = L\"\n", terms.join(" + "))
+}
+
+/// The rope through k = 1…8 segments: load, derive and the text document. Its C̈ is a sum
+/// of k terms `(v·v + d·a)/|d| − (d·v)²/|d|³`, so its size is linear in k (checked here:
+/// at most 100 characters a segment in the expression language).
+#[divan::bench(args = [1, 2, 3, 4, 5, 6, 7, 8], sample_count = 10)]
+fn rope_text(bencher: Bencher, k: usize) {
+    let text = rope(k);
+    let loaded = load(&text).expect("the rope loads");
+    let d = derive(&loaded.system).expect("the rope derives");
+    let c_ddot = print(&d.graph, d.constraints[0].c_ddot, Style::Source).expect("prints");
+    assert!(c_ddot.len() <= 100 * k, "C̈ of {k} segments is {} characters", c_ddot.len());
     bencher.bench(|| load_derive_and_print(black_box(&text)));
 }

@@ -231,16 +231,24 @@ fn force_sums(
         let s = g.declare(&format!("lambda_{}", c.name), Ty::Scalar, Role::Parameter);
         multipliers.push(g.sym(s));
     }
-    let mut sums = Vec::new();
-    for body in 0..system.bodies.len() {
-        let mut terms = Vec::new();
-        for (k, dc) in constraints.iter().enumerate() {
-            if let Some(&(_, j)) = dc.jacobian.iter().find(|(b, _)| *b == body) {
-                terms.push(g.mul(vec![multipliers[k], j])?);
+    // Each body's terms gathered from its own constraints' directions, in one pass over
+    // the constraints (not every constraint searched for every body: that was quadratic).
+    // A body's first direction in a constraint counts, as a search would find it.
+    let mut terms: Vec<Vec<Id>> = vec![Vec::new(); system.bodies.len()];
+    let mut last: Vec<Option<usize>> = vec![None; system.bodies.len()];
+    for (k, dc) in constraints.iter().enumerate() {
+        for &(body, j) in &dc.jacobian {
+            if body >= terms.len() || last[body] == Some(k) {
+                continue;
             }
+            last[body] = Some(k);
+            terms[body].push(g.mul(vec![multipliers[k], j])?);
         }
-        if !terms.is_empty() {
-            sums.push((body, g.add(terms)?));
+    }
+    let mut sums = Vec::new();
+    for (body, list) in terms.into_iter().enumerate() {
+        if !list.is_empty() {
+            sums.push((body, g.add(list)?));
         }
     }
     Ok((multipliers, sums))

@@ -431,7 +431,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
         FormatArg::Json => Format::Json,
     };
     if format == Format::Json {
-        // Written as it is serialised: a long chain's dense A is never held whole.
+        // A is sparse (its upper triangle's non-zero entries): linear in the scene's size.
         return match derivation::json(&loaded.system, &derivation) {
             Ok(doc) => {
                 emit_json(&doc);

@@ -131,10 +131,11 @@ fn json_expressions(system: &mut System, json: &serde_json::Value) -> Vec<(Strin
             out.push(parse(format!("constraints[{k}].gradient.{body}"), j));
         }
     }
-    for (k, row) in json["A"].as_array().expect("A").iter().enumerate() {
-        for (j, e) in row.as_array().expect("row").iter().enumerate() {
-            out.push(parse(format!("A[{k}][{j}]"), e));
-        }
+    // A: its non-zero entries over the upper triangle, `{"row": k, "col": j, "expr": …}`.
+    for entry in json["A"].as_array().expect("A") {
+        let (k, j) = (entry["row"].as_u64().expect("row"), entry["col"].as_u64().expect("col"));
+        assert!(k <= j, "A's entry ({k}, {j}) is below the diagonal");
+        out.push(parse(format!("A[{k}][{j}]"), &entry["expr"]));
     }
     for (k, e) in json["b"].as_array().expect("b").iter().enumerate() {
         out.push(parse(format!("b[{k}]"), e));
@@ -208,7 +209,9 @@ fn json_expressions_parse_again_and_satisfy_the_derivation() {
                             }
                         }
                     }
-                    a[k][j] = scalar(&system, get(&format!("A[{k}][{j}]")).expect("A"), &env);
+                    // A is symmetric and sparse: an entry not listed is zero.
+                    let (row, col) = (k.min(j), k.max(j));
+                    a[k][j] = get(&format!("A[{row}][{col}]")).map_or(0.0, |id| scalar(&system, id, &env));
                     assert!(close(a[k][j], expected, 1e-12), "{path}: A[{k}][{j}]");
                 }
                 let c_term = scalar(&system, get(&format!("constraints[{k}].c")).expect("c"), &env);

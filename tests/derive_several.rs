@@ -173,10 +173,11 @@ fn json_force_sums_parse_again() {
     }
 }
 
-/// A long chain's JSON: `A` is written row by row as it is serialised (never held whole), and
-/// is the dense N × N matrix of the contract, tridiagonal, symmetric, `"0"` off the band.
+/// A long chain's JSON: `A` is the list of its non-zero entries over the upper triangle,
+/// `{"row": k, "col": j, "expr": …}` sorted by row then column: for a chain the diagonal
+/// and the band above it, 2N − 1 entries, none of them `"0"`.
 #[test]
-fn a_long_chains_json_has_the_whole_dense_a() {
+fn a_long_chains_json_lists_the_sparse_upper_triangle_of_a() {
     let n = 300;
     let path = std::env::temp_dir().join(format!("lagrange_json_chain_{}.toml", std::process::id()));
     std::fs::write(&path, lagrange::scenario::chain(n)).expect("temporary file");
@@ -184,14 +185,14 @@ fn a_long_chains_json_has_the_whole_dense_a() {
     let _ = std::fs::remove_file(&path);
     let json: serde_json::Value = serde_json::from_str(&out).expect("valid JSON");
     let a = json["A"].as_array().expect("A");
-    assert_eq!(a.len(), n);
-    for (k, row) in a.iter().enumerate() {
-        let row = row.as_array().expect("a row");
-        assert_eq!(row.len(), n, "row {k}");
-        for (j, entry) in row.iter().enumerate() {
-            let entry = entry.as_str().expect("a string");
-            assert_eq!(entry == "0", k.abs_diff(j) > 1, "A[{k}][{j}] = {entry}");
-            assert_eq!(Some(entry), a[j][k].as_str(), "A is symmetric at ({k}, {j})");
-        }
+    assert_eq!(a.len(), 2 * n - 1);
+    let mut previous = None;
+    for entry in a {
+        let (k, j) = (entry["row"].as_u64().expect("row"), entry["col"].as_u64().expect("col"));
+        let expr = entry["expr"].as_str().expect("a string");
+        assert!(j == k || j == k + 1, "A[{k}][{j}] = {expr} is off the band or below the diagonal");
+        assert_ne!(expr, "0", "A[{k}][{j}] is listed but zero");
+        assert!(previous < Some((k, j)), "A's entries are not sorted at ({k}, {j})");
+        previous = Some((k, j));
     }
 }

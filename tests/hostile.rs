@@ -250,10 +250,10 @@ fn endless_and_oversized_inputs_are_refused_while_reading() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("too large"), "{stderr}");
-    // Generous: reading 16 MiB takes milliseconds; what this excludes is reading forever.
+    // Generous: reading 64 MiB takes milliseconds; what this excludes is reading forever.
     assert!(started.elapsed().as_secs() < 30, "took {:?}", started.elapsed());
 
-    let big = vec![b'#'; (16 << 20) + 1];
+    let big = vec![b'#'; lagrange::model::file::MAX_FILE_BYTES + 1];
     refused("oversized", &big, "too large");
 }
 

@@ -453,12 +453,29 @@ fn printing_then_parsing_gives_the_same_node() {
 
 #[test]
 fn derived_constraints_satisfy_the_velocity_and_acceleration_identities() {
-    let tally = Tally::new();
     let strategy = cases(Leaves::Positional, 3, false).prop_map(|(dim, text, seed)| {
         // Make sure the constraint involves a position (a random one may not).
         (dim, format!("{text} + k*dot(r1, r2)"), seed)
     });
-    check("derive", 150, strategy, |(dim, text, seed)| {
+    velocity_and_acceleration_identities("derive", 150, strategy, 300);
+}
+
+/// The same identities on sums of norms and roots over both bodies.
+#[test]
+fn derived_norm_constraints_satisfy_the_velocity_and_acceleration_identities() {
+    velocity_and_acceleration_identities("derive norms", 100, norm_sums(&["r1", "r2", "u"]), 250);
+}
+
+/// Ċ = Σᵢ ∇ᵢC·vᵢ + ∂C/∂t and C̈/κ = Σᵢ Jᵢ·aᵢ + c on constraints drawn from `strategy`, at
+/// least `at_least` states compared.
+fn velocity_and_acceleration_identities(
+    name: &str,
+    cases: u32,
+    strategy: impl Strategy<Value = (usize, String, u64)>,
+    at_least: usize,
+) {
+    let tally = Tally::new();
+    check(name, cases, strategy, |(dim, text, seed)| {
         let system = system(dim, Some(&text)).map_err(TestCaseError::fail)?;
         let mut d = match derive(&system) {
             Ok(d) => d,
@@ -513,7 +530,7 @@ fn derived_constraints_satisfy_the_velocity_and_acceleration_identities() {
         }
         Ok(())
     });
-    tally.assert_enough("derive", 300);
+    tally.assert_enough(name, at_least);
 }
 
 /// A constraint that repeats another with the bodies renamed (the next link of a chain) is
@@ -583,6 +600,66 @@ fn a_repeated_constraint_derives_as_if_it_were_alone() {
         Ok(())
     });
     assert!(reused.get() >= 60, "only {} repeats were compared", reused.get());
+}
+
+/// Sums of norms and roots of differences over several bodies (a rope over pulleys, a
+/// distance joint, `sqrt(dot(d, d) + c²)`): the terms the simplifier keeps as separate
+/// fractions over different roots (`x/|d1| + y/|d2|³`) rather than over one common
+/// denominator.
+fn norm_sums(vectors: &[&'static str]) -> impl Strategy<Value = (usize, String, u64)> {
+    let vector = proptest::sample::select(vectors.to_vec());
+    let position = proptest::sample::select(vec!["r1", "r2"]);
+    let coefficient = proptest::sample::select(vec!["1", "k", "2", "c", "-1"]);
+    let term = (coefficient, position, vector, 0..4usize).prop_map(|(k, a, b, form)| match form {
+        0 => format!("{k}*norm({a} - {b})"),
+        1 => format!("{k}*sqrt(dot({a} - {b}, {a} - {b}) + c^2)"),
+        2 => format!("{k}*dot({a}, {b})/norm({a} - {b})"),
+        _ => format!("{k}*norm({a} + {b})^3"),
+    });
+    (2..4usize, proptest::collection::vec(term, 1..5), any::<u64>())
+        .prop_map(|(dim, terms, seed)| (dim, terms.join(" + "), seed))
+}
+
+#[test]
+fn norms_and_roots_over_several_bodies_simplify_and_differentiate_exactly() {
+    let tally = Tally::new();
+    check("norms", 200, norm_sums(&["r1", "r2", "u"]), |(dim, text, seed)| {
+        let (mut system, e) = lowered(dim, &text, None)?;
+        let fail = |err: &dyn std::fmt::Display| TestCaseError::fail(err.to_string());
+        let de = time_derivative(&mut system.graph, e).map_err(|e| fail(&e))?;
+        let dde = time_derivative(&mut system.graph, de).map_err(|e| fail(&e))?;
+        for (what, id) in [("e", e), ("d/dt", de), ("d²/dt²", dde)] {
+            let s = system.simplifier.simplify(&mut system.graph, id).map_err(|e| fail(&e))?;
+            let again = Simplifier::new().simplify(&mut system.graph, s).map_err(|e| fail(&e))?;
+            let printed = print(&system.graph, s, Style::Source).unwrap_or_default();
+            prop_assert_eq!(again, s, "simplify is not idempotent on {} of {}: {}", what, text, printed);
+            let back = system.expression(&printed).map_err(|err| TestCaseError::fail(format!("{printed}: {err}")))?;
+            prop_assert_eq!(back, s, "{} of {} printed as {} parses to another node", what, text, printed);
+            let mut rng = Rng::new(seed);
+            for _ in 0..STATES {
+                let env = random_env(&system, &mut rng);
+                let (Some(x), Some(y)) = (value(&system, id, &env), value(&system, s, &env)) else {
+                    tally.record(Verdict::Skip);
+                    continue;
+                };
+                let scale = x.iter().chain(&y).fold(1f64, |m, v| m.max(v.abs()));
+                for (a, b) in x.iter().zip(&y) {
+                    prop_assert!(
+                        (a - b).abs() <= 1e-9 * scale,
+                        "simplify changed the value of {} of {}: {} vs {} (simplified: {})",
+                        what,
+                        text,
+                        a,
+                        b,
+                        printed
+                    );
+                }
+                tally.record(Verdict::Agree);
+            }
+        }
+        Ok(())
+    });
+    tally.assert_enough("norms", 1500);
 }
 
 /// What `derive --steps` prints — C, Ċ and C̈ as the product rule gives them and collected,

@@ -22,9 +22,18 @@ use std::cmp::Ordering;
 /// The most terms a polynomial may reach by expansion before it is kept unexpanded.
 pub const MAX_TERMS: usize = 2000;
 
-/// A product of atom powers, sorted by atom id, exponents positive.
+/// The most terms [`Poly::sqrt_exact`] looks at: a root costs a product per term, and the
+/// squares a layout meets (`((r1 − p)·v1)²`, 3 to 10 terms) are far below.
+pub const MAX_SQUARE_ROOT_TERMS: usize = 64;
+
+/// A product of atom powers, sorted by atom id, exponents non-zero.
+///
+/// Exponents are negative only for radical atoms (`norm(u)`, `sqrt(x)`, which are never
+/// zero where a formula is defined): the simplifier keeps `1/|d|` as `|d|⁻¹` in the
+/// numerator, so a sum of fractions over different roots is a (Laurent) polynomial and
+/// never goes over one common denominator. Every other atom has a positive exponent.
 #[derive(Clone, PartialEq, Eq, Hash, Debug, Default)]
-pub struct Mono(pub SmallVec<[(Id, u32); 4]>);
+pub struct Mono(pub SmallVec<[(Id, i32); 4]>);
 
 impl Mono {
     pub fn one() -> Mono {
@@ -41,11 +50,27 @@ impl Mono {
         self.0.is_empty()
     }
 
-    pub fn degree(&self) -> u64 {
-        self.0.iter().map(|&(_, e)| e as u64).sum()
+    pub fn degree(&self) -> i64 {
+        self.0.iter().map(|&(_, e)| i64::from(e)).sum()
     }
 
-    pub fn exponent(&self, atom: Id) -> u32 {
+    /// Whether some atom has a negative exponent (a radical in a denominator).
+    pub fn has_negative(&self) -> bool {
+        self.0.iter().any(|&(_, e)| e < 0)
+    }
+
+    /// The part with negative exponents (`|d|⁻³` of `(r·v) |d|⁻³`), and the rest.
+    pub fn split_negative(&self) -> (Mono, Mono) {
+        let (neg, pos): (SmallVec<_>, SmallVec<_>) = self.0.iter().copied().partition(|&(_, e)| e < 0);
+        (Mono(neg), Mono(pos))
+    }
+
+    /// `1 / self`.
+    pub fn inverse(&self) -> Mono {
+        Mono(self.0.iter().map(|&(a, e)| (a, -e)).collect())
+    }
+
+    pub fn exponent(&self, atom: Id) -> i32 {
         self.0.iter().find(|&&(a, _)| a == atom).map_or(0, |&(_, e)| e)
     }
 
@@ -74,7 +99,11 @@ impl Mono {
                     j += 1;
                 }
                 Ordering::Equal => {
-                    out.push((a[i].0, a[i].1 + b[j].1));
+                    // A radical's negative power can cancel its positive one.
+                    let e = a[i].1 + b[j].1;
+                    if e != 0 {
+                        out.push((a[i].0, e));
+                    }
                     i += 1;
                     j += 1;
                 }
@@ -92,34 +121,53 @@ impl Mono {
 
     /// `self / other`; `other` must divide `self`.
     pub fn div(&self, other: &Mono) -> Mono {
-        Mono(
-            self.0
-                .iter()
-                .filter_map(|&(a, e)| {
-                    let r = e - other.exponent(a).min(e);
-                    (r > 0).then_some((a, r))
-                })
-                .collect(),
-        )
+        self.mul(&other.inverse())
     }
 
-    /// The greatest common divisor (minimum exponents).
+    /// The greatest common divisor: the minimum exponent of each atom, an absent atom
+    /// counting as exponent 0 (so a negative exponent common to every term is kept).
     pub fn gcd(&self, other: &Mono) -> Mono {
-        Mono(
-            self.0
-                .iter()
-                .filter_map(|&(a, e)| {
-                    let m = e.min(other.exponent(a));
-                    (m > 0).then_some((a, m))
-                })
-                .collect(),
-        )
+        let mut out = SmallVec::new();
+        let (a, b) = (&self.0, &other.0);
+        let (mut i, mut j) = (0, 0);
+        while i < a.len() || j < b.len() {
+            let (atom, e) = match (a.get(i), b.get(j)) {
+                (Some(&(x, ex)), Some(&(y, ey))) => match x.cmp(&y) {
+                    Ordering::Less => {
+                        i += 1;
+                        (x, ex.min(0))
+                    }
+                    Ordering::Greater => {
+                        j += 1;
+                        (y, ey.min(0))
+                    }
+                    Ordering::Equal => {
+                        i += 1;
+                        j += 1;
+                        (x, ex.min(ey))
+                    }
+                },
+                (Some(&(x, ex)), None) => {
+                    i += 1;
+                    (x, ex.min(0))
+                }
+                (None, Some(&(y, ey))) => {
+                    j += 1;
+                    (y, ey.min(0))
+                }
+                (None, None) => break,
+            };
+            if e != 0 {
+                out.push((atom, e));
+            }
+        }
+        Mono(out)
     }
 
     /// Replaces the exponent of `atom` (removing it at zero).
-    pub fn with_exponent(&self, atom: Id, e: u32) -> Mono {
-        let mut v: SmallVec<[(Id, u32); 4]> = self.0.iter().copied().filter(|&(a, _)| a != atom).collect();
-        if e > 0 {
+    pub fn with_exponent(&self, atom: Id, e: i32) -> Mono {
+        let mut v: SmallVec<[(Id, i32); 4]> = self.0.iter().copied().filter(|&(a, _)| a != atom).collect();
+        if e != 0 {
             let pos = v.iter().position(|&(a, _)| a > atom).unwrap_or(v.len());
             v.insert(pos, (atom, e));
         }
@@ -127,7 +175,9 @@ impl Mono {
     }
 }
 
-/// Graded order: total degree first, then exponents compared atom by atom in id order.
+/// Graded order: total degree first, then exponents compared atom by atom in id order (an
+/// absent atom has exponent 0). With negative exponents this is still a group order
+/// (compatible with multiplication), which is what collecting and exact division need.
 impl Ord for Mono {
     fn cmp(&self, other: &Self) -> Ordering {
         self.degree().cmp(&other.degree()).then_with(|| {
@@ -136,12 +186,12 @@ impl Ord for Mono {
             loop {
                 match (a.get(i), b.get(j)) {
                     (None, None) => return Ordering::Equal,
-                    (Some(_), None) => return Ordering::Greater,
-                    (None, Some(_)) => return Ordering::Less,
+                    (Some(&(_, ex)), None) => return ex.cmp(&0),
+                    (None, Some(&(_, ey))) => return 0.cmp(&ey),
                     (Some(&(x, ex)), Some(&(y, ey))) => match x.cmp(&y) {
-                        // `self` has atom x and `other` does not: self is larger in x.
-                        Ordering::Less => return Ordering::Greater,
-                        Ordering::Greater => return Ordering::Less,
+                        // `self` has atom x and `other` does not.
+                        Ordering::Less => return ex.cmp(&0),
+                        Ordering::Greater => return 0.cmp(&ey),
                         Ordering::Equal => match ex.cmp(&ey) {
                             Ordering::Equal => {
                                 i += 1;
@@ -360,6 +410,37 @@ impl Poly {
         r.is_zero().then_some(quotient)
     }
 
+    /// The polynomial `q` with `q² = self` and a positive leading coefficient, if there is
+    /// one (over the rationals); `None` past [`MAX_SQUARE_ROOT_TERMS`] terms.
+    ///
+    /// The leading term of `q` is the root of the leading term of `self`; each next term is
+    /// the remainder's leading term over twice `q`'s (as for integers, the order being a
+    /// monomial order). A non-square fails at the first term that does not divide.
+    pub fn sqrt_exact(&self) -> Option<Poly> {
+        if self.len() > MAX_SQUARE_ROOT_TERMS {
+            return None;
+        }
+        let (lm, lq) = self.leading()?;
+        let half: Option<SmallVec<[(Id, i32); 4]>> =
+            lm.0.iter().map(|&(a, e)| (e % 2 == 0).then_some((a, e / 2))).collect();
+        let lead = (Mono(half?), lq.sqrt_exact()?);
+        let twice = (lead.0.clone(), lead.1.mul(&Rational::int(2)));
+        let mut root = Poly(vec![lead]);
+        for _ in 0..=self.len() {
+            let remainder = self.add(&root.mul(&root)?.neg());
+            let Some((rm, rq)) = remainder.leading() else { return Some(root) };
+            if !twice.0.divides(rm) {
+                return None;
+            }
+            let next = (rm.div(&twice.0), rq.div(&twice.1)?);
+            if next.0 >= twice.0 {
+                return None;
+            }
+            root = root.add(&Poly(vec![next]));
+        }
+        None
+    }
+
     /// Splits `self = k · m · P` with `k` rational (the sign of the leading term), `m` the common
     /// monomial and `P` primitive with a positive leading coefficient.
     pub fn split(&self) -> (Rational, Mono, Poly) {
@@ -463,13 +544,18 @@ impl Frac {
         }
         let (k, m, p) = self.num.split();
         let mut den = Vec::new();
-        for &(a, e) in &m.0 {
-            push_factor(&mut den, Poly::atom(a), e);
+        // A radical's negative power in the numerator comes back up as a positive one.
+        let (negative, positive) = m.split_negative();
+        for &(a, e) in &positive.0 {
+            push_factor(&mut den, Poly::atom(a), e.unsigned_abs());
         }
         if p.as_constant().is_none() {
             push_factor(&mut den, p, 1);
         }
-        let num = expand(&self.den)?.scale(&k.recip()?);
+        let mut num = expand(&self.den)?.scale(&k.recip()?);
+        if !negative.is_one() {
+            num = num.mul_mono(&negative.inverse());
+        }
         Some(Frac { num, den }.normalize())
     }
 
@@ -499,9 +585,9 @@ impl Frac {
         let mut cancel = Mono::one();
         for (f, e) in &mut self.den {
             if let Some(a) = f.as_atom() {
-                let k = (*e).min(common.exponent(a));
+                let k = common.exponent(a).min(i32::try_from(*e).unwrap_or(i32::MAX));
                 if k > 0 {
-                    *e -= k;
+                    *e -= k.unsigned_abs();
                     cancel = cancel.mul(&Mono(smallvec::smallvec![(a, k)]));
                 }
             } else {

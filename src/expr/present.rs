@@ -18,7 +18,7 @@
 
 use super::graph::{FastMap, Graph, Id, Node, Role, TypeError};
 use super::num::Rational;
-use super::poly::{Frac, Mono, Poly};
+use super::poly::{Frac, MAX_SQUARE_ROOT_TERMS, Mono, Poly, push_factor};
 use super::simplify::{Canon, Simplifier, VAtom, VecForm};
 use smallvec::SmallVec;
 use std::cmp::Ordering;
@@ -33,6 +33,66 @@ impl Simplifier {
     }
 
     fn build_frac(&mut self, g: &mut Graph, f: &Frac) -> Result<Id, TypeError> {
+        if let Some(q) = f.as_constant() {
+            return Ok(g.num(q));
+        }
+        if f.num.0.iter().any(|(m, _)| m.has_negative()) {
+            return self.build_separated(g, f);
+        }
+        self.build_one_fraction(g, f)
+    }
+
+    /// A numerator with radicals' negative powers (`|d|⁻¹`, `|d|⁻³`): one fraction per
+    /// power, `x/|d1| + y/|d2|³`, each over its own roots, never one common denominator of
+    /// them all (that form multiplies every numerator by every other root, and grows
+    /// exponentially in the number of roots). The denominator's other factors stay
+    /// outside: `(x/|d1| + y/|d2|)/(m1 m2)`.
+    fn build_separated(&mut self, g: &mut Graph, f: &Frac) -> Result<Id, TypeError> {
+        let mut groups: Vec<(Mono, Vec<(Mono, Rational)>)> = Vec::new();
+        for (m, q) in &f.num.0 {
+            let (negative, positive) = m.split_negative();
+            match groups.iter_mut().find(|(n, _)| *n == negative) {
+                Some((_, terms)) => terms.push((positive, q.clone())),
+                None => groups.push((negative, vec![(positive, q.clone())])),
+            }
+        }
+        let mut parts: Vec<(Frac, Id)> = Vec::with_capacity(groups.len());
+        let single = groups.len() == 1;
+        for (negative, terms) in groups {
+            let mut terms = terms;
+            terms.sort_by(|a, b| a.0.cmp(&b.0));
+            let mut den: Vec<(Poly, u32)> = if single { f.den.clone() } else { Vec::new() };
+            for &(a, e) in &negative.0 {
+                push_factor(&mut den, Poly::atom(a), e.unsigned_abs());
+            }
+            let part = Frac { num: Poly(terms), den };
+            let node = self.build_one_fraction(g, &part)?;
+            parts.push((part, node));
+        }
+        // Groups by the power of their roots (`x/|d|` before `y/|d|³`, as written by hand),
+        // then in reading order of their numerators, then by their roots.
+        let power = |f: &Frac| f.den.iter().filter(|(p, _)| p.as_atom().is_some()).map(|(_, e)| *e).sum::<u32>();
+        parts.sort_by(|a, b| {
+            power(&a.0).cmp(&power(&b.0)).then_with(|| cmp_poly_reading(g, &a.0.num, &b.0.num)).then_with(|| {
+                let roots = |f: &Frac| f.den.iter().filter_map(|(p, _)| p.as_atom()).collect::<Vec<_>>();
+                let (ra, rb) = (roots(&a.0), roots(&b.0));
+                ra.iter()
+                    .zip(&rb)
+                    .map(|(x, y)| g.cmp_nodes(*x, *y))
+                    .find(|o| o.is_ne())
+                    .unwrap_or(ra.len().cmp(&rb.len()))
+            })
+        });
+        let sum = g.add(parts.into_iter().map(|(_, n)| n).collect())?;
+        if single || f.den.is_empty() {
+            return Ok(sum);
+        }
+        let inverse = self.inverse_denominator(g, &Rational::ONE, &f.den)?;
+        g.mul(vec![sum, inverse])
+    }
+
+    /// One numerator over one denominator.
+    fn build_one_fraction(&mut self, g: &mut Graph, f: &Frac) -> Result<Id, TypeError> {
         if let Some(q) = f.as_constant() {
             return Ok(g.num(q));
         }
@@ -67,11 +127,21 @@ impl Simplifier {
         }
         // Rational content p/q: p stays in front, q joins the denominator.
         let (p, q) = k.split_parts();
+        let numerator = term(g, &p, factors)?;
+        let inv_den = self.inverse_denominator(g, &q, &f.den)?;
+        let mut all = splice(g, numerator);
+        all.push(inv_den);
+        g.mul(all)
+    }
+
+    /// `1/(q Π fᵢ^eᵢ)` as one node: the factors in reading order, one power alone written
+    /// `x/|d|³` rather than `x/(|d|³)`.
+    fn inverse_denominator(&mut self, g: &mut Graph, q: &Rational, factors: &[(Poly, u32)]) -> Result<Id, TypeError> {
         let mut den = Vec::new();
         if !q.is_one() {
-            den.push(g.num(q));
+            den.push(g.num(q.clone()));
         }
-        let mut dens: Vec<&(Poly, u32)> = f.den.iter().collect();
+        let mut dens: Vec<&(Poly, u32)> = factors.iter().collect();
         dens.sort_by(|a, b| cmp_poly_reading(g, &a.0, &b.0));
         for (factor, e) in dens {
             let node = match factor.as_atom() {
@@ -80,12 +150,19 @@ impl Simplifier {
             };
             den.push(if *e == 1 { node } else { g.powi(node, i64::from(*e))? });
         }
-        let numerator = term(g, &p, factors)?;
-        let denominator = g.mul(den)?;
-        let inv_den = g.powi(denominator, -1)?;
-        let mut all = splice(g, numerator);
-        all.push(inv_den);
-        g.mul(all)
+        match den.as_slice() {
+            [one] => match g.node(*one) {
+                &Node::Pow([b, e]) if g.as_num(e).and_then(Rational::to_i64).is_some_and(|n| n > 1) => {
+                    let n = g.as_num(e).and_then(Rational::to_i64).unwrap_or(1);
+                    g.powi(b, -n)
+                }
+                _ => g.powi(*one, -1),
+            },
+            _ => {
+                let denominator = g.mul(den)?;
+                g.powi(denominator, -1)
+            }
+        }
     }
 
     /// A primitive polynomial as a sum, with factorable dot products factored.
@@ -95,6 +172,16 @@ impl Simplifier {
 
     /// [`Simplifier::build_poly`] of terms already in reading order.
     fn build_ordered(&mut self, g: &mut Graph, terms: Vec<(Mono, Rational)>) -> Result<Id, TypeError> {
+        // A perfect square is written as one: `((r1 − p)·v1)²`, not its three expanded terms.
+        if terms.len() >= 3 && terms.len() <= MAX_SQUARE_ROOT_TERMS {
+            let mut p = Poly(terms.clone());
+            p.0.sort_by(|a, b| a.0.cmp(&b.0));
+            if let Some(root) = p.sqrt_exact().filter(|r| r.len() >= 2) {
+                let root = if signed_content(g, &root).is_negative() { root.neg() } else { root };
+                let base = self.build_poly(g, &root)?;
+                return g.powi(base, 2);
+            }
+        }
         let mut replaced: FastMap<usize, Option<(Rational, Mono, Id)>> = FastMap::default();
         for (indices, factored) in bilinear_groups(g, &terms)? {
             for (n, &i) in indices.iter().enumerate() {
@@ -249,7 +336,7 @@ pub(super) fn is_negation(g: &Graph, id: Id) -> bool {
 
 /// The atoms of a monomial as factors `x` or `x^e`, in canonical atom order.
 fn mono_factors(g: &mut Graph, m: &Mono) -> Result<Vec<Id>, TypeError> {
-    let mut atoms: Vec<(Id, u32)> = m.0.to_vec();
+    let mut atoms: Vec<(Id, i32)> = m.0.to_vec();
     atoms.sort_by(|a, b| g.cmp_nodes(a.0, b.0));
     atoms.into_iter().map(|(a, e)| if e == 1 { Ok(a) } else { g.powi(a, i64::from(e)) }).collect()
 }
@@ -308,12 +395,12 @@ fn cmp_mono_reading(g: &Graph, a: &Mono, b: &Mono) -> Ordering {
 /// What the reading order compares: the weighted degree, then the atoms with kinematic
 /// ones (positions, velocities, …) first.
 struct ReadingKey {
-    degree: u64,
-    atoms: SmallVec<[(bool, Id, u32); 4]>,
+    degree: i64,
+    atoms: SmallVec<[(bool, Id, i32); 4]>,
 }
 
 fn reading_key(g: &Graph, m: &Mono) -> ReadingKey {
-    let mut atoms: SmallVec<[(bool, Id, u32); 4]> = m.0.iter().map(|&(x, e)| (is_kinematic(g, x), x, e)).collect();
+    let mut atoms: SmallVec<[(bool, Id, i32); 4]> = m.0.iter().map(|&(x, e)| (is_kinematic(g, x), x, e)).collect();
     atoms.sort_by(|p, q| q.0.cmp(&p.0).then_with(|| g.cmp_nodes(p.1, q.1)));
     ReadingKey { degree: weighted_degree(g, m), atoms }
 }
@@ -331,7 +418,7 @@ fn cmp_reading_keys(g: &Graph, a: &ReadingKey, b: &ReadingKey) -> Ordering {
 }
 
 /// Degree counting a dot product as two factors, a triple product as three.
-fn weighted_degree(g: &Graph, m: &Mono) -> u64 {
+fn weighted_degree(g: &Graph, m: &Mono) -> i64 {
     m.0.iter()
         .map(|&(a, e)| {
             let w = match g.node(a) {
@@ -339,7 +426,7 @@ fn weighted_degree(g: &Graph, m: &Mono) -> u64 {
                 Node::Dot(_) | Node::Cross(_) => 2,
                 _ => 1,
             };
-            w * u64::from(e)
+            w * i64::from(e)
         })
         .sum()
 }
@@ -404,7 +491,7 @@ fn bilinear_groups(
     // Group by cofactor: the monomial without its single dot atom.
     let mut by_cofactor: Vec<(Mono, Vec<DotTerm>)> = Vec::new();
     for (index, (m, q)) in terms.iter().enumerate() {
-        let dots: SmallVec<[(Id, u32); 4]> =
+        let dots: SmallVec<[(Id, i32); 4]> =
             m.0.iter().copied().filter(|(a, _)| matches!(g.node(*a), Node::Dot(_)) && !is_triple(g, *a)).collect();
         let [(dot, 1)] = dots.as_slice() else { continue };
         let Node::Dot([u, w]) = *g.node(*dot) else { continue };

@@ -22,7 +22,7 @@
 //! | dot           | bilinear; `u·w = w·u`; `u·eₓ = u.x`; `(p×q)·w` is a triple product   |
 //! | cross         | bilinear; `u×u = 0`; `w×u = −u×w`; `(p×q)×w = q(p·w) − p(q·w)`      |
 //! | radicals      | `sqrt(x)² = x`; `norm(u)² = u·u`; `norm(c u) = |c| norm(u)`          |
-//! | functions     | `ln(exp x) = x`, `exp(ln x) = x`                                     |
+//! | functions     | `ln(exp x) = x`, `exp(ln x) = x`; `sin²x + cos²x = 1` (when smaller)  |
 //!
 //! Work is bounded: every expansion is capped by [`super::poly::MAX_TERMS`]; past it the
 //! piece is kept unexpanded as an atom, which is correct, only less simplified. Results are
@@ -71,6 +71,10 @@ pub struct Simplifier {
     pub(super) built: IdMap<Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
+    /// For each `sin(x)` atom, the `cos(x)` atom of the same argument (`sin² + cos² = 1`).
+    trig: Vec<(Id, Id)>,
+    /// The `sin` (`true`) and `cos` atoms met, by argument.
+    trig_seen: FastMap<(bool, Id), Id>,
     /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
     alike: FastMap<Vec<u32>, Reuse>,
     shaper: Shaper,
@@ -352,9 +356,12 @@ impl Simplifier {
         // Sums and products of sums (common denominators, bilinear dot) can create
         // `sqrt(x)²` anew; reduce them in every form, not only after products and powers.
         match result {
-            Some(Canon::S(f)) => Ok(Canon::S(self.reduce_radicals(f))),
+            Some(Canon::S(f)) => Ok(Canon::S(self.reduce_trig(self.reduce_radicals(f)))),
             Some(Canon::V(v)) => {
-                let terms = v.0.into_iter().map(|(u, s)| (u, self.reduce_radicals(s))).filter(|(_, s)| !s.is_zero());
+                let terms =
+                    v.0.into_iter()
+                        .map(|(u, s)| (u, self.reduce_trig(self.reduce_radicals(s))))
+                        .filter(|(_, s)| !s.is_zero());
                 Ok(Canon::V(VecForm(terms.collect())))
             }
             None => self.frozen(g, id, node),
@@ -477,64 +484,160 @@ impl Simplifier {
             built.push(self.build(g, &form)?);
         }
         let atom = g.call(f, &built)?;
+        if let (Some(sine), [arg]) = (
+            match f {
+                Func::Sin => Some(true),
+                Func::Cos => Some(false),
+                _ => None,
+            },
+            built.as_slice(),
+        ) {
+            // Paired when both have been met (no node is made for the other one: a
+            // node the formula does not use would move every later id).
+            self.trig_seen.insert((sine, *arg), atom);
+            if let Some(&other) = self.trig_seen.get(&(!sine, *arg)) {
+                let pair = if sine { (atom, other) } else { (other, atom) };
+                if !self.trig.contains(&pair) {
+                    self.trig.push(pair);
+                }
+            }
+        }
         Ok(Some(Frac::atom(atom)))
     }
 
-    /// Replaces `sqrt(x)^k` by `x^(k div 2) sqrt(x)^(k mod 2)`, and `norm(u)^k` likewise.
+    /// `sin²x + cos²x = 1` for every argument met: a numerator with `sin(x)²` or `cos(x)²`
+    /// takes `sin² = 1 − cos²` (or `cos² = 1 − sin²`) throughout when that leaves fewer
+    /// terms, until neither does. Each step removes terms, so it ends; a form it leaves
+    /// alone is left alone again (idempotence).
+    fn reduce_trig(&self, f: Frac) -> Frac {
+        if self.trig.is_empty() || f.num.len() < 2 {
+            return f;
+        }
+        let mut num = f.num;
+        loop {
+            let mut best: Option<Poly> = None;
+            for &(sin, cos) in &self.trig {
+                let squared = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 2);
+                let present = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 1);
+                if !(squared(sin) && present(cos) || squared(cos) && present(sin)) {
+                    continue;
+                }
+                for (x, y) in [(sin, cos), (cos, sin)] {
+                    if let Some(p) = substitute_square(&num, x, y)
+                        && p.len() < best.as_ref().map_or(num.len(), Poly::len)
+                    {
+                        best = Some(p);
+                    }
+                }
+            }
+            match best {
+                Some(p) => num = p,
+                None => return Frac { num, den: f.den }.normalize(),
+            }
+        }
+    }
+
+    /// Radicals to their normal form: a root or norm in a denominator moves up as a negative
+    /// power (`x/|d|³` is `x |d|⁻³`, so fractions over different roots add without a common
+    /// denominator), `sqrt(x)^k` becomes `x^(k div 2) sqrt(x)^(k mod 2)` for `k ≥ 2` (and
+    /// `norm(u)^k` likewise), and a negative power cancels against its square where the
+    /// square divides exactly (`(u·u) |u|⁻² = 1`).
     pub(super) fn reduce_radicals(&self, f: Frac) -> Frac {
         if self.radicals.is_empty() {
             return f;
         }
-        let heavy = |m: &Mono| m.0.iter().any(|(a, e)| *e >= 2 && self.radicals.contains_key(a));
-        let num_heavy = f.num.0.iter().any(|(m, _)| heavy(m));
-        let den_heavy =
-            f.den.iter().any(|(p, e)| *e >= 2 && p.as_atom().is_some_and(|a| self.radicals.contains_key(&a)));
-        if !num_heavy && !den_heavy {
+        let radical = |a: &Id| self.radicals.contains_key(a);
+        let num_heavy = f.num.0.iter().any(|(m, _)| m.0.iter().any(|(a, e)| (*e >= 2 || *e < 0) && radical(a)));
+        let den_radical = f.den.iter().any(|(p, _)| p.as_atom().is_some_and(|a| radical(&a)));
+        if !num_heavy && !den_radical {
             return f;
         }
-        let reduced = || -> Option<Frac> {
-            // Terms whose replacement is a polynomial (the square has no denominator, the
-            // common case) are summed in one sort; adding them one by one as fractions
-            // tried an exact division per term and took 40 s on `sqrt(1 + (r1·r2/(1+t²))²)`.
-            let mut poly_terms: Vec<(Mono, Rational)> = Vec::new();
-            let mut fractions = Frac::zero();
-            for (m, q) in &f.num.0 {
-                let mut term = Frac::constant(q.clone());
-                let mut rest = Mono::one();
-                for &(a, e) in &m.0 {
-                    match self.radicals.get(&a) {
-                        Some(square) if e >= 2 => {
-                            term = term.mul(&square.powi(i64::from(e / 2))?)?;
-                            if e % 2 == 1 {
-                                rest = rest.mul(&Mono::atom(a));
-                            }
-                        }
-                        _ => rest = rest.mul(&Mono(smallvec::smallvec![(a, e)])),
-                    }
-                }
-                term = term.mul(&Frac::poly(Poly(vec![(rest, Rational::ONE)])))?;
-                if term.den.is_empty() {
-                    poly_terms.extend(term.num.0);
-                } else {
-                    fractions = fractions.add(&term)?;
-                }
+        self.reduced(&f).unwrap_or(f)
+    }
+
+    /// [`Simplifier::reduce_radicals`]; `None` when a step is too large to expand.
+    fn reduced(&self, f: &Frac) -> Option<Frac> {
+        // Radical atoms of the denominator move up; the other factors stay factored.
+        let mut up = Mono::one();
+        let mut kept = Vec::new();
+        for (p, e) in &f.den {
+            match p.as_atom().filter(|a| self.radicals.contains_key(a)) {
+                Some(a) => up = up.mul(&Mono(smallvec::smallvec![(a, -i32::try_from(*e).ok()?)])),
+                None => push_factor(&mut kept, p.clone(), *e),
             }
-            let num = Frac::poly(sum_terms(poly_terms)).add(&fractions)?;
-            // Denominator factors stay factored; only heavy radicals move.
-            let mut kept = Vec::new();
-            let mut extra = Frac::constant(Rational::ONE);
-            for (p, e) in &f.den {
-                match p.as_atom().and_then(|a| self.radicals.get(&a)) {
-                    Some(square) if *e >= 2 => {
-                        push_factor(&mut kept, p.clone(), e % 2);
-                        extra = extra.mul(&square.powi(-i64::from(e / 2))?)?;
-                    }
-                    _ => push_factor(&mut kept, p.clone(), *e),
-                }
-            }
-            num.mul(&Frac { num: Poly::constant(Rational::ONE), den: kept })?.mul(&extra)
+        }
+        let moved;
+        let num = if up.is_one() {
+            &f.num
+        } else {
+            moved = f.num.mul_mono(&up);
+            &moved
         };
-        reduced().unwrap_or(f)
+        // Terms whose replacement is a polynomial (the square has no denominator, the
+        // common case) are summed in one sort; adding them one by one as fractions
+        // tried an exact division per term and took 40 s on `sqrt(1 + (r1·r2/(1+t²))²)`.
+        let mut poly_terms: Vec<(Mono, Rational)> = Vec::new();
+        let mut fractions = Frac::zero();
+        for (m, q) in &num.0 {
+            if !m.0.iter().any(|(a, e)| *e >= 2 && self.radicals.contains_key(a)) {
+                poly_terms.push((m.clone(), q.clone()));
+                continue;
+            }
+            let mut term = Frac::constant(q.clone());
+            let mut rest = Mono::one();
+            for &(a, e) in &m.0 {
+                match self.radicals.get(&a) {
+                    Some(square) if e >= 2 => {
+                        term = term.mul(&square.powi(i64::from(e / 2))?)?;
+                        if e % 2 == 1 {
+                            rest = rest.mul(&Mono::atom(a));
+                        }
+                    }
+                    _ => rest = rest.mul(&Mono(smallvec::smallvec![(a, e)])),
+                }
+            }
+            term = term.mul(&Frac::poly(Poly(vec![(rest, Rational::ONE)])))?;
+            if term.den.is_empty() {
+                poly_terms.extend(term.num.0);
+            } else {
+                fractions = fractions.add(&term)?;
+            }
+        }
+        let mut num = Frac::poly(self.cancel_negative_powers(sum_terms(poly_terms)));
+        if !fractions.is_zero() {
+            num = num.add(&fractions)?;
+        }
+        if kept.is_empty() {
+            return Some(num);
+        }
+        num.mul(&Frac { num: Poly::constant(Rational::ONE), den: kept })
+    }
+
+    /// `Σ cᵢ |u|⁻ᵏ` with `u·u` dividing `Σ cᵢ` exactly becomes `Σ (cᵢ/(u·u)) |u|²⁻ᵏ`, for
+    /// every radical and power `k ≥ 1`, as long as one applies (`(u·u)/|u| = |u|`). Each step
+    /// raises a negative exponent by two, so it ends.
+    fn cancel_negative_powers(&self, mut p: Poly) -> Poly {
+        let mut tried: Vec<(Id, i32)> = Vec::new();
+        loop {
+            let next = p.0.iter().find_map(|(m, _)| {
+                m.0.iter().copied().find(|&(a, e)| {
+                    e < 0
+                        && !tried.contains(&(a, e))
+                        && self.radicals.get(&a).is_some_and(|s| s.den.is_empty() && !s.num.is_zero())
+                })
+            });
+            let Some((a, e)) = next else { return p };
+            tried.push((a, e));
+            let square = &self.radicals[&a].num;
+            let (group, rest): (Vec<_>, Vec<_>) = p.0.iter().cloned().partition(|(m, _)| m.exponent(a) == e);
+            let cofactor = sum_terms(group.into_iter().map(|(m, q)| (m.with_exponent(a, 0), q)).collect());
+            if let Some(quotient) = cofactor.div_exact(square) {
+                let raised = if e == -2 { quotient } else { quotient.mul_mono(&Mono(smallvec::smallvec![(a, e + 2)])) };
+                let mut terms = rest;
+                terms.extend(raised.0);
+                p = sum_terms(terms);
+            }
+        }
     }
 
     // ---- vector algebra ----------------------------------------------------------------
@@ -803,6 +906,25 @@ impl Simplifier {
     }
 }
 
+/// `p` with `x² = 1 − y²` in every term: `x^e` becomes `x^(e mod 2) (1 − y²)^(e div 2)`;
+/// `None` when a power is too large to expand.
+fn substitute_square(p: &Poly, x: Id, y: Id) -> Option<Poly> {
+    let one_minus =
+        Poly::constant(Rational::ONE).add(&Poly(vec![(Mono(smallvec::smallvec![(y, 2)]), Rational::int(-1))]));
+    let mut terms: Vec<(Mono, Rational)> = Vec::with_capacity(p.len() * 2);
+    for (m, q) in &p.0 {
+        let e = m.exponent(x);
+        if e < 2 {
+            terms.push((m.clone(), q.clone()));
+            continue;
+        }
+        let rest = m.with_exponent(x, e % 2);
+        let factor = one_minus.powi(e.unsigned_abs() / 2)?;
+        terms.extend(factor.mul_mono(&rest).scale(q).0);
+    }
+    Some(sum_terms(terms))
+}
+
 /// The scalar part of a form (zero for a vector).
 fn scalar(c: &Canon) -> Frac {
     match c {
@@ -907,6 +1029,38 @@ impl VecForm {
 mod tests {
     use super::*;
     use crate::expr::graph::Role;
+
+    /// `sin²x + cos²x = 1` for any common argument, inside larger sums and products
+    /// (`k sin²(w t) + k cos²(w t)` is `k`, the tilted plane's `(sin²α + cos²α)/m` is
+    /// `1/m`), and a lone `sin²x` is left as it is (`1 − cos²x` is no smaller).
+    #[test]
+    fn sin_squared_plus_cos_squared_is_one_for_any_argument() {
+        let mut g = Graph::new(3);
+        let k = g.declare("k", Ty::Scalar, Role::Parameter);
+        let w = g.declare("w", Ty::Scalar, Role::Parameter);
+        let t = g.declare("t", Ty::Scalar, Role::Time);
+        let (k, w, t) = (g.sym(k), g.sym(w), g.sym(t));
+        let wt = g.mul(vec![w, t]).expect("scalars");
+        let s = g.call(Func::Sin, &[wt]).expect("scalar");
+        let c = g.call(Func::Cos, &[wt]).expect("scalar");
+        let (s2, c2) = (g.powi(s, 2).expect("scalar"), g.powi(c, 2).expect("scalar"));
+        let ks2 = g.mul(vec![k, s2]).expect("scalars");
+        let kc2 = g.mul(vec![k, c2]).expect("scalars");
+        let sum = g.add(vec![ks2, kc2]).expect("scalars");
+        let mut simplifier = Simplifier::new();
+        let simplified = simplifier.simplify(&mut g, sum).expect("well typed");
+        assert_eq!(simplified, k);
+        let alone = simplifier.simplify(&mut g, s2).expect("well typed");
+        assert_eq!(alone, s2);
+        // sin⁴ + 2 sin² cos² + cos⁴ = (sin² + cos²)² = 1
+        let s4 = g.powi(s, 4).expect("scalar");
+        let c4 = g.powi(c, 4).expect("scalar");
+        let two = g.int(2);
+        let cross = g.mul(vec![two, s2, c2]).expect("scalars");
+        let square = g.add(vec![s4, cross, c4]).expect("scalars");
+        let one = simplifier.simplify(&mut g, square).expect("well typed");
+        assert_eq!(g.as_num(one), Some(&Rational::ONE));
+    }
 
     /// A component of `(((a₀×a₁)×a₂)×…)×a₁₂` has 2¹² terms, past `MAX_TERMS`: the form is
     /// too large to expand, which means "keep it unexpanded", never zero.

@@ -20,7 +20,7 @@ use toml::Spanned;
 pub enum Problem {
     // Reading the file (`model::document`, `model::keys`).
     /// The file is larger than the loader reads.
-    #[error("file is too large ({bytes} bytes; the limit is {limit})")]
+    #[error("file is too large ({bytes} bytes; the limit is {limit} bytes, 64 MiB, about 240 000 bodies of a chain)")]
     TooLarge { bytes: usize, limit: usize },
     /// Not TOML: toml's own message (its limits said in the file's terms).
     #[error("{message}")]

@@ -503,63 +503,19 @@ fn chain(raw: &str, done: &str) -> String {
     if raw == done { done.to_string() } else { format!("{raw} = {done}") }
 }
 
-/// The derivation as JSON ([`json`](fn@json)): serialised as one value, with the dense `A` written
-/// row by row from its non-zero entries as it is serialised, so a long chain's N² entries
-/// (mostly `"0"`) are never all held in memory.
+/// The derivation as JSON ([`json`](fn@json)): one value, `A` in it as the list of its
+/// non-zero entries over the upper triangle, `[{"row": k, "col": j, "expr": "…"}]` with
+/// `k ≤ j`, sorted by row then column (A is symmetric: the entry `(j, k)` is the same
+/// expression). Its size is linear in the scene's: a chain's A has 2N − 1 such entries,
+/// where the dense N × N array of earlier versions held N² strings, nearly all `"0"`.
 #[derive(Debug)]
 pub struct JsonDerivation {
-    /// Every entry but `A`.
-    rest: Value,
-    /// `A`'s size and its non-zero entries, by row, in column order.
-    n: usize,
-    rows: Vec<Vec<(usize, String)>>,
-}
-
-impl JsonDerivation {
-    /// Row `k` of A, dense.
-    fn row(&self, k: usize) -> impl Iterator<Item = &str> {
-        let mut entries = self.rows[k].iter().peekable();
-        (0..self.n).map(move |j| match entries.peek() {
-            Some((col, s)) if *col == j => {
-                entries.next();
-                s.as_str()
-            }
-            _ => "0",
-        })
-    }
+    value: Value,
 }
 
 impl serde::Serialize for JsonDerivation {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::{SerializeMap, SerializeSeq};
-        struct Row<'a>(&'a JsonDerivation, usize);
-        impl serde::Serialize for Row<'_> {
-            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                let mut seq = serializer.serialize_seq(Some(self.0.n))?;
-                for entry in self.0.row(self.1) {
-                    seq.serialize_element(entry)?;
-                }
-                seq.end()
-            }
-        }
-        struct Rows<'a>(&'a JsonDerivation);
-        impl serde::Serialize for Rows<'_> {
-            fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-                let mut seq = serializer.serialize_seq(Some(self.0.n))?;
-                for k in 0..self.0.n {
-                    seq.serialize_element(&Row(self.0, k))?;
-                }
-                seq.end()
-            }
-        }
-        let rest = self.rest.as_object();
-        let mut map = serializer.serialize_map(Some(1 + rest.map_or(0, |m| m.len())))?;
-        // Keys in the order a `Value` writes them (sorted): "A" sorts before every other key.
-        map.serialize_entry("A", &Rows(self))?;
-        for (key, value) in rest.into_iter().flatten() {
-            map.serialize_entry(key, value)?;
-        }
-        map.end()
+        self.value.serialize(serializer)
     }
 }
 
@@ -585,17 +541,12 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             "c": e(dc.bias)?,
         }));
     }
-    let n = d.constraints.len();
-    let mut rows: Vec<Vec<(usize, String)>> = vec![Vec::new(); n];
-    for &(k, j, id) in &d.a {
-        let s = e(id)?;
-        if k != j {
-            rows[j].push((k, s.clone()));
-        }
-        rows[k].push((j, s));
-    }
-    for row in &mut rows {
-        row.sort_by_key(|e| e.0);
+    let mut entries: Vec<(usize, usize, Id)> =
+        d.a.iter().map(|&(k, j, id)| if k <= j { (k, j, id) } else { (j, k, id) }).collect();
+    entries.sort_by_key(|&(k, j, _)| (k, j));
+    let mut a = Vec::with_capacity(entries.len());
+    for (k, j, id) in entries {
+        a.push(json!({ "row": k, "col": j, "expr": e(id)? }));
     }
     let b: Result<Vec<String>, PrintError> = d.b.iter().map(|&id| e(id)).collect();
     let mut out = json!({
@@ -610,6 +561,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             "mass": e(b.mass).unwrap_or_default(),
         })).collect::<Vec<_>>(),
         "constraints": constraints,
+        "A": a,
         "b": b?,
     });
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
@@ -624,18 +576,25 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
         // force on each body is Σₖ λₖ Jₖᵢ in them (as `derive` prints it), so the JSON parses
         // again once the multiplier names are declared as scalars.
         let names: Vec<String> = system.constraints.iter().map(|c| multiplier_name(&c.name)).collect();
-        let mut sums = serde_json::Map::new();
-        for (body, b) in system.bodies.iter().enumerate() {
-            let mut terms = Vec::new();
-            for (k, dc) in d.constraints.iter().enumerate() {
-                if let Some(&(_, j)) = dc.jacobian.iter().find(|(i, _)| *i == body) {
-                    let j = e(j)?;
-                    let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
-                    terms.push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
+        // Each body's terms from its own constraints' directions, gathered in one pass
+        // over the constraints (a body's first direction in a constraint counts).
+        let mut terms: Vec<Vec<String>> = vec![Vec::new(); system.bodies.len()];
+        let mut last: Vec<Option<usize>> = vec![None; system.bodies.len()];
+        for (k, dc) in d.constraints.iter().enumerate() {
+            for &(body, j) in &dc.jacobian {
+                if body >= terms.len() || last[body] == Some(k) {
+                    continue;
                 }
+                last[body] = Some(k);
+                let j = e(j)?;
+                let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
+                terms[body].push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
             }
-            if !terms.is_empty() {
-                sums.insert(b.name.clone(), json!(terms.join(" + ")));
+        }
+        let mut sums = serde_json::Map::new();
+        for (b, list) in system.bodies.iter().zip(terms) {
+            if !list.is_empty() {
+                sums.insert(b.name.clone(), json!(list.join(" + ")));
             }
         }
         let multipliers: serde_json::Map<String, Value> =
@@ -643,7 +602,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
         out["multipliers"] = Value::Object(multipliers);
         out["force_sums"] = Value::Object(sums);
     }
-    Ok(JsonDerivation { rest: out, n, rows })
+    Ok(JsonDerivation { value: out })
 }
 
 /// The symbol of constraint `name`'s multiplier in JSON: `lambda_<name>`, with every
