@@ -621,3 +621,34 @@ fn sparse_j_agrees(name: &str, text: &str, seed: u64) -> String {
     assert!(lines.next().is_none());
     m.code
 }
+
+/// `constraints` is C as written and `jacobian` is ∇C/κ with κ = `SCALE`: a textbook Newton
+/// projection on C with ∇C = SCALE·J converges (quadratically) from off the constraint, for
+/// the bead (`dot(r,r) = l^2`, κ = 2) and the parabola.
+#[test]
+fn a_newton_projection_with_scale_converges() {
+    if common::skip_slow("a_newton_projection_with_scale_converges") {
+        return;
+    }
+    for (file, start) in
+        [("constraints/bead_on_wire.toml", "[3.0, 0.5]"), ("constraints/bead_on_parabola.toml", "[1.5, 0.2]")]
+    {
+        let l = loaded(Path::new(file));
+        let m = module(&l, &Options { specialize: true }).expect("generates");
+        assert!(m.code.contains("pub const SCALE: [f64; 1]"), "{file}");
+        let stem = Path::new(file).file_stem().and_then(|s| s.to_str()).unwrap_or("file");
+        let (dir, mut main) = harness_start(format!("generate_newton_{stem}"), &m.code);
+        let _ = writeln!(main, "    let mut s = State {{ r: {start}, ..State::default() }};");
+        main.push_str(
+            "    let mut steps = 0;\n    while constraints(&s)[0].abs() > 1e-13 && steps < 50 {\n        \
+             let (c, j) = (constraints(&s)[0], jacobian(&s)[0]);\n        \
+             let grad = [SCALE[0] * j[0], SCALE[0] * j[1]];\n        \
+             let n2 = grad[0] * grad[0] + grad[1] * grad[1];\n        \
+             s.r[0] -= c * grad[0] / n2;\n        s.r[1] -= c * grad[1] / n2;\n        steps += 1;\n    }\n    \
+             show(&[steps as f64, constraints(&s)[0]]);\n}\n",
+        );
+        let out = compile_and_run(&dir, &main, 0);
+        let got = numbers(out.trim());
+        assert!(got[0] < 10.0 && got[1].abs() <= 1e-13, "{file}: Newton took {} steps, |C| = {}", got[0], got[1]);
+    }
+}

@@ -2,6 +2,7 @@
 // Scene: Bead on a circular wire
 // Do not edit: regenerate. Self-contained: no dependency on lagrange or any crate.
 // 2D, 1 body, 1 constraint; vectors are [f64; 2].
+// Convention: `constraints` is C as written (`lhs = rhs` and `lhs >= rhs` give C = lhs − rhs, `lhs <= rhs` gives C = rhs − lhs). `jacobian` is J = ∇C/κ, with κ = SCALE[k] the constant content of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; the forces do not depend on κ.
 
 /// A state of the scene: every input of the formulas below.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -28,6 +29,14 @@ pub const DIM: usize = 2;
 pub const BODIES: usize = 1;
 /// Number of constraints (in file order).
 pub const CONSTRAINTS: usize = 1;
+
+/// κ of each constraint (in file order): the constant taken out of ∇C, so ∇C = SCALE[k]·J[k]
+/// (`jacobian`) and C/SCALE[k] is the value whose gradient is J[k]. A Newton projection on
+/// C as written steps −C·SCALE[k]·J[k] / |SCALE[k]·J[k]|² (mass-weighted: divide by mᵢ).
+pub const SCALE: [f64; 1] = [2.0];
+/// Which constraints are inequalities `C ≥ 0` (λ ≥ 0, zero unless touching), in file order:
+/// - `wire`: equality, C = 0
+pub const INEQUALITY: [bool; 1] = [false];
 
 /// The constraint values C (zero on the constraint):
 /// - `wire`: r·r − l²

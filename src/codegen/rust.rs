@@ -190,6 +190,9 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
     header(&mut out, title, options.specialize, &layout);
     state(&mut out, g, &fields, &layout);
+    let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
+    let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
+    row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
     let ctx = Ctx { g, inputs: &inputs, slots: &slots };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
@@ -227,6 +230,13 @@ fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout) {
     if specialize {
         let _ = writeln!(out, "// Specialised: the file's parameter values are written into the formulas.");
     }
+    let _ = writeln!(
+        out,
+        "// Convention: `constraints` is C as written (`lhs = rhs` and `lhs >= rhs` give C = lhs − rhs, \
+         `lhs <= rhs` gives C = rhs − lhs). `jacobian` is J = ∇C/κ, with κ = SCALE[k] the constant content \
+         of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; \
+         the forces do not depend on κ."
+    );
     // How a big system is laid out, so that none of its functions needs a big stack.
     match layout.a {
         AStorage::Band { bandwidth } => {
@@ -255,6 +265,30 @@ fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout) {
         );
     }
     let _ = writeln!(out);
+}
+
+/// The constraint names as comment text.
+fn names_of(names: &[&str]) -> Vec<String> {
+    names.iter().map(|n| comment_text(n)).collect()
+}
+
+/// `SCALE` (κ of each row: ∇C = κ·J) and `INEQUALITY` (which rows are `C ≥ 0`).
+fn row_constants(out: &mut String, scales: &[f64], inequalities: &[bool], names: &[String]) {
+    let k = scales.len();
+    let _ =
+        writeln!(out, "/// κ of each constraint (in file order): the constant taken out of ∇C, so ∇C = SCALE[k]·J[k]");
+    let _ =
+        writeln!(out, "/// (`jacobian`) and C/SCALE[k] is the value whose gradient is J[k]. A Newton projection on");
+    let _ = writeln!(out, "/// C as written steps −C·SCALE[k]·J[k] / |SCALE[k]·J[k]|² (mass-weighted: divide by mᵢ).");
+    let listed: Vec<String> = scales.iter().map(|x| format!("{x:?}")).collect();
+    let _ = writeln!(out, "pub const SCALE: [f64; {k}] = {};", array(&listed));
+    let _ =
+        writeln!(out, "/// Which constraints are inequalities `C ≥ 0` (λ ≥ 0, zero unless touching), in file order:");
+    for (name, &ineq) in names.iter().zip(inequalities) {
+        let _ = writeln!(out, "/// - `{name}`: {}", if ineq { "inequality, C ≥ 0" } else { "equality, C = 0" });
+    }
+    let listed: Vec<String> = inequalities.iter().map(|b| b.to_string()).collect();
+    let _ = writeln!(out, "pub const INEQUALITY: [bool; {k}] = {};\n", array(&listed));
 }
 
 /// The `State` struct and the size constants.
