@@ -9,12 +9,28 @@ use lagrange::derive::{Derivation, derive};
 use lagrange::expr::eval::{Env, Value, eval_one};
 use lagrange::expr::{Graph, Role, Symbol, Ty};
 use lagrange::model::file::{Loaded, load};
+use lagrange::numeric::rescale::solve_at;
+use lagrange::numeric::rows::RowProgram;
+use lagrange::numeric::solve::{Settings, Solution, safe_norm};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// States per module.
 const STATES: usize = 4;
+
+/// The outputs compared for every module, in the order the harness prints them.
+const OUTPUTS: [&str; 9] = [
+    "constraints",
+    "b_vector",
+    "c_term",
+    "lambda",
+    "constraint_rates",
+    "a_matrix",
+    "jacobian",
+    "forces",
+    "accelerations",
+];
 
 struct Rng(u64);
 
@@ -84,6 +100,13 @@ fn random_state(l: &Loaded, m: &Module, rng: &mut Rng, file_parameters: bool) ->
             env.set(s, v);
         }
     }
+    let literal = state_literal(l, m, &env);
+    (env, literal)
+}
+
+/// The generated `State` literal of `env`.
+fn state_literal(l: &Loaded, m: &Module, env: &Env) -> String {
+    let g = &l.system.graph;
     let mut literal = String::from("State { ");
     for (s, field) in &m.fields {
         match env.get(*s) {
@@ -97,7 +120,7 @@ fn random_state(l: &Loaded, m: &Module, rng: &mut Rng, file_parameters: bool) ->
         }
     }
     literal.push('}');
-    (env, literal)
+    literal
 }
 
 fn scalar(g: &Graph, id: lagrange::expr::Id, env: &Env) -> f64 {
@@ -127,20 +150,13 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
         }
     }
     let c_term: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.bias, env)).collect();
-    let lambda: Vec<f64> = match d.lambda {
-        Some(id) => vec![scalar(g, id, env)],
-        None => {
-            let am = nalgebra::DMatrix::from_row_slice(k, k, &a);
-            let bm = nalgebra::DVector::from_iterator(k, b.iter().map(|x| -x));
-            am.lu().solve(&bm).expect("A is regular at a random state").iter().copied().collect()
-        }
-    };
-    let mut forces = vec![0.0; n * dim];
-    for (r, lr) in lambda.iter().enumerate() {
-        for (f, jj) in forces.iter_mut().zip(&j[r * n * dim..(r + 1) * n * dim]) {
-            *f += lr * jj;
-        }
-    }
+    // λ, the forces and the accelerations are what `lagrange solve` gives at this state
+    // (inequalities by their contact state, the minimum-norm λ of a singular A).
+    let solution = solved(l, d, env);
+    let lambda = solution.lambda.clone();
+    let forces: Vec<f64> = solution.constraint_force.iter().flat_map(|f| f[..dim].to_vec()).collect();
+    let accelerations: Vec<f64> = solution.acceleration.iter().flat_map(|a| a[..dim].to_vec()).collect();
+    let rates: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c_dot, env)).collect();
     vec![
         ("constraints".into(), c),
         ("a_matrix".into(), a),
@@ -149,7 +165,25 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
         ("c_term".into(), c_term),
         ("lambda".into(), lambda),
         ("forces".into(), forces),
+        ("accelerations".into(), accelerations),
+        ("constraint_rates".into(), rates),
     ]
+}
+
+/// What `lagrange solve` gives at `env`: the rows (the state's forces as given), the contact
+/// length of the scene (its largest |r|), and the solve (rescaled where the raw rows overflow).
+fn solved(l: &Loaded, d: &Derivation, env: &Env) -> Solution {
+    let system = &l.system;
+    let program = RowProgram::new(system, d, &[]);
+    let length = system
+        .bodies
+        .iter()
+        .filter_map(|b| env.get(b.position).and_then(|v| v.vector()))
+        .map(|r| safe_norm(&r))
+        .fold(0.0, f64::max);
+    let settings =
+        Settings { length_scale: if length > 0.0 && length.is_finite() { length } else { 1.0 }, ..Settings::default() };
+    solve_at(&program, system, env, &settings).expect("evaluates").1
 }
 
 fn rustc() -> String {
@@ -226,10 +260,10 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
         for (i, (literal, _)) in case.states.iter().enumerate() {
             let m = &case.name;
             let _ = writeln!(main, "    {{\n        use {m}::*;\n        let s = {literal};");
-            for f in ["constraints", "b_vector", "c_term", "lambda"] {
+            for f in ["constraints", "b_vector", "c_term", "lambda", "constraint_rates"] {
                 let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s));");
             }
-            for f in ["a_matrix", "jacobian", "forces"] {
+            for f in ["a_matrix", "jacobian", "forces", "accelerations"] {
                 let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s).concat());");
             }
             main.push_str("    }\n");
@@ -241,7 +275,7 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
     let mut checked = 0;
     for case in &cases {
         for (i, (_, expect)) in case.states.iter().enumerate() {
-            for f in ["constraints", "b_vector", "c_term", "lambda", "a_matrix", "jacobian", "forces"] {
+            for f in OUTPUTS {
                 let line = lines.next().expect("one line per output");
                 let (label, values) = line.split_once(" [").expect("label [values]");
                 assert_eq!(label, format!("{} {i} {f}", case.name));
@@ -261,7 +295,7 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
             }
         }
     }
-    assert_eq!(checked, cases.len() * STATES * 7);
+    assert_eq!(checked, cases.len() * STATES * OUTPUTS.len());
 }
 
 #[test]
@@ -651,4 +685,208 @@ fn a_newton_projection_with_scale_converges() {
         let got = numbers(out.trim());
         assert!(got[0] < 10.0 && got[1].abs() <= 1e-13, "{file}: Newton took {} steps, |C| = {}", got[0], got[1]);
     }
+}
+
+/// A body's position, velocity and external force in 2D.
+type BodyState = ([f64; 2], [f64; 2], [f64; 2]);
+
+/// A state of `l` with the file's parameter values, t = 0 and each body's (r, v, F) as given.
+fn state_of(l: &Loaded, bodies: &[BodyState]) -> Env {
+    let mut env = Env::new();
+    for &(s, v) in &l.values {
+        env.set(s, v);
+    }
+    env.set(l.system.time, Value::Scalar(0.0));
+    let v3 = |x: [f64; 2]| Value::Vector([x[0], x[1], 0.0]);
+    for (b, &(r, v, f)) in l.system.bodies.iter().zip(bodies) {
+        env.set(b.position, v3(r));
+        env.set(b.velocity, v3(v));
+        env.set(b.force, v3(f));
+    }
+    env
+}
+
+/// The code of a contact state in the harness's output (−1 for an equality).
+fn contact_code(c: Option<lagrange::numeric::contact::ContactState>) -> f64 {
+    use lagrange::numeric::contact::ContactState::*;
+    match c {
+        None => -1.0,
+        Some(Apart) => 0.0,
+        Some(Separating) => 1.0,
+        Some(Resting) => 2.0,
+        Some(Closing) => 3.0,
+        Some(Penetrating) => 4.0,
+    }
+}
+
+/// Compiles `text`'s module, calls `solution` at each state and compares λ, the contact
+/// states, the status's being "solved" or not, the forces and the accelerations with what
+/// `lagrange solve` gives there; returns the contact codes seen (by state).
+fn agrees_with_solve(name: &str, text: &str, states: &[Vec<BodyState>]) -> Vec<Vec<f64>> {
+    let l = load(text).expect("loads");
+    let m = module(&l, &Options::default()).expect("generates");
+    let d = derive(&l.system).expect("derives");
+    let envs: Vec<Env> = states.iter().map(|s| state_of(&l, s)).collect();
+    let (dir, mut main) = harness_start(format!("generate_solve_{name}"), &m.code);
+    main.push_str(
+        "    let code = |c: Option<Contact>| match c {\n        None => -1.0,\n        Some(Contact::Apart) => 0.0,\n        \
+         Some(Contact::Separating) => 1.0,\n        Some(Contact::Resting) => 2.0,\n        Some(Contact::Closing) => 3.0,\n        \
+         Some(Contact::Penetrating) => 4.0,\n    };\n",
+    );
+    for env in &envs {
+        let _ = writeln!(main, "    let s = {};", state_literal(&l, &m, env));
+        main.push_str(
+            "    let x = solution(&s);\n    show(&x.lambda);\n    show(&x.contacts.iter().map(|c| code(*c)).collect::<Vec<f64>>());\n    \
+             show(&[(x.status == Status::Solved) as u8 as f64, (x.status == Status::MinimumNorm) as u8 as f64]);\n    \
+             show(&lambda(&s));\n    show(&forces(&s).concat());\n    show(&accelerations(&s).concat());\n",
+        );
+    }
+    main.push_str("}\n");
+    let stdout = compile_and_run(&dir, &main, 0);
+    let mut lines = stdout.lines().map(numbers);
+    let mut seen = Vec::new();
+    for (env, state) in envs.iter().zip(states) {
+        let want = solved(&l, &d, env);
+        let mut next = || lines.next().expect("one line per output");
+        let (lambda, contacts, status, lambda_fn, forces, accelerations) =
+            (next(), next(), next(), next(), next(), next());
+        let close = |x: f64, y: f64, scale: f64| (x - y).abs() <= 1e-9 * scale.max(1.0);
+        let scale = want.lambda.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for (what, got) in [("solution().lambda", &lambda), ("lambda()", &lambda_fn)] {
+            assert_eq!(got.len(), want.lambda.len());
+            for (k, (x, y)) in got.iter().zip(&want.lambda).enumerate() {
+                assert!(
+                    close(*x, *y, scale),
+                    "{name} at {state:?}: {what}[{k}] = {x}, solve gives {y} ({:?})",
+                    want.status
+                );
+            }
+        }
+        let want_contacts: Vec<f64> = want.contacts.iter().map(|c| contact_code(*c)).collect();
+        assert_eq!(contacts, want_contacts, "{name} at {state:?}: contact states");
+        use lagrange::numeric::solve::Status as S;
+        assert_eq!(
+            status,
+            [(want.status == S::Solved) as u8 as f64, (want.status == S::MinimumNorm) as u8 as f64],
+            "{name} at {state:?}: status {:?}",
+            want.status
+        );
+        let flat = |xs: &[[f64; 3]]| xs.iter().flat_map(|x| x[..2].to_vec()).collect::<Vec<f64>>();
+        for (what, got, want) in [
+            ("forces", &forces, flat(&want.constraint_force)),
+            ("accelerations", &accelerations, flat(&want.acceleration)),
+        ] {
+            let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            for (i, (x, y)) in got.iter().zip(&want).enumerate() {
+                assert!(close(*x, *y, scale), "{name} at {state:?}: {what}[{i}] = {x}, solve gives {y}");
+            }
+        }
+        seen.push(contacts);
+    }
+    assert!(lines.next().is_none());
+    seen
+}
+
+/// `dot(r, r) <= l^2` (the rope pendulum, l = 2): the generated module gives what `solve`
+/// gives when the bob is apart (inside), separating (moving in), resting and pushing
+/// (at the bottom), resting but pulling (at the top at rest: λ = 0 by complementarity) and
+/// closing (moving out); and `lambda`/`forces` are zero where the rope is slack.
+#[test]
+fn one_inequality_is_honoured_at_every_contact_state() {
+    if common::skip_slow("one_inequality_is_honoured_at_every_contact_state") {
+        return;
+    }
+    let text = std::fs::read_to_string("constraints/rope_pendulum.toml").expect("rope");
+    let g = [0.0, -9.81];
+    let states = vec![
+        vec![([1.0, 0.0], [0.0, 1.0], g)],
+        vec![([2.0, 0.0], [-1.0, 0.0], g)],
+        vec![([0.0, -2.0], [1.0, 0.0], g)],
+        vec![([0.0, 2.0], [0.0, 0.0], g)],
+        vec![([2.0, 0.0], [1.0, 0.5], g)],
+    ];
+    let seen = agrees_with_solve("rope", &text, &states);
+    assert_eq!(seen, [[0.0], [1.0], [2.0], [2.0], [3.0]], "apart, separating, resting, resting, closing");
+}
+
+/// Several rows, equalities and inequalities mixed: two bodies on a floor joined by a rope,
+/// the first on a vertical guide. Where the rope or a floor would pull, the module's active
+/// set gives `solve`'s λ (0 there) and forces.
+#[test]
+fn several_inequalities_are_honoured_as_solve_honours_them() {
+    if common::skip_slow("several_inequalities_are_honoured_as_solve_honours_them") {
+        return;
+    }
+    let mut text =
+        String::from("title = \"Two boxes and a rope\"\ndimension = 2\n\n[parameters]\nl = 1.0\nm1 = 1.0\nm2 = 2.0\n");
+    for i in 1..=2 {
+        let _ = write!(
+            text,
+            "\n[[bodies]]\nname = \"box{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\nmass = \"m{i}\"\nforce = \"F{i}\"\n"
+        );
+    }
+    for (name, expr) in [
+        ("guide", "r1.x = 0"),
+        ("floor1", "r1.y >= 0"),
+        ("floor2", "r2.y >= 0"),
+        ("rope", "dot(r2 - r1, r2 - r1) <= l^2"),
+    ] {
+        let _ = write!(text, "\n[[constraints]]\nname = \"{name}\"\nexpr = \"{expr}\"\n");
+    }
+    let (z, w1, w2) = ([0.0, 0.0], [0.0, -9.81], [0.0, -19.62]);
+    let states = vec![
+        // Both on the floor at rest, the rope taut but not needed.
+        vec![(z, z, w1), ([1.0, 0.0], z, w2)],
+        // Box 2 pulled away: the rope holds it, the guide holds box 1.
+        vec![(z, z, w1), ([1.0, 0.0], z, [5.0, -19.62])],
+        // Box 2 lifted and pulled: floor 2 would pull (λ = 0), the rope holds.
+        vec![(z, z, w1), ([1.0, 0.0], z, [5.0, 30.0])],
+        // Box 2 separating from the floor, the rope closing.
+        vec![(z, z, w1), ([1.0, 0.0], [1.0, 1.0], w2)],
+        // Box 1 in the air (apart), the rope slack.
+        vec![([0.0, 0.5], z, w1), ([0.5, 0.0], z, w2)],
+    ];
+    let seen = agrees_with_solve("two_boxes", &text, &states);
+    // (guide, floor1, floor2, rope)
+    assert_eq!(seen[0], [-1.0, 2.0, 2.0, 2.0]);
+    assert_eq!(seen[3], [-1.0, 2.0, 1.0, 3.0]);
+    assert_eq!(seen[4], [-1.0, 0.0, 2.0, 0.0]);
+}
+
+/// A square of four masses with its four sides and both diagonals (one rod redundant): the
+/// generated λ is `solve`'s minimum-norm λ (status "minimum-norm"), not NaN, at a state at
+/// rest and at a spinning one.
+#[test]
+fn a_redundant_system_gives_solves_minimum_norm_lambda() {
+    if common::skip_slow("a_redundant_system_gives_solves_minimum_norm_lambda") {
+        return;
+    }
+    let mut text = String::from("title = \"Braced square\"\ndimension = 2\n\n[parameters]\nm = 1.0\n");
+    for i in 1..=4 {
+        let _ = write!(
+            text,
+            "\n[[bodies]]\nname = \"p{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\nmass = \"m\"\nforce = \"F{i}\"\n"
+        );
+    }
+    let corners = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    for (i, j) in [(1, 2), (2, 3), (3, 4), (4, 1), (1, 3), (2, 4)] {
+        let (a, b) = (corners[i - 1], corners[j - 1]);
+        let l2 = (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]);
+        let _ = write!(
+            text,
+            "\n[[constraints]]\nname = \"rod{i}{j}\"\nexpr = \"dot(r{i} - r{j}, r{i} - r{j}) = {l2:?}\"\n"
+        );
+    }
+    let g = [0.0, -9.81];
+    let at_rest: Vec<_> = corners.iter().map(|&r| (r, [0.0, 0.0], g)).collect();
+    // Spinning about the centre at ω = 2: v = ω × (r − c).
+    let spinning: Vec<_> =
+        corners.iter().map(|&r| (r, [-2.0 * (r[1] - 0.5), 2.0 * (r[0] - 0.5)], [1.0, -3.0])).collect();
+    let l = load(&text).expect("loads");
+    let d = derive(&l.system).expect("derives");
+    for state in [&at_rest, &spinning] {
+        let want = solved(&l, &d, &state_of(&l, state));
+        assert_eq!(want.status, lagrange::numeric::solve::Status::MinimumNorm, "the square is redundant");
+    }
+    agrees_with_solve("braced_square", &text, &[at_rest, spinning]);
 }

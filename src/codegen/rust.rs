@@ -2,16 +2,19 @@
 //!
 //! The module has a `State` struct (time, positions, velocities, external forces, masses and
 //! parameters as fields, vectors as `[f64; D]`) and plain functions of it: the constraint
-//! values, A, b, the directions J (∇C over its constant content) and c, λ and the force on
-//! each body. With one constraint λ and the forces are closed formulas; with several, λ
-//! comes from a small Gaussian elimination in the module (A λ = −b).
+//! values C (as written) and rates Ċ, A, b, the directions J (∇C over its constant content
+//! κ, exported as `SCALE`) and c, the bodies' numbers, and `solution`: the solve of
+//! `lagrange solve` on the module's rows (`support/rows.rs`: scaled rows, contact states,
+//! λ ≥ 0 on inequalities, the minimum-norm λ of redundant constraints), with `lambda`,
+//! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
+//! forms, guarded: where their numbers leave f64's range the scaled solve answers.
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
 //! is written; this file writes the text it decides. The entries of A are computed from the
 //! directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the canonical, bilinearly expanded
-//! form the doc comments show: fewer operations and no cancellation. The solve a module
-//! carries is one of the helper files of `codegen::support`, included as it is written.
+//! form the doc comments show: fewer operations and no cancellation. The solves a module
+//! carries are helper files of `codegen::support`, included as they are written.
 //!
 //! Each function body is the scalar [`Program`] of its formulas: values used more than once
 //! become `let` bindings, values used once are written inline. `--specialize` substitutes
@@ -28,7 +31,7 @@
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{HELPERS, SOLVE, SOLVE_BAND, SOLVE_HEAP};
+use super::support::{HELPERS, ROWS, SOLVE_BAND};
 use crate::derive::{DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -67,6 +70,8 @@ const MAX_INLINE_DEPTH: u32 = 24;
 /// Every formula the module needs, as graph nodes.
 struct Formulas {
     c: Vec<Id>,
+    /// Ċ per constraint (with ∂C/∂t).
+    c_dot: Vec<Id>,
     /// `(k, j, Aₖⱼ)`, upper triangle.
     a: Vec<(usize, usize, Id)>,
     b: Vec<Id>,
@@ -80,6 +85,7 @@ impl Formulas {
     fn map(self, mut f: impl FnMut(Id) -> Result<Id, GenerateError>) -> Result<Formulas, GenerateError> {
         let mut each = |xs: Vec<Id>| xs.into_iter().map(&mut f).collect::<Result<Vec<_>, _>>();
         let c = each(self.c)?;
+        let c_dot = each(self.c_dot)?;
         let b = each(self.b)?;
         let bias = each(self.bias)?;
         let a = self.a.into_iter().map(|(k, j, x)| Ok((k, j, f(x)?))).collect::<Result<_, GenerateError>>()?;
@@ -93,7 +99,7 @@ impl Formulas {
             Some(fs) => Some(fs.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>()?),
             None => None,
         };
-        Ok(Formulas { c, a, b, jacobian, bias, lambda, forces })
+        Ok(Formulas { c, c_dot, a, b, jacobian, bias, lambda, forces })
     }
 }
 
@@ -123,6 +129,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let system = &loaded.system;
     let mut formulas = Formulas {
         c: d.constraints.iter().map(|c| c.c).collect(),
+        c_dot: d.constraints.iter().map(|c| c.c_dot).collect(),
         a: d.a.clone(),
         b: d.b.clone(),
         jacobian: d.constraints.iter().map(|c| c.jacobian.clone()).collect(),
@@ -174,6 +181,13 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     // comments keep the canonical form.
     let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
     let a_code = assembled_a(&mut d.graph, &formulas, &masses)?;
+    let inverse_masses = masses.iter().map(|&m| d.graph.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
+    let bodies = Bodies {
+        position: system.bodies.iter().map(|b| b.nodes.position).collect(),
+        velocity: system.bodies.iter().map(|b| b.nodes.velocity).collect(),
+        force: system.bodies.iter().map(|b| b.nodes.force).collect(),
+        inverse_mass: inverse_masses,
+    };
     let g = &d.graph;
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
@@ -184,7 +198,16 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
     let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
     let closed_form = formulas.lambda.is_some() && formulas.forces.is_some();
-    let layout = Layout::of(g.dim(), system.bodies.len(), system.constraints.len(), &a_entries, blocks, closed_form);
+    let inequalities = system.constraints.iter().any(|c| c.inequality);
+    let layout = Layout::of(
+        g.dim(),
+        system.bodies.len(),
+        system.constraints.len(),
+        &a_entries,
+        blocks,
+        closed_form,
+        inequalities,
+    );
 
     let mut out = String::new();
     let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
@@ -196,11 +219,16 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let ctx = Ctx { g, inputs: &inputs, slots: &slots };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
+    ctx.rates(&mut out, &formulas, &names)?;
     ctx.a(&mut out, &formulas, &a_code, &layout)?;
     ctx.b(&mut out, &formulas)?;
     ctx.jacobian(&mut out, &formulas, &names, &layout)?;
     ctx.c_term(&mut out, &formulas)?;
+    ctx.bodies(&mut out, &bodies, &names)?;
+    rows_fn(&mut out, &formulas, &layout);
     ctx.solution(&mut out, &formulas, &names, &layout)?;
+    out.push_str(ROWS);
+    out.push('\n');
     out.push_str(HELPERS);
     Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
 }
@@ -209,6 +237,71 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
 struct Names<'a> {
     bodies: &'a [&'a str],
     constraints: &'a [&'a str],
+}
+
+/// Each body's numbers as graph nodes, in file order: what the rows' solve reads.
+struct Bodies {
+    position: Vec<Id>,
+    velocity: Vec<Id>,
+    force: Vec<Id>,
+    inverse_mass: Vec<Id>,
+}
+
+/// `rows`: the constraint rows at a state (C/κ, Ċ/κ, c, J per body), as `lagrange solve`
+/// reads them. The bodies of each row are the derivation's, listed in `JACOBIAN_BODIES`
+/// for a dense J; a sparse J lists them itself.
+fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
+    let _ = writeln!(
+        out,
+        "/// The constraint rows at a state, as `lagrange solve` reads them: C/κ, Ċ/κ, c and J = ∇C/κ per body."
+    );
+    let _ = writeln!(out, "pub fn rows(s: &State) -> Vec<Row<DIM>> {{");
+    let _ = writeln!(out, "    let (c, rate, bias) = (constraints(s), constraint_rates(s), c_term(s));");
+    let _ = writeln!(
+        out,
+        "    let mut rows: Vec<Row<DIM>> = (0..CONSTRAINTS)\n        \
+         .map(|k| Row {{ value: c[k] / SCALE[k], rate: rate[k] / SCALE[k], bias: bias[k], inequality: INEQUALITY[k], jacobian: Vec::new() }})\n        \
+         .collect();"
+    );
+    match layout.j {
+        JStorage::Blocks { .. } => {
+            let _ = writeln!(
+                out,
+                "    for (k, i, d) in jacobian_blocks(s) {{\n        rows[k].jacobian.push((i, d));\n    }}"
+            );
+        }
+        JStorage::Dense => {
+            let _ = writeln!(out, "    let j = jacobian(s);");
+            let _ = writeln!(out, "    for (k, i) in JACOBIAN_BODIES {{");
+            let _ = writeln!(
+                out,
+                "        rows[k].jacobian.push((i, std::array::from_fn(|d| j[k][i * DIM + d])));\n    }}"
+            );
+        }
+    }
+    let _ = writeln!(out, "    rows\n}}\n");
+    if layout.j == JStorage::Dense {
+        let pairs: Vec<String> = formulas
+            .jacobian
+            .iter()
+            .enumerate()
+            .flat_map(|(k, dirs)| dirs.iter().map(move |&(i, _)| format!("({k}, {i})")))
+            .collect();
+        let _ = writeln!(
+            out,
+            "/// The (constraint, body) pairs of J's structure: body i appears in constraint k's C.\n\
+             const JACOBIAN_BODIES: [(usize, usize); {}] = {};\n",
+            pairs.len(),
+            array(&pairs)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "/// λ, the constraint forces and the accelerations at a state, with each inequality's contact state and\n\
+         /// the status: what `lagrange solve` gives (see `solve_rows`).\n\
+         pub fn solution(s: &State) -> Solution<DIM> {{\n    \
+         solve_rows(&rows(s), &inverse_masses(s), &velocities(s), &external_forces(s), length_scale(&positions(s)))\n}}\n"
+    );
 }
 
 /// The module's opening comment: what it is and how it is laid out.
@@ -317,6 +410,32 @@ impl Ctx<'_> {
             doc.push(format!("- `{}`: {}", comment_text(names.constraints[i]), formula(g, c)));
         }
         self.emit_scalars(out, &doc, "constraints", &formulas.c)
+    }
+
+    /// `constraint_rates`: Ċ, with ∂C/∂t (C as written).
+    fn rates(&self, out: &mut String, formulas: &Formulas, names: &Names<'_>) -> Result<(), GenerateError> {
+        let g = self.g;
+        let mut doc = vec!["The rates Ċ = Σᵢ ∇ᵢC·vᵢ + ∂C/∂t of C as written:".to_string()];
+        for (i, &c) in formulas.c_dot.iter().enumerate() {
+            doc.push(format!("- `{}`: {}", comment_text(names.constraints[i]), formula(g, c)));
+        }
+        self.emit_scalars(out, &doc, "constraint_rates", &formulas.c_dot)
+    }
+
+    /// `positions`, `velocities`, `external_forces` and `inverse_masses`: each body's numbers.
+    fn bodies(&self, out: &mut String, bodies: &Bodies, names: &Names<'_>) -> Result<(), GenerateError> {
+        let listed = names.bodies.iter().map(|b| format!("`{}`", comment_text(b))).collect::<Vec<_>>().join(", ");
+        let order = format!("Per body, in file order ({listed}).");
+        let vectors = [
+            ("positions", "The position of each body.", &bodies.position),
+            ("velocities", "The velocity of each body.", &bodies.velocity),
+            ("external_forces", "The external force on each body (the state's force fields).", &bodies.force),
+        ];
+        for (name, what, roots) in vectors {
+            self.emit_vectors(out, &[what.to_string(), order.clone()], name, roots)?;
+        }
+        let doc = ["1/m of each body.".to_string(), order];
+        self.emit_scalars(out, &doc, "inverse_masses", &bodies.inverse_mass)
     }
 
     /// `a_matrix` or `a_band`: A, as the layout stores it, from the assembled entries
@@ -496,8 +615,9 @@ impl Ctx<'_> {
         self.emit_scalars(out, &doc, "c_term", &formulas.bias)
     }
 
-    /// `lambda`, `forces` and `force_<body>`: closed formulas for one constraint, else a solve
-    /// of A λ = −b (and the helper that solves A as the layout stores it).
+    /// `lambda`, `forces`, `force_<body>` and `accelerations`: closed formulas for one
+    /// equality (where their numbers are in range), band Cholesky for a banded system of
+    /// equalities, else the rows' solve; the band solve when the layout needs it.
     fn solution(
         &self,
         out: &mut String,
@@ -518,72 +638,109 @@ impl Ctx<'_> {
             "forces",
         ]);
         let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
-        if let (Lambda::ClosedForm, Some(lambda), Some(forces)) = (layout.lambda, formulas.lambda, &formulas.forces) {
-            let doc = vec!["The multiplier λ, in closed form:".to_string(), format!("λ = {}", formula(g, lambda))];
-            let (lets, exprs) = self.body(&[lambda])?;
-            emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &array(&exprs));
-            for (body, name) in force_fns.iter().enumerate() {
-                let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
-                let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
-                let (lets, exprs) = match found {
-                    Some(id) => {
-                        doc.push(formula(g, id));
-                        self.body(&[id])?
+        let _ = writeln!(
+            out,
+            "/// The accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ of every body (in file order), from the rows' solve.\n\
+             pub fn accelerations(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+             let mut a = [[0.0; {dim}]; {n}];\n    a.copy_from_slice(&solution(s).acceleration);\n    a\n}}\n"
+        );
+        match (layout.lambda, formulas.lambda, &formulas.forces) {
+            (Lambda::ClosedForm, Some(lambda), Some(forces)) => {
+                let _ = writeln!(
+                    out,
+                    "/// Whether the closed forms' numbers are in range here (A normal, b finite); where they are not\n\
+                     /// (|r| ≈ 1e155 overflows r·r), `lambda` and the forces come from the scaled `solution`.\n\
+                     fn closed_form_holds(s: &State) -> bool {{\n    \
+                     a_matrix(s)[0][0].is_normal() && b_vector(s)[0].is_finite()\n}}\n"
+                );
+                let doc = vec![
+                    "The multiplier λ, in closed form (the scaled `solution` where its numbers leave f64's range):"
+                        .to_string(),
+                    format!("λ = {}", formula(g, lambda)),
+                ];
+                let (lets, exprs) = self.body(&[lambda])?;
+                let value = format!(
+                    "let x = {};\n    if closed_form_holds(s) && x[0].is_finite() {{ x }} else {{ [solution(s).lambda[0]] }}",
+                    array(&exprs)
+                );
+                emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &value);
+                for (body, name) in force_fns.iter().enumerate() {
+                    let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
+                    let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
+                    match found {
+                        Some(id) => {
+                            doc.push(formula(g, id));
+                            let (lets, exprs) = self.body(&[id])?;
+                            let value = format!(
+                                "let f = {};\n    \
+                                 if closed_form_holds(s) && f.iter().all(|x| x.is_finite()) {{ f }} else {{ solution(s).force[{body}] }}",
+                                array(&exprs)
+                            );
+                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &value);
+                        }
+                        None => {
+                            doc.push("zero: no constraint involves this body.".into());
+                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &[], &array(&vec!["0.0".into(); dim]));
+                        }
                     }
-                    None => {
-                        doc.push("zero: no constraint involves this body.".into());
-                        (Vec::new(), vec!["0.0".to_string(); dim])
-                    }
-                };
-                emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &array(&exprs));
+                }
+                let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
+                let doc = vec!["The constraint force on every body (in file order).".to_string()];
+                emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+                return Ok(());
             }
-            let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
-            let doc = vec!["The constraint force on every body (in file order).".to_string()];
-            emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
-            return Ok(());
-        }
-        if matches!(layout.a, AStorage::Band { .. }) {
-            let _ = writeln!(
-                out,
-                "/// The multipliers λ: the solution of A λ = −b (band Cholesky, O(K w²); NaN when A\n\
-                 /// is singular, e.g. redundant constraints).\n\
-                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                 let mut b = b_vector(s);\n    \
-                 for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
-                 solve_band(a_band(s), b)\n}}\n"
-            );
-        } else {
-            let _ = writeln!(
-                out,
-                "/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial\n\
-                 /// pivoting; NaN when A is singular, e.g. redundant constraints).\n\
-                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                 let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
-            );
-        }
-        if matches!(layout.j, JStorage::Blocks { .. }) {
-            let _ = writeln!(
-                out,
-                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-                 pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                 let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
-                 let mut f = [[0.0; {dim}]; {n}];\n    \
-                 for (k, i, d) in j {{\n        \
-                 for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
-                 f\n}}\n"
-            );
-        } else {
-            let _ = writeln!(
-                out,
-                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-             pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-             let (l, j) = (lambda(s), jacobian(s));\n    \
-             let mut f = [[0.0; {dim}]; {n}];\n    \
-             for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
-             for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
-             for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
-             f\n}}\n"
-            );
+            (Lambda::Band, _, _) => {
+                let _ = writeln!(
+                    out,
+                    "/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular\n\
+                     /// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let mut b = b_vector(s);\n    \
+                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
+                     let l = solve_band(a_band(s), b);\n    \
+                     if l.iter().all(|x| x.is_finite()) {{\n        return l;\n    }}\n    \
+                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+                );
+                if matches!(layout.j, JStorage::Blocks { .. }) {
+                    let _ = writeln!(
+                        out,
+                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (k, i, d) in j {{\n        \
+                         for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
+                         f\n}}\n"
+                    );
+                } else {
+                    let _ = writeln!(
+                        out,
+                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
+                         for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
+                         for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
+                         f\n}}\n"
+                    );
+                }
+            }
+            _ => {
+                let _ = writeln!(
+                    out,
+                    "/// The multipliers λ (for C/κ), as `lagrange solve` gives them: 0 on an inequality that is apart,\n\
+                     /// separating or would pull, and the minimum-norm λ where A is singular (see `solution`).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+                );
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order), from the rows' solve.\n\
+                     pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                     let mut f = [[0.0; {dim}]; {n}];\n    f.copy_from_slice(&solution(s).force);\n    f\n}}\n"
+                );
+            }
         }
         for (body, name) in force_fns.iter().enumerate() {
             let _ = writeln!(
@@ -592,14 +749,11 @@ impl Ctx<'_> {
                 comment_text(names.bodies[body])
             );
         }
-        // The solve A's storage needs (each helper file ends its last item with `}`; a blank
-        // line follows it).
-        out.push_str(match layout.a {
-            AStorage::Band { .. } => SOLVE_BAND,
-            AStorage::Heap => SOLVE_HEAP,
-            AStorage::Dense => SOLVE,
-        });
-        out.push('\n');
+        if layout.lambda == Lambda::Band {
+            // Each helper file ends its last item with `}`; a blank line follows it.
+            out.push_str(SOLVE_BAND);
+            out.push('\n');
+        }
         Ok(())
     }
 }
@@ -732,6 +886,15 @@ impl Ctx<'_> {
             emit_fn(out, doc, name, &format!("[f64; {k}]"), &lets, &array(&exprs));
             Ok(())
         }
+    }
+
+    /// `pub fn name(s: &State) -> [[f64; DIM]; N]` for one vector formula per entry.
+    fn emit_vectors(&self, out: &mut String, doc: &[String], name: &str, roots: &[Id]) -> Result<(), GenerateError> {
+        let (n, dim) = (roots.len(), self.g.dim());
+        let items: Vec<Vec<Id>> = roots.iter().map(|&r| vec![r]).collect();
+        let store = |i: usize, e: &[String]| format!("out[{i}] = {};", array(e));
+        let (ret, init) = (format!("[[f64; {dim}]; {n}]"), format!("[[0.0; {dim}]; {n}]"));
+        self.emit_items(out, doc, name, &ret, &init, &format!("[f64; {dim}]"), &items, store)
     }
 
     /// `pub fn name(s: &State) -> ret` that starts from `init` and stores every item:
