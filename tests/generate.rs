@@ -20,7 +20,7 @@ use std::process::Command;
 const STATES: usize = 4;
 
 /// The outputs compared for every module, in the order the harness prints them.
-const OUTPUTS: [&str; 9] = [
+const OUTPUTS: [&str; 10] = [
     "constraints",
     "b_vector",
     "c_term",
@@ -30,6 +30,7 @@ const OUTPUTS: [&str; 9] = [
     "jacobian",
     "forces",
     "accelerations",
+    "applied_forces",
 ];
 
 struct Rng(u64);
@@ -157,6 +158,12 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
     let forces: Vec<f64> = solution.constraint_force.iter().flat_map(|f| f[..dim].to_vec()).collect();
     let accelerations: Vec<f64> = solution.acceleration.iter().flat_map(|a| a[..dim].to_vec()).collect();
     let rates: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c_dot, env)).collect();
+    let applied: Vec<f64> = (0..n)
+        .flat_map(|i| match l.scene.forces.iter().find(|f| f.0 == i) {
+            Some(&(_, id)) => vector(g, id, env),
+            None => vec![0.0; dim],
+        })
+        .collect();
     vec![
         ("constraints".into(), c),
         ("a_matrix".into(), a),
@@ -167,6 +174,7 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
         ("forces".into(), forces),
         ("accelerations".into(), accelerations),
         ("constraint_rates".into(), rates),
+        ("applied_forces".into(), applied),
     ]
 }
 
@@ -263,7 +271,7 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
             for f in ["constraints", "b_vector", "c_term", "lambda", "constraint_rates"] {
                 let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s));");
             }
-            for f in ["a_matrix", "jacobian", "forces", "accelerations"] {
+            for f in ["a_matrix", "jacobian", "forces", "accelerations", "applied_forces"] {
                 let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s).concat());");
             }
             main.push_str("    }\n");
@@ -309,8 +317,28 @@ fn hostile_names_become_safe_identifiers_and_comments() {
     sorted.dedup();
     assert_eq!(sorted.len(), fields.len(), "{fields:?}");
     for f in &fields {
-        assert!(f.chars().all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_'), "{f}");
-        assert!(!["self", "type", "mut", "fn"].contains(f), "{f}");
+        assert!(f.chars().all(|c| c.is_ascii_alphanumeric() || c == '_'), "{f}");
+        assert!(!f.starts_with(|c: char| c.is_ascii_digit()) && *f != "_", "{f}");
+        assert!(!["self", "Self", "type", "mut", "fn", "super", "crate"].contains(f), "{f}");
+    }
+    // Names that are Rust identifiers stay as written; others follow the documented rule,
+    // and the header lists every one.
+    let field = |name: &str| {
+        let g = &l.system.graph;
+        m.fields.iter().find(|(s, _)| g.symbol(*s).name == name).map(|f| f.1.as_str()).expect(name)
+    };
+    for (name, ident) in [
+        ("R", "R"),
+        ("r", "r"),
+        ("F", "F"),
+        ("f_", "f_"),
+        ("Self_", "Self_"),
+        ("self", "self_"),
+        ("type", "type_"),
+        ("mut", "mut_"),
+    ] {
+        assert_eq!(field(name), ident, "{name}");
+        assert!(m.code.contains(&format!("//   `{name}` → `{ident}`")), "{name} is listed in the header");
     }
     // No line of the module is a comment that a name could end early, and no raw control
     // or direction-changing characters survive.

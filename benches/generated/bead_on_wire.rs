@@ -4,7 +4,18 @@
 // 2D, 1 body, 1 constraint; vectors are [f64; 2].
 // Convention: `constraints` is C as written (`lhs = rhs` and `lhs >= rhs` give C = lhs − rhs, `lhs <= rhs` gives C = rhs − lhs). `jacobian` is J = ∇C/κ, with κ = SCALE[k] the constant content of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; the forces do not depend on κ.
 
+// State fields: each symbol of the file under its own name where that is a Rust identifier (ASCII letters, digits, `_`; not a keyword), else its snake_case form (other letters as their code point, `λ` → `u3bb`; a keyword gets `_`; `_2`, `_3`, … where taken). Accelerations are not inputs. In the file → in `State`:
+//   `t` → `t`
+//   `g` → `g`
+//   `l` → `l`
+//   `m` → `m`
+//   `r` → `r`
+//   `v` → `v`
+//   `F` → `F`
+
 /// A state of the scene: every input of the formulas below.
+/// Fields are the file's names as written where Rust allows (see the module's header).
+#[allow(non_snake_case)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct State {
     /// The time `t`.
@@ -20,7 +31,7 @@ pub struct State {
     /// Velocity `v` of body `bead`.
     pub v: [f64; 2],
     /// External force `F` on body `bead`.
-    pub f: [f64; 2],
+    pub F: [f64; 2],
 }
 
 /// Space dimension.
@@ -59,7 +70,7 @@ pub fn a_matrix(s: &State) -> [[f64; 1]; 1] {
 /// b of A λ + b = 0: bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ.
 /// - b[0] = (m v·v + F·r)/m
 pub fn b_vector(s: &State) -> [f64; 1] {
-    [(s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.f[0] + s.r[1] * s.f[1])) / s.m]
+    [(s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.F[0] + s.r[1] * s.F[1])) / s.m]
 }
 
 /// J: row k is the force direction of constraint k (∇C over its constant content), body i's components at columns i·2 .. i·2 + 2.
@@ -94,7 +105,15 @@ pub fn velocities(s: &State) -> [[f64; 2]; 1] {
 /// Per body, in file order (`bead`).
 pub fn external_forces(s: &State) -> [[f64; 2]; 1] {
     let mut out = [[0.0; 2]; 1];
-    out[0] = [s.f[0], s.f[1]];
+    out[0] = [s.F[0], s.F[1]];
+    out
+}
+
+/// The scene's forces (`[scene] forces`) at this state, zero for a body it does not list: an engine's loop writes them into the state's force fields before asking for λ or the accelerations.
+/// Per body, in file order (`bead`).
+pub fn applied_forces(s: &State) -> [[f64; 2]; 1] {
+    let mut out = [[0.0; 2]; 1];
+    out[0] = [s.g[0] * s.m, s.g[1] * s.m];
     out
 }
 
@@ -142,14 +161,14 @@ fn closed_form_holds(s: &State) -> bool {
 /// The multiplier λ, in closed form (the scaled `solution` where its numbers leave f64's range):
 /// λ = −(m v·v + F·r)/(r·r)
 pub fn lambda(s: &State) -> [f64; 1] {
-    let x = [-((s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.f[0] + s.r[1] * s.f[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]))];
+    let x = [-((s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.F[0] + s.r[1] * s.F[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]))];
     if closed_form_holds(s) && x[0].is_finite() { x } else { [solution(s).lambda[0]] }
 }
 
 /// The constraint force on body `bead`:
 /// −(m v·v + F·r)/(r·r) r
 pub fn force_bead(s: &State) -> [f64; 2] {
-    let x0 = (s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.f[0] + s.r[1] * s.f[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]);
+    let x0 = (s.m * (s.v[0] * s.v[0] + s.v[1] * s.v[1]) + (s.r[0] * s.F[0] + s.r[1] * s.F[1])) / (s.r[0] * s.r[0] + s.r[1] * s.r[1]);
     let f = [-(s.r[0] * x0), -(s.r[1] * x0)];
     if closed_form_holds(s) && f.iter().all(|x| x.is_finite()) { f } else { solution(s).force[0] }
 }

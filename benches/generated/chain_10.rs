@@ -4,7 +4,45 @@
 // 2D, 10 bodies, 10 constraints; vectors are [f64; 2].
 // Convention: `constraints` is C as written (`lhs = rhs` and `lhs >= rhs` give C = lhs − rhs, `lhs <= rhs` gives C = rhs − lhs). `jacobian` is J = ∇C/κ, with κ = SCALE[k] the constant content of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; the forces do not depend on κ.
 
+// State fields: each symbol of the file under its own name where that is a Rust identifier (ASCII letters, digits, `_`; not a keyword), else its snake_case form (other letters as their code point, `λ` → `u3bb`; a keyword gets `_`; `_2`, `_3`, … where taken). Accelerations are not inputs. In the file → in `State`:
+//   `t` → `t`
+//   `g` → `g`
+//   `l` → `l`
+//   `m` → `m`
+//   `r1` → `r1`
+//   `v1` → `v1`
+//   `F1` → `F1`
+//   `r2` → `r2`
+//   `v2` → `v2`
+//   `F2` → `F2`
+//   `r3` → `r3`
+//   `v3` → `v3`
+//   `F3` → `F3`
+//   `r4` → `r4`
+//   `v4` → `v4`
+//   `F4` → `F4`
+//   `r5` → `r5`
+//   `v5` → `v5`
+//   `F5` → `F5`
+//   `r6` → `r6`
+//   `v6` → `v6`
+//   `F6` → `F6`
+//   `r7` → `r7`
+//   `v7` → `v7`
+//   `F7` → `F7`
+//   `r8` → `r8`
+//   `v8` → `v8`
+//   `F8` → `F8`
+//   `r9` → `r9`
+//   `v9` → `v9`
+//   `F9` → `F9`
+//   `r10` → `r10`
+//   `v10` → `v10`
+//   `F10` → `F10`
+
 /// A state of the scene: every input of the formulas below.
+/// Fields are the file's names as written where Rust allows (see the module's header).
+#[allow(non_snake_case)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct State {
     /// The time `t`.
@@ -20,61 +58,61 @@ pub struct State {
     /// Velocity `v1` of body `p1`.
     pub v1: [f64; 2],
     /// External force `F1` on body `p1`.
-    pub f1: [f64; 2],
+    pub F1: [f64; 2],
     /// Position `r2` of body `p2`.
     pub r2: [f64; 2],
     /// Velocity `v2` of body `p2`.
     pub v2: [f64; 2],
     /// External force `F2` on body `p2`.
-    pub f2: [f64; 2],
+    pub F2: [f64; 2],
     /// Position `r3` of body `p3`.
     pub r3: [f64; 2],
     /// Velocity `v3` of body `p3`.
     pub v3: [f64; 2],
     /// External force `F3` on body `p3`.
-    pub f3: [f64; 2],
+    pub F3: [f64; 2],
     /// Position `r4` of body `p4`.
     pub r4: [f64; 2],
     /// Velocity `v4` of body `p4`.
     pub v4: [f64; 2],
     /// External force `F4` on body `p4`.
-    pub f4: [f64; 2],
+    pub F4: [f64; 2],
     /// Position `r5` of body `p5`.
     pub r5: [f64; 2],
     /// Velocity `v5` of body `p5`.
     pub v5: [f64; 2],
     /// External force `F5` on body `p5`.
-    pub f5: [f64; 2],
+    pub F5: [f64; 2],
     /// Position `r6` of body `p6`.
     pub r6: [f64; 2],
     /// Velocity `v6` of body `p6`.
     pub v6: [f64; 2],
     /// External force `F6` on body `p6`.
-    pub f6: [f64; 2],
+    pub F6: [f64; 2],
     /// Position `r7` of body `p7`.
     pub r7: [f64; 2],
     /// Velocity `v7` of body `p7`.
     pub v7: [f64; 2],
     /// External force `F7` on body `p7`.
-    pub f7: [f64; 2],
+    pub F7: [f64; 2],
     /// Position `r8` of body `p8`.
     pub r8: [f64; 2],
     /// Velocity `v8` of body `p8`.
     pub v8: [f64; 2],
     /// External force `F8` on body `p8`.
-    pub f8: [f64; 2],
+    pub F8: [f64; 2],
     /// Position `r9` of body `p9`.
     pub r9: [f64; 2],
     /// Velocity `v9` of body `p9`.
     pub v9: [f64; 2],
     /// External force `F9` on body `p9`.
-    pub f9: [f64; 2],
+    pub F9: [f64; 2],
     /// Position `r10` of body `p10`.
     pub r10: [f64; 2],
     /// Velocity `v10` of body `p10`.
     pub v10: [f64; 2],
     /// External force `F10` on body `p10`.
-    pub f10: [f64; 2],
+    pub F10: [f64; 2],
 }
 
 /// Space dimension.
@@ -242,7 +280,7 @@ pub fn b_vector(s: &State) -> [f64; 10] {
     let x16 = s.v9[0] - s.v10[0];
     let x17 = s.v9[1] - s.v10[1];
     let x18 = 1.0 / s.m;
-    [(s.r1[0] * s.f1[0] + s.r1[1] * s.f1[1] + s.m * (s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1])) * x18, x18 * ((s.r1[0] - s.r2[0]) * (s.f1[0] - s.f2[0]) + (s.r1[1] - s.r2[1]) * (s.f1[1] - s.f2[1]) + s.m * (x0 * x0 + x1 * x1)), x18 * ((s.r2[0] - s.r3[0]) * (s.f2[0] - s.f3[0]) + (s.r2[1] - s.r3[1]) * (s.f2[1] - s.f3[1]) + s.m * (x2 * x2 + x3 * x3)), x18 * ((s.r3[0] - s.r4[0]) * (s.f3[0] - s.f4[0]) + (s.r3[1] - s.r4[1]) * (s.f3[1] - s.f4[1]) + s.m * (x4 * x4 + x5 * x5)), x18 * ((s.r4[0] - s.r5[0]) * (s.f4[0] - s.f5[0]) + (s.r4[1] - s.r5[1]) * (s.f4[1] - s.f5[1]) + s.m * (x6 * x6 + x7 * x7)), x18 * ((s.r5[0] - s.r6[0]) * (s.f5[0] - s.f6[0]) + (s.r5[1] - s.r6[1]) * (s.f5[1] - s.f6[1]) + s.m * (x8 * x8 + x9 * x9)), x18 * ((s.r6[0] - s.r7[0]) * (s.f6[0] - s.f7[0]) + (s.r6[1] - s.r7[1]) * (s.f6[1] - s.f7[1]) + s.m * (x10 * x10 + x11 * x11)), x18 * ((s.r7[0] - s.r8[0]) * (s.f7[0] - s.f8[0]) + (s.r7[1] - s.r8[1]) * (s.f7[1] - s.f8[1]) + s.m * (x12 * x12 + x13 * x13)), x18 * ((s.r8[0] - s.r9[0]) * (s.f8[0] - s.f9[0]) + (s.r8[1] - s.r9[1]) * (s.f8[1] - s.f9[1]) + s.m * (x14 * x14 + x15 * x15)), x18 * ((s.r9[0] - s.r10[0]) * (s.f9[0] - s.f10[0]) + (s.r9[1] - s.r10[1]) * (s.f9[1] - s.f10[1]) + s.m * (x16 * x16 + x17 * x17))]
+    [(s.r1[0] * s.F1[0] + s.r1[1] * s.F1[1] + s.m * (s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1])) * x18, x18 * ((s.r1[0] - s.r2[0]) * (s.F1[0] - s.F2[0]) + (s.r1[1] - s.r2[1]) * (s.F1[1] - s.F2[1]) + s.m * (x0 * x0 + x1 * x1)), x18 * ((s.r2[0] - s.r3[0]) * (s.F2[0] - s.F3[0]) + (s.r2[1] - s.r3[1]) * (s.F2[1] - s.F3[1]) + s.m * (x2 * x2 + x3 * x3)), x18 * ((s.r3[0] - s.r4[0]) * (s.F3[0] - s.F4[0]) + (s.r3[1] - s.r4[1]) * (s.F3[1] - s.F4[1]) + s.m * (x4 * x4 + x5 * x5)), x18 * ((s.r4[0] - s.r5[0]) * (s.F4[0] - s.F5[0]) + (s.r4[1] - s.r5[1]) * (s.F4[1] - s.F5[1]) + s.m * (x6 * x6 + x7 * x7)), x18 * ((s.r5[0] - s.r6[0]) * (s.F5[0] - s.F6[0]) + (s.r5[1] - s.r6[1]) * (s.F5[1] - s.F6[1]) + s.m * (x8 * x8 + x9 * x9)), x18 * ((s.r6[0] - s.r7[0]) * (s.F6[0] - s.F7[0]) + (s.r6[1] - s.r7[1]) * (s.F6[1] - s.F7[1]) + s.m * (x10 * x10 + x11 * x11)), x18 * ((s.r7[0] - s.r8[0]) * (s.F7[0] - s.F8[0]) + (s.r7[1] - s.r8[1]) * (s.F7[1] - s.F8[1]) + s.m * (x12 * x12 + x13 * x13)), x18 * ((s.r8[0] - s.r9[0]) * (s.F8[0] - s.F9[0]) + (s.r8[1] - s.r9[1]) * (s.F8[1] - s.F9[1]) + s.m * (x14 * x14 + x15 * x15)), x18 * ((s.r9[0] - s.r10[0]) * (s.F9[0] - s.F10[0]) + (s.r9[1] - s.r10[1]) * (s.F9[1] - s.F10[1]) + s.m * (x16 * x16 + x17 * x17))]
 }
 
 /// J: row k is the force direction of constraint k (∇C over its constant content), body i's components at columns i·2 .. i·2 + 2.
@@ -340,16 +378,35 @@ pub fn velocities(s: &State) -> [[f64; 2]; 10] {
 /// Per body, in file order (`p1`, `p2`, `p3`, `p4`, `p5`, `p6`, `p7`, `p8`, `p9`, `p10`).
 pub fn external_forces(s: &State) -> [[f64; 2]; 10] {
     let mut out = [[0.0; 2]; 10];
-    out[0] = [s.f1[0], s.f1[1]];
-    out[1] = [s.f2[0], s.f2[1]];
-    out[2] = [s.f3[0], s.f3[1]];
-    out[3] = [s.f4[0], s.f4[1]];
-    out[4] = [s.f5[0], s.f5[1]];
-    out[5] = [s.f6[0], s.f6[1]];
-    out[6] = [s.f7[0], s.f7[1]];
-    out[7] = [s.f8[0], s.f8[1]];
-    out[8] = [s.f9[0], s.f9[1]];
-    out[9] = [s.f10[0], s.f10[1]];
+    out[0] = [s.F1[0], s.F1[1]];
+    out[1] = [s.F2[0], s.F2[1]];
+    out[2] = [s.F3[0], s.F3[1]];
+    out[3] = [s.F4[0], s.F4[1]];
+    out[4] = [s.F5[0], s.F5[1]];
+    out[5] = [s.F6[0], s.F6[1]];
+    out[6] = [s.F7[0], s.F7[1]];
+    out[7] = [s.F8[0], s.F8[1]];
+    out[8] = [s.F9[0], s.F9[1]];
+    out[9] = [s.F10[0], s.F10[1]];
+    out
+}
+
+/// The scene's forces (`[scene] forces`) at this state, zero for a body it does not list: an engine's loop writes them into the state's force fields before asking for λ or the accelerations.
+/// Per body, in file order (`p1`, `p2`, `p3`, `p4`, `p5`, `p6`, `p7`, `p8`, `p9`, `p10`).
+pub fn applied_forces(s: &State) -> [[f64; 2]; 10] {
+    let mut out = [[0.0; 2]; 10];
+    let x0 = s.g[0] * s.m;
+    let x1 = s.g[1] * s.m;
+    out[0] = [x0, x1];
+    out[1] = [x0, x1];
+    out[2] = [x0, x1];
+    out[3] = [x0, x1];
+    out[4] = [x0, x1];
+    out[5] = [x0, x1];
+    out[6] = [x0, x1];
+    out[7] = [x0, x1];
+    out[8] = [x0, x1];
+    out[9] = [x0, x1];
     out
 }
 

@@ -182,7 +182,18 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
     let a_code = assembled_a(&mut d.graph, &formulas, &masses)?;
     let inverse_masses = masses.iter().map(|&m| d.graph.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
+    // The scene's force expressions (`[scene] forces`); a body not listed feels none.
+    let zero = d.graph.num(Rational::int(0));
+    let zero = d.graph.vector(vec![zero; d.graph.dim()])?;
+    let mut applied = Vec::with_capacity(system.bodies.len());
+    for i in 0..system.bodies.len() {
+        applied.push(match loaded.scene.forces.iter().find(|f| f.0 == i) {
+            Some(&(_, id)) => d.graph.substitute(id, &map)?,
+            None => zero,
+        });
+    }
     let bodies = Bodies {
+        applied,
         position: system.bodies.iter().map(|b| b.nodes.position).collect(),
         velocity: system.bodies.iter().map(|b| b.nodes.velocity).collect(),
         force: system.bodies.iter().map(|b| b.nodes.force).collect(),
@@ -212,6 +223,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let mut out = String::new();
     let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
     header(&mut out, title, options.specialize, &layout);
+    field_names(&mut out, g, &fields);
     state(&mut out, g, &fields, &layout);
     let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
     let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
@@ -241,6 +253,8 @@ struct Names<'a> {
 
 /// Each body's numbers as graph nodes, in file order: what the rows' solve reads.
 struct Bodies {
+    /// The scene's force expression per body (zero where it gives none).
+    applied: Vec<Id>,
     position: Vec<Id>,
     velocity: Vec<Id>,
     force: Vec<Id>,
@@ -302,6 +316,21 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
          pub fn solution(s: &State) -> Solution<DIM> {{\n    \
          solve_rows(&rows(s), &inverse_masses(s), &velocities(s), &external_forces(s), length_scale(&positions(s)))\n}}\n"
     );
+}
+
+/// The header's list of `State` fields: the rule, then each file name and its field.
+fn field_names(out: &mut String, g: &Graph, fields: &[Field]) {
+    let _ = writeln!(
+        out,
+        "// State fields: each symbol of the file under its own name where that is a Rust identifier \
+         (ASCII letters, digits, `_`; not a keyword), else its snake_case form (other letters as their \
+         code point, `λ` → `u3bb`; a keyword gets `_`; `_2`, `_3`, … where taken). Accelerations are \
+         not inputs. In the file → in `State`:"
+    );
+    for f in fields {
+        let _ = writeln!(out, "//   `{}` → `{}`", comment_text(&g.symbol(f.symbol).name), f.ident);
+    }
+    let _ = writeln!(out);
 }
 
 /// The module's opening comment: what it is and how it is laid out.
@@ -388,6 +417,8 @@ fn row_constants(out: &mut String, scales: &[f64], inequalities: &[bool], names:
 fn state(out: &mut String, g: &Graph, fields: &[Field], layout: &Layout) {
     let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
     let _ = writeln!(out, "/// A state of the scene: every input of the formulas below.");
+    let _ = writeln!(out, "/// Fields are the file's names as written where Rust allows (see the module's header).");
+    let _ = writeln!(out, "#[allow(non_snake_case)]");
     let _ = writeln!(out, "#[derive(Clone, Copy, Debug, Default, PartialEq)]");
     let _ = writeln!(out, "pub struct State {{");
     for f in fields {
@@ -430,6 +461,12 @@ impl Ctx<'_> {
             ("positions", "The position of each body.", &bodies.position),
             ("velocities", "The velocity of each body.", &bodies.velocity),
             ("external_forces", "The external force on each body (the state's force fields).", &bodies.force),
+            (
+                "applied_forces",
+                "The scene's forces (`[scene] forces`) at this state, zero for a body it does not list: an engine's \
+                 loop writes them into the state's force fields before asking for λ or the accelerations.",
+                &bodies.applied,
+            ),
         ];
         for (name, what, roots) in vectors {
             self.emit_vectors(out, &[what.to_string(), order.clone()], name, roots)?;
@@ -819,9 +856,16 @@ fn exact(x: f64) -> Option<Rational> {
     Some(if x < 0.0 { q.neg() } else { q })
 }
 
-/// The fields of `State`: every symbol but accelerations and substituted ones.
+/// The fields of `State`: every symbol but accelerations and substituted ones. A name that
+/// is a Rust identifier as written keeps it (`R`, `F`, `r`); any other becomes [`snake`] of
+/// it, with `_2`, `_3`, … in file order where that is taken (names kept as written first).
 fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>) -> Vec<Field> {
-    let mut namer = Namer::new(&[]);
+    let kept: Vec<&str> = g
+        .symbols()
+        .filter(|(s, info)| !substituted.contains(s) && !matches!(info.role, Role::Acceleration { .. }))
+        .filter_map(|(_, info)| super::names::as_written(&info.name))
+        .collect();
+    let mut namer = Namer::new(&kept);
     let mut fields = Vec::new();
     for (symbol, info) in g.symbols() {
         if substituted.contains(&symbol) {
@@ -838,7 +882,11 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>) -> Ve
             Role::Force { body: i } => format!("External force `{name}` on body `{}`.", body(i)),
             Role::Mass { body: i } => format!("Mass `{name}` (of body `{}`).", body(i)),
         };
-        fields.push(Field { symbol, ident: namer.name(&snake(&info.name)), doc });
+        let ident = match super::names::as_written(&info.name) {
+            Some(name) => name.to_string(),
+            None => namer.name(&snake(&info.name)),
+        };
+        fields.push(Field { symbol, ident, doc });
     }
     fields
 }
