@@ -6,7 +6,7 @@
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use lagrange::codegen::{Options, generate};
+use lagrange::codegen::{Options, module};
 use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
 use lagrange::expr::Symbol;
 use lagrange::expr::eval::Value;
@@ -348,18 +348,46 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
     }
 }
 
+/// Whether `a` and `b` name the same existing file (through symlinks or hard links too).
+fn same_file(a: &Path, b: &Path) -> bool {
+    let (Ok(x), Ok(y)) = (std::fs::metadata(a), std::fs::metadata(b)) else { return false };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if (x.dev(), x.ino()) == (y.dev(), y.ino()) {
+            return true;
+        }
+    }
+    let _ = (x, y);
+    matches!((std::fs::canonicalize(a), std::fs::canonicalize(b)), (Ok(p), Ok(q)) if p == q)
+}
+
 fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCode {
+    if let Some(out) = output
+        && same_file(path, out)
+    {
+        eprintln!(
+            "error: the output {} is the input file {}: refusing to overwrite it (choose another `-o`)",
+            out.display(),
+            path.display()
+        );
+        return ExitCode::from(1);
+    }
     let loaded = match load_file(path) {
         Ok(l) => l,
         Err(code) => return code,
     };
-    let code = match generate(&loaded, &Options { specialize }) {
-        Ok(code) => code,
+    let module = match module(&loaded, &Options { specialize }) {
+        Ok(m) => m,
         Err(e) => {
             eprintln!("error: {}: {e}", path.display());
             return ExitCode::from(1);
         }
     };
+    for warning in &module.warnings {
+        eprintln!("warning: {}: {warning}", path.display());
+    }
+    let code = module.code;
     match output {
         Some(out) => match std::fs::write(out, code) {
             Ok(()) => ExitCode::SUCCESS,

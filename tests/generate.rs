@@ -105,22 +105,23 @@ fn random_state(l: &Loaded, m: &Module, rng: &mut Rng, file_parameters: bool) ->
     (env, literal)
 }
 
-/// The generated `State` literal of `env`.
+/// The generated `State` of `env`, as a block expression assigning each field (a field of
+/// a big state is an entry of a role array, `position[3]`).
 fn state_literal(l: &Loaded, m: &Module, env: &Env) -> String {
     let g = &l.system.graph;
-    let mut literal = String::from("State { ");
+    let mut literal = String::from("{ let mut s = State::default(); ");
     for (s, field) in &m.fields {
         match env.get(*s) {
             Some(Value::Scalar(x)) => {
-                let _ = write!(literal, "{field}: {x:?}, ");
+                let _ = write!(literal, "s.{field} = {x:?}; ");
             }
             Some(Value::Vector(v)) => {
-                let _ = write!(literal, "{field}: {:?}, ", &v[..g.dim()]);
+                let _ = write!(literal, "s.{field} = {:?}; ", &v[..g.dim()]);
             }
             None => panic!("no value for field {field}"),
         }
     }
-    literal.push('}');
+    literal.push_str("s }");
     literal
 }
 
@@ -700,7 +701,7 @@ fn a_newton_projection_with_scale_converges() {
         assert!(m.code.contains("pub const SCALE: [f64; 1]"), "{file}");
         let stem = Path::new(file).file_stem().and_then(|s| s.to_str()).unwrap_or("file");
         let (dir, mut main) = harness_start(format!("generate_newton_{stem}"), &m.code);
-        let _ = writeln!(main, "    let mut s = State {{ r: {start}, ..State::default() }};");
+        let _ = writeln!(main, "    let mut s = State::default();\n    s.r = {start};");
         main.push_str(
             "    let mut steps = 0;\n    while constraints(&s)[0].abs() > 1e-13 && steps < 50 {\n        \
              let (c, j) = (constraints(&s)[0], jacobian(&s)[0]);\n        \
@@ -917,4 +918,122 @@ fn a_redundant_system_gives_solves_minimum_norm_lambda() {
         assert_eq!(want.status, lagrange::numeric::solve::Status::MinimumNorm, "the square is redundant");
     }
     agrees_with_solve("braced_square", &text, &[at_rest, spinning]);
+}
+
+/// A 2 000-link chain: its `State` holds the bodies' symbols in role arrays (8 000 named
+/// fields under `derive(PartialEq)` overflowed rustc's stack), the module compiles with
+/// warnings denied, unoptimised, and its forces on a 2 MiB thread agree with `solve` at the
+/// scene's initial state.
+#[test]
+fn a_chain_of_two_thousand_links_compiles() {
+    if common::skip_slow("a_chain_of_two_thousand_links_compiles") {
+        return;
+    }
+    const LINKS: usize = 2000;
+    let text = lagrange::scenario::chain(LINKS);
+    let l = load(&text).expect("chain loads");
+    let m = module(&l, &Options::default()).expect("generates");
+    assert!(m.code.contains(&format!("    pub position: [[f64; 2]; {LINKS}],")), "role arrays");
+    assert!(m.code.contains("//   `r7` → `position[6]`"), "the header lists the mapping");
+    let d = derive(&l.system).expect("derives");
+    let mut env = Env::new();
+    for &(s, v) in l.values.iter().chain(&l.scene.initial) {
+        env.set(s, v);
+    }
+    env.set(l.system.time, Value::Scalar(0.0));
+    let gravity = Value::Vector([0.0, -9.81, 0.0]);
+    for b in &l.system.bodies {
+        env.set(b.force, gravity);
+    }
+    let (dir, mut main) = harness_start("generate_chain_2000", &m.code);
+    let _ = writeln!(main, "    let s = Box::new({});", state_literal(&l, &m, &env));
+    main.push_str(
+        "    std::thread::Builder::new()\n        .stack_size(2 << 20)\n        .spawn(move || show(&forces(&s).concat()))\n        \
+         .expect(\"spawns\")\n        .join()\n        .expect(\"no overflow\");\n}\n",
+    );
+    let got = numbers(compile_and_run(&dir, &main, 0).trim());
+    let want = solved(&l, &d, &env);
+    let want: Vec<f64> = want.constraint_force.iter().flat_map(|f| f[..2].to_vec()).collect();
+    let scale = want.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+    assert_eq!(got.len(), want.len());
+    for (i, (x, y)) in got.iter().zip(&want).enumerate() {
+        assert!((x - y).abs() <= 1e-9 * scale, "force component {i}: generated {x}, solve {y}");
+    }
+}
+
+/// The huge pendulum (every length 1e155): r·r overflows, so the closed form would give
+/// [−0, −0]; the generated forces are `solve`'s at a moving state.
+#[test]
+fn generated_forces_are_overflow_safe_where_solve_is() {
+    if common::skip_slow("generated_forces_are_overflow_safe_where_solve_is") {
+        return;
+    }
+    let text = std::fs::read_to_string("constraints/hard/huge.toml").expect("huge");
+    let states = vec![
+        vec![([0.6e155, -0.8e155], [0.8e155, 0.6e155], [0.0, -9.81e155])],
+        vec![([1e155, 0.0], [0.0, 2e155], [0.0, -9.81e155])],
+    ];
+    agrees_with_solve("huge", &text, &states);
+    let l = load(&text).expect("loads");
+    let d = derive(&l.system).expect("derives");
+    let want = solved(&l, &d, &state_of(&l, &states[0]));
+    assert!(want.constraint_force[0][0].abs() > 1e154, "a real force: {:?}", want.constraint_force);
+}
+
+/// A constant past f64's range is written as `f64::INFINITY`, with a warning in the module
+/// and in `Module::warnings` (which `generate` prints to stderr).
+#[test]
+fn an_infinite_constant_is_warned_about() {
+    let text = std::fs::read_to_string("constraints/bead_on_parabola.toml").expect("parabola");
+    let text = text.replace("expr = \"r.y = r.x^2\"", "expr = \"r.x*1e400 = 1\"");
+    assert!(text.contains("1e400"));
+    let l = load(&text).expect("loads");
+    let m = module(&l, &Options::default()).expect("generates");
+    assert!(m.code.contains("f64::INFINITY"));
+    assert_eq!(m.warnings.len(), 1, "{:?}", m.warnings);
+    assert!(m.code.contains("// Warning: constants of the formulas do not fit in f64"), "a note in the module");
+    let plain =
+        module(&loaded(Path::new("constraints/bead_on_parabola.toml")), &Options::default()).expect("generates");
+    assert!(plain.warnings.is_empty() && !plain.code.contains("// Warning"));
+}
+
+/// `generate x.toml -o x.toml` (also through a symlink) is refused with a clear error and
+/// leaves the input as it was; the warning of an infinite constant reaches stderr.
+#[test]
+fn generate_refuses_to_overwrite_its_input() {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_same_file");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let input = dir.join("bead.toml");
+    let original = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("bead");
+    std::fs::write(&input, &original).expect("write");
+    let link = dir.join("link.toml");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink(&input, &link).expect("symlink");
+    for out in [&input, &link] {
+        let run = Command::new(env!("CARGO_BIN_EXE_lagrange"))
+            .arg("generate")
+            .arg(&input)
+            .arg("-o")
+            .arg(out)
+            .output()
+            .expect("runs");
+        assert_eq!(run.status.code(), Some(1), "refused");
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert!(stderr.contains("is the input file") && stderr.contains("refusing to overwrite"), "{stderr}");
+        assert_eq!(std::fs::read_to_string(&input).expect("still there"), original, "the input is intact");
+    }
+    let out = dir.join("bead.rs");
+    let run = Command::new(env!("CARGO_BIN_EXE_lagrange"))
+        .arg("generate")
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .expect("runs");
+    assert!(run.status.success() && std::fs::read_to_string(&out).expect("written").contains("pub fn solution"));
+    let inf = dir.join("inf.toml");
+    std::fs::write(&inf, original.replace("dot(r,r) = l^2", "r.x*1e400 = 1")).expect("write");
+    let run = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("generate").arg(&inf).output().expect("runs");
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success() && stderr.contains("warning:") && stderr.contains("do not fit in f64"), "{stderr}");
 }

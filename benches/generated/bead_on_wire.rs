@@ -140,9 +140,63 @@ pub fn rows(s: &State) -> Vec<Row<DIM>> {
 const JACOBIAN_BODIES: [(usize, usize); 1] = [(0, 0)];
 
 /// λ, the constraint forces and the accelerations at a state, with each inequality's contact state and
-/// the status: what `lagrange solve` gives (see `solve_rows`).
+/// the status: what `lagrange solve` gives (see `solve_rows`). Where the numbers overflow, it solves in a
+/// length unit 2ᵏ that brings the largest length-like number near 1, verified homogeneous, and scales back.
 pub fn solution(s: &State) -> Solution<DIM> {
-    solve_rows(&rows(s), &inverse_masses(s), &velocities(s), &external_forces(s), length_scale(&positions(s)))
+    let (r, w, v, f) = (rows(s), inverse_masses(s), velocities(s), external_forces(s));
+    let raw = solve_rows(&r, &w, &v, &f, length_scale(&positions(s)));
+    let big = length_like(s);
+    if rows_finite(&r, &w, &v, &f) || !(big > 0.0 && big.is_finite()) {
+        return raw;
+    }
+    let k = big.log2().floor() as i64;
+    let (at, half) = (scaled_state(s, -k), scaled_state(s, -k - 1));
+    let (r, w, v, f) = (rows(&at), inverse_masses(&at), velocities(&at), external_forces(&at));
+    let r_half = rows(&half);
+    if !rows_finite(&r, &w, &v, &f) || !rows_finite(&r_half, &w, &v, &f) {
+        return raw;
+    }
+    let Some(p) = degrees(&r, &r_half) else {
+        return raw;
+    };
+    let mut x = solve_rows(&r, &w, &v, &f, length_scale(&positions(&at)));
+    for y in x.force.iter_mut().chain(x.acceleration.iter_mut()) {
+        *y = y.map(|c| pow2(c, k));
+    }
+    for (q, l) in x.lambda.iter_mut().enumerate() {
+        *l = pow2(*l, -k * (p[q] - 2));
+    }
+    x
+}
+
+/// The state with its length-like fields (positions, velocities, forces, parameters no mass depends on) × 2ᵉ.
+pub fn scaled_state(s: &State, e: i64) -> State {
+    let mut x = *s;
+    x.g = x.g.map(|y| pow2(y, e));
+    x.l = pow2(x.l, e);
+    x.r = x.r.map(|y| pow2(y, e));
+    x.v = x.v.map(|y| pow2(y, e));
+    x.F = x.F.map(|y| pow2(y, e));
+    x
+}
+
+/// The largest |x| of the state's length-like numbers.
+fn length_like(s: &State) -> f64 {
+    let mut big = 0.0f64;
+    for y in s.g {
+        big = big.max(y.abs());
+    }
+    big = big.max(s.l.abs());
+    for y in s.r {
+        big = big.max(y.abs());
+    }
+    for y in s.v {
+        big = big.max(y.abs());
+    }
+    for y in s.F {
+        big = big.max(y.abs());
+    }
+    big
 }
 
 /// The accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ of every body (in file order), from the rows' solve.
@@ -557,6 +611,68 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], status: &mut Status) -> Vec<f64> {
     let consistent = size == 0.0 || residual <= CONTACT_TOLERANCE.sqrt() * 1e-2 * size;
     *status = (*status).max(if consistent { Status::MinimumNorm } else { Status::Inconsistent });
     x
+}
+
+/// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+#[allow(dead_code)]
+fn pow2(mut x: f64, mut e: i64) -> f64 {
+    while e > 1000 {
+        x *= 2f64.powi(1000);
+        e -= 1000;
+    }
+    while e < -1000 {
+        x *= 2f64.powi(-1000);
+        e += 1000;
+    }
+    x * 2f64.powi(e as i32)
+}
+
+/// Whether every number the solve reads is finite.
+#[allow(dead_code)]
+fn rows_finite<const D: usize>(
+    rows: &[Row<D>],
+    inverse_mass: &[f64],
+    velocity: &[[f64; D]],
+    force: &[[f64; D]],
+) -> bool {
+    inverse_mass.iter().all(|x| x.is_finite())
+        && velocity.iter().chain(force).flatten().all(|x| x.is_finite())
+        && rows.iter().all(|r| {
+            r.value.is_finite()
+                && r.rate.is_finite()
+                && r.bias.is_finite()
+                && r.jacobian.iter().all(|(_, j)| j.iter().all(|x| x.is_finite()))
+        })
+}
+
+/// The degree p of each row if `at` (a state scaled by 2ᵉ) and `half` (by 2ᵉ⁻¹) differ
+/// exactly as a homogeneous row would (C, Ċ, c by 2ᵖ, J by 2ᵖ⁻¹), else `None`.
+#[allow(dead_code)]
+fn degrees<const D: usize>(at: &[Row<D>], half: &[Row<D>]) -> Option<Vec<i64>> {
+    let exact = |a: f64, b: f64, p: i64| a == pow2(b, p);
+    let mut out = Vec::with_capacity(at.len());
+    for (a, b) in at.iter().zip(half) {
+        let scalars = [(a.value, b.value), (a.rate, b.rate), (a.bias, b.bias)];
+        let from_scalar = scalars.iter().find(|(x, _)| *x != 0.0).map(|&(x, y)| (x / y).log2().round() as i64);
+        let from_j = a
+            .jacobian
+            .iter()
+            .zip(&b.jacobian)
+            .flat_map(|((_, x), (_, y))| x.iter().zip(y).map(|(x, y)| (*x, *y)))
+            .find(|(x, _)| *x != 0.0)
+            .map(|(x, y)| (x / y).log2().round() as i64 + 1);
+        let p = from_scalar.or(from_j).unwrap_or(0);
+        let ok = scalars.iter().all(|&(x, y)| exact(x, y, p))
+            && a.jacobian
+                .iter()
+                .zip(&b.jacobian)
+                .all(|((_, x), (_, y))| x.iter().zip(y).all(|(x, y)| exact(*x, *y, p - 1)));
+        if !ok {
+            return None;
+        }
+        out.push(p);
+    }
+    Some(out)
 }
 
 /// |(x, y)| without overflow or underflow (the plain formula unless it would lose range).

@@ -32,6 +32,27 @@ pub const MAX_DENSE_J: usize = 4096;
 /// outputs stay one function each.
 pub const MAX_PART: usize = 64;
 
+/// Most fields of a `State` struct with one field per symbol. rustc's derives of
+/// `PartialEq` and `Debug` recurse over the fields: a 2 000-link chain's 8 000 fields
+/// overflow its stack, 1 700 links' compile; 1 024 keeps far from that edge while every
+/// shipped scene keeps named fields. Past it the bodies' symbols live in role arrays.
+pub const MAX_STATE_FIELDS: usize = 1024;
+
+/// How `State` holds the inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StateStorage {
+    /// One field per symbol.
+    Fields,
+    /// Positions, velocities, forces and mass symbols as arrays indexed by body (or mass
+    /// symbol); time and parameters stay fields. Past [`MAX_STATE_FIELDS`] fields.
+    Arrays,
+}
+
+/// How `State` holds `fields` inputs.
+pub fn state_storage(fields: usize) -> StateStorage {
+    if fields > MAX_STATE_FIELDS { StateStorage::Arrays } else { StateStorage::Fields }
+}
+
 /// How A is stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AStorage {

@@ -28,7 +28,7 @@
 //! Not here: layout decisions (`codegen::layout`), the helpers' text (`codegen::support`),
 //! files or stdout (`main.rs`), evaluation (`numeric`).
 
-use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART};
+use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
 use super::support::{HELPERS, ROWS, SOLVE_BAND};
@@ -38,6 +38,7 @@ use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
 use crate::model::file::Loaded;
 use crate::numeric::program::{LowerError, Op, Program};
+use std::cell::Cell;
 use std::collections::{HashMap, HashSet};
 use std::fmt::Write;
 
@@ -106,8 +107,12 @@ impl Formulas {
 /// A field of `State`.
 struct Field {
     symbol: Symbol,
+    /// The field's name, or `array[index]` for a symbol held in a role array.
     ident: String,
     doc: String,
+    /// The role array (`position`, `velocity`, `force`, `mass`) that holds it, with its
+    /// index, when the layout puts bodies' symbols in arrays.
+    array: Option<(&'static str, usize)>,
 }
 
 /// A generated module and the `State` field that holds each input symbol.
@@ -115,6 +120,9 @@ struct Field {
 pub struct Module {
     pub code: String,
     pub fields: Vec<(Symbol, String)>,
+    /// What the user should know about the code (also written as notes in its header):
+    /// constants that do not fit in f64.
+    pub warnings: Vec<String>,
 }
 
 /// Generates the Rust module for a loaded file (the source text).
@@ -203,7 +211,13 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
     // The state holds the file's symbols, not those the derivation declared (the multipliers).
-    let fields = state_fields(&system.graph, &body_names, &substituted);
+    let field_count = system
+        .graph
+        .symbols()
+        .filter(|(s, i)| !substituted.contains(s) && !matches!(i.role, Role::Acceleration { .. }))
+        .count();
+    let arrays = layout::state_storage(field_count) == StateStorage::Arrays;
+    let fields = state_fields(&system.graph, &body_names, &substituted, arrays);
     let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
     let slots = slot_exprs(g, &fields);
     let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
@@ -228,7 +242,8 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
     let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
     row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
-    let ctx = Ctx { g, inputs: &inputs, slots: &slots };
+    let header_end = out.len();
+    let ctx = Ctx { g, inputs: &inputs, slots: &slots, non_finite: Cell::new(0) };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
     ctx.rates(&mut out, &formulas, &names)?;
@@ -238,11 +253,26 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     ctx.c_term(&mut out, &formulas)?;
     ctx.bodies(&mut out, &bodies, &names)?;
     rows_fn(&mut out, &formulas, &layout);
+    let mass_symbols: HashSet<Symbol> = system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
+    scaling_fns(&mut out, g, &fields, &mass_symbols);
     ctx.solution(&mut out, &formulas, &names, &layout)?;
     out.push_str(ROWS);
     out.push('\n');
     out.push_str(HELPERS);
-    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
+    let mut warnings = Vec::new();
+    if ctx.non_finite.get() > 0 {
+        let warning = format!(
+            "constants of the formulas do not fit in f64 (past ±1.8e308: written as f64::INFINITY, or NaN; {} \
+             place(s) in the code); the outputs that use them are not finite",
+            ctx.non_finite.get()
+        );
+        let note = format!("// Warning: {}.\n\n", comment_text(&warning));
+        // After the header's paragraph (its blank line), before the field list.
+        let at = out[..header_end].rfind("\n\n// State fields").map_or(header_end, |i| i + 2);
+        out.insert_str(at, &note);
+        warnings.push(warning);
+    }
+    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect(), warnings })
 }
 
 /// The names of the file's bodies and constraints, in file order.
@@ -312,10 +342,83 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
     let _ = writeln!(
         out,
         "/// λ, the constraint forces and the accelerations at a state, with each inequality's contact state and\n\
-         /// the status: what `lagrange solve` gives (see `solve_rows`).\n\
+         /// the status: what `lagrange solve` gives (see `solve_rows`). Where the numbers overflow, it solves in a\n\
+         /// length unit 2ᵏ that brings the largest length-like number near 1, verified homogeneous, and scales back.\n\
          pub fn solution(s: &State) -> Solution<DIM> {{\n    \
-         solve_rows(&rows(s), &inverse_masses(s), &velocities(s), &external_forces(s), length_scale(&positions(s)))\n}}\n"
+         let (r, w, v, f) = (rows(s), inverse_masses(s), velocities(s), external_forces(s));\n    \
+         let raw = solve_rows(&r, &w, &v, &f, length_scale(&positions(s)));\n    \
+         let big = length_like(s);\n    \
+         if rows_finite(&r, &w, &v, &f) || !(big > 0.0 && big.is_finite()) {{\n        return raw;\n    }}\n    \
+         let k = big.log2().floor() as i64;\n    \
+         let (at, half) = (scaled_state(s, -k), scaled_state(s, -k - 1));\n    \
+         let (r, w, v, f) = (rows(&at), inverse_masses(&at), velocities(&at), external_forces(&at));\n    \
+         let r_half = rows(&half);\n    \
+         if !rows_finite(&r, &w, &v, &f) || !rows_finite(&r_half, &w, &v, &f) {{\n        return raw;\n    }}\n    \
+         let Some(p) = degrees(&r, &r_half) else {{\n        return raw;\n    }};\n    \
+         let mut x = solve_rows(&r, &w, &v, &f, length_scale(&positions(&at)));\n    \
+         for y in x.force.iter_mut().chain(x.acceleration.iter_mut()) {{\n        *y = y.map(|c| pow2(c, k));\n    }}\n    \
+         for (q, l) in x.lambda.iter_mut().enumerate() {{\n        *l = pow2(*l, -k * (p[q] - 2));\n    }}\n    \
+         x\n}}\n"
     );
+}
+
+/// `scaled_state` and `length_like`: the state's length-like fields (positions,
+/// velocities, forces, and the parameters no mass depends on), as `numeric::rescale`
+/// chooses them.
+fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) {
+    let mut places: Vec<(String, bool, bool)> = Vec::new(); // (place, vector, array of vectors)
+    let mut arrays = HashSet::new();
+    for f in fields {
+        let info = g.symbol(f.symbol);
+        let length = match info.role {
+            Role::Position { .. } | Role::Velocity { .. } | Role::Force { .. } => true,
+            Role::Parameter => !mass_symbols.contains(&f.symbol),
+            _ => false,
+        };
+        if !length {
+            continue;
+        }
+        match f.array {
+            Some((name, _)) => {
+                if arrays.insert(name) {
+                    places.push((name.to_string(), true, true));
+                }
+            }
+            None => places.push((f.ident.clone(), info.ty == Ty::Vector, false)),
+        }
+    }
+    let _ = writeln!(
+        out,
+        "/// The state with its length-like fields (positions, velocities, forces, parameters no mass depends on) × 2ᵉ."
+    );
+    let _ = writeln!(out, "pub fn scaled_state(s: &State, e: i64) -> State {{\n    let mut x = *s;");
+    for (place, vector, array) in &places {
+        let _ = match (vector, array) {
+            (_, true) => writeln!(out, "    x.{place} = x.{place}.map(|r| r.map(|y| pow2(y, e)));"),
+            (true, false) => writeln!(out, "    x.{place} = x.{place}.map(|y| pow2(y, e));"),
+            (false, false) => writeln!(out, "    x.{place} = pow2(x.{place}, e);"),
+        };
+    }
+    if places.is_empty() {
+        let _ = writeln!(out, "    let _ = e;");
+    }
+    let _ = writeln!(out, "    x\n}}\n");
+    let _ =
+        writeln!(out, "/// The largest |x| of the state's length-like numbers.\nfn length_like(s: &State) -> f64 {{");
+    let _ = writeln!(out, "    let mut big = 0.0f64;");
+    for (place, vector, array) in &places {
+        let _ = match (vector, array) {
+            (_, true) => {
+                writeln!(out, "    for y in s.{place}.iter().flatten() {{\n        big = big.max(y.abs());\n    }}")
+            }
+            (true, false) => writeln!(out, "    for y in s.{place} {{\n        big = big.max(y.abs());\n    }}"),
+            (false, false) => writeln!(out, "    big = big.max(s.{place}.abs());"),
+        };
+    }
+    if places.is_empty() {
+        let _ = writeln!(out, "    let _ = s;");
+    }
+    let _ = writeln!(out, "    big\n}}\n");
 }
 
 /// The header's list of `State` fields: the rule, then each file name and its field.
@@ -419,14 +522,39 @@ fn state(out: &mut String, g: &Graph, fields: &[Field], layout: &Layout) {
     let _ = writeln!(out, "/// A state of the scene: every input of the formulas below.");
     let _ = writeln!(out, "/// Fields are the file's names as written where Rust allows (see the module's header).");
     let _ = writeln!(out, "#[allow(non_snake_case)]");
-    let _ = writeln!(out, "#[derive(Clone, Copy, Debug, Default, PartialEq)]");
+    let arrays = fields.iter().any(|f| f.array.is_some());
+    // `Default` is derived only for arrays of at most 32 entries: role arrays get an impl.
+    let _ = writeln!(out, "#[derive(Clone, Copy, Debug, {}PartialEq)]", if arrays { "" } else { "Default, " });
     let _ = writeln!(out, "pub struct State {{");
-    for f in fields {
+    let mut defaults = Vec::new();
+    for f in fields.iter().filter(|f| f.array.is_none()) {
         let ty = if g.symbol(f.symbol).ty == Ty::Vector { format!("[f64; {dim}]") } else { "f64".into() };
         let _ = writeln!(out, "    /// {}", f.doc);
         let _ = writeln!(out, "    pub {}: {ty},", f.ident);
+        defaults.push(format!("{}: Default::default()", f.ident));
+    }
+    for (name, what) in ROLE_ARRAYS {
+        let len = fields.iter().filter(|f| f.array.is_some_and(|a| a.0 == name)).count();
+        if len == 0 {
+            continue;
+        }
+        let (ty, zero) = if name == "mass" {
+            (format!("[f64; {len}]"), format!("[0.0; {len}]"))
+        } else {
+            (format!("[[f64; {dim}]; {len}]"), format!("[[0.0; {dim}]; {len}]"))
+        };
+        let _ = writeln!(out, "    /// {what} (the header lists which symbol each entry holds).");
+        let _ = writeln!(out, "    pub {name}: {ty},");
+        defaults.push(format!("{name}: {zero}"));
     }
     let _ = writeln!(out, "}}\n");
+    if arrays {
+        let _ = writeln!(
+            out,
+            "impl Default for State {{\n    fn default() -> State {{\n        State {{ {} }}\n    }}\n}}\n",
+            defaults.join(", ")
+        );
+    }
     let _ = writeln!(out, "/// Space dimension.\npub const DIM: usize = {dim};");
     let _ = writeln!(out, "/// Number of bodies (in file order).\npub const BODIES: usize = {n};");
     let _ = writeln!(out, "/// Number of constraints (in file order).\npub const CONSTRAINTS: usize = {k};\n");
@@ -859,14 +987,21 @@ fn exact(x: f64) -> Option<Rational> {
 /// The fields of `State`: every symbol but accelerations and substituted ones. A name that
 /// is a Rust identifier as written keeps it (`R`, `F`, `r`); any other becomes [`snake`] of
 /// it, with `_2`, `_3`, … in file order where that is taken (names kept as written first).
-fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>) -> Vec<Field> {
-    let kept: Vec<&str> = g
+/// With `arrays`, the bodies' positions, velocities, forces and mass symbols are entries of
+/// the role arrays [`ROLE_ARRAYS`] instead (whose names no field takes).
+fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, arrays: bool) -> Vec<Field> {
+    let reserved: Vec<&str> = if arrays { ROLE_ARRAYS.iter().map(|r| r.0).collect() } else { Vec::new() };
+    let keep = |name: &str| super::names::as_written(name).filter(|n| !reserved.contains(n)).map(str::to_string);
+    let mut kept: Vec<String> = g
         .symbols()
         .filter(|(s, info)| !substituted.contains(s) && !matches!(info.role, Role::Acceleration { .. }))
-        .filter_map(|(_, info)| super::names::as_written(&info.name))
+        .filter_map(|(_, info)| keep(&info.name))
         .collect();
+    kept.extend(reserved.iter().map(|r| r.to_string()));
+    let kept: Vec<&str> = kept.iter().map(String::as_str).collect();
     let mut namer = Namer::new(&kept);
     let mut fields = Vec::new();
+    let mut masses = 0;
     for (symbol, info) in g.symbols() {
         if substituted.contains(&symbol) {
             continue;
@@ -882,14 +1017,35 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>) -> Ve
             Role::Force { body: i } => format!("External force `{name}` on body `{}`.", body(i)),
             Role::Mass { body: i } => format!("Mass `{name}` (of body `{}`).", body(i)),
         };
-        let ident = match super::names::as_written(&info.name) {
-            Some(name) => name.to_string(),
-            None => namer.name(&snake(&info.name)),
+        let array = match info.role {
+            _ if !arrays => None,
+            Role::Position { body } => Some(("position", body)),
+            Role::Velocity { body } => Some(("velocity", body)),
+            Role::Force { body } => Some(("force", body)),
+            Role::Mass { .. } => {
+                masses += 1;
+                Some(("mass", masses - 1))
+            }
+            _ => None,
         };
-        fields.push(Field { symbol, ident, doc });
+        let ident = match (array, keep(&info.name)) {
+            (Some((name, i)), _) => format!("{name}[{i}]"),
+            (None, Some(name)) => name,
+            (None, None) => namer.name(&snake(&info.name)),
+        };
+        fields.push(Field { symbol, ident, doc, array });
     }
     fields
 }
+
+/// The role arrays of a big `State`, with their doc: body i's symbol of that role is entry i
+/// (masses: the mass symbols in file order).
+const ROLE_ARRAYS: [(&str, &str); 4] = [
+    ("position", "The bodies' positions, body i at entry i"),
+    ("velocity", "The bodies' velocities, body i at entry i"),
+    ("force", "The external forces on the bodies, body i at entry i"),
+    ("mass", "The mass symbols, in file order"),
+];
 
 /// The Rust expression of every input slot, in slot order.
 fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {
@@ -909,6 +1065,8 @@ struct Ctx<'a> {
     g: &'a Graph,
     inputs: &'a [Symbol],
     slots: &'a [String],
+    /// Constants written that are not finite f64 (each occurrence in a function body).
+    non_finite: Cell<usize>,
 }
 
 /// Operator precedence of a rendered expression: what it may appear inside unparenthesised.
@@ -1046,6 +1204,9 @@ impl Ctx<'_> {
             let (t, prec, depth) = match *op {
                 Op::Input(j) => (self.slots[j as usize].clone(), Prec::Atom, 0),
                 Op::Const(bits) => {
+                    if !f64::from_bits(bits).is_finite() {
+                        self.non_finite.set(self.non_finite.get() + 1);
+                    }
                     let (t, prec) = literal(f64::from_bits(bits));
                     (t, prec, 0)
                 }

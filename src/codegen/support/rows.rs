@@ -12,7 +12,10 @@
 //! complementarity — the LCP `solve`'s QP solves, whose answer is unique for a regular Ã).
 //! A singular Ã (redundant constraints) gets the minimum-norm λ̃ in the scaled multipliers,
 //! from a symmetric eigendecomposition (cyclic Jacobi), with `solve`'s rank threshold
-//! (1e-10 of the largest eigenvalue); `Status` says so.
+//! (1e-10 of the largest eigenvalue); `Status` says so. Where the raw numbers overflow
+//! (|r| ≈ 1e155 makes C = r·r − l² ∞ − ∞), the module solves in a length unit scaled by a
+//! power of two, verified homogeneous (`degrees`), and scales back, as `solve` does
+//! (`numeric::rescale`).
 //!
 //! Included with `include_str!` from the first item on (this note is left out); compiled
 //! by the crate's tests. Not here: the formulas (generated), the closed form of one
@@ -397,4 +400,66 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], status: &mut Status) -> Vec<f64> {
     let consistent = size == 0.0 || residual <= CONTACT_TOLERANCE.sqrt() * 1e-2 * size;
     *status = (*status).max(if consistent { Status::MinimumNorm } else { Status::Inconsistent });
     x
+}
+
+/// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+#[allow(dead_code)]
+fn pow2(mut x: f64, mut e: i64) -> f64 {
+    while e > 1000 {
+        x *= 2f64.powi(1000);
+        e -= 1000;
+    }
+    while e < -1000 {
+        x *= 2f64.powi(-1000);
+        e += 1000;
+    }
+    x * 2f64.powi(e as i32)
+}
+
+/// Whether every number the solve reads is finite.
+#[allow(dead_code)]
+fn rows_finite<const D: usize>(
+    rows: &[Row<D>],
+    inverse_mass: &[f64],
+    velocity: &[[f64; D]],
+    force: &[[f64; D]],
+) -> bool {
+    inverse_mass.iter().all(|x| x.is_finite())
+        && velocity.iter().chain(force).flatten().all(|x| x.is_finite())
+        && rows.iter().all(|r| {
+            r.value.is_finite()
+                && r.rate.is_finite()
+                && r.bias.is_finite()
+                && r.jacobian.iter().all(|(_, j)| j.iter().all(|x| x.is_finite()))
+        })
+}
+
+/// The degree p of each row if `at` (a state scaled by 2ᵉ) and `half` (by 2ᵉ⁻¹) differ
+/// exactly as a homogeneous row would (C, Ċ, c by 2ᵖ, J by 2ᵖ⁻¹), else `None`.
+#[allow(dead_code)]
+fn degrees<const D: usize>(at: &[Row<D>], half: &[Row<D>]) -> Option<Vec<i64>> {
+    let exact = |a: f64, b: f64, p: i64| a == pow2(b, p);
+    let mut out = Vec::with_capacity(at.len());
+    for (a, b) in at.iter().zip(half) {
+        let scalars = [(a.value, b.value), (a.rate, b.rate), (a.bias, b.bias)];
+        let from_scalar = scalars.iter().find(|(x, _)| *x != 0.0).map(|&(x, y)| (x / y).log2().round() as i64);
+        let from_j = a
+            .jacobian
+            .iter()
+            .zip(&b.jacobian)
+            .flat_map(|((_, x), (_, y))| x.iter().zip(y).map(|(x, y)| (*x, *y)))
+            .find(|(x, _)| *x != 0.0)
+            .map(|(x, y)| (x / y).log2().round() as i64 + 1);
+        let p = from_scalar.or(from_j).unwrap_or(0);
+        let ok = scalars.iter().all(|&(x, y)| exact(x, y, p))
+            && a.jacobian
+                .iter()
+                .zip(&b.jacobian)
+                .all(|((_, x), (_, y))| x.iter().zip(y).all(|(x, y)| exact(*x, *y, p - 1)));
+        if !ok {
+            return None;
+        }
+        out.push(p);
+    }
+    Some(out)
 }
