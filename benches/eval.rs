@@ -85,7 +85,7 @@ fn bead_handwritten(b: Bencher) {
 
 #[divan::bench(name = "bead_2_generated")]
 fn bead_generated_bench(b: Bencher) {
-    let s = bead::State { r: R, v: V, f: F, m: M, ..Default::default() };
+    let s = bead::State { r: R, v: V, F, m: M, ..Default::default() };
     b.bench_local(|| bead_generated(black_box(&s)));
 }
 
@@ -252,16 +252,16 @@ fn chain_generated_state() -> chain::State {
         v8: v[7],
         v9: v[8],
         v10: v[9],
-        f1: f[0],
-        f2: f[1],
-        f3: f[2],
-        f4: f[3],
-        f5: f[4],
-        f6: f[5],
-        f7: f[6],
-        f8: f[7],
-        f9: f[8],
-        f10: f[9],
+        F1: f[0],
+        F2: f[1],
+        F3: f[2],
+        F4: f[3],
+        F5: f[4],
+        F6: f[5],
+        F7: f[6],
+        F8: f[7],
+        F9: f[8],
+        F10: f[9],
         m,
         ..Default::default()
     }

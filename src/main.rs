@@ -6,7 +6,7 @@
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use lagrange::codegen::{Options, generate};
+use lagrange::codegen::{Options, module};
 use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
 use lagrange::expr::Symbol;
 use lagrange::expr::eval::Value;
@@ -456,18 +456,26 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
     }
 }
 
+/// Whether `a` and `b` name the same existing file (through symlinks or hard links too).
 fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCode {
+    if let Err(code) = refuse_overwrite(path, &[("-o", output)]) {
+        return code;
+    }
     let loaded = match load_file(path) {
         Ok(l) => l,
         Err(code) => return code,
     };
-    let code = match generate(&loaded, &Options { specialize }) {
-        Ok(code) => code,
+    let module = match module(&loaded, &Options { specialize }) {
+        Ok(m) => m,
         Err(e) => {
             errln!("error: {}: {e}", path.display());
             return ExitCode::from(1);
         }
     };
+    for warning in &module.warnings {
+        eprintln!("warning: {}: {warning}", path.display());
+    }
+    let code = module.code;
     match output {
         Some(out) => match std::fs::write(out, code) {
             Ok(()) => ExitCode::SUCCESS,
@@ -620,12 +628,12 @@ fn same_file(input: &Path, output: &Path) -> bool {
 }
 
 /// Refuses, before anything runs, an output (`--csv`, `--plot`) that is the input file.
-fn refuse_overwrite(input: &Path, outputs: &[(&str, Option<&PathBuf>)]) -> Result<(), ExitCode> {
+fn refuse_overwrite(input: &Path, outputs: &[(&str, Option<&Path>)]) -> Result<(), ExitCode> {
     for (flag, path) in outputs {
         if let Some(path) = path
             && same_file(input, path)
         {
-            errln!("error: {flag} {} is the input file: lagrange does not overwrite it", path.display());
+            errln!("error: {flag} {} is the input file: refusing to overwrite it", path.display());
             return Err(ExitCode::from(2));
         }
     }
@@ -636,7 +644,8 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     use lagrange::numeric::integrate::Integrator;
     use lagrange::numeric::simulate::steps_for;
     use lagrange::numeric::stabilize::Stabilize;
-    if let Err(code) = refuse_overwrite(&args.file, &[("--csv", args.csv.as_ref()), ("--plot", args.plot.as_ref())]) {
+    if let Err(code) = refuse_overwrite(&args.file, &[("--csv", args.csv.as_deref()), ("--plot", args.plot.as_deref())])
+    {
         return code;
     }
     let scenario = match scenario(&args.file) {
@@ -742,7 +751,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
 
 fn cmd_bench(args: &BenchArgs) -> ExitCode {
     use lagrange::report::precision as table;
-    if let Err(code) = refuse_overwrite(&args.file, &[("--plot", args.plot.as_ref())]) {
+    if let Err(code) = refuse_overwrite(&args.file, &[("--plot", args.plot.as_deref())]) {
         return code;
     }
     let scenario = match scenario(&args.file) {

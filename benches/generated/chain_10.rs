@@ -2,8 +2,47 @@
 // Scene: Chain of 10 links
 // Do not edit: regenerate. Self-contained: no dependency on lagrange or any crate.
 // 2D, 10 bodies, 10 constraints; vectors are [f64; 2].
+// Convention: `constraints` is C as written (`lhs = rhs` and `lhs >= rhs` give C = lhs − rhs, `lhs <= rhs` gives C = rhs − lhs). `jacobian` is J = ∇C/κ, with κ = SCALE[k] the constant content of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; the forces do not depend on κ.
+
+// State fields: each symbol of the file under its own name where that is a Rust identifier (ASCII letters, digits, `_`; not a keyword), else its snake_case form (other letters as their code point, `λ` → `u3bb`; a keyword gets `_`; `_2`, `_3`, … where taken). Accelerations are not inputs. In the file → in `State`:
+//   `t` → `t`
+//   `g` → `g`
+//   `l` → `l`
+//   `m` → `m`
+//   `r1` → `r1`
+//   `v1` → `v1`
+//   `F1` → `F1`
+//   `r2` → `r2`
+//   `v2` → `v2`
+//   `F2` → `F2`
+//   `r3` → `r3`
+//   `v3` → `v3`
+//   `F3` → `F3`
+//   `r4` → `r4`
+//   `v4` → `v4`
+//   `F4` → `F4`
+//   `r5` → `r5`
+//   `v5` → `v5`
+//   `F5` → `F5`
+//   `r6` → `r6`
+//   `v6` → `v6`
+//   `F6` → `F6`
+//   `r7` → `r7`
+//   `v7` → `v7`
+//   `F7` → `F7`
+//   `r8` → `r8`
+//   `v8` → `v8`
+//   `F8` → `F8`
+//   `r9` → `r9`
+//   `v9` → `v9`
+//   `F9` → `F9`
+//   `r10` → `r10`
+//   `v10` → `v10`
+//   `F10` → `F10`
 
 /// A state of the scene: every input of the formulas below.
+/// Fields are the file's names as written where Rust allows (see the module's header).
+#[allow(non_snake_case)]
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct State {
     /// The time `t`.
@@ -19,61 +58,61 @@ pub struct State {
     /// Velocity `v1` of body `p1`.
     pub v1: [f64; 2],
     /// External force `F1` on body `p1`.
-    pub f1: [f64; 2],
+    pub F1: [f64; 2],
     /// Position `r2` of body `p2`.
     pub r2: [f64; 2],
     /// Velocity `v2` of body `p2`.
     pub v2: [f64; 2],
     /// External force `F2` on body `p2`.
-    pub f2: [f64; 2],
+    pub F2: [f64; 2],
     /// Position `r3` of body `p3`.
     pub r3: [f64; 2],
     /// Velocity `v3` of body `p3`.
     pub v3: [f64; 2],
     /// External force `F3` on body `p3`.
-    pub f3: [f64; 2],
+    pub F3: [f64; 2],
     /// Position `r4` of body `p4`.
     pub r4: [f64; 2],
     /// Velocity `v4` of body `p4`.
     pub v4: [f64; 2],
     /// External force `F4` on body `p4`.
-    pub f4: [f64; 2],
+    pub F4: [f64; 2],
     /// Position `r5` of body `p5`.
     pub r5: [f64; 2],
     /// Velocity `v5` of body `p5`.
     pub v5: [f64; 2],
     /// External force `F5` on body `p5`.
-    pub f5: [f64; 2],
+    pub F5: [f64; 2],
     /// Position `r6` of body `p6`.
     pub r6: [f64; 2],
     /// Velocity `v6` of body `p6`.
     pub v6: [f64; 2],
     /// External force `F6` on body `p6`.
-    pub f6: [f64; 2],
+    pub F6: [f64; 2],
     /// Position `r7` of body `p7`.
     pub r7: [f64; 2],
     /// Velocity `v7` of body `p7`.
     pub v7: [f64; 2],
     /// External force `F7` on body `p7`.
-    pub f7: [f64; 2],
+    pub F7: [f64; 2],
     /// Position `r8` of body `p8`.
     pub r8: [f64; 2],
     /// Velocity `v8` of body `p8`.
     pub v8: [f64; 2],
     /// External force `F8` on body `p8`.
-    pub f8: [f64; 2],
+    pub F8: [f64; 2],
     /// Position `r9` of body `p9`.
     pub r9: [f64; 2],
     /// Velocity `v9` of body `p9`.
     pub v9: [f64; 2],
     /// External force `F9` on body `p9`.
-    pub f9: [f64; 2],
+    pub F9: [f64; 2],
     /// Position `r10` of body `p10`.
     pub r10: [f64; 2],
     /// Velocity `v10` of body `p10`.
     pub v10: [f64; 2],
     /// External force `F10` on body `p10`.
-    pub f10: [f64; 2],
+    pub F10: [f64; 2],
 }
 
 /// Space dimension.
@@ -82,6 +121,23 @@ pub const DIM: usize = 2;
 pub const BODIES: usize = 10;
 /// Number of constraints (in file order).
 pub const CONSTRAINTS: usize = 10;
+
+/// κ of each constraint (in file order): the constant taken out of ∇C, so ∇C = SCALE[k]·J[k]
+/// (`jacobian`) and C/SCALE[k] is the value whose gradient is J[k]. A Newton projection on
+/// C as written steps −C·SCALE[k]·J[k] / |SCALE[k]·J[k]|² (mass-weighted: divide by mᵢ).
+pub const SCALE: [f64; 10] = [2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0];
+/// Which constraints are inequalities `C ≥ 0` (λ ≥ 0, zero unless touching), in file order:
+/// - `link1`: equality, C = 0
+/// - `link2`: equality, C = 0
+/// - `link3`: equality, C = 0
+/// - `link4`: equality, C = 0
+/// - `link5`: equality, C = 0
+/// - `link6`: equality, C = 0
+/// - `link7`: equality, C = 0
+/// - `link8`: equality, C = 0
+/// - `link9`: equality, C = 0
+/// - `link10`: equality, C = 0
+pub const INEQUALITY: [bool; 10] = [false, false, false, false, false, false, false, false, false, false];
 
 /// The constraint values C (zero on the constraint):
 /// - `link1`: r1·r1 − l²
@@ -115,6 +171,21 @@ pub fn constraints(s: &State) -> [f64; 10] {
     let x17 = s.r9[0] - s.r10[0];
     let x18 = s.r9[1] - s.r10[1];
     [s.r1[0] * s.r1[0] + s.r1[1] * s.r1[1] - x0, x1 * x1 + x2 * x2 - x0, x3 * x3 + x4 * x4 - x0, x5 * x5 + x6 * x6 - x0, x7 * x7 + x8 * x8 - x0, x9 * x9 + x10 * x10 - x0, x11 * x11 + x12 * x12 - x0, x13 * x13 + x14 * x14 - x0, x15 * x15 + x16 * x16 - x0, x17 * x17 + x18 * x18 - x0]
+}
+
+/// The rates Ċ = Σᵢ ∇ᵢC·vᵢ + ∂C/∂t of C as written:
+/// - `link1`: 2 r1·v1
+/// - `link2`: 2 (r1 − r2)·(v1 − v2)
+/// - `link3`: 2 (r2 − r3)·(v2 − v3)
+/// - `link4`: 2 (r3 − r4)·(v3 − v4)
+/// - `link5`: 2 (r4 − r5)·(v4 − v5)
+/// - `link6`: 2 (r5 − r6)·(v5 − v6)
+/// - `link7`: 2 (r6 − r7)·(v6 − v7)
+/// - `link8`: 2 (r7 − r8)·(v7 − v8)
+/// - `link9`: 2 (r8 − r9)·(v8 − v9)
+/// - `link10`: 2 (r9 − r10)·(v9 − v10)
+pub fn constraint_rates(s: &State) -> [f64; 10] {
+    [2.0 * (s.r1[0] * s.v1[0] + s.r1[1] * s.v1[1]), 2.0 * ((s.r1[0] - s.r2[0]) * (s.v1[0] - s.v2[0]) + (s.r1[1] - s.r2[1]) * (s.v1[1] - s.v2[1])), 2.0 * ((s.r2[0] - s.r3[0]) * (s.v2[0] - s.v3[0]) + (s.r2[1] - s.r3[1]) * (s.v2[1] - s.v3[1])), 2.0 * ((s.r3[0] - s.r4[0]) * (s.v3[0] - s.v4[0]) + (s.r3[1] - s.r4[1]) * (s.v3[1] - s.v4[1])), 2.0 * ((s.r4[0] - s.r5[0]) * (s.v4[0] - s.v5[0]) + (s.r4[1] - s.r5[1]) * (s.v4[1] - s.v5[1])), 2.0 * ((s.r5[0] - s.r6[0]) * (s.v5[0] - s.v6[0]) + (s.r5[1] - s.r6[1]) * (s.v5[1] - s.v6[1])), 2.0 * ((s.r6[0] - s.r7[0]) * (s.v6[0] - s.v7[0]) + (s.r6[1] - s.r7[1]) * (s.v6[1] - s.v7[1])), 2.0 * ((s.r7[0] - s.r8[0]) * (s.v7[0] - s.v8[0]) + (s.r7[1] - s.r8[1]) * (s.v7[1] - s.v8[1])), 2.0 * ((s.r8[0] - s.r9[0]) * (s.v8[0] - s.v9[0]) + (s.r8[1] - s.r9[1]) * (s.v8[1] - s.v9[1])), 2.0 * ((s.r9[0] - s.r10[0]) * (s.v9[0] - s.v10[0]) + (s.r9[1] - s.r10[1]) * (s.v9[1] - s.v10[1]))]
 }
 
 /// A of A λ + b = 0: Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ (symmetric, positive semidefinite). Non-zero entries:
@@ -209,7 +280,7 @@ pub fn b_vector(s: &State) -> [f64; 10] {
     let x16 = s.v9[0] - s.v10[0];
     let x17 = s.v9[1] - s.v10[1];
     let x18 = 1.0 / s.m;
-    [(s.r1[0] * s.f1[0] + s.r1[1] * s.f1[1] + s.m * (s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1])) * x18, x18 * ((s.r1[0] - s.r2[0]) * (s.f1[0] - s.f2[0]) + (s.r1[1] - s.r2[1]) * (s.f1[1] - s.f2[1]) + s.m * (x0 * x0 + x1 * x1)), x18 * ((s.r2[0] - s.r3[0]) * (s.f2[0] - s.f3[0]) + (s.r2[1] - s.r3[1]) * (s.f2[1] - s.f3[1]) + s.m * (x2 * x2 + x3 * x3)), x18 * ((s.r3[0] - s.r4[0]) * (s.f3[0] - s.f4[0]) + (s.r3[1] - s.r4[1]) * (s.f3[1] - s.f4[1]) + s.m * (x4 * x4 + x5 * x5)), x18 * ((s.r4[0] - s.r5[0]) * (s.f4[0] - s.f5[0]) + (s.r4[1] - s.r5[1]) * (s.f4[1] - s.f5[1]) + s.m * (x6 * x6 + x7 * x7)), x18 * ((s.r5[0] - s.r6[0]) * (s.f5[0] - s.f6[0]) + (s.r5[1] - s.r6[1]) * (s.f5[1] - s.f6[1]) + s.m * (x8 * x8 + x9 * x9)), x18 * ((s.r6[0] - s.r7[0]) * (s.f6[0] - s.f7[0]) + (s.r6[1] - s.r7[1]) * (s.f6[1] - s.f7[1]) + s.m * (x10 * x10 + x11 * x11)), x18 * ((s.r7[0] - s.r8[0]) * (s.f7[0] - s.f8[0]) + (s.r7[1] - s.r8[1]) * (s.f7[1] - s.f8[1]) + s.m * (x12 * x12 + x13 * x13)), x18 * ((s.r8[0] - s.r9[0]) * (s.f8[0] - s.f9[0]) + (s.r8[1] - s.r9[1]) * (s.f8[1] - s.f9[1]) + s.m * (x14 * x14 + x15 * x15)), x18 * ((s.r9[0] - s.r10[0]) * (s.f9[0] - s.f10[0]) + (s.r9[1] - s.r10[1]) * (s.f9[1] - s.f10[1]) + s.m * (x16 * x16 + x17 * x17))]
+    [(s.r1[0] * s.F1[0] + s.r1[1] * s.F1[1] + s.m * (s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1])) * x18, x18 * ((s.r1[0] - s.r2[0]) * (s.F1[0] - s.F2[0]) + (s.r1[1] - s.r2[1]) * (s.F1[1] - s.F2[1]) + s.m * (x0 * x0 + x1 * x1)), x18 * ((s.r2[0] - s.r3[0]) * (s.F2[0] - s.F3[0]) + (s.r2[1] - s.r3[1]) * (s.F2[1] - s.F3[1]) + s.m * (x2 * x2 + x3 * x3)), x18 * ((s.r3[0] - s.r4[0]) * (s.F3[0] - s.F4[0]) + (s.r3[1] - s.r4[1]) * (s.F3[1] - s.F4[1]) + s.m * (x4 * x4 + x5 * x5)), x18 * ((s.r4[0] - s.r5[0]) * (s.F4[0] - s.F5[0]) + (s.r4[1] - s.r5[1]) * (s.F4[1] - s.F5[1]) + s.m * (x6 * x6 + x7 * x7)), x18 * ((s.r5[0] - s.r6[0]) * (s.F5[0] - s.F6[0]) + (s.r5[1] - s.r6[1]) * (s.F5[1] - s.F6[1]) + s.m * (x8 * x8 + x9 * x9)), x18 * ((s.r6[0] - s.r7[0]) * (s.F6[0] - s.F7[0]) + (s.r6[1] - s.r7[1]) * (s.F6[1] - s.F7[1]) + s.m * (x10 * x10 + x11 * x11)), x18 * ((s.r7[0] - s.r8[0]) * (s.F7[0] - s.F8[0]) + (s.r7[1] - s.r8[1]) * (s.F7[1] - s.F8[1]) + s.m * (x12 * x12 + x13 * x13)), x18 * ((s.r8[0] - s.r9[0]) * (s.F8[0] - s.F9[0]) + (s.r8[1] - s.r9[1]) * (s.F8[1] - s.F9[1]) + s.m * (x14 * x14 + x15 * x15)), x18 * ((s.r9[0] - s.r10[0]) * (s.F9[0] - s.F10[0]) + (s.r9[1] - s.r10[1]) * (s.F9[1] - s.F10[1]) + s.m * (x16 * x16 + x17 * x17))]
 }
 
 /// J: row k is the force direction of constraint k (∇C over its constant content), body i's components at columns i·2 .. i·2 + 2.
@@ -269,24 +340,286 @@ pub fn c_term(s: &State) -> [f64; 10] {
     [s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1], x0 * x0 + x1 * x1, x2 * x2 + x3 * x3, x4 * x4 + x5 * x5, x6 * x6 + x7 * x7, x8 * x8 + x9 * x9, x10 * x10 + x11 * x11, x12 * x12 + x13 * x13, x14 * x14 + x15 * x15, x16 * x16 + x17 * x17]
 }
 
-/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial
-/// pivoting; NaN when A is singular, e.g. redundant constraints).
-pub fn lambda(s: &State) -> [f64; 10] {
-    let b = b_vector(s);
-    solve(a_matrix(s), b.map(|x| -x))
+/// The position of each body.
+/// Per body, in file order (`p1`, `p2`, `p3`, `p4`, `p5`, `p6`, `p7`, `p8`, `p9`, `p10`).
+pub fn positions(s: &State) -> [[f64; 2]; 10] {
+    let mut out = [[0.0; 2]; 10];
+    out[0] = [s.r1[0], s.r1[1]];
+    out[1] = [s.r2[0], s.r2[1]];
+    out[2] = [s.r3[0], s.r3[1]];
+    out[3] = [s.r4[0], s.r4[1]];
+    out[4] = [s.r5[0], s.r5[1]];
+    out[5] = [s.r6[0], s.r6[1]];
+    out[6] = [s.r7[0], s.r7[1]];
+    out[7] = [s.r8[0], s.r8[1]];
+    out[8] = [s.r9[0], s.r9[1]];
+    out[9] = [s.r10[0], s.r10[1]];
+    out
 }
 
-/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.
-pub fn forces(s: &State) -> [[f64; 2]; 10] {
-    let (l, j) = (lambda(s), jacobian(s));
-    let mut f = [[0.0; 2]; 10];
-    for (lk, jk) in l.iter().zip(j.iter()) {
-        for (fi, ji) in f.iter_mut().zip(jk.chunks(2)) {
-            for (x, y) in fi.iter_mut().zip(ji) {
-                *x += lk * y;
-            }
-        }
+/// The velocity of each body.
+/// Per body, in file order (`p1`, `p2`, `p3`, `p4`, `p5`, `p6`, `p7`, `p8`, `p9`, `p10`).
+pub fn velocities(s: &State) -> [[f64; 2]; 10] {
+    let mut out = [[0.0; 2]; 10];
+    out[0] = [s.v1[0], s.v1[1]];
+    out[1] = [s.v2[0], s.v2[1]];
+    out[2] = [s.v3[0], s.v3[1]];
+    out[3] = [s.v4[0], s.v4[1]];
+    out[4] = [s.v5[0], s.v5[1]];
+    out[5] = [s.v6[0], s.v6[1]];
+    out[6] = [s.v7[0], s.v7[1]];
+    out[7] = [s.v8[0], s.v8[1]];
+    out[8] = [s.v9[0], s.v9[1]];
+    out[9] = [s.v10[0], s.v10[1]];
+    out
+}
+
+/// The external force on each body (the state's force fields).
+/// Per body, in file order (`p1`, `p2`, `p3`, `p4`, `p5`, `p6`, `p7`, `p8`, `p9`, `p10`).
+pub fn external_forces(s: &State) -> [[f64; 2]; 10] {
+    let mut out = [[0.0; 2]; 10];
+    out[0] = [s.F1[0], s.F1[1]];
+    out[1] = [s.F2[0], s.F2[1]];
+    out[2] = [s.F3[0], s.F3[1]];
+    out[3] = [s.F4[0], s.F4[1]];
+    out[4] = [s.F5[0], s.F5[1]];
+    out[5] = [s.F6[0], s.F6[1]];
+    out[6] = [s.F7[0], s.F7[1]];
+    out[7] = [s.F8[0], s.F8[1]];
+    out[8] = [s.F9[0], s.F9[1]];
+    out[9] = [s.F10[0], s.F10[1]];
+    out
+}
+
+/// The scene's forces (`[scene] forces`) at this state, zero for a body it does not list: an engine's loop writes them into the state's force fields before asking for λ or the accelerations.
+/// Per body, in file order (`p1`, `p2`, `p3`, `p4`, `p5`, `p6`, `p7`, `p8`, `p9`, `p10`).
+pub fn applied_forces(s: &State) -> [[f64; 2]; 10] {
+    let mut out = [[0.0; 2]; 10];
+    let x0 = s.g[0] * s.m;
+    let x1 = s.g[1] * s.m;
+    out[0] = [x0, x1];
+    out[1] = [x0, x1];
+    out[2] = [x0, x1];
+    out[3] = [x0, x1];
+    out[4] = [x0, x1];
+    out[5] = [x0, x1];
+    out[6] = [x0, x1];
+    out[7] = [x0, x1];
+    out[8] = [x0, x1];
+    out[9] = [x0, x1];
+    out
+}
+
+/// 1/m of each body.
+/// Per body, in file order (`p1`, `p2`, `p3`, `p4`, `p5`, `p6`, `p7`, `p8`, `p9`, `p10`).
+pub fn inverse_masses(s: &State) -> [f64; 10] {
+    let x0 = 1.0 / s.m;
+    [x0, x0, x0, x0, x0, x0, x0, x0, x0, x0]
+}
+
+/// The constraint rows at a state, as `lagrange solve` reads them: C/κ, Ċ/κ, c and J = ∇C/κ per body.
+pub fn rows(s: &State) -> Vec<Row<DIM>> {
+    let (c, rate, bias) = (constraints(s), constraint_rates(s), c_term(s));
+    let mut rows: Vec<Row<DIM>> = (0..CONSTRAINTS)
+        .map(|k| Row { value: c[k] / SCALE[k], rate: rate[k] / SCALE[k], bias: bias[k], inequality: INEQUALITY[k], jacobian: Vec::new() })
+        .collect();
+    let j = jacobian(s);
+    for (k, i) in JACOBIAN_BODIES {
+        rows[k].jacobian.push((i, std::array::from_fn(|d| j[k][i * DIM + d])));
     }
+    rows
+}
+
+/// The (constraint, body) pairs of J's structure: body i appears in constraint k's C.
+const JACOBIAN_BODIES: [(usize, usize); 19] = [(0, 0), (1, 0), (1, 1), (2, 1), (2, 2), (3, 2), (3, 3), (4, 3), (4, 4), (5, 4), (5, 5), (6, 5), (6, 6), (7, 6), (7, 7), (8, 7), (8, 8), (9, 8), (9, 9)];
+
+/// λ, the constraint forces and the accelerations at a state, with each inequality's contact state and
+/// the status: what `lagrange solve` gives (see `solve_rows`). Where the numbers overflow, it solves in a
+/// length unit 2ᵏ that brings the largest length-like number near 1, verified homogeneous, and scales back.
+pub fn solution(s: &State) -> Solution<DIM> {
+    let (r, w, v, f) = (rows(s), inverse_masses(s), velocities(s), external_forces(s));
+    let raw = solve_rows(&r, &w, &v, &f, length_scale(&positions(s)));
+    let big = length_like(s);
+    if rows_finite(&r, &w, &v, &f) || !(big > 0.0 && big.is_finite()) {
+        return raw;
+    }
+    let k = big.log2().floor() as i64;
+    let (at, half) = (scaled_state(s, -k), scaled_state(s, -k - 1));
+    let (r, w, v, f) = (rows(&at), inverse_masses(&at), velocities(&at), external_forces(&at));
+    let r_half = rows(&half);
+    if !rows_finite(&r, &w, &v, &f) || !rows_finite(&r_half, &w, &v, &f) {
+        return raw;
+    }
+    let Some(p) = degrees(&r, &r_half) else {
+        return raw;
+    };
+    let mut x = solve_rows(&r, &w, &v, &f, length_scale(&positions(&at)));
+    for y in x.force.iter_mut().chain(x.acceleration.iter_mut()) {
+        *y = y.map(|c| pow2(c, k));
+    }
+    for (q, l) in x.lambda.iter_mut().enumerate() {
+        *l = pow2(*l, -k * (p[q] - 2));
+    }
+    x
+}
+
+/// The state with its length-like fields (positions, velocities, forces, parameters no mass depends on) × 2ᵉ.
+pub fn scaled_state(s: &State, e: i64) -> State {
+    let mut x = *s;
+    x.g = x.g.map(|y| pow2(y, e));
+    x.l = pow2(x.l, e);
+    x.r1 = x.r1.map(|y| pow2(y, e));
+    x.v1 = x.v1.map(|y| pow2(y, e));
+    x.F1 = x.F1.map(|y| pow2(y, e));
+    x.r2 = x.r2.map(|y| pow2(y, e));
+    x.v2 = x.v2.map(|y| pow2(y, e));
+    x.F2 = x.F2.map(|y| pow2(y, e));
+    x.r3 = x.r3.map(|y| pow2(y, e));
+    x.v3 = x.v3.map(|y| pow2(y, e));
+    x.F3 = x.F3.map(|y| pow2(y, e));
+    x.r4 = x.r4.map(|y| pow2(y, e));
+    x.v4 = x.v4.map(|y| pow2(y, e));
+    x.F4 = x.F4.map(|y| pow2(y, e));
+    x.r5 = x.r5.map(|y| pow2(y, e));
+    x.v5 = x.v5.map(|y| pow2(y, e));
+    x.F5 = x.F5.map(|y| pow2(y, e));
+    x.r6 = x.r6.map(|y| pow2(y, e));
+    x.v6 = x.v6.map(|y| pow2(y, e));
+    x.F6 = x.F6.map(|y| pow2(y, e));
+    x.r7 = x.r7.map(|y| pow2(y, e));
+    x.v7 = x.v7.map(|y| pow2(y, e));
+    x.F7 = x.F7.map(|y| pow2(y, e));
+    x.r8 = x.r8.map(|y| pow2(y, e));
+    x.v8 = x.v8.map(|y| pow2(y, e));
+    x.F8 = x.F8.map(|y| pow2(y, e));
+    x.r9 = x.r9.map(|y| pow2(y, e));
+    x.v9 = x.v9.map(|y| pow2(y, e));
+    x.F9 = x.F9.map(|y| pow2(y, e));
+    x.r10 = x.r10.map(|y| pow2(y, e));
+    x.v10 = x.v10.map(|y| pow2(y, e));
+    x.F10 = x.F10.map(|y| pow2(y, e));
+    x
+}
+
+/// The largest |x| of the state's length-like numbers.
+fn length_like(s: &State) -> f64 {
+    let mut big = 0.0f64;
+    for y in s.g {
+        big = big.max(y.abs());
+    }
+    big = big.max(s.l.abs());
+    for y in s.r1 {
+        big = big.max(y.abs());
+    }
+    for y in s.v1 {
+        big = big.max(y.abs());
+    }
+    for y in s.F1 {
+        big = big.max(y.abs());
+    }
+    for y in s.r2 {
+        big = big.max(y.abs());
+    }
+    for y in s.v2 {
+        big = big.max(y.abs());
+    }
+    for y in s.F2 {
+        big = big.max(y.abs());
+    }
+    for y in s.r3 {
+        big = big.max(y.abs());
+    }
+    for y in s.v3 {
+        big = big.max(y.abs());
+    }
+    for y in s.F3 {
+        big = big.max(y.abs());
+    }
+    for y in s.r4 {
+        big = big.max(y.abs());
+    }
+    for y in s.v4 {
+        big = big.max(y.abs());
+    }
+    for y in s.F4 {
+        big = big.max(y.abs());
+    }
+    for y in s.r5 {
+        big = big.max(y.abs());
+    }
+    for y in s.v5 {
+        big = big.max(y.abs());
+    }
+    for y in s.F5 {
+        big = big.max(y.abs());
+    }
+    for y in s.r6 {
+        big = big.max(y.abs());
+    }
+    for y in s.v6 {
+        big = big.max(y.abs());
+    }
+    for y in s.F6 {
+        big = big.max(y.abs());
+    }
+    for y in s.r7 {
+        big = big.max(y.abs());
+    }
+    for y in s.v7 {
+        big = big.max(y.abs());
+    }
+    for y in s.F7 {
+        big = big.max(y.abs());
+    }
+    for y in s.r8 {
+        big = big.max(y.abs());
+    }
+    for y in s.v8 {
+        big = big.max(y.abs());
+    }
+    for y in s.F8 {
+        big = big.max(y.abs());
+    }
+    for y in s.r9 {
+        big = big.max(y.abs());
+    }
+    for y in s.v9 {
+        big = big.max(y.abs());
+    }
+    for y in s.F9 {
+        big = big.max(y.abs());
+    }
+    for y in s.r10 {
+        big = big.max(y.abs());
+    }
+    for y in s.v10 {
+        big = big.max(y.abs());
+    }
+    for y in s.F10 {
+        big = big.max(y.abs());
+    }
+    big
+}
+
+/// The accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ of every body (in file order), from the rows' solve.
+pub fn accelerations(s: &State) -> [[f64; 2]; 10] {
+    let mut a = [[0.0; 2]; 10];
+    a.copy_from_slice(&solution(s).acceleration);
+    a
+}
+
+/// The multipliers λ (for C/κ), as `lagrange solve` gives them: 0 on an inequality that is apart,
+/// separating or would pull, and the minimum-norm λ where A is singular (see `solution`).
+pub fn lambda(s: &State) -> [f64; 10] {
+    let mut l = [0.0; 10];
+    l.copy_from_slice(&solution(s).lambda);
+    l
+}
+
+/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order), from the rows' solve.
+pub fn forces(s: &State) -> [[f64; 2]; 10] {
+    let mut f = [[0.0; 2]; 10];
+    f.copy_from_slice(&solution(s).force);
     f
 }
 
@@ -340,41 +673,447 @@ pub fn force_p10(s: &State) -> [f64; 2] {
     forces(s)[9]
 }
 
-/// Solves `a x = b` by Gaussian elimination with partial pivoting; NaN if `a` is singular.
-#[allow(clippy::needless_range_loop)]
-fn solve<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> [f64; K] {
-    for col in 0..K {
-        let mut p = col;
-        for row in col + 1..K {
-            if a[row][col].abs() > a[p][col].abs() {
-                p = row;
-            }
-        }
-        a.swap(col, p);
-        b.swap(col, p);
-        let pivot = a[col][col];
-        if pivot == 0.0 || !pivot.is_finite() {
-            return [f64::NAN; K];
-        }
-        for row in col + 1..K {
-            let f = a[row][col] / pivot;
-            if f != 0.0 {
-                for c in col..K {
-                    a[row][c] -= f * a[col][c];
+/// Where an inequality row stands (the contact states of `lagrange solve`).
+#[allow(dead_code)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Contact {
+    /// C > 0 beyond the tolerance: no force.
+    Apart,
+    /// Touching and opening (Ċ > 0): no force.
+    Separating,
+    /// Touching with Ċ ≈ 0: λ ≥ 0 by complementarity.
+    Resting,
+    /// Touching and closing (Ċ < 0): it needs an impulse; the force holds it as if resting.
+    Closing,
+    /// C < 0 beyond the tolerance: treated as touching.
+    Penetrating,
+}
+
+/// How a solve went, from best to worst (the statuses of `lagrange solve`).
+#[allow(dead_code)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Status {
+    /// Every condition holds.
+    Solved,
+    /// Redundant constraints with consistent data: the minimum-norm λ (in the scaled
+    /// multipliers λₖ·‖Jₖ‖·√Aₖₖ, which do not depend on how C is written).
+    MinimumNorm,
+    /// A constraint has a zero gradient here: it carries no force.
+    Singular,
+    /// The active-set search did not settle: the last λ, clamped.
+    Inaccurate,
+    /// The constraints contradict each other: the least-squares minimum-norm λ.
+    Inconsistent,
+    /// Non-finite numbers: λ is 0 on the rows involved.
+    Failed,
+}
+
+/// One constraint row at a state: C/κ, Ċ/κ, c, and J = ∇C/κ per body it involves.
+#[allow(dead_code)]
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row<const D: usize> {
+    pub value: f64,
+    pub rate: f64,
+    pub bias: f64,
+    pub inequality: bool,
+    pub jacobian: Vec<(usize, [f64; D])>,
+}
+
+/// The answer at one state, as `lagrange solve` gives it.
+#[allow(dead_code)]
+#[derive(Clone, Debug, PartialEq)]
+pub struct Solution<const D: usize> {
+    /// λ per constraint, for C/κ (0 for an inequality that is not pushing).
+    pub lambda: Vec<f64>,
+    /// The contact state of each inequality row (`None` for equalities).
+    pub contacts: Vec<Option<Contact>>,
+    /// The constraint force Σₖ λₖ Jₖᵢ on each body.
+    pub force: Vec<[f64; D]>,
+    /// (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ per body.
+    pub acceleration: Vec<[f64; D]>,
+    pub status: Status,
+}
+
+/// Relative tolerance of "touching" and "resting" (`numeric::solve::Settings`).
+const CONTACT_TOLERANCE: f64 = 1e-9;
+/// Pivots and eigenvalues of the unit-diagonal Ã at or below this are zero.
+const RANK_TOLERANCE: f64 = 1e-10;
+
+/// ‖x‖ without overflow or underflow.
+#[allow(dead_code)]
+fn safe_norm(x: &[f64]) -> f64 {
+    let big = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if big == 0.0 || !big.is_finite() {
+        return big;
+    }
+    let s: f64 = x.iter().map(|v| (v / big) * (v / big)).sum();
+    big * s.sqrt()
+}
+
+/// The contact length of a scene at a state: the largest |rᵢ| (1 when there is none).
+#[allow(dead_code)]
+fn length_scale<const D: usize>(positions: &[[f64; D]]) -> f64 {
+    let length = positions.iter().map(|r| safe_norm(r)).fold(0.0, f64::max);
+    if length > 0.0 && length.is_finite() { length } else { 1.0 }
+}
+
+/// λ, the forces and the accelerations at a state (see the note at the top of this part).
+#[allow(dead_code, clippy::needless_range_loop)]
+fn solve_rows<const D: usize>(
+    rows: &[Row<D>],
+    inverse_mass: &[f64],
+    velocity: &[[f64; D]],
+    force: &[[f64; D]],
+    length: f64,
+) -> Solution<D> {
+    let (k, n) = (rows.len(), inverse_mass.len());
+    let mut status = Status::Solved;
+    let bad_body: Vec<bool> = (0..n)
+        .map(|i| {
+            let w = inverse_mass[i];
+            !(w.is_finite() && w >= 0.0) || force[i].iter().chain(&velocity[i]).any(|x| !x.is_finite())
+        })
+        .collect();
+    // Scaling: ‖Jₖ‖, 1/√Âₖₖ and J̃ₖ per usable row.
+    let mut norm = vec![0.0; k];
+    let mut jacobi = vec![0.0; k];
+    let mut scaled: Vec<Vec<(usize, [f64; D])>> = vec![Vec::new(); k];
+    let mut contacts = vec![None; k];
+    for (q, row) in rows.iter().enumerate() {
+        let nq = row.jacobian.iter().map(|(_, j)| safe_norm(j)).fold(0.0, |a, b| safe_norm(&[a, b]));
+        // The contact state, as `numeric::contact::classify` gives it.
+        if row.inequality {
+            let speed = row.jacobian.iter().map(|(b, _)| safe_norm(&velocity[*b])).fold(0.0, f64::max);
+            let tol = CONTACT_TOLERANCE;
+            contacts[q] = Some(if !(nq > 0.0 && nq.is_finite()) {
+                if row.value >= 0.0 { Contact::Apart } else { Contact::Penetrating }
+            } else {
+                let (distance, rate) = (row.value / nq, row.rate / nq);
+                if distance > tol * length {
+                    Contact::Apart
+                } else if distance.is_nan() || distance < -tol * length {
+                    Contact::Penetrating
+                } else if rate > tol * speed {
+                    Contact::Separating
+                } else if rate < -tol * speed {
+                    Contact::Closing
+                } else {
+                    Contact::Resting
                 }
-                b[row] -= f * b[col];
+            });
+        }
+        let finite = nq.is_finite()
+            && row.bias.is_finite()
+            && !row.jacobian.iter().any(|(b, _)| bad_body[*b])
+            && (!row.inequality || (row.value.is_finite() && row.rate.is_finite()));
+        if !finite {
+            status = status.max(Status::Failed);
+            continue;
+        }
+        if nq == 0.0 {
+            status = status.max(Status::Singular);
+            continue;
+        }
+        let unit = |j: &[f64; D]| j.map(|x| x / nq);
+        let a_kk: f64 =
+            row.jacobian.iter().map(|(b, j)| unit(j).iter().map(|x| x * x).sum::<f64>() * inverse_mass[*b]).sum();
+        if !(a_kk > 0.0 && a_kk.is_finite()) {
+            status = status.max(Status::Singular);
+            continue;
+        }
+        let d = 1.0 / a_kk.sqrt();
+        norm[q] = nq;
+        jacobi[q] = d;
+        scaled[q] = row.jacobian.iter().map(|(b, j)| (*b, unit(j).map(|x| x * d))).collect();
+    }
+    // Candidates: usable equalities, and inequality rows touching without separating.
+    let index: Vec<usize> = (0..k)
+        .filter(|&q| norm[q] > 0.0 && !matches!(contacts[q], Some(Contact::Apart) | Some(Contact::Separating)))
+        .collect();
+    let m = index.len();
+    // b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ, and Ãₚq = Σᵢ J̃ₚᵢ·J̃qᵢ wᵢ over shared bodies.
+    let dot = |a: &[f64; D], b: &[f64; D]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let b: Vec<f64> = index
+        .iter()
+        .map(|&q| {
+            let ext: f64 = scaled[q].iter().map(|(i, j)| dot(j, &force[*i]) * inverse_mass[*i]).sum();
+            ext + (rows[q].bias / norm[q]) * jacobi[q]
+        })
+        .collect();
+    let mut a = vec![vec![0.0; m]; m];
+    for p in 0..m {
+        for r in p..m {
+            let mut x = 0.0;
+            for (i, jp) in &scaled[index[p]] {
+                if let Some((_, jr)) = scaled[index[r]].iter().find(|(j, _)| j == i) {
+                    x += dot(jp, jr) * inverse_mass[*i];
+                }
+            }
+            a[p][r] = x;
+            a[r][p] = x;
+        }
+    }
+    let nonnegative: Vec<bool> = index.iter().map(|&q| rows[q].inequality).collect();
+    let mu = multipliers(&a, &b, &nonnegative, &mut status);
+    let mut lambda = vec![0.0; k];
+    let mut constraint_force = vec![[0.0; D]; n];
+    for (p, &q) in index.iter().enumerate() {
+        lambda[q] = (mu[p] * jacobi[q]) / norm[q];
+        for (i, j) in &scaled[q] {
+            for c in 0..D {
+                constraint_force[*i][c] += mu[p] * j[c];
             }
         }
     }
-    let mut x = [0.0; K];
-    for row in (0..K).rev() {
-        let mut acc = b[row];
-        for c in row + 1..K {
-            acc -= a[row][c] * x[c];
+    let acceleration =
+        (0..n).map(|i| std::array::from_fn(|c| (force[i][c] + constraint_force[i][c]) * inverse_mass[i])).collect();
+    Solution { lambda, contacts, force: constraint_force, acceleration, status }
+}
+
+/// The scaled multipliers: the equality solve when no row is `nonnegative`, else the LCP.
+#[allow(dead_code)]
+fn multipliers(a: &[Vec<f64>], b: &[f64], nonnegative: &[bool], status: &mut Status) -> Vec<f64> {
+    let n = b.len();
+    let clamp = |x: Vec<f64>| -> Vec<f64> {
+        x.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect()
+    };
+    let everything = vec![true; n];
+    if !nonnegative.contains(&true) {
+        return subset(a, b, &everything, status);
+    }
+    let tol = CONTACT_TOLERANCE;
+    // Every touching inequality as an equality first: if they all push, that is the answer.
+    let mut first = Status::Solved;
+    let x = subset(a, b, &everything, &mut first);
+    let scale = x.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    if first == Status::Solved && x.iter().zip(nonnegative).all(|(v, &nn)| !nn || *v >= -tol * scale) {
+        return clamp(x);
+    }
+    // Murty's least-index principal pivoting (Murty 1974), from the rows that pushed.
+    let mut in_set: Vec<bool> = (0..n).map(|p| !nonnegative[p] || x[p] > 0.0).collect();
+    let mut last = x;
+    for _ in 0..(200 * n + 1000) {
+        let mut s = Status::Solved;
+        let x = subset(a, b, &in_set, &mut s);
+        let scale = b.iter().chain(&x).fold(1.0f64, |m, v| m.max(v.abs()));
+        let w: Vec<f64> = (0..n).map(|p| (0..n).map(|q| a[p][q] * x[q]).sum::<f64>() + b[p]).collect();
+        let flip = (0..n)
+            .find(|&p| nonnegative[p] && ((in_set[p] && x[p] < -tol * scale) || (!in_set[p] && w[p] < -tol * scale)));
+        last = x;
+        match flip {
+            None => {
+                *status = (*status).max(s);
+                return clamp(last);
+            }
+            Some(p) => in_set[p] = !in_set[p],
         }
-        x[row] = acc / a[row][row];
+    }
+    *status = (*status).max(Status::Inaccurate);
+    clamp(last)
+}
+
+/// Solves Ã μ = −b̃ on the rows marked in `keep` (the others get μ = 0): Cholesky with one
+/// step of iterative refinement; the minimum-norm solution when Ã is singular there.
+#[allow(dead_code, clippy::needless_range_loop)]
+fn subset(a: &[Vec<f64>], b: &[f64], keep: &[bool], status: &mut Status) -> Vec<f64> {
+    let rows: Vec<usize> = (0..b.len()).filter(|&p| keep[p]).collect();
+    let m = rows.len();
+    let sub: Vec<Vec<f64>> = rows.iter().map(|&p| rows.iter().map(|&q| a[p][q]).collect()).collect();
+    let rhs: Vec<f64> = rows.iter().map(|&p| -b[p]).collect();
+    let y = match cholesky(&sub) {
+        Some(l) => {
+            let mut y = cholesky_solve(&l, &rhs);
+            let r: Vec<f64> = (0..m).map(|p| rhs[p] - (0..m).map(|q| sub[p][q] * y[q]).sum::<f64>()).collect();
+            let dy = cholesky_solve(&l, &r);
+            for p in 0..m {
+                y[p] += dy[p];
+            }
+            y
+        }
+        None => minimum_norm(&sub, &rhs, status),
+    };
+    let mut x = vec![0.0; b.len()];
+    for (i, &p) in rows.iter().enumerate() {
+        x[p] = if y[i].is_finite() {
+            y[i]
+        } else {
+            *status = (*status).max(Status::Failed);
+            0.0
+        };
     }
     x
+}
+
+/// L of A = L Lᵀ, or `None` when a pivot L[i][i]² is at or below the rank tolerance.
+#[allow(dead_code, clippy::needless_range_loop)]
+fn cholesky(a: &[Vec<f64>]) -> Option<Vec<Vec<f64>>> {
+    let n = a.len();
+    let mut l = vec![vec![0.0; n]; n];
+    for i in 0..n {
+        for j in 0..=i {
+            let mut acc = a[i][j];
+            for p in 0..j {
+                acc -= l[i][p] * l[j][p];
+            }
+            if i == j {
+                if !(acc > RANK_TOLERANCE && acc.is_finite()) {
+                    return None;
+                }
+                l[i][i] = acc.sqrt();
+            } else {
+                l[i][j] = acc / l[j][j];
+            }
+        }
+    }
+    Some(l)
+}
+
+/// x with L Lᵀ x = b.
+#[allow(dead_code, clippy::needless_range_loop)]
+fn cholesky_solve(l: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
+    let n = b.len();
+    let mut x = b.to_vec();
+    for i in 0..n {
+        for p in 0..i {
+            x[i] -= l[i][p] * x[p];
+        }
+        x[i] /= l[i][i];
+    }
+    for i in (0..n).rev() {
+        for p in i + 1..n {
+            x[i] -= l[p][i] * x[p];
+        }
+        x[i] /= l[i][i];
+    }
+    x
+}
+
+/// The minimum-norm (least-squares if inconsistent) solution of a singular symmetric
+/// `a x = rhs`: Σ over eigenvalues above the rank threshold of vᵢ (vᵢ·rhs)/σᵢ, from a cyclic
+/// Jacobi eigendecomposition (for a symmetric matrix its singular values are |σᵢ|).
+#[allow(dead_code, clippy::needless_range_loop)]
+fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], status: &mut Status) -> Vec<f64> {
+    let n = rhs.len();
+    let mut s: Vec<Vec<f64>> = a.to_vec();
+    let mut v: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect();
+    for _sweep in 0..100 {
+        let off: f64 = (0..n)
+            .flat_map(|i| (0..n).filter(move |&j| j != i).map(move |j| (i, j)))
+            .map(|(i, j)| s[i][j] * s[i][j])
+            .sum();
+        let diag: f64 = (0..n).map(|i| s[i][i] * s[i][i]).sum();
+        if off.is_nan() || off <= 1e-32 * diag {
+            break;
+        }
+        for p in 0..n {
+            for q in p + 1..n {
+                if s[p][q] == 0.0 {
+                    continue;
+                }
+                // The rotation that zeroes s[p][q] (Golub & Van Loan, §8.5).
+                let theta = (s[q][q] - s[p][p]) / (2.0 * s[p][q]);
+                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+                let t = if theta == 0.0 { 1.0 } else { t };
+                let c = 1.0 / (t * t + 1.0).sqrt();
+                let sn = t * c;
+                for r in 0..n {
+                    let (x, y) = (s[r][p], s[r][q]);
+                    s[r][p] = c * x - sn * y;
+                    s[r][q] = sn * x + c * y;
+                }
+                for r in 0..n {
+                    let (x, y) = (s[p][r], s[q][r]);
+                    s[p][r] = c * x - sn * y;
+                    s[q][r] = sn * x + c * y;
+                }
+                for r in 0..n {
+                    let (x, y) = (v[r][p], v[r][q]);
+                    v[r][p] = c * x - sn * y;
+                    v[r][q] = sn * x + c * y;
+                }
+            }
+        }
+    }
+    let largest = (0..n).map(|i| s[i][i].abs()).fold(0.0, f64::max);
+    let threshold = RANK_TOLERANCE * largest.max(f64::MIN_POSITIVE);
+    let mut x = vec![0.0; n];
+    for e in 0..n {
+        let sigma = s[e][e];
+        if sigma.abs() > threshold {
+            let along = (0..n).map(|r| v[r][e] * rhs[r]).sum::<f64>() / sigma;
+            for r in 0..n {
+                x[r] += v[r][e] * along;
+            }
+        }
+    }
+    let amax = |xs: &mut dyn Iterator<Item = f64>| xs.fold(0.0f64, |m, y| m.max(y.abs()));
+    let residual = amax(&mut (0..n).map(|p| (0..n).map(|q| a[p][q] * x[q]).sum::<f64>() - rhs[p]));
+    let size = amax(&mut rhs.iter().copied()) + amax(&mut a.iter().flatten().copied()) * amax(&mut x.iter().copied());
+    let consistent = size == 0.0 || residual <= CONTACT_TOLERANCE.sqrt() * 1e-2 * size;
+    *status = (*status).max(if consistent { Status::MinimumNorm } else { Status::Inconsistent });
+    x
+}
+
+/// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+#[allow(dead_code)]
+fn pow2(mut x: f64, mut e: i64) -> f64 {
+    while e > 1000 {
+        x *= 2f64.powi(1000);
+        e -= 1000;
+    }
+    while e < -1000 {
+        x *= 2f64.powi(-1000);
+        e += 1000;
+    }
+    x * 2f64.powi(e as i32)
+}
+
+/// Whether every number the solve reads is finite.
+#[allow(dead_code)]
+fn rows_finite<const D: usize>(
+    rows: &[Row<D>],
+    inverse_mass: &[f64],
+    velocity: &[[f64; D]],
+    force: &[[f64; D]],
+) -> bool {
+    inverse_mass.iter().all(|x| x.is_finite())
+        && velocity.iter().chain(force).flatten().all(|x| x.is_finite())
+        && rows.iter().all(|r| {
+            r.value.is_finite()
+                && r.rate.is_finite()
+                && r.bias.is_finite()
+                && r.jacobian.iter().all(|(_, j)| j.iter().all(|x| x.is_finite()))
+        })
+}
+
+/// The degree p of each row if `at` (a state scaled by 2ᵉ) and `half` (by 2ᵉ⁻¹) differ
+/// exactly as a homogeneous row would (C, Ċ, c by 2ᵖ, J by 2ᵖ⁻¹), else `None`.
+#[allow(dead_code)]
+fn degrees<const D: usize>(at: &[Row<D>], half: &[Row<D>]) -> Option<Vec<i64>> {
+    let exact = |a: f64, b: f64, p: i64| a == pow2(b, p);
+    let mut out = Vec::with_capacity(at.len());
+    for (a, b) in at.iter().zip(half) {
+        let scalars = [(a.value, b.value), (a.rate, b.rate), (a.bias, b.bias)];
+        let from_scalar = scalars.iter().find(|(x, _)| *x != 0.0).map(|&(x, y)| (x / y).log2().round() as i64);
+        let from_j = a
+            .jacobian
+            .iter()
+            .zip(&b.jacobian)
+            .flat_map(|((_, x), (_, y))| x.iter().zip(y).map(|(x, y)| (*x, *y)))
+            .find(|(x, _)| *x != 0.0)
+            .map(|(x, y)| (x / y).log2().round() as i64 + 1);
+        let p = from_scalar.or(from_j).unwrap_or(0);
+        let ok = scalars.iter().all(|&(x, y)| exact(x, y, p))
+            && a.jacobian
+                .iter()
+                .zip(&b.jacobian)
+                .all(|((_, x), (_, y))| x.iter().zip(y).all(|(x, y)| exact(*x, *y, p - 1)));
+        if !ok {
+            return None;
+        }
+        out.push(p);
+    }
+    Some(out)
 }
 
 /// |(x, y)| without overflow or underflow (the plain formula unless it would lose range).

@@ -1,6 +1,8 @@
 //! How a generated module lays out a system: dense or banded A, on the stack or the heap,
 //! dense J or its blocks, outputs in one function or in parts. Decided once, from the
 //! derivation's sizes, before any text is written; every emitter (Rust today) follows it.
+//! How λ is found ([`Lambda`]: a guarded closed form, band Cholesky, or the rows' solve
+//! that honours inequalities and redundancy) is decided here too.
 //!
 //! Big systems must not need a big stack (a 1000-link chain's dense J alone is 16 MB), and
 //! code size should grow linearly with a chain's length. So A is a dense K×K array only up
@@ -30,6 +32,27 @@ pub const MAX_DENSE_J: usize = 4096;
 /// outputs stay one function each.
 pub const MAX_PART: usize = 64;
 
+/// Most fields of a `State` struct with one field per symbol. rustc's derives of
+/// `PartialEq` and `Debug` recurse over the fields: a 2 000-link chain's 8 000 fields
+/// overflow its stack, 1 700 links' compile; 1 024 keeps far from that edge while every
+/// shipped scene keeps named fields. Past it the bodies' symbols live in role arrays.
+pub const MAX_STATE_FIELDS: usize = 1024;
+
+/// How `State` holds the inputs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StateStorage {
+    /// One field per symbol.
+    Fields,
+    /// Positions, velocities, forces and mass symbols as arrays indexed by body (or mass
+    /// symbol); time and parameters stay fields. Past [`MAX_STATE_FIELDS`] fields.
+    Arrays,
+}
+
+/// How `State` holds `fields` inputs.
+pub fn state_storage(fields: usize) -> StateStorage {
+    if fields > MAX_STATE_FIELDS { StateStorage::Arrays } else { StateStorage::Fields }
+}
+
 /// How A is stored.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AStorage {
@@ -54,12 +77,16 @@ pub enum JStorage {
 /// How λ is found.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Lambda {
-    /// One constraint: λ and the forces are closed formulas.
+    /// One equality: λ and the forces are closed formulas, used where their numbers are in
+    /// range (A normal, b finite); elsewhere the rows' solve ([`Lambda::Rows`]) answers.
     ClosedForm,
-    /// Several: A λ = −b solved in the module, by the solve A's storage needs.
-    Solved,
+    /// Equalities only, A banded past [`MAX_DENSE_A`]: band Cholesky on A λ = −b, and the
+    /// rows' solve where it fails (a singular A).
+    Band,
+    /// The rows' solve of every other system: the scaled solve of `lagrange solve`, with
+    /// inequality rows (λ ≥ 0, contact states) and the minimum-norm λ of a singular A.
+    Rows,
 }
-
 /// The layout of one module.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Layout {
@@ -76,7 +103,8 @@ pub struct Layout {
 impl Layout {
     /// The layout for `constraints` constraints on `bodies` bodies in `dim` dimensions, with
     /// the non-zero entries `a` (upper triangle, `(k, j)`) and `blocks` non-zero blocks of J;
-    /// `closed_form` when the derivation gives λ as a formula.
+    /// `closed_form` when the derivation gives λ as a formula, `inequalities` when some row
+    /// is `C ≥ 0`.
     pub fn of(
         dim: usize,
         bodies: usize,
@@ -84,6 +112,7 @@ impl Layout {
         a: &[(usize, usize)],
         blocks: usize,
         closed_form: bool,
+        inequalities: bool,
     ) -> Layout {
         let k = constraints;
         let bandwidth = a.iter().map(|&(r, c)| r.abs_diff(c)).max().unwrap_or(0);
@@ -99,7 +128,12 @@ impl Layout {
         let parted = k > MAX_PART
             || (k > MAX_DENSE_A && a.len() > MAX_PART)
             || (matches!(j, JStorage::Blocks { .. }) && blocks > MAX_PART);
-        let lambda = if closed_form { Lambda::ClosedForm } else { Lambda::Solved };
+        let lambda = match a_storage {
+            _ if inequalities => Lambda::Rows,
+            _ if closed_form => Lambda::ClosedForm,
+            AStorage::Band { .. } => Lambda::Band,
+            _ => Lambda::Rows,
+        };
         Layout { dim, bodies, constraints, a: a_storage, j, lambda, parted }
     }
 }
@@ -133,16 +167,26 @@ mod tests {
     #[test]
     fn a_chain_is_banded_past_the_dense_limit_and_a_full_a_goes_to_the_heap() {
         let chain = |k: usize| (0..k).flat_map(|i| [(i, i), (i, (i + 1).min(k - 1))]).collect::<Vec<_>>();
-        assert_eq!(Layout::of(2, 16, 16, &chain(16), 31, false).a, AStorage::Dense);
-        assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false).a, AStorage::Band { bandwidth: 1 });
+        assert_eq!(Layout::of(2, 16, 16, &chain(16), 31, false, false).a, AStorage::Dense);
+        assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false, false).a, AStorage::Band { bandwidth: 1 });
         let full: Vec<(usize, usize)> = (0..17).flat_map(|i| (i..17).map(move |j| (i, j))).collect();
-        assert_eq!(Layout::of(2, 17, 17, &full, 17, false).a, AStorage::Heap);
+        assert_eq!(Layout::of(2, 17, 17, &full, 17, false, false).a, AStorage::Heap);
+    }
+
+    #[test]
+    fn inequalities_always_take_the_rows_solve() {
+        let chain = |k: usize| (0..k).flat_map(|i| [(i, i), (i, (i + 1).min(k - 1))]).collect::<Vec<_>>();
+        assert_eq!(Layout::of(2, 1, 1, &chain(1), 1, true, false).lambda, Lambda::ClosedForm);
+        assert_eq!(Layout::of(2, 1, 1, &chain(1), 1, true, true).lambda, Lambda::Rows);
+        assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false, false).lambda, Lambda::Band);
+        assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false, true).lambda, Lambda::Rows);
+        assert_eq!(Layout::of(2, 3, 3, &chain(3), 5, false, false).lambda, Lambda::Rows);
     }
 
     #[test]
     fn j_is_blocks_past_its_dense_limit() {
-        assert_eq!(Layout::of(2, 32, 64, &[], 10, false).j, JStorage::Dense);
-        assert_eq!(Layout::of(2, 33, 64, &[], 10, false).j, JStorage::Blocks { count: 10 });
+        assert_eq!(Layout::of(2, 32, 64, &[], 10, false, false).j, JStorage::Dense);
+        assert_eq!(Layout::of(2, 33, 64, &[], 10, false, false).j, JStorage::Blocks { count: 10 });
     }
 
     #[test]

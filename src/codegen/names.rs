@@ -73,6 +73,19 @@ pub fn snake(name: &str) -> String {
     out
 }
 
+/// The name itself when it can be a Rust field as written: ASCII letters, digits and `_`,
+/// not starting with a digit, not `_` alone and not a keyword. Otherwise `None` (the
+/// field's name is then [`snake`] of it).
+pub fn as_written(name: &str) -> Option<&str> {
+    let ok = !name.is_empty()
+        && name != "_"
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        && !name.starts_with(|c: char| c.is_ascii_digit())
+        && !KEYWORDS.contains(&name)
+        && !matches!(name, "Self" | "super" | "crate");
+    ok.then_some(name)
+}
+
 /// Hands out distinct identifiers: a clash gets `_2`, `_3`, ….
 pub(super) struct Namer {
     used: HashSet<String>,

@@ -2,16 +2,19 @@
 //!
 //! The module has a `State` struct (time, positions, velocities, external forces, masses and
 //! parameters as fields, vectors as `[f64; D]`) and plain functions of it: the constraint
-//! values, A, b, the directions J (∇C over its constant content) and c, λ and the force on
-//! each body. With one constraint λ and the forces are closed formulas; with several, λ
-//! comes from a small Gaussian elimination in the module (A λ = −b).
+//! values C (as written) and rates Ċ, A, b, the directions J (∇C over its constant content
+//! κ, exported as `SCALE`) and c, the bodies' numbers, and `solution`: the solve of
+//! `lagrange solve` on the module's rows (`support/rows.rs`: scaled rows, contact states,
+//! λ ≥ 0 on inequalities, the minimum-norm λ of redundant constraints), with `lambda`,
+//! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
+//! forms, guarded: where their numbers leave f64's range the scaled solve answers.
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
 //! is written; this file writes the text it decides. The entries of A are computed from the
 //! directions as assembled (Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ), not from the canonical, bilinearly expanded
-//! form the doc comments show: fewer operations and no cancellation. The solve a module
-//! carries is one of the helper files of `codegen::support`, included as it is written.
+//! form the doc comments show: fewer operations and no cancellation. The solves a module
+//! carries are helper files of `codegen::support`, included as they are written.
 //!
 //! Each function body is the scalar [`Program`] of its formulas: values used more than once
 //! become `let` bindings, values used once are written inline. `--specialize` substitutes
@@ -25,16 +28,17 @@
 //! Not here: layout decisions (`codegen::layout`), the helpers' text (`codegen::support`),
 //! files or stdout (`main.rs`), evaluation (`numeric`).
 
-use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART};
+use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{HELPERS, SOLVE, SOLVE_BAND, SOLVE_HEAP};
+use super::support::{HELPERS, ROWS, SOLVE_BAND};
 use crate::derive::{DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
 use crate::model::file::Loaded;
 use crate::numeric::program::{LowerError, Op, Program};
+use std::cell::Cell;
 use std::collections::{HashMap, HashSet};
 use std::fmt::Write;
 
@@ -67,6 +71,8 @@ const MAX_INLINE_DEPTH: u32 = 24;
 /// Every formula the module needs, as graph nodes.
 struct Formulas {
     c: Vec<Id>,
+    /// Ċ per constraint (with ∂C/∂t).
+    c_dot: Vec<Id>,
     /// `(k, j, Aₖⱼ)`, upper triangle.
     a: Vec<(usize, usize, Id)>,
     b: Vec<Id>,
@@ -80,6 +86,7 @@ impl Formulas {
     fn map(self, mut f: impl FnMut(Id) -> Result<Id, GenerateError>) -> Result<Formulas, GenerateError> {
         let mut each = |xs: Vec<Id>| xs.into_iter().map(&mut f).collect::<Result<Vec<_>, _>>();
         let c = each(self.c)?;
+        let c_dot = each(self.c_dot)?;
         let b = each(self.b)?;
         let bias = each(self.bias)?;
         let a = self.a.into_iter().map(|(k, j, x)| Ok((k, j, f(x)?))).collect::<Result<_, GenerateError>>()?;
@@ -93,15 +100,19 @@ impl Formulas {
             Some(fs) => Some(fs.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>()?),
             None => None,
         };
-        Ok(Formulas { c, a, b, jacobian, bias, lambda, forces })
+        Ok(Formulas { c, c_dot, a, b, jacobian, bias, lambda, forces })
     }
 }
 
 /// A field of `State`.
 struct Field {
     symbol: Symbol,
+    /// The field's name, or `array[index]` for a symbol held in a role array.
     ident: String,
     doc: String,
+    /// The role array (`position`, `velocity`, `force`, `mass`) that holds it, with its
+    /// index, when the layout puts bodies' symbols in arrays.
+    array: Option<(&'static str, usize)>,
 }
 
 /// A generated module and the `State` field that holds each input symbol.
@@ -109,6 +120,9 @@ struct Field {
 pub struct Module {
     pub code: String,
     pub fields: Vec<(Symbol, String)>,
+    /// What the user should know about the code (also written as notes in its header):
+    /// constants that do not fit in f64.
+    pub warnings: Vec<String>,
 }
 
 /// Generates the Rust module for a loaded file (the source text).
@@ -123,6 +137,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let system = &loaded.system;
     let mut formulas = Formulas {
         c: d.constraints.iter().map(|c| c.c).collect(),
+        c_dot: d.constraints.iter().map(|c| c.c_dot).collect(),
         a: d.a.clone(),
         b: d.b.clone(),
         jacobian: d.constraints.iter().map(|c| c.jacobian.clone()).collect(),
@@ -174,38 +189,251 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     // comments keep the canonical form.
     let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
     let a_code = assembled_a(&mut d.graph, &formulas, &masses)?;
+    let inverse_masses = masses.iter().map(|&m| d.graph.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
+    // The scene's force expressions (`[scene] forces`); a body not listed feels none.
+    let zero = d.graph.num(Rational::int(0));
+    let zero = d.graph.vector(vec![zero; d.graph.dim()])?;
+    let mut applied = Vec::with_capacity(system.bodies.len());
+    for i in 0..system.bodies.len() {
+        applied.push(match loaded.scene.forces.iter().find(|f| f.0 == i) {
+            Some(&(_, id)) => d.graph.substitute(id, &map)?,
+            None => zero,
+        });
+    }
+    let bodies = Bodies {
+        applied,
+        position: system.bodies.iter().map(|b| b.nodes.position).collect(),
+        velocity: system.bodies.iter().map(|b| b.nodes.velocity).collect(),
+        force: system.bodies.iter().map(|b| b.nodes.force).collect(),
+        inverse_mass: inverse_masses,
+    };
     let g = &d.graph;
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
     // The state holds the file's symbols, not those the derivation declared (the multipliers).
-    let fields = state_fields(&system.graph, &body_names, &substituted);
+    let field_count = system
+        .graph
+        .symbols()
+        .filter(|(s, i)| !substituted.contains(s) && !matches!(i.role, Role::Acceleration { .. }))
+        .count();
+    let arrays = layout::state_storage(field_count) == StateStorage::Arrays;
+    let fields = state_fields(&system.graph, &body_names, &substituted, arrays);
     let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
     let slots = slot_exprs(g, &fields);
     let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
     let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
     let closed_form = formulas.lambda.is_some() && formulas.forces.is_some();
-    let layout = Layout::of(g.dim(), system.bodies.len(), system.constraints.len(), &a_entries, blocks, closed_form);
+    let inequalities = system.constraints.iter().any(|c| c.inequality);
+    let layout = Layout::of(
+        g.dim(),
+        system.bodies.len(),
+        system.constraints.len(),
+        &a_entries,
+        blocks,
+        closed_form,
+        inequalities,
+    );
 
     let mut out = String::new();
     let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
     header(&mut out, title, options.specialize, &layout);
+    field_names(&mut out, g, &fields);
     state(&mut out, g, &fields, &layout);
-    let ctx = Ctx { g, inputs: &inputs, slots: &slots };
+    let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
+    let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
+    row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
+    let header_end = out.len();
+    let ctx = Ctx { g, inputs: &inputs, slots: &slots, non_finite: Cell::new(0) };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
+    ctx.rates(&mut out, &formulas, &names)?;
     ctx.a(&mut out, &formulas, &a_code, &layout)?;
     ctx.b(&mut out, &formulas)?;
     ctx.jacobian(&mut out, &formulas, &names, &layout)?;
     ctx.c_term(&mut out, &formulas)?;
+    ctx.bodies(&mut out, &bodies, &names)?;
+    rows_fn(&mut out, &formulas, &layout);
+    let mass_symbols: HashSet<Symbol> = system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
+    scaling_fns(&mut out, g, &fields, &mass_symbols);
     ctx.solution(&mut out, &formulas, &names, &layout)?;
+    out.push_str(ROWS);
+    out.push('\n');
     out.push_str(HELPERS);
-    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect() })
+    let mut warnings = Vec::new();
+    if ctx.non_finite.get() > 0 {
+        let warning = format!(
+            "constants of the formulas do not fit in f64 (past ±1.8e308: written as f64::INFINITY, or NaN; {} \
+             place(s) in the code); the outputs that use them are not finite",
+            ctx.non_finite.get()
+        );
+        let note = format!("// Warning: {}.\n\n", comment_text(&warning));
+        // After the header's paragraph (its blank line), before the field list.
+        let at = out[..header_end].rfind("\n\n// State fields").map_or(header_end, |i| i + 2);
+        out.insert_str(at, &note);
+        warnings.push(warning);
+    }
+    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect(), warnings })
 }
 
 /// The names of the file's bodies and constraints, in file order.
 struct Names<'a> {
     bodies: &'a [&'a str],
     constraints: &'a [&'a str],
+}
+
+/// Each body's numbers as graph nodes, in file order: what the rows' solve reads.
+struct Bodies {
+    /// The scene's force expression per body (zero where it gives none).
+    applied: Vec<Id>,
+    position: Vec<Id>,
+    velocity: Vec<Id>,
+    force: Vec<Id>,
+    inverse_mass: Vec<Id>,
+}
+
+/// `rows`: the constraint rows at a state (C/κ, Ċ/κ, c, J per body), as `lagrange solve`
+/// reads them. The bodies of each row are the derivation's, listed in `JACOBIAN_BODIES`
+/// for a dense J; a sparse J lists them itself.
+fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
+    let _ = writeln!(
+        out,
+        "/// The constraint rows at a state, as `lagrange solve` reads them: C/κ, Ċ/κ, c and J = ∇C/κ per body."
+    );
+    let _ = writeln!(out, "pub fn rows(s: &State) -> Vec<Row<DIM>> {{");
+    let _ = writeln!(out, "    let (c, rate, bias) = (constraints(s), constraint_rates(s), c_term(s));");
+    let _ = writeln!(
+        out,
+        "    let mut rows: Vec<Row<DIM>> = (0..CONSTRAINTS)\n        \
+         .map(|k| Row {{ value: c[k] / SCALE[k], rate: rate[k] / SCALE[k], bias: bias[k], inequality: INEQUALITY[k], jacobian: Vec::new() }})\n        \
+         .collect();"
+    );
+    match layout.j {
+        JStorage::Blocks { .. } => {
+            let _ = writeln!(
+                out,
+                "    for (k, i, d) in jacobian_blocks(s) {{\n        rows[k].jacobian.push((i, d));\n    }}"
+            );
+        }
+        JStorage::Dense => {
+            let _ = writeln!(out, "    let j = jacobian(s);");
+            let _ = writeln!(out, "    for (k, i) in JACOBIAN_BODIES {{");
+            let _ = writeln!(
+                out,
+                "        rows[k].jacobian.push((i, std::array::from_fn(|d| j[k][i * DIM + d])));\n    }}"
+            );
+        }
+    }
+    let _ = writeln!(out, "    rows\n}}\n");
+    if layout.j == JStorage::Dense {
+        let pairs: Vec<String> = formulas
+            .jacobian
+            .iter()
+            .enumerate()
+            .flat_map(|(k, dirs)| dirs.iter().map(move |&(i, _)| format!("({k}, {i})")))
+            .collect();
+        let _ = writeln!(
+            out,
+            "/// The (constraint, body) pairs of J's structure: body i appears in constraint k's C.\n\
+             const JACOBIAN_BODIES: [(usize, usize); {}] = {};\n",
+            pairs.len(),
+            array(&pairs)
+        );
+    }
+    let _ = writeln!(
+        out,
+        "/// λ, the constraint forces and the accelerations at a state, with each inequality's contact state and\n\
+         /// the status: what `lagrange solve` gives (see `solve_rows`). Where the numbers overflow, it solves in a\n\
+         /// length unit 2ᵏ that brings the largest length-like number near 1, verified homogeneous, and scales back.\n\
+         pub fn solution(s: &State) -> Solution<DIM> {{\n    \
+         let (r, w, v, f) = (rows(s), inverse_masses(s), velocities(s), external_forces(s));\n    \
+         let raw = solve_rows(&r, &w, &v, &f, length_scale(&positions(s)));\n    \
+         let big = length_like(s);\n    \
+         if rows_finite(&r, &w, &v, &f) || !(big > 0.0 && big.is_finite()) {{\n        return raw;\n    }}\n    \
+         let k = big.log2().floor() as i64;\n    \
+         let (at, half) = (scaled_state(s, -k), scaled_state(s, -k - 1));\n    \
+         let (r, w, v, f) = (rows(&at), inverse_masses(&at), velocities(&at), external_forces(&at));\n    \
+         let r_half = rows(&half);\n    \
+         if !rows_finite(&r, &w, &v, &f) || !rows_finite(&r_half, &w, &v, &f) {{\n        return raw;\n    }}\n    \
+         let Some(p) = degrees(&r, &r_half) else {{\n        return raw;\n    }};\n    \
+         let mut x = solve_rows(&r, &w, &v, &f, length_scale(&positions(&at)));\n    \
+         for y in x.force.iter_mut().chain(x.acceleration.iter_mut()) {{\n        *y = y.map(|c| pow2(c, k));\n    }}\n    \
+         for (q, l) in x.lambda.iter_mut().enumerate() {{\n        *l = pow2(*l, -k * (p[q] - 2));\n    }}\n    \
+         x\n}}\n"
+    );
+}
+
+/// `scaled_state` and `length_like`: the state's length-like fields (positions,
+/// velocities, forces, and the parameters no mass depends on), as `numeric::rescale`
+/// chooses them.
+fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) {
+    let mut places: Vec<(String, bool, bool)> = Vec::new(); // (place, vector, array of vectors)
+    let mut arrays = HashSet::new();
+    for f in fields {
+        let info = g.symbol(f.symbol);
+        let length = match info.role {
+            Role::Position { .. } | Role::Velocity { .. } | Role::Force { .. } => true,
+            Role::Parameter => !mass_symbols.contains(&f.symbol),
+            _ => false,
+        };
+        if !length {
+            continue;
+        }
+        match f.array {
+            Some((name, _)) => {
+                if arrays.insert(name) {
+                    places.push((name.to_string(), true, true));
+                }
+            }
+            None => places.push((f.ident.clone(), info.ty == Ty::Vector, false)),
+        }
+    }
+    let _ = writeln!(
+        out,
+        "/// The state with its length-like fields (positions, velocities, forces, parameters no mass depends on) × 2ᵉ."
+    );
+    let _ = writeln!(out, "pub fn scaled_state(s: &State, e: i64) -> State {{\n    let mut x = *s;");
+    for (place, vector, array) in &places {
+        let _ = match (vector, array) {
+            (_, true) => writeln!(out, "    x.{place} = x.{place}.map(|r| r.map(|y| pow2(y, e)));"),
+            (true, false) => writeln!(out, "    x.{place} = x.{place}.map(|y| pow2(y, e));"),
+            (false, false) => writeln!(out, "    x.{place} = pow2(x.{place}, e);"),
+        };
+    }
+    if places.is_empty() {
+        let _ = writeln!(out, "    let _ = e;");
+    }
+    let _ = writeln!(out, "    x\n}}\n");
+    let _ =
+        writeln!(out, "/// The largest |x| of the state's length-like numbers.\nfn length_like(s: &State) -> f64 {{");
+    let _ = writeln!(out, "    let mut big = 0.0f64;");
+    for (place, vector, array) in &places {
+        let _ = match (vector, array) {
+            (_, true) => {
+                writeln!(out, "    for y in s.{place}.iter().flatten() {{\n        big = big.max(y.abs());\n    }}")
+            }
+            (true, false) => writeln!(out, "    for y in s.{place} {{\n        big = big.max(y.abs());\n    }}"),
+            (false, false) => writeln!(out, "    big = big.max(s.{place}.abs());"),
+        };
+    }
+    if places.is_empty() {
+        let _ = writeln!(out, "    let _ = s;");
+    }
+    let _ = writeln!(out, "    big\n}}\n");
+}
+
+/// The header's list of `State` fields: the rule, then each file name and its field.
+fn field_names(out: &mut String, g: &Graph, fields: &[Field]) {
+    let _ = writeln!(
+        out,
+        "// State fields: each symbol of the file under its own name where that is a Rust identifier \
+         (ASCII letters, digits, `_`; not a keyword), else its snake_case form (other letters as their \
+         code point, `λ` → `u3bb`; a keyword gets `_`; `_2`, `_3`, … where taken). Accelerations are \
+         not inputs. In the file → in `State`:"
+    );
+    for f in fields {
+        let _ = writeln!(out, "//   `{}` → `{}`", comment_text(&g.symbol(f.symbol).name), f.ident);
+    }
+    let _ = writeln!(out);
 }
 
 /// The module's opening comment: what it is and how it is laid out.
@@ -227,6 +455,13 @@ fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout) {
     if specialize {
         let _ = writeln!(out, "// Specialised: the file's parameter values are written into the formulas.");
     }
+    let _ = writeln!(
+        out,
+        "// Convention: `constraints` is C as written (`lhs = rhs` and `lhs >= rhs` give C = lhs − rhs, \
+         `lhs <= rhs` gives C = rhs − lhs). `jacobian` is J = ∇C/κ, with κ = SCALE[k] the constant content \
+         of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; \
+         the forces do not depend on κ."
+    );
     // How a big system is laid out, so that none of its functions needs a big stack.
     match layout.a {
         AStorage::Band { bandwidth } => {
@@ -257,18 +492,69 @@ fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout) {
     let _ = writeln!(out);
 }
 
+/// The constraint names as comment text.
+fn names_of(names: &[&str]) -> Vec<String> {
+    names.iter().map(|n| comment_text(n)).collect()
+}
+
+/// `SCALE` (κ of each row: ∇C = κ·J) and `INEQUALITY` (which rows are `C ≥ 0`).
+fn row_constants(out: &mut String, scales: &[f64], inequalities: &[bool], names: &[String]) {
+    let k = scales.len();
+    let _ =
+        writeln!(out, "/// κ of each constraint (in file order): the constant taken out of ∇C, so ∇C = SCALE[k]·J[k]");
+    let _ =
+        writeln!(out, "/// (`jacobian`) and C/SCALE[k] is the value whose gradient is J[k]. A Newton projection on");
+    let _ = writeln!(out, "/// C as written steps −C·SCALE[k]·J[k] / |SCALE[k]·J[k]|² (mass-weighted: divide by mᵢ).");
+    let listed: Vec<String> = scales.iter().map(|x| format!("{x:?}")).collect();
+    let _ = writeln!(out, "pub const SCALE: [f64; {k}] = {};", array(&listed));
+    let _ =
+        writeln!(out, "/// Which constraints are inequalities `C ≥ 0` (λ ≥ 0, zero unless touching), in file order:");
+    for (name, &ineq) in names.iter().zip(inequalities) {
+        let _ = writeln!(out, "/// - `{name}`: {}", if ineq { "inequality, C ≥ 0" } else { "equality, C = 0" });
+    }
+    let listed: Vec<String> = inequalities.iter().map(|b| b.to_string()).collect();
+    let _ = writeln!(out, "pub const INEQUALITY: [bool; {k}] = {};\n", array(&listed));
+}
+
 /// The `State` struct and the size constants.
 fn state(out: &mut String, g: &Graph, fields: &[Field], layout: &Layout) {
     let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
     let _ = writeln!(out, "/// A state of the scene: every input of the formulas below.");
-    let _ = writeln!(out, "#[derive(Clone, Copy, Debug, Default, PartialEq)]");
+    let _ = writeln!(out, "/// Fields are the file's names as written where Rust allows (see the module's header).");
+    let _ = writeln!(out, "#[allow(non_snake_case)]");
+    let arrays = fields.iter().any(|f| f.array.is_some());
+    // `Default` is derived only for arrays of at most 32 entries: role arrays get an impl.
+    let _ = writeln!(out, "#[derive(Clone, Copy, Debug, {}PartialEq)]", if arrays { "" } else { "Default, " });
     let _ = writeln!(out, "pub struct State {{");
-    for f in fields {
+    let mut defaults = Vec::new();
+    for f in fields.iter().filter(|f| f.array.is_none()) {
         let ty = if g.symbol(f.symbol).ty == Ty::Vector { format!("[f64; {dim}]") } else { "f64".into() };
         let _ = writeln!(out, "    /// {}", f.doc);
         let _ = writeln!(out, "    pub {}: {ty},", f.ident);
+        defaults.push(format!("{}: Default::default()", f.ident));
+    }
+    for (name, what) in ROLE_ARRAYS {
+        let len = fields.iter().filter(|f| f.array.is_some_and(|a| a.0 == name)).count();
+        if len == 0 {
+            continue;
+        }
+        let (ty, zero) = if name == "mass" {
+            (format!("[f64; {len}]"), format!("[0.0; {len}]"))
+        } else {
+            (format!("[[f64; {dim}]; {len}]"), format!("[[0.0; {dim}]; {len}]"))
+        };
+        let _ = writeln!(out, "    /// {what} (the header lists which symbol each entry holds).");
+        let _ = writeln!(out, "    pub {name}: {ty},");
+        defaults.push(format!("{name}: {zero}"));
     }
     let _ = writeln!(out, "}}\n");
+    if arrays {
+        let _ = writeln!(
+            out,
+            "impl Default for State {{\n    fn default() -> State {{\n        State {{ {} }}\n    }}\n}}\n",
+            defaults.join(", ")
+        );
+    }
     let _ = writeln!(out, "/// Space dimension.\npub const DIM: usize = {dim};");
     let _ = writeln!(out, "/// Number of bodies (in file order).\npub const BODIES: usize = {n};");
     let _ = writeln!(out, "/// Number of constraints (in file order).\npub const CONSTRAINTS: usize = {k};\n");
@@ -283,6 +569,38 @@ impl Ctx<'_> {
             doc.push(format!("- `{}`: {}", comment_text(names.constraints[i]), formula(g, c)));
         }
         self.emit_scalars(out, &doc, "constraints", &formulas.c)
+    }
+
+    /// `constraint_rates`: Ċ, with ∂C/∂t (C as written).
+    fn rates(&self, out: &mut String, formulas: &Formulas, names: &Names<'_>) -> Result<(), GenerateError> {
+        let g = self.g;
+        let mut doc = vec!["The rates Ċ = Σᵢ ∇ᵢC·vᵢ + ∂C/∂t of C as written:".to_string()];
+        for (i, &c) in formulas.c_dot.iter().enumerate() {
+            doc.push(format!("- `{}`: {}", comment_text(names.constraints[i]), formula(g, c)));
+        }
+        self.emit_scalars(out, &doc, "constraint_rates", &formulas.c_dot)
+    }
+
+    /// `positions`, `velocities`, `external_forces` and `inverse_masses`: each body's numbers.
+    fn bodies(&self, out: &mut String, bodies: &Bodies, names: &Names<'_>) -> Result<(), GenerateError> {
+        let listed = names.bodies.iter().map(|b| format!("`{}`", comment_text(b))).collect::<Vec<_>>().join(", ");
+        let order = format!("Per body, in file order ({listed}).");
+        let vectors = [
+            ("positions", "The position of each body.", &bodies.position),
+            ("velocities", "The velocity of each body.", &bodies.velocity),
+            ("external_forces", "The external force on each body (the state's force fields).", &bodies.force),
+            (
+                "applied_forces",
+                "The scene's forces (`[scene] forces`) at this state, zero for a body it does not list: an engine's \
+                 loop writes them into the state's force fields before asking for λ or the accelerations.",
+                &bodies.applied,
+            ),
+        ];
+        for (name, what, roots) in vectors {
+            self.emit_vectors(out, &[what.to_string(), order.clone()], name, roots)?;
+        }
+        let doc = ["1/m of each body.".to_string(), order];
+        self.emit_scalars(out, &doc, "inverse_masses", &bodies.inverse_mass)
     }
 
     /// `a_matrix` or `a_band`: A, as the layout stores it, from the assembled entries
@@ -462,8 +780,9 @@ impl Ctx<'_> {
         self.emit_scalars(out, &doc, "c_term", &formulas.bias)
     }
 
-    /// `lambda`, `forces` and `force_<body>`: closed formulas for one constraint, else a solve
-    /// of A λ = −b (and the helper that solves A as the layout stores it).
+    /// `lambda`, `forces`, `force_<body>` and `accelerations`: closed formulas for one
+    /// equality (where their numbers are in range), band Cholesky for a banded system of
+    /// equalities, else the rows' solve; the band solve when the layout needs it.
     fn solution(
         &self,
         out: &mut String,
@@ -484,72 +803,109 @@ impl Ctx<'_> {
             "forces",
         ]);
         let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
-        if let (Lambda::ClosedForm, Some(lambda), Some(forces)) = (layout.lambda, formulas.lambda, &formulas.forces) {
-            let doc = vec!["The multiplier λ, in closed form:".to_string(), format!("λ = {}", formula(g, lambda))];
-            let (lets, exprs) = self.body(&[lambda])?;
-            emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &array(&exprs));
-            for (body, name) in force_fns.iter().enumerate() {
-                let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
-                let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
-                let (lets, exprs) = match found {
-                    Some(id) => {
-                        doc.push(formula(g, id));
-                        self.body(&[id])?
+        let _ = writeln!(
+            out,
+            "/// The accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ of every body (in file order), from the rows' solve.\n\
+             pub fn accelerations(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+             let mut a = [[0.0; {dim}]; {n}];\n    a.copy_from_slice(&solution(s).acceleration);\n    a\n}}\n"
+        );
+        match (layout.lambda, formulas.lambda, &formulas.forces) {
+            (Lambda::ClosedForm, Some(lambda), Some(forces)) => {
+                let _ = writeln!(
+                    out,
+                    "/// Whether the closed forms' numbers are in range here (A normal, b finite); where they are not\n\
+                     /// (|r| ≈ 1e155 overflows r·r), `lambda` and the forces come from the scaled `solution`.\n\
+                     fn closed_form_holds(s: &State) -> bool {{\n    \
+                     a_matrix(s)[0][0].is_normal() && b_vector(s)[0].is_finite()\n}}\n"
+                );
+                let doc = vec![
+                    "The multiplier λ, in closed form (the scaled `solution` where its numbers leave f64's range):"
+                        .to_string(),
+                    format!("λ = {}", formula(g, lambda)),
+                ];
+                let (lets, exprs) = self.body(&[lambda])?;
+                let value = format!(
+                    "let x = {};\n    if closed_form_holds(s) && x[0].is_finite() {{ x }} else {{ [solution(s).lambda[0]] }}",
+                    array(&exprs)
+                );
+                emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &value);
+                for (body, name) in force_fns.iter().enumerate() {
+                    let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
+                    let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
+                    match found {
+                        Some(id) => {
+                            doc.push(formula(g, id));
+                            let (lets, exprs) = self.body(&[id])?;
+                            let value = format!(
+                                "let f = {};\n    \
+                                 if closed_form_holds(s) && f.iter().all(|x| x.is_finite()) {{ f }} else {{ solution(s).force[{body}] }}",
+                                array(&exprs)
+                            );
+                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &value);
+                        }
+                        None => {
+                            doc.push("zero: no constraint involves this body.".into());
+                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &[], &array(&vec!["0.0".into(); dim]));
+                        }
                     }
-                    None => {
-                        doc.push("zero: no constraint involves this body.".into());
-                        (Vec::new(), vec!["0.0".to_string(); dim])
-                    }
-                };
-                emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &array(&exprs));
+                }
+                let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
+                let doc = vec!["The constraint force on every body (in file order).".to_string()];
+                emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+                return Ok(());
             }
-            let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
-            let doc = vec!["The constraint force on every body (in file order).".to_string()];
-            emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
-            return Ok(());
-        }
-        if matches!(layout.a, AStorage::Band { .. }) {
-            let _ = writeln!(
-                out,
-                "/// The multipliers λ: the solution of A λ = −b (band Cholesky, O(K w²); NaN when A\n\
-                 /// is singular, e.g. redundant constraints).\n\
-                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                 let mut b = b_vector(s);\n    \
-                 for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
-                 solve_band(a_band(s), b)\n}}\n"
-            );
-        } else {
-            let _ = writeln!(
-                out,
-                "/// The multipliers λ: the solution of A λ = −b (Gaussian elimination with partial\n\
-                 /// pivoting; NaN when A is singular, e.g. redundant constraints).\n\
-                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                 let b = b_vector(s);\n    solve(a_matrix(s), b.map(|x| -x))\n}}\n"
-            );
-        }
-        if matches!(layout.j, JStorage::Blocks { .. }) {
-            let _ = writeln!(
-                out,
-                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-                 pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                 let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
-                 let mut f = [[0.0; {dim}]; {n}];\n    \
-                 for (k, i, d) in j {{\n        \
-                 for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
-                 f\n}}\n"
-            );
-        } else {
-            let _ = writeln!(
-                out,
-                "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-             pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-             let (l, j) = (lambda(s), jacobian(s));\n    \
-             let mut f = [[0.0; {dim}]; {n}];\n    \
-             for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
-             for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
-             for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
-             f\n}}\n"
-            );
+            (Lambda::Band, _, _) => {
+                let _ = writeln!(
+                    out,
+                    "/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular\n\
+                     /// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let mut b = b_vector(s);\n    \
+                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
+                     let l = solve_band(a_band(s), b);\n    \
+                     if l.iter().all(|x| x.is_finite()) {{\n        return l;\n    }}\n    \
+                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+                );
+                if matches!(layout.j, JStorage::Blocks { .. }) {
+                    let _ = writeln!(
+                        out,
+                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (k, i, d) in j {{\n        \
+                         for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
+                         f\n}}\n"
+                    );
+                } else {
+                    let _ = writeln!(
+                        out,
+                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
+                         for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
+                         for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
+                         f\n}}\n"
+                    );
+                }
+            }
+            _ => {
+                let _ = writeln!(
+                    out,
+                    "/// The multipliers λ (for C/κ), as `lagrange solve` gives them: 0 on an inequality that is apart,\n\
+                     /// separating or would pull, and the minimum-norm λ where A is singular (see `solution`).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+                );
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order), from the rows' solve.\n\
+                     pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                     let mut f = [[0.0; {dim}]; {n}];\n    f.copy_from_slice(&solution(s).force);\n    f\n}}\n"
+                );
+            }
         }
         for (body, name) in force_fns.iter().enumerate() {
             let _ = writeln!(
@@ -558,14 +914,11 @@ impl Ctx<'_> {
                 comment_text(names.bodies[body])
             );
         }
-        // The solve A's storage needs (each helper file ends its last item with `}`; a blank
-        // line follows it).
-        out.push_str(match layout.a {
-            AStorage::Band { .. } => SOLVE_BAND,
-            AStorage::Heap => SOLVE_HEAP,
-            AStorage::Dense => SOLVE,
-        });
-        out.push('\n');
+        if layout.lambda == Lambda::Band {
+            // Each helper file ends its last item with `}`; a blank line follows it.
+            out.push_str(SOLVE_BAND);
+            out.push('\n');
+        }
         Ok(())
     }
 }
@@ -631,10 +984,24 @@ fn exact(x: f64) -> Option<Rational> {
     Some(if x < 0.0 { q.neg() } else { q })
 }
 
-/// The fields of `State`: every symbol but accelerations and substituted ones.
-fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>) -> Vec<Field> {
-    let mut namer = Namer::new(&[]);
+/// The fields of `State`: every symbol but accelerations and substituted ones. A name that
+/// is a Rust identifier as written keeps it (`R`, `F`, `r`); any other becomes [`snake`] of
+/// it, with `_2`, `_3`, … in file order where that is taken (names kept as written first).
+/// With `arrays`, the bodies' positions, velocities, forces and mass symbols are entries of
+/// the role arrays [`ROLE_ARRAYS`] instead (whose names no field takes).
+fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, arrays: bool) -> Vec<Field> {
+    let reserved: Vec<&str> = if arrays { ROLE_ARRAYS.iter().map(|r| r.0).collect() } else { Vec::new() };
+    let keep = |name: &str| super::names::as_written(name).filter(|n| !reserved.contains(n)).map(str::to_string);
+    let mut kept: Vec<String> = g
+        .symbols()
+        .filter(|(s, info)| !substituted.contains(s) && !matches!(info.role, Role::Acceleration { .. }))
+        .filter_map(|(_, info)| keep(&info.name))
+        .collect();
+    kept.extend(reserved.iter().map(|r| r.to_string()));
+    let kept: Vec<&str> = kept.iter().map(String::as_str).collect();
+    let mut namer = Namer::new(&kept);
     let mut fields = Vec::new();
+    let mut masses = 0;
     for (symbol, info) in g.symbols() {
         if substituted.contains(&symbol) {
             continue;
@@ -650,10 +1017,35 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>) -> Ve
             Role::Force { body: i } => format!("External force `{name}` on body `{}`.", body(i)),
             Role::Mass { body: i } => format!("Mass `{name}` (of body `{}`).", body(i)),
         };
-        fields.push(Field { symbol, ident: namer.name(&snake(&info.name)), doc });
+        let array = match info.role {
+            _ if !arrays => None,
+            Role::Position { body } => Some(("position", body)),
+            Role::Velocity { body } => Some(("velocity", body)),
+            Role::Force { body } => Some(("force", body)),
+            Role::Mass { .. } => {
+                masses += 1;
+                Some(("mass", masses - 1))
+            }
+            _ => None,
+        };
+        let ident = match (array, keep(&info.name)) {
+            (Some((name, i)), _) => format!("{name}[{i}]"),
+            (None, Some(name)) => name,
+            (None, None) => namer.name(&snake(&info.name)),
+        };
+        fields.push(Field { symbol, ident, doc, array });
     }
     fields
 }
+
+/// The role arrays of a big `State`, with their doc: body i's symbol of that role is entry i
+/// (masses: the mass symbols in file order).
+const ROLE_ARRAYS: [(&str, &str); 4] = [
+    ("position", "The bodies' positions, body i at entry i"),
+    ("velocity", "The bodies' velocities, body i at entry i"),
+    ("force", "The external forces on the bodies, body i at entry i"),
+    ("mass", "The mass symbols, in file order"),
+];
 
 /// The Rust expression of every input slot, in slot order.
 fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {
@@ -673,6 +1065,8 @@ struct Ctx<'a> {
     g: &'a Graph,
     inputs: &'a [Symbol],
     slots: &'a [String],
+    /// Constants written that are not finite f64 (each occurrence in a function body).
+    non_finite: Cell<usize>,
 }
 
 /// Operator precedence of a rendered expression: what it may appear inside unparenthesised.
@@ -698,6 +1092,15 @@ impl Ctx<'_> {
             emit_fn(out, doc, name, &format!("[f64; {k}]"), &lets, &array(&exprs));
             Ok(())
         }
+    }
+
+    /// `pub fn name(s: &State) -> [[f64; DIM]; N]` for one vector formula per entry.
+    fn emit_vectors(&self, out: &mut String, doc: &[String], name: &str, roots: &[Id]) -> Result<(), GenerateError> {
+        let (n, dim) = (roots.len(), self.g.dim());
+        let items: Vec<Vec<Id>> = roots.iter().map(|&r| vec![r]).collect();
+        let store = |i: usize, e: &[String]| format!("out[{i}] = {};", array(e));
+        let (ret, init) = (format!("[[f64; {dim}]; {n}]"), format!("[[0.0; {dim}]; {n}]"));
+        self.emit_items(out, doc, name, &ret, &init, &format!("[f64; {dim}]"), &items, store)
     }
 
     /// `pub fn name(s: &State) -> ret` that starts from `init` and stores every item:
@@ -801,6 +1204,9 @@ impl Ctx<'_> {
             let (t, prec, depth) = match *op {
                 Op::Input(j) => (self.slots[j as usize].clone(), Prec::Atom, 0),
                 Op::Const(bits) => {
+                    if !f64::from_bits(bits).is_finite() {
+                        self.non_finite.set(self.non_finite.get() + 1);
+                    }
                     let (t, prec) = literal(f64::from_bits(bits));
                     (t, prec, 0)
                 }

@@ -1,6 +1,7 @@
-//! The helper functions a generated module carries: Gaussian elimination (dense A, on the
-//! stack or the heap), band Cholesky (banded A), and the range-safe norms and powers the
-//! formulas call.
+//! The helper functions a generated module carries: the rows' solve of `lagrange solve`
+//! (scaled, with contact states, λ ≥ 0 on inequalities and the minimum-norm λ; every
+//! module), band Cholesky (the fast path of a banded A), and the range-safe norms and
+//! powers the formulas call.
 //!
 //! Each lives in a real Rust file beside this one, included as text with `include_str!`
 //! and written into a module as it is: from the file's first item on, its `//!` note left
@@ -12,11 +13,8 @@
 //! Not here: anything generated from a formula ([`super::rust`]), choosing which helpers a
 //! module needs ([`super::layout`]).
 
-/// Dense A λ = −b for several constraints, A a `[[f64; K]; K]`.
-pub(super) const SOLVE: &str = text(include_str!("solve.rs"));
-
-/// Dense A λ = −b, A a `Vec<[f64; K]>` (big, not banded).
-pub(super) const SOLVE_HEAP: &str = text(include_str!("solve_heap.rs"));
+/// The solve of `lagrange solve` on a module's rows: `solve_rows`, its types and helpers.
+pub(super) const ROWS: &str = text(include_str!("rows.rs"));
 
 /// Banded A λ = −b (a chain listed in order): Cholesky on the band, O(K w²).
 pub(super) const SOLVE_BAND: &str = text(include_str!("solve_band.rs"));
@@ -53,43 +51,24 @@ const fn text(file: &'static str) -> &'static str {
 mod helpers;
 #[cfg(test)]
 #[allow(dead_code)]
-mod solve;
+mod rows;
 #[cfg(test)]
 #[allow(dead_code)]
 mod solve_band;
-#[cfg(test)]
-#[allow(dead_code)]
-mod solve_heap;
 
 #[cfg(test)]
 mod tests {
-    use super::{HELPERS, SOLVE, SOLVE_BAND, SOLVE_HEAP};
+    use super::{HELPERS, ROWS, SOLVE_BAND};
 
     #[test]
     fn a_helper_is_its_file_without_the_note() {
         for (text, first) in [
-            (SOLVE, "/// Solves `a x = b`"),
-            (SOLVE_HEAP, "/// Solves `a x = b`"),
+            (ROWS, "/// Where an inequality row stands"),
             (SOLVE_BAND, "/// Solves `a x = b` for a symmetric"),
             (HELPERS, "/// |(x, y)|"),
         ] {
             assert!(text.starts_with(first), "{text}");
             assert!(!text.contains("//!") && text.ends_with("}\n"), "{text}");
         }
-    }
-
-    #[test]
-    fn the_heap_solve_is_the_stack_solve_but_for_the_type_of_a() {
-        let stack: Vec<&str> = SOLVE.lines().collect();
-        let heap: Vec<&str> = SOLVE_HEAP.lines().collect();
-        assert_eq!(stack.len(), heap.len());
-        let differ: Vec<(&&str, &&str)> = stack.iter().zip(&heap).filter(|(a, b)| a != b).collect();
-        assert_eq!(
-            differ,
-            [(
-                &"fn solve<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> [f64; K] {",
-                &"fn solve<const K: usize>(mut a: Vec<[f64; K]>, mut b: [f64; K]) -> [f64; K] {"
-            )]
-        );
     }
 }
