@@ -406,6 +406,8 @@ impl<'s> Simulation<'s> {
                 if max_kinetic > 0.0 { max_energy_error / max_kinetic } else { energy_back(max_energy_error) }
             });
             let solution = self.dynamics.solve(&mut rows);
+            // The active set for the step to come: contacts that push are held.
+            self.dynamics.hold(&rows, &solution);
             if n.is_multiple_of(stride) || n == s.steps {
                 summary.samples.push(Sample {
                     time: t,
@@ -486,7 +488,7 @@ impl<'s> Simulation<'s> {
                     }
                 }
                 update_rates(&mut end, &self.half, &self.v);
-                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed, self.dynamics.held());
                 self.dynamics.recycle(end);
                 self.dynamics.recycle(rows);
                 self.check_finite(n + 1, t1)?;
@@ -497,12 +499,28 @@ impl<'s> Simulation<'s> {
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {
                     let mut end = self.project(t1, length, tolerance, max_iterations)?;
-                    velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                    velocity_step(
+                        &mut end,
+                        &mut self.v,
+                        true,
+                        touch,
+                        s.restitution,
+                        bounce_speed,
+                        self.dynamics.held(),
+                    );
                     self.dynamics.recycle(end);
                 }
                 _ if has_inequalities => {
                     let mut end = self.dynamics.rows(t1, &self.q, &self.v)?;
-                    velocity_step(&mut end, &mut self.v, false, touch, s.restitution, bounce_speed);
+                    velocity_step(
+                        &mut end,
+                        &mut self.v,
+                        false,
+                        touch,
+                        s.restitution,
+                        bounce_speed,
+                        self.dynamics.held(),
+                    );
                     self.dynamics.recycle(end);
                 }
                 _ => {}

@@ -29,7 +29,7 @@
 //! Not here: evaluating rows (`numeric::rows`), files, text.
 
 use super::banded::Banded;
-use super::contact::{ContactState, classify};
+use super::contact::{ContactState, classify_holding};
 use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use nalgebra::{DMatrix, DVector};
@@ -395,12 +395,20 @@ pub fn solve(rows: &Rows) -> Solution {
 
 /// Solves for λ at `rows`.
 pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
+    solve_holding(rows, settings, &[])
+}
+
+/// Solves for λ at `rows`, with the inequality rows marked in `held` (a simulation's active
+/// set, `numeric::dynamics`) taken as touching whatever their distance
+/// (`contact::classify_holding`): they stay candidates, λ ≥ 0, and leave only when λ would
+/// turn negative or they open.
+pub fn solve_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Solution {
     let n_bodies = rows.inverse_mass.len();
     let k = rows.rows.len();
     let mut diagnostics = Vec::new();
     let mut status = Status::Solved;
     let scaled = Scaled::new(rows, &mut diagnostics, &mut status);
-    let contacts = classify(rows, settings);
+    let contacts = classify_holding(rows, settings, held);
     // Candidates: usable equalities, and inequality rows touching without separating.
     let index: Vec<usize> = (0..k)
         .filter(|&q| {
