@@ -11,8 +11,8 @@
 //! - Equalities. A is banded when constraints are numbered along a chain; the band Cholesky
 //!   (`numeric::banded`) is linear in the number of rows, dense Cholesky is the alternative.
 //!   A small pivot (Ã singular within `rank_tolerance`: a redundant constraint, a singular
-//!   configuration) falls back to a dense SVD: the minimum-norm λ̃ when the system is
-//!   consistent, least squares when not, always with a diagnostic naming the rows, the
+//!   configuration) falls back to a dense eigendecomposition: the minimum-norm λ when the
+//!   system is consistent, least squares when not, always with a diagnostic naming the rows, the
 //!   rank and a condition estimate. One step of iterative refinement follows each solve.
 //! - Inequalities. Rows are classified by `numeric::contact`. If the equality solve over all
 //!   touching rows already pushes on every inequality (λ ≥ 0), it is the answer (the QP's
@@ -23,8 +23,9 @@
 //!   pivoting (exact, terminates for positive definite Ã) starts from its guess, for blocks
 //!   of up to 64 rows.
 //!
-//! Minimum norm is taken in the scaled multipliers λ̃ (a constraint's force magnitude over
-//! the square root of its effective mass), which does not depend on how C is written.
+//! Minimum norm is that of λ for C/κ (what the pseudo-inverse of the unscaled A gives): the
+//! eigendecomposition runs on the scaled Ã, and the null-space part is then chosen to minimise ‖λ‖ with
+//! λₖ = λ̃ₖ/(‖Jₖ‖√Âₖₖ) (see `minimum_norm`).
 //!
 //! Not here: evaluating rows (`numeric::rows`), files, text.
 
@@ -62,7 +63,7 @@ const PIVOTING_MAX_ROWS: usize = 64;
 /// each other by more than that are reported inconsistent.
 const CONSISTENCY: f64 = 1e-2;
 /// A row takes part in a null vector of Ã (it is named as redundant) when its component is
-/// above `NULL_SHARE` of the vector's largest: smaller ones are the SVD's rounding.
+/// above `NULL_SHARE` of the vector's largest: smaller ones are rounding.
 const NULL_SHARE: f64 = 1e-6;
 
 /// Which factorisation the equality solve uses.
@@ -346,6 +347,9 @@ pub(crate) struct Block {
     pub n: usize,
     pub bandwidth: usize,
     pub a: Vec<(usize, usize, f64)>,
+    /// Per block row, λₖ/λ̃ₖ = 1/(‖Jₖ‖√Âₖₖ): the weights that make a minimum-norm λ̃ the
+    /// minimum-norm λ of C/κ (see [`minimum_norm`]).
+    pub weight: Vec<f64>,
 }
 
 /// Ãₚq = Σᵢ J̃ₚᵢ·J̃qᵢ wᵢ over the bodies rows p and q of `index` share.
@@ -385,7 +389,8 @@ pub(crate) fn assemble(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -
             }
         }
     }
-    Block { n: index.len(), bandwidth, a }
+    let weight = index.iter().map(|&k| scaled.unscale(k, 1.0)).collect();
+    Block { n: index.len(), bandwidth, a, weight }
 }
 
 /// Solves for λ at `rows` with the default settings.
@@ -566,6 +571,7 @@ fn solve_subset(
             .filter(|(p, q, _)| position[*p] != usize::MAX && position[*q] != usize::MAX)
             .map(|&(p, q, v)| (position[p], position[q], v))
             .collect(),
+        weight: rows.iter().map(|&p| block.weight[p]).collect(),
     };
     let sub_b: Vec<f64> = rows.iter().map(|&p| b[p]).collect();
     let sub_index: Vec<usize> = rows.iter().map(|&p| index[p]).collect();
@@ -618,7 +624,7 @@ fn pivoting(
     None
 }
 
-/// Solves Ã μ = −b̃ on a block: band or dense Cholesky, SVD when singular.
+/// Solves Ã μ = −b̃ on a block: band or dense Cholesky, an eigendecomposition when singular.
 pub(crate) fn equality(
     block: &Block,
     b: &[f64],
@@ -693,7 +699,7 @@ pub(crate) fn equality(
             return finite_or_zero(x.iter().copied().collect(), index, diagnostics, status);
         }
     }
-    let x = minimum_norm(&dense(block), &rhs, index, settings, diagnostics, status);
+    let x = minimum_norm(&dense(block), &rhs, &block.weight, index, settings, diagnostics, status);
     finite_or_zero(x, index, diagnostics, status)
 }
 
@@ -724,11 +730,23 @@ fn finite_or_zero(
     x
 }
 
-/// The minimum-norm (least-squares if inconsistent) solution of a singular `a μ = rhs` by
-/// SVD, with a diagnostic naming the rows in the null space.
+/// The minimum-norm (least-squares if inconsistent) solution of a singular `a μ = rhs`, with
+/// a diagnostic naming the rows in the null space.
+///
+/// `a` is the symmetric, positive semi-definite Ã, so its eigendecomposition Q Λ Qᵀ is its
+/// SVD, with eigenvectors orthogonal to rounding (nalgebra's SVD leaves the singular
+/// vectors of an exactly rank-deficient matrix inaccurate by 1e-6 on small redundant
+/// systems, which showed as residuals and a wrong minimum). Eigenvalues at or below the
+/// rank tolerance (relative to the largest) are zero: μ₀ = Σ qᵢ (qᵢ·rhs)/Λᵢ over the rest.
+///
+/// The norm minimised is that of λ = `weight`·μ (λ of C/κ, what the pseudo-inverse of the
+/// unscaled A gives), not of the scaled μ: among μ₀ + N z (N the null eigenvectors), z
+/// minimises ‖W (μ₀ + N z)‖ by a small least squares. Weights count relative to the largest;
+/// when their ratios leave the normal range, μ₀ stands (then Σ Aₖₖ λₖ² is what is minimised).
 fn minimum_norm(
     a: &DMatrix<f64>,
     rhs: &[f64],
+    weight: &[f64],
     index: &[usize],
     settings: &Settings,
     diagnostics: &mut Vec<Diagnostic>,
@@ -736,26 +754,46 @@ fn minimum_norm(
 ) -> Vec<f64> {
     let n = rhs.len();
     let rhs = DVector::from_column_slice(rhs);
-    let svd = a.clone().svd(true, true);
-    let largest = svd.singular_values.amax();
+    let eigen = a.clone().symmetric_eigen();
+    let magnitude: Vec<f64> = eigen.eigenvalues.iter().map(|x| x.abs()).collect();
+    let largest = magnitude.iter().copied().fold(0.0f64, f64::max);
     let threshold = settings.rank_tolerance * largest.max(f64::MIN_POSITIVE);
-    let rank = svd.singular_values.iter().filter(|s| **s > threshold).count();
-    let mu = svd.solve(&rhs, threshold).unwrap_or_else(|_| DVector::zeros(n));
+    let kept: Vec<usize> = (0..n).filter(|&s| magnitude[s] > threshold && magnitude[s].is_finite()).collect();
+    let null: Vec<usize> = (0..n).filter(|&s| !kept.contains(&s)).collect();
+    let rank = kept.len();
+    let q = &eigen.eigenvectors;
+    let mut mu = DVector::zeros(n);
+    for &s in &kept {
+        let column = q.column(s);
+        mu += column * (column.dot(&rhs) / eigen.eigenvalues[s]);
+    }
+    let top = weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    let w: Vec<f64> = weight.iter().map(|x| x / top).collect();
+    if !null.is_empty() && w.len() == n && w.iter().all(|x| x.is_normal()) {
+        // min over z of ‖W μ₀ + (W N) z‖: z = −(W N)⁺ W μ₀.
+        let basis = DMatrix::from_fn(n, null.len(), |p, c| q[(p, null[c])]);
+        let weighted = DMatrix::from_fn(n, null.len(), |p, c| w[p] * basis[(p, c)]);
+        let target = DVector::from_fn(n, |p, _| -w[p] * mu[p]);
+        let inner = weighted.svd(true, true);
+        let floor = settings.rank_tolerance * inner.singular_values.amax().max(f64::MIN_POSITIVE);
+        if let Ok(z) = inner.solve(&target, floor) {
+            let moved = &mu + basis * z;
+            if moved.iter().all(|x| x.is_finite()) {
+                mu = moved;
+            }
+        }
+    }
     let residual = (a * &mu - &rhs).amax();
     let size = rhs.amax() + a.amax() * mu.amax();
     let consistent = residual <= settings.contact_tolerance.sqrt() * CONSISTENCY * size || size == 0.0;
-    let smallest = svd.singular_values.iter().copied().filter(|s| *s > threshold).fold(f64::INFINITY, f64::min);
+    let smallest = kept.iter().map(|&s| magnitude[s]).fold(f64::INFINITY, f64::min);
     // Rows with a visible part in a null vector are the redundant ones.
     let mut involved = vec![false; n];
-    if let Some(v_t) = &svd.v_t {
-        for (s, sigma) in svd.singular_values.iter().enumerate() {
-            if *sigma <= threshold {
-                let row = v_t.row(s);
-                let top = row.amax();
-                for p in 0..n {
-                    involved[p] |= row[p].abs() > NULL_SHARE * top;
-                }
-            }
+    for &s in &null {
+        let column = q.column(s);
+        let top = column.amax();
+        for p in 0..n {
+            involved[p] |= column[p].abs() > NULL_SHARE * top;
         }
     }
     let constraints: Vec<usize> = (0..n).filter(|&p| involved[p]).map(|p| index[p]).collect();

@@ -116,11 +116,11 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
             format!("λ of constraint {} came out non-finite; it is set to 0", name(*constraint))
         }
         Diagnostic::Redundant { constraints, rank, size, condition } => format!(
-            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; consistent, minimum-norm λ",
+            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; consistent: the λ of least norm √(Σ λ²), λ for C/κ (the pseudo-inverse's)",
             list(constraints)
         ),
         Diagnostic::Inconsistent { constraints, rank, size, condition, residual } => format!(
-            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; inconsistent (relative residual {residual:.1e}), least-squares minimum-norm λ",
+            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; inconsistent (relative residual {residual:.1e}), the least-squares λ of least norm √(Σ λ²), λ for C/κ",
             list(constraints)
         ),
         Diagnostic::QpFailed { status, .. } => match status {
