@@ -294,7 +294,10 @@ Exit codes:
   2  bad settings or a run that stopped: simulate's settings out of range, a simulation or
      bench sweep that stopped (its summary is still printed; a CSV row that cannot be written
      stops the run too), or arguments the command line refuses
-  3  internal failure (please report it with the input file)";
+  3  internal failure (please report it with the input file)
+  4  no answer: solve's numbers are printed, but its status is failed or inconsistent, or
+     a constraint with a zero gradient cannot hold (singular); the diagnostics name the
+     cause (an undefined 0/0, an overflow, the constraints at fault)";
 
 /// Runs of at least this many steps show a progress bar (on a terminal): shorter ones end
 /// within about a second.
@@ -523,7 +526,7 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         }
         SolveFormat::Text => out!("{}", solution::text(system, &derivation, &rows, &solution, t)),
     }
-    Ok(())
+    if solution.is_answer() { Ok(()) } else { Err(ExitCode::from(4)) }
 }
 
 /// `check`: each file's expectations, one line per check, failures with their location and

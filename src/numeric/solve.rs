@@ -166,8 +166,9 @@ impl Status {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Diagnostic {
     /// The row has non-finite numbers (its gradient or c term, C or Ċ of an inequality, or
-    /// the mass, velocity or force of a body it acts on); it is left out (`Failed`).
-    NonFiniteRow { constraint: usize },
+    /// the mass, velocity or force of a body it acts on); it is left out (`Failed`). `part`
+    /// is the first of them found non-finite, `cause` whether it is NaN or ±∞.
+    NonFiniteRow { constraint: usize, part: RowPart, cause: NonFinite },
     /// The gradient is zero here (a singular configuration): the row carries no force.
     /// `unsatisfiable`: its c term is not zero, so its C̈ = 0 cannot hold.
     ZeroGradient { constraint: usize, unsatisfiable: bool },
@@ -201,11 +202,100 @@ pub enum Diagnostic {
     Rescaled { exponent: i64 },
 }
 
+/// Which number of a row (or of a body it acts on) is not finite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RowPart {
+    /// ∇C/κ on some body.
+    Gradient,
+    /// c, C̈/κ with every acceleration zero.
+    CTerm,
+    /// C/κ.
+    Value,
+    /// Ċ/κ.
+    Rate,
+    /// The inverse mass of this body (a zero, negative or non-finite mass).
+    Mass { body: usize },
+    /// This body's velocity.
+    Velocity { body: usize },
+    /// This body's external force.
+    Force { body: usize },
+}
+
+/// How a number is not finite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NonFinite {
+    /// NaN: an undefined operation in the formula (0/0, ∞ − ∞, 0·∞, `sqrt` or `ln` of a
+    /// negative number).
+    Undefined,
+    /// ±∞: the value exceeds f64's range (or a division by zero).
+    Overflow,
+}
+
+impl NonFinite {
+    /// The cause of `x`, `None` when it is finite.
+    pub fn of(x: f64) -> Option<NonFinite> {
+        if x.is_nan() {
+            Some(NonFinite::Undefined)
+        } else if x.is_infinite() {
+            Some(NonFinite::Overflow)
+        } else {
+            None
+        }
+    }
+
+    /// The cause of the first non-finite number among `xs` (NaN wins over ±∞, as the
+    /// deeper cause), `None` when all are finite.
+    pub fn of_all(xs: impl IntoIterator<Item = f64>) -> Option<NonFinite> {
+        xs.into_iter().filter_map(NonFinite::of).max_by_key(|c| matches!(c, NonFinite::Undefined))
+    }
+}
+
+/// Whether a mass's inverse `w` is unusable: negative, NaN or ±∞ (a mass of zero, negative,
+/// or non-finite), with its cause.
+fn bad_inverse_mass(w: f64) -> Option<NonFinite> {
+    match NonFinite::of(w) {
+        Some(c) => Some(c),
+        None if w < 0.0 => Some(NonFinite::Undefined),
+        None => None,
+    }
+}
+
+/// The first non-finite number of `row` (and the bodies it acts on), in the order the
+/// solve needs them; C and Ċ only for inequalities (`check_value`).
+fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Option<(RowPart, NonFinite)> {
+    if let Some(c) = NonFinite::of_all(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied())) {
+        return Some((RowPart::Gradient, c));
+    }
+    if let Some(c) = NonFinite::of(row.bias) {
+        return Some((RowPart::CTerm, c));
+    }
+    for &(body, _) in &row.jacobian {
+        if let Some(c) = bad_inverse_mass(rows.inverse_mass[body]) {
+            return Some((RowPart::Mass { body }, c));
+        }
+        if let Some(c) = NonFinite::of_all(rows.velocity[body]) {
+            return Some((RowPart::Velocity { body }, c));
+        }
+        if let Some(c) = NonFinite::of_all(rows.force[body]) {
+            return Some((RowPart::Force { body }, c));
+        }
+    }
+    if check_value {
+        if let Some(c) = NonFinite::of(row.value) {
+            return Some((RowPart::Value, c));
+        }
+        if let Some(c) = NonFinite::of(row.rate) {
+            return Some((RowPart::Rate, c));
+        }
+    }
+    None
+}
+
 impl Diagnostic {
     /// The constraints involved (indices; empty when the whole solve is meant).
     pub fn constraints(&self) -> &[usize] {
         match self {
-            Diagnostic::NonFiniteRow { constraint }
+            Diagnostic::NonFiniteRow { constraint, .. }
             | Diagnostic::ZeroGradient { constraint, .. }
             | Diagnostic::InfiniteMass { constraint }
             | Diagnostic::Closing { constraint }
@@ -240,6 +330,18 @@ pub struct Solution {
     pub contacts: Vec<Option<ContactState>>,
 }
 
+impl Solution {
+    /// Whether the numbers answer the question asked: false when the status is `Failed` or
+    /// `Inconsistent` (no λ satisfies every row), or when a row with a zero gradient has a
+    /// C̈ = 0 that cannot hold. A zero gradient whose c term is zero is an answer (λ = 0
+    /// is exact), as are the minimum-norm λ of consistent redundant rows and an inaccurate
+    /// QP's λ (its residuals are in the diagnostic).
+    pub fn is_answer(&self) -> bool {
+        !matches!(self.status, Status::Failed | Status::Inconsistent)
+            && !self.diagnostics.iter().any(|d| matches!(d, Diagnostic::ZeroGradient { unsatisfiable: true, .. }))
+    }
+}
+
 use super::vector::dot;
 /// Re-exported where callers have always found them; they live in `numeric::vector`.
 pub use super::vector::{row_norm, safe_norm};
@@ -263,14 +365,6 @@ impl Scaled {
     /// Scales `rows`; rows that cannot carry a force get a diagnostic and `usable = false`.
     pub fn new(rows: &Rows, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) -> Scaled {
         let k = rows.rows.len();
-        let bad_body: Vec<bool> = (0..rows.inverse_mass.len())
-            .map(|i| {
-                let w = rows.inverse_mass[i];
-                !(w.is_finite() && w >= 0.0)
-                    || rows.force[i].iter().any(|x| !x.is_finite())
-                    || rows.velocity[i].iter().any(|x| !x.is_finite())
-            })
-            .collect();
         // Sized up front: 1 % of a chain's simulation (see `assemble`).
         let parts = rows.rows.iter().map(|r| r.jacobian.len()).sum();
         let mut s = Scaled {
@@ -282,14 +376,20 @@ impl Scaled {
         };
         for (q, row) in rows.rows.iter().enumerate() {
             s.start.push(s.parts.len());
-            let norm = row_norm(&row.jacobian);
             // An inequality also needs C and Ċ to be classified.
-            let finite = norm.is_finite()
-                && row.bias.is_finite()
-                && !row.jacobian.iter().any(|(b, _)| bad_body[*b])
-                && (!row.inequality || (row.value.is_finite() && row.rate.is_finite()));
-            if !finite {
-                diagnostics.push(Diagnostic::NonFiniteRow { constraint: q });
+            if let Some((part, cause)) = non_finite_part(rows, row, row.inequality) {
+                diagnostics.push(Diagnostic::NonFiniteRow { constraint: q, part, cause });
+                *status = (*status).max(Status::Failed);
+                continue;
+            }
+            let norm = row_norm(&row.jacobian);
+            if !norm.is_finite() {
+                // Finite components whose norm overflows (row_norm scales, so this is rare).
+                diagnostics.push(Diagnostic::NonFiniteRow {
+                    constraint: q,
+                    part: RowPart::Gradient,
+                    cause: NonFinite::Overflow,
+                });
                 *status = (*status).max(Status::Failed);
                 continue;
             }
