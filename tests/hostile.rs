@@ -381,3 +381,29 @@ fn check_at_sampled_states_of_partly_undefined_constraints_ends() {
         assert!(!err.contains("panicked") && out.contains("0 passed, 1 failed"), "{exprs:?}: {out}{err}");
     }
 }
+
+/// `check` compares values past ~1.4e154 (whose squares overflow) as any others: wrong
+/// expectations fail, right ones pass. The bead at r = [2, 0] at rest pushed by F =
+/// [−1e200, 0]: λ (C/κ, κ = 2) = −F·r/(r·r) = 5e199, so λ for C as written is 2.5e199 and
+/// the force on the bead λ r = [1e200, 0].
+#[test]
+fn check_compares_huge_values_without_overflow() {
+    let state = "at = { r = [2.0, 0.0], v = [0.0, 0.0], F = [-1e200, 0.0] }";
+    let entries = [
+        ("force = { bead = [1e200, 0.0] }", true),
+        ("lambda = { wire = 2.5e199 }", true),
+        ("force = { bead = [2e200, 0.0] }", false),
+        ("force = { bead = [1e200, 1e199] }", false),
+        ("lambda = { wire = -1e300 }", false),
+        ("force = { bead = \"1e200*r\" }", false),
+        ("force = { bead = \"1e300*r\" }", false),
+    ];
+    for (entry, right) in entries {
+        let file = format!("{}[[expect]]\n{state}\n{entry}\n", bead_with("dot(r, r) = l^2"));
+        let temp = TempFile::new("huge-check", file.as_bytes());
+        let (code, out, err) = bounded(&["check", temp.0.to_str().expect("utf-8")], 20);
+        let verdict = if right { "1 passed, 0 failed" } else { "0 passed, 1 failed" };
+        assert!(out.contains(verdict), "{entry}: expected {verdict}:\n{out}{err}");
+        assert_eq!(code, Some(if right { 0 } else { 1 }), "{entry}: {out}{err}");
+    }
+}
