@@ -356,3 +356,42 @@ fn a_held_contact_is_released_when_it_would_pull() {
     assert!(worst_lambda >= 0.0, "the rope pushed: λ = {worst_lambda}");
     assert!(outside <= 1e-9, "the bob went {outside:e} past the rope's length");
 }
+
+/// The ball of `hard/bounce.toml` with restitution `e`: the ratio of its upward speed just
+/// after its first bounce to its downward speed just before, per stabilisation.
+fn bounce_ratio(e: f64, integrator: Integrator, stabilize: Stabilize) -> f64 {
+    let text = std::fs::read_to_string("constraints/hard/bounce.toml").expect("file");
+    let text = text.replace("restitution = 0.5", &format!("restitution = {e}"));
+    let s =
+        lagrange::scenario::Scenario::new(lagrange::model::file::load(&text).expect("valid"), &[]).expect("derives");
+    let mut settings = settings(&s, integrator, stabilize, 1e-4, 6000);
+    settings.restitution = e;
+    let (mut before, mut after) = (0.0f64, None);
+    s.simulate(settings, &mut |f| {
+        let vy = f.velocity[0][1];
+        if after.is_none() {
+            if vy < 0.0 {
+                before = before.min(vy);
+            } else if before < 0.0 && vy > 0.0 {
+                after = Some(vy);
+            }
+        }
+        Ok(())
+    })
+    .expect("runs");
+    after.expect("the ball bounced") / -before
+}
+
+#[test]
+fn baumgarte_keeps_restitution() {
+    // Before: e = 1 came back at 0.896 of its speed under Baumgarte (its rate term braked
+    // the approach inside the step), 1.0 with projection or none.
+    for integrator in Integrator::ALL {
+        for stabilize in [Stabilize::None, Stabilize::BAUMGARTE, Stabilize::PROJECTION] {
+            for e in [1.0, 0.5] {
+                let ratio = bounce_ratio(e, integrator, stabilize);
+                assert!((ratio - e).abs() <= 1e-3, "{integrator:?} + {stabilize:?}, e = {e}: came back at {ratio}");
+            }
+        }
+    }
+}

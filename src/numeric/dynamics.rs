@@ -229,7 +229,14 @@ impl<'s> Dynamics<'s> {
     /// a step, which decides what stays held ([`Dynamics::hold`]).
     pub fn solve(&self, rows: &mut Rows) -> Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
-            for row in &mut rows.rows {
+            for (k, row) in rows.rows.iter_mut().enumerate() {
+                // A closing contact that is not held is the impulse's (Ċ⁺ = −eĊ at the step's
+                // end): a spring on it would brake the approach inside the step, and a bounce
+                // with e = 1 came back at 0.9 of its speed. Held contacts (equalities in the
+                // stages) and contacts not closing keep the terms.
+                if row.inequality && !self.is_held(k) && row.rate < 0.0 {
+                    continue;
+                }
                 // C̈ + 2αĊ + β²C = 0 ⇒ the bias c gains 2αĊ + β²C.
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
