@@ -120,7 +120,7 @@ struct BenchArgs {
     /// Simulated time per run (default: the scene's).
     #[arg(long)]
     duration: Option<f64>,
-    /// Random (and as many hard) states for the formula accuracy.
+    /// Random (and as many hard) states for the formula accuracy, at most 100000.
     #[arg(long, default_value_t = 200)]
     states: usize,
     #[arg(long, value_enum, default_value_t = OutArg::Text)]
@@ -291,10 +291,14 @@ Exit codes:
   1  bad input or a failed check: an unreadable or invalid file, a bad --at or --set value,
      a derivation or solve that cannot be done, an expectation that failed, or a failure to
      write an output (standard output, -o, --plot, or creating the --csv file)
-  2  bad settings or a run that stopped: simulate's settings out of range, a simulation or
+  2  bad settings or a run that stopped: simulate's or bench's settings out of range (a run
+     of more than 10^8 steps or of none, bench --states above 100000), a simulation or
      bench sweep that stopped (its summary is still printed; a CSV row that cannot be written
      stops the run too), or arguments the command line refuses
-  3  internal failure (please report it with the input file)";
+  3  internal failure (please report it with the input file)
+  4  no answer: solve's numbers are printed, but its status is failed or inconsistent, or
+     a constraint with a zero gradient cannot hold (singular); the diagnostics name the
+     cause (an undefined 0/0, an overflow, the constraints at fault)";
 
 /// Runs of at least this many steps show a progress bar (on a terminal): shorter ones end
 /// within about a second.
@@ -542,7 +546,7 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         }
         SolveFormat::Text => out!("{}", solution::text(system, &derivation, &rows, &solution, t)),
     }
-    Ok(())
+    if solution.is_answer() { Ok(()) } else { Err(ExitCode::from(4)) }
 }
 
 /// `check`: each file's expectations, one line per check, failures with their location and
@@ -642,7 +646,7 @@ fn refuse_overwrite(input: &Path, outputs: &[(&str, Option<&Path>)]) -> Result<(
 
 fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     use lagrange::numeric::integrate::Integrator;
-    use lagrange::numeric::simulate::steps_for;
+    use lagrange::numeric::simulate::checked_steps;
     use lagrange::numeric::stabilize::Stabilize;
     if let Err(code) = refuse_overwrite(&args.file, &[("--csv", args.csv.as_deref()), ("--plot", args.plot.as_deref())])
     {
@@ -655,7 +659,16 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     let mut settings = scenario.settings();
     settings.dt = args.dt.unwrap_or(settings.dt);
     let duration = args.duration.unwrap_or(scenario.scene.duration);
-    settings.steps = args.steps.unwrap_or_else(|| steps_for(duration, settings.dt));
+    settings.steps = match args.steps {
+        Some(steps) => steps,
+        None => match checked_steps(duration, settings.dt) {
+            Ok(steps) => steps,
+            Err(e) => {
+                eprintln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
+                return ExitCode::from(2);
+            }
+        },
+    };
     settings.integrator = match args.integrator {
         IntegratorArg::Euler => Integrator::Euler,
         IntegratorArg::Verlet => Integrator::Verlet,
@@ -761,6 +774,14 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
     if args.solvers {
         return cmd_bench_solvers(args, &scenario);
     }
+    let max_states = lagrange::precision::accuracy::MAX_STATES;
+    if args.states > max_states {
+        eprintln!(
+            "error: --states must be at most {max_states} (precision::accuracy::MAX_STATES), found {}",
+            args.states
+        );
+        return ExitCode::from(2);
+    }
     let sweep = lagrange::precision::Sweep::new(
         args.dt.unwrap_or(scenario.scene.dt),
         args.duration.unwrap_or(scenario.scene.duration),
@@ -801,11 +822,14 @@ fn cmd_bench_solvers(args: &BenchArgs, scenario: &lagrange::scenario::Scenario) 
     use lagrange::report::solvers as table;
     let dt = args.dt.unwrap_or(scenario.scene.dt);
     let duration = args.duration.unwrap_or(scenario.scene.duration);
-    if !(dt.is_finite() && dt > 0.0 && duration.is_finite() && duration >= 0.0) {
-        errln!("error: --dt must be positive and --duration at least 0, found {dt} and {duration}");
-        return ExitCode::from(2);
-    }
-    let plan = Plan::new(dt, (duration / dt).round() as u64);
+    let steps = match lagrange::numeric::simulate::checked_steps(duration, dt) {
+        Ok(steps) => steps,
+        Err(e) => {
+            errln!("error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let plan = Plan::new(dt, steps);
     let scene = Scene {
         system: &scenario.system,
         program: &scenario.program,

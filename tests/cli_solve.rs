@@ -139,8 +139,9 @@ fn non_finite_values_are_rejected() {
 
 #[test]
 fn text_table_and_diagnostics_for_a_singular_state() {
+    // At the centre with v ≠ 0, C̈ = 0 cannot hold: no answer, exit 4 (the table is printed).
     let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--set", "r=[0,0]"]);
-    assert!(out.status.success());
+    assert_eq!(out.status.code(), Some(4), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("status: singular") && text.contains("wire") && text.contains("gradient"), "{text}");
     // The diagnostic names the constraint, not its index.
@@ -157,7 +158,96 @@ fn long_help_documents_every_exit_code() {
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     let table = text.split("Exit codes:").nth(1).expect("an exit-code table in --help");
-    for code in ["0  success", "1  bad input", "2  bad settings", "3  internal failure"] {
+    for code in ["0  success", "1  bad input", "2  bad settings", "3  internal failure", "4  no answer"] {
         assert!(table.contains(code), "{code} missing from {table}");
     }
+}
+
+/// The bead of `bead_on_wire.toml` with its constraint replaced by `expr`.
+fn bead_with(name: &str, expr: &str) -> std::path::PathBuf {
+    let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
+    let start = text.find("expr = ").expect("an expr line");
+    let end = start + text[start..].find('\n').expect("end of line");
+    temp_file(name, &format!("{}expr = '{expr}'{}", &text[..start], &text[end..]))
+}
+
+/// `solve` on `path` (with `extra` arguments) as text and as JSON: both exit 4, the text
+/// says `null` where the JSON has null (never NaN), and every sentence in `expect` is among
+/// the diagnostics of both.
+fn no_answer(path: &std::path::Path, extra: &[&str], status: &str, expect: &[&str]) {
+    let file = path.to_str().expect("utf-8");
+    let text = lagrange(&[&["solve", file][..], extra].concat());
+    assert_eq!(text.status.code(), Some(4), "{file}: {}", String::from_utf8_lossy(&text.stderr));
+    let table = String::from_utf8_lossy(&text.stdout);
+    assert!(table.contains(&format!("(status: {status})")), "{table}");
+    let numbers = table.split("\ndiagnostics").next().expect("the table");
+    assert!(!numbers.contains("NaN") && !numbers.contains("inf"), "{table}");
+    assert_eq!(numbers.contains("null"), status == "failed", "{table}");
+    let json = lagrange(&[&["solve", file, "--format", "json"][..], extra].concat());
+    assert_eq!(json.status.code(), Some(4));
+    let v: Value = serde_json::from_slice(&json.stdout).expect("JSON on stdout");
+    assert_eq!(v["status"], status);
+    let messages: Vec<String> = v["diagnostics"]
+        .as_array()
+        .expect("diagnostics")
+        .iter()
+        .map(|d| d["message"].as_str().expect("a message").to_string())
+        .collect();
+    for e in expect {
+        assert!(messages.iter().any(|m| m.contains(e)), "{e:?} not in {messages:#?}");
+        assert!(table.contains(e), "{e:?} not in {table}");
+    }
+    assert!(messages.iter().all(|m| !m.contains("(overflow)")), "{messages:#?}");
+}
+
+#[test]
+fn atwood_at_the_peg_is_undefined_not_an_overflow() {
+    // r1 exactly at the pulley: ∇|r1 − p| = (r1 − p)/|r1 − p| is 0/0.
+    let peg = ["--set", "r1=[0,0]", "--set", "r2=[0,-3]"];
+    no_answer(
+        std::path::Path::new("constraints/atwood.toml"),
+        &peg,
+        "failed",
+        &["its gradient is undefined (NaN: 0/0", "Ċ/κ of `string` is undefined (NaN: 0/0"],
+    );
+}
+
+#[test]
+fn failed_statuses_exit_4_and_name_the_cause() {
+    for (tag, expr, expect) in [
+        ("exp", "exp(1000)*r.x = 1", "its gradient is beyond f64's range"),
+        ("div0", "r.x/0 = 1", "its gradient is beyond f64's range"),
+        ("ln0", "ln(0)*r.x = 1", "its gradient is beyond f64's range"),
+        ("sqrt", "sqrt(-1 - r.x^2) = 1", "its gradient is undefined (NaN"),
+    ] {
+        let path = bead_with(&format!("{tag}.toml"), expr);
+        no_answer(&path, &[], "failed", &[expect, "left out"]);
+    }
+    // At the centre the gradient 2r vanishes and C̈ = 0 cannot hold with v ≠ 0.
+    no_answer(
+        std::path::Path::new("constraints/hard/bead_near_centre.toml"),
+        &["--set", "r=[0,0]"],
+        "singular",
+        &["singular configuration", "cannot hold"],
+    );
+}
+
+#[test]
+fn a_scale_beyond_f64_is_named_not_shown_as_nan() {
+    // κ = 1e400: J = (1, 0) and λ are fine (exit 0); C/κ and Ċ/κ cannot be formed in f64.
+    let path = bead_with("huge_scale.toml", "r.x*1e400 = 1");
+    let out = lagrange(&["solve", path.to_str().expect("utf-8")]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let table = String::from_utf8_lossy(&out.stdout);
+    let numbers = table.split("\ndiagnostics").next().expect("the table");
+    assert!(!numbers.contains("NaN") && numbers.contains("1.000e400"), "{table}");
+    assert!(table.contains("C/κ of `wire` cannot be computed in f64: κ = 1.000e400 is beyond f64's range"), "{table}");
+}
+
+#[test]
+fn a_zero_gradient_that_can_hold_is_an_answer() {
+    // At the centre at rest the c term v·v is 0: λ = 0 is exact (status singular, exit 0).
+    let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--set", "r=[0,0]", "--set", "v=[0,0]"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("status: singular"));
 }

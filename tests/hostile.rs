@@ -1,6 +1,8 @@
 //! Hostile input through the real binary: whatever the file holds, `lagrange derive` ends
 //! with a short message on stderr and exit code 1 — never a panic (101), a stack overflow
-//! or another signal, never a wall of text.
+//! or another signal, never a wall of text. Options that ask for unbounded work
+//! (`simulate --duration inf`, `bench --states 100000000`) are refused before any work with
+//! exit 2, and `check` ends on constraints that are undefined near its sampled states.
 
 use std::path::PathBuf;
 use std::process::Command;
@@ -390,4 +392,153 @@ fn csv_headers_quote_and_defuse_names() {
     let _ = std::fs::remove_file(&csv);
     assert_eq!(code, Some(0), "{stderr}");
     assert!(written.starts_with("t,r.x,r.y,v.x,v.y,\"lambda_a,b\nc\",\"C_a,b\nc\",\"Cdot_a,b\nc\"\n"), "{written}");
+}
+
+/// Runs `lagrange args…` from the crate root, killed if it is still running after
+/// `seconds`: (exit code, stdout, stderr). A run that had to be killed fails the test.
+fn bounded(args: &[&str], seconds: u64) -> (Option<i32>, String, String) {
+    use std::io::Read;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_lagrange"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("binary runs");
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break status;
+        }
+        if started.elapsed().as_secs() >= seconds {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("lagrange {args:?} still running after {seconds} s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let (mut out, mut err) = (String::new(), String::new());
+    child.stdout.take().expect("stdout").read_to_string(&mut out).expect("UTF-8 stdout");
+    child.stderr.take().expect("stderr").read_to_string(&mut err).expect("UTF-8 stderr");
+    (status.code(), out, err)
+}
+
+/// Step counts that cannot be a run are refused before it starts, with exit 2 and a message
+/// saying why: never a run for ever (the count saturating at u64::MAX), never 0 steps with
+/// exit 0.
+#[test]
+fn simulate_refuses_runs_without_a_bounded_step_count() {
+    let pendulum = "constraints/pendulum.toml";
+    for (flags, expect) in [
+        (&["--duration", "inf"][..], "the duration must be finite and positive, found inf"),
+        (&["--duration", "nan"], "the duration must be finite and positive, found NaN"),
+        (&["--duration", "1e300"], "more than the maximum of 100000000"),
+        (&["--dt", "1e-320"], "more than the maximum of 100000000"),
+        (&["--steps", "1000000000"], "more than the maximum of 100000000"),
+        (&["--dt", "1e300"], "the run would take no step"),
+        (&["--solver", "pgs", "--duration", "inf"], "the duration must be finite and positive"),
+    ] {
+        let (code, out, err) = bounded(&[&["simulate", pendulum][..], flags].concat(), 10);
+        assert_eq!(code, Some(2), "{flags:?}: {err}");
+        assert!(err.contains(expect), "{flags:?}: {err}");
+        assert!(out.is_empty(), "{flags:?}: no summary of a run that never started: {out}");
+    }
+    // The same for a scene's own dt.
+    let text = std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(pendulum)).expect("file");
+    let tiny = regex_free_replace(&text, "dt = ", "dt = 1e-320 #");
+    let file = TempFile::new("tiny-dt", tiny.as_bytes());
+    let (code, _, err) = bounded(&["simulate", file.0.to_str().expect("utf-8")], 10);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("more than the maximum of 100000000"), "{err}");
+}
+
+/// `text` with the first line starting with `key` given `replacement` as its start.
+fn regex_free_replace(text: &str, key: &str, replacement: &str) -> String {
+    text.lines()
+        .map(|l| if l.starts_with(key) { l.replacen(key, replacement, 1) } else { l.to_string() })
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// `bench` likewise: a sweep whose reference run has no bounded step count, a NaN duration
+/// and a state count that would exhaust memory are refused at once.
+#[test]
+fn bench_refuses_unbounded_work() {
+    let pendulum = "constraints/pendulum.toml";
+    for (flags, expect) in [
+        (&["--duration", "1e300"][..], "the reference run would take 3.200e304 steps"),
+        (&["--dt", "1e-300"], "the reference run would take 3.200e302 steps"),
+        (&["--duration", "nan"], "the duration must be positive, found NaN"),
+        (&["--states", "100000000"], "--states must be at most 100000"),
+        (&["--solvers", "--duration", "1e300"], "more than the maximum of 100000000"),
+    ] {
+        let (code, out, err) = bounded(&[&["bench", pendulum][..], flags].concat(), 10);
+        assert_eq!(code, Some(2), "{flags:?}: {err}");
+        assert!(err.contains(expect), "{flags:?}: {err}");
+        assert!(!out.contains("18446744073709551615"), "{flags:?}: {out}");
+    }
+}
+
+/// `check` at sampled states of constraints that are NaN or whose gradient is infinite
+/// somewhere near (`acos`, `sqrt`, `ln`, `asin`): each ends at once with its verdict (exit
+/// 1, the expectations are wrong or cannot be judged) — once a panic inside nalgebra's
+/// SVD ("Singular value was NaN") and, with three constraints, a run that never returned.
+#[test]
+fn check_at_sampled_states_of_partly_undefined_constraints_ends() {
+    let body = |name: &str, at: &str| {
+        format!(
+            "[[bodies]]\nname = \"{name}\"\nposition = \"r{at}\"\nvelocity = \"v{at}\"\nacceleration = \"a{at}\"\nmass = \"m\"\nforce = \"F{at}\"\n"
+        )
+    };
+    let constraint = |k: usize, expr: &str| format!("[[constraints]]\nname = \"c{k}\"\nexpr = '{expr}'\n");
+    let cases: [(&str, &[&str]); 4] = [
+        ("one", &["r.x = 0", "acos(r.y) = 0"]),
+        ("one", &["sqrt(r.y) - 1 = 0"]),
+        ("one", &["ln(r.x) = 0"]),
+        ("two", &["r1.x = 0", "r0.y = 0", "asin(r0.x) = 0"]),
+    ];
+    for (bodies, exprs) in cases {
+        let mut file = String::from("title = \"undefined nearby\"\ndimension = 2\n[parameters]\nm = 1.0\n");
+        if bodies == "one" {
+            file += &body("b", "");
+        } else {
+            file += &body("b0", "0");
+            file += &body("b1", "1");
+        }
+        for (k, e) in exprs.iter().enumerate() {
+            file += &constraint(k, e);
+        }
+        let target = if bodies == "one" { "b" } else { "b0" };
+        file += &format!("[[expect]]\nforce = {{ {target} = \"[1, 2]\" }}\n");
+        let temp = TempFile::new("undefined-nearby", file.as_bytes());
+        let (code, out, err) = bounded(&["check", temp.0.to_str().expect("utf-8")], 20);
+        assert_eq!(code, Some(1), "{exprs:?}: {out}{err}");
+        assert!(!err.contains("panicked") && out.contains("0 passed, 1 failed"), "{exprs:?}: {out}{err}");
+    }
+}
+
+/// `check` compares values past ~1.4e154 (whose squares overflow) as any others: wrong
+/// expectations fail, right ones pass. The bead at r = [2, 0] at rest pushed by F =
+/// [−1e200, 0]: λ (C/κ, κ = 2) = −F·r/(r·r) = 5e199, so λ for C as written is 2.5e199 and
+/// the force on the bead λ r = [1e200, 0].
+#[test]
+fn check_compares_huge_values_without_overflow() {
+    let state = "at = { r = [2.0, 0.0], v = [0.0, 0.0], F = [-1e200, 0.0] }";
+    let entries = [
+        ("force = { bead = [1e200, 0.0] }", true),
+        ("lambda = { wire = 2.5e199 }", true),
+        ("force = { bead = [2e200, 0.0] }", false),
+        ("force = { bead = [1e200, 1e199] }", false),
+        ("lambda = { wire = -1e300 }", false),
+        ("force = { bead = \"1e200*r\" }", false),
+        ("force = { bead = \"1e300*r\" }", false),
+    ];
+    for (entry, right) in entries {
+        let file = format!("{}[[expect]]\n{state}\n{entry}\n", bead_with("dot(r, r) = l^2"));
+        let temp = TempFile::new("huge-check", file.as_bytes());
+        let (code, out, err) = bounded(&["check", temp.0.to_str().expect("utf-8")], 20);
+        let verdict = if right { "1 passed, 0 failed" } else { "0 passed, 1 failed" };
+        assert!(out.contains(verdict), "{entry}: expected {verdict}:\n{out}{err}");
+        assert_eq!(code, Some(if right { 0 } else { 1 }), "{entry}: {out}{err}");
+    }
 }

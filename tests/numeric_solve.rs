@@ -752,3 +752,87 @@ fn overflowing_rows_are_solved_in_a_rescaled_unit() {
     assert!(sol.diagnostics.iter().any(|d| matches!(d, Diagnostic::NonFiniteRow { .. })));
     assert!(sol.lambda.iter().chain(&sol.constraint_force[0]).all(|x| x.is_finite()));
 }
+
+/// A random redundant system of equalities on `n` bodies in 2D: `independent` random rows,
+/// then rows that are combinations of them (J and c alike, so the data stay consistent),
+/// each row scaled by a random factor in [0.1, 10] so that ‖Jₖ‖ differs from row to row
+/// (not more: the unscaled pseudo-inverse of the reference must still see the rank).
+fn redundant_rows(rng: &mut lagrange::numeric::random::Rng, n: usize, independent: usize, extra: usize) -> Rows {
+    let mut dense: Vec<(Vec<[f64; 3]>, f64)> = Vec::new();
+    for _ in 0..independent {
+        let j = (0..n).map(|_| rng.normal_vector(2, 1.0)).collect();
+        dense.push((j, rng.normal()));
+    }
+    for _ in 0..extra {
+        let (mut j, mut c) = (vec![[0.0; 3]; n], 0.0);
+        for (jk, ck) in &dense[..independent] {
+            let alpha = rng.normal();
+            for (x, y) in j.iter_mut().zip(jk) {
+                for d in 0..2 {
+                    x[d] += alpha * y[d];
+                }
+            }
+            c += alpha * ck;
+        }
+        dense.push((j, c));
+    }
+    let rows = dense
+        .into_iter()
+        .map(|(j, c)| {
+            let s = 10f64.powf(rng.uniform(-1.0, 1.0));
+            let jacobian = j.iter().enumerate().map(|(b, x)| (b, [x[0] * s, x[1] * s, 0.0])).collect();
+            Row { value: 0.0, rate: 0.0, bias: c * s, inequality: false, jacobian }
+        })
+        .collect();
+    Rows {
+        dim: 2,
+        inverse_mass: (0..n).map(|_| 1.0 / rng.uniform(0.1, 10.0)).collect(),
+        velocity: vec![[0.0; 3]; n],
+        force: (0..n).map(|_| rng.normal_vector(2, 5.0)).collect(),
+        rows,
+    }
+}
+
+#[test]
+fn redundant_systems_get_the_pseudo_inverse_multipliers() {
+    // "Minimum-norm λ" is the minimum of ‖λ‖ for C/κ: λ = −A⁺ b with A = J M⁻¹ Jᵀ and
+    // b = J M⁻¹ F + c as the rows hold them (before: the minimum of Σ Aₖₖ λₖ², which differs
+    // whenever the rows' scales differ). nalgebra's pseudo-inverse of the unscaled A is the
+    // independent answer.
+    let mut rng = lagrange::numeric::random::Rng::new(14);
+    let mut checked = 0;
+    for case in 0..300 {
+        let n = 2 + case % 3;
+        let independent = 1 + case % (2 * n - 1);
+        let extra = 1 + case % 2;
+        let rows = redundant_rows(&mut rng, n, independent, extra);
+        let k = rows.rows.len();
+        let dense_j = |q: usize| {
+            let mut x = vec![0.0; 2 * n];
+            for (b, j) in &rows.rows[q].jacobian {
+                x[2 * b] = j[0];
+                x[2 * b + 1] = j[1];
+            }
+            x
+        };
+        let j: Vec<Vec<f64>> = (0..k).map(dense_j).collect();
+        let w = |i: usize| rows.inverse_mass[i / 2];
+        let a = nalgebra::DMatrix::from_fn(k, k, |p, q| (0..2 * n).map(|i| j[p][i] * j[q][i] * w(i)).sum::<f64>());
+        let b = nalgebra::DVector::from_fn(k, |p, _| {
+            (0..2 * n).map(|i| j[p][i] * w(i) * rows.force[i / 2][i % 2]).sum::<f64>() + rows.rows[p].bias
+        });
+        let want = -(a.clone().pseudo_inverse(1e-8 * a.amax()).expect("an SVD") * b.clone());
+        let sol = solve(&rows);
+        assert_eq!(sol.status, Status::MinimumNorm, "case {case}: {:?}", sol.diagnostics);
+        let got = nalgebra::DVector::from_vec(sol.lambda.clone());
+        let error = (&got - &want).norm();
+        assert!(
+            error <= 1e-7 * want.norm(),
+            "case {case}: λ = {got} against A⁺: {want} (‖λ‖ {} vs {})",
+            got.norm(),
+            want.norm()
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, 300);
+}

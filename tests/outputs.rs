@@ -151,7 +151,7 @@ const GOLDEN_RUNS: [(&str, &[&str], u64, usize); 5] = [
         718_846,
     ),
     ("constraints/hard/bounce.toml", &["--steps", "3000"], 0x8297_fd45_ae5f_4878, 283_483),
-    ("constraints/rope_pendulum.toml", &["--steps", "3000", "--every", "3"], 0xa69d_8ed8_1b09_faaa, 133_302),
+    ("constraints/rope_pendulum.toml", &["--steps", "3000", "--every", "3"], 0xa7e9_8853_e35f_b528, 128_578),
 ];
 
 #[test]

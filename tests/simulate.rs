@@ -220,3 +220,178 @@ fn bad_settings_are_refused_by_cause_before_any_step() {
         SettingsError::Stabilize(StabilizeError::NoIterations)
     );
 }
+
+// Resting contacts: an inequality that pushes moves as its equality twin does.
+
+/// A 2D ball (mass 1, gravity 9.81) inside a bowl `dot(r,r) <= R^2` of radius 0.5, starting
+/// at the bottom at speed 5: fast enough to loop (at the top m v²/R − m g = 0.95 > 0), so the
+/// bowl pushes all the way round. `relation` is `<=` (the bowl) or `=` (its equality twin,
+/// a bead on a circle).
+fn bowl(relation: &str) -> lagrange::scenario::Scenario {
+    let text = format!(
+        r#"
+title = "Ball pressed into a bowl"
+dimension = 2
+[parameters]
+R = 0.5
+m = 1.0
+g = [0.0, -9.81]
+[[bodies]]
+name = "ball"
+position = "r"
+velocity = "v"
+acceleration = "a"
+mass = "m"
+force = "F"
+[[constraints]]
+name = "bowl"
+expr = "dot(r, r) {relation} R^2"
+[scene]
+initial = {{ r = [0.0, -0.5], v = [5.0, 0.0] }}
+forces = {{ F = "m*g" }}
+"#
+    );
+    lagrange::scenario::Scenario::new(lagrange::model::file::load(&text).expect("valid"), &[]).expect("derives")
+}
+
+/// `rope_pendulum.toml` and its twin with the rope a rod (`<=` → `=`).
+fn rope_and_rod() -> (lagrange::scenario::Scenario, lagrange::scenario::Scenario) {
+    let text = std::fs::read_to_string("constraints/rope_pendulum.toml").expect("file");
+    let rod = text.replace("dot(r, r) <= l^2", "dot(r, r) = l^2");
+    assert_ne!(rod, text, "the rope's constraint is where the test expects it");
+    let go = |t: &str| {
+        lagrange::scenario::Scenario::new(lagrange::model::file::load(t).expect("valid"), &[]).expect("derives")
+    };
+    (go(&text), go(&rod))
+}
+
+/// Runs `s` and returns the summary with the number of frames whose λ is not positive.
+fn run_counting_slack(
+    s: &lagrange::scenario::Scenario,
+    integrator: Integrator,
+    dt: f64,
+    steps: u64,
+) -> (lagrange::numeric::simulate::Summary, usize) {
+    let mut slack = 0;
+    let summary = s
+        .simulate(settings(s, integrator, Stabilize::PROJECTION, dt, steps), &mut |f| {
+            slack += usize::from(f.lambda[0] <= 0.0);
+            Ok(())
+        })
+        .expect("runs");
+    (summary, slack)
+}
+
+#[test]
+fn a_taut_rope_holds_like_a_rod() {
+    // Before the contacts were held between steps: energy error 1.67e-3 against the rod's
+    // 4.1e-7, λ = 0 on 668 of 10 001 rows while the bob stayed taut.
+    let (rope, rod) = rope_and_rod();
+    for integrator in Integrator::ALL {
+        let (a, slack) = run_counting_slack(&rope, integrator, 1e-3, 10_000);
+        let (b, _) = run_counting_slack(&rod, integrator, 1e-3, 10_000);
+        let (ea, eb) = (a.energy_rel_drift.expect("reported"), b.energy_rel_drift.expect("reported"));
+        assert_eq!(slack, 0, "{integrator:?}: λ = 0 on {slack} rows of a taut rope");
+        assert!(ea <= 2.0 * eb, "{integrator:?}: energy error {ea:e} against the rod's {eb:e}");
+        let apart = (0..2).map(|d| (a.final_position[0][d] - b.final_position[0][d]).abs()).fold(0.0, f64::max);
+        assert!(apart <= 1e-9, "{integrator:?}: the rope's bob ends {apart:e} from the rod's");
+    }
+}
+
+#[test]
+fn a_ball_pressed_into_a_bowl_moves_as_a_bead_on_a_circle() {
+    // Before: energy error 2.1e-2 against 7.8e-7 for the equality (a bowl of radius 1).
+    let (ball, bead) = (bowl("<="), bowl("="));
+    for integrator in Integrator::ALL {
+        let (a, slack) = run_counting_slack(&ball, integrator, 1e-3, 5000);
+        let (b, _) = run_counting_slack(&bead, integrator, 1e-3, 5000);
+        let (ea, eb) = (a.energy_rel_drift.expect("reported"), b.energy_rel_drift.expect("reported"));
+        assert_eq!(slack, 0, "{integrator:?}: λ = 0 on {slack} rows of a pressed ball");
+        assert!(ea <= 2.0 * eb, "{integrator:?}: energy error {ea:e} against the bead's {eb:e}");
+        let apart = (0..2).map(|d| (a.final_position[0][d] - b.final_position[0][d]).abs()).fold(0.0, f64::max);
+        assert!(apart <= 1e-9, "{integrator:?}: the ball ends {apart:e} from the bead");
+    }
+}
+
+#[test]
+fn rk4_keeps_its_fourth_order_with_a_pressed_contact() {
+    // Before: second order only (the contact was dropped and caught again between stages).
+    // Now the ball's error is the bead's, step size by step size, and falls at least as dt⁴.
+    let error = |s: &lagrange::scenario::Scenario| {
+        let at = |dt: f64| {
+            let steps = (1.0 / dt).round() as u64;
+            let run = s.simulate(settings(s, Integrator::Rk4, Stabilize::PROJECTION, dt, steps), &mut |_| Ok(()));
+            run.expect("runs").final_position[0]
+        };
+        let reference = at(1e-4);
+        [0.01, 0.005].map(|dt| {
+            let q = at(dt);
+            ((q[0] - reference[0]).powi(2) + (q[1] - reference[1]).powi(2)).sqrt()
+        })
+    };
+    let ([e1, e2], [b1, b2]) = (error(&bowl("<=")), error(&bowl("=")));
+    let observed = (e1 / e2).log2();
+    assert!(observed >= 3.5, "RK4 order {observed} ({e1:e}, {e2:e})");
+    assert!((e1 / b1 - 1.0).abs() <= 1e-3 && (e2 / b2 - 1.0).abs() <= 1e-3, "ball {e1:e} {e2:e}, bead {b1:e} {b2:e}");
+}
+
+#[test]
+fn a_held_contact_is_released_when_it_would_pull() {
+    // The bowl at speed 3 cannot loop: the ball leaves the wall where its λ would turn
+    // negative (cos θ = −(v₀² − 2gR)/(3gR) from the bottom), flies, and lands again. Held
+    // contacts must let it go: some frames slack, λ never negative, never through the wall.
+    let text = std::fs::read_to_string("constraints/rope_pendulum.toml").expect("file");
+    let fast = text.replace("v = [1.0, 0.0]", "v = [8.0, 0.0]");
+    let s = lagrange::scenario::Scenario::new(lagrange::model::file::load(&fast).expect("valid"), &[]).expect("ok");
+    let (mut slack, mut worst_lambda, mut outside) = (0, 0.0f64, 0.0f64);
+    s.simulate(settings(&s, Integrator::Verlet, Stabilize::PROJECTION, 1e-3, 3000), &mut |f| {
+        slack += usize::from(f.lambda[0] == 0.0);
+        worst_lambda = worst_lambda.min(f.lambda[0]);
+        let r = f.position[0];
+        outside = outside.max((r[0] * r[0] + r[1] * r[1]).sqrt() - 2.0);
+        Ok(())
+    })
+    .expect("runs");
+    assert!(slack > 100, "the rope never went slack ({slack} frames)");
+    assert!(worst_lambda >= 0.0, "the rope pushed: λ = {worst_lambda}");
+    assert!(outside <= 1e-9, "the bob went {outside:e} past the rope's length");
+}
+
+/// The ball of `hard/bounce.toml` with restitution `e`: the ratio of its upward speed just
+/// after its first bounce to its downward speed just before, per stabilisation.
+fn bounce_ratio(e: f64, integrator: Integrator, stabilize: Stabilize) -> f64 {
+    let text = std::fs::read_to_string("constraints/hard/bounce.toml").expect("file");
+    let text = text.replace("restitution = 0.5", &format!("restitution = {e}"));
+    let s =
+        lagrange::scenario::Scenario::new(lagrange::model::file::load(&text).expect("valid"), &[]).expect("derives");
+    let mut settings = settings(&s, integrator, stabilize, 1e-4, 6000);
+    settings.restitution = e;
+    let (mut before, mut after) = (0.0f64, None);
+    s.simulate(settings, &mut |f| {
+        let vy = f.velocity[0][1];
+        if after.is_none() {
+            if vy < 0.0 {
+                before = before.min(vy);
+            } else if before < 0.0 && vy > 0.0 {
+                after = Some(vy);
+            }
+        }
+        Ok(())
+    })
+    .expect("runs");
+    after.expect("the ball bounced") / -before
+}
+
+#[test]
+fn baumgarte_keeps_restitution() {
+    // Before: e = 1 came back at 0.896 of its speed under Baumgarte (its rate term braked
+    // the approach inside the step), 1.0 with projection or none.
+    for integrator in Integrator::ALL {
+        for stabilize in [Stabilize::None, Stabilize::BAUMGARTE, Stabilize::PROJECTION] {
+            for e in [1.0, 0.5] {
+                let ratio = bounce_ratio(e, integrator, stabilize);
+                assert!((ratio - e).abs() <= 1e-3, "{integrator:?} + {stabilize:?}, e = {e}: came back at {ratio}");
+            }
+        }
+    }
+}

@@ -486,6 +486,11 @@ fn outcome(passed: bool, how: &str, detail: String) -> Outcome {
 }
 
 /// `(passed, ‖x − y‖)`: ‖x − y‖ ≤ tol · max(‖x‖, ‖y‖, 10⁻³), every value finite.
+///
+/// Computed in units of the largest |component| s, so neither the squares nor the
+/// difference overflow: values past ~1.4e154 (whose squares are ∞, which once made every
+/// such comparison pass) compare as any others. The returned difference is in the values'
+/// own unit (∞ only when it truly exceeds f64's range).
 fn compare(x: &Result<Vec<f64>, String>, y: &Result<Vec<f64>, String>, tol: f64) -> (bool, Option<f64>) {
     let (Ok(x), Ok(y)) = (x, y) else {
         return (false, None);
@@ -493,10 +498,17 @@ fn compare(x: &Result<Vec<f64>, String>, y: &Result<Vec<f64>, String>, tol: f64)
     if x.len() != y.len() || !x.iter().chain(y).all(|v| v.is_finite()) {
         return (false, None);
     }
-    let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
-    let diff: Vec<f64> = x.iter().zip(y).map(|(a, b)| a - b).collect();
-    let d = norm(&diff);
-    (d <= tol * norm(x).max(norm(y)).max(1e-3), Some(d))
+    let s = x.iter().chain(y).fold(0.0f64, |m, v| m.max(v.abs()));
+    if s == 0.0 {
+        return (true, Some(0.0));
+    }
+    let norm = |v: &mut dyn Iterator<Item = f64>| v.map(|a| a * a).sum::<f64>().sqrt();
+    // x/s and y/s lie in [−1, 1]: their difference and squares are finite.
+    let d = norm(&mut x.iter().zip(y).map(|(a, b)| a / s - b / s));
+    let size = norm(&mut x.iter().map(|a| a / s)).max(norm(&mut y.iter().map(|b| b / s)));
+    // 10⁻³ in units of s (∞ for a subnormal s: both values are then within 10⁻³ of 0).
+    let floor = 1e-3 / s;
+    (d <= tol * size.max(floor), Some(d * s))
 }
 
 fn show(v: &Result<Vec<f64>, String>) -> String {

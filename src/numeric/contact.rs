@@ -54,10 +54,19 @@ impl ContactState {
 
 /// The state of every inequality row (`None` for equalities).
 pub fn classify(rows: &Rows, settings: &Settings) -> Vec<Option<ContactState>> {
+    classify_holding(rows, settings, &[])
+}
+
+/// [`classify`], with the rows marked in `held` (an active set kept from an earlier state;
+/// missing entries are not held) touching whatever their distance: a held contact is
+/// resting or closing by its rate, or separating, never apart or penetrating, so the drift
+/// of a step cannot release it — only its λ turning negative (or its opening) can.
+pub fn classify_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Vec<Option<ContactState>> {
     let tol = settings.contact_tolerance;
     rows.rows
         .iter()
-        .map(|row| {
+        .enumerate()
+        .map(|(k, row)| {
             if !row.inequality {
                 return None;
             }
@@ -67,7 +76,7 @@ pub fn classify(rows: &Rows, settings: &Settings) -> Vec<Option<ContactState>> {
                 // No direction: the row cannot push; whether it holds is C's business.
                 return Some(if row.value >= 0.0 { ContactState::Apart } else { ContactState::Penetrating });
             }
-            let distance = row.value / norm;
+            let distance = if held.get(k).copied().unwrap_or(false) { 0.0 } else { row.value / norm };
             let rate = row.rate / norm;
             if distance > tol * settings.length_scale {
                 Some(ContactState::Apart)

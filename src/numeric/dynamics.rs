@@ -8,13 +8,21 @@
 //! lengths are far from 1 (|r| ≈ 1e155 or 1e-150) to a verified power-of-two unit
 //! (`numeric::rescale::Unit`); the run loop converts what it reports back.
 //!
+//! The dynamics also keep the run's active set of contacts ([`Dynamics::hold`]): a contact
+//! that pushes at the start of a step is an equality for the whole step (every integrator
+//! stage, SHAKE, the projections), and is released only at the start of a step whose solve
+//! gives it λ = 0 (λ would turn negative) or finds it opening. Without it a resting contact
+//! on a curved surface drifts off by O(dt³) in a step, counts as apart, falls for a step
+//! and is caught again: λ = 0 on some frames, energy lost, RK4's stages disagreeing.
+//!
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
+use super::contact::ContactState;
 use super::integrate::{Field, Vectors};
 use super::rescale::Unit;
 use super::rows::{RowProgram, RowScratch, Rows};
 use super::simulate::SettingsError;
-use super::solve::{Solution, solve};
+use super::solve::{Settings, Solution, solve_holding};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
@@ -88,6 +96,12 @@ pub struct Dynamics<'s> {
     pub evaluations: u64,
     /// The step being computed, for diagnostics.
     pub step: u64,
+    /// The active set kept between steps, per constraint: inequality rows that pushed
+    /// (λ > 0) at the start of the step. Within a step they are equalities (every stage of
+    /// an integrator, the projections, SHAKE), so a pressed contact moves as its equality
+    /// twin does; they are released only at the start of a step whose solve gives them
+    /// λ = 0 (λ would turn negative) or finds them opening. Empty: nothing held.
+    held: Vec<bool>,
 }
 
 impl<'s> Dynamics<'s> {
@@ -105,6 +119,7 @@ impl<'s> Dynamics<'s> {
             velocity_dependent_forces: true,
             evaluations: 0,
             step: 0,
+            held: Vec::new(),
         }
     }
 
@@ -112,6 +127,41 @@ impl<'s> Dynamics<'s> {
     /// evaluation count and scratch are kept.
     pub fn reset(&mut self, env: Env) {
         self.env = env;
+        self.held.clear();
+    }
+
+    /// Whether constraint `k` is a held contact (see [`Dynamics::hold`]).
+    pub fn is_held(&self, k: usize) -> bool {
+        self.held.get(k).copied().unwrap_or(false)
+    }
+
+    /// The held contacts, per constraint (possibly shorter than the constraints: the rest
+    /// are not held).
+    pub fn held(&self) -> &[bool] {
+        &self.held
+    }
+
+    /// Updates the active set from the solve at the start of a step ([`Dynamics::solve`] at
+    /// `rows`): an inequality row is held for the step when it pushes (λ > 0) and is
+    /// resting or penetrating, or was held and is still touching and not opening. A closing
+    /// contact that was not held is left to its impulse (holding it as an equality would
+    /// fold its correction into the velocity before the bounce).
+    pub fn hold(&mut self, rows: &Rows, solution: &Solution) {
+        self.held.resize(rows.rows.len(), false);
+        for (k, row) in rows.rows.iter().enumerate() {
+            let pushing = row.inequality && solution.lambda[k] > 0.0;
+            self.held[k] = pushing
+                && match solution.contacts[k] {
+                    Some(ContactState::Resting | ContactState::Penetrating) => true,
+                    Some(ContactState::Closing) => self.held[k],
+                    _ => false,
+                };
+        }
+    }
+
+    /// Releases every held contact (a new run, or a caller that keeps no active set).
+    pub fn release(&mut self) {
+        self.held.clear();
     }
 
     pub fn system(&self) -> &'s System {
@@ -174,15 +224,24 @@ impl<'s> Dynamics<'s> {
         }
     }
 
-    /// Solves for λ at `rows` (Baumgarte terms added first when set).
+    /// Solves for λ at `rows` (Baumgarte terms added first when set), the held contacts
+    /// touching whatever their distance (`solve::solve_holding`): the solve at the start of
+    /// a step, which decides what stays held ([`Dynamics::hold`]).
     pub fn solve(&self, rows: &mut Rows) -> Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
-            for row in &mut rows.rows {
+            for (k, row) in rows.rows.iter_mut().enumerate() {
+                // A closing contact that is not held is the impulse's (Ċ⁺ = −eĊ at the step's
+                // end): a spring on it would brake the approach inside the step, and a bounce
+                // with e = 1 came back at 0.9 of its speed. Held contacts (equalities in the
+                // stages) and contacts not closing keep the terms.
+                if row.inequality && !self.is_held(k) && row.rate < 0.0 {
+                    continue;
+                }
                 // C̈ + 2αĊ + β²C = 0 ⇒ the bias c gains 2αĊ + β²C.
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
         }
-        solve(rows)
+        solve_holding(rows, &Settings::default(), &self.held)
     }
 }
 
@@ -191,6 +250,13 @@ impl Field for Dynamics<'_> {
 
     fn acceleration(&mut self, t: f64, q: &Vectors, v: &Vectors, a: &mut Vectors) -> Result<(), SimError> {
         let mut rows = self.rows(t, q, v)?;
+        // Within a step the held contacts are equalities: every stage sees the same smooth
+        // field, so a pressed contact keeps the integrator's order.
+        for (k, row) in rows.rows.iter_mut().enumerate() {
+            if self.is_held(k) {
+                row.inequality = false;
+            }
+        }
         let solution = self.solve(&mut rows);
         a.copy_from_slice(&solution.acceleration);
         self.recycle(rows);

@@ -81,6 +81,9 @@ impl Settings {
         if !(self.blowup.is_finite() && self.blowup > 0.0) {
             return Err(SettingsError::Blowup(self.blowup));
         }
+        if self.steps > MAX_STEPS {
+            return Err(SettingsError::TooManySteps { steps: self.steps as f64 });
+        }
         Ok(self.stabilize.validate()?)
     }
 }
@@ -91,6 +94,18 @@ pub enum SettingsError {
     /// The step dt is not a finite positive number.
     #[error("the step must be finite and positive, found {0}")]
     Step(f64),
+    /// The simulated time is not a finite positive number.
+    #[error("the duration must be finite and positive, found {0}")]
+    Duration(f64),
+    /// The duration is shorter than half a step: the run would take no step.
+    #[error("the step dt = {dt:e} is longer than twice the duration {duration:e}: the run would take no step")]
+    NoStep { dt: f64, duration: f64 },
+    /// More steps than [`MAX_STEPS`].
+    #[error(
+        "the run would take {steps:.3e} steps, more than the maximum of {} (numeric::simulate::MAX_STEPS); use a larger --dt or a shorter --duration",
+        MAX_STEPS
+    )]
+    TooManySteps { steps: f64 },
     /// The restitution is outside [0, 1].
     #[error("the restitution must lie in [0, 1], found {0}")]
     Restitution(f64),
@@ -120,9 +135,35 @@ pub enum SettingsError {
     Baumgarte(f64),
 }
 
-/// The number of steps of `dt` that cover `duration` (rounded; 0 for a negative duration).
+/// The most steps one run takes (`simulate`, and each run of `bench`): a run asked for more
+/// (`--duration inf`, a scene `dt = 1e-320`) is refused before it starts, never run for
+/// ever. 10⁸ steps of a pendulum take about a minute.
+pub const MAX_STEPS: u64 = 100_000_000;
+
+/// The number of steps of `dt` that cover `duration` (rounded; 0 for a negative duration,
+/// saturating for a huge one, which [`Settings::validate`] then refuses).
 pub fn steps_for(duration: f64, dt: f64) -> u64 {
     (duration / dt).round().max(0.0) as u64
+}
+
+/// As [`steps_for`], refusing what cannot be a run: a step or a duration that is not a
+/// finite number (a NaN duration would run 0 steps), a duration that rounds to 0 steps
+/// (`--dt 1e300`), and more than [`MAX_STEPS`].
+pub fn checked_steps(duration: f64, dt: f64) -> Result<u64, SettingsError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(SettingsError::Step(dt));
+    }
+    if !(duration.is_finite() && duration > 0.0) {
+        return Err(SettingsError::Duration(duration));
+    }
+    let steps = (duration / dt).round();
+    if steps < 1.0 {
+        return Err(SettingsError::NoStep { dt, duration });
+    }
+    if steps > MAX_STEPS as f64 {
+        return Err(SettingsError::TooManySteps { steps });
+    }
+    Ok(steps as u64)
 }
 
 /// One recorded state, as the observer sees it.
@@ -406,6 +447,8 @@ impl<'s> Simulation<'s> {
                 if max_kinetic > 0.0 { max_energy_error / max_kinetic } else { energy_back(max_energy_error) }
             });
             let solution = self.dynamics.solve(&mut rows);
+            // The active set for the step to come: contacts that push are held.
+            self.dynamics.hold(&rows, &solution);
             if n.is_multiple_of(stride) || n == s.steps {
                 summary.samples.push(Sample {
                     time: t,
@@ -486,7 +529,7 @@ impl<'s> Simulation<'s> {
                     }
                 }
                 update_rates(&mut end, &self.half, &self.v);
-                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed, self.dynamics.held());
                 self.dynamics.recycle(end);
                 self.dynamics.recycle(rows);
                 self.check_finite(n + 1, t1)?;
@@ -497,12 +540,28 @@ impl<'s> Simulation<'s> {
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {
                     let mut end = self.project(t1, length, tolerance, max_iterations)?;
-                    velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed);
+                    velocity_step(
+                        &mut end,
+                        &mut self.v,
+                        true,
+                        touch,
+                        s.restitution,
+                        bounce_speed,
+                        self.dynamics.held(),
+                    );
                     self.dynamics.recycle(end);
                 }
                 _ if has_inequalities => {
                     let mut end = self.dynamics.rows(t1, &self.q, &self.v)?;
-                    velocity_step(&mut end, &mut self.v, false, touch, s.restitution, bounce_speed);
+                    velocity_step(
+                        &mut end,
+                        &mut self.v,
+                        false,
+                        touch,
+                        s.restitution,
+                        bounce_speed,
+                        self.dynamics.held(),
+                    );
                     self.dynamics.recycle(end);
                 }
                 _ => {}

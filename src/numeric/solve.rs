@@ -11,8 +11,8 @@
 //! - Equalities. A is banded when constraints are numbered along a chain; the band Cholesky
 //!   (`numeric::banded`) is linear in the number of rows, dense Cholesky is the alternative.
 //!   A small pivot (Ã singular within `rank_tolerance`: a redundant constraint, a singular
-//!   configuration) falls back to a dense SVD: the minimum-norm λ̃ when the system is
-//!   consistent, least squares when not, always with a diagnostic naming the rows, the
+//!   configuration) falls back to a dense eigendecomposition: the minimum-norm λ when the
+//!   system is consistent, least squares when not, always with a diagnostic naming the rows, the
 //!   rank and a condition estimate. One step of iterative refinement follows each solve.
 //! - Inequalities. Rows are classified by `numeric::contact`. If the equality solve over all
 //!   touching rows already pushes on every inequality (λ ≥ 0), it is the answer (the QP's
@@ -23,13 +23,14 @@
 //!   pivoting (exact, terminates for positive definite Ã) starts from its guess, for blocks
 //!   of up to 64 rows.
 //!
-//! Minimum norm is taken in the scaled multipliers λ̃ (a constraint's force magnitude over
-//! the square root of its effective mass), which does not depend on how C is written.
+//! Minimum norm is that of λ for C/κ (what the pseudo-inverse of the unscaled A gives): the
+//! eigendecomposition runs on the scaled Ã, and the null-space part is then chosen to minimise ‖λ‖ with
+//! λₖ = λ̃ₖ/(‖Jₖ‖√Âₖₖ) (see `minimum_norm`).
 //!
 //! Not here: evaluating rows (`numeric::rows`), files, text.
 
 use super::banded::Banded;
-use super::contact::{ContactState, classify};
+use super::contact::{ContactState, classify_holding};
 use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use nalgebra::{DMatrix, DVector};
@@ -62,7 +63,7 @@ const PIVOTING_MAX_ROWS: usize = 64;
 /// each other by more than that are reported inconsistent.
 const CONSISTENCY: f64 = 1e-2;
 /// A row takes part in a null vector of Ã (it is named as redundant) when its component is
-/// above `NULL_SHARE` of the vector's largest: smaller ones are the SVD's rounding.
+/// above `NULL_SHARE` of the vector's largest: smaller ones are rounding.
 const NULL_SHARE: f64 = 1e-6;
 
 /// Which factorisation the equality solve uses.
@@ -165,8 +166,9 @@ impl Status {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Diagnostic {
     /// The row has non-finite numbers (its gradient or c term, C or Ċ of an inequality, or
-    /// the mass, velocity or force of a body it acts on); it is left out (`Failed`).
-    NonFiniteRow { constraint: usize },
+    /// the mass, velocity or force of a body it acts on); it is left out (`Failed`). `part`
+    /// is the first of them found non-finite, `cause` whether it is NaN or ±∞.
+    NonFiniteRow { constraint: usize, part: RowPart, cause: NonFinite },
     /// The gradient is zero here (a singular configuration): the row carries no force.
     /// `unsatisfiable`: its c term is not zero, so its C̈ = 0 cannot hold.
     ZeroGradient { constraint: usize, unsatisfiable: bool },
@@ -200,11 +202,100 @@ pub enum Diagnostic {
     Rescaled { exponent: i64 },
 }
 
+/// Which number of a row (or of a body it acts on) is not finite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RowPart {
+    /// ∇C/κ on some body.
+    Gradient,
+    /// c, C̈/κ with every acceleration zero.
+    CTerm,
+    /// C/κ.
+    Value,
+    /// Ċ/κ.
+    Rate,
+    /// The inverse mass of this body (a zero, negative or non-finite mass).
+    Mass { body: usize },
+    /// This body's velocity.
+    Velocity { body: usize },
+    /// This body's external force.
+    Force { body: usize },
+}
+
+/// How a number is not finite.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NonFinite {
+    /// NaN: an undefined operation in the formula (0/0, ∞ − ∞, 0·∞, `sqrt` or `ln` of a
+    /// negative number).
+    Undefined,
+    /// ±∞: the value exceeds f64's range (or a division by zero).
+    Overflow,
+}
+
+impl NonFinite {
+    /// The cause of `x`, `None` when it is finite.
+    pub fn of(x: f64) -> Option<NonFinite> {
+        if x.is_nan() {
+            Some(NonFinite::Undefined)
+        } else if x.is_infinite() {
+            Some(NonFinite::Overflow)
+        } else {
+            None
+        }
+    }
+
+    /// The cause of the first non-finite number among `xs` (NaN wins over ±∞, as the
+    /// deeper cause), `None` when all are finite.
+    pub fn of_all(xs: impl IntoIterator<Item = f64>) -> Option<NonFinite> {
+        xs.into_iter().filter_map(NonFinite::of).max_by_key(|c| matches!(c, NonFinite::Undefined))
+    }
+}
+
+/// Whether a mass's inverse `w` is unusable: negative, NaN or ±∞ (a mass of zero, negative,
+/// or non-finite), with its cause.
+fn bad_inverse_mass(w: f64) -> Option<NonFinite> {
+    match NonFinite::of(w) {
+        Some(c) => Some(c),
+        None if w < 0.0 => Some(NonFinite::Undefined),
+        None => None,
+    }
+}
+
+/// The first non-finite number of `row` (and the bodies it acts on), in the order the
+/// solve needs them; C and Ċ only for inequalities (`check_value`).
+fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Option<(RowPart, NonFinite)> {
+    if let Some(c) = NonFinite::of_all(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied())) {
+        return Some((RowPart::Gradient, c));
+    }
+    if let Some(c) = NonFinite::of(row.bias) {
+        return Some((RowPart::CTerm, c));
+    }
+    for &(body, _) in &row.jacobian {
+        if let Some(c) = bad_inverse_mass(rows.inverse_mass[body]) {
+            return Some((RowPart::Mass { body }, c));
+        }
+        if let Some(c) = NonFinite::of_all(rows.velocity[body]) {
+            return Some((RowPart::Velocity { body }, c));
+        }
+        if let Some(c) = NonFinite::of_all(rows.force[body]) {
+            return Some((RowPart::Force { body }, c));
+        }
+    }
+    if check_value {
+        if let Some(c) = NonFinite::of(row.value) {
+            return Some((RowPart::Value, c));
+        }
+        if let Some(c) = NonFinite::of(row.rate) {
+            return Some((RowPart::Rate, c));
+        }
+    }
+    None
+}
+
 impl Diagnostic {
     /// The constraints involved (indices; empty when the whole solve is meant).
     pub fn constraints(&self) -> &[usize] {
         match self {
-            Diagnostic::NonFiniteRow { constraint }
+            Diagnostic::NonFiniteRow { constraint, .. }
             | Diagnostic::ZeroGradient { constraint, .. }
             | Diagnostic::InfiniteMass { constraint }
             | Diagnostic::Closing { constraint }
@@ -239,6 +330,18 @@ pub struct Solution {
     pub contacts: Vec<Option<ContactState>>,
 }
 
+impl Solution {
+    /// Whether the numbers answer the question asked: false when the status is `Failed` or
+    /// `Inconsistent` (no λ satisfies every row), or when a row with a zero gradient has a
+    /// C̈ = 0 that cannot hold. A zero gradient whose c term is zero is an answer (λ = 0
+    /// is exact), as are the minimum-norm λ of consistent redundant rows and an inaccurate
+    /// QP's λ (its residuals are in the diagnostic).
+    pub fn is_answer(&self) -> bool {
+        !matches!(self.status, Status::Failed | Status::Inconsistent)
+            && !self.diagnostics.iter().any(|d| matches!(d, Diagnostic::ZeroGradient { unsatisfiable: true, .. }))
+    }
+}
+
 use super::vector::dot;
 /// Re-exported where callers have always found them; they live in `numeric::vector`.
 pub use super::vector::{row_norm, safe_norm};
@@ -262,14 +365,6 @@ impl Scaled {
     /// Scales `rows`; rows that cannot carry a force get a diagnostic and `usable = false`.
     pub fn new(rows: &Rows, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) -> Scaled {
         let k = rows.rows.len();
-        let bad_body: Vec<bool> = (0..rows.inverse_mass.len())
-            .map(|i| {
-                let w = rows.inverse_mass[i];
-                !(w.is_finite() && w >= 0.0)
-                    || rows.force[i].iter().any(|x| !x.is_finite())
-                    || rows.velocity[i].iter().any(|x| !x.is_finite())
-            })
-            .collect();
         // Sized up front: 1 % of a chain's simulation (see `assemble`).
         let parts = rows.rows.iter().map(|r| r.jacobian.len()).sum();
         let mut s = Scaled {
@@ -281,14 +376,20 @@ impl Scaled {
         };
         for (q, row) in rows.rows.iter().enumerate() {
             s.start.push(s.parts.len());
-            let norm = row_norm(&row.jacobian);
             // An inequality also needs C and Ċ to be classified.
-            let finite = norm.is_finite()
-                && row.bias.is_finite()
-                && !row.jacobian.iter().any(|(b, _)| bad_body[*b])
-                && (!row.inequality || (row.value.is_finite() && row.rate.is_finite()));
-            if !finite {
-                diagnostics.push(Diagnostic::NonFiniteRow { constraint: q });
+            if let Some((part, cause)) = non_finite_part(rows, row, row.inequality) {
+                diagnostics.push(Diagnostic::NonFiniteRow { constraint: q, part, cause });
+                *status = (*status).max(Status::Failed);
+                continue;
+            }
+            let norm = row_norm(&row.jacobian);
+            if !norm.is_finite() {
+                // Finite components whose norm overflows (row_norm scales, so this is rare).
+                diagnostics.push(Diagnostic::NonFiniteRow {
+                    constraint: q,
+                    part: RowPart::Gradient,
+                    cause: NonFinite::Overflow,
+                });
                 *status = (*status).max(Status::Failed);
                 continue;
             }
@@ -346,6 +447,9 @@ pub(crate) struct Block {
     pub n: usize,
     pub bandwidth: usize,
     pub a: Vec<(usize, usize, f64)>,
+    /// Per block row, λₖ/λ̃ₖ = 1/(‖Jₖ‖√Âₖₖ): the weights that make a minimum-norm λ̃ the
+    /// minimum-norm λ of C/κ (see [`minimum_norm`]).
+    pub weight: Vec<f64>,
 }
 
 /// Ãₚq = Σᵢ J̃ₚᵢ·J̃qᵢ wᵢ over the bodies rows p and q of `index` share.
@@ -385,7 +489,8 @@ pub(crate) fn assemble(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -
             }
         }
     }
-    Block { n: index.len(), bandwidth, a }
+    let weight = index.iter().map(|&k| scaled.unscale(k, 1.0)).collect();
+    Block { n: index.len(), bandwidth, a, weight }
 }
 
 /// Solves for λ at `rows` with the default settings.
@@ -395,12 +500,20 @@ pub fn solve(rows: &Rows) -> Solution {
 
 /// Solves for λ at `rows`.
 pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
+    solve_holding(rows, settings, &[])
+}
+
+/// Solves for λ at `rows`, with the inequality rows marked in `held` (a simulation's active
+/// set, `numeric::dynamics`) taken as touching whatever their distance
+/// (`contact::classify_holding`): they stay candidates, λ ≥ 0, and leave only when λ would
+/// turn negative or they open.
+pub fn solve_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Solution {
     let n_bodies = rows.inverse_mass.len();
     let k = rows.rows.len();
     let mut diagnostics = Vec::new();
     let mut status = Status::Solved;
     let scaled = Scaled::new(rows, &mut diagnostics, &mut status);
-    let contacts = classify(rows, settings);
+    let contacts = classify_holding(rows, settings, held);
     // Candidates: usable equalities, and inequality rows touching without separating.
     let index: Vec<usize> = (0..k)
         .filter(|&q| {
@@ -558,6 +671,7 @@ fn solve_subset(
             .filter(|(p, q, _)| position[*p] != usize::MAX && position[*q] != usize::MAX)
             .map(|&(p, q, v)| (position[p], position[q], v))
             .collect(),
+        weight: rows.iter().map(|&p| block.weight[p]).collect(),
     };
     let sub_b: Vec<f64> = rows.iter().map(|&p| b[p]).collect();
     let sub_index: Vec<usize> = rows.iter().map(|&p| index[p]).collect();
@@ -610,7 +724,7 @@ fn pivoting(
     None
 }
 
-/// Solves Ã μ = −b̃ on a block: band or dense Cholesky, SVD when singular.
+/// Solves Ã μ = −b̃ on a block: band or dense Cholesky, an eigendecomposition when singular.
 pub(crate) fn equality(
     block: &Block,
     b: &[f64],
@@ -685,7 +799,7 @@ pub(crate) fn equality(
             return finite_or_zero(x.iter().copied().collect(), index, diagnostics, status);
         }
     }
-    let x = minimum_norm(&dense(block), &rhs, index, settings, diagnostics, status);
+    let x = minimum_norm(&dense(block), &rhs, &block.weight, index, settings, diagnostics, status);
     finite_or_zero(x, index, diagnostics, status)
 }
 
@@ -716,11 +830,23 @@ fn finite_or_zero(
     x
 }
 
-/// The minimum-norm (least-squares if inconsistent) solution of a singular `a μ = rhs` by
-/// SVD, with a diagnostic naming the rows in the null space.
+/// The minimum-norm (least-squares if inconsistent) solution of a singular `a μ = rhs`, with
+/// a diagnostic naming the rows in the null space.
+///
+/// `a` is the symmetric, positive semi-definite Ã, so its eigendecomposition Q Λ Qᵀ is its
+/// SVD, with eigenvectors orthogonal to rounding (nalgebra's SVD leaves the singular
+/// vectors of an exactly rank-deficient matrix inaccurate by 1e-6 on small redundant
+/// systems, which showed as residuals and a wrong minimum). Eigenvalues at or below the
+/// rank tolerance (relative to the largest) are zero: μ₀ = Σ qᵢ (qᵢ·rhs)/Λᵢ over the rest.
+///
+/// The norm minimised is that of λ = `weight`·μ (λ of C/κ, what the pseudo-inverse of the
+/// unscaled A gives), not of the scaled μ: among μ₀ + N z (N the null eigenvectors), z
+/// minimises ‖W (μ₀ + N z)‖ by a small least squares. Weights count relative to the largest;
+/// when their ratios leave the normal range, μ₀ stands (then Σ Aₖₖ λₖ² is what is minimised).
 fn minimum_norm(
     a: &DMatrix<f64>,
     rhs: &[f64],
+    weight: &[f64],
     index: &[usize],
     settings: &Settings,
     diagnostics: &mut Vec<Diagnostic>,
@@ -728,26 +854,46 @@ fn minimum_norm(
 ) -> Vec<f64> {
     let n = rhs.len();
     let rhs = DVector::from_column_slice(rhs);
-    let svd = a.clone().svd(true, true);
-    let largest = svd.singular_values.amax();
+    let eigen = a.clone().symmetric_eigen();
+    let magnitude: Vec<f64> = eigen.eigenvalues.iter().map(|x| x.abs()).collect();
+    let largest = magnitude.iter().copied().fold(0.0f64, f64::max);
     let threshold = settings.rank_tolerance * largest.max(f64::MIN_POSITIVE);
-    let rank = svd.singular_values.iter().filter(|s| **s > threshold).count();
-    let mu = svd.solve(&rhs, threshold).unwrap_or_else(|_| DVector::zeros(n));
+    let kept: Vec<usize> = (0..n).filter(|&s| magnitude[s] > threshold && magnitude[s].is_finite()).collect();
+    let null: Vec<usize> = (0..n).filter(|&s| !kept.contains(&s)).collect();
+    let rank = kept.len();
+    let q = &eigen.eigenvectors;
+    let mut mu = DVector::zeros(n);
+    for &s in &kept {
+        let column = q.column(s);
+        mu += column * (column.dot(&rhs) / eigen.eigenvalues[s]);
+    }
+    let top = weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    let w: Vec<f64> = weight.iter().map(|x| x / top).collect();
+    if !null.is_empty() && w.len() == n && w.iter().all(|x| x.is_normal()) {
+        // min over z of ‖W μ₀ + (W N) z‖: z = −(W N)⁺ W μ₀.
+        let basis = DMatrix::from_fn(n, null.len(), |p, c| q[(p, null[c])]);
+        let weighted = DMatrix::from_fn(n, null.len(), |p, c| w[p] * basis[(p, c)]);
+        let target = DVector::from_fn(n, |p, _| -w[p] * mu[p]);
+        let inner = weighted.svd(true, true);
+        let floor = settings.rank_tolerance * inner.singular_values.amax().max(f64::MIN_POSITIVE);
+        if let Ok(z) = inner.solve(&target, floor) {
+            let moved = &mu + basis * z;
+            if moved.iter().all(|x| x.is_finite()) {
+                mu = moved;
+            }
+        }
+    }
     let residual = (a * &mu - &rhs).amax();
     let size = rhs.amax() + a.amax() * mu.amax();
     let consistent = residual <= settings.contact_tolerance.sqrt() * CONSISTENCY * size || size == 0.0;
-    let smallest = svd.singular_values.iter().copied().filter(|s| *s > threshold).fold(f64::INFINITY, f64::min);
+    let smallest = kept.iter().map(|&s| magnitude[s]).fold(f64::INFINITY, f64::min);
     // Rows with a visible part in a null vector are the redundant ones.
     let mut involved = vec![false; n];
-    if let Some(v_t) = &svd.v_t {
-        for (s, sigma) in svd.singular_values.iter().enumerate() {
-            if *sigma <= threshold {
-                let row = v_t.row(s);
-                let top = row.amax();
-                for p in 0..n {
-                    involved[p] |= row[p].abs() > NULL_SHARE * top;
-                }
-            }
+    for &s in &null {
+        let column = q.column(s);
+        let top = column.amax();
+        for p in 0..n {
+            involved[p] |= column[p].abs() > NULL_SHARE * top;
         }
     }
     let constraints: Vec<usize> = (0..n).filter(|&p| involved[p]).map(|p| index[p]).collect();

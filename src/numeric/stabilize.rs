@@ -17,7 +17,9 @@
 //! "accelerations" M⁻¹Jᵀμ are exactly Δr (or Δv). Reusing it means the sparse solve and the
 //! QP for inequalities serve projection and contacts too, with one set of diagnostics.
 //! Inequality rows take part only where they are violated (C < 0) or closing (Ċ < 0 while
-//! touching); `solve`'s active set keeps their μ ≥ 0, so a contact only ever pushes.
+//! touching); `solve`'s active set keeps their μ ≥ 0, so a contact only ever pushes. Held
+//! contacts (the run's active set, `Dynamics::hold`) are equalities here: the projection
+//! and SHAKE hold them at C = 0 from both sides, and the velocity step at Ċ = 0.
 //!
 //! Contacts. A closing contact gets the impulse P = −(1+e)(J v)/(J M⁻¹ Jᵀ) (DESIGN.md step
 //! 6): the same velocity solve with c = (1+e)Ċ, so Ċ⁺ = −eĊ. Approaches slower than a
@@ -207,21 +209,24 @@ pub fn project_positions(
         let mut rows = dynamics.rows(t, q, v)?;
         // Residual: the largest first-order distance to a surface that is to be enforced.
         let all = inequalities == Inequalities::AsEqualities;
-        let enforced = |row: &Row, s: f64| !row.inequality || all || s < 0.0;
+        // Held contacts (the active set) are equalities for the step: held at C = 0 from
+        // both sides, so the drift of a step on a curved surface cannot lift them off.
+        let as_equality = |k: usize, row: &Row| !row.inequality || all || dynamics.is_held(k);
+        let enforced = |k: usize, row: &Row, s: f64| as_equality(k, row) || s < 0.0;
         let mut residual = 0.0f64;
-        for row in &rows.rows {
+        for (k, row) in rows.rows.iter().enumerate() {
             let s = distance(row);
-            if enforced(row, s) {
+            if enforced(k, row, s) {
                 residual = residual.max(s.abs());
             }
         }
         if residual <= bound || iterations >= max_iterations {
             return Ok((rows, iterations));
         }
-        for row in &mut rows.rows {
-            if enforced(row, distance(row)) {
-                // (J M⁻¹ Jᵀ) μ = −C: c = C.
-                row.inequality &= !all;
+        for (k, row) in rows.rows.iter_mut().enumerate() {
+            if enforced(k, row, distance(row)) {
+                // (J M⁻¹ Jᵀ) μ = −C: c = C (μ ≥ 0 on violated contacts that are not held).
+                row.inequality &= !as_equality(k, row);
                 enforce(row, row.value);
             } else {
                 leave_out(row);
@@ -261,8 +266,10 @@ pub fn shake_positions(
     loop {
         let rows = dynamics.rows(t, q, v_half)?;
         let mut residual = 0.0f64;
-        for row in rows.rows.iter().filter(|r| !r.inequality) {
-            residual = residual.max(distance(row).abs());
+        for (k, row) in rows.rows.iter().enumerate() {
+            if !row.inequality || dynamics.is_held(k) {
+                residual = residual.max(distance(row).abs());
+            }
         }
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
@@ -270,9 +277,11 @@ pub fn shake_positions(
             return Ok((rows, iterations));
         }
         previous = residual;
-        for ((old, new), constraint) in start.rows.iter_mut().zip(&rows.rows).zip(&system.constraints) {
-            old.inequality = constraint.inequality;
-            if !constraint.inequality {
+        for (k, ((old, new), constraint)) in start.rows.iter_mut().zip(&rows.rows).zip(&system.constraints).enumerate()
+        {
+            let equality = !constraint.inequality || dynamics.is_held(k);
+            old.inequality = !equality;
+            if equality {
                 // (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺): c = C(q⁺).
                 enforce(old, new.value);
             } else {
@@ -316,8 +325,9 @@ pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
 }
 
 /// The velocity solve at the rows of the current positions: closing contacts (touching
-/// within `touch`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
-/// `project` the equalities go onto Ċ = 0 too, else they keep their Ċ. Returns whether
+/// within `touch` or `held`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
+/// `project` the equalities and the held contacts that are not closing go onto Ċ = 0 too,
+/// else they keep their Ċ. Returns whether
 /// anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
 pub fn velocity_step(
     rows: &mut Rows,
@@ -326,12 +336,20 @@ pub fn velocity_step(
     touch: f64,
     restitution: f64,
     bounce_speed: f64,
+    held: &[bool],
 ) -> bool {
     let mut any = false;
-    for row in &mut rows.rows {
-        if row.inequality {
+    for (k, row) in rows.rows.iter_mut().enumerate() {
+        let is_held = held.get(k).copied().unwrap_or(false);
+        if row.inequality && is_held && normal_speed(row) >= 0.0 {
+            // A held contact not closing is an equality for the step: onto Ċ = 0 with
+            // projection (so round-off cannot make it separate), else its rate is kept.
+            row.inequality = false;
+            enforce(row, if project { row.rate } else { 0.0 });
+            any |= project;
+        } else if row.inequality {
             let (s, u) = (distance(row), normal_speed(row));
-            if s <= touch && u < 0.0 {
+            if (s <= touch || is_held) && u < 0.0 {
                 let e = if -u > bounce_speed { restitution } else { 0.0 };
                 // ΔĊ = −(1+e)Ċ: c = (1+e)Ċ.
                 enforce(row, (1.0 + e) * row.rate);

@@ -25,6 +25,10 @@ use twofloat::TwoFloat;
 /// turn: seven decades small or large, alone and together, where cancellation in f64 shows.
 const HARD_SCALES: [(f64, f64); 4] = [(1e-7, 1.0), (1.0, 1e7), (1e7, 1e7), (1e-7, 1e-7)];
 
+/// The most states of each class (`bench --states`): each is a whole state held while it is
+/// timed, so 10⁸ would exhaust memory; 10⁵ of a chain take seconds and tens of MB.
+pub const MAX_STATES: usize = 100_000;
+
 /// The error of one body's force over a class of states.
 #[derive(Clone, Debug, PartialEq)]
 pub struct AccuracyRow {

@@ -18,7 +18,7 @@ pub mod accuracy;
 pub mod reference;
 
 use crate::numeric::integrate::Integrator;
-use crate::numeric::simulate::Summary;
+use crate::numeric::simulate::{MAX_STEPS, Summary};
 use crate::numeric::stabilize::Stabilize;
 use crate::numeric::vector::length_scale;
 use crate::scenario::Scenario;
@@ -62,6 +62,15 @@ impl Sweep {
         if self.integrators.is_empty() || self.stabilizers.is_empty() {
             return Err(SweepError::Empty);
         }
+        if !(self.refinement.is_finite() && self.refinement >= 1.0) {
+            return Err(SweepError::Refinement(self.refinement));
+        }
+        // The reference run has the most steps: bounded like any run (`MAX_STEPS`).
+        let finest = self.steps.iter().copied().fold(f64::INFINITY, f64::min);
+        let reference = (self.duration / (finest / self.refinement)).round();
+        if reference > MAX_STEPS as f64 {
+            return Err(SweepError::TooManySteps { steps: reference });
+        }
         Ok(())
     }
 }
@@ -81,6 +90,15 @@ pub enum SweepError {
     /// No integrator or no stabilisation to run.
     #[error("nothing to sweep")]
     Empty,
+    /// The reference step is not the finest step divided by a finite factor ≥ 1.
+    #[error("the reference refinement must be finite and at least 1, found {0}")]
+    Refinement(f64),
+    /// The reference run would take more than `MAX_STEPS` steps.
+    #[error(
+        "the reference run would take {steps:.3e} steps, more than the maximum of {} (numeric::simulate::MAX_STEPS); use a larger --dt or a shorter --duration",
+        MAX_STEPS
+    )]
+    TooManySteps { steps: f64 },
 }
 
 /// One run of the sweep.

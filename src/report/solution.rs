@@ -14,7 +14,7 @@ use crate::derive::Derivation;
 use crate::model::system::System;
 use crate::numeric::qp::QpStatus;
 use crate::numeric::rows::Rows;
-use crate::numeric::solve::{Diagnostic, Solution};
+use crate::numeric::solve::{Diagnostic, NonFinite, RowPart, Solution};
 use serde_json::{Value, json};
 use std::fmt::Write;
 
@@ -58,29 +58,79 @@ pub fn json(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
         "constraints": constraints,
         "forces": per_body(&solution.constraint_force),
         "accelerations": per_body(&solution.acceleration),
-        "diagnostics": diagnostics(system, rows, solution).into_iter().map(|(c, m)| json!({
+        "diagnostics": diagnostics(system, derivation, rows, solution).into_iter().map(|(c, m)| json!({
             "constraints": c,
             "message": m,
         })).collect::<Vec<_>>(),
     })
 }
 
-/// The solver's diagnostics with constraint names, plus one per non-finite row number.
-fn diagnostics(system: &System, rows: &Rows, solution: &Solution) -> Vec<(Vec<String>, String)> {
+/// The solver's diagnostics with constraint names, plus one per non-finite C/κ or Ċ/κ,
+/// naming its cause.
+fn diagnostics(
+    system: &System,
+    derivation: &Derivation,
+    rows: &Rows,
+    solution: &Solution,
+) -> Vec<(Vec<String>, String)> {
     let mut out: Vec<(Vec<String>, String)> =
         solution.diagnostics.iter().map(|d| (names(system, d.constraints()), sentence(system, d))).collect();
     for (k, row) in rows.rows.iter().enumerate() {
-        if !row.value.is_finite() || !row.rate.is_finite() {
-            out.push((
-                names(system, &[k]),
+        let name = &system.constraints[k].name;
+        let kappa = derivation.constraints[k].scale.to_f64();
+        for (what, x) in [("C/κ", row.value), ("Ċ/κ", row.rate)] {
+            let Some(cause) = NonFinite::of(x) else { continue };
+            let message = if kappa.is_finite() {
+                format!("{what} of `{name}` is {} at this state; shown as null", cause_words(cause))
+            } else {
                 format!(
-                    "C or Ċ of `{}` is not representable at this state (overflow); it is reported as null",
-                    system.constraints[k].name
-                ),
-            ));
+                    "{what} of `{name}` cannot be computed in f64: κ = {} is beyond f64's range, so C as written overflows; shown as null",
+                    scale(derivation, k)
+                )
+            };
+            out.push((names(system, &[k]), message));
         }
     }
     out
+}
+
+/// What a non-finite number means, in words.
+fn cause_words(cause: NonFinite) -> &'static str {
+    match cause {
+        NonFinite::Undefined => "undefined (NaN: 0/0, ∞ − ∞, 0·∞ or a root or logarithm of a negative number)",
+        NonFinite::Overflow => "beyond f64's range (±∞: an overflow or a division by zero)",
+    }
+}
+
+/// The row part a non-finite diagnostic names, in words.
+fn part_words(system: &System, part: RowPart) -> String {
+    let body = |i: usize| system.bodies.get(i).map_or_else(|| i.to_string(), |b| format!("`{}`", b.name));
+    match part {
+        RowPart::Gradient => "its gradient".into(),
+        RowPart::CTerm => "its c term (C̈ at zero acceleration)".into(),
+        RowPart::Value => "C/κ".into(),
+        RowPart::Rate => "Ċ/κ".into(),
+        RowPart::Mass { body: i } => format!("the mass of body {} (zero, negative or not finite)", body(i)),
+        RowPart::Velocity { body: i } => format!("the velocity of body {}", body(i)),
+        RowPart::Force { body: i } => format!("the external force on body {}", body(i)),
+    }
+}
+
+/// κ as the table shows it: exact when short, else in scientific notation (from its digits
+/// when it is an integer beyond f64's range).
+fn scale(derivation: &Derivation, k: usize) -> String {
+    let kappa = &derivation.constraints[k].scale;
+    let exact = kappa.to_string();
+    if exact.len() <= 12 {
+        return exact;
+    }
+    let value = kappa.to_f64();
+    let digits = exact.trim_start_matches('-');
+    if value.is_finite() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return format!("{value:.3e}");
+    }
+    let sign = if exact.starts_with('-') { "-" } else { "" };
+    format!("{sign}{}.{}e{}", &digits[..1], &digits[1..4], digits.len() - 1)
 }
 
 /// A solver diagnostic as a sentence for people, constraints by name (`wire`); an index
@@ -89,9 +139,14 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
     let name = |k: usize| system.constraints.get(k).map_or_else(|| k.to_string(), |c| format!("`{}`", c.name));
     let list = |ks: &[usize]| ks.iter().map(|&k| name(k)).collect::<Vec<_>>().join(", ");
     match diagnostic {
-        Diagnostic::NonFiniteRow { constraint } => format!(
-            "constraint {} has non-finite numbers here (gradient, c term, C or Ċ of an inequality, or a body's mass, velocity or force); it is left out",
-            name(*constraint)
+        Diagnostic::NonFiniteRow { constraint, part, cause } => format!(
+            "constraint {} cannot be solved here: {} is {}; it is left out",
+            name(*constraint),
+            part_words(system, *part),
+            match (part, cause) {
+                (RowPart::Mass { .. }, _) => "unusable",
+                (_, c) => cause_words(*c),
+            }
         ),
         Diagnostic::ZeroGradient { constraint, unsatisfiable } => format!(
             "singular configuration: the gradient of constraint {} is zero here, so it carries no force (λ = 0){}",
@@ -116,11 +171,11 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
             format!("λ of constraint {} came out non-finite; it is set to 0", name(*constraint))
         }
         Diagnostic::Redundant { constraints, rank, size, condition } => format!(
-            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; consistent, minimum-norm λ",
+            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; consistent: the λ of least norm √(Σ λ²), λ for C/κ (the pseudo-inverse's)",
             list(constraints)
         ),
         Diagnostic::Inconsistent { constraints, rank, size, condition, residual } => format!(
-            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; inconsistent (relative residual {residual:.1e}), least-squares minimum-norm λ",
+            "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; inconsistent (relative residual {residual:.1e}), the least-squares λ of least norm √(Σ λ²), λ for C/κ",
             list(constraints)
         ),
         Diagnostic::QpFailed { status, .. } => match status {
@@ -144,8 +199,16 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
     }
 }
 
+/// A number of the table; a non-finite one is `null`, as in the JSON, and a diagnostic
+/// names its cause.
 fn number(x: f64) -> String {
-    if x == 0.0 { "0".into() } else { format!("{x:.6e}") }
+    if !x.is_finite() {
+        "null".into()
+    } else if x == 0.0 {
+        "0".into()
+    } else {
+        format!("{x:.6e}")
+    }
 }
 
 /// A readable table of the same numbers.
@@ -166,7 +229,7 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
             "{:<width$}  {:<10}  {:>4}  {:>13}  {:>13}  {:>13}  {:<6}  {}",
             c.name,
             if c.inequality { "inequality" } else { "equality" },
-            derivation.constraints[k].scale.to_string(),
+            scale(derivation, k),
             number(rows.rows[k].value),
             number(rows.rows[k].rate),
             number(solution.lambda[k]),
@@ -182,7 +245,7 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
         let _ = writeln!(out, "{:<bw$}  F_c = [{}]", b.name, vector(&solution.constraint_force[i]));
         let _ = writeln!(out, "{:<bw$}  a   = [{}]", "", vector(&solution.acceleration[i]));
     }
-    let diags = diagnostics(system, rows, solution);
+    let diags = diagnostics(system, derivation, rows, solution);
     if !diags.is_empty() {
         let _ = writeln!(out, "\ndiagnostics");
         for (c, m) in diags {
