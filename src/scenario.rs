@@ -27,6 +27,8 @@ pub enum ScenarioError {
     Derive(#[from] DeriveError),
     #[error("initial state: {0}")]
     State(#[from] StateError),
+    #[error(transparent)]
+    Rigid(#[from] crate::model::system::NotYetRigid),
 }
 
 /// A derived system with its numbers.
@@ -45,6 +47,7 @@ impl Scenario {
     /// Derives `loaded` and evaluates its initial state, with `overrides` (values checked
     /// by `model::state`).
     pub fn new(loaded: Loaded, overrides: &[(Symbol, Value)]) -> Result<Scenario, ScenarioError> {
+        loaded.system.refuse_rigid("simulate")?;
         let derivation = derive(&loaded.system)?;
         let program = RowProgram::new(&loaded.system, &derivation, &loaded.scene.forces);
         let env = environment(&loaded.system, &loaded.values, &loaded.scene, overrides)?;

@@ -64,6 +64,9 @@ invalid! {
     literal_length: "needs 2 entries, found 3",
     vector_vs_scalar: "cannot compare a vector with a scalar",
     syntax_error: "expected an expression",
+    rot_not_orientation: "`phi` is not an orientation",
+    rot_time_varying: "must be constant in time",
+    vector_inequality: "only `=` relates vectors",
 }
 
 /// The file-level invalid files (`file_*.toml`, snapshot-tested through the library by

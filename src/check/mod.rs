@@ -72,6 +72,9 @@ pub enum CheckError {
     /// The derivation failed.
     #[error("{path}: {error}")]
     Derive { path: String, error: DeriveError },
+    /// The file has a rigid body, which `check` does not handle yet.
+    #[error("{path}: {error}")]
+    Rigid { path: String, error: crate::model::system::NotYetRigid },
     /// An expected formula given to the API does not parse, type-check or name a known
     /// body or constraint.
     #[error("{0}")]
@@ -132,6 +135,7 @@ impl Checked {
             rendered: render(name, text, &problems),
             count: problems.len(),
         })?;
+        loaded.system.refuse_rigid("check").map_err(|error| CheckError::Rigid { path: name.to_string(), error })?;
         let derivation =
             derive(&loaded.system).map_err(|error| CheckError::Derive { path: name.to_string(), error })?;
         Ok(Checked { name: name.to_string(), loaded, derivation, program: None, states: None })

@@ -58,6 +58,19 @@ pub enum Problem {
     /// A mass written as a number that is not positive and finite.
     #[error("a mass must be a positive finite number, found {shown}")]
     Mass { span: Range<usize>, shown: String },
+    /// An inertia written as a number that is not positive and finite.
+    #[error("an inertia must be a positive finite number, found {shown}")]
+    Inertia { span: Range<usize>, shown: String },
+    /// A body with an `orientation` (so rigid) but no `inertia`.
+    #[error(
+        "body `{body}` has an `orientation`, so it is rigid, and needs an `inertia`: its moment of inertia about the centre of mass (e.g. `inertia = \"I\"` or `inertia = 0.5`)"
+    )]
+    NoInertia { span: Range<usize>, body: String },
+    /// A rotational key (`inertia`, `torque`, …) on a body without an `orientation`.
+    #[error(
+        "{what} has `{key}` but no `orientation`: a body is rigid when it has one (e.g. `orientation = \"th\"`), else a point mass"
+    )]
+    RigidKeyWithoutOrientation { span: Range<usize>, what: String, key: &'static str },
     /// A definition that uses itself, directly or `through` others.
     #[error("definition `{name}` refers to itself (through {through})")]
     Cycle { span: Range<usize>, name: String, through: String },
@@ -167,6 +180,9 @@ impl Problem {
             | Build { span, .. }
             | ParameterComponents { span, .. }
             | Mass { span, .. }
+            | Inertia { span, .. }
+            | NoInertia { span, .. }
+            | RigidKeyWithoutOrientation { span, .. }
             | Cycle { span, .. }
             | MassWithoutValue { span, .. }
             | MassWithoutValueAt { span, .. }
