@@ -118,6 +118,17 @@ fn propagate(g: &mut Graph, id: Id, node: &Node, w: Id) -> Result<Vec<(Id, Id)>,
             out.push((*a, ga));
             out.push((*b, gb));
         }
+        Node::Cross([a, b]) if involves_rotation(g, id) => {
+            // 2D, on rigid bodies: ∂(a×b)/∂a = −perp(b), ∂(a×b)/∂b = perp(a), kept as
+            // vectors (a lever arm's components would be written in cos θ and sin θ).
+            let pb = g.perp(*b)?;
+            let pa = g.perp(*a)?;
+            let minus_w = g.neg(w);
+            let ga = mul(g, vec![minus_w, pb], Ty::Vector)?;
+            let gb = mul(g, vec![w, pa], Ty::Vector)?;
+            out.push((*a, ga));
+            out.push((*b, gb));
+        }
         Node::Cross([a, b]) => {
             // 2D: a×b = a.x b.y − a.y b.x, so ∂/∂a = [b.y, −b.x] and ∂/∂b = [−a.y, a.x].
             let perp = |g: &mut Graph, v: Id, sign_x: i64| -> Result<Id, TypeError> {
@@ -177,4 +188,10 @@ fn propagate(g: &mut Graph, id: Id, node: &Node, w: Id) -> Result<Vec<(Id, Id)>,
         }
     }
     Ok(out)
+}
+
+/// Whether `id` involves `rot` or `perp` (a rigid body's vectors), so its gradient is
+/// written with `perp`; expressions of point masses keep their component form.
+fn involves_rotation(g: &Graph, id: Id) -> bool {
+    g.reachable(&[id]).iter().any(|&n| matches!(g.node(n), Node::Rot(_) | Node::Perp(_)))
 }
