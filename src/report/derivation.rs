@@ -514,6 +514,14 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     } else {
         doc.para(out, "Step 6. With F_c = Σ λ J, the conditions C̈ = 0 are linear in λ: A λ + b = 0, where");
     }
+    if system.has_rigid_bodies() {
+        doc.para(
+            out,
+            "With rigid bodies c is also taken at alpha = 0, and, with Jw the angular part of \
+             each direction, A gains Σ Jw Jw/I and b gains Σ Jw T/I over the rigid bodies \
+             (Euler's law in 2D: no gyroscopic term):",
+        );
+    }
     let g = &d.graph;
     a_and_b(system, d, doc, out)?;
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
