@@ -362,7 +362,6 @@ fn every_rigid_file_derives_in_every_format() {
 fn the_commands_without_rigid_bodies_refuse_them() {
     let rel = "constraints/rigid/rod_pinned.toml";
     for args in [
-        vec!["solve", rel],
         vec!["generate", rel],
         vec!["check", rel],
         vec!["simulate", rel, "--duration", "0.01"],

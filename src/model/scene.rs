@@ -144,6 +144,8 @@ pub enum StateError {
     NonFiniteForce { body: String, value: [f64; 3] },
     #[error("a mass must be positive and finite: `{name}` = {value}")]
     Mass { name: String, value: f64 },
+    #[error("a moment of inertia must be positive and finite: body `{name}` has {value}")]
+    Inertia { name: String, value: f64 },
     #[error("the force on body `{body}` cannot be evaluated: {error}")]
     Force { body: String, error: EvalError },
 }
@@ -153,6 +155,8 @@ pub enum StateError {
 /// `model::state`), then the external forces evaluated at that state
 /// (a force symbol given directly keeps its value; forces the scene does not name are zero).
 /// `t` defaults to 0. Every position, velocity, mass and parameter must end with a finite value.
+/// A rigid body needs its orientation; its angular velocity and its torque default to 0, and
+/// its inertia must be positive and finite.
 pub fn environment(
     system: &System,
     parameters: &[(Symbol, Value)],
@@ -171,6 +175,21 @@ pub fn environment(
     for body in &system.bodies {
         env.get(body.position).ok_or_else(|| missing(body.position))?;
         env.get(body.velocity).ok_or_else(|| missing(body.velocity))?;
+        if let Some(rigid) = &body.rigid {
+            env.get(rigid.orientation).ok_or_else(|| missing(rigid.orientation))?;
+            for s in [rigid.angular_velocity, rigid.torque] {
+                if env.get(s).is_none() {
+                    env.set(s, Value::Scalar(0.0));
+                }
+            }
+            let inertia = eval_one(&system.graph, rigid.inertia, &env)
+                .map_err(|EvalError::Missing(name)| StateError::Missing(name))?
+                .scalar()
+                .unwrap_or(f64::NAN);
+            if !(inertia.is_finite() && inertia > 0.0) {
+                return Err(StateError::Inertia { name: body.name.clone(), value: inertia });
+            }
+        }
     }
     // Masses and forces are evaluated in one pass each (an evaluation walks the graph once,
     // so one per body would cost bodies × graph size for a large scene).
