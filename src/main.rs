@@ -514,7 +514,8 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
 
     // Contact distances count as zero relative to the size of the scene.
     let (positions, _, t) = initial_state(system, &env);
-    let settings = Settings { length_scale: length_scale(&positions), ..Settings::default() };
+    // Lengths only: a rigid body's angle (its slot after the bodies) is no length.
+    let settings = Settings { length_scale: length_scale(&positions[..system.bodies.len()]), ..Settings::default() };
     let (rows, solution) =
         solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     match format {

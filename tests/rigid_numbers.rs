@@ -226,3 +226,43 @@ fn a_rigid_state_without_an_angle_or_with_zero_inertia_is_an_error() {
     assert_eq!(code, Some(1));
     assert!(err.contains("a moment of inertia must be positive and finite: body `rod` has 0"), "{err}");
 }
+
+/// The rigid-body files, relative to the crate root, sorted.
+fn rigid_files() -> Vec<String> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/rigid");
+    let mut out: Vec<String> = std::fs::read_dir(dir)
+        .expect("constraints/rigid exists")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .filter(|n| n.ends_with(".toml"))
+        .map(|n| format!("constraints/rigid/{n}"))
+        .collect();
+    out.sort();
+    out
+}
+
+/// `check` on every file of `constraints/rigid/`: each `[[expect]]` (forces and torques from
+/// closed forms or the engines' formulas) holds at random states with θ and ω on the
+/// constraints, and at the states the entries give.
+#[test]
+fn every_rigid_file_passes_check() {
+    let mut passed = 0;
+    for rel in rigid_files() {
+        let mut checked = lagrange::check::Checked::from_text(&rel, &read(&rel)).unwrap_or_else(|e| panic!("{e}"));
+        for outcome in checked.run() {
+            assert!(outcome.passed, "{rel}: {outcome}");
+            passed += 1;
+        }
+    }
+    assert!(passed >= 4, "only {passed} checks ran");
+}
+
+/// The user-test API judges torques too, and a wrong torque fails (with the state shown).
+#[test]
+fn the_check_api_judges_torques() {
+    let rel = "constraints/rigid/rod_pinned.toml";
+    let mut checked = lagrange::check::Checked::from_text(rel, &read(rel)).expect("valid file");
+    let right = "-(L/2)*(2*m*L*T - 4*I*dot(F, perp(rot(th, [1, 0]))))/(4*I + m*L^2)";
+    checked.assert_torque("rod", right);
+    let wrong = checked.torque("rod", &format!("-({right})")).expect("judged");
+    assert!(!wrong.passed && wrong.detail.contains("th = "), "{wrong}");
+}

@@ -399,6 +399,7 @@ impl Reader<'_> {
     fn expect<'i>(&mut self, _at: &Value<'i>, t: &DeTable<'i>) -> Option<RawExpect<'i>> {
         let mut entries = |key: &str| t.get(key).map(|x| self.expected(x, key)).unwrap_or_default();
         let force = entries("force");
+        let torque = entries("torque");
         let lambda = entries("lambda");
         let c_dot = entries("C_dot");
         let c_ddot = entries("C_ddot");
@@ -417,8 +418,9 @@ impl Reader<'_> {
             }
         });
         let note = t.get("note").and_then(|x| self.string(x, "`note`")).map(|s| s.into_inner().into_owned());
-        let written = ["force", "lambda", "C_dot", "C_ddot", "A", "b"].iter().filter(|k| t.contains_key(**k)).count();
-        Some(RawExpect { force, lambda, c_dot, c_ddot, a, b, at, tolerance, written, note })
+        let written =
+            ["force", "torque", "lambda", "C_dot", "C_ddot", "A", "b"].iter().filter(|k| t.contains_key(**k)).count();
+        Some(RawExpect { force, torque, lambda, c_dot, c_ddot, a, b, at, tolerance, written, note })
     }
 
     /// The `name = expected` entries of one quantity of an `[[expect]]`.

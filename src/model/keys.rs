@@ -34,7 +34,7 @@ const SCHEMA: &[(&str, &[&str])] = &[
     ),
     ("constraints[]", &["name", "expr"]),
     ("scene", &["initial", "forces", "dt", "duration", "restitution"]),
-    ("expect[]", &["force", "lambda", "C_dot", "C_ddot", "A", "b", "at", "tolerance", "note"]),
+    ("expect[]", &["force", "torque", "lambda", "C_dot", "C_ddot", "A", "b", "at", "tolerance", "note"]),
 ];
 
 /// Every unknown key of the file's tree, located.

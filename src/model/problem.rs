@@ -256,7 +256,11 @@ fn force_symbols(forces: &[String]) -> String {
 }
 
 fn unknown_name(kind: &str, name: &str, suggestion: &Option<String>, names: &[String]) -> String {
-    let kinds = if kind == "body" { "bodies" } else { "constraints" };
+    let kinds = match kind {
+        "body" => "bodies",
+        "rigid body" => "rigid bodies",
+        _ => "constraints",
+    };
     match suggestion {
         Some(s) => format!("`{name}` is not a {kind} of this file; did you mean `{s}`?"),
         None if names.is_empty() => format!("`{name}` is not a {kind} of this file (it declares no {kinds})"),

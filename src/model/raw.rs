@@ -105,6 +105,8 @@ pub type Entries<'a> = BTreeMap<Text<'a>, Spanned<RawExpected<'a>>>;
 #[derive(Debug, Default)]
 pub struct RawExpect<'a> {
     pub force: Entries<'a>,
+    /// The constraint torque on a rigid body, by body.
+    pub torque: Entries<'a>,
     pub lambda: Entries<'a>,
     /// `C_dot` in the file.
     pub c_dot: Entries<'a>,

@@ -8,11 +8,15 @@
 //! lengths are far from 1 (|r| ≈ 1e155 or 1e-150) to a verified power-of-two unit
 //! (`numeric::rescale::Unit`); the run loop converts what it reports back.
 //!
+//! A state's slots are the bodies' positions and velocities, then each rigid body's angle and
+//! angular velocity (`[θ, 0, 0]`, `[ω, 0, 0]`, in the order of `numeric::rows`' angular slots),
+//! so the integrators and the projections advance θ and ω as they advance x and v.
+//!
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
 use super::integrate::{Field, Vectors};
 use super::rescale::Unit;
-use super::rows::{RowProgram, RowScratch, Rows};
+use super::rows::{RowProgram, RowScratch, Rows, angular_bodies};
 use super::simulate::SettingsError;
 use super::solve::{Solution, solve};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -142,6 +146,12 @@ impl<'s> Dynamics<'s> {
             self.env.set(body.position, Value::Vector(q[i]));
             self.env.set(body.velocity, Value::Vector(v[i]));
         }
+        // Rigid bodies' angles and angular velocities, from their angular slots after the bodies.
+        let n = self.system.bodies.len();
+        for (slot, rigid) in (n..).zip(self.system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
+            self.env.set(rigid.orientation, Value::Scalar(q[slot][0]));
+            self.env.set(rigid.angular_velocity, Value::Scalar(v[slot][0]));
+        }
         let mut rows = self.spare.pop().unwrap_or_default();
         self.program
             .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)
@@ -159,7 +169,7 @@ impl<'s> Dynamics<'s> {
         }
         for (i, ((f, v), w)) in rows.force.iter().zip(&rows.velocity).zip(&rows.inverse_mass).enumerate() {
             if !(f.iter().chain(v).all(|x| x.is_finite()) && w.is_finite()) {
-                let body = self.system.bodies[i].name.clone();
+                let body = slot_name(self.system, i);
                 return Err(SimError::NonFinite { step: self.step, time: t, body });
             }
         }
@@ -184,6 +194,13 @@ impl<'s> Dynamics<'s> {
         }
         solve(rows)
     }
+}
+
+/// The body a slot of the rows belongs to: a body, or a rigid body's angular slot.
+fn slot_name(system: &System, slot: usize) -> String {
+    let n = system.bodies.len();
+    let body = if slot < n { Some(slot) } else { angular_bodies(system).nth(slot - n) };
+    body.and_then(|b| system.bodies.get(b)).map_or_else(|| slot.to_string(), |b| b.name.clone())
 }
 
 impl Field for Dynamics<'_> {

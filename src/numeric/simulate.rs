@@ -190,8 +190,12 @@ pub struct Failure {
 /// The positions and velocities that `env` gives the bodies.
 pub fn initial_state(system: &System, env: &Env) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, f64) {
     let get = |s| env.get(s).and_then(Value::vector).unwrap_or([0.0; 3]);
-    let q = system.bodies.iter().map(|b| get(b.position)).collect();
-    let v = system.bodies.iter().map(|b| get(b.velocity)).collect();
+    // A rigid body's angle and angular velocity come after every body, in its angular slot
+    // (`numeric::rows`: component 0 of `[θ, 0, 0]` and `[ω, 0, 0]`).
+    let angle = |s| [env.get(s).and_then(Value::scalar).unwrap_or(0.0), 0.0, 0.0];
+    let rigid = || system.bodies.iter().filter_map(|b| b.rigid.as_ref());
+    let q = system.bodies.iter().map(|b| get(b.position)).chain(rigid().map(|r| angle(r.orientation))).collect();
+    let v = system.bodies.iter().map(|b| get(b.velocity)).chain(rigid().map(|r| angle(r.angular_velocity))).collect();
     let t = env.get(system.time).and_then(Value::scalar).unwrap_or(0.0);
     (q, v, t)
 }
