@@ -624,6 +624,13 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // The velocity-level solvers step point masses only for now.
+    if velocity.is_some()
+        && let Err(e) = scenario.system.refuse_rigid("simulate --solver")
+    {
+        eprintln!("error: {}: {e}", args.file.display());
+        return ExitCode::from(1);
+    }
     let mut csv = match &args.csv {
         None => None,
         Some(path) => {
@@ -694,6 +701,11 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
+    // Work-precision sweeps and formula accuracy are point-mass only for now.
+    if let Err(e) = scenario.system.refuse_rigid("bench") {
+        eprintln!("error: {}: {e}", args.file.display());
+        return ExitCode::from(1);
+    }
     if args.solvers {
         return cmd_bench_solvers(args, &scenario);
     }

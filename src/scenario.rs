@@ -47,7 +47,6 @@ impl Scenario {
     /// Derives `loaded` and evaluates its initial state, with `overrides` (values checked
     /// by `model::state`).
     pub fn new(loaded: Loaded, overrides: &[(Symbol, Value)]) -> Result<Scenario, ScenarioError> {
-        loaded.system.refuse_rigid("simulate")?;
         let derivation = derive(&loaded.system)?;
         let program = RowProgram::new(&loaded.system, &derivation, &loaded.scene.forces);
         let env = environment(&loaded.system, &loaded.values, &loaded.scene, overrides)?;

@@ -173,22 +173,8 @@ fn a_door_on_two_hinges_is_diagnosed_redundant_by_name() {
 /// keyed by the rigid bodies only; each reaction names its constraint and body.
 #[test]
 fn solve_prints_torques_angular_accelerations_and_reactions() {
-    let (code, out, err) = lagrange(&[
-        "solve",
-        "constraints/rigid/rod_pinned.toml",
-        "--set",
-        "th=0",
-        "--set",
-        "x=[1,0]",
-        "--set",
-        "v=[0,0]",
-        "--set",
-        "I=0.3333333333333333",
-        "--set",
-        "F=[0,-9.81]",
-        "--format",
-        "json",
-    ]);
+    // The scene: horizontal, at rest, I = m L²/12, F = m g.
+    let (code, out, err) = lagrange(&["solve", "constraints/rigid/rod_pinned.toml", "--format", "json"]);
     assert_eq!(code, Some(0), "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
     // Horizontal rod released from rest: α = −3g/(2L), the pin carries ¼ m g.
@@ -213,16 +199,28 @@ fn solve_prints_torques_angular_accelerations_and_reactions() {
 /// A rigid body's state needs its orientation; a zero inertia is refused naming the body.
 #[test]
 fn a_rigid_state_without_an_angle_or_with_zero_inertia_is_an_error() {
+    use lagrange::model::scene::StateError;
     let rel = "constraints/rigid/rod_pinned.toml";
-    let base = ["solve", rel, "--set", "x=[1,0]", "--set", "v=[0,0]", "--set", "F=[0,-9.81]"];
-    let mut args = base.to_vec();
-    args.extend(["--set", "I=1"]);
-    let (code, _, err) = lagrange(&args);
-    assert_eq!(code, Some(1));
-    assert!(err.contains("no value for `th`"), "{err}");
-    let mut args = base.to_vec();
-    args.extend(["--set", "th=0", "--set", "I=0"]);
-    let (code, _, err) = lagrange(&args);
+    // The file without its scene: nothing gives th.
+    let text = read(rel);
+    let without_scene = text.split("[scene]").next().expect("the file's head");
+    let loaded = load(without_scene).expect("valid file");
+    let system = &loaded.system;
+    let sym = |name: &str| system.graph.symbol_named(name).expect("a symbol of the file");
+    let mut state = vec![
+        (sym("x"), Value::Vector([1.0, 0.0, 0.0])),
+        (sym("v"), Value::Vector([0.0; 3])),
+        (sym("F"), Value::Vector([0.0; 3])),
+        (sym("I"), Value::Scalar(1.0)),
+    ];
+    let missing = environment(system, &loaded.values, &loaded.scene, &state).map(|_| ());
+    assert!(matches!(&missing, Err(StateError::Missing(name)) if name == "th"), "{missing:?}");
+    state.push((sym("th"), Value::Scalar(0.0)));
+    let env = environment(system, &loaded.values, &loaded.scene, &state).expect("ω and τ default to 0");
+    assert_eq!(env.get(sym("w")), Some(Value::Scalar(0.0)));
+    assert_eq!(env.get(sym("T")), Some(Value::Scalar(0.0)));
+    // Through the binary: a zero inertia names the body.
+    let (code, _, err) = lagrange(&["solve", rel, "--set", "I=0"]);
     assert_eq!(code, Some(1));
     assert!(err.contains("a moment of inertia must be positive and finite: body `rod` has 0"), "{err}");
 }
@@ -265,4 +263,98 @@ fn the_check_api_judges_torques() {
     checked.assert_torque("rod", right);
     let wrong = checked.torque("rod", &format!("-({right})")).expect("judged");
     assert!(!wrong.passed && wrong.detail.contains("th = "), "{wrong}");
+}
+
+/// θ(t) of the physical pendulum θ'' = −(3g/2L) cos θ (the uniform rod pinned at one end,
+/// θ from the horizontal), by RK4 with a step 100 times finer than the simulation's.
+fn physical_pendulum(duration: f64) -> (f64, f64) {
+    let k = 1.5 * 9.81 / 2.0;
+    let f = |y: [f64; 2]| [y[1], -k * y[0].cos()];
+    let (mut y, h) = ([0.0, 0.0], 1e-5);
+    for _ in 0..(duration / h).round() as usize {
+        let a = f(y);
+        let b = f([y[0] + h / 2.0 * a[0], y[1] + h / 2.0 * a[1]]);
+        let c = f([y[0] + h / 2.0 * b[0], y[1] + h / 2.0 * b[1]]);
+        let d = f([y[0] + h * c[0], y[1] + h * c[1]]);
+        for i in 0..2 {
+            y[i] += h / 6.0 * (a[i] + 2.0 * b[i] + 2.0 * c[i] + d[i]);
+        }
+    }
+    (y[0], y[1])
+}
+
+fn final_number(summary: &serde_json::Value, name: &str) -> f64 {
+    summary["final"][name].as_f64().unwrap_or_else(|| panic!("no final {name}: {summary}"))
+}
+
+/// `simulate` integrates θ and ω with x and v: the pinned rod released horizontal swings as
+/// the physical pendulum (RK4 + projection against the ODE's own RK4 to 1e-9), keeps its
+/// pin to rounding, and Verlet + projection holds the energy (translation and rotation).
+#[test]
+fn simulate_swings_the_pinned_rod_as_a_physical_pendulum() {
+    let rel = "constraints/rigid/rod_pinned.toml";
+    let (code, out, err) = lagrange(&["simulate", rel, "--integrator", "rk4", "--duration", "1", "--format", "json"]);
+    assert_eq!(code, Some(0), "{err}");
+    let summary: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let (th, w) = physical_pendulum(1.0);
+    assert!((final_number(&summary, "th") - th).abs() < 1e-9, "θ {} against {th}", final_number(&summary, "th"));
+    assert!((final_number(&summary, "w") - w).abs() < 1e-9, "ω {} against {w}", final_number(&summary, "w"));
+    // The centre stays L/2 from the pin along the rod.
+    let x = [summary["final"]["x"][0].as_f64().expect("x"), summary["final"]["x"][1].as_f64().expect("x")];
+    assert!((x[0] - th.cos()).abs() < 1e-9 && (x[1] - th.sin()).abs() < 1e-9, "x = {x:?}");
+    assert!(summary["max_abs_C"].as_f64().expect("a number") < 1e-12);
+    let (code, out, err) = lagrange(&["simulate", rel, "--format", "json"]);
+    assert_eq!(code, Some(0), "{err}");
+    let summary: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+    let drift = summary["energy_rel_drift"].as_f64().expect("reported");
+    assert!(drift < 1e-5, "Verlet's energy balance {drift}");
+    assert!(summary["max_abs_C"].as_f64().expect("a number") < 1e-12);
+}
+
+/// The CSV carries each rigid body's angle and angular velocity after the positions and
+/// velocities, one number each.
+#[test]
+fn the_csv_has_the_angle_and_the_angular_velocity() {
+    let dir = std::env::temp_dir().join(format!("lagrange-rigid-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("a temporary folder");
+    let csv = dir.join("rod.csv");
+    let path = csv.to_str().expect("UTF-8");
+    let (code, _, err) =
+        lagrange(&["simulate", "constraints/rigid/rod_pinned.toml", "--duration", "0.01", "--csv", path]);
+    assert_eq!(code, Some(0), "{err}");
+    let text = std::fs::read_to_string(&csv).expect("the CSV");
+    let _ = std::fs::remove_dir_all(&dir);
+    let mut lines = text.lines();
+    let header = lines.next().expect("a header");
+    assert!(header.starts_with("t,x.x,x.y,v.x,v.y,th,w,lambda_pin.x,"), "{header}");
+    let columns = header.split(',').count();
+    let first = lines.next().expect("step 0");
+    assert_eq!(first.split(',').count(), columns);
+    assert!(first.starts_with("0,1,0,0,0,0,0,"), "{first}");
+}
+
+/// One Newton step of the projection in generalised coordinates: the pin's error is shared
+/// between x and θ in the ratio of 1/m to 1/I (the mass-weighted minimum-norm step).
+#[test]
+fn the_projection_weights_the_angle_by_the_inertia() {
+    use lagrange::numeric::dynamics::Dynamics;
+    use lagrange::numeric::simulate::initial_state;
+    use lagrange::numeric::stabilize::{Inequalities, project_positions};
+    let loaded = load(&read("constraints/rigid/rod_pinned.toml")).expect("valid file");
+    let system = &loaded.system;
+    let d = derive(system).expect("derive");
+    let program = RowProgram::new(system, &d, &loaded.scene.forces);
+    let sym = |name: &str| system.graph.symbol_named(name).expect("a symbol of the file");
+    // The centre 0.1 above where the pin allows (θ = 0 puts it at [1, 0]); I = m/3.
+    let overrides = [(sym("x"), Value::Vector([1.0, 0.1, 0.0]))];
+    let env = environment(system, &loaded.values, &loaded.scene, &overrides).expect("a full state");
+    let (mut q, v, t) = initial_state(system, &env);
+    assert_eq!(q.len(), 2, "one body and one angular slot");
+    let mut dynamics = Dynamics::new(system, program, env);
+    project_positions(&mut dynamics, t, &mut q, &v, 0.0, 1, Inequalities::Violated).expect("projects");
+    // J = [E, perp(rot(0, [-1, 0]))] = [E, [0, -1]]: Δy − Δθ = −0.1 with weights m = 1,
+    // I = 1/3 gives Δy = −0.1 (1/m)/(1/m + 1/I) = −0.025 and Δθ = 0.075.
+    assert!((q[0][1] - 0.075).abs() < 1e-12, "y = {}", q[0][1]);
+    assert!((q[1][0] - 0.075).abs() < 1e-12, "θ = {}", q[1][0]);
+    assert!(q[0][0] == 1.0, "x = {}", q[0][0]);
 }

@@ -127,6 +127,10 @@ impl<'s> Dynamics<'s> {
     /// [`rows`](Dynamics::rows) expects and returns numbers in that unit. Returns the unit,
     /// or `None` when the numbers stay as they are.
     pub fn choose_unit(&mut self, env: &Env) -> Result<Option<Unit>, SimError> {
+        // An angle is no length: a scene with rigid bodies runs in its own unit.
+        if self.system.has_rigid_bodies() {
+            return Ok(None);
+        }
         let Some(k) = Unit::exponent_at(self.system, env).filter(|k| k.abs() > NATURAL_RANGE) else {
             return Ok(None);
         };
@@ -197,7 +201,7 @@ impl<'s> Dynamics<'s> {
 }
 
 /// The body a slot of the rows belongs to: a body, or a rigid body's angular slot.
-fn slot_name(system: &System, slot: usize) -> String {
+pub(crate) fn slot_name(system: &System, slot: usize) -> String {
     let n = system.bodies.len();
     let body = if slot < n { Some(slot) } else { angular_bodies(system).nth(slot - n) };
     body.and_then(|b| system.bodies.get(b)).map_or_else(|| slot.to_string(), |b| b.name.clone())
