@@ -358,3 +358,59 @@ fn the_projection_weights_the_angle_by_the_inertia() {
     assert!((q[1][0] - 0.075).abs() < 1e-12, "θ = {}", q[1][0]);
     assert!(q[0][0] == 1.0, "x = {}", q[0][0]);
 }
+
+/// Ċ = κ Σᵢ (Jᵛᵢ·vᵢ + Jʷᵢ ωᵢ) + ∂C/∂t for every constraint of every joint and scene file
+/// of `constraints/rigid/`, at random states with angles on the whole circle.
+#[test]
+fn c_dot_is_j_times_u_for_every_rigid_file() {
+    use lagrange::expr::grad::gradient;
+    let mut checked = 0;
+    for rel in rigid_files() {
+        let loaded = load(&read(&rel)).expect("valid file");
+        let system = &loaded.system;
+        let mut d = derive(system).expect("derive");
+        let partials: Vec<_> = d
+            .constraints
+            .iter()
+            .map(|c| c.c)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .map(|c| gradient(&mut d.graph, c, system.time).expect("∂C/∂t"))
+            .collect();
+        let mut rng = Rng::new(0x0b0d_0003);
+        for _ in 0..100 {
+            let mut env: Env = common::random_env(system, &mut rng);
+            for (s, info) in system.graph.symbols() {
+                if matches!(info.role, Role::Orientation { .. }) {
+                    env.set(s, Value::Scalar(rng.uniform(-3.2, 3.2)));
+                }
+                if matches!(info.role, Role::AngularVelocity { .. }) {
+                    env.set(s, Value::Scalar(rng.uniform(-2.0, 2.0)));
+                }
+            }
+            let value = |id| eval_one(&d.graph, id, &env).expect("evaluates");
+            for (k, c) in d.constraints.iter().enumerate() {
+                let mut u = value(partials[k]).scalar().expect("a scalar");
+                let kappa = c.scale.to_f64();
+                for &(b, j) in &c.jacobian {
+                    let (j, v) = (value(j).components(2), env.get(system.bodies[b].velocity).expect("v"));
+                    let v = v.components(2);
+                    u += kappa * (j[0] * v[0] + j[1] * v[1]);
+                }
+                for &(b, jw) in &c.angular {
+                    let rigid = system.bodies[b].rigid.as_ref().expect("a rigid body");
+                    let w = env.get(rigid.angular_velocity).and_then(Value::scalar).expect("ω");
+                    u += kappa * value(jw).scalar().expect("a scalar") * w;
+                }
+                let c_dot = value(c.c_dot).scalar().expect("a scalar");
+                assert!(
+                    common::close(c_dot, u, 1e-11),
+                    "{rel}, {}: Ċ = {c_dot}, J·u + ∂C/∂t = {u}",
+                    system.constraints[k].name
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked >= 2000, "{checked} rows checked");
+}
