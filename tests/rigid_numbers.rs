@@ -414,3 +414,37 @@ fn c_dot_is_j_times_u_for_every_rigid_file() {
     }
     assert!(checked >= 2000, "{checked} rows checked");
 }
+
+/// `[scene] forces` takes a rigid body's torque by its symbol (`T = "…"`, a scalar): the
+/// state's torque is the expression's value, and `simulate` re-evaluates it at every
+/// state, so a damping torque −c ω takes energy out of the swinging rod.
+#[test]
+fn scene_torques_are_expressions_evaluated_at_each_state() {
+    use lagrange::scenario::Scenario;
+    let text = read("constraints/rigid/rod_pinned.toml");
+    let scene_forces = "forces = { F = \"[0, -m*g]\" }";
+    assert!(text.contains(scene_forces));
+    let with =
+        |torque: &str| text.replace(scene_forces, &format!("forces = {{ F = \"[0, -m*g]\", T = \"{torque}\" }}"));
+    // At the scene's state (th = 0, w = 0) the torque 2 + 3 cos(th) is 5.
+    let loaded = load(&with("2 + 3*cos(th)")).expect("valid file");
+    let system = &loaded.system;
+    let env = environment(system, &loaded.values, &loaded.scene, &[]).expect("a full state");
+    let t = system.graph.symbol_named("T").expect("the torque symbol");
+    assert_eq!(env.get(t), Some(Value::Scalar(5.0)));
+    // The energy ½ m |v|² + ½ I ω² + m g y after a second, from rest at y = 0.
+    let energy = |torque: &str| {
+        let scenario = Scenario::new(load(&with(torque)).expect("valid file"), &[]).expect("runnable");
+        let mut settings = scenario.settings();
+        settings.steps = 1000;
+        let summary = scenario.simulate(settings, &mut |_| Ok(())).map_err(|f| f.error.to_string()).expect("runs");
+        let get = |name: &str| summary.final_state.iter().find(|(n, _)| n == name).map(|(_, v)| *v).expect(name);
+        let (x, v) = (get("x").components(2), get("v").components(2));
+        let w = get("w").scalar().expect("ω");
+        0.5 * (v[0] * v[0] + v[1] * v[1]) + 0.5 * w * w / 3.0 + 9.81 * x[1]
+    };
+    let free = energy("0");
+    let damped = energy("-0.5*w");
+    assert!(free.abs() < 1e-4, "the free rod keeps its energy: {free}");
+    assert!(damped < -0.1, "the damped rod loses energy: {damped}");
+}

@@ -163,6 +163,9 @@ pub enum ForceError {
     Scalar,
     #[error("a force may not depend on `{0}` (an acceleration or a force)")]
     Depends(String),
+    /// A rigid body's torque written as a vector (a 2D torque is a scalar).
+    #[error("a 2D torque must be a scalar, found a vector")]
+    Vector,
 }
 
 impl Problem {
