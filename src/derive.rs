@@ -60,8 +60,13 @@ pub struct DerivedConstraint {
     pub scale: Rational,
     /// `(body, J = ∇C / κ)`.
     pub jacobian: Vec<(usize, Id)>,
-    /// `c = C̈|ₐ₌₀ / κ`, so that C̈/κ = Σᵢ Jᵢ·aᵢ + c.
+    /// `c = C̈|ₐ₌₀ / κ`, so that C̈/κ = Σᵢ Jᵢ·aᵢ + c (rigid bodies: also α = 0, and
+    /// C̈/κ = Σᵢ (Jᵢ·aᵢ + Jʷᵢ αᵢ) + c).
     pub bias: Id,
+    /// `(body, ∂C/∂θ)` for each rigid body whose orientation C involves, simplified.
+    pub angular_gradient: Vec<(usize, Id)>,
+    /// `(body, Jʷ = ∂C/∂θ / κ)`: the coefficient of α in C̈/κ, and of ω in Ċ/κ (2D: a scalar).
+    pub angular: Vec<(usize, Id)>,
 }
 
 /// The derivation of a whole system.
@@ -80,6 +85,8 @@ pub struct Derivation {
     pub lambda: Option<Id>,
     /// `(body, force)` in closed form, when there is a single constraint.
     pub forces: Option<Vec<(usize, Id)>>,
+    /// `(body, torque λ Jʷ)` on each rigid body in closed form, when there is a single constraint.
+    pub torques: Option<Vec<(usize, Id)>>,
     /// With [`Options::document`] and several constraints: each one's multiplier λₖ, the
     /// node of the scalar symbol `lambda_<name>`, by constraint (one constraint has λ in
     /// closed form).
@@ -87,8 +94,12 @@ pub struct Derivation {
     /// With [`Options::document`] and several constraints: `(body, Σₖ λₖ Jₖᵢ)` in the
     /// multiplier symbols, for each body some constraint acts on, in body order.
     pub force_sums: Option<Vec<(usize, Id)>>,
+    /// With [`Options::document`] and several constraints: `(body, Σₖ λₖ Jʷₖᵢ)`, the torque
+    /// on each rigid body some constraint turns, in body order.
+    pub torque_sums: Option<Vec<(usize, Id)>>,
     /// With [`Options::steps`]: each C̈ with Newton's law aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ substituted
-    /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`.
+    /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`, and
+    /// αᵢ = (τᵢ + τ_c,ᵢ)/Iᵢ for rigid bodies' angular accelerations (`T_c`, `T_c_<body>`).
     pub newton: Option<Vec<Id>>,
 }
 
@@ -147,12 +158,15 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     let mut shaper = Shaper::default();
     // With one constraint nothing repeats: shapes would be work for nothing.
     let repeats = system.constraints.len() > 1;
+    // Renaming follows positions along velocities and accelerations only: constraints on
+    // rigid bodies are each derived.
+    let reuse = repeats && !system.has_rigid_bodies();
     if repeats {
         // A link of a chain adds about 60 nodes to the graph.
         g.reserve(64 * system.constraints.len());
     }
     for k in 0..system.constraints.len() {
-        if !repeats {
+        if !reuse {
             constraints.push(derive_constraint(system, g, s, k)?);
             continue;
         }
@@ -171,8 +185,8 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         };
         constraints.push(dc);
     }
-    let (a, b) = assemble(system, g, s, &constraints, repeats)?;
-    let (mut lambda, mut forces) = (None, None);
+    let (a, b) = assemble(system, g, s, &constraints, reuse)?;
+    let (mut lambda, mut forces, mut torques) = (None, None, None);
     if let [only] = constraints.as_slice() {
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
@@ -182,17 +196,36 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
             let product = g.mul(vec![l, j])?;
             f.push((body, s.simplify(g, product)?));
         }
+        let mut t = Vec::with_capacity(only.angular.len());
+        for &(body, j) in &only.angular {
+            let product = g.mul(vec![l, j])?;
+            t.push((body, s.simplify(g, product)?));
+        }
         lambda = Some(l);
         forces = Some(f);
+        torques = Some(t);
     }
     let newton = if options.steps { Some(newton(system, g, &constraints)?) } else { None };
-    let (multipliers, force_sums) = if repeats && options.document {
-        let (multipliers, sums) = force_sums(system, g, &constraints)?;
-        (Some(multipliers), Some(sums))
+    let (multipliers, force_sums, torque_sums) = if repeats && options.document {
+        let (multipliers, sums, torque_sums) = force_sums(system, g, s, &constraints)?;
+        (Some(multipliers), Some(sums), Some(torque_sums))
     } else {
-        (None, None)
+        (None, None, None)
     };
-    Ok(Derivation { graph, simplifier, constraints, a, b, lambda, forces, multipliers, force_sums, newton })
+    Ok(Derivation {
+        graph,
+        simplifier,
+        constraints,
+        a,
+        b,
+        lambda,
+        forces,
+        torques,
+        multipliers,
+        force_sums,
+        torque_sums,
+        newton,
+    })
 }
 
 /// Each C̈ with aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ for every body it involves, in new vector symbols F_c,ᵢ.
@@ -203,6 +236,18 @@ fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> 
         let s = g.declare(&name, Ty::Vector, Role::Parameter);
         fc_nodes.push(g.sym(s));
     }
+    // The constraint torques, for rigid bodies: T_c or T_c_<body>.
+    let mut tc_nodes = Vec::with_capacity(system.bodies.len());
+    for body in &system.bodies {
+        let name = if system.bodies.len() == 1 { "T_c".to_string() } else { format!("T_c_{}", body.name) };
+        tc_nodes.push(match body.rigid {
+            Some(_) => {
+                let s = g.declare(&name, Ty::Scalar, Role::Parameter);
+                Some(g.sym(s))
+            }
+            None => None,
+        });
+    }
     let mut out = Vec::with_capacity(constraints.len());
     for (k, dc) in constraints.iter().enumerate() {
         let mut map = HashMap::new();
@@ -212,6 +257,13 @@ fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> 
             let inv_m = g.powi(b.mass, -1)?;
             let accel = g.mul(vec![inv_m, total])?;
             map.insert(b.nodes.acceleration, accel);
+            if let (Some(rigid), Some(tc)) = (&b.rigid, tc_nodes[body]) {
+                // Euler's law in 2D: I α = τ + τ_c.
+                let total = g.add(vec![rigid.nodes.torque, tc])?;
+                let inv_i = g.powi(rigid.inertia, -1)?;
+                let alpha = g.mul(vec![inv_i, total])?;
+                map.insert(rigid.nodes.angular_acceleration, alpha);
+            }
         }
         out.push(g.substitute(dc.c_ddot, &map)?);
     }
@@ -219,26 +271,48 @@ fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> 
 }
 
 /// The multiplier symbols `lambda_<name>` of several constraints, and the force on each body
-/// as Σₖ λₖ Jₖᵢ in them.
+/// as Σₖ λₖ Jₖᵢ in them (and the torque Σₖ λₖ Jʷₖᵢ on each rigid body). A component of a
+/// vector constraint `pin.x` has the multiplier `lambda_pin_x` (a name the language reads).
 #[allow(clippy::type_complexity)]
 fn force_sums(
     system: &System,
     g: &mut Graph,
+    s: &mut Simplifier,
     constraints: &[DerivedConstraint],
-) -> Result<(Vec<Id>, Vec<(usize, Id)>), TypeError> {
+) -> Result<(Vec<Id>, Vec<(usize, Id)>, Vec<(usize, Id)>), TypeError> {
     let mut multipliers = Vec::with_capacity(constraints.len());
     for c in &system.constraints {
-        let s = g.declare(&format!("lambda_{}", c.name), Ty::Scalar, Role::Parameter);
+        let s = g.declare(&format!("lambda_{}", c.name.replace('.', "_")), Ty::Scalar, Role::Parameter);
         multipliers.push(g.sym(s));
     }
     // Each body's terms gathered from its own constraints' directions, in one pass over
     // the constraints (not every constraint searched for every body: that was quadratic).
     // A body's first direction in a constraint counts, as a search would find it.
-    let mut terms: Vec<Vec<Id>> = vec![Vec::new(); system.bodies.len()];
-    let mut last: Vec<Option<usize>> = vec![None; system.bodies.len()];
+    let n = system.bodies.len();
+    let mut torque_terms: Vec<Vec<Id>> = vec![Vec::new(); n];
+    let mut last: Vec<Option<usize>> = vec![None; n];
+    for (k, dc) in constraints.iter().enumerate() {
+        for &(body, j) in &dc.angular {
+            if body >= n || last[body] == Some(k) {
+                continue;
+            }
+            last[body] = Some(k);
+            // Simplified term by term, so a negative lever arm reads `−λ L cos(th)`.
+            let term = g.mul(vec![multipliers[k], j])?;
+            torque_terms[body].push(s.simplify(g, term)?);
+        }
+    }
+    let mut torque_sums = Vec::new();
+    for (body, list) in torque_terms.into_iter().enumerate() {
+        if !list.is_empty() {
+            torque_sums.push((body, g.add(list)?));
+        }
+    }
+    let mut terms: Vec<Vec<Id>> = vec![Vec::new(); n];
+    let mut last: Vec<Option<usize>> = vec![None; n];
     for (k, dc) in constraints.iter().enumerate() {
         for &(body, j) in &dc.jacobian {
-            if body >= terms.len() || last[body] == Some(k) {
+            if body >= n || last[body] == Some(k) {
                 continue;
             }
             last[body] = Some(k);
@@ -251,7 +325,7 @@ fn force_sums(
             sums.push((body, g.add(list)?));
         }
     }
-    Ok((multipliers, sums))
+    Ok((multipliers, sums, torque_sums))
 }
 
 fn derive_constraint(
@@ -285,21 +359,64 @@ fn derive_constraint(
         });
         gradient_parts.push((body, grad));
     }
+    // Rigid bodies: ∂C/∂θ, the angular part of the direction (Jʷ before κ). κ is the
+    // linear parts' content (as for point masses, so a pin's J is [1, 0] and its Jʷ a lever
+    // arm); only a constraint on angles alone (a gear) takes it from the angular parts.
+    let linear_scale = scale.is_some();
+    let mut angular_parts = Vec::new();
+    for &body in involved {
+        let Some(rigid) = &system.bodies[body].rigid else { continue };
+        let grad = gradient(g, c, rigid.orientation)?;
+        let grad = s.simplify(g, grad)?;
+        if s.is_zero(g, grad)? {
+            continue;
+        }
+        if !linear_scale {
+            let content = s.content(g, grad)?;
+            scale = Some(match scale {
+                None => content,
+                Some(k) => k.gcd(&content),
+            });
+        }
+        angular_parts.push((body, grad));
+    }
     let scale = scale.ok_or_else(|| DeriveError::ZeroGradient(name.clone()))?;
     let inv = scale.recip().unwrap_or(Rational::ONE);
     let mut jacobian = Vec::with_capacity(gradient_parts.len());
     for &(body, grad) in &gradient_parts {
         jacobian.push((body, s.scaled(g, grad, &inv)?));
     }
-    // c = C̈ with every acceleration set to zero, over κ.
+    let mut angular = Vec::with_capacity(angular_parts.len());
+    for &(body, grad) in &angular_parts {
+        angular.push((body, s.scaled(g, grad, &inv)?));
+    }
+    // c = C̈ with every acceleration (and angular acceleration) set to zero, over κ.
     let zero = g.zero_vector();
+    let scalar_zero = g.int(0);
     let mut to_zero = FastMap::default();
     for &(body, _) in &gradient_parts {
         to_zero.insert(system.bodies[body].nodes.acceleration, zero);
     }
+    for &(body, _) in &angular_parts {
+        if let Some(rigid) = &system.bodies[body].rigid {
+            to_zero.insert(rigid.nodes.angular_acceleration, scalar_zero);
+        }
+    }
     let at_rest = g.substitute(c_ddot, &to_zero)?;
     let bias = s.scaled(g, at_rest, &inv)?;
-    Ok(DerivedConstraint { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, gradient: gradient_parts, scale, jacobian, bias })
+    Ok(DerivedConstraint {
+        c,
+        c_dot_raw,
+        c_dot,
+        c_ddot_raw,
+        c_ddot,
+        gradient: gradient_parts,
+        scale,
+        jacobian,
+        bias,
+        angular_gradient: angular_parts,
+        angular,
+    })
 }
 
 /// The expressions of a derived constraint that do not depend on the bodies it acts on.
@@ -401,6 +518,9 @@ fn renamed(
         scale: earlier.scale.clone(),
         jacobian: parts.iter().map(|e| (e.1, e.3)).collect(),
         bias,
+        // Renaming is used only for systems of point masses.
+        angular_gradient: Vec::new(),
+        angular: Vec::new(),
     })
 }
 
@@ -425,7 +545,21 @@ fn assemble(
     for body in &system.bodies {
         inv_mass.push(g.powi(body.mass, -1)?);
     }
-    // Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ, collected per pair (k ≤ j) over shared bodies.
+    // Which constraints turn each rigid body, and the bodies' inverse inertias.
+    let mut turning: Vec<Vec<(usize, Id)>> = vec![Vec::new(); system.bodies.len()];
+    for (k, dc) in constraints.iter().enumerate() {
+        for &(body, j) in &dc.angular {
+            turning[body].push((k, j));
+        }
+    }
+    let mut inv_inertia = Vec::with_capacity(system.bodies.len());
+    for body in &system.bodies {
+        inv_inertia.push(match &body.rigid {
+            Some(rigid) => Some(g.powi(rigid.inertia, -1)?),
+            None => None,
+        });
+    }
+    // Aₖⱼ = Σᵢ [Jₖᵢ·Jⱼᵢ / mᵢ + Jʷₖᵢ Jʷⱼᵢ / Iᵢ], collected per pair (k ≤ j) over shared bodies.
     let mut pairs: Vec<((usize, usize), Vec<Id>)> = Vec::new();
     let mut index: HashMap<(usize, usize), usize> = HashMap::new();
     for (body, acting) in on_body.iter().enumerate() {
@@ -433,6 +567,20 @@ fn assemble(
             for &(j, jj) in &acting[x..] {
                 let dot = g.dot(jk, jj)?;
                 let term = g.mul(vec![dot, inv_mass[body]])?;
+                let key = (k.min(j), k.max(j));
+                let slot = *index.entry(key).or_insert_with(|| {
+                    pairs.push((key, Vec::new()));
+                    pairs.len() - 1
+                });
+                pairs[slot].1.push(term);
+            }
+        }
+    }
+    for (body, acting) in turning.iter().enumerate() {
+        let Some(inv_i) = inv_inertia[body] else { continue };
+        for (x, &(k, jk)) in acting.iter().enumerate() {
+            for &(j, jj) in &acting[x..] {
+                let term = g.mul(vec![jk, jj, inv_i])?;
                 let key = (k.min(j), k.max(j));
                 let slot = *index.entry(key).or_insert_with(|| {
                     pairs.push((key, Vec::new()));
@@ -452,13 +600,18 @@ fn assemble(
             a.push((k, j, entry));
         }
     }
-    // bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ
+    // bₖ = Σᵢ [Jₖᵢ·Fᵢ / mᵢ + Jʷₖᵢ τᵢ / Iᵢ] + cₖ (2D: no gyroscopic term)
     let mut b = Vec::with_capacity(constraints.len());
     for dc in constraints {
-        let mut terms = Vec::with_capacity(dc.jacobian.len() + 1);
+        let mut terms = Vec::with_capacity(dc.jacobian.len() + dc.angular.len() + 1);
         for &(body, j) in &dc.jacobian {
             let dot = g.dot(j, system.bodies[body].nodes.force)?;
             terms.push(g.mul(vec![dot, inv_mass[body]])?);
+        }
+        for &(body, j) in &dc.angular {
+            if let (Some(rigid), Some(inv_i)) = (&system.bodies[body].rigid, inv_inertia[body]) {
+                terms.push(g.mul(vec![j, rigid.nodes.torque, inv_i])?);
+            }
         }
         terms.push(dc.bias);
         let sum = g.add(terms)?;

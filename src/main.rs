@@ -537,7 +537,8 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
 
     // Contact distances count as zero relative to the size of the scene.
     let (positions, _, t) = initial_state(system, &env);
-    let settings = Settings { length_scale: length_scale(&positions), ..Settings::default() };
+    // Lengths only: a rigid body's angle (its slot after the bodies) is no length.
+    let settings = Settings { length_scale: length_scale(&positions[..system.bodies.len()]), ..Settings::default() };
     let (rows, solution) =
         solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     match format {
@@ -693,6 +694,13 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
+    // The velocity-level solvers step point masses only for now.
+    if velocity.is_some()
+        && let Err(e) = scenario.system.refuse_rigid("simulate --solver")
+    {
+        eprintln!("error: {}: {e}", args.file.display());
+        return ExitCode::from(1);
+    }
     let mut csv = match &args.csv {
         None => None,
         Some(path) => {
@@ -771,6 +779,11 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
+    // Work-precision sweeps and formula accuracy are point-mass only for now.
+    if let Err(e) = scenario.system.refuse_rigid("bench") {
+        eprintln!("error: {}: {e}", args.file.display());
+        return ExitCode::from(1);
+    }
     if args.solvers {
         return cmd_bench_solvers(args, &scenario);
     }

@@ -27,6 +27,8 @@ pub enum ScenarioError {
     Derive(#[from] DeriveError),
     #[error("initial state: {0}")]
     State(#[from] StateError),
+    #[error(transparent)]
+    Rigid(#[from] crate::model::system::NotYetRigid),
 }
 
 /// A derived system with its numbers.
@@ -46,7 +48,8 @@ impl Scenario {
     /// by `model::state`).
     pub fn new(loaded: Loaded, overrides: &[(Symbol, Value)]) -> Result<Scenario, ScenarioError> {
         let derivation = derive(&loaded.system)?;
-        let program = RowProgram::new(&loaded.system, &derivation, &loaded.scene.forces);
+        let scene = &loaded.scene;
+        let program = RowProgram::with_torques(&loaded.system, &derivation, &scene.forces, &scene.torques);
         let env = environment(&loaded.system, &loaded.values, &loaded.scene, overrides)?;
         Ok(Scenario { system: loaded.system, derivation, program, env, scene: loaded.scene, values: loaded.values })
     }
@@ -65,9 +68,12 @@ impl Scenario {
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<Summary, Box<Failure>> {
         let mut dynamics = Dynamics::new(&self.system, self.program.clone(), self.env.clone());
-        dynamics.velocity_dependent_forces = self.scene.forces.iter().any(|&(_, f)| {
+        dynamics.velocity_dependent_forces = self.scene.forces.iter().chain(&self.scene.torques).any(|&(_, f)| {
             let graph = &self.system.graph;
-            graph.free_symbols(f).into_iter().any(|s| matches!(graph.symbol(s).role, Role::Velocity { .. }))
+            graph
+                .free_symbols(f)
+                .into_iter()
+                .any(|s| matches!(graph.symbol(s).role, Role::Velocity { .. } | Role::AngularVelocity { .. }))
         });
         let mut simulation = Simulation::new(dynamics, &self.env, settings)
             .map_err(|error| Box::new(Failure { error, summary: Summary::default() }))?;

@@ -72,6 +72,9 @@ invalid! {
     missing_relation: "a constraint is a relation",
     strict_inequality: "write `>=` or `<=`",
     pi_constant: "`pi` is not built in",
+    rot_not_orientation: "`phi` is not an orientation",
+    rot_time_varying: "must be constant in time",
+    vector_inequality: "only `=` relates vectors",
 }
 
 /// The file-level invalid files (`file_*.toml`, snapshot-tested through the library by

@@ -8,7 +8,9 @@
 //! relative tolerance [`FORMULA_TOLERANCE`]: a person may write `l^2` where lagrange has
 //! `dot(r,r)`, and the two are equal exactly where it matters. Forces and λ of files with
 //! several constraints have no closed form; there the derived side is the λ solve
-//! (`numeric::solve`, every constraint taken as active) at each state.
+//! (`numeric::solve`, every constraint taken as active) at each state. A rigid body's
+//! constraint torque (`torque`, about its centre of mass) is judged like a force; its random
+//! states have angles on the whole circle and ω on Ċ = 0 (`states`).
 //!
 //! A numeric check (`at = { … }`) compares with the numbers lagrange computes at that state
 //! (the λ solve, inequalities included), within the entry's relative tolerance.
@@ -45,7 +47,7 @@ use crate::expr::{Id, Rational, Role, Ty, TypeError};
 use crate::model::expect::{Expectation, Expected, Item};
 use crate::model::file::{Loaded, load};
 use crate::model::scene::{Scene, environment};
-use crate::numeric::rows::RowProgram;
+use crate::numeric::rows::{RowProgram, angular_slot};
 use crate::numeric::solve::solve;
 use crate::report::diagnostic::render;
 use std::fmt;
@@ -171,6 +173,17 @@ impl Checked {
         self.check(Quantity::Force(i), expected)
     }
 
+    /// Whether the derived constraint torque on the rigid body `body` (2D: a scalar, about
+    /// its centre of mass) equals `expected` on the constraints.
+    pub fn torque(&mut self, body: &str, expected: &str) -> Result<Outcome, CheckError> {
+        let s = &self.loaded.system;
+        let i = s
+            .body_named(body)
+            .filter(|&i| s.bodies[i].rigid.is_some())
+            .ok_or_else(|| self.unknown("rigid body", body))?;
+        self.check(Quantity::Torque(i), expected)
+    }
+
     /// Whether λ of `constraint` (for C as written) equals `expected` on the constraints.
     pub fn lambda(&mut self, constraint: &str, expected: &str) -> Result<Outcome, CheckError> {
         let k = self.constraint(constraint)?;
@@ -209,6 +222,13 @@ impl Checked {
     #[track_caller]
     pub fn assert_force(&mut self, body: &str, expected: &str) -> &mut Checked {
         let r = self.force(body, expected);
+        self.assert(r)
+    }
+
+    /// Asserts [`Checked::torque`]. # Panics: as [`Checked::assert_force`].
+    #[track_caller]
+    pub fn assert_torque(&mut self, body: &str, expected: &str) -> &mut Checked {
+        let r = self.torque(body, expected);
         self.assert(r)
     }
 
@@ -264,6 +284,8 @@ impl Checked {
         let s = &self.loaded.system;
         let names: Vec<&str> = if kind == "body" {
             s.bodies.iter().map(|b| b.name.as_str()).collect()
+        } else if kind == "rigid body" {
+            s.bodies.iter().filter(|b| b.rigid.is_some()).map(|b| b.name.as_str()).collect()
         } else {
             s.constraints.iter().map(|c| c.name.as_str()).collect()
         };
@@ -291,6 +313,7 @@ impl Checked {
         let c = |k: usize| s.constraints[k].name.as_str();
         let base = match q {
             Quantity::Force(i) => format!("force[{}]", s.bodies[i].name),
+            Quantity::Torque(i) => format!("torque[{}]", s.bodies[i].name),
             Quantity::Lambda(k) => format!("lambda[{}]", c(k)),
             Quantity::CDot(k) => format!("C_dot[{}]", c(k)),
             Quantity::CDdot(k) => format!("C_ddot[{}]", c(k)),
@@ -320,6 +343,13 @@ impl Checked {
                 Some(forces) => match forces.iter().find(|(b, _)| *b == i) {
                     Some(&(_, f)) => (f, Rational::ONE),
                     None => (d.graph.zero_vector(), Rational::ONE),
+                },
+                None => return Ok(None),
+            },
+            Quantity::Torque(i) => match &d.torques {
+                Some(torques) => match torques.iter().find(|(b, _)| *b == i) {
+                    Some(&(_, t)) => (t, Rational::ONE),
+                    None => (d.graph.int(0), Rational::ONE),
                 },
                 None => return Ok(None),
             },
@@ -419,6 +449,10 @@ impl Checked {
         let dim = system.dim();
         match q {
             Quantity::Force(i) => Ok(solution.constraint_force[i][..dim].to_vec()),
+            Quantity::Torque(i) => match angular_slot(system, i) {
+                Some(slot) => Ok(vec![solution.constraint_force[slot][0]]),
+                None => Err(format!("body `{}` is not rigid", system.bodies[i].name)),
+            },
             Quantity::Lambda(k) => Ok(vec![solution.lambda[k] / self.derivation.constraints[k].scale.to_f64()]),
             _ => {
                 let id = self.derived(q).map_err(|e| e.to_string())?.ok_or("no formula")?;

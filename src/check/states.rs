@@ -12,7 +12,11 @@
 //!    [`Inequalities::AsEqualities`], `project_velocities`), so J M⁻¹ Jᵀ is assembled and
 //!    factored by `numeric::solve` and nowhere else;
 //! 3. forces and accelerations: random; `t` uniform in [0, 2]; parameters from the file;
-//!    masses from the file, or uniform in [0.5, 2] when the file gives none.
+//!    masses (and inertias) from the file, or uniform in [0.5, 2] when the file gives none.
+//!
+//! A rigid body starts at a random angle on the whole circle with random ω, τ and α; its
+//! angle and ω are slots of the projection like positions and velocities (generalised
+//! coordinates, the angle weighted by the inertia), so they end on C = 0 and Ċ = 0 too.
 //!
 //! States where Newton does not converge, or where J M⁻¹ Jᵀ is ill-conditioned (a singular
 //! configuration, e.g. the bead at the wire's centre), are thrown away and drawn again.
@@ -70,7 +74,7 @@ pub fn sample(
     for &(s, v) in &scene.initial {
         match system.graph.symbol(s).role {
             Role::Position { body } => start[body] = v.vector().unwrap_or([0.0; 3]),
-            Role::Mass { .. } => base.set(s, v),
+            Role::Mass { .. } | Role::Inertia { .. } => base.set(s, v),
             _ => {}
         }
     }
@@ -78,7 +82,7 @@ pub fn sample(
     let masses: Vec<Symbol> = system
         .graph
         .symbols()
-        .filter(|(s, info)| matches!(info.role, Role::Mass { .. }) && base.get(*s).is_none())
+        .filter(|(s, info)| matches!(info.role, Role::Mass { .. } | Role::Inertia { .. }) && base.get(*s).is_none())
         .map(|(s, _)| s)
         .collect();
     let mut rng = Rng::new(0x5eed_1a94_a27e);
@@ -108,6 +112,14 @@ pub fn sample(
             env.set(body.velocity, Value::Vector(rng.normal_vector(dim, size)));
             env.set(body.force, Value::Vector(rng.normal_vector(dim, 10.0)));
             env.set(body.acceleration, Value::Vector(rng.normal_vector(dim, 10.0)));
+            // A rigid body: an angle anywhere on the circle, ω, τ and α random like v, F and a.
+            if let Some(rigid) = &body.rigid {
+                let angle = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
+                env.set(rigid.orientation, Value::Scalar(angle));
+                env.set(rigid.angular_velocity, Value::Scalar(rng.normal()));
+                env.set(rigid.torque, Value::Scalar(10.0 * rng.normal()));
+                env.set(rigid.angular_acceleration, Value::Scalar(10.0 * rng.normal()));
+            }
         }
         if project(&mut dynamics, &mut env, size).is_some() {
             states.push(env);
@@ -137,6 +149,12 @@ fn project(dynamics: &mut Dynamics<'_>, env: &mut Env, size: f64) -> Option<()> 
     let speed = v.iter().map(safe_norm).fold(1.0, f64::max);
     if !rows.rows.iter().all(|r| (r.rate / row_norm(&r.jacobian)).abs() <= RATE_TOLERANCE * speed) {
         return None;
+    }
+    // Angles and angular velocities sit in the slots after the bodies (`numeric::rows`).
+    let n = system.bodies.len();
+    for (slot, rigid) in (n..).zip(system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
+        env.set(rigid.orientation, Value::Scalar(q[slot][0]));
+        env.set(rigid.angular_velocity, Value::Scalar(v[slot][0]));
     }
     for (body, (q, v)) in system.bodies.iter().zip(q.into_iter().zip(v)) {
         env.set(body.position, Value::Vector(q));

@@ -54,6 +54,8 @@ pub struct Options {
 pub enum GenerateError {
     #[error(transparent)]
     Derive(#[from] DeriveError),
+    #[error(transparent)]
+    Rigid(#[from] crate::model::system::NotYetRigid),
     #[error("internal type error: {0}")]
     Type(#[from] TypeError),
     #[error(transparent)]
@@ -132,6 +134,7 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 
 /// Generates the Rust module for a loaded file, with its `State` layout.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
+    loaded.system.refuse_rigid("generate")?;
     // The module's own derivation: `--specialize` extends its graph.
     let mut d = derive(&loaded.system)?;
     let system = &loaded.system;
@@ -1009,7 +1012,11 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, array
         let name = comment_text(&info.name);
         let body = |i: usize| comment_text(bodies.get(i).copied().unwrap_or("?"));
         let doc = match info.role {
-            Role::Acceleration { .. } => continue,
+            Role::Acceleration { .. } | Role::AngularAcceleration { .. } => continue,
+            Role::Orientation { body: i } => format!("Orientation `{name}` of body `{}`.", body(i)),
+            Role::AngularVelocity { body: i } => format!("Angular velocity `{name}` of body `{}`.", body(i)),
+            Role::Torque { body: i } => format!("External torque `{name}` on body `{}`.", body(i)),
+            Role::Inertia { body: i } => format!("Inertia `{name}` (of body `{}`).", body(i)),
             Role::Time => format!("The time `{name}`."),
             Role::Parameter => format!("Parameter `{name}`."),
             Role::Position { body: i } => format!("Position `{name}` of body `{}`.", body(i)),

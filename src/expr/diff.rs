@@ -2,7 +2,9 @@
 //!
 //! d(a·b)/dt = ȧ·b + a·ḃ, d(a×b)/dt = ȧ×b + a×ḃ, d|a|/dt = a·ȧ/|a|, d f(u)/dt = Σ ∂f/∂uᵢ u̇ᵢ
 //! (the partials are the function table's, [`Func::partial`]);
-//! a position's derivative is its body's velocity symbol, a velocity's is the acceleration,
+//! d rot(θ, s)/dt = θ̇ perp(rot(θ, s)), d perp(u)/dt = perp(u̇);
+//! a position's derivative is its body's velocity symbol, a velocity's is the acceleration
+//! (an orientation's the angular velocity, whose derivative is the angular acceleration),
 //! `t` has derivative 1 and parameters are constant. The result is written the way a person
 //! applies the rules (`d(r·r)/dt = v·r + r·v`): only zero terms and unit factors are
 //! dropped here; collecting is the simplifier's job.
@@ -46,7 +48,7 @@ fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &FastMap<Id, Id>) -> Resul
             let info = g.symbol(*s);
             match (info.role, info.derivative) {
                 (Role::Time, _) => g.int(1),
-                (Role::Parameter | Role::Mass { .. }, _) => zero(g, ty),
+                (Role::Parameter | Role::Mass { .. } | Role::Inertia { .. }, _) => zero(g, ty),
                 (_, Some(next)) => g.sym(next),
                 (_, None) => return Err(DiffError::NoDerivative(info.name.clone())),
             }
@@ -144,6 +146,26 @@ fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &FastMap<Id, Id>) -> Resul
                 terms.push(mul(g, vec![outer, d[u]], Ty::Scalar)?);
             }
             add(g, terms, Ty::Scalar)?
+        }
+        Node::Rot([theta, v]) => {
+            // d/dt R(θ) s = θ̇ perp(R(θ) s) + R(θ) ṡ (ṡ = 0 for the constant `s` the
+            // language allows; kept for any other).
+            let mut terms = Vec::new();
+            if !g.is_zero(d[theta]) {
+                let turned = g.perp(id)?;
+                terms.push(mul(g, vec![d[theta], turned], Ty::Vector)?);
+            }
+            if !g.is_zero(d[v]) {
+                terms.push(g.rot(*theta, d[v])?);
+            }
+            add(g, terms, Ty::Vector)?
+        }
+        Node::Perp(a) => {
+            if g.is_zero(d[a]) {
+                g.zero_vector()
+            } else {
+                g.perp(d[a])?
+            }
         }
     })
 }

@@ -317,5 +317,14 @@ fn eval_node<S: Scalar>(graph: &Graph, node: &Node, values: &[Value<S>], env: &E
             }
             Value::Scalar(f.apply(&args))
         }
+        Node::Rot([theta, u]) => {
+            let (th, u) = (s(theta), v(u));
+            let (sin, cos) = (th.sin(), th.cos());
+            Value::Vector([cos * u[0] - sin * u[1], sin * u[0] + cos * u[1], S::ZERO])
+        }
+        Node::Perp(a) => {
+            let a = v(a);
+            Value::Vector([-a[1], a[0], S::ZERO])
+        }
     })
 }

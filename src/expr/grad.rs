@@ -4,7 +4,8 @@
 //! (the direction of the constraint force on the body at `r`); for a scalar symbol it is
 //! the partial derivative (∂C/∂t for `t`). Adjoints flow from the root to the leaves:
 //! a dot product `a·b` with adjoint `w` sends `w b` to `a` and `w a` to `b`, a cross product
-//! `a×b` sends `b×w` to `a` and `w×a` to `b`, and so on, so the result stays in vector
+//! `a×b` sends `b×w` to `a` and `w×a` to `b`, `rot(θ, s)` sends `w·perp(rot(θ, s))` to θ,
+//! `perp(u)` sends `−perp(w)` to `u`, and so on, so the result stays in vector
 //! form (∇(r·r) = r + r, which the simplifier collects to 2r) instead of components.
 //!
 //! Nodes that do not depend on the symbol get no adjoint, so the work is proportional to
@@ -117,6 +118,17 @@ fn propagate(g: &mut Graph, id: Id, node: &Node, w: Id) -> Result<Vec<(Id, Id)>,
             out.push((*a, ga));
             out.push((*b, gb));
         }
+        Node::Cross([a, b]) if involves_rotation(g, id) => {
+            // 2D, on rigid bodies: ∂(a×b)/∂a = −perp(b), ∂(a×b)/∂b = perp(a), kept as
+            // vectors (a lever arm's components would be written in cos θ and sin θ).
+            let pb = g.perp(*b)?;
+            let pa = g.perp(*a)?;
+            let minus_w = g.neg(w);
+            let ga = mul(g, vec![minus_w, pb], Ty::Vector)?;
+            let gb = mul(g, vec![w, pa], Ty::Vector)?;
+            out.push((*a, ga));
+            out.push((*b, gb));
+        }
         Node::Cross([a, b]) => {
             // 2D: a×b = a.x b.y − a.y b.x, so ∂/∂a = [b.y, −b.x] and ∂/∂b = [−a.y, a.x].
             let perp = |g: &mut Graph, v: Id, sign_x: i64| -> Result<Id, TypeError> {
@@ -152,6 +164,34 @@ fn propagate(g: &mut Graph, id: Id, node: &Node, w: Id) -> Result<Vec<(Id, Id)>,
                 out.push((u, gu));
             }
         }
+        Node::Rot([theta, v]) => {
+            // ∂(R(θ) s)/∂θ = perp(R(θ) s), so θ gets w·perp(R(θ) s); s gets Rᵀ w, written
+            // in components [w.x cos θ + w.y sin θ, −w.x sin θ + w.y cos θ].
+            let turned = g.perp(id)?;
+            let gt = g.dot(w, turned)?;
+            out.push((*theta, gt));
+            let (c, s) = (g.call(super::func::Func::Cos, &[*theta])?, g.call(super::func::Func::Sin, &[*theta])?);
+            let (wx, wy) = (g.comp(w, Axis::X)?, g.comp(w, Axis::Y)?);
+            let (cx, sy) = (mul(g, vec![c, wx], Ty::Scalar)?, mul(g, vec![s, wy], Ty::Scalar)?);
+            let first = add(g, vec![cx, sy], Ty::Scalar)?;
+            let (sx, cy) = (mul(g, vec![s, wx], Ty::Scalar)?, mul(g, vec![c, wy], Ty::Scalar)?);
+            let minus_sx = g.neg(sx);
+            let second = add(g, vec![minus_sx, cy], Ty::Scalar)?;
+            let gs = g.vector(vec![first, second])?;
+            out.push((*v, gs));
+        }
+        Node::Perp(a) => {
+            // w·perp(da) = da·(−perp(w))
+            let turned = g.perp(w)?;
+            let ga = g.neg(turned);
+            out.push((*a, ga));
+        }
     }
     Ok(out)
+}
+
+/// Whether `id` involves `rot` or `perp` (a rigid body's vectors), so its gradient is
+/// written with `perp`; expressions of point masses keep their component form.
+fn involves_rotation(g: &Graph, id: Id) -> bool {
+    g.reachable(&[id]).iter().any(|&n| matches!(g.node(n), Node::Rot(_) | Node::Perp(_)))
 }

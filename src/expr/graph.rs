@@ -258,6 +258,16 @@ pub enum Role {
     Force { body: usize },
     /// A body's mass: a constant.
     Mass { body: usize },
+    /// A rigid body's orientation (2D: the angle θ); its derivative is the angular velocity.
+    Orientation { body: usize },
+    /// A rigid body's angular velocity ω; its derivative is the angular acceleration.
+    AngularVelocity { body: usize },
+    /// A rigid body's angular acceleration α; its time derivative is not defined here.
+    AngularAcceleration { body: usize },
+    /// A rigid body's external torque; like a force, never differentiated.
+    Torque { body: usize },
+    /// A rigid body's moment of inertia: a constant.
+    Inertia { body: usize },
 }
 
 impl Role {
@@ -265,11 +275,11 @@ impl Role {
     /// `dot(v, r)` is written `r·v` and `F·r` reads as in the article.
     pub(super) fn rank(self) -> (u8, usize) {
         match self {
-            Role::Force { body } => (0, body),
-            Role::Position { body } => (1, body),
-            Role::Velocity { body } => (2, body),
-            Role::Acceleration { body } => (3, body),
-            Role::Mass { body } => (4, body),
+            Role::Force { body } | Role::Torque { body } => (0, body),
+            Role::Position { body } | Role::Orientation { body } => (1, body),
+            Role::Velocity { body } | Role::AngularVelocity { body } => (2, body),
+            Role::Acceleration { body } | Role::AngularAcceleration { body } => (3, body),
+            Role::Mass { body } | Role::Inertia { body } => (4, body),
             Role::Parameter => (5, 0),
             Role::Time => (6, 0),
         }
@@ -282,7 +292,8 @@ pub struct SymbolInfo {
     pub name: String,
     pub ty: Ty,
     pub role: Role,
-    /// The symbol its time derivative is, for positions and velocities.
+    /// The symbol its time derivative is, for positions and velocities (and orientations
+    /// and angular velocities).
     pub derivative: Option<Symbol>,
 }
 
@@ -307,6 +318,11 @@ pub enum Node {
     /// A function of the table in `func` over its arguments: the first `arity` slots; the
     /// others repeat the first argument ([`Func::slots`]), so equal calls are equal nodes.
     Call(Func, [Id; MAX_ARITY]),
+    /// `rot(θ, s)`: the body-frame vector `s` (constant in time) turned by the orientation
+    /// θ into world coordinates, R(θ) s. 2D: θ is a scalar angle.
+    Rot([Id; 2]),
+    /// `perp(u)` in 2D: `u` turned a quarter turn counter-clockwise, [−u.y, u.x].
+    Perp(Id),
 }
 
 impl Node {
@@ -316,8 +332,8 @@ impl Node {
         match self {
             Node::Num(_) | Node::Sym(_) => &[],
             Node::Vector(xs) | Node::Add(xs) | Node::Mul(xs) => xs,
-            Node::Pow(ab) | Node::Dot(ab) | Node::Cross(ab) => ab,
-            Node::Norm(a) | Node::Comp(a, _) => std::slice::from_ref(a),
+            Node::Pow(ab) | Node::Dot(ab) | Node::Cross(ab) | Node::Rot(ab) => ab,
+            Node::Norm(a) | Node::Comp(a, _) | Node::Perp(a) => std::slice::from_ref(a),
             Node::Call(f, args) => &args[..f.arity()],
         }
     }
@@ -334,6 +350,8 @@ impl Node {
             Node::Cross([a, b]) => Node::Cross([f(*a), f(*b)]),
             Node::Norm(a) => Node::Norm(f(*a)),
             Node::Comp(a, axis) => Node::Comp(f(*a), *axis),
+            Node::Rot([a, b]) => Node::Rot([f(*a), f(*b)]),
+            Node::Perp(a) => Node::Perp(f(*a)),
             Node::Call(func, args) => {
                 let mut mapped = *args;
                 for slot in &mut mapped[..func.arity()] {
@@ -366,6 +384,8 @@ impl Node {
             Node::Mul(_) => 8,
             Node::Add(_) => 9,
             Node::Vector(_) => 10,
+            Node::Rot(_) => 11,
+            Node::Perp(_) => 12,
         }
     }
 }
@@ -394,6 +414,8 @@ pub enum TypeError {
     MixedRelation,
     #[error("`{name}` takes {expected} argument(s), found {found}")]
     Arity { name: &'static str, expected: usize, found: usize },
+    #[error("`{name}` exists only in 2D files for now")]
+    OnlyIn2d { name: &'static str },
 }
 
 /// The arena. `dim` is the dimension of every vector in it (2 or 3).
@@ -662,6 +684,17 @@ impl Graph {
         self.make(Node::Comp(a, axis))
     }
 
+    /// `rot(θ, s)`: `s` in world coordinates (the checks that θ is an orientation and `s`
+    /// constant in time are the lowering's, which knows the spans).
+    pub fn rot(&mut self, theta: Id, s: Id) -> Result<Id, TypeError> {
+        self.make(Node::Rot([theta, s]))
+    }
+
+    /// `perp(u)` = [−u.y, u.x] (2D).
+    pub fn perp(&mut self, u: Id) -> Result<Id, TypeError> {
+        self.make(Node::Perp(u))
+    }
+
     /// `f(args)`, with as many arguments as `f` takes ([`Func::signature`]).
     pub fn call(&mut self, f: Func, args: &[Id]) -> Result<Id, TypeError> {
         if args.len() != f.arity() {
@@ -735,6 +768,21 @@ impl Graph {
                     expect(&[arg], ty)?;
                 }
                 result
+            }
+            Node::Rot([theta, s]) => {
+                if self.dim != 2 {
+                    return Err(TypeError::OnlyIn2d { name: "rot" });
+                }
+                expect(&[*theta], Ty::Scalar)?;
+                expect(&[*s], Ty::Vector)?;
+                Ty::Vector
+            }
+            Node::Perp(a) => {
+                if self.dim != 2 {
+                    return Err(TypeError::OnlyIn2d { name: "perp" });
+                }
+                expect(std::slice::from_ref(a), Ty::Vector)?;
+                Ty::Vector
             }
         })
     }

@@ -9,7 +9,7 @@
 //! printed `-1/2*x` parses back to the same node). Nothing else is evaluated here.
 
 use super::func::Func;
-use super::graph::{Graph, Id, NameMap, Ty, TypeError};
+use super::graph::{Graph, Id, NameMap, Node, Role, Ty, TypeError};
 use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
 use super::syntax::{MulOp, RelOp, Relation, Sign, Span, Syntax, SyntaxKind};
@@ -95,6 +95,16 @@ pub enum LowerErrorKind {
     NumberRange { text: String },
     #[error("a constraint must be a scalar, found a vector: compare components, e.g. `r.x = 0`")]
     VectorConstraint,
+    #[error(
+        "only `=` relates vectors (one equality per component); for an inequality compare components, e.g. `r.y >= 0`"
+    )]
+    VectorInequality,
+    #[error("`rot` turns a vector by a rigid body's orientation: `{name}` is not an orientation")]
+    NotAnOrientation { name: String },
+    #[error(
+        "the vector `rot` turns must be constant in time (numbers and parameters, in the body's frame): it uses `{name}`"
+    )]
+    TimeVaryingBodyVector { name: String },
     #[error("{0}")]
     Type(#[from] TypeError),
 }
@@ -105,7 +115,7 @@ fn hint(suggestion: &Option<String>) -> String {
 
 /// The functions of the language that are node kinds of their own (vectors in), with
 /// their arity; every other function is in the table of [`Func`].
-const VECTOR_FUNCTIONS: [(&str, usize); 3] = [("dot", 2), ("cross", 2), ("norm", 1)];
+const VECTOR_FUNCTIONS: [(&str, usize); 5] = [("dot", 2), ("cross", 2), ("norm", 1), ("rot", 2), ("perp", 1)];
 
 /// Whether `name` is a function of the expression language (and so cannot name a symbol).
 pub fn is_function_name(name: &str) -> bool {
@@ -160,7 +170,9 @@ pub struct LoweredRelation {
 }
 
 /// Lowers `lhs = rhs` to `C = lhs − rhs`, `lhs >= rhs` to `C = lhs − rhs ≥ 0`, and
-/// `lhs <= rhs` to `C = rhs − lhs ≥ 0`; a bare expression is `C` itself.
+/// `lhs <= rhs` to `C = rhs − lhs ≥ 0`; a bare expression is `C` itself. Between vectors
+/// only `=` is allowed, and `C` is then a vector: one equality per component (the caller
+/// splits it).
 pub fn lower_relation(rel: &Relation, scope: &Scope, graph: &mut Graph) -> Result<LoweredRelation, LowerError> {
     let mut l = Lower { scope, graph };
     let lhs = l.expr(&rel.lhs)?;
@@ -175,8 +187,8 @@ pub fn lower_relation(rel: &Relation, scope: &Scope, graph: &mut Graph) -> Resul
     if lt != rt {
         return Err(LowerError { span: *op_span, kind: TypeError::MixedRelation.into() });
     }
-    if lt == Ty::Vector {
-        return Err(LowerError { span: rel.lhs.span.to(rhs_syntax.span), kind: LowerErrorKind::VectorConstraint });
+    if lt == Ty::Vector && *op != RelOp::Eq {
+        return Err(LowerError { span: rel.lhs.span.to(rhs_syntax.span), kind: LowerErrorKind::VectorInequality });
     }
     let span = rel.lhs.span.to(rhs_syntax.span);
     let (a, b) = if *op == RelOp::Le { (rhs, lhs) } else { (lhs, rhs) };
@@ -367,6 +379,36 @@ impl Lower<'_> {
         Err(LowerError { span, kind: LowerErrorKind::Argument { function: function.to_string(), expected: ty, found } })
     }
 
+    /// The first argument of `rot`: a rigid body's orientation symbol.
+    fn orientation(&mut self, s: &Syntax) -> Result<Id, LowerError> {
+        let id = self.expr(s)?;
+        if let Node::Sym(sym) = self.graph.node(id)
+            && matches!(self.graph.symbol(*sym).role, Role::Orientation { .. })
+        {
+            return Ok(id);
+        }
+        let name = match &s.kind {
+            SyntaxKind::Ident(name) => name.to_string(),
+            _ => super::print::print(self.graph, id, super::print::Style::Source).unwrap_or_default(),
+        };
+        Err(LowerError { span: s.span, kind: LowerErrorKind::NotAnOrientation { name } })
+    }
+
+    /// Refuses a vector that changes in time (it uses `t` or a body's state) where a
+    /// body-frame vector belongs.
+    fn constant_in_time(&self, v: Id, span: Span) -> Result<(), LowerError> {
+        for s in self.graph.free_symbols(v) {
+            let info = self.graph.symbol(s);
+            if !matches!(info.role, Role::Parameter | Role::Mass { .. } | Role::Inertia { .. }) {
+                return Err(LowerError {
+                    span,
+                    kind: LowerErrorKind::TimeVaryingBodyVector { name: info.name.clone() },
+                });
+            }
+        }
+        Ok(())
+    }
+
     fn call(&mut self, name: &str, name_span: Span, args: &[Syntax], span: Span) -> Result<Id, LowerError> {
         let arity = Func::from_name(name)
             .map(Func::arity)
@@ -398,6 +440,16 @@ impl Lower<'_> {
             "norm" => {
                 let a = self.vector(&args[0], name)?;
                 self.graph.norm(a).map_err(at)
+            }
+            "rot" => {
+                let theta = self.orientation(&args[0])?;
+                let v = self.vector(&args[1], name)?;
+                self.constant_in_time(v, args[1].span)?;
+                self.graph.rot(theta, v).map_err(at)
+            }
+            "perp" => {
+                let a = self.vector(&args[0], name)?;
+                self.graph.perp(a).map_err(at)
             }
             _ => {
                 let f = Func::from_name(name).ok_or_else(|| at(TypeError::ExpectedScalar))?;

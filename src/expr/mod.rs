@@ -17,6 +17,7 @@ pub mod parse;
 pub mod poly;
 mod present;
 pub mod print;
+mod rigid;
 pub mod shape;
 pub mod simplify;
 pub mod syntax;

@@ -123,8 +123,13 @@ impl Printer<'_> {
             Node::Cross([a, b]) => self.call_source("cross", &[a, b], "(", ")"),
             Node::Norm(a) => self.call_source("norm", &[a], "(", ")"),
             Node::Call(f, args) => self.call_source(f.name(), &args[..f.arity()], "(", ")"),
+            Node::Rot([a, b]) => self.call_source("rot", &[a, b], "(", ")"),
+            Node::Perp(a) => self.call_source("perp", &[a], "(", ")"),
             Node::Comp(a, axis) => {
-                let plain = matches!(self.node(a), Node::Sym(_) | Node::Vector(_) | Node::Call(..));
+                let plain = matches!(
+                    self.node(a),
+                    Node::Sym(_) | Node::Vector(_) | Node::Call(..) | Node::Rot(_) | Node::Perp(_)
+                );
                 self.source_wrapped(a, !plain)?;
                 self.push(".")?;
                 self.push(axis.name())
@@ -396,6 +401,18 @@ impl Printer<'_> {
                 } else {
                     self.push(&format!(".{}", axis.name()))
                 }
+            }
+            &Node::Rot([theta, v]) => {
+                self.push(if latex { "\\operatorname{rot}\\left(" } else { "rot(" })?;
+                self.human(theta, style, 0)?;
+                self.push(", ")?;
+                self.human(v, style, 0)?;
+                self.push(if latex { "\\right)" } else { ")" })
+            }
+            &Node::Perp(a) => {
+                self.push(if latex { "\\operatorname{perp}\\left(" } else { "perp(" })?;
+                self.human(a, style, 0)?;
+                self.push(if latex { "\\right)" } else { ")" })
             }
             Node::Call(f, args) => match f.notation() {
                 Notation::Radical if latex => {

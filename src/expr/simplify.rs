@@ -23,6 +23,7 @@
 //! | cross         | bilinear; `u×u = 0`; `w×u = −u×w`; `(p×q)×w = q(p·w) − p(q·w)`      |
 //! | radicals      | `sqrt(x)² = x`; `norm(u)² = u·u`; `norm(c u) = |c| norm(u)`          |
 //! | functions     | `ln(exp x) = x`, `exp(ln x) = x`; `sin²x + cos²x = 1` (when smaller)  |
+//! | rot, perp     | linear; `perp(perp(u)) = −u`, `u·perp(u) = 0`, … (`rigid`)          |
 //!
 //! Work is bounded: every expansion is capped by [`super::poly::MAX_TERMS`]; past it the
 //! piece is kept unexpanded as an atom, which is correct, only less simplified. Results are
@@ -233,14 +234,14 @@ impl Simplifier {
         Ok(self.memo[&id].clone())
     }
 
-    fn scalar_of(&self, id: Id) -> Frac {
+    pub(super) fn scalar_of(&self, id: Id) -> Frac {
         match &*self.memo[&id] {
             Canon::S(f) => f.clone(),
             Canon::V(_) => Frac::zero(),
         }
     }
 
-    fn vector_of(&self, id: Id) -> VecForm {
+    pub(super) fn vector_of(&self, id: Id) -> VecForm {
         match &*self.memo[&id] {
             Canon::V(v) => v.clone(),
             Canon::S(_) => VecForm::default(),
@@ -352,6 +353,8 @@ impl Simplifier {
                 self.dot(g, &a, &e)?.map(Canon::S)
             }
             Node::Call(f, _) => self.call(g, *f, node.children())?.map(Canon::S),
+            Node::Rot([theta, v]) => self.rot_form(g, *theta, *v)?.map(Canon::V),
+            Node::Perp(v) => Some(Canon::V(self.perp_form(g, *v)?)),
         };
         // Sums and products of sums (common denominators, bilinear dot) can create
         // `sqrt(x)²` anew; reduce them in every form, not only after products and powers.
@@ -688,13 +691,16 @@ impl Simplifier {
     }
 
     /// `u·w` of two vector atoms; `None` when it is too large to expand ([`super::poly::MAX_TERMS`]).
-    fn dot_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Option<Frac>, TypeError> {
+    pub(super) fn dot_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Option<Frac>, TypeError> {
         Ok(match (u, w) {
             (VAtom::Basis(x), VAtom::Basis(y)) => {
                 Some(Frac::constant(if x == y { Rational::ONE } else { Rational::ZERO }))
             }
             (VAtom::Atom(a), VAtom::Basis(x)) | (VAtom::Basis(x), VAtom::Atom(a)) => self.component(g, a, x)?,
             (VAtom::Atom(a), VAtom::Atom(b)) => {
+                if let Some(rigid) = self.rigid_dot(g, a, b)? {
+                    return Ok(rigid);
+                }
                 match (g.node(a).clone(), g.node(b).clone()) {
                     // (p×q)·(s×t) = (p·s)(q·t) − (p·t)(q·s)
                     (Node::Cross([p, q]), Node::Cross([s, t])) => {
@@ -737,7 +743,10 @@ impl Simplifier {
     }
 
     /// The component `axis` of a vector atom; `None` when it is too large to expand.
-    fn component(&mut self, g: &mut Graph, a: Id, axis: Axis) -> Result<Option<Frac>, TypeError> {
+    pub(super) fn component(&mut self, g: &mut Graph, a: Id, axis: Axis) -> Result<Option<Frac>, TypeError> {
+        if let Some(rigid) = self.rigid_component(g, a, axis)? {
+            return Ok(rigid);
+        }
         if let Node::Cross([p, q]) = g.node(a).clone() {
             // (p×q)ₓ = p_y q_z − p_z q_y, cyclically.
             let (i, j) = match axis {
@@ -832,7 +841,7 @@ impl Simplifier {
     }
 
     /// `a×b` in 2D: the scalar `a.x b.y − a.y b.x`, bilinear.
-    fn cross2(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<Frac>, TypeError> {
+    pub(super) fn cross2(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<Frac>, TypeError> {
         let mut acc = Frac::zero();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
@@ -854,6 +863,10 @@ impl Simplifier {
                         c.scale(&Rational::int(sign))
                     }
                     (VAtom::Atom(p), VAtom::Atom(q)) if p == q => Frac::zero(),
+                    (VAtom::Atom(p), VAtom::Atom(q)) if let Some(rigid) = self.rigid_cross(g, p, q)? => {
+                        let Some(f) = rigid else { return Ok(None) };
+                        f
+                    }
                     (VAtom::Atom(p), VAtom::Atom(q)) => {
                         let (x, y, sign) = if g.cmp_nodes(p, q).is_lt() { (p, q, 1) } else { (q, p, -1) };
                         Frac::atom(g.cross(x, y)?).scale(&Rational::int(sign))

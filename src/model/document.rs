@@ -21,7 +21,9 @@
 
 use super::keys::unknown_keys;
 use super::problem::{Problem, shown};
-use super::raw::{RawBody, RawConstraint, RawExpect, RawExpected, RawFile, RawMass, RawScene, RawValue, Text};
+use super::raw::{
+    RawBody, RawConstraint, RawExpect, RawExpected, RawFile, RawMass, RawRigid, RawScene, RawValue, Text,
+};
 use std::borrow::Cow;
 use std::collections::BTreeMap;
 use std::fmt::{self, Display};
@@ -328,19 +330,45 @@ impl Reader<'_> {
                 self.missing(at, &label, "mass", "\"m\"");
                 Spanned::new(at.span(), RawMass::Number(1.0))
             }
-            Some(v) => match v.get_ref() {
-                DeValue::String(s) => Spanned::new(v.span(), RawMass::Symbol(s.clone())),
-                // Finiteness and sign are judged in `model::file` with the other mass checks.
-                DeValue::Integer(_) | DeValue::Float(_) => {
-                    Spanned::new(v.span(), RawMass::Number(Self::raw_number(v.get_ref()).unwrap_or(f64::NAN)))
-                }
-                _ => {
-                    self.wrong(v, &format_args!("the mass of {label}"), "a number or a symbol name (a string)");
-                    Spanned::new(v.span(), RawMass::Number(1.0))
-                }
-            },
+            Some(v) => self.mass_like(v, &format_args!("the mass of {label}")),
         };
-        Some(RawBody { name: name?, position, velocity, acceleration, mass, force })
+        // A body with an `orientation` is rigid, and then has the rotational keys too.
+        let rigid = if t.contains_key("orientation") {
+            let orientation = symbol(self, "orientation", "\"th\"");
+            let angular_velocity = symbol(self, "angular_velocity", "\"w\"");
+            let angular_acceleration = symbol(self, "angular_acceleration", "\"alpha\"");
+            let torque = symbol(self, "torque", "\"T\"");
+            let inertia = t.get("inertia").map(|v| self.mass_like(v, &format_args!("the inertia of {label}")));
+            Some(RawRigid { orientation, angular_velocity, angular_acceleration, torque, inertia })
+        } else {
+            // The rotational keys mean nothing without an orientation: say so, not ignore them.
+            for key in ["angular_velocity", "angular_acceleration", "inertia", "torque"] {
+                if let Some(v) = t.get(key) {
+                    self.problems.push(Problem::RigidKeyWithoutOrientation {
+                        span: v.span(),
+                        what: label.to_string(),
+                        key,
+                    });
+                }
+            }
+            None
+        };
+        Some(RawBody { name: name?, position, velocity, acceleration, mass, force, rigid })
+    }
+
+    /// A mass or an inertia: a number or a symbol's name. Finiteness and sign are judged in
+    /// `model::file` with the other mass checks.
+    fn mass_like<'i, W: Display + ?Sized>(&mut self, v: &Value<'i>, what: &W) -> Spanned<RawMass<'i>> {
+        match v.get_ref() {
+            DeValue::String(s) => Spanned::new(v.span(), RawMass::Symbol(s.clone())),
+            DeValue::Integer(_) | DeValue::Float(_) => {
+                Spanned::new(v.span(), RawMass::Number(Self::raw_number(v.get_ref()).unwrap_or(f64::NAN)))
+            }
+            _ => {
+                self.wrong(v, what, "a number or a symbol name (a string)");
+                Spanned::new(v.span(), RawMass::Number(1.0))
+            }
+        }
     }
 
     fn constraint<'i>(&mut self, at: &Value<'i>, t: &DeTable<'i>) -> Option<RawConstraint<'i>> {
@@ -372,6 +400,7 @@ impl Reader<'_> {
     fn expect<'i>(&mut self, _at: &Value<'i>, t: &DeTable<'i>) -> Option<RawExpect<'i>> {
         let mut entries = |key: &str| t.get(key).map(|x| self.expected(x, key)).unwrap_or_default();
         let force = entries("force");
+        let torque = entries("torque");
         let lambda = entries("lambda");
         let c_dot = entries("C_dot");
         let c_ddot = entries("C_ddot");
@@ -390,8 +419,9 @@ impl Reader<'_> {
             }
         });
         let note = t.get("note").and_then(|x| self.string(x, "`note`")).map(|s| s.into_inner().into_owned());
-        let written = ["force", "lambda", "C_dot", "C_ddot", "A", "b"].iter().filter(|k| t.contains_key(**k)).count();
-        Some(RawExpect { force, lambda, c_dot, c_ddot, a, b, at, tolerance, written, note })
+        let written =
+            ["force", "torque", "lambda", "C_dot", "C_ddot", "A", "b"].iter().filter(|k| t.contains_key(**k)).count();
+        Some(RawExpect { force, torque, lambda, c_dot, c_ddot, a, b, at, tolerance, written, note })
     }
 
     /// The `name = expected` entries of one quantity of an `[[expect]]`.

@@ -7,6 +7,7 @@
 //! ```toml
 //! [[expect]]
 //! force  = { bead = "-(m*dot(v,v) + dot(F,r))/l^2 * r" }   # by body
+//! torque = { rod = "cross(rot(th, s), ...)" }               # by rigid body (a scalar in 2D)
 //! lambda = { wire = "-(m*dot(v,v) + dot(F,r))/(2*l^2)" }   # by constraint
 //! C_dot  = { wire = "2*dot(r,v)" }                          # by constraint
 //! C_ddot = { wire = "2*dot(v,v) + 2*dot(r,a)" }             # by constraint
@@ -44,6 +45,8 @@ pub const DEFAULT_TOLERANCE: f64 = 1e-9;
 pub enum Quantity {
     /// The constraint force on a body.
     Force(usize),
+    /// The constraint torque on a rigid body (2D: a scalar).
+    Torque(usize),
     /// λ of a constraint, for C as written.
     Lambda(usize),
     CDot(usize),
@@ -121,6 +124,7 @@ pub fn resolve(
         let nothing = e.written == 0;
         let mut r = Resolver { text, system, problems, written, numeric: at.is_some(), items: Vec::new(), walk };
         r.table(&e.force, "force", Target::Body);
+        r.table(&e.torque, "torque", Target::RigidBody);
         r.table(&e.lambda, "lambda", Target::Constraint);
         r.table(&e.c_dot, "C_dot", Target::Constraint);
         r.table(&e.c_ddot, "C_ddot", Target::Constraint);
@@ -139,6 +143,7 @@ pub fn resolve(
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Target {
     Body,
+    RigidBody,
     Constraint,
     Pair,
 }
@@ -164,7 +169,7 @@ impl Resolver<'_> {
             let Some(quantity) = self.quantity(key, what, target) else {
                 continue;
             };
-            if self.numeric && !matches!(quantity, Quantity::Force(_) | Quantity::Lambda(_)) {
+            if self.numeric && !matches!(quantity, Quantity::Force(_) | Quantity::Torque(_) | Quantity::Lambda(_)) {
                 self.problem(Problem::NotAtState { span: key.span(), what: what.to_string() });
                 continue;
             }
@@ -179,6 +184,7 @@ impl Resolver<'_> {
         let name = key.get_ref().as_ref();
         match target {
             Target::Body => self.body(name, key.span()).map(Quantity::Force),
+            Target::RigidBody => self.rigid_body(name, key.span()).map(Quantity::Torque),
             Target::Constraint => {
                 let k = self.constraint(name, key.span())?;
                 Some(match what {
@@ -206,6 +212,18 @@ impl Resolver<'_> {
         if found.is_none() && !self.written.contains(&name) {
             let names: Vec<&str> = self.system.bodies.iter().map(|b| b.name.as_str()).collect();
             self.problem(unknown(span, "body", name, &names));
+        }
+        found
+    }
+
+    /// A body with an orientation: a torque on a point mass is no quantity.
+    fn rigid_body(&mut self, name: &str, span: Range<usize>) -> Option<usize> {
+        let body = self.system.body_named(name);
+        let found = body.filter(|&i| self.system.bodies[i].rigid.is_some());
+        if found.is_none() && (body.is_some() || !self.written.contains(&name)) {
+            let names: Vec<&str> =
+                self.system.bodies.iter().filter(|b| b.rigid.is_some()).map(|b| b.name.as_str()).collect();
+            self.problem(unknown(span, "rigid body", name, &names));
         }
         found
     }
@@ -247,7 +265,7 @@ impl Resolver<'_> {
                 if !matches!(quantity, Quantity::CDdot(_)) {
                     for &s in self.walk.free_symbols(&self.system.graph, id) {
                         let info = self.system.graph.symbol(s);
-                        if matches!(info.role, Role::Acceleration { .. }) {
+                        if matches!(info.role, Role::Acceleration { .. } | Role::AngularAcceleration { .. }) {
                             let (span, what, name) = (value.span(), what.to_string(), info.name.clone());
                             self.problem(Problem::ExpectedAcceleration { span, what, name });
                             return None;

@@ -13,9 +13,9 @@ use super::document::read;
 use super::expect::{Expectation, resolve};
 pub use super::problem::Problem;
 use super::problem::{locate, shown, sort};
-use super::raw::{RawFile, RawMass, RawValue, Text};
+use super::raw::{RawBody, RawFile, RawMass, RawRigid, RawValue, Text};
 use super::scene::{RefusedBodies, Scene, validate};
-use super::system::{BodySpec, BuildError, MassSpec, System, SystemBuilder};
+use super::system::{BodySpec, BuildError, MassSpec, RigidSpec, System, SystemBuilder};
 use crate::expr::eval::Value;
 use crate::expr::lower::LowerError;
 use crate::expr::parse::ParseError;
@@ -228,7 +228,11 @@ fn build<'t>(
             force: body.force.get_ref(),
             mass,
         };
-        if let Err(e) = b.body(&spec) {
+        let declared = b.body(&spec);
+        if let (Ok(index), Some(rigid)) = (&declared, &body.rigid) {
+            declare_rigid(&mut b, *index, body, rigid, problems);
+        }
+        if let Err(e) = declared {
             // Point at the field whose symbol is refused, not just at the body: the last
             // field that writes it (`velocity = "r"` after `position = "r"` is the clash).
             let named = match &e {
@@ -278,6 +282,49 @@ fn build<'t>(
         problems.push(Problem::NoConstraints);
     }
     Some(b.finish())
+}
+
+/// The rotational part of a rigid body: its inertia judged (present, positive and finite
+/// when a number) and its symbols declared, problems located at their fields.
+fn declare_rigid(
+    b: &mut SystemBuilder,
+    index: usize,
+    body: &RawBody<'_>,
+    rigid: &RawRigid<'_>,
+    problems: &mut Vec<Problem>,
+) {
+    let inertia = match rigid.inertia.as_ref().map(|i| (i.get_ref(), i.span())) {
+        None => {
+            problems.push(Problem::NoInertia { span: rigid.orientation.span(), body: body.name.get_ref().to_string() });
+            MassSpec::Number(1.0)
+        }
+        Some((RawMass::Number(x), _)) if x.is_finite() && *x > 0.0 => MassSpec::Number(*x),
+        Some((RawMass::Number(x), span)) => {
+            problems.push(Problem::Inertia { span, shown: shown(*x) });
+            MassSpec::Number(1.0)
+        }
+        Some((RawMass::Symbol(s), _)) => MassSpec::Symbol(s),
+    };
+    let spec = RigidSpec {
+        orientation: rigid.orientation.get_ref(),
+        angular_velocity: rigid.angular_velocity.get_ref(),
+        angular_acceleration: rigid.angular_acceleration.get_ref(),
+        torque: rigid.torque.get_ref(),
+        inertia,
+    };
+    if let Err(e) = b.rigid(index, &spec) {
+        let fields = [&rigid.orientation, &rigid.angular_velocity, &rigid.angular_acceleration, &rigid.torque];
+        let span = match &e {
+            BuildError::Duplicate { name, .. } => fields
+                .into_iter()
+                .find(|f| f.get_ref().as_ref() == name.as_str())
+                .map(|f| f.span())
+                .or_else(|| rigid.inertia.as_ref().map(|i| i.span()))
+                .unwrap_or_else(|| rigid.orientation.span()),
+            _ => rigid.orientation.span(),
+        };
+        problems.push(Problem::Build { span, error: e });
+    }
 }
 
 /// A builder error, located: in the expression text where it has a span, else at `fallback`.

@@ -16,10 +16,25 @@ use toml::de::{DeTable, DeValue};
 /// The keys of each table, by path. `[]` marks an array of tables.
 const SCHEMA: &[(&str, &[&str])] = &[
     ("", &["title", "dimension", "parameters", "definitions", "bodies", "constraints", "scene", "expect"]),
-    ("bodies[]", &["name", "position", "velocity", "acceleration", "mass", "force"]),
+    (
+        "bodies[]",
+        &[
+            "name",
+            "position",
+            "velocity",
+            "acceleration",
+            "mass",
+            "force",
+            "orientation",
+            "angular_velocity",
+            "angular_acceleration",
+            "inertia",
+            "torque",
+        ],
+    ),
     ("constraints[]", &["name", "expr"]),
     ("scene", &["initial", "forces", "dt", "duration", "restitution"]),
-    ("expect[]", &["force", "lambda", "C_dot", "C_ddot", "A", "b", "at", "tolerance", "note"]),
+    ("expect[]", &["force", "torque", "lambda", "C_dot", "C_ddot", "A", "b", "at", "tolerance", "note"]),
 ];
 
 /// Every unknown key of the file's tree, located.

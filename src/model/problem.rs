@@ -67,6 +67,19 @@ pub enum Problem {
         "the mass \"{written}\" is a number in quotes: write it without them (`mass = {written}`), or give the name of a mass symbol"
     )]
     QuotedMass { span: Range<usize>, written: String },
+    /// An inertia written as a number that is not positive and finite.
+    #[error("an inertia must be a positive finite number, found {shown}")]
+    Inertia { span: Range<usize>, shown: String },
+    /// A body with an `orientation` (so rigid) but no `inertia`.
+    #[error(
+        "body `{body}` has an `orientation`, so it is rigid, and needs an `inertia`: its moment of inertia about the centre of mass (e.g. `inertia = \"I\"` or `inertia = 0.5`)"
+    )]
+    NoInertia { span: Range<usize>, body: String },
+    /// A rotational key (`inertia`, `torque`, …) on a body without an `orientation`.
+    #[error(
+        "{what} has `{key}` but no `orientation`: a body is rigid when it has one (e.g. `orientation = \"th\"`), else a point mass"
+    )]
+    RigidKeyWithoutOrientation { span: Range<usize>, what: String, key: &'static str },
     /// A definition that uses itself, directly or `through` others.
     #[error("definition `{name}` refers to itself (through {through})")]
     Cycle { span: Range<usize>, name: String, through: String },
@@ -159,6 +172,9 @@ pub enum ForceError {
     Scalar,
     #[error("a force may not depend on `{0}` (an acceleration or a force)")]
     Depends(String),
+    /// A rigid body's torque written as a vector (a 2D torque is a scalar).
+    #[error("a 2D torque must be a scalar, found a vector")]
+    Vector,
 }
 
 impl Problem {
@@ -178,6 +194,9 @@ impl Problem {
             | Mass { span, .. }
             | QuotedMass { span, .. }
             | MassValue { span, .. }
+            | Inertia { span, .. }
+            | NoInertia { span, .. }
+            | RigidKeyWithoutOrientation { span, .. }
             | Cycle { span, .. }
             | MassWithoutValue { span, .. }
             | MassWithoutValueAt { span, .. }
@@ -266,7 +285,11 @@ fn force_symbols(forces: &[String]) -> String {
 }
 
 fn unknown_name(kind: &str, name: &str, suggestion: &Option<String>, names: &[String]) -> String {
-    let kinds = if kind == "body" { "bodies" } else { "constraints" };
+    let kinds = match kind {
+        "body" => "bodies",
+        "rigid body" => "rigid bodies",
+        _ => "constraints",
+    };
     match suggestion {
         Some(s) => format!("`{name}` is not a {kind} of this file; did you mean `{s}`?"),
         None if names.is_empty() => format!("`{name}` is not a {kind} of this file (it declares no {kinds})"),

@@ -59,6 +59,19 @@ pub struct RawBody<'a> {
     pub acceleration: Text<'a>,
     pub mass: Spanned<RawMass<'a>>,
     pub force: Text<'a>,
+    /// The rotational keys of a rigid body, present when the body has an `orientation`.
+    pub rigid: Option<RawRigid<'a>>,
+}
+
+/// A rigid body's rotational keys as written (placeholders as in [`RawBody`]).
+#[derive(Debug)]
+pub struct RawRigid<'a> {
+    pub orientation: Text<'a>,
+    pub angular_velocity: Text<'a>,
+    pub angular_acceleration: Text<'a>,
+    pub torque: Text<'a>,
+    /// `None` when missing (reported by `model::file`, at the orientation).
+    pub inertia: Option<Spanned<RawMass<'a>>>,
 }
 
 /// A body's mass as written: a number or the name of a symbol.
@@ -96,6 +109,8 @@ pub type Entries<'a> = BTreeMap<Text<'a>, Spanned<RawExpected<'a>>>;
 #[derive(Debug, Default)]
 pub struct RawExpect<'a> {
     pub force: Entries<'a>,
+    /// The constraint torque on a rigid body, by body.
+    pub torque: Entries<'a>,
     pub lambda: Entries<'a>,
     /// `C_dot` in the file.
     pub c_dot: Entries<'a>,

@@ -24,6 +24,9 @@ pub struct Scene {
     pub initial: Vec<(Symbol, Value)>,
     /// `(body, force expression)`; bodies not listed feel no external force.
     pub forces: Vec<(usize, Id)>,
+    /// `(rigid body, torque expression)`, keyed in `forces` by the torque symbol
+    /// (`T = "-c*w"`); rigid bodies not listed feel no external torque.
+    pub torques: Vec<(usize, Id)>,
     pub dt: f64,
     pub duration: f64,
     pub restitution: f64,
@@ -39,6 +42,7 @@ impl Default for Scene {
         Scene {
             initial: Vec::new(),
             forces: Vec::new(),
+            torques: Vec::new(),
             dt: Scene::DEFAULT_DT,
             duration: Scene::DEFAULT_DURATION,
             restitution: 0.0,
@@ -90,12 +94,30 @@ pub(super) fn validate(
     // Forces written alike (`m*g` on every link of a chain) are one expression: parsed,
     // lowered and checked once (the same text in the same scope is the same node).
     let mut resolved: NameMap<&str, Result<Id, Refused>> = NameMap::default();
+    // A rigid body's torque symbol names its torque (2D: a scalar expression).
+    let torque_of = |system: &System, name: &str| {
+        system.bodies.iter().position(|b| b.rigid.as_ref().is_some_and(|r| system.graph.symbol(r.torque).name == name))
+    };
     for ((name, expr), body) in raw.forces.iter().zip(bodies) {
+        if body.is_none()
+            && let Some(rigid) = torque_of(system, name.get_ref().as_ref())
+        {
+            match torque_expression(system, expr.get_ref()) {
+                Ok(id) => scene.torques.push((rigid, id)),
+                Err((inner, error)) => {
+                    let span = inner.map_or(expr.span(), |s| locate(text, expr, s));
+                    problems.push(Problem::Force { span, name: name.get_ref().to_string(), error })
+                }
+            }
+            continue;
+        }
         let Some(body) = body else {
             if refused.names.contains(&name.get_ref().as_ref()) {
                 continue;
             }
-            let declared = system.bodies.iter().map(|b| system.graph.symbol(b.force).name.clone());
+            let rigid = system.bodies.iter().filter_map(|b| b.rigid.as_ref()).map(|r| r.torque);
+            let declared = system.bodies.iter().map(|b| b.force).chain(rigid);
+            let declared = declared.map(|s| system.graph.symbol(s).name.clone());
             let forces = declared.chain(refused.forces.iter().map(|f| f.to_string())).collect();
             problems.push(Problem::UnknownForce { span: name.span(), name: name.get_ref().to_string(), forces });
             continue;
@@ -150,12 +172,39 @@ fn force_expression(system: &mut System, text: &str) -> Result<Id, Refused> {
     if system.graph.ty(id) != Ty::Vector {
         return Err((None, ForceError::Scalar));
     }
+    refuse_dependencies(system, id)?;
+    Ok(id)
+}
+
+/// A force or torque may not depend on what the solve finds (accelerations) or on what the
+/// scene defines (forces, torques).
+fn refuse_dependencies(system: &System, id: Id) -> Result<(), Refused> {
     for s in system.graph.free_symbols(id) {
         let info = system.graph.symbol(s);
-        if matches!(info.role, Role::Acceleration { .. } | Role::Force { .. }) {
+        if matches!(
+            info.role,
+            Role::Acceleration { .. } | Role::Force { .. } | Role::AngularAcceleration { .. } | Role::Torque { .. }
+        ) {
             return Err((None, ForceError::Depends(info.name.clone())));
         }
     }
+    Ok(())
+}
+
+/// Parses a rigid body's torque expression: a scalar (2D) with the dependencies of a force.
+fn torque_expression(system: &mut System, text: &str) -> Result<Id, Refused> {
+    let id = system.expression(text).map_err(|e| {
+        let span = match &e {
+            BuildError::Parse { error, .. } => Some(error.span.start..error.span.end),
+            BuildError::Lower { error, .. } => Some(error.span.start..error.span.end),
+            _ => None,
+        };
+        (span, ForceError::Build(e))
+    })?;
+    if system.graph.ty(id) != Ty::Scalar {
+        return Err((None, ForceError::Vector));
+    }
+    refuse_dependencies(system, id)?;
     Ok(id)
 }
 
@@ -168,8 +217,14 @@ pub enum StateError {
     NonFiniteForce { body: String, value: [f64; 3] },
     #[error("a mass must be positive and finite: `{name}` = {value}")]
     Mass { name: String, value: f64 },
+    #[error("a moment of inertia must be positive and finite: body `{name}` has {value}")]
+    Inertia { name: String, value: f64 },
     #[error("the force on body `{body}` cannot be evaluated: {error}")]
     Force { body: String, error: EvalError },
+    #[error("the torque on body `{body}` is not finite ({value}) at this state")]
+    NonFiniteTorque { body: String, value: f64 },
+    #[error("the torque on body `{body}` cannot be evaluated: {error}")]
+    Torque { body: String, error: EvalError },
 }
 
 /// Numbers for every symbol of `system`: parameter values (`Loaded::values`), then the
@@ -177,6 +232,9 @@ pub enum StateError {
 /// `model::state`), then the external forces evaluated at that state
 /// (a force symbol given directly keeps its value; forces the scene does not name are zero).
 /// `t` defaults to 0. Every position, velocity, mass and parameter must end with a finite value.
+/// A rigid body needs its orientation; its angular velocity defaults to 0, its torque is the
+/// scene's torque expression (or 0) unless the state gives it, and its inertia must be
+/// positive and finite.
 pub fn environment(
     system: &System,
     parameters: &[(Symbol, Value)],
@@ -195,6 +253,19 @@ pub fn environment(
     for body in &system.bodies {
         env.get(body.position).ok_or_else(|| missing(body.position))?;
         env.get(body.velocity).ok_or_else(|| missing(body.velocity))?;
+        if let Some(rigid) = &body.rigid {
+            env.get(rigid.orientation).ok_or_else(|| missing(rigid.orientation))?;
+            if env.get(rigid.angular_velocity).is_none() {
+                env.set(rigid.angular_velocity, Value::Scalar(0.0));
+            }
+            let inertia = eval_one(&system.graph, rigid.inertia, &env)
+                .map_err(|EvalError::Missing(name)| StateError::Missing(name))?
+                .scalar()
+                .unwrap_or(f64::NAN);
+            if !(inertia.is_finite() && inertia > 0.0) {
+                return Err(StateError::Inertia { name: body.name.clone(), value: inertia });
+            }
+        }
     }
     // Masses and forces are evaluated in one pass each (an evaluation walks the graph once,
     // so one per body would cost bodies × graph size for a large scene).
@@ -243,6 +314,24 @@ pub fn environment(
     }
     for (s, v) in forces {
         env.set(s, v);
+    }
+    // Torques: the state's value, else the scene's expression at this state, else 0.
+    for (i, body) in system.bodies.iter().enumerate() {
+        let Some(rigid) = &body.rigid else { continue };
+        if env.get(rigid.torque).is_some() {
+            continue;
+        }
+        let value = match scene.torques.iter().find(|(b, _)| *b == i) {
+            Some(&(_, id)) => eval_one(&system.graph, id, &env)
+                .map_err(|error| StateError::Torque { body: body.name.clone(), error })?
+                .scalar()
+                .unwrap_or(f64::NAN),
+            None => 0.0,
+        };
+        if !value.is_finite() {
+            return Err(StateError::NonFiniteTorque { body: body.name.clone(), value });
+        }
+        env.set(rigid.torque, Value::Scalar(value));
     }
     Ok(env)
 }

@@ -48,7 +48,7 @@ pub fn value(system: &System, name: &str, value: &RawValue) -> Result<(Symbol, V
         return Err(ValueError::NotASymbol { name: name.to_string(), suggestion });
     };
     let info = system.graph.symbol(s);
-    if matches!(info.role, Role::Acceleration { .. }) {
+    if matches!(info.role, Role::Acceleration { .. } | Role::AngularAcceleration { .. }) {
         return Err(ValueError::Acceleration(name.to_string()));
     }
     let v = match (info.ty, value) {

@@ -27,6 +27,30 @@ pub struct Body {
     /// The nodes of the body's symbols, made when they were declared: valid in the system's
     /// graph and in every graph that extends it (a derivation's), so no one needs to make them.
     pub nodes: BodyNodes,
+    /// The rotational part of a rigid body (one with an `orientation`); `None` for a point mass.
+    pub rigid: Option<Rigid>,
+}
+
+/// What a rigid body adds to a point mass (2D: scalar angle, angular velocity and
+/// acceleration, inertia and torque).
+#[derive(Clone, Debug)]
+pub struct Rigid {
+    pub orientation: Symbol,
+    pub angular_velocity: Symbol,
+    pub angular_acceleration: Symbol,
+    pub torque: Symbol,
+    /// The moment of inertia about the centre of mass: a symbol or a number.
+    pub inertia: Id,
+    pub nodes: RigidNodes,
+}
+
+/// The nodes of a rigid body's rotational symbols.
+#[derive(Clone, Copy, Debug)]
+pub struct RigidNodes {
+    pub orientation: Id,
+    pub angular_velocity: Id,
+    pub angular_acceleration: Id,
+    pub torque: Id,
 }
 
 /// The nodes of a body's symbols.
@@ -70,6 +94,32 @@ impl System {
         self.graph.dim()
     }
 
+    /// Whether some body is rigid (has an orientation).
+    pub fn has_rigid_bodies(&self) -> bool {
+        self.bodies.iter().any(|b| b.rigid.is_some())
+    }
+
+    /// The first rigid body's name: the commands that do not handle rigid bodies yet refuse
+    /// a file with one, naming it ([`NotYetRigid`]), rather than give a wrong answer.
+    pub fn refuse_rigid(&self, command: &'static str) -> Result<(), NotYetRigid> {
+        match self.bodies.iter().find(|b| b.rigid.is_some()) {
+            Some(b) => Err(NotYetRigid { command, body: b.name.clone() }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// A command that does not handle rigid bodies yet, asked to run on one.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "`{command}` does not handle rigid bodies yet (body `{body}` has an `orientation`); `lagrange derive` derives their formulas"
+)]
+pub struct NotYetRigid {
+    pub command: &'static str,
+    pub body: String,
+}
+
+impl System {
     pub fn body_named(&self, name: &str) -> Option<usize> {
         self.bodies.iter().position(|b| b.name == name)
     }
@@ -104,6 +154,10 @@ pub enum BuildError {
     NoBody(String),
     #[error("constraint `{name}` uses `{symbol}`: constraints may depend on positions, parameters and t only")]
     NotPositional { name: String, symbol: String },
+    #[error("body `{0}` is declared rigid twice")]
+    RigidTwice(String),
+    #[error("rigid bodies exist only in 2D files for now (3D orientations are quaternions, a later step)")]
+    Rigid3d,
 }
 
 /// Fills a [`System`] one declaration at a time.
@@ -166,6 +220,17 @@ pub struct BodySpec<'a> {
 pub enum MassSpec<'a> {
     Symbol(&'a str),
     Number(f64),
+}
+
+/// The rotational symbols of a rigid body, by name (2D: all scalars).
+#[derive(Clone, Debug)]
+pub struct RigidSpec<'a> {
+    pub orientation: &'a str,
+    pub angular_velocity: &'a str,
+    pub angular_acceleration: &'a str,
+    pub torque: &'a str,
+    /// The moment of inertia: a symbol name or a number (like a mass).
+    pub inertia: MassSpec<'a>,
 }
 
 impl SystemBuilder {
@@ -311,8 +376,68 @@ impl SystemBuilder {
             force,
             mass,
             nodes,
+            rigid: None,
         });
         Ok(body)
+    }
+
+    /// Makes body `body` (declared by [`SystemBuilder::body`]) rigid: declares its
+    /// orientation, angular velocity and acceleration, torque and inertia (2D: scalars).
+    pub fn rigid(&mut self, body: usize, spec: &RigidSpec<'_>) -> Result<(), BuildError> {
+        let Some(name) = self.system.bodies.get(body).map(|b| b.name.clone()) else {
+            return Err(BuildError::BadName(format!("body {body}")));
+        };
+        if self.system.bodies[body].rigid.is_some() {
+            return Err(BuildError::RigidTwice(name));
+        }
+        if self.system.dim() != 2 {
+            return Err(BuildError::Rigid3d);
+        }
+        let body_name: Arc<str> = Arc::from(name.as_str());
+        let of = |what: &'static str| Kind::OfBody { what, body: body_name.clone() };
+        let orientation = self.symbol(spec.orientation, Ty::Scalar, Role::Orientation { body }, of("orientation"))?;
+        let angular_velocity =
+            self.symbol(spec.angular_velocity, Ty::Scalar, Role::AngularVelocity { body }, of("angular velocity"))?;
+        let angular_acceleration = self.symbol(
+            spec.angular_acceleration,
+            Ty::Scalar,
+            Role::AngularAcceleration { body },
+            of("angular acceleration"),
+        )?;
+        let torque = self.symbol(spec.torque, Ty::Scalar, Role::Torque { body }, of("torque"))?;
+        let g = &mut self.system.graph;
+        g.set_derivative(orientation, angular_velocity);
+        g.set_derivative(angular_velocity, angular_acceleration);
+        let inertia = match spec.inertia {
+            MassSpec::Symbol(name) => match self.system.scope.get(name) {
+                // Bodies may share an inertia symbol, and it may be a scalar parameter.
+                Some(id) if self.system.graph.ty(id) == Ty::Scalar && self.is_inertia_or_constant(name) => id,
+                _ => {
+                    let s = self.symbol(name, Ty::Scalar, Role::Inertia { body }, of("inertia"))?;
+                    self.system.graph.sym(s)
+                }
+            },
+            MassSpec::Number(x) => {
+                let q = crate::expr::Rational::parse_decimal(&format!("{x:e}"))
+                    .ok_or_else(|| BuildError::BadName(format!("{x}")))?;
+                self.system.graph.num(q)
+            }
+        };
+        let g = &mut self.system.graph;
+        let nodes = RigidNodes {
+            orientation: g.sym(orientation),
+            angular_velocity: g.sym(angular_velocity),
+            angular_acceleration: g.sym(angular_acceleration),
+            torque: g.sym(torque),
+        };
+        self.system.bodies[body].rigid =
+            Some(Rigid { orientation, angular_velocity, angular_acceleration, torque, inertia, nodes });
+        Ok(())
+    }
+
+    fn is_inertia_or_constant(&self, name: &str) -> bool {
+        self.is_constant(name)
+            || self.kind(name).is_some_and(|what| matches!(what, Kind::OfBody { what: "inertia", .. }))
     }
 
     fn is_constant(&self, name: &str) -> bool {
@@ -343,8 +468,13 @@ impl SystemBuilder {
         for &s in self.walk.free_symbols(g, c) {
             let info = g.symbol(s);
             match info.role {
-                Role::Position { body } => bodies.push(body),
-                Role::Velocity { .. } | Role::Acceleration { .. } | Role::Force { .. } => {
+                Role::Position { body } | Role::Orientation { body } => bodies.push(body),
+                Role::Velocity { .. }
+                | Role::Acceleration { .. }
+                | Role::Force { .. }
+                | Role::AngularVelocity { .. }
+                | Role::AngularAcceleration { .. }
+                | Role::Torque { .. } => {
                     return Err(BuildError::NotPositional { name: name.to_string(), symbol: info.name.clone() });
                 }
                 _ => {}
@@ -353,7 +483,26 @@ impl SystemBuilder {
         if bodies.is_empty() {
             return Err(BuildError::NoBody(name.to_string()));
         }
-        if self.constraint_names.contains(name) {
+        // A rigid body is found through its position and its orientation: once, in order.
+        if self.system.has_rigid_bodies() {
+            bodies.sort_unstable();
+            bodies.dedup();
+        }
+        // A vector constraint is one scalar equality per component, `NAME.x`, `NAME.y`(, `NAME.z`).
+        let parts: Vec<(String, Id)> = if self.system.graph.ty(c) == Ty::Vector {
+            let mut parts = Vec::with_capacity(self.system.dim());
+            for axis in &crate::expr::Axis::ALL[..self.system.dim()] {
+                let component = self.system.graph.comp(c, *axis).map_err(|e| BuildError::Lower {
+                    context: context(),
+                    error: LowerError { span: relation.lhs.span, kind: e.into() },
+                })?;
+                parts.push((format!("{name}.{}", axis.name()), component));
+            }
+            parts
+        } else {
+            vec![(name.to_string(), c)]
+        };
+        if self.constraint_names.contains(name) || parts.iter().any(|(n, _)| self.constraint_names.contains(n)) {
             return Err(BuildError::Duplicate {
                 name: name.to_string(),
                 first: "a constraint".into(),
@@ -362,13 +511,16 @@ impl SystemBuilder {
         }
         let k = self.system.constraints.len();
         self.constraint_names.insert(name.to_string());
-        self.system.constraints.push(Constraint {
-            name: name.to_string(),
-            text: text.to_string(),
-            c,
-            inequality,
-            bodies,
-        });
+        for (part, c) in parts {
+            self.constraint_names.insert(part.clone());
+            self.system.constraints.push(Constraint {
+                name: part,
+                text: text.to_string(),
+                c,
+                inequality,
+                bodies: bodies.clone(),
+            });
+        }
         Ok(k)
     }
 

@@ -15,12 +15,16 @@
 //! on a curved surface drifts off by O(dt³) in a step, counts as apart, falls for a step
 //! and is caught again: λ = 0 on some frames, energy lost, RK4's stages disagreeing.
 //!
+//! A state's slots are the bodies' positions and velocities, then each rigid body's angle and
+//! angular velocity (`[θ, 0, 0]`, `[ω, 0, 0]`, in the order of `numeric::rows`' angular slots),
+//! so the integrators and the projections advance θ and ω as they advance x and v.
+//!
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
 use super::contact::ContactState;
 use super::integrate::{Field, Vectors};
 use super::rescale::Unit;
-use super::rows::{RowProgram, RowScratch, Rows};
+use super::rows::{RowProgram, RowScratch, Rows, angular_bodies};
 use super::simulate::SettingsError;
 use super::solve::{Settings, Solution, solve_holding};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -173,6 +177,10 @@ impl<'s> Dynamics<'s> {
     /// [`rows`](Dynamics::rows) expects and returns numbers in that unit. Returns the unit,
     /// or `None` when the numbers stay as they are.
     pub fn choose_unit(&mut self, env: &Env) -> Result<Option<Unit>, SimError> {
+        // An angle is no length: a scene with rigid bodies runs in its own unit.
+        if self.system.has_rigid_bodies() {
+            return Ok(None);
+        }
         let Some(k) = Unit::exponent_at(self.system, env).filter(|k| k.abs() > NATURAL_RANGE) else {
             return Ok(None);
         };
@@ -192,6 +200,12 @@ impl<'s> Dynamics<'s> {
             self.env.set(body.position, Value::Vector(q[i]));
             self.env.set(body.velocity, Value::Vector(v[i]));
         }
+        // Rigid bodies' angles and angular velocities, from their angular slots after the bodies.
+        let n = self.system.bodies.len();
+        for (slot, rigid) in (n..).zip(self.system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
+            self.env.set(rigid.orientation, Value::Scalar(q[slot][0]));
+            self.env.set(rigid.angular_velocity, Value::Scalar(v[slot][0]));
+        }
         let mut rows = self.spare.pop().unwrap_or_default();
         self.program
             .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)
@@ -209,7 +223,7 @@ impl<'s> Dynamics<'s> {
         }
         for (i, ((f, v), w)) in rows.force.iter().zip(&rows.velocity).zip(&rows.inverse_mass).enumerate() {
             if !(f.iter().chain(v).all(|x| x.is_finite()) && w.is_finite()) {
-                let body = self.system.bodies[i].name.clone();
+                let body = slot_name(self.system, i);
                 return Err(SimError::NonFinite { step: self.step, time: t, body });
             }
         }
@@ -243,6 +257,13 @@ impl<'s> Dynamics<'s> {
         }
         solve_holding(rows, &Settings::default(), &self.held)
     }
+}
+
+/// The body a slot of the rows belongs to: a body, or a rigid body's angular slot.
+pub(crate) fn slot_name(system: &System, slot: usize) -> String {
+    let n = system.bodies.len();
+    let body = if slot < n { Some(slot) } else { angular_bodies(system).nth(slot - n) };
+    body.and_then(|b| system.bodies.get(b)).map_or_else(|| slot.to_string(), |b| b.name.clone())
 }
 
 impl Field for Dynamics<'_> {

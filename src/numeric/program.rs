@@ -193,6 +193,19 @@ impl Program {
                     let args: Vec<Val> = args[..f.arity()].iter().map(|a| get(a)[0]).collect();
                     [b.call(*f, &args), 0, 0]
                 }
+                // R(θ) s = [cos θ s.x − sin θ s.y, sin θ s.x + cos θ s.y] (2D only).
+                Node::Rot([theta, u]) => {
+                    let (th, u) = (get(theta)[0], get(u));
+                    let (sin, cos) = (b.call(Func::Sin, &[th]), b.call(Func::Cos, &[th]));
+                    let (cx, sy) = (b.mul(cos, u[0]), b.mul(sin, u[1]));
+                    let (sx, cy) = (b.mul(sin, u[0]), b.mul(cos, u[1]));
+                    [b.sub(cx, sy), b.add(sx, cy), 0]
+                }
+                // perp(u) = [−u.y, u.x]
+                Node::Perp(x) => {
+                    let x = get(x);
+                    [b.neg(x[1]), x[0], 0]
+                }
             };
             vals.insert(id, v);
         }

@@ -12,6 +12,13 @@
 //! (`BodySlots`, `RowLayout`), so adding a quantity (an angular J, a torque) means adding
 //! a slot, not recounting offsets.
 //!
+//! Rigid bodies enter in generalised coordinates: after the n bodies' linear slots (1/m, v,
+//! F, and J per body) come one angular slot per rigid body (2D: 1/I, ω, τ and Jʷ, scalars
+//! in component 0 of the slot's `[f64; 3]`), in the order [`angular_bodies`] gives. So u = (v, ω),
+//! M = blockdiag(mᵢE, Iᵢ) and A = J M⁻¹ Jᵀ, b = J M⁻¹ (F, τ) + c are what the solve, the
+//! contact logic and the projections already compute over slots: none of them needs to know
+//! which slot is an angle (DESIGN.md, "Rigid bodies"; 2D has no gyroscopic term).
+//!
 //! Evaluation goes through one compiled [`Tape`] of every root (`evaluate`, `evaluate_into`);
 //! the interpreter (`expr::eval`, the reference semantics) stays available as
 //! `evaluate_interpreted`, and a test holds the two together on every constraint file.
@@ -42,14 +49,31 @@ pub struct Row {
 }
 
 /// All rows of a system at one state, with the bodies' numbers.
+///
+/// Indexed by slot: the system's bodies `0..n` (their linear part), then one angular slot per
+/// rigid body ([`angular_slot`]: 1/I, ω, τ in component 0). Without rigid bodies the slots
+/// are the bodies.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Rows {
     pub dim: usize,
+    /// 1/m per body, then 1/I per angular slot.
     pub inverse_mass: Vec<f64>,
+    /// v per body, then `[ω, 0, 0]` per angular slot.
     pub velocity: Vec<[f64; 3]>,
-    /// External force per body.
+    /// External force per body, then `[τ, 0, 0]` per angular slot.
     pub force: Vec<[f64; 3]>,
     pub rows: Vec<Row>,
+}
+
+/// The rigid bodies of `system` in the order of their angular slots: slot
+/// `system.bodies.len() + r` is the angle of the r-th body this yields.
+pub fn angular_bodies(system: &System) -> impl Iterator<Item = usize> + '_ {
+    system.bodies.iter().enumerate().filter(|(_, b)| b.rigid.is_some()).map(|(i, _)| i)
+}
+
+/// The angular slot of body `body` of `system`, if it is rigid.
+pub fn angular_slot(system: &System, body: usize) -> Option<usize> {
+    angular_bodies(system).position(|b| b == body).map(|r| system.bodies.len() + r)
 }
 
 /// The expressions to evaluate for a system's rows, gathered once and compiled to a
@@ -58,7 +82,7 @@ pub struct Rows {
 pub struct RowProgram {
     /// Every root, in the order the slots of `bodies` and `rows` say.
     roots: Vec<Id>,
-    /// Where each body's numbers are among the roots.
+    /// Where each body's numbers are among the roots, then each angular slot's.
     bodies: Vec<BodySlots>,
     /// What each constraint row is and where its numbers are among the roots.
     rows: Vec<RowLayout>,
@@ -68,7 +92,8 @@ pub struct RowProgram {
     inputs: Vec<Symbol>,
 }
 
-/// Where one body's numbers are among a [`RowProgram`]'s roots (and the tape's outputs).
+/// Where one slot's numbers are among a [`RowProgram`]'s roots (and the tape's outputs): a
+/// body's mass, velocity and force, or an angular slot's inertia, ω and τ.
 #[derive(Clone, Copy, Debug)]
 struct BodySlots {
     mass: usize,
@@ -82,7 +107,7 @@ struct BodySlots {
 struct RowLayout {
     inequality: bool,
     inverse_scale: f64,
-    /// The bodies of J, in the order of `jacobian`'s slots.
+    /// The slots of J (bodies, then angular slots for Jʷ), in the order of `jacobian`'s roots.
     bodies: Vec<usize>,
     value: usize,
     rate: usize,
@@ -108,8 +133,20 @@ pub struct RowScratch {
 impl RowProgram {
     /// Gathers the rows of `derivation`. The external force on body i is `forces`' expression
     /// for i when it has one (so a simulation re-evaluates `F = m*g - k*v` at every state),
-    /// else the body's force symbol, whose value the state gives.
+    /// else the body's force symbol, whose value the state gives. A rigid body's torque is
+    /// its torque symbol (`torques` gives expressions the same way).
     pub fn new(system: &System, derivation: &Derivation, forces: &[(usize, Id)]) -> RowProgram {
+        RowProgram::with_torques(system, derivation, forces, &[])
+    }
+
+    /// [`new`](RowProgram::new) with expressions for some rigid bodies' external torques
+    /// (`(body, torque expression)`); the others are their torque symbols.
+    pub fn with_torques(
+        system: &System,
+        derivation: &Derivation,
+        forces: &[(usize, Id)],
+        torques: &[(usize, Id)],
+    ) -> RowProgram {
         let graph = &derivation.graph;
         let mut roots = Vec::new();
         let mut bodies = Vec::with_capacity(system.bodies.len());
@@ -124,15 +161,38 @@ impl RowProgram {
                 force: push(&mut roots, f),
             });
         }
+        // One angular slot per rigid body, after every body: inertia, ω, τ.
+        let mut slot_of = vec![None; system.bodies.len()];
+        for i in angular_bodies(system) {
+            slot_of[i] = Some(bodies.len());
+            let Some(rigid) = &system.bodies[i].rigid else { continue };
+            let tau = match torques.iter().find(|(b, _)| *b == i) {
+                Some(&(_, expr)) => expr,
+                None => rigid.nodes.torque,
+            };
+            bodies.push(BodySlots {
+                mass: push(&mut roots, rigid.inertia),
+                velocity: push(&mut roots, rigid.nodes.angular_velocity),
+                force: push(&mut roots, tau),
+            });
+        }
         let mut rows = Vec::with_capacity(derivation.constraints.len());
         for (k, d) in derivation.constraints.iter().enumerate() {
             let (value, rate, bias) = (push(&mut roots, d.c), push(&mut roots, d.c_dot), push(&mut roots, d.bias));
             let start = roots.len();
             roots.extend(d.jacobian.iter().map(|&(_, j)| j));
+            let mut slots: Vec<usize> = d.jacobian.iter().map(|&(b, _)| b).collect();
+            // Jʷ of each rigid body the row turns, in its angular slot.
+            for &(b, jw) in &d.angular {
+                if let Some(slot) = slot_of[b] {
+                    roots.push(jw);
+                    slots.push(slot);
+                }
+            }
             rows.push(RowLayout {
                 inequality: system.constraints[k].inequality,
                 inverse_scale: d.scale.recip().unwrap_or(Rational::ONE).to_f64(),
-                bodies: d.jacobian.iter().map(|&(b, _)| b).collect(),
+                bodies: slots,
                 value,
                 rate,
                 bias,

@@ -17,7 +17,7 @@
 //!
 //! Not here: files, text, printing (the observer does that), the λ solve.
 
-use super::dynamics::{Dynamics, SimError};
+use super::dynamics::{Dynamics, SimError, slot_name};
 use super::integrate::{Integrator, Stepper, Vectors};
 use super::rescale::Unit;
 use super::rows::Rows;
@@ -231,8 +231,12 @@ pub struct Failure {
 /// The positions and velocities that `env` gives the bodies.
 pub fn initial_state(system: &System, env: &Env) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, f64) {
     let get = |s| env.get(s).and_then(Value::vector).unwrap_or([0.0; 3]);
-    let q = system.bodies.iter().map(|b| get(b.position)).collect();
-    let v = system.bodies.iter().map(|b| get(b.velocity)).collect();
+    // A rigid body's angle and angular velocity come after every body, in its angular slot
+    // (`numeric::rows`: component 0 of `[θ, 0, 0]` and `[ω, 0, 0]`).
+    let angle = |s| [env.get(s).and_then(Value::scalar).unwrap_or(0.0), 0.0, 0.0];
+    let rigid = || system.bodies.iter().filter_map(|b| b.rigid.as_ref());
+    let q = system.bodies.iter().map(|b| get(b.position)).chain(rigid().map(|r| angle(r.orientation))).collect();
+    let v = system.bodies.iter().map(|b| get(b.velocity)).chain(rigid().map(|r| angle(r.angular_velocity))).collect();
     let t = env.get(system.time).and_then(Value::scalar).unwrap_or(0.0);
     (q, v, t)
 }
@@ -315,6 +319,13 @@ impl<'s> Simulation<'s> {
             summary.final_state.push((system.graph.symbol(body.position).name.clone(), Value::Vector(q)));
             summary.final_state.push((system.graph.symbol(body.velocity).name.clone(), Value::Vector(v)));
         }
+        // Rigid bodies' angles and angular velocities, from their slots after the bodies.
+        let n = system.bodies.len();
+        for (slot, rigid) in (n..).zip(system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
+            let (th, w) = (self.q[slot][0], self.v[slot][0]);
+            summary.final_state.push((system.graph.symbol(rigid.orientation).name.clone(), Value::Scalar(th)));
+            summary.final_state.push((system.graph.symbol(rigid.angular_velocity).name.clone(), Value::Scalar(w)));
+        }
         match result {
             Ok(()) => Ok(summary),
             Err(error) => Err(Box::new(Failure { error, summary })),
@@ -325,7 +336,7 @@ impl<'s> Simulation<'s> {
     fn check_finite(&self, step: u64, time: f64) -> Result<(), SimError> {
         for (i, (q, v)) in self.q.iter().zip(&self.v).enumerate() {
             if !(q.iter().chain(v).all(|x| x.is_finite())) {
-                let body = self.dynamics.system().bodies[i].name.clone();
+                let body = slot_name(self.dynamics.system(), i);
                 return Err(SimError::NonFinite { step, time, body });
             }
         }
@@ -361,12 +372,13 @@ impl<'s> Simulation<'s> {
         let vector_back = |x: &[f64; 3]| unit.as_ref().map_or(*x, |u| u.vector(*x));
         let has_inequalities = system.constraints.iter().any(|c| c.inequality);
         let energy_reported = !time_dependent(system);
-        // The scene's length scale (in the run's unit).
-        let length = length_scale(&self.q);
+        // The scene's length scale (in the run's unit): positions only, not a rigid body's angle.
+        let bodies = system.bodies.len();
+        let length = length_scale(&self.q[..bodies]);
         let bound = s.blowup * length;
         let touch = CONTACT_TOLERANCE * length;
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
-        let plotted = self.q.len().min(PLOTTED_BODIES);
+        let plotted = bodies.min(PLOTTED_BODIES);
         let (mut kinetic0, mut work, mut max_energy_error, mut max_kinetic) = (0.0, 0.0, 0.0f64, 0.0f64);
         // P at steps n−2, n−1 and dP/dt at step 0, for the end correction of the trapezoid.
         let (mut power_2, mut power_1, mut power_rate0) = (0.0, 0.0, 0.0);

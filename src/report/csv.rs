@@ -1,5 +1,6 @@
 //! CSV of a simulation: one line per recorded step — t, every position and velocity
-//! component, then λ, C/κ and Ċ/κ per constraint.
+//! component, then each rigid body's angle and angular velocity, then λ, C/κ and Ċ/κ per
+//! constraint.
 //!
 //! Numbers are written with Rust's shortest round-trip formatting, so two identical runs
 //! give byte-identical files and a file read back gives the same f64s.
@@ -19,6 +20,8 @@ pub struct CsvWriter<W: Write> {
     out: W,
     every: u64,
     last: u64,
+    /// The number of bodies: the frame's slots past them are rigid bodies' angles.
+    bodies: usize,
     line: String,
 }
 
@@ -51,6 +54,11 @@ impl<W: Write> CsvWriter<W> {
                 }
             }
         }
+        for rigid in system.bodies.iter().filter_map(|b| b.rigid.as_ref()) {
+            for s in [rigid.orientation, rigid.angular_velocity] {
+                let _ = write!(header, ",{}", system.graph.symbol(s).name);
+            }
+        }
         for c in &system.constraints {
             for what in ["lambda", "C", "Cdot"] {
                 header.push(',');
@@ -58,7 +66,7 @@ impl<W: Write> CsvWriter<W> {
             }
         }
         writeln!(out, "{header}")?;
-        Ok(CsvWriter { out, every: every.max(1), last, line: String::new() })
+        Ok(CsvWriter { out, every: every.max(1), last, bodies: system.bodies.len(), line: String::new() })
     }
 
     /// Writes the frame if its step is due.
@@ -69,8 +77,10 @@ impl<W: Write> CsvWriter<W> {
         let dim = frame.rows.dim;
         self.line.clear();
         number(&mut self.line, frame.time);
-        for (q, v) in frame.position.iter().zip(frame.velocity) {
-            for &x in q[..dim].iter().chain(&v[..dim]) {
+        for (slot, (q, v)) in frame.position.iter().zip(frame.velocity).enumerate() {
+            // A body's components, or a rigid body's angle and angular velocity (component 0).
+            let n = if slot < self.bodies { dim } else { 1 };
+            for &x in q[..n].iter().chain(&v[..n]) {
                 self.line.push(',');
                 number(&mut self.line, x);
             }

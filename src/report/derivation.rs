@@ -133,10 +133,17 @@ impl Doc {
             ("lambda", true) => "\\lambda".into(),
             ("force", false) => "F_c".into(),
             ("force", true) => "\\vec{F}_c".into(),
+            ("angular", false) => "∂C/∂θ".into(),
+            ("angular", true) => "\\partial C / \\partial \\theta".into(),
+            ("torque", false) => "τ_c".into(),
+            ("torque", true) => "\\tau_c".into(),
             (other, _) => other.to_string(),
         };
         if which == "force" && latex && !sub.is_empty() {
             return format!("\\vec{{F}}_{{c,\\mathrm{{{}}}}}", latex_escape(sub));
+        }
+        if which == "torque" && latex && !sub.is_empty() {
+            return format!("\\tau_{{c,\\mathrm{{{}}}}}", latex_escape(sub));
         }
         match (sub.is_empty(), latex) {
             (true, _) => base,
@@ -334,7 +341,9 @@ fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Resu
                 );
             }
         }
-        let note = format!("C̈ at a = 0{}", scale_note(dc.scale.is_one(), &dc.scale));
+        angular_lines(system, d, doc, out, k, sub)?;
+        let at_rest = if dc.angular.is_empty() { "a = 0" } else { "a = 0 and alpha = 0" };
+        let note = format!("C̈ at {at_rest}{}", scale_note(dc.scale.is_one(), &dc.scale));
         doc.line(out, &doc.label("c", &note), &doc.expr(g, dc.bias)?);
     }
     doc.heading(out, "The multiplier equation  A λ + b = 0");
@@ -346,8 +355,42 @@ fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Resu
             let name = &system.bodies[body].name;
             doc.line(out, &doc.sym("force", name), &doc.expr(g, f)?);
         }
+        torque_lines(system, d, doc, out)?;
     } else {
         forces_as_sums(system, d, doc, out)?;
+    }
+    Ok(())
+}
+
+/// The angular part of constraint `k`'s direction on each rigid body it turns: ∂C/∂θ and,
+/// when κ ≠ 1, Jʷ = ∂C/∂θ / κ (the coefficient of ω in Ċ/κ and of α in C̈/κ).
+fn angular_lines(
+    system: &System,
+    d: &Derivation,
+    doc: &Doc,
+    out: &mut String,
+    k: usize,
+    sub: &str,
+) -> Result<(), ReportError> {
+    let (g, dc) = (&d.graph, &d.constraints[k]);
+    for (&(body, grad), &(_, dir)) in dc.angular_gradient.iter().zip(&dc.angular) {
+        let name = &system.bodies[body].name;
+        let Some(rigid) = &system.bodies[body].rigid else { continue };
+        let th = &g.symbol(rigid.orientation).name;
+        doc.line(out, &doc.label(&doc.sym("angular", sub), &format!("wrt {th}, body {name}")), &doc.expr(g, grad)?);
+        if !dc.scale.is_one() {
+            let jw = if doc.style == Style::Latex { "J^{\\omega}" } else { "Jʷ" };
+            let note = format!("angular direction, over {}, body {name}", dc.scale);
+            doc.line(out, &doc.label(jw, &note), &doc.expr(g, dir)?);
+        }
+    }
+    Ok(())
+}
+
+/// The constraint torque on each rigid body, λ Jʷ, for one constraint.
+fn torque_lines(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
+    for &(body, t) in d.torques.iter().flatten() {
+        doc.line(out, &doc.sym("torque", &system.bodies[body].name), &doc.expr(&d.graph, t)?);
     }
     Ok(())
 }
@@ -403,6 +446,9 @@ fn forces_as_sums(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     for &(body, sum) in sums {
         doc.line(out, &doc.sym("force", &system.bodies[body].name), &doc.expr(&d.graph, sum)?);
     }
+    for &(body, sum) in d.torque_sums.iter().flatten() {
+        doc.line(out, &doc.sym("torque", &system.bodies[body].name), &doc.expr(&d.graph, sum)?);
+    }
     Ok(())
 }
 
@@ -426,6 +472,14 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     // Newton: aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ, substituted into each C̈.
     doc.heading(out, "Newton's law");
     doc.para(out, "Step 4. Each body obeys m a = F + F_c, so a = (F + F_c)/m. Substituted into C̈ = 0:");
+    if system.has_rigid_bodies() {
+        doc.para(
+            out,
+            "A rigid body also obeys Euler's law I alpha = T + T_c (2D, about the centre of mass), \
+             so alpha = (T + T_c)/I, with its angle's rates d(th)/dt = w, d(w)/dt = alpha and \
+             d rot(th, s)/dt = w perp(rot(th, s)):",
+        );
+    }
     for (k, &substituted) in newton.iter().enumerate() {
         let sub = if many { system.constraints[k].name.as_str() } else { "" };
         doc.line(out, &doc.sym("Cddot", sub), &format!("{} = 0", doc.expr(&d.graph, substituted)?));
@@ -455,6 +509,14 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
                 doc.line(out, &doc.entry("J", &[k_name, name]), &doc.expr(g, dir)?);
             }
         }
+        if !dc.angular.is_empty() {
+            doc.para(
+                out,
+                "On a rigid body the constraint also turns it: the torque is λ times the \
+                 coefficient of its angular velocity w in Ċ (of alpha in C̈), the angular part of J:",
+            );
+            angular_lines(system, d, doc, out, k, &sub)?;
+        }
     }
     doc.heading(out, "The multiplier");
     if many {
@@ -475,6 +537,14 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     } else {
         doc.para(out, "Step 6. With F_c = Σ λ J, the conditions C̈ = 0 are linear in λ: A λ + b = 0, where");
     }
+    if system.has_rigid_bodies() {
+        doc.para(
+            out,
+            "With rigid bodies c is also taken at alpha = 0, and, with Jw the angular part of \
+             each direction, A gains Σ Jw Jw/I and b gains Σ Jw T/I over the rigid bodies \
+             (Euler's law in 2D: no gyroscopic term):",
+        );
+    }
     let g = &d.graph;
     a_and_b(system, d, doc, out)?;
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
@@ -486,6 +556,7 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
             let name = &system.bodies[body].name;
             doc.line(out, &doc.sym("force", name), &doc.expr(g, f)?);
         }
+        torque_lines(system, d, doc, out)?;
         Ok(())
     } else {
         doc.para(
@@ -530,7 +601,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
         for &(body, j) in &dc.jacobian {
             gradient.insert(system.bodies[body].name.clone(), json!(e(j)?));
         }
-        constraints.push(json!({
+        let mut entry = json!({
             "name": c.name,
             "kind": if c.inequality { "inequality" } else { "equality" },
             "C": e(dc.c)?,
@@ -539,7 +610,16 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             "scale": dc.scale.to_string(),
             "gradient": gradient,
             "c": e(dc.bias)?,
-        }));
+        });
+        // Rigid bodies: Jʷ = ∂C/∂θ / κ by body (absent for point masses).
+        if !dc.angular.is_empty() {
+            let mut angular = serde_json::Map::new();
+            for &(body, j) in &dc.angular {
+                angular.insert(system.bodies[body].name.clone(), json!(e(j)?));
+            }
+            entry["angular_gradient"] = Value::Object(angular);
+        }
+        constraints.push(entry);
     }
     let mut entries: Vec<(usize, usize, Id)> =
         d.a.iter().map(|&(k, j, id)| if k <= j { (k, j, id) } else { (j, k, id) }).collect();
@@ -552,14 +632,24 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
     let mut out = json!({
         "title": system.title,
         "dimension": system.dim(),
-        "bodies": system.bodies.iter().map(|b| json!({
-            "name": b.name,
-            "position": g.symbol(b.position).name,
-            "velocity": g.symbol(b.velocity).name,
-            "acceleration": g.symbol(b.acceleration).name,
-            "force": g.symbol(b.force).name,
-            "mass": e(b.mass).unwrap_or_default(),
-        })).collect::<Vec<_>>(),
+        "bodies": system.bodies.iter().map(|b| {
+            let mut body = json!({
+                "name": b.name,
+                "position": g.symbol(b.position).name,
+                "velocity": g.symbol(b.velocity).name,
+                "acceleration": g.symbol(b.acceleration).name,
+                "force": g.symbol(b.force).name,
+                "mass": e(b.mass).unwrap_or_default(),
+            });
+            if let Some(r) = &b.rigid {
+                body["orientation"] = json!(g.symbol(r.orientation).name);
+                body["angular_velocity"] = json!(g.symbol(r.angular_velocity).name);
+                body["angular_acceleration"] = json!(g.symbol(r.angular_acceleration).name);
+                body["torque"] = json!(g.symbol(r.torque).name);
+                body["inertia"] = json!(e(r.inertia).unwrap_or_default());
+            }
+            body
+        }).collect::<Vec<_>>(),
         "constraints": constraints,
         "A": a,
         "b": b?,
@@ -571,6 +661,13 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             f.insert(system.bodies[body].name.clone(), json!(e(id)?));
         }
         out["forces"] = Value::Object(f);
+        if let Some(torques) = d.torques.as_ref().filter(|t| !t.is_empty()) {
+            let mut t = serde_json::Map::new();
+            for &(body, id) in torques {
+                t.insert(system.bodies[body].name.clone(), json!(e(id)?));
+            }
+            out["torques"] = Value::Object(t);
+        }
     } else {
         // Several constraints: no closed form. The multipliers are named symbols, and the
         // force on each body is Σₖ λₖ Jₖᵢ in them (as `derive` prints it), so the JSON parses
@@ -601,6 +698,22 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             system.constraints.iter().zip(&names).map(|(c, n)| (c.name.clone(), json!(n))).collect();
         out["multipliers"] = Value::Object(multipliers);
         out["force_sums"] = Value::Object(sums);
+        // Rigid bodies: the torque on each as Σₖ λₖ Jʷₖᵢ (absent without rigid bodies).
+        let mut torque_sums = serde_json::Map::new();
+        for (body, b) in system.bodies.iter().enumerate() {
+            let mut terms = Vec::new();
+            for (k, dc) in d.constraints.iter().enumerate() {
+                if let Some(&(_, j)) = dc.angular.iter().find(|(i, _)| *i == body) {
+                    terms.push(format!("{}*({})", names[k], e(j)?));
+                }
+            }
+            if !terms.is_empty() {
+                torque_sums.insert(b.name.clone(), json!(terms.join(" + ")));
+            }
+        }
+        if !torque_sums.is_empty() {
+            out["torque_sums"] = Value::Object(torque_sums);
+        }
     }
     Ok(JsonDerivation { value: out })
 }

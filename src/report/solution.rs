@@ -5,6 +5,12 @@
 //! Σₖ λₖ·gradientₖ, with both taken from the same C/κ. Multiply `value` and `rate` by κ, and
 //! divide `lambda` by κ, for C as written.
 //!
+//! Rigid bodies (a system with one) add `"torques"` and `"angular_accelerations"` (2D: a
+//! number per rigid body; point masses do not appear) and `"reactions"`: each constraint's
+//! force λₖ Jᵛₖᵢ and, on a rigid body, torque λₖ Jʷₖᵢ on each body it acts on (what an
+//! engine's `GetConstraintForce` and `GetConstraintTorque` give). A system of point masses
+//! prints exactly what it printed before.
+//!
 //! Diagnostics arrive as typed causes with constraint indices ([`Diagnostic`]); [`sentence`]
 //! is where they become sentences naming the constraints.
 //!
@@ -13,7 +19,7 @@
 use crate::derive::Derivation;
 use crate::model::system::System;
 use crate::numeric::qp::QpStatus;
-use crate::numeric::rows::Rows;
+use crate::numeric::rows::{Rows, angular_bodies, angular_slot};
 use crate::numeric::solve::{Diagnostic, NonFinite, RowPart, Solution};
 use serde_json::{Value, json};
 use std::fmt::Write;
@@ -52,7 +58,7 @@ pub fn json(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
         }
         Value::Object(m)
     };
-    json!({
+    let mut out = json!({
         "t": t,
         "status": solution.status.name(),
         "constraints": constraints,
@@ -62,7 +68,64 @@ pub fn json(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
             "constraints": c,
             "message": m,
         })).collect::<Vec<_>>(),
-    })
+    });
+    if system.has_rigid_bodies()
+        && let Value::Object(map) = &mut out
+    {
+        let per_rigid = |v: &[[f64; 3]]| {
+            let mut m = serde_json::Map::new();
+            for (r, i) in angular_bodies(system).enumerate() {
+                m.insert(system.bodies[i].name.clone(), json!(v[system.bodies.len() + r][0]));
+            }
+            Value::Object(m)
+        };
+        map.insert("torques".into(), per_rigid(&solution.constraint_force));
+        map.insert("angular_accelerations".into(), per_rigid(&solution.acceleration));
+        let reactions: Vec<Value> = reactions(system, rows, solution)
+            .into_iter()
+            .map(|r| {
+                let mut entry = json!({
+                    "constraint": system.constraints[r.constraint].name,
+                    "body": system.bodies[r.body].name,
+                    "force": r.force[..dim],
+                });
+                if let (Some(torque), Value::Object(e)) = (r.torque, &mut entry) {
+                    e.insert("torque".into(), json!(torque));
+                }
+                entry
+            })
+            .collect();
+        map.insert("reactions".into(), Value::Array(reactions));
+    }
+    out
+}
+
+/// One constraint's reaction on one body: λₖ Jᵛₖᵢ and, on a rigid body, λₖ Jʷₖᵢ.
+struct Reaction {
+    constraint: usize,
+    body: usize,
+    force: [f64; 3],
+    torque: Option<f64>,
+}
+
+/// Every constraint's reaction on each body it acts on, constraints in order and bodies in
+/// the order of the system (a rigid body's torque beside its force).
+fn reactions(system: &System, rows: &Rows, solution: &Solution) -> Vec<Reaction> {
+    let mut out = Vec::new();
+    for (k, row) in rows.rows.iter().enumerate() {
+        let lambda = solution.lambda[k];
+        let part = |slot: usize| row.jacobian.iter().find(|(b, _)| *b == slot).map(|(_, j)| j.map(|x| lambda * x));
+        for body in 0..system.bodies.len() {
+            let force = part(body);
+            let torque = angular_slot(system, body).and_then(part).map(|j| j[0]);
+            if force.is_none() && torque.is_none() {
+                continue;
+            }
+            let torque = system.bodies[body].rigid.as_ref().map(|_| torque.unwrap_or(0.0));
+            out.push(Reaction { constraint: k, body, force: force.unwrap_or([0.0; 3]), torque });
+        }
+    }
+    out
 }
 
 /// The solver's diagnostics with constraint names, plus one per non-finite C/κ or Ċ/κ,
@@ -244,6 +307,24 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
     for (i, b) in system.bodies.iter().enumerate() {
         let _ = writeln!(out, "{:<bw$}  F_c = [{}]", b.name, vector(&solution.constraint_force[i]));
         let _ = writeln!(out, "{:<bw$}  a   = [{}]", "", vector(&solution.acceleration[i]));
+        // A rigid body's constraint torque and angular acceleration, from its angular slot.
+        if let Some(slot) = angular_slot(system, i) {
+            let _ = writeln!(out, "{:<bw$}  T_c = {}", "", number(solution.constraint_force[slot][0]));
+            let _ = writeln!(out, "{:<bw$}  α   = {}", "", number(solution.acceleration[slot][0]));
+        }
+    }
+    if system.has_rigid_bodies() {
+        let _ = writeln!(out, "\nreactions (each constraint's force and torque on each body)");
+        for r in reactions(system, rows, solution) {
+            let torque = r.torque.map_or_else(String::new, |x| format!("  T = {}", number(x)));
+            let _ = writeln!(
+                out,
+                "  {} on {}: F = [{}]{torque}",
+                system.constraints[r.constraint].name,
+                system.bodies[r.body].name,
+                vector(&r.force)
+            );
+        }
     }
     let diags = diagnostics(system, derivation, rows, solution);
     if !diags.is_empty() {
