@@ -677,6 +677,11 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     }
     let (summary, code) = match result {
         Ok(s) => (s, ExitCode::SUCCESS),
+        // Refused before the first step: there is no summary to show.
+        Err(failure) if failure.summary.integrator.is_empty() => {
+            eprintln!("error: {}: {}", args.file.display(), failure.error);
+            return ExitCode::from(2);
+        }
         Err(failure) => {
             eprintln!("error: {}: {}", args.file.display(), failure.error);
             (failure.summary, ExitCode::from(2))
