@@ -153,3 +153,14 @@ duration = 1.0
     assert!(err.contains("independent parts differ in size") && err.contains("2^0 and 2^664"), "{err}");
     assert!(out.stdout.is_empty(), "{}", String::from_utf8_lossy(&out.stdout));
 }
+
+/// `bench`'s ns/eval of a closed form times the interpreter; the table says so, so it is not
+/// read as the speed of the compiled tape users run (issue 14: 5 204 ns beside the README's
+/// 20–30 ns for the tape).
+#[test]
+fn bench_says_what_ns_per_eval_times() {
+    let out = lagrange(&["bench", "constraints/pendulum.toml", "--duration", "0.05", "--states", "10"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("closed form") && text.contains("ns/eval of `closed form`: the interpreter"), "{text}");
+}
