@@ -747,6 +747,11 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     let (summary, code) = match result {
         Ok(s) if csv_failed => (s, ExitCode::from(1)),
         Ok(s) => (s, ExitCode::SUCCESS),
+        // Refused before the first step: there is no summary to show.
+        Err(failure) if failure.summary.integrator.is_empty() => {
+            eprintln!("error: {}: {}", args.file.display(), failure.error);
+            return ExitCode::from(2);
+        }
         Err(failure) => {
             errln!("error: {}: {}", args.file.display(), failure.error);
             (failure.summary, ExitCode::from(2))

@@ -105,3 +105,62 @@ fn a_pendulum_of_1e155_metres_runs_in_its_own_unit_and_plots() {
     assert!(std::fs::read_to_string(&svg).expect("svg").contains("</svg>"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Two independent pendulums of sizes 1e200 and 1: one unit cannot hold both (the small bob
+/// left its rod, |r| = 3.45, while the summary said max |C| = 0). `simulate` refuses the
+/// scene before the first step, with exit 2 and no summary.
+#[test]
+fn simulate_refuses_parts_no_one_unit_can_hold() {
+    let scene = r#"title = "Two pendulums far apart in size"
+dimension = 2
+[parameters]
+L = 1e200
+l = 1.0
+m = 1.0
+[[bodies]]
+name = "big"
+position = "R"
+velocity = "V"
+acceleration = "A"
+mass = "m"
+force = "G"
+[[bodies]]
+name = "small"
+position = "r"
+velocity = "v"
+acceleration = "a"
+mass = "m"
+force = "F"
+[[constraints]]
+name = "big_rod"
+expr = "dot(R,R) = L^2"
+[[constraints]]
+name = "small_rod"
+expr = "dot(r,r) = l^2"
+[scene]
+initial = { R = [1e200, 0.0], V = [0.0, 0.0], r = [1.0, 0.0], v = [0.0, 1.0] }
+forces = { G = "[0, 0]", F = "[0, 0]" }
+dt = 1e-3
+duration = 1.0
+"#;
+    let dir = std::env::temp_dir().join(format!("lagrange-cli-two-scales-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("two_scales.toml");
+    std::fs::write(&path, scene).expect("write");
+    let out = lagrange(&["simulate", path.to_str().expect("utf-8")]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("independent parts differ in size") && err.contains("2^0 and 2^664"), "{err}");
+    assert!(out.stdout.is_empty(), "{}", String::from_utf8_lossy(&out.stdout));
+}
+
+/// `bench`'s ns/eval of a closed form times the interpreter; the table says so, so it is not
+/// read as the speed of the compiled tape users run (issue 14: 5 204 ns beside the README's
+/// 20–30 ns for the tape).
+#[test]
+fn bench_says_what_ns_per_eval_times() {
+    let out = lagrange(&["bench", "constraints/pendulum.toml", "--duration", "0.05", "--states", "10"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("closed form") && text.contains("ns/eval of `closed form`: the interpreter"), "{text}");
+}

@@ -251,3 +251,66 @@ fn a_zero_gradient_that_can_hold_is_an_answer() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stdout));
     assert!(String::from_utf8_lossy(&out.stdout).contains("status: singular"));
 }
+
+/// Two independent pendulums, one of size 1e200 and one of size 1 moving at 1: the unit
+/// that holds the big one (2^664) put the small one below f64's range and `solve` said
+/// "solved" with its force [0, 0]. Each block is now solved in a unit that fits it.
+const TWO_SCALES: &str = r#"title = "Two pendulums far apart in size"
+dimension = 2
+[parameters]
+L = 1e200
+l = 1.0
+m = 1.0
+[[bodies]]
+name = "big"
+position = "R"
+velocity = "V"
+acceleration = "A"
+mass = "m"
+force = "G"
+[[bodies]]
+name = "small"
+position = "r"
+velocity = "v"
+acceleration = "a"
+mass = "m"
+force = "F"
+[[constraints]]
+name = "big_rod"
+expr = "dot(R,R) = L^2"
+[[constraints]]
+name = "small_rod"
+expr = "dot(r,r) = l^2"
+[scene]
+initial = { R = [1e200, 0.0], V = [0.0, 1e199], r = [1.0, 0.0], v = [0.0, 1.0] }
+forces = { G = "[0, 0]", F = "[0, 0]" }
+dt = 1e-3
+duration = 1.0
+"#;
+
+#[test]
+fn independent_parts_of_very_different_size_keep_their_forces() {
+    let path = temp_file("two_scales.toml", TWO_SCALES);
+    let v = stdout_json(&lagrange(&["solve", path.to_str().expect("utf-8"), "--format", "json"]));
+    assert_eq!(v["status"], "solved");
+    // Centripetal m v²/l toward the pivot: [−1, 0] for the small bob, [−1e198, 0] for the big.
+    let small = numbers(&v["forces"]["small"]);
+    assert!((small[0] + 1.0).abs() <= 1e-12 && small[1] == 0.0, "{small:?}");
+    let big = numbers(&v["forces"]["big"]);
+    assert!((big[0] / 1e198 + 1.0).abs() <= 1e-12 && big[1] == 0.0, "{big:?}");
+    let text = v["diagnostics"].to_string();
+    assert!(text.contains("the rescaled unit does not fit `small_rod`"), "{text}");
+}
+
+#[test]
+fn a_huge_parameter_does_not_erase_the_bodies() {
+    // --set l=1e200 makes C = r·r − l² overflow, but the force −(m v·v + F·r)/(r·r) r does
+    // not depend on l: it is the force at the scene's l (it was [0, 0]).
+    let at_scene = stdout_json(&lagrange(&["solve", "constraints/bead_on_wire.toml", "--format", "json"]));
+    let huge =
+        stdout_json(&lagrange(&["solve", "constraints/bead_on_wire.toml", "--set", "l=1e200", "--format", "json"]));
+    assert_eq!(huge["status"], "solved");
+    assert_eq!(huge["forces"], at_scene["forces"]);
+    assert!(numbers(&huge["forces"]["bead"]).iter().any(|x| *x != 0.0));
+    assert!(huge["constraints"][0]["value"].is_null());
+}

@@ -23,7 +23,7 @@
 
 use super::contact::ContactState;
 use super::integrate::{Field, Vectors};
-use super::rescale::Unit;
+use super::rescale::{Unit, spread};
 use super::rows::{RowProgram, RowScratch, Rows, angular_bodies};
 use super::simulate::SettingsError;
 use super::solve::{Settings, Solution, solve_holding};
@@ -59,6 +59,10 @@ pub enum SimError {
         /// What would have helped, as a sentence starting with "; " (or empty).
         hint: String,
     },
+    #[error(
+        "the scene's independent parts differ in size beyond what one length unit can serve (about 2^{small} and 2^{large}): a run in a unit near the larger would lose the smaller below f64's range; simulate them as separate files"
+    )]
+    MixedScales { small: i64, large: i64 },
     #[error("cannot write the output: {0}")]
     Output(String),
     #[error("invalid settings: {0}")]
@@ -184,8 +188,14 @@ impl<'s> Dynamics<'s> {
         let Some(k) = Unit::exponent_at(self.system, env).filter(|k| k.abs() > NATURAL_RANGE) else {
             return Ok(None);
         };
-        let unit =
-            Unit::verified(&self.program, self.system, env, k).map_err(|error| SimError::Eval { time: 0.0, error })?;
+        let eval_error = |error| SimError::Eval { time: 0.0, error };
+        // One unit serves a run: a block nearer the caller's unit than 2ᵏ would be lost in it.
+        if let Some((small, large)) = spread(&self.program, self.system, env).map_err(eval_error)?
+            && [small, large].iter().any(|e| e.abs() < (e - k).abs())
+        {
+            return Err(SimError::MixedScales { small, large });
+        }
+        let unit = Unit::verified(&self.program, self.system, env, k).map_err(eval_error)?;
         if let Some(unit) = &unit {
             self.env = unit.to_unit(&self.env);
         }

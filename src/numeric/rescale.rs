@@ -17,6 +17,14 @@
 //! a whole run when the scene's lengths are far from 1, integrating in the new unit and
 //! converting what it reports back (exactly: the factors are powers of two).
 //!
+//! One unit for a whole scene can erase a part of it: two independent pendulums at 1e200
+//! and at 1, in a unit of 2^664, put the small one's numbers below f64's range (its force
+//! came out [0, 0]). [`solve_at`] therefore works per independent block (constraints that
+//! share bodies, transitively): a block whose own size is nearer the caller's unit than the
+//! new one, and whose raw numbers the solve needs are finite, keeps its raw solution
+//! (`Diagnostic::MixedScales` names it). A simulation integrates in one unit, so it refuses
+//! such a scene instead (`Dynamics::choose_unit`, [`spread`]).
+//!
 //! Not here: the solve itself (`numeric::solve`), files or text.
 
 use super::rows::{RowProgram, Rows};
@@ -201,6 +209,63 @@ impl Unit {
     }
 }
 
+/// The independent blocks of a scene: per body and per row the index of its block (bodies
+/// joined, transitively, by the rows acting on both; a body no row acts on is a block of its
+/// own). Rows with no body get `usize::MAX`.
+pub fn blocks(rows: &Rows) -> (Vec<usize>, Vec<usize>) {
+    let n = rows.inverse_mass.len();
+    let mut parent: Vec<usize> = (0..n).collect();
+    fn root(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    for row in &rows.rows {
+        if let Some(&(first, _)) = row.jacobian.first() {
+            for &(b, _) in &row.jacobian[1..] {
+                let (x, y) = (root(&mut parent, first), root(&mut parent, b));
+                parent[x] = y;
+            }
+        }
+    }
+    let body: Vec<usize> = (0..n).map(|i| root(&mut parent, i)).collect();
+    let row = rows.rows.iter().map(|r| r.jacobian.first().map_or(usize::MAX, |&(b, _)| body[b])).collect();
+    (body, row)
+}
+
+/// Per block of [`blocks`] (indexed by its root body), the exponent of its largest
+/// position, velocity or force component (`None` when all are zero or one is not finite).
+fn block_exponents(rows: &Rows, env: &Env, system: &System, body_block: &[usize]) -> Vec<Option<i64>> {
+    let mut big = vec![0.0f64; body_block.len()];
+    for (i, b) in system.bodies.iter().enumerate() {
+        let get = |s| env.get(s).and_then(Value::vector).unwrap_or([0.0; 3]);
+        let m = [get(b.position), get(b.velocity), rows.force[i]].iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        big[body_block[i]] = big[body_block[i]].max(m);
+    }
+    big.iter().map(|&x| (x.is_finite() && x > 0.0).then(|| x.log2().floor() as i64)).collect()
+}
+
+/// The spread of length scales over the scene's independent blocks: (smallest, largest)
+/// exponent of the blocks' sizes at `env`, `None` with fewer than two sized blocks. A
+/// simulation in one unit refuses a scene whose spread passes what f64 can hold for both.
+pub fn spread(program: &RowProgram, system: &System, env: &Env) -> Result<Option<(i64, i64)>, EvalError> {
+    let rows = program.evaluate(system, env)?;
+    let (body_block, _) = blocks(&rows);
+    let sized: Vec<i64> = block_exponents(&rows, env, system, &body_block).into_iter().flatten().collect();
+    Ok((sized.len() >= 2).then(|| (sized.iter().copied().min().unwrap_or(0), sized.iter().copied().max().unwrap_or(0))))
+}
+
+/// Whether the raw solve of block `block` is usable: none of its rows has non-finite numbers
+/// or λ.
+fn raw_usable(solution: &Solution, row_block: &[usize], block: usize) -> bool {
+    !solution.diagnostics.iter().any(|d| {
+        matches!(d, Diagnostic::NonFiniteRow { .. } | Diagnostic::NonFiniteLambda { .. })
+            && d.constraints().iter().any(|&q| row_block.get(q) == Some(&block))
+    })
+}
+
 /// The rows at `env` and their solution; when the raw rows are not finite, the verified
 /// rescaled solve (see the module note), with a diagnostic saying so. The rows returned are
 /// the raw ones scaled back from the rescaled state (∞ where the true number overflows).
@@ -241,5 +306,50 @@ pub fn solve_at(
     }
     solution.diagnostics.push(Diagnostic::Rescaled { exponent: -k });
     unit.rows(&mut rows);
+    keep_raw_blocks(system, env, settings, &raw, k, &mut rows, &mut solution);
     Ok((rows, solution))
+}
+
+/// The blocks whose own size is nearer the caller's unit (2⁰) than the new one (2ᵏ) take
+/// their raw solution where it is usable: the rescaled one has lost them below f64's range.
+fn keep_raw_blocks(
+    system: &System,
+    env: &Env,
+    settings: &Settings,
+    raw: &Rows,
+    k: i64,
+    rows: &mut Rows,
+    solution: &mut Solution,
+) {
+    let (body_block, row_block) = blocks(raw);
+    let exponents = block_exponents(raw, env, system, &body_block);
+    let raw_solution = solve_with(raw, settings);
+    let keep: Vec<bool> = (0..body_block.len())
+        .map(|b| exponents[b].is_some_and(|e| e.abs() < (e - k).abs()) && raw_usable(&raw_solution, &row_block, b))
+        .collect();
+    let kept_row = |q: usize| row_block.get(q).is_some_and(|&b| b != usize::MAX && keep[b]);
+    let kept: Vec<usize> = (0..raw.rows.len()).filter(|&q| kept_row(q)).collect();
+    if kept.is_empty() {
+        return;
+    }
+    for (i, &b) in body_block.iter().enumerate() {
+        if keep[b] {
+            solution.constraint_force[i] = raw_solution.constraint_force[i];
+            solution.acceleration[i] = raw_solution.acceleration[i];
+            rows.velocity[i] = raw.velocity[i];
+            rows.force[i] = raw.force[i];
+        }
+    }
+    for &q in &kept {
+        solution.lambda[q] = raw_solution.lambda[q];
+        solution.active[q] = raw_solution.active[q];
+        solution.contacts[q] = raw_solution.contacts[q];
+        rows.rows[q] = raw.rows[q].clone();
+    }
+    // Diagnostics of the kept rows come from the raw solve, the others' from the rescaled.
+    let about_kept = |d: &Diagnostic| !d.constraints().is_empty() && d.constraints().iter().all(|&q| kept_row(q));
+    solution.diagnostics.retain(|d| !about_kept(d));
+    solution.diagnostics.extend(raw_solution.diagnostics.iter().filter(|d| about_kept(d)).cloned());
+    solution.diagnostics.push(Diagnostic::MixedScales { raw: kept });
+    solution.status = solution.diagnostics.iter().map(Diagnostic::status).max().unwrap_or_default();
 }

@@ -200,6 +200,10 @@ pub enum Diagnostic {
     /// The numbers overflow at this state; the solve ran in a length unit of 2^`exponent`
     /// (verified homogeneous) and was scaled back.
     Rescaled { exponent: i64 },
+    /// The scene has independent parts at length scales one unit cannot serve: these
+    /// constraints (and their bodies) were solved in the caller's unit, the rest in the
+    /// rescaled one ([`Diagnostic::Rescaled`]).
+    MixedScales { raw: Vec<usize> },
 }
 
 /// Which number of a row (or of a body it acts on) is not finite.
@@ -292,6 +296,26 @@ fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Op
 }
 
 impl Diagnostic {
+    /// The status this diagnostic implies on its own (the solve's status is the worst of its
+    /// diagnostics'), for callers that merge the diagnostics of two solves.
+    pub fn status(&self) -> Status {
+        match self {
+            Diagnostic::NonFiniteRow { .. } | Diagnostic::NonFiniteLambda { .. } => Status::Failed,
+            Diagnostic::ZeroGradient { .. } | Diagnostic::InfiniteMass { .. } => Status::Singular,
+            Diagnostic::Redundant { .. } => Status::MinimumNorm,
+            Diagnostic::Inconsistent { .. } => Status::Inconsistent,
+            Diagnostic::QpFailed { status: QpStatus::Infeasible | QpStatus::Unbounded, .. } => Status::Inconsistent,
+            Diagnostic::QpFailed { .. } => Status::Failed,
+            Diagnostic::QpInaccurate { .. } => Status::Inaccurate,
+            Diagnostic::Closing { .. }
+            | Diagnostic::Penetrating { .. }
+            | Diagnostic::LambdaOutOfRange { .. }
+            | Diagnostic::Restitution { .. }
+            | Diagnostic::Rescaled { .. }
+            | Diagnostic::MixedScales { .. } => Status::Solved,
+        }
+    }
+
     /// The constraints involved (indices; empty when the whole solve is meant).
     pub fn constraints(&self) -> &[usize] {
         match self {
@@ -306,6 +330,7 @@ impl Diagnostic {
             | Diagnostic::Inconsistent { constraints, .. }
             | Diagnostic::QpFailed { constraints, .. }
             | Diagnostic::QpInaccurate { constraints, .. } => constraints,
+            Diagnostic::MixedScales { raw } => raw,
             Diagnostic::Restitution { .. } | Diagnostic::Rescaled { .. } => &[],
         }
     }

@@ -99,6 +99,11 @@ pub fn text(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> String {
             a.nanos_per_eval
         );
     }
+    if accuracy.iter().any(|a| a.method == "closed form") {
+        // What the column times, so it is not read as the speed of the compiled tape.
+        s += "ns/eval of `closed form`: the interpreter (expr::eval) on the closed-form λ J, not the compiled\n";
+        s += "tape that `solve` and `simulate` run (`solve` rows: the tape of the rows and the λ solve)\n";
+    }
     s
 }
 

@@ -256,6 +256,10 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
             residuals.stationarity, residuals.feasibility, residuals.complementarity
         ),
         Diagnostic::Restitution { value } => format!("restitution must lie in [0, 1], found {value}; 0 is used"),
+        Diagnostic::MixedScales { raw } => format!(
+            "the rescaled unit does not fit {}: their bodies' positions, velocities and forces are near the file's unit, so they are solved in it (the rest in the rescaled unit)",
+            list(raw)
+        ),
         Diagnostic::Rescaled { exponent } => format!(
             "the numbers overflow at this state; solved in a length unit scaled by 2^{exponent} (verified homogeneous) and scaled back"
         ),
