@@ -6,6 +6,7 @@
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use lagrange::codegen::layout::Solver;
 use lagrange::codegen::{Options, module};
 use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
 use lagrange::expr::Symbol;
@@ -62,6 +63,10 @@ enum Command {
         /// Write the file's parameter values into the formulas (only what the scene needs).
         #[arg(long)]
         specialize: bool,
+        /// Also write the velocity-level step an engine runs, `step(state, impulses, h)`,
+        /// for this solver (Box2D v3's soft step, PGS, or the exact velocity solve).
+        #[arg(long, value_enum)]
+        solver: Option<SolverArg>,
     },
     /// Numbers at a state: C, Ċ and λ per constraint, force and acceleration per body.
     ///
@@ -99,6 +104,24 @@ enum Command {
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum LangArg {
     Rust,
+}
+
+/// The step `generate --solver` writes.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum SolverArg {
+    SoftStep,
+    Pgs,
+    Exact,
+}
+
+impl SolverArg {
+    fn solver(self) -> Solver {
+        match self {
+            SolverArg::SoftStep => Solver::SoftStep,
+            SolverArg::Pgs => Solver::Pgs,
+            SolverArg::Exact => Solver::Exact,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -268,8 +291,9 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
-        Command::Generate { file, lang: LangArg::Rust, output, specialize } => {
-            cmd_generate(&file, output.as_deref(), specialize)
+        Command::Generate { file, lang: LangArg::Rust, output, specialize, solver } => {
+            let options = Options { specialize, solver: solver.map(SolverArg::solver) };
+            cmd_generate(&file, output.as_deref(), &options)
         }
         Command::Solve { file, at, set, format } => match cmd_solve(&file, at.as_deref(), &set, format) {
             Ok(()) => ExitCode::SUCCESS,
@@ -362,7 +386,7 @@ fn same_file(a: &Path, b: &Path) -> bool {
     matches!((std::fs::canonicalize(a), std::fs::canonicalize(b)), (Ok(p), Ok(q)) if p == q)
 }
 
-fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCode {
+fn cmd_generate(path: &Path, output: Option<&Path>, options: &Options) -> ExitCode {
     if let Some(out) = output
         && same_file(path, out)
     {
@@ -377,7 +401,7 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
         Ok(l) => l,
         Err(code) => return code,
     };
-    let module = match module(&loaded, &Options { specialize }) {
+    let module = match module(&loaded, options) {
         Ok(m) => m,
         Err(e) => {
             eprintln!("error: {}: {e}", path.display());

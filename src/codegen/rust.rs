@@ -8,6 +8,10 @@
 //! λ ≥ 0 on inequalities, the minimum-norm λ of redundant constraints), with `lambda`,
 //! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
+//! With `--solver` the module also carries the velocity-level step an engine runs
+//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
+//! library's row roots in one function, so the library's numbers) and the helper text of
+//! `support/step.rs` and the solver's file.
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
@@ -28,10 +32,11 @@
 //! Not here: layout decisions (`codegen::layout`), the helpers' text (`codegen::support`),
 //! files or stdout (`main.rs`), evaluation (`numeric`).
 
+use super::layout::Solver;
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{HELPERS, ROWS, SOLVE_BAND};
+use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, STEP, SWEEP};
 use crate::derive::{DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -47,6 +52,8 @@ use std::fmt::Write;
 pub struct Options {
     /// Substitute the file's parameter values (and numeric masses) before generating.
     pub specialize: bool,
+    /// Write the velocity-level step of this solver too (`generate --solver`).
+    pub solver: Option<Solver>,
 }
 
 /// Why code could not be generated.
@@ -256,9 +263,36 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let mass_symbols: HashSet<Symbol> = system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
     scaling_fns(&mut out, g, &fields, &mass_symbols);
     ctx.solution(&mut out, &formulas, &names, &layout)?;
+    if let Some(solver) = options.solver {
+        let inverse_scales: Vec<f64> =
+            d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect();
+        let step = StepPlaces {
+            time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
+            position: system.bodies.iter().map(|b| ident_of(&fields, b.position)).collect(),
+            velocity: system.bodies.iter().map(|b| ident_of(&fields, b.velocity)).collect(),
+            mass: masses.clone(),
+            velocity_node: bodies.velocity.clone(),
+            applied: bodies.applied.clone(),
+        };
+        step_fns(&mut out, &ctx, solver, &inverse_scales, &step, &formulas, &names, &layout)?;
+    }
     out.push_str(ROWS);
     out.push('\n');
     out.push_str(HELPERS);
+    if let Some(solver) = options.solver {
+        out.push('\n');
+        out.push_str(STEP);
+        if solver.sweeps() {
+            out.push('\n');
+            out.push_str(SWEEP);
+        }
+        out.push('\n');
+        out.push_str(match solver {
+            Solver::SoftStep => SOFT_STEP,
+            Solver::Pgs => PGS,
+            Solver::Exact => EXACT,
+        });
+    }
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         let warning = format!(
@@ -273,6 +307,180 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         warnings.push(warning);
     }
     Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect(), warnings })
+}
+
+/// The `State` field of a symbol (every body's position and velocity has one).
+fn ident_of(fields: &[Field], symbol: Symbol) -> &str {
+    fields.iter().find(|f| f.symbol == symbol).map_or("t", |f| f.ident.as_str())
+}
+
+/// Where the step reads and writes the state: the time field (none when the file has no
+/// `t` in its state) and each body's position and velocity fields, in file order.
+struct StepPlaces<'a> {
+    time: Option<&'a str>,
+    position: Vec<&'a str>,
+    velocity: Vec<&'a str>,
+    /// Each body's mass, velocity symbol and scene force as graph nodes (the rows' roots).
+    mass: Vec<Id>,
+    velocity_node: Vec<Id>,
+    applied: Vec<Id>,
+}
+
+/// The scene's part of the step (`--solver`): its solver and default iterations, 1/κ as the
+/// library's rows use it, `step_rows` with the derivation of each row as comments, and the
+/// state's accessors the step's helper text calls (`time`, `put`, `prepared`).
+#[allow(clippy::too_many_arguments)]
+fn step_fns(
+    out: &mut String,
+    ctx: &Ctx<'_>,
+    solver: Solver,
+    inverse_scales: &[f64],
+    places: &StepPlaces<'_>,
+    formulas: &Formulas,
+    names: &Names<'_>,
+    layout: &Layout,
+) -> Result<(), GenerateError> {
+    let g = ctx.g;
+    let k = layout.constraints;
+    let _ = writeln!(
+        out,
+        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
+         pub const SOLVER: &str = \"{0}\";
+         /// Iterations per substep of `StepSettings::default()` for this solver.
+         pub const DEFAULT_ITERATIONS: usize = {1};
+         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
+         pub const INVERSE_SCALE: [f64; {k}] = {2};
+",
+        solver.name(),
+        solver.default_iterations(),
+        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
+    );
+    // The derivation, row by row: what the step's helper text computes from these numbers.
+    let mut doc = vec![
+        "The rows the step solves, at a state: per body 1/m, v and F (the scene's, `applied_forces`), per row C/κ, Ċ/κ, c and J = ∇C/κ per body. Per row k".to_string(),
+        "of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,"
+            .to_string(),
+        "and the impulse ΔP the solver gives (see `step_with`); ΔP moves body i by Δvᵢ = Jᵢ ΔP / mᵢ.".to_string(),
+    ];
+    for (r, dirs) in formulas.jacobian.iter().enumerate() {
+        doc.push(format!("- row {r}, `{}`: C = {}", comment_text(names.constraints[r]), formula(g, formulas.c[r])));
+        for &(body, id) in dirs {
+            doc.push(format!("  J, body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
+        }
+        if let Some(&(_, _, a)) = formulas.a.iter().find(|e| e.0 == r && e.1 == r) {
+            doc.push(format!("  J M⁻¹ Jᵀ = A[{r}][{r}] = {}", formula(g, a)));
+        }
+    }
+    for line in &doc {
+        let _ = writeln!(out, "/// {line}");
+    }
+    // One function over the roots of the library's row program, in its order (per body its
+    // mass, velocity and force; per row C, Ċ, c and J), so the shared values (one reciprocal
+    // for a value divided twice or more) are the library's and the rows its numbers, bit for bit.
+    let mut roots = Vec::new();
+    for i in 0..layout.bodies {
+        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
+    }
+    for r in 0..k {
+        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
+        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
+    }
+    let (lets, exprs) = ctx.body(&roots)?;
+    let dim = layout.dim;
+    let mut at = 0;
+    let mut next = |n: usize| {
+        let part = exprs[at..at + n].to_vec();
+        at += n;
+        part
+    };
+    let _ = writeln!(out, "fn step_rows(s: &State) -> StepRows<DIM> {{");
+    for l in &lets {
+        let _ = writeln!(out, "    {l}");
+    }
+    let _ = writeln!(
+        out,
+        "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
+        n = layout.bodies
+    );
+    for _ in 0..layout.bodies {
+        let m = next(1);
+        let (v, f) = (next(dim), next(dim));
+        let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
+        let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
+    }
+    for r in 0..k {
+        let scalars = next(3);
+        let js: Vec<String> =
+            formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+        let _ = writeln!(
+            out,
+            "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
+            operand(&scalars[0]),
+            operand(&scalars[1]),
+            scalars[2],
+            array(&js)
+        );
+    }
+    let _ = writeln!(out, "    r\n}}\n");
+    let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
+    let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
+    let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });
+    let _ = writeln!(
+        out,
+        "/// Writes the time, the positions and the velocities (per body, in file order) into the state.\n\
+         fn put(s: &mut State, t: f64, q: &[[f64; DIM]], v: &[[f64; DIM]]) {{"
+    );
+    match places.time {
+        Some(field) => {
+            let _ = writeln!(out, "    s.{field} = t;");
+        }
+        None => {
+            let _ = writeln!(out, "    let _ = t;");
+        }
+    }
+    for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
+        let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+    }
+    let _ = writeln!(out, "}}\n");
+    let _ = writeln!(
+        out,
+        "/// The rows of the state flattened for the step, with the scene's forces (`applied_forces`).\n\
+         #[allow(dead_code)]\n\
+         fn prepared(s: &State) -> Prepared<DIM> {{\n    \
+         let r = step_rows(s);\n    \
+         Prepared::new(&r.rows, &r.inverse_mass, &r.velocity, &r.force)\n}}\n"
+    );
+    Ok(())
+}
+
+/// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a field,
+/// an index or a number.
+fn operand(e: &str) -> String {
+    if e.chars().all(|c| c.is_alphanumeric() || matches!(c, '_' | '.' | '[' | ']')) {
+        e.to_string()
+    } else {
+        format!("({e})")
+    }
+}
+
+/// The loop that fills `rows[k].jacobian` from J as the layout stores it.
+fn row_jacobians(out: &mut String, layout: &Layout) {
+    match layout.j {
+        JStorage::Blocks { .. } => {
+            let _ = writeln!(
+                out,
+                "    for (k, i, d) in jacobian_blocks(s) {{\n        rows[k].jacobian.push((i, d));\n    }}"
+            );
+        }
+        JStorage::Dense => {
+            let _ = writeln!(out, "    let j = jacobian(s);");
+            let _ = writeln!(out, "    for (k, i) in JACOBIAN_BODIES {{");
+            let _ = writeln!(
+                out,
+                "        rows[k].jacobian.push((i, std::array::from_fn(|d| j[k][i * DIM + d])));\n    }}"
+            );
+        }
+    }
 }
 
 /// The names of the file's bodies and constraints, in file order.
@@ -307,22 +515,7 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
          .map(|k| Row {{ value: c[k] / SCALE[k], rate: rate[k] / SCALE[k], bias: bias[k], inequality: INEQUALITY[k], jacobian: Vec::new() }})\n        \
          .collect();"
     );
-    match layout.j {
-        JStorage::Blocks { .. } => {
-            let _ = writeln!(
-                out,
-                "    for (k, i, d) in jacobian_blocks(s) {{\n        rows[k].jacobian.push((i, d));\n    }}"
-            );
-        }
-        JStorage::Dense => {
-            let _ = writeln!(out, "    let j = jacobian(s);");
-            let _ = writeln!(out, "    for (k, i) in JACOBIAN_BODIES {{");
-            let _ = writeln!(
-                out,
-                "        rows[k].jacobian.push((i, std::array::from_fn(|d| j[k][i * DIM + d])));\n    }}"
-            );
-        }
-    }
+    row_jacobians(out, layout);
     let _ = writeln!(out, "    rows\n}}\n");
     if layout.j == JStorage::Dense {
         let pairs: Vec<String> = formulas
