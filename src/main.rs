@@ -7,7 +7,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use lagrange::codegen::layout::Solver;
-use lagrange::codegen::{Options, module};
+use lagrange::codegen::{Lang, Options, module};
 use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
 use lagrange::expr::Symbol;
 use lagrange::expr::eval::Value;
@@ -104,6 +104,7 @@ enum Command {
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum LangArg {
     Rust,
+    C,
 }
 
 /// The step `generate --solver` writes.
@@ -291,8 +292,12 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
-        Command::Generate { file, lang: LangArg::Rust, output, specialize, solver } => {
-            let options = Options { specialize, solver: solver.map(SolverArg::solver) };
+        Command::Generate { file, lang, output, specialize, solver } => {
+            let lang = match lang {
+                LangArg::Rust => Lang::Rust,
+                LangArg::C => Lang::C,
+            };
+            let options = Options { specialize, solver: solver.map(SolverArg::solver), lang };
             cmd_generate(&file, output.as_deref(), &options)
         }
         Command::Solve { file, at, set, format } => match cmd_solve(&file, at.as_deref(), &set, format) {

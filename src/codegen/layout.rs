@@ -1,6 +1,6 @@
 //! How a generated module lays out a system: dense or banded A, on the stack or the heap,
 //! dense J or its blocks, outputs in one function or in parts. Decided once, from the
-//! derivation's sizes, before any text is written; every emitter (Rust today) follows it.
+//! derivation's sizes, before any text is written; every emitter (Rust, C) follows it.
 //! How λ is found ([`Lambda`]: a guarded closed form, band Cholesky, or the rows' solve
 //! that honours inequalities and redundancy) is decided here too.
 //!

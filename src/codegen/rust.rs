@@ -54,6 +54,18 @@ pub struct Options {
     pub specialize: bool,
     /// Write the velocity-level step of this solver too (`generate --solver`).
     pub solver: Option<Solver>,
+    /// The language written.
+    pub lang: Lang,
+}
+
+/// The language of a generated module.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Lang {
+    /// A self-contained Rust module.
+    #[default]
+    Rust,
+    /// C99 without dependencies (`<math.h>` only).
+    C,
 }
 
 /// Why code could not be generated.
@@ -67,6 +79,8 @@ pub enum GenerateError {
     Lower(#[from] LowerError),
     #[error("parameter `{0}` has a value that cannot be written exactly (not finite, or too large)")]
     BadValue(String),
+    #[error("--lang c writes the formulas only: the step (--solver) is generated in Rust for now")]
+    CStep,
 }
 
 /// Longest formula quoted in a doc comment, in characters.
@@ -76,17 +90,17 @@ const MAX_DOC_FORMULA: usize = 400;
 const MAX_INLINE_DEPTH: u32 = 24;
 
 /// Every formula the module needs, as graph nodes.
-struct Formulas {
-    c: Vec<Id>,
+pub(super) struct Formulas {
+    pub(super) c: Vec<Id>,
     /// Ċ per constraint (with ∂C/∂t).
-    c_dot: Vec<Id>,
+    pub(super) c_dot: Vec<Id>,
     /// `(k, j, Aₖⱼ)`, upper triangle.
-    a: Vec<(usize, usize, Id)>,
-    b: Vec<Id>,
-    jacobian: Vec<Vec<(usize, Id)>>,
-    bias: Vec<Id>,
-    lambda: Option<Id>,
-    forces: Option<Vec<(usize, Id)>>,
+    pub(super) a: Vec<(usize, usize, Id)>,
+    pub(super) b: Vec<Id>,
+    pub(super) jacobian: Vec<Vec<(usize, Id)>>,
+    pub(super) bias: Vec<Id>,
+    pub(super) lambda: Option<Id>,
+    pub(super) forces: Option<Vec<(usize, Id)>>,
 }
 
 impl Formulas {
@@ -112,14 +126,14 @@ impl Formulas {
 }
 
 /// A field of `State`.
-struct Field {
-    symbol: Symbol,
+pub(super) struct Field {
+    pub(super) symbol: Symbol,
     /// The field's name, or `array[index]` for a symbol held in a role array.
-    ident: String,
-    doc: String,
+    pub(super) ident: String,
+    pub(super) doc: String,
     /// The role array (`position`, `velocity`, `force`, `mass`) that holds it, with its
     /// index, when the layout puts bodies' symbols in arrays.
-    array: Option<(&'static str, usize)>,
+    pub(super) array: Option<(&'static str, usize)>,
 }
 
 /// A generated module and the `State` field that holds each input symbol.
@@ -250,7 +264,42 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
     row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
     let header_end = out.len();
-    let ctx = Ctx { g, inputs: &inputs, slots: &slots, non_finite: Cell::new(0) };
+    if options.lang == Lang::C {
+        if options.solver.is_some() {
+            return Err(GenerateError::CStep);
+        }
+        let c_names = super::c::field_names(&fields);
+        let c_slots = super::c::slots(g, &fields, &c_names);
+        let ctx = Ctx { g, inputs: &inputs, slots: &c_slots, non_finite: Cell::new(0), c: true };
+        let names = Names { bodies: &body_names, constraints: &constraint_names };
+        let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
+        let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
+        let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
+        let parts = super::c::Parts {
+            title,
+            specialize: options.specialize,
+            fields: &fields,
+            c_names: &c_names,
+            formulas: &formulas,
+            a_code: &a_code,
+            bodies: &bodies,
+            names: &names,
+            layout: &layout,
+            scales: &scales,
+            inequalities: &inequalities,
+        };
+        let code = super::c::emit(&ctx, &parts)?;
+        let mut warnings = Vec::new();
+        if ctx.non_finite.get() > 0 {
+            warnings.push(format!(
+                "constants of the formulas do not fit in f64 (written as INFINITY or NAN; {} place(s) in the code)",
+                ctx.non_finite.get()
+            ));
+        }
+        let fields = fields.iter().zip(c_names).map(|(f, n)| (f.symbol, n)).collect();
+        return Ok(Module { code, fields, warnings });
+    }
+    let ctx = Ctx { g, inputs: &inputs, slots: &slots, non_finite: Cell::new(0), c: false };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
     ctx.rates(&mut out, &formulas, &names)?;
@@ -484,19 +533,19 @@ fn row_jacobians(out: &mut String, layout: &Layout) {
 }
 
 /// The names of the file's bodies and constraints, in file order.
-struct Names<'a> {
-    bodies: &'a [&'a str],
-    constraints: &'a [&'a str],
+pub(super) struct Names<'a> {
+    pub(super) bodies: &'a [&'a str],
+    pub(super) constraints: &'a [&'a str],
 }
 
 /// Each body's numbers as graph nodes, in file order: what the rows' solve reads.
-struct Bodies {
+pub(super) struct Bodies {
     /// The scene's force expression per body (zero where it gives none).
-    applied: Vec<Id>,
-    position: Vec<Id>,
-    velocity: Vec<Id>,
-    force: Vec<Id>,
-    inverse_mass: Vec<Id>,
+    pub(super) applied: Vec<Id>,
+    pub(super) position: Vec<Id>,
+    pub(super) velocity: Vec<Id>,
+    pub(super) force: Vec<Id>,
+    pub(super) inverse_mass: Vec<Id>,
 }
 
 /// `rows`: the constraint rows at a state (C/κ, Ċ/κ, c, J per body), as `lagrange solve`
@@ -1254,17 +1303,19 @@ fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {
 }
 
 /// Lowers formulas to Rust statements and expressions.
-struct Ctx<'a> {
-    g: &'a Graph,
-    inputs: &'a [Symbol],
-    slots: &'a [String],
+pub(super) struct Ctx<'a> {
+    pub(super) g: &'a Graph,
+    pub(super) inputs: &'a [Symbol],
+    pub(super) slots: &'a [String],
     /// Constants written that are not finite f64 (each occurrence in a function body).
-    non_finite: Cell<usize>,
+    pub(super) non_finite: Cell<usize>,
+    /// Write C (`const double` bindings, `<math.h>` calls, the module's `lg_` helpers).
+    pub(super) c: bool,
 }
 
 /// Operator precedence of a rendered expression: what it may appear inside unparenthesised.
 #[derive(Clone, Copy, PartialEq, PartialOrd)]
-enum Prec {
+pub(super) enum Prec {
     Sum,
     Product,
     Unary,
@@ -1368,7 +1419,7 @@ impl Ctx<'_> {
     }
 
     /// `let` statements and one expression per output component of `roots`.
-    fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
+    pub(super) fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let p = Program::lower(self.g, roots, self.inputs)?;
         let uses = p.use_counts();
         // Each value: its text, precedence and inline depth.
@@ -1382,7 +1433,7 @@ impl Ctx<'_> {
             let receiver = |v: u32| -> (String, u32) {
                 match p.ops[v as usize] {
                     // Folding leaves no constant receivers; should one appear, type it.
-                    Op::Const(bits) if f64::from_bits(bits).is_finite() => {
+                    Op::Const(bits) if f64::from_bits(bits).is_finite() && !self.c => {
                         (format!("({:?}_f64)", f64::from_bits(bits)), 0)
                     }
                     _ => arg(v, Prec::Atom),
@@ -1400,7 +1451,8 @@ impl Ctx<'_> {
                     if !f64::from_bits(bits).is_finite() {
                         self.non_finite.set(self.non_finite.get() + 1);
                     }
-                    let (t, prec) = literal(f64::from_bits(bits));
+                    let (t, prec) =
+                        if self.c { super::c::literal(f64::from_bits(bits)) } else { literal(f64::from_bits(bits)) };
                     (t, prec, 0)
                 }
                 Op::Add(a, b) => bin(a, b, "+", Prec::Sum),
@@ -1411,9 +1463,21 @@ impl Ctx<'_> {
                     let (x, d) = arg(a, Prec::Atom);
                     (format!("-{x}"), Prec::Unary, d + 1)
                 }
+                Op::Powi(a, n) if self.c => {
+                    let (x, d) = arg(a, Prec::Sum);
+                    (format!("lg_powi({x}, {n})"), Prec::Atom, d + 1)
+                }
                 Op::Powi(a, n) => {
                     let (x, d) = receiver(a);
                     (format!("{x}.powi({n})"), Prec::Atom, d + 1)
+                }
+                // `<math.h>`'s function of the name: `sin(x)`, `atan2(y, x)`, `log(x)` for ln.
+                Op::Call(f, args) if self.c => {
+                    let all: Vec<(String, u32)> = args[..f.arity()].iter().map(|&a| arg(a, Prec::Sum)).collect();
+                    let list = all.iter().map(|(t, _)| t.as_str()).collect::<Vec<_>>().join(", ");
+                    let depth = all.iter().map(|(_, d)| *d).fold(0, u32::max);
+                    let name = if f.name() == "ln" { "log" } else { f.name() };
+                    (format!("{name}({list})"), Prec::Atom, depth + 1)
                 }
                 // `f64`'s method of the function's name: `x.sin()`, `y.atan2(x)`.
                 Op::Call(f, args) => {
@@ -1424,19 +1488,25 @@ impl Ctx<'_> {
                     (format!("{x}.{}({list})", f.name()), Prec::Atom, depth + 1)
                 }
                 Op::Powf(a, b) | Op::Norm2(a, b) => {
-                    let name = if matches!(op, Op::Powf(..)) { "powf" } else { "norm2" };
+                    let name = match (matches!(op, Op::Powf(..)), self.c) {
+                        (true, false) => "powf",
+                        (false, false) => "norm2",
+                        (true, true) => "lg_powf",
+                        (false, true) => "lg_norm2",
+                    };
                     let ((x, dx), (y, dy)) = (arg(a, Prec::Sum), arg(b, Prec::Sum));
                     (format!("{name}({x}, {y})"), Prec::Atom, dx.max(dy) + 1)
                 }
                 Op::Norm3(a, b, c) => {
                     let ((x, dx), (y, dy), (z, dz)) = (arg(a, Prec::Sum), arg(b, Prec::Sum), arg(c, Prec::Sum));
-                    (format!("norm3({x}, {y}, {z})"), Prec::Atom, dx.max(dy).max(dz) + 1)
+                    let name = if self.c { "lg_norm3" } else { "norm3" };
+                    (format!("{name}({x}, {y}, {z})"), Prec::Atom, dx.max(dy).max(dz) + 1)
                 }
             };
             let simple = matches!(op, Op::Input(_) | Op::Const(_));
             if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
                 let name = format!("x{}", lets.len());
-                lets.push(format!("let {name} = {t};"));
+                lets.push(if self.c { format!("const double {name} = {t};") } else { format!("let {name} = {t};") });
                 text.push((name, Prec::Atom, 0));
             } else {
                 text.push((t, prec, depth));
@@ -1448,7 +1518,7 @@ impl Ctx<'_> {
 }
 
 /// A float literal and its precedence (a negative literal is a unary minus).
-fn literal(x: f64) -> (String, Prec) {
+pub(super) fn literal(x: f64) -> (String, Prec) {
     if x.is_nan() {
         ("f64::NAN".into(), Prec::Atom)
     } else if x == f64::INFINITY {
@@ -1462,7 +1532,7 @@ fn literal(x: f64) -> (String, Prec) {
     }
 }
 
-fn array(items: &[String]) -> String {
+pub(super) fn array(items: &[String]) -> String {
     format!("[{}]", items.join(", "))
 }
 
@@ -1482,7 +1552,7 @@ fn emit_fn(out: &mut String, doc: &[String], name: &str, ret: &str, lets: &[Stri
 }
 
 /// A formula for a doc comment: Unicode text, one line, escaped, shortened if long.
-fn formula(g: &Graph, id: Id) -> String {
+pub(super) fn formula(g: &Graph, id: Id) -> String {
     match print(g, id, Style::Text) {
         Ok(t) if t.chars().count() > MAX_DOC_FORMULA => {
             let short: String = t.chars().take(MAX_DOC_FORMULA).collect();
