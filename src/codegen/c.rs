@@ -13,14 +13,18 @@
 //! `jacobian_blocks`), `c_term`, `positions`, `velocities`, `external_forces`,
 //! `applied_forces`, `inverse_masses`.
 //!
+//! With `--solver soft-step|pgs` the module also has the step (`step`, `step_with`,
+//! `step_settings_default`): the scene's `step_rows` over the Rust module's roots and the
+//! text of `support/step.c`, the Rust step's operations in its order.
+//!
 //! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the rows'
-//! solve and the step (the Rust module's `solution` and `step` have no C twin yet), files or
+//! solve (the Rust module's `solution` and the exact step have no C twin yet), files or
 //! stdout.
 
-use super::layout::{AStorage, JStorage, Layout};
+use super::layout::{AStorage, JStorage, Layout, Solver};
 use super::names::{Namer, c_reserved, comment_text};
 use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, Names, Prec, formula};
-use crate::expr::{Graph, Id, Ty};
+use crate::expr::{Graph, Id, Symbol, Ty};
 use std::fmt::Write;
 
 /// What the C text is written from (the Rust emitter's formulas and layout).
@@ -37,7 +41,24 @@ pub(super) struct Parts<'a> {
     pub layout: &'a Layout,
     pub scales: &'a [f64],
     pub inequalities: &'a [bool],
+    /// The step, with `--solver`.
+    pub step: Option<StepParts>,
 }
+
+/// What the step's C needs beyond the formulas.
+pub(super) struct StepParts {
+    pub solver: Solver,
+    /// 1/κ as the library's rows multiply by it.
+    pub inverse_scales: Vec<f64>,
+    pub time: Symbol,
+    /// Each body's position and velocity symbols.
+    pub bodies: Vec<(Symbol, Symbol)>,
+    /// Each body's mass (the rows' root).
+    pub masses: Vec<Id>,
+}
+
+/// The step's shared C (`support/step.c`): the Rust step's operations in its order.
+const STEP_C: &str = include_str!("support/step.c");
 
 /// The C name of each field: the Rust one, unless C cannot have it (then `_`, and a suffix
 /// where taken). A role array's entry (`position[3]`) keeps its form.
@@ -221,7 +242,135 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
         &lets,
         &stores,
     );
+    if let Some(step) = &p.step {
+        step_c(ctx, &mut out, p, step)?;
+    }
     Ok(out)
+}
+
+/// The scene's part of the step in C (`step_rows`, the state's accessors, the row
+/// structure) and the shared text of `support/step.c`.
+fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> Result<(), GenerateError> {
+    let (dim, n, k) = (p.layout.dim, p.layout.bodies, p.layout.constraints);
+    let f = p.formulas;
+    let entries: usize = f.jacobian.iter().map(Vec::len).sum();
+    let _ = writeln!(
+        out,
+        "/* The velocity-level step: `lagrange generate --lang c --solver {}`. */\nenum {{ SOLVER_PGS = {}, DEFAULT_ITERATIONS = {} }};\n",
+        step.solver.name(),
+        i32::from(step.solver == Solver::Pgs),
+        step.solver.default_iterations()
+    );
+    let inv: Vec<String> = step.inverse_scales.iter().map(|x| literal(*x).0).collect();
+    let _ = writeln!(
+        out,
+        "/* 1/kappa of each constraint. */\nconst double INVERSE_SCALE[{}] = {{{}}};",
+        k.max(1),
+        list(&inv, k)
+    );
+    let mut starts = vec!["0".to_string()];
+    let mut bodies = Vec::new();
+    for dirs in &f.jacobian {
+        bodies.extend(dirs.iter().map(|d| d.0.to_string()));
+        starts.push(bodies.len().to_string());
+    }
+    let _ =
+        writeln!(out, "/* Row k's Jacobian entries are ROW_START[k] .. ROW_START[k + 1], on bodies ROW_BODY[e]. */");
+    let _ = writeln!(out, "static const int ROW_START[{}] = {{{}}};", k + 1, starts.join(", "));
+    let _ = writeln!(out, "static const int ROW_BODY[{}] = {{{}}};\n", entries.max(1), list(&bodies, entries));
+    let _ = writeln!(
+        out,
+        "/* The rows of a state as the step reads them: per row C/kappa, its rate, c, J per entry; per body\n   \
+         1/m, v and the scene's force; and the step's effective masses and dC/dt. */\n\
+         typedef struct Prepared {{\n    double value[{k1}], rate[{k1}], bias[{k1}], time_rate[{k1}], effective_mass[{k1}];\n    \
+         double inverse_mass[{n1}], velocity[{n1}][{dim}], force[{n1}][{dim}];\n    double jacobian[{e1}][{dim}];\n}} Prepared;\n",
+        k1 = k.max(1),
+        n1 = n.max(1),
+        e1 = entries.max(1)
+    );
+    // The rows' roots in the library's order (as the Rust module's `step_rows`).
+    let mut roots = Vec::new();
+    for i in 0..n {
+        roots.extend([step.masses[i], p.bodies.velocity[i], p.bodies.applied[i]]);
+    }
+    for r in 0..k {
+        roots.extend([f.c[r], f.c_dot[r], f.bias[r]]);
+        roots.extend(f.jacobian[r].iter().map(|&(_, j)| j));
+    }
+    let (lets, exprs) = ctx.body(&roots)?;
+    let mut values = exprs.into_iter();
+    let mut next = || values.next().unwrap_or_default();
+    let mut stores = Vec::new();
+    for i in 0..n {
+        stores.push(format!("r->inverse_mass[{i}] = 1.0 / {};", paren(&next())));
+        for d in 0..dim {
+            stores.push(format!("r->velocity[{i}][{d}] = {};", next()));
+        }
+        for d in 0..dim {
+            stores.push(format!("r->force[{i}][{d}] = {};", next()));
+        }
+    }
+    let mut e = 0;
+    for r in 0..k {
+        stores.push(format!("r->value[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
+        stores.push(format!("r->rate[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
+        stores.push(format!("r->bias[{r}] = {};", next()));
+        for _ in &f.jacobian[r] {
+            for d in 0..dim {
+                stores.push(format!("r->jacobian[{e}][{d}] = {};", next()));
+            }
+            e += 1;
+        }
+    }
+    let _ = writeln!(out, "/* The rows at a state (the Rust module's step_rows, one program over the same roots). */");
+    let _ = writeln!(out, "static void step_rows(const State *s, Prepared *r) {{");
+    if !lets.iter().chain(&stores).any(|t| t.contains("s->")) {
+        let _ = writeln!(out, "    (void)s;");
+    }
+    for l in lets.iter().chain(&stores) {
+        let _ = writeln!(out, "    {l}");
+    }
+    let _ = writeln!(out, "}}\n");
+    let name_of = |sym: Symbol| p.fields.iter().position(|f| f.symbol == sym).map(|i| p.c_names[i].clone());
+    let _ = writeln!(out, "static double state_time(const State *s) {{");
+    match name_of(step.time) {
+        Some(t) => {
+            let _ = writeln!(out, "    return s->{t};\n}}\n");
+        }
+        None => {
+            let _ = writeln!(out, "    (void)s;\n    return 0.0;\n}}\n");
+        }
+    }
+    let mut get = Vec::new();
+    let mut put = Vec::new();
+    for (i, &(q, v)) in step.bodies.iter().enumerate() {
+        let (q, v) = (name_of(q).unwrap_or_default(), name_of(v).unwrap_or_default());
+        for d in 0..dim {
+            get.push(format!("q[{i}][{d}] = s->{q}[{d}];\n    v[{i}][{d}] = s->{v}[{d}];"));
+            put.push(format!("s->{q}[{d}] = q[{i}][{d}];\n    s->{v}[{d}] = v[{i}][{d}];"));
+        }
+    }
+    let _ = writeln!(
+        out,
+        "static void state_get(const State *s, double q[][DIM], double v[][DIM]) {{\n    {}\n}}\n",
+        get.join("\n    ")
+    );
+    let time = name_of(step.time).map_or("(void)t;".to_string(), |t| format!("s->{t} = t;"));
+    let _ = writeln!(
+        out,
+        "static void state_put(State *s, double t, double q[][DIM], double v[][DIM]) {{\n    {time}\n    {}\n}}\n",
+        put.join("\n    ")
+    );
+    out.push_str(STEP_C);
+    Ok(())
+}
+
+/// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a
+/// field, an index or an unsigned number.
+fn paren(e: &str) -> String {
+    let simple = e.chars().all(|c| c.is_alphanumeric() || matches!(c, '_' | '.' | '[' | ']'))
+        || (e.starts_with("s->") && !e.contains(' '));
+    if simple { e.to_string() } else { format!("({e})") }
 }
 
 /// `a_matrix` (dense K×K, or the caller's array for a big unbanded A) or `a_band`.

@@ -79,7 +79,9 @@ pub enum GenerateError {
     Lower(#[from] LowerError),
     #[error("parameter `{0}` has a value that cannot be written exactly (not finite, or too large)")]
     BadValue(String),
-    #[error("--lang c writes the formulas only: the step (--solver) is generated in Rust for now")]
+    #[error(
+        "--lang c writes the soft step and PGS; the exact step (its rows' solve) is generated in Rust only for now"
+    )]
     CStep,
 }
 
@@ -265,7 +267,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
     let header_end = out.len();
     if options.lang == Lang::C {
-        if options.solver.is_some() {
+        if options.solver == Some(Solver::Exact) {
             return Err(GenerateError::CStep);
         }
         let c_names = super::c::field_names(&fields);
@@ -287,6 +289,17 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
             layout: &layout,
             scales: &scales,
             inequalities: &inequalities,
+            step: options.solver.map(|solver| super::c::StepParts {
+                solver,
+                inverse_scales: d
+                    .constraints
+                    .iter()
+                    .map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64())
+                    .collect(),
+                time: system.time,
+                bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
+                masses: masses.clone(),
+            }),
         };
         let code = super::c::emit(&ctx, &parts)?;
         let mut warnings = Vec::new();
