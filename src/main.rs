@@ -6,7 +6,8 @@
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use lagrange::codegen::{Options, module};
+use lagrange::codegen::layout::Solver;
+use lagrange::codegen::{Lang, Options, module};
 use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
 use lagrange::expr::Symbol;
 use lagrange::expr::eval::Value;
@@ -64,6 +65,10 @@ enum Command {
         /// Write the file's parameter values into the formulas (only what the scene needs).
         #[arg(long)]
         specialize: bool,
+        /// Also write the velocity-level step an engine runs, `step(state, impulses, h)`,
+        /// for this solver (Box2D v3's soft step, PGS, or the exact velocity solve).
+        #[arg(long, value_enum)]
+        solver: Option<StepArg>,
     },
     /// Numbers at a state: C, Ċ and λ per constraint, force and acceleration per body.
     ///
@@ -101,6 +106,25 @@ enum Command {
 #[derive(Clone, Copy, Debug, ValueEnum)]
 enum LangArg {
     Rust,
+    C,
+}
+
+/// The step `generate --solver` writes.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum StepArg {
+    SoftStep,
+    Pgs,
+    Exact,
+}
+
+impl StepArg {
+    fn solver(self) -> Solver {
+        match self {
+            StepArg::SoftStep => Solver::SoftStep,
+            StepArg::Pgs => Solver::Pgs,
+            StepArg::Exact => Solver::Exact,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
@@ -380,8 +404,13 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
-        Command::Generate { file, lang: LangArg::Rust, output, specialize } => {
-            cmd_generate(&file, output.as_deref(), specialize)
+        Command::Generate { file, lang, output, specialize, solver } => {
+            let lang = match lang {
+                LangArg::Rust => Lang::Rust,
+                LangArg::C => Lang::C,
+            };
+            let options = Options { specialize, solver: solver.map(StepArg::solver), lang };
+            cmd_generate(&file, output.as_deref(), &options)
         }
         Command::Solve { file, at, set, format } => match cmd_solve(&file, at.as_deref(), &set, format) {
             Ok(()) => ExitCode::SUCCESS,
@@ -461,7 +490,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
 }
 
 /// Whether `a` and `b` name the same existing file (through symlinks or hard links too).
-fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCode {
+fn cmd_generate(path: &Path, output: Option<&Path>, options: &Options) -> ExitCode {
     if let Err(code) = refuse_overwrite(path, &[("-o", output)]) {
         return code;
     }
@@ -469,7 +498,7 @@ fn cmd_generate(path: &Path, output: Option<&Path>, specialize: bool) -> ExitCod
         Ok(l) => l,
         Err(code) => return code,
     };
-    let module = match module(&loaded, &Options { specialize }) {
+    let module = match module(&loaded, options) {
         Ok(m) => m,
         Err(e) => {
             errln!("error: {}: {e}", path.display());

@@ -241,7 +241,8 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
     for path in files() {
         for specialize in [false, true] {
             let l = loaded(&path);
-            let m = module(&l, &Options { specialize }).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let m = module(&l, &Options { specialize, ..Options::default() })
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
             // The reference derivation, on a fresh load (the generator may have grown the graph).
             let reference = loaded(&path);
             let d = derive(&reference.system).expect("derives");
@@ -355,7 +356,7 @@ fn hostile_names_become_safe_identifiers_and_comments() {
 #[test]
 fn specialised_code_carries_no_parameters() {
     let l = loaded(Path::new("constraints/bead_on_wire.toml"));
-    let m = module(&l, &Options { specialize: true }).expect("generates");
+    let m = module(&l, &Options { specialize: true, ..Options::default() }).expect("generates");
     let g = &l.system.graph;
     let names: Vec<&str> = m.fields.iter().map(|(s, _)| g.symbol(*s).name.as_str()).collect();
     assert!(!names.contains(&"l") && !names.contains(&"m") && !names.contains(&"g"), "{names:?}");
@@ -385,7 +386,7 @@ fn specialising_extreme_values_keeps_formulas_finite() {
     let text = text.replace("l = 2.0", "l = 1e-200");
     assert!(text.contains("l = 1e-200"));
     let l = load(&text).expect("loads");
-    let code = lagrange::codegen::generate(&l, &Options { specialize: true }).expect("generates");
+    let code = lagrange::codegen::generate(&l, &Options { specialize: true, ..Options::default() }).expect("generates");
     assert!(!code.contains("INFINITY") && !code.contains("NAN"), "{code}");
 }
 
@@ -697,7 +698,7 @@ fn a_newton_projection_with_scale_converges() {
         [("constraints/bead_on_wire.toml", "[3.0, 0.5]"), ("constraints/bead_on_parabola.toml", "[1.5, 0.2]")]
     {
         let l = loaded(Path::new(file));
-        let m = module(&l, &Options { specialize: true }).expect("generates");
+        let m = module(&l, &Options { specialize: true, ..Options::default() }).expect("generates");
         assert!(m.code.contains("pub const SCALE: [f64; 1]"), "{file}");
         let stem = Path::new(file).file_stem().and_then(|s| s.to_str()).unwrap_or("file");
         let (dir, mut main) = harness_start(format!("generate_newton_{stem}"), &m.code);

@@ -1,6 +1,6 @@
 //! How a generated module lays out a system: dense or banded A, on the stack or the heap,
 //! dense J or its blocks, outputs in one function or in parts. Decided once, from the
-//! derivation's sizes, before any text is written; every emitter (Rust today) follows it.
+//! derivation's sizes, before any text is written; every emitter (Rust, C) follows it.
 //! How λ is found ([`Lambda`]: a guarded closed form, band Cholesky, or the rows' solve
 //! that honours inequalities and redundancy) is decided here too.
 //!
@@ -87,6 +87,43 @@ pub enum Lambda {
     /// inequality rows (λ ≥ 0, contact states) and the minimum-norm λ of a singular A.
     Rows,
 }
+/// The velocity-level step a module carries (`generate --solver`), and the helper files
+/// it needs beside the rows' solve every module has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Solver {
+    /// Box2D v3's soft step: substeps, soft bias, warm start, relax, restitution.
+    SoftStep,
+    /// Sequential impulses with Baumgarte bias and accumulated clamping.
+    Pgs,
+    /// The exact velocity solve A P = −(J u + bias) per substep, then a projection.
+    Exact,
+}
+
+impl Solver {
+    /// The name `--solver` takes and the module's `SOLVER` says.
+    pub fn name(self) -> &'static str {
+        match self {
+            Solver::SoftStep => "soft-step",
+            Solver::Pgs => "pgs",
+            Solver::Exact => "exact",
+        }
+    }
+
+    /// Iterations per substep by default, as the library's solvers run them (Box2D v3: one;
+    /// PGS without softness needs more to converge on a chain).
+    pub fn default_iterations(self) -> usize {
+        match self {
+            Solver::SoftStep | Solver::Exact => 1,
+            Solver::Pgs => 8,
+        }
+    }
+
+    /// Whether the step runs the sequential-impulse sweep (warm start and `sweep`).
+    pub fn sweeps(self) -> bool {
+        matches!(self, Solver::SoftStep | Solver::Pgs)
+    }
+}
+
 /// The layout of one module.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Layout {

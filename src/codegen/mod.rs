@@ -2,7 +2,8 @@
 //!
 //! [`layout`] decides how a system's outputs are laid out (dense or banded A, dense or block
 //! J, parts of at most 64 formulas); [`rust`] writes a self-contained Rust module (no
-//! dependency on lagrange or any crate) following it, with the helper functions of
+//! dependency on lagrange or any crate) following it, and `c` the formulas as C99 with the
+//! Rust module's numbers bit for bit, with the helper functions of
 //! `support` (real Rust files, included as text).
 //! The code is generated from the same scalar program the tape evaluates
 //! ([`crate::numeric::program`]), so codegen and the tape share one lowering.
@@ -12,9 +13,10 @@
 //!
 //! Not here: files, stdout, evaluation of the formulas (`numeric`).
 
+mod c;
 pub mod layout;
 mod names;
 pub mod rust;
 mod support;
 
-pub use rust::{GenerateError, Module, Options, generate, module};
+pub use rust::{GenerateError, Lang, Module, Options, generate, module};

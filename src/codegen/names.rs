@@ -86,6 +86,92 @@ pub fn as_written(name: &str) -> Option<&str> {
     ok.then_some(name)
 }
 
+/// C's keywords (C99 and later) and the object-like macros `<math.h>` defines: a name among
+/// them, or one C reserves everywhere (`_` and a capital, or `__` anywhere), cannot be a C
+/// field.
+const C_RESERVED: &[&str] = &[
+    "auto",
+    "break",
+    "case",
+    "char",
+    "const",
+    "continue",
+    "default",
+    "do",
+    "double",
+    "else",
+    "enum",
+    "extern",
+    "float",
+    "for",
+    "goto",
+    "if",
+    "inline",
+    "int",
+    "long",
+    "register",
+    "restrict",
+    "return",
+    "short",
+    "signed",
+    "sizeof",
+    "static",
+    "struct",
+    "switch",
+    "typedef",
+    "union",
+    "unsigned",
+    "void",
+    "volatile",
+    "while",
+    "_Bool",
+    "_Complex",
+    "_Imaginary",
+    "bool",
+    "true",
+    "false",
+    "alignas",
+    "alignof",
+    "nullptr",
+    "static_assert",
+    "thread_local",
+    "typeof",
+    "constexpr",
+    "INFINITY",
+    "NAN",
+    "HUGE_VAL",
+    "HUGE_VALF",
+    "HUGE_VALL",
+    "FP_NAN",
+    "FP_INFINITE",
+    "FP_ZERO",
+    "FP_SUBNORMAL",
+    "FP_NORMAL",
+    "FP_ILOGB0",
+    "FP_ILOGBNAN",
+    "MATH_ERRNO",
+    "MATH_ERREXCEPT",
+    "math_errhandling",
+    "FP_FAST_FMA",
+    "FP_FAST_FMAF",
+    "FP_FAST_FMAL",
+    "DIM",
+    "BODIES",
+    "CONSTRAINTS",
+    "errno",
+    "NULL",
+    "EOF",
+];
+
+/// Whether a Rust identifier cannot be a C field as it is (a keyword, a macro of
+/// `<math.h>` or of the module, or a reserved identifier).
+pub fn c_reserved(name: &str) -> bool {
+    let mut chars = name.chars();
+    let reserved_form =
+        name.contains("__") || (chars.next() == Some('_') && chars.next().is_some_and(|c| c.is_ascii_uppercase()));
+    reserved_form || C_RESERVED.contains(&name)
+}
+
 /// Hands out distinct identifiers: a clash gets `_2`, `_3`, ….
 pub(super) struct Namer {
     used: HashSet<String>,
@@ -105,5 +191,20 @@ impl Namer {
             k += 1;
         }
         name
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::c_reserved;
+
+    #[test]
+    fn c_keywords_macros_and_reserved_forms_are_not_c_fields() {
+        for name in ["int", "double", "restrict", "INFINITY", "NAN", "DIM", "_Bool", "_X", "a__b"] {
+            assert!(c_reserved(name), "{name}");
+        }
+        for name in ["r1", "v", "F_1", "_x", "theta", "position"] {
+            assert!(!c_reserved(name), "{name}");
+        }
     }
 }

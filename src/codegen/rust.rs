@@ -8,6 +8,10 @@
 //! λ ≥ 0 on inequalities, the minimum-norm λ of redundant constraints), with `lambda`,
 //! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
+//! With `--solver` the module also carries the velocity-level step an engine runs
+//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
+//! library's row roots in one function, so the library's numbers) and the helper text of
+//! `support/step.rs` and the solver's file.
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
@@ -28,10 +32,11 @@
 //! Not here: layout decisions (`codegen::layout`), the helpers' text (`codegen::support`),
 //! files or stdout (`main.rs`), evaluation (`numeric`).
 
+use super::layout::Solver;
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{HELPERS, ROWS, SOLVE_BAND};
+use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, STEP, SWEEP};
 use crate::derive::{DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -47,6 +52,20 @@ use std::fmt::Write;
 pub struct Options {
     /// Substitute the file's parameter values (and numeric masses) before generating.
     pub specialize: bool,
+    /// Write the velocity-level step of this solver too (`generate --solver`).
+    pub solver: Option<Solver>,
+    /// The language written.
+    pub lang: Lang,
+}
+
+/// The language of a generated module.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Lang {
+    /// A self-contained Rust module.
+    #[default]
+    Rust,
+    /// C99 without dependencies (`<math.h>` only).
+    C,
 }
 
 /// Why code could not be generated.
@@ -62,6 +81,10 @@ pub enum GenerateError {
     Lower(#[from] LowerError),
     #[error("parameter `{0}` has a value that cannot be written exactly (not finite, or too large)")]
     BadValue(String),
+    #[error(
+        "--lang c writes the soft step and PGS; the exact step (its rows' solve) is generated in Rust only for now"
+    )]
+    CStep,
 }
 
 /// Longest formula quoted in a doc comment, in characters.
@@ -71,17 +94,17 @@ const MAX_DOC_FORMULA: usize = 400;
 const MAX_INLINE_DEPTH: u32 = 24;
 
 /// Every formula the module needs, as graph nodes.
-struct Formulas {
-    c: Vec<Id>,
+pub(super) struct Formulas {
+    pub(super) c: Vec<Id>,
     /// Ċ per constraint (with ∂C/∂t).
-    c_dot: Vec<Id>,
+    pub(super) c_dot: Vec<Id>,
     /// `(k, j, Aₖⱼ)`, upper triangle.
-    a: Vec<(usize, usize, Id)>,
-    b: Vec<Id>,
-    jacobian: Vec<Vec<(usize, Id)>>,
-    bias: Vec<Id>,
-    lambda: Option<Id>,
-    forces: Option<Vec<(usize, Id)>>,
+    pub(super) a: Vec<(usize, usize, Id)>,
+    pub(super) b: Vec<Id>,
+    pub(super) jacobian: Vec<Vec<(usize, Id)>>,
+    pub(super) bias: Vec<Id>,
+    pub(super) lambda: Option<Id>,
+    pub(super) forces: Option<Vec<(usize, Id)>>,
 }
 
 impl Formulas {
@@ -107,14 +130,14 @@ impl Formulas {
 }
 
 /// A field of `State`.
-struct Field {
-    symbol: Symbol,
+pub(super) struct Field {
+    pub(super) symbol: Symbol,
     /// The field's name, or `array[index]` for a symbol held in a role array.
-    ident: String,
-    doc: String,
+    pub(super) ident: String,
+    pub(super) doc: String,
     /// The role array (`position`, `velocity`, `force`, `mass`) that holds it, with its
     /// index, when the layout puts bodies' symbols in arrays.
-    array: Option<(&'static str, usize)>,
+    pub(super) array: Option<(&'static str, usize)>,
 }
 
 /// A generated module and the `State` field that holds each input symbol.
@@ -246,7 +269,53 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
     row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
     let header_end = out.len();
-    let ctx = Ctx { g, inputs: &inputs, slots: &slots, non_finite: Cell::new(0) };
+    if options.lang == Lang::C {
+        if options.solver == Some(Solver::Exact) {
+            return Err(GenerateError::CStep);
+        }
+        let c_names = super::c::field_names(&fields);
+        let c_slots = super::c::slots(g, &fields, &c_names);
+        let ctx = Ctx { g, inputs: &inputs, slots: &c_slots, non_finite: Cell::new(0), c: true };
+        let names = Names { bodies: &body_names, constraints: &constraint_names };
+        let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
+        let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
+        let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
+        let parts = super::c::Parts {
+            title,
+            specialize: options.specialize,
+            fields: &fields,
+            c_names: &c_names,
+            formulas: &formulas,
+            a_code: &a_code,
+            bodies: &bodies,
+            names: &names,
+            layout: &layout,
+            scales: &scales,
+            inequalities: &inequalities,
+            step: options.solver.map(|solver| super::c::StepParts {
+                solver,
+                inverse_scales: d
+                    .constraints
+                    .iter()
+                    .map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64())
+                    .collect(),
+                time: system.time,
+                bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
+                masses: masses.clone(),
+            }),
+        };
+        let code = super::c::emit(&ctx, &parts)?;
+        let mut warnings = Vec::new();
+        if ctx.non_finite.get() > 0 {
+            warnings.push(format!(
+                "constants of the formulas do not fit in f64 (written as INFINITY or NAN; {} place(s) in the code)",
+                ctx.non_finite.get()
+            ));
+        }
+        let fields = fields.iter().zip(c_names).map(|(f, n)| (f.symbol, n)).collect();
+        return Ok(Module { code, fields, warnings });
+    }
+    let ctx = Ctx { g, inputs: &inputs, slots: &slots, non_finite: Cell::new(0), c: false };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
     ctx.rates(&mut out, &formulas, &names)?;
@@ -259,9 +328,36 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let mass_symbols: HashSet<Symbol> = system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
     scaling_fns(&mut out, g, &fields, &mass_symbols);
     ctx.solution(&mut out, &formulas, &names, &layout)?;
+    if let Some(solver) = options.solver {
+        let inverse_scales: Vec<f64> =
+            d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect();
+        let step = StepPlaces {
+            time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
+            position: system.bodies.iter().map(|b| ident_of(&fields, b.position)).collect(),
+            velocity: system.bodies.iter().map(|b| ident_of(&fields, b.velocity)).collect(),
+            mass: masses.clone(),
+            velocity_node: bodies.velocity.clone(),
+            applied: bodies.applied.clone(),
+        };
+        step_fns(&mut out, &ctx, solver, &inverse_scales, &step, &formulas, &names, &layout)?;
+    }
     out.push_str(ROWS);
     out.push('\n');
     out.push_str(HELPERS);
+    if let Some(solver) = options.solver {
+        out.push('\n');
+        out.push_str(STEP);
+        if solver.sweeps() {
+            out.push('\n');
+            out.push_str(SWEEP);
+        }
+        out.push('\n');
+        out.push_str(match solver {
+            Solver::SoftStep => SOFT_STEP,
+            Solver::Pgs => PGS,
+            Solver::Exact => EXACT,
+        });
+    }
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         let warning = format!(
@@ -278,20 +374,194 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect(), warnings })
 }
 
+/// The `State` field of a symbol (every body's position and velocity has one).
+fn ident_of(fields: &[Field], symbol: Symbol) -> &str {
+    fields.iter().find(|f| f.symbol == symbol).map_or("t", |f| f.ident.as_str())
+}
+
+/// Where the step reads and writes the state: the time field (none when the file has no
+/// `t` in its state) and each body's position and velocity fields, in file order.
+struct StepPlaces<'a> {
+    time: Option<&'a str>,
+    position: Vec<&'a str>,
+    velocity: Vec<&'a str>,
+    /// Each body's mass, velocity symbol and scene force as graph nodes (the rows' roots).
+    mass: Vec<Id>,
+    velocity_node: Vec<Id>,
+    applied: Vec<Id>,
+}
+
+/// The scene's part of the step (`--solver`): its solver and default iterations, 1/κ as the
+/// library's rows use it, `step_rows` with the derivation of each row as comments, and the
+/// state's accessors the step's helper text calls (`time`, `put`, `prepared`).
+#[allow(clippy::too_many_arguments)]
+fn step_fns(
+    out: &mut String,
+    ctx: &Ctx<'_>,
+    solver: Solver,
+    inverse_scales: &[f64],
+    places: &StepPlaces<'_>,
+    formulas: &Formulas,
+    names: &Names<'_>,
+    layout: &Layout,
+) -> Result<(), GenerateError> {
+    let g = ctx.g;
+    let k = layout.constraints;
+    let _ = writeln!(
+        out,
+        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
+         pub const SOLVER: &str = \"{0}\";
+         /// Iterations per substep of `StepSettings::default()` for this solver.
+         pub const DEFAULT_ITERATIONS: usize = {1};
+         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
+         pub const INVERSE_SCALE: [f64; {k}] = {2};
+",
+        solver.name(),
+        solver.default_iterations(),
+        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
+    );
+    // The derivation, row by row: what the step's helper text computes from these numbers.
+    let mut doc = vec![
+        "The rows the step solves, at a state: per body 1/m, v and F (the scene's, `applied_forces`), per row C/κ, Ċ/κ, c and J = ∇C/κ per body. Per row k".to_string(),
+        "of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,"
+            .to_string(),
+        "and the impulse ΔP the solver gives (see `step_with`); ΔP moves body i by Δvᵢ = Jᵢ ΔP / mᵢ.".to_string(),
+    ];
+    for (r, dirs) in formulas.jacobian.iter().enumerate() {
+        doc.push(format!("- row {r}, `{}`: C = {}", comment_text(names.constraints[r]), formula(g, formulas.c[r])));
+        for &(body, id) in dirs {
+            doc.push(format!("  J, body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
+        }
+        if let Some(&(_, _, a)) = formulas.a.iter().find(|e| e.0 == r && e.1 == r) {
+            doc.push(format!("  J M⁻¹ Jᵀ = A[{r}][{r}] = {}", formula(g, a)));
+        }
+    }
+    for line in &doc {
+        let _ = writeln!(out, "/// {line}");
+    }
+    // One function over the roots of the library's row program, in its order (per body its
+    // mass, velocity and force; per row C, Ċ, c and J), so the shared values (one reciprocal
+    // for a value divided twice or more) are the library's and the rows its numbers, bit for bit.
+    let mut roots = Vec::new();
+    for i in 0..layout.bodies {
+        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
+    }
+    for r in 0..k {
+        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
+        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
+    }
+    let (lets, exprs) = ctx.body(&roots)?;
+    let dim = layout.dim;
+    let mut at = 0;
+    let mut next = |n: usize| {
+        let part = exprs[at..at + n].to_vec();
+        at += n;
+        part
+    };
+    let _ = writeln!(out, "fn step_rows(s: &State) -> StepRows<DIM> {{");
+    for l in &lets {
+        let _ = writeln!(out, "    {l}");
+    }
+    let _ = writeln!(
+        out,
+        "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
+        n = layout.bodies
+    );
+    for _ in 0..layout.bodies {
+        let m = next(1);
+        let (v, f) = (next(dim), next(dim));
+        let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
+        let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
+    }
+    for r in 0..k {
+        let scalars = next(3);
+        let js: Vec<String> =
+            formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+        let _ = writeln!(
+            out,
+            "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
+            operand(&scalars[0]),
+            operand(&scalars[1]),
+            scalars[2],
+            array(&js)
+        );
+    }
+    let _ = writeln!(out, "    r\n}}\n");
+    let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
+    let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
+    let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });
+    let _ = writeln!(
+        out,
+        "/// Writes the time, the positions and the velocities (per body, in file order) into the state.\n\
+         fn put(s: &mut State, t: f64, q: &[[f64; DIM]], v: &[[f64; DIM]]) {{"
+    );
+    match places.time {
+        Some(field) => {
+            let _ = writeln!(out, "    s.{field} = t;");
+        }
+        None => {
+            let _ = writeln!(out, "    let _ = t;");
+        }
+    }
+    for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
+        let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+    }
+    let _ = writeln!(out, "}}\n");
+    let _ = writeln!(
+        out,
+        "/// The rows of the state flattened for the step, with the scene's forces (`applied_forces`).\n\
+         #[allow(dead_code)]\n\
+         fn prepared(s: &State) -> Prepared<DIM> {{\n    \
+         let r = step_rows(s);\n    \
+         Prepared::new(&r.rows, &r.inverse_mass, &r.velocity, &r.force)\n}}\n"
+    );
+    Ok(())
+}
+
+/// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a field,
+/// an index or a number.
+fn operand(e: &str) -> String {
+    if e.chars().all(|c| c.is_alphanumeric() || matches!(c, '_' | '.' | '[' | ']')) {
+        e.to_string()
+    } else {
+        format!("({e})")
+    }
+}
+
+/// The loop that fills `rows[k].jacobian` from J as the layout stores it.
+fn row_jacobians(out: &mut String, layout: &Layout) {
+    match layout.j {
+        JStorage::Blocks { .. } => {
+            let _ = writeln!(
+                out,
+                "    for (k, i, d) in jacobian_blocks(s) {{\n        rows[k].jacobian.push((i, d));\n    }}"
+            );
+        }
+        JStorage::Dense => {
+            let _ = writeln!(out, "    let j = jacobian(s);");
+            let _ = writeln!(out, "    for (k, i) in JACOBIAN_BODIES {{");
+            let _ = writeln!(
+                out,
+                "        rows[k].jacobian.push((i, std::array::from_fn(|d| j[k][i * DIM + d])));\n    }}"
+            );
+        }
+    }
+}
+
 /// The names of the file's bodies and constraints, in file order.
-struct Names<'a> {
-    bodies: &'a [&'a str],
-    constraints: &'a [&'a str],
+pub(super) struct Names<'a> {
+    pub(super) bodies: &'a [&'a str],
+    pub(super) constraints: &'a [&'a str],
 }
 
 /// Each body's numbers as graph nodes, in file order: what the rows' solve reads.
-struct Bodies {
+pub(super) struct Bodies {
     /// The scene's force expression per body (zero where it gives none).
-    applied: Vec<Id>,
-    position: Vec<Id>,
-    velocity: Vec<Id>,
-    force: Vec<Id>,
-    inverse_mass: Vec<Id>,
+    pub(super) applied: Vec<Id>,
+    pub(super) position: Vec<Id>,
+    pub(super) velocity: Vec<Id>,
+    pub(super) force: Vec<Id>,
+    pub(super) inverse_mass: Vec<Id>,
 }
 
 /// `rows`: the constraint rows at a state (C/κ, Ċ/κ, c, J per body), as `lagrange solve`
@@ -310,22 +580,7 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
          .map(|k| Row {{ value: c[k] / SCALE[k], rate: rate[k] / SCALE[k], bias: bias[k], inequality: INEQUALITY[k], jacobian: Vec::new() }})\n        \
          .collect();"
     );
-    match layout.j {
-        JStorage::Blocks { .. } => {
-            let _ = writeln!(
-                out,
-                "    for (k, i, d) in jacobian_blocks(s) {{\n        rows[k].jacobian.push((i, d));\n    }}"
-            );
-        }
-        JStorage::Dense => {
-            let _ = writeln!(out, "    let j = jacobian(s);");
-            let _ = writeln!(out, "    for (k, i) in JACOBIAN_BODIES {{");
-            let _ = writeln!(
-                out,
-                "        rows[k].jacobian.push((i, std::array::from_fn(|d| j[k][i * DIM + d])));\n    }}"
-            );
-        }
-    }
+    row_jacobians(out, layout);
     let _ = writeln!(out, "    rows\n}}\n");
     if layout.j == JStorage::Dense {
         let pairs: Vec<String> = formulas
@@ -1068,17 +1323,19 @@ fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {
 }
 
 /// Lowers formulas to Rust statements and expressions.
-struct Ctx<'a> {
-    g: &'a Graph,
-    inputs: &'a [Symbol],
-    slots: &'a [String],
+pub(super) struct Ctx<'a> {
+    pub(super) g: &'a Graph,
+    pub(super) inputs: &'a [Symbol],
+    pub(super) slots: &'a [String],
     /// Constants written that are not finite f64 (each occurrence in a function body).
-    non_finite: Cell<usize>,
+    pub(super) non_finite: Cell<usize>,
+    /// Write C (`const double` bindings, `<math.h>` calls, the module's `lg_` helpers).
+    pub(super) c: bool,
 }
 
 /// Operator precedence of a rendered expression: what it may appear inside unparenthesised.
 #[derive(Clone, Copy, PartialEq, PartialOrd)]
-enum Prec {
+pub(super) enum Prec {
     Sum,
     Product,
     Unary,
@@ -1182,7 +1439,7 @@ impl Ctx<'_> {
     }
 
     /// `let` statements and one expression per output component of `roots`.
-    fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
+    pub(super) fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let p = Program::lower(self.g, roots, self.inputs)?;
         let uses = p.use_counts();
         // Each value: its text, precedence and inline depth.
@@ -1196,7 +1453,7 @@ impl Ctx<'_> {
             let receiver = |v: u32| -> (String, u32) {
                 match p.ops[v as usize] {
                     // Folding leaves no constant receivers; should one appear, type it.
-                    Op::Const(bits) if f64::from_bits(bits).is_finite() => {
+                    Op::Const(bits) if f64::from_bits(bits).is_finite() && !self.c => {
                         (format!("({:?}_f64)", f64::from_bits(bits)), 0)
                     }
                     _ => arg(v, Prec::Atom),
@@ -1214,7 +1471,8 @@ impl Ctx<'_> {
                     if !f64::from_bits(bits).is_finite() {
                         self.non_finite.set(self.non_finite.get() + 1);
                     }
-                    let (t, prec) = literal(f64::from_bits(bits));
+                    let (t, prec) =
+                        if self.c { super::c::literal(f64::from_bits(bits)) } else { literal(f64::from_bits(bits)) };
                     (t, prec, 0)
                 }
                 Op::Add(a, b) => bin(a, b, "+", Prec::Sum),
@@ -1225,9 +1483,21 @@ impl Ctx<'_> {
                     let (x, d) = arg(a, Prec::Atom);
                     (format!("-{x}"), Prec::Unary, d + 1)
                 }
+                Op::Powi(a, n) if self.c => {
+                    let (x, d) = arg(a, Prec::Sum);
+                    (format!("lg_powi({x}, {n})"), Prec::Atom, d + 1)
+                }
                 Op::Powi(a, n) => {
                     let (x, d) = receiver(a);
                     (format!("{x}.powi({n})"), Prec::Atom, d + 1)
+                }
+                // `<math.h>`'s function of the name: `sin(x)`, `atan2(y, x)`, `log(x)` for ln.
+                Op::Call(f, args) if self.c => {
+                    let all: Vec<(String, u32)> = args[..f.arity()].iter().map(|&a| arg(a, Prec::Sum)).collect();
+                    let list = all.iter().map(|(t, _)| t.as_str()).collect::<Vec<_>>().join(", ");
+                    let depth = all.iter().map(|(_, d)| *d).fold(0, u32::max);
+                    let name = if f.name() == "ln" { "log" } else { f.name() };
+                    (format!("{name}({list})"), Prec::Atom, depth + 1)
                 }
                 // `f64`'s method of the function's name: `x.sin()`, `y.atan2(x)`.
                 Op::Call(f, args) => {
@@ -1238,19 +1508,25 @@ impl Ctx<'_> {
                     (format!("{x}.{}({list})", f.name()), Prec::Atom, depth + 1)
                 }
                 Op::Powf(a, b) | Op::Norm2(a, b) => {
-                    let name = if matches!(op, Op::Powf(..)) { "powf" } else { "norm2" };
+                    let name = match (matches!(op, Op::Powf(..)), self.c) {
+                        (true, false) => "powf",
+                        (false, false) => "norm2",
+                        (true, true) => "lg_powf",
+                        (false, true) => "lg_norm2",
+                    };
                     let ((x, dx), (y, dy)) = (arg(a, Prec::Sum), arg(b, Prec::Sum));
                     (format!("{name}({x}, {y})"), Prec::Atom, dx.max(dy) + 1)
                 }
                 Op::Norm3(a, b, c) => {
                     let ((x, dx), (y, dy), (z, dz)) = (arg(a, Prec::Sum), arg(b, Prec::Sum), arg(c, Prec::Sum));
-                    (format!("norm3({x}, {y}, {z})"), Prec::Atom, dx.max(dy).max(dz) + 1)
+                    let name = if self.c { "lg_norm3" } else { "norm3" };
+                    (format!("{name}({x}, {y}, {z})"), Prec::Atom, dx.max(dy).max(dz) + 1)
                 }
             };
             let simple = matches!(op, Op::Input(_) | Op::Const(_));
             if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
                 let name = format!("x{}", lets.len());
-                lets.push(format!("let {name} = {t};"));
+                lets.push(if self.c { format!("const double {name} = {t};") } else { format!("let {name} = {t};") });
                 text.push((name, Prec::Atom, 0));
             } else {
                 text.push((t, prec, depth));
@@ -1262,7 +1538,7 @@ impl Ctx<'_> {
 }
 
 /// A float literal and its precedence (a negative literal is a unary minus).
-fn literal(x: f64) -> (String, Prec) {
+pub(super) fn literal(x: f64) -> (String, Prec) {
     if x.is_nan() {
         ("f64::NAN".into(), Prec::Atom)
     } else if x == f64::INFINITY {
@@ -1276,7 +1552,7 @@ fn literal(x: f64) -> (String, Prec) {
     }
 }
 
-fn array(items: &[String]) -> String {
+pub(super) fn array(items: &[String]) -> String {
     format!("[{}]", items.join(", "))
 }
 
@@ -1296,7 +1572,7 @@ fn emit_fn(out: &mut String, doc: &[String], name: &str, ret: &str, lets: &[Stri
 }
 
 /// A formula for a doc comment: Unicode text, one line, escaped, shortened if long.
-fn formula(g: &Graph, id: Id) -> String {
+pub(super) fn formula(g: &Graph, id: Id) -> String {
     match print(g, id, Style::Text) {
         Ok(t) if t.chars().count() > MAX_DOC_FORMULA => {
             let short: String = t.chars().take(MAX_DOC_FORMULA).collect();

@@ -1,7 +1,8 @@
 //! The helper functions a generated module carries: the rows' solve of `lagrange solve`
 //! (scaled, with contact states, λ ≥ 0 on inequalities and the minimum-norm λ; every
-//! module), band Cholesky (the fast path of a banded A), and the range-safe norms and
-//! powers the formulas call.
+//! module), band Cholesky (the fast path of a banded A), the range-safe norms and
+//! powers the formulas call, and with `--solver` the velocity-level step (shared pieces,
+//! the sequential-impulse sweep, and one file per solver).
 //!
 //! Each lives in a real Rust file beside this one, included as text with `include_str!`
 //! and written into a module as it is: from the file's first item on, its `//!` note left
@@ -18,6 +19,21 @@ pub(super) const ROWS: &str = text(include_str!("rows.rs"));
 
 /// Banded A λ = −b (a chain listed in order): Cholesky on the band, O(K w²).
 pub(super) const SOLVE_BAND: &str = text(include_str!("solve_band.rs"));
+
+/// The velocity-level step's shared pieces: softness, settings, the prepared rows (`--solver`).
+pub(super) const STEP: &str = text(include_str!("step.rs"));
+
+/// Warm start and the sequential-impulse sweep (`--solver soft-step` and `pgs`).
+pub(super) const SWEEP: &str = text(include_str!("sweep.rs"));
+
+/// Box2D v3's soft step (`--solver soft-step`).
+pub(super) const SOFT_STEP: &str = text(include_str!("soft_step.rs"));
+
+/// Projected Gauss–Seidel with Baumgarte bias (`--solver pgs`).
+pub(super) const PGS: &str = text(include_str!("pgs.rs"));
+
+/// The exact velocity solve and its projection (`--solver exact`).
+pub(super) const EXACT: &str = text(include_str!("exact.rs"));
 
 /// What the formulas may call: `norm2`, `norm3`, `powf`; every module carries them.
 pub(super) const HELPERS: &str = text(include_str!("helpers.rs"));
@@ -58,7 +74,7 @@ mod solve_band;
 
 #[cfg(test)]
 mod tests {
-    use super::{HELPERS, ROWS, SOLVE_BAND};
+    use super::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, STEP, SWEEP};
 
     #[test]
     fn a_helper_is_its_file_without_the_note() {
@@ -66,6 +82,11 @@ mod tests {
             (ROWS, "/// Where an inequality row stands"),
             (SOLVE_BAND, "/// Solves `a x = b` for a symmetric"),
             (HELPERS, "/// |(x, y)|"),
+            (STEP, "/// Box2D's `b2Softness`"),
+            (SWEEP, "impl<const D: usize> Prepared<D>"),
+            (SOFT_STEP, "/// One soft step of `dt`"),
+            (PGS, "/// One PGS step of `dt`"),
+            (EXACT, "/// Relative tolerance"),
         ] {
             assert!(text.starts_with(first), "{text}");
             assert!(!text.contains("//!") && text.ends_with("}\n"), "{text}");

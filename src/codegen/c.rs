@@ -1,0 +1,497 @@
+//! `lagrange generate --lang c`: the formulas of the Rust module as C99 without dependencies
+//! (`<math.h>` only), clean under `-std=c99 -Wall -Wextra -Werror -ffp-contract=off`, and
+//! bit for bit the Rust module's numbers: every function body is the same scalar program
+//! (`Ctx::body` of `codegen::rust` in its C form), the helpers (`lg_norm2`, `lg_norm3`,
+//! `lg_powf`, `lg_powi`) do the Rust helpers' operations, and `-ffp-contract=off` keeps the
+//! compiler from fusing a product into a sum (Rust never does).
+//!
+//! The module has a `State` struct (the Rust module's fields; a name C cannot have — a C
+//! keyword, a macro of `<math.h>`, a reserved identifier — gets `_`, then a suffix where
+//! taken), the constants `DIM`, `BODIES`, `CONSTRAINTS`, `SCALE`, `INEQUALITY`, and one
+//! function per output writing into an array the caller passes: `constraints`,
+//! `constraint_rates`, `a_matrix` (or `a_band`), `b_vector`, `jacobian` (or
+//! `jacobian_blocks`), `c_term`, `positions`, `velocities`, `external_forces`,
+//! `applied_forces`, `inverse_masses`.
+//!
+//! With `--solver soft-step|pgs` the module also has the step (`step`, `step_with`,
+//! `step_settings_default`): the scene's `step_rows` over the Rust module's roots and the
+//! text of `support/step.c`, the Rust step's operations in its order.
+//!
+//! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the rows'
+//! solve (the Rust module's `solution` and the exact step have no C twin yet), files or
+//! stdout.
+
+use super::layout::{AStorage, JStorage, Layout, Solver};
+use super::names::{Namer, c_reserved, comment_text};
+use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, Names, Prec, formula};
+use crate::expr::{Graph, Id, Symbol, Ty};
+use std::fmt::Write;
+
+/// What the C text is written from (the Rust emitter's formulas and layout).
+pub(super) struct Parts<'a> {
+    pub title: &'a str,
+    pub specialize: bool,
+    pub fields: &'a [Field],
+    /// The C name of each field (same order).
+    pub c_names: &'a [String],
+    pub formulas: &'a Formulas,
+    pub a_code: &'a [Id],
+    pub bodies: &'a Bodies,
+    pub names: &'a Names<'a>,
+    pub layout: &'a Layout,
+    pub scales: &'a [f64],
+    pub inequalities: &'a [bool],
+    /// The step, with `--solver`.
+    pub step: Option<StepParts>,
+}
+
+/// What the step's C needs beyond the formulas.
+pub(super) struct StepParts {
+    pub solver: Solver,
+    /// 1/κ as the library's rows multiply by it.
+    pub inverse_scales: Vec<f64>,
+    pub time: Symbol,
+    /// Each body's position and velocity symbols.
+    pub bodies: Vec<(Symbol, Symbol)>,
+    /// Each body's mass (the rows' root).
+    pub masses: Vec<Id>,
+}
+
+/// The step's shared C (`support/step.c`): the Rust step's operations in its order.
+const STEP_C: &str = include_str!("support/step.c");
+
+/// The C name of each field: the Rust one, unless C cannot have it (then `_`, and a suffix
+/// where taken). A role array's entry (`position[3]`) keeps its form.
+pub(super) fn field_names(fields: &[Field]) -> Vec<String> {
+    let taken: Vec<&str> = fields.iter().map(|f| f.ident.as_str()).collect();
+    let mut namer = Namer::new(&taken);
+    fields
+        .iter()
+        .map(|f| {
+            if f.array.is_none() && c_reserved(&f.ident) {
+                namer.name(&format!("{}_", f.ident))
+            } else {
+                f.ident.clone()
+            }
+        })
+        .collect()
+}
+
+/// The C expression of every input slot, in slot order (`s->r1[0]`).
+pub(super) fn slots(g: &Graph, fields: &[Field], c_names: &[String]) -> Vec<String> {
+    let mut slots = Vec::new();
+    for (f, name) in fields.iter().zip(c_names) {
+        if g.symbol(f.symbol).ty == Ty::Vector {
+            slots.extend((0..g.dim()).map(|k| format!("s->{name}[{k}]")));
+        } else {
+            slots.push(format!("s->{name}"));
+        }
+    }
+    slots
+}
+
+/// A C literal of `x`, exact (the shortest decimal that reads back as `x`); `<math.h>`'s
+/// `INFINITY` and `NAN` for the non-finite.
+pub(super) fn literal(x: f64) -> (String, Prec) {
+    if x.is_nan() {
+        ("NAN".into(), Prec::Atom)
+    } else if x == f64::INFINITY {
+        ("INFINITY".into(), Prec::Atom)
+    } else if x == f64::NEG_INFINITY {
+        ("-INFINITY".into(), Prec::Unary)
+    } else {
+        let t = format!("{x:?}");
+        if x.is_sign_negative() { (t, Prec::Unary) } else { (t, Prec::Atom) }
+    }
+}
+
+/// The helpers the formulas call: the Rust module's `norm2`, `norm3`, `powf` and f64's
+/// `powi` (binary powers, as LLVM expands a constant exponent), with their operations.
+const HELPERS: &str = "\
+/* |(x, y)| without overflow or underflow (the plain formula unless it would lose range). */
+static inline double lg_norm2(double x, double y) {
+    const double s = x * x + y * y;
+    return (isfinite(s) && s >= DBL_MIN) ? sqrt(s) : hypot(x, y);
+}
+
+/* |(x, y, z)| without overflow or underflow. */
+static inline double lg_norm3(double x, double y, double z) {
+    const double s = x * x + y * y + z * z;
+    return (isfinite(s) && s >= DBL_MIN) ? sqrt(s) : hypot(hypot(x, y), z);
+}
+
+/* x^n for an integer n by binary powers: the result starts at the lowest set bit's power. */
+static inline double lg_powi(double x, int n) {
+    const int reciprocal = n < 0;
+    double r = 1.0;
+    for (;;) {
+        if (n & 1) {
+            r *= x;
+        }
+        n /= 2;
+        if (n == 0) {
+            break;
+        }
+        x *= x;
+    }
+    return reciprocal ? 1.0 / r : r;
+}
+
+/* b^e, integer exponents by lg_powi so that negative bases work. */
+static inline double lg_powf(double b, double e) {
+    if (e == trunc(e) && fabs(e) <= 2147483647.0) {
+        return lg_powi(b, (int)e);
+    }
+    return pow(b, e);
+}
+";
+
+/// The C module's text.
+pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError> {
+    let (g, l) = (ctx.g, p.layout);
+    let (dim, n, k) = (l.dim, l.bodies, l.constraints);
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "/* Generated by `lagrange generate --lang c{}`. */",
+        if p.specialize { " --specialize" } else { "" }
+    );
+    let _ = writeln!(out, "/* Scene: {} */", c_comment(p.title));
+    let _ = writeln!(
+        out,
+        "/* Do not edit: regenerate. C99 without dependencies (<math.h>, link with -lm); compile with\n   \
+         -ffp-contract=off to get the Rust module's numbers bit for bit. */"
+    );
+    let _ = writeln!(
+        out,
+        "/* {dim}D, {n} bod{}, {k} constraint{}; vectors are double[{dim}]. Convention: `constraints` is C as\n   \
+         written, `jacobian` J = grad C / SCALE[k], and `c_term` and lambda refer to C/SCALE[k]. */\n",
+        if n == 1 { "y" } else { "ies" },
+        if k == 1 { "" } else { "s" }
+    );
+    out.push_str("#include <float.h>\n#include <math.h>\n\n");
+    let _ = writeln!(out, "enum {{ DIM = {dim}, BODIES = {n}, CONSTRAINTS = {k} }};\n");
+    // The state.
+    let _ = writeln!(out, "/* A state of the scene: every input of the formulas (the Rust module's fields). */");
+    let _ = writeln!(out, "typedef struct State {{");
+    for (f, name) in p.fields.iter().zip(p.c_names).filter(|(f, _)| f.array.is_none()) {
+        let ty = if g.symbol(f.symbol).ty == Ty::Vector { format!("[{dim}]") } else { String::new() };
+        let _ = writeln!(out, "    /* {} */\n    double {name}{ty};", c_comment(&f.doc));
+    }
+    for role in ["position", "velocity", "force", "mass"] {
+        let len = p.fields.iter().filter(|f| f.array.is_some_and(|a| a.0 == role)).count();
+        if len > 0 {
+            let shape = if role == "mass" { format!("[{len}]") } else { format!("[{len}][{dim}]") };
+            let _ = writeln!(out, "    double {role}{shape};");
+        }
+    }
+    if p.fields.is_empty() {
+        let _ = writeln!(out, "    double unused;");
+    }
+    let _ = writeln!(out, "}} State;\n");
+    let scales: Vec<String> = p.scales.iter().map(|x| literal(*x).0).collect();
+    let _ = writeln!(out, "/* kappa of each constraint: grad C = SCALE[k] J[k]. */");
+    let _ = writeln!(out, "const double SCALE[{}] = {{{}}};", k.max(1), list(&scales, k));
+    let flags: Vec<String> = p.inequalities.iter().map(|b| if *b { "1".into() } else { "0".into() }).collect();
+    let _ = writeln!(out, "/* Which constraints are inequalities C >= 0. */");
+    let _ = writeln!(out, "const int INEQUALITY[{}] = {{{}}};\n", k.max(1), list(&flags, k));
+    out.push_str(HELPERS);
+    out.push('\n');
+    let f = p.formulas;
+    let doc_list = |what: &str, ids: &[Id]| {
+        let mut d = vec![what.to_string()];
+        for (i, &id) in ids.iter().enumerate() {
+            d.push(format!("- `{}`: {}", comment_text(p.names.constraints[i]), formula(g, id)));
+        }
+        d
+    };
+    scalars(ctx, &mut out, &doc_list("The constraint values C:", &f.c), "constraints", &f.c, k)?;
+    scalars(ctx, &mut out, &doc_list("The rates of C (with dC/dt):", &f.c_dot), "constraint_rates", &f.c_dot, k)?;
+    a(ctx, &mut out, p)?;
+    scalars(ctx, &mut out, &["b of A lambda + b = 0.".to_string()], "b_vector", &f.b, k)?;
+    jacobian(ctx, &mut out, p)?;
+    scalars(
+        ctx,
+        &mut out,
+        &["c: the part of the second derivative of C/SCALE without accelerations.".to_string()],
+        "c_term",
+        &f.bias,
+        k,
+    )?;
+    let b = p.bodies;
+    for (name, what, roots) in [
+        ("positions", "The position of each body.", &b.position),
+        ("velocities", "The velocity of each body.", &b.velocity),
+        ("external_forces", "The external force on each body (the state's force fields).", &b.force),
+        ("applied_forces", "The scene's forces at this state (zero for a body it does not list).", &b.applied),
+    ] {
+        let (lets, exprs) = ctx.body(roots)?;
+        let stores: Vec<String> = (0..n)
+            .flat_map(|i| (0..dim).map(move |d| (i, d)))
+            .map(|(i, d)| format!("out[{i}][{d}] = {};", exprs[i * dim + d]))
+            .collect();
+        function(&mut out, &[what.to_string()], name, &format!("double out[{}][{dim}]", n.max(1)), &lets, &stores);
+    }
+    let (lets, exprs) = ctx.body(&b.inverse_mass)?;
+    let stores: Vec<String> = exprs.iter().enumerate().map(|(i, e)| format!("out[{i}] = {e};")).collect();
+    function(
+        &mut out,
+        &["1/m of each body.".to_string()],
+        "inverse_masses",
+        &format!("double out[{}]", n.max(1)),
+        &lets,
+        &stores,
+    );
+    if let Some(step) = &p.step {
+        step_c(ctx, &mut out, p, step)?;
+    }
+    Ok(out)
+}
+
+/// The scene's part of the step in C (`step_rows`, the state's accessors, the row
+/// structure) and the shared text of `support/step.c`.
+fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> Result<(), GenerateError> {
+    let (dim, n, k) = (p.layout.dim, p.layout.bodies, p.layout.constraints);
+    let f = p.formulas;
+    let entries: usize = f.jacobian.iter().map(Vec::len).sum();
+    let _ = writeln!(
+        out,
+        "/* The velocity-level step: `lagrange generate --lang c --solver {}`. */\nenum {{ SOLVER_PGS = {}, DEFAULT_ITERATIONS = {} }};\n",
+        step.solver.name(),
+        i32::from(step.solver == Solver::Pgs),
+        step.solver.default_iterations()
+    );
+    let inv: Vec<String> = step.inverse_scales.iter().map(|x| literal(*x).0).collect();
+    let _ = writeln!(
+        out,
+        "/* 1/kappa of each constraint. */\nconst double INVERSE_SCALE[{}] = {{{}}};",
+        k.max(1),
+        list(&inv, k)
+    );
+    let mut starts = vec!["0".to_string()];
+    let mut bodies = Vec::new();
+    for dirs in &f.jacobian {
+        bodies.extend(dirs.iter().map(|d| d.0.to_string()));
+        starts.push(bodies.len().to_string());
+    }
+    let _ =
+        writeln!(out, "/* Row k's Jacobian entries are ROW_START[k] .. ROW_START[k + 1], on bodies ROW_BODY[e]. */");
+    let _ = writeln!(out, "static const int ROW_START[{}] = {{{}}};", k + 1, starts.join(", "));
+    let _ = writeln!(out, "static const int ROW_BODY[{}] = {{{}}};\n", entries.max(1), list(&bodies, entries));
+    let _ = writeln!(
+        out,
+        "/* The rows of a state as the step reads them: per row C/kappa, its rate, c, J per entry; per body\n   \
+         1/m, v and the scene's force; and the step's effective masses and dC/dt. */\n\
+         typedef struct Prepared {{\n    double value[{k1}], rate[{k1}], bias[{k1}], time_rate[{k1}], effective_mass[{k1}];\n    \
+         double inverse_mass[{n1}], velocity[{n1}][{dim}], force[{n1}][{dim}];\n    double jacobian[{e1}][{dim}];\n}} Prepared;\n",
+        k1 = k.max(1),
+        n1 = n.max(1),
+        e1 = entries.max(1)
+    );
+    // The rows' roots in the library's order (as the Rust module's `step_rows`).
+    let mut roots = Vec::new();
+    for i in 0..n {
+        roots.extend([step.masses[i], p.bodies.velocity[i], p.bodies.applied[i]]);
+    }
+    for r in 0..k {
+        roots.extend([f.c[r], f.c_dot[r], f.bias[r]]);
+        roots.extend(f.jacobian[r].iter().map(|&(_, j)| j));
+    }
+    let (lets, exprs) = ctx.body(&roots)?;
+    let mut values = exprs.into_iter();
+    let mut next = || values.next().unwrap_or_default();
+    let mut stores = Vec::new();
+    for i in 0..n {
+        stores.push(format!("r->inverse_mass[{i}] = 1.0 / {};", paren(&next())));
+        for d in 0..dim {
+            stores.push(format!("r->velocity[{i}][{d}] = {};", next()));
+        }
+        for d in 0..dim {
+            stores.push(format!("r->force[{i}][{d}] = {};", next()));
+        }
+    }
+    let mut e = 0;
+    for r in 0..k {
+        stores.push(format!("r->value[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
+        stores.push(format!("r->rate[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
+        stores.push(format!("r->bias[{r}] = {};", next()));
+        for _ in &f.jacobian[r] {
+            for d in 0..dim {
+                stores.push(format!("r->jacobian[{e}][{d}] = {};", next()));
+            }
+            e += 1;
+        }
+    }
+    let _ = writeln!(out, "/* The rows at a state (the Rust module's step_rows, one program over the same roots). */");
+    let _ = writeln!(out, "static void step_rows(const State *s, Prepared *r) {{");
+    if !lets.iter().chain(&stores).any(|t| t.contains("s->")) {
+        let _ = writeln!(out, "    (void)s;");
+    }
+    for l in lets.iter().chain(&stores) {
+        let _ = writeln!(out, "    {l}");
+    }
+    let _ = writeln!(out, "}}\n");
+    let name_of = |sym: Symbol| p.fields.iter().position(|f| f.symbol == sym).map(|i| p.c_names[i].clone());
+    let _ = writeln!(out, "static double state_time(const State *s) {{");
+    match name_of(step.time) {
+        Some(t) => {
+            let _ = writeln!(out, "    return s->{t};\n}}\n");
+        }
+        None => {
+            let _ = writeln!(out, "    (void)s;\n    return 0.0;\n}}\n");
+        }
+    }
+    let mut get = Vec::new();
+    let mut put = Vec::new();
+    for (i, &(q, v)) in step.bodies.iter().enumerate() {
+        let (q, v) = (name_of(q).unwrap_or_default(), name_of(v).unwrap_or_default());
+        for d in 0..dim {
+            get.push(format!("q[{i}][{d}] = s->{q}[{d}];\n    v[{i}][{d}] = s->{v}[{d}];"));
+            put.push(format!("s->{q}[{d}] = q[{i}][{d}];\n    s->{v}[{d}] = v[{i}][{d}];"));
+        }
+    }
+    let _ = writeln!(
+        out,
+        "static void state_get(const State *s, double q[][DIM], double v[][DIM]) {{\n    {}\n}}\n",
+        get.join("\n    ")
+    );
+    let time = name_of(step.time).map_or("(void)t;".to_string(), |t| format!("s->{t} = t;"));
+    let _ = writeln!(
+        out,
+        "static void state_put(State *s, double t, double q[][DIM], double v[][DIM]) {{\n    {time}\n    {}\n}}\n",
+        put.join("\n    ")
+    );
+    out.push_str(STEP_C);
+    Ok(())
+}
+
+/// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a
+/// field, an index or an unsigned number.
+fn paren(e: &str) -> String {
+    let simple = e.chars().all(|c| c.is_alphanumeric() || matches!(c, '_' | '.' | '[' | ']'))
+        || (e.starts_with("s->") && !e.contains(' '));
+    if simple { e.to_string() } else { format!("({e})") }
+}
+
+/// `a_matrix` (dense K×K, or the caller's array for a big unbanded A) or `a_band`.
+fn a(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
+    let k = p.layout.constraints;
+    let (lets, exprs) = ctx.body(p.a_code)?;
+    let mut stores = Vec::new();
+    let doc = ["A of A lambda + b = 0: A[k][j] = sum_i J[k][i].J[j][i] / m_i.".to_string()];
+    match p.layout.a {
+        AStorage::Band { bandwidth } => {
+            for r in 0..k {
+                for d in 0..=bandwidth {
+                    let at = p.formulas.a.iter().position(|e| e.0 == r && e.1 == r + d);
+                    stores.push(format!("out[{r}][{d}] = {};", at.map_or("0.0".to_string(), |i| exprs[i].clone())));
+                }
+            }
+            let doc = [format!("A as its band: out[k][d] = A[k][k + d] for d <= {bandwidth}.")];
+            function(out, &doc, "a_band", &format!("double out[{}][{}]", k.max(1), bandwidth + 1), &lets, &stores);
+        }
+        AStorage::Dense | AStorage::Heap => {
+            for r in 0..k {
+                for c in 0..k {
+                    let at = p.formulas.a.iter().position(|e| (e.0, e.1) == (r, c) || (e.0, e.1) == (c, r));
+                    stores.push(format!("out[{r}][{c}] = {};", at.map_or("0.0".to_string(), |i| exprs[i].clone())));
+                }
+            }
+            function(out, &doc, "a_matrix", &format!("double out[{0}][{0}]", k.max(1)), &lets, &stores);
+        }
+    }
+    Ok(())
+}
+
+/// `jacobian` (dense K × N·DIM) or `jacobian_blocks` (the non-zero blocks, with their
+/// constraint and body in `JACOBIAN_ROW` and `JACOBIAN_BODY`).
+fn jacobian(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
+    let (dim, n, k) = (p.layout.dim, p.layout.bodies, p.layout.constraints);
+    let blocks: Vec<(usize, usize, Id)> = p
+        .formulas
+        .jacobian
+        .iter()
+        .enumerate()
+        .flat_map(|(r, dirs)| dirs.iter().map(move |&(b, id)| (r, b, id)))
+        .collect();
+    let roots: Vec<Id> = blocks.iter().map(|b| b.2).collect();
+    let (lets, exprs) = ctx.body(&roots)?;
+    let mut stores = Vec::new();
+    match p.layout.j {
+        JStorage::Blocks { count } => {
+            let rows: Vec<String> = blocks.iter().map(|b| b.0.to_string()).collect();
+            let bodies: Vec<String> = blocks.iter().map(|b| b.1.to_string()).collect();
+            let _ = writeln!(out, "/* The constraint and the body of each block of `jacobian_blocks`. */");
+            let _ = writeln!(out, "const int JACOBIAN_ROW[{}] = {{{}}};", count.max(1), list(&rows, count));
+            let _ = writeln!(out, "const int JACOBIAN_BODY[{}] = {{{}}};\n", count.max(1), list(&bodies, count));
+            for (i, _) in blocks.iter().enumerate() {
+                for d in 0..dim {
+                    stores.push(format!("out[{i}][{d}] = {};", exprs[i * dim + d]));
+                }
+            }
+            let doc =
+                ["J, sparse: block i is constraint JACOBIAN_ROW[i]'s direction on body JACOBIAN_BODY[i].".to_string()];
+            function(out, &doc, "jacobian_blocks", &format!("double out[{}][{dim}]", count.max(1)), &lets, &stores);
+        }
+        JStorage::Dense => {
+            for r in 0..k {
+                for body in 0..n {
+                    let at = blocks.iter().position(|b| b.0 == r && b.1 == body);
+                    for d in 0..dim {
+                        let e = at.map_or("0.0".to_string(), |i| exprs[i * dim + d].clone());
+                        stores.push(format!("out[{r}][{}] = {e};", body * dim + d));
+                    }
+                }
+            }
+            let doc = [format!("J: row k is constraint k's direction, body i's components at columns i*{dim} ..")];
+            function(out, &doc, "jacobian", &format!("double out[{}][{}]", k.max(1), (n * dim).max(1)), &lets, &stores);
+        }
+    }
+    Ok(())
+}
+
+/// A function writing one scalar formula per entry of `out`.
+fn scalars(
+    ctx: &Ctx<'_>,
+    out: &mut String,
+    doc: &[String],
+    name: &str,
+    roots: &[Id],
+    k: usize,
+) -> Result<(), GenerateError> {
+    let (lets, exprs) = ctx.body(roots)?;
+    let stores: Vec<String> = exprs.iter().enumerate().map(|(i, e)| format!("out[{i}] = {e};")).collect();
+    function(out, doc, name, &format!("double out[{}]", k.max(1)), &lets, &stores);
+    Ok(())
+}
+
+/// `void name(const State *s, OUT) { lets; stores }`, its doc as a comment.
+fn function(out: &mut String, doc: &[String], name: &str, param: &str, lets: &[String], stores: &[String]) {
+    let _ = writeln!(out, "/* {}", c_comment(&doc[0]));
+    for line in &doc[1..] {
+        let _ = writeln!(out, "   {}", c_comment(line));
+    }
+    let _ = writeln!(out, "*/\nvoid {name}(const State *s, {param}) {{");
+    let uses_state = lets.iter().chain(stores).any(|t| t.contains("s->"));
+    if !uses_state {
+        let _ = writeln!(out, "    (void)s;");
+    }
+    if stores.is_empty() {
+        let _ = writeln!(out, "    (void)out;");
+    }
+    for l in lets.iter().chain(stores) {
+        let _ = writeln!(out, "    {l}");
+    }
+    let _ = writeln!(out, "}}\n");
+}
+
+/// An initialiser list of `k` entries (one `0` when there are none: C has no empty arrays).
+fn list(items: &[String], k: usize) -> String {
+    if k == 0 { "0".into() } else { items.join(", ") }
+}
+
+/// Text safe inside a C `/* */` comment: one line (as [`comment_text`]), no `*/` or `/*`,
+/// and no trigraph (`??`, which C99 reads before comments end).
+fn c_comment(s: &str) -> String {
+    comment_text(s).replace("*/", "* /").replace("/*", "/ *").replace("??", "? ?")
+}

@@ -1,0 +1,47 @@
+//! Written into modules generated with `--solver pgs`: projected Gauss–Seidel, sequential
+//! impulses with Baumgarte bias and accumulated clamping (E. Catto, "Iterative Dynamics with
+//! Temporal Coherence", 2005; Box2D v2.4), the operations and their order those of the
+//! library's `numeric::velocity::pgs`.
+//!
+//! Included with `include_str!` from the first item on (this note is left out); compiled as part of every
+//! generated module of `tests/generate_step.rs` (it uses the module's items, so it is not a
+//! module of its own). Not here: the rows (generated), the shared pieces (`step.rs`, `sweep.rs`).
+
+/// One PGS step of `dt` with the defaults (`StepSettings::default()`: 4 substeps, 8
+/// iterations, β = 0.2); `impulses` is the warm-start storage, the accumulated impulse of
+/// each row (for C/κ; P/h ≈ λ), kept by the caller from one step to the next (start from zeros).
+pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
+    step_with(s, impulses, dt, &StepSettings::default());
+}
+
+/// One PGS step of `dt` in `settings.substeps` substeps of h = dt/substeps, each: u ← v +
+/// h M⁻¹F (F: `applied_forces`, the scene's); warm start u ← u + M⁻¹Jᵀ P; `iterations`
+/// sweeps over the rows in file order, row k taking ΔP = −m_eff·(J u + ∂C/∂t + b) with
+/// b = β·C/(κh) (an inequality row apart, C > 0, is speculative: b = C/(κh)), an inequality
+/// row clamping its accumulated impulse at P ≥ 0; then q ← q + h u, and the rows evaluated
+/// again. No softness and no relax pass. The state's time advances by h per substep; its
+/// force fields are not read.
+pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
+    let h = dt / settings.substeps as f64;
+    let beta = settings.baumgarte;
+    if !settings.warm_start {
+        impulses.iter_mut().for_each(|p| *p = 0.0);
+    }
+    let t = time(s);
+    let (mut q, mut v) = (positions(s), velocities(s));
+    let mut p = prepared(s);
+    for sub in 0..settings.substeps {
+        p.kick(&mut v, h);
+        p.warm_start(&mut v, impulses);
+        let pr = &p;
+        for _ in 0..settings.iterations {
+            pr.sweep(&mut v, impulses, |k, c| {
+                let bias = if pr.inequality[k] && c > 0.0 { c / h } else { beta * c / h };
+                (bias, Softness::RIGID)
+            });
+        }
+        drift(&mut q, &v, h);
+        put(s, t + (sub + 1) as f64 * h, &q, &v);
+        p = prepared(s);
+    }
+}

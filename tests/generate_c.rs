@@ -1,0 +1,374 @@
+//! `generate --lang c` against `generate --lang rust`, bit for bit: for every file in
+//! `constraints/` (and `constraints/hard/`, and the hostile names of `tests/data`), the C
+//! module is compiled with `cc -std=c99 -Wall -Wextra -Werror -ffp-contract=off` (one
+//! invocation per file: each module is its own translation unit) and the Rust modules with
+//! `rustc -D warnings` (one invocation for all), both print every output at the same
+//! random states, and every number must have the same bits (or both be NaN). The step
+//! (`--solver soft-step` and `pgs`) likewise: 60 steps of 1/60 from random states, the
+//! positions, velocities and impulses bit for bit (measured: every number of every file).
+//!
+//! Skipped, saying so, when no C compiler is found (`CC`, else `cc`, else `gcc`) and under
+//! `LAGRANGE_QUICK_TESTS`.
+//!
+//! Not here: the Rust module against the library (`tests/generate.rs`, `tests/generate_step.rs`).
+
+mod common;
+
+use lagrange::codegen::layout::Solver;
+use lagrange::codegen::{Lang, Module, Options, module};
+use lagrange::expr::Ty;
+use lagrange::expr::eval::{Env, Value};
+use lagrange::model::file::{Loaded, load};
+use std::fmt::Write;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const STATES: usize = 4;
+
+fn files() -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for dir in ["constraints", "constraints/hard"] {
+        let mut here: Vec<PathBuf> = std::fs::read_dir(dir)
+            .expect("constraints/")
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        here.sort();
+        files.extend(here);
+    }
+    files.push(PathBuf::from("tests/data/hostile_names.toml"));
+    files
+}
+
+fn loaded(path: &Path) -> Loaded {
+    let text = std::fs::read_to_string(path).expect("readable");
+    load(&text).unwrap_or_else(|e| panic!("{}: {e:?}", path.display()))
+}
+
+/// A C compiler: `CC`, else the first of `cc`, `gcc` that runs.
+fn c_compiler() -> Option<String> {
+    let candidates = std::env::var("CC").into_iter().chain(["cc".to_string(), "gcc".to_string()]);
+    candidates.into_iter().find(|c| Command::new(c).arg("--version").output().is_ok_and(|o| o.status.success()))
+}
+
+/// Random values for every symbol of the file (masses and parameters in [0.5, 2)).
+fn random_env(l: &Loaded, rng: &mut common::Rng) -> Env {
+    let g = &l.system.graph;
+    let mut env = Env::new();
+    for (s, info) in g.symbols() {
+        let value = match info.ty {
+            Ty::Scalar if matches!(info.role, lagrange::expr::Role::Mass { .. } | lagrange::expr::Role::Parameter) => {
+                Value::Scalar(rng.uniform(0.5, 2.0))
+            }
+            Ty::Scalar => Value::Scalar(rng.uniform(-2.0, 2.0)),
+            Ty::Vector => Value::Vector(rng.uniform_vector(g.dim(), -1.0, 1.0)),
+        };
+        env.set(s, value);
+    }
+    env
+}
+
+/// Statements giving `s` the values of `env`, in Rust (`rust`) or C: one per field and component.
+fn assignments(l: &Loaded, m: &Module, env: &Env, rust: bool) -> String {
+    let dim = l.system.graph.dim();
+    let mut out = String::new();
+    for (s, field) in &m.fields {
+        match env.get(*s) {
+            Some(Value::Scalar(x)) => {
+                let _ = write!(out, "s.{field} = {x:?}; ");
+            }
+            Some(Value::Vector(v)) => {
+                for (d, x) in v.iter().enumerate().take(dim) {
+                    let _ = write!(out, "s.{field}[{d}] = {x:?}; ");
+                }
+            }
+            None => {}
+        }
+    }
+    if rust { format!("{{ let mut s = State::default(); {out}s }}") } else { out }
+}
+
+/// The outputs both modules have, with how each language flattens them.
+struct Output {
+    name: &'static str,
+    /// The Rust expression of its numbers as a `Vec<f64>`.
+    rust: String,
+    /// The C array's declaration and its length in numbers.
+    c_array: String,
+    len: usize,
+}
+
+fn outputs(rust: &str) -> Vec<Output> {
+    // The number right after `pattern` in the Rust module (a constant's value, an array's size).
+    let count = |pattern: &str| -> usize {
+        let at = rust.find(pattern).expect("the output exists") + pattern.len();
+        rust[at..].chars().take_while(char::is_ascii_digit).collect::<String>().parse().expect("a size")
+    };
+    let mut list = Vec::new();
+    let mut add = |name: &'static str, rust_expr: String, shape: String, len: usize| {
+        list.push(Output { name, rust: rust_expr, c_array: format!("double out_{name}{shape}"), len });
+    };
+    let k = count("pub const CONSTRAINTS: usize = ");
+    let n = count("pub const BODIES: usize = ");
+    let dim = count("pub const DIM: usize = ");
+    for name in ["constraints", "constraint_rates", "b_vector", "c_term"] {
+        add(name, format!("{name}(&s).to_vec()"), format!("[{}]", k.max(1)), k);
+    }
+    if rust.contains("pub fn a_band(") {
+        let w = count("pub fn a_band(s: &State) -> [[f64; ");
+        add("a_band", "a_band(&s).concat()".into(), format!("[{}][{w}]", k.max(1)), k * w);
+    } else {
+        add("a_matrix", "a_matrix(&s).concat()".into(), format!("[{0}][{0}]", k.max(1)), k * k);
+    }
+    if rust.contains("pub fn jacobian_blocks(") {
+        let blocks = count("pub const JACOBIAN_BLOCKS: usize = ");
+        add(
+            "jacobian_blocks",
+            "jacobian_blocks(&s).iter().flat_map(|b| b.2).collect()".into(),
+            format!("[{}][{dim}]", blocks.max(1)),
+            blocks * dim,
+        );
+    } else {
+        add("jacobian", "jacobian(&s).concat()".into(), format!("[{}][{}]", k.max(1), (n * dim).max(1)), k * n * dim);
+    }
+    for name in ["positions", "velocities", "external_forces", "applied_forces"] {
+        add(name, format!("{name}(&s).concat()"), format!("[{}][{dim}]", n.max(1)), n * dim);
+    }
+    add("inverse_masses", "inverse_masses(&s).to_vec()".into(), format!("[{}]", n.max(1)), n);
+    list
+}
+
+fn numbers(line: &str) -> Vec<f64> {
+    line.split_whitespace().map(|x| x.parse().unwrap_or_else(|_| panic!("a number: {x}"))).collect()
+}
+
+#[test]
+fn the_c_module_gives_the_rust_modules_numbers_bit_for_bit() {
+    if common::skip_slow("the_c_module_gives_the_rust_modules_numbers_bit_for_bit") {
+        return;
+    }
+    let Some(cc) = c_compiler() else {
+        eprintln!(
+            "the_c_module_gives_the_rust_modules_numbers_bit_for_bit: skipped (no C compiler: set CC or install cc)"
+        );
+        return;
+    };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_c");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut rng = common::Rng::new(0xc0de_5eed);
+    let mut rust_main = String::from("// Test harness generated by tests/generate_c.rs.\n");
+    let mut rust_body = String::new();
+    let mut c_runs = Vec::new();
+    for path in files() {
+        let l = loaded(&path);
+        let rust = module(&l, &Options::default()).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let c = module(&l, &Options { lang: Lang::C, ..Options::default() })
+            .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("file").replace('-', "_");
+        let name = format!("m{}_{stem}", c_runs.len());
+        let rs = dir.join(format!("{name}.rs"));
+        std::fs::write(&rs, &rust.code).expect("write");
+        let _ = writeln!(rust_main, "#[allow(dead_code)]\npub mod {name} {{\n    include!({rs:?});\n}}");
+        let outs = outputs(&rust.code);
+        let mut c_main = format!(
+            "#include <stdio.h>\n#include \"{name}.c\"\n\nstatic void show(const double *x, int n) {{\n    for (int i = 0; i < n; i++) {{\n        printf(\"%.17g \", x[i]);\n    }}\n    printf(\"\\n\");\n}}\n\nint main(void) {{\n"
+        );
+        for _ in 0..STATES {
+            let env = random_env(&l, &mut rng);
+            let _ = writeln!(
+                rust_body,
+                "    {{\n        use {name}::*;\n        let s = {};",
+                assignments(&l, &rust, &env, true)
+            );
+            let _ = writeln!(c_main, "    {{\n        State s = {{0}};\n        {}", assignments(&l, &c, &env, false));
+            for o in &outs {
+                let _ = writeln!(
+                    rust_body,
+                    "        let x: Vec<f64> = {};\n        println!(\"{{}}\", x.iter().map(|y| format!(\"{{y:?}}\")).collect::<Vec<_>>().join(\" \"));",
+                    o.rust
+                );
+                let _ = writeln!(
+                    c_main,
+                    "        {};\n        {}(&s, out_{});\n        show(&out_{}[0]{}, {});",
+                    o.c_array,
+                    o.name,
+                    o.name,
+                    o.name,
+                    if o.c_array.matches('[').count() > 1 { "[0]" } else { "" },
+                    o.len
+                );
+            }
+            rust_body.push_str("    }\n");
+            c_main.push_str("    }\n");
+        }
+        c_main.push_str("    return 0;\n}\n");
+        std::fs::write(dir.join(format!("{name}.c")), &c.code).expect("write");
+        let main_c = dir.join(format!("{name}_main.c"));
+        std::fs::write(&main_c, c_main).expect("write");
+        let exe = dir.join(format!("{name}_c"));
+        let built = Command::new(&cc)
+            .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-ffp-contract=off", "-O1", "-o"])
+            .arg(&exe)
+            .arg(&main_c)
+            .arg("-lm")
+            .output()
+            .expect("cc runs");
+        assert!(
+            built.status.success(),
+            "{}: the C module does not compile:\n{}",
+            path.display(),
+            String::from_utf8_lossy(&built.stderr)
+        );
+        let run = Command::new(&exe).output().expect("runs");
+        assert!(run.status.success(), "{}: C harness failed", path.display());
+        c_runs.push((path.display().to_string(), outs.len(), String::from_utf8_lossy(&run.stdout).into_owned()));
+    }
+    let _ = write!(rust_main, "\nfn main() {{\n{rust_body}}}\n");
+    let main_rs = dir.join("harness.rs");
+    std::fs::write(&main_rs, rust_main).expect("write");
+    let exe = dir.join("harness");
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    let built = Command::new(rustc)
+        .args(["--edition", "2021", "-C", "opt-level=1", "-D", "warnings", "-o"])
+        .arg(&exe)
+        .arg(&main_rs)
+        .output()
+        .expect("rustc runs");
+    assert!(built.status.success(), "the Rust modules do not compile:\n{}", String::from_utf8_lossy(&built.stderr));
+    let run = Command::new(&exe).output().expect("runs");
+    assert!(run.status.success(), "Rust harness failed: {}", String::from_utf8_lossy(&run.stderr));
+    let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
+    let mut rust_lines = stdout.lines();
+    let mut compared = 0;
+    for (file, count, c_out) in &c_runs {
+        let mut c_lines = c_out.lines();
+        for line in 0..STATES * count {
+            let (r, c) = (numbers(rust_lines.next().expect("a Rust line")), numbers(c_lines.next().expect("a C line")));
+            assert_eq!(r.len(), c.len(), "{file}: output {line}");
+            for (x, y) in r.iter().zip(&c) {
+                assert!(
+                    x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()),
+                    "{file}: output {line}: Rust {r:?}, C {c:?}"
+                );
+                compared += 1;
+            }
+        }
+    }
+    eprintln!("{compared} numbers equal bit for bit over {} files", c_runs.len());
+    assert!(compared > 1000);
+}
+
+/// Steps each state takes in the step comparison, of dt = 1/60.
+const STEPS: usize = 60;
+
+#[test]
+fn the_c_step_gives_the_rust_steps_numbers_bit_for_bit() {
+    if common::skip_slow("the_c_step_gives_the_rust_steps_numbers_bit_for_bit") {
+        return;
+    }
+    let Some(cc) = c_compiler() else {
+        eprintln!("the_c_step_gives_the_rust_steps_numbers_bit_for_bit: skipped (no C compiler: set CC or install cc)");
+        return;
+    };
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("generate_c_step");
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut rng = common::Rng::new(0x57e9_c0de);
+    let mut rust_main = String::from("// Test harness generated by tests/generate_c.rs.\n");
+    let mut rust_body = String::new();
+    let mut c_runs = Vec::new();
+    for path in files() {
+        for solver in [Solver::SoftStep, Solver::Pgs] {
+            let l = loaded(&path);
+            let options = Options { solver: Some(solver), ..Options::default() };
+            let rust = module(&l, &options).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let c =
+                module(&l, &Options { lang: Lang::C, ..options }).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let name = format!("m{}", c_runs.len());
+            let rs = dir.join(format!("{name}.rs"));
+            std::fs::write(&rs, &rust.code).expect("write");
+            let _ = writeln!(rust_main, "#[allow(dead_code)]\npub mod {name} {{\n    include!({rs:?});\n}}");
+            let mut c_main = format!(
+                "#include <stdio.h>\n#include \"{name}.c\"\n\nint main(void) {{\n    int n, i, d;\n    double p[CONSTRAINTS > 0 ? CONSTRAINTS : 1];\n"
+            );
+            for _ in 0..STATES {
+                let env = random_env(&l, &mut rng);
+                let _ = writeln!(
+                    rust_body,
+                    "    {{\n        use {name}::*;\n        let mut s = {};\n        let mut p = [0.0; CONSTRAINTS];\n        \
+                     for _ in 0..{STEPS} {{\n            step(&mut s, &mut p, 1.0 / 60.0);\n        }}\n        \
+                     let x: Vec<f64> = positions(&s).iter().chain(velocities(&s).iter()).flatten().copied().chain(p).collect();\n        \
+                     println!(\"{{}}\", x.iter().map(|y| format!(\"{{y:?}}\")).collect::<Vec<_>>().join(\" \"));\n    }}",
+                    assignments(&l, &rust, &env, true)
+                );
+                let _ = writeln!(
+                    c_main,
+                    "    {{\n        State s = {{0}};\n        double q[BODIES][DIM], v[BODIES][DIM];\n        {}\n        \
+                     for (i = 0; i < CONSTRAINTS; i++) {{\n            p[i] = 0.0;\n        }}\n        \
+                     for (n = 0; n < {STEPS}; n++) {{\n            step(&s, p, 1.0 / 60.0);\n        }}\n        \
+                     state_get(&s, q, v);\n        \
+                     for (i = 0; i < BODIES; i++) {{\n            for (d = 0; d < DIM; d++) {{\n                printf(\"%.17g \", q[i][d]);\n            }}\n        }}\n        \
+                     for (i = 0; i < BODIES; i++) {{\n            for (d = 0; d < DIM; d++) {{\n                printf(\"%.17g \", v[i][d]);\n            }}\n        }}\n        \
+                     for (i = 0; i < CONSTRAINTS; i++) {{\n            printf(\"%.17g \", p[i]);\n        }}\n        printf(\"\\n\");\n    }}",
+                    assignments(&l, &c, &env, false)
+                );
+            }
+            c_main.push_str("    return 0;\n}\n");
+            std::fs::write(dir.join(format!("{name}.c")), &c.code).expect("write");
+            let main_c = dir.join(format!("{name}_main.c"));
+            std::fs::write(&main_c, c_main).expect("write");
+            let exe = dir.join(format!("{name}_c"));
+            let built = Command::new(&cc)
+                .args(["-std=c99", "-Wall", "-Wextra", "-Werror", "-ffp-contract=off", "-O1", "-o"])
+                .arg(&exe)
+                .arg(&main_c)
+                .arg("-lm")
+                .output()
+                .expect("cc runs");
+            assert!(
+                built.status.success(),
+                "{} ({}): the C step does not compile:\n{}",
+                path.display(),
+                solver.name(),
+                String::from_utf8_lossy(&built.stderr)
+            );
+            let run = Command::new(&exe).output().expect("runs");
+            assert!(run.status.success(), "{}: C harness failed", path.display());
+            c_runs.push((
+                format!("{} ({})", path.display(), solver.name()),
+                String::from_utf8_lossy(&run.stdout).into_owned(),
+            ));
+        }
+    }
+    let _ = write!(rust_main, "\nfn main() {{\n{rust_body}}}\n");
+    let main_rs = dir.join("harness.rs");
+    std::fs::write(&main_rs, rust_main).expect("write");
+    let exe = dir.join("harness");
+    let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    let built = Command::new(rustc)
+        .args(["--edition", "2021", "-C", "opt-level=1", "-D", "warnings", "-o"])
+        .arg(&exe)
+        .arg(&main_rs)
+        .output()
+        .expect("rustc runs");
+    assert!(built.status.success(), "the Rust modules do not compile:\n{}", String::from_utf8_lossy(&built.stderr));
+    let run = Command::new(&exe).output().expect("runs");
+    assert!(run.status.success(), "Rust harness failed: {}", String::from_utf8_lossy(&run.stderr));
+    let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
+    let mut rust_lines = stdout.lines();
+    let mut compared = 0;
+    for (case, c_out) in &c_runs {
+        for (state, c_line) in c_out.lines().enumerate() {
+            let (r, c) = (numbers(rust_lines.next().expect("a Rust line")), numbers(c_line));
+            assert_eq!(r.len(), c.len(), "{case}: state {state}");
+            for (x, y) in r.iter().zip(&c) {
+                assert!(
+                    x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()),
+                    "{case}: state {state}: Rust {r:?}, C {c:?}"
+                );
+                compared += 1;
+            }
+        }
+    }
+    eprintln!("step: {compared} numbers equal bit for bit after {STEPS} steps, {} modules", c_runs.len());
+    assert!(compared > 1000);
+}
