@@ -39,7 +39,7 @@ use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
 use crate::expr::graph::FastMap;
 use crate::expr::shape::{Reuse, Shaper};
-use crate::expr::{Graph, Id, Rational, Role, Simplifier, Symbol, Ty, TypeError};
+use crate::expr::{Graph, Id, Node, Rational, Role, Simplifier, Symbol, Ty, TypeError};
 use crate::model::system::{BuildError, System};
 use std::collections::HashMap;
 
@@ -90,6 +90,18 @@ pub struct Derivation {
     /// With [`Options::steps`]: each C̈ with Newton's law aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ substituted
     /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`.
     pub newton: Option<Vec<Id>>,
+    /// With [`Options::document`]: the file's definitions the documents print as names.
+    pub definitions: Option<Vec<Definition>>,
+}
+
+/// A `[definitions]` entry as the documents show it: `d` for `r2 − r1`.
+#[derive(Clone, Debug)]
+pub struct Definition {
+    pub name: String,
+    /// The definition as lowered (what each use of the name is in the file's formulas).
+    pub written: Id,
+    /// Its simplified form, as the derived formulas contain it.
+    pub simplified: Id,
 }
 
 /// What [`derive_with`] derives beyond the formulas (the numbers need none of it).
@@ -140,6 +152,11 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     let mut graph = system.graph.clone();
     let mut simplifier = Simplifier::new();
     let (g, s) = (&mut graph, &mut simplifier);
+    // Differences keep the orientation the file wrote them in (`r2 − r1`).
+    let written: Vec<Id> =
+        system.constraints.iter().map(|c| c.c).chain(system.definitions.iter().map(|d| d.1)).collect();
+    let forces: Vec<Id> = system.bodies.iter().map(|b| b.nodes.force).collect();
+    s.keep_orientations(g, &written, &forces);
     let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
     // Constraints already derived, by shape: a repeat (the next link of a chain) is the
     // earlier derivation with the bodies renamed.
@@ -186,13 +203,44 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         forces = Some(f);
     }
     let newton = if options.steps { Some(newton(system, g, &constraints)?) } else { None };
+    let definitions = if options.document { Some(definitions(system, g, s)?) } else { None };
     let (multipliers, force_sums) = if repeats && options.document {
         let (multipliers, sums) = force_sums(system, g, &constraints)?;
         (Some(multipliers), Some(sums))
     } else {
         (None, None)
     };
-    Ok(Derivation { graph, simplifier, constraints, a, b, lambda, forces, multipliers, force_sums, newton })
+    Ok(Derivation {
+        graph,
+        simplifier,
+        constraints,
+        a,
+        b,
+        lambda,
+        forces,
+        multipliers,
+        force_sums,
+        newton,
+        definitions,
+    })
+}
+
+/// The file's definitions as the documents name them: each with its node as lowered and as
+/// laid out (both are printed as the name), those that are more than a symbol or a number.
+fn definitions(system: &System, g: &mut Graph, s: &mut Simplifier) -> Result<Vec<Definition>, TypeError> {
+    let mut out = Vec::with_capacity(system.definitions.len());
+    for (name, id) in &system.definitions {
+        let trivial = |g: &Graph, x: Id| matches!(g.node(x), Node::Sym(_) | Node::Num(_));
+        if trivial(g, *id) {
+            continue;
+        }
+        let simplified = s.simplify(g, *id)?;
+        if trivial(g, simplified) {
+            continue;
+        }
+        out.push(Definition { name: name.clone(), written: *id, simplified });
+    }
+    Ok(out)
 }
 
 /// Each C̈ with aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ for every body it involves, in new vector symbols F_c,ᵢ.

@@ -34,6 +34,7 @@ use super::func::Func;
 use super::graph::{Axis, FastMap, Graph, Id, IdMap, Marks, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
+use super::present::Orientations;
 use super::shape::{Reuse, Shaper};
 use std::rc::Rc;
 
@@ -80,6 +81,9 @@ pub struct Simplifier {
     shaper: Shaper,
     /// `canon`'s marks of the nodes queued in its current walk.
     queued: Marks,
+    /// Differences as the user wrote them (`r2 − r1`), by their canonical orientation
+    /// (`r1 − r2`): what the layout writes instead ([`Simplifier::keep_orientations`]).
+    pub(super) orientations: Orientations,
 }
 
 impl Simplifier {
@@ -900,6 +904,12 @@ impl Simplifier {
             return Ok(Some(Frac::constant(content.abs())));
         }
         let arg = self.build(g, &Canon::V(inner))?;
+        // The layout may write the argument as the negation of a difference the user wrote
+        // (`−(r2 − r1)`, `Simplifier::keep_orientations`): the norm of that difference.
+        let arg = match g.node(arg) {
+            Node::Mul(xs) if super::present::is_negation(g, arg) => xs[1],
+            _ => arg,
+        };
         let atom = g.norm(arg)?;
         self.radicals.insert(atom, Rc::new(square));
         Ok(Some(Frac::atom(atom).scale(&content.abs())))

@@ -16,11 +16,14 @@
 //!
 //! Not here: deriving (`derive`), expression printing rules (`expr::print`).
 
+use crate::derive::Definition;
 use crate::derive::Derivation;
-use crate::expr::print::{PrintError, Style, print};
+use crate::expr::graph::FastSet;
+use crate::expr::print::{Names, PrintError, Style, print, print_named, symbol_name};
 use crate::expr::{Graph, Id, TypeError};
 use crate::model::system::System;
 use serde_json::{Value, json};
+use std::cell::RefCell;
 use std::fmt::Write;
 
 /// The document formats of `derive`.
@@ -48,6 +51,10 @@ pub enum ReportError {
 struct Doc {
     style: Style,
     format: Format,
+    /// The file's definitions, printed as their names (text, LaTeX and Markdown only).
+    names: Names,
+    /// The nodes of `names` printed so far.
+    used: RefCell<FastSet<Id>>,
 }
 
 impl Doc {
@@ -57,11 +64,45 @@ impl Doc {
             Format::Latex | Format::Markdown => Style::Latex,
             Format::Json => Style::Source,
         };
-        Doc { style, format }
+        Doc { style, format, names: Names::default(), used: RefCell::default() }
+    }
+
+    /// A document that prints each of `d`'s definitions as its name (none in JSON, whose
+    /// expressions stand alone).
+    fn naming(format: Format, d: &Derivation) -> Doc {
+        let mut doc = Doc::new(format);
+        if format != Format::Json {
+            for def in d.definitions.iter().flatten() {
+                for id in [def.written, def.simplified] {
+                    doc.names.entry(id).or_insert_with(|| def.name.clone());
+                }
+            }
+        }
+        doc
     }
 
     fn expr(&self, g: &Graph, id: Id) -> Result<String, PrintError> {
-        print(g, id, self.style)
+        print_named(g, id, self.style, &self.names, &mut self.used.borrow_mut())
+    }
+
+    /// The definitions the document printed by name, each once: `d = r2 − r1`.
+    fn definitions(&self, g: &Graph, d: &Derivation, out: &mut String) -> Result<(), ReportError> {
+        let used = self.used.borrow();
+        let defs: Vec<&Definition> = d
+            .definitions
+            .iter()
+            .flatten()
+            .filter(|def| used.contains(&def.written) || used.contains(&def.simplified))
+            .collect();
+        if defs.is_empty() {
+            return Ok(());
+        }
+        self.heading(out, "Definitions (printed by name below)");
+        for def in defs {
+            let vector = g.ty(def.simplified) == crate::expr::Ty::Vector;
+            self.line(out, &symbol_name(&def.name, vector, self.style), &print(g, def.simplified, self.style)?);
+        }
+        Ok(())
     }
 
     /// An equation `lhs = rhs` as a display line.
@@ -267,7 +308,7 @@ fn latex_escape(s: &str) -> String {
 
 /// The derivation as a document (text, LaTeX or Markdown).
 pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
-    let doc = Doc::new(format);
+    let doc = Doc::naming(format, d);
     let mut out = String::new();
     let title = if system.title.is_empty() { "Constraint forces".to_string() } else { system.title.clone() };
     match format {
@@ -281,11 +322,15 @@ pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) ->
             let _ = writeln!(out, "# {title} ({}D)", system.dim());
         }
     }
+    // The body first: the definitions shown are those it printed by name.
+    let mut body = String::new();
     if steps {
-        steps_document(system, d, &doc, &mut out)?;
+        steps_document(system, d, &doc, &mut body)?;
     } else {
-        summary(system, d, &doc, &mut out)?;
+        summary(system, d, &doc, &mut body)?;
     }
+    doc.definitions(&d.graph, d, &mut out)?;
+    out.push_str(&body);
     Ok(out)
 }
 
