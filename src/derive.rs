@@ -140,6 +140,24 @@ pub enum DeriveError {
     ZeroGradient(String),
     #[error("internal type error: {0}")]
     Type(#[from] TypeError),
+    /// A formula passed the simplifier's work budget (`expr::simplify::MAX_FORM_WORK`).
+    #[error(
+        "{what} is too large to derive: one of its formulas needs more than {work} terms of work \
+         to simplify (the limit of docs/file-format.md, \"Limits\"); write it in a smaller form, \
+         or split it with [definitions] and more constraints"
+    )]
+    TooLarge { what: String, work: u64 },
+}
+
+/// `e`, with a budget error said of `what` (a constraint, the multiplier equation).
+fn located(e: DeriveError, what: impl FnOnce() -> String) -> DeriveError {
+    match e {
+        DeriveError::Type(TypeError::TooLarge(work)) => DeriveError::TooLarge { what: what(), work },
+        DeriveError::Diff { error: DiffError::Type(TypeError::TooLarge(work)), name } => {
+            DeriveError::TooLarge { what: format!("constraint `{name}`"), work }
+        }
+        e => e,
+    }
 }
 
 /// Runs DESIGN.md steps 1–5 on every constraint of `system`.
@@ -168,9 +186,10 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         // A link of a chain adds about 60 nodes to the graph.
         g.reserve(64 * system.constraints.len());
     }
+    let name = |k: usize| move || format!("constraint `{}`", system.constraints[k].name);
     for k in 0..system.constraints.len() {
         if !repeats {
-            constraints.push(derive_constraint(system, g, s, k)?);
+            constraints.push(derive_constraint(system, g, s, k).map_err(|e| located(e, name(k)))?);
             continue;
         }
         let shape = shaper.shape(g, &[system.constraints[k].c]);
@@ -181,23 +200,25 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         let dc = match repeat {
             Some(dc) => dc,
             None => {
-                let dc = derive_constraint(system, g, s, k)?;
+                let dc = derive_constraint(system, g, s, k).map_err(|e| located(e, name(k)))?;
                 derived.insert(shape.key, (k, Reuse::new(Roots::of(&dc), shape.symbols, true)));
                 dc
             }
         };
         constraints.push(dc);
     }
-    let (a, b) = assemble(system, g, s, &constraints, repeats)?;
+    let (a, b) = assemble(system, g, s, &constraints, repeats)
+        .map_err(|e| located(e.into(), || "the multiplier equation A λ + b = 0".to_string()))?;
     let (mut lambda, mut forces) = (None, None);
     if let [only] = constraints.as_slice() {
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
-        let l = s.negated_quotient(g, b[0], a00)?;
+        let closed_form = || format!("λ and the forces of constraint `{}`", system.constraints[0].name);
+        let l = s.negated_quotient(g, b[0], a00).map_err(|e| located(e.into(), closed_form))?;
         let mut f = Vec::with_capacity(only.jacobian.len());
         for &(body, j) in &only.jacobian {
             let product = g.mul(vec![l, j])?;
-            f.push((body, s.simplify(g, product)?));
+            f.push((body, s.simplify(g, product).map_err(|e| located(e.into(), closed_form))?));
         }
         lambda = Some(l);
         forces = Some(f);

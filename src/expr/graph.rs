@@ -394,6 +394,10 @@ pub enum TypeError {
     MixedRelation,
     #[error("`{name}` takes {expected} argument(s), found {found}")]
     Arity { name: &'static str, expected: usize, found: usize },
+    /// Simplifying one formula passed the work budget
+    /// ([`MAX_FORM_WORK`](crate::expr::simplify::MAX_FORM_WORK) terms of canonical forms).
+    #[error("too large to simplify: more than {0} terms of work on one formula")]
+    TooLarge(u64),
 }
 
 /// The arena. `dim` is the dimension of every vector in it (2 or 3).

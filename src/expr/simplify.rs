@@ -63,9 +63,27 @@ pub(super) enum Canon {
     V(VecForm),
 }
 
+impl Canon {
+    /// The terms of the form (its numerators' and denominators' factors'), the unit of
+    /// [`MAX_FORM_WORK`].
+    fn terms(&self) -> u64 {
+        let frac = |f: &Frac| f.num.len() as u64 + f.den.iter().map(|(p, _)| p.len() as u64).sum::<u64>();
+        match self {
+            Canon::S(f) => frac(f),
+            Canon::V(v) => v.0.iter().map(|(_, f)| frac(f)).sum(),
+        }
+    }
+}
+
 /// Simplifies nodes of one graph, remembering what it has done.
 ///
 /// Keep one per graph: ids of different graphs mean different things.
+/// The most terms of canonical forms (numerators and denominators' factors, every node's
+/// form counted once) that simplifying one formula may compute: a deterministic budget on
+/// work, not a timer. Past it the formula is refused as too large ([`TypeError::TooLarge`]);
+/// the largest formulas of the shipped files and benchmarks use a few thousand.
+pub const MAX_FORM_WORK: u64 = 200_000;
+
 #[derive(Debug, Default)]
 pub struct Simplifier {
     pub(super) memo: IdMap<Rc<Canon>>,
@@ -229,9 +247,15 @@ impl Simplifier {
             stack.extend_from_slice(g.node(n).children());
         }
         todo.sort_unstable();
+        // The work budget of this formula: the terms of every form computed for it.
+        let mut work: u64 = 0;
         for n in todo {
             let node = g.node(n).clone();
             let c = self.canon_node(g, n, &node)?;
+            work = work.saturating_add(c.terms());
+            if work > MAX_FORM_WORK {
+                return Err(TypeError::TooLarge(MAX_FORM_WORK));
+            }
             self.memo.insert(n, Rc::new(c));
         }
         Ok(self.memo[&id].clone())

@@ -45,6 +45,21 @@ pub enum ReportError {
     /// ([`derive_with`](crate::derive::derive_with) with `Options { document, steps }`).
     #[error("the derivation was made without {0} (derive_with and Options)")]
     NotDerived(&'static str),
+    /// The document's formulas together passed [`document_budget`].
+    #[error(
+        "the document is too large to print: its formulas pass {0} bytes (16 MiB, and 4 KiB more \
+         per body and per constraint; docs/file-format.md, \"Limits\"); `lagrange solve` and \
+         `generate` need no document"
+    )]
+    DocumentTooLarge(usize),
+}
+
+/// The most bytes of formulas one document of `derive` prints: 16 MiB, and 4 KiB more per
+/// body and per constraint, so a scene's document may grow linearly with it (a chain of
+/// 10⁵ links prints about 1 KiB per link) but one formula repeated in every body's force
+/// cannot make it quadratic.
+pub fn document_budget(system: &System) -> usize {
+    (16 << 20) + 4096 * (system.bodies.len() + system.constraints.len())
 }
 
 /// How expressions look in one document format.
@@ -55,6 +70,9 @@ struct Doc {
     names: Names,
     /// The nodes of `names` printed so far.
     used: RefCell<FastSet<Id>>,
+    /// Bytes of formulas this document may still print ([`document_budget`]).
+    room: std::cell::Cell<usize>,
+    budget: usize,
 }
 
 impl Doc {
@@ -64,13 +82,22 @@ impl Doc {
             Format::Latex | Format::Markdown => Style::Latex,
             Format::Json => Style::Source,
         };
-        Doc { style, format, names: Names::default(), used: RefCell::default() }
+        Doc {
+            style,
+            format,
+            names: Names::default(),
+            used: RefCell::default(),
+            room: usize::MAX.into(),
+            budget: usize::MAX,
+        }
     }
 
     /// A document that prints each of `d`'s definitions as its name (none in JSON, whose
     /// expressions stand alone).
-    fn naming(format: Format, d: &Derivation) -> Doc {
+    fn naming(format: Format, d: &Derivation, budget: usize) -> Doc {
         let mut doc = Doc::new(format);
+        doc.room.set(budget);
+        doc.budget = budget;
         if format != Format::Json {
             for def in d.definitions.iter().flatten() {
                 for id in [def.written, def.simplified] {
@@ -81,8 +108,11 @@ impl Doc {
         doc
     }
 
-    fn expr(&self, g: &Graph, id: Id) -> Result<String, PrintError> {
-        print_named(g, id, self.style, &self.names, &mut self.used.borrow_mut())
+    fn expr(&self, g: &Graph, id: Id) -> Result<String, ReportError> {
+        let text = print_named(g, id, self.style, &self.names, &mut self.used.borrow_mut())?;
+        let room = self.room.get().checked_sub(text.len()).ok_or(ReportError::DocumentTooLarge(self.budget))?;
+        self.room.set(room);
+        Ok(text)
     }
 
     /// The definitions the document printed by name, each once: `d = r2 − r1`.
@@ -92,7 +122,13 @@ impl Doc {
             .definitions
             .iter()
             .flatten()
-            .filter(|def| used.contains(&def.written) || used.contains(&def.simplified))
+            .filter(|def| {
+                // The name printed for a node is the first definition's of that node (an
+                // alias `d2 = "d1"` of an earlier definition is printed as `d1`).
+                [def.written, def.simplified]
+                    .iter()
+                    .any(|id| used.contains(id) && self.names.get(id).is_some_and(|n| *n == def.name))
+            })
             .collect();
         if defs.is_empty() {
             return Ok(());
@@ -308,7 +344,7 @@ fn latex_escape(s: &str) -> String {
 
 /// The derivation as a document (text, LaTeX or Markdown).
 pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
-    let doc = Doc::naming(format, d);
+    let doc = Doc::naming(format, d, document_budget(system));
     let mut out = String::new();
     let title = if system.title.is_empty() { "Constraint forces".to_string() } else { system.title.clone() };
     match format {
@@ -544,7 +580,13 @@ impl serde::Serialize for JsonDerivation {
 /// The derivation as JSON: every expression a string in the expression language.
 pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportError> {
     let g = &d.graph;
-    let e = |id: Id| print(g, id, Style::Source);
+    let budget = document_budget(system);
+    let room = std::cell::Cell::new(budget);
+    let e = |id: Id| -> Result<String, ReportError> {
+        let text = print(g, id, Style::Source)?;
+        room.set(room.get().checked_sub(text.len()).ok_or(ReportError::DocumentTooLarge(budget))?);
+        Ok(text)
+    };
     let mut constraints = Vec::new();
     for (k, dc) in d.constraints.iter().enumerate() {
         let c = &system.constraints[k];
@@ -570,7 +612,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
     for (k, j, id) in entries {
         a.push(json!({ "row": k, "col": j, "expr": e(id)? }));
     }
-    let b: Result<Vec<String>, PrintError> = d.b.iter().map(|&id| e(id)).collect();
+    let b: Result<Vec<String>, ReportError> = d.b.iter().map(|&id| e(id)).collect();
     let mut out = json!({
         "title": system.title,
         "dimension": system.dim(),
