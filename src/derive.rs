@@ -39,7 +39,7 @@ use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
 use crate::expr::graph::FastMap;
 use crate::expr::shape::{Reuse, Shaper};
-use crate::expr::{Graph, Id, Rational, Role, Simplifier, Symbol, Ty, TypeError};
+use crate::expr::{Graph, Id, Node, Rational, Role, Simplifier, Symbol, Ty, TypeError};
 use crate::model::system::{BuildError, System};
 use std::collections::HashMap;
 
@@ -101,6 +101,18 @@ pub struct Derivation {
     /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`, and
     /// αᵢ = (τᵢ + τ_c,ᵢ)/Iᵢ for rigid bodies' angular accelerations (`T_c`, `T_c_<body>`).
     pub newton: Option<Vec<Id>>,
+    /// With [`Options::document`]: the file's definitions the documents print as names.
+    pub definitions: Option<Vec<Definition>>,
+}
+
+/// A `[definitions]` entry as the documents show it: `d` for `r2 − r1`.
+#[derive(Clone, Debug)]
+pub struct Definition {
+    pub name: String,
+    /// The definition as lowered (what each use of the name is in the file's formulas).
+    pub written: Id,
+    /// Its simplified form, as the derived formulas contain it.
+    pub simplified: Id,
 }
 
 /// What [`derive_with`] derives beyond the formulas (the numbers need none of it).
@@ -139,6 +151,24 @@ pub enum DeriveError {
     ZeroGradient(String),
     #[error("internal type error: {0}")]
     Type(#[from] TypeError),
+    /// A formula passed the simplifier's work budget (`expr::simplify::MAX_FORM_WORK`).
+    #[error(
+        "{what} is too large to derive: one of its formulas needs more than {work} terms of work \
+         to simplify (the limit of docs/file-format.md, \"Limits\"); write it in a smaller form, \
+         or split it with [definitions] and more constraints"
+    )]
+    TooLarge { what: String, work: u64 },
+}
+
+/// `e`, with a budget error said of `what` (a constraint, the multiplier equation).
+fn located(e: DeriveError, what: impl FnOnce() -> String) -> DeriveError {
+    match e {
+        DeriveError::Type(TypeError::TooLarge(work)) => DeriveError::TooLarge { what: what(), work },
+        DeriveError::Diff { error: DiffError::Type(TypeError::TooLarge(work)), name } => {
+            DeriveError::TooLarge { what: format!("constraint `{name}`"), work }
+        }
+        e => e,
+    }
 }
 
 /// Runs DESIGN.md steps 1–5 on every constraint of `system`.
@@ -151,6 +181,11 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     let mut graph = system.graph.clone();
     let mut simplifier = Simplifier::new();
     let (g, s) = (&mut graph, &mut simplifier);
+    // Differences keep the orientation the file wrote them in (`r2 − r1`).
+    let written: Vec<Id> =
+        system.constraints.iter().map(|c| c.c).chain(system.definitions.iter().map(|d| d.1)).collect();
+    let forces: Vec<Id> = system.bodies.iter().map(|b| b.nodes.force).collect();
+    s.keep_orientations(g, &written, &forces);
     let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
     // Constraints already derived, by shape: a repeat (the next link of a chain) is the
     // earlier derivation with the bodies renamed.
@@ -165,9 +200,10 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         // A link of a chain adds about 60 nodes to the graph.
         g.reserve(64 * system.constraints.len());
     }
+    let name = |k: usize| move || format!("constraint `{}`", system.constraints[k].name);
     for k in 0..system.constraints.len() {
         if !reuse {
-            constraints.push(derive_constraint(system, g, s, k)?);
+            constraints.push(derive_constraint(system, g, s, k).map_err(|e| located(e, name(k)))?);
             continue;
         }
         let shape = shaper.shape(g, &[system.constraints[k].c]);
@@ -178,23 +214,25 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         let dc = match repeat {
             Some(dc) => dc,
             None => {
-                let dc = derive_constraint(system, g, s, k)?;
+                let dc = derive_constraint(system, g, s, k).map_err(|e| located(e, name(k)))?;
                 derived.insert(shape.key, (k, Reuse::new(Roots::of(&dc), shape.symbols, true)));
                 dc
             }
         };
         constraints.push(dc);
     }
-    let (a, b) = assemble(system, g, s, &constraints, reuse)?;
+    let (a, b) = assemble(system, g, s, &constraints, reuse)
+        .map_err(|e| located(e.into(), || "the multiplier equation A λ + b = 0".to_string()))?;
     let (mut lambda, mut forces, mut torques) = (None, None, None);
     if let [only] = constraints.as_slice() {
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
-        let l = s.negated_quotient(g, b[0], a00)?;
+        let closed_form = || format!("λ and the forces of constraint `{}`", system.constraints[0].name);
+        let l = s.negated_quotient(g, b[0], a00).map_err(|e| located(e.into(), closed_form))?;
         let mut f = Vec::with_capacity(only.jacobian.len());
         for &(body, j) in &only.jacobian {
             let product = g.mul(vec![l, j])?;
-            f.push((body, s.simplify(g, product)?));
+            f.push((body, s.simplify(g, product).map_err(|e| located(e.into(), closed_form))?));
         }
         let mut t = Vec::with_capacity(only.angular.len());
         for &(body, j) in &only.angular {
@@ -206,6 +244,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         torques = Some(t);
     }
     let newton = if options.steps { Some(newton(system, g, &constraints)?) } else { None };
+    let definitions = if options.document { Some(definitions(system, g, s)?) } else { None };
     let (multipliers, force_sums, torque_sums) = if repeats && options.document {
         let (multipliers, sums, torque_sums) = force_sums(system, g, s, &constraints)?;
         (Some(multipliers), Some(sums), Some(torque_sums))
@@ -225,7 +264,26 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         force_sums,
         torque_sums,
         newton,
+        definitions,
     })
+}
+
+/// The file's definitions as the documents name them: each with its node as lowered and as
+/// laid out (both are printed as the name), those that are more than a symbol or a number.
+fn definitions(system: &System, g: &mut Graph, s: &mut Simplifier) -> Result<Vec<Definition>, TypeError> {
+    let mut out = Vec::with_capacity(system.definitions.len());
+    for (name, id) in &system.definitions {
+        let trivial = |g: &Graph, x: Id| matches!(g.node(x), Node::Sym(_) | Node::Num(_));
+        if trivial(g, *id) {
+            continue;
+        }
+        let simplified = s.simplify(g, *id)?;
+        if trivial(g, simplified) {
+            continue;
+        }
+        out.push(Definition { name: name.clone(), written: *id, simplified });
+    }
+    Ok(out)
 }
 
 /// Each C̈ with aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ for every body it involves, in new vector symbols F_c,ᵢ.

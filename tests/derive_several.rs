@@ -38,12 +38,12 @@ fn text_names_every_entry_and_sums_the_forces() {
         &text,
         &[
             "A[rod1, rod1] = (r1·r1)/m1",
-            "A[rod1, rod2] = (r1·(r1 − r2))/m1",
+            "A[rod1, rod2] = −(r1·(r2 − r1))/m1",
             "A[rod2, rod2] = ",
             "b[rod1] = (m1 v1·v1 + F1·r1)/m1",
             "b[rod2] = ",
-            "F_c[upper] = λ_rod1 r1 + λ_rod2 (r1 − r2)",
-            "F_c[lower] = −λ_rod2 (r1 − r2)",
+            "F_c[upper] = λ_rod1 r1 − λ_rod2 (r2 − r1)",
+            "F_c[lower] = λ_rod2 (r2 − r1)",
         ],
         "derive",
     );
@@ -52,7 +52,7 @@ fn text_names_every_entry_and_sums_the_forces() {
 }
 
 /// Neighbouring links of a chain share a body: their A entry is the dot product of the two
-/// link vectors, written so (`(r1 − r2)·(r2 − r3)`, a bilinear form of rank two), not expanded
+/// link vectors as the file writes them (`(r2 − r1)·(r3 − r2)`, a bilinear form of rank two), not expanded
 /// into four dot products that cancel in floating point when the links are short and far from
 /// the origin. The later links are the first ones renamed (`expr::shape`) and read the same.
 #[test]
@@ -61,11 +61,11 @@ fn a_chain_couples_neighbouring_links_by_one_dot_product() {
     assert_all(
         &text,
         &[
-            "A[link1, link2] = (r1·(r1 − r2))/m",
-            "A[link2, link3] = −((r1 − r2)·(r2 − r3))/m",
-            "A[link3, link4] = −((r2 − r3)·(r3 − r4))/m",
-            "A[link4, link5] = −((r3 − r4)·(r4 − r5))/m",
-            "A[link5, link5] = 2 ((r4 − r5)·(r4 − r5))/m",
+            "A[link1, link2] = −(r1·(r2 − r1))/m",
+            "A[link2, link3] = −((r2 − r1)·(r3 − r2))/m",
+            "A[link3, link4] = −((r3 − r2)·(r4 − r3))/m",
+            "A[link4, link5] = −((r4 − r3)·(r5 − r4))/m",
+            "A[link5, link5] = 2 ((r5 − r4)·(r5 − r4))/m",
         ],
         "chain",
     );
@@ -82,15 +82,15 @@ fn steps_show_each_constraint_then_the_system() {
         "Ċ[rod2] = ",
         "C̈[rod2] = ",
         "J[rod1, upper] = r1",
-        "J[rod2, upper] = r1 − r2",
-        "J[rod2, lower] = −(r1 − r2)",
+        "J[rod2, upper] = −(r2 − r1)",
+        "J[rod2, lower] = r2 − r1",
         "c[rod1] = v1·v1",
-        "c[rod2] = (v1 − v2)·(v1 − v2)",
+        "c[rod2] = (v2 − v1)·(v2 − v1)",
         "A[rod1, rod2] = ",
         "b[rod2] = ",
         "A[rod1, rod1] λ_rod1 + A[rod1, rod2] λ_rod2 = −b[rod1]",
         "A[rod2, rod1] λ_rod1 + A[rod2, rod2] λ_rod2 = −b[rod2]",
-        "F_c[upper] = λ_rod1 r1 + λ_rod2 (r1 − r2)",
+        "F_c[upper] = λ_rod1 r1 − λ_rod2 (r2 − r1)",
     ];
     assert_all(&text, &needles, "derive --steps");
     // The steps come in the article's order.
@@ -121,7 +121,7 @@ fn latex_and_markdown_carry_the_same_entries() {
             "b_{\\mathrm{rod1}} = ",
             "b_{\\mathrm{rod2}} = ",
             "\\vec{F}_{c,\\mathrm{upper}} = \\lambda_{\\mathrm{rod1}}",
-            "\\vec{F}_{c,\\mathrm{lower}} = -\\lambda_{\\mathrm{rod2}}",
+            "\\vec{F}_{c,\\mathrm{lower}} = \\lambda_{\\mathrm{rod2}}",
         ];
         assert_all(&summary, &entries, format);
         assert_all(&steps, &entries, format);

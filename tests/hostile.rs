@@ -271,6 +271,21 @@ fn run(args: &[&std::ffi::OsStr]) -> (Option<i32>, String, String) {
     )
 }
 
+// ---- Work that is not bounded (issue 17): budgets on work, not timers -----------------------
+// Each file below is generated here; each run ends because a count runs out (terms of
+// canonical forms, bits of coefficients, bytes of a document), never because of a clock.
+
+/// `lagrange ARGS… FILE` on `text`: exit code, stdout, stderr.
+fn run_on(tag: &str, text: &str, args: &[&str]) -> (Option<i32>, String, String) {
+    let file = TempFile::new(tag, text.as_bytes());
+    let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).args(args).arg(&file.0).output().expect("binary runs");
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 fn bead_scene() -> String {
     bead_with("dot(r, r) = l^2") + "[scene]\ninitial = { r = [1.0, 0.0], v = [0.0, 1.0] }\n"
 }
@@ -541,4 +556,81 @@ fn check_compares_huge_values_without_overflow() {
         assert!(out.contains(verdict), "{entry}: expected {verdict}:\n{out}{err}");
         assert_eq!(code, Some(if right { 0 } else { 1 }), "{entry}: {out}{err}");
     }
+}
+
+/// A bead file with `[definitions]` `defs` and the constraint `expr`.
+fn bead_with_definitions(defs: &[(String, String)], expr: &str) -> String {
+    let mut text = bead_with(expr);
+    let table: String = defs.iter().map(|(k, v)| format!("{k} = \"{v}\"\n")).collect();
+    text = text.replacen("[[bodies]]", &format!("[definitions]\n{table}[[bodies]]"), 1);
+    text
+}
+
+/// `n` bodies `b1…bn` (positions `r1…rn`) and one constraint `expr`.
+fn bodies_with(n: usize, expr: &str) -> String {
+    let mut text = String::from("title = \"many\"\ndimension = 2\n[parameters]\nm = 1.0\n");
+    for i in 1..=n {
+        text += &format!(
+            "[[bodies]]\nname = \"b{i}\"\nposition = \"r{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\nmass = \"m\"\nforce = \"F{i}\"\n"
+        );
+    }
+    text + &format!("[[constraints]]\nname = \"all\"\nexpr = \"{expr}\"\n")
+}
+
+#[test]
+fn a_formula_past_the_work_budget_is_refused_by_its_constraint() {
+    // d_i = sin(d_{i-1}) d_{i-1} + d_{i-1}², twelve deep: C̈ passes 200 000 terms of work
+    // (it used to take > 20 s and 2 GB).
+    let mut defs = vec![("d0".to_string(), "r.x".to_string())];
+    for i in 1..=12 {
+        defs.push((format!("d{i}"), format!("sin(d{j})*d{j} + d{j}^2", j = i - 1)));
+    }
+    let (code, stdout, stderr) = run_on("definitions12", &bead_with_definitions(&defs, "d12 = 0"), &["derive"]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stdout.is_empty());
+    assert!(stderr.contains("constraint `wire` is too large to derive"), "{stderr}");
+    assert!(stderr.contains("\"Limits\"") && stderr.lines().count() <= 3, "{stderr}");
+}
+
+#[test]
+fn a_document_past_its_budget_is_refused_not_written() {
+    // One constraint summing 2 000 dot(rᵢ, rᵢ): each body's closed-form force repeats λ
+    // (175 MB of text before); the document's budget is 16 MiB + 4 KiB per body.
+    let sum: Vec<String> = (1..=2000).map(|i| format!("dot(r{i}, r{i})")).collect();
+    let text = bodies_with(2000, &format!("{} = 1", sum.join(" + ")));
+    for format in ["text", "json"] {
+        let (code, stdout, stderr) = run_on("dots2000", &text, &["derive", "--format", format]);
+        assert_eq!(code, Some(1), "{format}: {stderr}");
+        assert!(stdout.is_empty(), "{format}: no half document");
+        assert!(stderr.contains("the document is too large to print"), "{format}: {stderr}");
+    }
+}
+
+#[test]
+fn exact_powers_and_long_chains_end_with_a_result() {
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        // Powers past 4 096 bits stay powers: nothing computes 3^1000000.
+        ("pow3", bead_with("r.x - 3^1000000 = 0"), vec!["derive"]),
+        ("pow23", bead_with("r.x - (2/3)^100000 = 0"), vec!["derive"]),
+        // (r.y + 1.827 r.x)^-100000: no 1.827^100000 is expanded (> 60 s before).
+        ("negpow", bead_with("(r.y + 1.827*r.x)^-100000 = 1"), vec!["derive"]),
+        ("negpow_gen", bead_with("(r.y + 1.827*r.x)^-100000 = 1"), vec!["generate", "--specialize"]),
+        // 60 nested square roots.
+        ("sqrt60", bead_with(&format!("{}r.x^2 + 1{} = 2", "sqrt(".repeat(60), ")".repeat(60))), vec!["derive"]),
+    ];
+    for (tag, text, args) in cases {
+        let (code, stdout, stderr) = run_on(tag, &text, &args);
+        assert_eq!(code, Some(0), "{tag}: {stderr}");
+        assert!(!stdout.is_empty() && stdout.len() < 4 << 20, "{tag}: {} bytes", stdout.len());
+    }
+    let (_, stdout, _) = run_on("pow3_doc", &bead_with("r.x - 3^1000000 = 0"), &["derive"]);
+    assert!(stdout.contains("C = r.x − 3¹⁰⁰⁰⁰⁰⁰"), "{stdout}");
+    // 3 000 chained aliases d_i = d_{i-1}, unused: linear, and the document lists none of them.
+    let mut defs = vec![("d0".to_string(), "r.x".to_string())];
+    for i in 1..=3000 {
+        defs.push((format!("d{i}"), format!("d{}", i - 1)));
+    }
+    let (code, stdout, stderr) = run_on("aliases", &bead_with_definitions(&defs, "dot(r, r) = l^2"), &["derive"]);
+    assert_eq!(code, Some(0), "{stderr}");
+    assert!(!stdout.contains("d1 =") && stdout.len() < 2000, "{stdout}");
 }

@@ -416,6 +416,10 @@ pub enum TypeError {
     Arity { name: &'static str, expected: usize, found: usize },
     #[error("`{name}` exists only in 2D files for now")]
     OnlyIn2d { name: &'static str },
+    /// Simplifying one formula passed the work budget
+    /// ([`MAX_FORM_WORK`](crate::expr::simplify::MAX_FORM_WORK) terms of canonical forms).
+    #[error("too large to simplify: more than {0} terms of work on one formula")]
+    TooLarge(u64),
 }
 
 /// The arena. `dim` is the dimension of every vector in it (2 or 3).

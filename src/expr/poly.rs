@@ -11,8 +11,9 @@
 //! people read is applied only when the form is turned back into a graph (`simplify`).
 //!
 //! Every operation that can grow the form (products, powers, common denominators) is
-//! bounded by [`MAX_TERMS`]: past it the operation returns `None` and the caller keeps that
-//! piece unexpanded. Nothing here is exponential.
+//! bounded by [`MAX_TERMS`] and its coefficients by [`MAX_COEFFICIENT_BITS`]: past either the
+//! operation returns `None` and the caller keeps that piece unexpanded. Nothing here is
+//! exponential, and no coefficient grows to millions of digits (`(x + 2 y)²⁰⁰⁰`).
 
 use super::graph::Id;
 use super::num::Rational;
@@ -21,6 +22,11 @@ use std::cmp::Ordering;
 
 /// The most terms a polynomial may reach by expansion before it is kept unexpanded.
 pub const MAX_TERMS: usize = 2000;
+
+/// The largest coefficient (numerator and denominator bits together) a product or power
+/// may make before it is kept unexpanded: about 1 200 decimal digits, as for literals
+/// ([`super::num::MAX_BITS`]).
+pub const MAX_COEFFICIENT_BITS: u64 = super::num::MAX_BITS;
 
 /// The most terms [`Poly::sqrt_exact`] looks at: a root costs a product per term, and the
 /// squares a layout meets (`((r1 − p)·v1)²`, 3 to 10 terms) are far below.
@@ -328,6 +334,11 @@ impl Poly {
         if self.len().saturating_mul(other.len()) > 4 * MAX_TERMS {
             return None;
         }
+        // A product's coefficient is a sum of at most min(len) products of two coefficients.
+        let sum_bits = 64 - (self.len().min(other.len()) as u64).leading_zeros() as u64;
+        if self.max_bits().saturating_add(other.max_bits()).saturating_add(sum_bits) > MAX_COEFFICIENT_BITS {
+            return None;
+        }
         let (small, big) = if self.len() <= other.len() { (self, other) } else { (other, self) };
         // One term (often a constant): every product keeps the order, no merging.
         if let [(m, q)] = small.0.as_slice() {
@@ -353,6 +364,13 @@ impl Poly {
         if n == 1 {
             return Some(self.clone());
         }
+        // The coefficients of p^n have at least n times the bits of p's leading one.
+        if self
+            .leading()
+            .is_some_and(|(_, q)| q.bits().saturating_sub(2).saturating_mul(u64::from(n)) > MAX_COEFFICIENT_BITS)
+        {
+            return None;
+        }
         let mut result = Poly::constant(Rational::ONE);
         let mut base = self.clone();
         let mut n = n;
@@ -366,6 +384,11 @@ impl Poly {
             }
         }
         Some(result)
+    }
+
+    /// The most bits of any coefficient (0 for zero).
+    pub fn max_bits(&self) -> u64 {
+        self.0.iter().map(|(_, q)| q.bits()).max().unwrap_or(0)
     }
 
     /// The positive rational gcd of the coefficients (1 for zero).

@@ -11,19 +11,74 @@
 //! - a vector groups its atoms by common coefficient: `−(m v·v + F·r)/(r·r) r`,
 //!   `2 (r1 − r2)`, unit vectors as one literal `[x, y]`;
 //! - terms are ordered by weighted degree, kinematic atoms (positions, velocities, …) before
-//!   parameters, so `r·r − l²`, `m v·v + F·r`, `2 v·v + 2 r·a` read as in the article.
+//!   parameters, so `r·r − l²`, `m v·v + F·r`, `2 v·v + 2 r·a` read as in the article;
+//! - a difference of vectors the user wrote (`r2 − r1` in a constraint or a definition) keeps
+//!   the user's orientation and order wherever the layout writes that combination or its
+//!   negation ([`Simplifier::keep_orientations`]); others start with a positive entry.
 //!
 //! Whatever is built here simplifies back to the same canonical form (tested), so
 //! `simplify` is idempotent.
 
-use super::graph::{FastMap, Graph, Id, Node, Role, TypeError};
+use super::graph::{FastMap, Graph, Id, Marks, Node, Role, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, MAX_SQUARE_ROOT_TERMS, Mono, Poly, push_factor};
 use super::simplify::{Canon, Simplifier, VAtom, VecForm};
 use smallvec::SmallVec;
 use std::cmp::Ordering;
 
+/// Vector combinations as the user wrote them, by their canonical form: the primitive
+/// integer combination in atom order with a positive first entry (`r1 − r2`) → the user's
+/// primitive combination in the user's order and sign (`r2 − r1`).
+pub(crate) type Orientations = FastMap<Vec<(Id, Rational)>, Vec<(Id, Rational)>>;
+
 impl Simplifier {
+    /// Remembers every sum of two or more vector atoms with constant coefficients under
+    /// `roots` (`r2 - r1` as lowered from a constraint or a definition), so that the
+    /// layout writes that combination, or its negation, as the user did: `(r2 − r1)·(v2 − v1)`,
+    /// not `(r1 − r2)·(v1 − v2)`. The value is the same either way; only the sign taken out
+    /// and the order of the terms change. Call it before simplifying (the layout is
+    /// memoised). One walk over the nodes under `roots`, each visited once.
+    ///
+    /// Positions' differences carry their orientation to the velocities and accelerations
+    /// (`r2 − r1` makes `v2 − v1` and `a2 − a1`), and to the bodies' forces (`F2 − F1`),
+    /// `forces` being each body's force node by body index.
+    pub fn keep_orientations(&mut self, g: &mut Graph, roots: &[Id], forces: &[Id]) {
+        let mut seen: Marks = Marks::default();
+        seen.clear();
+        let mut stack: Vec<Id> = roots.to_vec();
+        while let Some(id) = stack.pop() {
+            if !seen.insert(id.index()) {
+                continue;
+            }
+            let node = g.node(id);
+            if let Node::Add(xs) = node
+                && g.ty(id) == Ty::Vector
+                && let Some(written) = constant_combination(g, xs)
+            {
+                let of_forces = forces_combination(g, &written, forces);
+                let mut next = Some(written);
+                while let Some(written) = next.take() {
+                    next = derivative_combination(g, &written);
+                    self.remember_orientation(g, written);
+                }
+                if let Some(written) = of_forces {
+                    self.remember_orientation(g, written);
+                }
+            }
+            stack.extend_from_slice(g.node(id).children());
+        }
+    }
+
+    /// `written` (a combination as the user wrote it) by its canonical form; the first
+    /// one written wins.
+    fn remember_orientation(&mut self, g: &Graph, written: Vec<(Id, Rational)>) {
+        let mut canonical = written.clone();
+        canonical.sort_by(|x, y| g.cmp_nodes(x.0, y.0));
+        let (canonical, _) = canonical_primitive(canonical);
+        let (written, _) = primitive_keeping_sign(written);
+        self.orientations.entry(canonical).or_insert(written);
+    }
+
     /// The readable graph of a canonical form.
     pub(super) fn build(&mut self, g: &mut Graph, c: &Canon) -> Result<Id, TypeError> {
         match c {
@@ -183,7 +238,7 @@ impl Simplifier {
             }
         }
         let mut replaced: FastMap<usize, Option<(Rational, Mono, Id)>> = FastMap::default();
-        for (indices, factored) in bilinear_groups(g, &terms)? {
+        for (indices, factored) in bilinear_groups(g, &terms, &self.orientations)? {
             for (n, &i) in indices.iter().enumerate() {
                 replaced.insert(i, if n == 0 { Some(factored.clone()) } else { None });
             }
@@ -258,12 +313,15 @@ impl Simplifier {
                 kk = kk.neg();
             }
             let inv = kk.recip().unwrap_or(Rational::ONE);
-            // Exact room, as the factors above.
-            let mut parts = Vec::with_capacity(members.len());
-            for (a, k) in &members {
-                parts.push(term1(g, &k.mul(&inv), *a)?);
-            }
-            let vector = g.add(parts)?;
+            let combination: Vec<(Id, Rational)> = members.iter().map(|(a, k)| (*a, k.mul(&inv))).collect();
+            // A difference the user wrote keeps the user's orientation: `−(r2 − r1)`.
+            let (combination, sign) = if combination.len() >= 2 {
+                primitive(combination, &self.orientations)
+            } else {
+                (combination, Rational::ONE)
+            };
+            let kk = kk.mul(&sign);
+            let vector = vector_sum(g, &combination)?;
             let scalar = self.build_frac(g, &shape.scale(&kk))?;
             nodes.push(times(g, scalar, vector)?);
         }
@@ -487,6 +545,7 @@ struct DotTerm {
 fn bilinear_groups(
     g: &mut Graph,
     terms: &[(Mono, Rational)],
+    orientations: &Orientations,
 ) -> Result<Vec<(Vec<usize>, (Rational, Mono, Id))>, TypeError> {
     // Group by cofactor: the monomial without its single dot atom.
     let mut by_cofactor: Vec<(Mono, Vec<DotTerm>)> = Vec::new();
@@ -512,7 +571,7 @@ fn bilinear_groups(
                 continue;
             }
             let members: Vec<&DotTerm> = component.iter().map(|&i| &list[i]).collect();
-            if let Some((k, a, b)) = factor_bilinear(g, &members) {
+            if let Some((k, a, b)) = factor_bilinear(g, &members, orientations) {
                 let ua = vector_sum(g, &a)?;
                 let wb = vector_sum(g, &b)?;
                 let (x, y) = if g.cmp_nodes(a[0].0, b[0].0).is_le() { (ua, wb) } else { (wb, ua) };
@@ -563,7 +622,11 @@ fn components(list: &[DotTerm]) -> Vec<Vec<usize>> {
 /// Writes `Σ c (u·w)` as `k (Σ aᵢ uᵢ)·(Σ bⱼ wⱼ)` when the bilinear form has rank one, with
 /// `a`, `b` primitive integer vectors whose first entry (in reading order) is positive.
 #[allow(clippy::type_complexity)]
-fn factor_bilinear(g: &Graph, terms: &[&DotTerm]) -> Option<(Rational, Vec<(Id, Rational)>, Vec<(Id, Rational)>)> {
+fn factor_bilinear(
+    g: &Graph,
+    terms: &[&DotTerm],
+    orientations: &Orientations,
+) -> Option<(Rational, Vec<(Id, Rational)>, Vec<(Id, Rational)>)> {
     let mut atoms: Vec<Id> = terms.iter().flat_map(|t| [t.u, t.w]).collect();
     atoms.sort_by(|x, y| g.cmp_nodes(*x, *y));
     atoms.dedup();
@@ -573,7 +636,7 @@ fn factor_bilinear(g: &Graph, terms: &[&DotTerm]) -> Option<(Rational, Vec<(Id, 
             .find(|t| (t.u == x && t.w == y) || (t.u == y && t.w == x))
             .map_or(Rational::ZERO, |t| t.coef.clone())
     };
-    if let Some(found) = factor_symmetric_or_bipartite(g, terms, &atoms, &coef) {
+    if let Some(found) = factor_symmetric_or_bipartite(g, terms, &atoms, &coef, orientations) {
         return Some(found);
     }
     // A vector common to every term: u·(Σ cⱼ wⱼ), as in r1·r1 − r1·r2 = r1·(r1 − r2).
@@ -581,7 +644,7 @@ fn factor_bilinear(g: &Graph, terms: &[&DotTerm]) -> Option<(Rational, Vec<(Id, 
         let mut other: Vec<(Id, Rational)> =
             terms.iter().map(|t| (if t.u == common { t.w } else { t.u }, t.coef.clone())).collect();
         other.sort_by(|x, y| g.cmp_nodes(x.0, y.0));
-        let (b, sb) = primitive(other);
+        let (b, sb) = primitive(other, orientations);
         return Some((sb, vec![(common, Rational::ONE)], b));
     }
     // Two different sums, sharing atoms: (r1 − r2)·(r2 − r3).
@@ -589,8 +652,8 @@ fn factor_bilinear(g: &Graph, terms: &[&DotTerm]) -> Option<(Rational, Vec<(Id, 
     let m = |x: Id, y: Id| if x == y { coef(x, x) } else { coef(x, y).mul(&half) };
     let p = *atoms.iter().find(|&&x| !coef(x, x).is_zero())?;
     let (k, a, b) = rank_two(&atoms, p, &m)?;
-    let (a, sa) = primitive(a);
-    let (b, sb) = primitive(b);
+    let (a, sa) = primitive(a, orientations);
+    let (b, sb) = primitive(b, orientations);
     Some((k.mul(&sa).mul(&sb), a, b))
 }
 
@@ -600,6 +663,7 @@ fn factor_symmetric_or_bipartite(
     terms: &[&DotTerm],
     atoms: &[Id],
     coef: &dyn Fn(Id, Id) -> Rational,
+    orientations: &Orientations,
 ) -> Option<(Rational, Vec<(Id, Rational)>, Vec<(Id, Rational)>)> {
     let _ = g;
     let (k, a, b) = if terms.iter().any(|t| t.u == t.w) {
@@ -657,8 +721,8 @@ fn factor_symmetric_or_bipartite(
         }
         (k, a, b)
     };
-    let (a, sa) = primitive(a);
-    let (b, sb) = primitive(b);
+    let (a, sa) = primitive(a, orientations);
+    let (b, sb) = primitive(b, orientations);
     let k = k.mul(&sa).mul(&sb);
     Some((k, a, b))
 }
@@ -700,8 +764,70 @@ fn rank_two(
     Some((mpp.recip()?, side(-1), side(1)))
 }
 
-/// `v = s · v'` with `v'` integer, gcd 1, first entry positive; zero entries dropped.
-fn primitive(v: Vec<(Id, Rational)>) -> (Vec<(Id, Rational)>, Rational) {
+/// `Σ qᵢ uᵢ` of a sum's terms when each is a vector atom `u`, `−u` or `q u` with `q` a number,
+/// over two or more different atoms.
+fn constant_combination(g: &Graph, terms: &[Id]) -> Option<Vec<(Id, Rational)>> {
+    let atom = |x: Id| !matches!(g.node(x), Node::Add(_) | Node::Mul(_) | Node::Vector(_) | Node::Num(_));
+    let mut out: Vec<(Id, Rational)> = Vec::with_capacity(terms.len());
+    for &t in terms {
+        let (u, q) = match g.node(t) {
+            Node::Mul(xs) if xs.len() == 2 && atom(xs[1]) => (xs[1], g.as_num(xs[0])?.clone()),
+            _ if atom(t) => (t, Rational::ONE),
+            _ => return None,
+        };
+        if q.is_zero() || out.iter().any(|(v, _)| *v == u) {
+            return None;
+        }
+        out.push((u, q));
+    }
+    (out.len() >= 2).then_some(out)
+}
+
+/// The same combination of the atoms' time derivatives, when every atom is a symbol that
+/// has one (positions → velocities → accelerations).
+fn derivative_combination(g: &mut Graph, v: &[(Id, Rational)]) -> Option<Vec<(Id, Rational)>> {
+    let mut out = Vec::with_capacity(v.len());
+    for (u, q) in v {
+        let Node::Sym(s) = *g.node(*u) else { return None };
+        let d = g.symbol(s).derivative?;
+        out.push((g.sym(d), q.clone()));
+    }
+    Some(out)
+}
+
+/// The same combination of the bodies' forces, when every atom is a body's position.
+fn forces_combination(g: &Graph, v: &[(Id, Rational)], forces: &[Id]) -> Option<Vec<(Id, Rational)>> {
+    let mut out = Vec::with_capacity(v.len());
+    for (u, q) in v {
+        let Node::Sym(s) = *g.node(*u) else { return None };
+        let Role::Position { body } = g.symbol(s).role else { return None };
+        out.push((*forces.get(body)?, q.clone()));
+    }
+    Some(out)
+}
+
+/// `v = s · v'` with `v'` integer and gcd 1, `s > 0`: the combination as written, scaled.
+fn primitive_keeping_sign(v: Vec<(Id, Rational)>) -> (Vec<(Id, Rational)>, Rational) {
+    let (p, s) = canonical_primitive(v);
+    if s.is_negative() { (p.into_iter().map(|(x, q)| (x, q.neg())).collect(), s.neg()) } else { (p, s) }
+}
+
+/// `v = s · v'` with `v'` integer, gcd 1, first entry positive, zero entries dropped; or,
+/// when `±v'` is a combination the user wrote (`orientations`), `v'` as the user wrote it.
+fn primitive(v: Vec<(Id, Rational)>, orientations: &Orientations) -> (Vec<(Id, Rational)>, Rational) {
+    let (p, s) = canonical_primitive(v);
+    match orientations.get(&p) {
+        Some(written) if written.len() == p.len() => {
+            // The user's sign: the entry of p's first atom in what the user wrote.
+            let same = written.iter().find(|(x, _)| *x == p[0].0).is_some_and(|(_, q)| !q.is_negative());
+            (written.clone(), if same { s } else { s.neg() })
+        }
+        _ => (p, s),
+    }
+}
+
+/// [`primitive`] without the user's orientations.
+fn canonical_primitive(v: Vec<(Id, Rational)>) -> (Vec<(Id, Rational)>, Rational) {
     let v: Vec<(Id, Rational)> = v.into_iter().filter(|(_, q)| !q.is_zero()).collect();
     let mut s = v.first().map_or(Rational::ONE, |(_, q)| q.abs());
     for (_, q) in &v[1.min(v.len())..] {
@@ -763,7 +889,7 @@ mod tests {
                     continue;
                 }
                 let refs: Vec<&DotTerm> = terms.iter().collect();
-                let Some((k, x, y)) = factor_bilinear(&g, &refs) else {
+                let Some((k, x, y)) = factor_bilinear(&g, &refs, &Orientations::default()) else {
                     panic!("{a:?}·{b:?} was not factored");
                 };
                 // k (Σ xᵢ uᵢ)·(Σ yⱼ uⱼ), expanded, is the form again.

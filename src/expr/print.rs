@@ -5,13 +5,16 @@
 //! can be read back by lagrange or any evaluator. `Style::Text` and `Style::Latex` are for
 //! people: `−(m v·v + F·r)/(r·r) r`, `\frac{…}{…}`, `\vec{r}`.
 //!
+//! Text and LaTeX can print given nodes as names ([`print_named`]): a document prints a
+//! file's definition `d = r2 − r1` as `d` wherever that node occurs.
+//!
 //! Printing expands the graph into a tree, so a graph with heavy sharing could print to an
 //! enormous string; [`MAX_OUTPUT`] bounds that and [`MAX_PRINT_DEPTH`] bounds recursion.
 //!
 //! Not here: documents (derivation layouts live in `report`), numbers' evaluation.
 
 use super::func::Notation;
-use super::graph::{Graph, Id, Node, Ty};
+use super::graph::{FastMap, FastSet, Graph, Id, Node, Ty};
 use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
 use super::present::is_negation;
@@ -40,12 +43,29 @@ pub enum PrintError {
     TooLarge,
 }
 
+/// Nodes to print as a name in text and LaTeX (a definition's name for its expression).
+pub type Names = FastMap<Id, String>;
+
 /// Prints `id` in `style`.
 pub fn print(g: &Graph, id: Id, style: Style) -> Result<String, PrintError> {
+    print_named(g, id, style, &Names::default(), &mut FastSet::default())
+}
+
+/// Prints `id` in `style`, each node of `names` as its name in text and LaTeX (as a symbol
+/// of the node's type: `d`, `\vec{d}`), adding the nodes it printed so to `used`; the
+/// expression language ignores `names`, so what it prints still stands alone and parses back.
+pub fn print_named(
+    g: &Graph,
+    id: Id,
+    style: Style,
+    names: &Names,
+    used: &mut FastSet<Id>,
+) -> Result<String, PrintError> {
     if g.depth(id) > MAX_PRINT_DEPTH {
         return Err(PrintError::TooDeep(g.depth(id)));
     }
-    let mut p = Printer { g, out: String::new() };
+    let names = Some(names).filter(|n| !n.is_empty() && style != Style::Source);
+    let mut p = Printer { g, out: String::new(), names, used };
     match style {
         Style::Source => p.source(id)?,
         Style::Text | Style::Latex => p.human(id, style, 0)?,
@@ -53,9 +73,20 @@ pub fn print(g: &Graph, id: Id, style: Style) -> Result<String, PrintError> {
     Ok(p.out)
 }
 
+/// A symbol's name as `style` writes it: `θ2`, `\\vec{d}`, `lambda_rod1`.
+pub fn symbol_name(name: &str, vector: bool, style: Style) -> String {
+    match style {
+        Style::Source => name.to_string(),
+        Style::Text => text_name(name),
+        Style::Latex => latex_name(name, vector),
+    }
+}
+
 struct Printer<'g> {
     g: &'g Graph,
     out: String,
+    names: Option<&'g Names>,
+    used: &'g mut FastSet<Id>,
 }
 
 const MINUS: &str = "−";
@@ -64,7 +95,7 @@ fn is_fraction_or_negative(q: &Rational) -> bool {
     q.is_negative() || !q.is_integer()
 }
 
-impl Printer<'_> {
+impl<'g> Printer<'g> {
     fn push(&mut self, s: &str) -> Result<(), PrintError> {
         if self.out.len() + s.len() > MAX_OUTPUT {
             return Err(PrintError::TooLarge);
@@ -75,6 +106,11 @@ impl Printer<'_> {
 
     fn node(&self, id: Id) -> &Node {
         self.g.node(id)
+    }
+
+    /// The name `id` prints as, if it is one of the printer's names.
+    fn name_of(&self, id: Id) -> Option<&'g str> {
+        self.names.and_then(|n| n.get(&id)).map(String::as_str)
     }
 
     // ---- the expression language -------------------------------------------------------
@@ -272,6 +308,12 @@ impl Printer<'_> {
     }
 
     fn human_at(&mut self, id: Id, style: Style, ctx: u8) -> Result<(), PrintError> {
+        if let Some(name) = self.name_of(id) {
+            self.used.insert(id);
+            let vector = self.g.ty(id) == Ty::Vector;
+            let name = if style == Style::Latex { latex_name(name, vector) } else { text_name(name) };
+            return self.push(&name);
+        }
         let prec = self.human_prec(id);
         let wrap = prec < ctx;
         if wrap {
@@ -285,6 +327,9 @@ impl Printer<'_> {
     }
 
     fn human_prec(&self, id: Id) -> u8 {
+        if self.name_of(id).is_some() {
+            return 5;
+        }
         match self.node(id) {
             Node::Add(_) => 1,
             Node::Mul(_) if is_negation(self.g, id) => 3,
@@ -391,6 +436,11 @@ impl Printer<'_> {
             }
             &Node::Norm(a) => {
                 self.push(if latex { "\\left\\lVert " } else { "|" })?;
+                // |−u| is |u|: a named difference prints as its name, not its negation.
+                let a = match self.node(a) {
+                    Node::Mul(xs) if is_negation(self.g, a) => xs[1],
+                    _ => a,
+                };
                 self.human(a, style, 0)?;
                 self.push(if latex { " \\right\\rVert" } else { "|" })
             }
@@ -449,6 +499,14 @@ impl Printer<'_> {
         let mut negative = false;
         for (i, &x) in xs.iter().enumerate() {
             match self.node(x) {
+                // A name is one factor, whatever it stands for.
+                _ if self.name_of(x).is_some() => {
+                    if i == xs.len() - 1 && self.g.ty(x) == Ty::Vector {
+                        vector = Some(x);
+                    } else {
+                        numerator.push(x);
+                    }
+                }
                 Node::Num(q) => coefficient = coefficient.mul(q),
                 Node::Pow([b, e]) if self.g.as_num(*e).is_some_and(|q| q.is_negative() && q.is_integer()) => {
                     let n = self.g.as_num(*e).and_then(Rational::to_i64).unwrap_or(-1);
@@ -458,7 +516,13 @@ impl Printer<'_> {
                 Node::Mul(inner) if is_negation(self.g, x) => {
                     negative = !negative;
                     let y = inner[1];
-                    if i == xs.len() - 1 && self.g.ty(y) == Ty::Vector {
+                    // `−|d|⁻¹ d` reads `−d/|d|`.
+                    if self.name_of(y).is_none()
+                        && let Node::Pow([b, e]) = self.node(y)
+                        && let Some(n) = self.g.as_num(*e).filter(|q| q.is_negative() && q.is_integer())
+                    {
+                        denominator.push((*b, -n.to_i64().unwrap_or(-1)));
+                    } else if i == xs.len() - 1 && self.g.ty(y) == Ty::Vector {
                         vector = Some(y);
                     } else {
                         numerator.push(y);

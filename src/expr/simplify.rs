@@ -35,6 +35,7 @@ use super::func::Func;
 use super::graph::{Axis, FastMap, Graph, Id, IdMap, Marks, Node, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
+use super::present::Orientations;
 use super::shape::{Reuse, Shaper};
 use std::rc::Rc;
 
@@ -63,9 +64,27 @@ pub(super) enum Canon {
     V(VecForm),
 }
 
+impl Canon {
+    /// The terms of the form (its numerators' and denominators' factors'), the unit of
+    /// [`MAX_FORM_WORK`].
+    fn terms(&self) -> u64 {
+        let frac = |f: &Frac| f.num.len() as u64 + f.den.iter().map(|(p, _)| p.len() as u64).sum::<u64>();
+        match self {
+            Canon::S(f) => frac(f),
+            Canon::V(v) => v.0.iter().map(|(_, f)| frac(f)).sum(),
+        }
+    }
+}
+
 /// Simplifies nodes of one graph, remembering what it has done.
 ///
 /// Keep one per graph: ids of different graphs mean different things.
+/// The most terms of canonical forms (numerators and denominators' factors, every node's
+/// form counted once) that simplifying one formula may compute: a deterministic budget on
+/// work, not a timer. Past it the formula is refused as too large ([`TypeError::TooLarge`]);
+/// the largest formulas of the shipped files and benchmarks use a few thousand.
+pub const MAX_FORM_WORK: u64 = 200_000;
+
 #[derive(Debug, Default)]
 pub struct Simplifier {
     pub(super) memo: IdMap<Rc<Canon>>,
@@ -81,6 +100,9 @@ pub struct Simplifier {
     shaper: Shaper,
     /// `canon`'s marks of the nodes queued in its current walk.
     queued: Marks,
+    /// Differences as the user wrote them (`r2 − r1`), by their canonical orientation
+    /// (`r1 − r2`): what the layout writes instead ([`Simplifier::keep_orientations`]).
+    pub(super) orientations: Orientations,
 }
 
 impl Simplifier {
@@ -226,9 +248,15 @@ impl Simplifier {
             stack.extend_from_slice(g.node(n).children());
         }
         todo.sort_unstable();
+        // The work budget of this formula: the terms of every form computed for it.
+        let mut work: u64 = 0;
         for n in todo {
             let node = g.node(n).clone();
             let c = self.canon_node(g, n, &node)?;
+            work = work.saturating_add(c.terms());
+            if work > MAX_FORM_WORK {
+                return Err(TypeError::TooLarge(MAX_FORM_WORK));
+            }
             self.memo.insert(n, Rc::new(c));
         }
         Ok(self.memo[&id].clone())
@@ -913,6 +941,12 @@ impl Simplifier {
             return Ok(Some(Frac::constant(content.abs())));
         }
         let arg = self.build(g, &Canon::V(inner))?;
+        // The layout may write the argument as the negation of a difference the user wrote
+        // (`−(r2 − r1)`, `Simplifier::keep_orientations`): the norm of that difference.
+        let arg = match g.node(arg) {
+            Node::Mul(xs) if super::present::is_negation(g, arg) => xs[1],
+            _ => arg,
+        };
         let atom = g.norm(arg)?;
         self.radicals.insert(atom, Rc::new(square));
         Ok(Some(Frac::atom(atom).scale(&content.abs())))

@@ -85,6 +85,9 @@ pub struct System {
     pub constraints: Vec<Constraint>,
     /// Parameters in declaration order, with their types.
     pub parameters: Vec<(String, Symbol)>,
+    /// `[definitions]` in the order they were declared, each with its lowered node (what
+    /// every use of the name is); documents print the name for it (`report::derivation`).
+    pub definitions: Vec<(String, Id)>,
     pub time: Symbol,
     pub scope: Scope,
 }
@@ -250,6 +253,7 @@ impl SystemBuilder {
             bodies: Vec::new(),
             constraints: Vec::new(),
             parameters: Vec::new(),
+            definitions: Vec::new(),
             time,
             scope,
         };
@@ -453,6 +457,7 @@ impl SystemBuilder {
             .map_err(|error| BuildError::Lower { context: context(), error })?;
         self.claim(name, &Kind::Definition, |_| (id, ()))?;
         self.definitions.insert(name.to_string());
+        self.system.definitions.push((name.to_string(), id));
         Ok(id)
     }
 

@@ -16,11 +16,14 @@
 //!
 //! Not here: deriving (`derive`), expression printing rules (`expr::print`).
 
+use crate::derive::Definition;
 use crate::derive::Derivation;
-use crate::expr::print::{PrintError, Style, print, rational_operand};
+use crate::expr::graph::FastSet;
+use crate::expr::print::{Names, PrintError, Style, print, print_named, rational_operand, symbol_name};
 use crate::expr::{Graph, Id, TypeError};
 use crate::model::system::System;
 use serde_json::{Value, json};
+use std::cell::RefCell;
 use std::fmt::Write;
 
 /// The document formats of `derive`.
@@ -42,12 +45,34 @@ pub enum ReportError {
     /// ([`derive_with`](crate::derive::derive_with) with `Options { document, steps }`).
     #[error("the derivation was made without {0} (derive_with and Options)")]
     NotDerived(&'static str),
+    /// The document's formulas together passed [`document_budget`].
+    #[error(
+        "the document is too large to print: its formulas pass {0} bytes (16 MiB, and 4 KiB more \
+         per body and per constraint; docs/file-format.md, \"Limits\"); `lagrange solve` and \
+         `generate` need no document"
+    )]
+    DocumentTooLarge(usize),
+}
+
+/// The most bytes of formulas one document of `derive` prints: 16 MiB, and 4 KiB more per
+/// body and per constraint, so a scene's document may grow linearly with it (a chain of
+/// 10⁵ links prints about 1 KiB per link) but one formula repeated in every body's force
+/// cannot make it quadratic.
+pub fn document_budget(system: &System) -> usize {
+    (16 << 20) + 4096 * (system.bodies.len() + system.constraints.len())
 }
 
 /// How expressions look in one document format.
 struct Doc {
     style: Style,
     format: Format,
+    /// The file's definitions, printed as their names (text, LaTeX and Markdown only).
+    names: Names,
+    /// The nodes of `names` printed so far.
+    used: RefCell<FastSet<Id>>,
+    /// Bytes of formulas this document may still print ([`document_budget`]).
+    room: std::cell::Cell<usize>,
+    budget: usize,
 }
 
 impl Doc {
@@ -57,11 +82,63 @@ impl Doc {
             Format::Latex | Format::Markdown => Style::Latex,
             Format::Json => Style::Source,
         };
-        Doc { style, format }
+        Doc {
+            style,
+            format,
+            names: Names::default(),
+            used: RefCell::default(),
+            room: usize::MAX.into(),
+            budget: usize::MAX,
+        }
     }
 
-    fn expr(&self, g: &Graph, id: Id) -> Result<String, PrintError> {
-        print(g, id, self.style)
+    /// A document that prints each of `d`'s definitions as its name (none in JSON, whose
+    /// expressions stand alone).
+    fn naming(format: Format, d: &Derivation, budget: usize) -> Doc {
+        let mut doc = Doc::new(format);
+        doc.room.set(budget);
+        doc.budget = budget;
+        if format != Format::Json {
+            for def in d.definitions.iter().flatten() {
+                for id in [def.written, def.simplified] {
+                    doc.names.entry(id).or_insert_with(|| def.name.clone());
+                }
+            }
+        }
+        doc
+    }
+
+    fn expr(&self, g: &Graph, id: Id) -> Result<String, ReportError> {
+        let text = print_named(g, id, self.style, &self.names, &mut self.used.borrow_mut())?;
+        let room = self.room.get().checked_sub(text.len()).ok_or(ReportError::DocumentTooLarge(self.budget))?;
+        self.room.set(room);
+        Ok(text)
+    }
+
+    /// The definitions the document printed by name, each once: `d = r2 − r1`.
+    fn definitions(&self, g: &Graph, d: &Derivation, out: &mut String) -> Result<(), ReportError> {
+        let used = self.used.borrow();
+        let defs: Vec<&Definition> = d
+            .definitions
+            .iter()
+            .flatten()
+            .filter(|def| {
+                // The name printed for a node is the first definition's of that node (an
+                // alias `d2 = "d1"` of an earlier definition is printed as `d1`).
+                [def.written, def.simplified]
+                    .iter()
+                    .any(|id| used.contains(id) && self.names.get(id).is_some_and(|n| *n == def.name))
+            })
+            .collect();
+        if defs.is_empty() {
+            return Ok(());
+        }
+        self.heading(out, "Definitions (printed by name below)");
+        for def in defs {
+            let vector = g.ty(def.simplified) == crate::expr::Ty::Vector;
+            self.line(out, &symbol_name(&def.name, vector, self.style), &print(g, def.simplified, self.style)?);
+        }
+        Ok(())
     }
 
     /// An equation `lhs = rhs` as a display line.
@@ -293,7 +370,7 @@ fn latex_escape(s: &str) -> String {
 
 /// The derivation as a document (text, LaTeX or Markdown).
 pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) -> Result<String, ReportError> {
-    let doc = Doc::new(format);
+    let doc = Doc::naming(format, d, document_budget(system));
     let mut out = String::new();
     let title = if system.title.is_empty() { "Constraint forces".to_string() } else { one_line(&system.title) };
     match format {
@@ -307,11 +384,15 @@ pub fn document(system: &System, d: &Derivation, format: Format, steps: bool) ->
             let _ = writeln!(out, "# {} ({}D)", markdown_text(&title), system.dim());
         }
     }
+    // The body first: the definitions shown are those it printed by name.
+    let mut body = String::new();
     if steps {
-        steps_document(system, d, &doc, &mut out)?;
+        steps_document(system, d, &doc, &mut body)?;
     } else {
-        summary(system, d, &doc, &mut out)?;
+        summary(system, d, &doc, &mut body)?;
     }
+    doc.definitions(&d.graph, d, &mut out)?;
+    out.push_str(&body);
     Ok(out)
 }
 
@@ -593,7 +674,13 @@ impl serde::Serialize for JsonDerivation {
 /// The derivation as JSON: every expression a string in the expression language.
 pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportError> {
     let g = &d.graph;
-    let e = |id: Id| print(g, id, Style::Source);
+    let budget = document_budget(system);
+    let room = std::cell::Cell::new(budget);
+    let e = |id: Id| -> Result<String, ReportError> {
+        let text = print(g, id, Style::Source)?;
+        room.set(room.get().checked_sub(text.len()).ok_or(ReportError::DocumentTooLarge(budget))?);
+        Ok(text)
+    };
     let mut constraints = Vec::new();
     for (k, dc) in d.constraints.iter().enumerate() {
         let c = &system.constraints[k];
@@ -628,7 +715,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
     for (k, j, id) in entries {
         a.push(json!({ "row": k, "col": j, "expr": e(id)? }));
     }
-    let b: Result<Vec<String>, PrintError> = d.b.iter().map(|&id| e(id)).collect();
+    let b: Result<Vec<String>, ReportError> = d.b.iter().map(|&id| e(id)).collect();
     let mut out = json!({
         "title": system.title,
         "dimension": system.dim(),
