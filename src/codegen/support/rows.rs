@@ -10,9 +10,10 @@
 //! rows carry λ = 0. The touching rows are solved as equalities; if an inequality row would
 //! pull, Murty's least-index principal pivoting finds the active set (λ ≥ 0 and C̈ ≥ 0 with
 //! complementarity — the LCP `solve`'s QP solves, whose answer is unique for a regular Ã).
-//! A singular Ã (redundant constraints) gets the minimum-norm λ̃ in the scaled multipliers,
-//! from a symmetric eigendecomposition (cyclic Jacobi), with `solve`'s rank threshold
-//! (1e-10 of the largest eigenvalue); `Status` says so. Where the raw numbers overflow
+//! A singular Ã (redundant constraints) gets the λ of least norm √(Σ λ²) for C/κ (the
+//! pseudo-inverse's, as `solve` gives), from a symmetric eigendecomposition (cyclic Jacobi)
+//! with `solve`'s rank threshold (1e-10 of the largest eigenvalue) and the null-space part
+//! chosen in λ; `Status` says so. Where the raw numbers overflow
 //! (|r| ≈ 1e155 makes C = r·r − l² ∞ − ∞), the module solves in a length unit scaled by a
 //! power of two, verified homogeneous (`degrees`), and scales back, as `solve` does
 //! (`numeric::rescale`).
@@ -202,7 +203,9 @@ fn solve_rows<const D: usize>(
         }
     }
     let nonnegative: Vec<bool> = index.iter().map(|&q| rows[q].inequality).collect();
-    let mu = multipliers(&a, &b, &nonnegative, &mut status);
+    // λ_q/μ_p: the minimum norm is taken in λ (for C/κ), as `solve` takes it.
+    let weight: Vec<f64> = index.iter().map(|&q| jacobi[q] / norm[q]).collect();
+    let mu = multipliers(&a, &b, &weight, &nonnegative, &mut status);
     let mut lambda = vec![0.0; k];
     let mut constraint_force = vec![[0.0; D]; n];
     for (p, &q) in index.iter().enumerate() {
@@ -220,19 +223,19 @@ fn solve_rows<const D: usize>(
 
 /// The scaled multipliers: the equality solve when no row is `nonnegative`, else the LCP.
 #[allow(dead_code)]
-fn multipliers(a: &[Vec<f64>], b: &[f64], nonnegative: &[bool], status: &mut Status) -> Vec<f64> {
+fn multipliers(a: &[Vec<f64>], b: &[f64], weight: &[f64], nonnegative: &[bool], status: &mut Status) -> Vec<f64> {
     let n = b.len();
     let clamp = |x: Vec<f64>| -> Vec<f64> {
         x.into_iter().zip(nonnegative).map(|(v, &nn)| if nn { v.max(0.0) } else { v }).collect()
     };
     let everything = vec![true; n];
     if !nonnegative.contains(&true) {
-        return subset(a, b, &everything, status);
+        return subset(a, b, weight, &everything, status);
     }
     let tol = CONTACT_TOLERANCE;
     // Every touching inequality as an equality first: if they all push, that is the answer.
     let mut first = Status::Solved;
-    let x = subset(a, b, &everything, &mut first);
+    let x = subset(a, b, weight, &everything, &mut first);
     let scale = x.iter().fold(1.0f64, |m, v| m.max(v.abs()));
     if first == Status::Solved && x.iter().zip(nonnegative).all(|(v, &nn)| !nn || *v >= -tol * scale) {
         return clamp(x);
@@ -242,7 +245,7 @@ fn multipliers(a: &[Vec<f64>], b: &[f64], nonnegative: &[bool], status: &mut Sta
     let mut last = x;
     for _ in 0..(200 * n + 1000) {
         let mut s = Status::Solved;
-        let x = subset(a, b, &in_set, &mut s);
+        let x = subset(a, b, weight, &in_set, &mut s);
         let scale = b.iter().chain(&x).fold(1.0f64, |m, v| m.max(v.abs()));
         let w: Vec<f64> = (0..n).map(|p| (0..n).map(|q| a[p][q] * x[q]).sum::<f64>() + b[p]).collect();
         let flip = (0..n)
@@ -263,11 +266,12 @@ fn multipliers(a: &[Vec<f64>], b: &[f64], nonnegative: &[bool], status: &mut Sta
 /// Solves Ã μ = −b̃ on the rows marked in `keep` (the others get μ = 0): Cholesky with one
 /// step of iterative refinement; the minimum-norm solution when Ã is singular there.
 #[allow(dead_code, clippy::needless_range_loop)]
-fn subset(a: &[Vec<f64>], b: &[f64], keep: &[bool], status: &mut Status) -> Vec<f64> {
+fn subset(a: &[Vec<f64>], b: &[f64], weight: &[f64], keep: &[bool], status: &mut Status) -> Vec<f64> {
     let rows: Vec<usize> = (0..b.len()).filter(|&p| keep[p]).collect();
     let m = rows.len();
     let sub: Vec<Vec<f64>> = rows.iter().map(|&p| rows.iter().map(|&q| a[p][q]).collect()).collect();
     let rhs: Vec<f64> = rows.iter().map(|&p| -b[p]).collect();
+    let w: Vec<f64> = rows.iter().map(|&p| weight[p]).collect();
     let y = match cholesky(&sub) {
         Some(l) => {
             let mut y = cholesky_solve(&l, &rhs);
@@ -278,7 +282,7 @@ fn subset(a: &[Vec<f64>], b: &[f64], keep: &[bool], status: &mut Status) -> Vec<
             }
             y
         }
-        None => minimum_norm(&sub, &rhs, status),
+        None => minimum_norm(&sub, &rhs, &w, status),
     };
     let mut x = vec![0.0; b.len()];
     for (i, &p) in rows.iter().enumerate() {
@@ -338,9 +342,12 @@ fn cholesky_solve(l: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
 
 /// The minimum-norm (least-squares if inconsistent) solution of a singular symmetric
 /// `a x = rhs`: Σ over eigenvalues above the rank threshold of vᵢ (vᵢ·rhs)/σᵢ, from a cyclic
-/// Jacobi eigendecomposition (for a symmetric matrix its singular values are |σᵢ|).
+/// Jacobi eigendecomposition (for a symmetric matrix its singular values are |σᵢ|). Of the
+/// solutions x₀ + N z (N the null eigenvectors) it returns the one of least ‖W x‖, W the
+/// `weight`s λ/μ, so that λ has the least norm, as `solve` gives (when the weights' ratios
+/// leave the normal range, x₀ stands).
 #[allow(dead_code, clippy::needless_range_loop)]
-fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], status: &mut Status) -> Vec<f64> {
+fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status) -> Vec<f64> {
     let n = rhs.len();
     let mut s: Vec<Vec<f64>> = a.to_vec();
     let mut v: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| if i == j { 1.0 } else { 0.0 }).collect()).collect();
@@ -391,6 +398,27 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], status: &mut Status) -> Vec<f64> {
             let along = (0..n).map(|r| v[r][e] * rhs[r]).sum::<f64>() / sigma;
             for r in 0..n {
                 x[r] += v[r][e] * along;
+            }
+        }
+    }
+    let null: Vec<usize> = (0..n).filter(|&e| !(s[e][e].abs() > threshold)).collect();
+    let top = weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    let w: Vec<f64> = weight.iter().map(|x| x / top).collect();
+    if !null.is_empty() && w.len() == n && w.iter().all(|x| x.is_normal()) {
+        // min over z of ‖W (x₀ + N z)‖: (Nᵀ W² N) z = −Nᵀ W² x₀, scaled to a unit diagonal.
+        let m = null.len();
+        let g: Vec<Vec<f64>> = (0..m)
+            .map(|i| (0..m).map(|j| (0..n).map(|r| w[r] * w[r] * v[r][null[i]] * v[r][null[j]]).sum()).collect())
+            .collect();
+        let h: Vec<f64> = (0..m).map(|i| -(0..n).map(|r| w[r] * w[r] * v[r][null[i]] * x[r]).sum::<f64>()).collect();
+        let d: Vec<f64> = (0..m).map(|i| 1.0 / g[i][i].sqrt()).collect();
+        let unit: Vec<Vec<f64>> = (0..m).map(|i| (0..m).map(|j| g[i][j] * d[i] * d[j]).collect()).collect();
+        if let Some(l) = cholesky(&unit) {
+            let z = cholesky_solve(&l, &h.iter().zip(&d).map(|(y, e)| y * e).collect::<Vec<f64>>());
+            let moved: Vec<f64> =
+                (0..n).map(|r| x[r] + (0..m).map(|i| v[r][null[i]] * z[i] * d[i]).sum::<f64>()).collect();
+            if moved.iter().all(|y| y.is_finite()) {
+                x = moved;
             }
         }
     }
