@@ -401,7 +401,7 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
             }
         }
     }
-    let null: Vec<usize> = (0..n).filter(|&e| !(s[e][e].abs() > threshold)).collect();
+    let null: Vec<usize> = (0..n).filter(|&e| s[e][e].abs() <= threshold || s[e][e].is_nan()).collect();
     let top = weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
     let w: Vec<f64> = weight.iter().map(|x| x / top).collect();
     if !null.is_empty() && w.len() == n && w.iter().all(|x| x.is_normal()) {
