@@ -4,11 +4,8 @@
 //! state, and its positions, velocities and impulses are compared with the library's at
 //! steps 1, 10, 100 and 1 000.
 //!
-//! The library's step here is `reference`, the library's velocity-level solvers as
-//! `numeric::velocity` runs them (the same operations in the same order) on the library's
-//! own rows (`numeric::dynamics`, the compiled tape), written out in this test because this
-//! branch does not yet carry `numeric::velocity`; it is to be replaced by
-//! `numeric::velocity::Stepper` once both are in one tree.
+//! The library's step is `numeric::velocity::Stepper` with its default settings, on the
+//! library's own rows (`numeric::dynamics`, the compiled tape).
 //!
 //! What holds (measured): the soft step and PGS agree **bitwise** on every file at every
 //! checkpoint (124 of them: `hard/huge` leaves f64's range at the library's first step) —
@@ -36,296 +33,6 @@ use std::process::Command;
 /// Steps run, and the steps after which both runs are compared.
 const STEPS: usize = 1000;
 const CHECKPOINTS: [usize; 4] = [1, 10, 100, 1000];
-
-/// The library's velocity-level step, as `numeric::velocity` runs it (see the file's note).
-mod reference {
-    use lagrange::numeric::dynamics::{Dynamics, SimError};
-    use lagrange::numeric::rows::Rows;
-    use lagrange::numeric::solve::solve;
-
-    pub type Vectors = Vec<[f64; 3]>;
-
-    #[derive(Clone, Copy)]
-    pub struct Softness {
-        pub bias_rate: f64,
-        pub mass_scale: f64,
-        pub impulse_scale: f64,
-    }
-
-    pub const RIGID: Softness = Softness { bias_rate: 0.0, mass_scale: 1.0, impulse_scale: 0.0 };
-
-    pub fn softness(hertz: f64, zeta: f64, h: f64) -> Softness {
-        if hertz == 0.0 {
-            return RIGID;
-        }
-        let omega = 2.0 * std::f64::consts::PI * hertz;
-        let a1 = 2.0 * zeta + h * omega;
-        let a2 = h * omega * a1;
-        let a3 = 1.0 / (1.0 + a2);
-        Softness { bias_rate: omega / a1, mass_scale: a2 * a3, impulse_scale: a3 }
-    }
-
-    fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-        a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-    }
-
-    #[derive(Default)]
-    pub struct Prepared {
-        start: Vec<usize>,
-        body: Vec<usize>,
-        jacobian: Vec<[f64; 3]>,
-        pub value: Vec<f64>,
-        time_rate: Vec<f64>,
-        pub effective_mass: Vec<f64>,
-        pub inequality: Vec<bool>,
-        inverse_mass: Vec<f64>,
-        force: Vec<[f64; 3]>,
-    }
-
-    impl Prepared {
-        pub fn load(rows: &Rows) -> Prepared {
-            let mut p =
-                Prepared { inverse_mass: rows.inverse_mass.clone(), force: rows.force.clone(), ..Prepared::default() };
-            for row in &rows.rows {
-                p.start.push(p.body.len());
-                let (mut k, mut jv) = (0.0, 0.0);
-                for (b, j) in &row.jacobian {
-                    p.body.push(*b);
-                    p.jacobian.push(*j);
-                    k += rows.inverse_mass[*b] * dot(j, j);
-                    jv += dot(j, &rows.velocity[*b]);
-                }
-                p.value.push(row.value);
-                p.time_rate.push(row.rate - jv);
-                p.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
-                p.inequality.push(row.inequality);
-            }
-            p.start.push(p.body.len());
-            p
-        }
-
-        pub fn rate(&self, k: usize, u: &Vectors) -> f64 {
-            let mut c = self.time_rate[k];
-            for e in self.start[k]..self.start[k + 1] {
-                c += dot(&self.jacobian[e], &u[self.body[e]]);
-            }
-            c
-        }
-
-        pub fn apply(&self, k: usize, u: &mut Vectors, p: f64) {
-            for e in self.start[k]..self.start[k + 1] {
-                let (b, j) = (self.body[e], &self.jacobian[e]);
-                let s = self.inverse_mass[b] * p;
-                for d in 0..3 {
-                    u[b][d] += s * j[d];
-                }
-            }
-        }
-
-        pub fn kick(&self, u: &mut Vectors, h: f64) {
-            for ((u, f), w) in u.iter_mut().zip(&self.force).zip(&self.inverse_mass) {
-                for d in 0..3 {
-                    u[d] += h * w * f[d];
-                }
-            }
-        }
-
-        pub fn warm_start(&self, u: &mut Vectors, impulse: &[f64]) {
-            for (k, &p) in impulse.iter().enumerate() {
-                if p != 0.0 {
-                    self.apply(k, u, p);
-                }
-            }
-        }
-
-        pub fn sweep(&self, u: &mut Vectors, impulse: &mut [f64], mut law: impl FnMut(usize, f64) -> (f64, Softness)) {
-            for (k, impulse) in impulse.iter_mut().enumerate() {
-                let m = self.effective_mass[k];
-                if m == 0.0 {
-                    continue;
-                }
-                let (bias, soft) = law(k, self.value[k]);
-                let rate = self.rate(k, u);
-                let old = *impulse;
-                let mut delta = -soft.mass_scale * m * (rate + bias) - soft.impulse_scale * old;
-                if self.inequality[k] {
-                    delta = (old + delta).max(0.0) - old;
-                }
-                *impulse = old + delta;
-                self.apply(k, u, delta);
-            }
-        }
-    }
-
-    fn drift(q: &mut Vectors, u: &Vectors, h: f64) {
-        for (q, u) in q.iter_mut().zip(u) {
-            for d in 0..3 {
-                q[d] += h * u[d];
-            }
-        }
-    }
-
-    /// Box2D's defaults as the library's `velocity::Settings::new` has them.
-    const SUBSTEPS: usize = 4;
-    const HERTZ: f64 = 60.0;
-    const ZETA: f64 = 2.0;
-    const CONTACT_HERTZ: f64 = 30.0;
-    const CONTACT_ZETA: f64 = 10.0;
-    const CONTACT_SPEED: f64 = 3.0;
-    const BAUMGARTE: f64 = 0.2;
-
-    /// One soft step (`velocity::soft_step::step`, restitution 0).
-    pub fn soft_step(
-        dynamics: &mut Dynamics<'_>,
-        t: f64,
-        dt: f64,
-        q: &mut Vectors,
-        v: &mut Vectors,
-        impulse: &mut [f64],
-    ) -> Result<(), SimError> {
-        let h = dt / SUBSTEPS as f64;
-        let joint = softness(HERTZ.min(0.25 / h), ZETA, h);
-        let contact = softness(CONTACT_HERTZ.min(0.25 / h), CONTACT_ZETA, h);
-        let mut p = Prepared::load(&dynamics.rows(t, q, v)?);
-        for sub in 0..SUBSTEPS {
-            p.kick(v, h);
-            p.warm_start(v, impulse);
-            let pr = &p;
-            pr.sweep(v, impulse, |k, c| {
-                if !pr.inequality[k] {
-                    (joint.bias_rate * c, joint)
-                } else if c > 0.0 {
-                    (c / h, RIGID)
-                } else {
-                    ((contact.bias_rate * c).max(-CONTACT_SPEED), contact)
-                }
-            });
-            drift(q, v, h);
-            p = Prepared::load(&dynamics.rows(t + (sub + 1) as f64 * h, q, v)?);
-            let pr = &p;
-            pr.sweep(v, impulse, |k, c| if pr.inequality[k] && c > 0.0 { (c / h, RIGID) } else { (0.0, RIGID) });
-        }
-        Ok(())
-    }
-
-    /// One PGS step (`velocity::pgs::step`, 8 iterations).
-    pub fn pgs(
-        dynamics: &mut Dynamics<'_>,
-        t: f64,
-        dt: f64,
-        q: &mut Vectors,
-        v: &mut Vectors,
-        impulse: &mut [f64],
-    ) -> Result<(), SimError> {
-        let h = dt / SUBSTEPS as f64;
-        let mut p = Prepared::load(&dynamics.rows(t, q, v)?);
-        for sub in 0..SUBSTEPS {
-            p.kick(v, h);
-            p.warm_start(v, impulse);
-            let pr = &p;
-            for _ in 0..8 {
-                pr.sweep(v, impulse, |k, c| {
-                    let bias = if pr.inequality[k] && c > 0.0 { c / h } else { BAUMGARTE * c / h };
-                    (bias, RIGID)
-                });
-            }
-            drift(q, v, h);
-            p = Prepared::load(&dynamics.rows(t + (sub + 1) as f64 * h, q, v)?);
-        }
-        Ok(())
-    }
-
-    fn leave_out(row: &mut lagrange::numeric::rows::Row) {
-        row.inequality = true;
-        row.value = f64::MAX;
-        row.rate = f64::MAX;
-        row.bias = 0.0;
-    }
-
-    fn enforce(row: &mut lagrange::numeric::rows::Row, bias: f64) {
-        row.value = 0.0;
-        row.rate = 0.0;
-        row.bias = bias;
-    }
-
-    fn distance(row: &lagrange::numeric::rows::Row) -> f64 {
-        let n = row.jacobian.iter().map(|(_, j)| dot(j, j)).sum::<f64>().sqrt();
-        if n > 0.0 && n.is_finite() {
-            row.value / n
-        } else if row.value == 0.0 {
-            0.0
-        } else {
-            f64::INFINITY.copysign(row.value)
-        }
-    }
-
-    /// One exact velocity step (`velocity::exact::step`): A P = −(J u + ∂C/∂t + C/h) by
-    /// `numeric::solve`, then Newton onto C = 0 (equalities and violated inequalities).
-    pub fn exact(
-        dynamics: &mut Dynamics<'_>,
-        t: f64,
-        dt: f64,
-        q: &mut Vectors,
-        v: &mut Vectors,
-        impulse: &mut [f64],
-        length: f64,
-    ) -> Result<(), SimError> {
-        let h = dt / SUBSTEPS as f64;
-        for sub in 0..SUBSTEPS {
-            let mut rows = dynamics.rows(t + sub as f64 * h, q, v)?;
-            let p = Prepared::load(&rows);
-            p.kick(v, h);
-            for (k, row) in rows.rows.iter_mut().enumerate() {
-                let bias = p.rate(k, v) + p.value[k] / h;
-                if row.inequality && bias >= 0.0 { leave_out(row) } else { enforce(row, bias) }
-            }
-            rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-            let solution = solve(&rows);
-            for (u, du) in v.iter_mut().zip(&solution.acceleration) {
-                for d in 0..3 {
-                    if du[d].is_finite() {
-                        u[d] += du[d];
-                    }
-                }
-            }
-            impulse.copy_from_slice(&solution.lambda);
-            drift(q, v, h);
-            let t1 = t + (sub + 1) as f64 * h;
-            for _ in 0..=20 {
-                let mut rows = dynamics.rows(t1, q, v)?;
-                let enforced = |row: &lagrange::numeric::rows::Row, d: f64| !row.inequality || d < 0.0;
-                let residual = rows
-                    .rows
-                    .iter()
-                    .map(|r| (r, distance(r)))
-                    .filter(|(r, d)| enforced(r, *d))
-                    .fold(0.0f64, |m, (_, d)| m.max(d.abs()));
-                if residual <= 1e-13 * length {
-                    break;
-                }
-                for row in &mut rows.rows {
-                    let d = distance(row);
-                    if enforced(row, d) {
-                        let value = row.value;
-                        enforce(row, value);
-                    } else {
-                        leave_out(row);
-                    }
-                }
-                rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-                let solution = solve(&rows);
-                for (x, dx) in q.iter_mut().zip(&solution.acceleration) {
-                    for d in 0..3 {
-                        if dx[d].is_finite() {
-                            x[d] += dx[d];
-                        }
-                    }
-                }
-            }
-        }
-        Ok(())
-    }
-}
 
 fn files() -> Vec<PathBuf> {
     let mut files = Vec::new();
@@ -368,30 +75,31 @@ fn state_literal(l: &Loaded, m: &Module, env: &Env) -> String {
 /// One scene's run: its numbers at each checkpoint (positions, velocities, impulses).
 type Run = Vec<Vec<f64>>;
 
-/// The library's run of `solver` on `scenario`: `STEPS` steps of the scene's dt.
+/// The library's run of `solver` on `scenario`: `STEPS` steps of the scene's dt, by
+/// `numeric::velocity::Stepper` with its default settings.
 fn library_run(s: &Scenario, solver: Solver) -> Run {
+    use lagrange::numeric::velocity::{Settings, Solver as Library, Stepper};
     let dim = s.system.graph.dim();
     let mut dynamics = Dynamics::new(&s.system, s.program.clone(), s.env.clone());
     let (mut q, mut v, t0) = lagrange::numeric::simulate::initial_state(&s.system, &s.env);
-    let length = q.iter().map(|r| r.iter().map(|x| x * x).sum::<f64>().sqrt()).fold(0.0, f64::max);
-    let length = if length > 0.0 && length.is_finite() { length } else { 1.0 };
-    let mut impulse = vec![0.0; s.system.constraints.len()];
     let dt = s.scene.dt;
+    let library = match solver {
+        Solver::SoftStep => Library::SoftStep,
+        Solver::Pgs => Library::Pgs,
+        Solver::Exact => Library::Exact,
+    };
+    let mut stepper = Stepper::new(Settings::new(library, dt, STEPS as f64 * dt), s.system.constraints.len(), q.len());
     let mut out = Vec::new();
     for n in 0..STEPS {
         let t = t0 + n as f64 * dt;
-        let stepped = match solver {
-            Solver::SoftStep => reference::soft_step(&mut dynamics, t, dt, &mut q, &mut v, &mut impulse),
-            Solver::Pgs => reference::pgs(&mut dynamics, t, dt, &mut q, &mut v, &mut impulse),
-            Solver::Exact => reference::exact(&mut dynamics, t, dt, &mut q, &mut v, &mut impulse, length),
-        };
         // The library stops where its rows leave f64's range; the comparison stops there too.
-        if stepped.is_err() {
+        let Ok(rows) = dynamics.rows(t, &q, &v) else { break };
+        if stepper.step(&mut dynamics, t, &mut q, &mut v, rows).is_err() {
             break;
         }
         if CHECKPOINTS.contains(&(n + 1)) {
             let mut numbers: Vec<f64> = q.iter().chain(&v).flat_map(|x| x[..dim].iter().copied()).collect();
-            numbers.extend(&impulse);
+            numbers.extend(&stepper.impulse);
             out.push(numbers);
         }
     }
