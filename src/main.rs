@@ -12,14 +12,13 @@ use lagrange::derive::{Options as DeriveOptions, derive, derive_with};
 use lagrange::expr::Symbol;
 use lagrange::expr::eval::Value;
 use lagrange::model::file::{Loaded, Problem, load};
-use lagrange::model::scene::environment;
+use lagrange::model::scene::{environment, unset_forces};
 use lagrange::model::state;
 use lagrange::model::system::System;
 use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::rows::RowProgram;
-use lagrange::numeric::simulate::initial_state;
-use lagrange::numeric::solve::Settings;
-use lagrange::numeric::vector::length_scale;
+use lagrange::numeric::simulate::{initial_state, scene_length};
+use lagrange::numeric::solve::{Settings, off_constraint};
 use lagrange::report::derivation::{self, Format};
 use lagrange::report::diagnostic::render;
 use lagrange::report::solution;
@@ -559,17 +558,20 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         given.into_iter().collect::<Result<_, _>>().map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     let env = environment(system, &loaded.values, &loaded.scene, &overrides)
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    for symbol in unset_forces(system, &loaded.scene, &overrides) {
+        errln!("{}", solution::zero_force_note(system, symbol));
+    }
     // A force given in the state replaces the scene's expression for that body.
     let given: Vec<String> = overrides.iter().map(|&(s, _)| system.graph.symbol(s).name.clone()).collect();
     let given: Vec<&str> = given.iter().map(String::as_str).collect();
     let program = RowProgram::with_given_forces(system, &derivation, &loaded.scene.forces, &given);
 
     // Contact distances count as zero relative to the size of the scene.
-    let (positions, _, t) = initial_state(system, &env);
-    // Lengths only: a rigid body's angle (its slot after the bodies) is no length.
-    let settings = Settings { length_scale: length_scale(&positions[..system.bodies.len()]), ..Settings::default() };
-    let (rows, solution) =
+    let (_, _, t) = initial_state(system, &env);
+    let settings = Settings { length_scale: scene_length(system, &env), ..Settings::default() };
+    let (rows, mut solution) =
         solve_at(&program, system, &env, &settings).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    solution.diagnostics.extend(off_constraint(&rows, &settings));
     match format {
         SolveFormat::Json => {
             emit_json(&solution::json(system, &derivation, &rows, &solution, t));
@@ -729,6 +731,13 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     {
         eprintln!("error: {}: {e}", args.file.display());
         return ExitCode::from(1);
+    }
+    for symbol in unset_forces(&scenario.system, &scenario.scene, &[]) {
+        errln!("{}", solution::zero_force_note(&scenario.system, symbol));
+    }
+    let projects = velocity.is_none() && matches!(settings.stabilize, Stabilize::Projection { .. });
+    for offset in scenario.initial_offsets() {
+        errln!("{}", solution::initial_offset_note(&scenario.system, &offset, projects));
     }
     let mut csv = match &args.csv {
         None => None,

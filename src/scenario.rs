@@ -17,7 +17,8 @@ use crate::model::scene::{Scene, StateError, environment};
 use crate::model::system::System;
 use crate::numeric::dynamics::Dynamics;
 use crate::numeric::rows::RowProgram;
-use crate::numeric::simulate::{Failure, Frame, Settings, Simulation, Summary};
+use crate::numeric::simulate::{Failure, Frame, Settings, Simulation, Summary, scene_length};
+use crate::numeric::solve::{self, Diagnostic, off_constraint};
 use std::fmt::Write;
 
 /// Why a file cannot be run.
@@ -59,6 +60,15 @@ impl Scenario {
         let mut s = Settings::new(self.scene.dt, self.scene.duration);
         s.restitution = self.scene.restitution;
         s
+    }
+
+    /// The equality rows the initial state is off, and by how much
+    /// (`numeric::solve::off_constraint`), for a note before a run projects it onto them. A
+    /// state where the rows cannot be evaluated gives none: the run reports that itself.
+    pub fn initial_offsets(&self) -> Vec<Diagnostic> {
+        let Ok(rows) = self.program.evaluate(&self.system, &self.env) else { return Vec::new() };
+        let settings = solve::Settings { length_scale: scene_length(&self.system, &self.env), ..Default::default() };
+        off_constraint(&rows, &settings)
     }
 
     /// Runs from the initial state.

@@ -164,3 +164,32 @@ fn bench_says_what_ns_per_eval_times() {
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("closed form") && text.contains("ns/eval of `closed form`: the interpreter"), "{text}");
 }
+
+/// `simulate` from a state off the constraint says by how much before the run projects it
+/// (r = [2.1, 0] on a wire of l = 2, v with a radial part), naming the constraint.
+#[test]
+fn simulate_says_how_far_off_the_initial_state_is() {
+    let bead = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
+    let dir = std::env::temp_dir().join(format!("lagrange-cli-off-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("off.toml");
+    let off =
+        bead.replace("initial = { r = [2.0, 0.0], v = [0.0, 1.0] }", "initial = { r = [2.1, 0.0], v = [0.5, 1.0] }");
+    assert_ne!(off, bead, "the scene line to replace");
+    std::fs::write(&path, off).expect("write");
+    let out = lagrange(&["simulate", path.to_str().expect("utf-8"), "--steps", "10"]);
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    // |C|/‖∇C‖ = (2.1² − 4)/(2 · 2.1); |Ċ|/‖∇C‖ = |r·v|/|r| = 0.5.
+    assert!(
+        stderr.contains("note: initially the state is off constraint `wire`: distance |C|/‖∇C‖ = 9.762e-2"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("speed off it |Ċ|/‖∇C‖ = 5.000e-1") && stderr.contains("the first step projects it"),
+        "{stderr}"
+    );
+    let on = lagrange(&["simulate", "constraints/bead_on_wire.toml", "--steps", "10"]);
+    assert!(on.status.success() && !String::from_utf8_lossy(&on.stderr).contains("off constraint"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

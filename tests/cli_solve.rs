@@ -314,3 +314,38 @@ fn a_huge_parameter_does_not_erase_the_bodies() {
     assert!(numbers(&huge["forces"]["bead"]).iter().any(|x| *x != 0.0));
     assert!(huge["constraints"][0]["value"].is_null());
 }
+
+/// A bead on the wire without `[scene] forces`: its force F is zero, and `solve` says so on
+/// stderr (DESIGN: "solve and simulate say which symbols were taken as zero"); a force given
+/// in the state, or by the scene, is not mentioned.
+#[test]
+fn forces_nobody_set_are_said_to_be_zero() {
+    let bead = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
+    let unforced = temp_file("unforced.toml", &bead.replace("forces = { F = \"m*g\" }", ""));
+    let path = unforced.to_str().expect("utf-8");
+    let note = "note: the force `F` of `bead` has no value and no [scene] forces expression: taken as zero";
+    let out = lagrange(&["solve", path, "--format", "json"]);
+    let v = stdout_json(&out);
+    assert!(String::from_utf8_lossy(&out.stderr).contains(note), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(numbers(&v["forces"]["bead"])[1], 0.0, "no gravity: the pull is centripetal only");
+    let given = lagrange(&["solve", path, "--set", "F=[0,-1]", "--format", "json"]);
+    stdout_json(&given);
+    assert!(!String::from_utf8_lossy(&given.stderr).contains("taken as zero"));
+    let scene = lagrange(&["solve", "constraints/bead_on_wire.toml"]);
+    assert!(scene.status.success() && !String::from_utf8_lossy(&scene.stderr).contains("taken as zero"));
+}
+
+/// `solve` at a state off the wire names the constraint with |C|/‖∇C‖ (r = [3, 0] on l = 2:
+/// C/κ = 5/2, ∇C/κ = r, so 2.5/3) and still answers (exit 0, status solved): the force at
+/// that state.
+#[test]
+fn a_state_off_the_constraint_is_a_diagnostic_with_its_distance() {
+    let out = lagrange(&["solve", "constraints/bead_on_wire.toml", "--set", "r=[3,0]", "--format", "json"]);
+    let v = stdout_json(&out);
+    assert_eq!(v["status"], "solved");
+    let d = v["diagnostics"].as_array().expect("array");
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert_eq!(d[0]["constraints"][0], "wire");
+    let message = d[0]["message"].as_str().expect("message");
+    assert!(message.contains("off constraint `wire`: distance |C|/‖∇C‖ = 8.333e-1"), "{message}");
+}

@@ -836,3 +836,56 @@ fn redundant_systems_get_the_pseudo_inverse_multipliers() {
     }
     assert_eq!(checked, 300);
 }
+
+/// `off_constraint` (what `solve` and `simulate` say of a state off a constraint): on the wire
+/// with a tangent velocity nothing is reported, at any scale; moved off by a relative δ above
+/// the contact tolerance, or given a radial speed, the row is named with |C|/‖∇C‖ and
+/// |Ċ|/‖∇C‖ as worked out by hand for C = r·r − l² (∇C/κ = r, C/κ = (r·r − l²)/2).
+#[test]
+fn states_off_the_constraint_are_named_with_distance_and_speed() {
+    use lagrange::numeric::solve::off_constraint;
+    let setup = setup(BEAD);
+    let system = &setup.loaded.system;
+    let mut rng = lagrange::numeric::random::Rng::new(17);
+    for _ in 0..200 {
+        let l = 10f64.powf(rng.uniform(-6.0, 6.0));
+        let (theta, speed) = (rng.uniform(-3.1, 3.1), l * rng.uniform(0.0, 3.0));
+        let settings = Settings { length_scale: l, ..Settings::default() };
+        let offsets = |r: [f64; 2], vel: [f64; 2]| {
+            let o = state::values(system, &[("l", s(l)), ("r", v(&r)), ("v", v(&vel))]).expect("values");
+            let env = environment(system, &setup.loaded.values, &setup.loaded.scene, &o).expect("state");
+            off_constraint(&setup.program.evaluate(system, &env).expect("rows"), &settings)
+        };
+        let (e, t) = ([theta.cos(), theta.sin()], [-theta.sin(), theta.cos()]);
+        let on = offsets([l * e[0], l * e[1]], [speed * t[0], speed * t[1]]);
+        assert!(on.is_empty(), "on the wire at l = {l:e}: {on:?}");
+        // Off by δ l radially: |C|/‖∇C‖ = ((1+δ)² − 1) l / (2 (1+δ)).
+        let delta = 10f64.powf(rng.uniform(-7.0, -1.0));
+        let r = [(1.0 + delta) * l * e[0], (1.0 + delta) * l * e[1]];
+        let off = offsets(r, [speed * t[0], speed * t[1]]);
+        let want = ((1.0 + delta).powi(2) - 1.0) * l / (2.0 * (1.0 + delta));
+        match off.as_slice() {
+            [Diagnostic::OffConstraint { constraint: 0, distance, normal_speed, .. }] => {
+                assert!((distance - want).abs() <= 1e-6 * want, "δ = {delta:e}: distance {distance:e}, want {want:e}");
+                assert!(normal_speed.abs() <= 1e-9 * speed.max(l), "tangent speed counted: {normal_speed:e}");
+            }
+            other => panic!("δ = {delta:e} at l = {l:e}: {other:?}"),
+        }
+        // On the wire with a radial speed u: |Ċ|/‖∇C‖ = u.
+        let u = speed.max(l) * 10f64.powf(rng.uniform(-6.0, 0.0));
+        let off = offsets([l * e[0], l * e[1]], [speed * t[0] + u * e[0], speed * t[1] + u * e[1]]);
+        match off.as_slice() {
+            [Diagnostic::OffConstraint { normal_speed, distance, .. }] => {
+                assert!((normal_speed - u).abs() <= 1e-9 * u, "radial speed {normal_speed:e}, want {u:e}");
+                assert!(distance.abs() <= 1e-12 * l, "distance on the wire {distance:e}");
+            }
+            other => panic!("radial speed {u:e} at l = {l:e}: {other:?}"),
+        }
+    }
+    // Inequality rows are the contact states' business, never an offset.
+    let rope = self::setup(&BEAD.replace("dot(r,r) = l^2", "dot(r,r) <= l^2"));
+    let o = state::values(&rope.loaded.system, &[("r", v(&[0.5, 0.0]))]).expect("values");
+    let env = environment(&rope.loaded.system, &rope.loaded.values, &rope.loaded.scene, &o).expect("state");
+    let rows = rope.program.evaluate(&rope.loaded.system, &env).expect("rows");
+    assert!(off_constraint(&rows, &Settings::default()).is_empty());
+}

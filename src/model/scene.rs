@@ -227,6 +227,27 @@ pub enum StateError {
     Torque { body: String, error: EvalError },
 }
 
+/// The bodies' external force and torque symbols that [`environment`] takes as zero: given
+/// no value (in the scene's `initial` or `overrides`) and no `[scene] forces` expression. In
+/// body order, each body's force before its torque. The commands say so: a scene without
+/// gravity is more often a slip than a choice.
+pub fn unset_forces(system: &System, scene: &Scene, overrides: &[(Symbol, Value)]) -> Vec<Symbol> {
+    let given = |s: Symbol| scene.initial.iter().chain(overrides).any(|&(g, _)| g == s);
+    let mut unset = Vec::new();
+    for (i, body) in system.bodies.iter().enumerate() {
+        if !given(body.force) && !scene.forces.iter().any(|&(b, _)| b == i) {
+            unset.push(body.force);
+        }
+        if let Some(rigid) = &body.rigid
+            && !given(rigid.torque)
+            && !scene.torques.iter().any(|&(b, _)| b == i)
+        {
+            unset.push(rigid.torque);
+        }
+    }
+    unset
+}
+
 /// Numbers for every symbol of `system`: parameter values (`Loaded::values`), then the
 /// scene's initial values, then `overrides` in order (later wins; validated by
 /// `model::state`), then the external forces evaluated at that state

@@ -241,6 +241,14 @@ pub fn initial_state(system: &System, env: &Env) -> (Vec<[f64; 3]>, Vec<[f64; 3]
     (q, v, t)
 }
 
+/// The length scale of the state `env` gives (`numeric::vector::length_scale` of the bodies'
+/// positions; a rigid body's angle is no length): what contact distances, drift and
+/// off-constraint distances count against.
+pub fn scene_length(system: &System, env: &Env) -> f64 {
+    let (q, _, _) = initial_state(system, env);
+    length_scale(&q[..system.bodies.len()])
+}
+
 /// Whether some constraint depends on t (its force then does work).
 pub fn time_dependent(system: &System) -> bool {
     system.constraints.iter().any(|c| system.graph.free_symbols(c.c).contains(&system.time))

@@ -204,6 +204,10 @@ pub enum Diagnostic {
     /// constraints (and their bodies) were solved in the caller's unit, the rest in the
     /// rescaled one ([`Diagnostic::Rescaled`]).
     MixedScales { raw: Vec<usize> },
+    /// The state is off an equality row ([`off_constraint`]): its first-order distance
+    /// |C|/‖∇C‖ is beyond the contact tolerance of `length`, or its normal speed |Ċ|/‖∇C‖
+    /// beyond that of `speed`. λ is the force at this state, which is not on the constraint.
+    OffConstraint { constraint: usize, distance: f64, length: f64, normal_speed: f64, speed: f64 },
 }
 
 /// Which number of a row (or of a body it acts on) is not finite.
@@ -312,7 +316,8 @@ impl Diagnostic {
             | Diagnostic::LambdaOutOfRange { .. }
             | Diagnostic::Restitution { .. }
             | Diagnostic::Rescaled { .. }
-            | Diagnostic::MixedScales { .. } => Status::Solved,
+            | Diagnostic::MixedScales { .. }
+            | Diagnostic::OffConstraint { .. } => Status::Solved,
         }
     }
 
@@ -325,6 +330,7 @@ impl Diagnostic {
             | Diagnostic::Closing { constraint }
             | Diagnostic::Penetrating { constraint }
             | Diagnostic::LambdaOutOfRange { constraint, .. }
+            | Diagnostic::OffConstraint { constraint, .. }
             | Diagnostic::NonFiniteLambda { constraint } => std::slice::from_ref(constraint),
             Diagnostic::Redundant { constraints, .. }
             | Diagnostic::Inconsistent { constraints, .. }
@@ -334,6 +340,40 @@ impl Diagnostic {
             Diagnostic::Restitution { .. } | Diagnostic::Rescaled { .. } => &[],
         }
     }
+}
+
+/// The equality rows the state is off, as [`Diagnostic::OffConstraint`]: a row whose distance
+/// |C|/‖∇C‖ exceeds `contact_tolerance` · `length_scale`, or whose normal speed |Ċ|/‖∇C‖
+/// exceeds `contact_tolerance` times its speed scale — the largest speed of the bodies it
+/// acts on, or of its own motion ∂C/∂t/‖∇C‖ (a driven constraint at rest). Inequality rows
+/// have their contact states instead; a row with a zero or non-finite gradient has its own
+/// diagnostics. A solve at any state is an answer for that state: this says only that the
+/// state is not one the constraints allow, and by how much.
+pub fn off_constraint(rows: &Rows, settings: &Settings) -> Vec<Diagnostic> {
+    let tol = settings.contact_tolerance;
+    let mut off = Vec::new();
+    for (k, row) in rows.rows.iter().enumerate() {
+        let norm = row_norm(&row.jacobian);
+        if row.inequality || !(norm > 0.0 && norm.is_finite()) {
+            continue;
+        }
+        let (distance, normal_speed) = (row.value / norm, row.rate / norm);
+        let along: f64 = row.jacobian.iter().map(|(b, j)| dot(j, &rows.velocity[*b]) / norm).sum();
+        let bodies = row.jacobian.iter().map(|(b, _)| safe_norm(&rows.velocity[*b])).fold(0.0, f64::max);
+        let speed = bodies.max((normal_speed - along).abs());
+        let far = distance.abs() > tol * settings.length_scale;
+        let moving = normal_speed.abs() > tol * speed;
+        if (far || moving) && distance.is_finite() && normal_speed.is_finite() {
+            off.push(Diagnostic::OffConstraint {
+                constraint: k,
+                distance,
+                length: settings.length_scale,
+                normal_speed,
+                speed,
+            });
+        }
+    }
+    off
 }
 
 /// The answer at one state.

@@ -17,6 +17,7 @@
 //! Not here: solving (`numeric::solve`), writing anything out.
 
 use crate::derive::Derivation;
+use crate::expr::{Role, Symbol};
 use crate::model::system::System;
 use crate::numeric::qp::QpStatus;
 use crate::numeric::rows::{Rows, angular_bodies, angular_slot};
@@ -196,6 +197,48 @@ fn scale(derivation: &Derivation, k: usize) -> String {
     format!("{sign}{}.{}e{}", &digits[..1], &digits[1..4], digits.len() - 1)
 }
 
+/// "the state is off constraint `wire`: distance … (0.62× the scene's length …), speed off
+/// it …" for [`Diagnostic::OffConstraint`]; empty for any other diagnostic.
+fn off_words(system: &System, diagnostic: &Diagnostic) -> String {
+    let Diagnostic::OffConstraint { constraint, distance, length, normal_speed, speed } = diagnostic else {
+        return String::new();
+    };
+    let name = system.constraints.get(*constraint).map_or_else(|| constraint.to_string(), |c| format!("`{}`", c.name));
+    let relative = |x: f64, scale: f64, what: &str| {
+        if x == 0.0 { "0".to_string() } else { format!("{x:.3e} ({} {what} {scale:.3e})", share(x, scale)) }
+    };
+    let speed_words = if *speed > 0.0 {
+        relative(normal_speed.abs(), *speed, "the speed scale")
+    } else {
+        format!("{} (the bodies are at rest)", fmt_e(normal_speed.abs()))
+    };
+    format!(
+        "the state is off constraint {name}: distance |C|/‖∇C‖ = {}, speed off it |Ċ|/‖∇C‖ = {speed_words}",
+        relative(distance.abs(), *length, "the scene's length"),
+    )
+}
+
+/// The note `simulate` prints before a run from a state off a constraint
+/// ([`Diagnostic::OffConstraint`]); `projects`: the run projects onto C = 0 and Ċ = 0 at
+/// its first step (`--stabilize projection`), else the stabilisation or the solver's bias
+/// pulls it back over the run, or nothing does.
+pub fn initial_offset_note(system: &System, diagnostic: &Diagnostic, projects: bool) -> String {
+    let then =
+        if projects { "the first step projects it onto the constraint" } else { "the run starts from it as it is" };
+    format!("note: initially {}; {then}", off_words(system, diagnostic))
+}
+
+/// A number in the sentences: 0 as `0`, others to four digits.
+fn fmt_e(x: f64) -> String {
+    if x == 0.0 { "0".into() } else { format!("{x:.3e}") }
+}
+
+/// `part` as a share of `whole`: `0.62×`, or `1.0e-6×`.
+fn share(part: f64, whole: f64) -> String {
+    let r = part / whole;
+    if (1e-2..1e3).contains(&r) { format!("{r:.2}×") } else { format!("{r:.1e}×") }
+}
+
 /// A solver diagnostic as a sentence for people, constraints by name (`wire`); an index
 /// the system does not have stays a number.
 pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
@@ -260,6 +303,12 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
             "the rescaled unit does not fit {}: their bodies' positions, velocities and forces are near the file's unit, so they are solved in it (the rest in the rescaled unit)",
             list(raw)
         ),
+        Diagnostic::OffConstraint { .. } => {
+            format!(
+                "{}; λ is the force at this state, which the constraint does not allow",
+                off_words(system, diagnostic)
+            )
+        }
         Diagnostic::Rescaled { exponent } => format!(
             "the numbers overflow at this state; solved in a length unit scaled by 2^{exponent} (verified homogeneous) and scaled back"
         ),
@@ -276,6 +325,18 @@ fn number(x: f64) -> String {
     } else {
         format!("{x:.6e}")
     }
+}
+
+/// The note for an external force or torque taken as zero (`model::scene::unset_forces`).
+pub fn zero_force_note(system: &System, symbol: Symbol) -> String {
+    let sym = system.graph.symbol(symbol);
+    let (what, body) = match sym.role {
+        Role::Torque { body } => ("torque", body),
+        Role::Force { body } => ("force", body),
+        _ => ("value", usize::MAX),
+    };
+    let body = system.bodies.get(body).map_or_else(String::new, |b| format!(" of `{}`", b.name));
+    format!("note: the {what} `{}`{body} has no value and no [scene] forces expression: taken as zero", sym.name)
 }
 
 /// A readable table of the same numbers.
