@@ -329,6 +329,31 @@ const PROGRESS_MIN_STEPS: u64 = 20_000;
 /// The progress bar moves every this many steps, so drawing it costs nothing measurable.
 const PROGRESS_EVERY: u64 = 1000;
 
+/// Files with at least this many constraints show a spinner while they derive and print (on
+/// a terminal): a 10⁴-link chain takes about a second, so smaller files end before it would
+/// draw.
+const SPINNER_MIN_CONSTRAINTS: usize = 10_000;
+
+/// A spinner on stderr, with the elapsed time, while `work` runs on a system of `constraints`
+/// constraints — only on a terminal and for large files (`SPINNER_MIN_CONSTRAINTS`).
+fn with_spinner<T>(what: &str, constraints: usize, work: impl FnOnce() -> T) -> T {
+    use std::io::IsTerminal;
+    let spinner = (std::io::stderr().is_terminal() && constraints >= SPINNER_MIN_CONSTRAINTS).then(|| {
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.set_message(format!("{what} {constraints} constraints"));
+        if let Ok(style) = indicatif::ProgressStyle::with_template("{spinner} {msg} ({elapsed})") {
+            bar.set_style(style);
+        }
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
+        bar
+    });
+    let result = work();
+    if let Some(bar) = spinner {
+        bar.finish_and_clear();
+    }
+    result
+}
+
 /// Set when standard output failed for a reason other than its reader going away.
 static STDOUT_FAILED: AtomicBool = AtomicBool::new(false);
 
@@ -448,14 +473,15 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
         Ok(l) => l,
         Err(code) => return code,
     };
-    let derivation =
-        match derive_with(&loaded.system, DeriveOptions { document: !matches!(format, FormatArg::Json), steps }) {
-            Ok(d) => d,
-            Err(e) => {
-                errln!("error: {}: {e}", path.display());
-                return ExitCode::from(1);
-            }
-        };
+    let options = DeriveOptions { document: !matches!(format, FormatArg::Json), steps };
+    let constraints = loaded.system.constraints.len();
+    let derivation = match with_spinner("deriving", constraints, || derive_with(&loaded.system, options)) {
+        Ok(d) => d,
+        Err(e) => {
+            errln!("error: {}: {e}", path.display());
+            return ExitCode::from(1);
+        }
+    };
     let format = match format {
         FormatArg::Text => Format::Text,
         FormatArg::Latex => Format::Latex,
@@ -464,7 +490,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
     };
     if format == Format::Json {
         // A is sparse (its upper triangle's non-zero entries): linear in the scene's size.
-        return match derivation::json(&loaded.system, &derivation) {
+        return match with_spinner("writing", constraints, || derivation::json(&loaded.system, &derivation)) {
             Ok(doc) => {
                 emit_json(&doc);
                 ExitCode::SUCCESS
@@ -475,7 +501,8 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
             }
         };
     }
-    let result = derivation::document(&loaded.system, &derivation, format, steps);
+    let result =
+        with_spinner("writing", constraints, || derivation::document(&loaded.system, &derivation, format, steps));
     match result {
         Ok(s) => {
             outln!("{s}");
