@@ -179,6 +179,9 @@ pub struct SystemBuilder {
     constraint_names: NameSet<String>,
     /// Scratch of the walk for a constraint's symbols, kept from one constraint to the next.
     walk: SymbolWalk,
+    /// Whether some body is rigid so far ([`System::has_rigid_bodies`] walks every body: once
+    /// per constraint would make loading a large scene quadratic).
+    has_rigid: bool,
 }
 
 /// What a name was declared as; written out (`the position of body `bead``) only for a
@@ -266,6 +269,7 @@ impl SystemBuilder {
             body_names: NameSet::default(),
             constraint_names: NameSet::default(),
             walk: SymbolWalk::default(),
+            has_rigid: false,
         })
     }
 
@@ -436,6 +440,7 @@ impl SystemBuilder {
         };
         self.system.bodies[body].rigid =
             Some(Rigid { orientation, angular_velocity, angular_acceleration, torque, inertia, nodes });
+        self.has_rigid = true;
         Ok(())
     }
 
@@ -489,7 +494,7 @@ impl SystemBuilder {
             return Err(BuildError::NoBody(name.to_string()));
         }
         // A rigid body is found through its position and its orientation: once, in order.
-        if self.system.has_rigid_bodies() {
+        if self.has_rigid {
             bodies.sort_unstable();
             bodies.dedup();
         }

@@ -785,17 +785,20 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
             system.constraints.iter().zip(&names).map(|(c, n)| (c.name.clone(), json!(n))).collect();
         out["multipliers"] = Value::Object(multipliers);
         out["force_sums"] = Value::Object(sums);
-        // Rigid bodies: the torque on each as Σₖ λₖ Jʷₖᵢ (absent without rigid bodies).
-        let mut torque_sums = serde_json::Map::new();
-        for (body, b) in system.bodies.iter().enumerate() {
-            let mut terms = Vec::new();
-            for (k, dc) in d.constraints.iter().enumerate() {
-                if let Some(&(_, j)) = dc.angular.iter().find(|(i, _)| *i == body) {
-                    terms.push(format!("{}*({})", names[k], e(j)?));
+        // Rigid bodies: the torque on each as Σₖ λₖ Jʷₖᵢ (absent without rigid bodies),
+        // gathered in one pass over the constraints as the force sums are.
+        let mut terms: Vec<Vec<String>> = vec![Vec::new(); system.bodies.len()];
+        for (k, dc) in d.constraints.iter().enumerate() {
+            for &(body, j) in &dc.angular {
+                if let Some(list) = terms.get_mut(body) {
+                    list.push(format!("{}*({})", names[k], e(j)?));
                 }
             }
-            if !terms.is_empty() {
-                torque_sums.insert(b.name.clone(), json!(terms.join(" + ")));
+        }
+        let mut torque_sums = serde_json::Map::new();
+        for (b, list) in system.bodies.iter().zip(terms) {
+            if !list.is_empty() {
+                torque_sums.insert(b.name.clone(), json!(list.join(" + ")));
             }
         }
         if !torque_sums.is_empty() {
