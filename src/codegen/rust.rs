@@ -42,7 +42,7 @@ use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
 use crate::model::file::Loaded;
-use crate::numeric::program::{LowerError, Op, Program};
+use crate::numeric::program::{Inputs, LowerError, Op, Program};
 use std::cell::Cell;
 use std::collections::{HashMap, HashSet};
 use std::fmt::Write;
@@ -275,7 +275,8 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         }
         let c_names = super::c::field_names(&fields);
         let c_slots = super::c::slots(g, &fields, &c_names);
-        let ctx = Ctx { g, inputs: &inputs, slots: &c_slots, non_finite: Cell::new(0), c: true };
+        let input_layout = Inputs::new(g, &inputs)?;
+        let ctx = Ctx { g, inputs: &input_layout, slots: &c_slots, non_finite: Cell::new(0), c: true };
         let names = Names { bodies: &body_names, constraints: &constraint_names };
         let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
         let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
@@ -315,7 +316,8 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         let fields = fields.iter().zip(c_names).map(|(f, n)| (f.symbol, n)).collect();
         return Ok(Module { code, fields, warnings });
     }
-    let ctx = Ctx { g, inputs: &inputs, slots: &slots, non_finite: Cell::new(0), c: false };
+    let input_layout = Inputs::new(g, &inputs)?;
+    let ctx = Ctx { g, inputs: &input_layout, slots: &slots, non_finite: Cell::new(0), c: false };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
     ctx.rates(&mut out, &formulas, &names)?;
@@ -1325,7 +1327,8 @@ fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {
 /// Lowers formulas to Rust statements and expressions.
 pub(super) struct Ctx<'a> {
     pub(super) g: &'a Graph,
-    pub(super) inputs: &'a [Symbol],
+    /// The module's input layout, built once for all its functions.
+    pub(super) inputs: &'a Inputs,
     pub(super) slots: &'a [String],
     /// Constants written that are not finite f64 (each occurrence in a function body).
     pub(super) non_finite: Cell<usize>,
@@ -1440,7 +1443,7 @@ impl Ctx<'_> {
 
     /// `let` statements and one expression per output component of `roots`.
     pub(super) fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
-        let p = Program::lower(self.g, roots, self.inputs)?;
+        let p = Program::lower_in(self.g, roots, self.inputs)?;
         let uses = p.use_counts();
         // Each value: its text, precedence and inline depth.
         let mut text: Vec<(String, Prec, u32)> = Vec::new();

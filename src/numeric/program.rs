@@ -17,7 +17,7 @@
 use crate::expr::eval;
 use crate::expr::func::MAX_ARITY;
 use crate::expr::{Func, Graph, Id, Node, Symbol, Ty};
-use std::collections::HashMap;
+use crate::expr::graph::FastMap;
 use std::ops::Range;
 
 /// A value of the program: the index of the operation that computes it.
@@ -107,37 +107,66 @@ pub struct Program {
     pub output_ranges: Vec<Range<usize>>,
 }
 
+/// The input layout of programs: the slots of each input symbol (1, or `dim` for a vector),
+/// in the order given. Built once for many lowerings over the same inputs (`codegen` lowers
+/// every function of a module over one layout), so a lowering costs the size of its
+/// expressions, not of the inputs.
+#[derive(Clone, Debug)]
+pub struct Inputs {
+    /// Symbol → (first slot, width).
+    slots: FastMap<Symbol, (u32, usize)>,
+    ranges: Vec<Range<usize>>,
+    n: usize,
+}
+
+impl Inputs {
+    pub fn new(g: &Graph, inputs: &[Symbol]) -> Result<Inputs, LowerError> {
+        let mut slots = FastMap::default();
+        let mut ranges = Vec::new();
+        let mut n = 0usize;
+        for &s in inputs {
+            let width = if g.symbol(s).ty == Ty::Vector { g.dim() } else { 1 };
+            if slots.insert(s, (n as u32, width)).is_some() {
+                return Err(LowerError::DuplicateInput(g.symbol(s).name.clone()));
+            }
+            ranges.push(n..n + width);
+            n += width;
+        }
+        Ok(Inputs { slots, ranges, n })
+    }
+}
+
 impl Program {
     /// Lowers `roots` over the input layout `inputs` (each symbol takes 1 or `dim` slots).
     pub fn lower(g: &Graph, roots: &[Id], inputs: &[Symbol]) -> Result<Program, LowerError> {
-        let dim = g.dim();
+        Program::lower_in(g, roots, &Inputs::new(g, inputs)?)
+    }
+
+    /// [`Program::lower`] over a layout built once. Only the inputs the roots use get an
+    /// operation (`Op::Input`), at their first use.
+    pub fn lower_in(g: &Graph, roots: &[Id], inputs: &Inputs) -> Result<Program, LowerError> {
         let mut b = Builder::default();
-        // Input layout: symbol → its slot values.
-        let mut slots: HashMap<Symbol, [Val; 3]> = HashMap::new();
-        let mut input_ranges = Vec::new();
-        let mut n = 0u32;
-        for &s in inputs {
-            let width = if g.symbol(s).ty == Ty::Vector { dim } else { 1 };
-            let mut v = [0; 3];
-            for (k, slot) in v.iter_mut().enumerate().take(width) {
-                *slot = b.push(Op::Input(n + k as u32));
-            }
-            if slots.insert(s, v).is_some() {
-                return Err(LowerError::DuplicateInput(g.symbol(s).name.clone()));
-            }
-            input_ranges.push(n as usize..n as usize + width);
-            n += width as u32;
-        }
+        // The input symbols met so far → their slot values.
+        let mut slots: FastMap<Symbol, [Val; 3]> = FastMap::default();
         // Node → its component values (a scalar uses entry 0).
-        let mut vals: HashMap<Id, [Val; 3]> = HashMap::new();
+        let mut vals: FastMap<Id, [Val; 3]> = FastMap::default();
+        let dim = g.dim();
         for id in g.reachable(roots) {
             let width = if g.ty(id) == Ty::Vector { dim } else { 1 };
             let get = |x: &Id| vals[x];
             let v: [Val; 3] = match g.node(id) {
                 Node::Num(q) => [b.constant(q.to_f64()), 0, 0],
-                Node::Sym(s) => match slots.get(s) {
-                    Some(v) => *v,
-                    None => return Err(LowerError::MissingInput(g.symbol(*s).name.clone())),
+                Node::Sym(s) => match (slots.get(s), inputs.slots.get(s)) {
+                    (Some(v), _) => *v,
+                    (None, Some(&(first, width))) => {
+                        let mut v = [0; 3];
+                        for (k, slot) in v.iter_mut().enumerate().take(width) {
+                            *slot = b.push(Op::Input(first + k as u32));
+                        }
+                        slots.insert(*s, v);
+                        v
+                    }
+                    (None, None) => return Err(LowerError::MissingInput(g.symbol(*s).name.clone())),
                 },
                 Node::Vector(xs) => {
                     let mut v = [0; 3];
@@ -217,7 +246,8 @@ impl Program {
             outputs.extend_from_slice(&vals[r][..width]);
             output_ranges.push(start..outputs.len());
         }
-        let mut p = Program { ops: b.ops, n_inputs: n as usize, input_ranges, outputs, output_ranges };
+        let (n_inputs, input_ranges) = (inputs.n, inputs.ranges.clone());
+        let mut p = Program { ops: b.ops, n_inputs, input_ranges, outputs, output_ranges };
         p.drop_dead();
         p.share_reciprocals();
         Ok(p)
@@ -321,7 +351,7 @@ fn renumber(op: Op, m: &[Val]) -> Op {
 #[derive(Default)]
 struct Builder {
     ops: Vec<Op>,
-    index: HashMap<Op, Val>,
+    index: FastMap<Op, Val>,
 }
 
 impl Builder {
@@ -519,7 +549,7 @@ impl Builder {
 
     /// A product node: constant factors first, factors `y^−n` as divisions, the vector
     /// factor (last, if any) scaled component by component.
-    fn product(&mut self, g: &Graph, xs: &[Id], vals: &HashMap<Id, [Val; 3]>, width: usize) -> [Val; 3] {
+    fn product(&mut self, g: &Graph, xs: &[Id], vals: &FastMap<Id, [Val; 3]>, width: usize) -> [Val; 3] {
         let mut numerator = self.constant(1.0);
         let mut denominator = self.constant(1.0);
         let mut vector = None;
