@@ -16,8 +16,8 @@
 
 use crate::expr::eval;
 use crate::expr::func::MAX_ARITY;
-use crate::expr::{Func, Graph, Id, Node, Symbol, Ty};
 use crate::expr::graph::FastMap;
+use crate::expr::{Func, Graph, Id, Node, Symbol, Ty};
 use std::ops::Range;
 
 /// A value of the program: the index of the operation that computes it.
