@@ -65,3 +65,38 @@ fn a_fractional_scale_is_written_in_parentheses() {
     let steps = doc(THIRD, Format::Text, true);
     assert!(steps.contains("= (2/3) · (r)"), "{steps}");
 }
+
+/// A vector over a scalar denominator is one fraction in LaTeX, as a person writes the unit
+/// vector of a spherical pendulum, `\frac{\vec r - \vec p}{\lVert \vec r - \vec p \rVert}`, and
+/// Newton's `\frac{\vec F + \vec F_c}{m}` — not `\frac{1}{…} \, (…)`; the text keeps
+/// `(r − p)/|r − p|`.
+#[test]
+fn a_vector_over_a_denominator_is_one_fraction_in_latex() {
+    let pendulum = r#"
+dimension = 3
+[parameters]
+l = 1.0
+m = 1.0
+p = [0.0, 0.0, 1.0]
+[[bodies]]
+name = "bob"
+position = "r"
+velocity = "v"
+acceleration = "a"
+mass = "m"
+force = "F"
+[[constraints]]
+name = "rod"
+expr = "norm(r - p) = l"
+"#;
+    let latex = doc(pendulum, Format::Latex, true);
+    let gradient = latex.lines().find(|l| l.contains("\\nabla C \\quad")).expect("a ∇C line");
+    assert!(
+        gradient.ends_with("= \\frac{\\vec{r} - \\vec{p}}{\\left\\lVert \\vec{r} - \\vec{p} \\right\\rVert} \\]"),
+        "{gradient}"
+    );
+    assert!(latex.contains("\\frac{\\vec{F} + \\vec{F}_{c}}{m}"), "Newton's step: {latex}");
+    assert!(!latex.contains("\\frac{1}{\\left\\lVert"), "no reciprocal in front of a vector: {latex}");
+    let text = doc(pendulum, Format::Text, false);
+    assert!(text.contains("(r − p)/|r − p|"), "{text}");
+}

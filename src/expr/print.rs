@@ -543,11 +543,15 @@ impl<'g> Printer<'g> {
         }
         let has_den = !denominator.is_empty() || !q.is_one();
         let mut pieces = 0;
-        // `(F + F_c)/m` rather than `1/m (F + F_c)`.
-        if let Some(v) = vector.filter(|_| has_den && numerator.is_empty() && p.is_one() && !latex) {
-            self.juxtaposed(v, style, 3, negative)?;
+        // `(F + F_c)/m` rather than `1/m (F + F_c)`; in LaTeX `\frac{\vec F + …}{m}`.
+        if let Some(v) = vector.filter(|_| has_den && numerator.is_empty() && p.is_one()) {
+            if latex {
+                numerator.push(v);
+            } else {
+                self.juxtaposed(v, style, 3, negative)?;
+                pieces += 1;
+            }
             vector = None;
-            pieces += 1;
         }
         if has_den && latex {
             self.push("\\frac{")?;
