@@ -72,3 +72,200 @@ fn lagrange_pendulum_step(bencher: divan::Bencher) {
     settings.steps = 1;
     bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
 }
+
+/// Steps per sample of the per-step benchmarks: a `simulate` call's setup (cloning the
+/// program and the state) is spread over them, as it is over a real run.
+const STEPS: u64 = 100;
+
+/// `simulate` of an N-link chain for [`STEPS`] Verlet + projection steps (RATTLE: the
+/// acceleration solve, drift, SHAKE, kick, velocity projection), beside
+/// [`handwritten_chain_steps`] doing the same work by hand: divide both by `STEPS` for the
+/// cost of a step; their ratio is the overhead of the general path.
+#[divan::bench(args = [10, 100, 1000, 10000], sample_count = 5, sample_size = 1)]
+fn chain_steps(bencher: divan::Bencher, n: usize) {
+    let s = chain(n);
+    let mut settings = s.settings();
+    settings.integrator = Integrator::Verlet;
+    settings.stabilize = Stabilize::PROJECTION;
+    settings.steps = STEPS;
+    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+}
+
+/// The baseline of [`chain_steps`]: the same chain (`lagrange::scenario::chain`: links of
+/// l = 0.5, masses 1, g = [0, −9.81], straight along +x at rest, dt = 1e-3) stepped by a
+/// handwritten RATTLE with its tridiagonal solves, as an engine programmer would write it.
+#[divan::bench(args = [10, 100, 1000, 10000], sample_count = 5, sample_size = 1)]
+fn handwritten_chain_steps(bencher: divan::Bencher, n: usize) {
+    bencher.bench_local(|| {
+        let mut chain = HandChain::new(n);
+        for _ in 0..STEPS {
+            chain.step();
+        }
+        divan::black_box(chain.q[n - 1])
+    });
+}
+
+/// An N-link chain pinned at the origin, C_k = |d_k|² − l² with d_k = q_k − q_{k−1}
+/// (q_{−1} = 0), J_k = ±d_k (κ = 2), unit masses: A is tridiagonal.
+struct HandChain {
+    q: Vec<[f64; 2]>,
+    v: Vec<[f64; 2]>,
+    a: Vec<[f64; 2]>,
+    /// Scratch: d_k at the step's start (SHAKE's gradients), the tridiagonal's bands and
+    /// right-hand side, the multipliers.
+    d0: Vec<[f64; 2]>,
+    lower: Vec<f64>,
+    diag: Vec<f64>,
+    upper: Vec<f64>,
+    rhs: Vec<f64>,
+    mu: Vec<f64>,
+}
+
+const L: f64 = 0.5;
+const G: f64 = -9.81;
+const DT: f64 = 1e-3;
+
+fn sub(a: [f64; 2], b: [f64; 2]) -> [f64; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+fn dot(a: [f64; 2], b: [f64; 2]) -> f64 {
+    a[0] * b[0] + a[1] * b[1]
+}
+
+impl HandChain {
+    fn new(n: usize) -> HandChain {
+        let q = (1..=n).map(|i| [0.5 * i as f64, 0.0]).collect();
+        let z = || vec![0.0; n];
+        let mut c = HandChain {
+            q,
+            v: vec![[0.0; 2]; n],
+            a: vec![[0.0; 2]; n],
+            d0: vec![[0.0; 2]; n],
+            lower: z(),
+            diag: z(),
+            upper: z(),
+            rhs: z(),
+            mu: z(),
+        };
+        c.accelerations();
+        c
+    }
+
+    fn link(x: &[[f64; 2]], k: usize) -> [f64; 2] {
+        if k == 0 { x[0] } else { sub(x[k], x[k - 1]) }
+    }
+
+    /// Solves the tridiagonal system in `lower`, `diag`, `upper`, `rhs` into `mu` (Thomas;
+    /// the bands are overwritten).
+    fn solve(&mut self) {
+        let n = self.diag.len();
+        for k in 1..n {
+            let w = self.lower[k] / self.diag[k - 1];
+            self.diag[k] -= w * self.upper[k - 1];
+            self.rhs[k] -= w * self.rhs[k - 1];
+        }
+        self.mu[n - 1] = self.rhs[n - 1] / self.diag[n - 1];
+        for k in (0..n - 1).rev() {
+            self.mu[k] = (self.rhs[k] - self.upper[k] * self.mu[k + 1]) / self.diag[k];
+        }
+    }
+
+    /// The bands of Σᵢ Jₖᵢ·Hⱼᵢ (unit masses) for rows J = ±e_k at q and columns H = ±h_k.
+    fn bands(&mut self, e: impl Fn(&HandChain, usize) -> [f64; 2], h: impl Fn(&HandChain, usize) -> [f64; 2]) {
+        let n = self.q.len();
+        for k in 0..n {
+            let (ek, hk) = (e(self, k), h(self, k));
+            self.diag[k] = if k == 0 { dot(ek, hk) } else { 2.0 * dot(ek, hk) };
+            self.lower[k] = if k > 0 { -dot(ek, h(self, k - 1)) } else { 0.0 };
+            self.upper[k] = if k + 1 < n { -dot(ek, h(self, k + 1)) } else { 0.0 };
+        }
+    }
+
+    /// a = g + Σ λ J: A λ = −b with b_k = |ḋ_k|² (+ d_0·g for the pinned link).
+    fn accelerations(&mut self) {
+        let n = self.q.len();
+        self.bands(|c, k| Self::link(&c.q, k), |c, k| Self::link(&c.q, k));
+        for k in 0..n {
+            let dv = Self::link(&self.v, k);
+            let gravity = if k == 0 { G * self.q[0][1] } else { 0.0 };
+            self.rhs[k] = -(dot(dv, dv) + gravity);
+        }
+        self.solve();
+        for i in 0..n {
+            let mut f = [0.0, G];
+            let di = Self::link(&self.q, i);
+            for d in 0..2 {
+                f[d] += self.mu[i] * di[d];
+            }
+            if i + 1 < n {
+                let dn = Self::link(&self.q, i + 1);
+                for d in 0..2 {
+                    f[d] -= self.mu[i + 1] * dn[d];
+                }
+            }
+            self.a[i] = f;
+        }
+    }
+
+    fn step(&mut self) {
+        let n = self.q.len();
+        for k in 0..n {
+            self.d0[k] = Self::link(&self.q, k);
+        }
+        // Drift: v½ = v + h/2 a, q⁺ = q + h v½.
+        for i in 0..n {
+            for d in 0..2 {
+                self.v[i][d] += 0.5 * DT * self.a[i][d];
+                self.q[i][d] += DT * self.v[i][d];
+            }
+        }
+        // SHAKE along the start's gradients: Δqᵢ = −Σₖ μₖ J⁰ₖᵢ until every distance
+        // |C/κ|/|J| is within 1e-13 of the scene's size (its largest |qᵢ|), as `simulate`'s.
+        let length = self.q.iter().map(|q| dot(*q, *q)).fold(0.0, f64::max).sqrt();
+        for _ in 0..20 {
+            let mut worst = 0.0f64;
+            for k in 0..n {
+                let dk = Self::link(&self.q, k);
+                self.rhs[k] = 0.5 * (dot(dk, dk) - L * L);
+                worst = worst.max(self.rhs[k].abs());
+            }
+            if worst / L <= 1e-13 * length {
+                break;
+            }
+            self.bands(|c, k| Self::link(&c.q, k), |c, k| c.d0[k]);
+            self.solve();
+            for i in 0..n {
+                for d in 0..2 {
+                    let mut dq = -self.mu[i] * self.d0[i][d];
+                    if i + 1 < n {
+                        dq += self.mu[i + 1] * self.d0[i + 1][d];
+                    }
+                    self.q[i][d] += dq;
+                    self.v[i][d] += dq / DT;
+                }
+            }
+        }
+        // Kick by the external force, then project the velocities onto J v = 0.
+        for v in &mut self.v {
+            v[1] += 0.5 * DT * G;
+        }
+        self.bands(|c, k| Self::link(&c.q, k), |c, k| Self::link(&c.q, k));
+        for k in 0..n {
+            self.rhs[k] = dot(Self::link(&self.q, k), Self::link(&self.v, k));
+        }
+        self.solve();
+        for i in 0..n {
+            let di = Self::link(&self.q, i);
+            for d in 0..2 {
+                let mut dv = -self.mu[i] * di[d];
+                if i + 1 < n {
+                    dv += self.mu[i + 1] * Self::link(&self.q, i + 1)[d];
+                }
+                self.v[i][d] += dv;
+            }
+        }
+        // The next step's accelerations at the new state (what the run records).
+        self.accelerations();
+    }
+}
