@@ -257,12 +257,10 @@ impl HandChain {
         self.solve();
         for i in 0..n {
             let di = Self::link(&self.q, i);
-            for d in 0..2 {
-                let mut dv = -self.mu[i] * di[d];
-                if i + 1 < n {
-                    dv += self.mu[i + 1] * Self::link(&self.q, i + 1)[d];
-                }
-                self.v[i][d] += dv;
+            let next = if i + 1 < n { Self::link(&self.q, i + 1) } else { [0.0; 2] };
+            let mu_next = if i + 1 < n { self.mu[i + 1] } else { 0.0 };
+            for (d, v) in self.v[i].iter_mut().enumerate() {
+                *v += -self.mu[i] * di[d] + mu_next * next[d];
             }
         }
         // The next step's accelerations at the new state (what the run records).
