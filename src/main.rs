@@ -752,13 +752,6 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    // The velocity-level solvers step point masses only for now.
-    if velocity.is_some()
-        && let Err(e) = scenario.system.refuse_rigid("simulate --solver")
-    {
-        eprintln!("error: {}: {e}", args.file.display());
-        return ExitCode::from(1);
-    }
     for symbol in unset_forces(&scenario.system, &scenario.scene, &[]) {
         errln!("{}", solution::zero_force_note(&scenario.system, symbol));
     }
@@ -849,13 +842,14 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
-    // Work-precision sweeps and formula accuracy are point-mass only for now.
+    // The velocity-level solvers step rigid bodies; work-precision sweeps and formula
+    // accuracy are point-mass only for now.
+    if args.solvers {
+        return cmd_bench_solvers(args, &scenario);
+    }
     if let Err(e) = scenario.system.refuse_rigid("bench") {
         eprintln!("error: {}: {e}", args.file.display());
         return ExitCode::from(1);
-    }
-    if args.solvers {
-        return cmd_bench_solvers(args, &scenario);
     }
     let max_states = lagrange::precision::accuracy::MAX_STATES;
     if args.states > max_states {

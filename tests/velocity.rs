@@ -6,14 +6,12 @@
 
 mod common;
 
-use common::scenario;
+use common::{impulse_system, scenario, velocity_steps};
 use lagrange::numeric::dynamics::{Dynamics, SimError};
-use lagrange::numeric::rows::Rows;
 use lagrange::numeric::simulate::initial_state;
 use lagrange::numeric::solve::solve;
 use lagrange::numeric::velocity::{Settings, Softness, Solver, Stepper, stability};
 use lagrange::scenario::Scenario;
-use nalgebra::{DMatrix, DVector};
 
 /// `path` with some initial values replaced.
 fn scenario_at(path: &str, overrides: &[(&str, [f64; 2])]) -> Scenario {
@@ -22,22 +20,6 @@ fn scenario_at(path: &str, overrides: &[(&str, [f64; 2])]) -> Scenario {
     let raw: Vec<_> = overrides.iter().map(|(n, v)| (*n, lagrange::model::raw::RawValue::Vector(v.to_vec()))).collect();
     let overrides = lagrange::model::state::values(&loaded.system, &raw).expect("values of the file's symbols");
     Scenario::new(loaded, &overrides).expect("derives")
-}
-
-/// Runs `steps` steps of `settings` on `s` by hand, calling `each` with the stepper after
-/// every step.
-fn steps(s: &Scenario, settings: Settings, steps: u64, mut each: impl FnMut(&Stepper, &Rows)) -> Result<(), SimError> {
-    let mut dynamics = Dynamics::new(&s.system, s.program.clone(), s.env.clone());
-    let (mut q, mut v, t0) = initial_state(&s.system, &s.env);
-    let mut stepper = Stepper::new(settings, s.system.constraints.len(), q.len());
-    for n in 0..steps {
-        let t = t0 + n as f64 * settings.dt;
-        let rows = dynamics.rows(t, &q, &v)?;
-        stepper.step(&mut dynamics, t, &mut q, &mut v, rows)?;
-        let after = dynamics.rows(t + settings.dt, &q, &v)?;
-        each(&stepper, &after);
-    }
-    Ok(())
 }
 
 #[test]
@@ -69,7 +51,7 @@ fn a_resting_pendulum_takes_lambda_times_h_per_substep() {
         let settings = Settings::new(solver, 1.0 / 60.0, 1.0);
         let h = settings.substep();
         let (mut last, mut lambda) = (0.0, 0.0);
-        steps(&s, settings, 600, |st, rows| {
+        velocity_steps(&s, settings, 600, |st, rows| {
             last = st.impulse[0];
             lambda = solve(rows).lambda[0];
         })
@@ -78,30 +60,6 @@ fn a_resting_pendulum_takes_lambda_times_h_per_substep() {
         let relative = (last / h - lambda).abs() / lambda.abs();
         assert!(relative < 1e-9, "{}: P/h = {} against λ = {lambda} ({relative:e})", solver.name(), last / h);
     }
-}
-
-/// A = J M⁻¹ Jᵀ and J u for the rows at a state.
-fn system(rows: &Rows, u: &[[f64; 3]]) -> (DMatrix<f64>, DVector<f64>, Vec<f64>) {
-    let k = rows.rows.len();
-    let mut a = DMatrix::zeros(k, k);
-    let mut ju = DVector::zeros(k);
-    let mut meff = vec![0.0; k];
-    for (p, rp) in rows.rows.iter().enumerate() {
-        for (b, j) in &rp.jacobian {
-            ju[p] += j[0] * u[*b][0] + j[1] * u[*b][1] + j[2] * u[*b][2];
-        }
-        for (q, rq) in rows.rows.iter().enumerate() {
-            for (bp, jp) in &rp.jacobian {
-                for (bq, jq) in &rq.jacobian {
-                    if bp == bq {
-                        a[(p, q)] += rows.inverse_mass[*bp] * (jp[0] * jq[0] + jp[1] * jq[1] + jp[2] * jq[2]);
-                    }
-                }
-            }
-        }
-        meff[p] = 1.0 / a[(p, p)];
-    }
-    (a, ju, meff)
 }
 
 #[test]
@@ -121,12 +79,12 @@ fn pgs_and_the_soft_step_converge_to_the_exact_velocity_solve_as_iterations_grow
             [v[0] + h * w * f[0], v[1] + h * w * f[1], 0.0]
         })
         .collect();
-    let (a, ju, meff) = system(&rows, &u0);
+    let (a, ju, meff) = impulse_system(&rows, &u0);
     let exact = a.clone().lu().solve(&(-&ju)).expect("A is regular");
     let mut base = Settings::new(Solver::Exact, h, h);
     base.substeps = 1;
     let mut library = Vec::new();
-    steps(&s, base, 1, |st, _| library = st.impulse.clone()).expect("runs");
+    velocity_steps(&s, base, 1, |st, _| library = st.impulse.clone()).expect("runs");
     let gap: f64 = library.iter().zip(exact.iter()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
     assert!(gap < 1e-9 * exact.amax(), "the library's exact velocity solve: {gap:e}");
 
@@ -142,7 +100,7 @@ fn pgs_and_the_soft_step_converge_to_the_exact_velocity_solve_as_iterations_grow
             let mut settings = Settings { iterations: Some(iterations), relax: false, ..base };
             settings.solver = solver;
             let mut p = Vec::new();
-            steps(&s, settings, 1, |st, _| p = st.impulse.clone()).expect("runs");
+            velocity_steps(&s, settings, 1, |st, _| p = st.impulse.clone()).expect("runs");
             let e = p.iter().zip(target.iter()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / target.amax();
             errors.push(e);
         }
@@ -161,7 +119,7 @@ fn inequality_impulses_never_pull() {
         for solver in Solver::ALL {
             let settings = Settings::new(solver, 1.0 / 60.0, 1.0);
             let mut pushed = 0;
-            steps(&s, settings, 300, |st, _| {
+            velocity_steps(&s, settings, 300, |st, _| {
                 for (k, &p) in st.impulse.iter().enumerate() {
                     if inequality[k] {
                         assert!(p >= 0.0, "{path}, {}: row {k} pulls with P = {p}", solver.name());
@@ -182,7 +140,7 @@ fn xpbd_with_zero_compliance_keeps_its_rows() {
     let s = scenario("constraints/chain_5.toml");
     let settings = Settings::new(Solver::Xpbd, 1.0 / 60.0, 2.0);
     let mut worst = 0.0f64;
-    steps(&s, settings, 120, |_, rows| {
+    velocity_steps(&s, settings, 120, |_, rows| {
         for row in &rows.rows {
             worst = worst.max(row.value.abs() / (0.5 * 0.5));
         }

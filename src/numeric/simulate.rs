@@ -249,6 +249,23 @@ pub fn scene_length(system: &System, env: &Env) -> f64 {
     length_scale(&q[..system.bodies.len()])
 }
 
+/// The state at the end of a run by symbol name, for the summary: each body's position and
+/// velocity, then each rigid body's angle and angular velocity from its slot after the bodies.
+pub fn final_state(system: &System, q: &[[f64; 3]], v: &[[f64; 3]]) -> Vec<(String, Value)> {
+    let name = |s| system.graph.symbol(s).name.clone();
+    let mut state = Vec::new();
+    for (i, body) in system.bodies.iter().enumerate() {
+        state.push((name(body.position), Value::Vector(q[i])));
+        state.push((name(body.velocity), Value::Vector(v[i])));
+    }
+    let n = system.bodies.len();
+    for (slot, rigid) in (n..).zip(system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
+        state.push((name(rigid.orientation), Value::Scalar(q[slot][0])));
+        state.push((name(rigid.angular_velocity), Value::Scalar(v[slot][0])));
+    }
+    state
+}
+
 /// Whether some constraint depends on t (its force then does work).
 pub fn time_dependent(system: &System) -> bool {
     system.constraints.iter().any(|c| system.graph.free_symbols(c.c).contains(&system.time))
@@ -322,18 +339,12 @@ impl<'s> Simulation<'s> {
         let back = |x: &[f64; 3]| self.unit.as_ref().map_or(*x, |u| u.vector(*x));
         summary.final_position = self.q.iter().map(back).collect();
         summary.final_velocity = self.v.iter().map(back).collect();
-        for (i, body) in system.bodies.iter().enumerate() {
-            let (q, v) = (summary.final_position[i], summary.final_velocity[i]);
-            summary.final_state.push((system.graph.symbol(body.position).name.clone(), Value::Vector(q)));
-            summary.final_state.push((system.graph.symbol(body.velocity).name.clone(), Value::Vector(v)));
-        }
-        // Rigid bodies' angles and angular velocities, from their slots after the bodies.
+        // Angles are no lengths: the unit converts the bodies' slots only.
         let n = system.bodies.len();
-        for (slot, rigid) in (n..).zip(system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
-            let (th, w) = (self.q[slot][0], self.v[slot][0]);
-            summary.final_state.push((system.graph.symbol(rigid.orientation).name.clone(), Value::Scalar(th)));
-            summary.final_state.push((system.graph.symbol(rigid.angular_velocity).name.clone(), Value::Scalar(w)));
-        }
+        let (mut q, mut v) = (summary.final_position.clone(), summary.final_velocity.clone());
+        q[n..].copy_from_slice(&self.q[n..]);
+        v[n..].copy_from_slice(&self.v[n..]);
+        summary.final_state = final_state(system, &q, &v);
         match result {
             Ok(()) => Ok(summary),
             Err(error) => Err(Box::new(Failure { error, summary })),

@@ -8,10 +8,15 @@ use lagrange::expr::eval::{Env, Value, eval_one};
 use lagrange::expr::{Id, Role, Ty};
 use lagrange::model::file::load;
 use lagrange::model::system::{BodySpec, MassSpec, System, SystemBuilder};
+use lagrange::numeric::dynamics::{Dynamics, SimError};
 use lagrange::numeric::integrate::Integrator;
+use lagrange::numeric::rows::Rows;
+use lagrange::numeric::simulate::initial_state;
 use lagrange::numeric::simulate::{Failure, Frame, Settings, Summary};
 use lagrange::numeric::stabilize::Stabilize;
+use lagrange::numeric::velocity::{Settings as VelocitySettings, Stepper};
 use lagrange::scenario::Scenario;
+use nalgebra::{DMatrix, DVector};
 
 /// The environment variable that makes the slow tests (the 10⁵-step chain, the 10⁶-step
 /// pendulum, the rustc compiles of generated modules, the 1000-body chain) return at once:
@@ -169,4 +174,50 @@ pub fn run_observed(
 /// Runs `path` with Verlet + projection at the scene's step.
 pub fn run(path: &str, steps: Option<u64>) -> Result<Summary, Box<Failure>> {
     run_observed(path, Integrator::Verlet, Stabilize::PROJECTION, None, steps, &mut |_| {})
+}
+
+/// Runs `steps` steps of the velocity-level `settings` on `s` by hand, calling `each` with
+/// the stepper and the rows after every step.
+pub fn velocity_steps(
+    s: &Scenario,
+    settings: VelocitySettings,
+    steps: u64,
+    mut each: impl FnMut(&Stepper, &Rows),
+) -> Result<(), SimError> {
+    let mut dynamics = Dynamics::new(&s.system, s.program.clone(), s.env.clone());
+    let (mut q, mut v, t0) = initial_state(&s.system, &s.env);
+    let mut stepper = Stepper::new(settings, s.system.constraints.len(), q.len());
+    for n in 0..steps {
+        let t = t0 + n as f64 * settings.dt;
+        let rows = dynamics.rows(t, &q, &v)?;
+        stepper.step(&mut dynamics, t, &mut q, &mut v, rows)?;
+        let after = dynamics.rows(t + settings.dt, &q, &v)?;
+        each(&stepper, &after);
+    }
+    Ok(())
+}
+
+/// A = J M⁻¹ Jᵀ, J u and the effective masses 1/Aₖₖ for the rows at a state, over the
+/// rows' slots (a rigid body's angular slot carries 1/I and Jʷ).
+pub fn impulse_system(rows: &Rows, u: &[[f64; 3]]) -> (DMatrix<f64>, DVector<f64>, Vec<f64>) {
+    let k = rows.rows.len();
+    let mut a = DMatrix::zeros(k, k);
+    let mut ju = DVector::zeros(k);
+    let mut meff = vec![0.0; k];
+    for (p, rp) in rows.rows.iter().enumerate() {
+        for (b, j) in &rp.jacobian {
+            ju[p] += j[0] * u[*b][0] + j[1] * u[*b][1] + j[2] * u[*b][2];
+        }
+        for (q, rq) in rows.rows.iter().enumerate() {
+            for (bp, jp) in &rp.jacobian {
+                for (bq, jq) in &rq.jacobian {
+                    if bp == bq {
+                        a[(p, q)] += rows.inverse_mass[*bp] * (jp[0] * jq[0] + jp[1] * jq[1] + jp[2] * jq[2]);
+                    }
+                }
+            }
+        }
+        meff[p] = 1.0 / a[(p, p)];
+    }
+    (a, ju, meff)
 }

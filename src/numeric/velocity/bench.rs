@@ -4,10 +4,11 @@
 //! state (`velocity::stability`).
 //!
 //! Per run: max |C| and max |Ċ| (C/κ, as the rows), the largest energy balance |E| relative
-//! to the larger of the largest kinetic energy and the work scale Σ|Fᵢ|·(scene size) (a scene
+//! to the larger of the largest kinetic energy and the work scale Σ|Fᵢ|·(scene size) + Σ|τᵢ|·1 rad (a scene
 //! at rest has no kinetic energy to compare with), the jitter (the spread max − min of each row's λ = P/h over the
 //! second half of the run, relative to the largest mean |λ|: 0 for a scene at rest solved
-//! exactly), the final state's distance from the reference run relative to the scene's size,
+//! exactly), the final state's distance from the reference run relative to the scene's size
+//! (the bodies' positions: a rigid body's angle enters through the points its joints hold),
 //! and the wall time per step. A run that diverges keeps its figures up to the step it
 //! stopped at and says why.
 //!
@@ -113,10 +114,13 @@ fn measure(scene: Scene<'_>, settings: Settings) -> (Entry, Option<Vec<[f64; 3]>
         (vec![f64::INFINITY; rows], vec![f64::NEG_INFINITY; rows], vec![0.0; rows], 0u64);
     let dynamics = Dynamics::new(scene.system, scene.program.clone(), scene.env.clone());
     let (mut energy, mut kinetic, mut work_scale) = (0.0f64, 0.0f64, 0.0f64);
+    let bodies = scene.system.bodies.len();
     let result = run(dynamics, scene.env, settings, &mut |frame| {
-        let size = frame.position.iter().map(safe_norm).fold(0.0, f64::max);
+        let size = frame.position[..bodies].iter().map(safe_norm).fold(0.0, f64::max);
         if frame.step == 0 {
-            work_scale = frame.rows.force.iter().map(safe_norm).sum::<f64>() * size;
+            let (forces, torques) = frame.rows.force.split_at(bodies);
+            work_scale =
+                forces.iter().map(safe_norm).sum::<f64>() * size + torques.iter().map(|t| t[0].abs()).sum::<f64>();
         }
         let t: f64 = frame
             .velocity
@@ -138,7 +142,7 @@ fn measure(scene: Scene<'_>, settings: Settings) -> (Entry, Option<Vec<[f64; 3]>
     });
     let (summary, failure, end): (Summary, Option<String>, _) = match result {
         Ok(s) => {
-            let end = s.final_position.clone();
+            let end = s.final_position[..bodies].to_vec();
             (s, None, Some(end))
         }
         Err(f) => (f.summary, Some(f.error.to_string()), None),
@@ -188,7 +192,7 @@ pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, String
     reference_settings.validate().map_err(|e| e.to_string())?;
     let (reference, end) = measure(scene, reference_settings);
     let (q0, v0, t0) = initial_state(scene.system, scene.env);
-    let size = q0.iter().map(safe_norm).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
+    let size = q0[..scene.system.bodies.len()].iter().map(safe_norm).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
     let mut entries = Vec::new();
     for solver in [Solver::SoftStep, Solver::Pgs, Solver::Xpbd, Solver::Exact] {
         for &substeps in &plan.substeps {
@@ -217,9 +221,8 @@ pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, String
         }
     }
     let mut stable_hertz = Vec::new();
-    let dim = scene.system.dim();
     let probe = settings_for(Solver::SoftStep, 1, 60.0);
-    if state_len(dim, q0.len(), scene.system.constraints.len(), &probe) <= plan.stability_max_state {
+    if state_len(scene.system, &probe) <= plan.stability_max_state {
         let mut dynamics = Dynamics::new(scene.system, scene.program.clone(), scene.env.clone());
         for &substeps in &plan.substeps {
             let mut limit = |relax: bool| {

@@ -38,7 +38,8 @@ pub fn step(
     mut rows: Rows,
 ) -> Result<(), SimError> {
     let h = s.settings.substep();
-    let length = length_scale(q.iter());
+    // Positions only: a rigid body's angle is no length.
+    let length = length_scale(&q[..dynamics.system().bodies.len()]);
     for sub in 0..s.settings.substeps {
         s.prepared.load(&rows);
         let p = &s.prepared;

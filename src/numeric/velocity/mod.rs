@@ -6,11 +6,29 @@
 //! the stability analysis of the soft step ([`stability`]).
 //!
 //! Every solver reads the rows of `numeric::rows` through [`Dynamics::rows`]: per constraint
-//! C/κ, Ċ/κ and J = ∇C/κ per body, per body 1/m, v and F. The rows are evaluated at the
+//! C/κ, Ċ/κ and J = ∇C/κ per slot, per slot 1/m, v and F. The rows are evaluated at the
 //! positions each substep starts from and held fixed within the substep, as Box2D holds a
 //! joint's anchors between position updates. Ċ at any velocity u is J·u + ∂C/∂t, with
 //! ∂C/∂t = Ċ − J·v taken from the rows (so moving constraints work). A row's impulse P acts
 //! as Δvᵢ = (1/mᵢ) Jᵢ P; with J = ∇C/κ, P refers to C/κ as λ does, and P/h ≈ λ.
+//!
+//! Rigid bodies (2D) need nothing of their own: a state's slots are the bodies, then one
+//! angular slot per rigid body (`numeric::rows`: 1/I, ω, τ and the row's Jʷ in component 0,
+//! θ in the position's). So a row's entries are its linear and angular parts per body,
+//! u = (v, ω), M⁻¹ = blockdiag(1/m E, 1/I), m_eff = 1/(Σ Jᵛ·Jᵛ/m + Σ (Jʷ)²/I) (for a pin,
+//! Jʷ = (r × n): Box2D's (r × n)²/I terms), an impulse changes v by Jᵛ P/m and ω by Jʷ P/I,
+//! and θ += h ω with x += h v (symplectic Euler, as for point masses; in 2D the turn is
+//! exact, so XPBD's position update θ += Jʷ Δλ/I is its angular generalised inverse mass).
+//! Lengths (the scene's size, the blow-up bound, the bench's deviation) come from the bodies'
+//! positions only, never an angle.
+//!
+//! Row by row, not in blocks: a vector constraint (a revolute pin, `NAME.x` and `NAME.y`) is
+//! two rows swept one after the other, where Box2D v3 solves a point joint's two rows as one
+//! 2×2 block (`revolute_joint.c`: ΔP = −s_m K⁻¹(Ċ + bias) − s_i P). Converged, both give the
+//! exact velocity solve −K⁻¹Ċ (PGS, and the soft step's relax pass); with softness the
+//! sweep's fixed point is (A + (s_i/s_m) diag A) P = −Ċ, Box2D's (A + (s_i/s_m) K) P = −Ċ,
+//! and one iteration differs (`tests/velocity_rigid.rs`). A generated step that follows the
+//! library must sweep the same rows in the same order.
 //!
 //! Design note. [`Stepper`] holds the solver's state between steps (accumulated impulses
 //! for warm starting) and its scratch (the rows flattened into [`Prepared`]), so a step of
@@ -20,7 +38,7 @@
 //! Clarabel for inequality rows), like the projections of `numeric::stabilize`.
 //!
 //! Not here: files or text; the acceleration-level run (`numeric::simulate`, the default
-//! `exact` of the command line); rigid bodies (angular rows come with them).
+//! `exact` of the command line); 3D rigid bodies (quaternion slots).
 
 pub mod bench;
 pub mod exact;
@@ -245,7 +263,8 @@ impl Settings {
 }
 
 /// The rows of one substep, flattened for the sequential-impulse loops: per row its C/κ,
-/// ∂C/∂t, effective mass 1/(J M⁻¹ Jᵀ) and its Jacobian entries (body, Jᵢ); per body 1/m and F.
+/// ∂C/∂t, effective mass 1/(J M⁻¹ Jᵀ) and its Jacobian entries (slot, Jᵢ: a body's Jᵛ or an
+/// angular slot's Jʷ); per slot 1/m (1/I) and F (τ).
 #[derive(Clone, Debug, Default)]
 pub struct Prepared {
     /// Entries of row k: `start[k]..start[k + 1]`.

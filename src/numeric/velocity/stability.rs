@@ -1,6 +1,7 @@
 //! Stability limits of the velocity-level step: at a state the step is a map
-//! x = (q, v, P) ↦ x⁺ (P the warm-start impulses, when warm starting), and for point masses
-//! under rows of fixed direction it is affine, x⁺ = M x + c; it is stable when the spectral
+//! x = (q, v, P) ↦ x⁺ (P the warm-start impulses, when warm starting; q and v with a rigid
+//! body's angle and angular velocity), and for point masses under rows of fixed direction it
+//! is affine, x⁺ = M x + c; it is stable when the spectral
 //! radius ρ(M) ≤ 1. M is built column by column by central differences of the step
 //! (exact for an affine map up to round-off; the linearisation otherwise), its eigenvalues
 //! come from nalgebra (real Schur form), and the largest stable hertz is found by bisection
@@ -14,6 +15,7 @@
 //! Not here: the steps themselves (one file per solver), reports.
 
 use super::{Settings, Solver, Stepper};
+use crate::model::system::System;
 use crate::numeric::dynamics::{Dynamics, SimError};
 use nalgebra::DMatrix;
 
@@ -25,13 +27,23 @@ fn carries_impulses(s: &Settings) -> bool {
     s.warm_start && matches!(s.solver, Solver::SoftStep | Solver::Pgs)
 }
 
-/// The length of the state vector x = (q, v[, P]).
-pub fn state_len(dim: usize, bodies: usize, rows: usize, s: &Settings) -> usize {
-    2 * dim * bodies + if carries_impulses(s) { rows } else { 0 }
+/// The components of each slot in the state: `dim` for a body's position, 1 for a rigid
+/// body's angle (component 0 of its angular slot, `numeric::rows`).
+fn slot_components(system: &System) -> Vec<usize> {
+    let dim = system.dim();
+    let angles = system.bodies.iter().filter(|b| b.rigid.is_some()).count();
+    std::iter::repeat_n(dim, system.bodies.len()).chain(std::iter::repeat_n(1, angles)).collect()
+}
+
+/// The length of the state vector x = (q, v[, P]) of `system`.
+pub fn state_len(system: &System, s: &Settings) -> usize {
+    let rows = system.constraints.len();
+    2 * slot_components(system).iter().sum::<usize>() + if carries_impulses(s) { rows } else { 0 }
 }
 
 /// The step's linear part at (t, q, v) with warm-start impulses `impulse`: the matrix
-/// ∂x⁺/∂x over x = (q, v[, P]) (components up to the system's dimension).
+/// ∂x⁺/∂x over x = (q, v[, P]) (a body's components up to the system's dimension, a rigid
+/// body's angle and angular velocity one each).
 pub fn step_jacobian(
     dynamics: &mut Dynamics<'_>,
     t: f64,
@@ -40,35 +52,40 @@ pub fn step_jacobian(
     impulse: &[f64],
     s: &Settings,
 ) -> Result<DMatrix<f64>, SimError> {
-    let dim = dynamics.system().dim();
-    let (bodies, rows) = (q.len(), impulse.len());
+    let components = slot_components(dynamics.system());
+    let (slots, rows) = (q.len(), impulse.len());
     let settings = Settings { restitution: 0.0, ..*s };
-    let n = state_len(dim, bodies, rows, &settings);
+    let n = state_len(dynamics.system(), &settings);
+    // The slots' components, in the order of x: the positions, then the velocities.
+    let flat = |x: &[[f64; 3]], out: &mut Vec<f64>| {
+        out.extend(x.iter().zip(&components).flat_map(|(x, &c)| x[..c].iter().copied()));
+    };
+    let half: usize = components.iter().sum();
     let mut x0 = Vec::with_capacity(n);
-    x0.extend(q.iter().flat_map(|x| x[..dim].to_vec()));
-    x0.extend(v.iter().flat_map(|x| x[..dim].to_vec()));
+    flat(q, &mut x0);
+    flat(v, &mut x0);
     if carries_impulses(&settings) {
         x0.extend_from_slice(impulse);
     }
-    let mut stepper = Stepper::new(settings, rows, bodies);
-    let (mut qs, mut vs) = (vec![[0.0; 3]; bodies], vec![[0.0; 3]; bodies]);
+    let mut stepper = Stepper::new(settings, rows, slots);
+    let (mut qs, mut vs) = (vec![[0.0; 3]; slots], vec![[0.0; 3]; slots]);
     let mut image = |x: &[f64], out: &mut Vec<f64>| -> Result<(), SimError> {
-        for i in 0..bodies {
-            for d in 0..dim {
-                qs[i][d] = x[i * dim + d];
-                vs[i][d] = x[(bodies + i) * dim + d];
-            }
+        let mut at = 0;
+        for (i, &c) in components.iter().enumerate() {
+            qs[i][..c].copy_from_slice(&x[at..at + c]);
+            vs[i][..c].copy_from_slice(&x[half + at..half + at + c]);
+            at += c;
         }
         if carries_impulses(&settings) {
-            stepper.impulse.copy_from_slice(&x[2 * dim * bodies..]);
+            stepper.impulse.copy_from_slice(&x[2 * half..]);
         } else {
             stepper.impulse.iter_mut().for_each(|p| *p = 0.0);
         }
         let r = dynamics.rows(t, &qs, &vs)?;
         stepper.step(dynamics, t, &mut qs, &mut vs, r)?;
         out.clear();
-        out.extend(qs.iter().flat_map(|x| x[..dim].to_vec()));
-        out.extend(vs.iter().flat_map(|x| x[..dim].to_vec()));
+        flat(&qs, out);
+        flat(&vs, out);
         if carries_impulses(&settings) {
             out.extend_from_slice(&stepper.impulse);
         }
