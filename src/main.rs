@@ -822,7 +822,12 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         outln!("{}", lagrange::report::simulation::text(&summary, dim));
     }
     if let Some(path) = &args.plot {
-        let title = format!("{} — {} + {}", scenario.system.title, summary.integrator, summary.stabilize);
+        let title = format!(
+            "{} — {} + {}",
+            scenario.system.title,
+            summary.integrator,
+            lagrange::report::simulation::stabilization(&summary)
+        );
         let written = lagrange::report::plot::simulation(&title, &summary)
             .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
         if let Err(e) = written {

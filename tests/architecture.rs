@@ -64,6 +64,14 @@ fn rules() -> Vec<Rule> {
             why: "numeric knows nothing of TOML, files or text: it sees the resolved System, never the file",
         },
         Rule {
+            scope: "src/numeric",
+            exempt: &[],
+            forbidden: &["format!", "write!", "writeln!", "impl fmt::Display", "impl std::fmt::Display"],
+            why: "numeric writes no prose: outcomes are typed (enums with indices and numbers); \
+                  report and main.rs make the sentences, and the only words in numeric are the \
+                  #[error] messages of its typed errors",
+        },
+        Rule {
             scope: "src",
             exempt: &["src/main.rs"],
             forbidden: PRINTING,

@@ -290,7 +290,7 @@ fn every_solver_runs_every_scene_and_the_exact_one_keeps_its_joints() {
                 settings.warm_start = false;
             }
             let result = s.simulate_velocity(settings, &mut |_| Ok(()));
-            let summary = result.unwrap_or_else(|f| panic!("{name}, {}: {}", settings.describe(), f.error));
+            let summary = result.unwrap_or_else(|f| panic!("{name}, {}: {}", lagrange::report::simulation::velocity_settings(&settings), f.error));
             // Joints only: the stretched chain starts far from its surface, and the stack's
             // contacts (the exact solve with Clarabel) let the discs in by up to 1.6e-4 m.
             if solver == Solver::Exact && !name.contains("stretched") && !name.contains("stack") {
@@ -442,7 +442,7 @@ fn removing_the_heavy_top_disc_does_not_launch_the_lower_ones() {
             eprintln!(
                 "{} {}: sag {sag:.3e} m, jump {flight:.3e} m, upward speed {speed:.3e} m/s",
                 solver.name(),
-                settings.describe()
+                lagrange::report::simulation::velocity_settings(&settings)
             );
             let held = match solver {
                 Solver::SoftStep | Solver::Exact => true,
@@ -450,7 +450,7 @@ fn removing_the_heavy_top_disc_does_not_launch_the_lower_ones() {
                 Solver::Xpbd => false,
             };
             if held {
-                assert!(flight < 1e-3, "{} {}: the lower discs jumped {flight} m", solver.name(), settings.describe());
+                assert!(flight < 1e-3, "{} {}: the lower discs jumped {flight} m", solver.name(), lagrange::report::simulation::velocity_settings(&settings));
             }
         }
     }

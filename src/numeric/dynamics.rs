@@ -46,7 +46,7 @@ pub enum SimError {
     )]
     Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
     #[error(
-        "step {step} (t = {time}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){hint}"
+        "step {step} (t = {time}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){remedy}"
     )]
     Diverged {
         step: u64,
@@ -56,8 +56,8 @@ pub enum SimError {
         value: f64,
         distance: f64,
         bound: f64,
-        /// What would have helped, as a sentence starting with "; " (or empty).
-        hint: String,
+        /// What would have helped.
+        remedy: Remedy,
     },
     #[error(
         "the scene's independent parts differ in size beyond what one length unit can serve (about 2^{small} and 2^{large}): a run in a unit near the larger would lose the smaller below f64's range; simulate them as separate files"
@@ -67,6 +67,22 @@ pub enum SimError {
     Output(String),
     #[error("invalid settings: {0}")]
     Settings(#[from] SettingsError),
+}
+
+/// What would have kept a diverged velocity-level run stable ([`SimError::Diverged`]); its
+/// message is the end of the error's.
+#[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
+pub enum Remedy {
+    /// The soft step's largest stable hertz at the initial state (`velocity::stability`), below
+    /// the stiffness it ran at.
+    #[error("; at the initial state the soft step is stable up to {hertz:.3} Hz (--hertz), it ran at {ran_at} Hz")]
+    StableUpTo { hertz: f64, ran_at: f64 },
+    /// A soft step the stability analysis could not place (too large a scene, no limit found).
+    #[error("; try more --substeps or a lower --hertz")]
+    SubstepsOrHertz,
+    /// PGS, XPBD or the exact velocity solve.
+    #[error("; try more --substeps or a smaller --dt")]
+    SubstepsOrDt,
 }
 
 /// Baumgarte's terms b += 2αĊ + β²C, stored as (2α, β²).

@@ -193,7 +193,11 @@ pub struct Sample {
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Summary {
     pub integrator: String,
+    /// The stabilisation's name (`projection`, `baumgarte`, `none`); empty for a
+    /// velocity-level run, whose settings are in `velocity`.
     pub stabilize: String,
+    /// The settings of a velocity-level run (`numeric::velocity`), for its report.
+    pub velocity: Option<super::velocity::Settings>,
     pub steps: u64,
     pub dt: f64,
     /// Simulated time.

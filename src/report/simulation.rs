@@ -2,6 +2,7 @@
 
 use crate::expr::eval::Value;
 use crate::numeric::simulate::Summary;
+use crate::numeric::velocity::{Settings as VelocitySettings, Solver};
 use serde_json::{Map, Value as Json, json};
 
 fn value_json(v: &Value, dim: usize) -> Json {
@@ -19,7 +20,7 @@ pub fn json(summary: &Summary, dim: usize) -> Json {
     }
     json!({
         "integrator": summary.integrator,
-        "stabilize": summary.stabilize,
+        "stabilize": stabilization(summary),
         "dt": summary.dt,
         "steps": summary.steps,
         "duration": summary.duration,
@@ -33,11 +34,41 @@ pub fn json(summary: &Summary, dim: usize) -> Json {
     })
 }
 
+/// How the run held its constraints: the stabilisation's name, or a velocity-level solver's
+/// settings in one line (substeps, iterations, stiffness).
+pub fn stabilization(summary: &Summary) -> String {
+    match &summary.velocity {
+        Some(v) => velocity_settings(v),
+        None => summary.stabilize.clone(),
+    }
+}
+
+/// A velocity-level run's settings in one line: `4 substeps × 1 iterations, 60 Hz, ζ = 2`.
+pub fn velocity_settings(s: &VelocitySettings) -> String {
+    let base = format!("{} substeps × {} iterations", s.substeps, s.iterations());
+    let warm = if s.warm_start { "" } else { ", no warm start" };
+    match s.solver {
+        Solver::SoftStep => format!(
+            "{base}, {} Hz, ζ = {}{}{warm}",
+            s.joint_hertz(),
+            s.damping_ratio,
+            if s.relax { "" } else { ", no relax" },
+        ),
+        Solver::Pgs => format!("{base}, β = {}{warm}", s.baumgarte),
+        Solver::Xpbd => format!("{base}, compliance {}", s.compliance),
+        Solver::Exact => base,
+    }
+}
+
 /// A few lines: method, drift, energy, cost, final state.
 pub fn text(summary: &Summary, dim: usize) -> String {
     let mut s = format!(
         "{} steps (dt = {:e}, t = {}) with {} + {}\n",
-        summary.steps, summary.dt, summary.duration, summary.integrator, summary.stabilize
+        summary.steps,
+        summary.dt,
+        summary.duration,
+        summary.integrator,
+        stabilization(summary)
     );
     s += &format!("  max |C|   {:.3e}\n  max |Ċ|   {:.3e}\n", summary.max_abs_c, summary.max_abs_c_dot);
     match summary.energy_rel_drift {

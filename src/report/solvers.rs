@@ -25,7 +25,7 @@ fn entry_json(e: &Entry) -> Json {
         "hertz": opt(e.hertz), "steps": e.steps, "max_abs_C": num(e.max_abs_c),
         "max_abs_C_dot": num(e.max_abs_c_dot), "energy_drift": opt(e.energy_drift),
         "jitter": num(e.jitter), "deviation": opt(e.deviation),
-        "seconds_per_step": num(e.seconds_per_step), "failure": e.failure,
+        "seconds_per_step": num(e.seconds_per_step), "failure": e.failure.as_ref().map(ToString::to_string),
     })
 }
 
@@ -88,7 +88,7 @@ pub fn text(bench: &SolverBench) -> String {
             sci(e.jitter),
             maybe(e.deviation),
             sci(e.seconds_per_step),
-            e.failure.as_deref().map_or("ok".to_string(), |f| format!("stopped: {f}"))
+            e.failure.as_ref().map_or("ok".to_string(), |f| format!("stopped: {f}"))
         );
     }
     if bench.stable_hertz.is_empty() {

@@ -19,9 +19,9 @@ use super::stability::{largest_stable_hertz, state_len};
 use super::{Settings, Solver};
 use crate::expr::eval::Env;
 use crate::model::system::System;
-use crate::numeric::dynamics::Dynamics;
+use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::rows::RowProgram;
-use crate::numeric::simulate::{Summary, initial_state};
+use crate::numeric::simulate::{SettingsError, Summary, initial_state};
 use crate::numeric::solve::safe_norm;
 
 /// A scene ready to run: the system, its rows and its initial state (what
@@ -83,7 +83,7 @@ pub struct Entry {
     pub deviation: Option<f64>,
     pub seconds_per_step: f64,
     /// Why the run stopped early.
-    pub failure: Option<String>,
+    pub failure: Option<SimError>,
 }
 
 /// The soft step's largest stable hertz at the initial state, per substep count.
@@ -140,12 +140,12 @@ fn measure(scene: Scene<'_>, settings: Settings) -> (Entry, Option<Vec<[f64; 3]>
         }
         Ok(())
     });
-    let (summary, failure, end): (Summary, Option<String>, _) = match result {
+    let (summary, failure, end): (Summary, Option<SimError>, _) = match result {
         Ok(s) => {
             let end = s.final_position[..bodies].to_vec();
             (s, None, Some(end))
         }
-        Err(f) => (f.summary, Some(f.error.to_string()), None),
+        Err(f) => (f.summary, Some(f.error), None),
     };
     let scale = sum.iter().map(|s| (s / count.max(1) as f64).abs()).fold(0.0, f64::max);
     let spread =
@@ -173,9 +173,9 @@ fn measure(scene: Scene<'_>, settings: Settings) -> (Entry, Option<Vec<[f64; 3]>
 }
 
 /// The bench of `plan` on `scene`.
-pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, String> {
+pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, SimError> {
     if plan.substeps.is_empty() || plan.substeps.contains(&0) {
-        return Err("the substep counts must be at least 1".into());
+        return Err(SimError::Settings(SettingsError::Substeps));
     }
     let settings_for = |solver: Solver, substeps: usize, hertz: f64| {
         let mut s = Settings::new(solver, plan.dt, 0.0);
@@ -189,7 +189,7 @@ pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, String
     };
     let finest = plan.substeps.iter().copied().max().unwrap_or(1);
     let reference_settings = settings_for(Solver::Exact, finest, 60.0);
-    reference_settings.validate().map_err(|e| e.to_string())?;
+    reference_settings.validate()?;
     let (reference, end) = measure(scene, reference_settings);
     let (q0, v0, t0) = initial_state(scene.system, scene.env);
     let size = q0[..scene.system.bodies.len()].iter().map(safe_norm).fold(0.0, f64::max).max(f64::MIN_POSITIVE);
@@ -200,7 +200,7 @@ pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, String
             let hertz: &[f64] = if solver == Solver::SoftStep { &plan.hertz } else { &[60.0] };
             for &h in hertz {
                 let settings = settings_for(solver, substeps, h);
-                settings.validate().map_err(|e| e.to_string())?;
+                settings.validate()?;
                 if solver == Solver::SoftStep {
                     if seen.contains(&settings.joint_hertz()) {
                         continue;

@@ -241,25 +241,6 @@ impl Settings {
         let hertz = if self.cap_hertz { CONTACT_HERTZ.min(0.25 / self.substep()) } else { CONTACT_HERTZ };
         Softness::new(hertz, CONTACT_DAMPING_RATIO, self.substep())
     }
-
-    /// A one-line description for summaries: solver, substeps, iterations, stiffness.
-    pub fn describe(&self) -> String {
-        let base = format!("{} substeps × {} iterations", self.substeps, self.iterations());
-        match self.solver {
-            Solver::SoftStep => format!(
-                "{base}, {} Hz, ζ = {}{}{}",
-                self.joint_hertz(),
-                self.damping_ratio,
-                if self.relax { "" } else { ", no relax" },
-                if self.warm_start { "" } else { ", no warm start" }
-            ),
-            Solver::Pgs => {
-                format!("{base}, β = {}{}", self.baumgarte, if self.warm_start { "" } else { ", no warm start" })
-            }
-            Solver::Xpbd => format!("{base}, compliance {}", self.compliance),
-            Solver::Exact => base,
-        }
-    }
 }
 
 /// The rows of one substep, flattened for the sequential-impulse loops: per row its C/κ,

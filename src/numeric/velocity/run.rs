@@ -19,7 +19,7 @@
 
 use super::{Settings, Solver, Stepper, stability};
 use crate::expr::eval::Env;
-use crate::numeric::dynamics::{Dynamics, SimError, slot_name};
+use crate::numeric::dynamics::{Dynamics, Remedy, SimError, slot_name};
 use crate::numeric::simulate::{Failure, Frame, Sample, Summary, final_state, initial_state, time_dependent};
 use crate::numeric::solve::CONTACT_TOLERANCE;
 use crate::numeric::stabilize::distance;
@@ -45,7 +45,7 @@ pub fn run(
     let system = dynamics.system();
     let mut summary = Summary {
         integrator: settings.solver.name().into(),
-        stabilize: settings.describe(),
+        velocity: Some(settings),
         dt: settings.dt,
         ..Summary::default()
     };
@@ -97,10 +97,10 @@ fn run_inner(
         for (k, row) in rows.rows.iter().enumerate() {
             let d = distance(row);
             if d.abs() > bound && (!row.inequality || d < 0.0) {
-                let hint = if s.solver == Solver::SoftStep {
-                    hint(dynamics, t0, &q0, &v0, &s)
+                let remedy = if s.solver == Solver::SoftStep {
+                    remedy(dynamics, t0, &q0, &v0, &s)
                 } else {
-                    "; try more --substeps or a smaller --dt".into()
+                    Remedy::SubstepsOrDt
                 };
                 return Err(SimError::Diverged {
                     step: n,
@@ -110,7 +110,7 @@ fn run_inner(
                     value: row.value,
                     distance: d,
                     bound,
-                    hint,
+                    remedy,
                 });
             }
             if row.inequality {
@@ -171,19 +171,14 @@ fn run_inner(
     Ok(())
 }
 
-/// "; stable up to H Hz at the initial state" for a soft step that diverged, when the scene
-/// is small enough to analyse.
-fn hint(dynamics: &mut Dynamics<'_>, t0: f64, q0: &[[f64; 3]], v0: &[[f64; 3]], s: &Settings) -> String {
+/// What would have kept a diverged soft step stable: the largest stable hertz at the initial
+/// state, when the scene is small enough to analyse and it is below the hertz the run used.
+fn remedy(dynamics: &mut Dynamics<'_>, t0: f64, q0: &[[f64; 3]], v0: &[[f64; 3]], s: &Settings) -> Remedy {
     if stability::state_len(dynamics.system(), s) > HINT_MAX_STATE {
-        return "; try more --substeps or a lower --hertz".into();
+        return Remedy::SubstepsOrHertz;
     }
     match stability::largest_stable_hertz(dynamics, t0, q0, v0, s) {
-        Ok(Some(h)) if h < s.joint_hertz() => {
-            format!(
-                "; at the initial state the soft step is stable up to {h:.3} Hz (--hertz), it ran at {} Hz",
-                s.joint_hertz()
-            )
-        }
-        _ => "; try more --substeps or a lower --hertz".into(),
+        Ok(Some(hertz)) if hertz < s.joint_hertz() => Remedy::StableUpTo { hertz, ran_at: s.joint_hertz() },
+        _ => Remedy::SubstepsOrHertz,
     }
 }
