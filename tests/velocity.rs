@@ -290,7 +290,9 @@ fn every_solver_runs_every_scene_and_the_exact_one_keeps_its_joints() {
                 settings.warm_start = false;
             }
             let result = s.simulate_velocity(settings, &mut |_| Ok(()));
-            let summary = result.unwrap_or_else(|f| panic!("{name}, {}: {}", lagrange::report::simulation::velocity_settings(&settings), f.error));
+            let summary = result.unwrap_or_else(|f| {
+                panic!("{name}, {}: {}", lagrange::report::simulation::velocity_settings(&settings), f.error)
+            });
             // Joints only: the stretched chain starts far from its surface, and the stack's
             // contacts (the exact solve with Clarabel) let the discs in by up to 1.6e-4 m.
             if solver == Solver::Exact && !name.contains("stretched") && !name.contains("stack") {
@@ -450,7 +452,12 @@ fn removing_the_heavy_top_disc_does_not_launch_the_lower_ones() {
                 Solver::Xpbd => false,
             };
             if held {
-                assert!(flight < 1e-3, "{} {}: the lower discs jumped {flight} m", solver.name(), lagrange::report::simulation::velocity_settings(&settings));
+                assert!(
+                    flight < 1e-3,
+                    "{} {}: the lower discs jumped {flight} m",
+                    solver.name(),
+                    lagrange::report::simulation::velocity_settings(&settings)
+                );
             }
         }
     }
