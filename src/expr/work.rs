@@ -83,6 +83,46 @@ pub fn words(bits: u64) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::expr::func::Func;
+    use crate::expr::graph::Graph;
+    use crate::expr::num::Rational;
+    use crate::expr::poly::Poly;
+    use std::cmp::Ordering;
+
+    #[test]
+    fn the_arithmetic_refuses_once_the_budget_is_spent() {
+        let mut g = Graph::new(2);
+        let (x, y) = (g.int(7), g.int(8));
+        let s = Poly::atom(x).add(&Poly::atom(y)).add(&Poly::constant(Rational::int(3)));
+        // (x + y + 3)^20 has 231 terms: unmetered it is computed; under a budget of 1 000
+        // operations it is refused and the budget reads exhausted.
+        let full = s.powi(20).expect("unmetered");
+        assert_eq!(full.len(), 231);
+        let (refused, over) = metered(1_000, || s.powi(20));
+        assert!(refused.is_none() && over);
+        // Exact division stops too: (x + y + 3)^20 / (x + y + 3) needs many steps.
+        let (quotient, over) = metered(1_000, || full.div_exact(&s));
+        assert!(quotient.is_none() && over);
+        assert_eq!(full.div_exact(&s), s.powi(19), "unmetered, the same division succeeds");
+    }
+
+    #[test]
+    fn deep_graphs_compare_without_recursion() {
+        // Two towers sin(sin(…(k)…)) 200 000 deep that differ only at the bottom: the
+        // comparison walks the whole depth on a heap stack, on a thread whose 256 KiB
+        // stack a recursion of that depth would overflow.
+        let worker = std::thread::Builder::new().stack_size(256 << 10).spawn(|| {
+            let mut g = Graph::new(2);
+            let (mut a, mut b) = (g.int(1), g.int(2));
+            for _ in 0..200_000 {
+                a = g.call(Func::Sin, &[a]).expect("scalar");
+                b = g.call(Func::Sin, &[b]).expect("scalar");
+            }
+            (g.cmp_nodes(a, b), g.cmp_nodes(b, a), g.cmp_nodes(a, a))
+        });
+        let orders = worker.expect("thread").join().expect("no overflow");
+        assert_eq!(orders, (Ordering::Less, Ordering::Greater, Ordering::Equal));
+    }
 
     #[test]
     fn a_budget_refuses_past_its_limit_and_only_while_it_runs() {
