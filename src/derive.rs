@@ -152,20 +152,33 @@ pub enum DeriveError {
     #[error("internal type error: {0}")]
     Type(#[from] TypeError),
     /// A formula passed the simplifier's work budget (`expr::simplify::MAX_FORM_WORK`).
+    /// `constraint`: the index of the constraint whose formula it is, when it is one's (the
+    /// report points at its `expr` in the file).
     #[error(
-        "{what} is too large to derive: one of its formulas needs more than {work} terms of work \
+        "{what} is too large to derive: one of its formulas needs more than {work} term operations \
          to simplify (the limit of docs/file-format.md, \"Limits\"); write it in a smaller form, \
          or split it with [definitions] and more constraints"
     )]
-    TooLarge { what: String, work: u64 },
+    TooLarge { what: String, work: u64, constraint: Option<usize> },
 }
 
-/// `e`, with a budget error said of `what` (a constraint, the multiplier equation).
-fn located(e: DeriveError, what: impl FnOnce() -> String) -> DeriveError {
+impl DeriveError {
+    /// The index of the constraint the error is about, when it names one by position.
+    pub fn constraint(&self) -> Option<usize> {
+        match self {
+            DeriveError::TooLarge { constraint, .. } => *constraint,
+            _ => None,
+        }
+    }
+}
+
+/// `e`, with a budget error said of `what` (a constraint, the multiplier equation), and of
+/// constraint `k` when it is one's.
+fn located(e: DeriveError, k: Option<usize>, what: impl FnOnce() -> String) -> DeriveError {
     match e {
-        DeriveError::Type(TypeError::TooLarge(work)) => DeriveError::TooLarge { what: what(), work },
+        DeriveError::Type(TypeError::TooLarge(work)) => DeriveError::TooLarge { what: what(), work, constraint: k },
         DeriveError::Diff { error: DiffError::Type(TypeError::TooLarge(work)), name } => {
-            DeriveError::TooLarge { what: format!("constraint `{name}`"), work }
+            DeriveError::TooLarge { what: format!("constraint `{name}`"), work, constraint: k }
         }
         e => e,
     }
@@ -203,7 +216,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     let name = |k: usize| move || format!("constraint `{}`", system.constraints[k].name);
     for k in 0..system.constraints.len() {
         if !reuse {
-            constraints.push(derive_constraint(system, g, s, k).map_err(|e| located(e, name(k)))?);
+            constraints.push(derive_constraint(system, g, s, k).map_err(|e| located(e, Some(k), name(k)))?);
             continue;
         }
         let shape = shaper.shape(g, &[system.constraints[k].c]);
@@ -214,7 +227,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         let dc = match repeat {
             Some(dc) => dc,
             None => {
-                let dc = derive_constraint(system, g, s, k).map_err(|e| located(e, name(k)))?;
+                let dc = derive_constraint(system, g, s, k).map_err(|e| located(e, Some(k), name(k)))?;
                 derived.insert(shape.key, (k, Reuse::new(Roots::of(&dc), shape.symbols, true)));
                 dc
             }
@@ -222,17 +235,17 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         constraints.push(dc);
     }
     let (a, b) = assemble(system, g, s, &constraints, reuse)
-        .map_err(|e| located(e.into(), || "the multiplier equation A λ + b = 0".to_string()))?;
+        .map_err(|e| located(e.into(), None, || "the multiplier equation A λ + b = 0".to_string()))?;
     let (mut lambda, mut forces, mut torques) = (None, None, None);
     if let [only] = constraints.as_slice() {
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
         let closed_form = || format!("λ and the forces of constraint `{}`", system.constraints[0].name);
-        let l = s.negated_quotient(g, b[0], a00).map_err(|e| located(e.into(), closed_form))?;
+        let l = s.negated_quotient(g, b[0], a00).map_err(|e| located(e.into(), Some(0), closed_form))?;
         let mut f = Vec::with_capacity(only.jacobian.len());
         for &(body, j) in &only.jacobian {
             let product = g.mul(vec![l, j])?;
-            f.push((body, s.simplify(g, product).map_err(|e| located(e.into(), closed_form))?));
+            f.push((body, s.simplify(g, product).map_err(|e| located(e.into(), Some(0), closed_form))?));
         }
         let mut t = Vec::with_capacity(only.angular.len());
         for &(body, j) in &only.angular {

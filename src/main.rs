@@ -452,6 +452,19 @@ fn read_text(path: &Path) -> Result<String, String> {
     lagrange::check::read_text(path).map_err(|e| format!("error: {e}"))
 }
 
+/// A derivation's error, printed: at the constraint's `expr` in the file when it is about
+/// one (a formula past the work budget), as file problems are; else `error: FILE: message`.
+fn report_derive_error(path: &Path, e: &lagrange::DeriveError) {
+    if let Some(k) = e.constraint()
+        && let Ok(text) = read_text(path)
+    {
+        let shown = path.display().to_string();
+        eprint!("{}", lagrange::report::diagnostic::render_constraint(&shown, &text, k, &e.to_string()));
+        return;
+    }
+    errln!("error: {}: {e}", path.display());
+}
+
 fn report_problems(path: &Path, text: &str, problems: &[Problem]) -> ExitCode {
     eprint!("{}", render(&path.display().to_string(), text, problems));
     errln!("{} problem{} in {}", problems.len(), if problems.len() == 1 { "" } else { "s" }, path.display());
@@ -478,7 +491,7 @@ fn cmd_derive(path: &Path, format: FormatArg, steps: bool) -> ExitCode {
     let derivation = match with_spinner("deriving", constraints, || derive_with(&loaded.system, options)) {
         Ok(d) => d,
         Err(e) => {
-            errln!("error: {}: {e}", path.display());
+            report_derive_error(path, &e);
             return ExitCode::from(1);
         }
     };
@@ -526,6 +539,10 @@ fn cmd_generate(path: &Path, output: Option<&Path>, options: &Options) -> ExitCo
     };
     let module = match module(&loaded, options) {
         Ok(m) => m,
+        Err(lagrange::GenerateError::Derive(e)) => {
+            report_derive_error(path, &e);
+            return ExitCode::from(1);
+        }
         Err(e) => {
             errln!("error: {}: {e}", path.display());
             return ExitCode::from(1);
@@ -571,7 +588,10 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         ExitCode::from(1)
     };
     let loaded = load_file(path)?;
-    let derivation = derive(&loaded.system).map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let derivation = derive(&loaded.system).map_err(|e| {
+        report_derive_error(path, &e);
+        ExitCode::from(1)
+    })?;
     let system = &loaded.system;
     let mut given = match at {
         Some(p) => read_state(system, p).map_err(fail)?,

@@ -85,6 +85,21 @@ pub enum GenerateError {
         "--lang c writes the soft step and PGS; the exact step (its rows' solve) is generated in Rust only for now"
     )]
     CStep,
+    /// The formulas' code passed [`code_budget`] bytes.
+    #[error(
+        "the generated code is too large: its formulas pass {0} bytes (64 MiB, and 8 KiB more per body and \
+         per constraint; docs/commands.md, \"generate\")"
+    )]
+    CodeTooLarge(usize),
+}
+
+/// The most bytes of formula code (`let` bindings and output expressions) one generated
+/// module may hold: 64 MiB, and 8 KiB more per body and per constraint, so a module grows
+/// linearly with its scene (a chain's is a few hundred bytes per link) but one formula
+/// repeated in every body's force cannot make it quadratic. Charged while the code is
+/// written, so a module past it stops there.
+pub fn code_budget(system: &crate::model::system::System) -> usize {
+    (64 << 20) + 8192 * (system.bodies.len() + system.constraints.len())
 }
 
 /// Longest formula quoted in a doc comment, in characters.
@@ -276,7 +291,9 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         let c_names = super::c::field_names(&fields);
         let c_slots = super::c::slots(g, &fields, &c_names);
         let input_layout = Inputs::new(g, &inputs)?;
-        let ctx = Ctx { g, inputs: &input_layout, slots: &c_slots, non_finite: Cell::new(0), c: true };
+        let budget = code_budget(system);
+        let room = Cell::new(budget);
+        let ctx = Ctx { g, inputs: &input_layout, slots: &c_slots, non_finite: Cell::new(0), c: true, room, budget };
         let names = Names { bodies: &body_names, constraints: &constraint_names };
         let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
         let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
@@ -317,7 +334,9 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         return Ok(Module { code, fields, warnings });
     }
     let input_layout = Inputs::new(g, &inputs)?;
-    let ctx = Ctx { g, inputs: &input_layout, slots: &slots, non_finite: Cell::new(0), c: false };
+    let budget = code_budget(system);
+    let room = Cell::new(budget);
+    let ctx = Ctx { g, inputs: &input_layout, slots: &slots, non_finite: Cell::new(0), c: false, room, budget };
     let names = Names { bodies: &body_names, constraints: &constraint_names };
     ctx.constraints(&mut out, &formulas, &names)?;
     ctx.rates(&mut out, &formulas, &names)?;
@@ -1334,6 +1353,9 @@ pub(super) struct Ctx<'a> {
     pub(super) non_finite: Cell<usize>,
     /// Write C (`const double` bindings, `<math.h>` calls, the module's `lg_` helpers).
     pub(super) c: bool,
+    /// Bytes of formula code the module may still write, of its [`code_budget`].
+    pub(super) room: Cell<usize>,
+    pub(super) budget: usize,
 }
 
 /// Operator precedence of a rendered expression: what it may appear inside unparenthesised.
@@ -1528,6 +1550,7 @@ impl Ctx<'_> {
             };
             let simple = matches!(op, Op::Input(_) | Op::Const(_));
             if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
+                self.spend(t.len())?;
                 let name = format!("x{}", lets.len());
                 lets.push(if self.c { format!("const double {name} = {t};") } else { format!("let {name} = {t};") });
                 text.push((name, Prec::Atom, 0));
@@ -1535,8 +1558,16 @@ impl Ctx<'_> {
                 text.push((t, prec, depth));
             }
         }
-        let exprs = p.outputs.iter().map(|&o| text[o as usize].0.clone()).collect();
+        let exprs: Vec<String> = p.outputs.iter().map(|&o| text[o as usize].0.clone()).collect();
+        self.spend(exprs.iter().map(String::len).sum())?;
         Ok((lets, exprs))
+    }
+
+    /// Takes `bytes` of code from the module's [`code_budget`].
+    fn spend(&self, bytes: usize) -> Result<(), GenerateError> {
+        let left = self.room.get().checked_sub(bytes).ok_or(GenerateError::CodeTooLarge(self.budget))?;
+        self.room.set(left);
+        Ok(())
     }
 }
 

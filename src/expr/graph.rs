@@ -13,7 +13,7 @@
 
 use super::func::{Func, MAX_ARITY};
 use super::num::Rational;
-use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
+use super::work;
 use smallvec::SmallVec;
 use std::cmp::Ordering;
 use std::collections::HashMap;
@@ -877,35 +877,52 @@ impl Graph {
     /// A total order on nodes that depends only on their structure and symbol names, never
     /// on ids, so that a canonical form is the same whatever order things were built in.
     pub fn cmp_nodes(&self, a: Id, b: Id) -> Ordering {
-        if a == b {
-            return Ordering::Equal;
+        /// A comparison still to make: two nodes, or an outcome decided once the pairs
+        /// pushed above it are equal (a component's axis, a list's length).
+        enum Step {
+            Pair(Id, Id),
+            Then(Ordering),
         }
-        stacker::maybe_grow(STACK_RED_ZONE, STACK_GROWTH, || self.cmp_distinct(a, b))
-    }
-
-    fn cmp_distinct(&self, a: Id, b: Id) -> Ordering {
-        let (na, nb) = (self.node(a), self.node(b));
-        na.rank().cmp(&nb.rank()).then_with(|| match (na, nb) {
-            (Node::Num(x), Node::Num(y)) => x.cmp(y),
-            (Node::Sym(x), Node::Sym(y)) => self.cmp_symbols(*x, *y),
-            (Node::Comp(x, i), Node::Comp(y, j)) => self.cmp_nodes(*x, *y).then(i.cmp(j)),
-            // Dot products sort by their later operand first, so `v·v` comes before `r·a`.
-            (Node::Dot([x1, x2]), Node::Dot([y1, y2])) => {
-                self.cmp_nodes(*x2, *y2).then_with(|| self.cmp_nodes(*x1, *y1))
+        // Depth-first in the order the comparison reads them, on a heap stack: the first
+        // unequal pair decides, as a recursion would, but no depth overflows the thread's
+        // stack, and each pair visited is charged to the simplifier's work meter.
+        let mut todo: SmallVec<[Step; 16]> = smallvec::smallvec![Step::Pair(a, b)];
+        while let Some(step) = todo.pop() {
+            let (a, b) = match step {
+                Step::Then(Ordering::Equal) => continue,
+                Step::Then(o) => return o,
+                Step::Pair(a, b) if a == b => continue,
+                Step::Pair(a, b) => (a, b),
+            };
+            work::charge(1);
+            let (na, nb) = (self.node(a), self.node(b));
+            let head = na.rank().cmp(&nb.rank()).then_with(|| match (na, nb) {
+                (Node::Num(x), Node::Num(y)) => x.cmp(y),
+                (Node::Sym(x), Node::Sym(y)) => self.cmp_symbols(*x, *y),
+                (Node::Call(f, _), Node::Call(g, _)) => f.cmp(g),
+                _ => Ordering::Equal,
+            });
+            if head != Ordering::Equal {
+                return head;
             }
-            (Node::Call(f, _), Node::Call(g, _)) => f.cmp(g).then_with(|| self.cmp_lists(na.children(), nb.children())),
-            _ => self.cmp_lists(na.children(), nb.children()),
-        })
-    }
-
-    fn cmp_lists(&self, xs: &[Id], ys: &[Id]) -> Ordering {
-        for (x, y) in xs.iter().zip(ys) {
-            let o = self.cmp_nodes(*x, *y);
-            if o != Ordering::Equal {
-                return o;
+            match (na, nb) {
+                (Node::Comp(x, i), Node::Comp(y, j)) => {
+                    todo.push(Step::Then(i.cmp(j)));
+                    todo.push(Step::Pair(*x, *y));
+                }
+                // Dot products sort by their later operand first, so `v·v` comes before `r·a`.
+                (Node::Dot([x1, x2]), Node::Dot([y1, y2])) => {
+                    todo.push(Step::Pair(*x1, *y1));
+                    todo.push(Step::Pair(*x2, *y2));
+                }
+                _ => {
+                    let (xs, ys) = (na.children(), nb.children());
+                    todo.push(Step::Then(xs.len().cmp(&ys.len())));
+                    todo.extend(xs.iter().zip(ys).rev().map(|(x, y)| Step::Pair(*x, *y)));
+                }
             }
         }
-        xs.len().cmp(&ys.len())
+        Ordering::Equal
     }
 
     /// Symbols sort by role (forces, positions, velocities, …), then body, then name.

@@ -21,6 +21,7 @@ mod rigid;
 pub mod shape;
 pub mod simplify;
 pub mod syntax;
+pub mod work;
 
 pub use func::Func;
 pub use graph::{Axis, Graph, Id, Node, Role, Symbol, Ty, TypeError};

@@ -184,7 +184,13 @@ impl Rational {
                 return Rational::reduce_small(n, bd);
             }
         }
-        Rational::from_big(self.to_big() + other.to_big())
+        let (x, y) = (self.to_big(), other.to_big());
+        if x.is_integer() && y.is_integer() {
+            // No reduction: num-rational's gcd with a denominator of one is a binary gcd that
+            // takes a shift per bit of the numerator (a 4 096-bit sum: ~100 µs, callgrind).
+            return Rational::from_big(BigRational::from_integer(x.numer() + y.numer()));
+        }
+        Rational::from_big(x + y)
     }
 
     pub fn sub(&self, other: &Rational) -> Rational {
@@ -207,7 +213,12 @@ impl Rational {
                 return Rational::reduce_small(n, m);
             }
         }
-        Rational::from_big(self.to_big() * other.to_big())
+        let (x, y) = (self.to_big(), other.to_big());
+        if x.is_integer() && y.is_integer() {
+            // No reduction, as in `add`.
+            return Rational::from_big(BigRational::from_integer(x.numer() * y.numer()));
+        }
+        Rational::from_big(x * y)
     }
 
     /// `1 / self`; `None` for zero.

@@ -17,6 +17,7 @@
 
 use super::graph::Id;
 use super::num::Rational;
+use super::work;
 use smallvec::SmallVec;
 use std::cmp::Ordering;
 
@@ -267,6 +268,10 @@ impl Poly {
 
     pub fn add(&self, other: &Poly) -> Poly {
         let (a, b) = (&self.0, &other.0);
+        // Bounded by the operands: charged, never refused (the callers that loop check).
+        work::charge(
+            self.weight().saturating_add(other.weight()).saturating_add(self.atoms()).saturating_add(other.atoms()),
+        );
         // Merges: the result's size is bounded by the operands', and growing it was 3 % of the
         // bead's derivation (callgrind).
         let mut out = Vec::with_capacity(a.len() + b.len());
@@ -301,6 +306,7 @@ impl Poly {
     /// growing total. Equal to adding them one by one (the representation is canonical).
     pub fn sum<'a>(polys: impl IntoIterator<Item = &'a Poly>) -> Poly {
         let mut terms: Vec<(Mono, Rational)> = polys.into_iter().flat_map(|p| p.0.iter().cloned()).collect();
+        work::charge(terms.len() as u64);
         terms.sort_by(|a, b| a.0.cmp(&b.0));
         let mut out: Vec<(Mono, Rational)> = Vec::with_capacity(terms.len());
         for (m, q) in terms {
@@ -337,6 +343,16 @@ impl Poly {
         // A product's coefficient is a sum of at most min(len) products of two coefficients.
         let sum_bits = 64 - (self.len().min(other.len()) as u64).leading_zeros() as u64;
         if self.max_bits().saturating_add(other.max_bits()).saturating_add(sum_bits) > MAX_COEFFICIENT_BITS {
+            return None;
+        }
+        // Every pair of terms, weighted by their coefficients' words (a product of big
+        // numbers is quadratic in words) and their monomials' atoms (merged):
+        // Σᵢⱼ (1 + wᵢ)(1 + wⱼ) + aᵢ + aⱼ.
+        let (la, lb) = (self.len() as u64, other.len() as u64);
+        let cost = (self.weight().saturating_mul(other.weight()))
+            .saturating_add(self.atoms().saturating_mul(lb))
+            .saturating_add(other.atoms().saturating_mul(la));
+        if !work::charge(cost) {
             return None;
         }
         let (small, big) = if self.len() <= other.len() { (self, other) } else { (other, self) };
@@ -386,6 +402,16 @@ impl Poly {
         Some(result)
     }
 
+    /// What visiting every term costs the work meter: a term and its coefficient's words.
+    fn weight(&self) -> u64 {
+        self.0.iter().map(|(_, q)| 1 + work::words(q.bits())).sum()
+    }
+
+    /// The atoms of every monomial together (what merging them visits).
+    fn atoms(&self) -> u64 {
+        self.0.iter().map(|(m, _)| m.0.len() as u64).sum()
+    }
+
     /// The most bits of any coefficient (0 for zero).
     pub fn max_bits(&self) -> u64 {
         self.0.iter().map(|(_, q)| q.bits()).max().unwrap_or(0)
@@ -420,7 +446,7 @@ impl Poly {
         // Each step removes the leading term of r; the bound keeps a non-divisor cheap.
         for _ in 0..(self.len() + 1) * 4 {
             let Some((rm, rq)) = r.leading().cloned() else { return Some(quotient) };
-            if !lm.divides(&rm) {
+            if !lm.divides(&rm) || work::exhausted() {
                 return None;
             }
             let t = Poly(vec![(rm.div(lm), rq.div(lq)?)]);

@@ -23,6 +23,7 @@ use super::graph::{FastMap, Graph, Id, Marks, Node, Role, Ty, TypeError};
 use super::num::Rational;
 use super::poly::{Frac, MAX_SQUARE_ROOT_TERMS, Mono, Poly, push_factor};
 use super::simplify::{Canon, Simplifier, VAtom, VecForm};
+use super::work;
 use smallvec::SmallVec;
 use std::cmp::Ordering;
 
@@ -516,19 +517,23 @@ fn is_kinematic(g: &Graph, atom: Id) -> bool {
     }
     let mut stack: SmallVec<[Id; 16]> = smallvec::smallvec![atom];
     let mut budget = KINEMATIC_BUDGET;
+    let mut found = false;
     while let Some(id) = stack.pop() {
         if let Node::Sym(s) = g.node(id)
             && !matches!(g.symbol(*s).role, Role::Parameter | Role::Mass { .. } | Role::Time)
         {
-            return true;
+            found = true;
+            break;
         }
         budget -= 1;
         if budget == 0 {
-            return false;
+            break;
         }
         stack.extend_from_slice(g.node(id).children());
     }
-    false
+    // The nodes visited, charged to the formula's work (a layout of many large atoms is work).
+    work::charge((KINEMATIC_BUDGET - budget) as u64);
+    found
 }
 
 /// A term eligible for dot factoring: `cofactor · (u·w)`.

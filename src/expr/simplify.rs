@@ -37,6 +37,7 @@ use super::num::Rational;
 use super::poly::{Frac, Mono, Poly, push_factor};
 use super::present::Orientations;
 use super::shape::{Reuse, Shaper};
+use super::work;
 use std::rc::Rc;
 
 /// A sum of more than two polynomials with more than this many terms in all is merged in
@@ -79,11 +80,12 @@ impl Canon {
 /// Simplifies nodes of one graph, remembering what it has done.
 ///
 /// Keep one per graph: ids of different graphs mean different things.
-/// The most terms of canonical forms (numerators and denominators' factors, every node's
-/// form counted once) that simplifying one formula may compute: a deterministic budget on
-/// work, not a timer. Past it the formula is refused as too large ([`TypeError::TooLarge`]);
-/// the largest formulas of the shipped files and benchmarks use a few thousand.
-pub const MAX_FORM_WORK: u64 = 200_000;
+/// The most term operations simplifying one formula may spend ([`work`]): the terms of its
+/// canonical forms (numerators and denominators' factors, every node's form counted once),
+/// and the terms the arithmetic visits computing them (a term of a sum, a pair of terms of
+/// a product, one more per 64 bits of their coefficients). A deterministic budget on work,
+/// not a timer: past it the formula is refused as too large ([`TypeError::TooLarge`]).
+pub const MAX_FORM_WORK: u64 = 100_000_000;
 
 #[derive(Debug, Default)]
 pub struct Simplifier {
@@ -115,8 +117,15 @@ impl Simplifier {
         if let Some(&s) = self.built.get(&id) {
             return Ok(s);
         }
-        let c = self.canon(g, id)?;
-        let s = self.laid_out(g, c)?;
+        // One budget for the form and its layout (the layout's comparisons are work too).
+        let (s, over) = work::metered(MAX_FORM_WORK, || {
+            let c = self.canon(g, id)?;
+            self.laid_out(g, c)
+        });
+        let s = s?;
+        if over {
+            return Err(TypeError::TooLarge(MAX_FORM_WORK));
+        }
         self.built.insert(id, s);
         Ok(s)
     }
@@ -248,16 +257,23 @@ impl Simplifier {
             stack.extend_from_slice(g.node(n).children());
         }
         todo.sort_unstable();
-        // The work budget of this formula: the terms of every form computed for it.
-        let mut work: u64 = 0;
-        for n in todo {
-            let node = g.node(n).clone();
-            let c = self.canon_node(g, n, &node)?;
-            work = work.saturating_add(c.terms());
-            if work > MAX_FORM_WORK {
-                return Err(TypeError::TooLarge(MAX_FORM_WORK));
+        // The work budget of this formula ([`work`]): the terms of every form computed for
+        // it, and what the arithmetic spent computing them. A nested `canon` (a power's
+        // exponent) spends from its formula's budget.
+        let (done, over) = work::metered(MAX_FORM_WORK, || {
+            for n in todo {
+                let node = g.node(n).clone();
+                let c = self.canon_node(g, n, &node)?;
+                if !work::charge(c.terms()) || work::exhausted() {
+                    return Err(TypeError::TooLarge(MAX_FORM_WORK));
+                }
+                self.memo.insert(n, Rc::new(c));
             }
-            self.memo.insert(n, Rc::new(c));
+            Ok(())
+        });
+        done?;
+        if over {
+            return Err(TypeError::TooLarge(MAX_FORM_WORK));
         }
         Ok(self.memo[&id].clone())
     }

@@ -66,6 +66,12 @@ const CONSISTENCY: f64 = 1e-2;
 /// above `NULL_SHARE` of the vector's largest: smaller ones are rounding.
 const NULL_SHARE: f64 = 1e-6;
 
+/// The most rows a dense equality solve (or the minimum-norm solve of a singular block) may
+/// have: both cost n³ (a symmetric eigendecomposition, then a least squares over the null
+/// space), about a second here. A coupled block past it whose band solve does not apply is
+/// refused ([`Diagnostic::TooLarge`]), a deterministic bound rather than a timer.
+pub const MAX_DENSE_ROWS: usize = 1000;
+
 /// Which factorisation the equality solve uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Method {
@@ -200,6 +206,9 @@ pub enum Diagnostic {
     /// The numbers overflow at this state; the solve ran in a length unit of 2^`exponent`
     /// (verified homogeneous) and was scaled back.
     Rescaled { exponent: i64 },
+    /// A coupled block of `rows` rows needs a dense solve (it is not banded, or it is
+    /// singular) past [`MAX_DENSE_ROWS`]: it is not solved, λ is 0 on it (`Failed`).
+    TooLarge { constraints: Vec<usize>, rows: usize },
     /// The scene has independent parts at length scales one unit cannot serve: these
     /// constraints (and their bodies) were solved in the caller's unit, the rest in the
     /// rescaled one ([`Diagnostic::Rescaled`]).
@@ -304,7 +313,9 @@ impl Diagnostic {
     /// diagnostics'), for callers that merge the diagnostics of two solves.
     pub fn status(&self) -> Status {
         match self {
-            Diagnostic::NonFiniteRow { .. } | Diagnostic::NonFiniteLambda { .. } => Status::Failed,
+            Diagnostic::NonFiniteRow { .. } | Diagnostic::NonFiniteLambda { .. } | Diagnostic::TooLarge { .. } => {
+                Status::Failed
+            }
             Diagnostic::ZeroGradient { .. } | Diagnostic::InfiniteMass { .. } => Status::Singular,
             Diagnostic::Redundant { .. } => Status::MinimumNorm,
             Diagnostic::Inconsistent { .. } => Status::Inconsistent,
@@ -335,7 +346,8 @@ impl Diagnostic {
             Diagnostic::Redundant { constraints, .. }
             | Diagnostic::Inconsistent { constraints, .. }
             | Diagnostic::QpFailed { constraints, .. }
-            | Diagnostic::QpInaccurate { constraints, .. } => constraints,
+            | Diagnostic::QpInaccurate { constraints, .. }
+            | Diagnostic::TooLarge { constraints, .. } => constraints,
             Diagnostic::MixedScales { raw } => raw,
             Diagnostic::Restitution { .. } | Diagnostic::Rescaled { .. } => &[],
         }
@@ -824,6 +836,14 @@ pub(crate) fn equality(
         Method::Auto => BAND_FRACTION * bandwidth < n,
     };
     let floor = settings.rank_tolerance;
+    let too_large = |diagnostics: &mut Vec<Diagnostic>, status: &mut Status| {
+        diagnostics.push(Diagnostic::TooLarge { constraints: index.to_vec(), rows: n });
+        *status = (*status).max(Status::Failed);
+        vec![0.0; n]
+    };
+    if !banded && n > MAX_DENSE_ROWS {
+        return too_large(diagnostics, status);
+    }
     if banded {
         // position[old] = new (the identity without a renumbering).
         let mut position: Vec<usize> = (0..n).collect();
@@ -863,6 +883,9 @@ pub(crate) fn equality(
             x += ch.solve(&r);
             return finite_or_zero(x.iter().copied().collect(), index, diagnostics, status);
         }
+    }
+    if n > MAX_DENSE_ROWS {
+        return too_large(diagnostics, status);
     }
     let x = minimum_norm(&dense(block), &rhs, &block.weight, index, settings, diagnostics, status);
     finite_or_zero(x, index, diagnostics, status)

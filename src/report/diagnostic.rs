@@ -1,4 +1,5 @@
-//! Renders file problems as `file:line:col: message` with the source line and a caret.
+//! Renders file problems (and budget errors of a constraint) as `file:line:col: message`
+//! with the source line and a caret.
 //!
 //! codespan-reporting draws the rustc-style `^^^` under the fault. Plain text, no colour,
 //! so the same bytes go to a terminal, a pipe and a snapshot. The message is the problem's
@@ -13,33 +14,51 @@ use codespan_reporting::term::{self, Config};
 
 /// Renders every problem of one file, in order.
 pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
+    problems.iter().map(|p| render_message(path, text, &p.to_string(), p.span())).collect()
+}
+
+/// Renders an error about constraint `k` of the file (a formula past the work budget) at
+/// that constraint's `expr`, as file problems are: `file:line:col`, the line, a caret.
+/// Without a place to show (the text does not parse as it did), `error: file: message`.
+pub fn render_constraint(path: &str, text: &str, k: usize, message: &str) -> String {
+    render_message(path, text, message, constraint_expr_span(text, k))
+}
+
+/// The span of the `expr` of the `k`-th `[[constraints]]` table (its table when it has none).
+fn constraint_expr_span(text: &str, k: usize) -> Option<std::ops::Range<usize>> {
+    use toml::de::{DeTable, DeValue};
+    let root = DeTable::parse(text).ok()?;
+    let DeValue::Array(tables) = root.get_ref().get("constraints")?.get_ref() else { return None };
+    let table = tables.get(k)?;
+    match table.get_ref() {
+        DeValue::Table(t) => Some(t.get("expr").map_or(table.span(), |e| e.span())),
+        _ => None,
+    }
+}
+
+fn render_message(path: &str, text: &str, message: &str, span: Option<std::ops::Range<usize>>) -> String {
     let file = SimpleFile::new(path, text);
     let config = Config::default();
-    let mut out = String::new();
-    for p in problems {
-        // A name in a message (`in constraint `…``) never reaches the terminal raw.
-        let message = escape_controls(&p.to_string(), false).into_owned();
-        if let Some(span) = &p.span()
-            && let Some(clipped) = render_long_line(path, text, &message, span)
-        {
-            out.push_str(&clipped);
-            continue;
-        }
-        let mut d = Diagnostic::error().with_message(&message);
-        match &p.span() {
-            Some(span) => {
-                let start = floor_char(text, span.start.min(text.len()));
-                let end = floor_char(text, span.end.clamp(start, text.len()));
-                d = d.with_labels(vec![Label::primary((), start..end)]);
-            }
-            None => d = d.with_notes(vec![format!("in {path}")]),
-        }
-        match term::emit_into_string(&config, &file, &d) {
-            Ok(s) => out.push_str(&s),
-            Err(_) => out.push_str(&format!("error: {path}: {message}\n")),
-        }
+    // A name in a message (`in constraint `…``) never reaches the terminal raw.
+    let message = escape_controls(message, false).into_owned();
+    if let Some(span) = &span
+        && let Some(clipped) = render_long_line(path, text, &message, span)
+    {
+        return clipped;
     }
-    out
+    let mut d = Diagnostic::error().with_message(&message);
+    match &span {
+        Some(span) => {
+            let start = floor_char(text, span.start.min(text.len()));
+            let end = floor_char(text, span.end.clamp(start, text.len()));
+            d = d.with_labels(vec![Label::primary((), start..end)]);
+        }
+        None => d = d.with_notes(vec![format!("in {path}")]),
+    }
+    match term::emit_into_string(&config, &file, &d) {
+        Ok(s) => s,
+        Err(_) => format!("error: {path}: {message}\n"),
+    }
 }
 
 /// Source lines longer than this are shown as a window around the fault.

@@ -21,7 +21,7 @@ use crate::expr::{Role, Symbol};
 use crate::model::system::System;
 use crate::numeric::qp::QpStatus;
 use crate::numeric::rows::{Rows, angular_bodies, angular_slot};
-use crate::numeric::solve::{Diagnostic, NonFinite, RowPart, Solution};
+use crate::numeric::solve::{Diagnostic, MAX_DENSE_ROWS, NonFinite, RowPart, Solution};
 use serde_json::{Value, json};
 use std::fmt::Write;
 
@@ -299,6 +299,9 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
             residuals.stationarity, residuals.feasibility, residuals.complementarity
         ),
         Diagnostic::Restitution { value } => format!("restitution must lie in [0, 1], found {value}; 0 is used"),
+        Diagnostic::TooLarge { rows, .. } => format!(
+            "too large to solve: {rows} coupled rows need a dense solve (the limit is {MAX_DENSE_ROWS} rows; docs/commands.md, \"solve\"); λ is 0 on them"
+        ),
         Diagnostic::MixedScales { raw } => format!(
             "the rescaled unit does not fit {}: their bodies' positions, velocities and forces are near the file's unit, so they are solved in it (the rest in the rescaled unit)",
             list(raw)
