@@ -364,9 +364,9 @@ fn every_rigid_file_derives_in_every_format() {
 fn the_commands_without_rigid_bodies_refuse_them() {
     let rel = "constraints/rigid/rod_pinned.toml";
     for args in [
-        vec!["generate", rel],
+        vec!["generate", rel, "--solver", "pgs"],
         vec!["simulate", rel, "--duration", "0.01", "--solver", "pgs"],
-        vec!["bench", rel, "--duration", "0.01"],
+        vec!["bench", rel, "--duration", "0.01", "--solvers"],
     ] {
         let (code, out, err) = lagrange(&args);
         assert_ne!(code, Some(0), "lagrange {args:?} accepted a rigid body:\n{out}");
