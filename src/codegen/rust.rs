@@ -329,6 +329,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
             formulas: &formulas,
             a_code: &a_code,
             bodies: &bodies,
+            turns: &turns,
             names: &names,
             layout: &layout,
             scales: &scales,
