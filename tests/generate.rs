@@ -443,6 +443,7 @@ fn checked_in_generated_code_is_current() {
     for (file, generated) in [
         ("constraints/bead_on_wire.toml", "benches/generated/bead_on_wire.rs"),
         ("benches/data/chain_10.toml", "benches/generated/chain_10.rs"),
+        ("constraints/rigid/revolute.toml", "benches/generated/revolute.rs"),
     ] {
         let l = loaded(Path::new(file));
         let code = lagrange::codegen::generate(&l, &Options::default()).expect("generates");
