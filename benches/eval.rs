@@ -377,12 +377,29 @@ fn revolute_by_hand(a: &Rigid2, b: &Rigid2) -> ([[f64; 2]; 2], [f64; 2]) {
     ([l, [-l[0], -l[1]]], [torque_a, torque_b])
 }
 
-/// The generated module's wrench: its rows' solve (`solution`, what `lagrange solve` gives),
-/// the forces and the torques from one solve.
+/// The generated module's wrench: `dense_solution` (one program of A, b, J, Jʷ and a 2×2
+/// Cholesky), the forces and the torques from one solve; its rows' solve (`solution`, what
+/// `lagrange solve` gives) where Cholesky gives up, which this state never needs.
 #[inline(never)]
 fn revolute_generated(s: &revolute::State) -> ([[f64; 2]; 2], [f64; 2]) {
-    let x = revolute::solution(s);
-    ([x.force[0], x.force[1]], [x.force[2][0], x.force[3][0]])
+    match revolute::dense_solution(s) {
+        Some((_, f, t)) => (f, t),
+        None => {
+            let x = revolute::solution(s);
+            ([x.force[0], x.force[1]], [x.force[2][0], x.force[3][0]])
+        }
+    }
+}
+
+/// The same wrench through the rows' solve (`solution`): the general path (row scaling,
+/// contact states, rows on the heap), for comparison.
+#[divan::bench(name = "revolute_wrench_3_rows_solve")]
+fn revolute_rows_bench(bencher: Bencher) {
+    let s = revolute_state();
+    bencher.bench_local(|| {
+        let x = revolute::solution(black_box(&s));
+        ([x.force[0], x.force[1]], [x.force[2][0], x.force[3][0]])
+    });
 }
 
 fn revolute_state() -> revolute::State {

@@ -340,23 +340,77 @@ pub fn angular_accelerations(s: &State) -> [f64; 2] {
     std::array::from_fn(|r| x.acceleration[BODIES + r][0])
 }
 
-/// The multipliers λ (for C/κ), as `lagrange solve` gives them: 0 on an inequality that is apart,
-/// separating or would pull, and the minimum-norm λ where A is singular (see `solution`).
+/// λ, the constraint forces Σₖ λₖ Jₖᵢ and torques Σₖ λₖ Jʷₖ of these equalities, from one program of A and b (as assembled)
+/// and J, and A λ = −b by L D Lᵀ (`solve_dense`); `None` where A is singular (redundant constraints) or its
+/// numbers leave f64's range: there `solution` (the rows' solve of `lagrange solve`) answers.
+pub fn dense_solution(s: &State) -> Option<([f64; 2], [[f64; 2]; 2], [f64; 2])> {
+    let x0 = 1.0 / s.m1;
+    let x1 = 1.0 / s.m2;
+    let x2 = s.th1.cos();
+    let x3 = s.th1.sin();
+    let x4 = s.th2.cos();
+    let x5 = s.th2.sin();
+    let x6 = s.w1 * s.w1;
+    let x7 = s.sA[1] * x6;
+    let x8 = s.sA[0] * x6;
+    let x9 = s.w2 * s.w2;
+    let x10 = s.sB[1] * x9;
+    let x11 = s.sB[0] * x9;
+    let x12 = s.sA[0] * x3 + s.sA[1] * x2;
+    let x13 = s.sB[0] * x5 + s.sB[1] * x4;
+    let x14 = s.sA[0] * x2 - s.sA[1] * x3;
+    let x15 = s.sB[1] * x5 - s.sB[0] * x4;
+    let x16 = 1.0 / s.I1;
+    let x17 = 1.0 / s.I2;
+    let x18 = x0 + x1;
+    let mut a = [[0.0; 2]; 2];
+    a[0][0] = x13 * x13 * x17 + (x12 * x12 * x16 + x18);
+    a[0][1] = x17 * (x13 * x15) + (x0 * 0.0 + x1 * -0.0 - x16 * (x12 * x14));
+    a[1][0] = a[0][1];
+    a[1][1] = x17 * (x15 * x15) + (x16 * (x14 * x14) + x18);
+    let l = solve_dense(a, [-(x4 * x11 + (x3 * x7 - x2 * x8 - x5 * x10) + (x17 * (s.T2 * x13) + (x0 * (s.F1[0] + s.F1[1] * 0.0) + x1 * (s.F2[1] * 0.0 - s.F2[0]) - x16 * (s.T1 * x12)))), -(x4 * x10 - (x3 * x8 + x2 * x7 - x5 * x11) + (x17 * (s.T2 * x15) + (x16 * (s.T1 * x14) + (x0 * (s.F1[1] + s.F1[0] * 0.0) + x1 * (s.F2[0] * 0.0 - s.F2[1])))))])?;
+    let mut f = [[0.0; 2]; 2];
+    f[0][0] += l[0] * 1.0;
+    f[0][1] += l[0] * 0.0;
+    f[1][0] += l[0] * (-1.0);
+    f[1][1] += l[0] * 0.0;
+    f[0][0] += l[1] * 0.0;
+    f[0][1] += l[1] * 1.0;
+    f[1][0] += l[1] * 0.0;
+    f[1][1] += l[1] * (-1.0);
+    let mut t = [0.0; 2];
+    t[0] += l[0] * (-x12);
+    t[1] += l[0] * x13;
+    t[0] += l[1] * x14;
+    t[1] += l[1] * x15;
+    Some((l, f, t))
+}
+
+/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.
 pub fn lambda(s: &State) -> [f64; 2] {
+    if let Some(x) = dense_solution(s) {
+        return x.0;
+    }
     let mut l = [0.0; 2];
     l.copy_from_slice(&solution(s).lambda);
     l
 }
 
-/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order), from the rows' solve.
+/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order): `dense_solution`, else `solution`.
 pub fn forces(s: &State) -> [[f64; 2]; 2] {
+    if let Some(x) = dense_solution(s) {
+        return x.1;
+    }
     let mut f = [[0.0; 2]; 2];
     f.copy_from_slice(&solution(s).force[..BODIES]);
     f
 }
 
-/// The constraint torque Σₖ λₖ Jʷₖ on every rigid body (`RIGID_BODIES`), from the rows' solve.
+/// The constraint torque Σₖ λₖ Jʷₖ on every rigid body (`RIGID_BODIES`): `dense_solution`, else `solution`.
 pub fn torques(s: &State) -> [f64; 2] {
+    if let Some(x) = dense_solution(s) {
+        return x.2;
+    }
     let x = solution(s);
     std::array::from_fn(|r| x.force[BODIES + r][0])
 }
@@ -379,6 +433,53 @@ pub fn force_a(s: &State) -> [f64; 2] {
 /// The constraint force on body `b`.
 pub fn force_b(s: &State) -> [f64; 2] {
     forces(s)[1]
+}
+
+/// Solves `a x = b` for a symmetric positive definite `a` by Cholesky in its square-root-free
+/// form, A = L D Lᵀ (L below the diagonal and D on it, in place). `None` where the rows' solve
+/// is needed: a diagonal entry that is not a positive normal number (its numbers out of f64's
+/// range), a pivot dᵢ at or below 1e-10 of its diagonal entry (the rows' rank tolerance on the
+/// unit-diagonal Ã: A singular, constraints redundant), or an answer that is not finite.
+#[allow(dead_code, clippy::needless_range_loop)]
+fn solve_dense<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> Option<[f64; K]> {
+    for i in 0..K {
+        let diagonal = a[i][i];
+        if !(diagonal.is_normal() && diagonal > 0.0) {
+            return None;
+        }
+        for j in 0..i {
+            // L[i][j] = (A[i][j] − Σₚ L[i][p] dₚ L[j][p]) / dⱼ
+            let mut acc = a[i][j];
+            for p in 0..j {
+                acc -= a[i][p] * a[p][p] * a[j][p];
+            }
+            a[i][j] = acc / a[j][j];
+        }
+        // dᵢ = A[i][i] − Σₚ L[i][p]² dₚ
+        let mut d = diagonal;
+        for p in 0..i {
+            d -= a[i][p] * a[i][p] * a[p][p];
+        }
+        if !(d > 1e-10 * diagonal && d.is_finite()) {
+            return None;
+        }
+        a[i][i] = d;
+    }
+    // L y = b, D z = y, Lᵀ x = z (in place in b).
+    for i in 0..K {
+        for p in 0..i {
+            b[i] -= a[i][p] * b[p];
+        }
+    }
+    for i in 0..K {
+        b[i] /= a[i][i];
+    }
+    for i in (0..K).rev() {
+        for p in i + 1..K {
+            b[i] -= a[p][i] * b[p];
+        }
+    }
+    if b.iter().all(|x| x.is_finite()) { Some(b) } else { None }
 }
 
 /// Where an inequality row stands (the contact states of `lagrange solve`).

@@ -39,7 +39,7 @@ use super::layout::Solver;
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, STEP, SWEEP};
+use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
 use crate::derive::{DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -241,6 +241,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         .map(|b| b.rigid.as_ref().map(|r| d.graph.substitute(r.inertia, &map)).transpose())
         .collect::<Result<Vec<_>, _>>()?;
     let a_code = assembled_a(&mut d.graph, &formulas, &masses, &inertias)?;
+    let b_code = assembled_b(&mut d.graph, &formulas, system, &masses, &inertias)?;
     let inverse_masses = masses.iter().map(|&m| d.graph.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
     // The scene's force expressions (`[scene] forces`); a body not listed feels none.
     let zero = d.graph.num(Rational::int(0));
@@ -375,7 +376,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
             system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
         scaling_fns(&mut out, g, &fields, &mass_symbols);
     }
-    ctx.solution(&mut out, &formulas, &names, &layout, &turns)?;
+    ctx.solution(&mut out, &formulas, (&a_code, &b_code), &names, &layout, &turns)?;
     if let Some(solver) = options.solver {
         let inverse_scales: Vec<f64> =
             d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect();
@@ -1282,10 +1283,12 @@ impl Ctx<'_> {
     /// `lambda`, `forces`, `force_<body>` and `accelerations`: closed formulas for one
     /// equality (where their numbers are in range), band Cholesky for a banded system of
     /// equalities, else the rows' solve; the band solve when the layout needs it.
+    #[allow(clippy::too_many_arguments)]
     fn solution(
         &self,
         out: &mut String,
         formulas: &Formulas,
+        (a_code, b_code): (&[Id], &[Id]),
         names: &Names<'_>,
         layout: &Layout,
         turns: &Turns,
@@ -1454,6 +1457,7 @@ impl Ctx<'_> {
                     );
                 }
             }
+            (Lambda::Dense, _, _) => self.dense_solution(out, formulas, (a_code, b_code), layout, turns)?,
             _ => {
                 let _ = writeln!(
                     out,
@@ -1497,6 +1501,105 @@ impl Ctx<'_> {
             out.push_str(SOLVE_BAND);
             out.push('\n');
         }
+        if layout.lambda == Lambda::Dense {
+            out.push_str(SOLVE_DENSE);
+            out.push('\n');
+        }
+        Ok(())
+    }
+
+    /// `dense_solution`, `lambda`, `forces` (and `torques`) of a small system of equalities:
+    /// one program computes A and b (as assembled), J and Jʷ with their shared values, Cholesky
+    /// solves A λ = −b, and the forces Σₖ λₖ Jₖᵢ and torques Σₖ λₖ Jʷₖ follow; where Cholesky
+    /// gives up (A singular: redundant constraints; numbers out of range) the rows' solve answers.
+    fn dense_solution(
+        &self,
+        out: &mut String,
+        formulas: &Formulas,
+        (a_code, b_code): (&[Id], &[Id]),
+        layout: &Layout,
+        turns: &Turns,
+    ) -> Result<(), GenerateError> {
+        let (dim, n, k, rigid) = (layout.dim, layout.bodies, layout.constraints, turns.body.len());
+        let blocks: Vec<(usize, usize, Id)> = formulas
+            .jacobian
+            .iter()
+            .enumerate()
+            .flat_map(|(r, dirs)| dirs.iter().map(move |&(b, id)| (r, b, id)))
+            .collect();
+        let angular = turns.entries(formulas);
+        let mut roots: Vec<Id> = a_code.to_vec();
+        roots.extend(b_code);
+        roots.extend(blocks.iter().map(|b| b.2));
+        roots.extend(angular.iter().map(|e| e.2));
+        let (lets, exprs) = self.body(&roots)?;
+        let mut next = exprs.into_iter();
+        let mut lines = lets;
+        lines.push(format!("let mut a = [[0.0; {k}]; {k}];"));
+        for &(r, c, _) in &formulas.a {
+            lines.push(format!("a[{r}][{c}] = {};", next.next().unwrap_or_default()));
+            if r != c {
+                lines.push(format!("a[{c}][{r}] = a[{r}][{c}];"));
+            }
+        }
+        let b: Vec<String> = (0..k).map(|_| format!("-{}", operand(&next.next().unwrap_or_default()))).collect();
+        lines.push(format!("let l = solve_dense(a, {})?;", array(&b)));
+        lines.push(format!("let mut f = [[0.0; {dim}]; {n}];"));
+        for &(r, body, _) in &blocks {
+            for d in 0..dim {
+                lines.push(format!("f[{body}][{d}] += l[{r}] * {};", operand(&next.next().unwrap_or_default())));
+            }
+        }
+        let result = if rigid > 0 {
+            lines.push(format!("let mut t = [0.0; {rigid}];"));
+            for &(r, slot, _) in &angular {
+                lines.push(format!("t[{slot}] += l[{r}] * {};", operand(&next.next().unwrap_or_default())));
+            }
+            "Some((l, f, t))"
+        } else {
+            "Some((l, f))"
+        };
+        let ty = if rigid > 0 {
+            format!("([f64; {k}], [[f64; {dim}]; {n}], [f64; {rigid}])")
+        } else {
+            format!("([f64; {k}], [[f64; {dim}]; {n}])")
+        };
+        let _ = writeln!(
+            out,
+            "/// λ, the constraint forces Σₖ λₖ Jₖᵢ{} of these equalities, from one program of A and b (as assembled)\n\
+             /// and J, and A λ = −b by L D Lᵀ (`solve_dense`); `None` where A is singular (redundant constraints) or its\n\
+             /// numbers leave f64's range: there `solution` (the rows' solve of `lagrange solve`) answers.\n\
+             pub fn dense_solution(s: &State) -> Option<{ty}> {{",
+            if rigid > 0 { " and torques Σₖ λₖ Jʷₖ" } else { "" }
+        );
+        for l in &lines {
+            let _ = writeln!(out, "    {l}");
+        }
+        let _ = writeln!(out, "    {result}\n}}\n");
+        let _ = writeln!(
+            out,
+            "/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.\n\
+             pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+             if let Some(x) = dense_solution(s) {{\n        return x.0;\n    }}\n    \
+             let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+        );
+        let bodies_only = if rigid > 0 { "[..BODIES]" } else { "" };
+        let _ = writeln!(
+            out,
+            "/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order): `dense_solution`, else `solution`.\n\
+             pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+             if let Some(x) = dense_solution(s) {{\n        return x.1;\n    }}\n    \
+             let mut f = [[0.0; {dim}]; {n}];\n    f.copy_from_slice(&solution(s).force{bodies_only});\n    f\n}}\n"
+        );
+        if rigid > 0 {
+            let _ = writeln!(
+                out,
+                "/// The constraint torque Σₖ λₖ Jʷₖ on every rigid body (`RIGID_BODIES`): `dense_solution`, else `solution`.\n\
+                 pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
+                 if let Some(x) = dense_solution(s) {{\n        return x.2;\n    }}\n    \
+                 let x = solution(s);\n    std::array::from_fn(|r| x.force[BODIES + r][0])\n}}\n"
+            );
+        }
         Ok(())
     }
 }
@@ -1537,6 +1640,35 @@ fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id], inertias: &[Option<Id
         entries.push(g.add(terms)?);
     }
     Ok(entries)
+}
+
+/// bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + Σ Jʷₖ τ / I + cₖ as assembled from the directions (the state's forces
+/// and torques), unsimplified: it shares J, Jʷ and c with the rest of a program, where the
+/// canonical bₖ is over a common denominator.
+fn assembled_b(
+    g: &mut Graph,
+    f: &Formulas,
+    system: &crate::model::system::System,
+    masses: &[Id],
+    inertias: &[Option<Id>],
+) -> Result<Vec<Id>, GenerateError> {
+    let mut out = Vec::with_capacity(f.bias.len());
+    for k in 0..f.bias.len() {
+        let mut terms = Vec::new();
+        for &(body, j) in &f.jacobian[k] {
+            let dot = g.dot(j, system.bodies[body].nodes.force)?;
+            let inv = g.powi(masses[body], -1)?;
+            terms.push(g.mul(vec![dot, inv])?);
+        }
+        for &(body, w) in &f.angular[k] {
+            let (Some(rigid), Some(inertia)) = (&system.bodies[body].rigid, inertias[body]) else { continue };
+            let inv = g.powi(inertia, -1)?;
+            terms.push(g.mul(vec![w, rigid.nodes.torque, inv])?);
+        }
+        terms.push(f.bias[k]);
+        out.push(g.add(terms)?);
+    }
+    Ok(out)
 }
 
 /// `(true, u)` when `id` is `−u`, else `(false, id)`.
