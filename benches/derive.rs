@@ -10,7 +10,9 @@
 //! `lagrange derive FILE` does after that: the text document (`report::derivation`), so the
 //! whole command is measured too, file reading and stdout aside. `rope_text`: a rope over
 //! pulleys through k = 1…8 segments (sums of norms), whose C̈ is linear in k (asserted).
-//! Targets (issue 2): bead
+//! `revolute`: the 2D revolute joint between two rigid bodies beside the bead;
+//! `rigid_chain_links`: N rigid rods on revolute joints (N = 10, 100, 1000), each next to its
+//! load-only baseline. Targets (issue 2): bead
 //! < 20 µs; chain linear in N, N = 200 < 4 ms, N = 1000 < 20 ms.
 
 /// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
@@ -33,6 +35,7 @@ fn main() {
 
 const BEAD_2D: &str = include_str!("../constraints/bead_on_wire.toml");
 const BEAD_3D: &str = include_str!("../constraints/bead_on_sphere.toml");
+const REVOLUTE: &str = include_str!("../constraints/rigid/revolute.toml");
 
 fn load_and_derive(text: &str) -> usize {
     let loaded = load(text).expect("the file loads");
@@ -91,6 +94,58 @@ fn bead_from_declarations(dim: usize) -> lagrange::model::system::System {
     b.body(&bead).expect("new names");
     b.constraint("wire", black_box("dot(r,r) = l^2")).expect("a constraint");
     b.finish()
+}
+
+/// The 2D revolute joint between two rigid bodies (a vector constraint: two rows, Jᵛ and Jʷ
+/// per body, the 2×2 K), beside the bead in the same run; `revolute_load_only` is its baseline.
+#[divan::bench]
+fn revolute(bencher: Bencher) {
+    assert_eq!(load_and_derive(REVOLUTE), 5, "A has 3 entries (upper triangle), b 2");
+    bencher.bench(|| load_and_derive(black_box(REVOLUTE)));
+}
+
+#[divan::bench]
+fn revolute_load_only(bencher: Bencher) {
+    bencher.bench(|| load(black_box(REVOLUTE)).map(|l| l.system.graph.len()).unwrap_or(0));
+}
+
+/// An N-rod chain of rigid bodies on revolute joints, the first rod's upper end pinned at the
+/// origin (`constraints/rigid/chain_20.toml`'s shape), as the constraint file's text.
+fn rigid_chain(n: usize) -> String {
+    let mut text = String::from(
+        "title = \"rigid chain\"\ndimension = 2\n\n[parameters]\nm = 1.0\nL = 1.0\nI = 0.08\np = [0.0, 0.0]\n\n\
+         [definitions]\nup = \"[-L/2, 0]\"\ndown = \"[L/2, 0]\"\n",
+    );
+    for i in 1..=n {
+        text += &format!(
+            "\n[[bodies]]\nname = \"rod{i}\"\nposition = \"x{i}\"\nvelocity = \"v{i}\"\nacceleration = \"a{i}\"\n\
+             mass = \"m\"\nforce = \"F{i}\"\norientation = \"th{i}\"\nangular_velocity = \"w{i}\"\n\
+             angular_acceleration = \"alpha{i}\"\ninertia = \"I\"\ntorque = \"T{i}\"\n"
+        );
+    }
+    text += "\n[[constraints]]\nname = \"pin\"\nexpr = \"x1 + rot(th1, up) = p\"\n";
+    for i in 1..n {
+        text += &format!(
+            "\n[[constraints]]\nname = \"joint{i}\"\nexpr = \"x{i} + rot(th{i}, down) = x{j} + rot(th{j}, up)\"\n",
+            j = i + 1
+        );
+    }
+    text
+}
+
+/// The rigid chain of N = 10, 100, 1000 rods (2N rows): derived in time linear in N, as the
+/// point-mass chains are (A has at most 3 (upper-triangle) entries a row: the band of a chain).
+#[divan::bench(args = [10, 100, 1000], sample_count = 5)]
+fn rigid_chain_links(bencher: Bencher, n: usize) {
+    let text = rigid_chain(n);
+    assert!(load_and_derive(&text) <= 5 * 2 * n);
+    bencher.bench(|| load_and_derive(black_box(&text)));
+}
+
+#[divan::bench(args = [10, 100, 1000], sample_count = 5)]
+fn rigid_chain_load_only(bencher: Bencher, n: usize) {
+    let text = rigid_chain(n);
+    bencher.bench(|| load(black_box(&text)).map(|l| l.system.graph.len()).unwrap_or(0));
 }
 
 #[divan::bench(args = [2, 3])]

@@ -1,7 +1,8 @@
 //! Evaluation speed, always against a handwritten baseline from the same run.
 //!
-//! The article's bead force F_c = −(m v·v + F·r)/(r·r) r and a 10-link chain's A and b, each
-//! computed by: handwritten Rust, the code `lagrange generate` writes (checked in under
+//! The article's bead force F_c = −(m v·v + F·r)/(r·r) r, a 10-link chain's A and b, and the
+//! 2D revolute joint's wrench (λ of its two rows, the force and torque on both bodies), each
+//! computed by: handwritten Rust (the revolute joint Box2D-style), the code `lagrange generate` writes (checked in under
 //! `benches/generated/`, kept current by `tests/generate.rs`), the compiled tape for one
 //! state, and the tape batched over many states (structure of arrays).
 //!
@@ -31,6 +32,11 @@ mod bead {
 #[allow(dead_code, clippy::all)]
 mod chain {
     include!("generated/chain_10.rs");
+}
+
+#[allow(dead_code, clippy::all)]
+mod revolute {
+    include!("generated/revolute.rs");
 }
 
 fn main() {
@@ -322,4 +328,121 @@ fn chain_batch_tape(b: Bencher, n: usize) {
     let mut out = vec![0.0; tape.output_len() * n];
     let mut scratch = tape.batch_scratch();
     b.counter(ItemsCount::new(n)).bench_local(|| tape.eval_batch(n, black_box(&inputs), &mut scratch, &mut out));
+}
+
+// ---- the 2D revolute joint ----------------------------------------------------------------
+
+/// Two rigid bodies' numbers for the handwritten revolute joint (`constraints/rigid/revolute.toml`).
+struct Rigid2 {
+    x: [f64; 2],
+    v: [f64; 2],
+    f: [f64; 2],
+    m: f64,
+    th: f64,
+    w: f64,
+    t: f64,
+    i: f64,
+}
+
+const ANCHOR_A: [f64; 2] = [0.5, 0.0];
+const ANCHOR_B: [f64; 2] = [-0.5, 0.0];
+
+fn revolute_bodies() -> (Rigid2, Rigid2) {
+    let a = Rigid2 { x: [0.1, 0.2], v: [0.3, -0.4], f: [0.5, -9.81], m: 1.5, th: 0.3, w: 1.2, t: 0.2, i: 0.4 };
+    let b = Rigid2 { x: [1.05, 0.35], v: [-0.2, 0.6], f: [-0.3, -4.9], m: 0.8, th: -0.7, w: -0.5, t: -0.1, i: 0.25 };
+    (a, b)
+}
+
+/// The pin's wrench by hand, as Box2D v3's `revolute_joint.c` lays it out (rA, rB the anchors
+/// from the centres, K its 2×2 effective mass), at the acceleration level: C = pA − pB, so
+/// J = [E, perp(rA), −E, −perp(rB)], K = J M⁻¹ Jᵀ, b = J M⁻¹ (F, τ) + c with c = −ωA² rA + ωB² rB,
+/// λ = −K⁻¹ b (Cramer), and the wrench (λ, rA × λ) on A and (−λ, −rB × λ) on B.
+#[inline(never)]
+fn revolute_by_hand(a: &Rigid2, b: &Rigid2) -> ([[f64; 2]; 2], [f64; 2]) {
+    let (ca, sa) = (a.th.cos(), a.th.sin());
+    let (cb, sb) = (b.th.cos(), b.th.sin());
+    let ra = [ca * ANCHOR_A[0] - sa * ANCHOR_A[1], sa * ANCHOR_A[0] + ca * ANCHOR_A[1]];
+    let rb = [cb * ANCHOR_B[0] - sb * ANCHOR_B[1], sb * ANCHOR_B[0] + cb * ANCHOR_B[1]];
+    let (ma, mb, ia, ib) = (1.0 / a.m, 1.0 / b.m, 1.0 / a.i, 1.0 / b.i);
+    let k11 = ma + mb + ra[1] * ra[1] * ia + rb[1] * rb[1] * ib;
+    let k12 = -ra[1] * ra[0] * ia - rb[1] * rb[0] * ib;
+    let k22 = ma + mb + ra[0] * ra[0] * ia + rb[0] * rb[0] * ib;
+    // perp(r) = [−r.y, r.x]
+    let b1 = a.f[0] * ma - ra[1] * a.t * ia - b.f[0] * mb + rb[1] * b.t * ib - a.w * a.w * ra[0] + b.w * b.w * rb[0];
+    let b2 = a.f[1] * ma + ra[0] * a.t * ia - b.f[1] * mb - rb[0] * b.t * ib - a.w * a.w * ra[1] + b.w * b.w * rb[1];
+    let det = k11 * k22 - k12 * k12;
+    let l = [-(k22 * b1 - k12 * b2) / det, -(k11 * b2 - k12 * b1) / det];
+    let torque_a = ra[0] * l[1] - ra[1] * l[0];
+    let torque_b = -(rb[0] * l[1] - rb[1] * l[0]);
+    ([l, [-l[0], -l[1]]], [torque_a, torque_b])
+}
+
+/// The generated module's wrench: `dense_solution` (one program of A, b, J, Jʷ and a 2×2
+/// Cholesky), the forces and the torques from one solve; its rows' solve (`solution`, what
+/// `lagrange solve` gives) where Cholesky gives up, which this state never needs.
+#[inline(never)]
+fn revolute_generated(s: &revolute::State) -> ([[f64; 2]; 2], [f64; 2]) {
+    match revolute::dense_solution(s) {
+        Some((_, f, t)) => (f, t),
+        None => {
+            let x = revolute::solution(s);
+            ([x.force[0], x.force[1]], [x.force[2][0], x.force[3][0]])
+        }
+    }
+}
+
+/// The same wrench through the rows' solve (`solution`): the general path (row scaling,
+/// contact states, rows on the heap), for comparison.
+#[divan::bench(name = "revolute_wrench_3_rows_solve")]
+fn revolute_rows_bench(bencher: Bencher) {
+    let s = revolute_state();
+    bencher.bench_local(|| {
+        let x = revolute::solution(black_box(&s));
+        ([x.force[0], x.force[1]], [x.force[2][0], x.force[3][0]])
+    });
+}
+
+fn revolute_state() -> revolute::State {
+    let (a, b) = revolute_bodies();
+    revolute::State {
+        x1: a.x,
+        v1: a.v,
+        F1: a.f,
+        m1: a.m,
+        th1: a.th,
+        w1: a.w,
+        T1: a.t,
+        I1: a.i,
+        x2: b.x,
+        v2: b.v,
+        F2: b.f,
+        m2: b.m,
+        th2: b.th,
+        w2: b.w,
+        T2: b.t,
+        I2: b.i,
+        sA: ANCHOR_A,
+        sB: ANCHOR_B,
+        ..Default::default()
+    }
+}
+
+#[divan::bench(name = "revolute_wrench_1_handwritten")]
+fn revolute_handwritten(bencher: Bencher) {
+    let (a, b) = revolute_bodies();
+    // The baseline does the generated module's work: the same wrench (checked once, untimed).
+    let (hand, generated) = (revolute_by_hand(&a, &b), revolute_generated(&revolute_state()));
+    let close = |x: f64, y: f64| (x - y).abs() <= 1e-12 * x.abs().max(y.abs()).max(1.0);
+    assert!(
+        hand.0.iter().flatten().zip(generated.0.iter().flatten()).all(|(x, y)| close(*x, *y)),
+        "{hand:?} {generated:?}"
+    );
+    assert!(hand.1.iter().zip(&generated.1).all(|(x, y)| close(*x, *y)), "{hand:?} {generated:?}");
+    bencher.bench_local(|| revolute_by_hand(black_box(&a), black_box(&b)));
+}
+
+#[divan::bench(name = "revolute_wrench_2_generated")]
+fn revolute_generated_bench(bencher: Bencher) {
+    let s = revolute_state();
+    bencher.bench_local(|| revolute_generated(black_box(&s)));
 }

@@ -867,14 +867,10 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
-    // The velocity-level solvers step rigid bodies; work-precision sweeps and formula
-    // accuracy are point-mass only for now.
+    // Every bench handles 2D rigid bodies: the work-precision sweep, formula accuracy and the
+    // velocity-level solvers.
     if args.solvers {
         return cmd_bench_solvers(args, &scenario);
-    }
-    if let Err(e) = scenario.system.refuse_rigid("bench") {
-        eprintln!("error: {}: {e}", args.file.display());
-        return ExitCode::from(1);
     }
     let max_states = lagrange::precision::accuracy::MAX_STATES;
     if args.states > max_states {

@@ -1,6 +1,8 @@
 //! `lagrange generate --lang rust`: the generated modules compile with rustc (warnings
 //! denied) and compute what the reference interpreter computes, for every file in
-//! `constraints/` and for a file of hostile names, plain and specialised.
+//! `constraints/` and `constraints/rigid/` (rigid bodies: θ, ω, τ, I in the state; Jʷ, the
+//! torques and α beside J, the forces and a) and for a file of hostile names, plain and
+//! specialised.
 
 mod common;
 
@@ -10,7 +12,7 @@ use lagrange::expr::eval::{Env, Value, eval_one};
 use lagrange::expr::{Graph, Role, Symbol, Ty};
 use lagrange::model::file::{Loaded, load};
 use lagrange::numeric::rescale::solve_at;
-use lagrange::numeric::rows::RowProgram;
+use lagrange::numeric::rows::{RowProgram, angular_bodies, angular_slot};
 use lagrange::numeric::solve::{Settings, Solution, safe_norm};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -31,6 +33,17 @@ const OUTPUTS: [&str; 10] = [
     "forces",
     "accelerations",
     "applied_forces",
+];
+
+/// The outputs compared beside [`OUTPUTS`] for a module with rigid bodies.
+const RIGID_OUTPUTS: [&str; 7] = [
+    "torques",
+    "angular_accelerations",
+    "orientations",
+    "angular_velocities",
+    "inverse_inertias",
+    "applied_torques",
+    "angular_jacobian",
 ];
 
 struct Rng(u64);
@@ -56,15 +69,23 @@ struct Case {
     name: String,
     module: Module,
     states: Vec<(String, Outputs)>,
+    /// The file has rigid bodies: the module's rigid outputs are compared too.
+    rigid: bool,
+    /// The module's A is banded (`a_band`, no `a_matrix`).
+    banded: bool,
 }
 
 fn files() -> Vec<PathBuf> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir("constraints")
-        .expect("constraints/")
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-        .collect();
-    files.sort();
+    let mut files = Vec::new();
+    for dir in ["constraints", "constraints/rigid"] {
+        let mut here: Vec<PathBuf> = std::fs::read_dir(dir)
+            .expect("constraints/")
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        here.sort();
+        files.extend(here);
+    }
     files.push(PathBuf::from("tests/data/hostile_names.toml"));
     files
 }
@@ -81,7 +102,7 @@ fn random_state(l: &Loaded, m: &Module, rng: &mut Rng, file_parameters: bool) ->
     let mut env = Env::new();
     for (s, info) in g.symbols() {
         let value = match info.ty {
-            Ty::Scalar if matches!(info.role, Role::Mass { .. } | Role::Parameter) => {
+            Ty::Scalar if matches!(info.role, Role::Mass { .. } | Role::Inertia { .. } | Role::Parameter) => {
                 Value::Scalar(rng.range(0.5, 2.0))
             }
             Ty::Scalar => Value::Scalar(rng.range(-2.0, 2.0)),
@@ -156,8 +177,8 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
     // (inequalities by their contact state, the minimum-norm λ of a singular A).
     let solution = solved(l, d, env);
     let lambda = solution.lambda.clone();
-    let forces: Vec<f64> = solution.constraint_force.iter().flat_map(|f| f[..dim].to_vec()).collect();
-    let accelerations: Vec<f64> = solution.acceleration.iter().flat_map(|a| a[..dim].to_vec()).collect();
+    let forces: Vec<f64> = solution.constraint_force[..n].iter().flat_map(|f| f[..dim].to_vec()).collect();
+    let accelerations: Vec<f64> = solution.acceleration[..n].iter().flat_map(|a| a[..dim].to_vec()).collect();
     let rates: Vec<f64> = d.constraints.iter().map(|c| scalar(g, c.c_dot, env)).collect();
     let applied: Vec<f64> = (0..n)
         .flat_map(|i| match l.scene.forces.iter().find(|f| f.0 == i) {
@@ -165,7 +186,8 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
             None => vec![0.0; dim],
         })
         .collect();
-    vec![
+    let rigid_outputs = rigid_expected(l, d, env, &solution);
+    let mut outputs: Outputs = vec![
         ("constraints".into(), c),
         ("a_matrix".into(), a),
         ("b_vector".into(), b),
@@ -176,6 +198,47 @@ fn expected(l: &Loaded, d: &Derivation, env: &Env) -> Outputs {
         ("accelerations".into(), accelerations),
         ("constraint_rates".into(), rates),
         ("applied_forces".into(), applied),
+    ];
+    outputs.extend(rigid_outputs);
+    outputs
+}
+
+/// What a module's rigid-body functions must return (nothing for point masses): the
+/// constraint torques and α from `lagrange solve`'s angular slots, the state's θ, ω, 1/I,
+/// the scene's torques and Jʷ (constraint by rigid body) from the interpreter.
+fn rigid_expected(l: &Loaded, d: &Derivation, env: &Env, solution: &Solution) -> Outputs {
+    let g = &d.graph;
+    let system = &l.system;
+    let rigid: Vec<usize> = angular_bodies(system).collect();
+    if rigid.is_empty() {
+        return Vec::new();
+    }
+    let slot = |i: usize| angular_slot(system, i).expect("a rigid body has an angular slot");
+    let per_body = |f: &dyn Fn(&lagrange::model::system::Rigid) -> f64| -> Vec<f64> {
+        rigid.iter().map(|&i| f(system.bodies[i].rigid.as_ref().expect("rigid"))).collect()
+    };
+    let (r, k) = (rigid.len(), d.constraints.len());
+    let mut jw = vec![0.0; k * r];
+    for (row, dc) in d.constraints.iter().enumerate() {
+        for &(body, id) in &dc.angular {
+            let col = rigid.iter().position(|&b| b == body).expect("Jʷ of a rigid body");
+            jw[row * r + col] = scalar(g, id, env);
+        }
+    }
+    vec![
+        ("torques".into(), rigid.iter().map(|&i| solution.constraint_force[slot(i)][0]).collect()),
+        ("angular_accelerations".into(), rigid.iter().map(|&i| solution.acceleration[slot(i)][0]).collect()),
+        ("orientations".into(), per_body(&|b| scalar(g, b.nodes.orientation, env))),
+        ("angular_velocities".into(), per_body(&|b| scalar(g, b.nodes.angular_velocity, env))),
+        ("inverse_inertias".into(), per_body(&|b| 1.0 / scalar(g, b.inertia, env))),
+        (
+            "applied_torques".into(),
+            rigid
+                .iter()
+                .map(|&i| l.scene.torques.iter().find(|t| t.0 == i).map_or(0.0, |&(_, id)| scalar(g, id, env)))
+                .collect(),
+        ),
+        ("angular_jacobian".into(), jw),
     ]
 }
 
@@ -252,8 +315,10 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
                 states.push((literal, expected(&reference, &d, &env)));
             }
             let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("file").replace('-', "_");
-            let name = format!("{stem}{}", if specialize { "_specialized" } else { "" });
-            cases.push(Case { name, module: m, states });
+            let folder = if path.starts_with("constraints/rigid") { "rigid_" } else { "" };
+            let name = format!("{folder}{stem}{}", if specialize { "_specialized" } else { "" });
+            let (rigid, banded) = (reference.system.has_rigid_bodies(), m.code.contains("pub fn a_band("));
+            cases.push(Case { name, module: m, states, rigid, banded });
         }
     }
     // One crate: each module included in its own `mod`, and a main that prints every output.
@@ -274,7 +339,17 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
                 let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s));");
             }
             for f in ["a_matrix", "jacobian", "forces", "accelerations", "applied_forces"] {
+                // A banded A (the 20-rod chain's 40 rows) is `a_band`: the big-chain tests compare it.
+                if f == "a_matrix" && case.banded {
+                    continue;
+                }
                 let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s).concat());");
+            }
+            if case.rigid {
+                for f in &RIGID_OUTPUTS[..6] {
+                    let _ = writeln!(main, "        show(\"{m} {i} {f}\", &{f}(&s));");
+                }
+                let _ = writeln!(main, "        show(\"{m} {i} angular_jacobian\", &angular_jacobian(&s).concat());");
             }
             main.push_str("    }\n");
         }
@@ -282,10 +357,17 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
     main.push_str("}\n");
     let stdout = compile_and_run(&dir, &main, 1);
     let mut lines = stdout.lines();
-    let mut checked = 0;
+    let (mut checked, mut expected_checks) = (0, 0);
     for case in &cases {
+        let outputs: Vec<&str> = OUTPUTS
+            .iter()
+            .chain(if case.rigid { &RIGID_OUTPUTS[..] } else { &[] })
+            .copied()
+            .filter(|&f| !(f == "a_matrix" && case.banded))
+            .collect();
+        expected_checks += STATES * outputs.len();
         for (i, (_, expect)) in case.states.iter().enumerate() {
-            for f in OUTPUTS {
+            for &f in &outputs {
                 let line = lines.next().expect("one line per output");
                 let (label, values) = line.split_once(" [").expect("label [values]");
                 assert_eq!(label, format!("{} {i} {f}", case.name));
@@ -305,7 +387,9 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
             }
         }
     }
-    assert_eq!(checked, cases.len() * STATES * OUTPUTS.len());
+    assert_eq!(checked, expected_checks);
+    let rigid = cases.iter().filter(|c| c.rigid).count();
+    assert!(rigid >= 2 * 12, "the rigid files were checked plain and specialised: {rigid} modules");
 }
 
 #[test]
@@ -370,6 +454,7 @@ fn checked_in_generated_code_is_current() {
     for (file, generated) in [
         ("constraints/bead_on_wire.toml", "benches/generated/bead_on_wire.rs"),
         ("benches/data/chain_10.toml", "benches/generated/chain_10.rs"),
+        ("constraints/rigid/revolute.toml", "benches/generated/revolute.rs"),
     ] {
         let l = loaded(Path::new(file));
         let code = lagrange::codegen::generate(&l, &Options::default()).expect("generates");

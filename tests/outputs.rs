@@ -27,9 +27,16 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 
 /// Every constraint file whose outputs are pinned, relative to the crate root, in a fixed order.
 fn files() -> Vec<String> {
+    let out = files_in(&["constraints", "constraints/hard"]);
+    assert!(out.len() >= 30, "expected the shipped constraint files, found {}", out.len());
+    out
+}
+
+/// The `.toml` files of `dirs`, relative to the crate root, sorted within each folder.
+fn files_in(dirs: &[&str]) -> Vec<String> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut out = Vec::new();
-    for dir in ["constraints", "constraints/hard"] {
+    for &dir in dirs {
         let mut here: Vec<PathBuf> = std::fs::read_dir(root.join(dir))
             .expect("the constraints folder is readable")
             .map(|e| e.expect("a directory entry").path())
@@ -40,7 +47,6 @@ fn files() -> Vec<String> {
             here.iter().map(|p| format!("{dir}/{}", p.file_name().and_then(|n| n.to_str()).expect("UTF-8 name"))),
         );
     }
-    assert!(out.len() >= 30, "expected the shipped constraint files, found {}", out.len());
     out
 }
 
@@ -78,8 +84,13 @@ fn pinned(output: &str) -> String {
 
 /// Snapshots `lagrange ARGS… FILE` for every file, under `what`.
 fn pin_every_file(what: &str, args: &[&str]) {
+    pin_files(files(), what, args);
+}
+
+/// Snapshots `lagrange ARGS… FILE` for each of `files`, under `what`.
+fn pin_files(files: Vec<String>, what: &str, args: &[&str]) {
     insta::with_settings!({ snapshot_path => "snapshots/outputs", prepend_module_to_snapshot => false }, {
-        for rel in files() {
+        for rel in files {
             let mut full = vec![args[0], rel.as_str()];
             full.extend_from_slice(&args[1..]);
             let output = run(&full);
@@ -131,6 +142,14 @@ fn derive_json_steps() {
 #[test]
 fn generate_rust() {
     pin_every_file("generate_rust", &["generate"]);
+}
+
+/// The rigid-body files' modules (their `derive` outputs are pinned by `tests/rigid.rs`).
+#[test]
+fn generate_rust_rigid() {
+    let files = files_in(&["constraints/rigid"]);
+    assert!(files.len() >= 12, "expected the joint library, found {}", files.len());
+    pin_files(files, "generate_rust", &["generate"]);
 }
 
 #[test]

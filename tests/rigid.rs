@@ -363,11 +363,11 @@ fn every_rigid_file_derives_in_every_format() {
 #[test]
 fn the_commands_without_rigid_bodies_refuse_them() {
     let rel = "constraints/rigid/rod_pinned.toml";
-    for args in [vec!["generate", rel], vec!["bench", rel, "--duration", "0.01"]] {
-        let (code, out, err) = lagrange(&args);
-        assert_ne!(code, Some(0), "lagrange {args:?} accepted a rigid body:\n{out}");
-        assert!(err.contains("does not handle rigid bodies yet (body `rod`"), "lagrange {args:?}:\n{err}");
-    }
+    // The generated velocity-level step (`generate --solver`) is the one left.
+    let args = ["generate", rel, "--solver", "pgs"];
+    let (code, out, err) = lagrange(&args);
+    assert_ne!(code, Some(0), "lagrange {args:?} accepted a rigid body:\n{out}");
+    assert!(err.contains("does not handle rigid bodies yet (body `rod`"), "lagrange {args:?}:\n{err}");
 }
 
 /// Evaluates `expected` (parsed into the derivation's graph) and `derived` at random

@@ -105,9 +105,14 @@ fn rigid_files() -> Vec<String> {
 /// every substep (measured: 2e-13 at most); the iterative solvers hold the joints to 5 mm
 /// (measured: 2e-3 at most, the pulley's; the soft step sags by its spring's equilibrium,
 /// g/ω² ≈ 7e-5 m at 60 Hz for a pin, more while the bodies swing).
-fn bound(solver: Solver) -> f64 {
+/// A chain of many joints in series (`chain_20.toml`: the top pin carries twenty 1 m rods
+/// while they swing down) stretches further under the iterative solvers: one sweep a substep
+/// carries a correction one joint down the chain, and the soft step's joints are springs.
+/// 5 cm there (measured: soft step 2.0e-2, PGS 1.7e-2), as Box2D's own chains stretch.
+fn bound(solver: Solver, joints_in_series: usize) -> f64 {
     match solver {
         Solver::Exact => 1e-9,
+        _ if joints_in_series > 10 => 5e-2,
         Solver::SoftStep | Solver::Pgs | Solver::Xpbd => 5e-3,
     }
 }
@@ -121,6 +126,7 @@ fn every_solver_holds_every_rigid_file() {
         // A state of our own runs 2/3 s: the pulley's lighter body reaches its pulley (a
         // rope segment of length 0, where C is singular) at about 0.9 s.
         let steps = if s.scene.initial.is_empty() { 40 } else { 120 };
+        let joints = s.system.constraints.len() / s.system.dim();
         for solver in Solver::ALL {
             let settings = Settings { steps, ..Settings::new(solver, 1.0 / 60.0, 0.0) };
             let summary = s
@@ -128,11 +134,11 @@ fn every_solver_holds_every_rigid_file() {
                 .unwrap_or_else(|f| panic!("{rel}, {}: {}", solver.name(), f.error));
             assert_eq!(summary.steps, steps, "{rel}, {}", solver.name());
             assert!(
-                summary.max_abs_c <= bound(solver),
+                summary.max_abs_c <= bound(solver, joints),
                 "{rel}, {}: max |C| = {:e} > {:e}",
                 solver.name(),
                 summary.max_abs_c,
-                bound(solver)
+                bound(solver, joints)
             );
             // The angles and angular velocities are in the summary's final state.
             for rigid in s.system.bodies.iter().filter_map(|b| b.rigid.as_ref()) {
@@ -313,7 +319,7 @@ fn the_revolute_limit_only_pushes_and_holds() {
         })
         .expect("runs");
         assert!(last > 0.0, "{}: the limit does not push at the end", solver.name());
-        assert!(-deepest <= bound(solver), "{}: the angle went {:e} rad past the limit", solver.name(), -deepest);
+        assert!(-deepest <= bound(solver, 1), "{}: the angle went {:e} rad past the limit", solver.name(), -deepest);
     }
 }
 
@@ -423,9 +429,10 @@ fn the_command_line_steps_and_benches_rigid_bodies() {
     for name in ["soft-step", "pgs", "xpbd", "exact-velocity"] {
         assert!(text.contains(name), "{name} in the bench: {text}");
     }
-    // Work-precision and formula accuracy are not yet for rigid bodies: still refused.
-    let (code, _, err) = lagrange(&["bench", "constraints/rigid/rod_pinned.toml"]);
-    assert_eq!(code, Some(1), "{err}");
+    // Work-precision and formula accuracy run rigid bodies too.
+    let (code, out, err) = lagrange(&["bench", "constraints/rigid/rod_pinned.toml", "--duration", "0.05"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.contains("rod (torque)"), "the torque's formula accuracy: {out}");
 }
 
 #[test]

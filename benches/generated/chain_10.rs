@@ -608,16 +608,161 @@ pub fn accelerations(s: &State) -> [[f64; 2]; 10] {
     a
 }
 
-/// The multipliers λ (for C/κ), as `lagrange solve` gives them: 0 on an inequality that is apart,
-/// separating or would pull, and the minimum-norm λ where A is singular (see `solution`).
+/// λ, the constraint forces Σₖ λₖ Jₖᵢ of these equalities, from one program of A and b (as assembled)
+/// and J, and A λ = −b by L D Lᵀ (`solve_dense`); `None` where A is singular (redundant constraints) or its
+/// numbers leave f64's range: there `solution` (the rows' solve of `lagrange solve`) answers.
+pub fn dense_solution(s: &State) -> Option<([f64; 10], [[f64; 2]; 10])> {
+    let x0 = s.r2[0] - s.r1[0];
+    let x1 = s.r2[1] - s.r1[1];
+    let x2 = x0 * x0 + x1 * x1;
+    let x3 = s.r3[0] - s.r2[0];
+    let x4 = s.r3[1] - s.r2[1];
+    let x5 = x3 * x3 + x4 * x4;
+    let x6 = s.r4[0] - s.r3[0];
+    let x7 = s.r4[1] - s.r3[1];
+    let x8 = x6 * x6 + x7 * x7;
+    let x9 = s.r5[0] - s.r4[0];
+    let x10 = s.r5[1] - s.r4[1];
+    let x11 = x9 * x9 + x10 * x10;
+    let x12 = s.r6[0] - s.r5[0];
+    let x13 = s.r6[1] - s.r5[1];
+    let x14 = x12 * x12 + x13 * x13;
+    let x15 = s.r7[0] - s.r6[0];
+    let x16 = s.r7[1] - s.r6[1];
+    let x17 = x15 * x15 + x16 * x16;
+    let x18 = s.r8[0] - s.r7[0];
+    let x19 = s.r8[1] - s.r7[1];
+    let x20 = x18 * x18 + x19 * x19;
+    let x21 = s.r9[0] - s.r8[0];
+    let x22 = s.r9[1] - s.r8[1];
+    let x23 = x21 * x21 + x22 * x22;
+    let x24 = s.r10[0] - s.r9[0];
+    let x25 = s.r10[1] - s.r9[1];
+    let x26 = x24 * x24 + x25 * x25;
+    let x27 = s.v2[0] - s.v1[0];
+    let x28 = s.v2[1] - s.v1[1];
+    let x29 = s.r1[0] - s.r2[0];
+    let x30 = s.r1[1] - s.r2[1];
+    let x31 = s.v3[0] - s.v2[0];
+    let x32 = s.v3[1] - s.v2[1];
+    let x33 = s.r2[0] - s.r3[0];
+    let x34 = s.r2[1] - s.r3[1];
+    let x35 = s.v4[0] - s.v3[0];
+    let x36 = s.v4[1] - s.v3[1];
+    let x37 = s.r3[0] - s.r4[0];
+    let x38 = s.r3[1] - s.r4[1];
+    let x39 = s.v5[0] - s.v4[0];
+    let x40 = s.v5[1] - s.v4[1];
+    let x41 = s.r4[0] - s.r5[0];
+    let x42 = s.r4[1] - s.r5[1];
+    let x43 = s.v6[0] - s.v5[0];
+    let x44 = s.v6[1] - s.v5[1];
+    let x45 = s.r5[0] - s.r6[0];
+    let x46 = s.r5[1] - s.r6[1];
+    let x47 = s.v7[0] - s.v6[0];
+    let x48 = s.v7[1] - s.v6[1];
+    let x49 = s.r6[0] - s.r7[0];
+    let x50 = s.r6[1] - s.r7[1];
+    let x51 = s.v8[0] - s.v7[0];
+    let x52 = s.v8[1] - s.v7[1];
+    let x53 = s.r7[0] - s.r8[0];
+    let x54 = s.r7[1] - s.r8[1];
+    let x55 = s.v9[0] - s.v8[0];
+    let x56 = s.v9[1] - s.v8[1];
+    let x57 = s.r8[0] - s.r9[0];
+    let x58 = s.r8[1] - s.r9[1];
+    let x59 = s.v10[0] - s.v9[0];
+    let x60 = s.v10[1] - s.v9[1];
+    let x61 = s.r9[0] - s.r10[0];
+    let x62 = s.r9[1] - s.r10[1];
+    let x63 = 1.0 / s.m;
+    let mut a = [[0.0; 10]; 10];
+    a[0][0] = (s.r1[0] * s.r1[0] + s.r1[1] * s.r1[1]) * x63;
+    a[0][1] = -(x63 * (s.r1[0] * x0 + s.r1[1] * x1));
+    a[1][0] = a[0][1];
+    a[1][1] = x63 * (x2 + x2);
+    a[1][2] = -(x63 * (x0 * x3 + x1 * x4));
+    a[2][1] = a[1][2];
+    a[2][2] = x63 * (x5 + x5);
+    a[2][3] = -(x63 * (x3 * x6 + x4 * x7));
+    a[3][2] = a[2][3];
+    a[3][3] = x63 * (x8 + x8);
+    a[3][4] = -(x63 * (x6 * x9 + x7 * x10));
+    a[4][3] = a[3][4];
+    a[4][4] = x63 * (x11 + x11);
+    a[4][5] = -(x63 * (x9 * x12 + x10 * x13));
+    a[5][4] = a[4][5];
+    a[5][5] = x63 * (x14 + x14);
+    a[5][6] = -(x63 * (x12 * x15 + x13 * x16));
+    a[6][5] = a[5][6];
+    a[6][6] = x63 * (x17 + x17);
+    a[6][7] = -(x63 * (x15 * x18 + x16 * x19));
+    a[7][6] = a[6][7];
+    a[7][7] = x63 * (x20 + x20);
+    a[7][8] = -(x63 * (x18 * x21 + x19 * x22));
+    a[8][7] = a[7][8];
+    a[8][8] = x63 * (x23 + x23);
+    a[8][9] = -(x63 * (x21 * x24 + x22 * x25));
+    a[9][8] = a[8][9];
+    a[9][9] = x63 * (x26 + x26);
+    let l = solve_dense(a, [-(s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1] + x63 * (s.r1[0] * s.F1[0] + s.r1[1] * s.F1[1])), -(x27 * x27 + x28 * x28 + (x63 * (s.F1[0] * x29 + s.F1[1] * x30) + x63 * (s.F2[0] * x0 + s.F2[1] * x1))), -(x31 * x31 + x32 * x32 + (x63 * (s.F2[0] * x33 + s.F2[1] * x34) + x63 * (s.F3[0] * x3 + s.F3[1] * x4))), -(x35 * x35 + x36 * x36 + (x63 * (s.F3[0] * x37 + s.F3[1] * x38) + x63 * (s.F4[0] * x6 + s.F4[1] * x7))), -(x39 * x39 + x40 * x40 + (x63 * (s.F4[0] * x41 + s.F4[1] * x42) + x63 * (s.F5[0] * x9 + s.F5[1] * x10))), -(x43 * x43 + x44 * x44 + (x63 * (s.F5[0] * x45 + s.F5[1] * x46) + x63 * (s.F6[0] * x12 + s.F6[1] * x13))), -(x47 * x47 + x48 * x48 + (x63 * (s.F6[0] * x49 + s.F6[1] * x50) + x63 * (s.F7[0] * x15 + s.F7[1] * x16))), -(x51 * x51 + x52 * x52 + (x63 * (s.F7[0] * x53 + s.F7[1] * x54) + x63 * (s.F8[0] * x18 + s.F8[1] * x19))), -(x55 * x55 + x56 * x56 + (x63 * (s.F8[0] * x57 + s.F8[1] * x58) + x63 * (s.F9[0] * x21 + s.F9[1] * x22))), -(x59 * x59 + x60 * x60 + (x63 * (s.F9[0] * x61 + s.F9[1] * x62) + x63 * (s.F10[0] * x24 + s.F10[1] * x25)))])?;
+    let mut f = [[0.0; 2]; 10];
+    f[0][0] += l[0] * s.r1[0];
+    f[0][1] += l[0] * s.r1[1];
+    f[0][0] += l[1] * x29;
+    f[0][1] += l[1] * x30;
+    f[1][0] += l[1] * x0;
+    f[1][1] += l[1] * x1;
+    f[1][0] += l[2] * x33;
+    f[1][1] += l[2] * x34;
+    f[2][0] += l[2] * x3;
+    f[2][1] += l[2] * x4;
+    f[2][0] += l[3] * x37;
+    f[2][1] += l[3] * x38;
+    f[3][0] += l[3] * x6;
+    f[3][1] += l[3] * x7;
+    f[3][0] += l[4] * x41;
+    f[3][1] += l[4] * x42;
+    f[4][0] += l[4] * x9;
+    f[4][1] += l[4] * x10;
+    f[4][0] += l[5] * x45;
+    f[4][1] += l[5] * x46;
+    f[5][0] += l[5] * x12;
+    f[5][1] += l[5] * x13;
+    f[5][0] += l[6] * x49;
+    f[5][1] += l[6] * x50;
+    f[6][0] += l[6] * x15;
+    f[6][1] += l[6] * x16;
+    f[6][0] += l[7] * x53;
+    f[6][1] += l[7] * x54;
+    f[7][0] += l[7] * x18;
+    f[7][1] += l[7] * x19;
+    f[7][0] += l[8] * x57;
+    f[7][1] += l[8] * x58;
+    f[8][0] += l[8] * x21;
+    f[8][1] += l[8] * x22;
+    f[8][0] += l[9] * x61;
+    f[8][1] += l[9] * x62;
+    f[9][0] += l[9] * x24;
+    f[9][1] += l[9] * x25;
+    Some((l, f))
+}
+
+/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.
 pub fn lambda(s: &State) -> [f64; 10] {
+    if let Some(x) = dense_solution(s) {
+        return x.0;
+    }
     let mut l = [0.0; 10];
     l.copy_from_slice(&solution(s).lambda);
     l
 }
 
-/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order), from the rows' solve.
+/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order): `dense_solution`, else `solution`.
 pub fn forces(s: &State) -> [[f64; 2]; 10] {
+    if let Some(x) = dense_solution(s) {
+        return x.1;
+    }
     let mut f = [[0.0; 2]; 10];
     f.copy_from_slice(&solution(s).force);
     f
@@ -671,6 +816,53 @@ pub fn force_p9(s: &State) -> [f64; 2] {
 /// The constraint force on body `p10`.
 pub fn force_p10(s: &State) -> [f64; 2] {
     forces(s)[9]
+}
+
+/// Solves `a x = b` for a symmetric positive definite `a` by Cholesky in its square-root-free
+/// form, A = L D Lᵀ (L below the diagonal and D on it, in place). `None` where the rows' solve
+/// is needed: a diagonal entry that is not a positive normal number (its numbers out of f64's
+/// range), a pivot dᵢ at or below 1e-10 of its diagonal entry (the rows' rank tolerance on the
+/// unit-diagonal Ã: A singular, constraints redundant), or an answer that is not finite.
+#[allow(dead_code, clippy::needless_range_loop)]
+fn solve_dense<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> Option<[f64; K]> {
+    for i in 0..K {
+        let diagonal = a[i][i];
+        if !(diagonal.is_normal() && diagonal > 0.0) {
+            return None;
+        }
+        for j in 0..i {
+            // L[i][j] = (A[i][j] − Σₚ L[i][p] dₚ L[j][p]) / dⱼ
+            let mut acc = a[i][j];
+            for p in 0..j {
+                acc -= a[i][p] * a[p][p] * a[j][p];
+            }
+            a[i][j] = acc / a[j][j];
+        }
+        // dᵢ = A[i][i] − Σₚ L[i][p]² dₚ
+        let mut d = diagonal;
+        for p in 0..i {
+            d -= a[i][p] * a[i][p] * a[p][p];
+        }
+        if !(d > 1e-10 * diagonal && d.is_finite()) {
+            return None;
+        }
+        a[i][i] = d;
+    }
+    // L y = b, D z = y, Lᵀ x = z (in place in b).
+    for i in 0..K {
+        for p in 0..i {
+            b[i] -= a[i][p] * b[p];
+        }
+    }
+    for i in 0..K {
+        b[i] /= a[i][i];
+    }
+    for i in (0..K).rev() {
+        for p in i + 1..K {
+            b[i] -= a[p][i] * b[p];
+        }
+    }
+    if b.iter().all(|x| x.is_finite()) { Some(b) } else { None }
 }
 
 /// Where an inequality row stands (the contact states of `lagrange solve`).

@@ -11,7 +11,9 @@
 //! function per output writing into an array the caller passes: `constraints`,
 //! `constraint_rates`, `a_matrix` (or `a_band`), `b_vector`, `jacobian` (or
 //! `jacobian_blocks`), `c_term`, `positions`, `velocities`, `external_forces`,
-//! `applied_forces`, `inverse_masses`.
+//! `applied_forces`, `inverse_masses`; with rigid bodies also `orientations`,
+//! `angular_velocities`, `external_torques`, `applied_torques`, `inverse_inertias` and
+//! `angular_jacobian` (Jʷ), as the Rust module has them.
 //!
 //! With `--solver soft-step|pgs` the module also has the step (`step`, `step_with`,
 //! `step_settings_default`): the scene's `step_rows` over the Rust module's roots and the
@@ -23,7 +25,7 @@
 
 use super::layout::{AStorage, JStorage, Layout, Solver};
 use super::names::{Namer, c_reserved, comment_text};
-use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, Names, Prec, formula};
+use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, Names, Prec, Turns, formula};
 use crate::expr::{Graph, Id, Symbol, Ty};
 use std::fmt::Write;
 
@@ -37,6 +39,8 @@ pub(super) struct Parts<'a> {
     pub formulas: &'a Formulas,
     pub a_code: &'a [Id],
     pub bodies: &'a Bodies,
+    /// The rigid bodies (none for point masses).
+    pub turns: &'a Turns,
     pub names: &'a Names<'a>,
     pub layout: &'a Layout,
     pub scales: &'a [f64],
@@ -242,10 +246,73 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
         &lets,
         &stores,
     );
+    rigid(ctx, &mut out, p)?;
     if let Some(step) = &p.step {
         step_c(ctx, &mut out, p, step)?;
     }
     Ok(out)
+}
+
+/// The rigid bodies' numbers and Jʷ, as the Rust module has them (nothing for point masses):
+/// `RIGID`, `RIGID_BODIES`, `orientations`, `angular_velocities`, `external_torques`,
+/// `applied_torques`, `inverse_inertias` and `angular_jacobian` (dense, K × RIGID) or
+/// `angular_jacobian_blocks` (with `ANGULAR_ROW` and `ANGULAR_SLOT`).
+fn rigid(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
+    let t = p.turns;
+    let (r, k) = (t.body.len(), p.layout.constraints);
+    if r == 0 {
+        return Ok(());
+    }
+    let bodies: Vec<String> = t.body.iter().map(usize::to_string).collect();
+    let _ = writeln!(
+        out,
+        "/* The rigid bodies: rigid body r is body RIGID_BODIES[r] (2D: angle, angular velocity, inertia, torque). */
+         enum {{ RIGID = {r} }};
+const int RIGID_BODIES[{r}] = {{{}}};
+",
+        bodies.join(", ")
+    );
+    for (name, what, roots) in [
+        ("orientations", "The angle of each rigid body (counter-clockwise).", &t.orientation),
+        ("angular_velocities", "The angular velocity of each rigid body.", &t.angular_velocity),
+        ("external_torques", "The external torque on each rigid body (the state's torque fields).", &t.torque),
+        ("applied_torques", "The scene's torques at this state (zero for a rigid body it does not list).", &t.applied),
+        ("inverse_inertias", "1/I of each rigid body.", &t.inverse_inertia),
+    ] {
+        scalars(ctx, out, &[what.to_string()], name, roots, r)?;
+    }
+    let entries = t.entries(p.formulas);
+    let roots: Vec<Id> = entries.iter().map(|e| e.2).collect();
+    let (lets, exprs) = ctx.body(&roots)?;
+    let mut stores = Vec::new();
+    match p.layout.j {
+        JStorage::Blocks { .. } => {
+            let count = entries.len();
+            let rows: Vec<String> = entries.iter().map(|e| e.0.to_string()).collect();
+            let slots: Vec<String> = entries.iter().map(|e| e.1.to_string()).collect();
+            let _ =
+                writeln!(out, "/* The constraint and the rigid body of each entry of `angular_jacobian_blocks`. */");
+            let _ = writeln!(out, "const int ANGULAR_ROW[{}] = {{{}}};", count.max(1), list(&rows, count));
+            let _ = writeln!(out, "const int ANGULAR_SLOT[{}] = {{{}}};\n", count.max(1), list(&slots, count));
+            stores.extend(exprs.iter().enumerate().map(|(i, e)| format!("out[{i}] = {e};")));
+            let doc =
+                ["The angular part of J, sparse: entry i is constraint ANGULAR_ROW[i] on rigid body ANGULAR_SLOT[i]."
+                    .to_string()];
+            function(out, &doc, "angular_jacobian_blocks", &format!("double out[{}]", count.max(1)), &lets, &stores);
+        }
+        JStorage::Dense => {
+            for row in 0..k {
+                for slot in 0..r {
+                    let at = entries.iter().position(|e| e.0 == row && e.1 == slot);
+                    stores
+                        .push(format!("out[{row}][{slot}] = {};", at.map_or("0.0".to_string(), |i| exprs[i].clone())));
+                }
+            }
+            let doc = ["The angular part of J (dC/dtheta over SCALE[k]): row k, column r is rigid body r.".to_string()];
+            function(out, &doc, "angular_jacobian", &format!("double out[{}][{r}]", k.max(1)), &lets, &stores);
+        }
+    }
+    Ok(())
 }
 
 /// The scene's part of the step in C (`step_rows`, the state's accessors, the row

@@ -83,6 +83,10 @@ pub enum Lambda {
     /// Equalities only, A banded past [`MAX_DENSE_A`]: band Cholesky on A λ = −b, and the
     /// rows' solve where it fails (a singular A).
     Band,
+    /// Equalities only, A dense (at most [`MAX_DENSE_A`] constraints): Cholesky on A λ = −b
+    /// from one program of A, b, J (and Jʷ), and the rows' solve where it gives up (A
+    /// singular or its numbers out of range).
+    Dense,
     /// The rows' solve of every other system: the scaled solve of `lagrange solve`, with
     /// inequality rows (λ ≥ 0, contact states) and the minimum-norm λ of a singular A.
     Rows,
@@ -169,7 +173,8 @@ impl Layout {
             _ if inequalities => Lambda::Rows,
             _ if closed_form => Lambda::ClosedForm,
             AStorage::Band { .. } => Lambda::Band,
-            _ => Lambda::Rows,
+            AStorage::Dense => Lambda::Dense,
+            AStorage::Heap => Lambda::Rows,
         };
         Layout { dim, bodies, constraints, a: a_storage, j, lambda, parted }
     }
@@ -217,7 +222,10 @@ mod tests {
         assert_eq!(Layout::of(2, 1, 1, &chain(1), 1, true, true).lambda, Lambda::Rows);
         assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false, false).lambda, Lambda::Band);
         assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false, true).lambda, Lambda::Rows);
-        assert_eq!(Layout::of(2, 3, 3, &chain(3), 5, false, false).lambda, Lambda::Rows);
+        assert_eq!(Layout::of(2, 3, 3, &chain(3), 5, false, false).lambda, Lambda::Dense);
+        assert_eq!(Layout::of(2, 3, 3, &chain(3), 5, false, true).lambda, Lambda::Rows);
+        let full: Vec<(usize, usize)> = (0..17).flat_map(|i| (i..17).map(move |j| (i, j))).collect();
+        assert_eq!(Layout::of(2, 17, 17, &full, 17, false, false).lambda, Lambda::Rows);
     }
 
     #[test]

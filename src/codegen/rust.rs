@@ -8,6 +8,9 @@
 //! λ ≥ 0 on inequalities, the minimum-norm λ of redundant constraints), with `lambda`,
 //! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
+//! Rigid bodies (2D) add their θ, ω, τ (and I) to `State`, Jʷ (`angular_jacobian`), the
+//! constraint torques and α: the rows' solve runs over the library's slots (bodies, then one
+//! angular slot per rigid body), so its numbers are `lagrange solve`'s.
 //! With `--solver` the module also carries the velocity-level step an engine runs
 //! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
 //! library's row roots in one function, so the library's numbers) and the helper text of
@@ -36,7 +39,7 @@ use super::layout::Solver;
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, STEP, SWEEP};
+use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
 use crate::derive::{DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -120,6 +123,10 @@ pub(super) struct Formulas {
     pub(super) bias: Vec<Id>,
     pub(super) lambda: Option<Id>,
     pub(super) forces: Option<Vec<(usize, Id)>>,
+    /// `(body, Jʷ)` per constraint: the angular part of J on each rigid body it turns.
+    pub(super) angular: Vec<Vec<(usize, Id)>>,
+    /// `(body, torque λ Jʷ)` in closed form (one constraint), on each rigid body it turns.
+    pub(super) torques: Option<Vec<(usize, Id)>>,
 }
 
 impl Formulas {
@@ -135,12 +142,21 @@ impl Formulas {
             .into_iter()
             .map(|d| d.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>())
             .collect::<Result<_, _>>()?;
+        let angular = self
+            .angular
+            .into_iter()
+            .map(|d| d.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>())
+            .collect::<Result<_, _>>()?;
         let lambda = self.lambda.map(&mut f).transpose()?;
-        let forces = match self.forces {
-            Some(fs) => Some(fs.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>()?),
-            None => None,
+        let mut pairs = |list: Option<Vec<(usize, Id)>>| match list {
+            Some(fs) => {
+                fs.into_iter().map(|(i, x)| Ok((i, f(x)?))).collect::<Result<Vec<_>, GenerateError>>().map(Some)
+            }
+            None => Ok(None),
         };
-        Ok(Formulas { c, c_dot, a, b, jacobian, bias, lambda, forces })
+        let forces = pairs(self.forces)?;
+        let torques = pairs(self.torques)?;
+        Ok(Formulas { c, c_dot, a, b, jacobian, bias, lambda, forces, angular, torques })
     }
 }
 
@@ -172,7 +188,10 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 
 /// Generates the Rust module for a loaded file, with its `State` layout.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
-    loaded.system.refuse_rigid("generate")?;
+    // The velocity-level step moves positions only: its rigid twin is not written yet.
+    if options.solver.is_some() {
+        loaded.system.refuse_rigid("generate --solver")?;
+    }
     // The module's own derivation: `--specialize` extends its graph.
     let mut d = derive(&loaded.system)?;
     let system = &loaded.system;
@@ -185,6 +204,8 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         bias: d.constraints.iter().map(|c| c.bias).collect(),
         lambda: d.lambda,
         forces: d.forces.clone(),
+        angular: d.constraints.iter().map(|c| c.angular.clone()).collect(),
+        torques: d.torques.clone(),
     };
     let mut substituted = HashSet::new();
     let mut map = HashMap::new();
@@ -229,7 +250,13 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     // products), which costs more operations and loses digits to cancellation. The doc
     // comments keep the canonical form.
     let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
-    let a_code = assembled_a(&mut d.graph, &formulas, &masses)?;
+    let inertias = system
+        .bodies
+        .iter()
+        .map(|b| b.rigid.as_ref().map(|r| d.graph.substitute(r.inertia, &map)).transpose())
+        .collect::<Result<Vec<_>, _>>()?;
+    let a_code = assembled_a(&mut d.graph, &formulas, &masses, &inertias)?;
+    let b_code = assembled_b(&mut d.graph, &formulas, system, &masses, &inertias)?;
     let inverse_masses = masses.iter().map(|&m| d.graph.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
     // The scene's force expressions (`[scene] forces`); a body not listed feels none.
     let zero = d.graph.num(Rational::int(0));
@@ -248,6 +275,21 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         force: system.bodies.iter().map(|b| b.nodes.force).collect(),
         inverse_mass: inverse_masses,
     };
+    // The rigid bodies, in the order of their angular slots (`numeric::rows::angular_bodies`).
+    let mut turns = Turns::default();
+    for (i, body) in system.bodies.iter().enumerate() {
+        let (Some(rigid), Some(inertia)) = (&body.rigid, inertias[i]) else { continue };
+        let scalar_zero = d.graph.num(Rational::int(0));
+        turns.body.push(i);
+        turns.orientation.push(rigid.nodes.orientation);
+        turns.angular_velocity.push(rigid.nodes.angular_velocity);
+        turns.torque.push(rigid.nodes.torque);
+        turns.applied.push(match loaded.scene.torques.iter().find(|t| t.0 == i) {
+            Some(&(_, id)) => d.graph.substitute(id, &map)?,
+            None => scalar_zero,
+        });
+        turns.inverse_inertia.push(d.graph.powi(inertia, -1)?);
+    }
     let g = &d.graph;
     let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
     let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
@@ -277,7 +319,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
 
     let mut out = String::new();
     let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
-    header(&mut out, title, options.specialize, &layout);
+    header(&mut out, title, options.specialize, &layout, turns.body.len());
     field_names(&mut out, g, &fields);
     state(&mut out, g, &fields, &layout);
     let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
@@ -306,6 +348,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
             formulas: &formulas,
             a_code: &a_code,
             bodies: &bodies,
+            turns: &turns,
             names: &names,
             layout: &layout,
             scales: &scales,
@@ -345,10 +388,16 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     ctx.jacobian(&mut out, &formulas, &names, &layout)?;
     ctx.c_term(&mut out, &formulas)?;
     ctx.bodies(&mut out, &bodies, &names)?;
-    rows_fn(&mut out, &formulas, &layout);
-    let mass_symbols: HashSet<Symbol> = system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
-    scaling_fns(&mut out, g, &fields, &mass_symbols);
-    ctx.solution(&mut out, &formulas, &names, &layout)?;
+    ctx.rigid(&mut out, &turns, &formulas, &names, &layout)?;
+    rows_fn(&mut out, &formulas, &layout, &turns);
+    // A change of length unit scales no angle, inertia or torque: a module with rigid bodies
+    // solves in the file's unit, as `numeric::rescale` finds such rows not homogeneous.
+    if turns.body.is_empty() {
+        let mass_symbols: HashSet<Symbol> =
+            system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
+        scaling_fns(&mut out, g, &fields, &mass_symbols);
+    }
+    ctx.solution(&mut out, &formulas, (&a_code, &b_code), &names, &layout, &turns)?;
     if let Some(solver) = options.solver {
         let inverse_scales: Vec<f64> =
             d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect();
@@ -585,13 +634,46 @@ pub(super) struct Bodies {
     pub(super) inverse_mass: Vec<Id>,
 }
 
+/// The rigid bodies' numbers as graph nodes, in the order of their angular slots (the file's
+/// order of the rigid bodies): what the rows' solve reads beside [`Bodies`].
+#[derive(Default)]
+pub(super) struct Turns {
+    /// The body index of each rigid body.
+    pub(super) body: Vec<usize>,
+    pub(super) orientation: Vec<Id>,
+    pub(super) angular_velocity: Vec<Id>,
+    /// The state's torque symbol.
+    pub(super) torque: Vec<Id>,
+    /// The scene's torque expression (zero where it gives none).
+    pub(super) applied: Vec<Id>,
+    pub(super) inverse_inertia: Vec<Id>,
+}
+
+impl Turns {
+    /// The angular slot (index among the rigid bodies) of body `body`, if it is rigid.
+    pub(super) fn slot(&self, body: usize) -> Option<usize> {
+        self.body.iter().position(|&b| b == body)
+    }
+
+    /// `(constraint, slot, Jʷ)` for every angular entry of J, by constraint.
+    pub(super) fn entries(&self, formulas: &Formulas) -> Vec<(usize, usize, Id)> {
+        let mut out = Vec::new();
+        for (k, dirs) in formulas.angular.iter().enumerate() {
+            out.extend(dirs.iter().filter_map(|&(b, id)| self.slot(b).map(|r| (k, r, id))));
+        }
+        out
+    }
+}
+
 /// `rows`: the constraint rows at a state (C/κ, Ċ/κ, c, J per body), as `lagrange solve`
 /// reads them. The bodies of each row are the derivation's, listed in `JACOBIAN_BODIES`
-/// for a dense J; a sparse J lists them itself.
-fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
+/// for a dense J; a sparse J lists them itself. A rigid body's Jʷ follows in its angular
+/// slot `BODIES + r` (component 0), as `numeric::rows` places it.
+fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout, turns: &Turns) {
     let _ = writeln!(
         out,
-        "/// The constraint rows at a state, as `lagrange solve` reads them: C/κ, Ċ/κ, c and J = ∇C/κ per body."
+        "/// The constraint rows at a state, as `lagrange solve` reads them: C/κ, Ċ/κ, c and J = ∇C/κ per body{}.",
+        if turns.body.is_empty() { "" } else { " (then Jʷ of rigid body r in slot BODIES + r, component 0)" }
     );
     let _ = writeln!(out, "pub fn rows(s: &State) -> Vec<Row<DIM>> {{");
     let _ = writeln!(out, "    let (c, rate, bias) = (constraints(s), constraint_rates(s), c_term(s));");
@@ -602,6 +684,20 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
          .collect();"
     );
     row_jacobians(out, layout);
+    if !turns.body.is_empty() {
+        let (call, pattern, value) = match layout.j {
+            JStorage::Blocks { .. } => ("angular_jacobian_blocks(s)", "(k, r, w)", "w"),
+            JStorage::Dense => ("ANGULAR_ENTRIES", "(k, r)", "jw[k][r]"),
+        };
+        if layout.j == JStorage::Dense {
+            let _ = writeln!(out, "    let jw = angular_jacobian(s);");
+        }
+        let _ = writeln!(
+            out,
+            "    for {pattern} in {call} {{\n        let mut x = [0.0; DIM];\n        x[0] = {value};\n        \
+             rows[k].jacobian.push((BODIES + r, x));\n    }}"
+        );
+    }
     let _ = writeln!(out, "    rows\n}}\n");
     if layout.j == JStorage::Dense {
         let pairs: Vec<String> = formulas
@@ -617,6 +713,43 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout) {
             pairs.len(),
             array(&pairs)
         );
+        if !turns.body.is_empty() {
+            let pairs: Vec<String> = formulas
+                .angular
+                .iter()
+                .enumerate()
+                .flat_map(|(k, dirs)| {
+                    dirs.iter().filter_map(move |&(i, _)| turns.slot(i).map(|r| format!("({k}, {r})")))
+                })
+                .collect();
+            let _ = writeln!(
+                out,
+                "/// The (constraint, rigid body) pairs of Jʷ's structure: rigid body r's angle appears in constraint k's C.\n\
+                 const ANGULAR_ENTRIES: [(usize, usize); {}] = {};\n",
+                pairs.len(),
+                array(&pairs)
+            );
+        }
+    }
+    if !turns.body.is_empty() {
+        let _ = writeln!(
+            out,
+            "/// λ, the constraint forces and torques and the accelerations at a state, with each inequality's contact\n\
+             /// state and the status: what `lagrange solve` gives (see `solve_rows`). The solve runs over slots: the\n\
+             /// bodies (1/m, v, F), then one angular slot per rigid body (1/I, ω, τ in component 0), so `force` and\n\
+             /// `acceleration` hold the constraint torque and α of rigid body r at `BODIES + r`, component 0. Rigid\n\
+             /// bodies are solved in the file's length unit (an angle does not scale with it).\n\
+             pub fn solution(s: &State) -> Solution<DIM> {{\n    \
+             let slot = |x: f64| {{\n        let mut v = [0.0; DIM];\n        v[0] = x;\n        v\n    }};\n    \
+             let mut w = inverse_masses(s).to_vec();\n    \
+             w.extend(inverse_inertias(s));\n    \
+             let mut v = velocities(s).to_vec();\n    \
+             v.extend(angular_velocities(s).map(slot));\n    \
+             let mut f = external_forces(s).to_vec();\n    \
+             f.extend(external_torques(s).map(slot));\n    \
+             solve_rows(&rows(s), &w, &v, &f, length_scale(&positions(s)))\n}}\n"
+        );
+        return;
     }
     let _ = writeln!(
         out,
@@ -716,7 +849,7 @@ fn field_names(out: &mut String, g: &Graph, fields: &[Field]) {
 }
 
 /// The module's opening comment: what it is and how it is laid out.
-fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout) {
+fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout, rigid: usize) {
     let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
     let _ = writeln!(
         out,
@@ -741,6 +874,15 @@ fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout) {
          of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; \
          the forces do not depend on κ."
     );
+    if rigid > 0 {
+        let _ = writeln!(
+            out,
+            "// Rigid bodies ({rigid}): `State` holds each one's angle θ, angular velocity ω and torque τ beside its \
+             position, velocity and force (and its inertia I as the file declares it); `angular_jacobian` is Jʷ, \
+             `torques` and `angular_accelerations` the constraint torque and α. M = blockdiag(m E, I): \
+             A = Σ (Jᵢ·Jᵢ/mᵢ + Jʷ Jʷ/I), b = Σ (Jᵢ·Fᵢ/mᵢ + Jʷ τ/I) + c (2D: no gyroscopic term)."
+        );
+    }
     // How a big system is laid out, so that none of its functions needs a big stack.
     match layout.a {
         AStorage::Band { bandwidth } => {
@@ -880,6 +1022,106 @@ impl Ctx<'_> {
         }
         let doc = ["1/m of each body.".to_string(), order];
         self.emit_scalars(out, &doc, "inverse_masses", &bodies.inverse_mass)
+    }
+
+    /// The rigid bodies' numbers and Jʷ (nothing for a scene of point masses): `RIGID_BODIES`,
+    /// `orientations`, `angular_velocities`, `external_torques`, `applied_torques`,
+    /// `inverse_inertias`, and `angular_jacobian` (dense, `[[f64; RIGID]; K]`) or
+    /// `angular_jacobian_blocks` as the layout stores J.
+    fn rigid(
+        &self,
+        out: &mut String,
+        turns: &Turns,
+        formulas: &Formulas,
+        names: &Names<'_>,
+        layout: &Layout,
+    ) -> Result<(), GenerateError> {
+        let r = turns.body.len();
+        if r == 0 {
+            return Ok(());
+        }
+        let g = self.g;
+        let listed: Vec<String> = turns.body.iter().map(|&b| b.to_string()).collect();
+        let rigid_names =
+            turns.body.iter().map(|&b| format!("`{}`", comment_text(names.bodies[b]))).collect::<Vec<_>>().join(", ");
+        let _ = writeln!(
+            out,
+            "/// Number of rigid bodies (2D: an angle θ, ω = θ̇, the inertia I about the centre of mass, a torque τ).\n\
+             pub const RIGID: usize = {r};\n\
+             /// The body (index into the bodies) of each rigid body, in file order ({rigid_names}): rigid body r is\n\
+             /// body RIGID_BODIES[r], and its angular slot in `rows` and `solution` is BODIES + r.\n\
+             pub const RIGID_BODIES: [usize; {r}] = {};\n",
+            array(&listed)
+        );
+        let order = format!("Per rigid body, in file order ({rigid_names}).");
+        let scalars = [
+            ("orientations", "The angle θ of each rigid body (counter-clockwise).", &turns.orientation),
+            ("angular_velocities", "The angular velocity ω of each rigid body.", &turns.angular_velocity),
+            ("external_torques", "The external torque on each rigid body (the state's torque fields).", &turns.torque),
+            (
+                "applied_torques",
+                "The scene's torques (`[scene] forces` on a torque symbol) at this state, zero for a rigid body it \
+                 does not list: an engine's loop writes them into the state's torque fields.",
+                &turns.applied,
+            ),
+            ("inverse_inertias", "1/I of each rigid body.", &turns.inverse_inertia),
+        ];
+        for (name, what, roots) in scalars {
+            self.emit_scalars(out, &[what.to_string(), order.clone()], name, roots)?;
+        }
+        let entries = turns.entries(formulas);
+        let mut doc = vec![format!(
+            "Jʷ: the angular part of J (∂C/∂θ over the same constant κ as J), so Ċ/κ = Σᵢ Jᵢ·vᵢ + Σ_r Jʷ_r ω_r + ∂C/∂t/κ \
+             and the constraint torque on rigid body r is Σₖ λₖ Jʷₖ_r. {}",
+            match layout.j {
+                JStorage::Dense => "Row k, column r: rigid body r (`RIGID_BODIES`).",
+                JStorage::Blocks { .. } => "Sparse: every non-zero entry `(k, r, Jʷ)`, sorted by k.",
+            }
+        )];
+        for &(k, slot, id) in &entries {
+            doc.push(format!("- Jʷ[{k}], body `{}`: {}", comment_text(names.bodies[turns.body[slot]]), formula(g, id)));
+        }
+        let roots: Vec<Id> = entries.iter().map(|e| e.2).collect();
+        if let JStorage::Blocks { .. } = layout.j {
+            let count = entries.len();
+            let items: Vec<Vec<Id>> = roots.iter().map(|&id| vec![id]).collect();
+            let store =
+                |i: usize, exprs: &[String]| format!("out[{i}] = ({}, {}, {});", entries[i].0, entries[i].1, exprs[0]);
+            let _ = writeln!(
+                out,
+                "/// Number of non-zero entries of Jʷ: the entries `angular_jacobian_blocks` returns.\n\
+                 pub const ANGULAR_BLOCKS: usize = {count};\n"
+            );
+            let ret = "Vec<(usize, usize, f64)>".to_string();
+            let init = format!("vec![(0, 0, 0.0); {count}]");
+            return self.emit_items(
+                out,
+                &doc,
+                "angular_jacobian_blocks",
+                &ret,
+                &init,
+                "(usize, usize, f64)",
+                &items,
+                store,
+            );
+        }
+        let (lets, exprs) = self.body(&roots)?;
+        let k = layout.constraints;
+        let rows: Vec<String> = (0..k)
+            .map(|row| {
+                let cells: Vec<String> = (0..r)
+                    .map(|slot| {
+                        entries
+                            .iter()
+                            .position(|e| e.0 == row && e.1 == slot)
+                            .map_or("0.0".into(), |i| exprs[i].clone())
+                    })
+                    .collect();
+                array(&cells)
+            })
+            .collect();
+        emit_fn(out, &doc, "angular_jacobian", &format!("[[f64; {r}]; {k}]"), &lets, &array(&rows));
+        Ok(())
     }
 
     /// `a_matrix` or `a_band`: A, as the layout stores it, from the assembled entries
@@ -1062,14 +1304,20 @@ impl Ctx<'_> {
     /// `lambda`, `forces`, `force_<body>` and `accelerations`: closed formulas for one
     /// equality (where their numbers are in range), band Cholesky for a banded system of
     /// equalities, else the rows' solve; the band solve when the layout needs it.
+    #[allow(clippy::too_many_arguments)]
     fn solution(
         &self,
         out: &mut String,
         formulas: &Formulas,
+        (a_code, b_code): (&[Id], &[Id]),
         names: &Names<'_>,
         layout: &Layout,
+        turns: &Turns,
     ) -> Result<(), GenerateError> {
         let (g, dim, n, k) = (self.g, layout.dim, layout.bodies, layout.constraints);
+        let rigid = turns.body.len();
+        // The solution's slots past the bodies are the rigid bodies' angles.
+        let bodies_only = if rigid > 0 { "[..BODIES]" } else { "" };
         let mut namer = Namer::new(&[
             "constraints",
             "a_matrix",
@@ -1080,14 +1328,25 @@ impl Ctx<'_> {
             "c_term",
             "lambda",
             "forces",
+            "torques",
         ]);
         let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
+        let torque_fns: Vec<String> =
+            turns.body.iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
         let _ = writeln!(
             out,
             "/// The accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ of every body (in file order), from the rows' solve.\n\
              pub fn accelerations(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-             let mut a = [[0.0; {dim}]; {n}];\n    a.copy_from_slice(&solution(s).acceleration);\n    a\n}}\n"
+             let mut a = [[0.0; {dim}]; {n}];\n    a.copy_from_slice(&solution(s).acceleration{bodies_only});\n    a\n}}\n"
         );
+        if rigid > 0 {
+            let _ = writeln!(
+                out,
+                "/// The angular accelerations α = (τ + Σₖ λₖ Jʷₖ)/I of every rigid body (`RIGID_BODIES`), from the rows' solve.\n\
+                 pub fn angular_accelerations(s: &State) -> [f64; {rigid}] {{\n    \
+                 let x = solution(s);\n    std::array::from_fn(|r| x.acceleration[BODIES + r][0])\n}}\n"
+            );
+        }
         match (layout.lambda, formulas.lambda, &formulas.forces) {
             (Lambda::ClosedForm, Some(lambda), Some(forces)) => {
                 let _ = writeln!(
@@ -1131,6 +1390,36 @@ impl Ctx<'_> {
                 let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
                 let doc = vec!["The constraint force on every body (in file order).".to_string()];
                 emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+                if rigid > 0 {
+                    let torques = formulas.torques.as_deref().unwrap_or(&[]);
+                    for (slot, name) in torque_fns.iter().enumerate() {
+                        let body = turns.body[slot];
+                        let found = torques.iter().find(|t| t.0 == body).map(|t| t.1);
+                        let mut doc = vec![format!(
+                            "The constraint torque λ Jʷ on rigid body `{}` (about its centre of mass):",
+                            comment_text(names.bodies[body])
+                        )];
+                        match found {
+                            Some(id) => {
+                                doc.push(formula(g, id));
+                                let (lets, exprs) = self.body(&[id])?;
+                                let value = format!(
+                                    "let x = {};\n    \
+                                     if closed_form_holds(s) && x.is_finite() {{ x }} else {{ solution(s).force[BODIES + {slot}][0] }}",
+                                    exprs[0]
+                                );
+                                emit_fn(out, &doc, name, "f64", &lets, &value);
+                            }
+                            None => {
+                                doc.push("zero: the constraint does not turn this body.".into());
+                                emit_fn(out, &doc, name, "f64", &[], "0.0");
+                            }
+                        }
+                    }
+                    let calls: Vec<String> = torque_fns.iter().map(|f| format!("{f}(s)")).collect();
+                    let doc = vec!["The constraint torque on every rigid body (`RIGID_BODIES`).".to_string()];
+                    emit_fn(out, &doc, "torques", &format!("[f64; {rigid}]"), &[], &array(&calls));
+                }
                 return Ok(());
             }
             (Lambda::Band, _, _) => {
@@ -1169,7 +1458,27 @@ impl Ctx<'_> {
                          f\n}}\n"
                     );
                 }
+                if rigid > 0 {
+                    let (call, each) = match layout.j {
+                        JStorage::Blocks { .. } => {
+                            ("angular_jacobian_blocks(s)", "for (k, r, w) in jw {\n        t[r] += l[k] * w;\n    }")
+                        }
+                        JStorage::Dense => (
+                            "angular_jacobian(s)",
+                            "for (lk, wk) in l.iter().zip(jw.iter()) {\n        \
+                             for (x, y) in t.iter_mut().zip(wk) {\n            *x += lk * y;\n        }\n    }",
+                        ),
+                    };
+                    let _ = writeln!(
+                        out,
+                        "/// The constraint torque on every rigid body (`RIGID_BODIES`): Σₖ λₖ Jʷₖ.\n\
+                         pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
+                         let (l, jw) = (lambda(s), {call});\n    \
+                         let mut t = [0.0; {rigid}];\n    {each}\n    t\n}}\n"
+                    );
+                }
             }
+            (Lambda::Dense, _, _) => self.dense_solution(out, formulas, (a_code, b_code), layout, turns)?,
             _ => {
                 let _ = writeln!(
                     out,
@@ -1182,9 +1491,24 @@ impl Ctx<'_> {
                     out,
                     "/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order), from the rows' solve.\n\
                      pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                     let mut f = [[0.0; {dim}]; {n}];\n    f.copy_from_slice(&solution(s).force);\n    f\n}}\n"
+                     let mut f = [[0.0; {dim}]; {n}];\n    f.copy_from_slice(&solution(s).force{bodies_only});\n    f\n}}\n"
                 );
+                if rigid > 0 {
+                    let _ = writeln!(
+                        out,
+                        "/// The constraint torque Σₖ λₖ Jʷₖ on every rigid body (`RIGID_BODIES`), from the rows' solve.\n\
+                         pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
+                         let x = solution(s);\n    std::array::from_fn(|r| x.force[BODIES + r][0])\n}}\n"
+                    );
+                }
             }
+        }
+        for (slot, name) in torque_fns.iter().enumerate() {
+            let _ = writeln!(
+                out,
+                "/// The constraint torque on rigid body `{}` (about its centre of mass).\npub fn {name}(s: &State) -> f64 {{\n    torques(s)[{slot}]\n}}\n",
+                comment_text(names.bodies[turns.body[slot]])
+            );
         }
         for (body, name) in force_fns.iter().enumerate() {
             let _ = writeln!(
@@ -1198,13 +1522,113 @@ impl Ctx<'_> {
             out.push_str(SOLVE_BAND);
             out.push('\n');
         }
+        if layout.lambda == Lambda::Dense {
+            out.push_str(SOLVE_DENSE);
+            out.push('\n');
+        }
+        Ok(())
+    }
+
+    /// `dense_solution`, `lambda`, `forces` (and `torques`) of a small system of equalities:
+    /// one program computes A and b (as assembled), J and Jʷ with their shared values, Cholesky
+    /// solves A λ = −b, and the forces Σₖ λₖ Jₖᵢ and torques Σₖ λₖ Jʷₖ follow; where Cholesky
+    /// gives up (A singular: redundant constraints; numbers out of range) the rows' solve answers.
+    fn dense_solution(
+        &self,
+        out: &mut String,
+        formulas: &Formulas,
+        (a_code, b_code): (&[Id], &[Id]),
+        layout: &Layout,
+        turns: &Turns,
+    ) -> Result<(), GenerateError> {
+        let (dim, n, k, rigid) = (layout.dim, layout.bodies, layout.constraints, turns.body.len());
+        let blocks: Vec<(usize, usize, Id)> = formulas
+            .jacobian
+            .iter()
+            .enumerate()
+            .flat_map(|(r, dirs)| dirs.iter().map(move |&(b, id)| (r, b, id)))
+            .collect();
+        let angular = turns.entries(formulas);
+        let mut roots: Vec<Id> = a_code.to_vec();
+        roots.extend(b_code);
+        roots.extend(blocks.iter().map(|b| b.2));
+        roots.extend(angular.iter().map(|e| e.2));
+        let (lets, exprs) = self.body(&roots)?;
+        let mut next = exprs.into_iter();
+        let mut lines = lets;
+        lines.push(format!("let mut a = [[0.0; {k}]; {k}];"));
+        for &(r, c, _) in &formulas.a {
+            lines.push(format!("a[{r}][{c}] = {};", next.next().unwrap_or_default()));
+            if r != c {
+                lines.push(format!("a[{c}][{r}] = a[{r}][{c}];"));
+            }
+        }
+        let b: Vec<String> = (0..k).map(|_| format!("-{}", operand(&next.next().unwrap_or_default()))).collect();
+        lines.push(format!("let l = solve_dense(a, {})?;", array(&b)));
+        lines.push(format!("let mut f = [[0.0; {dim}]; {n}];"));
+        for &(r, body, _) in &blocks {
+            for d in 0..dim {
+                lines.push(format!("f[{body}][{d}] += l[{r}] * {};", operand(&next.next().unwrap_or_default())));
+            }
+        }
+        let result = if rigid > 0 {
+            lines.push(format!("let mut t = [0.0; {rigid}];"));
+            for &(r, slot, _) in &angular {
+                lines.push(format!("t[{slot}] += l[{r}] * {};", operand(&next.next().unwrap_or_default())));
+            }
+            "Some((l, f, t))"
+        } else {
+            "Some((l, f))"
+        };
+        let ty = if rigid > 0 {
+            format!("([f64; {k}], [[f64; {dim}]; {n}], [f64; {rigid}])")
+        } else {
+            format!("([f64; {k}], [[f64; {dim}]; {n}])")
+        };
+        let _ = writeln!(
+            out,
+            "/// λ, the constraint forces Σₖ λₖ Jₖᵢ{} of these equalities, from one program of A and b (as assembled)\n\
+             /// and J, and A λ = −b by L D Lᵀ (`solve_dense`); `None` where A is singular (redundant constraints) or its\n\
+             /// numbers leave f64's range: there `solution` (the rows' solve of `lagrange solve`) answers.\n\
+             pub fn dense_solution(s: &State) -> Option<{ty}> {{",
+            if rigid > 0 { " and torques Σₖ λₖ Jʷₖ" } else { "" }
+        );
+        for l in &lines {
+            let _ = writeln!(out, "    {l}");
+        }
+        let _ = writeln!(out, "    {result}\n}}\n");
+        let _ = writeln!(
+            out,
+            "/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.\n\
+             pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+             if let Some(x) = dense_solution(s) {{\n        return x.0;\n    }}\n    \
+             let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+        );
+        let bodies_only = if rigid > 0 { "[..BODIES]" } else { "" };
+        let _ = writeln!(
+            out,
+            "/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order): `dense_solution`, else `solution`.\n\
+             pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+             if let Some(x) = dense_solution(s) {{\n        return x.1;\n    }}\n    \
+             let mut f = [[0.0; {dim}]; {n}];\n    f.copy_from_slice(&solution(s).force{bodies_only});\n    f\n}}\n"
+        );
+        if rigid > 0 {
+            let _ = writeln!(
+                out,
+                "/// The constraint torque Σₖ λₖ Jʷₖ on every rigid body (`RIGID_BODIES`): `dense_solution`, else `solution`.\n\
+                 pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
+                 if let Some(x) = dense_solution(s) {{\n        return x.2;\n    }}\n    \
+                 let x = solution(s);\n    std::array::from_fn(|r| x.force[BODIES + r][0])\n}}\n"
+            );
+        }
         Ok(())
     }
 }
 
-/// Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ for every non-zero entry of `f.a`, unsimplified: the sum over the
-/// bodies both constraints act on, terms with the same mass summed before one division.
-fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, GenerateError> {
+/// Aₖⱼ = Σᵢ [Jₖᵢ·Jⱼᵢ / mᵢ + Jʷₖᵢ Jʷⱼᵢ / Iᵢ] for every non-zero entry of `f.a`, unsimplified:
+/// the sum over the bodies both constraints act on, terms with the same mass summed before
+/// one division, then the rigid bodies both turn (`inertias`: I of each rigid body).
+fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id], inertias: &[Option<Id>]) -> Result<Vec<Id>, GenerateError> {
     let mut entries = Vec::new();
     for &(k, j, _) in &f.a {
         // (mass, dots over the bodies of that mass), in body order.
@@ -1227,9 +1651,45 @@ fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id]) -> Result<Vec<Id>, Ge
             let inv = g.powi(m, -1)?;
             terms.push(g.mul(vec![sum, inv])?);
         }
+        for &(body, wk) in &f.angular[k] {
+            let (Some(&(_, wj)), Some(inertia)) = (f.angular[j].iter().find(|d| d.0 == body), inertias[body]) else {
+                continue;
+            };
+            let inv = g.powi(inertia, -1)?;
+            terms.push(g.mul(vec![wk, wj, inv])?);
+        }
         entries.push(g.add(terms)?);
     }
     Ok(entries)
+}
+
+/// bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + Σ Jʷₖ τ / I + cₖ as assembled from the directions (the state's forces
+/// and torques), unsimplified: it shares J, Jʷ and c with the rest of a program, where the
+/// canonical bₖ is over a common denominator.
+fn assembled_b(
+    g: &mut Graph,
+    f: &Formulas,
+    system: &crate::model::system::System,
+    masses: &[Id],
+    inertias: &[Option<Id>],
+) -> Result<Vec<Id>, GenerateError> {
+    let mut out = Vec::with_capacity(f.bias.len());
+    for k in 0..f.bias.len() {
+        let mut terms = Vec::new();
+        for &(body, j) in &f.jacobian[k] {
+            let dot = g.dot(j, system.bodies[body].nodes.force)?;
+            let inv = g.powi(masses[body], -1)?;
+            terms.push(g.mul(vec![dot, inv])?);
+        }
+        for &(body, w) in &f.angular[k] {
+            let (Some(rigid), Some(inertia)) = (&system.bodies[body].rigid, inertias[body]) else { continue };
+            let inv = g.powi(inertia, -1)?;
+            terms.push(g.mul(vec![w, rigid.nodes.torque, inv])?);
+        }
+        terms.push(f.bias[k]);
+        out.push(g.add(terms)?);
+    }
+    Ok(out)
 }
 
 /// `(true, u)` when `id` is `−u`, else `(false, id)`.

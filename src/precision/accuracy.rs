@@ -1,6 +1,9 @@
-//! Formula accuracy: every derived constraint force evaluated in f64 against a
-//! double-double reference of the same graph, over random and hard states, with the f64
-//! evaluation time beside it — speed and error side by side.
+//! Formula accuracy: every derived constraint force (and constraint torque on a rigid body)
+//! evaluated in f64 against a double-double reference of the same graph, over random and
+//! hard states, with the f64 evaluation time beside it — speed and error side by side.
+//! Rigid bodies enter as `numeric::rows` lays them out: one angular slot per rigid body
+//! (1/I, τ, Jʷ in component 0), so the reference solve is the same code over more slots;
+//! their states draw θ anywhere on the circle and ω of the scene's angular speed.
 //!
 //! The f64 path is what `solve` and `simulate` use: the closed form λ J when the system has
 //! one constraint, else the rows and the λ solve. The reference evaluates the same
@@ -16,6 +19,7 @@
 use super::reference::{Dd, eval_dd, solve_dense};
 use crate::expr::eval::{Env, Value, eval};
 use crate::numeric::random::Rng;
+use crate::numeric::rows::{angular_bodies, angular_slot};
 use crate::numeric::solve::solve;
 use crate::scenario::Scenario;
 use std::time::Instant;
@@ -46,19 +50,23 @@ pub struct AccuracyRow {
 
 use crate::numeric::vector::safe_norm as norm;
 
-/// The forces on every body at `env`, in f64, by the path the library uses.
+/// The forces on every body at `env`, in f64, by the path the library uses, then the
+/// constraint torque on every rigid body (`[τ, 0, 0]`, in the order of their angular slots).
 fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
-    match &s.derivation.forces {
-        Some(closed) => {
-            let ids: Vec<_> = closed.iter().map(|&(_, id)| id).collect();
+    match (&s.derivation.forces, &s.derivation.torques) {
+        (Some(forces), Some(torques)) => {
+            let ids: Vec<_> = forces.iter().chain(torques).map(|&(_, id)| id).collect();
             let values = eval(&s.derivation.graph, &ids, env).ok()?;
-            let mut out = vec![[0.0; 3]; s.system.bodies.len()];
-            for (&(b, _), v) in closed.iter().zip(values) {
+            let mut out = vec![[0.0; 3]; slots(s)];
+            for (&(b, _), v) in forces.iter().zip(&values) {
                 out[b] = v.vector()?;
+            }
+            for (&(b, _), v) in torques.iter().zip(&values[forces.len()..]) {
+                out[angular_slot(&s.system, b)?] = [v.scalar()?, 0.0, 0.0];
             }
             Some(out)
         }
-        None => {
+        _ => {
             let mut rows = s.program.evaluate(&s.system, env).ok()?;
             rows.rows.iter_mut().for_each(|r| r.inequality = false);
             Some(solve(&rows).constraint_force)
@@ -66,31 +74,45 @@ fn forces_f64(s: &Scenario, env: &Env) -> Option<Vec<[f64; 3]>> {
     }
 }
 
-/// The same forces in double-double (None where the reference is undefined there).
+/// The slots of the solve: every body, then one angular slot per rigid body.
+fn slots(s: &Scenario) -> usize {
+    s.system.bodies.len() + angular_bodies(&s.system).count()
+}
+
+/// The same forces (and torques) in double-double (None where the reference is undefined there).
 fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     let graph = &s.derivation.graph;
     let n = s.system.bodies.len();
     let zero = TwoFloat::from(0.0);
-    if let Some(closed) = &s.derivation.forces {
-        let ids: Vec<_> = closed.iter().map(|&(_, id)| id).collect();
+    if let (Some(forces), Some(torques)) = (&s.derivation.forces, &s.derivation.torques) {
+        let ids: Vec<_> = forces.iter().chain(torques).map(|&(_, id)| id).collect();
         let values = eval_dd(graph, &ids, env).ok()?;
-        let mut out = vec![[zero; 3]; n];
-        for (&(b, _), v) in closed.iter().zip(values) {
+        let mut out = vec![[zero; 3]; slots(s)];
+        for (&(b, _), v) in forces.iter().zip(&values) {
             out[b] = v.vector_or_nan();
+        }
+        for (&(b, _), v) in torques.iter().zip(&values[forces.len()..]) {
+            out[angular_slot(&s.system, b)?] = [v.scalar_or_nan(), zero, zero];
         }
         return Some(out);
     }
-    // Masses and external forces per body.
+    // Masses and external forces per body, then inertias and external torques per rigid body.
+    let rigid: Vec<usize> = angular_bodies(&s.system).collect();
     let mut roots: Vec<_> = s.system.bodies.iter().map(|b| b.mass).collect();
     let force_expr: Vec<Option<_>> =
         (0..n).map(|i| s.scene.forces.iter().find(|(b, _)| *b == i).map(|&(_, id)| id)).collect();
     roots.extend(force_expr.iter().flatten());
+    roots.extend(rigid.iter().filter_map(|&i| s.system.bodies[i].rigid.as_ref().map(|r| r.inertia)));
+    let torque_expr: Vec<Option<_>> =
+        rigid.iter().map(|&i| s.scene.torques.iter().find(|(b, _)| *b == i).map(|&(_, id)| id)).collect();
+    roots.extend(torque_expr.iter().flatten());
     for d in &s.derivation.constraints {
         roots.push(d.bias);
         roots.extend(d.jacobian.iter().map(|&(_, j)| j));
+        roots.extend(d.angular.iter().map(|&(_, j)| j));
     }
     let values = eval_dd(graph, &roots, env).ok()?;
-    let inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar_or_nan()).collect();
+    let mut inverse_mass: Vec<TwoFloat> = values[..n].iter().map(|m| TwoFloat::from(1.0) / m.scalar_or_nan()).collect();
     let mut at = n;
     let mut force = Vec::new();
     for (i, f) in force_expr.iter().enumerate() {
@@ -105,16 +127,39 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
             },
         });
     }
+    // The angular slots: 1/I and τ in component 0 (a torque without a value is zero).
+    inverse_mass.extend(values[at..at + rigid.len()].iter().map(|i| TwoFloat::from(1.0) / i.scalar_or_nan()));
+    at += rigid.len();
+    for (r, t) in torque_expr.iter().enumerate() {
+        let tau = match t {
+            Some(_) => {
+                at += 1;
+                values[at - 1].scalar_or_nan()
+            }
+            None => {
+                let symbol = s.system.bodies[rigid[r]].rigid.as_ref().map(|b| b.torque);
+                TwoFloat::from(symbol.and_then(|t| env.get(t)).and_then(Value::scalar).unwrap_or(0.0))
+            }
+        };
+        force.push([tau, zero, zero]);
+    }
     let dot = |a: &[TwoFloat; 3], b: &[TwoFloat; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     let mut c = Vec::new();
     let mut jac: Vec<Vec<(usize, [TwoFloat; 3])>> = Vec::new();
     for d in &s.derivation.constraints {
         c.push(values[at].scalar_or_nan());
         at += 1;
-        jac.push(d.jacobian.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector_or_nan())).collect());
+        let mut row: Vec<(usize, [TwoFloat; 3])> =
+            d.jacobian.iter().map(|&(b, _)| b).zip(values[at..].iter().map(|v: &Dd| v.vector_or_nan())).collect();
         at += d.jacobian.len();
+        for &(b, _) in &d.angular {
+            row.push((angular_slot(&s.system, b)?, [values[at].scalar_or_nan(), zero, zero]));
+            at += 1;
+        }
+        jac.push(row);
     }
-    // A λ = −b with Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ/mᵢ, bₖ = Σᵢ Jₖᵢ·Fᵢ/mᵢ + cₖ.
+    // A λ = −b with Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ/mᵢ, bₖ = Σᵢ Jₖᵢ·Fᵢ/mᵢ + cₖ over the slots (a rigid body's
+    // angular slot adds Jʷₖ Jʷⱼ/I and Jʷₖ τ/I: M = blockdiag(m E, I), DESIGN "Rigid bodies").
     let k = c.len();
     let mut a = vec![vec![zero; k]; k];
     let mut b = vec![zero; k];
@@ -132,7 +177,7 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
         b[p] = -(b[p] + c[p]);
     }
     let lambda = solve_dense(a, b)?;
-    let mut out = vec![[zero; 3]; n];
+    let mut out = vec![[zero; 3]; slots(s)];
     for (p, l) in lambda.iter().enumerate() {
         for &(body, ref j) in &jac[p] {
             for d in 0..3 {
@@ -143,7 +188,8 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     Some(out)
 }
 
-/// Measures every body's force over `count` random and `count` hard states.
+/// Measures every body's force (and every rigid body's constraint torque, as the row
+/// `<body> (torque)`) over `count` random and `count` hard states.
 pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRow> {
     let system = &s.system;
     let n = system.bodies.len();
@@ -155,10 +201,21 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
     let speed = v0.iter().map(norm).fold(0.0, f64::max).max(length);
     let dim = system.dim();
     let method = if s.derivation.forces.is_some() { "closed form" } else { "solve" };
+    // Rigid bodies: the angle anywhere on the circle around the scene's, ω of the scene's
+    // angular speed scale (its largest |ω|, at least speed/length).
+    let rigid: Vec<usize> = angular_bodies(system).collect();
+    let scalar = |sym| s.env.get(sym).and_then(Value::scalar).unwrap_or(0.0);
+    let spin = system
+        .bodies
+        .iter()
+        .filter_map(|b| b.rigid.as_ref())
+        .map(|r| scalar(r.angular_velocity).abs())
+        .fold(speed / length, f64::max);
+    let slots = slots(s);
     let mut rng = Rng::new(seed);
     let mut rows = Vec::new();
     for class in ["random", "hard"] {
-        let mut errors: Vec<Vec<f64>> = vec![Vec::new(); n];
+        let mut errors: Vec<Vec<f64>> = vec![Vec::new(); slots];
         let mut envs = Vec::new();
         for k in 0..count {
             let (qs, vs) = if class == "random" { (1.0, 1.0) } else { HARD_SCALES[k % HARD_SCALES.len()] };
@@ -173,6 +230,13 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
                 env.set(body.position, Value::Vector(q));
                 env.set(body.velocity, Value::Vector(v));
             }
+            for &i in &rigid {
+                let Some(r) = &system.bodies[i].rigid else { continue };
+                let theta = scalar(r.orientation) + std::f64::consts::PI * rng.uniform(-1.0, 1.0);
+                let omega = vs * (scalar(r.angular_velocity) + spin * rng.uniform(-0.5, 0.5));
+                env.set(r.orientation, Value::Scalar(theta));
+                env.set(r.angular_velocity, Value::Scalar(omega));
+            }
             envs.push(env);
         }
         // Time the f64 path alone.
@@ -186,7 +250,7 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
         let nanos = start.elapsed().as_secs_f64() * 1e9 / (repeats * envs.len().max(1)) as f64;
         for env in &envs {
             let (Some(f), Some(r)) = (forces_f64(s, env), forces_dd(s, env)) else { continue };
-            for i in 0..n {
+            for i in 0..slots {
                 let diff: [f64; 3] = std::array::from_fn(|d| (TwoFloat::from(f[i][d]) - r[i][d]).hi());
                 let size = norm(&std::array::from_fn(|d| r[i][d].hi()));
                 if size > 0.0 && size.is_finite() {
@@ -198,8 +262,13 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
         for (i, mut e) in errors.into_iter().enumerate() {
             e.sort_by(f64::total_cmp);
             let median = if e.is_empty() { f64::NAN } else { e[e.len() / 2] };
+            // Slot i past the bodies is rigid body rigid[i − n]'s constraint torque.
+            let body = match i.checked_sub(n) {
+                None => system.bodies[i].name.clone(),
+                Some(r) => format!("{} (torque)", system.bodies[rigid[r]].name),
+            };
             rows.push(AccuracyRow {
-                body: system.bodies[i].name.clone(),
+                body,
                 method: method.into(),
                 states: class.into(),
                 count: e.len(),

@@ -153,7 +153,10 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
         Ok(s) => (Some(s), None),
         Err(e) => (None, Some(format!("the reference run (RK4 + projection, dt = {reference_dt:e}) failed: {e}"))),
     };
-    let reference_position = reference.as_ref().map(|r| r.final_position.clone());
+    // The bodies' positions only: a rigid body's angle (its slot after the bodies) is no length.
+    let bodies = scenario.system.bodies.len();
+    let reference_position =
+        reference.as_ref().map(|r| r.final_position[..bodies.min(r.final_position.len())].to_vec());
     let length = length_scale(reference_position.iter().flatten());
     let mut rows = Vec::new();
     for &integrator in &sweep.integrators {

@@ -1,6 +1,7 @@
 //! The helper functions a generated module carries: the rows' solve of `lagrange solve`
 //! (scaled, with contact states, λ ≥ 0 on inequalities and the minimum-norm λ; every
-//! module), band Cholesky (the fast path of a banded A), the range-safe norms and
+//! module), band Cholesky (the fast path of a banded A), dense Cholesky (of a small A of
+//! equalities), the range-safe norms and
 //! powers the formulas call, and with `--solver` the velocity-level step (shared pieces,
 //! the sequential-impulse sweep, and one file per solver).
 //!
@@ -19,6 +20,9 @@ pub(super) const ROWS: &str = text(include_str!("rows.rs"));
 
 /// Banded A λ = −b (a chain listed in order): Cholesky on the band, O(K w²).
 pub(super) const SOLVE_BAND: &str = text(include_str!("solve_band.rs"));
+
+/// A small dense A λ = −b of equalities: Cholesky on the array, the fast path before `solve_rows`.
+pub(super) const SOLVE_DENSE: &str = text(include_str!("solve_dense.rs"));
 
 /// The velocity-level step's shared pieces: softness, settings, the prepared rows (`--solver`).
 pub(super) const STEP: &str = text(include_str!("step.rs"));
@@ -71,16 +75,20 @@ mod rows;
 #[cfg(test)]
 #[allow(dead_code)]
 mod solve_band;
+#[cfg(test)]
+#[allow(dead_code)]
+mod solve_dense;
 
 #[cfg(test)]
 mod tests {
-    use super::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, STEP, SWEEP};
+    use super::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
 
     #[test]
     fn a_helper_is_its_file_without_the_note() {
         for (text, first) in [
             (ROWS, "/// Where an inequality row stands"),
             (SOLVE_BAND, "/// Solves `a x = b` for a symmetric"),
+            (SOLVE_DENSE, "/// Solves `a x = b` for a symmetric positive definite `a` by Cholesky"),
             (HELPERS, "/// |(x, y)|"),
             (STEP, "/// Box2D's `b2Softness`"),
             (SWEEP, "impl<const D: usize> Prepared<D>"),
