@@ -118,6 +118,7 @@ fn state_literal(l: &Loaded, m: &Module, env: &Env) -> String {
             Some(Value::Vector(v)) => {
                 let _ = write!(literal, "s.{field} = {:?}; ", &v[..g.dim()]);
             }
+            Some(Value::Quaternion(_)) => panic!("`generate` refuses 3D rigid bodies: field {field}"),
             None => panic!("no value for field {field}"),
         }
     }

@@ -82,7 +82,8 @@ fn assignments(l: &Loaded, m: &Module, env: &Env, rust: bool) -> String {
                     let _ = write!(out, "s.{field}[{d}] = {x:?}; ");
                 }
             }
-            None => {}
+            // `generate` refuses 3D rigid bodies: no state has a quaternion.
+            Some(Value::Quaternion(_)) | None => {}
         }
     }
     if rust { format!("{{ let mut s = State::default(); {out}s }}") } else { out }

@@ -184,6 +184,8 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
                     let q = exact(x).ok_or_else(bad)?;
                     g.num(q)
                 }
+                // A quaternion is never a parameter: 3D rigid bodies are refused before this.
+                Value::Quaternion(_) => return Err(bad()),
                 Value::Vector(_) => {
                     let mut entries = Vec::new();
                     for &x in value.components(dim).iter() {

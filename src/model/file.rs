@@ -219,6 +219,10 @@ fn build<'t>(
                 MassSpec::Number(1.0)
             }
             RawMass::Symbol(s) => MassSpec::Symbol(s),
+            RawMass::Vector(_) => {
+                problems.push(Problem::VectorMass { span: body.mass.span() });
+                MassSpec::Number(1.0)
+            }
         };
         let spec = BodySpec {
             name: body.name.get_ref(),
@@ -304,6 +308,20 @@ fn declare_rigid(
             MassSpec::Number(1.0)
         }
         Some((RawMass::Symbol(s), _)) => MassSpec::Symbol(s),
+        // Principal moments: three positive finite numbers (a 2D file refuses them in the
+        // builder, naming the body).
+        Some((RawMass::Vector(xs), span)) => match xs[..] {
+            [a, b, c] if [a, b, c].iter().all(|x| x.is_finite() && *x > 0.0) => MassSpec::Principal([a, b, c]),
+            [a, b, c] => {
+                let bad = [a, b, c].into_iter().find(|x| !(x.is_finite() && *x > 0.0)).unwrap_or(f64::NAN);
+                problems.push(Problem::Inertia { span, shown: shown(bad) });
+                MassSpec::Principal([1.0; 3])
+            }
+            _ => {
+                problems.push(Problem::InertiaLength { span: span.clone(), found: xs.len() });
+                MassSpec::Principal([1.0; 3])
+            }
+        },
     };
     let spec = RigidSpec {
         orientation: rigid.orientation.get_ref(),
