@@ -686,6 +686,11 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
+    // Quaternion integration is not written yet: a 3D rigid body is refused, named.
+    if let Err(e) = scenario.system.refuse_rigid_3d("simulate") {
+        eprintln!("error: {}: {e}", args.file.display());
+        return ExitCode::from(1);
+    }
     let mut settings = scenario.settings();
     settings.dt = args.dt.unwrap_or(settings.dt);
     let duration = args.duration.unwrap_or(scenario.scene.duration);

@@ -117,6 +117,27 @@ impl System {
     }
 }
 
+impl System {
+    /// The first 3D rigid body's name: the commands that handle 2D rigid bodies but not
+    /// quaternions yet refuse a file with one, naming it ([`NotYet3dRigid`]).
+    pub fn refuse_rigid_3d(&self, command: &'static str) -> Result<(), NotYet3dRigid> {
+        match self.bodies.iter().find(|b| b.rigid.as_ref().is_some_and(|r| r.nodes.axes.is_some())) {
+            Some(b) => Err(NotYet3dRigid { command, body: b.name.clone() }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// A command that does not handle 3D rigid bodies yet, asked to run on one.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "`{command}` does not handle 3D rigid bodies yet (body `{body}` has a quaternion orientation); `lagrange derive`, `solve` and `check` do"
+)]
+pub struct NotYet3dRigid {
+    pub command: &'static str,
+    pub body: String,
+}
+
 /// A command that does not handle rigid bodies yet, asked to run on one.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(

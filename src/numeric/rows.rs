@@ -95,16 +95,17 @@ pub fn angular_slots(system: &System, body: usize) -> Option<Range<usize>> {
         .map(|r| system.bodies.len() + r * w..system.bodies.len() + (r + 1) * w)
 }
 
-/// The world vector Σₖ x[slot + k][0] R(q) eₖ of a 3D rigid body's angular slots `slots`
-/// (a constraint torque, an angular acceleration, from per-axis numbers); 2D: `[x[slot][0], 0, 0]`.
-pub fn world_angular(rows: &Rows, x: &[[f64; 3]], slots: Range<usize>) -> [f64; 3] {
+/// The world vector Σₖ xₖ R(q) eₖ of a 3D rigid body's angular slots `slots`, from the
+/// number `x(slot)` of each (a constraint torque, an angular acceleration); 2D:
+/// `[x(slot), 0, 0]`.
+pub fn world_angular(rows: &Rows, x: impl Fn(usize) -> f64, slots: Range<usize>) -> [f64; 3] {
     if rows.axes.is_empty() {
-        return [x[slots.start][0], 0.0, 0.0];
+        return [x(slots.start), 0.0, 0.0];
     }
     let mut out = [0.0; 3];
     for slot in slots {
         for (o, e) in out.iter_mut().zip(rows.axes[slot]) {
-            *o += x[slot][0] * e;
+            *o += x(slot) * e;
         }
     }
     out
