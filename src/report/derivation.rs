@@ -559,7 +559,14 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     // Newton: aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ, substituted into each C̈.
     doc.heading(out, "Newton's law");
     doc.para(out, "Step 4. Each body obeys m a = F + F_c, so a = (F + F_c)/m. Substituted into C̈ = 0:");
-    if system.has_rigid_bodies() {
+    if system.has_rigid_bodies() && system.dim() == 3 {
+        doc.para(
+            out,
+            "A rigid body also obeys Euler's law I alpha = T + T_c - w x (I w) (3D, about the centre \
+             of mass, I = R(q) diag(I1, I2, I3) R(q)^T the world inertia), so alpha = I^-1 (T + T_c - w x (I w)), \
+             with d(w)/dt = alpha and d rot(q, s)/dt = w x rot(q, s):",
+        );
+    } else if system.has_rigid_bodies() {
         doc.para(
             out,
             "A rigid body also obeys Euler's law I alpha = T + T_c (2D, about the centre of mass), \
