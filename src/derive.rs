@@ -63,9 +63,11 @@ pub struct DerivedConstraint {
     /// `c = C̈|ₐ₌₀ / κ`, so that C̈/κ = Σᵢ Jᵢ·aᵢ + c (rigid bodies: also α = 0, and
     /// C̈/κ = Σᵢ (Jᵢ·aᵢ + Jʷᵢ αᵢ) + c).
     pub bias: Id,
-    /// `(body, ∂C/∂θ)` for each rigid body whose orientation C involves, simplified.
+    /// `(body, ∂C/∂θ)` for each rigid body whose orientation C involves, simplified (3D:
+    /// ∂Ċ/∂ω, a vector: the quaternion is never differentiated).
     pub angular_gradient: Vec<(usize, Id)>,
-    /// `(body, Jʷ = ∂C/∂θ / κ)`: the coefficient of α in C̈/κ, and of ω in Ċ/κ (2D: a scalar).
+    /// `(body, Jʷ = ∂C/∂θ / κ)`: the coefficient of α in C̈/κ, and of ω in Ċ/κ (2D: a scalar;
+    /// 3D: a vector).
     pub angular: Vec<(usize, Id)>,
 }
 

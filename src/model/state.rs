@@ -3,7 +3,9 @@
 //! (TOML or JSON) and `--set NAME=VALUE`.
 //!
 //! [`value`] checks a [`RawValue`] against the symbol it is given to (known, not an
-//! acceleration, scalar or vector of the file's dimension, finite); [`state_file`] and
+//! acceleration, scalar or vector of the file's dimension, finite; a 3D orientation is a
+//! quaternion of four numbers with unit norm within [`QUATERNION_TOLERANCE`], since `rot`
+//! does not normalise, else an error naming the body); [`state_file`] and
 //! [`assignment`] read the command line's forms of a state and check each entry the same
 //! way, so a caller holds `(Symbol, Value)` pairs and never a raw value. Each entry comes
 //! out [`Given`]: checked, its misfit kept rather than returned at once, so that a command

@@ -14,7 +14,10 @@
 //!
 //! Rigid bodies enter in generalised coordinates: after the n bodies' linear slots (1/m, v,
 //! F, and J per body) come one angular slot per rigid body (2D: 1/I, ω, τ and Jʷ, scalars
-//! in component 0 of the slot's `[f64; 3]`), in the order [`angular_bodies`] gives. So u = (v, ω),
+//! in component 0 of the slot's `[f64; 3]`), in the order [`angular_bodies`] gives; a 3D
+//! rigid body has three, one per principal axis eₖ = R(q) eₖ (1/Iₖ, eₖ·ω,
+//! eₖ·τ − (ω_b × I ω_b)ₖ with ω_b = (eⱼ·ω)ⱼ, and Jʷ·eₖ), so M⁻¹ stays diagonal with the world
+//! inertia R diag(I) Rᵀ; [`world_angular`] turns per-axis results back into world vectors. So u = (v, ω),
 //! M = blockdiag(mᵢE, Iᵢ) and A = J M⁻¹ Jᵀ, b = J M⁻¹ (F, τ) + c are what the solve, the
 //! contact logic and the projections already compute over slots: none of them needs to know
 //! which slot is an angle (DESIGN.md, "Rigid bodies"; 2D has no gyroscopic term).
