@@ -44,7 +44,7 @@ fn chain(n: usize) -> Rows {
             Row { value: 0.0, rate: 0.0, bias: u[0] * u[0] + u[1] * u[1], inequality: false, jacobian }
         })
         .collect();
-    Rows { dim: 2, inverse_mass: vec![1.0; n], velocity, force: vec![[0.0, -9.81, 0.0]; n], rows }
+    Rows { dim: 2, inverse_mass: vec![1.0; n], velocity, force: vec![[0.0, -9.81, 0.0]; n], rows, axes: Vec::new() }
 }
 
 #[divan::bench(args = [10, 100, 1000])]

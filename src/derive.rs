@@ -63,9 +63,11 @@ pub struct DerivedConstraint {
     /// `c = C̈|ₐ₌₀ / κ`, so that C̈/κ = Σᵢ Jᵢ·aᵢ + c (rigid bodies: also α = 0, and
     /// C̈/κ = Σᵢ (Jᵢ·aᵢ + Jʷᵢ αᵢ) + c).
     pub bias: Id,
-    /// `(body, ∂C/∂θ)` for each rigid body whose orientation C involves, simplified.
+    /// `(body, ∂C/∂θ)` for each rigid body whose orientation C involves, simplified (3D:
+    /// ∂Ċ/∂ω, a vector: the quaternion is never differentiated).
     pub angular_gradient: Vec<(usize, Id)>,
-    /// `(body, Jʷ = ∂C/∂θ / κ)`: the coefficient of α in C̈/κ, and of ω in Ċ/κ (2D: a scalar).
+    /// `(body, Jʷ = ∂C/∂θ / κ)`: the coefficient of α in C̈/κ, and of ω in Ċ/κ (2D: a scalar;
+    /// 3D: a vector).
     pub angular: Vec<(usize, Id)>,
 }
 
@@ -311,9 +313,10 @@ fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> 
     let mut tc_nodes = Vec::with_capacity(system.bodies.len());
     for body in &system.bodies {
         let name = if system.bodies.len() == 1 { "T_c".to_string() } else { format!("T_c_{}", body.name) };
-        tc_nodes.push(match body.rigid {
-            Some(_) => {
-                let s = g.declare(&name, Ty::Scalar, Role::Parameter);
+        tc_nodes.push(match &body.rigid {
+            Some(rigid) => {
+                let ty = if rigid.nodes.axes.is_some() { Ty::Vector } else { Ty::Scalar };
+                let s = g.declare(&name, ty, Role::Parameter);
                 Some(g.sym(s))
             }
             None => None,
@@ -329,10 +332,21 @@ fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> 
             let accel = g.mul(vec![inv_m, total])?;
             map.insert(b.nodes.acceleration, accel);
             if let (Some(rigid), Some(tc)) = (&b.rigid, tc_nodes[body]) {
-                // Euler's law in 2D: I α = τ + τ_c.
-                let total = g.add(vec![rigid.nodes.torque, tc])?;
-                let inv_i = g.powi(rigid.inertia, -1)?;
-                let alpha = g.mul(vec![inv_i, total])?;
+                // Euler's law: I α = τ + τ_c (2D); I α = τ + τ_c − ω × (I ω) (3D, I the
+                // world inertia).
+                let alpha = match rigid.nodes.axes {
+                    Some(axes) => {
+                        let spin = gyroscopic(g, rigid, axes)?;
+                        let minus_spin = g.neg(spin);
+                        let total = g.add(vec![rigid.nodes.torque, tc, minus_spin])?;
+                        inverse_inertia_times(g, rigid, axes, total)?
+                    }
+                    None => {
+                        let total = g.add(vec![rigid.nodes.torque, tc])?;
+                        let inv_i = g.powi(rigid.inertia, -1)?;
+                        g.mul(vec![inv_i, total])?
+                    }
+                };
                 map.insert(rigid.nodes.angular_acceleration, alpha);
             }
         }
@@ -437,7 +451,13 @@ fn derive_constraint(
     let mut angular_parts = Vec::new();
     for &body in involved {
         let Some(rigid) = &system.bodies[body].rigid else { continue };
-        let grad = gradient(g, c, rigid.orientation)?;
+        // 3D: the coefficient of ω in Ċ (= that of α in C̈), a vector: q is never
+        // differentiated, only `rot(q, s)` is (d/dt = ω × rot(q, s)).
+        let grad = if rigid.nodes.axes.is_some() {
+            gradient(g, c_dot, rigid.angular_velocity)?
+        } else {
+            gradient(g, c, rigid.orientation)?
+        };
         let grad = s.simplify(g, grad)?;
         if s.is_zero(g, grad)? {
             continue;
@@ -470,7 +490,8 @@ fn derive_constraint(
     }
     for &(body, _) in &angular_parts {
         if let Some(rigid) = &system.bodies[body].rigid {
-            to_zero.insert(rigid.nodes.angular_acceleration, scalar_zero);
+            let zero = if rigid.nodes.axes.is_some() { zero } else { scalar_zero };
+            to_zero.insert(rigid.nodes.angular_acceleration, zero);
         }
     }
     let at_rest = g.substitute(c_ddot, &to_zero)?;
@@ -626,8 +647,9 @@ fn assemble(
     let mut inv_inertia = Vec::with_capacity(system.bodies.len());
     for body in &system.bodies {
         inv_inertia.push(match &body.rigid {
-            Some(rigid) => Some(g.powi(rigid.inertia, -1)?),
-            None => None,
+            // 3D: I⁻¹ is applied through the body's axes (`inverse_inertia_times`).
+            Some(rigid) if rigid.nodes.axes.is_none() => Some(g.powi(rigid.inertia, -1)?),
+            _ => None,
         });
     }
     // Aₖⱼ = Σᵢ [Jₖᵢ·Jⱼᵢ / mᵢ + Jʷₖᵢ Jʷⱼᵢ / Iᵢ], collected per pair (k ≤ j) over shared bodies.
@@ -648,10 +670,18 @@ fn assemble(
         }
     }
     for (body, acting) in turning.iter().enumerate() {
-        let Some(inv_i) = inv_inertia[body] else { continue };
+        let Some(rigid) = &system.bodies[body].rigid else { continue };
         for (x, &(k, jk)) in acting.iter().enumerate() {
             for &(j, jj) in &acting[x..] {
-                let term = g.mul(vec![jk, jj, inv_i])?;
+                // 2D: Jʷₖ Jʷⱼ / I; 3D: Jʷₖ·I⁻¹ Jʷⱼ with the world inertia.
+                let term = match (inv_inertia[body], rigid.nodes.axes) {
+                    (Some(inv_i), _) => g.mul(vec![jk, jj, inv_i])?,
+                    (None, Some(axes)) => {
+                        let turned = inverse_inertia_times(g, rigid, axes, jj)?;
+                        g.dot(jk, turned)?
+                    }
+                    (None, None) => continue,
+                };
                 let key = (k.min(j), k.max(j));
                 let slot = *index.entry(key).or_insert_with(|| {
                     pairs.push((key, Vec::new()));
@@ -671,7 +701,8 @@ fn assemble(
             a.push((k, j, entry));
         }
     }
-    // bₖ = Σᵢ [Jₖᵢ·Fᵢ / mᵢ + Jʷₖᵢ τᵢ / Iᵢ] + cₖ (2D: no gyroscopic term)
+    // bₖ = Σᵢ [Jₖᵢ·Fᵢ / mᵢ + Jʷₖᵢ τᵢ / Iᵢ] + cₖ (2D: no gyroscopic term; 3D:
+    // Jʷₖᵢ·Iᵢ⁻¹ (τᵢ − ωᵢ × Iᵢ ωᵢ))
     let mut b = Vec::with_capacity(constraints.len());
     for dc in constraints {
         let mut terms = Vec::with_capacity(dc.jacobian.len() + dc.angular.len() + 1);
@@ -680,8 +711,18 @@ fn assemble(
             terms.push(g.mul(vec![dot, inv_mass[body]])?);
         }
         for &(body, j) in &dc.angular {
-            if let (Some(rigid), Some(inv_i)) = (&system.bodies[body].rigid, inv_inertia[body]) {
-                terms.push(g.mul(vec![j, rigid.nodes.torque, inv_i])?);
+            let Some(rigid) = &system.bodies[body].rigid else { continue };
+            match (inv_inertia[body], rigid.nodes.axes) {
+                (Some(inv_i), _) => terms.push(g.mul(vec![j, rigid.nodes.torque, inv_i])?),
+                // 3D: Jʷ·I⁻¹ (τ − ω × I ω)
+                (None, Some(axes)) => {
+                    let spin = gyroscopic(g, rigid, axes)?;
+                    let minus_spin = g.neg(spin);
+                    let net = g.add(vec![rigid.nodes.torque, minus_spin])?;
+                    let turned = inverse_inertia_times(g, rigid, axes, net)?;
+                    terms.push(g.dot(j, turned)?);
+                }
+                (None, None) => {}
             }
         }
         terms.push(dc.bias);
@@ -689,4 +730,36 @@ fn assemble(
         b.push(if repeats { s.simplify_alike(g, sum)? } else { s.simplify(g, sum)? });
     }
     Ok((a, b))
+}
+
+/// I⁻¹ u for a 3D rigid body, with the world inertia I = R diag(I1, I2, I3) Rᵀ written
+/// through the body's axes eₖ = rot(q, eₖ) (the columns of R): Σₖ eₖ (eₖ·u) / Iₖ.
+fn inverse_inertia_times(
+    g: &mut Graph,
+    rigid: &crate::model::system::Rigid,
+    axes: [Id; 3],
+    u: Id,
+) -> Result<Id, TypeError> {
+    let mut terms = Vec::with_capacity(3);
+    for (axis, e) in crate::expr::Axis::ALL.into_iter().zip(axes) {
+        let moment = g.comp(rigid.inertia, axis)?;
+        let inv = g.powi(moment, -1)?;
+        let along = g.dot(e, u)?;
+        terms.push(g.mul(vec![along, inv, e])?);
+    }
+    g.add(terms)
+}
+
+/// ω × (I ω) for a 3D rigid body, with I ω = Σₖ Iₖ eₖ (eₖ·ω) (see [`inverse_inertia_times`]):
+/// the gyroscopic term of Euler's equations in the world frame.
+fn gyroscopic(g: &mut Graph, rigid: &crate::model::system::Rigid, axes: [Id; 3]) -> Result<Id, TypeError> {
+    let w = rigid.nodes.angular_velocity;
+    let mut terms = Vec::with_capacity(3);
+    for (axis, e) in crate::expr::Axis::ALL.into_iter().zip(axes) {
+        let moment = g.comp(rigid.inertia, axis)?;
+        let along = g.dot(e, w)?;
+        terms.push(g.mul(vec![along, moment, e])?);
+    }
+    let momentum = g.add(terms)?;
+    g.cross(w, momentum)
 }

@@ -735,6 +735,11 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
+    // Quaternion integration is not written yet: a 3D rigid body is refused, named.
+    if let Err(e) = scenario.system.refuse_rigid_3d("simulate") {
+        eprintln!("error: {}: {e}", args.file.display());
+        return ExitCode::from(1);
+    }
     let mut settings = scenario.settings();
     settings.dt = args.dt.unwrap_or(settings.dt);
     let duration = args.duration.unwrap_or(scenario.scene.duration);
@@ -868,7 +873,11 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Err(code) => return code,
     };
     // Every bench handles 2D rigid bodies: the work-precision sweep, formula accuracy and the
-    // velocity-level solvers.
+    // velocity-level solvers; 3D ones (quaternion integration) not yet.
+    if let Err(e) = scenario.system.refuse_rigid_3d("bench") {
+        eprintln!("error: {}: {e}", args.file.display());
+        return ExitCode::from(1);
+    }
     if args.solvers {
         return cmd_bench_solvers(args, &scenario);
     }

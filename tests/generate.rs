@@ -82,6 +82,8 @@ fn files() -> Vec<PathBuf> {
             .expect("constraints/")
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            // 3D rigid bodies (quaternions) are not generated yet (`tests/rigid3d.rs`).
+            .filter(|p| !(p.starts_with("constraints/rigid") && is_3d(p)))
             .collect();
         here.sort();
         files.extend(here);
@@ -139,6 +141,7 @@ fn state_literal(l: &Loaded, m: &Module, env: &Env) -> String {
             Some(Value::Vector(v)) => {
                 let _ = write!(literal, "s.{field} = {:?}; ", &v[..g.dim()]);
             }
+            Some(Value::Quaternion(_)) => panic!("`generate` refuses 3D rigid bodies: field {field}"),
             None => panic!("no value for field {field}"),
         }
     }
@@ -1122,4 +1125,9 @@ fn generate_refuses_to_overwrite_its_input() {
     let run = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("generate").arg(&inf).output().expect("runs");
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success() && stderr.contains("warning:") && stderr.contains("do not fit in f64"), "{stderr}");
+}
+
+/// Whether a constraint file is 3D (in `constraints/rigid/`: quaternion orientations).
+fn is_3d(path: &std::path::Path) -> bool {
+    std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
 }

@@ -65,7 +65,8 @@ fn state_literal(l: &Loaded, m: &Module, env: &Env) -> String {
             Some(Value::Vector(v)) => {
                 let _ = write!(literal, "s.{field} = {:?}; ", &v[..dim]);
             }
-            None => {}
+            // `generate` refuses 3D rigid bodies: no state has a quaternion.
+            Some(Value::Quaternion(_)) | None => {}
         }
     }
     literal.push_str("s }");

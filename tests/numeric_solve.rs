@@ -460,6 +460,7 @@ fn contact_rows() -> impl Strategy<Value = Rows> {
                 inverse_mass: masses.iter().map(|m| 1.0 / m).collect(),
                 velocity: vec![[0.0; 3]; n],
                 force: forces.iter().map(|&(x, y)| [x, y, 0.0]).collect(),
+                axes: Vec::new(),
                 rows,
             }
         })
@@ -589,6 +590,7 @@ fn qp_path_finds_the_active_contact() {
         inverse_mass: vec![0.5],
         velocity: vec![[0.0; 3]],
         force: vec![[3.0, -19.62, 0.0]],
+        axes: Vec::new(),
         rows: vec![
             Row { value: 0.0, rate: 0.0, bias: 0.0, inequality: true, jacobian: vec![(0, [0.0, 1.0, 0.0])] },
             Row { value: 0.0, rate: 0.0, bias: 0.0, inequality: true, jacobian: vec![(0, [1.0, 1.0, 0.0])] },
@@ -621,6 +623,7 @@ fn straight_chain_band_and_dense_agree_with_statics() {
         inverse_mass: vec![1.0 / m; n],
         velocity: vec![[0.0; 3]; n],
         force: vec![[0.0, -m * g, 0.0]; n],
+        axes: Vec::new(),
         rows,
     };
     for method in [lagrange::numeric::solve::Method::Banded, lagrange::numeric::solve::Method::Dense] {
@@ -671,6 +674,7 @@ fn simultaneous_impulses_at_a_corner() {
         inverse_mass: vec![0.25],
         velocity: vec![[-3.0, -2.0, 0.0]],
         force: vec![[0.0, -39.24, 0.0]],
+        axes: Vec::new(),
         rows: vec![
             Row { value: 0.0, rate: -2.0, bias: 0.0, inequality: true, jacobian: vec![(0, [0.0, 1.0, 0.0])] },
             Row { value: 0.0, rate: -3.0, bias: 0.0, inequality: true, jacobian: vec![(0, [1.0, 0.0, 0.0])] },
@@ -708,6 +712,7 @@ fn scrambled_chain_is_renumbered_into_a_band() {
         inverse_mass: vec![1.0 / m; n],
         velocity: vec![[0.0; 3]; n],
         force: vec![[0.0, -m * g, 0.0]; n],
+        axes: Vec::new(),
         rows,
     };
     let sol = solve(&rows);
@@ -789,6 +794,7 @@ fn redundant_rows(rng: &mut lagrange::numeric::random::Rng, n: usize, independen
         inverse_mass: (0..n).map(|_| 1.0 / rng.uniform(0.1, 10.0)).collect(),
         velocity: vec![[0.0; 3]; n],
         force: (0..n).map(|_| rng.normal_vector(2, 5.0)).collect(),
+        axes: Vec::new(),
         rows,
     }
 }

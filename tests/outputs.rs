@@ -147,7 +147,14 @@ fn generate_rust() {
 /// The rigid-body files' modules (their `derive` outputs are pinned by `tests/rigid.rs`).
 #[test]
 fn generate_rust_rigid() {
-    let files = files_in(&["constraints/rigid"]);
+    // 3D rigid bodies (quaternions) are not generated yet: `tests/rigid3d.rs` has their refusal.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let files: Vec<String> = files_in(&["constraints/rigid"])
+        .into_iter()
+        .filter(|f| {
+            !std::fs::read_to_string(root.join(f)).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
+        })
+        .collect();
     assert!(files.len() >= 12, "expected the joint library, found {}", files.len());
     pin_files(files, "generate_rust", &["generate"]);
 }

@@ -221,7 +221,8 @@ fn well_conditioned(system: &System, roots: &[Id], env: &Env, rng: &mut Rng) -> 
             match env.get(sym) {
                 Some(Value::Scalar(x)) => moved.set(sym, Value::Scalar(wiggle(x, rng))),
                 Some(Value::Vector(v)) => moved.set(sym, Value::Vector(v.map(|x| wiggle(x, rng)))),
-                None => {}
+                // A quaternion stays unit (none of these systems has one).
+                Some(Value::Quaternion(_)) | None => {}
             }
         }
         for (&id, b) in roots.iter().zip(&base) {

@@ -53,6 +53,7 @@ fn num(g: &Graph, id: Id, env: &Env) -> Vec<f64> {
     match eval_one(g, id, env) {
         Ok(Value::Scalar(x)) => vec![x],
         Ok(Value::Vector(v)) => v[..g.dim()].to_vec(),
+        Ok(Value::Quaternion(q)) => q.to_vec(),
         Err(e) => panic!("evaluation failed: {e}"),
     }
 }

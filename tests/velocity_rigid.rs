@@ -123,6 +123,10 @@ fn every_solver_holds_every_rigid_file() {
     assert!(files.len() >= 12, "the joint library: {files:?}");
     for rel in &files {
         let s = rigid_scenario(rel, 0x5eed_0015);
+        // 3D rigid bodies (quaternions) are not stepped yet: refused, tested in `tests/rigid3d.rs`.
+        if s.system.dim() == 3 {
+            continue;
+        }
         // A state of our own runs 2/3 s: the pulley's lighter body reaches its pulley (a
         // rope segment of length 0, where C is singular) at about 0.9 s.
         let steps = if s.scene.initial.is_empty() { 40 } else { 120 };

@@ -47,7 +47,7 @@ use crate::expr::{Id, Rational, Role, Ty, TypeError};
 use crate::model::expect::{Expectation, Expected, Item};
 use crate::model::file::{Loaded, load};
 use crate::model::scene::{Scene, environment};
-use crate::numeric::rows::{RowProgram, angular_slot};
+use crate::numeric::rows::{RowProgram, angular_slots, world_angular};
 use crate::numeric::solve::solve;
 use crate::report::diagnostic::render;
 use std::fmt;
@@ -449,8 +449,12 @@ impl Checked {
         let dim = system.dim();
         match q {
             Quantity::Force(i) => Ok(solution.constraint_force[i][..dim].to_vec()),
-            Quantity::Torque(i) => match angular_slot(system, i) {
-                Some(slot) => Ok(vec![solution.constraint_force[slot][0]]),
+            // 2D: the scalar torque; 3D: the world vector of the body's principal slots.
+            Quantity::Torque(i) => match angular_slots(system, i) {
+                Some(slots) => {
+                    let torque = world_angular(&rows, |s| solution.constraint_force[s][0], slots);
+                    Ok(torque[..if dim == 3 { 3 } else { 1 }].to_vec())
+                }
                 None => Err(format!("body `{}` is not rigid", system.bodies[i].name)),
             },
             Quantity::Lambda(k) => Ok(vec![solution.lambda[k] / self.derivation.constraints[k].scale.to_f64()]),

@@ -28,7 +28,7 @@
 
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, Value};
-use crate::expr::{Role, Symbol};
+use crate::expr::{Role, Symbol, Ty};
 use crate::model::scene::Scene;
 use crate::model::system::System;
 use crate::numeric::dynamics::Dynamics;
@@ -85,6 +85,7 @@ pub fn sample(
         .filter(|(s, info)| matches!(info.role, Role::Mass { .. } | Role::Inertia { .. }) && base.get(*s).is_none())
         .map(|(s, _)| s)
         .collect();
+    let three_d_rigid = dim == 3 && system.has_rigid_bodies();
     let mut rng = Rng::new(0x5eed_1a94_a27e);
     let mut states = Vec::new();
     let mut attempts = 0;
@@ -101,7 +102,13 @@ pub fn sample(
         let mut env = base.clone();
         env.set(system.time, Value::Scalar(rng.uniform(0.0, 2.0)));
         for &m in &masses {
-            env.set(m, Value::Scalar(rng.uniform(0.5, 2.0)));
+            // A 3D inertia is three principal moments.
+            let moment = if system.graph.symbol(m).ty == Ty::Vector {
+                Value::Vector([rng.uniform(0.5, 2.0), rng.uniform(0.5, 2.0), rng.uniform(0.5, 2.0)])
+            } else {
+                Value::Scalar(rng.uniform(0.5, 2.0))
+            };
+            env.set(m, moment);
         }
         for (i, body) in system.bodies.iter().enumerate() {
             let mut r = rng.normal_vector(dim, 0.5 * size);
@@ -113,7 +120,18 @@ pub fn sample(
             env.set(body.force, Value::Vector(rng.normal_vector(dim, 10.0)));
             env.set(body.acceleration, Value::Vector(rng.normal_vector(dim, 10.0)));
             // A rigid body: an angle anywhere on the circle, ω, τ and α random like v, F and a.
-            if let Some(rigid) = &body.rigid {
+            if let Some(rigid) = &body.rigid
+                && rigid.nodes.axes.is_some()
+            {
+                // 3D: a uniformly random unit quaternion (a normal 4-vector normalised), and
+                // world-frame vectors ω, τ and α.
+                let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
+                let n = crate::expr::eval::norm(q);
+                env.set(rigid.orientation, Value::Quaternion(q.map(|x| x / n)));
+                env.set(rigid.angular_velocity, Value::Vector(rng.normal_vector(3, 1.0)));
+                env.set(rigid.torque, Value::Vector(rng.normal_vector(3, 10.0)));
+                env.set(rigid.angular_acceleration, Value::Vector(rng.normal_vector(3, 10.0)));
+            } else if let Some(rigid) = &body.rigid {
                 let angle = rng.uniform(-std::f64::consts::PI, std::f64::consts::PI);
                 env.set(rigid.orientation, Value::Scalar(angle));
                 env.set(rigid.angular_velocity, Value::Scalar(rng.normal()));
@@ -121,7 +139,10 @@ pub fn sample(
                 env.set(rigid.angular_acceleration, Value::Scalar(10.0 * rng.normal()));
             }
         }
-        if project(&mut dynamics, &mut env, size).is_some() {
+        // 3D rigid bodies are not projected (positions in generalised coordinates with a
+        // quaternion are the simulation's, not written yet): their expectations are
+        // identities in the state, checked at states that need not satisfy C = 0.
+        if three_d_rigid || project(&mut dynamics, &mut env, size).is_some() {
             states.push(env);
         }
     }

@@ -78,6 +78,8 @@ pub enum GenerateError {
     Derive(#[from] DeriveError),
     #[error(transparent)]
     Rigid(#[from] crate::model::system::NotYetRigid),
+    #[error(transparent)]
+    Rigid3d(#[from] crate::model::system::NotYet3dRigid),
     #[error("internal type error: {0}")]
     Type(#[from] TypeError),
     #[error(transparent)]
@@ -188,6 +190,8 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 
 /// Generates the Rust module for a loaded file, with its `State` layout.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
+    // The 3D module (quaternions in `State`) is not written yet.
+    loaded.system.refuse_rigid_3d("generate")?;
     // The velocity-level step moves positions only: its rigid twin is not written yet.
     if options.solver.is_some() {
         loaded.system.refuse_rigid("generate --solver")?;
@@ -220,6 +224,8 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
                     let q = exact(x).ok_or_else(bad)?;
                     g.num(q)
                 }
+                // A quaternion is never a parameter: 3D rigid bodies are refused before this.
+                Value::Quaternion(_) => return Err(bad()),
                 Value::Vector(_) => {
                     let mut entries = Vec::new();
                     for &x in value.components(dim).iter() {

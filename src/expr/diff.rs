@@ -2,7 +2,7 @@
 //!
 //! d(a·b)/dt = ȧ·b + a·ḃ, d(a×b)/dt = ȧ×b + a×ḃ, d|a|/dt = a·ȧ/|a|, d f(u)/dt = Σ ∂f/∂uᵢ u̇ᵢ
 //! (the partials are the function table's, [`Func::partial`]);
-//! d rot(θ, s)/dt = θ̇ perp(rot(θ, s)), d perp(u)/dt = perp(u̇);
+//! d rot(θ, s)/dt = θ̇ perp(rot(θ, s)) in 2D and ω × rot(q, s) in 3D, d perp(u)/dt = perp(u̇);
 //! a position's derivative is its body's velocity symbol, a velocity's is the acceleration
 //! (an orientation's the angular velocity, whose derivative is the angular acceleration),
 //! `t` has derivative 1 and parameters are constant. The result is written the way a person
@@ -149,9 +149,13 @@ fn derive_node(g: &mut Graph, id: Id, node: &Node, d: &FastMap<Id, Id>) -> Resul
         }
         Node::Rot([theta, v]) => {
             // d/dt R(θ) s = θ̇ perp(R(θ) s) + R(θ) ṡ (ṡ = 0 for the constant `s` the
-            // language allows; kept for any other).
+            // language allows; kept for any other). 3D: d/dt R(q) s = ω × R(q) s, where
+            // `d[q]` is ω (the orientation symbol's derivative symbol): q̇ itself is never
+            // written, since q appears only inside `rot`.
             let mut terms = Vec::new();
-            if !g.is_zero(d[theta]) {
+            if !g.is_zero(d[theta]) && g.dim() == 3 {
+                terms.push(g.cross(d[theta], id)?);
+            } else if !g.is_zero(d[theta]) {
                 let turned = g.perp(id)?;
                 terms.push(mul(g, vec![d[theta], turned], Ty::Vector)?);
             }

@@ -139,25 +139,49 @@ pub fn norm<S: Scalar, const N: usize>(x: [S; N]) -> S {
     if s.is_safe_square() { s.sqrt() } else { x[1..].iter().fold(x[0], |h, &c| h.hypot(c)) }
 }
 
-/// A value: a scalar, or a vector whose unused trailing components are zero.
+/// A value: a scalar, or a vector whose unused trailing components are zero, or a 3D
+/// orientation's quaternion [w, x, y, z] (the value of an orientation symbol in 3D only).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Value<S = f64> {
     Scalar(S),
     Vector([S; 3]),
+    Quaternion([S; 4]),
+}
+
+/// R(q) u for a quaternion q = [w, x, y, z] (Hamilton), not normalised: the matrix of
+/// DESIGN.md, "Rigid bodies",
+/// [[1−2(y²+z²), 2(xy−wz), 2(xz+wy)], [2(xy+wz), 1−2(x²+z²), 2(yz−wx)], [2(xz−wy), 2(yz+wx), 1−2(x²+y²)]].
+/// The one meaning of `rot` in 3D: the interpreter's; the tape lowers the same products.
+pub fn rotate<S: Scalar>(q: [S; 4], u: [S; 3]) -> [S; 3] {
+    let [w, x, y, z] = q;
+    let two = S::ONE + S::ONE;
+    let m = [
+        [S::ONE - two * (y * y + z * z), two * (x * y - w * z), two * (x * z + w * y)],
+        [two * (x * y + w * z), S::ONE - two * (x * x + z * z), two * (y * z - w * x)],
+        [two * (x * z - w * y), two * (y * z + w * x), S::ONE - two * (x * x + y * y)],
+    ];
+    m.map(|row| row[0] * u[0] + row[1] * u[1] + row[2] * u[2])
 }
 
 impl<S: Scalar> Value<S> {
     pub fn scalar(self) -> Option<S> {
         match self {
             Value::Scalar(x) => Some(x),
-            Value::Vector(_) => None,
+            Value::Vector(_) | Value::Quaternion(_) => None,
         }
     }
 
     pub fn vector(self) -> Option<[S; 3]> {
         match self {
             Value::Vector(v) => Some(v),
-            Value::Scalar(_) => None,
+            Value::Scalar(_) | Value::Quaternion(_) => None,
+        }
+    }
+
+    pub fn quaternion(self) -> Option<[S; 4]> {
+        match self {
+            Value::Quaternion(q) => Some(q),
+            Value::Scalar(_) | Value::Vector(_) => None,
         }
     }
 
@@ -176,6 +200,7 @@ impl<S: Scalar> Value<S> {
         match self {
             Value::Scalar(x) => Value::Scalar(f(x)),
             Value::Vector(v) => Value::Vector(v.map(f)),
+            Value::Quaternion(q) => Value::Quaternion(q.map(f)),
         }
     }
 }
@@ -186,6 +211,7 @@ impl Value {
         match self {
             Value::Scalar(x) => vec![x],
             Value::Vector(v) => v[..dim].to_vec(),
+            Value::Quaternion(q) => q.to_vec(),
         }
     }
 
@@ -193,6 +219,7 @@ impl Value {
         match self {
             Value::Scalar(x) => x.is_finite(),
             Value::Vector(v) => v.iter().all(|x| x.is_finite()),
+            Value::Quaternion(q) => q.iter().all(|x| x.is_finite()),
         }
     }
 }
@@ -284,6 +311,8 @@ fn eval_node<S: Scalar>(graph: &Graph, node: &Node, values: &[Value<S>], env: &E
                 match values[x.index()] {
                     Value::Scalar(y) => k *= y,
                     Value::Vector(w) => vec = Some(w),
+                    // Never a factor: the lowering allows a quaternion only in `rot`.
+                    Value::Quaternion(_) => k *= S::NAN,
                 }
             }
             match vec {
@@ -316,6 +345,10 @@ fn eval_node<S: Scalar>(graph: &Graph, node: &Node, values: &[Value<S>], env: &E
                 *arg = s(c);
             }
             Value::Scalar(f.apply(&args))
+        }
+        Node::Rot([q, u]) if graph.dim() == 3 => {
+            let q = values[q.index()].quaternion().unwrap_or([S::NAN; 4]);
+            Value::Vector(rotate(q, v(u)))
         }
         Node::Rot([theta, u]) => {
             let (th, u) = (s(theta), v(u));

@@ -164,6 +164,9 @@ fn propagate(g: &mut Graph, id: Id, node: &Node, w: Id) -> Result<Vec<(Id, Id)>,
                 out.push((u, gu));
             }
         }
+        // 3D: no symbol a gradient is taken for (a position, ω, t) is inside `rot(q, s)`:
+        // q is read by `rot` only and `s` is constant in time, so this is never reached.
+        Node::Rot(_) if g.dim() == 3 => return Err(TypeError::OnlyIn2d { name: "∂rot/∂q" }),
         Node::Rot([theta, v]) => {
             // ∂(R(θ) s)/∂θ = perp(R(θ) s), so θ gets w·perp(R(θ) s); s gets Rᵀ w, written
             // in components [w.x cos θ + w.y sin θ, −w.x sin θ + w.y cos θ].

@@ -258,7 +258,9 @@ pub enum Role {
     Force { body: usize },
     /// A body's mass: a constant.
     Mass { body: usize },
-    /// A rigid body's orientation (2D: the angle θ); its derivative is the angular velocity.
+    /// A rigid body's orientation (2D: the angle θ; 3D: a unit quaternion, typed scalar,
+    /// read only by `rot`); its derivative is the angular velocity (in 3D only `rot`'s
+    /// d/dt uses it: d rot(q, s)/dt = ω × rot(q, s)).
     Orientation { body: usize },
     /// A rigid body's angular velocity ω; its derivative is the angular acceleration.
     AngularVelocity { body: usize },
@@ -319,7 +321,8 @@ pub enum Node {
     /// others repeat the first argument ([`Func::slots`]), so equal calls are equal nodes.
     Call(Func, [Id; MAX_ARITY]),
     /// `rot(θ, s)`: the body-frame vector `s` (constant in time) turned by the orientation
-    /// θ into world coordinates, R(θ) s. 2D: θ is a scalar angle.
+    /// θ into world coordinates, R(θ) s. 2D: θ is a scalar angle; 3D: θ is a unit
+    /// quaternion symbol ([`Graph::is_quaternion`]), whose only use is here.
     Rot([Id; 2]),
     /// `perp(u)` in 2D: `u` turned a quarter turn counter-clockwise, [−u.y, u.x].
     Perp(Id),
@@ -694,6 +697,12 @@ impl Graph {
         self.make(Node::Rot([theta, s]))
     }
 
+    /// Whether `s` is a 3D orientation: a unit quaternion [w, x, y, z], four numbers in a
+    /// state, which the graph types as a scalar and which only `rot` may read.
+    pub fn is_quaternion(&self, s: Symbol) -> bool {
+        self.dim == 3 && matches!(self.symbols[s.index()].role, Role::Orientation { .. })
+    }
+
     /// `perp(u)` = [−u.y, u.x] (2D).
     pub fn perp(&mut self, u: Id) -> Result<Id, TypeError> {
         self.make(Node::Perp(u))
@@ -774,9 +783,8 @@ impl Graph {
                 result
             }
             Node::Rot([theta, s]) => {
-                if self.dim != 2 {
-                    return Err(TypeError::OnlyIn2d { name: "rot" });
-                }
+                // 3D: the quaternion symbol has the scalar type (it is no vector of the
+                // file's dimension); the lowering allows it nowhere else.
                 expect(&[*theta], Ty::Scalar)?;
                 expect(&[*s], Ty::Vector)?;
                 Ty::Vector

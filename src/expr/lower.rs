@@ -105,6 +105,12 @@ pub enum LowerErrorKind {
         "the vector `rot` turns must be constant in time (numbers and parameters, in the body's frame): it uses `{name}`"
     )]
     TimeVaryingBodyVector { name: String },
+    /// A 3D orientation (a quaternion) outside `rot`: its time derivative is not written
+    /// symbolically (d rot(q, s)/dt = ω × rot(q, s) needs none), so nothing else may read it.
+    #[error(
+        "`{name}` is a 3D orientation (a unit quaternion): it can only turn a vector, as in `rot({name}, s)`; compare points or axes of the body instead"
+    )]
+    BareQuaternion { name: String },
     #[error("{0}")]
     Type(#[from] TypeError),
 }
@@ -277,6 +283,11 @@ impl Lower<'_> {
 
     fn ident(&mut self, name: &str, span: Span) -> Result<Id, LowerError> {
         if let Some(id) = self.scope.get(name) {
+            if let Node::Sym(sym) = self.graph.node(id)
+                && self.graph.is_quaternion(*sym)
+            {
+                return Err(LowerError { span, kind: LowerErrorKind::BareQuaternion { name: name.to_string() } });
+            }
             return Ok(id);
         }
         if is_function_name(name) {
@@ -381,7 +392,11 @@ impl Lower<'_> {
 
     /// The first argument of `rot`: a rigid body's orientation symbol.
     fn orientation(&mut self, s: &Syntax) -> Result<Id, LowerError> {
-        let id = self.expr(s)?;
+        // A name is looked up here, not by `ident`, which refuses a 3D orientation elsewhere.
+        let id = match &s.kind {
+            SyntaxKind::Ident(name) if let Some(id) = self.scope.get(name) => id,
+            _ => self.expr(s)?,
+        };
         if let Node::Sym(sym) = self.graph.node(id)
             && matches!(self.graph.symbol(*sym).role, Role::Orientation { .. })
         {

@@ -15,8 +15,14 @@
 //! | `rot(θ,u)·rot(θ,w) = u·w`, `rot(θ,u)×rot(θ,w) = u×w`     | R(θ) is a rotation       |
 //! | `rot(θ,u).x = u.x cos θ − u.y sin θ`, `.y = u.x sin θ + u.y cos θ` | components     |
 //!
+//! In 3D (`q` a quaternion) `rot(q, ·)` is linear with atoms `rot(q, u)` for a constant
+//! vector symbol `u` or a unit vector eₖ, and the rules are those of a rotation:
+//! `rot(q,u)·rot(q,w) = u·w` and `rot(q,u)×rot(q,w) = rot(q, u×w)`, so a triple product
+//! of one body's vectors is its body-frame triple product, in the simplifier's one sorted
+//! form (`[u, w, z]` with a sign); a component `rot(q, u).x` is an atom.
+//!
 //! Not here: the simplifier's other rules (`simplify`), d/dt and ∇ of `rot` and `perp`
-//! (`diff`, `grad`), 3D orientations (quaternions: a later step).
+//! (`diff`, `grad`).
 
 use super::func::Func;
 use super::graph::{Axis, Graph, Id, Node, TypeError};
@@ -45,6 +51,14 @@ impl Simplifier {
     /// `rot(θ, u)` of one atom of a constant vector.
     fn rot_atom(&mut self, g: &mut Graph, theta: Id, u: VAtom) -> Result<VecForm, TypeError> {
         let one = || Frac::constant(Rational::ONE);
+        if g.dim() == 3 {
+            // 3D: every atom stays `rot(q, u)`, a unit vector as its literal.
+            let u = match u {
+                VAtom::Basis(axis) => unit(g, axis)?,
+                VAtom::Atom(a) => a,
+            };
+            return Ok(VecForm(vec![(VAtom::Atom(g.rot(theta, u)?), one())]));
+        }
         Ok(match u {
             VAtom::Basis(Axis::X) => {
                 let ex = unit_x(g)?;
@@ -127,6 +141,53 @@ impl Simplifier {
         })
     }
 
+    /// `p×q` (3D) of two vector atoms when a rule of this file applies (`Some`; its value
+    /// `None` when too large to expand): `rot(q,u)×rot(q,w) = rot(q, u×w)`.
+    pub(super) fn rigid_cross3(&mut self, g: &mut Graph, p: Id, q: Id) -> Result<Option<Option<VecForm>>, TypeError> {
+        let (Node::Rot([t1, u]), Node::Rot([t2, w])) = (g.node(p).clone(), g.node(q).clone()) else { return Ok(None) };
+        if t1 != t2 {
+            return Ok(None);
+        }
+        let one = || Frac::constant(Rational::ONE);
+        let (u, w) = (VecForm(vec![(constant_atom(g, u), one())]), VecForm(vec![(constant_atom(g, w), one())]));
+        let Some(body_frame) = self.cross3(g, &u, &w)? else { return Ok(Some(None)) };
+        let mut acc = VecForm::default();
+        for (atom, s) in body_frame.0 {
+            let Some(term) = self.rot_atom(g, t1, atom)?.scale(&s) else { return Ok(Some(None)) };
+            let Some(sum) = acc.add(&term) else { return Ok(Some(None)) };
+            acc = sum;
+        }
+        Ok(Some(Some(acc)))
+    }
+
+    /// `x·(p×q)` (3D) when two of the three turn with one quaternion: the cyclic order puts
+    /// them in the cross product, `rot(q,u)×rot(q,w) = rot(q, u×w)`, and the dot product is
+    /// taken of the result (`Some`; its value `None` when too large), else `None`.
+    pub(super) fn rigid_triple(
+        &mut self,
+        g: &mut Graph,
+        x: Id,
+        p: Id,
+        q: Id,
+    ) -> Result<Option<Option<Frac>>, TypeError> {
+        if g.dim() != 3 {
+            return Ok(None);
+        }
+        // x·(p×q) = p·(q×x) = q·(x×p)
+        for (a, b, c) in [(x, p, q), (p, q, x), (q, x, p)] {
+            let Some(turned) = self.rigid_cross3(g, b, c)? else { continue };
+            let Some(turned) = turned else { return Ok(Some(None)) };
+            let mut acc = Frac::zero();
+            for (atom, s) in turned.0 {
+                let Some(d) = self.dot_atoms(g, VAtom::Atom(a), atom)? else { return Ok(Some(None)) };
+                let Some(sum) = d.mul(&s).and_then(|t| acc.add(&t)) else { return Ok(Some(None)) };
+                acc = sum;
+            }
+            return Ok(Some(Some(acc)));
+        }
+        Ok(None)
+    }
+
     /// `u×w` (2D) of two atoms, through the simplifier's bilinear cross product.
     fn cross_of_atoms(&mut self, g: &mut Graph, u: VAtom, w: VAtom) -> Result<Option<Frac>, TypeError> {
         let one = || Frac::constant(Rational::ONE);
@@ -147,6 +208,8 @@ impl Simplifier {
                 Axis::X => self.component(g, b, Axis::Y)?.map(|f| f.neg()),
                 _ => self.component(g, b, Axis::X)?,
             }),
+            // 3D: a component of `rot(q, u)` is an atom of its own.
+            Node::Rot(_) if g.dim() == 3 => None,
             Node::Rot([theta, u]) => {
                 let cos = Frac::atom(g.call(Func::Cos, &[theta])?);
                 let sin = Frac::atom(g.call(Func::Sin, &[theta])?);
@@ -174,9 +237,26 @@ fn unit_x(g: &mut Graph) -> Result<Id, TypeError> {
     g.vector(vec![one, zero])
 }
 
-/// The second argument of a `rot` atom (a constant vector symbol or the literal eₓ) as an
-/// atom of a vector form.
+/// The unit vector along `axis` as a literal (3D).
+fn unit(g: &mut Graph, axis: Axis) -> Result<Id, TypeError> {
+    let entries = Axis::ALL.map(|a| g.int(i64::from(a == axis)));
+    g.vector(entries.to_vec())
+}
+
+/// The second argument of a `rot` atom (a constant vector symbol or the literal eₓ; in 3D
+/// any unit literal) as an atom of a vector form.
 fn constant_atom(g: &Graph, u: Id) -> VAtom {
+    if g.dim() == 3 {
+        if let Node::Vector(xs) = g.node(u) {
+            let ones: Vec<usize> = (0..3).filter(|&k| g.as_num(xs[k]).is_some_and(Rational::is_one)).collect();
+            if let [k] = ones[..]
+                && (0..3).all(|j| j == k || g.is_zero(xs[j]))
+            {
+                return VAtom::Basis(Axis::ALL[k]);
+            }
+        }
+        return VAtom::Atom(u);
+    }
     match g.node(u) {
         Node::Vector(xs) if g.as_num(xs[0]).is_some_and(Rational::is_one) && g.is_zero(xs[1]) => VAtom::Basis(Axis::X),
         Node::Vector(xs) if g.as_num(xs[1]).is_some_and(Rational::is_one) && g.is_zero(xs[0]) => VAtom::Basis(Axis::Y),

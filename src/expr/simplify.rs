@@ -771,6 +771,9 @@ impl Simplifier {
         if v[0] == v[1] || v[1] == v[2] || v[0] == v[2] {
             return Ok(Frac::zero());
         }
+        if let Some(Some(rigid)) = self.rigid_triple(g, x, p, q)? {
+            return Ok(rigid);
+        }
         // Sort with a parity count: the triple product is antisymmetric.
         let mut sign = 1;
         for i in 0..3 {
@@ -806,7 +809,7 @@ impl Simplifier {
     }
 
     /// `a×b` in 3D, bilinear.
-    fn cross3(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<VecForm>, TypeError> {
+    pub(super) fn cross3(&mut self, g: &mut Graph, a: &VecForm, b: &VecForm) -> Result<Option<VecForm>, TypeError> {
         let mut acc = VecForm::default();
         for (u, s) in &a.0 {
             for (w, t) in &b.0 {
@@ -854,6 +857,9 @@ impl Simplifier {
             (VAtom::Atom(a), VAtom::Atom(b)) => {
                 if a == b {
                     return Ok(Some(VecForm::default()));
+                }
+                if let Some(rigid) = self.rigid_cross3(g, a, b)? {
+                    return Ok(rigid);
                 }
                 match (g.node(a).clone(), g.node(b).clone()) {
                     // (p×q)×w = q(p·w) − p(q·w)

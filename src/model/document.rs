@@ -356,11 +356,21 @@ impl Reader<'_> {
         Some(RawBody { name: name?, position, velocity, acceleration, mass, force, rigid })
     }
 
-    /// A mass or an inertia: a number or a symbol's name. Finiteness and sign are judged in
-    /// `model::file` with the other mass checks.
+    /// A mass or an inertia: a number or a symbol's name (an inertia also a vector of
+    /// numbers, the principal moments). Finiteness and sign are judged in `model::file`
+    /// with the other mass checks.
     fn mass_like<'i, W: Display + ?Sized>(&mut self, v: &Value<'i>, what: &W) -> Spanned<RawMass<'i>> {
         match v.get_ref() {
             DeValue::String(s) => Spanned::new(v.span(), RawMass::Symbol(s.clone())),
+            DeValue::Array(items) => {
+                let xs: Vec<f64> = items
+                    .iter()
+                    .map(|x| {
+                        self.number(x, &format_args!("each component of {what}")).map_or(f64::NAN, |x| *x.get_ref())
+                    })
+                    .collect();
+                Spanned::new(v.span(), RawMass::Vector(xs))
+            }
             DeValue::Integer(_) | DeValue::Float(_) => {
                 Spanned::new(v.span(), RawMass::Number(Self::raw_number(v.get_ref()).unwrap_or(f64::NAN)))
             }

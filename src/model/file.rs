@@ -219,6 +219,10 @@ fn build<'t>(
                 MassSpec::Number(1.0)
             }
             RawMass::Symbol(s) => MassSpec::Symbol(s),
+            RawMass::Vector(_) => {
+                problems.push(Problem::VectorMass { span: body.mass.span() });
+                MassSpec::Number(1.0)
+            }
         };
         let spec = BodySpec {
             name: body.name.get_ref(),
@@ -304,6 +308,43 @@ fn declare_rigid(
             MassSpec::Number(1.0)
         }
         Some((RawMass::Symbol(s), _)) => MassSpec::Symbol(s),
+        // Principal moments: three positive finite numbers (a 2D file refuses them in the
+        // builder, naming the body).
+        Some((RawMass::Vector(_), span)) if b.system().dim() == 2 => {
+            let error = BuildError::PrincipalInertia2d(body.name.get_ref().to_string());
+            problems.push(Problem::Build { span, error });
+            MassSpec::Number(1.0)
+        }
+        Some((RawMass::Vector(xs), span)) => match xs[..] {
+            [a, b, c] if [a, b, c].iter().all(|x| x.is_finite() && *x > 0.0) => MassSpec::Principal([a, b, c]),
+            [a, b, c] => {
+                let bad = [a, b, c].into_iter().find(|x| !(x.is_finite() && *x > 0.0)).unwrap_or(f64::NAN);
+                problems.push(Problem::Inertia { span, shown: shown(bad) });
+                MassSpec::Principal([1.0; 3])
+            }
+            _ => {
+                problems.push(Problem::InertiaLength { span: span.clone(), found: xs.len() });
+                MassSpec::Principal([1.0; 3])
+            }
+        },
+    };
+    // An inertia of the other dimension's kind is reported here and replaced by a
+    // placeholder of the right kind, so the body's symbols are still declared (no follow-on
+    // "unknown symbol" for its orientation).
+    let three = b.system().dim() == 3;
+    let inertia = match (inertia, rigid.inertia.as_ref()) {
+        (MassSpec::Principal(_), Some(at)) if !three => {
+            let error = BuildError::PrincipalInertia2d(body.name.get_ref().to_string());
+            problems.push(Problem::Build { span: at.span(), error });
+            MassSpec::Number(1.0)
+        }
+        (MassSpec::Number(_), Some(at)) if three => {
+            let error = BuildError::ScalarInertia3d(body.name.get_ref().to_string());
+            problems.push(Problem::Build { span: at.span(), error });
+            MassSpec::Principal([1.0; 3])
+        }
+        (MassSpec::Number(_), None) if three => MassSpec::Principal([1.0; 3]),
+        (inertia, _) => inertia,
     };
     let spec = RigidSpec {
         orientation: rigid.orientation.get_ref(),

@@ -67,6 +67,12 @@ pub enum Problem {
         "the mass \"{written}\" is a number in quotes: write it without them (`mass = {written}`), or give the name of a mass symbol"
     )]
     QuotedMass { span: Range<usize>, written: String },
+    /// A mass written as a vector.
+    #[error("a mass is one number or a scalar symbol's name, found a vector")]
+    VectorMass { span: Range<usize> },
+    /// Principal moments written with other than three entries.
+    #[error("principal moments of inertia are three numbers [I1, I2, I3], found {found}")]
+    InertiaLength { span: Range<usize>, found: usize },
     /// An inertia written as a number that is not positive and finite.
     #[error("an inertia must be a positive finite number, found {shown}")]
     Inertia { span: Range<usize>, shown: String },
@@ -195,6 +201,8 @@ impl Problem {
             | QuotedMass { span, .. }
             | MassValue { span, .. }
             | Inertia { span, .. }
+            | VectorMass { span }
+            | InertiaLength { span, .. }
             | NoInertia { span, .. }
             | RigidKeyWithoutOrientation { span, .. }
             | Cycle { span, .. }

@@ -79,6 +79,8 @@ pub struct RawRigid<'a> {
 pub enum RawMass<'a> {
     Number(f64),
     Symbol(Cow<'a, str>),
+    /// A vector literal: a 3D rigid body's principal moments (refused for a mass).
+    Vector(Vec<f64>),
 }
 
 /// A constraint as written.

@@ -276,15 +276,20 @@ pub fn environment(
         env.get(body.velocity).ok_or_else(|| missing(body.velocity))?;
         if let Some(rigid) = &body.rigid {
             env.get(rigid.orientation).ok_or_else(|| missing(rigid.orientation))?;
+            let three = rigid.nodes.axes.is_some();
             if env.get(rigid.angular_velocity).is_none() {
-                env.set(rigid.angular_velocity, Value::Scalar(0.0));
+                env.set(rigid.angular_velocity, if three { Value::Vector([0.0; 3]) } else { Value::Scalar(0.0) });
             }
             let inertia = eval_one(&system.graph, rigid.inertia, &env)
-                .map_err(|EvalError::Missing(name)| StateError::Missing(name))?
-                .scalar()
-                .unwrap_or(f64::NAN);
-            if !(inertia.is_finite() && inertia > 0.0) {
-                return Err(StateError::Inertia { name: body.name.clone(), value: inertia });
+                .map_err(|EvalError::Missing(name)| StateError::Missing(name))?;
+            // 2D: one moment; 3D: the three principal moments, each positive and finite.
+            let moments = match inertia {
+                Value::Scalar(x) if !three => vec![x],
+                Value::Vector(v) if three => v.to_vec(),
+                _ => vec![f64::NAN],
+            };
+            if let Some(&bad) = moments.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+                return Err(StateError::Inertia { name: body.name.clone(), value: bad });
             }
         }
     }
@@ -342,17 +347,23 @@ pub fn environment(
         if env.get(rigid.torque).is_some() {
             continue;
         }
+        let three = rigid.nodes.axes.is_some();
         let value = match scene.torques.iter().find(|(b, _)| *b == i) {
             Some(&(_, id)) => eval_one(&system.graph, id, &env)
-                .map_err(|error| StateError::Torque { body: body.name.clone(), error })?
-                .scalar()
-                .unwrap_or(f64::NAN),
-            None => 0.0,
+                .map_err(|error| StateError::Torque { body: body.name.clone(), error })?,
+            None if three => Value::Vector([0.0; 3]),
+            None => Value::Scalar(0.0),
         };
-        if !value.is_finite() {
-            return Err(StateError::NonFiniteTorque { body: body.name.clone(), value });
+        // 3D torques are vectors; the largest non-finite component is the one reported.
+        let shown = match value {
+            Value::Scalar(x) => x,
+            Value::Vector(v) => v.into_iter().find(|x| !x.is_finite()).unwrap_or(0.0),
+            Value::Quaternion(_) => f64::NAN,
+        };
+        if !value.is_finite() || matches!(value, Value::Quaternion(_)) {
+            return Err(StateError::NonFiniteTorque { body: body.name.clone(), value: shown });
         }
-        env.set(rigid.torque, Value::Scalar(value));
+        env.set(rigid.torque, value);
     }
     Ok(env)
 }

@@ -3,7 +3,9 @@
 //! (TOML or JSON) and `--set NAME=VALUE`.
 //!
 //! [`value`] checks a [`RawValue`] against the symbol it is given to (known, not an
-//! acceleration, scalar or vector of the file's dimension, finite); [`state_file`] and
+//! acceleration, scalar or vector of the file's dimension, finite; a 3D orientation is a
+//! quaternion of four numbers with unit norm within [`QUATERNION_TOLERANCE`], since `rot`
+//! does not normalise, else an error naming the body); [`state_file`] and
 //! [`assignment`] read the command line's forms of a state and check each entry the same
 //! way, so a caller holds `(Symbol, Value)` pairs and never a raw value. Each entry comes
 //! out [`Given`]: checked, its misfit kept rather than returned at once, so that a command
@@ -33,7 +35,18 @@ pub enum ValueError {
     VectorForScalar(String),
     #[error("`{0}` must be finite")]
     NotFinite(String),
+    /// A 3D orientation given as other than four numbers.
+    #[error("`{name}` is the orientation of body `{body}`, a unit quaternion [w, x, y, z]: found {found}")]
+    QuaternionShape { name: String, body: String, found: String },
+    /// A 3D orientation whose quaternion is not unit: `rot` does not normalise.
+    #[error(
+        "`{name}`, the orientation of body `{body}`, is not a unit quaternion: its norm is {norm} (it must be 1 within {QUATERNION_TOLERANCE:e}; `rot` does not normalise)"
+    )]
+    NonUnitQuaternion { name: String, body: String, norm: f64 },
 }
+
+/// How far from 1 a state's quaternion norm may be (relative: the norm is 1).
+pub const QUATERNION_TOLERANCE: f64 = 1e-12;
 
 fn hint(suggestion: &Option<String>) -> String {
     suggestion.as_ref().map_or_else(String::new, |s| format!("; did you mean `{s}`?"))
@@ -50,6 +63,11 @@ pub fn value(system: &System, name: &str, value: &RawValue) -> Result<(Symbol, V
     let info = system.graph.symbol(s);
     if matches!(info.role, Role::Acceleration { .. } | Role::AngularAcceleration { .. }) {
         return Err(ValueError::Acceleration(name.to_string()));
+    }
+    if let Role::Orientation { body } = info.role
+        && system.graph.is_quaternion(s)
+    {
+        return quaternion(name, &system.bodies[body].name, value).map(|q| (s, q));
     }
     let v = match (info.ty, value) {
         (Ty::Scalar, RawValue::Number(x)) => Value::Scalar(*x),
@@ -70,6 +88,23 @@ pub fn value(system: &System, name: &str, value: &RawValue) -> Result<(Symbol, V
     Ok((s, v))
 }
 
+/// A 3D orientation's value: four finite numbers of norm 1 (within [`QUATERNION_TOLERANCE`]).
+fn quaternion(name: &str, body: &str, value: &RawValue) -> Result<Value, ValueError> {
+    let shape = |found: String| ValueError::QuaternionShape { name: name.to_string(), body: body.to_string(), found };
+    let q: [f64; 4] = match value {
+        RawValue::Vector(xs) => xs[..].try_into().map_err(|_| shape(format!("{} numbers", xs.len())))?,
+        RawValue::Number(_) => return Err(shape("a number".to_string())),
+    };
+    if !q.iter().all(|x| x.is_finite()) {
+        return Err(ValueError::NotFinite(name.to_string()));
+    }
+    let norm = crate::expr::eval::norm(q);
+    if (norm - 1.0).abs() > QUATERNION_TOLERANCE {
+        return Err(ValueError::NonUnitQuaternion { name: name.to_string(), body: body.to_string(), norm });
+    }
+    Ok(Value::Quaternion(q))
+}
+
 /// Every `(name, value)` of `entries` checked by [`value`], in order; the first misfit is
 /// the error. (For programs that build a state by hand.)
 pub fn values<S: AsRef<str>>(system: &System, entries: &[(S, RawValue)]) -> Result<Vec<(Symbol, Value)>, ValueError> {
@@ -81,7 +116,7 @@ pub fn values<S: AsRef<str>>(system: &System, entries: &[(S, RawValue)]) -> Resu
 pub fn written(v: Value, dim: usize) -> String {
     match v {
         Value::Scalar(x) => x.to_string(),
-        Value::Vector(_) => {
+        Value::Vector(_) | Value::Quaternion(_) => {
             format!("[{}]", v.components(dim).iter().map(|x| x.to_string()).collect::<Vec<_>>().join(", "))
         }
     }

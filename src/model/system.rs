@@ -32,14 +32,16 @@ pub struct Body {
 }
 
 /// What a rigid body adds to a point mass (2D: scalar angle, angular velocity and
-/// acceleration, inertia and torque).
+/// acceleration, inertia and torque; 3D: a quaternion, world-frame vectors ω, α and τ, and
+/// the principal moments as a vector).
 #[derive(Clone, Debug)]
 pub struct Rigid {
     pub orientation: Symbol,
     pub angular_velocity: Symbol,
     pub angular_acceleration: Symbol,
     pub torque: Symbol,
-    /// The moment of inertia about the centre of mass: a symbol or a number.
+    /// The moment of inertia about the centre of mass: a symbol or a number (3D: the
+    /// principal moments, a vector symbol or literal).
     pub inertia: Id,
     pub nodes: RigidNodes,
 }
@@ -51,6 +53,9 @@ pub struct RigidNodes {
     pub angular_velocity: Id,
     pub angular_acceleration: Id,
     pub torque: Id,
+    /// 3D: the body's principal axes in the world, `rot(q, eₖ)` for k = x, y, z (the
+    /// columns of R(q)); `None` in 2D.
+    pub axes: Option<[Id; 3]>,
 }
 
 /// The nodes of a body's symbols.
@@ -112,6 +117,27 @@ impl System {
     }
 }
 
+impl System {
+    /// The first 3D rigid body's name: the commands that handle 2D rigid bodies but not
+    /// quaternions yet refuse a file with one, naming it ([`NotYet3dRigid`]).
+    pub fn refuse_rigid_3d(&self, command: &'static str) -> Result<(), NotYet3dRigid> {
+        match self.bodies.iter().find(|b| b.rigid.as_ref().is_some_and(|r| r.nodes.axes.is_some())) {
+            Some(b) => Err(NotYet3dRigid { command, body: b.name.clone() }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// A command that does not handle 3D rigid bodies yet, asked to run on one.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "`{command}` does not handle 3D rigid bodies yet (body `{body}` has a quaternion orientation); `lagrange derive`, `solve` and `check` do"
+)]
+pub struct NotYet3dRigid {
+    pub command: &'static str,
+    pub body: String,
+}
+
 /// A command that does not handle rigid bodies yet, asked to run on one.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
@@ -159,8 +185,25 @@ pub enum BuildError {
     NotPositional { name: String, symbol: String },
     #[error("body `{0}` is declared rigid twice")]
     RigidTwice(String),
-    #[error("rigid bodies exist only in 2D files for now (3D orientations are quaternions, a later step)")]
-    Rigid3d,
+    #[error("the mass of body `{0}` is a number or a scalar symbol, not a vector")]
+    VectorMass(String),
+    /// A 2D rigid body's inertia written as three principal moments.
+    #[error(
+        "body `{0}` is in a 2D file, where the inertia is one number (the moment about the centre of mass), not principal moments [I1, I2, I3]"
+    )]
+    PrincipalInertia2d(String),
+    /// A 3D rigid body's inertia written as one number or a scalar symbol.
+    #[error(
+        "body `{0}` is in a 3D file, where the inertia is the principal moments [I1, I2, I3] in the body frame (a vector literal or a vector symbol), not one number"
+    )]
+    ScalarInertia3d(String),
+}
+
+/// A number of the file as an exact constant node.
+fn exact_number(g: &mut crate::expr::Graph, x: f64) -> Result<Id, BuildError> {
+    let q =
+        crate::expr::Rational::parse_decimal(&format!("{x:e}")).ok_or_else(|| BuildError::BadName(format!("{x}")))?;
+    Ok(g.num(q))
 }
 
 /// Fills a [`System`] one declaration at a time.
@@ -226,6 +269,8 @@ pub struct BodySpec<'a> {
 pub enum MassSpec<'a> {
     Symbol(&'a str),
     Number(f64),
+    /// Principal moments [I1, I2, I3]: a 3D rigid body's inertia only.
+    Principal([f64; 3]),
 }
 
 /// The rotational symbols of a rigid body, by name (2D: all scalars).
@@ -361,11 +406,8 @@ impl SystemBuilder {
                     }
                 }
             }
-            MassSpec::Number(x) => {
-                let q = crate::expr::Rational::parse_decimal(&format!("{x:e}"))
-                    .ok_or_else(|| BuildError::BadName(format!("{x}")))?;
-                self.system.graph.num(q)
-            }
+            MassSpec::Number(x) => exact_number(&mut self.system.graph, x)?,
+            MassSpec::Principal(_) => return Err(BuildError::VectorMass(spec.name.to_string())),
         };
         let g = &mut self.system.graph;
         // Each symbol's node exists since it was bound in the scope: these make none.
@@ -398,45 +440,69 @@ impl SystemBuilder {
         if self.system.bodies[body].rigid.is_some() {
             return Err(BuildError::RigidTwice(name));
         }
-        if self.system.dim() != 2 {
-            return Err(BuildError::Rigid3d);
+        // 2D: scalars. 3D: ω, α and τ are world-frame vectors, the orientation a quaternion
+        // (typed scalar, read only by `rot`: `Graph::is_quaternion`), the inertia a vector.
+        let three = self.system.dim() == 3;
+        let turn = if three { Ty::Vector } else { Ty::Scalar };
+        match (&spec.inertia, three) {
+            (MassSpec::Principal(_), false) => return Err(BuildError::PrincipalInertia2d(name)),
+            (MassSpec::Number(_), true) => return Err(BuildError::ScalarInertia3d(name)),
+            _ => {}
         }
         let body_name: Arc<str> = Arc::from(name.as_str());
         let of = |what: &'static str| Kind::OfBody { what, body: body_name.clone() };
         let orientation = self.symbol(spec.orientation, Ty::Scalar, Role::Orientation { body }, of("orientation"))?;
         let angular_velocity =
-            self.symbol(spec.angular_velocity, Ty::Scalar, Role::AngularVelocity { body }, of("angular velocity"))?;
+            self.symbol(spec.angular_velocity, turn, Role::AngularVelocity { body }, of("angular velocity"))?;
         let angular_acceleration = self.symbol(
             spec.angular_acceleration,
-            Ty::Scalar,
+            turn,
             Role::AngularAcceleration { body },
             of("angular acceleration"),
         )?;
-        let torque = self.symbol(spec.torque, Ty::Scalar, Role::Torque { body }, of("torque"))?;
+        let torque = self.symbol(spec.torque, turn, Role::Torque { body }, of("torque"))?;
         let g = &mut self.system.graph;
         g.set_derivative(orientation, angular_velocity);
         g.set_derivative(angular_velocity, angular_acceleration);
         let inertia = match spec.inertia {
             MassSpec::Symbol(name) => match self.system.scope.get(name) {
-                // Bodies may share an inertia symbol, and it may be a scalar parameter.
-                Some(id) if self.system.graph.ty(id) == Ty::Scalar && self.is_inertia_or_constant(name) => id,
+                // Bodies may share an inertia symbol, and it may be a parameter (a scalar
+                // in 2D, a vector in 3D).
+                Some(id) if self.system.graph.ty(id) == turn && self.is_inertia_or_constant(name) => id,
                 _ => {
-                    let s = self.symbol(name, Ty::Scalar, Role::Inertia { body }, of("inertia"))?;
+                    let s = self.symbol(name, turn, Role::Inertia { body }, of("inertia"))?;
                     self.system.graph.sym(s)
                 }
             },
-            MassSpec::Number(x) => {
-                let q = crate::expr::Rational::parse_decimal(&format!("{x:e}"))
-                    .ok_or_else(|| BuildError::BadName(format!("{x}")))?;
-                self.system.graph.num(q)
+            MassSpec::Number(x) => exact_number(&mut self.system.graph, x)?,
+            MassSpec::Principal(moments) => {
+                let mut entries = Vec::with_capacity(3);
+                for x in moments {
+                    entries.push(exact_number(&mut self.system.graph, x)?);
+                }
+                self.system.graph.vector(entries).map_err(|_| BuildError::PrincipalInertia2d(name.clone()))?
             }
         };
         let g = &mut self.system.graph;
+        // 3D: the body's axes in the world, rot(q, eₖ), for the world inertia R diag(I) Rᵀ.
+        let axes = if three {
+            let q = g.sym(orientation);
+            let mut axes = [q; 3];
+            for (k, axis) in axes.iter_mut().enumerate() {
+                let entries: Vec<Id> = (0..3).map(|j| g.int(i64::from(j == k))).collect();
+                let unit = g.vector(entries).map_err(|_| BuildError::ScalarInertia3d(name.clone()))?;
+                *axis = g.rot(q, unit).map_err(|_| BuildError::ScalarInertia3d(name.clone()))?;
+            }
+            Some(axes)
+        } else {
+            None
+        };
         let nodes = RigidNodes {
             orientation: g.sym(orientation),
             angular_velocity: g.sym(angular_velocity),
             angular_acceleration: g.sym(angular_acceleration),
             torque: g.sym(torque),
+            axes,
         };
         self.system.bodies[body].rigid =
             Some(Rigid { orientation, angular_velocity, angular_acceleration, torque, inertia, nodes });

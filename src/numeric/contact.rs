@@ -107,6 +107,7 @@ pub fn impulse(rows: &Rows, k: usize, restitution: f64) -> Option<f64> {
         inverse_mass: rows.inverse_mass.clone(),
         velocity: rows.velocity.clone(),
         force: rows.force.clone(),
+        axes: rows.axes.clone(),
         rows: vec![row.clone()],
     };
     let scaled = Scaled::new(&single, &mut d, &mut s);

@@ -67,6 +67,9 @@ pub enum SimError {
     Output(String),
     #[error("invalid settings: {0}")]
     Settings(#[from] SettingsError),
+    /// Quaternion integration is not written yet: a 3D rigid body is refused before any step.
+    #[error(transparent)]
+    Rigid3d(#[from] crate::model::system::NotYet3dRigid),
 }
 
 /// What would have kept a diverged velocity-level run stable ([`SimError::Diverged`]); its

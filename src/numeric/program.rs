@@ -91,6 +91,10 @@ pub enum LowerError {
     MissingInput(String),
     #[error("an input symbol is listed twice: `{0}`")]
     DuplicateInput(String),
+    /// `rot` in 3D over something other than an orientation symbol (the lowering of the
+    /// language allows only those).
+    #[error("`rot` in 3D turns by an orientation symbol's quaternion only")]
+    NotAQuaternion,
 }
 
 /// A scalar SSA program: `ops[i]` computes value `i` from earlier values.
@@ -125,7 +129,13 @@ impl Inputs {
         let mut ranges = Vec::new();
         let mut n = 0usize;
         for &s in inputs {
-            let width = if g.symbol(s).ty == Ty::Vector { g.dim() } else { 1 };
+            let width = if g.is_quaternion(s) {
+                4
+            } else if g.symbol(s).ty == Ty::Vector {
+                g.dim()
+            } else {
+                1
+            };
             if slots.insert(s, (n as u32, width)).is_some() {
                 return Err(LowerError::DuplicateInput(g.symbol(s).name.clone()));
             }
@@ -148,6 +158,8 @@ impl Program {
         let mut b = Builder::default();
         // The input symbols met so far → their slot values.
         let mut slots: FastMap<Symbol, [Val; 3]> = FastMap::default();
+        // A 3D orientation takes four slots, [w, x, y, z], read only by `rot`.
+        let mut quaternions: FastMap<Symbol, [Val; 4]> = FastMap::default();
         // Node → its component values (a scalar uses entry 0).
         let mut vals: FastMap<Id, [Val; 3]> = FastMap::default();
         let dim = g.dim();
@@ -159,10 +171,14 @@ impl Program {
                 Node::Sym(s) => match (slots.get(s), inputs.slots.get(s)) {
                     (Some(v), _) => *v,
                     (None, Some(&(first, width))) => {
-                        let mut v = [0; 3];
+                        let mut v = [0; 4];
                         for (k, slot) in v.iter_mut().enumerate().take(width) {
                             *slot = b.push(Op::Input(first + k as u32));
                         }
+                        if width == 4 {
+                            quaternions.insert(*s, v);
+                        }
+                        let v = [v[0], v[1], v[2]];
                         slots.insert(*s, v);
                         v
                     }
@@ -221,6 +237,15 @@ impl Program {
                 Node::Call(f, args) => {
                     let args: Vec<Val> = args[..f.arity()].iter().map(|a| get(a)[0]).collect();
                     [b.call(*f, &args), 0, 0]
+                }
+                // R(q) s, the matrix of `eval::rotate` in its order of operations (3D).
+                Node::Rot([q, u]) if dim == 3 => {
+                    let q = match g.node(*q) {
+                        Node::Sym(s) => quaternions.get(s).copied(),
+                        _ => None,
+                    };
+                    let Some(q) = q else { return Err(LowerError::NotAQuaternion) };
+                    b.rotate(q, get(u))
                 }
                 // R(θ) s = [cos θ s.x − sin θ s.y, sin θ s.x + cos θ s.y] (2D only).
                 Node::Rot([theta, u]) => {
@@ -461,6 +486,34 @@ impl Builder {
             return self.neg(p);
         }
         self.push(Op::Mul(a.min(b), a.max(b)))
+    }
+
+    /// R(q) u, as [`eval::rotate`] computes it (the same products in the same order).
+    fn rotate(&mut self, q: [Val; 4], u: [Val; 3]) -> [Val; 3] {
+        let [w, x, y, z] = q;
+        let (one, two) = (self.constant(1.0), self.constant(2.0));
+        let (xx, yy, zz) = (self.mul(x, x), self.mul(y, y), self.mul(z, z));
+        let (xy, xz, yz) = (self.mul(x, y), self.mul(x, z), self.mul(y, z));
+        let (wx, wy, wz) = (self.mul(w, x), self.mul(w, y), self.mul(w, z));
+        let diagonal = |b: &mut Builder, p: Val, r: Val| {
+            let s = b.add(p, r);
+            let t = b.mul(two, s);
+            b.sub(one, t)
+        };
+        let off = |b: &mut Builder, p: Val, r: Val, plus: bool| {
+            let s = if plus { b.add(p, r) } else { b.sub(p, r) };
+            b.mul(two, s)
+        };
+        let m = [
+            [diagonal(self, yy, zz), off(self, xy, wz, false), off(self, xz, wy, true)],
+            [off(self, xy, wz, true), diagonal(self, xx, zz), off(self, yz, wx, false)],
+            [off(self, xz, wy, false), off(self, yz, wx, true), diagonal(self, xx, yy)],
+        ];
+        m.map(|row| {
+            let (a, b, c) = (self.mul(row[0], u[0]), self.mul(row[1], u[1]), self.mul(row[2], u[2]));
+            let ab = self.add(a, b);
+            self.add(ab, c)
+        })
     }
 
     fn div(&mut self, a: Val, b: Val) -> Val {

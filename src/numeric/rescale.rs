@@ -75,7 +75,8 @@ fn scaled_env(env: &Env, symbols: &[Symbol], e: i64) -> Env {
         match env.get(s) {
             Some(Value::Scalar(x)) => out.set(s, Value::Scalar(pow2(x, e))),
             Some(Value::Vector(v)) => out.set(s, Value::Vector(v.map(|x| pow2(x, e)))),
-            None => {}
+            // An orientation has no length.
+            Some(Value::Quaternion(_)) | None => {}
         }
     }
     out
@@ -140,6 +141,7 @@ impl Unit {
             .flat_map(|v| match v {
                 Value::Scalar(x) => [x, 0.0, 0.0],
                 Value::Vector(v) => v,
+                Value::Quaternion(_) => [0.0; 3],
             })
             .fold(0.0f64, |m, x| m.max(x.abs()));
         (big.is_finite() && big > 0.0).then(|| big.log2().floor() as i64)

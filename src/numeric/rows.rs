@@ -14,7 +14,10 @@
 //!
 //! Rigid bodies enter in generalised coordinates: after the n bodies' linear slots (1/m, v,
 //! F, and J per body) come one angular slot per rigid body (2D: 1/I, ω, τ and Jʷ, scalars
-//! in component 0 of the slot's `[f64; 3]`), in the order [`angular_bodies`] gives. So u = (v, ω),
+//! in component 0 of the slot's `[f64; 3]`), in the order [`angular_bodies`] gives; a 3D
+//! rigid body has three, one per principal axis eₖ = R(q) eₖ (1/Iₖ, eₖ·ω,
+//! eₖ·τ − (ω_b × I ω_b)ₖ with ω_b = (eⱼ·ω)ⱼ, and Jʷ·eₖ), so M⁻¹ stays diagonal with the world
+//! inertia R diag(I) Rᵀ; [`world_angular`] turns per-axis results back into world vectors. So u = (v, ω),
 //! M = blockdiag(mᵢE, Iᵢ) and A = J M⁻¹ Jᵀ, b = J M⁻¹ (F, τ) + c are what the solve, the
 //! contact logic and the projections already compute over slots: none of them needs to know
 //! which slot is an angle (DESIGN.md, "Rigid bodies"; 2D has no gyroscopic term).
@@ -31,6 +34,7 @@ use crate::expr::graph::SymbolWalk;
 use crate::expr::{Id, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::tape::{Scratch, Tape};
+use crate::numeric::vector::dot;
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -63,17 +67,51 @@ pub struct Rows {
     /// External force per body, then `[τ, 0, 0]` per angular slot.
     pub force: Vec<[f64; 3]>,
     pub rows: Vec<Row>,
+    /// 3D: per slot, the world direction an angular slot's component 0 is along (the
+    /// body's principal axis R(q) eₖ; zero for linear slots). Empty in 2D.
+    pub axes: Vec<[f64; 3]>,
 }
 
-/// The rigid bodies of `system` in the order of their angular slots: slot
-/// `system.bodies.len() + r` is the angle of the r-th body this yields.
+/// The rigid bodies of `system` in the order of their angular slots: the r-th body this
+/// yields has the slots `system.bodies.len() + r·w ..` of [`angular_width`] w.
 pub fn angular_bodies(system: &System) -> impl Iterator<Item = usize> + '_ {
     system.bodies.iter().enumerate().filter(|(_, b)| b.rigid.is_some()).map(|(i, _)| i)
 }
 
-/// The angular slot of body `body` of `system`, if it is rigid.
+/// How many angular slots a rigid body has: 1 in 2D (the angle), 3 in 3D (one per
+/// principal axis, so M = blockdiag(mE, diag(I1, I2, I3)) in the body's axes stays
+/// diagonal and the solve needs no 3×3 block).
+pub fn angular_width(system: &System) -> usize {
+    if system.dim() == 3 { 3 } else { 1 }
+}
+
+/// The first angular slot of body `body` of `system`, if it is rigid (2D: its only one).
 pub fn angular_slot(system: &System, body: usize) -> Option<usize> {
-    angular_bodies(system).position(|b| b == body).map(|r| system.bodies.len() + r)
+    angular_slots(system, body).map(|r| r.start)
+}
+
+/// The angular slots of body `body` of `system`, if it is rigid.
+pub fn angular_slots(system: &System, body: usize) -> Option<Range<usize>> {
+    let w = angular_width(system);
+    angular_bodies(system)
+        .position(|b| b == body)
+        .map(|r| system.bodies.len() + r * w..system.bodies.len() + (r + 1) * w)
+}
+
+/// The world vector Σₖ xₖ R(q) eₖ of a 3D rigid body's angular slots `slots`, from the
+/// number `x(slot)` of each (a constraint torque, an angular acceleration); 2D:
+/// `[x(slot), 0, 0]`.
+pub fn world_angular(rows: &Rows, x: impl Fn(usize) -> f64, slots: Range<usize>) -> [f64; 3] {
+    if rows.axes.is_empty() {
+        return [x(slots.start), 0.0, 0.0];
+    }
+    let mut out = [0.0; 3];
+    for slot in slots {
+        for (o, e) in out.iter_mut().zip(rows.axes[slot]) {
+            *o += x(slot) * e;
+        }
+    }
+    out
 }
 
 /// The expressions to evaluate for a system's rows, gathered once and compiled to a
@@ -99,6 +137,9 @@ struct BodySlots {
     mass: usize,
     velocity: usize,
     force: usize,
+    /// 3D: this slot is axis `k` of a rigid body whose principal axes R(q) eⱼ are the
+    /// roots `axes` (`mass`, `velocity` and `force` are then the vectors I, ω and τ).
+    principal: Option<(usize, [usize; 3])>,
 }
 
 /// One constraint row of a [`RowProgram`]: its kind, its bodies, 1/κ, and where its
@@ -159,6 +200,7 @@ impl RowProgram {
                 mass: push(&mut roots, body.mass),
                 velocity: push(&mut roots, body.nodes.velocity),
                 force: push(&mut roots, f),
+                principal: None,
             });
         }
         // One angular slot per rigid body, after every body: inertia, ω, τ.
@@ -170,11 +212,21 @@ impl RowProgram {
                 Some(&(_, expr)) => expr,
                 None => rigid.nodes.torque,
             };
-            bodies.push(BodySlots {
-                mass: push(&mut roots, rigid.inertia),
-                velocity: push(&mut roots, rigid.nodes.angular_velocity),
-                force: push(&mut roots, tau),
-            });
+            let (mass, velocity, force) = (
+                push(&mut roots, rigid.inertia),
+                push(&mut roots, rigid.nodes.angular_velocity),
+                push(&mut roots, tau),
+            );
+            match rigid.nodes.axes {
+                // 3D: one slot per principal axis, each reading I, ω, τ and the axes.
+                Some(axes) => {
+                    let axes = axes.map(|e| push(&mut roots, e));
+                    for k in 0..3 {
+                        bodies.push(BodySlots { mass, velocity, force, principal: Some((k, axes)) });
+                    }
+                }
+                None => bodies.push(BodySlots { mass, velocity, force, principal: None }),
+            }
         }
         let mut rows = Vec::with_capacity(derivation.constraints.len());
         for (k, d) in derivation.constraints.iter().enumerate() {
@@ -182,11 +234,14 @@ impl RowProgram {
             let start = roots.len();
             roots.extend(d.jacobian.iter().map(|&(_, j)| j));
             let mut slots: Vec<usize> = d.jacobian.iter().map(|&(b, _)| b).collect();
-            // Jʷ of each rigid body the row turns, in its angular slot.
+            // Jʷ of each rigid body the row turns, in its angular slot (3D: the vector Jʷ
+            // once per principal slot, projected on that axis when evaluated).
             for &(b, jw) in &d.angular {
                 if let Some(slot) = slot_of[b] {
-                    roots.push(jw);
-                    slots.push(slot);
+                    for k in 0..angular_width(system) {
+                        roots.push(jw);
+                        slots.push(slot + k);
+                    }
                 }
             }
             rows.push(RowLayout {
@@ -252,6 +307,10 @@ impl RowProgram {
                     let n = slots.len();
                     scratch.inputs[slots].copy_from_slice(&v[..n]);
                 }
+                Some(Value::Quaternion(q)) => {
+                    let n = slots.len();
+                    scratch.inputs[slots].copy_from_slice(&q[..n]);
+                }
                 None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
             }
         }
@@ -266,13 +325,49 @@ impl RowProgram {
             x[..n].copy_from_slice(&out[range]);
             x
         };
+        self.fill(system, rows, scalar, vector);
+        Ok(())
+    }
+
+    /// `rows` from the roots' values (`scalar`, `vector` by root): the one assembly of the
+    /// compiled and the interpreted paths.
+    fn fill(
+        &self,
+        system: &System,
+        rows: &mut Rows,
+        scalar: impl Fn(usize) -> f64,
+        vector: impl Fn(usize) -> [f64; 3],
+    ) {
         rows.dim = system.dim();
         rows.inverse_mass.clear();
-        rows.inverse_mass.extend(self.bodies.iter().map(|b| 1.0 / scalar(b.mass)));
         rows.velocity.clear();
-        rows.velocity.extend(self.bodies.iter().map(|b| vector(b.velocity)));
         rows.force.clear();
-        rows.force.extend(self.bodies.iter().map(|b| vector(b.force)));
+        rows.axes.clear();
+        let three = angular_width(system) == 3 && system.has_rigid_bodies();
+        for b in &self.bodies {
+            let Some((k, axes)) = b.principal else {
+                rows.inverse_mass.push(1.0 / scalar(b.mass));
+                rows.velocity.push(vector(b.velocity));
+                rows.force.push(vector(b.force));
+                if three {
+                    rows.axes.push([0.0; 3]);
+                }
+                continue;
+            };
+            // Axis k of a 3D rigid body, in its principal frame eⱼ = R(q) eⱼ:
+            // 1/Iₖ, ωₖ = eₖ·ω, and τₖ − (ω_b × I ω_b)ₖ, the gyroscopic term of Euler's
+            // equations in the body frame (ω_b = (eⱼ·ω)ⱼ).
+            let (moments, w, tau) = (vector(b.mass), vector(b.velocity), vector(b.force));
+            let e = axes.map(&vector);
+            let wb = e.map(|ej| dot(&ej, &w));
+            let iw = [moments[0] * wb[0], moments[1] * wb[1], moments[2] * wb[2]];
+            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+            let gyroscopic = wb[i] * iw[j] - wb[j] * iw[i];
+            rows.inverse_mass.push(1.0 / moments[k]);
+            rows.velocity.push([wb[k], 0.0, 0.0]);
+            rows.force.push([dot(&e[k], &tau) - gyroscopic, 0.0, 0.0]);
+            rows.axes.push(e[k]);
+        }
         rows.rows.resize_with(self.rows.len(), Row::default);
         for (layout, row) in self.rows.iter().zip(&mut rows.rows) {
             row.value = scalar(layout.value) * layout.inverse_scale;
@@ -280,9 +375,16 @@ impl RowProgram {
             row.bias = scalar(layout.bias);
             row.inequality = layout.inequality;
             row.jacobian.clear();
-            row.jacobian.extend(layout.bodies.iter().zip(layout.jacobian.clone()).map(|(&b, at)| (b, vector(at))));
+            for (&slot, at) in layout.bodies.iter().zip(layout.jacobian.clone()) {
+                let j = vector(at);
+                // A 3D angular slot holds Jʷ·eₖ, its axis' part of the vector Jʷ.
+                let j = match self.bodies[slot].principal {
+                    Some((k, axes)) => [dot(&vector(axes[k]), &j), 0.0, 0.0],
+                    None => j,
+                };
+                row.jacobian.push((slot, j));
+            }
         }
-        Ok(())
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of
@@ -291,23 +393,8 @@ impl RowProgram {
         let values = eval(&derivation.graph, &self.roots, env)?;
         let vector = |at: usize| values[at].vector().unwrap_or([f64::NAN; 3]);
         let scalar = |at: usize| values[at].scalar().unwrap_or(f64::NAN);
-        let mut rows = Rows {
-            dim: system.dim(),
-            inverse_mass: self.bodies.iter().map(|b| 1.0 / scalar(b.mass)).collect(),
-            velocity: self.bodies.iter().map(|b| vector(b.velocity)).collect(),
-            force: self.bodies.iter().map(|b| vector(b.force)).collect(),
-            rows: Vec::with_capacity(self.rows.len()),
-        };
-        for layout in &self.rows {
-            let jacobian = layout.bodies.iter().zip(layout.jacobian.clone()).map(|(&b, at)| (b, vector(at))).collect();
-            rows.rows.push(Row {
-                value: scalar(layout.value) * layout.inverse_scale,
-                rate: scalar(layout.rate) * layout.inverse_scale,
-                bias: scalar(layout.bias),
-                inequality: layout.inequality,
-                jacobian,
-            });
-        }
+        let mut rows = Rows::default();
+        self.fill(system, &mut rows, scalar, vector);
         Ok(rows)
     }
 }

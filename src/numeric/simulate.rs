@@ -304,6 +304,7 @@ struct Shown {
 impl<'s> Simulation<'s> {
     pub fn new(mut dynamics: Dynamics<'s>, env: &Env, settings: Settings) -> Result<Simulation<'s>, SimError> {
         settings.validate().map_err(SimError::Settings)?;
+        dynamics.system().refuse_rigid_3d("simulate")?;
         let unit = dynamics.choose_unit(env)?;
         let (q, v, t0) = match &unit {
             Some(unit) => initial_state(dynamics.system(), &unit.to_unit(env)),

@@ -212,6 +212,9 @@ impl Doc {
             ("force", true) => "\\vec{F}_c".into(),
             ("angular", false) => "∂C/∂θ".into(),
             ("angular", true) => "\\partial C / \\partial \\theta".into(),
+            // 3D: the coefficient of ω in Ċ (q has no derivative of its own in the formulas).
+            ("angular3", false) => "∂Ċ/∂ω".into(),
+            ("angular3", true) => "\\partial \\dot{C} / \\partial \\omega".into(),
             ("torque", false) => "τ_c".into(),
             ("torque", true) => "\\tau_c".into(),
             (other, _) => other.to_string(),
@@ -457,8 +460,11 @@ fn angular_lines(
     for (&(body, grad), &(_, dir)) in dc.angular_gradient.iter().zip(&dc.angular) {
         let name = &system.bodies[body].name;
         let Some(rigid) = &system.bodies[body].rigid else { continue };
-        let th = &g.symbol(rigid.orientation).name;
-        doc.line(out, &doc.label(&doc.sym("angular", sub), &format!("wrt {th}, body {name}")), &doc.expr(g, grad)?);
+        let (which, wrt) = match rigid.nodes.axes {
+            Some(_) => ("angular3", &g.symbol(rigid.angular_velocity).name),
+            None => ("angular", &g.symbol(rigid.orientation).name),
+        };
+        doc.line(out, &doc.label(&doc.sym(which, sub), &format!("wrt {wrt}, body {name}")), &doc.expr(g, grad)?);
         if !dc.scale.is_one() {
             let jw = if doc.style == Style::Latex { "J^{\\omega}" } else { "Jʷ" };
             let note = format!("angular direction, over {}, body {name}", dc.scale);
@@ -553,7 +559,14 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     // Newton: aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ, substituted into each C̈.
     doc.heading(out, "Newton's law");
     doc.para(out, "Step 4. Each body obeys m a = F + F_c, so a = (F + F_c)/m. Substituted into C̈ = 0:");
-    if system.has_rigid_bodies() {
+    if system.has_rigid_bodies() && system.dim() == 3 {
+        doc.para(
+            out,
+            "A rigid body also obeys Euler's law I alpha = T + T_c - w x (I w) (3D, about the centre \
+             of mass, I = R(q) diag(I1, I2, I3) R(q)^T the world inertia), so alpha = I^-1 (T + T_c - w x (I w)), \
+             with d(w)/dt = alpha and d rot(q, s)/dt = w x rot(q, s):",
+        );
+    } else if system.has_rigid_bodies() {
         doc.para(
             out,
             "A rigid body also obeys Euler's law I alpha = T + T_c (2D, about the centre of mass), \

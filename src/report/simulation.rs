@@ -9,6 +9,7 @@ fn value_json(v: &Value, dim: usize) -> Json {
     match v {
         Value::Scalar(x) => json!(x),
         Value::Vector(xs) => json!(xs[..dim]),
+        Value::Quaternion(q) => json!(q),
     }
 }
 

@@ -20,7 +20,7 @@ use crate::derive::Derivation;
 use crate::expr::{Role, Symbol};
 use crate::model::system::System;
 use crate::numeric::qp::QpStatus;
-use crate::numeric::rows::{Rows, angular_bodies, angular_slot};
+use crate::numeric::rows::{Rows, angular_bodies, angular_slots, world_angular};
 use crate::numeric::solve::{Diagnostic, MAX_DENSE_ROWS, NonFinite, RowPart, Solution};
 use serde_json::{Value, json};
 use std::fmt::Write;
@@ -73,10 +73,13 @@ pub fn json(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
     if system.has_rigid_bodies()
         && let Value::Object(map) = &mut out
     {
+        // 2D: a number per rigid body; 3D: the world vector of its principal slots.
         let per_rigid = |v: &[[f64; 3]]| {
             let mut m = serde_json::Map::new();
-            for (r, i) in angular_bodies(system).enumerate() {
-                m.insert(system.bodies[i].name.clone(), json!(v[system.bodies.len() + r][0]));
+            for i in angular_bodies(system) {
+                let Some(slots) = angular_slots(system, i) else { continue };
+                let x = world_angular(rows, |s| v[s][0], slots);
+                m.insert(system.bodies[i].name.clone(), if dim == 3 { json!(x) } else { json!(x[0]) });
             }
             Value::Object(m)
         };
@@ -91,7 +94,7 @@ pub fn json(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
                     "force": r.force[..dim],
                 });
                 if let (Some(torque), Value::Object(e)) = (r.torque, &mut entry) {
-                    e.insert("torque".into(), json!(torque));
+                    e.insert("torque".into(), if dim == 3 { json!(torque) } else { json!(torque[0]) });
                 }
                 entry
             })
@@ -106,7 +109,8 @@ struct Reaction {
     constraint: usize,
     body: usize,
     force: [f64; 3],
-    torque: Option<f64>,
+    /// In the world frame; 2D: the scalar in component 0.
+    torque: Option<[f64; 3]>,
 }
 
 /// Every constraint's reaction on each body it acts on, constraints in order and bodies in
@@ -118,11 +122,15 @@ fn reactions(system: &System, rows: &Rows, solution: &Solution) -> Vec<Reaction>
         let part = |slot: usize| row.jacobian.iter().find(|(b, _)| *b == slot).map(|(_, j)| j.map(|x| lambda * x));
         for body in 0..system.bodies.len() {
             let force = part(body);
-            let torque = angular_slot(system, body).and_then(part).map(|j| j[0]);
+            // λ Jʷ per angular slot, turned into the world frame (3D: three principal slots).
+            let torque = angular_slots(system, body).and_then(|slots| {
+                let acts = slots.clone().any(|s| part(s).is_some());
+                acts.then(|| world_angular(rows, |s| part(s).map_or(0.0, |j| j[0]), slots))
+            });
             if force.is_none() && torque.is_none() {
                 continue;
             }
-            let torque = system.bodies[body].rigid.as_ref().map(|_| torque.unwrap_or(0.0));
+            let torque = system.bodies[body].rigid.as_ref().map(|_| torque.unwrap_or([0.0; 3]));
             out.push(Reaction { constraint: k, body, force: force.unwrap_or([0.0; 3]), torque });
         }
     }
@@ -375,16 +383,22 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
     for (i, b) in system.bodies.iter().enumerate() {
         let _ = writeln!(out, "{:<bw$}  F_c = [{}]", b.name, vector(&solution.constraint_force[i]));
         let _ = writeln!(out, "{:<bw$}  a   = [{}]", "", vector(&solution.acceleration[i]));
-        // A rigid body's constraint torque and angular acceleration, from its angular slot.
-        if let Some(slot) = angular_slot(system, i) {
-            let _ = writeln!(out, "{:<bw$}  T_c = {}", "", number(solution.constraint_force[slot][0]));
-            let _ = writeln!(out, "{:<bw$}  α   = {}", "", number(solution.acceleration[slot][0]));
+        // A rigid body's constraint torque and angular acceleration, from its angular
+        // slot (3D: its principal slots, in the world frame).
+        if let Some(slots) = angular_slots(system, i) {
+            let torque = world_angular(rows, |s| solution.constraint_force[s][0], slots.clone());
+            let alpha = world_angular(rows, |s| solution.acceleration[s][0], slots);
+            let show = |x: &[f64; 3]| if dim == 3 { format!("[{}]", vector(x)) } else { number(x[0]) };
+            let _ = writeln!(out, "{:<bw$}  T_c = {}", "", show(&torque));
+            let _ = writeln!(out, "{:<bw$}  α   = {}", "", show(&alpha));
         }
     }
     if system.has_rigid_bodies() {
         let _ = writeln!(out, "\nreactions (each constraint's force and torque on each body)");
         for r in reactions(system, rows, solution) {
-            let torque = r.torque.map_or_else(String::new, |x| format!("  T = {}", number(x)));
+            let torque = r.torque.map_or_else(String::new, |x| {
+                if dim == 3 { format!("  T = [{}]", vector(&x)) } else { format!("  T = {}", number(x[0])) }
+            });
             let _ = writeln!(
                 out,
                 "  {} on {}: F = [{}]{torque}",

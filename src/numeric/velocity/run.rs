@@ -52,6 +52,7 @@ pub fn run(
     let (mut q, mut v, t0) = initial_state(system, env);
     let result = settings
         .validate()
+        .and_then(|()| Ok(system.refuse_rigid_3d("simulate --solver")?))
         .and_then(|()| run_inner(&mut dynamics, settings, &mut q, &mut v, t0, &mut summary, observe));
     summary.wall_seconds = start.elapsed().as_secs_f64();
     summary.evaluations = dynamics.evaluations;
