@@ -72,6 +72,13 @@ fn rules() -> Vec<Rule> {
                   #[error] messages of its typed errors",
         },
         Rule {
+            scope: "src/precision",
+            exempt: &[],
+            forbidden: &["format!", "write!", "writeln!", "impl fmt::Display", "impl std::fmt::Display"],
+            why: "precision measures; report::precision words it (failures are SimError values, \
+                  labels are names and flags)",
+        },
+        Rule {
             scope: "src",
             exempt: &["src/main.rs"],
             forbidden: PRINTING,

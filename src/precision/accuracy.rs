@@ -37,6 +37,8 @@ pub const MAX_STATES: usize = 100_000;
 #[derive(Clone, Debug, PartialEq)]
 pub struct AccuracyRow {
     pub body: String,
+    /// The row is the body's constraint torque (a rigid body), not its force.
+    pub torque: bool,
     /// "closed form" or "solve".
     pub method: String,
     /// "random" or "hard".
@@ -263,12 +265,13 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
             e.sort_by(f64::total_cmp);
             let median = if e.is_empty() { f64::NAN } else { e[e.len() / 2] };
             // Slot i past the bodies is rigid body rigid[i − n]'s constraint torque.
-            let body = match i.checked_sub(n) {
-                None => system.bodies[i].name.clone(),
-                Some(r) => format!("{} (torque)", system.bodies[rigid[r]].name),
+            let (body, torque) = match i.checked_sub(n) {
+                None => (system.bodies[i].name.clone(), false),
+                Some(r) => (system.bodies[rigid[r]].name.clone(), true),
             };
             rows.push(AccuracyRow {
                 body,
+                torque,
                 method: method.into(),
                 states: class.into(),
                 count: e.len(),

@@ -17,6 +17,7 @@
 pub mod accuracy;
 pub mod reference;
 
+use crate::numeric::dynamics::SimError;
 use crate::numeric::integrate::Integrator;
 use crate::numeric::simulate::{MAX_STEPS, Summary};
 use crate::numeric::stabilize::Stabilize;
@@ -115,8 +116,8 @@ pub struct SweepRow {
     pub energy_error: Option<f64>,
     /// max |qᵢ − qᵢ,ref| / the scene's size; None when the run failed.
     pub final_error: Option<f64>,
-    /// "ok", or why the run stopped.
-    pub status: String,
+    /// Why the run stopped, if it did.
+    pub failure: Option<SimError>,
 }
 
 /// The reference run and the sweep's rows.
@@ -125,8 +126,9 @@ pub struct WorkPrecision {
     pub reference_dt: f64,
     pub reference_steps: u64,
     pub reference_wall_seconds: f64,
-    /// Why the reference run failed, if it did (the final-state errors are then unknown).
-    pub reference_error: Option<String>,
+    /// Why the reference run (RK4 + projection at `reference_dt`) failed, if it did (the
+    /// final-state errors are then unknown).
+    pub reference_error: Option<SimError>,
     pub rows: Vec<SweepRow>,
 }
 
@@ -137,21 +139,21 @@ fn steps_for(duration: f64, dt: f64) -> u64 {
 /// Runs the sweep over `scenario`.
 pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecision, SweepError> {
     sweep.validate()?;
-    let run = |integrator, stabilize, dt: f64| -> Result<Summary, String> {
+    let run = |integrator, stabilize, dt: f64| -> Result<Summary, SimError> {
         let mut settings = scenario.settings();
         settings.integrator = integrator;
         settings.stabilize = stabilize;
         // Same simulated time for every step: round the step count, then fit dt to it.
         settings.steps = steps_for(sweep.duration, dt);
         settings.dt = sweep.duration / settings.steps as f64;
-        scenario.simulate(settings, &mut |_| Ok(())).map_err(|f| f.error.to_string())
+        scenario.simulate(settings, &mut |_| Ok(())).map_err(|f| f.error)
     };
     let finest = sweep.steps.iter().copied().fold(f64::INFINITY, f64::min);
     let reference_dt = finest / sweep.refinement;
     // A failed reference leaves the final-state errors unknown, not the rest of the table.
     let (reference, reference_error) = match run(Integrator::Rk4, Stabilize::PROJECTION, reference_dt) {
         Ok(s) => (Some(s), None),
-        Err(e) => (None, Some(format!("the reference run (RK4 + projection, dt = {reference_dt:e}) failed: {e}"))),
+        Err(e) => (None, Some(e)),
     };
     // The bodies' positions only: a rigid body's angle (its slot after the bodies) is no length.
     let bodies = scenario.system.bodies.len();
@@ -183,7 +185,7 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
                             max_abs_c_dot: s.max_abs_c_dot,
                             energy_error: s.energy_rel_drift,
                             final_error: error,
-                            status: "ok".into(),
+                            failure: None,
                         }
                     }
                     Err(e) => SweepRow {
@@ -196,7 +198,7 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
                         max_abs_c_dot: f64::NAN,
                         energy_error: None,
                         final_error: None,
-                        status: e,
+                        failure: Some(e),
                     },
                 };
                 rows.push(row);

@@ -1,8 +1,9 @@
 //! `lagrange bench`'s results (`precision`) as a text table, JSON (`{"rows": [...],
 //! "accuracy": [...]}`) or CSV, and the lines of the work-precision plot.
 
-use crate::precision::WorkPrecision;
+use crate::numeric::dynamics::SimError;
 use crate::precision::accuracy::AccuracyRow;
+use crate::precision::{SweepRow, WorkPrecision};
 use crate::report::plot::Line;
 use serde_json::{Value as Json, json};
 
@@ -24,7 +25,7 @@ pub fn json(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> Json {
                 "integrator": r.integrator, "stabilize": r.stabilize, "dt": r.dt, "steps": r.steps,
                 "wall_per_second": num(r.wall_per_second), "max_abs_C": num(r.max_abs_c),
                 "max_abs_C_dot": num(r.max_abs_c_dot), "energy_error": opt(r.energy_error),
-                "final_error": opt(r.final_error), "status": r.status,
+                "final_error": opt(r.final_error), "status": status(r),
             })
         })
         .collect();
@@ -32,7 +33,7 @@ pub fn json(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> Json {
         .iter()
         .map(|a| {
             json!({
-                "body": a.body, "method": a.method, "states": a.states, "count": a.count,
+                "body": label(a), "method": a.method, "states": a.states, "count": a.count,
                 "median_rel_error": num(a.median_rel_error), "max_rel_error": num(a.max_rel_error),
                 "nanos_per_eval": num(a.nanos_per_eval),
             })
@@ -41,10 +42,25 @@ pub fn json(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> Json {
     json!({
         "reference": {"integrator": "rk4", "stabilize": "projection", "dt": wp.reference_dt,
                       "steps": wp.reference_steps, "wall_seconds": num(wp.reference_wall_seconds),
-                      "error": wp.reference_error},
+                      "error": wp.reference_error.as_ref().map(|e| reference_failure(wp, e))},
         "rows": rows,
         "accuracy": accuracy,
     })
+}
+
+/// An accuracy row's label: the body, `rod (torque)` for a rigid body's constraint torque.
+fn label(a: &AccuracyRow) -> String {
+    if a.torque { format!("{} (torque)", a.body) } else { a.body.clone() }
+}
+
+/// A row's status: `ok`, or why the run stopped.
+fn status(r: &SweepRow) -> String {
+    r.failure.as_ref().map_or_else(|| "ok".to_string(), ToString::to_string)
+}
+
+/// Why the reference run failed, as a sentence.
+fn reference_failure(wp: &WorkPrecision, e: &SimError) -> String {
+    format!("the reference run (RK4 + projection, dt = {:e}) failed: {e}", wp.reference_dt)
 }
 
 fn e(x: f64) -> String {
@@ -61,7 +77,7 @@ pub fn text(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> String {
         wp.reference_dt, wp.reference_steps, wp.reference_wall_seconds
     );
     if let Some(e) = &wp.reference_error {
-        s += &format!("warning: {e}; final-state errors are unknown\n\n");
+        s += &format!("warning: {}; final-state errors are unknown\n\n", reference_failure(wp, e));
     }
     s += &format!(
         "{:<8} {:<11} {:>9} {:>8} {:>11} {:>9} {:>9} {:>9} {:>11}  status\n",
@@ -79,7 +95,7 @@ pub fn text(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> String {
             e(r.max_abs_c_dot),
             oe(r.energy_error),
             oe(r.final_error),
-            r.status
+            status(r)
         );
     }
     s += "\nformula accuracy (f64 against double-double)\n";
@@ -90,7 +106,7 @@ pub fn text(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> String {
     for a in accuracy {
         s += &format!(
             "{:<12} {:<12} {:<7} {:>6} {:>12} {:>12} {:>12.0}\n",
-            a.body,
+            label(a),
             a.method,
             a.states,
             a.count,
@@ -128,14 +144,14 @@ pub fn csv(wp: &WorkPrecision, accuracy: &[AccuracyRow]) -> String {
             csv_num(r.max_abs_c_dot),
             r.energy_error.map_or(String::new(), csv_num),
             r.final_error.map_or(String::new(), csv_num),
-            r.status.replace('"', "'")
+            status(r).replace('"', "'")
         );
     }
     s += "\nbody,method,states,count,median_rel_error,max_rel_error,nanos_per_eval\n";
     for a in accuracy {
         s += &format!(
             "{},{},{},{},{},{},{}\n",
-            a.body,
+            label(a),
             a.method,
             a.states,
             a.count,
