@@ -93,8 +93,12 @@ pub struct Simplifier {
     pub(super) built: IdMap<Id>,
     /// For `sqrt(x)` and `norm(u)` atoms: what their square is (`x`, `u·u`).
     pub(super) radicals: FastMap<Id, Rc<Frac>>,
-    /// For each `sin(x)` atom, the `cos(x)` atom of the same argument (`sin² + cos² = 1`).
+    /// For each `sin(x)` atom, the `cos(x)` atom of the same argument (`sin² + cos² = 1`),
+    /// in the order the pairs were met.
     trig: Vec<(Id, Id)>,
+    /// Each paired atom (sine or cosine) → its pair's index in `trig`, so a numerator looks
+    /// up only the pairs of its own atoms (a scene of N rotating bodies has N pairs).
+    trig_index: FastMap<Id, usize>,
     /// The `sin` (`true`) and `cos` atoms met, by argument.
     trig_seen: FastMap<(bool, Id), Id>,
     /// What [`Simplifier::simplify_alike`] did, by shape: the result, to be renamed.
@@ -544,7 +548,9 @@ impl Simplifier {
             self.trig_seen.insert((sine, *arg), atom);
             if let Some(&other) = self.trig_seen.get(&(!sine, *arg)) {
                 let pair = if sine { (atom, other) } else { (other, atom) };
-                if !self.trig.contains(&pair) {
+                if !self.trig_index.contains_key(&atom) {
+                    self.trig_index.insert(pair.0, self.trig.len());
+                    self.trig_index.insert(pair.1, self.trig.len());
                     self.trig.push(pair);
                 }
             }
@@ -563,7 +569,12 @@ impl Simplifier {
         let mut num = f.num;
         loop {
             let mut best: Option<Poly> = None;
-            for &(sin, cos) in &self.trig {
+            // The pairs whose atoms the numerator has, in the order they were met.
+            let mut pairs: Vec<usize> =
+                num.0.iter().flat_map(|(m, _)| m.0.iter().filter_map(|(a, _)| self.trig_index.get(a).copied())).collect();
+            pairs.sort_unstable();
+            pairs.dedup();
+            for &(sin, cos) in pairs.iter().map(|&k| &self.trig[k]) {
                 let squared = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 2);
                 let present = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 1);
                 if !(squared(sin) && present(cos) || squared(cos) && present(sin)) {
