@@ -570,8 +570,11 @@ impl Simplifier {
         loop {
             let mut best: Option<Poly> = None;
             // The pairs whose atoms the numerator has, in the order they were met.
-            let mut pairs: Vec<usize> =
-                num.0.iter().flat_map(|(m, _)| m.0.iter().filter_map(|(a, _)| self.trig_index.get(a).copied())).collect();
+            let mut pairs: Vec<usize> = num
+                .0
+                .iter()
+                .flat_map(|(m, _)| m.0.iter().filter_map(|(a, _)| self.trig_index.get(a).copied()))
+                .collect();
             pairs.sort_unstable();
             pairs.dedup();
             for &(sin, cos) in pairs.iter().map(|&k| &self.trig[k]) {
