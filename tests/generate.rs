@@ -83,7 +83,7 @@ fn files() -> Vec<PathBuf> {
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
             // 3D rigid bodies (quaternions) are not generated yet (`tests/rigid3d.rs`).
-            .filter(|p| !(p.starts_with("constraints/rigid") && is_3d(p)))
+            .filter(|p| !(p.starts_with("constraints/rigid") && common::is_3d(p)))
             .collect();
         here.sort();
         files.extend(here);
@@ -1125,9 +1125,4 @@ fn generate_refuses_to_overwrite_its_input() {
     let run = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("generate").arg(&inf).output().expect("runs");
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success() && stderr.contains("warning:") && stderr.contains("do not fit in f64"), "{stderr}");
-}
-
-/// Whether a constraint file is 3D (in `constraints/rigid/`: quaternion orientations).
-fn is_3d(path: &std::path::Path) -> bool {
-    std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
 }

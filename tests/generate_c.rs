@@ -41,7 +41,7 @@ fn files(rigid: bool) -> Vec<PathBuf> {
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
             // 3D rigid bodies (quaternions) are not generated yet (`tests/rigid3d.rs`).
-            .filter(|p| !(p.starts_with("constraints/rigid") && is_3d(p)))
+            .filter(|p| !(p.starts_with("constraints/rigid") && common::is_3d(p)))
             .collect();
         here.sort();
         files.extend(here);
@@ -409,9 +409,4 @@ fn the_c_step_gives_the_rust_steps_numbers_bit_for_bit() {
     }
     eprintln!("step: {compared} numbers equal bit for bit after {STEPS} steps, {} modules", c_runs.len());
     assert!(compared > 1000);
-}
-
-/// Whether a constraint file is 3D (in `constraints/rigid/`: quaternion orientations).
-fn is_3d(path: &std::path::Path) -> bool {
-    std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
 }

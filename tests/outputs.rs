@@ -10,6 +10,8 @@
 //! Outputs longer than [`INLINE_LIMIT`] (the 100-link chain) are pinned by their length and
 //! an FNV-1a hash, with their first lines for orientation, so the snapshots stay readable.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -149,12 +151,8 @@ fn generate_rust() {
 fn generate_rust_rigid() {
     // 3D rigid bodies (quaternions) are not generated yet: `tests/rigid3d.rs` has their refusal.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let files: Vec<String> = files_in(&["constraints/rigid"])
-        .into_iter()
-        .filter(|f| {
-            !std::fs::read_to_string(root.join(f)).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
-        })
-        .collect();
+    let files: Vec<String> =
+        files_in(&["constraints/rigid"]).into_iter().filter(|f| !common::is_3d(&root.join(f))).collect();
     assert!(files.len() >= 12, "expected the joint library, found {}", files.len());
     pin_files(files, "generate_rust", &["generate"]);
 }

@@ -221,3 +221,9 @@ pub fn impulse_system(rows: &Rows, u: &[[f64; 3]]) -> (DMatrix<f64>, DVector<f64
     }
     (a, ju, meff)
 }
+
+/// Whether a constraint file is 3D (in `constraints/rigid/`: quaternion orientations, which
+/// `generate`, `bench` and the velocity solvers do not handle yet).
+pub fn is_3d(path: &std::path::Path) -> bool {
+    std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
+}
