@@ -201,7 +201,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         system.constraints.iter().map(|c| c.c).chain(system.definitions.iter().map(|d| d.1)).collect();
     let forces: Vec<Id> = system.bodies.iter().map(|b| b.nodes.force).collect();
     s.keep_orientations(g, &written, &forces);
-    let mut constraints: Vec<DerivedConstraint> = Vec::with_capacity(system.constraints.len());
+    let mut constraints: Vec<DerivedConstraint> = Vec::new();
     // Constraints already derived, by shape: a repeat (the next link of a chain) is the
     // earlier derivation with the bodies renamed.
     let mut derived: FastMap<Vec<u32>, (usize, Reuse)> = FastMap::default();
@@ -211,10 +211,6 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     // Renaming follows positions along velocities and accelerations only: constraints on
     // rigid bodies are each derived.
     let reuse = repeats && !system.has_rigid_bodies();
-    if repeats {
-        // A link of a chain adds about 60 nodes to the graph.
-        g.reserve(64 * system.constraints.len());
-    }
     let name = |k: usize| move || format!("constraint `{}`", system.constraints[k].name);
     for k in 0..system.constraints.len() {
         if !reuse {
@@ -244,12 +240,12 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
         let closed_form = || format!("λ and the forces of constraint `{}`", system.constraints[0].name);
         let l = s.negated_quotient(g, b[0], a00).map_err(|e| located(e.into(), Some(0), closed_form))?;
-        let mut f = Vec::with_capacity(only.jacobian.len());
+        let mut f = Vec::new();
         for &(body, j) in &only.jacobian {
             let product = g.mul(vec![l, j])?;
             f.push((body, s.simplify(g, product).map_err(|e| located(e.into(), Some(0), closed_form))?));
         }
-        let mut t = Vec::with_capacity(only.angular.len());
+        let mut t = Vec::new();
         for &(body, j) in &only.angular {
             let product = g.mul(vec![l, j])?;
             t.push((body, s.simplify(g, product)?));
@@ -286,7 +282,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
 /// The file's definitions as the documents name them: each with its node as lowered and as
 /// laid out (both are printed as the name), those that are more than a symbol or a number.
 fn definitions(system: &System, g: &mut Graph, s: &mut Simplifier) -> Result<Vec<Definition>, TypeError> {
-    let mut out = Vec::with_capacity(system.definitions.len());
+    let mut out = Vec::new();
     for (name, id) in &system.definitions {
         let trivial = |g: &Graph, x: Id| matches!(g.node(x), Node::Sym(_) | Node::Num(_));
         if trivial(g, *id) {
@@ -303,14 +299,16 @@ fn definitions(system: &System, g: &mut Graph, s: &mut Simplifier) -> Result<Vec
 
 /// Each C̈ with aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ for every body it involves, in new vector symbols F_c,ᵢ.
 fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> Result<Vec<Id>, TypeError> {
-    let mut fc_nodes = Vec::with_capacity(system.bodies.len());
-    for body in &system.bodies {
-        let name = if system.bodies.len() == 1 { "F_c".to_string() } else { format!("F_c_{}", body.name) };
-        let s = g.declare(&name, Ty::Vector, Role::Parameter);
-        fc_nodes.push(g.sym(s));
-    }
+    let single = system.bodies.len() == 1;
+    let fc_nodes: Vec<Id> = (system.bodies.iter())
+        .map(|body| {
+            let name = if single { "F_c".to_string() } else { format!("F_c_{}", body.name) };
+            let s = g.declare(&name, Ty::Vector, Role::Parameter);
+            g.sym(s)
+        })
+        .collect();
     // The constraint torques, for rigid bodies: T_c or T_c_<body>.
-    let mut tc_nodes = Vec::with_capacity(system.bodies.len());
+    let mut tc_nodes = Vec::new();
     for body in &system.bodies {
         let name = if system.bodies.len() == 1 { "T_c".to_string() } else { format!("T_c_{}", body.name) };
         tc_nodes.push(match &body.rigid {
@@ -322,7 +320,7 @@ fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> 
             None => None,
         });
     }
-    let mut out = Vec::with_capacity(constraints.len());
+    let mut out = Vec::new();
     for (k, dc) in constraints.iter().enumerate() {
         let mut map = HashMap::new();
         for &body in &system.constraints[k].bodies {
@@ -365,11 +363,12 @@ fn force_sums(
     s: &mut Simplifier,
     constraints: &[DerivedConstraint],
 ) -> Result<(Vec<Id>, Vec<(usize, Id)>, Vec<(usize, Id)>), TypeError> {
-    let mut multipliers = Vec::with_capacity(constraints.len());
-    for c in &system.constraints {
-        let s = g.declare(&format!("lambda_{}", c.name.replace('.', "_")), Ty::Scalar, Role::Parameter);
-        multipliers.push(g.sym(s));
-    }
+    let multipliers: Vec<Id> = (system.constraints.iter())
+        .map(|c| {
+            let s = g.declare(&format!("lambda_{}", c.name.replace('.', "_")), Ty::Scalar, Role::Parameter);
+            g.sym(s)
+        })
+        .collect();
     // Each body's terms gathered from its own constraints' directions, in one pass over
     // the constraints (not every constraint searched for every body: that was quadratic).
     // A body's first direction in a constraint counts, as a search would find it.
@@ -428,7 +427,7 @@ fn derive_constraint(
     let c_dot = s.simplify(g, c_dot_raw)?;
     let c_ddot_raw = time_derivative(g, c_dot).map_err(diff_error)?;
     let c_ddot = s.simplify(g, c_ddot_raw)?;
-    let mut gradient_parts = Vec::with_capacity(involved.len());
+    let mut gradient_parts = Vec::new();
     let mut scale: Option<Rational> = None;
     for &body in involved {
         let r = system.bodies[body].position;
@@ -473,14 +472,11 @@ fn derive_constraint(
     }
     let scale = scale.ok_or_else(|| DeriveError::ZeroGradient(name.clone()))?;
     let inv = scale.recip().unwrap_or(Rational::ONE);
-    let mut jacobian = Vec::with_capacity(gradient_parts.len());
-    for &(body, grad) in &gradient_parts {
-        jacobian.push((body, s.scaled(g, grad, &inv)?));
-    }
-    let mut angular = Vec::with_capacity(angular_parts.len());
-    for &(body, grad) in &angular_parts {
-        angular.push((body, s.scaled(g, grad, &inv)?));
-    }
+    let mut scaled = |parts: &[(usize, Id)]| -> Result<Vec<(usize, Id)>, TypeError> {
+        parts.iter().map(|&(body, grad)| Ok((body, s.scaled(g, grad, &inv)?))).collect()
+    };
+    let jacobian = scaled(&gradient_parts)?;
+    let angular = scaled(&angular_parts)?;
     // c = C̈ with every acceleration (and angular acceleration) set to zero, over κ.
     let zero = g.zero_vector();
     let scalar_zero = g.int(0);
@@ -588,7 +584,7 @@ fn renamed(
     let from = reuse.slots();
     // Bodies correspond through their positions' slots.
     let involved = &system.constraints[k].bodies;
-    let mut parts = Vec::with_capacity(gradient.len());
+    let mut parts = Vec::new();
     for ((&(body, _), &grad), &j) in earlier.gradient.iter().zip(gradient).zip(jacobian) {
         let position = system.bodies[body].position;
         let slot = from.iter().position(|&s| s == position)?;
@@ -633,10 +629,7 @@ fn assemble(
             on_body[body].push((k, j));
         }
     }
-    let mut inv_mass = Vec::with_capacity(system.bodies.len());
-    for body in &system.bodies {
-        inv_mass.push(g.powi(body.mass, -1)?);
-    }
+    let inv_mass = (system.bodies.iter()).map(|body| g.powi(body.mass, -1)).collect::<Result<Vec<Id>, _>>()?;
     // Which constraints turn each rigid body, and the bodies' inverse inertias.
     let mut turning: Vec<Vec<(usize, Id)>> = vec![Vec::new(); system.bodies.len()];
     for (k, dc) in constraints.iter().enumerate() {
@@ -644,7 +637,7 @@ fn assemble(
             turning[body].push((k, j));
         }
     }
-    let mut inv_inertia = Vec::with_capacity(system.bodies.len());
+    let mut inv_inertia = Vec::new();
     for body in &system.bodies {
         inv_inertia.push(match &body.rigid {
             // 3D: I⁻¹ is applied through the body's axes (`inverse_inertia_times`).
@@ -692,7 +685,7 @@ fn assemble(
         }
     }
     pairs.sort_by_key(|(key, _)| *key);
-    let mut a = Vec::with_capacity(pairs.len());
+    let mut a = Vec::new();
     for ((k, j), terms) in pairs {
         let sum = g.add(terms)?;
         let entry = if repeats { s.simplify_alike(g, sum)? } else { s.simplify(g, sum)? };
@@ -703,9 +696,9 @@ fn assemble(
     }
     // bₖ = Σᵢ [Jₖᵢ·Fᵢ / mᵢ + Jʷₖᵢ τᵢ / Iᵢ] + cₖ (2D: no gyroscopic term; 3D:
     // Jʷₖᵢ·Iᵢ⁻¹ (τᵢ − ωᵢ × Iᵢ ωᵢ))
-    let mut b = Vec::with_capacity(constraints.len());
+    let mut b = Vec::new();
     for dc in constraints {
-        let mut terms = Vec::with_capacity(dc.jacobian.len() + dc.angular.len() + 1);
+        let mut terms = Vec::new();
         for &(body, j) in &dc.jacobian {
             let dot = g.dot(j, system.bodies[body].nodes.force)?;
             terms.push(g.mul(vec![dot, inv_mass[body]])?);
@@ -740,7 +733,7 @@ fn inverse_inertia_times(
     axes: [Id; 3],
     u: Id,
 ) -> Result<Id, TypeError> {
-    let mut terms = Vec::with_capacity(3);
+    let mut terms = Vec::new();
     for (axis, e) in crate::expr::Axis::ALL.into_iter().zip(axes) {
         let moment = g.comp(rigid.inertia, axis)?;
         let inv = g.powi(moment, -1)?;
@@ -754,7 +747,7 @@ fn inverse_inertia_times(
 /// the gyroscopic term of Euler's equations in the world frame.
 fn gyroscopic(g: &mut Graph, rigid: &crate::model::system::Rigid, axes: [Id; 3]) -> Result<Id, TypeError> {
     let w = rigid.nodes.angular_velocity;
-    let mut terms = Vec::with_capacity(3);
+    let mut terms = Vec::new();
     for (axis, e) in crate::expr::Axis::ALL.into_iter().zip(axes) {
         let moment = g.comp(rigid.inertia, axis)?;
         let along = g.dot(e, w)?;

@@ -308,7 +308,7 @@ impl Poly {
         let mut terms: Vec<(Mono, Rational)> = polys.into_iter().flat_map(|p| p.0.iter().cloned()).collect();
         work::charge(terms.len() as u64);
         terms.sort_by(|a, b| a.0.cmp(&b.0));
-        let mut out: Vec<(Mono, Rational)> = Vec::with_capacity(terms.len());
+        let mut out: Vec<(Mono, Rational)> = Vec::new();
         for (m, q) in terms {
             match out.last_mut() {
                 Some((last, sum)) if *last == m => *sum = sum.add(&q),

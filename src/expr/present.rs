@@ -112,7 +112,7 @@ impl Simplifier {
                 None => groups.push((negative, vec![(positive, q.clone())])),
             }
         }
-        let mut parts: Vec<(Frac, Id)> = Vec::with_capacity(groups.len());
+        let mut parts: Vec<(Frac, Id)> = Vec::new();
         let single = groups.len() == 1;
         for (negative, terms) in groups {
             let mut terms = terms;
@@ -773,7 +773,7 @@ fn rank_two(
 /// over two or more different atoms.
 fn constant_combination(g: &Graph, terms: &[Id]) -> Option<Vec<(Id, Rational)>> {
     let atom = |x: Id| !matches!(g.node(x), Node::Add(_) | Node::Mul(_) | Node::Vector(_) | Node::Num(_));
-    let mut out: Vec<(Id, Rational)> = Vec::with_capacity(terms.len());
+    let mut out: Vec<(Id, Rational)> = Vec::new();
     for &t in terms {
         let (u, q) = match g.node(t) {
             Node::Mul(xs) if xs.len() == 2 && atom(xs[1]) => (xs[1], g.as_num(xs[0])?.clone()),
@@ -791,7 +791,7 @@ fn constant_combination(g: &Graph, terms: &[Id]) -> Option<Vec<(Id, Rational)>> 
 /// The same combination of the atoms' time derivatives, when every atom is a symbol that
 /// has one (positions → velocities → accelerations).
 fn derivative_combination(g: &mut Graph, v: &[(Id, Rational)]) -> Option<Vec<(Id, Rational)>> {
-    let mut out = Vec::with_capacity(v.len());
+    let mut out = Vec::new();
     for (u, q) in v {
         let Node::Sym(s) = *g.node(*u) else { return None };
         let d = g.symbol(s).derivative?;
@@ -802,7 +802,7 @@ fn derivative_combination(g: &mut Graph, v: &[(Id, Rational)]) -> Option<Vec<(Id
 
 /// The same combination of the bodies' forces, when every atom is a body's position.
 fn forces_combination(g: &Graph, v: &[(Id, Rational)], forces: &[Id]) -> Option<Vec<(Id, Rational)>> {
-    let mut out = Vec::with_capacity(v.len());
+    let mut out = Vec::new();
     for (u, q) in v {
         let Node::Sym(s) = *g.node(*u) else { return None };
         let Role::Position { body } = g.symbol(s).role else { return None };

@@ -87,7 +87,7 @@ impl Simplifier {
     }
 
     fn perp_of(&mut self, g: &mut Graph, form: &VecForm) -> Result<VecForm, TypeError> {
-        let mut terms = Vec::with_capacity(form.0.len());
+        let mut terms = Vec::new();
         for (u, s) in &form.0 {
             let (atom, sign) = match *u {
                 VAtom::Basis(Axis::X) => (VAtom::Basis(Axis::Y), 1),

@@ -298,7 +298,7 @@ impl Simplifier {
 
     /// Keeps `node` unexpanded, its children simplified, as an atom.
     fn frozen(&mut self, g: &mut Graph, id: Id, node: &Node) -> Result<Canon, TypeError> {
-        let mut kids = Vec::with_capacity(node.children().len());
+        let mut kids = Vec::new();
         for &c in node.children() {
             let form = self.memo[&c].clone();
             kids.push(self.build(g, &form)?);
@@ -994,7 +994,7 @@ impl Simplifier {
 fn substitute_square(p: &Poly, x: Id, y: Id) -> Option<Poly> {
     let one_minus =
         Poly::constant(Rational::ONE).add(&Poly(vec![(Mono(smallvec::smallvec![(y, 2)]), Rational::int(-1))]));
-    let mut terms: Vec<(Mono, Rational)> = Vec::with_capacity(p.len() * 2);
+    let mut terms: Vec<(Mono, Rational)> = Vec::new();
     for (m, q) in &p.0 {
         let e = m.exponent(x);
         if e < 2 {
@@ -1019,7 +1019,7 @@ fn scalar(c: &Canon) -> Frac {
 /// The polynomial `Σ qᵢ mᵢ` of unsorted terms: sorted once, like terms collected.
 fn sum_terms(mut terms: Vec<(Mono, Rational)>) -> Poly {
     terms.sort_by(|a, b| a.0.cmp(&b.0));
-    let mut out: Vec<(Mono, Rational)> = Vec::with_capacity(terms.len());
+    let mut out: Vec<(Mono, Rational)> = Vec::new();
     for (m, q) in terms {
         match out.last_mut() {
             Some(last) if last.0 == m => last.1 = last.1.add(&q),
@@ -1096,7 +1096,7 @@ impl VecForm {
         if k.is_zero() {
             return Some(VecForm::default());
         }
-        let mut out = Vec::with_capacity(self.0.len());
+        let mut out = Vec::new();
         for (u, s) in &self.0 {
             out.push((*u, s.mul(k)?));
         }

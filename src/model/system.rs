@@ -476,7 +476,7 @@ impl SystemBuilder {
             },
             MassSpec::Number(x) => exact_number(&mut self.system.graph, x)?,
             MassSpec::Principal(moments) => {
-                let mut entries = Vec::with_capacity(3);
+                let mut entries = Vec::new();
                 for x in moments {
                     entries.push(exact_number(&mut self.system.graph, x)?);
                 }
@@ -566,7 +566,7 @@ impl SystemBuilder {
         }
         // A vector constraint is one scalar equality per component, `NAME.x`, `NAME.y`(, `NAME.z`).
         let parts: Vec<(String, Id)> = if self.system.graph.ty(c) == Ty::Vector {
-            let mut parts = Vec::with_capacity(self.system.dim());
+            let mut parts = Vec::new();
             for axis in &crate::expr::Axis::ALL[..self.system.dim()] {
                 let component = self.system.graph.comp(c, *axis).map_err(|e| BuildError::Lower {
                     context: context(),

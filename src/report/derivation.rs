@@ -255,7 +255,7 @@ fn one_line(s: &str) -> String {
 /// Text for a Markdown heading: a `<` that could open an HTML tag or comment (`<b`, `</`,
 /// `<!`, `<?`) as `&lt;`, so no raw HTML passes; `<=` in a constraint stays as written.
 fn markdown_text(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
+    let mut out = String::new();
     let mut chars = s.chars().peekable();
     while let Some(c) = chars.next() {
         let tag = c == '<' && chars.peek().is_some_and(|n| n.is_ascii_alphabetic() || matches!(n, '/' | '!' | '?'));
@@ -357,7 +357,7 @@ fn latex_escape(s: &str) -> String {
         };
         push(&mut pieces, Piece::Text(text));
     }
-    let mut out = String::with_capacity(s.len());
+    let mut out = String::new();
     for piece in pieces {
         match piece {
             Piece::Text(t) => out.push_str(&t),
@@ -724,7 +724,7 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
     let mut entries: Vec<(usize, usize, Id)> =
         d.a.iter().map(|&(k, j, id)| if k <= j { (k, j, id) } else { (j, k, id) }).collect();
     entries.sort_by_key(|&(k, j, _)| (k, j));
-    let mut a = Vec::with_capacity(entries.len());
+    let mut a = Vec::new();
     for (k, j, id) in entries {
         a.push(json!({ "row": k, "col": j, "expr": e(id)? }));
     }

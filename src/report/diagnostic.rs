@@ -122,7 +122,7 @@ pub fn escape_controls(s: &str, keep_newlines: bool) -> std::borrow::Cow<'_, str
     if !s.contains(unsafe_char) {
         return std::borrow::Cow::Borrowed(s);
     }
-    let mut out = String::with_capacity(s.len() + 8);
+    let mut out = String::new();
     for c in s.chars() {
         match c {
             '\n' if !keep_newlines => out.push_str("\\n"),
