@@ -69,6 +69,10 @@ pub struct DerivedConstraint {
     /// `(body, Jʷ = ∂C/∂θ / κ)`: the coefficient of α in C̈/κ, and of ω in Ċ/κ (2D: a scalar;
     /// 3D: a vector).
     pub angular: Vec<(usize, Id)>,
+    /// `(C/κ, Ċ/κ)` as formulas, only when κ or 1/κ is outside f64's normal range: there C
+    /// or 1/κ is ±∞ or 0 in f64, and C · (1/κ) would be NaN or 0 where C/κ is a number
+    /// (`r.x*1e400 = 1`). Otherwise the rows multiply C and Ċ by 1/κ.
+    pub over_scale: Option<(Id, Id)>,
 }
 
 /// The derivation of a whole system.
@@ -492,6 +496,11 @@ fn derive_constraint(
     }
     let at_rest = g.substitute(c_ddot, &to_zero)?;
     let bias = s.scaled(g, at_rest, &inv)?;
+    let over_scale = if scale.to_f64().is_normal() && inv.to_f64().is_normal() {
+        None
+    } else {
+        Some((s.scaled_for_numbers(g, c, &inv)?, s.scaled_for_numbers(g, c_dot, &inv)?))
+    };
     Ok(DerivedConstraint {
         c,
         c_dot_raw,
@@ -504,6 +513,7 @@ fn derive_constraint(
         bias,
         angular_gradient: angular_parts,
         angular,
+        over_scale,
     })
 }
 
@@ -579,6 +589,11 @@ fn renamed(
     to: &[Symbol],
     k: usize,
 ) -> Option<DerivedConstraint> {
+    // C/κ and Ċ/κ as formulas are not among the renamed roots: such a constraint is
+    // derived alone.
+    if earlier.over_scale.is_some() {
+        return None;
+    }
     let new = reuse.renamed(g, to)?;
     let (scalars, gradient, jacobian) = Roots { bodies: earlier.gradient.len() }.split(&new)?;
     let from = reuse.slots();
@@ -609,6 +624,7 @@ fn renamed(
         // Renaming is used only for systems of point masses.
         angular_gradient: Vec::new(),
         angular: Vec::new(),
+        over_scale: None,
     })
 }
 

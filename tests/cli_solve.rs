@@ -232,16 +232,27 @@ fn failed_statuses_exit_4_and_name_the_cause() {
     );
 }
 
+/// κ beyond f64's range either way (1e400 or 1e-400): C/κ and Ċ/κ are numbers (C and 1/κ
+/// are not, and C · (1/κ) was NaN), λ and J as usual, κ printed from its digits.
 #[test]
-fn a_scale_beyond_f64_is_named_not_shown_as_nan() {
-    // κ = 1e400: J = (1, 0) and λ are fine (exit 0); C/κ and Ċ/κ cannot be formed in f64.
-    let path = bead_with("huge_scale.toml", "r.x*1e400 = 1");
-    let out = lagrange(&["solve", path.to_str().expect("utf-8")]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let table = String::from_utf8_lossy(&out.stdout);
-    let numbers = table.split("\ndiagnostics").next().expect("the table");
-    assert!(!numbers.contains("NaN") && numbers.contains("1.000e400"), "{table}");
-    assert!(table.contains("C/κ of `wire` cannot be computed in f64: κ = 1.000e400 is beyond f64's range"), "{table}");
+fn a_scale_beyond_f64_still_gives_c_over_kappa() {
+    // The scene's state: r = [2, 0], v = [0, 1]; C/κ is r.x − 10⁻⁴⁰⁰ (= 2 in f64) or r.x − 1, Ċ/κ = v.x.
+    for (name, expr, kappa, value) in [
+        ("huge_scale.toml", "r.x*1e400 = 1", "1.000e400", 2.0),
+        ("tiny_scale.toml", "r.x*1e-400 = 1e-400", "1.000e-400", 1.0),
+    ] {
+        let path = bead_with(name, expr);
+        let file = path.to_str().expect("utf-8");
+        let out = lagrange(&["solve", file]);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let table = String::from_utf8_lossy(&out.stdout);
+        assert!(!table.contains("NaN") && !table.contains("null") && table.contains(kappa), "{table}");
+        let v = stdout_json(&lagrange(&["solve", file, "--format", "json"]));
+        let row = &v["constraints"][0];
+        assert_eq!(row["value"].as_f64(), Some(value), "{expr}: {row}");
+        assert_eq!(row["rate"].as_f64(), Some(0.0), "{expr}: {row}");
+        assert_eq!(row["lambda"].as_f64(), Some(0.0), "{expr}: {row}");
+    }
 }
 
 #[test]

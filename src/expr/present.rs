@@ -88,6 +88,30 @@ impl Simplifier {
         }
     }
 
+    /// A scalar form with every coefficient on its own term and no content in front:
+    /// `r.x − 10⁻⁴⁰⁰` rather than `10⁻⁴⁰⁰ (10⁴⁰⁰ r.x − 1)`, whose factors are out of f64's
+    /// range apart though the whole is not. For numbers only
+    /// ([`DerivedConstraint::over_scale`](crate::derive::DerivedConstraint)); the documents
+    /// use `build`. A vector form is built as `build` does.
+    pub(super) fn build_distributed(&mut self, g: &mut Graph, c: &Canon) -> Result<Id, TypeError> {
+        let Canon::S(f) = c else { return self.build(g, c) };
+        if let Some(q) = f.as_constant() {
+            return Ok(g.num(q));
+        }
+        let terms = (f.num.0.iter())
+            .map(|(m, q)| {
+                let factors = mono_factors(g, m)?;
+                term(g, q, factors)
+            })
+            .collect::<Result<Vec<Id>, TypeError>>()?;
+        let sum = g.add(terms)?;
+        if f.den.is_empty() {
+            return Ok(sum);
+        }
+        let inverse = self.inverse_denominator(g, &Rational::ONE, &f.den)?;
+        g.mul(vec![sum, inverse])
+    }
+
     fn build_frac(&mut self, g: &mut Graph, f: &Frac) -> Result<Id, TypeError> {
         if let Some(q) = f.as_constant() {
             return Ok(g.num(q));

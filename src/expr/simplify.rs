@@ -239,6 +239,17 @@ impl Simplifier {
         self.build(g, &c)
     }
 
+    /// `k · id` for evaluating in f64: as [`scaled`](Self::scaled), but each term keeps its
+    /// own coefficient (no content in front), so a value within f64's range is computed
+    /// even where its content and its terms are not.
+    pub fn scaled_for_numbers(&mut self, g: &mut Graph, id: Id, k: &Rational) -> Result<Id, TypeError> {
+        let c = match &*self.canon(g, id)? {
+            Canon::S(f) => Canon::S(f.scale(k)),
+            Canon::V(v) => Canon::V(VecForm(v.0.iter().map(|(a, s)| (*a, s.scale(k))).collect())),
+        };
+        self.build_distributed(g, &c)
+    }
+
     /// The canonical form of `id`, computing every reachable node's form once, children first.
     pub(super) fn canon(&mut self, g: &mut Graph, id: Id) -> Result<Rc<Canon>, TypeError> {
         if let Some(c) = self.memo.get(&id) {

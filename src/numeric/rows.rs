@@ -230,7 +230,13 @@ impl RowProgram {
         }
         let mut rows = Vec::with_capacity(derivation.constraints.len());
         for (k, d) in derivation.constraints.iter().enumerate() {
-            let (value, rate, bias) = (push(&mut roots, d.c), push(&mut roots, d.c_dot), push(&mut roots, d.bias));
+            // C and Ċ, multiplied by 1/κ when evaluated; or C/κ and Ċ/κ themselves where
+            // κ is out of f64's range (`DerivedConstraint::over_scale`).
+            let ((c, c_dot), inverse_scale) = match d.over_scale {
+                Some(scaled) => (scaled, 1.0),
+                None => ((d.c, d.c_dot), d.scale.recip().unwrap_or(Rational::ONE).to_f64()),
+            };
+            let (value, rate, bias) = (push(&mut roots, c), push(&mut roots, c_dot), push(&mut roots, d.bias));
             let start = roots.len();
             roots.extend(d.jacobian.iter().map(|&(_, j)| j));
             let mut slots: Vec<usize> = d.jacobian.iter().map(|&(b, _)| b).collect();
@@ -246,7 +252,7 @@ impl RowProgram {
             }
             rows.push(RowLayout {
                 inequality: system.constraints[k].inequality,
-                inverse_scale: d.scale.recip().unwrap_or(Rational::ONE).to_f64(),
+                inverse_scale,
                 bodies: slots,
                 value,
                 rate,

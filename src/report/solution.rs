@@ -189,7 +189,7 @@ fn part_words(system: &System, part: RowPart) -> String {
 }
 
 /// κ as the table shows it: exact when short, else in scientific notation (from its digits
-/// when it is an integer beyond f64's range).
+/// when it is beyond f64's range: `1.000e400`, `1.000e-400`).
 fn scale(derivation: &Derivation, k: usize) -> String {
     let kappa = &derivation.constraints[k].scale;
     let exact = kappa.to_string();
@@ -197,12 +197,27 @@ fn scale(derivation: &Derivation, k: usize) -> String {
         return exact;
     }
     let value = kappa.to_f64();
-    let digits = exact.trim_start_matches('-');
-    if value.is_finite() || !digits.bytes().all(|b| b.is_ascii_digit()) {
+    if value.is_normal() {
         return format!("{value:.3e}");
     }
-    let sign = if exact.starts_with('-') { "-" } else { "" };
-    format!("{sign}{}.{}e{}", &digits[..1], &digits[1..4], digits.len() - 1)
+    // p/q from the leading digits of each and their lengths.
+    let (sign, digits) = exact.strip_prefix('-').map_or(("", exact.as_str()), |d| ("-", d));
+    let (p, q) = digits.split_once('/').unwrap_or((digits, "1"));
+    let lead = |d: &str| {
+        let head = &d[..d.len().min(15)];
+        (head.parse::<f64>().unwrap_or(1.0) / 10f64.powi(head.len() as i32 - 1), d.len() as i64 - 1)
+    };
+    let ((mp, ep), (mq, eq)) = (lead(p), lead(q));
+    let (mut m, mut e) = (mp / mq, ep - eq);
+    if m < 1.0 {
+        m *= 10.0;
+        e -= 1;
+    }
+    if (m * 1000.0).round() >= 10_000.0 {
+        m /= 10.0;
+        e += 1;
+    }
+    format!("{sign}{m:.3}e{e}")
 }
 
 /// "the state is off constraint `wire`: distance … (0.62× the scene's length …), speed off
