@@ -576,8 +576,10 @@ fn bilinear_groups(
     terms: &[(Mono, Rational)],
     orientations: &Orientations,
 ) -> Result<Vec<(Vec<usize>, (Rational, Mono, Id))>, TypeError> {
-    // Group by cofactor: the monomial without its single dot atom.
+    // Group by cofactor: the monomial without its single dot atom (groups in order of first
+    // appearance, found through a map: a sum of thousands of dot products stays linear).
     let mut by_cofactor: Vec<(Mono, Vec<DotTerm>)> = Vec::new();
+    let mut group_of: FastMap<Mono, usize> = FastMap::default();
     for (index, (m, q)) in terms.iter().enumerate() {
         let dots: SmallVec<[(Id, i32); 4]> =
             m.0.iter().copied().filter(|(a, _)| matches!(g.node(*a), Node::Dot(_)) && !is_triple(g, *a)).collect();
@@ -585,9 +587,12 @@ fn bilinear_groups(
         let Node::Dot([u, w]) = *g.node(*dot) else { continue };
         let cofactor = m.with_exponent(*dot, 0);
         let t = DotTerm { index, u, w, coef: q.clone() };
-        match by_cofactor.iter_mut().find(|(c, _)| *c == cofactor) {
-            Some((_, list)) => list.push(t),
-            None => by_cofactor.push((cofactor, vec![t])),
+        match group_of.get(&cofactor) {
+            Some(&k) => by_cofactor[k].1.push(t),
+            None => {
+                group_of.insert(cofactor.clone(), by_cofactor.len());
+                by_cofactor.push((cofactor, vec![t]));
+            }
         }
     }
     let mut out = Vec::new();
@@ -617,7 +622,9 @@ fn is_triple(g: &Graph, a: Id) -> bool {
     matches!(g.node(a), Node::Dot([_, b]) if matches!(g.node(*b), Node::Cross(_)))
 }
 
-/// Connected components of the terms, joined when they share a vector atom.
+/// Connected components of the terms, joined when they share a vector atom: each term is
+/// joined to the first term that had each of its atoms (union–find), so the work is linear
+/// in the terms. Components come in order of their first term, members in term order.
 fn components(list: &[DotTerm]) -> Vec<Vec<usize>> {
     let mut parent: Vec<usize> = (0..list.len()).collect();
     fn find(parent: &mut [usize], i: usize) -> usize {
@@ -625,27 +632,38 @@ fn components(list: &[DotTerm]) -> Vec<Vec<usize>> {
         while parent[r] != r {
             r = parent[r];
         }
-        parent[i] = r;
+        // Path compression: every node on the way now points at the root.
+        let mut i = i;
+        while parent[i] != r {
+            let next = parent[i];
+            parent[i] = r;
+            i = next;
+        }
         r
     }
+    let mut first_with: FastMap<Id, usize> = FastMap::default();
+    for (i, t) in list.iter().enumerate() {
+        for atom in [t.u, t.w] {
+            let j = *first_with.entry(atom).or_insert(i);
+            let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
+            // The earlier root stays the root.
+            let (lo, hi) = if ri < rj { (ri, rj) } else { (rj, ri) };
+            parent[hi] = lo;
+        }
+    }
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    let mut group_of_root: FastMap<usize, usize> = FastMap::default();
     for i in 0..list.len() {
-        for j in 0..i {
-            let (a, b) = (&list[i], &list[j]);
-            if a.u == b.u || a.u == b.w || a.w == b.u || a.w == b.w {
-                let (ri, rj) = (find(&mut parent, i), find(&mut parent, j));
-                parent[ri] = rj;
+        let r = find(&mut parent, i);
+        match group_of_root.get(&r) {
+            Some(&k) => groups[k].push(i),
+            None => {
+                group_of_root.insert(r, groups.len());
+                groups.push(vec![i]);
             }
         }
     }
-    let mut groups: Vec<(usize, Vec<usize>)> = Vec::new();
-    for i in 0..list.len() {
-        let r = find(&mut parent, i);
-        match groups.iter_mut().find(|(root, _)| *root == r) {
-            Some((_, members)) => members.push(i),
-            None => groups.push((r, vec![i])),
-        }
-    }
-    groups.into_iter().map(|(_, m)| m).collect()
+    groups
 }
 
 /// Writes `Σ c (u·w)` as `k (Σ aᵢ uᵢ)·(Σ bⱼ wⱼ)` when the bilinear form has rank one, with
