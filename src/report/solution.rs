@@ -262,11 +262,24 @@ fn share(part: f64, whole: f64) -> String {
     if (1e-2..1e3).contains(&r) { format!("{r:.2}×") } else { format!("{r:.1e}×") }
 }
 
+/// Names for people: all of them up to [`LISTED_NAMES`], else the first ones and how many
+/// there are (a dense block of 3 160 rows is not a paragraph of names; JSON's
+/// `"constraints"` keeps them all).
+fn short_list(names: &[String]) -> String {
+    if names.len() <= LISTED_NAMES {
+        return names.join(", ");
+    }
+    format!("{}, … ({} in all)", names[..LISTED_NAMES - 1].join(", "), names.len())
+}
+
+/// The most names a sentence or a diagnostic's label lists in full.
+const LISTED_NAMES: usize = 8;
+
 /// A solver diagnostic as a sentence for people, constraints by name (`wire`); an index
 /// the system does not have stays a number.
 pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
     let name = |k: usize| system.constraints.get(k).map_or_else(|| k.to_string(), |c| format!("`{}`", c.name));
-    let list = |ks: &[usize]| ks.iter().map(|&k| name(k)).collect::<Vec<_>>().join(", ");
+    let list = |ks: &[usize]| short_list(&ks.iter().map(|&k| name(k)).collect::<Vec<_>>());
     match diagnostic {
         Diagnostic::NonFiniteRow { constraint, part, cause } => format!(
             "constraint {} cannot be solved here: {} is {}; it is left out",
@@ -427,7 +440,7 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
     if !diags.is_empty() {
         let _ = writeln!(out, "\ndiagnostics");
         for (c, m) in diags {
-            let _ = writeln!(out, "  - [{}] {m}", c.join(", "));
+            let _ = writeln!(out, "  - [{}] {m}", short_list(&c));
         }
     }
     out
