@@ -73,7 +73,7 @@ fn sym(system: &lagrange::System, name: &str) -> lagrange::expr::Symbol {
 
 #[test]
 fn the_ball_joint_a_is_the_engines_effective_mass() {
-    let loaded = load(&read("constraints/rigid/ball_3d.toml")).expect("valid file");
+    let loaded = load(&read("constraints/joints/ball_3d.toml")).expect("valid file");
     let system = &loaded.system;
     let d = derive(system).expect("derive");
     let program = RowProgram::new(system, &d, &[]);
@@ -359,17 +359,17 @@ fn rates_and_accelerations_match_central_differences_along_a_rotation() {
 
 #[test]
 fn a_non_unit_quaternion_is_refused_naming_the_body() {
-    let (code, _, err) = lagrange(&["solve", "constraints/rigid/ball_3d.toml", "--set", "q1=[1, 0.1, 0, 0]"]);
+    let (code, _, err) = lagrange(&["solve", "constraints/joints/ball_3d.toml", "--set", "q1=[1, 0.1, 0, 0]"]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("`q1`, the orientation of body `a`, is not a unit quaternion"), "{err}");
-    let (code, _, err) = lagrange(&["solve", "constraints/rigid/ball_3d.toml", "--set", "q1=[1, 0, 0]"]);
+    let (code, _, err) = lagrange(&["solve", "constraints/joints/ball_3d.toml", "--set", "q1=[1, 0, 0]"]);
     assert_ne!(code, Some(0), "{err}");
     assert!(err.contains("a unit quaternion [w, x, y, z]: found 3 numbers"), "{err}");
 }
 
 #[test]
 fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
-    let (code, out, err) = lagrange(&["solve", "constraints/rigid/hinge_3d.toml", "--format", "json"]);
+    let (code, out, err) = lagrange(&["solve", "constraints/joints/hinge_3d.toml", "--format", "json"]);
     assert_eq!(code, Some(0), "{err}");
     let json: serde_json::Value = serde_json::from_str(&out).expect("JSON");
     for key in ["torques", "angular_accelerations"] {
@@ -385,9 +385,9 @@ fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
 #[test]
 fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
     for args in [
-        &["simulate", "constraints/rigid/ball_3d.toml"][..],
-        &["bench", "constraints/rigid/ball_3d.toml"][..],
-        &["generate", "constraints/rigid/ball_3d.toml"][..],
+        &["simulate", "constraints/joints/ball_3d.toml"][..],
+        &["bench", "constraints/joints/ball_3d.toml"][..],
+        &["generate", "constraints/joints/ball_3d.toml"][..],
     ] {
         let (code, _, err) = lagrange(args);
         assert_eq!(code, Some(1), "{args:?}: {err}");

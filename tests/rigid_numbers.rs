@@ -94,8 +94,8 @@ fn the_pinned_rod_solves_to_its_closed_form() {
 #[test]
 fn the_numeric_lambda_agrees_with_the_symbolic_a_and_b() {
     let mut checked = 0;
-    for rel in ["revolute", "weld", "prismatic", "gear", "rod_pinned"] {
-        let rel = format!("constraints/rigid/{rel}.toml");
+    for rel in ["joints/revolute", "joints/weld", "joints/prismatic", "joints/gear", "rigid/rod_pinned"] {
+        let rel = format!("constraints/{rel}.toml");
         let loaded = load(&read(&rel)).expect("valid file");
         let system = &loaded.system;
         let d = derive(system).expect("derive");
@@ -225,26 +225,13 @@ fn a_rigid_state_without_an_angle_or_with_zero_inertia_is_an_error() {
     assert!(err.contains("a moment of inertia must be positive and finite: body `rod` has 0"), "{err}");
 }
 
-/// The rigid-body files, relative to the crate root, sorted.
-fn rigid_files() -> Vec<String> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/rigid");
-    let mut out: Vec<String> = std::fs::read_dir(dir)
-        .expect("constraints/rigid exists")
-        .filter_map(|e| e.ok()?.file_name().into_string().ok())
-        .filter(|n| n.ends_with(".toml"))
-        .map(|n| format!("constraints/rigid/{n}"))
-        .collect();
-    out.sort();
-    out
-}
-
-/// `check` on every file of `constraints/rigid/`: each `[[expect]]` (forces and torques from
+/// `check` on every file of `constraints/joints/` and `constraints/rigid/`: each `[[expect]]` (forces and torques from
 /// closed forms or the engines' formulas) holds at random states with θ and ω on the
 /// constraints, and at the states the entries give.
 #[test]
 fn every_rigid_file_passes_check() {
     let mut passed = 0;
-    for rel in rigid_files() {
+    for rel in common::rigid_files() {
         let mut checked = lagrange::check::Checked::from_text(&rel, &read(&rel)).unwrap_or_else(|e| panic!("{e}"));
         for outcome in checked.run() {
             assert!(outcome.passed, "{rel}: {outcome}");
@@ -360,12 +347,12 @@ fn the_projection_weights_the_angle_by_the_inertia() {
 }
 
 /// Ċ = κ Σᵢ (Jᵛᵢ·vᵢ + Jʷᵢ ωᵢ) + ∂C/∂t for every constraint of every joint and scene file
-/// of `constraints/rigid/`, at random states with angles on the whole circle.
+/// of `constraints/joints/` and `constraints/rigid/`, at random states with angles on the whole circle.
 #[test]
 fn c_dot_is_j_times_u_for_every_rigid_file() {
     use lagrange::expr::grad::gradient;
     let mut checked = 0;
-    for rel in rigid_files() {
+    for rel in common::rigid_files() {
         let loaded = load(&read(&rel)).expect("valid file");
         let system = &loaded.system;
         // 3D files (quaternions, vector ω) have their own J·u test in `tests/rigid3d.rs`.
