@@ -15,7 +15,7 @@
 
 mod common;
 
-use common::Rng;
+use common::{Rng, random_quaternion, turned};
 use lagrange::derive::derive;
 use lagrange::expr::eval::{Env, Value, eval_one};
 use lagrange::model::file::load;
@@ -40,12 +40,6 @@ fn lagrange(args: &[&str]) -> (Option<i32>, String, String) {
         String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
-}
-
-fn random_quaternion(rng: &mut Rng) -> [f64; 4] {
-    let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
-    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-    q.map(|x| x / n)
 }
 
 /// R(q) from nalgebra (Hamilton, [w, x, y, z]).
@@ -267,14 +261,6 @@ expr = "norm(x2 + rot(q2, s2) - x1 - rot(q1, s1)) = L"
 name = "twist"
 expr = "dot(cross(rot(q1, h1), rot(q2, b2)), rot(q1, s1) + x1 - x2) = t/3"
 "#;
-
-/// exp(½ n φ) ⊗ q₀: q₀ turned by φ about the world axis n (unit).
-fn turned(q0: [f64; 4], n: [f64; 3], phi: f64) -> [f64; 4] {
-    let (s, c) = (0.5 * phi).sin_cos();
-    let p = Quaternion::new(c, s * n[0], s * n[1], s * n[2]);
-    let q = p * Quaternion::new(q0[0], q0[1], q0[2], q0[3]);
-    [q.w, q.i, q.j, q.k]
-}
 
 #[test]
 fn rates_and_accelerations_match_central_differences_along_a_rotation() {

@@ -8,6 +8,8 @@
 //! - The numeric λ (rows → `numeric::solve`) against the symbolic A and b of the derivation
 //!   evaluated at the same random states and solved densely, for every joint file.
 //! - A door on two hinges (redundant revolute joints): the diagnostic names the rows.
+//! - Ċ = J·u + ∂C/∂t, and Ċ the central-difference rate of C along the state's own motion,
+//!   for every constraint of every joint and scene file, 2D and 3D.
 
 mod common;
 
@@ -346,19 +348,21 @@ fn the_projection_weights_the_angle_by_the_inertia() {
     assert!(q[0][0] == 1.0, "x = {}", q[0][0]);
 }
 
-/// Ċ = κ Σᵢ (Jᵛᵢ·vᵢ + Jʷᵢ ωᵢ) + ∂C/∂t for every constraint of every joint and scene file
-/// of `constraints/joints/` and `constraints/rigid/`, at random states with angles on the whole circle.
+/// Ċ = κ Σᵢ (Jᵛᵢ·vᵢ + Jʷᵢ·ωᵢ) + ∂C/∂t for every constraint of every joint and scene file
+/// (`constraints/joints/`, `constraints/rigid/`, 2D and 3D), at random states with angles on
+/// the whole circle and uniformly random unit quaternions; and Ċ is the rate of C along the
+/// motion the state gives, x + v s, θ + ω s in 2D or exp(½ ω s) ⊗ q in 3D (ω in the world
+/// frame), t + s, by fourth-order central differences: the derivation's J against numbers,
+/// not only against its own Ċ.
 #[test]
-fn c_dot_is_j_times_u_for_every_rigid_file() {
+fn c_dot_is_j_times_u_for_every_joint_and_scene_file() {
     use lagrange::expr::grad::gradient;
-    let mut checked = 0;
+    let (mut checked, mut files_3d) = (0, 0);
     for rel in common::rigid_files() {
         let loaded = load(&read(&rel)).expect("valid file");
         let system = &loaded.system;
-        // 3D files (quaternions, vector ω) have their own J·u test in `tests/rigid3d.rs`.
-        if system.dim() == 3 {
-            continue;
-        }
+        let dim = system.dim();
+        files_3d += usize::from(dim == 3);
         let mut d = derive(system).expect("derive");
         let partials: Vec<_> = d
             .constraints
@@ -372,38 +376,70 @@ fn c_dot_is_j_times_u_for_every_rigid_file() {
         for _ in 0..100 {
             let mut env: Env = common::random_env(system, &mut rng);
             for (s, info) in system.graph.symbols() {
-                if matches!(info.role, Role::Orientation { .. }) {
-                    env.set(s, Value::Scalar(rng.uniform(-3.2, 3.2)));
-                }
-                if matches!(info.role, Role::AngularVelocity { .. }) {
-                    env.set(s, Value::Scalar(rng.uniform(-2.0, 2.0)));
+                match (info.role, dim) {
+                    (Role::Orientation { .. }, 2) => env.set(s, Value::Scalar(rng.uniform(-3.2, 3.2))),
+                    (Role::Orientation { .. }, _) => env.set(s, Value::Quaternion(common::random_quaternion(&mut rng))),
+                    (Role::AngularVelocity { .. }, 2) => env.set(s, Value::Scalar(rng.uniform(-2.0, 2.0))),
+                    (Role::AngularVelocity { .. }, _) => env.set(s, Value::Vector(rng.uniform_vector(3, -2.0, 2.0))),
+                    _ => {}
                 }
             }
-            let value = |id| eval_one(&d.graph, id, &env).expect("evaluates");
+            // The state moved along its own velocities by s.
+            let moved = |s: f64| {
+                let mut e = env.clone();
+                let t = env.get(system.time).and_then(Value::scalar).expect("t");
+                e.set(system.time, Value::Scalar(t + s));
+                for body in &system.bodies {
+                    let x = env.get(body.position).expect("x").components(dim);
+                    let v = env.get(body.velocity).expect("v").components(dim);
+                    let mut moved = [0.0; 3];
+                    for c in 0..dim {
+                        moved[c] = x[c] + v[c] * s;
+                    }
+                    e.set(body.position, Value::Vector(moved));
+                    let Some(rigid) = body.rigid.as_ref() else { continue };
+                    let w = env.get(rigid.angular_velocity).expect("ω");
+                    match (env.get(rigid.orientation).expect("orientation"), w) {
+                        (Value::Scalar(th), Value::Scalar(w)) => e.set(rigid.orientation, Value::Scalar(th + w * s)),
+                        (Value::Quaternion(q), Value::Vector(w)) => {
+                            let speed = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+                            let axis = w.map(|c| c / speed);
+                            e.set(rigid.orientation, Value::Quaternion(common::turned(q, axis, speed * s)));
+                        }
+                        other => panic!("{rel}: orientation and ω {other:?}"),
+                    }
+                }
+                e
+            };
+            let h = 1e-3;
+            let around = [moved(-2.0 * h), moved(-h), moved(h), moved(2.0 * h)];
+            let value = |id, env: &Env| eval_one(&d.graph, id, env).expect("evaluates");
             for (k, c) in d.constraints.iter().enumerate() {
-                let mut u = value(partials[k]).scalar().expect("a scalar");
+                let mut u = value(partials[k], &env).scalar().expect("a scalar");
                 let kappa = c.scale.to_f64();
                 for &(b, j) in &c.jacobian {
-                    let (j, v) = (value(j).components(2), env.get(system.bodies[b].velocity).expect("v"));
-                    let v = v.components(2);
-                    u += kappa * (j[0] * v[0] + j[1] * v[1]);
+                    let j = value(j, &env).components(dim);
+                    let v = env.get(system.bodies[b].velocity).expect("v").components(dim);
+                    u += kappa * (0..dim).map(|i| j[i] * v[i]).sum::<f64>();
                 }
                 for &(b, jw) in &c.angular {
                     let rigid = system.bodies[b].rigid.as_ref().expect("a rigid body");
-                    let w = env.get(rigid.angular_velocity).and_then(Value::scalar).expect("ω");
-                    u += kappa * value(jw).scalar().expect("a scalar") * w;
+                    let w = env.get(rigid.angular_velocity).expect("ω").components(dim);
+                    let jw = value(jw, &env).components(dim);
+                    u += kappa * jw.iter().zip(&w).map(|(a, b)| a * b).sum::<f64>();
                 }
-                let c_dot = value(c.c_dot).scalar().expect("a scalar");
-                assert!(
-                    common::close(c_dot, u, 1e-11),
-                    "{rel}, {}: Ċ = {c_dot}, J·u + ∂C/∂t = {u}",
-                    system.constraints[k].name
-                );
+                let name = &system.constraints[k].name;
+                let c_dot = value(c.c_dot, &env).scalar().expect("a scalar");
+                assert!(common::close(c_dot, u, 1e-11), "{rel}, {name}: Ċ = {c_dot}, J·u + ∂C/∂t = {u}");
+                let [c2m, cm, cp, c2p] = [0, 1, 2, 3].map(|i| value(c.c, &around[i]).scalar().expect("a scalar"));
+                let rate = (-c2p + 8.0 * cp - 8.0 * cm + c2m) / (12.0 * h);
+                assert!(common::close(c_dot, rate, 1e-7), "{rel}, {name}: Ċ = {c_dot}, dC/ds = {rate}");
                 checked += 1;
             }
         }
     }
-    assert!(checked >= 2000, "{checked} rows checked");
+    assert!(files_3d >= 6, "the 3D joints: {files_3d} files");
+    assert!(checked >= 10_000, "{checked} rows checked");
 }
 
 /// `[scene] forces` takes a rigid body's torque by its symbol (`T = "…"`, a scalar): the

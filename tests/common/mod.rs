@@ -254,3 +254,22 @@ pub fn in_rigid_dirs(path: &std::path::Path) -> bool {
 pub fn is_3d(path: &std::path::Path) -> bool {
     std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
 }
+
+/// A uniformly random unit quaternion [w, x, y, z] (a normalised 4D normal sample).
+pub fn random_quaternion(rng: &mut Rng) -> [f64; 4] {
+    let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    q.map(|x| x / n)
+}
+
+/// exp(½ n φ) ⊗ q₀: q₀ turned by φ about the world axis n (unit), Hamilton's product.
+pub fn turned(q0: [f64; 4], n: [f64; 3], phi: f64) -> [f64; 4] {
+    let (s, c) = (0.5 * phi).sin_cos();
+    let p = [c, s * n[0], s * n[1], s * n[2]];
+    [
+        p[0] * q0[0] - p[1] * q0[1] - p[2] * q0[2] - p[3] * q0[3],
+        p[0] * q0[1] + p[1] * q0[0] + p[2] * q0[3] - p[3] * q0[2],
+        p[0] * q0[2] - p[1] * q0[3] + p[2] * q0[0] + p[3] * q0[1],
+        p[0] * q0[3] + p[1] * q0[2] - p[2] * q0[1] + p[3] * q0[0],
+    ]
+}
