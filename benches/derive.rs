@@ -35,7 +35,7 @@ fn main() {
 
 const BEAD_2D: &str = include_str!("../constraints/bead_on_wire.toml");
 const BEAD_3D: &str = include_str!("../constraints/bead_on_sphere.toml");
-const REVOLUTE: &str = include_str!("../constraints/rigid/revolute.toml");
+const REVOLUTE: &str = include_str!("../constraints/joints/revolute.toml");
 
 fn load_and_derive(text: &str) -> usize {
     let loaded = load(text).expect("the file loads");

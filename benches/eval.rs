@@ -332,7 +332,7 @@ fn chain_batch_tape(b: Bencher, n: usize) {
 
 // ---- the 2D revolute joint ----------------------------------------------------------------
 
-/// Two rigid bodies' numbers for the handwritten revolute joint (`constraints/rigid/revolute.toml`).
+/// Two rigid bodies' numbers for the handwritten revolute joint (`constraints/joints/revolute.toml`).
 struct Rigid2 {
     x: [f64; 2],
     v: [f64; 2],

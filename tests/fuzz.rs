@@ -232,7 +232,7 @@ fn mutate(text: &str, edits: &[Edit]) -> String {
 fn mutated_files_end_with_a_result_or_a_typed_error() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut seeds: Vec<String> = Vec::new();
-    for dir in ["constraints", "constraints/rigid", "constraints/solvers"] {
+    for dir in ["constraints", "constraints/joints", "constraints/rigid", "constraints/solvers"] {
         let mut paths: Vec<PathBuf> = std::fs::read_dir(root.join(dir))
             .expect("constraint directory")
             .map(|e| e.expect("entry").path())

@@ -1,6 +1,6 @@
 //! `lagrange generate --lang rust`: the generated modules compile with rustc (warnings
 //! denied) and compute what the reference interpreter computes, for every file in
-//! `constraints/` and `constraints/rigid/` (rigid bodies: θ, ω, τ, I in the state; Jʷ, the
+//! `constraints/`, `constraints/joints/` and `constraints/rigid/` (rigid bodies: θ, ω, τ, I in the state; Jʷ, the
 //! torques and α beside J, the forces and a) and for a file of hostile names, plain and
 //! specialised.
 
@@ -77,13 +77,13 @@ struct Case {
 
 fn files() -> Vec<PathBuf> {
     let mut files = Vec::new();
-    for dir in ["constraints", "constraints/rigid"] {
+    for dir in ["constraints", "constraints/joints", "constraints/rigid"] {
         let mut here: Vec<PathBuf> = std::fs::read_dir(dir)
             .expect("constraints/")
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
             // 3D rigid bodies (quaternions) are not generated yet (`tests/rigid3d.rs`).
-            .filter(|p| !(p.starts_with("constraints/rigid") && common::is_3d(p)))
+            .filter(|p| !(common::in_rigid_dirs(p) && common::is_3d(p)))
             .collect();
         here.sort();
         files.extend(here);
@@ -318,7 +318,13 @@ fn generated_rust_compiles_and_agrees_with_the_interpreter() {
                 states.push((literal, expected(&reference, &d, &env)));
             }
             let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("file").replace('-', "_");
-            let folder = if path.starts_with("constraints/rigid") { "rigid_" } else { "" };
+            let folder = if path.starts_with("constraints/joints") {
+                "joints_"
+            } else if path.starts_with("constraints/rigid") {
+                "rigid_"
+            } else {
+                ""
+            };
             let name = format!("{folder}{stem}{}", if specialize { "_specialized" } else { "" });
             let (rigid, banded) = (reference.system.has_rigid_bodies(), m.code.contains("pub fn a_band("));
             cases.push(Case { name, module: m, states, rigid, banded });
@@ -457,7 +463,7 @@ fn checked_in_generated_code_is_current() {
     for (file, generated) in [
         ("constraints/bead_on_wire.toml", "benches/generated/bead_on_wire.rs"),
         ("benches/data/chain_10.toml", "benches/generated/chain_10.rs"),
-        ("constraints/rigid/revolute.toml", "benches/generated/revolute.rs"),
+        ("constraints/joints/revolute.toml", "benches/generated/revolute.rs"),
     ] {
         let l = loaded(Path::new(file));
         let code = lagrange::codegen::generate(&l, &Options::default()).expect("generates");

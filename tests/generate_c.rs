@@ -1,5 +1,5 @@
 //! `generate --lang c` against `generate --lang rust`, bit for bit: for every file in
-//! `constraints/` (and `constraints/hard/`, `constraints/rigid/` — θ, ω, τ, I and Jʷ too —
+//! `constraints/` (and `constraints/hard/`, `constraints/joints/`, `constraints/rigid/` — θ, ω, τ, I and Jʷ too —
 //! and the hostile names of `tests/data`), the C
 //! module is compiled with `cc -std=c99 -Wall -Wextra -Werror -ffp-contract=off` (one
 //! invocation per file: each module is its own translation unit) and the Rust modules with
@@ -27,11 +27,11 @@ use std::process::Command;
 const STATES: usize = 4;
 
 /// The files compared: `constraints/`, `constraints/hard/`, with `rigid` also
-/// `constraints/rigid/` (the step is point-mass only), and the hostile names.
+/// `constraints/joints/` and `constraints/rigid/` (the step is point-mass only), and the hostile names.
 fn files(rigid: bool) -> Vec<PathBuf> {
     let mut files = Vec::new();
     let dirs: &[&str] = if rigid {
-        &["constraints", "constraints/hard", "constraints/rigid"]
+        &["constraints", "constraints/hard", "constraints/joints", "constraints/rigid"]
     } else {
         &["constraints", "constraints/hard"]
     };
@@ -41,7 +41,7 @@ fn files(rigid: bool) -> Vec<PathBuf> {
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
             // 3D rigid bodies (quaternions) are not generated yet (`tests/rigid3d.rs`).
-            .filter(|p| !(p.starts_with("constraints/rigid") && common::is_3d(p)))
+            .filter(|p| !(common::in_rigid_dirs(p) && common::is_3d(p)))
             .collect();
         here.sort();
         files.extend(here);

@@ -152,7 +152,7 @@ fn generate_rust_rigid() {
     // 3D rigid bodies (quaternions) are not generated yet: `tests/rigid3d.rs` has their refusal.
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let files: Vec<String> =
-        files_in(&["constraints/rigid"]).into_iter().filter(|f| !common::is_3d(&root.join(f))).collect();
+        files_in(&common::RIGID_DIRS).into_iter().filter(|f| !common::is_3d(&root.join(f))).collect();
     assert!(files.len() >= 12, "expected the joint library, found {}", files.len());
     pin_files(files, "generate_rust", &["generate"]);
 }

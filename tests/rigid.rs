@@ -310,28 +310,15 @@ fn lagrange(args: &[&str]) -> (Option<i32>, String, String) {
     )
 }
 
-/// The rigid-body files, relative to the crate root, sorted.
-fn rigid_files() -> Vec<String> {
-    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/rigid");
-    let mut out: Vec<String> = std::fs::read_dir(dir)
-        .expect("constraints/rigid exists")
-        .filter_map(|e| e.ok()?.file_name().into_string().ok())
-        .filter(|n| n.ends_with(".toml"))
-        .map(|n| format!("constraints/rigid/{n}"))
-        .collect();
-    out.sort();
-    out
-}
-
-/// `derive` of every file in `constraints/rigid/`, in every format with and without
+/// `derive` of every file in `constraints/joints/` and `constraints/rigid/`, in every format with and without
 /// `--steps`, pinned as snapshots (the outputs of `tests/outputs.rs`, for files the other
 /// commands do not handle yet). LaTeX is ASCII, so it compiles.
 #[test]
 fn every_rigid_file_derives_in_every_format() {
-    let files = rigid_files();
+    let files = common::rigid_files();
     assert!(!files.is_empty());
     for rel in &files {
-        let stem = rel.trim_start_matches("constraints/rigid/").trim_end_matches(".toml");
+        let stem = rel.rsplit('/').next().unwrap_or(rel).trim_end_matches(".toml");
         for format in ["text", "latex", "markdown", "json"] {
             for steps in [false, true] {
                 if steps && format == "json" {

@@ -15,7 +15,7 @@
 
 mod common;
 
-use common::Rng;
+use common::{Rng, random_quaternion, turned};
 use lagrange::derive::derive;
 use lagrange::expr::eval::{Env, Value, eval_one};
 use lagrange::model::file::load;
@@ -40,12 +40,6 @@ fn lagrange(args: &[&str]) -> (Option<i32>, String, String) {
         String::from_utf8_lossy(&out.stdout).into_owned(),
         String::from_utf8_lossy(&out.stderr).into_owned(),
     )
-}
-
-fn random_quaternion(rng: &mut Rng) -> [f64; 4] {
-    let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
-    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
-    q.map(|x| x / n)
 }
 
 /// R(q) from nalgebra (Hamilton, [w, x, y, z]).
@@ -73,7 +67,7 @@ fn sym(system: &lagrange::System, name: &str) -> lagrange::expr::Symbol {
 
 #[test]
 fn the_ball_joint_a_is_the_engines_effective_mass() {
-    let loaded = load(&read("constraints/rigid/ball_3d.toml")).expect("valid file");
+    let loaded = load(&read("constraints/joints/ball_3d.toml")).expect("valid file");
     let system = &loaded.system;
     let d = derive(system).expect("derive");
     let program = RowProgram::new(system, &d, &[]);
@@ -268,14 +262,6 @@ name = "twist"
 expr = "dot(cross(rot(q1, h1), rot(q2, b2)), rot(q1, s1) + x1 - x2) = t/3"
 "#;
 
-/// exp(½ n φ) ⊗ q₀: q₀ turned by φ about the world axis n (unit).
-fn turned(q0: [f64; 4], n: [f64; 3], phi: f64) -> [f64; 4] {
-    let (s, c) = (0.5 * phi).sin_cos();
-    let p = Quaternion::new(c, s * n[0], s * n[1], s * n[2]);
-    let q = p * Quaternion::new(q0[0], q0[1], q0[2], q0[3]);
-    [q.w, q.i, q.j, q.k]
-}
-
 #[test]
 fn rates_and_accelerations_match_central_differences_along_a_rotation() {
     let loaded = load(JOINTS).expect("valid file");
@@ -359,17 +345,17 @@ fn rates_and_accelerations_match_central_differences_along_a_rotation() {
 
 #[test]
 fn a_non_unit_quaternion_is_refused_naming_the_body() {
-    let (code, _, err) = lagrange(&["solve", "constraints/rigid/ball_3d.toml", "--set", "q1=[1, 0.1, 0, 0]"]);
+    let (code, _, err) = lagrange(&["solve", "constraints/joints/ball_3d.toml", "--set", "q1=[1, 0.1, 0, 0]"]);
     assert_eq!(code, Some(1), "{err}");
     assert!(err.contains("`q1`, the orientation of body `a`, is not a unit quaternion"), "{err}");
-    let (code, _, err) = lagrange(&["solve", "constraints/rigid/ball_3d.toml", "--set", "q1=[1, 0, 0]"]);
+    let (code, _, err) = lagrange(&["solve", "constraints/joints/ball_3d.toml", "--set", "q1=[1, 0, 0]"]);
     assert_ne!(code, Some(0), "{err}");
     assert!(err.contains("a unit quaternion [w, x, y, z]: found 3 numbers"), "{err}");
 }
 
 #[test]
 fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
-    let (code, out, err) = lagrange(&["solve", "constraints/rigid/hinge_3d.toml", "--format", "json"]);
+    let (code, out, err) = lagrange(&["solve", "constraints/joints/hinge_3d.toml", "--format", "json"]);
     assert_eq!(code, Some(0), "{err}");
     let json: serde_json::Value = serde_json::from_str(&out).expect("JSON");
     for key in ["torques", "angular_accelerations"] {
@@ -385,9 +371,9 @@ fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
 #[test]
 fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
     for args in [
-        &["simulate", "constraints/rigid/ball_3d.toml"][..],
-        &["bench", "constraints/rigid/ball_3d.toml"][..],
-        &["generate", "constraints/rigid/ball_3d.toml"][..],
+        &["simulate", "constraints/joints/ball_3d.toml"][..],
+        &["bench", "constraints/joints/ball_3d.toml"][..],
+        &["generate", "constraints/joints/ball_3d.toml"][..],
     ] {
         let (code, _, err) = lagrange(args);
         assert_eq!(code, Some(1), "{args:?}: {err}");

@@ -1,5 +1,5 @@
 //! The velocity-level solvers (`numeric::velocity`) on 2D rigid bodies: every solver holds
-//! every joint of `constraints/rigid/` within its stated bound, the exact velocity solve's
+//! every joint of `constraints/joints/` and scene of `constraints/rigid/` within its stated bound, the exact velocity solve's
 //! impulse on the resting pinned rod is λ·h, PGS and the soft step converge to the exact
 //! velocity solve (which is Box2D's 2×2 revolute block solve) as iterations grow, the
 //! revolute limit only pushes, the pinned rod's energy stays bounded, runs are bitwise
@@ -89,17 +89,6 @@ fn rigid_scenario(rel: &str, seed: u64) -> Scenario {
     s
 }
 
-fn rigid_files() -> Vec<String> {
-    let mut files: Vec<String> =
-        std::fs::read_dir(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/rigid"))
-            .expect("constraints/rigid")
-            .map(|e| format!("constraints/rigid/{}", e.expect("entry").file_name().to_string_lossy()))
-            .filter(|p| p.ends_with(".toml"))
-            .collect();
-    files.sort();
-    files
-}
-
 /// The bound on max |C| (metres for a pin, radians for an angle) over 120 steps at 60 Hz
 /// with Box2D's defaults (4 substeps): the exact velocity solve projects onto C = 0 after
 /// every substep (measured: 2e-13 at most); the iterative solvers hold the joints to 5 mm
@@ -119,7 +108,7 @@ fn bound(solver: Solver, joints_in_series: usize) -> f64 {
 
 #[test]
 fn every_solver_holds_every_rigid_file() {
-    let files = rigid_files();
+    let files = common::rigid_files();
     assert!(files.len() >= 12, "the joint library: {files:?}");
     for rel in &files {
         let s = rigid_scenario(rel, 0x5eed_0015);
@@ -196,7 +185,7 @@ fn broken_revolute() -> (Scenario, [f64; 2], [f64; 2]) {
     let (ra, rb) = (rot(th1, [0.5, 0.0]), rot(th2, [-0.5, 0.0]));
     let x2 = [ra[0] - rb[0], ra[1] - rb[1]];
     let s = scenario_with(
-        "constraints/rigid/revolute.toml",
+        "constraints/joints/revolute.toml",
         &[
             ("m1", &[1.0]),
             ("m2", &[2.0]),
@@ -292,7 +281,7 @@ fn the_revolute_limit_only_pushes_and_holds() {
     // ≥ 0 at every step and pushes at the end, and the angle stays within its bound of the
     // limit (the exact solve within 1e-9 rad).
     let s = scenario_with(
-        "constraints/rigid/revolute_limit.toml",
+        "constraints/joints/revolute_limit.toml",
         &[
             ("m1", &[1.0]),
             ("m2", &[1.0]),

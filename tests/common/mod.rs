@@ -222,8 +222,54 @@ pub fn impulse_system(rows: &Rows, u: &[[f64; 3]]) -> (DMatrix<f64>, DVector<f64
     (a, ju, meff)
 }
 
-/// Whether a constraint file is 3D (in `constraints/rigid/`: quaternion orientations, which
+/// The folders of rigid-body files: the joint library (`constraints/joints/`) and the rigid
+/// scenes with closed forms (`constraints/rigid/`).
+pub const RIGID_DIRS: [&str; 2] = ["constraints/joints", "constraints/rigid"];
+
+/// The `.toml` files of [`RIGID_DIRS`], relative to the crate root: the joints, then the
+/// scenes, each folder sorted.
+pub fn rigid_files() -> Vec<String> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut out = Vec::new();
+    for dir in RIGID_DIRS {
+        let mut here: Vec<String> = std::fs::read_dir(root.join(dir))
+            .unwrap_or_else(|e| panic!("{dir}: {e}"))
+            .filter_map(|e| e.ok()?.file_name().into_string().ok())
+            .filter(|n| n.ends_with(".toml"))
+            .map(|n| format!("{dir}/{n}"))
+            .collect();
+        here.sort();
+        out.extend(here);
+    }
+    out
+}
+
+/// Whether a path is in one of the [`RIGID_DIRS`].
+pub fn in_rigid_dirs(path: &std::path::Path) -> bool {
+    RIGID_DIRS.iter().any(|d| path.starts_with(d))
+}
+
+/// Whether a constraint file is 3D (in [`RIGID_DIRS`]: quaternion orientations, which
 /// `generate`, `bench` and the velocity solvers do not handle yet).
 pub fn is_3d(path: &std::path::Path) -> bool {
     std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
+}
+
+/// A uniformly random unit quaternion [w, x, y, z] (a normalised 4D normal sample).
+pub fn random_quaternion(rng: &mut Rng) -> [f64; 4] {
+    let q = [rng.normal(), rng.normal(), rng.normal(), rng.normal()];
+    let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+    q.map(|x| x / n)
+}
+
+/// exp(½ n φ) ⊗ q₀: q₀ turned by φ about the world axis n (unit), Hamilton's product.
+pub fn turned(q0: [f64; 4], n: [f64; 3], phi: f64) -> [f64; 4] {
+    let (s, c) = (0.5 * phi).sin_cos();
+    let p = [c, s * n[0], s * n[1], s * n[2]];
+    [
+        p[0] * q0[0] - p[1] * q0[1] - p[2] * q0[2] - p[3] * q0[3],
+        p[0] * q0[1] + p[1] * q0[0] + p[2] * q0[3] - p[3] * q0[2],
+        p[0] * q0[2] - p[1] * q0[3] + p[2] * q0[0] + p[3] * q0[1],
+        p[0] * q0[3] + p[1] * q0[2] - p[2] * q0[1] + p[3] * q0[0],
+    ]
 }
