@@ -26,7 +26,7 @@ use super::integrate::{Field, Vectors};
 use super::rescale::{Unit, spread};
 use super::rows::{RowProgram, RowScratch, Rows, angular_bodies};
 use super::simulate::SettingsError;
-use super::solve::{Settings, Solution, solve_holding};
+use super::solve::{Settings, Solution, SolveCache, solve_cached};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
@@ -129,6 +129,9 @@ pub struct Dynamics<'s> {
     /// twin does; they are released only at the start of a step whose solve gives them
     /// λ = 0 (λ would turn negative) or finds them opening. Empty: nothing held.
     held: Vec<bool>,
+    /// The factorisation shared by solves with the same J (`solve::SolveCache`): the step's
+    /// acceleration solve, SHAKE's iterations, the velocity projection and the next start.
+    solver: SolveCache,
 }
 
 impl<'s> Dynamics<'s> {
@@ -147,6 +150,7 @@ impl<'s> Dynamics<'s> {
             evaluations: 0,
             step: 0,
             held: Vec::new(),
+            solver: SolveCache::default(),
         }
     }
 
@@ -270,7 +274,7 @@ impl<'s> Dynamics<'s> {
     /// Solves for λ at `rows` (Baumgarte terms added first when set), the held contacts
     /// touching whatever their distance (`solve::solve_holding`): the solve at the start of
     /// a step, which decides what stays held ([`Dynamics::hold`]).
-    pub fn solve(&self, rows: &mut Rows) -> Solution {
+    pub fn solve(&mut self, rows: &mut Rows) -> Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
             for (k, row) in rows.rows.iter_mut().enumerate() {
                 // A closing contact that is not held is the impulse's (Ċ⁺ = −eĊ at the step's
@@ -284,7 +288,18 @@ impl<'s> Dynamics<'s> {
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
         }
-        solve_holding(rows, &Settings::default(), &self.held)
+        solve_cached(rows, &Settings::default(), &self.held, &mut self.solver)
+    }
+
+    /// The solve of a correction (projection, SHAKE, velocity step: forces zeroed, c set to
+    /// the target), with no contact held: `solve::solve` through the run's cache.
+    pub fn correct(&mut self, rows: &Rows) -> Solution {
+        solve_cached(rows, &Settings::default(), &[], &mut self.solver)
+    }
+
+    /// The way the last solve went (`solve::SolvePath`).
+    pub fn last_solve_path(&self) -> super::solve::SolvePath {
+        self.solver.last_path()
     }
 }
 

@@ -165,10 +165,14 @@ fn enforce(row: &mut Row, bias: f64) {
     row.bias = bias;
 }
 
-/// Adds M⁻¹Jᵀμ for the rows to `x` and returns the largest |step| component.
-fn apply_correction(rows: &mut Rows, x: &mut Vectors) -> f64 {
+/// Adds M⁻¹Jᵀμ for the rows to `x` and returns the largest |step| component; the solve
+/// goes through the run's cache when `dynamics` is given.
+fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dynamics<'_>>) -> f64 {
     rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    let solution = solve(rows);
+    let solution = match dynamics {
+        Some(dynamics) => dynamics.correct(rows),
+        None => solve(rows),
+    };
     let mut largest = 0.0f64;
     for (x, dx) in x.iter_mut().zip(&solution.acceleration) {
         for d in 0..3 {
@@ -232,7 +236,7 @@ pub fn project_positions(
                 leave_out(row);
             }
         }
-        apply_correction(&mut rows, q);
+        apply_correction(&mut rows, q, Some(dynamics));
         dynamics.recycle(rows);
         iterations += 1;
     }
@@ -290,7 +294,7 @@ pub fn shake_positions(
         }
         dynamics.recycle(rows);
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        let solution = solve(start);
+        let solution = dynamics.correct(start);
         for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
             for d in 0..3 {
                 if dq[d].is_finite() {
@@ -321,14 +325,14 @@ pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
         row.inequality = false;
         enforce(row, row.rate);
     }
-    apply_correction(rows, v);
+    apply_correction(rows, v, None);
 }
 
 /// The velocity solve at the rows of the current positions: closing contacts (touching
 /// within `touch` or `held`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
 /// `project` the equalities and the held contacts that are not closing go onto Ċ = 0 too,
-/// else they keep their Ċ. Returns whether
-/// anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
+/// else they keep their Ċ; `dynamics` says which contacts are held and serves the solve.
+/// Returns whether anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
 pub fn velocity_step(
     rows: &mut Rows,
     v: &mut Vectors,
@@ -336,11 +340,11 @@ pub fn velocity_step(
     touch: f64,
     restitution: f64,
     bounce_speed: f64,
-    held: &[bool],
+    dynamics: &mut Dynamics<'_>,
 ) -> bool {
     let mut any = false;
     for (k, row) in rows.rows.iter_mut().enumerate() {
-        let is_held = held.get(k).copied().unwrap_or(false);
+        let is_held = dynamics.is_held(k);
         if row.inequality && is_held && normal_speed(row) >= 0.0 {
             // A held contact not closing is an equality for the step: onto Ċ = 0 with
             // projection (so round-off cannot make it separate), else its rate is kept.
@@ -367,7 +371,7 @@ pub fn velocity_step(
         }
     }
     if any {
-        apply_correction(rows, v);
+        apply_correction(rows, v, Some(dynamics));
     }
     any
 }
