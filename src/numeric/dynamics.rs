@@ -24,7 +24,7 @@
 use super::contact::ContactState;
 use super::integrate::{Field, Vectors};
 use super::rescale::{Unit, spread};
-use super::rows::{RowProgram, RowScratch, Rows, angular_bodies};
+use super::rows::{Row, RowProgram, RowScratch, Rows, angular_bodies};
 use super::simulate::SettingsError;
 use super::solve::{Settings, Solution, SolveCache, solve_cached};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -132,6 +132,8 @@ pub struct Dynamics<'s> {
     /// The factorisation shared by solves with the same J (`solve::SolveCache`): the step's
     /// acceleration solve, SHAKE's iterations, the velocity projection and the next start.
     solver: SolveCache,
+    /// The rows of the last [`positions`](Dynamics::positions).
+    position_rows: Vec<Row>,
 }
 
 impl<'s> Dynamics<'s> {
@@ -151,6 +153,7 @@ impl<'s> Dynamics<'s> {
             step: 0,
             held: Vec::new(),
             solver: SolveCache::default(),
+            position_rows: Vec::new(),
         }
     }
 
@@ -225,9 +228,8 @@ impl<'s> Dynamics<'s> {
         Ok(unit)
     }
 
-    /// The rows at (t, q, v): the one place states become numbers.
-    pub fn rows(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
-        self.evaluations += 1;
+    /// Puts (t, q, v) into the environment the tapes read.
+    fn set_state(&mut self, t: f64, q: &Vectors, v: &Vectors) {
         self.env.set(self.system.time, Value::Scalar(t));
         for (i, body) in self.system.bodies.iter().enumerate() {
             self.env.set(body.position, Value::Vector(q[i]));
@@ -239,6 +241,37 @@ impl<'s> Dynamics<'s> {
             self.env.set(rigid.orientation, Value::Scalar(q[slot][0]));
             self.env.set(rigid.angular_velocity, Value::Scalar(v[slot][0]));
         }
+    }
+
+    /// C/κ and J of every row at (t, q) (`RowProgram::evaluate_positions_into`: a tape of C
+    /// and J only), read back with [`position_rows`](Dynamics::position_rows): what an
+    /// iteration onto C = 0 needs. A number that is not finite is reported as
+    /// [`rows`](Dynamics::rows) reports it (the full rows at the same state are evaluated
+    /// for the error).
+    pub fn positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<(), SimError> {
+        self.evaluations += 1;
+        self.set_state(t, q, v);
+        self.program
+            .evaluate_positions_into(self.system, &self.env, &mut self.scratch, &mut self.position_rows)
+            .map_err(|error| SimError::Eval { time: t, error })?;
+        let finite =
+            |row: &Row| row.value.is_finite() && row.jacobian.iter().all(|(_, j)| j.iter().all(|x| x.is_finite()));
+        if !self.position_rows.iter().all(finite) {
+            let rows = self.rows(t, q, v)?;
+            self.recycle(rows);
+        }
+        Ok(())
+    }
+
+    /// The rows of the last [`positions`](Dynamics::positions) (C/κ and J; Ċ and c are 0).
+    pub fn position_rows(&self) -> &[Row] {
+        &self.position_rows
+    }
+
+    /// The rows at (t, q, v): the one place states become numbers.
+    pub fn rows(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
+        self.evaluations += 1;
+        self.set_state(t, q, v);
         let mut rows = self.spare.pop().unwrap_or_default();
         self.program
             .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)

@@ -645,6 +645,10 @@ pub enum SolvePath {
 pub struct SolveCache {
     entry: Option<Factored>,
     path: SolvePath,
+    /// Buffers of the reused solve: −b̃, μ and the band solve's.
+    rhs: Vec<f64>,
+    mu: Vec<f64>,
+    work: BandWork,
 }
 
 /// One cached factorisation and the inputs it was made from.
@@ -729,24 +733,26 @@ pub fn solve_cached(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut
     }
     let Some(c) = &cache.entry else { return solve_holding(rows, settings, held) };
     let (mut diagnostics, mut status) = (Vec::new(), Status::Solved);
-    let mut mu = Vec::new();
+    cache.mu.clear();
     if !c.index.is_empty() {
-        let rhs: Vec<f64> = right_hand_side(rows, &c.scaled, &c.index).iter().map(|x| -x).collect();
-        mu = finite_or_zero(c.factor.solve(&rhs), &c.index, &mut diagnostics, &mut status);
+        cache.rhs.clear();
+        cache.rhs.extend(c.index.iter().map(|&q| -b_entry(rows, &c.scaled, q)));
+        c.factor.solve_into(&cache.rhs, &mut cache.work, &mut cache.mu);
+        finite_in_place(&mut cache.mu, &c.index, &mut diagnostics, &mut status);
     }
-    finish(rows, &c.scaled, &c.index, &mu, diagnostics, status, vec![None; rows.rows.len()])
+    finish(rows, &c.scaled, &c.index, &cache.mu, diagnostics, status, vec![None; rows.rows.len()])
 }
 
 /// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.
 fn right_hand_side(rows: &Rows, scaled: &Scaled, index: &[usize]) -> Vec<f64> {
-    index
-        .iter()
-        .map(|&q| {
-            let ext: f64 =
-                scaled.jacobian(q).iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
-            ext + scaled.scale(q, rows.rows[q].bias)
-        })
-        .collect()
+    index.iter().map(|&q| b_entry(rows, scaled, q)).collect()
+}
+
+/// b̃ of row `q`.
+fn b_entry(rows: &Rows, scaled: &Scaled, q: usize) -> f64 {
+    let ext: f64 =
+        scaled.jacobian(q).iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
+    ext + scaled.scale(q, rows.rows[q].bias)
 }
 
 /// The solution from the scaled multipliers `mu` of the rows `index`: λ, forces,
@@ -763,9 +769,7 @@ fn finish(
     let n_bodies = rows.inverse_mass.len();
     let k = rows.rows.len();
     let mut lambda = vec![0.0; k];
-    let mut scaled_lambda = vec![0.0; k];
     for (p, &q) in index.iter().enumerate() {
-        scaled_lambda[q] = mu[p];
         lambda[q] = scaled.unscale(q, mu[p]);
         // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
         // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
@@ -775,10 +779,10 @@ fn finish(
     }
     // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
     let mut constraint_force = vec![[0.0; 3]; n_bodies];
-    for &q in index {
+    for (&q, &m) in index.iter().zip(mu) {
         for (body, j) in scaled.jacobian(q) {
             for d in 0..3 {
-                constraint_force[*body][d] += scaled_lambda[q] * j[d];
+                constraint_force[*body][d] += m * j[d];
             }
         }
     }
@@ -1051,21 +1055,42 @@ pub(crate) struct BandFactor {
 impl BandFactor {
     /// Ã x = `rhs` (in the block's order), with one step of iterative refinement.
     fn solve(&self, rhs: &[f64]) -> Vec<f64> {
+        let mut x = Vec::new();
+        self.solve_into(rhs, &mut BandWork::default(), &mut x);
+        x
+    }
+
+    /// [`solve`](BandFactor::solve) into `x`, with `work`'s buffers (no allocation once
+    /// they have the block's size).
+    fn solve_into(&self, rhs: &[f64], work: &mut BandWork, x: &mut Vec<f64>) {
         let n = rhs.len();
-        let mut permuted = vec![0.0; n];
+        let BandWork { permuted, y, ax, r } = work;
+        permuted.resize(n, 0.0);
         for (old, &new) in self.position.iter().enumerate() {
             permuted[new] = rhs[old];
         }
-        let mut x = permuted.clone();
-        self.factor.solve_in_place(&mut x);
+        y.clear();
+        y.extend_from_slice(permuted);
+        self.factor.solve_in_place(y);
         // One step of iterative refinement: x += A⁻¹ (rhs − A x).
-        let mut ax = vec![0.0; n];
-        self.a.mul(&x, &mut ax);
-        let mut r: Vec<f64> = permuted.iter().zip(&ax).map(|(u, v)| u - v).collect();
-        self.factor.solve_in_place(&mut r);
-        x.iter_mut().zip(&r).for_each(|(u, v)| *u += v);
-        self.position.iter().map(|&new| x[new]).collect()
+        ax.resize(n, 0.0);
+        self.a.mul(y, ax);
+        r.clear();
+        r.extend(permuted.iter().zip(ax.iter()).map(|(u, v)| u - v));
+        self.factor.solve_in_place(r);
+        y.iter_mut().zip(r.iter()).for_each(|(u, v)| *u += v);
+        x.clear();
+        x.extend(self.position.iter().map(|&new| y[new]));
     }
+}
+
+/// Buffers of [`BandFactor::solve_into`].
+#[derive(Clone, Debug, Default)]
+struct BandWork {
+    permuted: Vec<f64>,
+    y: Vec<f64>,
+    ax: Vec<f64>,
+    r: Vec<f64>,
 }
 
 fn dense(block: &Block) -> DMatrix<f64> {
@@ -1085,6 +1110,12 @@ fn finite_or_zero(
     diagnostics: &mut Vec<Diagnostic>,
     status: &mut Status,
 ) -> Vec<f64> {
+    finite_in_place(&mut x, index, diagnostics, status);
+    x
+}
+
+/// Sets the non-finite entries of `x` to 0, with a diagnostic each.
+fn finite_in_place(x: &mut [f64], index: &[usize], diagnostics: &mut Vec<Diagnostic>, status: &mut Status) {
     for (p, v) in x.iter_mut().enumerate() {
         if !v.is_finite() {
             diagnostics.push(Diagnostic::NonFiniteLambda { constraint: index[p] });
@@ -1092,7 +1123,6 @@ fn finite_or_zero(
             *v = 0.0;
         }
     }
-    x
 }
 
 /// The minimum-norm (least-squares if inconsistent) solution of a singular `a μ = rhs`, with

@@ -268,9 +268,10 @@ pub fn shake_positions(
     let mut iterations = 0;
     let mut previous = f64::INFINITY;
     loop {
-        let rows = dynamics.rows(t, q, v_half)?;
+        // C and J only (the iteration reads nothing else); the full rows once, at the end.
+        dynamics.positions(t, q, v_half)?;
         let mut residual = 0.0f64;
-        for (k, row) in rows.rows.iter().enumerate() {
+        for (k, row) in dynamics.position_rows().iter().enumerate() {
             if !row.inequality || dynamics.is_held(k) {
                 residual = residual.max(distance(row).abs());
             }
@@ -278,10 +279,11 @@ pub fn shake_positions(
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
-            return Ok((rows, iterations));
+            return Ok((dynamics.rows(t, q, v_half)?, iterations));
         }
         previous = residual;
-        for (k, ((old, new), constraint)) in start.rows.iter_mut().zip(&rows.rows).zip(&system.constraints).enumerate()
+        for (k, ((old, new), constraint)) in
+            start.rows.iter_mut().zip(dynamics.position_rows()).zip(&system.constraints).enumerate()
         {
             let equality = !constraint.inequality || dynamics.is_held(k);
             old.inequality = !equality;
@@ -292,7 +294,6 @@ pub fn shake_positions(
                 leave_out(old);
             }
         }
-        dynamics.recycle(rows);
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
         let solution = dynamics.correct(start);
         for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
