@@ -440,8 +440,9 @@ impl RowProgram {
 
     /// C/κ and J of every row at `env` (positions, parameters and `t`), into `rows`: `value`,
     /// `jacobian` and `inequality` as [`evaluate_into`](RowProgram::evaluate_into) gives
-    /// them, number for number (the same lowering of the same nodes); `rate` and `bias` are
-    /// 0. A tape of C and J only, for iterations onto C = 0 that read nothing else.
+    /// them, to rounding (the same nodes, lowered without the others, may share a
+    /// subexpression differently: an ulp apart); `rate` and `bias` are 0. A tape of C and J
+    /// only, for iterations onto C = 0 that read nothing else.
     pub fn evaluate_positions_into(
         &self,
         system: &System,

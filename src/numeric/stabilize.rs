@@ -250,7 +250,9 @@ pub fn project_positions(
 /// a contact's correction must not turn into a velocity (that would pre-empt its impulse
 /// and restitution), so violated inequalities are left to [`project_positions`]. `start` holds
 /// the rows at the start of the step (its C, Ċ and c are overwritten; its J is kept).
-/// Returns the rows at the final positions.
+/// An iteration reads C and J alone (`Dynamics::positions`), and its solve has the start's
+/// J, so the run's solve cache serves it with the start's factor; the full rows are
+/// evaluated once, at the final positions, and returned.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
