@@ -8,37 +8,19 @@
 
 mod common;
 
-use lagrange::numeric::rows::{Row, Rows};
+use lagrange::model::file::load;
+use lagrange::numeric::rows::Rows;
 use lagrange::numeric::solve::{
     Diagnostic, Method, Settings, Solution, SolveCache, SolvePath, Status, solve_cached, solve_holding,
 };
+use lagrange::scenario::Scenario;
 
-/// An N-link chain from the origin in a zig-zag, moving, under gravity (A tridiagonal, every
-/// entry non-trivial); `phase` moves the state so J differs between two calls.
-fn chain(n: usize, phase: f64) -> Rows {
-    let mut position = Vec::with_capacity(n);
-    let mut at = [0.0f64, 0.0];
-    for k in 0..n {
-        let angle = -1.2 + 0.4 * ((k % 7) as f64) + phase;
-        at = [at[0] + 0.5 * angle.cos(), at[1] + 0.5 * angle.sin()];
-        position.push(at);
-    }
-    let velocity: Vec<[f64; 3]> = (0..n).map(|k| [0.1 * (k as f64).sin(), 0.2 * (k as f64).cos(), 0.0]).collect();
-    let rows = (0..n)
-        .map(|k| {
-            let prev = if k == 0 { [0.0, 0.0] } else { position[k - 1] };
-            let vprev = if k == 0 { [0.0; 3] } else { velocity[k - 1] };
-            let d = [position[k][0] - prev[0], position[k][1] - prev[1], 0.0];
-            let u = [velocity[k][0] - vprev[0], velocity[k][1] - vprev[1], 0.0];
-            let mut jacobian = vec![(k, d)];
-            if k > 0 {
-                jacobian.insert(0, (k - 1, [-d[0], -d[1], 0.0]));
-            }
-            Row { value: 0.0, rate: 0.0, bias: u[0] * u[0] + u[1] * u[1], inequality: false, jacobian }
-        })
-        .collect();
-    let inverse_mass = (0..n).map(|k| 1.0 / (1.0 + 0.1 * k as f64)).collect();
-    Rows { dim: 2, inverse_mass, velocity, force: vec![[0.0, -9.81, 0.0]; n], rows, axes: Vec::new() }
+/// The rows of an N-link chain (`lagrange::scenario::chain`) at a random state `seed`: A
+/// tridiagonal with every entry non-trivial, other J for another seed.
+fn chain(n: usize, seed: u64) -> Rows {
+    let s = Scenario::new(load(&lagrange::scenario::chain(n)).expect("valid"), &[]).expect("derives");
+    let env = common::random_env(&s.system, &mut common::Rng::new(seed));
+    s.program.evaluate(&s.system, &env).expect("rows")
 }
 
 /// Equal number for number (bits, so a −0 for a +0 counts too).
@@ -63,7 +45,7 @@ fn the_reused_factorisation_gives_the_general_answer_and_only_while_j_and_the_ma
     let settings = Settings::default();
     for n in [1, 5, 10, 17, 300] {
         let mut cache = SolveCache::default();
-        let rows = chain(n, 0.0);
+        let rows = chain(n, 1);
         assert_eq!(solve_checked(&rows, &settings, &mut cache), SolvePath::Factored, "n = {n}");
         // Other forces, c and velocities with the same J and masses: the factor serves.
         let mut other = rows.clone();
@@ -82,10 +64,10 @@ fn the_reused_factorisation_gives_the_general_answer_and_only_while_j_and_the_ma
         let mut heavier = nudged.clone();
         heavier.inverse_mass[n - 1] *= 0.5;
         assert_eq!(solve_checked(&heavier, &settings, &mut cache), SolvePath::Factored, "n = {n}");
-        assert_eq!(solve_checked(&chain(n, 0.1), &settings, &mut cache), SolvePath::Factored, "n = {n}");
+        assert_eq!(solve_checked(&chain(n, 2), &settings, &mut cache), SolvePath::Factored, "n = {n}");
         // Other settings: the rank tolerance decides the factor's pivots.
         let strict = Settings { rank_tolerance: 1e-3, ..settings };
-        assert_ne!(solve_checked(&chain(n, 0.1), &strict, &mut cache), SolvePath::Reused, "n = {n}");
+        assert_ne!(solve_checked(&chain(n, 2), &strict, &mut cache), SolvePath::Reused, "n = {n}");
     }
 }
 
@@ -96,7 +78,7 @@ fn every_case_the_cache_does_not_serve_goes_to_the_general_solve() {
     // Each case starts from a warm cache whose J matches, so only the guard keeps it off.
     let general = |change: &dyn Fn(&mut Rows), settings: &Settings| {
         let mut cache = SolveCache::default();
-        let rows = chain(n, 0.0);
+        let rows = chain(n, 1);
         solve_checked(&rows, &Settings::default(), &mut cache);
         let mut rows = rows;
         change(&mut rows);
@@ -130,7 +112,7 @@ fn every_case_the_cache_does_not_serve_goes_to_the_general_solve() {
     let (path, _) = general(&|_| {}, &dense);
     assert_eq!(path, SolvePath::General);
     let mut cache = SolveCache::default();
-    assert_eq!(solve_checked(&chain(2, 0.0), &settings, &mut cache), SolvePath::General);
+    assert_eq!(solve_checked(&chain(2, 1), &settings, &mut cache), SolvePath::General);
 }
 
 #[test]
@@ -139,12 +121,7 @@ fn the_positions_tape_gives_the_rows_c_and_j_on_every_file() {
     // a subexpression differently and round an ulp apart (bead_on_ellipse's C did), never
     // more than a few: relative 1e-13 (against 1) at 10 random states of every file.
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-13 * a.abs().max(b.abs()).max(1.0);
-    let mut files: Vec<_> = ["constraints", "constraints/hard", "constraints/rigid"]
-        .iter()
-        .flat_map(|d| std::fs::read_dir(d).expect("dir").map(|e| e.expect("entry").path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    files.sort();
+    let files = common::constraint_files(&["constraints", "constraints/hard", "constraints/rigid"]);
     let mut checked = 0;
     for path in files {
         let text = std::fs::read_to_string(&path).expect("file");

@@ -632,7 +632,7 @@ pub enum SolvePath {
 }
 
 /// What repeated solves with the same J and masses share: the scaling of the rows
-/// ([`Scaled`]) and the band Cholesky of Ã. A run's solves come in such series — the
+/// (J/‖J‖ and Jacobi) and the band Cholesky of Ã. A run's solves come in such series — the
 /// acceleration solve at the start of a step, every SHAKE iteration along the start's
 /// gradients, and the next step's start at the positions the velocity projection had —
 /// so most of them only substitute a right-hand side.
