@@ -105,6 +105,48 @@ fn handwritten_chain_steps(bencher: divan::Bencher, n: usize) {
     });
 }
 
+/// The step of issue 16's first aim, without integrating: at the chain's scene state,
+/// assemble A and b of the tridiagonal by hand and solve them (Thomas, [`HandChain`]'s
+/// `accelerations`), to the accelerations.
+#[divan::bench(name = "chain_solve_1_handwritten", args = [10, 100, 1000, 10000])]
+fn chain_solve_handwritten(bencher: divan::Bencher, n: usize) {
+    let mut chain = HandChain::new(n);
+    bencher.bench_local(|| {
+        chain.accelerations();
+        divan::black_box(chain.a[n - 1])
+    });
+}
+
+/// The same through the library: the rows by the compiled tape (`RowProgram::evaluate_into`)
+/// and the general solve (`solve_with`: scaling, contact classes, assembly, band Cholesky,
+/// refinement), to the accelerations.
+#[divan::bench(name = "chain_solve_2_library", args = [10, 100, 1000, 10000])]
+fn chain_solve_library(bencher: divan::Bencher, n: usize) {
+    let s = chain(n);
+    let mut scratch = s.program.scratch();
+    let mut rows = lagrange::numeric::rows::Rows::default();
+    let settings = lagrange::numeric::solve::Settings::default();
+    bencher.bench_local(|| {
+        s.program.evaluate_into(&s.system, &s.env, &mut scratch, &mut rows).expect("rows");
+        lagrange::numeric::solve::solve_with(&rows, &settings).acceleration[n - 1]
+    });
+}
+
+/// As [`chain_solve_library`] with the run's solve (`solve_cached`) warm at the same J: what
+/// a SHAKE iteration or the next step's start pays for its solve.
+#[divan::bench(name = "chain_solve_3_library_reused", args = [10, 100, 1000, 10000])]
+fn chain_solve_library_reused(bencher: divan::Bencher, n: usize) {
+    use lagrange::numeric::solve::{Settings, SolveCache, solve_cached};
+    let s = chain(n);
+    let mut scratch = s.program.scratch();
+    let mut rows = lagrange::numeric::rows::Rows::default();
+    let mut cache = SolveCache::default();
+    bencher.bench_local(|| {
+        s.program.evaluate_into(&s.system, &s.env, &mut scratch, &mut rows).expect("rows");
+        solve_cached(&rows, &Settings::default(), &[], &mut cache).acceleration[n - 1]
+    });
+}
+
 /// An N-link chain pinned at the origin, C_k = |d_k|² − l² with d_k = q_k − q_{k−1}
 /// (q_{−1} = 0), J_k = ±d_k (κ = 2), unit masses: A is tridiagonal.
 struct HandChain {

@@ -152,12 +152,7 @@ fn compiled_rows_agree_with_the_interpreter_on_every_file() {
     // The simulation's rows come from the compiled tape; the interpreter is the reference
     // semantics. They may round differently (x·y⁻¹ is lowered to x/y), never by more than a
     // few ulps: relative 1e-12 at 20 random states of every file with a scene.
-    let mut files: Vec<_> = ["constraints", "constraints/hard"]
-        .iter()
-        .flat_map(|d| std::fs::read_dir(d).expect("dir").map(|e| e.expect("entry").path()))
-        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
-        .collect();
-    files.sort();
+    let files = common::constraint_files(&["constraints", "constraints/hard"]);
     let mut checked = 0;
     for path in files {
         let text = std::fs::read_to_string(&path).expect("file");

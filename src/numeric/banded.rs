@@ -100,27 +100,25 @@ impl BandedCholesky {
     /// Overwrites `x` (the right-hand side) with the solution of L Lᵀ y = x.
     pub fn solve_in_place(&self, x: &mut [f64]) {
         let (n, w) = (self.n, self.w);
-        let at = |i: usize, j: usize| i * (w + 1) + w + j - i;
-        // Forward: L y = x.
+        // Row i of L is `l[i (w + 1) ..][..w + 1]`, entry (i, k) at w + k − i: the same sums
+        // in the same order as indexing (i, k), on slices the compiler can keep in registers.
         for i in 0..n {
             let lo = i.saturating_sub(w);
-            let s: f64 = (lo..i).zip(&x[lo..i]).map(|(k, xk)| self.l[at(i, k)] * xk).sum();
-            x[i] = (x[i] - s) / self.l[at(i, i)];
+            let row = &self.l[i * (w + 1)..(i + 1) * (w + 1)];
+            let s: f64 = row[w + lo - i..w].iter().zip(&x[lo..i]).map(|(l, xk)| l * xk).sum();
+            x[i] = (x[i] - s) / row[w];
         }
-        // Backward: Lᵀ z = y, column by column of L.
         for i in (0..n).rev() {
-            x[i] /= self.l[at(i, i)];
+            let row = &self.l[i * (w + 1)..(i + 1) * (w + 1)];
+            x[i] /= row[w];
             let (xi, lo) = (x[i], i.saturating_sub(w));
-            for (k, xk) in (lo..i).zip(&mut x[lo..i]) {
-                *xk -= self.l[at(i, k)] * xi;
+            for (l, xk) in row[w + lo - i..w].iter().zip(&mut x[lo..i]) {
+                *xk -= l * xi;
             }
         }
     }
 }
 
-/// Reverse Cuthill–McKee: an order of the `n` nodes of a graph (edges `(i, j)`, self-loops
-/// ignored) that keeps neighbours close, as `order[new] = old`. Breadth-first from a node of
-/// least degree in each component, neighbours by increasing degree, then reversed.
 pub fn reverse_cuthill_mckee(n: usize, edges: impl Iterator<Item = (usize, usize)>) -> Vec<usize> {
     let mut neighbours: Vec<Vec<usize>> = vec![Vec::new(); n];
     for (i, j) in edges {

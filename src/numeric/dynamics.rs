@@ -24,9 +24,9 @@
 use super::contact::ContactState;
 use super::integrate::{Field, Vectors};
 use super::rescale::{Unit, spread};
-use super::rows::{RowProgram, RowScratch, Rows, angular_bodies};
+use super::rows::{Row, RowProgram, RowScratch, Rows, angular_bodies};
 use super::simulate::SettingsError;
-use super::solve::{Settings, Solution, solve_holding};
+use super::solve::{Settings, Solution, SolveCache, solve_cached};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
@@ -129,6 +129,11 @@ pub struct Dynamics<'s> {
     /// twin does; they are released only at the start of a step whose solve gives them
     /// λ = 0 (λ would turn negative) or finds them opening. Empty: nothing held.
     held: Vec<bool>,
+    /// The factorisation shared by solves with the same J (`solve::SolveCache`): the step's
+    /// acceleration solve, SHAKE's iterations, the velocity projection and the next start.
+    solver: SolveCache,
+    /// The rows of the last [`positions`](Dynamics::positions).
+    position_rows: Vec<Row>,
 }
 
 impl<'s> Dynamics<'s> {
@@ -147,6 +152,8 @@ impl<'s> Dynamics<'s> {
             evaluations: 0,
             step: 0,
             held: Vec::new(),
+            solver: SolveCache::default(),
+            position_rows: Vec::new(),
         }
     }
 
@@ -221,9 +228,8 @@ impl<'s> Dynamics<'s> {
         Ok(unit)
     }
 
-    /// The rows at (t, q, v): the one place states become numbers.
-    pub fn rows(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
-        self.evaluations += 1;
+    /// Puts (t, q, v) into the environment the tapes read.
+    fn set_state(&mut self, t: f64, q: &Vectors, v: &Vectors) {
         self.env.set(self.system.time, Value::Scalar(t));
         for (i, body) in self.system.bodies.iter().enumerate() {
             self.env.set(body.position, Value::Vector(q[i]));
@@ -235,6 +241,37 @@ impl<'s> Dynamics<'s> {
             self.env.set(rigid.orientation, Value::Scalar(q[slot][0]));
             self.env.set(rigid.angular_velocity, Value::Scalar(v[slot][0]));
         }
+    }
+
+    /// C/κ and J of every row at (t, q) (`RowProgram::evaluate_positions_into`: a tape of C
+    /// and J only), read back with [`position_rows`](Dynamics::position_rows): what an
+    /// iteration onto C = 0 needs. A number that is not finite is reported as
+    /// [`rows`](Dynamics::rows) reports it (the full rows at the same state are evaluated
+    /// for the error).
+    pub fn positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<(), SimError> {
+        self.evaluations += 1;
+        self.set_state(t, q, v);
+        self.program
+            .evaluate_positions_into(self.system, &self.env, &mut self.scratch, &mut self.position_rows)
+            .map_err(|error| SimError::Eval { time: t, error })?;
+        let finite =
+            |row: &Row| row.value.is_finite() && row.jacobian.iter().all(|(_, j)| j.iter().all(|x| x.is_finite()));
+        if !self.position_rows.iter().all(finite) {
+            let rows = self.rows(t, q, v)?;
+            self.recycle(rows);
+        }
+        Ok(())
+    }
+
+    /// The rows of the last [`positions`](Dynamics::positions) (C/κ and J; Ċ and c are 0).
+    pub fn position_rows(&self) -> &[Row] {
+        &self.position_rows
+    }
+
+    /// The rows at (t, q, v): the one place states become numbers.
+    pub fn rows(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
+        self.evaluations += 1;
+        self.set_state(t, q, v);
         let mut rows = self.spare.pop().unwrap_or_default();
         self.program
             .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)
@@ -270,7 +307,7 @@ impl<'s> Dynamics<'s> {
     /// Solves for λ at `rows` (Baumgarte terms added first when set), the held contacts
     /// touching whatever their distance (`solve::solve_holding`): the solve at the start of
     /// a step, which decides what stays held ([`Dynamics::hold`]).
-    pub fn solve(&self, rows: &mut Rows) -> Solution {
+    pub fn solve(&mut self, rows: &mut Rows) -> Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
             for (k, row) in rows.rows.iter_mut().enumerate() {
                 // A closing contact that is not held is the impulse's (Ċ⁺ = −eĊ at the step's
@@ -284,7 +321,18 @@ impl<'s> Dynamics<'s> {
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
         }
-        solve_holding(rows, &Settings::default(), &self.held)
+        solve_cached(rows, &Settings::default(), &self.held, &mut self.solver)
+    }
+
+    /// The solve of a correction (projection, SHAKE, velocity step: forces zeroed, c set to
+    /// the target), with no contact held: `solve::solve` through the run's cache.
+    pub fn correct(&mut self, rows: &Rows) -> Solution {
+        solve_cached(rows, &Settings::default(), &[], &mut self.solver)
+    }
+
+    /// The way the last solve went (`solve::SolvePath`).
+    pub fn last_solve_path(&self) -> super::solve::SolvePath {
+        self.solver.last_path()
     }
 }
 

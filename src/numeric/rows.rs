@@ -128,6 +128,36 @@ pub struct RowProgram {
     tape: Tape,
     /// The free symbols of the roots, in the tape's input order.
     inputs: Vec<Symbol>,
+    /// C and J alone (with the principal axes they are projected on): what an iteration
+    /// onto C = 0 reads ([`RowProgram::evaluate_positions_into`]).
+    positions: Subprogram,
+}
+
+/// A tape of some of a [`RowProgram`]'s roots.
+#[derive(Clone, Debug)]
+struct Subprogram {
+    tape: Tape,
+    inputs: Vec<Symbol>,
+    /// The tape's root of each of the program's roots (`usize::MAX`: not in it).
+    root: Vec<usize>,
+}
+
+impl Subprogram {
+    /// The roots `wanted` of `roots` (indices), compiled over their own free symbols.
+    fn new(graph: &crate::expr::Graph, roots: &[Id], wanted: impl IntoIterator<Item = usize>) -> Subprogram {
+        let mut root = vec![usize::MAX; roots.len()];
+        let mut ids = Vec::new();
+        for r in wanted {
+            if root[r] == usize::MAX {
+                root[r] = ids.len();
+                ids.push(roots[r]);
+            }
+        }
+        let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &ids).to_vec();
+        // As for the whole program: the inputs are the roots' free symbols.
+        let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
+        Subprogram { tape, inputs, root }
+    }
 }
 
 /// Where one slot's numbers are among a [`RowProgram`]'s roots (and the tape's outputs): a
@@ -163,12 +193,36 @@ fn push(roots: &mut Vec<Id>, id: Id) -> usize {
     roots.len() - 1
 }
 
+/// `tape`'s inputs (the symbols `inputs`) from `env` into `buffer`.
+fn load(system: &System, env: &Env, tape: &Tape, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
+    for (i, &s) in inputs.iter().enumerate() {
+        let slots = tape.input_range(i);
+        match env.get(s) {
+            Some(Value::Scalar(x)) => buffer[slots].fill(x),
+            Some(Value::Vector(v)) => {
+                let n = slots.len();
+                buffer[slots].copy_from_slice(&v[..n]);
+            }
+            Some(Value::Quaternion(q)) => {
+                let n = slots.len();
+                buffer[slots].copy_from_slice(&q[..n]);
+            }
+            None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
+        }
+    }
+    Ok(())
+}
+
 /// Input and output buffers of [`RowProgram::evaluate_into`], reused across evaluations.
 #[derive(Clone, Debug)]
 pub struct RowScratch {
     inputs: Vec<f64>,
     outputs: Vec<f64>,
     tape: Scratch,
+    /// The same for the positions' subprogram.
+    position_inputs: Vec<f64>,
+    position_outputs: Vec<f64>,
+    position_tape: Scratch,
 }
 
 impl RowProgram {
@@ -263,7 +317,10 @@ impl RowProgram {
         let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
         // Every symbol a root reads is an input and each is listed once, so lowering cannot fail.
         let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
-        RowProgram { roots, bodies, rows, tape, inputs }
+        let axes = bodies.iter().filter_map(|b| b.principal).flat_map(|(_, axes)| axes);
+        let c_and_j = rows.iter().flat_map(|r| std::iter::once(r.value).chain(r.jacobian.clone()));
+        let positions = Subprogram::new(graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
+        RowProgram { roots, bodies, rows, tape, inputs, positions }
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
@@ -286,6 +343,9 @@ impl RowProgram {
             inputs: vec![0.0; self.tape.input_len()],
             outputs: vec![0.0; self.tape.output_len()],
             tape: self.tape.scratch(),
+            position_inputs: vec![0.0; self.positions.tape.input_len()],
+            position_outputs: vec![0.0; self.positions.tape.output_len()],
+            position_tape: self.positions.tape.scratch(),
         }
     }
 
@@ -305,21 +365,7 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
-        for (i, &s) in self.inputs.iter().enumerate() {
-            let slots = self.tape.input_range(i);
-            match env.get(s) {
-                Some(Value::Scalar(x)) => scratch.inputs[slots].fill(x),
-                Some(Value::Vector(v)) => {
-                    let n = slots.len();
-                    scratch.inputs[slots].copy_from_slice(&v[..n]);
-                }
-                Some(Value::Quaternion(q)) => {
-                    let n = slots.len();
-                    scratch.inputs[slots].copy_from_slice(&q[..n]);
-                }
-                None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
-            }
-        }
+        load(system, env, &self.tape, &self.inputs, &mut scratch.inputs)?;
         self.tape.eval(&scratch.inputs, &mut scratch.tape, &mut scratch.outputs);
         let out = &scratch.outputs;
         let tape = &self.tape;
@@ -380,17 +426,56 @@ impl RowProgram {
             row.rate = scalar(layout.rate) * layout.inverse_scale;
             row.bias = scalar(layout.bias);
             row.inequality = layout.inequality;
-            row.jacobian.clear();
-            for (&slot, at) in layout.bodies.iter().zip(layout.jacobian.clone()) {
-                let j = vector(at);
-                // A 3D angular slot holds Jʷ·eₖ, its axis' part of the vector Jʷ.
-                let j = match self.bodies[slot].principal {
-                    Some((k, axes)) => [dot(&vector(axes[k]), &j), 0.0, 0.0],
-                    None => j,
-                };
-                row.jacobian.push((slot, j));
-            }
+            self.fill_jacobian(layout, row, &vector);
         }
+    }
+
+    /// Row `layout`'s J from the roots' values.
+    fn fill_jacobian(&self, layout: &RowLayout, row: &mut Row, vector: &impl Fn(usize) -> [f64; 3]) {
+        row.jacobian.clear();
+        for (&slot, at) in layout.bodies.iter().zip(layout.jacobian.clone()) {
+            let j = vector(at);
+            // A 3D angular slot holds Jʷ·eₖ, its axis' part of the vector Jʷ.
+            let j = match self.bodies[slot].principal {
+                Some((k, axes)) => [dot(&vector(axes[k]), &j), 0.0, 0.0],
+                None => j,
+            };
+            row.jacobian.push((slot, j));
+        }
+    }
+
+    /// C/κ and J of every row at `env` (positions, parameters and `t`), into `rows`: `value`,
+    /// `jacobian` and `inequality` as [`evaluate_into`](RowProgram::evaluate_into) gives
+    /// them, to rounding (the same nodes, lowered without the others, may share a
+    /// subexpression differently: an ulp apart); `rate` and `bias` are 0. A tape of C and J
+    /// only, for iterations onto C = 0 that read nothing else.
+    pub fn evaluate_positions_into(
+        &self,
+        system: &System,
+        env: &Env,
+        scratch: &mut RowScratch,
+        rows: &mut Vec<Row>,
+    ) -> Result<(), EvalError> {
+        let p = &self.positions;
+        load(system, env, &p.tape, &p.inputs, &mut scratch.position_inputs)?;
+        p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs);
+        let out = &scratch.position_outputs;
+        let vector = |root: usize| {
+            let mut x = [0.0; 3];
+            let range = p.tape.output_range(p.root[root]);
+            let n = range.len();
+            x[..n].copy_from_slice(&out[range]);
+            x
+        };
+        rows.resize_with(self.rows.len(), Row::default);
+        for (layout, row) in self.rows.iter().zip(rows.iter_mut()) {
+            row.value = out[p.tape.output_range(p.root[layout.value]).start] * layout.inverse_scale;
+            row.rate = 0.0;
+            row.bias = 0.0;
+            row.inequality = layout.inequality;
+            self.fill_jacobian(layout, row, &vector);
+        }
+        Ok(())
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of

@@ -565,7 +565,7 @@ impl<'s> Simulation<'s> {
                     }
                 }
                 update_rates(&mut end, &self.half, &self.v);
-                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed, self.dynamics.held());
+                velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed, &mut self.dynamics);
                 self.dynamics.recycle(end);
                 self.dynamics.recycle(rows);
                 self.check_finite(n + 1, t1)?;
@@ -576,28 +576,12 @@ impl<'s> Simulation<'s> {
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {
                     let mut end = self.project(t1, length, tolerance, max_iterations)?;
-                    velocity_step(
-                        &mut end,
-                        &mut self.v,
-                        true,
-                        touch,
-                        s.restitution,
-                        bounce_speed,
-                        self.dynamics.held(),
-                    );
+                    velocity_step(&mut end, &mut self.v, true, touch, s.restitution, bounce_speed, &mut self.dynamics);
                     self.dynamics.recycle(end);
                 }
                 _ if has_inequalities => {
                     let mut end = self.dynamics.rows(t1, &self.q, &self.v)?;
-                    velocity_step(
-                        &mut end,
-                        &mut self.v,
-                        false,
-                        touch,
-                        s.restitution,
-                        bounce_speed,
-                        self.dynamics.held(),
-                    );
+                    velocity_step(&mut end, &mut self.v, false, touch, s.restitution, bounce_speed, &mut self.dynamics);
                     self.dynamics.recycle(end);
                 }
                 _ => {}

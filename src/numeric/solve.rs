@@ -29,7 +29,7 @@
 //!
 //! Not here: evaluating rows (`numeric::rows`), files, text.
 
-use super::banded::Banded;
+use super::banded::{Banded, BandedCholesky};
 use super::contact::{ContactState, classify_holding};
 use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
@@ -585,7 +585,6 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
 /// (`contact::classify_holding`): they stay candidates, λ ≥ 0, and leave only when λ would
 /// turn negative or they open.
 pub fn solve_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Solution {
-    let n_bodies = rows.inverse_mass.len();
     let k = rows.rows.len();
     let mut diagnostics = Vec::new();
     let mut status = Status::Solved;
@@ -609,22 +608,168 @@ pub fn solve_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Solutio
             diagnostics.push(Diagnostic::Penetrating { constraint: q });
         }
     }
-    // b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ
-    let b: Vec<f64> = index
-        .iter()
-        .map(|&q| {
-            let ext: f64 =
-                scaled.jacobian(q).iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
-            ext + scaled.scale(q, rows.rows[q].bias)
-        })
-        .collect();
+    let b = right_hand_side(rows, &scaled, &index);
     let nonnegative: Vec<bool> = index.iter().map(|&q| rows.rows[q].inequality).collect();
     let block = assemble(&scaled, &rows.inverse_mass, &index);
     let mu = multipliers(&block, &b, &nonnegative, &index, settings, &mut diagnostics, &mut status);
+    finish(rows, &scaled, &index, &mu, diagnostics, status, contacts)
+}
+
+/// Which way a [`solve_cached`] went (for tests of the switch, and for profiles).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum SolvePath {
+    /// Nothing solved yet.
+    #[default]
+    None,
+    /// The cached scaling and band factor served: J and the masses were bit for bit those
+    /// it was made from.
+    Reused,
+    /// J or the masses changed: scaled, assembled and factored anew, and cached.
+    Factored,
+    /// Not a case the cache serves (an inequality row, a number that is not finite, a row
+    /// that cannot carry a force, a dense or singular block): [`solve_holding`].
+    General,
+}
+
+/// What repeated solves with the same J and masses share: the scaling of the rows
+/// (J/‖J‖ and Jacobi) and the band Cholesky of Ã. A run's solves come in such series — the
+/// acceleration solve at the start of a step, every SHAKE iteration along the start's
+/// gradients, and the next step's start at the positions the velocity projection had —
+/// so most of them only substitute a right-hand side.
+///
+/// It serves only equality rows whose numbers are all finite and usable, on a block the
+/// band Cholesky factors; anything else goes to [`solve_holding`] unchanged. A solve it
+/// serves is the one `solve_holding` would compute, number for number (the same
+/// scaling, assembly, factor and refinement, made from inputs equal bit for bit).
+#[derive(Clone, Debug, Default)]
+pub struct SolveCache {
+    entry: Option<Factored>,
+    path: SolvePath,
+    /// Buffers of the reused solve: −b̃, μ and the band solve's.
+    rhs: Vec<f64>,
+    mu: Vec<f64>,
+    work: BandWork,
+}
+
+/// One cached factorisation and the inputs it was made from.
+#[derive(Clone, Debug)]
+struct Factored {
+    rank_tolerance: u64,
+    method: Method,
+    /// 1/m per slot, as bits.
+    inverse_mass: Vec<u64>,
+    /// Every row's J, concatenated (slot, bits of each component), and each row's length.
+    jacobian: Vec<(usize, [u64; 3])>,
+    lengths: Vec<usize>,
+    scaled: Scaled,
+    /// 0..k: every row takes part.
+    index: Vec<usize>,
+    factor: BandFactor,
+}
+
+impl Factored {
+    fn matches(&self, rows: &Rows, settings: &Settings) -> bool {
+        let bits = |j: &[f64; 3]| j.map(f64::to_bits);
+        self.rank_tolerance == settings.rank_tolerance.to_bits()
+            && self.method == settings.method
+            && self.lengths.len() == rows.rows.len()
+            && self.inverse_mass.len() == rows.inverse_mass.len()
+            && self.inverse_mass.iter().zip(&rows.inverse_mass).all(|(a, b)| *a == b.to_bits())
+            && self.lengths.iter().zip(&rows.rows).all(|(n, row)| *n == row.jacobian.len())
+            && self
+                .jacobian
+                .iter()
+                .zip(rows.rows.iter().flat_map(|row| &row.jacobian))
+                .all(|((s, a), (t, b))| s == t && *a == bits(b))
+    }
+}
+
+impl SolveCache {
+    /// The way the last solve went.
+    pub fn last_path(&self) -> SolvePath {
+        self.path
+    }
+}
+
+/// [`solve_holding`], reusing `cache`'s factorisation when J and the masses are those it
+/// was made from (see [`SolveCache`]); the answer is the same either way.
+pub fn solve_cached(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut SolveCache) -> Solution {
+    let finite = |x: &[f64; 3]| x.iter().all(|c| c.is_finite());
+    let servable = rows.rows.iter().all(|row| !row.inequality && row.bias.is_finite())
+        && rows.velocity.iter().all(finite)
+        && rows.force.iter().all(finite);
+    if !servable {
+        cache.path = SolvePath::General;
+        return solve_holding(rows, settings, held);
+    }
+    if cache.entry.as_ref().is_some_and(|c| c.matches(rows, settings)) {
+        cache.path = SolvePath::Reused;
+    } else {
+        cache.entry = None;
+        let (mut diagnostics, mut status) = (Vec::new(), Status::Solved);
+        let scaled = Scaled::new(rows, &mut diagnostics, &mut status);
+        // No diagnostic: every row is usable, so every row takes part.
+        if !diagnostics.is_empty() {
+            cache.path = SolvePath::General;
+            return solve_holding(rows, settings, held);
+        }
+        let index: Vec<usize> = (0..rows.rows.len()).collect();
+        let block = assemble(&scaled, &rows.inverse_mass, &index);
+        let Plan::Band(Some(factor)) = plan(&block, settings) else {
+            cache.path = SolvePath::General;
+            return solve_holding(rows, settings, held);
+        };
+        cache.entry = Some(Factored {
+            rank_tolerance: settings.rank_tolerance.to_bits(),
+            method: settings.method,
+            inverse_mass: rows.inverse_mass.iter().map(|w| w.to_bits()).collect(),
+            jacobian: rows.rows.iter().flat_map(|row| &row.jacobian).map(|(s, j)| (*s, j.map(f64::to_bits))).collect(),
+            lengths: rows.rows.iter().map(|row| row.jacobian.len()).collect(),
+            scaled,
+            index,
+            factor,
+        });
+        cache.path = SolvePath::Factored;
+    }
+    let Some(c) = &cache.entry else { return solve_holding(rows, settings, held) };
+    let (mut diagnostics, mut status) = (Vec::new(), Status::Solved);
+    cache.mu.clear();
+    if !c.index.is_empty() {
+        cache.rhs.clear();
+        cache.rhs.extend(c.index.iter().map(|&q| -b_entry(rows, &c.scaled, q)));
+        c.factor.solve_into(&cache.rhs, &mut cache.work, &mut cache.mu);
+        finite_in_place(&mut cache.mu, &c.index, &mut diagnostics, &mut status);
+    }
+    finish(rows, &c.scaled, &c.index, &cache.mu, diagnostics, status, vec![None; rows.rows.len()])
+}
+
+/// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.
+fn right_hand_side(rows: &Rows, scaled: &Scaled, index: &[usize]) -> Vec<f64> {
+    index.iter().map(|&q| b_entry(rows, scaled, q)).collect()
+}
+
+/// b̃ of row `q`.
+fn b_entry(rows: &Rows, scaled: &Scaled, q: usize) -> f64 {
+    let ext: f64 =
+        scaled.jacobian(q).iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
+    ext + scaled.scale(q, rows.rows[q].bias)
+}
+
+/// The solution from the scaled multipliers `mu` of the rows `index`: λ, forces,
+/// accelerations (the one tail of the general and the reused solve).
+fn finish(
+    rows: &Rows,
+    scaled: &Scaled,
+    index: &[usize],
+    mu: &[f64],
+    mut diagnostics: Vec<Diagnostic>,
+    status: Status,
+    contacts: Vec<Option<ContactState>>,
+) -> Solution {
+    let n_bodies = rows.inverse_mass.len();
+    let k = rows.rows.len();
     let mut lambda = vec![0.0; k];
-    let mut scaled_lambda = vec![0.0; k];
     for (p, &q) in index.iter().enumerate() {
-        scaled_lambda[q] = mu[p];
         lambda[q] = scaled.unscale(q, mu[p]);
         // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
         // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
@@ -634,10 +779,10 @@ pub fn solve_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Solutio
     }
     // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
     let mut constraint_force = vec![[0.0; 3]; n_bodies];
-    for &q in &index {
+    for (&q, &m) in index.iter().zip(mu) {
         for (body, j) in scaled.jacobian(q) {
             for d in 0..3 {
-                constraint_force[*body][d] += scaled_lambda[q] * j[d];
+                constraint_force[*body][d] += m * j[d];
             }
         }
     }
@@ -815,7 +960,52 @@ pub(crate) fn equality(
         return Vec::new();
     }
     let rhs: Vec<f64> = b.iter().map(|x| -x).collect();
-    // Renumber by reverse Cuthill–McKee when the given order is not already narrow.
+    let floor = settings.rank_tolerance;
+    let too_large = |diagnostics: &mut Vec<Diagnostic>, status: &mut Status| {
+        diagnostics.push(Diagnostic::TooLarge { constraints: index.to_vec(), rows: n });
+        *status = (*status).max(Status::Failed);
+        vec![0.0; n]
+    };
+    match plan(block, settings) {
+        Plan::Band(Some(factor)) => {
+            return finite_or_zero(factor.solve(&rhs), index, diagnostics, status);
+        }
+        Plan::Band(None) => {}
+        Plan::Dense => {
+            if n > MAX_DENSE_ROWS {
+                return too_large(diagnostics, status);
+            }
+            let a = dense(block);
+            if let Some(ch) = a.clone().cholesky()
+                && ch.l().diagonal().iter().all(|d| d * d > floor)
+            {
+                let rhs = DVector::from_vec(rhs.clone());
+                let mut x = ch.solve(&rhs);
+                let r = &rhs - &a * &x;
+                x += ch.solve(&r);
+                return finite_or_zero(x.iter().copied().collect(), index, diagnostics, status);
+            }
+        }
+    }
+    if n > MAX_DENSE_ROWS {
+        return too_large(diagnostics, status);
+    }
+    let x = minimum_norm(&dense(block), &rhs, &block.weight, index, settings, diagnostics, status);
+    finite_or_zero(x, index, diagnostics, status)
+}
+
+/// How [`equality`] factors a block: the band Cholesky (`Some` when its pivots all stay
+/// above the rank tolerance, `None` when one does not: the block is singular), or dense.
+pub(crate) enum Plan {
+    Band(Option<BandFactor>),
+    Dense,
+}
+
+/// The factorisation chosen for `block` ([`Method`]; `Auto` renumbers by reverse
+/// Cuthill–McKee when the given order is not already narrow, then takes the band when it is
+/// under a quarter of the size).
+pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
+    let n = block.n;
     let mut order: Option<Vec<usize>> = None;
     let mut bandwidth = block.bandwidth;
     if settings.method != Method::Dense && BAND_FRACTION * bandwidth >= n && n >= RENUMBER_MIN_ROWS {
@@ -835,60 +1025,72 @@ pub(crate) fn equality(
         Method::Dense => false,
         Method::Auto => BAND_FRACTION * bandwidth < n,
     };
-    let floor = settings.rank_tolerance;
-    let too_large = |diagnostics: &mut Vec<Diagnostic>, status: &mut Status| {
-        diagnostics.push(Diagnostic::TooLarge { constraints: index.to_vec(), rows: n });
-        *status = (*status).max(Status::Failed);
-        vec![0.0; n]
-    };
-    if !banded && n > MAX_DENSE_ROWS {
-        return too_large(diagnostics, status);
+    if !banded {
+        return Plan::Dense;
     }
-    if banded {
-        // position[old] = new (the identity without a renumbering).
-        let mut position: Vec<usize> = (0..n).collect();
-        if let Some(order) = &order {
-            for (new, &old) in order.iter().enumerate() {
-                position[old] = new;
-            }
-        }
-        let mut a = Banded::zeros(n, bandwidth);
-        for &(p, q, v) in &block.a {
-            a.add(position[q], position[p], v);
-        }
-        if let Ok(ch) = a.cholesky(floor) {
-            let mut permuted = vec![0.0; n];
-            for (old, &new) in position.iter().enumerate() {
-                permuted[new] = rhs[old];
-            }
-            let mut x = permuted.clone();
-            ch.solve_in_place(&mut x);
-            // One step of iterative refinement: x += A⁻¹ (rhs − A x).
-            let mut ax = vec![0.0; n];
-            a.mul(&x, &mut ax);
-            let mut r: Vec<f64> = permuted.iter().zip(&ax).map(|(u, v)| u - v).collect();
-            ch.solve_in_place(&mut r);
-            x.iter_mut().zip(&r).for_each(|(u, v)| *u += v);
-            let x = position.iter().map(|&new| x[new]).collect();
-            return finite_or_zero(x, index, diagnostics, status);
-        }
-    } else {
-        let a = dense(block);
-        if let Some(ch) = a.clone().cholesky()
-            && ch.l().diagonal().iter().all(|d| d * d > floor)
-        {
-            let rhs = DVector::from_vec(rhs.clone());
-            let mut x = ch.solve(&rhs);
-            let r = &rhs - &a * &x;
-            x += ch.solve(&r);
-            return finite_or_zero(x.iter().copied().collect(), index, diagnostics, status);
+    // position[old] = new (the identity without a renumbering).
+    let mut position: Vec<usize> = (0..n).collect();
+    if let Some(order) = &order {
+        for (new, &old) in order.iter().enumerate() {
+            position[old] = new;
         }
     }
-    if n > MAX_DENSE_ROWS {
-        return too_large(diagnostics, status);
+    let mut a = Banded::zeros(n, bandwidth);
+    for &(p, q, v) in &block.a {
+        a.add(position[q], position[p], v);
     }
-    let x = minimum_norm(&dense(block), &rhs, &block.weight, index, settings, diagnostics, status);
-    finite_or_zero(x, index, diagnostics, status)
+    Plan::Band(a.cholesky(settings.rank_tolerance).ok().map(|factor| BandFactor { position, a, factor }))
+}
+
+/// A block's band Cholesky, in its (possibly renumbered) order: what a solve needs to be
+/// repeated with other right-hand sides.
+#[derive(Clone, Debug)]
+pub(crate) struct BandFactor {
+    /// position[old] = new.
+    position: Vec<usize>,
+    a: Banded,
+    factor: BandedCholesky,
+}
+
+impl BandFactor {
+    /// Ã x = `rhs` (in the block's order), with one step of iterative refinement.
+    fn solve(&self, rhs: &[f64]) -> Vec<f64> {
+        let mut x = Vec::new();
+        self.solve_into(rhs, &mut BandWork::default(), &mut x);
+        x
+    }
+
+    /// [`solve`](BandFactor::solve) into `x`, with `work`'s buffers (no allocation once
+    /// they have the block's size).
+    fn solve_into(&self, rhs: &[f64], work: &mut BandWork, x: &mut Vec<f64>) {
+        let n = rhs.len();
+        let BandWork { permuted, y, ax, r } = work;
+        permuted.resize(n, 0.0);
+        for (old, &new) in self.position.iter().enumerate() {
+            permuted[new] = rhs[old];
+        }
+        y.clear();
+        y.extend_from_slice(permuted);
+        self.factor.solve_in_place(y);
+        // One step of iterative refinement: x += A⁻¹ (rhs − A x).
+        ax.resize(n, 0.0);
+        self.a.mul(y, ax);
+        r.clear();
+        r.extend(permuted.iter().zip(ax.iter()).map(|(u, v)| u - v));
+        self.factor.solve_in_place(r);
+        y.iter_mut().zip(r.iter()).for_each(|(u, v)| *u += v);
+        x.clear();
+        x.extend(self.position.iter().map(|&new| y[new]));
+    }
+}
+
+/// Buffers of [`BandFactor::solve_into`].
+#[derive(Clone, Debug, Default)]
+struct BandWork {
+    permuted: Vec<f64>,
+    y: Vec<f64>,
+    ax: Vec<f64>,
+    r: Vec<f64>,
 }
 
 fn dense(block: &Block) -> DMatrix<f64> {
@@ -908,6 +1110,12 @@ fn finite_or_zero(
     diagnostics: &mut Vec<Diagnostic>,
     status: &mut Status,
 ) -> Vec<f64> {
+    finite_in_place(&mut x, index, diagnostics, status);
+    x
+}
+
+/// Sets the non-finite entries of `x` to 0, with a diagnostic each.
+fn finite_in_place(x: &mut [f64], index: &[usize], diagnostics: &mut Vec<Diagnostic>, status: &mut Status) {
     for (p, v) in x.iter_mut().enumerate() {
         if !v.is_finite() {
             diagnostics.push(Diagnostic::NonFiniteLambda { constraint: index[p] });
@@ -915,7 +1123,6 @@ fn finite_or_zero(
             *v = 0.0;
         }
     }
-    x
 }
 
 /// The minimum-norm (least-squares if inconsistent) solution of a singular `a μ = rhs`, with

@@ -165,10 +165,14 @@ fn enforce(row: &mut Row, bias: f64) {
     row.bias = bias;
 }
 
-/// Adds M⁻¹Jᵀμ for the rows to `x` and returns the largest |step| component.
-fn apply_correction(rows: &mut Rows, x: &mut Vectors) -> f64 {
+/// Adds M⁻¹Jᵀμ for the rows to `x` and returns the largest |step| component; the solve
+/// goes through the run's cache when `dynamics` is given.
+fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dynamics<'_>>) -> f64 {
     rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    let solution = solve(rows);
+    let solution = match dynamics {
+        Some(dynamics) => dynamics.correct(rows),
+        None => solve(rows),
+    };
     let mut largest = 0.0f64;
     for (x, dx) in x.iter_mut().zip(&solution.acceleration) {
         for d in 0..3 {
@@ -232,7 +236,7 @@ pub fn project_positions(
                 leave_out(row);
             }
         }
-        apply_correction(&mut rows, q);
+        apply_correction(&mut rows, q, Some(dynamics));
         dynamics.recycle(rows);
         iterations += 1;
     }
@@ -246,7 +250,9 @@ pub fn project_positions(
 /// a contact's correction must not turn into a velocity (that would pre-empt its impulse
 /// and restitution), so violated inequalities are left to [`project_positions`]. `start` holds
 /// the rows at the start of the step (its C, Ċ and c are overwritten; its J is kept).
-/// Returns the rows at the final positions.
+/// An iteration reads C and J alone (`Dynamics::positions`), and its solve has the start's
+/// J, so the run's solve cache serves it with the start's factor; the full rows are
+/// evaluated once, at the final positions, and returned.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
@@ -264,9 +270,10 @@ pub fn shake_positions(
     let mut iterations = 0;
     let mut previous = f64::INFINITY;
     loop {
-        let rows = dynamics.rows(t, q, v_half)?;
+        // C and J only (the iteration reads nothing else); the full rows once, at the end.
+        dynamics.positions(t, q, v_half)?;
         let mut residual = 0.0f64;
-        for (k, row) in rows.rows.iter().enumerate() {
+        for (k, row) in dynamics.position_rows().iter().enumerate() {
             if !row.inequality || dynamics.is_held(k) {
                 residual = residual.max(distance(row).abs());
             }
@@ -274,10 +281,11 @@ pub fn shake_positions(
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
-            return Ok((rows, iterations));
+            return Ok((dynamics.rows(t, q, v_half)?, iterations));
         }
         previous = residual;
-        for (k, ((old, new), constraint)) in start.rows.iter_mut().zip(&rows.rows).zip(&system.constraints).enumerate()
+        for (k, ((old, new), constraint)) in
+            start.rows.iter_mut().zip(dynamics.position_rows()).zip(&system.constraints).enumerate()
         {
             let equality = !constraint.inequality || dynamics.is_held(k);
             old.inequality = !equality;
@@ -288,9 +296,8 @@ pub fn shake_positions(
                 leave_out(old);
             }
         }
-        dynamics.recycle(rows);
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        let solution = solve(start);
+        let solution = dynamics.correct(start);
         for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
             for d in 0..3 {
                 if dq[d].is_finite() {
@@ -321,14 +328,14 @@ pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
         row.inequality = false;
         enforce(row, row.rate);
     }
-    apply_correction(rows, v);
+    apply_correction(rows, v, None);
 }
 
 /// The velocity solve at the rows of the current positions: closing contacts (touching
 /// within `touch` or `held`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
 /// `project` the equalities and the held contacts that are not closing go onto Ċ = 0 too,
-/// else they keep their Ċ. Returns whether
-/// anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
+/// else they keep their Ċ; `dynamics` says which contacts are held and serves the solve.
+/// Returns whether anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
 pub fn velocity_step(
     rows: &mut Rows,
     v: &mut Vectors,
@@ -336,11 +343,11 @@ pub fn velocity_step(
     touch: f64,
     restitution: f64,
     bounce_speed: f64,
-    held: &[bool],
+    dynamics: &mut Dynamics<'_>,
 ) -> bool {
     let mut any = false;
     for (k, row) in rows.rows.iter_mut().enumerate() {
-        let is_held = held.get(k).copied().unwrap_or(false);
+        let is_held = dynamics.is_held(k);
         if row.inequality && is_held && normal_speed(row) >= 0.0 {
             // A held contact not closing is an equality for the step: onto Ċ = 0 with
             // projection (so round-off cannot make it separate), else its rate is kept.
@@ -367,7 +374,7 @@ pub fn velocity_step(
         }
     }
     if any {
-        apply_correction(rows, v);
+        apply_correction(rows, v, Some(dynamics));
     }
     any
 }

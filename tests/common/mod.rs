@@ -66,6 +66,17 @@ pub fn two_bodies(dim: i64, params: &[&str], constraints: &[(&str, &str)]) -> Sy
     b.finish()
 }
 
+/// The `.toml` files of `dirs`, sorted.
+pub fn constraint_files(dirs: &[&str]) -> Vec<std::path::PathBuf> {
+    let mut files: Vec<_> = dirs
+        .iter()
+        .flat_map(|d| std::fs::read_dir(d).expect("dir").map(|e| e.expect("entry").path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    files
+}
+
 /// A random state for every symbol of `system`: vectors in `[-1, 1)ᵈ`, masses and scalar
 /// parameters in `[0.5, 2)`, `t` in `[-1, 1)`.
 pub fn random_env(system: &System, rng: &mut Rng) -> Env {

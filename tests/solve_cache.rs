@@ -1,0 +1,154 @@
+//! The fast paths of the numbers: the solve that reuses a factorisation
+//! (`solve::solve_cached`) and the tape of C and J alone
+//! (`RowProgram::evaluate_positions_into`). The reused factorisation must give exactly what
+//! the general solve gives, the positions tape the full tape's C and J to rounding, and the
+//! reused factorisation must be taken only where it is safe: every case that
+//! needs the general solve (an inequality, a number that is not finite, a row that carries
+//! no force, redundant rows, a dense block) goes there and is answered as before.
+
+mod common;
+
+use lagrange::model::file::load;
+use lagrange::numeric::rows::Rows;
+use lagrange::numeric::solve::{
+    Diagnostic, Method, Settings, Solution, SolveCache, SolvePath, Status, solve_cached, solve_holding,
+};
+use lagrange::scenario::Scenario;
+
+/// The rows of an N-link chain (`lagrange::scenario::chain`) at a random state `seed`: A
+/// tridiagonal with every entry non-trivial, other J for another seed.
+fn chain(n: usize, seed: u64) -> Rows {
+    let s = Scenario::new(load(&lagrange::scenario::chain(n)).expect("valid"), &[]).expect("derives");
+    let env = common::random_env(&s.system, &mut common::Rng::new(seed));
+    s.program.evaluate(&s.system, &env).expect("rows")
+}
+
+/// Equal number for number (bits, so a −0 for a +0 counts too).
+fn assert_same(a: &Solution, b: &Solution) {
+    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let bits3 = |x: &[[f64; 3]]| x.iter().flat_map(|v| v.map(f64::to_bits)).collect::<Vec<_>>();
+    assert_eq!(bits(&a.lambda), bits(&b.lambda));
+    assert_eq!(bits3(&a.acceleration), bits3(&b.acceleration));
+    assert_eq!(bits3(&a.constraint_force), bits3(&b.constraint_force));
+    assert_eq!((&a.active, &a.diagnostics, a.status, &a.contacts), (&b.active, &b.diagnostics, b.status, &b.contacts));
+}
+
+/// Solves through `cache` and checks the answer against the general solve; returns the path.
+fn solve_checked(rows: &Rows, settings: &Settings, cache: &mut SolveCache) -> SolvePath {
+    let fast = solve_cached(rows, settings, &[], cache);
+    assert_same(&fast, &solve_holding(rows, settings, &[]));
+    cache.last_path()
+}
+
+#[test]
+fn the_reused_factorisation_gives_the_general_answer_and_only_while_j_and_the_masses_stay() {
+    let settings = Settings::default();
+    for n in [1, 5, 10, 17, 300] {
+        let mut cache = SolveCache::default();
+        let rows = chain(n, 1);
+        assert_eq!(solve_checked(&rows, &settings, &mut cache), SolvePath::Factored, "n = {n}");
+        // Other forces, c and velocities with the same J and masses: the factor serves.
+        let mut other = rows.clone();
+        for (k, row) in other.rows.iter_mut().enumerate() {
+            row.bias = (k as f64 * 0.37).sin();
+            row.value = 1e-3 * k as f64;
+        }
+        other.force.iter_mut().for_each(|f| *f = [0.3, -2.0, 0.0]);
+        other.velocity.iter_mut().for_each(|v| v[0] += 1.0);
+        assert_eq!(solve_checked(&other, &settings, &mut cache), SolvePath::Reused, "n = {n}");
+        // One ulp of one J component, one mass, another state: factored anew.
+        let mut nudged = rows.clone();
+        let j = &mut nudged.rows[n / 2].jacobian[0].1[1];
+        *j = f64::from_bits(j.to_bits() + 1);
+        assert_eq!(solve_checked(&nudged, &settings, &mut cache), SolvePath::Factored, "n = {n}");
+        let mut heavier = nudged.clone();
+        heavier.inverse_mass[n - 1] *= 0.5;
+        assert_eq!(solve_checked(&heavier, &settings, &mut cache), SolvePath::Factored, "n = {n}");
+        assert_eq!(solve_checked(&chain(n, 2), &settings, &mut cache), SolvePath::Factored, "n = {n}");
+        // Other settings: the rank tolerance decides the factor's pivots.
+        let strict = Settings { rank_tolerance: 1e-3, ..settings };
+        assert_ne!(solve_checked(&chain(n, 2), &strict, &mut cache), SolvePath::Reused, "n = {n}");
+    }
+}
+
+#[test]
+fn every_case_the_cache_does_not_serve_goes_to_the_general_solve() {
+    let settings = Settings::default();
+    let n = 20;
+    // Each case starts from a warm cache whose J matches, so only the guard keeps it off.
+    let general = |change: &dyn Fn(&mut Rows), settings: &Settings| {
+        let mut cache = SolveCache::default();
+        let rows = chain(n, 1);
+        solve_checked(&rows, &Settings::default(), &mut cache);
+        let mut rows = rows;
+        change(&mut rows);
+        let path = solve_checked(&rows, settings, &mut cache);
+        let answer = solve_holding(&rows, settings, &[]);
+        (path, answer)
+    };
+    // An inequality row (a contact: λ ≥ 0, the active set).
+    let (path, _) = general(&|r| r.rows[3].inequality = true, &settings);
+    assert_eq!(path, SolvePath::General);
+    // A c term, a velocity, a force that is not finite: the general solve's diagnostics.
+    for change in [
+        (|r: &mut Rows| r.rows[4].bias = f64::NAN) as fn(&mut Rows),
+        |r| r.velocity[2][0] = f64::INFINITY,
+        |r| r.force[5][1] = f64::NAN,
+    ] {
+        let (path, answer) = general(&change, &settings);
+        assert_eq!(path, SolvePath::General);
+        assert!(answer.diagnostics.iter().any(|d| matches!(d, Diagnostic::NonFiniteRow { .. })));
+    }
+    // A row with a zero gradient carries no force.
+    let (path, answer) = general(&|r| r.rows[6].jacobian.iter_mut().for_each(|(_, j)| *j = [0.0; 3]), &settings);
+    assert_eq!(path, SolvePath::General);
+    assert!(answer.diagnostics.iter().any(|d| matches!(d, Diagnostic::ZeroGradient { constraint: 6, .. })));
+    // A redundant row (the same link twice): the band pivot fails, the minimum-norm λ.
+    let (path, answer) = general(&|r| r.rows[8] = r.rows[7].clone(), &settings);
+    assert_eq!(path, SolvePath::General);
+    assert_eq!(answer.status, Status::MinimumNorm);
+    // A dense block: asked for, or chosen (a band of a quarter of the size or more).
+    let dense = Settings { method: Method::Dense, ..settings };
+    let (path, _) = general(&|_| {}, &dense);
+    assert_eq!(path, SolvePath::General);
+    let mut cache = SolveCache::default();
+    assert_eq!(solve_checked(&chain(2, 1), &settings, &mut cache), SolvePath::General);
+}
+
+#[test]
+fn the_positions_tape_gives_the_rows_c_and_j_on_every_file() {
+    // The same nodes, compiled without Ċ, c and the bodies' numbers: the lowering may share
+    // a subexpression differently and round an ulp apart (bead_on_ellipse's C did), never
+    // more than a few: relative 1e-13 (against 1) at 10 random states of every file.
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-13 * a.abs().max(b.abs()).max(1.0);
+    let files = common::constraint_files(&["constraints", "constraints/hard", "constraints/rigid"]);
+    let mut checked = 0;
+    for path in files {
+        let text = std::fs::read_to_string(&path).expect("file");
+        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
+        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+        let mut rng = common::Rng::new(11);
+        let mut scratch = s.program.scratch();
+        let mut positions = Vec::new();
+        for _ in 0..10 {
+            let env = common::random_env(&s.system, &mut rng);
+            let full = s.program.evaluate(&s.system, &env).expect("rows");
+            s.program.evaluate_positions_into(&s.system, &env, &mut scratch, &mut positions).expect("rows");
+            assert_eq!(positions.len(), full.rows.len());
+            for (a, b) in positions.iter().zip(&full.rows) {
+                let at = path.display();
+                assert!(close(a.value, b.value), "{at}: C {a:?} vs {b:?}");
+                assert_eq!(a.inequality, b.inequality, "{at}");
+                let same = a.jacobian.len() == b.jacobian.len()
+                    && a.jacobian
+                        .iter()
+                        .zip(&b.jacobian)
+                        .all(|((p, x), (q, y))| p == q && (0..3).all(|d| close(x[d], y[d])));
+                assert!(same, "{at}: J {a:?} vs {b:?}");
+                assert_eq!((a.rate, a.bias), (0.0, 0.0), "{at}");
+            }
+        }
+        checked += 1;
+    }
+    assert!(checked >= 25, "only {checked} files checked");
+}
