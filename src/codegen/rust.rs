@@ -359,6 +359,14 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
             layout: &layout,
             scales: &scales,
             inequalities: &inequalities,
+            b_code: &b_code,
+            length_places: if turns.body.is_empty() {
+                let mass_symbols: HashSet<Symbol> =
+                    system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
+                length_places(g, &fields, &mass_symbols)
+            } else {
+                Vec::new()
+            },
             step: options.solver.map(|solver| super::c::StepParts {
                 solver,
                 inverse_scales: d
@@ -780,13 +788,20 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout, turns: &Turns
     );
 }
 
-/// `scaled_state` and `length_like`: the state's length-like fields (positions,
-/// velocities, forces, and the parameters no mass depends on), as `numeric::rescale`
-/// chooses them.
-fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) {
-    let mut places: Vec<(String, bool, bool)> = Vec::new(); // (place, vector, array of vectors)
+/// A length-like place of `State`: a field (`vector` when it is one), or a whole role array
+/// of vectors (`array`, named by its first field) where the layout holds bodies in arrays.
+pub(super) struct LengthPlace {
+    pub(super) field: usize,
+    pub(super) vector: bool,
+    pub(super) array: Option<&'static str>,
+}
+
+/// The state's length-like places (positions, velocities, forces, and the parameters no mass
+/// depends on), as `numeric::rescale` chooses them, in field order (a role array once).
+pub(super) fn length_places(g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) -> Vec<LengthPlace> {
+    let mut places = Vec::new();
     let mut arrays = HashSet::new();
-    for f in fields {
+    for (i, f) in fields.iter().enumerate() {
         let info = g.symbol(f.symbol);
         let length = match info.role {
             Role::Position { .. } | Role::Velocity { .. } | Role::Force { .. } => true,
@@ -799,12 +814,26 @@ fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &Has
         match f.array {
             Some((name, _)) => {
                 if arrays.insert(name) {
-                    places.push((name.to_string(), true, true));
+                    places.push(LengthPlace { field: i, vector: true, array: Some(name) });
                 }
             }
-            None => places.push((f.ident.clone(), info.ty == Ty::Vector, false)),
+            None => places.push(LengthPlace { field: i, vector: info.ty == Ty::Vector, array: None }),
         }
     }
+    places
+}
+
+/// `scaled_state` and `length_like`: the state's length-like fields (positions,
+/// velocities, forces, and the parameters no mass depends on), as `numeric::rescale`
+/// chooses them.
+fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) {
+    let places: Vec<(String, bool, bool)> = length_places(g, fields, mass_symbols)
+        .into_iter()
+        .map(|p| match p.array {
+            Some(name) => (name.to_string(), true, true),
+            None => (fields[p.field].ident.clone(), p.vector, false),
+        })
+        .collect();
     let _ = writeln!(
         out,
         "/// The state with its length-like fields (positions, velocities, forces, parameters no mass depends on) × 2ᵉ."
@@ -1324,21 +1353,7 @@ impl Ctx<'_> {
         let rigid = turns.body.len();
         // The solution's slots past the bodies are the rigid bodies' angles.
         let bodies_only = if rigid > 0 { "[..BODIES]" } else { "" };
-        let mut namer = Namer::new(&[
-            "constraints",
-            "a_matrix",
-            "a_band",
-            "b_vector",
-            "jacobian",
-            "jacobian_blocks",
-            "c_term",
-            "lambda",
-            "forces",
-            "torques",
-        ]);
-        let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
-        let torque_fns: Vec<String> =
-            turns.body.iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
+        let (force_fns, torque_fns) = per_body_fns(names, turns);
         let _ = writeln!(
             out,
             "/// The accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ of every body (in file order), from the rows' solve.\n\
@@ -1629,6 +1644,27 @@ impl Ctx<'_> {
         }
         Ok(())
     }
+}
+
+/// The names of `force_<body>` (every body) and `torque_<body>` (every rigid body), clear of
+/// the module's other functions.
+pub(super) fn per_body_fns(names: &Names<'_>, turns: &Turns) -> (Vec<String>, Vec<String>) {
+    let mut namer = Namer::new(&[
+        "constraints",
+        "a_matrix",
+        "a_band",
+        "b_vector",
+        "jacobian",
+        "jacobian_blocks",
+        "c_term",
+        "lambda",
+        "forces",
+        "torques",
+    ]);
+    let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
+    let torque_fns: Vec<String> =
+        turns.body.iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
+    (force_fns, torque_fns)
 }
 
 /// Aₖⱼ = Σᵢ [Jₖᵢ·Jⱼᵢ / mᵢ + Jʷₖᵢ Jʷⱼᵢ / Iᵢ] for every non-zero entry of `f.a`, unsimplified:
