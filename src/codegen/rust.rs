@@ -40,7 +40,7 @@ use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateSto
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
 use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
-use crate::derive::{DeriveError, derive};
+use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
@@ -188,7 +188,9 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
     Ok(module(loaded, options)?.code)
 }
 
-/// Generates the Rust module for a loaded file, with its `State` layout.
+/// Generates the Rust module for a loaded file, with its `State` layout: the module's own
+/// derivation, specialised where asked, the scene's numbers as graph nodes, the plan (the
+/// state's fields and the layout), then the text in the chosen language.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
     // The 3D module (quaternions in `State`) is not written yet.
     loaded.system.refuse_rigid_3d("generate")?;
@@ -198,7 +200,28 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     }
     // The module's own derivation: `--specialize` extends its graph.
     let mut d = derive(&loaded.system)?;
-    let system = &loaded.system;
+    let specialised = specialise(loaded, &mut d, options.specialize)?;
+    let scene = scene_numbers(loaded, &mut d.graph, &specialised)?;
+    let plan = Plan::of(loaded, &d, &specialised);
+    let formulas = &specialised.formulas;
+    match options.lang {
+        Lang::C => c_module(loaded, options, &d, formulas, &scene, &plan),
+        Lang::Rust => rust_module(loaded, options, &d, formulas, &scene, &plan),
+    }
+}
+
+/// The formulas a module is written from, with the parameters `--specialize` substituted.
+struct Specialised {
+    formulas: Formulas,
+    /// The symbols replaced by their values (not fields of `State`).
+    substituted: HashSet<Symbol>,
+    /// Each substituted symbol's node → its value's node.
+    map: HashMap<Id, Id>,
+}
+
+/// The derivation's formulas; with `specialize`, each parameter's value substituted and the
+/// formulas simplified again (kept as substituted where that leaves f64's range).
+fn specialise(loaded: &Loaded, d: &mut Derivation, specialize: bool) -> Result<Specialised, GenerateError> {
     let mut formulas = Formulas {
         c: d.constraints.iter().map(|c| c.c).collect(),
         c_dot: d.constraints.iter().map(|c| c.c_dot).collect(),
@@ -213,7 +236,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     };
     let mut substituted = HashSet::new();
     let mut map = HashMap::new();
-    if options.specialize {
+    if specialize {
         let g = &mut d.graph;
         let dim = g.dim();
         for &(s, value) in &loaded.values {
@@ -251,26 +274,41 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
             Ok(if out_of_range(g, simplified) && !out_of_range(g, replaced) { replaced } else { simplified })
         })?;
     }
+    Ok(Specialised { formulas, substituted, map })
+}
+
+/// The scene's numbers as graph nodes: masses, A and b as assembled, the bodies' and the
+/// rigid bodies' inputs of the rows' solve.
+struct SceneNumbers {
+    masses: Vec<Id>,
+    a_code: Vec<Id>,
+    b_code: Vec<Id>,
+    bodies: Bodies,
+    turns: Turns,
+}
+
+fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<SceneNumbers, GenerateError> {
+    let (system, formulas, map) = (&loaded.system, &sp.formulas, &sp.map);
     // The code computes A from the directions, Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ, as assembled: the derivation's
     // canonical Aₖⱼ expands each dot bilinearly (a chain's (r₁ − r₂)·(r₂ − r₃) becomes four dot
     // products), which costs more operations and loses digits to cancellation. The doc
     // comments keep the canonical form.
-    let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
+    let masses = system.bodies.iter().map(|b| g.substitute(b.mass, map)).collect::<Result<Vec<_>, _>>()?;
     let inertias = system
         .bodies
         .iter()
-        .map(|b| b.rigid.as_ref().map(|r| d.graph.substitute(r.inertia, &map)).transpose())
+        .map(|b| b.rigid.as_ref().map(|r| g.substitute(r.inertia, map)).transpose())
         .collect::<Result<Vec<_>, _>>()?;
-    let a_code = assembled_a(&mut d.graph, &formulas, &masses, &inertias)?;
-    let b_code = assembled_b(&mut d.graph, &formulas, system, &masses, &inertias)?;
-    let inverse_masses = masses.iter().map(|&m| d.graph.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
+    let a_code = assembled_a(g, formulas, &masses, &inertias)?;
+    let b_code = assembled_b(g, formulas, system, &masses, &inertias)?;
+    let inverse_masses = masses.iter().map(|&m| g.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
     // The scene's force expressions (`[scene] forces`); a body not listed feels none.
-    let zero = d.graph.num(Rational::int(0));
-    let zero = d.graph.vector(vec![zero; d.graph.dim()])?;
+    let zero = g.num(Rational::int(0));
+    let zero = g.vector(vec![zero; g.dim()])?;
     let mut applied = Vec::with_capacity(system.bodies.len());
     for i in 0..system.bodies.len() {
         applied.push(match loaded.scene.forces.iter().find(|f| f.0 == i) {
-            Some(&(_, id)) => d.graph.substitute(id, &map)?,
+            Some(&(_, id)) => g.substitute(id, map)?,
             None => zero,
         });
     }
@@ -285,163 +323,191 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let mut turns = Turns::default();
     for (i, body) in system.bodies.iter().enumerate() {
         let (Some(rigid), Some(inertia)) = (&body.rigid, inertias[i]) else { continue };
-        let scalar_zero = d.graph.num(Rational::int(0));
+        let scalar_zero = g.num(Rational::int(0));
         turns.body.push(i);
         turns.orientation.push(rigid.nodes.orientation);
         turns.angular_velocity.push(rigid.nodes.angular_velocity);
         turns.torque.push(rigid.nodes.torque);
         turns.applied.push(match loaded.scene.torques.iter().find(|t| t.0 == i) {
-            Some(&(_, id)) => d.graph.substitute(id, &map)?,
+            Some(&(_, id)) => g.substitute(id, map)?,
             None => scalar_zero,
         });
-        turns.inverse_inertia.push(d.graph.powi(inertia, -1)?);
+        turns.inverse_inertia.push(g.powi(inertia, -1)?);
     }
-    let g = &d.graph;
-    let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
-    let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
-    // The state holds the file's symbols, not those the derivation declared (the multipliers).
-    let field_count = system
-        .graph
-        .symbols()
-        .filter(|(s, i)| !substituted.contains(s) && !matches!(i.role, Role::Acceleration { .. }))
-        .count();
-    let arrays = layout::state_storage(field_count) == StateStorage::Arrays;
-    let fields = state_fields(&system.graph, &body_names, &substituted, arrays);
-    let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
-    let slots = slot_exprs(g, &fields);
-    let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
-    let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
-    let closed_form = formulas.lambda.is_some() && formulas.forces.is_some();
-    let inequalities = system.constraints.iter().any(|c| c.inequality);
-    let layout = Layout::of(
-        g.dim(),
-        system.bodies.len(),
-        system.constraints.len(),
-        &a_entries,
-        blocks,
-        closed_form,
-        inequalities,
-    );
+    Ok(SceneNumbers { masses, a_code, b_code, bodies, turns })
+}
 
-    let mut out = String::new();
-    let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
-    header(&mut out, title, options.specialize, &layout, turns.body.len());
-    field_names(&mut out, g, &fields);
-    state(&mut out, g, &fields, &layout);
-    let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
-    let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
-    row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
-    let header_end = out.len();
-    if options.lang == Lang::C {
-        if options.solver == Some(Solver::Exact) {
-            return Err(GenerateError::CStep);
+/// What both languages lay out the same way: names, the state's fields, the layout, κ and
+/// the inequality flags per row.
+struct Plan<'a> {
+    title: &'a str,
+    body_names: Vec<&'a str>,
+    constraint_names: Vec<&'a str>,
+    fields: Vec<Field>,
+    layout: Layout,
+    scales: Vec<f64>,
+    inequalities: Vec<bool>,
+}
+
+impl<'a> Plan<'a> {
+    fn of(loaded: &'a Loaded, d: &Derivation, sp: &Specialised) -> Plan<'a> {
+        let (system, formulas, g) = (&loaded.system, &sp.formulas, &d.graph);
+        let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
+        let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
+        // The state holds the file's symbols, not those the derivation declared (the multipliers).
+        let field_count = system
+            .graph
+            .symbols()
+            .filter(|(s, i)| !sp.substituted.contains(s) && !matches!(i.role, Role::Acceleration { .. }))
+            .count();
+        let arrays = layout::state_storage(field_count) == StateStorage::Arrays;
+        let fields = state_fields(&system.graph, &body_names, &sp.substituted, arrays);
+        let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
+        let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
+        let closed_form = formulas.lambda.is_some() && formulas.forces.is_some();
+        let layout = Layout::of(
+            g.dim(),
+            system.bodies.len(),
+            system.constraints.len(),
+            &a_entries,
+            blocks,
+            closed_form,
+            system.constraints.iter().any(|c| c.inequality),
+        );
+        Plan {
+            title: if system.title.is_empty() { "untitled scene" } else { system.title.as_str() },
+            body_names,
+            constraint_names,
+            fields,
+            layout,
+            scales: d.constraints.iter().map(|c| c.scale.to_f64()).collect(),
+            inequalities: system.constraints.iter().map(|c| c.inequality).collect(),
         }
-        let c_names = super::c::field_names(&fields);
-        let c_slots = super::c::slots(g, &fields, &c_names);
-        let input_layout = Inputs::new(g, &inputs)?;
-        let budget = code_budget(system);
-        let room = Cell::new(budget);
-        let ctx = Ctx { g, inputs: &input_layout, slots: &c_slots, non_finite: Cell::new(0), c: true, room, budget };
-        let names = Names { bodies: &body_names, constraints: &constraint_names };
-        let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
-        let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
-        let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
-        let parts = super::c::Parts {
-            title,
-            specialize: options.specialize,
-            fields: &fields,
-            c_names: &c_names,
-            formulas: &formulas,
-            a_code: &a_code,
-            bodies: &bodies,
-            turns: &turns,
-            names: &names,
-            layout: &layout,
-            scales: &scales,
-            inequalities: &inequalities,
-            b_code: &b_code,
-            length_places: if turns.body.is_empty() {
-                let mass_symbols: HashSet<Symbol> =
-                    system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
-                length_places(g, &fields, &mass_symbols)
-            } else {
-                Vec::new()
-            },
-            step: options.solver.map(|solver| super::c::StepParts {
-                solver,
-                inverse_scales: d
-                    .constraints
-                    .iter()
-                    .map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64())
-                    .collect(),
-                time: system.time,
-                bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
-                masses: masses.clone(),
-            }),
-        };
-        let code = super::c::emit(&ctx, &parts)?;
-        let mut warnings = Vec::new();
-        if ctx.non_finite.get() > 0 {
-            warnings.push(format!(
-                "constants of the formulas do not fit in f64 (written as INFINITY or NAN; {} place(s) in the code)",
-                ctx.non_finite.get()
-            ));
-        }
-        let fields = fields.iter().zip(c_names).map(|(f, n)| (f.symbol, n)).collect();
-        return Ok(Module { code, fields, warnings });
     }
-    let input_layout = Inputs::new(g, &inputs)?;
+
+    fn names(&self) -> Names<'_> {
+        Names { bodies: &self.body_names, constraints: &self.constraint_names }
+    }
+
+    fn inputs(&self) -> Vec<Symbol> {
+        self.fields.iter().map(|f| f.symbol).collect()
+    }
+}
+
+/// 1/κ per row, as `numeric::rows` multiplies by it (the step's rows).
+fn inverse_scales(d: &Derivation) -> Vec<f64> {
+    d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect()
+}
+
+/// The symbols the masses depend on (never length-like).
+fn mass_symbols(system: &crate::model::system::System) -> HashSet<Symbol> {
+    system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect()
+}
+
+/// `generate --lang c`: the same plan written by `codegen::c`.
+fn c_module(
+    loaded: &Loaded,
+    options: &Options,
+    d: &Derivation,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<Module, GenerateError> {
+    if options.solver == Some(Solver::Exact) {
+        return Err(GenerateError::CStep);
+    }
+    let (system, g, fields) = (&loaded.system, &d.graph, &plan.fields);
+    let c_names = super::c::field_names(fields);
+    let c_slots = super::c::slots(g, fields, &c_names);
+    let input_layout = Inputs::new(g, &plan.inputs())?;
+    let budget = code_budget(system);
+    let room = Cell::new(budget);
+    let ctx = Ctx { g, inputs: &input_layout, slots: &c_slots, non_finite: Cell::new(0), c: true, room, budget };
+    let names = plan.names();
+    let parts = super::c::Parts {
+        title: plan.title,
+        specialize: options.specialize,
+        fields,
+        c_names: &c_names,
+        formulas,
+        a_code: &scene.a_code,
+        bodies: &scene.bodies,
+        turns: &scene.turns,
+        names: &names,
+        layout: &plan.layout,
+        scales: &plan.scales,
+        inequalities: &plan.inequalities,
+        b_code: &scene.b_code,
+        length_places: if scene.turns.body.is_empty() {
+            length_places(g, fields, &mass_symbols(system))
+        } else {
+            Vec::new()
+        },
+        step: options.solver.map(|solver| super::c::StepParts {
+            solver,
+            inverse_scales: inverse_scales(d),
+            time: system.time,
+            bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
+            masses: scene.masses.clone(),
+        }),
+    };
+    let code = super::c::emit(&ctx, &parts)?;
+    let mut warnings = Vec::new();
+    if ctx.non_finite.get() > 0 {
+        warnings.push(format!(
+            "constants of the formulas do not fit in f64 (written as INFINITY or NAN; {} place(s) in the code)",
+            ctx.non_finite.get()
+        ));
+    }
+    let fields = fields.iter().zip(c_names).map(|(f, n)| (f.symbol, n)).collect();
+    Ok(Module { code, fields, warnings })
+}
+
+/// `generate --lang rust`, section by section as the module reads: the header (comment,
+/// field list, `State`, row constants), the formulas' functions, the solve (rows, change of
+/// unit, λ and forces), the step (`--solver`), the helpers, and a note on non-finite
+/// constants.
+fn rust_module(
+    loaded: &Loaded,
+    options: &Options,
+    d: &Derivation,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<Module, GenerateError> {
+    let (system, g, fields, layout) = (&loaded.system, &d.graph, &plan.fields, &plan.layout);
+    let mut out = String::new();
+    header(&mut out, plan.title, options.specialize, layout, scene.turns.body.len());
+    field_names(&mut out, g, fields);
+    state(&mut out, g, fields, layout);
+    row_constants(&mut out, &plan.scales, &plan.inequalities, &names_of(&plan.constraint_names));
+    let header_end = out.len();
+    let slots = slot_exprs(g, fields);
+    let input_layout = Inputs::new(g, &plan.inputs())?;
     let budget = code_budget(system);
     let room = Cell::new(budget);
     let ctx = Ctx { g, inputs: &input_layout, slots: &slots, non_finite: Cell::new(0), c: false, room, budget };
-    let names = Names { bodies: &body_names, constraints: &constraint_names };
-    ctx.constraints(&mut out, &formulas, &names)?;
-    ctx.rates(&mut out, &formulas, &names)?;
-    ctx.a(&mut out, &formulas, &a_code, &layout)?;
-    ctx.b(&mut out, &formulas)?;
-    ctx.jacobian(&mut out, &formulas, &names, &layout)?;
-    ctx.c_term(&mut out, &formulas)?;
-    ctx.bodies(&mut out, &bodies, &names)?;
-    ctx.rigid(&mut out, &turns, &formulas, &names, &layout)?;
-    rows_fn(&mut out, &formulas, &layout, &turns);
+    let names = plan.names();
+    formula_fns(&mut out, &ctx, formulas, scene, plan)?;
+    rows_fn(&mut out, formulas, layout, &scene.turns);
     // A change of length unit scales no angle, inertia or torque: a module with rigid bodies
     // solves in the file's unit, as `numeric::rescale` finds such rows not homogeneous.
-    if turns.body.is_empty() {
-        let mass_symbols: HashSet<Symbol> =
-            system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
-        scaling_fns(&mut out, g, &fields, &mass_symbols);
+    if scene.turns.body.is_empty() {
+        scaling_fns(&mut out, g, fields, &mass_symbols(system));
     }
-    ctx.solution(&mut out, &formulas, (&a_code, &b_code), &names, &layout, &turns)?;
+    ctx.solution(&mut out, formulas, (&scene.a_code, &scene.b_code), &names, layout, &scene.turns)?;
     if let Some(solver) = options.solver {
-        let inverse_scales: Vec<f64> =
-            d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect();
         let step = StepPlaces {
             time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
-            position: system.bodies.iter().map(|b| ident_of(&fields, b.position)).collect(),
-            velocity: system.bodies.iter().map(|b| ident_of(&fields, b.velocity)).collect(),
-            mass: masses.clone(),
-            velocity_node: bodies.velocity.clone(),
-            applied: bodies.applied.clone(),
+            position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
+            velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
+            mass: scene.masses.clone(),
+            velocity_node: scene.bodies.velocity.clone(),
+            applied: scene.bodies.applied.clone(),
         };
-        step_fns(&mut out, &ctx, solver, &inverse_scales, &step, &formulas, &names, &layout)?;
+        step_fns(&mut out, &ctx, solver, &inverse_scales(d), &step, formulas, &names, layout)?;
     }
-    out.push_str(ROWS);
-    out.push('\n');
-    out.push_str(HELPERS);
-    if let Some(solver) = options.solver {
-        out.push('\n');
-        out.push_str(STEP);
-        if solver.sweeps() {
-            out.push('\n');
-            out.push_str(SWEEP);
-        }
-        out.push('\n');
-        out.push_str(match solver {
-            Solver::SoftStep => SOFT_STEP,
-            Solver::Pgs => PGS,
-            Solver::Exact => EXACT,
-        });
-    }
+    helper_texts(&mut out, options.solver);
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         let warning = format!(
@@ -455,7 +521,49 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         out.insert_str(at, &note);
         warnings.push(warning);
     }
-    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect(), warnings })
+    Ok(Module { code: out, fields: fields.iter().map(|f| (f.symbol, f.ident.clone())).collect(), warnings })
+}
+
+/// The formulas' functions, in the module's order: C, Ċ, A, b, J, c, the bodies' numbers and
+/// the rigid bodies'.
+fn formula_fns(
+    out: &mut String,
+    ctx: &Ctx<'_>,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<(), GenerateError> {
+    let (names, layout) = (plan.names(), &plan.layout);
+    ctx.constraints(out, formulas, &names)?;
+    ctx.rates(out, formulas, &names)?;
+    ctx.a(out, formulas, &scene.a_code, layout)?;
+    ctx.b(out, formulas)?;
+    ctx.jacobian(out, formulas, &names, layout)?;
+    ctx.c_term(out, formulas)?;
+    ctx.bodies(out, &scene.bodies, &names)?;
+    ctx.rigid(out, &scene.turns, formulas, &names, layout)
+}
+
+/// The helpers every module carries (the rows' solve, the norms), then the step's with
+/// `--solver`.
+fn helper_texts(out: &mut String, solver: Option<Solver>) {
+    out.push_str(ROWS);
+    out.push('\n');
+    out.push_str(HELPERS);
+    if let Some(solver) = solver {
+        out.push('\n');
+        out.push_str(STEP);
+        if solver.sweeps() {
+            out.push('\n');
+            out.push_str(SWEEP);
+        }
+        out.push('\n');
+        out.push_str(match solver {
+            Solver::SoftStep => SOFT_STEP,
+            Solver::Pgs => PGS,
+            Solver::Exact => EXACT,
+        });
+    }
 }
 
 /// The `State` field of a symbol (every body's position and velocity has one).
