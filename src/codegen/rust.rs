@@ -1457,7 +1457,7 @@ impl Ctx<'_> {
         layout: &Layout,
         turns: &Turns,
     ) -> Result<(), GenerateError> {
-        let (g, dim, n, k) = (self.g, layout.dim, layout.bodies, layout.constraints);
+        let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
         let rigid = turns.body.len();
         // The solution's slots past the bodies are the rigid bodies' angles.
         let bodies_only = if rigid > 0 { "[..BODIES]" } else { "" };
@@ -1478,135 +1478,17 @@ impl Ctx<'_> {
         }
         match (layout.lambda, formulas.lambda, &formulas.forces) {
             (Lambda::ClosedForm, Some(lambda), Some(forces)) => {
-                let _ = writeln!(
+                return self.closed_form_fns(
                     out,
-                    "/// Whether the closed forms' numbers are in range here (A normal, b finite); where they are not\n\
-                     /// (|r| ≈ 1e155 overflows r·r), `lambda` and the forces come from the scaled `solution`.\n\
-                     fn closed_form_holds(s: &State) -> bool {{\n    \
-                     a_matrix(s)[0][0].is_normal() && b_vector(s)[0].is_finite()\n}}\n"
+                    formulas,
+                    (lambda, forces),
+                    names,
+                    layout,
+                    turns,
+                    (&force_fns, &torque_fns),
                 );
-                let doc = vec![
-                    "The multiplier λ, in closed form (the scaled `solution` where its numbers leave f64's range):"
-                        .to_string(),
-                    format!("λ = {}", formula(g, lambda)),
-                ];
-                let (lets, exprs) = self.body(&[lambda])?;
-                let value = format!(
-                    "let x = {};\n    if closed_form_holds(s) && x[0].is_finite() {{ x }} else {{ [solution(s).lambda[0]] }}",
-                    array(&exprs)
-                );
-                emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &value);
-                for (body, name) in force_fns.iter().enumerate() {
-                    let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
-                    let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
-                    match found {
-                        Some(id) => {
-                            doc.push(formula(g, id));
-                            let (lets, exprs) = self.body(&[id])?;
-                            let value = format!(
-                                "let f = {};\n    \
-                                 if closed_form_holds(s) && f.iter().all(|x| x.is_finite()) {{ f }} else {{ solution(s).force[{body}] }}",
-                                array(&exprs)
-                            );
-                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &value);
-                        }
-                        None => {
-                            doc.push("zero: no constraint involves this body.".into());
-                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &[], &array(&vec!["0.0".into(); dim]));
-                        }
-                    }
-                }
-                let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
-                let doc = vec!["The constraint force on every body (in file order).".to_string()];
-                emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
-                if rigid > 0 {
-                    let torques = formulas.torques.as_deref().unwrap_or(&[]);
-                    for (slot, name) in torque_fns.iter().enumerate() {
-                        let body = turns.body[slot];
-                        let found = torques.iter().find(|t| t.0 == body).map(|t| t.1);
-                        let mut doc = vec![format!(
-                            "The constraint torque λ Jʷ on rigid body `{}` (about its centre of mass):",
-                            comment_text(names.bodies[body])
-                        )];
-                        match found {
-                            Some(id) => {
-                                doc.push(formula(g, id));
-                                let (lets, exprs) = self.body(&[id])?;
-                                let value = format!(
-                                    "let x = {};\n    \
-                                     if closed_form_holds(s) && x.is_finite() {{ x }} else {{ solution(s).force[BODIES + {slot}][0] }}",
-                                    exprs[0]
-                                );
-                                emit_fn(out, &doc, name, "f64", &lets, &value);
-                            }
-                            None => {
-                                doc.push("zero: the constraint does not turn this body.".into());
-                                emit_fn(out, &doc, name, "f64", &[], "0.0");
-                            }
-                        }
-                    }
-                    let calls: Vec<String> = torque_fns.iter().map(|f| format!("{f}(s)")).collect();
-                    let doc = vec!["The constraint torque on every rigid body (`RIGID_BODIES`).".to_string()];
-                    emit_fn(out, &doc, "torques", &format!("[f64; {rigid}]"), &[], &array(&calls));
-                }
-                return Ok(());
             }
-            (Lambda::Band, _, _) => {
-                let _ = writeln!(
-                    out,
-                    "/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular\n\
-                     /// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).\n\
-                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                     let mut b = b_vector(s);\n    \
-                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
-                     let l = solve_band(a_band(s), b);\n    \
-                     if l.iter().all(|x| x.is_finite()) {{\n        return l;\n    }}\n    \
-                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
-                );
-                if matches!(layout.j, JStorage::Blocks { .. }) {
-                    let _ = writeln!(
-                        out,
-                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                         let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
-                         let mut f = [[0.0; {dim}]; {n}];\n    \
-                         for (k, i, d) in j {{\n        \
-                         for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
-                         f\n}}\n"
-                    );
-                } else {
-                    let _ = writeln!(
-                        out,
-                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                         let (l, j) = (lambda(s), jacobian(s));\n    \
-                         let mut f = [[0.0; {dim}]; {n}];\n    \
-                         for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
-                         for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
-                         for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
-                         f\n}}\n"
-                    );
-                }
-                if rigid > 0 {
-                    let (call, each) = match layout.j {
-                        JStorage::Blocks { .. } => {
-                            ("angular_jacobian_blocks(s)", "for (k, r, w) in jw {\n        t[r] += l[k] * w;\n    }")
-                        }
-                        JStorage::Dense => (
-                            "angular_jacobian(s)",
-                            "for (lk, wk) in l.iter().zip(jw.iter()) {\n        \
-                             for (x, y) in t.iter_mut().zip(wk) {\n            *x += lk * y;\n        }\n    }",
-                        ),
-                    };
-                    let _ = writeln!(
-                        out,
-                        "/// The constraint torque on every rigid body (`RIGID_BODIES`): Σₖ λₖ Jʷₖ.\n\
-                         pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
-                         let (l, jw) = (lambda(s), {call});\n    \
-                         let mut t = [0.0; {rigid}];\n    {each}\n    t\n}}\n"
-                    );
-                }
-            }
+            (Lambda::Band, _, _) => band_fns(out, layout, rigid),
             (Lambda::Dense, _, _) => self.dense_solution(out, formulas, (a_code, b_code), layout, turns)?,
             _ => {
                 let _ = writeln!(
@@ -1654,6 +1536,93 @@ impl Ctx<'_> {
         if layout.lambda == Lambda::Dense {
             out.push_str(SOLVE_DENSE);
             out.push('\n');
+        }
+        Ok(())
+    }
+
+    /// One equality's closed forms: `closed_form_holds`, `lambda`, `force_<body>`, `forces`
+    /// (and `torque_<body>`, `torques`), each guarded, the scaled `solution` where they are not.
+    #[allow(clippy::too_many_arguments)]
+    fn closed_form_fns(
+        &self,
+        out: &mut String,
+        formulas: &Formulas,
+        (lambda, forces): (Id, &[(usize, Id)]),
+        names: &Names<'_>,
+        layout: &Layout,
+        turns: &Turns,
+        (force_fns, torque_fns): (&[String], &[String]),
+    ) -> Result<(), GenerateError> {
+        let (g, dim, n, rigid) = (self.g, layout.dim, layout.bodies, turns.body.len());
+        let _ = writeln!(
+            out,
+            "/// Whether the closed forms' numbers are in range here (A normal, b finite); where they are not\n\
+                     /// (|r| ≈ 1e155 overflows r·r), `lambda` and the forces come from the scaled `solution`.\n\
+                     fn closed_form_holds(s: &State) -> bool {{\n    \
+                     a_matrix(s)[0][0].is_normal() && b_vector(s)[0].is_finite()\n}}\n"
+        );
+        let doc = vec![
+            "The multiplier λ, in closed form (the scaled `solution` where its numbers leave f64's range):".to_string(),
+            format!("λ = {}", formula(g, lambda)),
+        ];
+        let (lets, exprs) = self.body(&[lambda])?;
+        let value = format!(
+            "let x = {};\n    if closed_form_holds(s) && x[0].is_finite() {{ x }} else {{ [solution(s).lambda[0]] }}",
+            array(&exprs)
+        );
+        emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &value);
+        for (body, name) in force_fns.iter().enumerate() {
+            let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
+            let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
+            match found {
+                Some(id) => {
+                    doc.push(formula(g, id));
+                    let (lets, exprs) = self.body(&[id])?;
+                    let value = format!(
+                        "let f = {};\n    \
+                                 if closed_form_holds(s) && f.iter().all(|x| x.is_finite()) {{ f }} else {{ solution(s).force[{body}] }}",
+                        array(&exprs)
+                    );
+                    emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &value);
+                }
+                None => {
+                    doc.push("zero: no constraint involves this body.".into());
+                    emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &[], &array(&vec!["0.0".into(); dim]));
+                }
+            }
+        }
+        let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
+        let doc = vec!["The constraint force on every body (in file order).".to_string()];
+        emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+        if rigid > 0 {
+            let torques = formulas.torques.as_deref().unwrap_or(&[]);
+            for (slot, name) in torque_fns.iter().enumerate() {
+                let body = turns.body[slot];
+                let found = torques.iter().find(|t| t.0 == body).map(|t| t.1);
+                let mut doc = vec![format!(
+                    "The constraint torque λ Jʷ on rigid body `{}` (about its centre of mass):",
+                    comment_text(names.bodies[body])
+                )];
+                match found {
+                    Some(id) => {
+                        doc.push(formula(g, id));
+                        let (lets, exprs) = self.body(&[id])?;
+                        let value = format!(
+                            "let x = {};\n    \
+                                     if closed_form_holds(s) && x.is_finite() {{ x }} else {{ solution(s).force[BODIES + {slot}][0] }}",
+                            exprs[0]
+                        );
+                        emit_fn(out, &doc, name, "f64", &lets, &value);
+                    }
+                    None => {
+                        doc.push("zero: the constraint does not turn this body.".into());
+                        emit_fn(out, &doc, name, "f64", &[], "0.0");
+                    }
+                }
+            }
+            let calls: Vec<String> = torque_fns.iter().map(|f| format!("{f}(s)")).collect();
+            let doc = vec!["The constraint torque on every rigid body (`RIGID_BODIES`).".to_string()];
+            emit_fn(out, &doc, "torques", &format!("[f64; {rigid}]"), &[], &array(&calls));
         }
         Ok(())
     }
@@ -1773,6 +1742,66 @@ pub(super) fn per_body_fns(names: &Names<'_>, turns: &Turns) -> (Vec<String>, Ve
     let torque_fns: Vec<String> =
         turns.body.iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
     (force_fns, torque_fns)
+}
+
+/// A banded system of equalities: `lambda` by band Cholesky (`solution` where A is singular),
+/// `forces` (and `torques`) Σₖ λₖ Jₖᵢ over J as the layout stores it.
+fn band_fns(out: &mut String, layout: &Layout, rigid: usize) {
+    let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
+    let _ = writeln!(
+        out,
+        "/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular\n\
+                     /// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let mut b = b_vector(s);\n    \
+                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
+                     let l = solve_band(a_band(s), b);\n    \
+                     if l.iter().all(|x| x.is_finite()) {{\n        return l;\n    }}\n    \
+                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+    );
+    if matches!(layout.j, JStorage::Blocks { .. }) {
+        let _ = writeln!(
+            out,
+            "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (k, i, d) in j {{\n        \
+                         for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
+                         f\n}}\n"
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
+                         for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
+                         for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
+                         f\n}}\n"
+        );
+    }
+    if rigid > 0 {
+        let (call, each) = match layout.j {
+            JStorage::Blocks { .. } => {
+                ("angular_jacobian_blocks(s)", "for (k, r, w) in jw {\n        t[r] += l[k] * w;\n    }")
+            }
+            JStorage::Dense => (
+                "angular_jacobian(s)",
+                "for (lk, wk) in l.iter().zip(jw.iter()) {\n        \
+                             for (x, y) in t.iter_mut().zip(wk) {\n            *x += lk * y;\n        }\n    }",
+            ),
+        };
+        let _ = writeln!(
+            out,
+            "/// The constraint torque on every rigid body (`RIGID_BODIES`): Σₖ λₖ Jʷₖ.\n\
+                         pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
+                         let (l, jw) = (lambda(s), {call});\n    \
+                         let mut t = [0.0; {rigid}];\n    {each}\n    t\n}}\n"
+        );
+    }
 }
 
 /// Aₖⱼ = Σᵢ [Jₖᵢ·Jⱼᵢ / mᵢ + Jʷₖᵢ Jʷⱼᵢ / Iᵢ] for every non-zero entry of `f.a`, unsimplified:
