@@ -18,6 +18,7 @@
 #![doc = include_str!("../examples/derive_bead.rs")]
 //! ```
 
+pub mod build;
 pub mod check;
 pub mod codegen;
 pub mod derive;

@@ -24,6 +24,7 @@ use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+/// Random states per file; the last has its lengths near 1e155 (see [`huge`]).
 const STATES: usize = 4;
 
 /// The files compared: `constraints/`, `constraints/hard/`, with `rigid` also
@@ -85,6 +86,19 @@ fn random_env(l: &Loaded, rng: &mut common::Rng) -> Env {
     env
 }
 
+/// `env` with every vector (positions, velocities, forces, vector parameters) times 1e155.
+fn huge(l: &Loaded, env: &Env) -> Env {
+    let mut out = Env::new();
+    for (s, _) in l.system.graph.symbols() {
+        match env.get(s) {
+            Some(Value::Vector(v)) => out.set(s, Value::Vector(v.map(|x| x * 1e155))),
+            Some(other) => out.set(s, other),
+            None => {}
+        }
+    }
+    out
+}
+
 /// Statements giving `s` the values of `env`, in Rust (`rust`) or C: one per field and component.
 fn assignments(l: &Loaded, m: &Module, env: &Env, rust: bool) -> String {
     let dim = l.system.graph.dim();
@@ -114,6 +128,8 @@ struct Output {
     /// The C array's declaration and its length in numbers.
     c_array: String,
     len: usize,
+    /// C statements filling `out_NAME` when it is not one call of `NAME(&s, out_NAME)`.
+    c_fill: Option<String>,
 }
 
 fn outputs(rust: &str) -> Vec<Output> {
@@ -124,7 +140,7 @@ fn outputs(rust: &str) -> Vec<Output> {
     };
     let mut list = Vec::new();
     let mut add = |name: &'static str, rust_expr: String, shape: String, len: usize| {
-        list.push(Output { name, rust: rust_expr, c_array: format!("double out_{name}{shape}"), len });
+        list.push(Output { name, rust: rust_expr, c_array: format!("double out_{name}{shape}"), len, c_fill: None });
     };
     let k = count("pub const CONSTRAINTS: usize = ");
     let n = count("pub const BODIES: usize = ");
@@ -170,6 +186,39 @@ fn outputs(rust: &str) -> Vec<Output> {
             add("angular_jacobian", "angular_jacobian(&s).concat()".into(), format!("[{}][{r}]", k.max(1)), k * r);
         }
     }
+    // The λ path: λ, the forces and accelerations (and torques, α), and the rows' solve
+    // itself — λ, contact states (-1 for an equality, then Apart .. Penetrating as 0 .. 4),
+    // forces and accelerations per slot, the status (Solved .. Failed as 0 .. 5).
+    add("lambda", "lambda(&s).to_vec()".into(), format!("[{}]", k.max(1)), k);
+    add("forces", "forces(&s).concat()".into(), format!("[{}][{dim}]", n.max(1)), n * dim);
+    add("accelerations", "accelerations(&s).concat()".into(), format!("[{}][{dim}]", n.max(1)), n * dim);
+    let mut slots = n;
+    if rust.contains("pub const RIGID: usize = ") {
+        let r = count("pub const RIGID: usize = ");
+        slots += r;
+        add("torques", "torques(&s).to_vec()".into(), format!("[{r}]"), r);
+        add("angular_accelerations", "angular_accelerations(&s).to_vec()".into(), format!("[{r}]"), r);
+    }
+    let len = 2 * k + 2 * slots * dim + 1;
+    list.push(Output {
+        name: "solution",
+        rust: "{ let x = solution(&s); x.lambda.iter().copied()\
+               .chain(x.contacts.iter().map(|c| c.map_or(-1.0, |c| c as i32 as f64)))\
+               .chain(x.force.iter().flatten().copied()).chain(x.acceleration.iter().flatten().copied())\
+               .chain([x.status as i32 as f64]).collect() }"
+            .into(),
+        c_array: format!("double out_solution[{}]", len),
+        len,
+        c_fill: Some(
+            "Solution x;\n        int at = 0;\n        solution(&s, &x);\n        \
+             for (int i = 0; i < CONSTRAINTS; i++) { out_solution[at++] = x.lambda[i]; }\n        \
+             for (int i = 0; i < CONSTRAINTS; i++) { out_solution[at++] = (double)x.contact[i]; }\n        \
+             for (int i = 0; i < SLOTS; i++) { for (int d = 0; d < DIM; d++) { out_solution[at++] = x.force[i][d]; } }\n        \
+             for (int i = 0; i < SLOTS; i++) { for (int d = 0; d < DIM; d++) { out_solution[at++] = x.acceleration[i][d]; } }\n        \
+             out_solution[at++] = (double)x.status;"
+                .into(),
+        ),
+    });
     list
 }
 
@@ -208,8 +257,12 @@ fn the_c_module_gives_the_rust_modules_numbers_bit_for_bit() {
         let mut c_main = format!(
             "#include <stdio.h>\n#include \"{name}.c\"\n\nstatic void show(const double *x, int n) {{\n    for (int i = 0; i < n; i++) {{\n        printf(\"%.17g \", x[i]);\n    }}\n    printf(\"\\n\");\n}}\n\nint main(void) {{\n"
         );
-        for _ in 0..STATES {
-            let env = random_env(&l, &mut rng);
+        for state in 0..STATES {
+            let mut env = random_env(&l, &mut rng);
+            if state == STATES - 1 {
+                // Lengths near 1e155: r·r overflows, so `solution` takes its change of length unit.
+                env = huge(&l, &env);
+            }
             let _ = writeln!(
                 rust_body,
                 // black_box: LLVM folds a constant `powi` with the host's `pow` (one rounding)
@@ -225,12 +278,11 @@ fn the_c_module_gives_the_rust_modules_numbers_bit_for_bit() {
                     "        let x: Vec<f64> = {};\n        println!(\"{{}}\", x.iter().map(|y| format!(\"{{y:?}}\")).collect::<Vec<_>>().join(\" \"));",
                     o.rust
                 );
+                let fill = o.c_fill.clone().unwrap_or_else(|| format!("{}(&s, out_{});", o.name, o.name));
                 let _ = writeln!(
                     c_main,
-                    "        {};\n        {}(&s, out_{});\n        show(&out_{}[0]{}, {});",
+                    "        {{\n        {};\n        {fill}\n        show(&out_{}[0]{}, {});\n        }}",
                     o.c_array,
-                    o.name,
-                    o.name,
                     o.name,
                     if o.c_array.matches('[').count() > 1 { "[0]" } else { "" },
                     o.len

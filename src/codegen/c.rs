@@ -25,7 +25,7 @@
 
 use super::layout::{AStorage, JStorage, Layout, Solver};
 use super::names::{Namer, c_reserved, comment_text};
-use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, Names, Prec, Turns, formula};
+use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, LengthPlace, Names, Prec, Turns, formula};
 use crate::expr::{Graph, Id, Symbol, Ty};
 use std::fmt::Write;
 
@@ -45,6 +45,10 @@ pub(super) struct Parts<'a> {
     pub layout: &'a Layout,
     pub scales: &'a [f64],
     pub inequalities: &'a [bool],
+    /// b as assembled (the dense λ path's program).
+    pub b_code: &'a [Id],
+    /// The state's length-like places (`solution`'s change of unit; point masses).
+    pub length_places: Vec<LengthPlace>,
     /// The step, with `--solver`.
     pub step: Option<StepParts>,
 }
@@ -173,7 +177,7 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
         if n == 1 { "y" } else { "ies" },
         if k == 1 { "" } else { "s" }
     );
-    out.push_str("#include <float.h>\n#include <math.h>\n\n");
+    out.push_str("#include <float.h>\n#include <math.h>\n#include <stdlib.h>\n\n");
     let _ = writeln!(out, "enum {{ DIM = {dim}, BODIES = {n}, CONSTRAINTS = {k} }};\n");
     // The state.
     let _ = writeln!(out, "/* A state of the scene: every input of the formulas (the Rust module's fields). */");
@@ -247,6 +251,7 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
         &stores,
     );
     rigid(ctx, &mut out, p)?;
+    super::c_solve::emit(ctx, &mut out, p)?;
     if let Some(step) = &p.step {
         step_c(ctx, &mut out, p, step)?;
     }
@@ -434,7 +439,7 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
 
 /// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a
 /// field, an index or an unsigned number.
-fn paren(e: &str) -> String {
+pub(super) fn paren(e: &str) -> String {
     let simple = e.chars().all(|c| c.is_alphanumeric() || matches!(c, '_' | '.' | '[' | ']'))
         || (e.starts_with("s->") && !e.contains(' '));
     if simple { e.to_string() } else { format!("({e})") }
@@ -454,6 +459,10 @@ fn a(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError
                     stores.push(format!("out[{r}][{d}] = {};", at.map_or("0.0".to_string(), |i| exprs[i].clone())));
                 }
             }
+            let _ = writeln!(
+                out,
+                "/* Half-bandwidth of A: A[k][j] = 0 when |k - j| > A_BANDWIDTH. */\nenum {{ A_BANDWIDTH = {bandwidth} }};\n"
+            );
             let doc = [format!("A as its band: out[k][d] = A[k][k + d] for d <= {bandwidth}.")];
             function(out, &doc, "a_band", &format!("double out[{}][{}]", k.max(1), bandwidth + 1), &lets, &stores);
         }
@@ -533,7 +542,7 @@ fn scalars(
 }
 
 /// `void name(const State *s, OUT) { lets; stores }`, its doc as a comment.
-fn function(out: &mut String, doc: &[String], name: &str, param: &str, lets: &[String], stores: &[String]) {
+pub(super) fn function(out: &mut String, doc: &[String], name: &str, param: &str, lets: &[String], stores: &[String]) {
     let _ = writeln!(out, "/* {}", c_comment(&doc[0]));
     for line in &doc[1..] {
         let _ = writeln!(out, "   {}", c_comment(line));
@@ -553,12 +562,12 @@ fn function(out: &mut String, doc: &[String], name: &str, param: &str, lets: &[S
 }
 
 /// An initialiser list of `k` entries (one `0` when there are none: C has no empty arrays).
-fn list(items: &[String], k: usize) -> String {
+pub(super) fn list(items: &[String], k: usize) -> String {
     if k == 0 { "0".into() } else { items.join(", ") }
 }
 
 /// Text safe inside a C `/* */` comment: one line (as [`comment_text`]), no `*/` or `/*`,
 /// and no trigraph (`??`, which C99 reads before comments end).
-fn c_comment(s: &str) -> String {
+pub(super) fn c_comment(s: &str) -> String {
     comment_text(s).replace("*/", "* /").replace("/*", "/ *").replace("??", "? ?")
 }

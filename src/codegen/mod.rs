@@ -14,6 +14,7 @@
 //! Not here: files, stdout, evaluation of the formulas (`numeric`).
 
 mod c;
+mod c_solve;
 pub mod layout;
 mod names;
 pub mod rust;

@@ -40,7 +40,7 @@ use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateSto
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
 use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
-use crate::derive::{DeriveError, derive};
+use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
@@ -188,7 +188,9 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
     Ok(module(loaded, options)?.code)
 }
 
-/// Generates the Rust module for a loaded file, with its `State` layout.
+/// Generates the Rust module for a loaded file, with its `State` layout: the module's own
+/// derivation, specialised where asked, the scene's numbers as graph nodes, the plan (the
+/// state's fields and the layout), then the text in the chosen language.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
     // The 3D module (quaternions in `State`) is not written yet.
     loaded.system.refuse_rigid_3d("generate")?;
@@ -198,7 +200,28 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     }
     // The module's own derivation: `--specialize` extends its graph.
     let mut d = derive(&loaded.system)?;
-    let system = &loaded.system;
+    let specialised = specialise(loaded, &mut d, options.specialize)?;
+    let scene = scene_numbers(loaded, &mut d.graph, &specialised)?;
+    let plan = Plan::of(loaded, &d, &specialised);
+    let formulas = &specialised.formulas;
+    match options.lang {
+        Lang::C => c_module(loaded, options, &d, formulas, &scene, &plan),
+        Lang::Rust => rust_module(loaded, options, &d, formulas, &scene, &plan),
+    }
+}
+
+/// The formulas a module is written from, with the parameters `--specialize` substituted.
+struct Specialised {
+    formulas: Formulas,
+    /// The symbols replaced by their values (not fields of `State`).
+    substituted: HashSet<Symbol>,
+    /// Each substituted symbol's node → its value's node.
+    map: HashMap<Id, Id>,
+}
+
+/// The derivation's formulas; with `specialize`, each parameter's value substituted and the
+/// formulas simplified again (kept as substituted where that leaves f64's range).
+fn specialise(loaded: &Loaded, d: &mut Derivation, specialize: bool) -> Result<Specialised, GenerateError> {
     let mut formulas = Formulas {
         c: d.constraints.iter().map(|c| c.c).collect(),
         c_dot: d.constraints.iter().map(|c| c.c_dot).collect(),
@@ -213,7 +236,7 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     };
     let mut substituted = HashSet::new();
     let mut map = HashMap::new();
-    if options.specialize {
+    if specialize {
         let g = &mut d.graph;
         let dim = g.dim();
         for &(s, value) in &loaded.values {
@@ -251,26 +274,41 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
             Ok(if out_of_range(g, simplified) && !out_of_range(g, replaced) { replaced } else { simplified })
         })?;
     }
+    Ok(Specialised { formulas, substituted, map })
+}
+
+/// The scene's numbers as graph nodes: masses, A and b as assembled, the bodies' and the
+/// rigid bodies' inputs of the rows' solve.
+struct SceneNumbers {
+    masses: Vec<Id>,
+    a_code: Vec<Id>,
+    b_code: Vec<Id>,
+    bodies: Bodies,
+    turns: Turns,
+}
+
+fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<SceneNumbers, GenerateError> {
+    let (system, formulas, map) = (&loaded.system, &sp.formulas, &sp.map);
     // The code computes A from the directions, Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ, as assembled: the derivation's
     // canonical Aₖⱼ expands each dot bilinearly (a chain's (r₁ − r₂)·(r₂ − r₃) becomes four dot
     // products), which costs more operations and loses digits to cancellation. The doc
     // comments keep the canonical form.
-    let masses = system.bodies.iter().map(|b| d.graph.substitute(b.mass, &map)).collect::<Result<Vec<_>, _>>()?;
+    let masses = system.bodies.iter().map(|b| g.substitute(b.mass, map)).collect::<Result<Vec<_>, _>>()?;
     let inertias = system
         .bodies
         .iter()
-        .map(|b| b.rigid.as_ref().map(|r| d.graph.substitute(r.inertia, &map)).transpose())
+        .map(|b| b.rigid.as_ref().map(|r| g.substitute(r.inertia, map)).transpose())
         .collect::<Result<Vec<_>, _>>()?;
-    let a_code = assembled_a(&mut d.graph, &formulas, &masses, &inertias)?;
-    let b_code = assembled_b(&mut d.graph, &formulas, system, &masses, &inertias)?;
-    let inverse_masses = masses.iter().map(|&m| d.graph.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
+    let a_code = assembled_a(g, formulas, &masses, &inertias)?;
+    let b_code = assembled_b(g, formulas, system, &masses, &inertias)?;
+    let inverse_masses = masses.iter().map(|&m| g.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
     // The scene's force expressions (`[scene] forces`); a body not listed feels none.
-    let zero = d.graph.num(Rational::int(0));
-    let zero = d.graph.vector(vec![zero; d.graph.dim()])?;
+    let zero = g.num(Rational::int(0));
+    let zero = g.vector(vec![zero; g.dim()])?;
     let mut applied = Vec::with_capacity(system.bodies.len());
     for i in 0..system.bodies.len() {
         applied.push(match loaded.scene.forces.iter().find(|f| f.0 == i) {
-            Some(&(_, id)) => d.graph.substitute(id, &map)?,
+            Some(&(_, id)) => g.substitute(id, map)?,
             None => zero,
         });
     }
@@ -285,155 +323,191 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let mut turns = Turns::default();
     for (i, body) in system.bodies.iter().enumerate() {
         let (Some(rigid), Some(inertia)) = (&body.rigid, inertias[i]) else { continue };
-        let scalar_zero = d.graph.num(Rational::int(0));
+        let scalar_zero = g.num(Rational::int(0));
         turns.body.push(i);
         turns.orientation.push(rigid.nodes.orientation);
         turns.angular_velocity.push(rigid.nodes.angular_velocity);
         turns.torque.push(rigid.nodes.torque);
         turns.applied.push(match loaded.scene.torques.iter().find(|t| t.0 == i) {
-            Some(&(_, id)) => d.graph.substitute(id, &map)?,
+            Some(&(_, id)) => g.substitute(id, map)?,
             None => scalar_zero,
         });
-        turns.inverse_inertia.push(d.graph.powi(inertia, -1)?);
+        turns.inverse_inertia.push(g.powi(inertia, -1)?);
     }
-    let g = &d.graph;
-    let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
-    let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
-    // The state holds the file's symbols, not those the derivation declared (the multipliers).
-    let field_count = system
-        .graph
-        .symbols()
-        .filter(|(s, i)| !substituted.contains(s) && !matches!(i.role, Role::Acceleration { .. }))
-        .count();
-    let arrays = layout::state_storage(field_count) == StateStorage::Arrays;
-    let fields = state_fields(&system.graph, &body_names, &substituted, arrays);
-    let inputs: Vec<Symbol> = fields.iter().map(|f| f.symbol).collect();
-    let slots = slot_exprs(g, &fields);
-    let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
-    let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
-    let closed_form = formulas.lambda.is_some() && formulas.forces.is_some();
-    let inequalities = system.constraints.iter().any(|c| c.inequality);
-    let layout = Layout::of(
-        g.dim(),
-        system.bodies.len(),
-        system.constraints.len(),
-        &a_entries,
-        blocks,
-        closed_form,
-        inequalities,
-    );
+    Ok(SceneNumbers { masses, a_code, b_code, bodies, turns })
+}
 
-    let mut out = String::new();
-    let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
-    header(&mut out, title, options.specialize, &layout, turns.body.len());
-    field_names(&mut out, g, &fields);
-    state(&mut out, g, &fields, &layout);
-    let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
-    let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
-    row_constants(&mut out, &scales, &inequalities, &names_of(&constraint_names));
-    let header_end = out.len();
-    if options.lang == Lang::C {
-        if options.solver == Some(Solver::Exact) {
-            return Err(GenerateError::CStep);
+/// What both languages lay out the same way: names, the state's fields, the layout, κ and
+/// the inequality flags per row.
+struct Plan<'a> {
+    title: &'a str,
+    body_names: Vec<&'a str>,
+    constraint_names: Vec<&'a str>,
+    fields: Vec<Field>,
+    layout: Layout,
+    scales: Vec<f64>,
+    inequalities: Vec<bool>,
+}
+
+impl<'a> Plan<'a> {
+    fn of(loaded: &'a Loaded, d: &Derivation, sp: &Specialised) -> Plan<'a> {
+        let (system, formulas, g) = (&loaded.system, &sp.formulas, &d.graph);
+        let body_names: Vec<&str> = system.bodies.iter().map(|b| b.name.as_str()).collect();
+        let constraint_names: Vec<&str> = system.constraints.iter().map(|c| c.name.as_str()).collect();
+        // The state holds the file's symbols, not those the derivation declared (the multipliers).
+        let field_count = system
+            .graph
+            .symbols()
+            .filter(|(s, i)| !sp.substituted.contains(s) && !matches!(i.role, Role::Acceleration { .. }))
+            .count();
+        let arrays = layout::state_storage(field_count) == StateStorage::Arrays;
+        let fields = state_fields(&system.graph, &body_names, &sp.substituted, arrays);
+        let a_entries: Vec<(usize, usize)> = formulas.a.iter().map(|&(r, c, _)| (r, c)).collect();
+        let blocks = formulas.jacobian.iter().map(Vec::len).sum::<usize>();
+        let closed_form = formulas.lambda.is_some() && formulas.forces.is_some();
+        let layout = Layout::of(
+            g.dim(),
+            system.bodies.len(),
+            system.constraints.len(),
+            &a_entries,
+            blocks,
+            closed_form,
+            system.constraints.iter().any(|c| c.inequality),
+        );
+        Plan {
+            title: if system.title.is_empty() { "untitled scene" } else { system.title.as_str() },
+            body_names,
+            constraint_names,
+            fields,
+            layout,
+            scales: d.constraints.iter().map(|c| c.scale.to_f64()).collect(),
+            inequalities: system.constraints.iter().map(|c| c.inequality).collect(),
         }
-        let c_names = super::c::field_names(&fields);
-        let c_slots = super::c::slots(g, &fields, &c_names);
-        let input_layout = Inputs::new(g, &inputs)?;
-        let budget = code_budget(system);
-        let room = Cell::new(budget);
-        let ctx = Ctx { g, inputs: &input_layout, slots: &c_slots, non_finite: Cell::new(0), c: true, room, budget };
-        let names = Names { bodies: &body_names, constraints: &constraint_names };
-        let title = if system.title.is_empty() { "untitled scene" } else { system.title.as_str() };
-        let scales: Vec<f64> = d.constraints.iter().map(|c| c.scale.to_f64()).collect();
-        let inequalities: Vec<bool> = system.constraints.iter().map(|c| c.inequality).collect();
-        let parts = super::c::Parts {
-            title,
-            specialize: options.specialize,
-            fields: &fields,
-            c_names: &c_names,
-            formulas: &formulas,
-            a_code: &a_code,
-            bodies: &bodies,
-            turns: &turns,
-            names: &names,
-            layout: &layout,
-            scales: &scales,
-            inequalities: &inequalities,
-            step: options.solver.map(|solver| super::c::StepParts {
-                solver,
-                inverse_scales: d
-                    .constraints
-                    .iter()
-                    .map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64())
-                    .collect(),
-                time: system.time,
-                bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
-                masses: masses.clone(),
-            }),
-        };
-        let code = super::c::emit(&ctx, &parts)?;
-        let mut warnings = Vec::new();
-        if ctx.non_finite.get() > 0 {
-            warnings.push(format!(
-                "constants of the formulas do not fit in f64 (written as INFINITY or NAN; {} place(s) in the code)",
-                ctx.non_finite.get()
-            ));
-        }
-        let fields = fields.iter().zip(c_names).map(|(f, n)| (f.symbol, n)).collect();
-        return Ok(Module { code, fields, warnings });
     }
-    let input_layout = Inputs::new(g, &inputs)?;
+
+    fn names(&self) -> Names<'_> {
+        Names { bodies: &self.body_names, constraints: &self.constraint_names }
+    }
+
+    fn inputs(&self) -> Vec<Symbol> {
+        self.fields.iter().map(|f| f.symbol).collect()
+    }
+}
+
+/// 1/κ per row, as `numeric::rows` multiplies by it (the step's rows).
+fn inverse_scales(d: &Derivation) -> Vec<f64> {
+    d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect()
+}
+
+/// The symbols the masses depend on (never length-like).
+fn mass_symbols(system: &crate::model::system::System) -> HashSet<Symbol> {
+    system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect()
+}
+
+/// `generate --lang c`: the same plan written by `codegen::c`.
+fn c_module(
+    loaded: &Loaded,
+    options: &Options,
+    d: &Derivation,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<Module, GenerateError> {
+    if options.solver == Some(Solver::Exact) {
+        return Err(GenerateError::CStep);
+    }
+    let (system, g, fields) = (&loaded.system, &d.graph, &plan.fields);
+    let c_names = super::c::field_names(fields);
+    let c_slots = super::c::slots(g, fields, &c_names);
+    let input_layout = Inputs::new(g, &plan.inputs())?;
+    let budget = code_budget(system);
+    let room = Cell::new(budget);
+    let ctx = Ctx { g, inputs: &input_layout, slots: &c_slots, non_finite: Cell::new(0), c: true, room, budget };
+    let names = plan.names();
+    let parts = super::c::Parts {
+        title: plan.title,
+        specialize: options.specialize,
+        fields,
+        c_names: &c_names,
+        formulas,
+        a_code: &scene.a_code,
+        bodies: &scene.bodies,
+        turns: &scene.turns,
+        names: &names,
+        layout: &plan.layout,
+        scales: &plan.scales,
+        inequalities: &plan.inequalities,
+        b_code: &scene.b_code,
+        length_places: if scene.turns.body.is_empty() {
+            length_places(g, fields, &mass_symbols(system))
+        } else {
+            Vec::new()
+        },
+        step: options.solver.map(|solver| super::c::StepParts {
+            solver,
+            inverse_scales: inverse_scales(d),
+            time: system.time,
+            bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
+            masses: scene.masses.clone(),
+        }),
+    };
+    let code = super::c::emit(&ctx, &parts)?;
+    let mut warnings = Vec::new();
+    if ctx.non_finite.get() > 0 {
+        warnings.push(format!(
+            "constants of the formulas do not fit in f64 (written as INFINITY or NAN; {} place(s) in the code)",
+            ctx.non_finite.get()
+        ));
+    }
+    let fields = fields.iter().zip(c_names).map(|(f, n)| (f.symbol, n)).collect();
+    Ok(Module { code, fields, warnings })
+}
+
+/// `generate --lang rust`, section by section as the module reads: the header (comment,
+/// field list, `State`, row constants), the formulas' functions, the solve (rows, change of
+/// unit, λ and forces), the step (`--solver`), the helpers, and a note on non-finite
+/// constants.
+fn rust_module(
+    loaded: &Loaded,
+    options: &Options,
+    d: &Derivation,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<Module, GenerateError> {
+    let (system, g, fields, layout) = (&loaded.system, &d.graph, &plan.fields, &plan.layout);
+    let mut out = String::new();
+    header(&mut out, plan.title, options.specialize, layout, scene.turns.body.len());
+    field_names(&mut out, g, fields);
+    state(&mut out, g, fields, layout);
+    row_constants(&mut out, &plan.scales, &plan.inequalities, &names_of(&plan.constraint_names));
+    let header_end = out.len();
+    let slots = slot_exprs(g, fields);
+    let input_layout = Inputs::new(g, &plan.inputs())?;
     let budget = code_budget(system);
     let room = Cell::new(budget);
     let ctx = Ctx { g, inputs: &input_layout, slots: &slots, non_finite: Cell::new(0), c: false, room, budget };
-    let names = Names { bodies: &body_names, constraints: &constraint_names };
-    ctx.constraints(&mut out, &formulas, &names)?;
-    ctx.rates(&mut out, &formulas, &names)?;
-    ctx.a(&mut out, &formulas, &a_code, &layout)?;
-    ctx.b(&mut out, &formulas)?;
-    ctx.jacobian(&mut out, &formulas, &names, &layout)?;
-    ctx.c_term(&mut out, &formulas)?;
-    ctx.bodies(&mut out, &bodies, &names)?;
-    ctx.rigid(&mut out, &turns, &formulas, &names, &layout)?;
-    rows_fn(&mut out, &formulas, &layout, &turns);
+    let names = plan.names();
+    formula_fns(&mut out, &ctx, formulas, scene, plan)?;
+    rows_fn(&mut out, formulas, layout, &scene.turns);
     // A change of length unit scales no angle, inertia or torque: a module with rigid bodies
     // solves in the file's unit, as `numeric::rescale` finds such rows not homogeneous.
-    if turns.body.is_empty() {
-        let mass_symbols: HashSet<Symbol> =
-            system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
-        scaling_fns(&mut out, g, &fields, &mass_symbols);
+    if scene.turns.body.is_empty() {
+        scaling_fns(&mut out, g, fields, &mass_symbols(system));
     }
-    ctx.solution(&mut out, &formulas, (&a_code, &b_code), &names, &layout, &turns)?;
+    ctx.solution(&mut out, formulas, (&scene.a_code, &scene.b_code), &names, layout, &scene.turns)?;
     if let Some(solver) = options.solver {
-        let inverse_scales: Vec<f64> =
-            d.constraints.iter().map(|c| c.scale.recip().unwrap_or(Rational::ONE).to_f64()).collect();
         let step = StepPlaces {
             time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
-            position: system.bodies.iter().map(|b| ident_of(&fields, b.position)).collect(),
-            velocity: system.bodies.iter().map(|b| ident_of(&fields, b.velocity)).collect(),
-            mass: masses.clone(),
-            velocity_node: bodies.velocity.clone(),
-            applied: bodies.applied.clone(),
+            position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
+            velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
+            mass: scene.masses.clone(),
+            velocity_node: scene.bodies.velocity.clone(),
+            applied: scene.bodies.applied.clone(),
         };
-        step_fns(&mut out, &ctx, solver, &inverse_scales, &step, &formulas, &names, &layout)?;
+        step_fns(&mut out, &ctx, solver, &inverse_scales(d), &step, formulas, &names, layout)?;
     }
-    out.push_str(ROWS);
-    out.push('\n');
-    out.push_str(HELPERS);
-    if let Some(solver) = options.solver {
-        out.push('\n');
-        out.push_str(STEP);
-        if solver.sweeps() {
-            out.push('\n');
-            out.push_str(SWEEP);
-        }
-        out.push('\n');
-        out.push_str(match solver {
-            Solver::SoftStep => SOFT_STEP,
-            Solver::Pgs => PGS,
-            Solver::Exact => EXACT,
-        });
-    }
+    helper_texts(&mut out, options.solver);
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         let warning = format!(
@@ -447,7 +521,49 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
         out.insert_str(at, &note);
         warnings.push(warning);
     }
-    Ok(Module { code: out, fields: fields.into_iter().map(|f| (f.symbol, f.ident)).collect(), warnings })
+    Ok(Module { code: out, fields: fields.iter().map(|f| (f.symbol, f.ident.clone())).collect(), warnings })
+}
+
+/// The formulas' functions, in the module's order: C, Ċ, A, b, J, c, the bodies' numbers and
+/// the rigid bodies'.
+fn formula_fns(
+    out: &mut String,
+    ctx: &Ctx<'_>,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<(), GenerateError> {
+    let (names, layout) = (plan.names(), &plan.layout);
+    ctx.constraints(out, formulas, &names)?;
+    ctx.rates(out, formulas, &names)?;
+    ctx.a(out, formulas, &scene.a_code, layout)?;
+    ctx.b(out, formulas)?;
+    ctx.jacobian(out, formulas, &names, layout)?;
+    ctx.c_term(out, formulas)?;
+    ctx.bodies(out, &scene.bodies, &names)?;
+    ctx.rigid(out, &scene.turns, formulas, &names, layout)
+}
+
+/// The helpers every module carries (the rows' solve, the norms), then the step's with
+/// `--solver`.
+fn helper_texts(out: &mut String, solver: Option<Solver>) {
+    out.push_str(ROWS);
+    out.push('\n');
+    out.push_str(HELPERS);
+    if let Some(solver) = solver {
+        out.push('\n');
+        out.push_str(STEP);
+        if solver.sweeps() {
+            out.push('\n');
+            out.push_str(SWEEP);
+        }
+        out.push('\n');
+        out.push_str(match solver {
+            Solver::SoftStep => SOFT_STEP,
+            Solver::Pgs => PGS,
+            Solver::Exact => EXACT,
+        });
+    }
 }
 
 /// The `State` field of a symbol (every body's position and velocity has one).
@@ -780,13 +896,20 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout, turns: &Turns
     );
 }
 
-/// `scaled_state` and `length_like`: the state's length-like fields (positions,
-/// velocities, forces, and the parameters no mass depends on), as `numeric::rescale`
-/// chooses them.
-fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) {
-    let mut places: Vec<(String, bool, bool)> = Vec::new(); // (place, vector, array of vectors)
+/// A length-like place of `State`: a field (`vector` when it is one), or a whole role array
+/// of vectors (`array`, named by its first field) where the layout holds bodies in arrays.
+pub(super) struct LengthPlace {
+    pub(super) field: usize,
+    pub(super) vector: bool,
+    pub(super) array: Option<&'static str>,
+}
+
+/// The state's length-like places (positions, velocities, forces, and the parameters no mass
+/// depends on), as `numeric::rescale` chooses them, in field order (a role array once).
+pub(super) fn length_places(g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) -> Vec<LengthPlace> {
+    let mut places = Vec::new();
     let mut arrays = HashSet::new();
-    for f in fields {
+    for (i, f) in fields.iter().enumerate() {
         let info = g.symbol(f.symbol);
         let length = match info.role {
             Role::Position { .. } | Role::Velocity { .. } | Role::Force { .. } => true,
@@ -799,12 +922,26 @@ fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &Has
         match f.array {
             Some((name, _)) => {
                 if arrays.insert(name) {
-                    places.push((name.to_string(), true, true));
+                    places.push(LengthPlace { field: i, vector: true, array: Some(name) });
                 }
             }
-            None => places.push((f.ident.clone(), info.ty == Ty::Vector, false)),
+            None => places.push(LengthPlace { field: i, vector: info.ty == Ty::Vector, array: None }),
         }
     }
+    places
+}
+
+/// `scaled_state` and `length_like`: the state's length-like fields (positions,
+/// velocities, forces, and the parameters no mass depends on), as `numeric::rescale`
+/// chooses them.
+fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) {
+    let places: Vec<(String, bool, bool)> = length_places(g, fields, mass_symbols)
+        .into_iter()
+        .map(|p| match p.array {
+            Some(name) => (name.to_string(), true, true),
+            None => (fields[p.field].ident.clone(), p.vector, false),
+        })
+        .collect();
     let _ = writeln!(
         out,
         "/// The state with its length-like fields (positions, velocities, forces, parameters no mass depends on) × 2ᵉ."
@@ -1320,25 +1457,11 @@ impl Ctx<'_> {
         layout: &Layout,
         turns: &Turns,
     ) -> Result<(), GenerateError> {
-        let (g, dim, n, k) = (self.g, layout.dim, layout.bodies, layout.constraints);
+        let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
         let rigid = turns.body.len();
         // The solution's slots past the bodies are the rigid bodies' angles.
         let bodies_only = if rigid > 0 { "[..BODIES]" } else { "" };
-        let mut namer = Namer::new(&[
-            "constraints",
-            "a_matrix",
-            "a_band",
-            "b_vector",
-            "jacobian",
-            "jacobian_blocks",
-            "c_term",
-            "lambda",
-            "forces",
-            "torques",
-        ]);
-        let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
-        let torque_fns: Vec<String> =
-            turns.body.iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
+        let (force_fns, torque_fns) = per_body_fns(names, turns);
         let _ = writeln!(
             out,
             "/// The accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ of every body (in file order), from the rows' solve.\n\
@@ -1355,135 +1478,17 @@ impl Ctx<'_> {
         }
         match (layout.lambda, formulas.lambda, &formulas.forces) {
             (Lambda::ClosedForm, Some(lambda), Some(forces)) => {
-                let _ = writeln!(
+                return self.closed_form_fns(
                     out,
-                    "/// Whether the closed forms' numbers are in range here (A normal, b finite); where they are not\n\
-                     /// (|r| ≈ 1e155 overflows r·r), `lambda` and the forces come from the scaled `solution`.\n\
-                     fn closed_form_holds(s: &State) -> bool {{\n    \
-                     a_matrix(s)[0][0].is_normal() && b_vector(s)[0].is_finite()\n}}\n"
+                    formulas,
+                    (lambda, forces),
+                    names,
+                    layout,
+                    turns,
+                    (&force_fns, &torque_fns),
                 );
-                let doc = vec![
-                    "The multiplier λ, in closed form (the scaled `solution` where its numbers leave f64's range):"
-                        .to_string(),
-                    format!("λ = {}", formula(g, lambda)),
-                ];
-                let (lets, exprs) = self.body(&[lambda])?;
-                let value = format!(
-                    "let x = {};\n    if closed_form_holds(s) && x[0].is_finite() {{ x }} else {{ [solution(s).lambda[0]] }}",
-                    array(&exprs)
-                );
-                emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &value);
-                for (body, name) in force_fns.iter().enumerate() {
-                    let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
-                    let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
-                    match found {
-                        Some(id) => {
-                            doc.push(formula(g, id));
-                            let (lets, exprs) = self.body(&[id])?;
-                            let value = format!(
-                                "let f = {};\n    \
-                                 if closed_form_holds(s) && f.iter().all(|x| x.is_finite()) {{ f }} else {{ solution(s).force[{body}] }}",
-                                array(&exprs)
-                            );
-                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &value);
-                        }
-                        None => {
-                            doc.push("zero: no constraint involves this body.".into());
-                            emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &[], &array(&vec!["0.0".into(); dim]));
-                        }
-                    }
-                }
-                let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
-                let doc = vec!["The constraint force on every body (in file order).".to_string()];
-                emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
-                if rigid > 0 {
-                    let torques = formulas.torques.as_deref().unwrap_or(&[]);
-                    for (slot, name) in torque_fns.iter().enumerate() {
-                        let body = turns.body[slot];
-                        let found = torques.iter().find(|t| t.0 == body).map(|t| t.1);
-                        let mut doc = vec![format!(
-                            "The constraint torque λ Jʷ on rigid body `{}` (about its centre of mass):",
-                            comment_text(names.bodies[body])
-                        )];
-                        match found {
-                            Some(id) => {
-                                doc.push(formula(g, id));
-                                let (lets, exprs) = self.body(&[id])?;
-                                let value = format!(
-                                    "let x = {};\n    \
-                                     if closed_form_holds(s) && x.is_finite() {{ x }} else {{ solution(s).force[BODIES + {slot}][0] }}",
-                                    exprs[0]
-                                );
-                                emit_fn(out, &doc, name, "f64", &lets, &value);
-                            }
-                            None => {
-                                doc.push("zero: the constraint does not turn this body.".into());
-                                emit_fn(out, &doc, name, "f64", &[], "0.0");
-                            }
-                        }
-                    }
-                    let calls: Vec<String> = torque_fns.iter().map(|f| format!("{f}(s)")).collect();
-                    let doc = vec!["The constraint torque on every rigid body (`RIGID_BODIES`).".to_string()];
-                    emit_fn(out, &doc, "torques", &format!("[f64; {rigid}]"), &[], &array(&calls));
-                }
-                return Ok(());
             }
-            (Lambda::Band, _, _) => {
-                let _ = writeln!(
-                    out,
-                    "/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular\n\
-                     /// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).\n\
-                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                     let mut b = b_vector(s);\n    \
-                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
-                     let l = solve_band(a_band(s), b);\n    \
-                     if l.iter().all(|x| x.is_finite()) {{\n        return l;\n    }}\n    \
-                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
-                );
-                if matches!(layout.j, JStorage::Blocks { .. }) {
-                    let _ = writeln!(
-                        out,
-                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                         let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
-                         let mut f = [[0.0; {dim}]; {n}];\n    \
-                         for (k, i, d) in j {{\n        \
-                         for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
-                         f\n}}\n"
-                    );
-                } else {
-                    let _ = writeln!(
-                        out,
-                        "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
-                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
-                         let (l, j) = (lambda(s), jacobian(s));\n    \
-                         let mut f = [[0.0; {dim}]; {n}];\n    \
-                         for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
-                         for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
-                         for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
-                         f\n}}\n"
-                    );
-                }
-                if rigid > 0 {
-                    let (call, each) = match layout.j {
-                        JStorage::Blocks { .. } => {
-                            ("angular_jacobian_blocks(s)", "for (k, r, w) in jw {\n        t[r] += l[k] * w;\n    }")
-                        }
-                        JStorage::Dense => (
-                            "angular_jacobian(s)",
-                            "for (lk, wk) in l.iter().zip(jw.iter()) {\n        \
-                             for (x, y) in t.iter_mut().zip(wk) {\n            *x += lk * y;\n        }\n    }",
-                        ),
-                    };
-                    let _ = writeln!(
-                        out,
-                        "/// The constraint torque on every rigid body (`RIGID_BODIES`): Σₖ λₖ Jʷₖ.\n\
-                         pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
-                         let (l, jw) = (lambda(s), {call});\n    \
-                         let mut t = [0.0; {rigid}];\n    {each}\n    t\n}}\n"
-                    );
-                }
-            }
+            (Lambda::Band, _, _) => band_fns(out, layout, rigid),
             (Lambda::Dense, _, _) => self.dense_solution(out, formulas, (a_code, b_code), layout, turns)?,
             _ => {
                 let _ = writeln!(
@@ -1531,6 +1536,93 @@ impl Ctx<'_> {
         if layout.lambda == Lambda::Dense {
             out.push_str(SOLVE_DENSE);
             out.push('\n');
+        }
+        Ok(())
+    }
+
+    /// One equality's closed forms: `closed_form_holds`, `lambda`, `force_<body>`, `forces`
+    /// (and `torque_<body>`, `torques`), each guarded, the scaled `solution` where they are not.
+    #[allow(clippy::too_many_arguments)]
+    fn closed_form_fns(
+        &self,
+        out: &mut String,
+        formulas: &Formulas,
+        (lambda, forces): (Id, &[(usize, Id)]),
+        names: &Names<'_>,
+        layout: &Layout,
+        turns: &Turns,
+        (force_fns, torque_fns): (&[String], &[String]),
+    ) -> Result<(), GenerateError> {
+        let (g, dim, n, rigid) = (self.g, layout.dim, layout.bodies, turns.body.len());
+        let _ = writeln!(
+            out,
+            "/// Whether the closed forms' numbers are in range here (A normal, b finite); where they are not\n\
+                     /// (|r| ≈ 1e155 overflows r·r), `lambda` and the forces come from the scaled `solution`.\n\
+                     fn closed_form_holds(s: &State) -> bool {{\n    \
+                     a_matrix(s)[0][0].is_normal() && b_vector(s)[0].is_finite()\n}}\n"
+        );
+        let doc = vec![
+            "The multiplier λ, in closed form (the scaled `solution` where its numbers leave f64's range):".to_string(),
+            format!("λ = {}", formula(g, lambda)),
+        ];
+        let (lets, exprs) = self.body(&[lambda])?;
+        let value = format!(
+            "let x = {};\n    if closed_form_holds(s) && x[0].is_finite() {{ x }} else {{ [solution(s).lambda[0]] }}",
+            array(&exprs)
+        );
+        emit_fn(out, &doc, "lambda", "[f64; 1]", &lets, &value);
+        for (body, name) in force_fns.iter().enumerate() {
+            let found = forces.iter().find(|f| f.0 == body).map(|f| f.1);
+            let mut doc = vec![format!("The constraint force on body `{}`:", comment_text(names.bodies[body]))];
+            match found {
+                Some(id) => {
+                    doc.push(formula(g, id));
+                    let (lets, exprs) = self.body(&[id])?;
+                    let value = format!(
+                        "let f = {};\n    \
+                                 if closed_form_holds(s) && f.iter().all(|x| x.is_finite()) {{ f }} else {{ solution(s).force[{body}] }}",
+                        array(&exprs)
+                    );
+                    emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &lets, &value);
+                }
+                None => {
+                    doc.push("zero: no constraint involves this body.".into());
+                    emit_fn(out, &doc, name, &format!("[f64; {dim}]"), &[], &array(&vec!["0.0".into(); dim]));
+                }
+            }
+        }
+        let calls: Vec<String> = force_fns.iter().map(|f| format!("{f}(s)")).collect();
+        let doc = vec!["The constraint force on every body (in file order).".to_string()];
+        emit_fn(out, &doc, "forces", &format!("[[f64; {dim}]; {n}]"), &[], &array(&calls));
+        if rigid > 0 {
+            let torques = formulas.torques.as_deref().unwrap_or(&[]);
+            for (slot, name) in torque_fns.iter().enumerate() {
+                let body = turns.body[slot];
+                let found = torques.iter().find(|t| t.0 == body).map(|t| t.1);
+                let mut doc = vec![format!(
+                    "The constraint torque λ Jʷ on rigid body `{}` (about its centre of mass):",
+                    comment_text(names.bodies[body])
+                )];
+                match found {
+                    Some(id) => {
+                        doc.push(formula(g, id));
+                        let (lets, exprs) = self.body(&[id])?;
+                        let value = format!(
+                            "let x = {};\n    \
+                                     if closed_form_holds(s) && x.is_finite() {{ x }} else {{ solution(s).force[BODIES + {slot}][0] }}",
+                            exprs[0]
+                        );
+                        emit_fn(out, &doc, name, "f64", &lets, &value);
+                    }
+                    None => {
+                        doc.push("zero: the constraint does not turn this body.".into());
+                        emit_fn(out, &doc, name, "f64", &[], "0.0");
+                    }
+                }
+            }
+            let calls: Vec<String> = torque_fns.iter().map(|f| format!("{f}(s)")).collect();
+            let doc = vec!["The constraint torque on every rigid body (`RIGID_BODIES`).".to_string()];
+            emit_fn(out, &doc, "torques", &format!("[f64; {rigid}]"), &[], &array(&calls));
         }
         Ok(())
     }
@@ -1628,6 +1720,87 @@ impl Ctx<'_> {
             );
         }
         Ok(())
+    }
+}
+
+/// The names of `force_<body>` (every body) and `torque_<body>` (every rigid body), clear of
+/// the module's other functions.
+pub(super) fn per_body_fns(names: &Names<'_>, turns: &Turns) -> (Vec<String>, Vec<String>) {
+    let mut namer = Namer::new(&[
+        "constraints",
+        "a_matrix",
+        "a_band",
+        "b_vector",
+        "jacobian",
+        "jacobian_blocks",
+        "c_term",
+        "lambda",
+        "forces",
+        "torques",
+    ]);
+    let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
+    let torque_fns: Vec<String> =
+        turns.body.iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
+    (force_fns, torque_fns)
+}
+
+/// A banded system of equalities: `lambda` by band Cholesky (`solution` where A is singular),
+/// `forces` (and `torques`) Σₖ λₖ Jₖᵢ over J as the layout stores it.
+fn band_fns(out: &mut String, layout: &Layout, rigid: usize) {
+    let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
+    let _ = writeln!(
+        out,
+        "/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular\n\
+                     /// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).\n\
+                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                     let mut b = b_vector(s);\n    \
+                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
+                     let l = solve_band(a_band(s), b);\n    \
+                     if l.iter().all(|x| x.is_finite()) {{\n        return l;\n    }}\n    \
+                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+    );
+    if matches!(layout.j, JStorage::Blocks { .. }) {
+        let _ = writeln!(
+            out,
+            "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian_blocks(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (k, i, d) in j {{\n        \
+                         for (x, y) in f[i].iter_mut().zip(d) {{\n            *x += l[k] * y;\n        }}\n    }}\n    \
+                         f\n}}\n"
+        );
+    } else {
+        let _ = writeln!(
+            out,
+            "/// The constraint force on every body (in file order): Σₖ λₖ Jₖᵢ.\n\
+                         pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                         let (l, j) = (lambda(s), jacobian(s));\n    \
+                         let mut f = [[0.0; {dim}]; {n}];\n    \
+                         for (lk, jk) in l.iter().zip(j.iter()) {{\n        \
+                         for (fi, ji) in f.iter_mut().zip(jk.chunks({dim})) {{\n            \
+                         for (x, y) in fi.iter_mut().zip(ji) {{\n                *x += lk * y;\n            }}\n        }}\n    }}\n    \
+                         f\n}}\n"
+        );
+    }
+    if rigid > 0 {
+        let (call, each) = match layout.j {
+            JStorage::Blocks { .. } => {
+                ("angular_jacobian_blocks(s)", "for (k, r, w) in jw {\n        t[r] += l[k] * w;\n    }")
+            }
+            JStorage::Dense => (
+                "angular_jacobian(s)",
+                "for (lk, wk) in l.iter().zip(jw.iter()) {\n        \
+                             for (x, y) in t.iter_mut().zip(wk) {\n            *x += lk * y;\n        }\n    }",
+            ),
+        };
+        let _ = writeln!(
+            out,
+            "/// The constraint torque on every rigid body (`RIGID_BODIES`): Σₖ λₖ Jʷₖ.\n\
+                         pub fn torques(s: &State) -> [f64; {rigid}] {{\n    \
+                         let (l, jw) = (lambda(s), {call});\n    \
+                         let mut t = [0.0; {rigid}];\n    {each}\n    t\n}}\n"
+        );
     }
 }
 

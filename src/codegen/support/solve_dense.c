@@ -1,0 +1,52 @@
+/* L D L^T (the Rust module's solve_dense, its operations in its order): solves a x = b in
+   place in b for a symmetric positive definite a (CONSTRAINTS x CONSTRAINTS, overwritten).
+   0 where the rows' solve is needed: a diagonal entry that is not a positive normal number,
+   a pivot at or below 1e-10 of its diagonal entry (A singular), or an answer not finite. */
+int solve_dense(double a[][CONSTRAINTS], double b[]) {
+    const int k = CONSTRAINTS;
+    int i, j, p;
+    for (i = 0; i < k; i++) {
+        const double diagonal = a[i][i];
+        double d;
+        if (!(isnormal(diagonal) && diagonal > 0.0)) {
+            return 0;
+        }
+        for (j = 0; j < i; j++) {
+            /* L[i][j] = (A[i][j] - sum_p L[i][p] d_p L[j][p]) / d_j */
+            double acc = a[i][j];
+            for (p = 0; p < j; p++) {
+                acc -= a[i][p] * a[p][p] * a[j][p];
+            }
+            a[i][j] = acc / a[j][j];
+        }
+        /* d_i = A[i][i] - sum_p L[i][p]^2 d_p */
+        d = diagonal;
+        for (p = 0; p < i; p++) {
+            d -= a[i][p] * a[i][p] * a[p][p];
+        }
+        if (!(d > 1e-10 * diagonal && isfinite(d))) {
+            return 0;
+        }
+        a[i][i] = d;
+    }
+    /* L y = b, D z = y, L^T x = z (in place in b). */
+    for (i = 0; i < k; i++) {
+        for (p = 0; p < i; p++) {
+            b[i] -= a[i][p] * b[p];
+        }
+    }
+    for (i = 0; i < k; i++) {
+        b[i] /= a[i][i];
+    }
+    for (i = k - 1; i >= 0; i--) {
+        for (p = i + 1; p < k; p++) {
+            b[i] -= a[p][i] * b[p];
+        }
+    }
+    for (i = 0; i < k; i++) {
+        if (!isfinite(b[i])) {
+            return 0;
+        }
+    }
+    return 1;
+}
