@@ -68,9 +68,9 @@ fn a_bad_file_reads_as_lagrange_generates_diagnostic() {
         assert_eq!(code, 1);
         assert_eq!(format!("{e}\n"), stderr, "{file}");
     }
-    let e = Module::new("constraints/rigid/ball_3d.toml").out_dir(&dir).write().expect_err("3D is refused");
+    let e = Module::new("constraints/joints/ball_3d.toml").out_dir(&dir).write().expect_err("3D is refused");
     assert!(matches!(e, BuildError::Generate { .. }), "{e:?}");
-    assert_eq!(format!("{e}\n"), generate(&["constraints/rigid/ball_3d.toml"]).2);
+    assert_eq!(format!("{e}\n"), generate(&["constraints/joints/ball_3d.toml"]).2);
     let e = Module::new("constraints/no_such_file.toml").out_dir(&dir).write().expect_err("missing");
     assert!(matches!(e, BuildError::Read(_)), "{e:?}");
     assert_eq!(format!("{e}\n"), generate(&["constraints/no_such_file.toml"]).2);
