@@ -232,21 +232,23 @@ impl Simplifier {
 
     /// The simplified `k · e`.
     pub fn scaled(&mut self, g: &mut Graph, id: Id, k: &Rational) -> Result<Id, TypeError> {
-        let c = match &*self.canon(g, id)? {
+        let c = self.scaled_form(g, id, k)?;
+        self.build(g, &c)
+    }
+
+    /// The canonical form of `k · id`.
+    fn scaled_form(&mut self, g: &mut Graph, id: Id, k: &Rational) -> Result<Canon, TypeError> {
+        Ok(match &*self.canon(g, id)? {
             Canon::S(f) => Canon::S(f.scale(k)),
             Canon::V(v) => Canon::V(VecForm(v.0.iter().map(|(a, s)| (*a, s.scale(k))).collect())),
-        };
-        self.build(g, &c)
+        })
     }
 
     /// `k · id` for evaluating in f64: as [`scaled`](Self::scaled), but each term keeps its
     /// own coefficient (no content in front), so a value within f64's range is computed
     /// even where its content and its terms are not.
     pub fn scaled_for_numbers(&mut self, g: &mut Graph, id: Id, k: &Rational) -> Result<Id, TypeError> {
-        let c = match &*self.canon(g, id)? {
-            Canon::S(f) => Canon::S(f.scale(k)),
-            Canon::V(v) => Canon::V(VecForm(v.0.iter().map(|(a, s)| (*a, s.scale(k))).collect())),
-        };
+        let c = self.scaled_form(g, id, k)?;
         self.build_distributed(g, &c)
     }
 
