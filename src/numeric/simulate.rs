@@ -409,10 +409,9 @@ impl<'s> Simulation<'s> {
         Ok(())
     }
 
-    /// With 3D rigid bodies, the first half of Euler's and Verlet's step: v += h a₀ with the
-    /// gyroscopic term at the implicit midpoint (`rotation::kick`, `rows` the start's), then
-    /// the drift q += dt v (dt = h for Euler, 2h for Verlet's half kick is not assumed: the
-    /// caller's step is `self.settings.dt`).
+    /// With 3D rigid bodies, the first part of Euler's and Verlet's step: the kick v += h a₀
+    /// with the gyroscopic term at the implicit midpoint (`rotation::kick`, `rows` the
+    /// start's; h = dt for Euler, dt/2 for Verlet), then the drift q += dt v.
     fn first_kick(&mut self, rows: &Rows, h: f64) {
         self.half.copy_from_slice(&self.v);
         kick(rows, h, &self.a, &self.half, &mut self.v);
