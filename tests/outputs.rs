@@ -165,7 +165,7 @@ fn solve_json() {
 /// Fixed `simulate` runs and the FNV-1a hash and length of their CSV. The hashes were taken
 /// from the binary at the commit that added this test; a change that moves one on purpose
 /// says why in its commit.
-const GOLDEN_RUNS: [(&str, &[&str], u64, usize); 5] = [
+const GOLDEN_RUNS: [(&str, &[&str], u64, usize); 6] = [
     ("constraints/pendulum.toml", &["--steps", "2000"], 0x02d6_20b6_b78d_b6b9, 281_385),
     ("constraints/double_pendulum.toml", &["--integrator", "rk4", "--steps", "2000"], 0x63cd_20f1_eb3f_8a8d, 543_717),
     (
@@ -176,6 +176,8 @@ const GOLDEN_RUNS: [(&str, &[&str], u64, usize); 5] = [
     ),
     ("constraints/hard/bounce.toml", &["--steps", "3000"], 0x8297_fd45_ae5f_4878, 283_483),
     ("constraints/rope_pendulum.toml", &["--steps", "3000", "--every", "3"], 0xa7e9_8853_e35f_b528, 128_578),
+    // A 3D rigid body: quaternion columns, the implicit gyroscopic kick, RATTLE in (x, φ).
+    ("constraints/rigid/spinning_top.toml", &["--steps", "1000"], 0xc093_56c9_2e75_0248, 463_105),
 ];
 
 #[test]

@@ -11,7 +11,8 @@
 //!   against central differences of C along a trajectory with an exact rotation
 //!   q(t) = exp(½ n φ(t)) q₀ about a random fixed axis n, φ = w t + ½ a t² (so ω = n φ̇,
 //!   α = n a); and Ċ/κ = Σ J·u over the rows' slots.
-//! - Refusals naming the body: a non-unit quaternion, `simulate`, `generate`, `bench`.
+//! - Refusals naming the body: a non-unit quaternion, `simulate --solver` (the velocity
+//!   level), `generate`, `bench`.
 
 mod common;
 
@@ -371,7 +372,8 @@ fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
 #[test]
 fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
     for args in [
-        &["simulate", "constraints/joints/ball_3d.toml"][..],
+        &["simulate", "constraints/joints/ball_3d.toml", "--solver", "soft-step"][..],
+        &["simulate", "constraints/joints/ball_3d.toml", "--solver", "pgs"][..],
         &["bench", "constraints/joints/ball_3d.toml"][..],
         &["generate", "constraints/joints/ball_3d.toml"][..],
     ] {

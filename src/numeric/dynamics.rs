@@ -15,16 +15,22 @@
 //! on a curved surface drifts off by O(dt³) in a step, counts as apart, falls for a step
 //! and is caught again: λ = 0 on some frames, energy lost, RK4's stages disagreeing.
 //!
-//! A state's slots are the bodies' positions and velocities, then each rigid body's angle and
-//! angular velocity (`[θ, 0, 0]`, `[ω, 0, 0]`, in the order of `numeric::rows`' angular slots),
-//! so the integrators and the projections advance θ and ω as they advance x and v.
+//! A state's slots are the bodies' positions and velocities, then each rigid body's angular
+//! slots in the order of `numeric::rows`: in 2D its angle and angular velocity (`[θ, 0, 0]`,
+//! `[ω, 0, 0]`), in 3D three slots whose first holds the world rotation vector φ since the
+//! start of the step and the world ω (`numeric::rotation`; the orientation is
+//! exp(φ) ⊗ q₀, q₀ kept here in [`Dynamics::orientations`]) and whose other two are zero.
+//! So the integrators and the projections advance θ or φ and ω as they advance x and v; the
+//! solve's per-axis accelerations and corrections are folded into world vectors
+//! (`rotation::fold`) before they reach the state.
 //!
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
 use super::contact::ContactState;
 use super::integrate::{Field, Vectors};
 use super::rescale::{Unit, spread};
-use super::rows::{Row, RowProgram, RowScratch, Rows, angular_bodies};
+use super::rotation::{dexp_inv, fold, kick, rebase, turned};
+use super::rows::{Row, RowProgram, RowScratch, Rows, angular_bodies, angular_width};
 use super::simulate::SettingsError;
 use super::solve::{Settings, Solution, SolveCache, solve_cached};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -67,7 +73,8 @@ pub enum SimError {
     Output(String),
     #[error("invalid settings: {0}")]
     Settings(#[from] SettingsError),
-    /// Quaternion integration is not written yet: a 3D rigid body is refused before any step.
+    /// A solver that does not handle 3D rigid bodies yet (the velocity-level ones): refused
+    /// before any step.
     #[error(transparent)]
     Rigid3d(#[from] crate::model::system::NotYet3dRigid),
 }
@@ -134,6 +141,25 @@ pub struct Dynamics<'s> {
     solver: SolveCache,
     /// The rows of the last [`positions`](Dynamics::positions).
     position_rows: Vec<Row>,
+    /// Per 3D rigid body (in the order of its angular slots), the orientation q₀ at the start
+    /// of the step; the state's rotation vector φ turns it (`numeric::rotation`).
+    orientations: Vec<[f64; 4]>,
+    /// The solve's accelerations folded into state slots (scratch of [`Dynamics::kick_at`]).
+    folded: Vec<[f64; 3]>,
+}
+
+/// The state slot of each rigid body's angle or rotation vector (and angular velocity), in
+/// the order of the rigid bodies.
+fn angular_state_slots(system: &System) -> impl Iterator<Item = usize> + use<> {
+    let (n, w) = (system.bodies.len(), angular_width(system));
+    let count = system.bodies.iter().filter(|b| b.rigid.is_some()).count();
+    (0..count).map(move |r| n + r * w)
+}
+
+/// The orientations `env` gives the 3D rigid bodies of `system`, in the order of their slots.
+fn orientations_of(system: &System, env: &Env) -> Vec<[f64; 4]> {
+    let rigid = system.bodies.iter().filter_map(|b| b.rigid.as_ref()).filter(|r| r.nodes.axes.is_some());
+    rigid.map(|r| env.get(r.orientation).and_then(Value::quaternion).unwrap_or([1.0, 0.0, 0.0, 0.0])).collect()
 }
 
 impl<'s> Dynamics<'s> {
@@ -141,6 +167,7 @@ impl<'s> Dynamics<'s> {
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
         let scratch = program.scratch();
+        let orientations = orientations_of(system, &env);
         Dynamics {
             system,
             program,
@@ -154,14 +181,31 @@ impl<'s> Dynamics<'s> {
             held: Vec::new(),
             solver: SolveCache::default(),
             position_rows: Vec::new(),
+            orientations,
+            folded: Vec::new(),
         }
     }
 
     /// Starts again from `env` (every parameter and mass) in the scene's own unit; the
     /// evaluation count and scratch are kept.
     pub fn reset(&mut self, env: Env) {
+        self.orientations = orientations_of(self.system, &env);
         self.env = env;
         self.held.clear();
+    }
+
+    /// The 3D rigid bodies' orientations q₀ at the start of the step (after [`rebase`](Dynamics::rebase)
+    /// the bodies' orientations), in the order of their angular slots.
+    pub fn orientations(&self) -> &[[f64; 4]] {
+        &self.orientations
+    }
+
+    /// The start of a step: each 3D rigid body's rotation vector φ in `q` is folded into its
+    /// orientation q₀ ← exp(φ) ⊗ q₀, renormalised, and φ set to zero.
+    pub fn rebase(&mut self, q: &mut Vectors) {
+        if !self.orientations.is_empty() {
+            rebase(&mut self.orientations, angular_state_slots(self.system), q);
+        }
     }
 
     /// Whether constraint `k` is a held contact (see [`Dynamics::hold`]).
@@ -235,11 +279,20 @@ impl<'s> Dynamics<'s> {
             self.env.set(body.position, Value::Vector(q[i]));
             self.env.set(body.velocity, Value::Vector(v[i]));
         }
-        // Rigid bodies' angles and angular velocities, from their angular slots after the bodies.
-        let n = self.system.bodies.len();
-        for (slot, rigid) in (n..).zip(self.system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
-            self.env.set(rigid.orientation, Value::Scalar(q[slot][0]));
-            self.env.set(rigid.angular_velocity, Value::Scalar(v[slot][0]));
+        // Rigid bodies' angles (3D: q = exp(φ) ⊗ q₀) and angular velocities, from their
+        // angular slots after the bodies.
+        let rigid = self.system.bodies.iter().filter_map(|b| b.rigid.as_ref());
+        for (r, (slot, rigid)) in angular_state_slots(self.system).zip(rigid).enumerate() {
+            match self.orientations.get(r) {
+                Some(&q0) => {
+                    self.env.set(rigid.orientation, Value::Quaternion(turned(q[slot], q0)));
+                    self.env.set(rigid.angular_velocity, Value::Vector(v[slot]));
+                }
+                None => {
+                    self.env.set(rigid.orientation, Value::Scalar(q[slot][0]));
+                    self.env.set(rigid.angular_velocity, Value::Scalar(v[slot][0]));
+                }
+            }
         }
     }
 
@@ -334,20 +387,11 @@ impl<'s> Dynamics<'s> {
     pub fn last_solve_path(&self) -> super::solve::SolvePath {
         self.solver.last_path()
     }
-}
 
-/// The body a slot of the rows belongs to: a body, or a rigid body's angular slot.
-pub(crate) fn slot_name(system: &System, slot: usize) -> String {
-    let n = system.bodies.len();
-    let body = if slot < n { Some(slot) } else { angular_bodies(system).nth(slot - n) };
-    body.and_then(|b| system.bodies.get(b)).map_or_else(|| slot.to_string(), |b| b.name.clone())
-}
-
-impl Field for Dynamics<'_> {
-    type Error = SimError;
-
-    fn acceleration(&mut self, t: f64, q: &Vectors, v: &Vectors, a: &mut Vectors) -> Result<(), SimError> {
-        let mut rows = self.rows(t, q, v)?;
+    /// The solve at (t, q, `at`) with the held contacts as equalities, its accelerations
+    /// folded into state slots in `a`; returns the rows for reuse.
+    fn accelerations(&mut self, t: f64, q: &Vectors, at: &Vectors, a: &mut Vectors) -> Result<Rows, SimError> {
+        let mut rows = self.rows(t, q, at)?;
         // Within a step the held contacts are equalities: every stage sees the same smooth
         // field, so a pressed contact keeps the integrator's order.
         for (k, row) in rows.rows.iter_mut().enumerate() {
@@ -357,7 +401,46 @@ impl Field for Dynamics<'_> {
         }
         let solution = self.solve(&mut rows);
         a.copy_from_slice(&solution.acceleration);
+        fold(&rows, a);
+        Ok(rows)
+    }
+
+    /// Verlet's second kick for 3D rigid bodies: v += h a(t, q, `at`), the gyroscopic term at
+    /// the implicit midpoint (`rotation::kick`).
+    pub fn kick_at(&mut self, t: f64, q: &Vectors, at: &Vectors, h: f64, v: &mut Vectors) -> Result<(), SimError> {
+        let mut a = std::mem::take(&mut self.folded);
+        a.resize(v.len(), [0.0; 3]);
+        let rows = self.accelerations(t, q, at, &mut a)?;
+        kick(&rows, h, &a, at, v);
+        self.recycle(rows);
+        self.folded = a;
+        Ok(())
+    }
+}
+
+/// The body a slot of the rows belongs to: a body, or a rigid body's angular slot.
+pub(crate) fn slot_name(system: &System, slot: usize) -> String {
+    let n = system.bodies.len();
+    let body = if slot < n { Some(slot) } else { angular_bodies(system).nth((slot - n) / angular_width(system)) };
+    body.and_then(|b| system.bodies.get(b)).map_or_else(|| slot.to_string(), |b| b.name.clone())
+}
+
+impl Field for Dynamics<'_> {
+    type Error = SimError;
+
+    fn acceleration(&mut self, t: f64, q: &Vectors, v: &Vectors, a: &mut Vectors) -> Result<(), SimError> {
+        let rows = self.accelerations(t, q, v, a)?;
         self.recycle(rows);
         Ok(())
+    }
+
+    /// v, but φ̇ = dexp⁻¹(φ) ω for each 3D rigid body's rotation vector (`rotation::dexp_inv`).
+    fn rate(&self, q: &Vectors, v: &Vectors, out: &mut Vectors) {
+        out.copy_from_slice(v);
+        if !self.orientations.is_empty() {
+            for slot in angular_state_slots(self.system) {
+                out[slot] = dexp_inv(q[slot], v[slot]);
+            }
+        }
     }
 }

@@ -22,6 +22,15 @@ pub trait Field {
     type Error;
     /// Writes aᵢ(t, q, v) into `a`.
     fn acceleration(&mut self, t: f64, q: &Vectors, v: &Vectors, a: &mut Vectors) -> Result<(), Self::Error>;
+
+    /// Writes q̇(q, v) into `out`: v itself, unless some coordinate is not the integral of
+    /// its velocity slot (a 3D rigid body's rotation vector, φ̇ = dexp⁻¹(φ) ω,
+    /// `numeric::rotation`). RK4's stages use it; the other steppers drift from φ = 0,
+    /// where q̇ = v holds along the step's straight line.
+    fn rate(&self, q: &Vectors, v: &Vectors, out: &mut Vectors) {
+        let _ = q;
+        out.copy_from_slice(v);
+    }
 }
 
 /// Which stepper.
@@ -63,6 +72,8 @@ pub struct Stepper {
     q: Vec<[f64; 3]>,
     v: Vec<[f64; 3]>,
     dq: Vec<[f64; 3]>,
+    /// q̇ of an RK4 stage ([`Field::rate`]).
+    r: Vec<[f64; 3]>,
     k: [Vec<[f64; 3]>; 3],
 }
 
@@ -87,7 +98,7 @@ pub fn add_scaled(x: &mut Vectors, h: f64, y: &Vectors) {
 impl Stepper {
     pub fn new(integrator: Integrator, n: usize) -> Stepper {
         let z = vec![[0.0; 3]; n];
-        Stepper { integrator, q: z.clone(), v: z.clone(), dq: z.clone(), k: [z.clone(), z.clone(), z] }
+        Stepper { integrator, q: z.clone(), v: z.clone(), dq: z.clone(), r: z.clone(), k: [z.clone(), z.clone(), z] }
     }
 
     /// Verlet's first half: v½ = v + dt/2 a₀ (written into `v`); q⁺ = q + dt v½.
@@ -135,26 +146,33 @@ impl Stepper {
                 self.verlet_kick(field, t + dt, dt, q, v, a0)?;
             }
             Integrator::Rk4 => {
-                // Stages on y = (q, v), y' = (v, a): k₁ = (v, a₀) at y; k₂ at y + dt/2 k₁;
-                // k₃ at y + dt/2 k₂; k₄ at y + dt k₃; y⁺ = y + dt/6 (k₁ + 2k₂ + 2k₃ + k₄).
+                // Stages on y = (q, v), y' = (q̇, a) with q̇ = r(q, v) (v itself but for a 3D
+                // body's rotation vector, [`Field::rate`]): k₁ = (r₁, a₀) at y; k₂ at
+                // y + dt/2 k₁; k₃ at y + dt/2 k₂; k₄ at y + dt k₃;
+                // y⁺ = y + dt/6 (k₁ + 2k₂ + 2k₃ + k₄).
                 let [a2, a3, a4] = &mut self.k;
-                let (sq, sv, dq) = (&mut self.q, &mut self.v, &mut self.dq);
+                let (sq, sv, dq, r) = (&mut self.q, &mut self.v, &mut self.dq, &mut self.r);
                 let h = 0.5 * dt;
-                // Stage 2 at q₂ = q + h v, v₂ = v + h a₀; dq collects v + 2v₂ + 2v₃ + v₄.
-                axpy(sq, q, h, v);
+                // Stage 2 at q₂ = q + h r₁, v₂ = v + h a₀; dq collects r₁ + 2r₂ + 2r₃ + r₄.
+                field.rate(q, v, r);
+                axpy(sq, q, h, r);
                 axpy(sv, v, h, a0);
                 field.acceleration(t + h, sq, sv, a2)?;
-                axpy(dq, v, 2.0, sv);
-                // Stage 3 at q₃ = q + h v₂, v₃ = v + h a₂.
-                axpy(sq, q, h, sv);
+                dq.copy_from_slice(r);
+                field.rate(sq, sv, r);
+                add_scaled(dq, 2.0, r);
+                // Stage 3 at q₃ = q + h r₂, v₃ = v + h a₂.
+                axpy(sq, q, h, r);
                 axpy(sv, v, h, a2);
                 field.acceleration(t + h, sq, sv, a3)?;
-                add_scaled(dq, 2.0, sv);
-                // Stage 4 at q₄ = q + dt v₃, v₄ = v + dt a₃.
-                axpy(sq, q, dt, sv);
+                field.rate(sq, sv, r);
+                add_scaled(dq, 2.0, r);
+                // Stage 4 at q₄ = q + dt r₃, v₄ = v + dt a₃.
+                axpy(sq, q, dt, r);
                 axpy(sv, v, dt, a3);
                 field.acceleration(t + dt, sq, sv, a4)?;
-                add_scaled(dq, 1.0, sv);
+                field.rate(sq, sv, r);
+                add_scaled(dq, 1.0, r);
                 // q⁺ = q + dt/6 dq;  v⁺ = v + dt/6 (a₀ + 2a₂ + 2a₃ + a₄).
                 add_scaled(q, dt / 6.0, dq);
                 for i in 0..v.len() {

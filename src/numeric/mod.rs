@@ -7,7 +7,8 @@
 //! generator (`codegen`) starts from the same program. [`rows`] evaluates a derivation's rows
 //! (C, Ċ, J, c) at a state; [`solve`] finds the multipliers ([`banded`], [`qp`], [`contact`],
 //! [`rescale`]). [`dynamics`], [`integrate`], [`stabilize`] and [`simulate`] step a scene.
-//! [`vector`] holds the small vector arithmetic they share, [`random`] the one seeded generator.
+//! [`rotation`] moves 3D rigid bodies' quaternions and holds the
+//! implicit gyroscopic kick. [`vector`] holds the small vector arithmetic they share, [`random`] the one seeded generator.
 //!
 //! This module knows nothing of TOML, files or text: states arrive as
 //! [`crate::expr::eval::Env`], results leave as plain numbers and diagnostics.
@@ -20,6 +21,7 @@ pub mod program;
 pub mod qp;
 pub mod random;
 pub mod rescale;
+pub mod rotation;
 pub mod rows;
 pub mod simulate;
 pub mod solve;

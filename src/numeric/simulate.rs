@@ -18,8 +18,9 @@
 //! Not here: files, text, printing (the observer does that), the λ solve.
 
 use super::dynamics::{Dynamics, SimError, slot_name};
-use super::integrate::{Integrator, Stepper, Vectors};
+use super::integrate::{Integrator, Stepper, Vectors, add_scaled};
 use super::rescale::Unit;
+use super::rotation::{fold, kick};
 use super::rows::Rows;
 use super::solve::CONTACT_TOLERANCE;
 use super::stabilize::{
@@ -172,6 +173,10 @@ pub struct Frame<'a> {
     pub time: f64,
     pub position: &'a Vectors,
     pub velocity: &'a Vectors,
+    /// Each 3D rigid body's orientation q = [w, x, y, z], in the order of the rigid bodies
+    /// (their rotation-vector slots in `position` are zero at a recorded state); empty
+    /// without 3D rigid bodies.
+    pub orientations: &'a [[f64; 4]],
     /// The rows at this state (C/κ, Ċ/κ per constraint).
     pub rows: &'a Rows,
     pub lambda: &'a [f64],
@@ -233,14 +238,25 @@ pub struct Failure {
 }
 
 /// The positions and velocities that `env` gives the bodies.
+///
+/// A rigid body's angular slots come after every body (`numeric::rows`): in 2D component 0
+/// of `[θ, 0, 0]` and `[ω, 0, 0]`; in 3D three slots, the first holding the rotation vector
+/// φ = 0 (the orientation itself is the dynamics', `Dynamics::orientations`) and the world
+/// ω, the other two zero (`numeric::rotation`).
 pub fn initial_state(system: &System, env: &Env) -> (Vec<[f64; 3]>, Vec<[f64; 3]>, f64) {
     let get = |s| env.get(s).and_then(Value::vector).unwrap_or([0.0; 3]);
-    // A rigid body's angle and angular velocity come after every body, in its angular slot
-    // (`numeric::rows`: component 0 of `[θ, 0, 0]` and `[ω, 0, 0]`).
     let angle = |s| [env.get(s).and_then(Value::scalar).unwrap_or(0.0), 0.0, 0.0];
-    let rigid = || system.bodies.iter().filter_map(|b| b.rigid.as_ref());
-    let q = system.bodies.iter().map(|b| get(b.position)).chain(rigid().map(|r| angle(r.orientation))).collect();
-    let v = system.bodies.iter().map(|b| get(b.velocity)).chain(rigid().map(|r| angle(r.angular_velocity))).collect();
+    let mut q: Vec<[f64; 3]> = system.bodies.iter().map(|b| get(b.position)).collect();
+    let mut v: Vec<[f64; 3]> = system.bodies.iter().map(|b| get(b.velocity)).collect();
+    for rigid in system.bodies.iter().filter_map(|b| b.rigid.as_ref()) {
+        if rigid.nodes.axes.is_some() {
+            q.extend([[0.0; 3]; 3]);
+            v.extend([get(rigid.angular_velocity), [0.0; 3], [0.0; 3]]);
+        } else {
+            q.push(angle(rigid.orientation));
+            v.push(angle(rigid.angular_velocity));
+        }
+    }
     let t = env.get(system.time).and_then(Value::scalar).unwrap_or(0.0);
     (q, v, t)
 }
@@ -254,18 +270,31 @@ pub fn scene_length(system: &System, env: &Env) -> f64 {
 }
 
 /// The state at the end of a run by symbol name, for the summary: each body's position and
-/// velocity, then each rigid body's angle and angular velocity from its slot after the bodies.
-pub fn final_state(system: &System, q: &[[f64; 3]], v: &[[f64; 3]]) -> Vec<(String, Value)> {
+/// velocity, then each rigid body's angle and angular velocity from its slot after the bodies
+/// (3D: its orientation from `orientations`, in the order of the 3D rigid bodies, and the
+/// world ω; the state's rotation vector must have been folded in, `Dynamics::rebase`).
+pub fn final_state(system: &System, q: &[[f64; 3]], v: &[[f64; 3]], orientations: &[[f64; 4]]) -> Vec<(String, Value)> {
     let name = |s| system.graph.symbol(s).name.clone();
     let mut state = Vec::new();
     for (i, body) in system.bodies.iter().enumerate() {
         state.push((name(body.position), Value::Vector(q[i])));
         state.push((name(body.velocity), Value::Vector(v[i])));
     }
-    let n = system.bodies.len();
-    for (slot, rigid) in (n..).zip(system.bodies.iter().filter_map(|b| b.rigid.as_ref())) {
-        state.push((name(rigid.orientation), Value::Scalar(q[slot][0])));
-        state.push((name(rigid.angular_velocity), Value::Scalar(v[slot][0])));
+    let mut slot = system.bodies.len();
+    let mut turned = orientations.iter();
+    for rigid in system.bodies.iter().filter_map(|b| b.rigid.as_ref()) {
+        match (rigid.nodes.axes, turned.next()) {
+            (Some(_), Some(&q0)) => {
+                state.push((name(rigid.orientation), Value::Quaternion(q0)));
+                state.push((name(rigid.angular_velocity), Value::Vector(v[slot])));
+                slot += 3;
+            }
+            _ => {
+                state.push((name(rigid.orientation), Value::Scalar(q[slot][0])));
+                state.push((name(rigid.angular_velocity), Value::Scalar(v[slot][0])));
+                slot += 1;
+            }
+        }
     }
     state
 }
@@ -286,6 +315,11 @@ pub struct Simulation<'s> {
     a: Vec<[f64; 3]>,
     /// v½ of a RATTLE step.
     half: Vec<[f64; 3]>,
+    /// Verlet's predicted velocity v½ + dt/2 a₀ (3D rigid bodies' second kick).
+    predicted: Vec<[f64; 3]>,
+    /// Whether some body is a 3D rigid body: Euler and Verlet then kick with the implicit
+    /// gyroscopic term (`numeric::rotation::kick`).
+    three_d: bool,
     /// The length unit the run works in, when not the scene's own (see [`Dynamics::choose_unit`]).
     unit: Option<Unit>,
     /// What the observer sees when the run works in another unit: the state, rows and λ
@@ -304,7 +338,10 @@ struct Shown {
 impl<'s> Simulation<'s> {
     pub fn new(mut dynamics: Dynamics<'s>, env: &Env, settings: Settings) -> Result<Simulation<'s>, SimError> {
         settings.validate().map_err(SimError::Settings)?;
-        dynamics.system().refuse_rigid_3d("simulate")?;
+        // The gyroscopic term −ω × Iω depends on ω: Verlet's second kick needs its own solve.
+        if !dynamics.orientations().is_empty() {
+            dynamics.velocity_dependent_forces = true;
+        }
         let unit = dynamics.choose_unit(env)?;
         let (q, v, t0) = match &unit {
             Some(unit) => initial_state(dynamics.system(), &unit.to_unit(env)),
@@ -312,6 +349,7 @@ impl<'s> Simulation<'s> {
         };
         dynamics.baumgarte = settings.stabilize.baumgarte_terms(settings.dt);
         let n = q.len();
+        let three_d = !dynamics.orientations().is_empty();
         Ok(Simulation {
             dynamics,
             settings,
@@ -321,6 +359,8 @@ impl<'s> Simulation<'s> {
             v,
             a: vec![[0.0; 3]; n],
             half: vec![[0.0; 3]; n],
+            predicted: vec![[0.0; 3]; n],
+            three_d,
             unit,
             shown: Shown::default(),
         })
@@ -341,6 +381,8 @@ impl<'s> Simulation<'s> {
         let result = self.run_inner(s, &mut summary, observe);
         summary.wall_seconds = start.elapsed().as_secs_f64();
         summary.evaluations = self.dynamics.evaluations;
+        // 3D rigid bodies: the last step's rotation vectors into the orientations reported.
+        self.dynamics.rebase(&mut self.q);
         let back = |x: &[f64; 3]| self.unit.as_ref().map_or(*x, |u| u.vector(*x));
         summary.final_position = self.q.iter().map(back).collect();
         summary.final_velocity = self.v.iter().map(back).collect();
@@ -349,7 +391,7 @@ impl<'s> Simulation<'s> {
         let (mut q, mut v) = (summary.final_position.clone(), summary.final_velocity.clone());
         q[n..].copy_from_slice(&self.q[n..]);
         v[n..].copy_from_slice(&self.v[n..]);
-        summary.final_state = final_state(system, &q, &v);
+        summary.final_state = final_state(system, &q, &v, self.dynamics.orientations());
         match result {
             Ok(()) => Ok(summary),
             Err(error) => Err(Box::new(Failure { error, summary })),
@@ -365,6 +407,26 @@ impl<'s> Simulation<'s> {
             }
         }
         Ok(())
+    }
+
+    /// With 3D rigid bodies, the first part of Euler's and Verlet's step: the kick v += h a₀
+    /// with the gyroscopic term at the implicit midpoint (`rotation::kick`, `rows` the
+    /// start's; h = dt for Euler, dt/2 for Verlet), then the drift q += dt v.
+    fn first_kick(&mut self, rows: &Rows, h: f64) {
+        self.half.copy_from_slice(&self.v);
+        kick(rows, h, &self.a, &self.half, &mut self.v);
+        add_scaled(&mut self.q, self.settings.dt, &self.v);
+    }
+
+    /// With 3D rigid bodies, Verlet's second kick at t⁺: v⁺ = v½ + dt/2 a(q⁺, ṽ) at the
+    /// predicted ṽ = v½ + dt/2 a₀, the gyroscopic term at the implicit midpoint.
+    fn second_kick(&mut self, t1: f64, dt: f64) -> Result<(), SimError> {
+        for ((p, v), a) in self.predicted.iter_mut().zip(&self.v).zip(&self.a) {
+            for d in 0..3 {
+                p[d] = v[d] + 0.5 * dt * a[d];
+            }
+        }
+        self.dynamics.kick_at(t1, &self.q, &self.predicted, 0.5 * dt, &mut self.v)
     }
 
     /// Newton onto C = 0 at `t` (`stabilize::project_positions`): the rows at the result.
@@ -410,6 +472,8 @@ impl<'s> Simulation<'s> {
         for n in 0..=s.steps {
             let t = self.t0 + n as f64 * s.dt;
             self.dynamics.step = n;
+            // 3D rigid bodies: the rotation vectors of the last step into the orientations.
+            self.dynamics.rebase(&mut self.q);
             let mut rows = self.dynamics.rows(t, &self.q, &self.v)?;
             // Drift: |C| and |Ċ| of what should be zero; stop when a surface is out of reach.
             let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
@@ -445,11 +509,12 @@ impl<'s> Simulation<'s> {
             summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
             // Energy balance: T − T₀ − ∫ F·v dt (trapezoid).
             let (mut kinetic, mut power, mut accel) = (0.0, 0.0, 0.0f64);
-            for i in 0..self.q.len() {
-                let w = rows.inverse_mass[i];
-                kinetic += 0.5 * dot(&self.v[i], &self.v[i]) / w;
-                power += dot(&rows.force[i], &self.v[i]);
-                accel = accel.max(safe_norm(&rows.force[i]) * w);
+            // Over the rows' slots: a 3D rigid body's T = ½ Σₖ Iₖ (eₖ·ω)², and its forces
+            // τₖ − (ω × Iω)ₖ, whose gyroscopic part does no work.
+            for ((u, f), w) in rows.velocity.iter().zip(&rows.force).zip(&rows.inverse_mass) {
+                kinetic += 0.5 * dot(u, u) / w;
+                power += dot(f, u);
+                accel = accel.max(safe_norm(f) * w);
             }
             if n == 0 {
                 kinetic0 = kinetic;
@@ -499,6 +564,7 @@ impl<'s> Simulation<'s> {
                     time: t,
                     position: &self.q,
                     velocity: &self.v,
+                    orientations: self.dynamics.orientations(),
                     rows: &rows,
                     lambda: &solution.lambda,
                     energy_error,
@@ -518,6 +584,7 @@ impl<'s> Simulation<'s> {
                         time: t,
                         position: &shown.q,
                         velocity: &shown.v,
+                        orientations: &[],
                         rows: &shown.rows,
                         lambda: &shown.lambda,
                         energy_error,
@@ -531,13 +598,18 @@ impl<'s> Simulation<'s> {
                 break;
             }
             self.a.copy_from_slice(&solution.acceleration);
+            fold(&rows, &mut self.a);
             let t1 = self.t0 + (n + 1) as f64 * s.dt;
             self.dynamics.step = n + 1;
             if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) =
                 (s.integrator, s.stabilize)
             {
                 // RATTLE: drift, SHAKE along the start's gradients, kick, velocity projection.
-                Stepper::verlet_drift(s.dt, &mut self.q, &mut self.v, &self.a);
+                if self.three_d {
+                    self.first_kick(&rows, 0.5 * s.dt);
+                } else {
+                    Stepper::verlet_drift(s.dt, &mut self.q, &mut self.v, &self.a);
+                }
                 let (mut end, _) = shake_positions(
                     &mut self.dynamics,
                     t1,
@@ -553,7 +625,9 @@ impl<'s> Simulation<'s> {
                     end = self.project(t1, length, tolerance, max_iterations)?;
                 }
                 self.half.copy_from_slice(&self.v);
-                if self.dynamics.velocity_dependent_forces {
+                if self.three_d {
+                    self.second_kick(t1, s.dt)?;
+                } else if self.dynamics.velocity_dependent_forces {
                     self.stepper.verlet_kick(&mut self.dynamics, t1, s.dt, &self.q, &mut self.v, &self.a)?;
                 } else {
                     // v⁺ = v½ + dt/2 M⁻¹F(q⁺): the constraint part of the kick is what the
@@ -571,7 +645,14 @@ impl<'s> Simulation<'s> {
                 self.check_finite(n + 1, t1)?;
                 continue;
             }
-            self.stepper.step(&mut self.dynamics, t, s.dt, &mut self.q, &mut self.v, &self.a)?;
+            match s.integrator {
+                Integrator::Euler if self.three_d => self.first_kick(&rows, s.dt),
+                Integrator::Verlet if self.three_d => {
+                    self.first_kick(&rows, 0.5 * s.dt);
+                    self.second_kick(t1, s.dt)?;
+                }
+                _ => self.stepper.step(&mut self.dynamics, t, s.dt, &mut self.q, &mut self.v, &self.a)?,
+            }
             self.check_finite(n + 1, t1)?;
             match s.stabilize {
                 Stabilize::Projection { tolerance, max_iterations } => {

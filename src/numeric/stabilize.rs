@@ -30,10 +30,15 @@
 //! projection of Ċ = 0 at every step, contacts measured against the scene's size, and the
 //! threshold, so it keeps [`velocity_step`].
 //!
+//! 3D rigid bodies are corrected in the generalised coordinates: the solve's per-axis
+//! Δφₖ, Δωₖ along the principal axes are folded into a world rotation vector and ω
+//! (`rotation::fold`), and the rotation vector turns the orientation (q = exp(φ) ⊗ q₀).
+//!
 //! Not here: the integrators, the run loop.
 
 use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
+use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
 use super::solve::solve;
 use super::vector::row_norm;
@@ -169,12 +174,14 @@ fn enforce(row: &mut Row, bias: f64) {
 /// goes through the run's cache when `dynamics` is given.
 fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dynamics<'_>>) -> f64 {
     rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    let solution = match dynamics {
+    let mut step = match dynamics {
         Some(dynamics) => dynamics.correct(rows),
         None => solve(rows),
-    };
+    }
+    .acceleration;
+    fold(rows, &mut step);
     let mut largest = 0.0f64;
-    for (x, dx) in x.iter_mut().zip(&solution.acceleration) {
+    for (x, dx) in x.iter_mut().zip(&step) {
         for d in 0..3 {
             if dx[d].is_finite() {
                 x[d] += dx[d];
@@ -297,8 +304,9 @@ pub fn shake_positions(
             }
         }
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        let solution = dynamics.correct(start);
-        for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&solution.acceleration) {
+        let mut step = dynamics.correct(start).acceleration;
+        fold(start, &mut step);
+        for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&step) {
             for d in 0..3 {
                 if dq[d].is_finite() {
                     q[d] += dq[d];
@@ -313,11 +321,16 @@ pub fn shake_positions(
 /// Ċ of `rows` after the velocities changed from `before` to `after` (Ċ is affine in v:
 /// Ċ = Σᵢ Jᵢ·vᵢ + ∂C/∂t), without evaluating again.
 pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {
-    for row in &mut rows.rows {
-        for (b, j) in &row.jacobian {
-            let (x, y) = (before[*b], after[*b]);
-            row.rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
+    let first = first_angular(rows);
+    for k in 0..rows.rows.len() {
+        let row = &rows.rows[k];
+        let mut rate = row.rate;
+        for &(b, j) in &row.jacobian {
+            // A 3D rigid body's slot k reads eₖ·ω of the state's world ω.
+            let (x, y) = (unfold(rows, first, before, b), unfold(rows, first, after, b));
+            rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
         }
+        rows.rows[k].rate = rate;
     }
 }
 

@@ -1,5 +1,6 @@
 //! CSV of a simulation: one line per recorded step — t, every position and velocity
-//! component, then each rigid body's angle and angular velocity, then λ, C/κ and Ċ/κ per
+//! component, then each rigid body's angle and angular velocity (3D: its quaternion as
+//! `q.w, q.x, q.y, q.z` and its world ω as `w.x, w.y, w.z`), then λ, C/κ and Ċ/κ per
 //! constraint.
 //!
 //! Numbers are written with Rust's shortest round-trip formatting, so two identical runs
@@ -55,8 +56,20 @@ impl<W: Write> CsvWriter<W> {
             }
         }
         for rigid in system.bodies.iter().filter_map(|b| b.rigid.as_ref()) {
-            for s in [rigid.orientation, rigid.angular_velocity] {
-                let _ = write!(header, ",{}", system.graph.symbol(s).name);
+            let name = |s| system.graph.symbol(s).name.clone();
+            if rigid.nodes.axes.is_some() {
+                for c in ["w", "x", "y", "z"] {
+                    header.push(',');
+                    header.push_str(&field(&format!("{}.{c}", name(rigid.orientation))));
+                }
+                for axis in AXES {
+                    header.push(',');
+                    header.push_str(&field(&format!("{}.{axis}", name(rigid.angular_velocity))));
+                }
+            } else {
+                for s in [rigid.orientation, rigid.angular_velocity] {
+                    let _ = write!(header, ",{}", name(s));
+                }
             }
         }
         for c in &system.constraints {
@@ -77,12 +90,27 @@ impl<W: Write> CsvWriter<W> {
         let dim = frame.rows.dim;
         self.line.clear();
         number(&mut self.line, frame.time);
-        for (slot, (q, v)) in frame.position.iter().zip(frame.velocity).enumerate() {
-            // A body's components, or a rigid body's angle and angular velocity (component 0).
-            let n = if slot < self.bodies { dim } else { 1 };
-            for &x in q[..n].iter().chain(&v[..n]) {
+        for (q, v) in frame.position.iter().zip(frame.velocity).take(self.bodies) {
+            for &x in q[..dim].iter().chain(&v[..dim]) {
                 self.line.push(',');
                 number(&mut self.line, x);
+            }
+        }
+        // A rigid body's angle and angular velocity (component 0 of its slot); in 3D its
+        // orientation and the world ω of the first of its three slots.
+        if frame.orientations.is_empty() {
+            for (q, v) in frame.position.iter().zip(frame.velocity).skip(self.bodies) {
+                for x in [q[0], v[0]] {
+                    self.line.push(',');
+                    number(&mut self.line, x);
+                }
+            }
+        } else {
+            for (q, v) in frame.orientations.iter().zip(frame.velocity[self.bodies..].iter().step_by(3)) {
+                for &x in q.iter().chain(v) {
+                    self.line.push(',');
+                    number(&mut self.line, x);
+                }
             }
         }
         for (row, &lambda) in frame.rows.rows.iter().zip(frame.lambda) {

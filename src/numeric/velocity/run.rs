@@ -58,7 +58,7 @@ pub fn run(
     summary.evaluations = dynamics.evaluations;
     summary.final_position.clone_from(&q);
     summary.final_velocity.clone_from(&v);
-    summary.final_state = final_state(system, &q, &v);
+    summary.final_state = final_state(system, &q, &v, &[]);
     match result {
         Ok(()) => Ok(summary),
         Err(error) => Err(Box::new(Failure { error, summary })),
@@ -153,7 +153,16 @@ fn run_inner(
         if n > 0 {
             stepper.lambda(&mut lambda);
         }
-        let frame = Frame { step: n, time: t, position: q, velocity: v, rows: &rows, lambda: &lambda, energy_error };
+        let frame = Frame {
+            step: n,
+            time: t,
+            position: q,
+            velocity: v,
+            orientations: &[],
+            rows: &rows,
+            lambda: &lambda,
+            energy_error,
+        };
         observe(&frame).map_err(SimError::Output)?;
         summary.steps = n;
         summary.duration = n as f64 * s.dt;
