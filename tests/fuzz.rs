@@ -8,14 +8,15 @@
 //! The seed corpus `tests/fuzz/corpus/` holds the cases (one file each); every file
 //! of it runs as a regression test, and the mutation strategy starts from it and from
 //! `constraints/`. `PROPTEST_CASES` sets the number of random cases per property (64 by
-//! default, a few seconds); `docs/fuzzing.md` says how to run it for an hour.
+//! default) and `PROPTEST_RNG_SEED` their seed (fixed by default, so the suite's time does not
+//! vary between runs); `docs/fuzzing.md` says how to run it for an hour.
 
 use lagrange::codegen::{Lang, Options as GenerateOptions};
 use lagrange::derive::Options as DeriveOptions;
 use lagrange::report::derivation::{Format, document};
 use lagrange::{Checked, derive_with, generate, load};
 use proptest::prelude::*;
-use proptest::test_runner::{Config, TestRunner};
+use proptest::test_runner::{Config, RngSeed, TestRunner};
 use std::path::{Path, PathBuf};
 
 /// Runs `text` through every in-process entry point; returns how far it got, for the
@@ -40,8 +41,16 @@ fn exercise(name: &str, text: &str) -> &'static str {
     }
 }
 
-fn cases() -> u32 {
-    std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(64)
+/// The runner's settings: `PROPTEST_CASES` random cases per property (64 by default) from
+/// `PROPTEST_RNG_SEED` (a fixed seed by default, so every run of the suite, and CI, draws the
+/// same cases and takes the same time; set the variable to explore others).
+fn config() -> Config {
+    let mut config = Config { failure_persistence: None, ..Config::default() };
+    config.cases = std::env::var("PROPTEST_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(64);
+    if config.rng_seed == RngSeed::Random {
+        config.rng_seed = RngSeed::Fixed(0x1a9_2a4e);
+    }
+    config
 }
 
 fn corpus() -> Vec<PathBuf> {
@@ -120,7 +129,7 @@ fn bead_file(exprs: &[(String, bool)]) -> String {
 /// Grammar-made files: one to three constraints of random expressions.
 #[test]
 fn grammar_made_files_end_with_a_result_or_a_typed_error() {
-    let mut runner = TestRunner::new(Config { cases: cases(), failure_persistence: None, ..Config::default() });
+    let mut runner = TestRunner::new(config());
     let strategy = prop::collection::vec((scalar(), any::<bool>()), 1..=3);
     runner
         .run(&strategy, |exprs| {
@@ -243,7 +252,7 @@ fn mutated_files_end_with_a_result_or_a_typed_error() {
     }
     // The corpus's small seeds (the large ones only repeat their budget refusals).
     seeds.extend(corpus().iter().map(|p| std::fs::read_to_string(p).expect("UTF-8")).filter(|t| t.len() < 4096));
-    let mut runner = TestRunner::new(Config { cases: cases(), failure_persistence: None, ..Config::default() });
+    let mut runner = TestRunner::new(config());
     let strategy = (0..seeds.len(), prop::collection::vec(edit(), 1..=8));
     runner
         .run(&strategy, |(k, edits)| {
