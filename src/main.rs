@@ -724,8 +724,6 @@ fn refuse_overwrite(input: &Path, outputs: &[(&str, Option<&Path>)]) -> Result<(
 }
 
 fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
-    use lagrange::numeric::integrate::Integrator;
-    use lagrange::numeric::simulate::checked_steps;
     use lagrange::numeric::stabilize::Stabilize;
     if let Err(code) = refuse_overwrite(&args.file, &[("--csv", args.csv.as_deref()), ("--plot", args.plot.as_deref())])
     {
@@ -735,36 +733,10 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
-    let mut settings = scenario.settings();
-    settings.dt = args.dt.unwrap_or(settings.dt);
-    let duration = args.duration.unwrap_or(scenario.scene.duration);
-    settings.steps = match args.steps {
-        Some(steps) => steps,
-        None => match checked_steps(duration, settings.dt) {
-            Ok(steps) => steps,
-            Err(e) => {
-                eprintln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
-                return ExitCode::from(2);
-            }
-        },
+    let settings = match simulate_settings(args, &scenario) {
+        Ok(settings) => settings,
+        Err(code) => return code,
     };
-    settings.integrator = match args.integrator {
-        IntegratorArg::Euler => Integrator::Euler,
-        IntegratorArg::Verlet => Integrator::Verlet,
-        IntegratorArg::Rk4 => Integrator::Rk4,
-    };
-    settings.stabilize = match args.stabilize {
-        StabilizeArg::None => Stabilize::None,
-        StabilizeArg::Baumgarte => Stabilize::Baumgarte { zeta: args.zeta, omega_dt: args.omega_dt },
-        StabilizeArg::Projection => Stabilize::Projection {
-            tolerance: args.tolerance,
-            max_iterations: lagrange::numeric::stabilize::PROJECTION_ITERATIONS,
-        },
-    };
-    if let Err(e) = settings.validate() {
-        errln!("error: {}", lagrange::numeric::dynamics::SimError::Settings(e));
-        return ExitCode::from(2);
-    }
     let velocity = match args.velocity.settings(settings.dt, settings.steps, settings.restitution) {
         Ok(v) => v,
         Err(e) => {
@@ -786,23 +758,10 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     for offset in scenario.initial_offsets() {
         errln!("{}", solution::initial_offset_note(&scenario.system, &offset, projects));
     }
-    let mut csv = match &args.csv {
+    let mut csv = match args.csv.as_deref().map(|path| csv_writer(path, &scenario.system, args.every, settings.steps)) {
         None => None,
-        Some(path) => {
-            let file = std::fs::File::create(path).map_err(|e| e.to_string());
-            let out = file.and_then(|f| {
-                let out = std::io::BufWriter::new(f);
-                lagrange::report::csv::CsvWriter::new(&scenario.system, out, args.every, settings.steps)
-                    .map_err(|e| e.to_string())
-            });
-            match out {
-                Ok(w) => Some(w),
-                Err(e) => {
-                    errln!("error: cannot write {}: {e}", path.display());
-                    return ExitCode::from(1);
-                }
-            }
-        }
+        Some(Ok(w)) => Some(w),
+        Some(Err(code)) => return code,
     };
     use std::io::IsTerminal;
     let bar = (std::io::stderr().is_terminal() && settings.steps >= PROGRESS_MIN_STEPS)
@@ -842,27 +801,95 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
             (failure.summary, ExitCode::from(2))
         }
     };
+    if let Err(code) = show_simulation(args, &scenario, &summary) {
+        return code;
+    }
+    code
+}
+
+/// The run's settings: the scene's, overridden by the flags, validated before any step.
+fn simulate_settings(
+    args: &SimulateArgs,
+    scenario: &lagrange::scenario::Scenario,
+) -> Result<lagrange::numeric::simulate::Settings, ExitCode> {
+    use lagrange::numeric::dynamics::SimError;
+    use lagrange::numeric::integrate::Integrator;
+    use lagrange::numeric::stabilize::Stabilize;
+    let mut settings = scenario.settings();
+    settings.dt = args.dt.unwrap_or(settings.dt);
+    let duration = args.duration.unwrap_or(scenario.scene.duration);
+    settings.steps = match args.steps {
+        Some(steps) => steps,
+        None => lagrange::numeric::simulate::checked_steps(duration, settings.dt).map_err(|e| {
+            errln!("error: {}", SimError::Settings(e));
+            ExitCode::from(2)
+        })?,
+    };
+    settings.integrator = match args.integrator {
+        IntegratorArg::Euler => Integrator::Euler,
+        IntegratorArg::Verlet => Integrator::Verlet,
+        IntegratorArg::Rk4 => Integrator::Rk4,
+    };
+    settings.stabilize = match args.stabilize {
+        StabilizeArg::None => Stabilize::None,
+        StabilizeArg::Baumgarte => Stabilize::Baumgarte { zeta: args.zeta, omega_dt: args.omega_dt },
+        StabilizeArg::Projection => Stabilize::Projection {
+            tolerance: args.tolerance,
+            max_iterations: lagrange::numeric::stabilize::PROJECTION_ITERATIONS,
+        },
+    };
+    settings.validate().map_err(|e| {
+        errln!("error: {}", SimError::Settings(e));
+        ExitCode::from(2)
+    })?;
+    Ok(settings)
+}
+
+/// The `--csv` writer, its header written (exit 1 when the file cannot be written).
+fn csv_writer(
+    path: &Path,
+    system: &lagrange::System,
+    every: u64,
+    steps: u64,
+) -> Result<lagrange::report::csv::CsvWriter<std::io::BufWriter<std::fs::File>>, ExitCode> {
+    let file = std::fs::File::create(path).map_err(|e| e.to_string());
+    let out = file.and_then(|f| {
+        lagrange::report::csv::CsvWriter::new(system, std::io::BufWriter::new(f), every, steps)
+            .map_err(|e| e.to_string())
+    });
+    out.map_err(|e| {
+        errln!("error: cannot write {}: {e}", path.display());
+        ExitCode::from(1)
+    })
+}
+
+/// The run's summary (text or JSON) and its `--plot` (exit 1 when the plot cannot be written).
+fn show_simulation(
+    args: &SimulateArgs,
+    scenario: &lagrange::scenario::Scenario,
+    summary: &lagrange::numeric::simulate::Summary,
+) -> Result<(), ExitCode> {
     let dim = scenario.system.dim();
     if args.format == SummaryArg::Json {
-        emit_json(&lagrange::report::simulation::json(&summary, dim));
+        emit_json(&lagrange::report::simulation::json(summary, dim));
     } else {
-        outln!("{}", lagrange::report::simulation::text(&summary, dim));
+        outln!("{}", lagrange::report::simulation::text(summary, dim));
     }
     if let Some(path) = &args.plot {
         let title = format!(
             "{} — {} + {}",
             scenario.system.title,
             summary.integrator,
-            lagrange::report::simulation::stabilization(&summary)
+            lagrange::report::simulation::stabilization(summary)
         );
-        let written = lagrange::report::plot::simulation(&title, &summary)
+        let written = lagrange::report::plot::simulation(&title, summary)
             .and_then(|svg| std::fs::write(path, svg).map_err(|e| e.to_string()));
         if let Err(e) = written {
             errln!("error: {}: {e}", path.display());
-            return ExitCode::from(1);
+            return Err(ExitCode::from(1));
         }
     }
-    code
+    Ok(())
 }
 
 fn cmd_bench(args: &BenchArgs) -> ExitCode {
