@@ -686,139 +686,166 @@ impl serde::Serialize for JsonDerivation {
 
 /// The derivation as JSON: every expression a string in the expression language.
 pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportError> {
-    let g = &d.graph;
-    let budget = document_budget(system);
-    let room = std::cell::Cell::new(budget);
-    let e = |id: Id| -> Result<String, ReportError> {
-        let text = print(g, id, Style::Source)?;
-        room.set(room.get().checked_sub(text.len()).ok_or(ReportError::DocumentTooLarge(budget))?);
-        Ok(text)
-    };
-    let mut constraints = Vec::new();
-    for (k, dc) in d.constraints.iter().enumerate() {
-        let c = &system.constraints[k];
-        let mut gradient = serde_json::Map::new();
-        for &(body, j) in &dc.jacobian {
-            gradient.insert(system.bodies[body].name.clone(), json!(e(j)?));
-        }
-        let mut entry = json!({
-            "name": c.name,
-            "kind": if c.inequality { "inequality" } else { "equality" },
-            "C": e(dc.c)?,
-            "C_dot": e(dc.c_dot)?,
-            "C_ddot": e(dc.c_ddot)?,
-            "scale": dc.scale.to_string(),
-            "gradient": gradient,
-            "c": e(dc.bias)?,
-        });
-        // Rigid bodies: Jʷ = ∂C/∂θ / κ by body (absent for point masses).
-        if !dc.angular.is_empty() {
-            let mut angular = serde_json::Map::new();
-            for &(body, j) in &dc.angular {
-                angular.insert(system.bodies[body].name.clone(), json!(e(j)?));
-            }
-            entry["angular_gradient"] = Value::Object(angular);
-        }
-        constraints.push(entry);
-    }
+    let e = &JsonText::new(system, &d.graph);
+    let constraints = json_constraints(system, d, e)?;
     let mut entries: Vec<(usize, usize, Id)> =
         d.a.iter().map(|&(k, j, id)| if k <= j { (k, j, id) } else { (j, k, id) }).collect();
     entries.sort_by_key(|&(k, j, _)| (k, j));
     let mut a = Vec::new();
     for (k, j, id) in entries {
-        a.push(json!({ "row": k, "col": j, "expr": e(id)? }));
+        a.push(json!({ "row": k, "col": j, "expr": e.text(id)? }));
     }
-    let b: Result<Vec<String>, ReportError> = d.b.iter().map(|&id| e(id)).collect();
+    let b: Result<Vec<String>, ReportError> = d.b.iter().map(|&id| e.text(id)).collect();
     let mut out = json!({
         "title": system.title,
         "dimension": system.dim(),
-        "bodies": system.bodies.iter().map(|b| {
-            let mut body = json!({
-                "name": b.name,
-                "position": g.symbol(b.position).name,
-                "velocity": g.symbol(b.velocity).name,
-                "acceleration": g.symbol(b.acceleration).name,
-                "force": g.symbol(b.force).name,
-                "mass": e(b.mass).unwrap_or_default(),
-            });
-            if let Some(r) = &b.rigid {
-                body["orientation"] = json!(g.symbol(r.orientation).name);
-                body["angular_velocity"] = json!(g.symbol(r.angular_velocity).name);
-                body["angular_acceleration"] = json!(g.symbol(r.angular_acceleration).name);
-                body["torque"] = json!(g.symbol(r.torque).name);
-                body["inertia"] = json!(e(r.inertia).unwrap_or_default());
-            }
-            body
-        }).collect::<Vec<_>>(),
+        "bodies": json_bodies(system, e),
         "constraints": constraints,
         "A": a,
         "b": b?,
     });
     if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
-        out["lambda"] = json!({ system.constraints[0].name.clone(): e(lambda)? });
-        let mut f = serde_json::Map::new();
-        for &(body, id) in forces {
-            f.insert(system.bodies[body].name.clone(), json!(e(id)?));
-        }
-        out["forces"] = Value::Object(f);
+        out["lambda"] = json!({ system.constraints[0].name.clone(): e.text(lambda)? });
+        out["forces"] = e.by_body(forces)?;
         if let Some(torques) = d.torques.as_ref().filter(|t| !t.is_empty()) {
-            let mut t = serde_json::Map::new();
-            for &(body, id) in torques {
-                t.insert(system.bodies[body].name.clone(), json!(e(id)?));
-            }
-            out["torques"] = Value::Object(t);
+            out["torques"] = e.by_body(torques)?;
         }
     } else {
-        // Several constraints: no closed form. The multipliers are named symbols, and the
-        // force on each body is Σₖ λₖ Jₖᵢ in them (as `derive` prints it), so the JSON parses
-        // again once the multiplier names are declared as scalars.
-        let names: Vec<String> = system.constraints.iter().map(|c| multiplier_name(&c.name)).collect();
-        // Each body's terms from its own constraints' directions, gathered in one pass
-        // over the constraints (a body's first direction in a constraint counts).
-        let mut terms: Vec<Vec<String>> = vec![Vec::new(); system.bodies.len()];
-        let mut last: Vec<Option<usize>> = vec![None; system.bodies.len()];
-        for (k, dc) in d.constraints.iter().enumerate() {
-            for &(body, j) in &dc.jacobian {
-                if body >= terms.len() || last[body] == Some(k) {
-                    continue;
-                }
-                last[body] = Some(k);
-                let j = e(j)?;
-                let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
-                terms[body].push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
-            }
-        }
-        let mut sums = serde_json::Map::new();
-        for (b, list) in system.bodies.iter().zip(terms) {
-            if !list.is_empty() {
-                sums.insert(b.name.clone(), json!(list.join(" + ")));
-            }
-        }
-        let multipliers: serde_json::Map<String, Value> =
-            system.constraints.iter().zip(&names).map(|(c, n)| (c.name.clone(), json!(n))).collect();
-        out["multipliers"] = Value::Object(multipliers);
-        out["force_sums"] = Value::Object(sums);
-        // Rigid bodies: the torque on each as Σₖ λₖ Jʷₖᵢ (absent without rigid bodies),
-        // gathered in one pass over the constraints as the force sums are.
-        let mut terms: Vec<Vec<String>> = vec![Vec::new(); system.bodies.len()];
-        for (k, dc) in d.constraints.iter().enumerate() {
-            for &(body, j) in &dc.angular {
-                if let Some(list) = terms.get_mut(body) {
-                    list.push(format!("{}*({})", names[k], e(j)?));
-                }
-            }
-        }
-        let mut torque_sums = serde_json::Map::new();
-        for (b, list) in system.bodies.iter().zip(terms) {
-            if !list.is_empty() {
-                torque_sums.insert(b.name.clone(), json!(list.join(" + ")));
-            }
-        }
-        if !torque_sums.is_empty() {
-            out["torque_sums"] = Value::Object(torque_sums);
-        }
+        json_sums(system, d, e, &mut out)?;
     }
     Ok(JsonDerivation { value: out })
+}
+
+/// Expressions printed for JSON within the document's budget (`document_budget`).
+struct JsonText<'a> {
+    system: &'a System,
+    graph: &'a crate::expr::graph::Graph,
+    budget: usize,
+    room: std::cell::Cell<usize>,
+}
+
+impl<'a> JsonText<'a> {
+    fn new(system: &'a System, graph: &'a crate::expr::graph::Graph) -> JsonText<'a> {
+        let budget = document_budget(system);
+        JsonText { system, graph, budget, room: std::cell::Cell::new(budget) }
+    }
+
+    /// `id` in the expression language; an error once the document passes its budget.
+    fn text(&self, id: Id) -> Result<String, ReportError> {
+        let text = print(self.graph, id, Style::Source)?;
+        let left = self.room.get().checked_sub(text.len()).ok_or(ReportError::DocumentTooLarge(self.budget))?;
+        self.room.set(left);
+        Ok(text)
+    }
+
+    /// `{ body name: expression }` for (body, expression) pairs.
+    fn by_body(&self, pairs: &[(usize, Id)]) -> Result<Value, ReportError> {
+        let mut map = serde_json::Map::new();
+        for &(body, id) in pairs {
+            map.insert(self.system.bodies[body].name.clone(), json!(self.text(id)?));
+        }
+        Ok(Value::Object(map))
+    }
+}
+
+/// Each body's symbols, mass and (rigid bodies) orientation, angular symbols and inertia.
+fn json_bodies(system: &System, e: &JsonText<'_>) -> Vec<Value> {
+    let g = e.graph;
+    let mut bodies = Vec::new();
+    for b in &system.bodies {
+        let mut body = json!({
+            "name": b.name,
+            "position": g.symbol(b.position).name,
+            "velocity": g.symbol(b.velocity).name,
+            "acceleration": g.symbol(b.acceleration).name,
+            "force": g.symbol(b.force).name,
+            "mass": e.text(b.mass).unwrap_or_default(),
+        });
+        if let Some(r) = &b.rigid {
+            body["orientation"] = json!(g.symbol(r.orientation).name);
+            body["angular_velocity"] = json!(g.symbol(r.angular_velocity).name);
+            body["angular_acceleration"] = json!(g.symbol(r.angular_acceleration).name);
+            body["torque"] = json!(g.symbol(r.torque).name);
+            body["inertia"] = json!(e.text(r.inertia).unwrap_or_default());
+        }
+        bodies.push(body);
+    }
+    bodies
+}
+
+/// Each constraint: C, Ċ, C̈, κ, J by body (`gradient`), c, and Jʷ on rigid bodies.
+fn json_constraints(system: &System, d: &Derivation, e: &JsonText<'_>) -> Result<Vec<Value>, ReportError> {
+    let mut constraints = Vec::new();
+    for (k, dc) in d.constraints.iter().enumerate() {
+        let c = &system.constraints[k];
+        let mut entry = json!({
+            "name": c.name,
+            "kind": if c.inequality { "inequality" } else { "equality" },
+            "C": e.text(dc.c)?,
+            "C_dot": e.text(dc.c_dot)?,
+            "C_ddot": e.text(dc.c_ddot)?,
+            "scale": dc.scale.to_string(),
+            "gradient": e.by_body(&dc.jacobian)?,
+            "c": e.text(dc.bias)?,
+        });
+        // Rigid bodies: Jʷ = ∂C/∂θ / κ by body (absent for point masses).
+        if !dc.angular.is_empty() {
+            entry["angular_gradient"] = e.by_body(&dc.angular)?;
+        }
+        constraints.push(entry);
+    }
+    Ok(constraints)
+}
+
+/// Several constraints: no closed form. The multipliers are named symbols, and the force on
+/// each body is Σₖ λₖ Jₖᵢ in them (as `derive` prints it), so the JSON parses again once
+/// the multiplier names are declared as scalars; likewise the torques on rigid bodies.
+fn json_sums(system: &System, d: &Derivation, e: &JsonText<'_>, out: &mut Value) -> Result<(), ReportError> {
+    let names: Vec<String> = system.constraints.iter().map(|c| multiplier_name(&c.name)).collect();
+    // Each body's terms from its own constraints' directions, gathered in one pass over the
+    // constraints (a body's first direction in a constraint counts).
+    let mut terms: Vec<Vec<String>> = vec![Vec::new(); system.bodies.len()];
+    let mut last: Vec<Option<usize>> = vec![None; system.bodies.len()];
+    for (k, dc) in d.constraints.iter().enumerate() {
+        for &(body, j) in &dc.jacobian {
+            if body >= terms.len() || last[body] == Some(k) {
+                continue;
+            }
+            last[body] = Some(k);
+            let j = e.text(j)?;
+            let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
+            terms[body].push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
+        }
+    }
+    let multipliers: serde_json::Map<String, Value> =
+        system.constraints.iter().zip(&names).map(|(c, n)| (c.name.clone(), json!(n))).collect();
+    out["multipliers"] = Value::Object(multipliers);
+    out["force_sums"] = sums_by_body(system, terms);
+    // Rigid bodies: the torque on each as Σₖ λₖ Jʷₖᵢ (absent without rigid bodies).
+    let mut terms: Vec<Vec<String>> = vec![Vec::new(); system.bodies.len()];
+    for (k, dc) in d.constraints.iter().enumerate() {
+        for &(body, j) in &dc.angular {
+            if let Some(list) = terms.get_mut(body) {
+                list.push(format!("{}*({})", names[k], e.text(j)?));
+            }
+        }
+    }
+    let torque_sums = sums_by_body(system, terms);
+    if torque_sums.as_object().is_some_and(|m| !m.is_empty()) {
+        out["torque_sums"] = torque_sums;
+    }
+    Ok(())
+}
+
+/// `{ body name: "t₁ + t₂ + …" }` over the bodies with terms.
+fn sums_by_body(system: &System, terms: Vec<Vec<String>>) -> Value {
+    let mut sums = serde_json::Map::new();
+    for (b, list) in system.bodies.iter().zip(terms) {
+        if !list.is_empty() {
+            sums.insert(b.name.clone(), json!(list.join(" + ")));
+        }
+    }
+    Value::Object(sums)
 }
 
 /// The symbol of constraint `name`'s multiplier in JSON: `lambda_<name>`, with every
