@@ -52,6 +52,7 @@ use super::dynamics::{Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rows::Rows;
 use super::simulate::SettingsError;
+use super::vector::dot;
 
 /// Which velocity-level solver a run uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -260,10 +261,6 @@ pub struct Prepared {
     pub inequality: Vec<bool>,
     pub inverse_mass: Vec<f64>,
     pub force: Vec<[f64; 3]>,
-}
-
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 impl Prepared {

@@ -23,15 +23,11 @@ use crate::numeric::dynamics::{Dynamics, Remedy, SimError, slot_name};
 use crate::numeric::simulate::{Failure, Frame, Sample, Summary, final_state, initial_state, time_dependent};
 use crate::numeric::solve::CONTACT_TOLERANCE;
 use crate::numeric::stabilize::distance;
-use crate::numeric::vector::length_scale;
+use crate::numeric::vector::{dot, length_scale};
 use std::time::Instant;
 
 /// State vectors up to this size get the stable-hertz hint when a soft step diverges.
 pub const HINT_MAX_STATE: usize = 400;
-
-fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
 
 /// Runs `settings.steps` steps from `env`'s state, calling `observe` at every recorded state
 /// (step 0 … steps).
