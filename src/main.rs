@@ -981,7 +981,7 @@ fn cmd_bench_solvers(args: &BenchArgs, scenario: &lagrange::scenario::Scenario) 
     };
     match args.format {
         OutArg::Text => out!("{}", table::text(&bench)),
-        OutArg::Json => outln!("{}", serde_json::to_string_pretty(&table::json(&bench)).unwrap_or_default()),
+        OutArg::Json => emit_json(&table::json(&bench)),
         OutArg::Csv => out!("{}", table::csv(&bench)),
     }
     if let Some(path) = &args.plot {

@@ -93,35 +93,6 @@ pub fn classify_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Vec<
         .collect()
 }
 
-/// The impulse that stops one closing contact `k` alone: P = −(1+e) J v / (J M⁻¹ Jᵀ), for
-/// C/κ like the rows (so Δvᵢ = P Jᵢ / mᵢ); 0 when it is not closing; `None` when the row has
-/// no usable gradient or `restitution` is outside [0, 1].
-pub fn impulse(rows: &Rows, k: usize, restitution: f64) -> Option<f64> {
-    let row = rows.rows.get(k)?;
-    if !(0.0..=1.0).contains(&restitution) {
-        return None;
-    }
-    let (mut d, mut s) = (Vec::new(), Status::Solved);
-    let single = Rows {
-        dim: rows.dim,
-        inverse_mass: rows.inverse_mass.clone(),
-        velocity: rows.velocity.clone(),
-        force: rows.force.clone(),
-        axes: rows.axes.clone(),
-        rows: vec![row.clone()],
-    };
-    let scaled = Scaled::new(&single, &mut d, &mut s);
-    if !scaled.usable[0] {
-        return None;
-    }
-    // In scaled terms J̃ M⁻¹ J̃ᵀ = 1, so P̃ = −(1+e) J̃ v.
-    let rate = scaled.scale(0, row.rate);
-    if rate >= 0.0 {
-        return Some(0.0);
-    }
-    Some(scaled.unscale(0, -(1.0 + restitution) * rate))
-}
-
 /// Impulses for every row at a state (`restitution` e ∈ [0, 1]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Impulses {
