@@ -257,6 +257,14 @@ fn endless_and_oversized_inputs_are_refused_while_reading() {
 
     let big = vec![b'#'; lagrange::model::file::MAX_FILE_BYTES + 1];
     refused("oversized", &big, "too large");
+
+    // A 3 GiB file (sparse: no byte of it is written) is refused by its length, unread.
+    let sparse = TempFile::new("sparse3g", b"");
+    std::fs::OpenOptions::new().write(true).open(&sparse.0).and_then(|f| f.set_len(3 << 30)).expect("a sparse file");
+    let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("derive").arg(&sparse.0).output().expect("binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("too large") && out.stdout.is_empty(), "{stderr}");
 }
 
 // ---- files and injection ---------------------------------------------------------------
@@ -645,12 +653,15 @@ fn exact_powers_and_long_chains_end_with_a_result() {
 #[test]
 fn work_inside_the_arithmetic_is_budgeted() {
     let atan2 = (0..6).fold("r.x".to_string(), |e, _| format!("atan2({e}, r.y)"));
+    let atan2_8 = (0..8).fold("r.x".to_string(), |e, _| format!("atan2({e}, r.y)"));
     let binomials: Vec<String> = (1..=2000).map(|i| format!("(r.x + {i})")).collect();
     let xs: Vec<String> = (1..=300).map(|i| format!("r{i}.x")).collect();
     let tower = vec!["r.x"; 64].join("^");
     let cases = [
         // > 20 s and 18 MB of output before.
         ("atan2_6", bead_with(&format!("{atan2} = 0")), "wire"),
+        // Depth 8: 35 s before.
+        ("atan2_8", bead_with(&format!("{atan2_8} = 0")), "wire"),
         // > 30 s in Poly::div_exact before.
         (
             "poly3d",
@@ -673,6 +684,13 @@ fn work_inside_the_arithmetic_is_budgeted() {
         // At the constraint's `expr` in the file (a long line shown as a window).
         assert!(stderr.contains(".toml:") && stderr.contains("expr = "), "{tag}: {stderr}");
     }
+    // `solve` derives first, so it is refused the same way (the 3D power: 17 s before).
+    let poly3d =
+        bead_with("(r.z + r.y + atan(r.x)/(2 + sin(r.z - r.z^2)))^4 = 0").replace("dimension = 2", "dimension = 3");
+    let at = TempFile::new("poly3d-state", b"r = [0.1, 0.2, 0.3]\nv = [0.0, 0.0, 0.0]\nF = [0.0, 0.0, 0.0]\n");
+    let (code, stdout, stderr) = run_on("poly3d_solve", &poly3d, &["solve", "--at", at.0.to_str().expect("utf-8")]);
+    assert_eq!(code, Some(1), "{stdout}{stderr}");
+    assert!(stdout.is_empty() && stderr.contains("constraint `wire` is too large to derive"), "{stderr}");
     // Below the budget the same shapes are derived: 5 nested atan2, 300 binomials.
     let atan2_5 = (0..5).fold("r.x".to_string(), |e, _| format!("atan2({e}, r.y)"));
     let (code, stdout, stderr) = run_on("atan2_5", &bead_with(&format!("{atan2_5} = 0")), &["derive"]);

@@ -266,8 +266,10 @@ fn specialise(loaded: &Loaded, d: &mut Derivation, specialize: bool) -> Result<S
             substituted.insert(s);
         }
         let simplifier = &mut d.simplifier;
+        // One memo for every formula: they share most of their nodes (λ in each force).
+        let mut memo = crate::expr::graph::FastMap::default();
         formulas = formulas.map(|id| {
-            let replaced = g.substitute(id, &map)?;
+            let replaced = g.substitute_memo(id, &map, &mut memo)?;
             let simplified = simplifier.simplify(g, replaced)?;
             // Collecting over a common denominator can build constants past f64's range
             // (l = 1e-200 gives 1e400 l²-free forms); then keep the formula as substituted.

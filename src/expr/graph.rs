@@ -857,16 +857,39 @@ impl Graph {
 
     /// Replaces every occurrence of the nodes in `map` (keys) by their values, bottom-up.
     pub fn substitute<S: BuildHasher>(&mut self, root: Id, map: &HashMap<Id, Id, S>) -> Result<Id, TypeError> {
-        let order = self.reachable(&[root]);
-        let mut new: FastMap<Id, Id> = FastMap::default();
+        self.substitute_memo(root, map, &mut FastMap::default())
+    }
+
+    /// [`Graph::substitute`] for many roots under one `map`: `memo` keeps each node's
+    /// replacement between calls, so nodes the roots share (λ in every body's force) are
+    /// visited once, not once per root. `memo` must only ever be used with the same `map`.
+    pub fn substitute_memo<S: BuildHasher>(
+        &mut self,
+        root: Id,
+        map: &HashMap<Id, Id, S>,
+        memo: &mut FastMap<Id, Id>,
+    ) -> Result<Id, TypeError> {
+        // The nodes under `root` not yet replaced; sorted, children come first (a node's
+        // children are interned before it).
+        let mut seen: FastSet<Id> = FastSet::default();
+        let mut stack = vec![root];
+        let mut order = Vec::new();
+        while let Some(id) = stack.pop() {
+            if memo.contains_key(&id) || !seen.insert(id) {
+                continue;
+            }
+            order.push(id);
+            stack.extend_from_slice(self.node(id).children());
+        }
+        order.sort_unstable();
         for id in order {
             let replaced = match map.get(&id) {
                 Some(&to) => to,
-                None => self.rebuilt(id, &new)?,
+                None => self.rebuilt(id, memo)?,
             };
-            new.insert(id, replaced);
+            memo.insert(id, replaced);
         }
-        Ok(new[&root])
+        Ok(memo[&root])
     }
 
     /// `id` over the children `new` maps its children to (itself when none changed).

@@ -581,6 +581,11 @@ impl Simplifier {
         }
         let mut num = f.num;
         loop {
+            // Each pass rewrites the whole numerator: once the formula's budget is spent, stop
+            // (the caller refuses the formula) rather than keep rewriting unmetered.
+            if work::exhausted() {
+                return Frac { num, den: f.den };
+            }
             let mut best: Option<Poly> = None;
             // The pairs whose atoms the numerator has, in the order they were met.
             let mut pairs: Vec<usize> = num
@@ -1031,6 +1036,13 @@ fn scalar(c: &Canon) -> Frac {
 
 /// The polynomial `Σ qᵢ mᵢ` of unsorted terms: sorted once, like terms collected.
 fn sum_terms(mut terms: Vec<(Mono, Rational)>) -> Poly {
+    // The sort makes about n log₂ n comparisons of monomials, each visiting their atoms:
+    // charged to the work meter as the arithmetic's term operations are (uncharged, the
+    // trigonometric reduction of one large numerator sorted for seconds past its formula's
+    // budget: issue 17's twelve definitions, 8 s and 355 MB).
+    let n = terms.len() as u64;
+    let visited: u64 = terms.iter().map(|(m, _)| m.0.len() as u64 + 1).sum();
+    work::charge(visited.saturating_mul(u64::from(u64::BITS - n.leading_zeros())));
     terms.sort_by(|a, b| a.0.cmp(&b.0));
     let mut out: Vec<(Mono, Rational)> = Vec::new();
     for (m, q) in terms {
