@@ -12,7 +12,7 @@
 //!   q(t) = exp(½ n φ(t)) q₀ about a random fixed axis n, φ = w t + ½ a t² (so ω = n φ̇,
 //!   α = n a); and Ċ/κ = Σ J·u over the rows' slots.
 //! - Refusals naming the body: a non-unit quaternion, `simulate --solver` (the velocity
-//!   level), `generate`, `bench`.
+//!   level), `generate --lang c`, `bench`.
 
 mod common;
 
@@ -375,7 +375,7 @@ fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
         &["simulate", "constraints/joints/ball_3d.toml", "--solver", "soft-step"][..],
         &["simulate", "constraints/joints/ball_3d.toml", "--solver", "pgs"][..],
         &["bench", "constraints/joints/ball_3d.toml"][..],
-        &["generate", "constraints/joints/ball_3d.toml"][..],
+        &["generate", "constraints/joints/ball_3d.toml", "--lang", "c"][..],
     ] {
         let (code, _, err) = lagrange(args);
         assert_eq!(code, Some(1), "{args:?}: {err}");

@@ -43,7 +43,7 @@ pub mod states;
 use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::{Env, Value, eval_one};
 use crate::expr::print::{Style, print};
-use crate::expr::{Id, Rational, Role, Ty, TypeError};
+use crate::expr::{Id, Rational, Role, TypeError};
 use crate::model::expect::{Expectation, Expected, Item};
 use crate::model::file::{Loaded, load};
 use crate::model::scene::{Scene, environment};
