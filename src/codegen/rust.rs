@@ -10,7 +10,10 @@
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
 //! Rigid bodies (2D) add their θ, ω, τ (and I) to `State`, Jʷ (`angular_jacobian`), the
 //! constraint torques and α: the rows' solve runs over the library's slots (bodies, then one
-//! angular slot per rigid body), so its numbers are `lagrange solve`'s.
+//! angular slot per rigid body), so its numbers are `lagrange solve`'s. 3D rigid bodies add
+//! q (`[f64; 4]`), world ω and τ and the principal moments; the solve runs over three
+//! slots per body, one per principal axis (`axis_slot`), and the torques and α come back as
+//! world vectors.
 //! With `--solver` the module also carries the velocity-level step an engine runs
 //! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
 //! library's row roots in one function, so the library's numbers) and the helper text of
