@@ -46,7 +46,7 @@ pub enum BuildError {
     /// located at that constraint's `expr`.
     #[error("{}", render_constraint(&path.display().to_string(), text, *constraint, &source.to_string()))]
     Located { path: PathBuf, text: String, constraint: usize, source: GenerateError },
-    /// The code could not be generated (a 3D rigid body, `--solver` with rigid bodies, a
+    /// The code could not be generated (a 3D rigid body in C, `--solver` with rigid bodies, a
     /// parameter value that cannot be written, a module past the code budget).
     #[error("error: {}: {source}", path.display())]
     Generate { path: PathBuf, source: GenerateError },

@@ -68,9 +68,14 @@ fn a_bad_file_reads_as_lagrange_generates_diagnostic() {
         assert_eq!(code, 1);
         assert_eq!(format!("{e}\n"), stderr, "{file}");
     }
-    let e = Module::new("constraints/joints/ball_3d.toml").out_dir(&dir).write().expect_err("3D is refused");
+    // A rigid body with the velocity-level step is refused (no rigid step yet).
+    let e = Module::new("constraints/joints/ball_3d.toml")
+        .solver(Solver::SoftStep)
+        .out_dir(&dir)
+        .write()
+        .expect_err("a rigid step is refused");
     assert!(matches!(e, BuildError::Generate { .. }), "{e:?}");
-    assert_eq!(format!("{e}\n"), generate(&["constraints/joints/ball_3d.toml"]).2);
+    assert_eq!(format!("{e}\n"), generate(&["constraints/joints/ball_3d.toml", "--solver", "soft-step"]).2);
     let e = Module::new("constraints/no_such_file.toml").out_dir(&dir).write().expect_err("missing");
     assert!(matches!(e, BuildError::Read(_)), "{e:?}");
     assert_eq!(format!("{e}\n"), generate(&["constraints/no_such_file.toml"]).2);

@@ -12,7 +12,7 @@
 //!   q(t) = exp(½ n φ(t)) q₀ about a random fixed axis n, φ = w t + ½ a t² (so ω = n φ̇,
 //!   α = n a); and Ċ/κ = Σ J·u over the rows' slots.
 //! - Refusals naming the body: a non-unit quaternion, `simulate --solver` (the velocity
-//!   level), `generate`, `bench`.
+//!   level), `generate --lang c`, `bench`.
 
 mod common;
 
@@ -375,10 +375,32 @@ fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
         &["simulate", "constraints/joints/ball_3d.toml", "--solver", "soft-step"][..],
         &["simulate", "constraints/joints/ball_3d.toml", "--solver", "pgs"][..],
         &["bench", "constraints/joints/ball_3d.toml"][..],
-        &["generate", "constraints/joints/ball_3d.toml"][..],
+        &["generate", "constraints/joints/ball_3d.toml", "--lang", "c"][..],
     ] {
         let (code, _, err) = lagrange(args);
         assert_eq!(code, Some(1), "{args:?}: {err}");
         assert!(err.contains("body `a`"), "{args:?}: {err}");
+    }
+}
+
+/// 3D torque expectations are world vectors compared component-wise: the ball joint's
+/// torques (Jolt's r × P) pass at their state, and the same file with the torque on `a`
+/// turned round fails there while the force on it still passes.
+#[test]
+fn a_wrong_3d_torque_expectation_fails() {
+    let rel = "constraints/joints/ball_3d.toml";
+    let text = read(rel);
+    let right = "torque = { a = \"cross(rot(q1, s1), ";
+    assert!(text.contains(right), "{rel} lost its torque expectation");
+    let judge = |text: &str| {
+        let mut checked = lagrange::check::Checked::from_text(rel, text).unwrap_or_else(|e| panic!("{e}"));
+        checked.run()
+    };
+    let outcomes = judge(&text);
+    assert!(outcomes.iter().any(|o| o.label.starts_with("torque[a]")), "no torque checked");
+    assert!(outcomes.iter().all(|o| o.passed), "{outcomes:?}");
+    let wrong = text.replace(right, "torque = { a = \"-cross(rot(q1, s1), ");
+    for o in judge(&wrong) {
+        assert_eq!(o.passed, !o.label.starts_with("torque[a]"), "{o}");
     }
 }

@@ -43,7 +43,7 @@ pub mod states;
 use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::{Env, Value, eval_one};
 use crate::expr::print::{Style, print};
-use crate::expr::{Id, Rational, Role, Ty, TypeError};
+use crate::expr::{Id, Rational, Role, TypeError};
 use crate::model::expect::{Expectation, Expected, Item};
 use crate::model::file::{Loaded, load};
 use crate::model::scene::{Scene, environment};
@@ -173,8 +173,9 @@ impl Checked {
         self.check(Quantity::Force(i), expected)
     }
 
-    /// Whether the derived constraint torque on the rigid body `body` (2D: a scalar, about
-    /// its centre of mass) equals `expected` on the constraints.
+    /// Whether the derived constraint torque on the rigid body `body` (2D: a scalar; 3D: a
+    /// vector in the world frame; about its centre of mass) equals `expected` on the
+    /// constraints.
     pub fn torque(&mut self, body: &str, expected: &str) -> Result<Outcome, CheckError> {
         let s = &self.loaded.system;
         let i = s
@@ -299,7 +300,7 @@ impl Checked {
         let id = d
             .expression(&self.loaded.system, expected)
             .map_err(|e| CheckError::Expected(format!("in `{expected}`: {e}")))?;
-        let want = if matches!(quantity, Quantity::Force(_)) { Ty::Vector } else { Ty::Scalar };
+        let want = quantity.ty(self.loaded.system.dim());
         if d.graph.ty(id) != want {
             return Err(CheckError::Expected(format!("`{expected}` must be a {want:?}, found a {:?}", d.graph.ty(id))));
         }
@@ -349,6 +350,7 @@ impl Checked {
             Quantity::Torque(i) => match &d.torques {
                 Some(torques) => match torques.iter().find(|(b, _)| *b == i) {
                     Some(&(_, t)) => (t, Rational::ONE),
+                    None if self.loaded.system.dim() == 3 => (d.graph.zero_vector(), Rational::ONE),
                     None => (d.graph.int(0), Rational::ONE),
                 },
                 None => return Ok(None),

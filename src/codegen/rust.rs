@@ -10,7 +10,10 @@
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
 //! Rigid bodies (2D) add their θ, ω, τ (and I) to `State`, Jʷ (`angular_jacobian`), the
 //! constraint torques and α: the rows' solve runs over the library's slots (bodies, then one
-//! angular slot per rigid body), so its numbers are `lagrange solve`'s.
+//! angular slot per rigid body), so its numbers are `lagrange solve`'s. 3D rigid bodies add
+//! q (`[f64; 4]`), world ω and τ and the principal moments; the solve runs over three
+//! slots per body, one per principal axis (`axis_slot`), and the torques and α come back as
+//! world vectors.
 //! With `--solver` the module also carries the velocity-level step an engine runs
 //! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
 //! library's row roots in one function, so the library's numbers) and the helper text of
@@ -192,8 +195,10 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 /// derivation, specialised where asked, the scene's numbers as graph nodes, the plan (the
 /// state's fields and the layout), then the text in the chosen language.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
-    // The 3D module (quaternions in `State`) is not written yet.
-    loaded.system.refuse_rigid_3d("generate")?;
+    // The C module of 3D rigid bodies (quaternions in `State`) is not written yet.
+    if options.lang == Lang::C {
+        loaded.system.refuse_rigid_3d("generate --lang c")?;
+    }
     // The velocity-level step moves positions only: its rigid twin is not written yet.
     if options.solver.is_some() {
         loaded.system.refuse_rigid("generate --solver")?;
@@ -301,7 +306,7 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
         .iter()
         .map(|b| b.rigid.as_ref().map(|r| g.substitute(r.inertia, map)).transpose())
         .collect::<Result<Vec<_>, _>>()?;
-    let a_code = assembled_a(g, formulas, &masses, &inertias)?;
+    let a_code = assembled_a(g, formulas, system, &masses, &inertias)?;
     let b_code = assembled_b(g, formulas, system, &masses, &inertias)?;
     let inverse_masses = masses.iter().map(|&m| g.powi(m, -1)).collect::<Result<Vec<_>, _>>()?;
     // The scene's force expressions (`[scene] forces`); a body not listed feels none.
@@ -325,6 +330,32 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
     let mut turns = Turns::default();
     for (i, body) in system.bodies.iter().enumerate() {
         let (Some(rigid), Some(inertia)) = (&body.rigid, inertias[i]) else { continue };
+        if let Some(axes) = rigid.nodes.axes {
+            // 3D: three slots, one per principal axis eₖ = R(q) eₖ (`numeric::rows`).
+            let applied = match loaded.scene.torques.iter().find(|t| t.0 == i) {
+                Some(&(_, id)) => g.substitute(id, map)?,
+                None => zero,
+            };
+            turns.three.push(Turn3 {
+                body: i,
+                first_slot: turns.body.len(),
+                orientation: body_symbol(g, rigid.nodes.orientation),
+                angular_velocity: rigid.nodes.angular_velocity,
+                torque: rigid.nodes.torque,
+                applied,
+                axes,
+            });
+            for k in 0..3 {
+                let w = axis_slot(g, axes, rigid.nodes.angular_velocity, rigid.nodes.torque, inertia, k)?;
+                turns.body.push(i);
+                turns.orientation.push(rigid.nodes.orientation);
+                turns.angular_velocity.push(w.omega);
+                turns.torque.push(w.torque);
+                turns.applied.push(applied);
+                turns.inverse_inertia.push(w.inverse_inertia);
+            }
+            continue;
+        }
         let scalar_zero = g.num(Rational::int(0));
         turns.body.push(i);
         turns.orientation.push(rigid.nodes.orientation);
@@ -336,7 +367,56 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
         });
         turns.inverse_inertia.push(g.powi(inertia, -1)?);
     }
+    // 3D: Jʷ projected on each principal axis, the entry of the axis' slot.
+    if !turns.three.is_empty() {
+        for (k, dirs) in formulas.angular.iter().enumerate() {
+            for &(b, jw) in dirs {
+                let Some(t) = turns.three.iter().find(|t| t.body == b) else { continue };
+                let (first, axes) = (t.first_slot, t.axes);
+                for (a, &e) in axes.iter().enumerate() {
+                    let p = g.dot(jw, e)?;
+                    turns.projected.push((k, first + a, p));
+                }
+            }
+        }
+    }
     Ok(SceneNumbers { masses, a_code, b_code, bodies, turns })
+}
+
+/// The symbol of a symbol's node (a rigid body's orientation).
+fn body_symbol(g: &Graph, node: Id) -> Symbol {
+    match g.node(node) {
+        crate::expr::Node::Sym(s) => *s,
+        _ => unreachable!("a rigid body's orientation is its symbol's node"),
+    }
+}
+
+/// One principal-axis slot of a 3D rigid body, as `numeric::rows` evaluates it.
+struct AxisSlot {
+    /// 1/Iₖ.
+    inverse_inertia: Id,
+    /// ωₖ = eₖ·ω.
+    omega: Id,
+    /// eₖ·τ − (ω_b × I ω_b)ₖ, the gyroscopic term of Euler's equations in the body frame.
+    torque: Id,
+}
+
+/// Axis `k`'s slot of a 3D rigid body with principal axes `axes`, angular velocity `omega`,
+/// torque `tau` and principal moments `moments` (a vector node): with ω_b = (eⱼ·ω)ⱼ and
+/// (i, j) = (k + 1, k + 2) mod 3, (ω_b × I ω_b)ₖ = ω_b,i (I_j ω_b,j) − ω_b,j (I_i ω_b,i).
+fn axis_slot(g: &mut Graph, axes: [Id; 3], omega: Id, tau: Id, moments: Id, k: usize) -> Result<AxisSlot, TypeError> {
+    use crate::expr::Axis;
+    let wb: Vec<Id> = axes.iter().map(|&e| g.dot(e, omega)).collect::<Result<_, _>>()?;
+    let m: Vec<Id> = Axis::ALL.iter().map(|&a| g.comp(moments, a)).collect::<Result<_, _>>()?;
+    let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+    let iw_j = g.mul(vec![m[j], wb[j]])?;
+    let iw_i = g.mul(vec![m[i], wb[i]])?;
+    let first = g.mul(vec![wb[i], iw_j])?;
+    let second = g.mul(vec![wb[j], iw_i])?;
+    let gyroscopic = g.sub(first, second)?;
+    let along = g.dot(axes[k], tau)?;
+    let torque = g.sub(along, gyroscopic)?;
+    Ok(AxisSlot { inverse_inertia: g.powi(m[k], -1)?, omega: wb[k], torque })
 }
 
 /// What both languages lay out the same way: names, the state's fields, the layout, κ and
@@ -374,7 +454,9 @@ impl<'a> Plan<'a> {
             &a_entries,
             blocks,
             closed_form,
-            system.constraints.iter().any(|c| c.inequality),
+            // 3D rigid bodies: λ from the rows' solve over the axis slots only (no closed form
+            // or dense path writes the world inertia yet).
+            system.constraints.iter().any(|c| c.inequality) || system.dim() == 3 && system.has_rigid_bodies(),
         );
         Plan {
             title: if system.title.is_empty() { "untitled scene" } else { system.title.as_str() },
@@ -479,7 +561,13 @@ fn rust_module(
 ) -> Result<Module, GenerateError> {
     let (system, g, fields, layout) = (&loaded.system, &d.graph, &plan.fields, &plan.layout);
     let mut out = String::new();
-    header(&mut out, plan.title, options.specialize, layout, scene.turns.body.len());
+    header(
+        &mut out,
+        plan.title,
+        options.specialize,
+        layout,
+        (scene.turns.rigid_bodies().len(), !scene.turns.three.is_empty()),
+    );
     field_names(&mut out, g, fields);
     state(&mut out, g, fields, layout);
     row_constants(&mut out, &plan.scales, &plan.inequalities, &names_of(&plan.constraint_names));
@@ -543,7 +631,7 @@ fn formula_fns(
     ctx.jacobian(out, formulas, &names, layout)?;
     ctx.c_term(out, formulas)?;
     ctx.bodies(out, &scene.bodies, &names)?;
-    ctx.rigid(out, &scene.turns, formulas, &names, layout)
+    ctx.rigid(out, &scene.turns, formulas, &names, (layout, &plan.fields))
 }
 
 /// The helpers every module carries (the rows' solve, the norms), then the step's with
@@ -771,9 +859,39 @@ pub(super) struct Turns {
     /// The scene's torque expression (zero where it gives none).
     pub(super) applied: Vec<Id>,
     pub(super) inverse_inertia: Vec<Id>,
+    /// 3D rigid bodies (empty in 2D): each one's three slots are axis slots, and the
+    /// entries of Jʷ are `projected`.
+    pub(super) three: Vec<Turn3>,
+    /// 3D: `(constraint, slot, Jʷ·eₖ)` for every slot a row turns.
+    pub(super) projected: Vec<(usize, usize, Id)>,
+}
+
+/// A 3D rigid body: three angular slots from `first_slot`, one per principal axis.
+pub(super) struct Turn3 {
+    pub(super) body: usize,
+    pub(super) first_slot: usize,
+    /// The quaternion [w, x, y, z].
+    pub(super) orientation: Symbol,
+    /// ω, τ (world frame), the scene's τ expression (zero where it gives none).
+    pub(super) angular_velocity: Id,
+    pub(super) torque: Id,
+    pub(super) applied: Id,
+    /// The principal axes R(q) eₖ.
+    pub(super) axes: [Id; 3],
 }
 
 impl Turns {
+    /// The rigid bodies, each once (a 3D body has three slots).
+    pub(super) fn rigid_bodies(&self) -> Vec<usize> {
+        let mut out: Vec<usize> = Vec::new();
+        for &b in &self.body {
+            if out.last() != Some(&b) {
+                out.push(b);
+            }
+        }
+        out
+    }
+
     /// The angular slot (index among the rigid bodies) of body `body`, if it is rigid.
     pub(super) fn slot(&self, body: usize) -> Option<usize> {
         self.body.iter().position(|&b| b == body)
@@ -781,6 +899,9 @@ impl Turns {
 
     /// `(constraint, slot, Jʷ)` for every angular entry of J, by constraint.
     pub(super) fn entries(&self, formulas: &Formulas) -> Vec<(usize, usize, Id)> {
+        if !self.three.is_empty() {
+            return self.projected.clone();
+        }
         let mut out = Vec::new();
         for (k, dirs) in formulas.angular.iter().enumerate() {
             out.extend(dirs.iter().filter_map(|&(b, id)| self.slot(b).map(|r| (k, r, id))));
@@ -797,7 +918,13 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout, turns: &Turns
     let _ = writeln!(
         out,
         "/// The constraint rows at a state, as `lagrange solve` reads them: C/κ, Ċ/κ, c and J = ∇C/κ per body{}.",
-        if turns.body.is_empty() { "" } else { " (then Jʷ of rigid body r in slot BODIES + r, component 0)" }
+        if turns.body.is_empty() {
+            ""
+        } else if !turns.three.is_empty() {
+            " (then Jʷ·eₖ of rigid body r's principal axis k in slot BODIES + 3r + k, component 0)"
+        } else {
+            " (then Jʷ of rigid body r in slot BODIES + r, component 0)"
+        }
     );
     let _ = writeln!(out, "pub fn rows(s: &State) -> Vec<Row<DIM>> {{");
     let _ = writeln!(out, "    let (c, rate, bias) = (constraints(s), constraint_rates(s), c_term(s));");
@@ -838,14 +965,7 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout, turns: &Turns
             array(&pairs)
         );
         if !turns.body.is_empty() {
-            let pairs: Vec<String> = formulas
-                .angular
-                .iter()
-                .enumerate()
-                .flat_map(|(k, dirs)| {
-                    dirs.iter().filter_map(move |&(i, _)| turns.slot(i).map(|r| format!("({k}, {r})")))
-                })
-                .collect();
+            let pairs: Vec<String> = turns.entries(formulas).iter().map(|&(k, r, _)| format!("({k}, {r})")).collect();
             let _ = writeln!(
                 out,
                 "/// The (constraint, rigid body) pairs of Jʷ's structure: rigid body r's angle appears in constraint k's C.\n\
@@ -854,6 +974,27 @@ fn rows_fn(out: &mut String, formulas: &Formulas, layout: &Layout, turns: &Turns
                 array(&pairs)
             );
         }
+    }
+    if !turns.three.is_empty() {
+        let _ = writeln!(
+            out,
+            "/// λ, the constraint forces and torques and the accelerations at a state, with each inequality's contact\n\
+             /// state and the status: what `lagrange solve` gives (see `solve_rows`). The solve runs over slots: the\n\
+             /// bodies (1/m, v, F), then three per rigid body r, one per principal axis eₖ = R(q) eₖ at BODIES + 3r + k\n\
+             /// (1/Iₖ, eₖ·ω and eₖ·τ − (ω_b × I ω_b)ₖ in component 0), so M stays diagonal; `force` and `acceleration`\n\
+             /// there hold the axis' part of the constraint torque and of α (`torques`, `angular_accelerations` turn\n\
+             /// them back into the world). Rigid bodies are solved in the file's length unit.\n\
+             pub fn solution(s: &State) -> Solution<DIM> {{\n    \
+             let slot = |x: f64| {{\n        let mut v = [0.0; DIM];\n        v[0] = x;\n        v\n    }};\n    \
+             let mut w = inverse_masses(s).to_vec();\n    \
+             w.extend(axis_inverse_inertias(s));\n    \
+             let mut v = velocities(s).to_vec();\n    \
+             v.extend(axis_angular_velocities(s).map(slot));\n    \
+             let mut f = external_forces(s).to_vec();\n    \
+             f.extend(axis_torques(s).map(slot));\n    \
+             solve_rows(&rows(s), &w, &v, &f, length_scale(&positions(s)))\n}}\n"
+        );
+        return;
     }
     if !turns.body.is_empty() {
         let _ = writeln!(
@@ -994,7 +1135,7 @@ fn field_names(out: &mut String, g: &Graph, fields: &[Field]) {
 }
 
 /// The module's opening comment: what it is and how it is laid out.
-fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout, rigid: usize) {
+fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout, (rigid, three): (usize, bool)) {
     let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
     let _ = writeln!(
         out,
@@ -1019,7 +1160,17 @@ fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout, rigi
          of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; \
          the forces do not depend on κ."
     );
-    if rigid > 0 {
+    if three {
+        let _ = writeln!(
+            out,
+            "// Rigid bodies ({rigid}, 3D): `State` holds each one's unit quaternion q = [w, x, y, z] (Hamilton), angular \
+             velocity ω and torque τ (world frame) beside its position, velocity and force (and its principal moments \
+             [I1, I2, I3] as the file declares them). The solve runs over three angular slots per rigid body, one per \
+             principal axis eₖ = R(q) eₖ (`body_axes`), so M = blockdiag(m E, diag(I1, I2, I3)) stays diagonal: \
+             A = Σ Jᵢ·Jᵢ/mᵢ + Σₖ (Jʷ·eₖ)²/Iₖ, b = Σ Jᵢ·Fᵢ/mᵢ + Σₖ (Jʷ·eₖ)(eₖ·τ − (ω_b × I ω_b)ₖ)/Iₖ + c, the world \
+             I⁻¹(τ − ω × I ω) with its gyroscopic term; `torques` and `angular_accelerations` are world vectors."
+        );
+    } else if rigid > 0 {
         let _ = writeln!(
             out,
             "// Rigid bodies ({rigid}): `State` holds each one's angle θ, angular velocity ω and torque τ beside its \
@@ -1094,7 +1245,13 @@ fn state(out: &mut String, g: &Graph, fields: &[Field], layout: &Layout) {
     let _ = writeln!(out, "pub struct State {{");
     let mut defaults = Vec::new();
     for f in fields.iter().filter(|f| f.array.is_none()) {
-        let ty = if g.symbol(f.symbol).ty == Ty::Vector { format!("[f64; {dim}]") } else { "f64".into() };
+        let ty = if g.is_quaternion(f.symbol) {
+            "[f64; 4]".to_string()
+        } else if g.symbol(f.symbol).ty == Ty::Vector {
+            format!("[f64; {dim}]")
+        } else {
+            "f64".into()
+        };
         let _ = writeln!(out, "    /// {}", f.doc);
         let _ = writeln!(out, "    pub {}: {ty},", f.ident);
         defaults.push(format!("{}: Default::default()", f.ident));
@@ -1179,13 +1336,49 @@ impl Ctx<'_> {
         turns: &Turns,
         formulas: &Formulas,
         names: &Names<'_>,
-        layout: &Layout,
+        (layout, fields): (&Layout, &[Field]),
     ) -> Result<(), GenerateError> {
         let r = turns.body.len();
         if r == 0 {
             return Ok(());
         }
         let g = self.g;
+        if !turns.three.is_empty() {
+            self.rigid_3d(out, turns, names, fields)?;
+        } else {
+            self.rigid_2d(out, turns, names)?;
+        }
+        let entries = turns.entries(formulas);
+        let mut doc = vec![if turns.three.is_empty() {
+            format!(
+                "Jʷ: the angular part of J (∂C/∂θ over the same constant κ as J), so Ċ/κ = Σᵢ Jᵢ·vᵢ + Σ_r Jʷ_r ω_r + ∂C/∂t/κ \
+                 and the constraint torque on rigid body r is Σₖ λₖ Jʷₖ_r. {}",
+                match layout.j {
+                    JStorage::Dense => "Row k, column r: rigid body r (`RIGID_BODIES`).",
+                    JStorage::Blocks { .. } => "Sparse: every non-zero entry `(k, r, Jʷ)`, sorted by k.",
+                }
+            )
+        } else {
+            format!(
+                "Jʷ·eₖ: the angular part of J (∂Ċ/∂ω over the same constant κ as J, a world vector) on each principal \
+                 axis eₖ = R(q) eₖ, so Ċ/κ = Σᵢ Jᵢ·vᵢ + Σ_slots (Jʷ·eₖ)(eₖ·ω) + ∂C/∂t/κ and the constraint torque on \
+                 rigid body r is Σₖ λₖ Jʷₖ_r = Σ_axes eₖ Σₖ λₖ (Jʷₖ_r·eₖ). {}",
+                match layout.j {
+                    JStorage::Dense => "Row k, column 3r + a: rigid body r's axis a (`RIGID_BODIES`).",
+                    JStorage::Blocks { .. } => "Sparse: every non-zero entry `(k, 3r + a, Jʷ·eₐ)`, sorted by k.",
+                }
+            )
+        }];
+        for &(k, slot, id) in &entries {
+            doc.push(format!("- Jʷ[{k}], body `{}`: {}", comment_text(names.bodies[turns.body[slot]]), formula(g, id)));
+        }
+        self.angular_jacobian(out, &entries, doc, layout, r)
+    }
+
+    /// A 2D module's rigid bodies: `RIGID`, `RIGID_BODIES`, and θ, ω, τ, the scene's τ and 1/I
+    /// per rigid body.
+    fn rigid_2d(&self, out: &mut String, turns: &Turns, names: &Names<'_>) -> Result<(), GenerateError> {
+        let r = turns.body.len();
         let listed: Vec<String> = turns.body.iter().map(|&b| b.to_string()).collect();
         let rigid_names =
             turns.body.iter().map(|&b| format!("`{}`", comment_text(names.bodies[b]))).collect::<Vec<_>>().join(", ");
@@ -1214,18 +1407,111 @@ impl Ctx<'_> {
         for (name, what, roots) in scalars {
             self.emit_scalars(out, &[what.to_string(), order.clone()], name, roots)?;
         }
-        let entries = turns.entries(formulas);
-        let mut doc = vec![format!(
-            "Jʷ: the angular part of J (∂C/∂θ over the same constant κ as J), so Ċ/κ = Σᵢ Jᵢ·vᵢ + Σ_r Jʷ_r ω_r + ∂C/∂t/κ \
-             and the constraint torque on rigid body r is Σₖ λₖ Jʷₖ_r. {}",
-            match layout.j {
-                JStorage::Dense => "Row k, column r: rigid body r (`RIGID_BODIES`).",
-                JStorage::Blocks { .. } => "Sparse: every non-zero entry `(k, r, Jʷ)`, sorted by k.",
-            }
-        )];
-        for &(k, slot, id) in &entries {
-            doc.push(format!("- Jʷ[{k}], body `{}`: {}", comment_text(names.bodies[turns.body[slot]]), formula(g, id)));
+        Ok(())
+    }
+
+    /// A 3D module's rigid bodies: `RIGID`, `RIGID_BODIES`, `ANGULAR_SLOTS`; per rigid body q,
+    /// ω, τ, the scene's τ and the principal axes (`body_axes`); per axis slot 1/Iₖ, eₖ·ω and
+    /// eₖ·τ − (ω_b × I ω_b)ₖ, what the rows' solve reads.
+    fn rigid_3d(
+        &self,
+        out: &mut String,
+        turns: &Turns,
+        names: &Names<'_>,
+        fields: &[Field],
+    ) -> Result<(), GenerateError> {
+        let r = turns.three.len();
+        let listed: Vec<String> = turns.three.iter().map(|t| t.body.to_string()).collect();
+        let rigid_names = turns
+            .three
+            .iter()
+            .map(|t| format!("`{}`", comment_text(names.bodies[t.body])))
+            .collect::<Vec<_>>()
+            .join(", ");
+        let _ = writeln!(
+            out,
+            "/// Number of rigid bodies (3D: a unit quaternion q = [w, x, y, z], ω and τ in the world frame, the\n\
+             /// principal moments [I1, I2, I3] in the body frame).\n\
+             pub const RIGID: usize = {r};\n\
+             /// The body (index into the bodies) of each rigid body, in file order ({rigid_names}): rigid body r is\n\
+             /// body RIGID_BODIES[r], and its principal axis k has the angular slot BODIES + 3r + k in `rows` and `solution`.\n\
+             pub const RIGID_BODIES: [usize; {r}] = {};\n\
+             /// Number of angular slots: three per rigid body, one per principal axis.\n\
+             pub const ANGULAR_SLOTS: usize = {};\n",
+            array(&listed),
+            3 * r
+        );
+        let order = format!("Per rigid body, in file order ({rigid_names}).");
+        let quaternions: Vec<String> =
+            turns.three.iter().map(|t| format!("s.{}", ident_of(fields, t.orientation))).collect();
+        emit_fn(
+            out,
+            &["The orientation q = [w, x, y, z] (Hamilton, unit) of each rigid body.".to_string(), order.clone()],
+            "orientations",
+            &format!("[[f64; 4]; {r}]"),
+            &[],
+            &array(&quaternions),
+        );
+        let vectors: [(&str, &str, Vec<Id>); 3] = [
+            (
+                "angular_velocities",
+                "The angular velocity ω (world frame) of each rigid body.",
+                turns.three.iter().map(|t| t.angular_velocity).collect(),
+            ),
+            (
+                "external_torques",
+                "The external torque τ (world frame) on each rigid body (the state's torque fields).",
+                turns.three.iter().map(|t| t.torque).collect(),
+            ),
+            (
+                "applied_torques",
+                "The scene's torques (`[scene] forces` on a torque symbol, world frame) at this state, zero for a rigid \
+                 body it does not list: an engine's loop writes them into the state's torque fields.",
+                turns.three.iter().map(|t| t.applied).collect(),
+            ),
+        ];
+        for (name, what, roots) in vectors {
+            self.emit_vectors(out, &[what.to_string(), order.clone()], name, &roots)?;
         }
+        let items: Vec<Vec<Id>> = turns.three.iter().map(|t| t.axes.to_vec()).collect();
+        let store = |i: usize, e: &[String]| {
+            let rows: Vec<String> = e.chunks(3).map(array).collect();
+            format!("out[{i}] = {};", array(&rows))
+        };
+        let doc = [
+            "The principal axes R(q) eₖ (k = 1, 2, 3; the columns of R(q)) of each rigid body, in the world."
+                .to_string(),
+            order,
+        ];
+        let (ret, init) = (format!("[[[f64; 3]; 3]; {r}]"), format!("[[[0.0; 3]; 3]; {r}]"));
+        self.emit_items(out, &doc, "body_axes", &ret, &init, "[[f64; 3]; 3]", &items, store)?;
+        let slots = format!("Per angular slot: rigid body r's principal axis k at 3r + k ({rigid_names}).");
+        let scalars = [
+            ("axis_inverse_inertias", "1/Iₖ of each axis slot.", &turns.inverse_inertia),
+            ("axis_angular_velocities", "ωₖ = eₖ·ω of each axis slot.", &turns.angular_velocity),
+            (
+                "axis_torques",
+                "eₖ·τ − (ω_b × I ω_b)ₖ of each axis slot: the external torque with the gyroscopic term of Euler's \
+                 equations in the body frame (ω_b = (eⱼ·ω)ⱼ), from the state's torque fields.",
+                &turns.torque,
+            ),
+        ];
+        for (name, what, roots) in scalars {
+            self.emit_scalars(out, &[what.to_string(), slots.clone()], name, roots)?;
+        }
+        Ok(())
+    }
+
+    /// `angular_jacobian` (dense, `[[f64; R]; K]` over the `r` angular slots) or
+    /// `angular_jacobian_blocks`, as the layout stores J.
+    fn angular_jacobian(
+        &self,
+        out: &mut String,
+        entries: &[(usize, usize, Id)],
+        doc: Vec<String>,
+        layout: &Layout,
+        r: usize,
+    ) -> Result<(), GenerateError> {
         let roots: Vec<Id> = entries.iter().map(|e| e.2).collect();
         if let JStorage::Blocks { .. } = layout.j {
             let count = entries.len();
@@ -1470,6 +1756,61 @@ impl Ctx<'_> {
              pub fn accelerations(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
              let mut a = [[0.0; {dim}]; {n}];\n    a.copy_from_slice(&solution(s).acceleration{bodies_only});\n    a\n}}\n"
         );
+        if !turns.three.is_empty() {
+            let r = turns.three.len();
+            let _ = writeln!(
+                out,
+                "/// The angular accelerations α (world frame) of every rigid body (`RIGID_BODIES`), from the rows' solve:\n\
+                 /// Σₖ eₖ αₖ over the principal axes eₖ = R(q) eₖ, with Iₖ αₖ = eₖ·τ − (ω_b × I ω_b)ₖ + Σ λ Jʷ·eₖ.\n\
+                 pub fn angular_accelerations(s: &State) -> [[f64; 3]; {r}] {{\n    \
+                 let (x, e) = (solution(s), body_axes(s));\n    \
+                 std::array::from_fn(|r| world(&e[r], |k| x.acceleration[BODIES + 3 * r + k][0]))\n}}\n"
+            );
+            let _ = writeln!(
+                out,
+                "/// The multipliers λ (for C/κ), as `lagrange solve` gives them: 0 on an inequality that is apart,\n\
+                 /// separating or would pull, and the minimum-norm λ where A is singular (see `solution`).\n\
+                 pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+                 let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+            );
+            let _ = writeln!(
+                out,
+                "/// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order), from the rows' solve.\n\
+                 pub fn forces(s: &State) -> [[f64; {dim}]; {n}] {{\n    \
+                 let mut f = [[0.0; {dim}]; {n}];\n    f.copy_from_slice(&solution(s).force[..BODIES]);\n    f\n}}\n"
+            );
+            let _ = writeln!(
+                out,
+                "/// The constraint torque Σₖ λₖ Jʷₖ (world frame, about the centre of mass) on every rigid body\n\
+                 /// (`RIGID_BODIES`), from the rows' solve: Σₖ eₖ (its axis slots' parts).\n\
+                 pub fn torques(s: &State) -> [[f64; 3]; {r}] {{\n    \
+                 let (x, e) = (solution(s), body_axes(s));\n    \
+                 std::array::from_fn(|r| world(&e[r], |k| x.force[BODIES + 3 * r + k][0]))\n}}\n"
+            );
+            let _ = writeln!(
+                out,
+                "/// Σₖ eₖ xₖ: a vector given by its parts on the axes `e`, in the world (`numeric::rows::world_angular`'s order).\n\
+                 fn world(e: &[[f64; 3]; 3], x: impl Fn(usize) -> f64) -> [f64; 3] {{\n    \
+                 let mut out = [0.0; 3];\n    \
+                 for (k, axis) in e.iter().enumerate() {{\n        \
+                 for (o, a) in out.iter_mut().zip(axis) {{\n            *o += x(k) * a;\n        }}\n    }}\n    out\n}}\n"
+            );
+            for (slot, name) in torque_fns.iter().enumerate() {
+                let _ = writeln!(
+                    out,
+                    "/// The constraint torque on rigid body `{}` (world frame, about its centre of mass).\npub fn {name}(s: &State) -> [f64; 3] {{\n    torques(s)[{slot}]\n}}\n",
+                    comment_text(names.bodies[turns.three[slot].body])
+                );
+            }
+            for (body, name) in force_fns.iter().enumerate() {
+                let _ = writeln!(
+                    out,
+                    "/// The constraint force on body `{}`.\npub fn {name}(s: &State) -> [f64; {dim}] {{\n    forces(s)[{body}]\n}}\n",
+                    comment_text(names.bodies[body])
+                );
+            }
+            return Ok(());
+        }
         if rigid > 0 {
             let _ = writeln!(
                 out,
@@ -1742,7 +2083,7 @@ pub(super) fn per_body_fns(names: &Names<'_>, turns: &Turns) -> (Vec<String>, Ve
     ]);
     let force_fns: Vec<String> = names.bodies.iter().map(|b| namer.name(&format!("force_{}", snake(b)))).collect();
     let torque_fns: Vec<String> =
-        turns.body.iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
+        turns.rigid_bodies().iter().map(|&b| namer.name(&format!("torque_{}", snake(names.bodies[b])))).collect();
     (force_fns, torque_fns)
 }
 
@@ -1809,7 +2150,13 @@ fn band_fns(out: &mut String, layout: &Layout, rigid: usize) {
 /// Aₖⱼ = Σᵢ [Jₖᵢ·Jⱼᵢ / mᵢ + Jʷₖᵢ Jʷⱼᵢ / Iᵢ] for every non-zero entry of `f.a`, unsimplified:
 /// the sum over the bodies both constraints act on, terms with the same mass summed before
 /// one division, then the rigid bodies both turn (`inertias`: I of each rigid body).
-fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id], inertias: &[Option<Id>]) -> Result<Vec<Id>, GenerateError> {
+fn assembled_a(
+    g: &mut Graph,
+    f: &Formulas,
+    system: &crate::model::system::System,
+    masses: &[Id],
+    inertias: &[Option<Id>],
+) -> Result<Vec<Id>, GenerateError> {
     let mut entries = Vec::new();
     for &(k, j, _) in &f.a {
         // (mass, dots over the bodies of that mass), in body order.
@@ -1836,6 +2183,16 @@ fn assembled_a(g: &mut Graph, f: &Formulas, masses: &[Id], inertias: &[Option<Id
             let (Some(&(_, wj)), Some(inertia)) = (f.angular[j].iter().find(|d| d.0 == body), inertias[body]) else {
                 continue;
             };
+            // 3D: Σₐ (Jʷₖ·eₐ)(Jʷⱼ·eₐ)/Iₐ over the principal axes, as the axis slots solve it.
+            if let Some(axes) = system.bodies[body].rigid.as_ref().and_then(|r| r.nodes.axes) {
+                for (a, &e) in crate::expr::Axis::ALL.iter().zip(&axes) {
+                    let (pk, pj) = (g.dot(wk, e)?, g.dot(wj, e)?);
+                    let moment = g.comp(inertia, *a)?;
+                    let inv = g.powi(moment, -1)?;
+                    terms.push(g.mul(vec![pk, pj, inv])?);
+                }
+                continue;
+            }
             let inv = g.powi(inertia, -1)?;
             terms.push(g.mul(vec![wk, wj, inv])?);
         }
@@ -1864,6 +2221,15 @@ fn assembled_b(
         }
         for &(body, w) in &f.angular[k] {
             let (Some(rigid), Some(inertia)) = (&system.bodies[body].rigid, inertias[body]) else { continue };
+            // 3D: Σₐ (Jʷ·eₐ)(eₐ·τ − (ω_b × I ω_b)ₐ)/Iₐ, the world I⁻¹(τ − ω × I ω) in the body's axes.
+            if let Some(axes) = rigid.nodes.axes {
+                for (a, &e) in axes.iter().enumerate() {
+                    let slot = axis_slot(g, axes, rigid.nodes.angular_velocity, rigid.nodes.torque, inertia, a)?;
+                    let p = g.dot(w, e)?;
+                    terms.push(g.mul(vec![p, slot.torque, slot.inverse_inertia])?);
+                }
+                continue;
+            }
             let inv = g.powi(inertia, -1)?;
             terms.push(g.mul(vec![w, rigid.nodes.torque, inv])?);
         }
@@ -1975,7 +2341,9 @@ const ROLE_ARRAYS: [(&str, &str); 4] = [
 fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {
     let mut slots = Vec::new();
     for f in fields {
-        if g.symbol(f.symbol).ty == Ty::Vector {
+        if g.is_quaternion(f.symbol) {
+            slots.extend((0..4).map(|k| format!("s.{}[{k}]", f.ident)));
+        } else if g.symbol(f.symbol).ty == Ty::Vector {
             slots.extend((0..g.dim()).map(|k| format!("s.{}[{k}]", f.ident)));
         } else {
             slots.push(format!("s.{}", f.ident));

@@ -7,7 +7,7 @@
 //! ```toml
 //! [[expect]]
 //! force  = { bead = "-(m*dot(v,v) + dot(F,r))/l^2 * r" }   # by body
-//! torque = { rod = "cross(rot(th, s), ...)" }               # by rigid body (a scalar in 2D)
+//! torque = { rod = "cross(rot(th, s), ...)" }               # by rigid body (2D a scalar, 3D a vector)
 //! lambda = { wire = "-(m*dot(v,v) + dot(F,r))/(2*l^2)" }   # by constraint
 //! C_dot  = { wire = "2*dot(r,v)" }                          # by constraint
 //! C_ddot = { wire = "2*dot(v,v) + 2*dot(r,a)" }             # by constraint
@@ -45,7 +45,7 @@ pub const DEFAULT_TOLERANCE: f64 = 1e-9;
 pub enum Quantity {
     /// The constraint force on a body.
     Force(usize),
-    /// The constraint torque on a rigid body (2D: a scalar).
+    /// The constraint torque on a rigid body (2D: a scalar; 3D: a vector, world frame).
     Torque(usize),
     /// λ of a constraint, for C as written.
     Lambda(usize),
@@ -55,6 +55,18 @@ pub enum Quantity {
     A(usize, usize),
     /// bₖ for C as written.
     B(usize),
+}
+
+impl Quantity {
+    /// The type of the quantity in a file of dimension `dim`: forces are vectors, torques
+    /// vectors in 3D (world frame) and scalars in 2D, everything else scalars.
+    pub fn ty(self, dim: usize) -> Ty {
+        match self {
+            Quantity::Force(_) => Ty::Vector,
+            Quantity::Torque(_) if dim == 3 => Ty::Vector,
+            _ => Ty::Scalar,
+        }
+    }
 }
 
 /// The expected side of an item.
@@ -238,8 +250,8 @@ impl Resolver<'_> {
     }
 
     fn expected(&mut self, quantity: Quantity, what: &str, value: &Spanned<RawExpected<'_>>) -> Option<Expected> {
-        let want = if matches!(quantity, Quantity::Force(_)) { Ty::Vector } else { Ty::Scalar };
         let dim = self.system.dim();
+        let want = quantity.ty(dim);
         match value.get_ref() {
             RawExpected::Formula(text) => {
                 let id = match self.system.expression(text) {

@@ -181,6 +181,9 @@ pub enum ForceError {
     /// A rigid body's torque written as a vector (a 2D torque is a scalar).
     #[error("a 2D torque must be a scalar, found a vector")]
     Vector,
+    /// A 3D rigid body's torque written as a scalar (a 3D torque is a world-frame vector).
+    #[error("a 3D torque must be a vector in the world frame, found a scalar (no torque: `[0, 0, 0]`)")]
+    ScalarTorque,
 }
 
 impl Problem {

@@ -94,7 +94,7 @@ pub(super) fn validate(
     // Forces written alike (`m*g` on every link of a chain) are one expression: parsed,
     // lowered and checked once (the same text in the same scope is the same node).
     let mut resolved: NameMap<&str, Result<Id, Refused>> = NameMap::default();
-    // A rigid body's torque symbol names its torque (2D: a scalar expression).
+    // A rigid body's torque symbol names its torque (2D: a scalar expression, 3D a vector).
     let torque_of = |system: &System, name: &str| {
         system.bodies.iter().position(|b| b.rigid.as_ref().is_some_and(|r| system.graph.symbol(r.torque).name == name))
     };
@@ -191,7 +191,8 @@ fn refuse_dependencies(system: &System, id: Id) -> Result<(), Refused> {
     Ok(())
 }
 
-/// Parses a rigid body's torque expression: a scalar (2D) with the dependencies of a force.
+/// Parses a rigid body's torque expression: a scalar in 2D, a vector (world frame) in 3D,
+/// with the dependencies of a force.
 fn torque_expression(system: &mut System, text: &str) -> Result<Id, Refused> {
     let id = system.expression(text).map_err(|e| {
         let span = match &e {
@@ -201,8 +202,10 @@ fn torque_expression(system: &mut System, text: &str) -> Result<Id, Refused> {
         };
         (span, ForceError::Build(e))
     })?;
-    if system.graph.ty(id) != Ty::Scalar {
-        return Err((None, ForceError::Vector));
+    match (system.dim(), system.graph.ty(id)) {
+        (3, Ty::Scalar) => return Err((None, ForceError::ScalarTorque)),
+        (3, _) | (_, Ty::Scalar) => {}
+        _ => return Err((None, ForceError::Vector)),
     }
     refuse_dependencies(system, id)?;
     Ok(id)
