@@ -46,6 +46,9 @@ use std::rc::Rc;
 /// short operands is cheaper than collecting and sorting them; above it, pairwise merging
 /// passes over the growing total once per operand (quadratic in a long chain's sums).
 const MERGE_MIN_TERMS: usize = 64;
+/// Up to this many sine–cosine pairs met, [`Simplifier::reduce_trig`] tests each pair on a
+/// numerator instead of looking its atoms up in `trig_index` (a time-dependent scene has one).
+const FEW_TRIG_PAIRS: usize = 4;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
@@ -582,14 +585,21 @@ impl Simplifier {
         let mut num = f.num;
         loop {
             let mut best: Option<Poly> = None;
-            // The pairs whose atoms the numerator has, in the order they were met.
-            let mut pairs: Vec<usize> = num
-                .0
-                .iter()
-                .flat_map(|(m, _)| m.0.iter().filter_map(|(a, _)| self.trig_index.get(a).copied()))
-                .collect();
-            pairs.sort_unstable();
-            pairs.dedup();
+            // The pairs whose atoms the numerator has, in the order they were met: with a
+            // few pairs (one time-dependent argument) all of them, tested below, without
+            // looking every atom up.
+            let pairs: Vec<usize> = if self.trig.len() <= FEW_TRIG_PAIRS {
+                (0..self.trig.len()).collect()
+            } else {
+                let mut pairs: Vec<usize> = num
+                    .0
+                    .iter()
+                    .flat_map(|(m, _)| m.0.iter().filter_map(|(a, _)| self.trig_index.get(a).copied()))
+                    .collect();
+                pairs.sort_unstable();
+                pairs.dedup();
+                pairs
+            };
             for &(sin, cos) in pairs.iter().map(|&k| &self.trig[k]) {
                 let squared = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 2);
                 let present = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 1);
