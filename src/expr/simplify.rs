@@ -1045,8 +1045,10 @@ fn substitute_square(p: &Poly, x: Id, y: Id) -> Option<Poly> {
             continue;
         }
         let rest = m.with_exponent(x, e % 2);
-        let factor = one_minus.powi(e.unsigned_abs() / 2)?;
-        terms.extend(factor.mul_mono(&rest).scale(q).0);
+        let k = e.unsigned_abs() / 2;
+        let factor = if k == 1 { None } else { Some(one_minus.powi(k)?) };
+        // q rest (1 − y²)^k, term by term.
+        terms.extend(factor.as_ref().unwrap_or(&one_minus).0.iter().map(|(t, c)| (t.mul(&rest), c.mul(q))));
     }
     Some(sum_terms(terms))
 }
