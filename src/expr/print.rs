@@ -368,7 +368,11 @@ impl<'g> Printer<'g> {
             }
             &Node::Sym(s) => {
                 let info = self.g.symbol(s);
-                let name = if latex { Cow::Owned(latex_name(&info.name, info.ty == Ty::Vector)) } else { text_name(&info.name) };
+                let name = if latex {
+                    Cow::Owned(latex_name(&info.name, info.ty == Ty::Vector))
+                } else {
+                    text_name(&info.name)
+                };
                 self.push(&name)
             }
             Node::Vector(xs) => {
