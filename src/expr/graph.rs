@@ -908,6 +908,10 @@ impl Graph {
     /// A total order on nodes that depends only on their structure and symbol names, never
     /// on ids, so that a canonical form is the same whatever order things were built in.
     pub fn cmp_nodes(&self, a: Id, b: Id) -> Ordering {
+        // A node is equal to itself (hash-consed): the common case of sorting factors.
+        if a == b {
+            return Ordering::Equal;
+        }
         /// A comparison still to make: two nodes, or an outcome decided once the pairs
         /// pushed above it are equal (a component's axis, a list's length).
         enum Step {

@@ -470,13 +470,22 @@ impl Poly {
             return None;
         }
         let (lm, lq) = self.leading()?;
-        let half: Option<SmallVec<[(Id, i32); 4]>> =
-            lm.0.iter().map(|&(a, e)| (e % 2 == 0).then_some((a, e / 2))).collect();
-        let lead = (Mono(half?), lq.sqrt_exact()?);
+        let half = |m: &Mono| -> Option<Mono> {
+            let half: Option<SmallVec<[(Id, i32); 4]>> =
+                m.0.iter().map(|&(a, e)| (e % 2 == 0).then_some((a, e / 2))).collect();
+            half.map(Mono)
+        };
+        // The order is a monomial order, so the lowest term of q² is the square of q's
+        // lowest term: a lowest term that is no square rejects at once (most sums).
+        let (low_m, low_q) = self.0.first()?;
+        half(low_m)?;
+        low_q.sqrt_exact()?;
+        let lead = (half(lm)?, lq.sqrt_exact()?);
         let twice = (lead.0.clone(), lead.1.mul(&Rational::int(2)));
         let mut root = Poly(vec![lead]);
+        // self − root², updated by each new term t: (root + t)² = root² + (2 root + t) t.
+        let mut remainder = self.add(&root.mul(&root)?.neg());
         for _ in 0..=self.len() {
-            let remainder = self.add(&root.mul(&root)?.neg());
             let Some((rm, rq)) = remainder.leading() else { return Some(root) };
             if !twice.0.divides(rm) {
                 return None;
@@ -485,7 +494,16 @@ impl Poly {
             if next.0 >= twice.0 {
                 return None;
             }
-            root = root.add(&Poly(vec![next]));
+            let t = Poly(vec![next]);
+            let grown = root.add(&t);
+            // The coefficients' bound of the product `root · root` this replaces.
+            let sum_bits = 64 - (grown.len() as u64).leading_zeros() as u64;
+            if grown.max_bits().saturating_mul(2).saturating_add(sum_bits) > MAX_COEFFICIENT_BITS {
+                return None;
+            }
+            let change = root.scale(&Rational::int(2)).add(&t).mul(&t)?;
+            remainder = remainder.add(&change.neg());
+            root = grown;
         }
         None
     }

@@ -18,6 +18,7 @@ use super::graph::{FastMap, FastSet, Graph, Id, Node, Ty};
 use super::num::Rational;
 use super::parse::{STACK_GROWTH, STACK_RED_ZONE};
 use super::present::is_negation;
+use std::borrow::Cow;
 
 /// Which notation to print in.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]
@@ -77,7 +78,7 @@ pub fn print_named(
 pub fn symbol_name(name: &str, vector: bool, style: Style) -> String {
     match style {
         Style::Source => name.to_string(),
-        Style::Text => text_name(name),
+        Style::Text => text_name(name).into_owned(),
         Style::Latex => latex_name(name, vector),
     }
 }
@@ -311,7 +312,7 @@ impl<'g> Printer<'g> {
         if let Some(name) = self.name_of(id) {
             self.used.insert(id);
             let vector = self.g.ty(id) == Ty::Vector;
-            let name = if style == Style::Latex { latex_name(name, vector) } else { text_name(name) };
+            let name = if style == Style::Latex { Cow::Owned(latex_name(name, vector)) } else { text_name(name) };
             return self.push(&name);
         }
         let prec = self.human_prec(id);
@@ -367,7 +368,11 @@ impl<'g> Printer<'g> {
             }
             &Node::Sym(s) => {
                 let info = self.g.symbol(s);
-                let name = if latex { latex_name(&info.name, info.ty == Ty::Vector) } else { text_name(&info.name) };
+                let name = if latex {
+                    Cow::Owned(latex_name(&info.name, info.ty == Ty::Vector))
+                } else {
+                    text_name(&info.name)
+                };
                 self.push(&name)
             }
             Node::Vector(xs) => {
@@ -687,17 +692,19 @@ fn split_index(name: &str) -> (&str, &str) {
     if cut == 0 { (name, "") } else { name.split_at(cut) }
 }
 
-fn text_name(name: &str) -> String {
+/// A name as text writes it; borrowed when it has no Greek letter to spell (most names:
+/// the documents print a symbol at every occurrence).
+fn text_name(name: &str) -> Cow<'_, str> {
     // `lambda_rod1` → `λ_rod1`, `theta2` → `θ2`.
     if let Some((head, tail)) = name.split_once('_')
         && let Some(i) = GREEK.iter().position(|g| *g == head)
     {
-        return format!("{}_{tail}", GREEK_TEXT[i]);
+        return Cow::Owned(format!("{}_{tail}", GREEK_TEXT[i]));
     }
     let (stem, index) = split_index(name);
     match GREEK.iter().position(|g| *g == stem) {
-        Some(i) => format!("{}{index}", GREEK_TEXT[i]),
-        None => name.to_string(),
+        Some(i) => Cow::Owned(format!("{}{index}", GREEK_TEXT[i])),
+        None => Cow::Borrowed(name),
     }
 }
 

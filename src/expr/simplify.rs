@@ -38,6 +38,7 @@ use super::poly::{Frac, Mono, Poly, push_factor};
 use super::present::Orientations;
 use super::shape::{Reuse, Shaper};
 use super::work;
+use smallvec::SmallVec;
 use std::rc::Rc;
 
 /// A sum of more than two polynomials with more than this many terms in all is merged in
@@ -46,6 +47,9 @@ use std::rc::Rc;
 /// short operands is cheaper than collecting and sorting them; above it, pairwise merging
 /// passes over the growing total once per operand (quadratic in a long chain's sums).
 const MERGE_MIN_TERMS: usize = 64;
+/// Up to this many sine–cosine pairs met, [`Simplifier::reduce_trig`] tests each pair on a
+/// numerator instead of looking its atoms up in `trig_index` (a time-dependent scene has one).
+const FEW_TRIG_PAIRS: usize = 4;
 
 /// A vector atom of the canonical form: a graph node, or a unit vector.
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Debug)]
@@ -580,6 +584,7 @@ impl Simplifier {
             return f;
         }
         let mut num = f.num;
+        let mut changed = false;
         loop {
             // Each pass rewrites the whole numerator: once the formula's budget is spent, stop
             // (the caller refuses the formula) rather than keep rewriting unmetered.
@@ -587,18 +592,32 @@ impl Simplifier {
                 return Frac { num, den: f.den };
             }
             let mut best: Option<Poly> = None;
-            // The pairs whose atoms the numerator has, in the order they were met.
-            let mut pairs: Vec<usize> = num
-                .0
-                .iter()
-                .flat_map(|(m, _)| m.0.iter().filter_map(|(a, _)| self.trig_index.get(a).copied()))
-                .collect();
-            pairs.sort_unstable();
-            pairs.dedup();
+            // The pairs whose atoms the numerator has, in the order they were met: with a
+            // few pairs (one time-dependent argument) all of them, tested below, without
+            // looking every atom up.
+            let pairs: SmallVec<[usize; FEW_TRIG_PAIRS]> = if self.trig.len() <= FEW_TRIG_PAIRS {
+                (0..self.trig.len()).collect()
+            } else {
+                let mut pairs: SmallVec<[usize; FEW_TRIG_PAIRS]> = num
+                    .0
+                    .iter()
+                    .flat_map(|(m, _)| m.0.iter().filter_map(|(a, _)| self.trig_index.get(a).copied()))
+                    .collect();
+                pairs.sort_unstable();
+                pairs.dedup();
+                pairs
+            };
             for &(sin, cos) in pairs.iter().map(|&k| &self.trig[k]) {
-                let squared = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 2);
-                let present = |a: Id| num.0.iter().any(|(m, _)| m.exponent(a) >= 1);
-                if !(squared(sin) && present(cos) || squared(cos) && present(sin)) {
+                // The highest powers of sin and cos in the numerator, in one pass.
+                let (mut s, mut c) = (0, 0);
+                for &(a, e) in num.0.iter().flat_map(|(m, _)| m.0.iter()) {
+                    if a == sin {
+                        s = s.max(e);
+                    } else if a == cos {
+                        c = c.max(e);
+                    }
+                }
+                if !(s >= 2 && c >= 1 || c >= 2 && s >= 1) {
                     continue;
                 }
                 for (x, y) in [(sin, cos), (cos, sin)] {
@@ -610,8 +629,19 @@ impl Simplifier {
                 }
             }
             match best {
-                Some(p) => num = p,
-                None => return Frac { num, den: f.den }.normalize(),
+                Some(p) => {
+                    num = p;
+                    changed = true;
+                }
+                None => {
+                    let out = Frac { num, den: f.den };
+                    // Unchanged, `f` is a form the simplifier made, normalised already; with
+                    // at most one factor that is not an atom normalising again gives it back
+                    // (with two, a division by one can lengthen the numerator past the
+                    // other's length test), so that pass is skipped.
+                    let factors = out.den.iter().filter(|(p, _)| p.as_atom().is_none()).count();
+                    return if changed || factors > 1 { out.normalize() } else { out };
+                }
             }
         }
     }
@@ -1010,9 +1040,9 @@ impl Simplifier {
 /// `p` with `x² = 1 − y²` in every term: `x^e` becomes `x^(e mod 2) (1 − y²)^(e div 2)`;
 /// `None` when a power is too large to expand.
 fn substitute_square(p: &Poly, x: Id, y: Id) -> Option<Poly> {
-    let one_minus =
-        Poly::constant(Rational::ONE).add(&Poly(vec![(Mono(smallvec::smallvec![(y, 2)]), Rational::int(-1))]));
-    let mut terms: Vec<(Mono, Rational)> = Vec::new();
+    // 1 − y², its terms in order (degree 0, then 2).
+    let one_minus = Poly(vec![(Mono::one(), Rational::ONE), (Mono(smallvec::smallvec![(y, 2)]), Rational::int(-1))]);
+    let mut terms: Vec<(Mono, Rational)> = Vec::with_capacity(p.len() + 4);
     for (m, q) in &p.0 {
         let e = m.exponent(x);
         if e < 2 {
@@ -1020,8 +1050,10 @@ fn substitute_square(p: &Poly, x: Id, y: Id) -> Option<Poly> {
             continue;
         }
         let rest = m.with_exponent(x, e % 2);
-        let factor = one_minus.powi(e.unsigned_abs() / 2)?;
-        terms.extend(factor.mul_mono(&rest).scale(q).0);
+        let k = e.unsigned_abs() / 2;
+        let factor = if k == 1 { None } else { Some(one_minus.powi(k)?) };
+        // q rest (1 − y²)^k, term by term.
+        terms.extend(factor.as_ref().unwrap_or(&one_minus).0.iter().map(|(t, c)| (t.mul(&rest), c.mul(q))));
     }
     Some(sum_terms(terms))
 }
