@@ -116,6 +116,11 @@ pub fn between(from: [f64; 3], to: [f64; 3]) -> [f64; 3] {
     log(product(exp(to), exp(from.map(|x| -x))))
 }
 
+/// The world rotation vector of the turn from orientation `from` to `to`: log(to ⊗ from*).
+pub fn between_orientations(from: [f64; 4], to: [f64; 4]) -> [f64; 3] {
+    log(product(to, [from[0], -from[1], -from[2], -from[3]]))
+}
+
 /// State slots into the rows' slots, in place, with the principal axes `axes` of the rows
 /// (`Rows::axes`; empty without 3D rigid bodies, and then nothing changes): a 3D body's
 /// world vector x in its first slot becomes [eₖ·x, 0, 0] in its slot k. [`to_world`] is the

@@ -41,6 +41,8 @@ pub fn step(
     // Positions only: a rigid body's angle is no length.
     let length = length_scale(&q[..dynamics.system().bodies.len()]);
     for sub in 0..s.settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         s.prepared.load(&rows);
         let p = &s.prepared;
         // In the rows' slots (a 3D body's ω along its principal axes), as the solve's are.

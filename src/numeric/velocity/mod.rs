@@ -456,7 +456,9 @@ impl Stepper {
     }
 
     /// One step of `settings.dt` from (t, q, v), whose rows `rows` are (the run loop has them
-    /// from recording the state; they are recycled).
+    /// from recording the state; they are recycled). 3D rigid bodies: every substep starts
+    /// with `Dynamics::rebase` (the orientation is unchanged, so the rows still hold), so a
+    /// rotation vector in `q` is the turn since the substep's start.
     pub fn step(
         &mut self,
         dynamics: &mut Dynamics<'_>,

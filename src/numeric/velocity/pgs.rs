@@ -49,6 +49,8 @@ pub fn step(
     }
     s.prepared.load(&rows);
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         let p = &s.prepared;
         // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
         p.to_axes(v);

@@ -89,15 +89,21 @@ fn run_inner(
     let (mut q_1, mut force_1) = (q.clone(), vec![[0.0; 3]; q.len()]);
     let mut lambda = vec![0.0; system.constraints.len()];
     // 3D rigid bodies: T from the rows' body-frame ω, the work of the world torques over the
-    // step's rotation vector (before `rebase` folds it into the orientation).
+    // turn between the recorded orientations, log(q ⊗ q₋₁*), in place of the rotation vector.
     let three_d = !dynamics.orientations().is_empty();
     let (mut moved, mut force) = (q.clone(), vec![[0.0; 3]; q.len()]);
+    let mut orientations_1 = dynamics.orientations().to_vec();
     for n in 0..=s.steps {
         let t = t0 + n as f64 * s.dt;
         dynamics.step = n;
         if three_d {
-            moved.copy_from_slice(q);
             dynamics.rebase(q);
+            moved.copy_from_slice(q);
+            let slots = (bodies..q.len()).step_by(3);
+            for ((slot, now), before) in slots.zip(dynamics.orientations()).zip(&mut orientations_1) {
+                moved[slot] = rotation::between_orientations(*before, *now);
+                *before = *now;
+            }
         }
         let rows = dynamics.rows(t, q, v)?;
         let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);

@@ -54,6 +54,8 @@ pub fn step(
         s.start_rate[k] = s.prepared.rate(k, v);
     }
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         let p = &s.prepared;
         // v is in the rows' slots here (a 3D body's ω along its principal axes).
         p.kick(v, h);

@@ -38,6 +38,8 @@ pub fn step(
     let alpha = settings.compliance / (h * h);
     s.prepared.load(&rows);
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         let t1 = t + (sub + 1) as f64 * h;
         // Predict: the previous positions are kept, the new ones are x.
         s.prepared.to_axes(v);
