@@ -371,10 +371,9 @@ fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
 
 #[test]
 fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
-    for args in [
-        &["bench", "constraints/joints/ball_3d.toml"][..],
-        &["generate", "constraints/joints/ball_3d.toml"][..],
-    ] {
+    for args in
+        [&["bench", "constraints/joints/ball_3d.toml"][..], &["generate", "constraints/joints/ball_3d.toml"][..]]
+    {
         let (code, _, err) = lagrange(args);
         assert_eq!(code, Some(1), "{args:?}: {err}");
         assert!(err.contains("body `a`"), "{args:?}: {err}");

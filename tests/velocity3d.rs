@@ -44,20 +44,22 @@ fn norm4(q: [f64; 4]) -> f64 {
 }
 
 /// The bound on max |C| over 1 s at 60 Hz with Box2D's defaults (4 substeps): the exact
-/// velocity solve projects onto C = 0 after every substep (measured: 5e-14 at most); the
-/// iterative solvers hold the joints to 2 mm (measured: the soft step's spring on the
-/// spinning top 1.2e-3 — its tip carries the top's weight and the centripetal pull — PGS
-/// and XPBD 2e-5 at most).
+/// velocity solve projects onto C = 0 after every substep (measured: 1.1e-13 at most); the
+/// iterative solvers hold the joints to 5 mm, as in 2D (measured: 1.0e-3, 1.5e-3 and
+/// 1.2e-3 for the soft step, PGS and XPBD on the spinning top, whose tip carries its weight
+/// and the centripetal pull at 100 rad/s of spin, 0.4 rad a substep; 1.4e-4 at most on the
+/// joints).
 fn bound(solver: Solver) -> f64 {
     match solver {
         Solver::Exact => 1e-9,
-        Solver::SoftStep | Solver::Pgs | Solver::Xpbd => 2e-3,
+        Solver::SoftStep | Solver::Pgs | Solver::Xpbd => 5e-3,
     }
 }
 
 #[test]
 fn every_solver_runs_the_3d_joints_and_the_top_for_a_second() {
-    for rel in ["constraints/joints/ball_3d.toml", "constraints/joints/hinge_3d.toml", "constraints/rigid/spinning_top.toml"]
+    for rel in
+        ["constraints/joints/ball_3d.toml", "constraints/joints/hinge_3d.toml", "constraints/rigid/spinning_top.toml"]
     {
         let s = scenario_of(&read(rel), &[]);
         for solver in Solver::ALL {
@@ -171,8 +173,7 @@ fn pgs_and_the_soft_step_converge_to_the_exact_velocity_solve_on_a_3d_hinge() {
     let bias = DVector::from_iterator(rows.rows.len(), rows.rows.iter().map(|r| soft.bias_rate * r.value));
     let soft_exact = twin.lu().solve(&(-&ju - &bias)).expect("regular");
     for (solver, target) in [(Solver::Pgs, &exact), (Solver::SoftStep, &soft_exact)] {
-        let errors: Vec<f64> =
-            [1, 2, 4, 8, 16, 64, 512].iter().map(|&n| (&one(solver, n) - target).amax()).collect();
+        let errors: Vec<f64> = [1, 2, 4, 8, 16, 64, 512].iter().map(|&n| (&one(solver, n) - target).amax()).collect();
         for w in errors.windows(2) {
             assert!(w[1] <= w[0] * 1.0001 + 1e-13 * target.amax(), "{}: errors {errors:?} must fall", solver.name());
         }
@@ -205,7 +206,13 @@ fn the_resting_hung_top_takes_lambda_times_h() {
         })
         .expect("runs");
         let relative = (last[2] / h - lambda[2]).abs() / lambda[2];
-        assert!(relative < tolerance, "{}: P/h = {} against λ = {} ({relative:e})", solver.name(), last[2] / h, lambda[2]);
+        assert!(
+            relative < tolerance,
+            "{}: P/h = {} against λ = {} ({relative:e})",
+            solver.name(),
+            last[2] / h,
+            lambda[2]
+        );
         for k in 0..2 {
             assert!(last[k].abs() / h < tolerance * lambda[2], "{}: tip P/h = {:?}", solver.name(), last);
         }
@@ -259,7 +266,8 @@ fn a_fast_asymmetric_spinner_keeps_its_energy_and_momentum_under_the_soft_step()
     // every step (Avian #420, Bullet #357); the implicit-midpoint kick keeps T and |L| of
     // the body-frame ω exactly, and the drift turns the body about ω itself (exp(h ω)), which
     // leaves the body-frame ω as it is. Bound over 10⁴ steps: |T/T₀ − 1| and ||L|/|L₀| − 1|
-    // below 1e-10 (rounding only; measured 2e-13).
+    // below 1e-9, rounding only (measured 2.0e-11 and 1.0e-11: the per-axis and world
+    // conversions of ω at each of the 4·10⁴ substeps).
     let s = scenario_of(SPINNER, &[]);
     let settings = Settings { steps: 10_000, ..Settings::new(Solver::SoftStep, 1.0 / 60.0, 0.0) };
     let (mut first, mut worst_t, mut worst_l, mut turned) = (None, 0.0f64, 0.0f64, 0.0f64);
@@ -274,7 +282,7 @@ fn a_fast_asymmetric_spinner_keeps_its_energy_and_momentum_under_the_soft_step()
     })
     .unwrap_or_else(|f| panic!("{}", f.error));
     assert!(turned > 1.0, "the spinner tumbles (e₂·y fell by {turned})");
-    assert!(worst_t < 1e-10 && worst_l < 1e-10, "T drifted by {worst_t:e}, |L| by {worst_l:e}");
+    assert!(worst_t < 1e-9 && worst_l < 1e-9, "T drifted by {worst_t:e}, |L| by {worst_l:e}");
 }
 
 #[test]

@@ -176,8 +176,8 @@ pub fn applied(rows: &Rows, out: &mut Vectors) {
         let mut tau = [0.0; 3];
         for k in 0..3 {
             let s = rows.force[g + k][0] + inertia[k] * gyro[k];
-            for d in 0..3 {
-                tau[d] += s * rows.axes[g + k][d];
+            for (t, e) in tau.iter_mut().zip(rows.axes[g + k]) {
+                *t += s * e;
             }
         }
         out[g] = tau;
@@ -357,7 +357,10 @@ mod tests {
         }
         let q0 = normalise([0.3, -0.5, 0.1, 0.8]);
         let e = [0, 1, 2].map(|k| {
-            let q = product(product(q0, [0.0, (k == 0) as u8 as f64, (k == 1) as u8 as f64, (k == 2) as u8 as f64]), [q0[0], -q0[1], -q0[2], -q0[3]]);
+            let q = product(
+                product(q0, [0.0, (k == 0) as u8 as f64, (k == 1) as u8 as f64, (k == 2) as u8 as f64]),
+                [q0[0], -q0[1], -q0[2], -q0[3]],
+            );
             [q[1], q[2], q[3]]
         });
         let axes = vec![[0.0; 3], e[0], e[1], e[2]];

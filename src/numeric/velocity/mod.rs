@@ -22,6 +22,18 @@
 //! Lengths (the scene's size, the blow-up bound, the bench's deviation) come from the bodies'
 //! positions only, never an angle.
 //!
+//! 3D rigid bodies. The state holds a 3D body's world rotation vector φ and world ω in its
+//! first angular slot (`numeric::rotation`), the rows three slots along the principal axes
+//! eₖ (1/Iₖ, eₖ·ω, eₖ·τ − gyroscopic, Jʷ·eₖ). Each substep rebases (φ = 0, the orientation
+//! into `Dynamics`), [`Prepared::to_axes`] turns the state's ω into the rows' slots, where
+//! the kick ([`Prepared::kick`]: τ and the gyroscopic term at the implicit midpoint,
+//! `rotation::kick_axes`, so a free body keeps T and |L|) and the sweeps or the solve act
+//! with no change; [`Prepared::to_world`] folds ω back and [`Prepared::drift`] turns the body
+//! exactly, φ ← log(exp(h ω) ⊗ exp(φ)). XPBD does the same with positions: its correction
+//! (1/Iₖ)(Jʷ·eₖ)Δλ per axis is I⁻¹Jʷ Δλ in the world, added to φ (first order, as its
+//! linear correction), and ω = log(exp(φ⁺) ⊗ exp(−φ))/h is the substep's turn. Without 3D
+//! bodies these conversions do nothing.
+//!
 //! Row by row, not in blocks: a vector constraint (a revolute pin, `NAME.x` and `NAME.y`) is
 //! two rows swept one after the other, where Box2D v3 solves a point joint's two rows as one
 //! 2×2 block (`revolute_joint.c`: ΔP = −s_m K⁻¹(Ċ + bias) − s_i P). Converged, both give the
@@ -38,7 +50,7 @@
 //! Clarabel for inequality rows), like the projections of `numeric::stabilize`.
 //!
 //! Not here: files or text; the acceleration-level run (`numeric::simulate`, the default
-//! `exact` of the command line); 3D rigid bodies (quaternion slots).
+//! `exact` of the command line); quaternion arithmetic (`numeric::rotation`).
 
 pub mod bench;
 pub mod exact;

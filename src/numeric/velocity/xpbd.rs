@@ -19,9 +19,9 @@
 //! Not here: the run loop (`velocity::run`).
 
 use super::Stepper;
-use crate::numeric::rotation;
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
+use crate::numeric::rotation;
 use crate::numeric::rows::Rows;
 
 /// One XPBD step (see the file's note).
