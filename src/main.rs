@@ -744,13 +744,6 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    // The velocity-level solvers do not turn quaternions yet: a 3D rigid body is refused, named.
-    if velocity.is_some()
-        && let Err(e) = scenario.system.refuse_rigid_3d("simulate --solver")
-    {
-        errln!("error: {}: {e}", args.file.display());
-        return ExitCode::from(1);
-    }
     for symbol in unset_forces(&scenario.system, &scenario.scene, &[]) {
         errln!("{}", solution::zero_force_note(&scenario.system, symbol));
     }

@@ -372,8 +372,6 @@ fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
 #[test]
 fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
     for args in [
-        &["simulate", "constraints/joints/ball_3d.toml", "--solver", "soft-step"][..],
-        &["simulate", "constraints/joints/ball_3d.toml", "--solver", "pgs"][..],
         &["bench", "constraints/joints/ball_3d.toml"][..],
         &["generate", "constraints/joints/ball_3d.toml", "--lang", "c"][..],
     ] {

@@ -112,7 +112,7 @@ fn every_solver_holds_every_rigid_file() {
     assert!(files.len() >= 12, "the joint library: {files:?}");
     for rel in &files {
         let s = rigid_scenario(rel, 0x5eed_0015);
-        // 3D rigid bodies (quaternions) are not stepped yet: refused, tested in `tests/rigid3d.rs`.
+        // 3D rigid bodies (quaternions; the random states here are 2D): `tests/velocity3d.rs`.
         if s.system.dim() == 3 {
             continue;
         }

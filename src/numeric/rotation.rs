@@ -94,6 +94,98 @@ pub fn rebase(orientations: &mut [[f64; 4]], slots: impl Iterator<Item = usize>,
     }
 }
 
+/// The rotation vector φ of the unit quaternion q = exp(φ): the inverse of [`exp`] on the
+/// rotations by at most π (q and −q are the same rotation; the shorter turn is taken).
+pub fn log(q: [f64; 4]) -> [f64; 3] {
+    let [w, x, y, z] = if q[0] < 0.0 { q.map(|c| -c) } else { q };
+    let n = (x * x + y * y + z * z).sqrt();
+    // |φ| = 2 atan2(|v|, w); |φ|/|v| → 2/w as |v| → 0 (atan2 keeps its relative accuracy).
+    let s = if n > 0.0 { 2.0 * n.atan2(w) / n } else { 2.0 };
+    [s * x, s * y, s * z]
+}
+
+/// The rotation vector of exp(`turn`) ⊗ exp(φ): a body at exp(φ) ⊗ q₀ turned by the world
+/// rotation vector `turn` (the exact composition, where φ + turn holds to first order).
+pub fn compose(turn: [f64; 3], phi: [f64; 3]) -> [f64; 3] {
+    log(product(exp(turn), exp(phi)))
+}
+
+/// The world rotation vector of exp(`to`) ⊗ exp(−`from`): the turn from exp(`from`) ⊗ q₀ to
+/// exp(`to`) ⊗ q₀.
+pub fn between(from: [f64; 3], to: [f64; 3]) -> [f64; 3] {
+    log(product(exp(to), exp(from.map(|x| -x))))
+}
+
+/// The world rotation vector of the turn from orientation `from` to `to`: log(to ⊗ from*).
+pub fn between_orientations(from: [f64; 4], to: [f64; 4]) -> [f64; 3] {
+    log(product(to, [from[0], -from[1], -from[2], -from[3]]))
+}
+
+/// State slots into the rows' slots, in place, with the principal axes `axes` of the rows
+/// (`Rows::axes`; empty without 3D rigid bodies, and then nothing changes): a 3D body's
+/// world vector x in its first slot becomes [eₖ·x, 0, 0] in its slot k. [`to_world`] is the
+/// inverse (the axes are orthonormal).
+pub fn to_axes(axes: &[[f64; 3]], x: &mut Vectors) {
+    let Some(first) = axes.iter().position(|e| *e != [0.0; 3]) else { return };
+    for g in (first..x.len()).step_by(3) {
+        let w = x[g];
+        for k in 0..3 {
+            x[g + k] = [dot(&axes[g + k], &w), 0.0, 0.0];
+        }
+    }
+}
+
+/// The rows' slots into state slots, in place: [`fold`] with the axes given as a slice.
+pub fn to_world(axes: &[[f64; 3]], x: &mut Vectors) {
+    let Some(first) = axes.iter().position(|e| *e != [0.0; 3]) else { return };
+    for g in (first..x.len()).step_by(3) {
+        let mut w = [0.0; 3];
+        for k in 0..3 {
+            let (e, s) = (axes[g + k], x[g + k][0]);
+            for d in 0..3 {
+                w[d] += s * e[d];
+            }
+        }
+        x[g] = w;
+        x[g + 1] = [0.0; 3];
+        x[g + 2] = [0.0; 3];
+    }
+}
+
+/// The implicit-midpoint kick of one 3D rigid body over `h` in its principal frame (see the
+/// file's note): from the body-frame ω, with the rows' per-axis 1/Iₖ and force
+/// fₖ = τₖ − (ω_at × Iω_at)ₖ evaluated at the body-frame velocity `at`, whose explicit
+/// gyroscopic part is replaced by the one at the midpoint. Returns the body-frame ω⁺.
+pub fn kick_axes(inverse_inertia: [f64; 3], force: [f64; 3], at: [f64; 3], h: f64, w: [f64; 3]) -> [f64; 3] {
+    let inertia = inverse_inertia.map(|x| 1.0 / x);
+    let g_at = gyroscopic(inertia, at);
+    let applied = [0, 1, 2].map(|k| inverse_inertia[k] * force[k] + g_at[k]);
+    implicit_midpoint(inertia, h, w, applied)
+}
+
+/// The applied forces of `rows` in state slots: a linear slot's F as it is; a 3D body's
+/// world torque τ = Σₖ (fₖ + (ω_b × Iω_b)ₖ) eₖ in its first slot (the rows' per-axis force
+/// less its gyroscopic term, which does no work), zero in the other two.
+pub fn applied(rows: &Rows, out: &mut Vectors) {
+    out.copy_from_slice(&rows.force);
+    let Some(first) = first_angular(rows) else { return };
+    for g in (first..out.len()).step_by(3) {
+        let inertia = [0, 1, 2].map(|k| 1.0 / rows.inverse_mass[g + k]);
+        let w = [0, 1, 2].map(|k| rows.velocity[g + k][0]);
+        let gyro = gyroscopic(inertia, w);
+        let mut tau = [0.0; 3];
+        for k in 0..3 {
+            let s = rows.force[g + k][0] + inertia[k] * gyro[k];
+            for (t, e) in tau.iter_mut().zip(rows.axes[g + k]) {
+                *t += s * e;
+            }
+        }
+        out[g] = tau;
+        out[g + 1] = [0.0; 3];
+        out[g + 2] = [0.0; 3];
+    }
+}
+
 /// The first angular slot of the 3D rigid bodies in `rows` (the linear slots have no axis):
 /// body r's slots are `first + 3r ..`; `None` without 3D rigid bodies.
 pub fn first_angular(rows: &Rows) -> Option<usize> {
@@ -244,6 +336,42 @@ mod tests {
         // The series branch meets the closed form at its threshold.
         let small = exp([1e-4, 0.0, 0.0]);
         assert!((small[1] - (0.5e-4f64).sin()).abs() < 1e-20);
+    }
+
+    /// Property: log inverts exp up to π, compose(a n, b n) = (a + b) n about one axis, and
+    /// to_world undoes to_axes.
+    #[test]
+    fn log_inverts_exp_and_composes() {
+        for phi in [[0.0, 0.0, 0.0], [1e-9, 0.0, -2e-9], [0.4, -1.1, 0.6], [2.0, 1.0, -1.5]] {
+            let back = log(exp(phi));
+            for d in 0..3 {
+                assert!((back[d] - phi[d]).abs() < 1e-14, "{phi:?} → {back:?}");
+            }
+        }
+        let n = [0.6, -0.48, 0.64];
+        let c = compose(n.map(|x| 0.3 * x), n.map(|x| 0.9 * x));
+        let between = between(n.map(|x| 0.9 * x), c);
+        for d in 0..3 {
+            assert!((c[d] - 1.2 * n[d]).abs() < 1e-15);
+            assert!((between[d] - 0.3 * n[d]).abs() < 1e-15);
+        }
+        let q0 = normalise([0.3, -0.5, 0.1, 0.8]);
+        let e = [0, 1, 2].map(|k| {
+            let q = product(
+                product(q0, [0.0, (k == 0) as u8 as f64, (k == 1) as u8 as f64, (k == 2) as u8 as f64]),
+                [q0[0], -q0[1], -q0[2], -q0[3]],
+            );
+            [q[1], q[2], q[3]]
+        });
+        let axes = vec![[0.0; 3], e[0], e[1], e[2]];
+        let x = vec![[1.0, 2.0, 3.0], [0.7, -1.3, 2.1], [0.0; 3], [0.0; 3]];
+        let mut y = x.clone();
+        to_axes(&axes, &mut y);
+        assert_eq!(y[0], x[0]);
+        to_world(&axes, &mut y);
+        for d in 0..3 {
+            assert!((y[1][d] - x[1][d]).abs() < 1e-15);
+        }
     }
 
     /// Property: d/dt exp(φ(t)) ⊗ q₀ with φ̇ = dexp⁻¹(φ) ω is ½ [0, ω] ⊗ q (central

@@ -261,7 +261,7 @@ pub fn in_rigid_dirs(path: &std::path::Path) -> bool {
 }
 
 /// Whether a constraint file is 3D (in [`RIGID_DIRS`]: quaternion orientations, which
-/// `generate`, `bench` and the velocity solvers do not handle yet).
+/// `generate` and `bench` do not handle yet).
 pub fn is_3d(path: &std::path::Path) -> bool {
     std::fs::read_to_string(path).is_ok_and(|t| t.lines().any(|l| l.trim() == "dimension = 3"))
 }

@@ -16,7 +16,7 @@
 //!
 //! Not here: the iterative solvers; the acceleration-level run (`numeric::simulate`).
 
-use super::{Stepper, drift};
+use super::Stepper;
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
 use crate::numeric::rows::Rows;
@@ -41,8 +41,12 @@ pub fn step(
     // Positions only: a rigid body's angle is no length.
     let length = length_scale(&q[..dynamics.system().bodies.len()]);
     for sub in 0..s.settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         s.prepared.load(&rows);
         let p = &s.prepared;
+        // In the rows' slots (a 3D body's ω along its principal axes), as the solve's are.
+        p.to_axes(v);
         p.kick(v, h);
         for (k, row) in rows.rows.iter_mut().enumerate() {
             // Target: ΔĊ = −(J u + ∂C/∂t + C/h), i.e. c = J u + ∂C/∂t + C/h.
@@ -68,7 +72,8 @@ pub fn step(
             }
         }
         s.impulse.copy_from_slice(&solution.lambda);
-        drift(q, v, h);
+        s.prepared.to_world(v);
+        s.prepared.drift(q, v, h);
         dynamics.recycle(rows);
         let t1 = t + (sub + 1) as f64 * h;
         (rows, _) = project_positions(

@@ -22,6 +22,18 @@
 //! Lengths (the scene's size, the blow-up bound, the bench's deviation) come from the bodies'
 //! positions only, never an angle.
 //!
+//! 3D rigid bodies. The state holds a 3D body's world rotation vector φ and world ω in its
+//! first angular slot (`numeric::rotation`), the rows three slots along the principal axes
+//! eₖ (1/Iₖ, eₖ·ω, eₖ·τ − gyroscopic, Jʷ·eₖ). Each substep rebases (φ = 0, the orientation
+//! into `Dynamics`), [`Prepared::to_axes`] turns the state's ω into the rows' slots, where
+//! the kick ([`Prepared::kick`]: τ and the gyroscopic term at the implicit midpoint,
+//! `rotation::kick_axes`, so a free body keeps T and |L|) and the sweeps or the solve act
+//! with no change; [`Prepared::to_world`] folds ω back and [`Prepared::drift`] turns the body
+//! exactly, φ ← log(exp(h ω) ⊗ exp(φ)). XPBD does the same with positions: its correction
+//! (1/Iₖ)(Jʷ·eₖ)Δλ per axis is I⁻¹Jʷ Δλ in the world, added to φ (first order, as its
+//! linear correction), and ω = log(exp(φ⁺) ⊗ exp(−φ))/h is the substep's turn. Without 3D
+//! bodies these conversions do nothing.
+//!
 //! Row by row, not in blocks: a vector constraint (a revolute pin, `NAME.x` and `NAME.y`) is
 //! two rows swept one after the other, where Box2D v3 solves a point joint's two rows as one
 //! 2×2 block (`revolute_joint.c`: ΔP = −s_m K⁻¹(Ċ + bias) − s_i P). Converged, both give the
@@ -38,7 +50,7 @@
 //! Clarabel for inequality rows), like the projections of `numeric::stabilize`.
 //!
 //! Not here: files or text; the acceleration-level run (`numeric::simulate`, the default
-//! `exact` of the command line); 3D rigid bodies (quaternion slots).
+//! `exact` of the command line); quaternion arithmetic (`numeric::rotation`).
 
 pub mod bench;
 pub mod exact;
@@ -50,6 +62,7 @@ pub mod xpbd;
 
 use super::dynamics::{Dynamics, SimError};
 use super::integrate::Vectors;
+use super::rotation;
 use super::rows::Rows;
 use super::simulate::SettingsError;
 use super::vector::dot;
@@ -261,6 +274,13 @@ pub struct Prepared {
     pub inequality: Vec<bool>,
     pub inverse_mass: Vec<f64>,
     pub force: Vec<[f64; 3]>,
+    /// Per slot its principal axis (`Rows::axes`: empty without 3D rigid bodies).
+    pub axes: Vec<[f64; 3]>,
+    /// Per slot the velocity the rows were evaluated at (3D rigid bodies: the body-frame ω
+    /// their gyroscopic term was taken at; empty without 3D rigid bodies).
+    pub velocity: Vec<[f64; 3]>,
+    /// The first 3D rigid body's first slot (`None` without 3D rigid bodies).
+    pub first: Option<usize>,
 }
 
 impl Prepared {
@@ -275,6 +295,11 @@ impl Prepared {
         self.inequality.clear();
         self.inverse_mass.clone_from(&rows.inverse_mass);
         self.force.clone_from(&rows.force);
+        self.axes.clone_from(&rows.axes);
+        self.first = rotation::first_angular(rows);
+        if self.first.is_some() {
+            self.velocity.clone_from(&rows.velocity);
+        }
         for row in &rows.rows {
             self.start.push(self.body.len());
             let (mut k, mut jv) = (0.0, 0.0);
@@ -320,12 +345,45 @@ impl Prepared {
         }
     }
 
-    /// u += h M⁻¹ F: the external forces over one substep.
+    /// u += h M⁻¹ F: the external forces over one substep, u in the rows' slots
+    /// ([`Prepared::to_axes`]). A 3D rigid body's torque and gyroscopic term go through the
+    /// implicit-midpoint kick in its principal frame (`rotation::kick_axes`).
     pub fn kick(&self, u: &mut Vectors, h: f64) {
-        for ((u, f), w) in u.iter_mut().zip(&self.force).zip(&self.inverse_mass) {
+        let first = self.first.unwrap_or(u.len());
+        for ((u, f), w) in u[..first].iter_mut().zip(&self.force).zip(&self.inverse_mass) {
             for d in 0..3 {
                 u[d] += h * w * f[d];
             }
+        }
+        for g in (first..u.len()).step_by(3) {
+            let axis = |x: &[[f64; 3]]| [x[g][0], x[g + 1][0], x[g + 2][0]];
+            let w = [self.inverse_mass[g], self.inverse_mass[g + 1], self.inverse_mass[g + 2]];
+            let w1 = rotation::kick_axes(w, axis(&self.force), axis(&self.velocity), h, axis(u));
+            for k in 0..3 {
+                u[g + k] = [w1[k], 0.0, 0.0];
+            }
+        }
+    }
+
+    /// State slots (a 3D rigid body's world ω or rotation vector in its first slot) into the
+    /// rows' slots (its components along the principal axes of these rows), in place; nothing
+    /// changes without 3D rigid bodies.
+    pub fn to_axes(&self, x: &mut Vectors) {
+        rotation::to_axes(&self.axes, x);
+    }
+
+    /// The inverse of [`Prepared::to_axes`].
+    pub fn to_world(&self, x: &mut Vectors) {
+        rotation::to_world(&self.axes, x);
+    }
+
+    /// q += h u over state slots, a 3D rigid body's rotation vector (since the step's start)
+    /// turned exactly by h ω: φ ← log(exp(h ω) ⊗ exp(φ)) (`rotation::compose`).
+    pub fn drift(&self, q: &mut Vectors, u: &Vectors, h: f64) {
+        let Some(first) = self.first else { return drift(q, u, h) };
+        drift(&mut q[..first], &u[..first], h);
+        for g in (first..q.len()).step_by(3) {
+            q[g] = rotation::compose(u[g].map(|x| h * x), q[g]);
         }
     }
 
@@ -362,7 +420,7 @@ impl Prepared {
 }
 
 /// q += h u.
-pub fn drift(q: &mut Vectors, u: &Vectors, h: f64) {
+pub fn drift(q: &mut [[f64; 3]], u: &[[f64; 3]], h: f64) {
     for (q, u) in q.iter_mut().zip(u) {
         for d in 0..3 {
             q[d] += h * u[d];
@@ -410,7 +468,9 @@ impl Stepper {
     }
 
     /// One step of `settings.dt` from (t, q, v), whose rows `rows` are (the run loop has them
-    /// from recording the state; they are recycled).
+    /// from recording the state; they are recycled). 3D rigid bodies: every substep starts
+    /// with `Dynamics::rebase` (the orientation is unchanged, so the rows still hold), so a
+    /// rotation vector in `q` is the turn since the substep's start.
     pub fn step(
         &mut self,
         dynamics: &mut Dynamics<'_>,

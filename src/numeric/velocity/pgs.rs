@@ -27,7 +27,7 @@
 //!
 //! Not here: the run loop (`velocity::run`).
 
-use super::{Softness, Stepper, drift};
+use super::{Softness, Stepper};
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
 use crate::numeric::rows::Rows;
@@ -49,7 +49,11 @@ pub fn step(
     }
     s.prepared.load(&rows);
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         let p = &s.prepared;
+        // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
+        p.to_axes(v);
         p.kick(v, h);
         p.warm_start(v, &s.impulse);
         for _ in 0..settings.iterations() {
@@ -58,7 +62,8 @@ pub fn step(
                 (bias, Softness::RIGID)
             });
         }
-        drift(q, v, h);
+        p.to_world(v);
+        p.drift(q, v, h);
         dynamics.recycle(rows);
         rows = dynamics.rows(t + (sub + 1) as f64 * h, q, v)?;
         s.prepared.load(&rows);

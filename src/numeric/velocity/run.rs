@@ -20,6 +20,7 @@
 use super::{Settings, Solver, Stepper, stability};
 use crate::expr::eval::Env;
 use crate::numeric::dynamics::{Dynamics, Remedy, SimError, slot_name};
+use crate::numeric::rotation;
 use crate::numeric::simulate::{Failure, Frame, Sample, Summary, final_state, initial_state, time_dependent};
 use crate::numeric::solve::CONTACT_TOLERANCE;
 use crate::numeric::stabilize::distance;
@@ -48,13 +49,14 @@ pub fn run(
     let (mut q, mut v, t0) = initial_state(system, env);
     let result = settings
         .validate()
-        .and_then(|()| Ok(system.refuse_rigid_3d("simulate --solver")?))
         .and_then(|()| run_inner(&mut dynamics, settings, &mut q, &mut v, t0, &mut summary, observe));
     summary.wall_seconds = start.elapsed().as_secs_f64();
     summary.evaluations = dynamics.evaluations;
+    // 3D rigid bodies: the last step's rotation vectors into the orientations reported.
+    dynamics.rebase(&mut q);
     summary.final_position.clone_from(&q);
     summary.final_velocity.clone_from(&v);
-    summary.final_state = final_state(system, &q, &v, &[]);
+    summary.final_state = final_state(system, &q, &v, dynamics.orientations());
     match result {
         Ok(()) => Ok(summary),
         Err(error) => Err(Box::new(Failure { error, summary })),
@@ -86,15 +88,29 @@ fn run_inner(
     // The last recorded state's positions and forces (slots), for the work over a step.
     let (mut q_1, mut force_1) = (q.clone(), vec![[0.0; 3]; q.len()]);
     let mut lambda = vec![0.0; system.constraints.len()];
+    // 3D rigid bodies: T from the rows' body-frame ω, the work of the world torques over the
+    // turn between the recorded orientations, log(q ⊗ q₋₁*), in place of the rotation vector.
+    let three_d = !dynamics.orientations().is_empty();
+    let (mut moved, mut force) = (q.clone(), vec![[0.0; 3]; q.len()]);
+    let mut orientations_1 = dynamics.orientations().to_vec();
     for n in 0..=s.steps {
         let t = t0 + n as f64 * s.dt;
         dynamics.step = n;
+        if three_d {
+            dynamics.rebase(q);
+            moved.copy_from_slice(q);
+            let slots = (bodies..q.len()).step_by(3);
+            for ((slot, now), before) in slots.zip(dynamics.orientations()).zip(&mut orientations_1) {
+                moved[slot] = rotation::between_orientations(*before, *now);
+                *before = *now;
+            }
+        }
         let rows = dynamics.rows(t, q, v)?;
         let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
         for (k, row) in rows.rows.iter().enumerate() {
             let d = distance(row);
             if d.abs() > bound && (!row.inequality || d < 0.0) {
-                let remedy = if s.solver == Solver::SoftStep {
+                let remedy = if s.solver == Solver::SoftStep && !three_d {
                     remedy(dynamics, t0, &q0, &v0, &s)
                 } else {
                     Remedy::SubstepsOrDt
@@ -123,19 +139,25 @@ fn run_inner(
         summary.max_abs_c = summary.max_abs_c.max(c_max);
         summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
         let mut kinetic = 0.0;
-        for (v, w) in v.iter().zip(&rows.inverse_mass) {
+        let (velocity, position, applied) = if three_d {
+            rotation::applied(&rows, &mut force);
+            (&rows.velocity[..], &moved[..], &force[..])
+        } else {
+            (&v[..], &q[..], &rows.force[..])
+        };
+        for (v, w) in velocity.iter().zip(&rows.inverse_mass) {
             kinetic += 0.5 * dot(v, v) / w;
         }
         if n == 0 {
             kinetic0 = kinetic;
         } else {
-            for (((f, f_1), x), x_1) in rows.force.iter().zip(&force_1).zip(q.iter()).zip(&q_1) {
+            for (((f, f_1), x), x_1) in applied.iter().zip(&force_1).zip(position).zip(&q_1) {
                 let mean = [0.5 * (f[0] + f_1[0]), 0.5 * (f[1] + f_1[1]), 0.5 * (f[2] + f_1[2])];
                 work += dot(&mean, &[x[0] - x_1[0], x[1] - x_1[1], x[2] - x_1[2]]);
             }
         }
         q_1.copy_from_slice(q);
-        force_1.copy_from_slice(&rows.force);
+        force_1.copy_from_slice(applied);
         let energy_error = (kinetic - kinetic0) - work;
         max_energy_error = max_energy_error.max(energy_error.abs());
         max_kinetic = max_kinetic.max(kinetic);
@@ -154,7 +176,7 @@ fn run_inner(
             time: t,
             position: q,
             velocity: v,
-            orientations: &[],
+            orientations: dynamics.orientations(),
             rows: &rows,
             lambda: &lambda,
             energy_error,

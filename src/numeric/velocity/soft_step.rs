@@ -26,7 +26,7 @@
 //!
 //! Not here: the run loop (`velocity::run`), the stability analysis (`velocity::stability`).
 
-use super::{CONTACT_SPEED, Softness, Stepper, drift};
+use super::{CONTACT_SPEED, Softness, Stepper};
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
 use crate::numeric::rows::Rows;
@@ -49,11 +49,15 @@ pub fn step(
         s.impulse.iter_mut().for_each(|p| *p = 0.0);
     }
     s.prepared.load(&rows);
+    s.prepared.to_axes(v);
     for k in 0..s.prepared.len() {
         s.start_rate[k] = s.prepared.rate(k, v);
     }
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         let p = &s.prepared;
+        // v is in the rows' slots here (a 3D body's ω along its principal axes).
         p.kick(v, h);
         p.warm_start(v, &s.impulse);
         for _ in 0..iterations {
@@ -68,13 +72,15 @@ pub fn step(
                 }
             });
         }
-        drift(q, v, h);
+        p.to_world(v);
+        p.drift(q, v, h);
         let t1 = t + (sub + 1) as f64 * h;
         dynamics.recycle(rows);
         rows = dynamics.rows(t1, q, v)?;
         s.prepared.load(&rows);
+        let p = &s.prepared;
+        p.to_axes(v);
         if settings.relax {
-            let p = &s.prepared;
             for _ in 0..iterations {
                 p.sweep(v, &mut s.impulse, |k, c| {
                     if p.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
@@ -96,6 +102,7 @@ pub fn step(
             p.apply(k, v, delta);
         }
     }
+    s.prepared.to_world(v);
     dynamics.recycle(rows);
     Ok(())
 }

@@ -21,6 +21,7 @@
 use super::Stepper;
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
+use crate::numeric::rotation;
 use crate::numeric::rows::Rows;
 
 /// One XPBD step (see the file's note).
@@ -37,18 +38,24 @@ pub fn step(
     let alpha = settings.compliance / (h * h);
     s.prepared.load(&rows);
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
+        dynamics.rebase(q);
         let t1 = t + (sub + 1) as f64 * h;
         // Predict: the previous positions are kept, the new ones are x.
+        s.prepared.to_axes(v);
         s.prepared.kick(v, h);
+        s.prepared.to_world(v);
         s.saved.copy_from_slice(q);
-        super::drift(q, v, h);
+        s.prepared.drift(q, v, h);
         s.impulse.iter_mut().for_each(|l| *l = 0.0);
         for _ in 0..settings.iterations() {
             dynamics.recycle(rows);
             rows = dynamics.rows(t1, q, v)?;
             s.prepared.load(&rows);
-            s.evaluated.copy_from_slice(q);
             let p = &s.prepared;
+            // Positions in the rows' slots: a 3D body's rotation vector along its axes.
+            p.to_axes(q);
+            s.evaluated.copy_from_slice(q);
             for k in 0..p.len() {
                 let m = p.effective_mass[k];
                 if m == 0.0 {
@@ -69,11 +76,17 @@ pub fn step(
                 s.impulse[k] = old + delta;
                 p.apply(k, q, delta);
             }
+            p.to_world(q);
         }
-        // v = (x − q)/h.
+        // v = (x − q)/h; a 3D body's ω is its turn over the substep over h.
         for ((v, x), x0) in v.iter_mut().zip(q.iter()).zip(&s.saved) {
             for d in 0..3 {
                 v[d] = (x[d] - x0[d]) / h;
+            }
+        }
+        if let Some(first) = s.prepared.first {
+            for g in (first..q.len()).step_by(3) {
+                v[g] = rotation::between(s.saved[g], q[g]).map(|x| x / h);
             }
         }
         if sub + 1 < settings.substeps {
