@@ -38,6 +38,7 @@
 use crate::expr::diff::{DiffError, time_derivative};
 use crate::expr::grad::gradient;
 use crate::expr::graph::FastMap;
+use crate::expr::print::{Style, print};
 use crate::expr::shape::{Reuse, Shaper};
 use crate::expr::{Graph, Id, Node, Rational, Role, Simplifier, Symbol, Ty, TypeError};
 use crate::model::system::{BuildError, System};
@@ -243,16 +244,24 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         // λ = −b / A
         let a00 = a.first().map(|e| e.2).ok_or(DeriveError::ZeroGradient(system.constraints[0].name.clone()))?;
         let closed_form = || format!("λ and the forces of constraint `{}`", system.constraints[0].name);
-        let l = s.negated_quotient(g, b[0], a00).map_err(|e| located(e.into(), Some(0), closed_form))?;
+        let (l, separated) = closed_form_lambda(g, s, b[0], a00).map_err(|e| located(e, Some(0), closed_form))?;
+        // A separated λ stays a factor of each force and torque as written (λ J): simplified,
+        // the product would be put over λ's combined denominator again.
+        let mut wrench = |j: Id| -> Result<Id, DeriveError> {
+            let product = g.mul(vec![l, j])?;
+            if separated {
+                s.adopt(product);
+                return Ok(product);
+            }
+            s.simplify(g, product).map_err(|e| located(e.into(), Some(0), closed_form))
+        };
         let mut f = Vec::new();
         for &(body, j) in &only.jacobian {
-            let product = g.mul(vec![l, j])?;
-            f.push((body, s.simplify(g, product).map_err(|e| located(e.into(), Some(0), closed_form))?));
+            f.push((body, wrench(j)?));
         }
         let mut t = Vec::new();
         for &(body, j) in &only.angular {
-            let product = g.mul(vec![l, j])?;
-            t.push((body, s.simplify(g, product)?));
+            t.push((body, wrench(j)?));
         }
         lambda = Some(l);
         forces = Some(f);
@@ -355,6 +364,18 @@ fn newton(system: &System, g: &mut Graph, constraints: &[DerivedConstraint]) -> 
         out.push(g.substitute(dc.c_ddot, &map)?);
     }
     Ok(out)
+}
+
+/// λ = −b/A of one constraint in the shorter of its two forms: combined over one
+/// denominator ([`Simplifier::negated_quotient`], the form of every polynomial A), or, where
+/// A is a sum of fractions over different roots, the quotient of the two sums as they read
+/// ([`Simplifier::separated_quotient`]); `true` when the separated one is kept. Both are
+/// the same function; the length compared is the expression language's.
+fn closed_form_lambda(g: &mut Graph, s: &mut Simplifier, b: Id, a: Id) -> Result<(Id, bool), DeriveError> {
+    let combined = s.negated_quotient(g, b, a)?;
+    let Some(separated) = s.separated_quotient(g, b, a)? else { return Ok((combined, false)) };
+    let length = |id: Id| print(g, id, Style::Source).map_or(usize::MAX, |text| text.len());
+    Ok(if length(separated) < length(combined) { (separated, true) } else { (combined, false) })
 }
 
 /// The multiplier symbols `lambda_<name>` of several constraints, and the force on each body

@@ -100,3 +100,57 @@ expr = "norm(r - p) = l"
     let text = doc(pendulum, Format::Text, false);
     assert!(text.contains("(r − p)/|r − p|"), "{text}");
 }
+
+/// A rope over pulleys through `k` segments (`norm(r1 - p1) + norm(r2 - p1) + norm(r2 - p2) + …
+/// = L`, a body between each two pulleys), as the benches' rope writes it.
+fn rope(k: usize) -> String {
+    let body = |s: usize| s / 2 + 1 + s % 2;
+    let pulley = |s: usize| s.div_ceil(2) + usize::from(s.is_multiple_of(2));
+    let mut text = String::from("title = \"rope\"\ndimension = 2\n\n[parameters]\nL = 10.0\n");
+    for p in 1..=pulley(k - 1) {
+        text += &format!("p{p} = [{p}.0, 0.0]\n");
+    }
+    for b in 1..=body(k - 1) {
+        text += &format!("m{b} = 1.0\n");
+    }
+    for b in 1..=body(k - 1) {
+        text += &format!(
+            "[[bodies]]\nname = \"b{b}\"\nposition = \"r{b}\"\nvelocity = \"v{b}\"\nacceleration = \"a{b}\"\n\
+             mass = \"m{b}\"\nforce = \"F{b}\"\n"
+        );
+    }
+    let terms: Vec<String> = (0..k).map(|s| format!("norm(r{} - p{})", body(s), pulley(s))).collect();
+    text + &format!("[[constraints]]\nname = \"rope\"\nexpr = \"{} = L\"\n", terms.join(" + "))
+}
+
+/// Where two segments meet at a body, A is a sum of fractions over their lengths
+/// (`2 m1 + m2 + 2 m1 ((r2 − p1)·(r2 − p2))/(|r2 − p1| |r2 − p2|)` over `m1 m2`), and
+/// λ = −b/A over one common denominator would repeat the product of the other lengths in
+/// every term (1 261 characters at k = 5, growing faster than k). It is printed as the
+/// quotient of the two sums, as by hand: linear in k, shorter than the combined form from
+/// k = 3 on, and the same function.
+#[test]
+fn a_rope_over_pulleys_prints_lambda_as_the_quotient_of_b_and_a() {
+    use lagrange::expr::print::{Style, print};
+    for k in 2..=6 {
+        let loaded = load(&rope(k)).unwrap_or_else(|p| panic!("loads: {p:?}"));
+        let mut d = derive_with(&loaded.system, Options::default()).expect("derives");
+        let lambda = d.lambda.expect("one constraint has a closed form");
+        let text = print(&d.graph, lambda, Style::Source).expect("prints");
+        assert!(text.len() <= 200 * k, "k = {k}: λ is {} characters: {text}", text.len());
+        let (b, a) = (d.b[0], d.a[0].2);
+        let combined = d.simplifier.negated_quotient(&mut d.graph, b, a).expect("the combined form");
+        let combined_text = print(&d.graph, combined, Style::Source).expect("prints");
+        if k >= 3 {
+            assert!(text.len() < combined_text.len(), "k = {k}: {text} against {combined_text}");
+        }
+        assert!(d.simplifier.equivalent(&mut d.graph, lambda, combined).expect("compares"), "k = {k}");
+        // Where the quotient is kept, the force on the first body is λ times its direction
+        // (r1 − p1)/|r1 − p1|, λ as printed.
+        if k >= 3 {
+            let force = d.forces.as_ref().expect("forces")[0].1;
+            let force_text = print(&d.graph, force, Style::Source).expect("prints");
+            assert!(force_text.starts_with(&format!("({text})")), "k = {k}: {force_text}");
+        }
+    }
+}

@@ -224,6 +224,36 @@ impl Simplifier {
         self.laid_out(g, Rc::new(Canon::S(form)))
     }
 
+    /// `−n / d` kept as one quotient of two readable sums, where `d` is a sum of fractions
+    /// over different roots (a term with a root's negative power, as A has where two unit
+    /// vectors d/|d| meet at one body: `(d₁·d₂)/(|d₁| |d₂|)`). The combined form of
+    /// [`Simplifier::negated_quotient`] clears those roots into one denominator, so its
+    /// numerator carries the product of the other roots in every term and grows faster than
+    /// the scene; this one is `−(n's numerator × d's denominator over n's)/(d's numerator)`,
+    /// linear in the terms of `n` and `d`. Equal to the combined form as a function; `None`
+    /// where `d` has no such term (nothing to gain) or a form is too large. The caller
+    /// prints both and keeps the shorter.
+    pub fn separated_quotient(&mut self, g: &mut Graph, n: Id, d: Id) -> Result<Option<Id>, TypeError> {
+        if self.radicals.is_empty() || g.ty(n) != Ty::Scalar || g.ty(d) != Ty::Scalar {
+            return Ok(None);
+        }
+        let (cn, cd) = (self.canon(g, n)?, self.canon(g, d)?);
+        let (Canon::S(fnum), Canon::S(fden)) = (&*cn, &*cd) else { return Ok(None) };
+        if !fden.num.0.iter().any(|(m, _)| m.has_negative()) {
+            return Ok(None);
+        }
+        let top = crate::expr::poly::expand(&fden.den)
+            .and_then(|den| fnum.mul(&Frac::poly(den)))
+            .map(|top| top.scale(&Rational::int(-1)));
+        let Some(top) = top else { return Ok(None) };
+        let bottom = Frac::poly(fden.num.clone());
+        let top = self.laid_out(g, Rc::new(Canon::S(top)))?;
+        let bottom = self.laid_out(g, Rc::new(Canon::S(bottom)))?;
+        let quotient = g.div(top, bottom)?;
+        self.adopt(quotient);
+        Ok(Some(quotient))
+    }
+
     /// The readable graph of the form `c`, remembered as simplified. What `build` lays out
     /// has the canonical form it came from (the round trip is tested), so `is_zero`,
     /// `content` and `scaled` on the result need not redo it.
