@@ -1,7 +1,8 @@
 //! Fuzzing kept in the project (issue 17, "Keep it found"): whole constraint files, made
 //! from a grammar of expressions and by mutating real files, run in-process through the
-//! loader, `derive` (with its documents), `generate`, and `check` (which derives, samples
-//! states and solves at them). Each case must end with a result or a typed error: a panic
+//! loader, `derive` (with its documents), `generate`, `solve` at the file's scene state
+//! (what `lagrange solve` does, the change of unit included), and `check` (which derives,
+//! samples states and solves at them). Each case must end with a result or a typed error: a panic
 //! fails the property, and the work budgets (`expr::work`, the document's and the code's)
 //! keep every case short, so the run needs no timer.
 //!
@@ -14,7 +15,9 @@
 use lagrange::codegen::{Lang, Options as GenerateOptions};
 use lagrange::derive::Options as DeriveOptions;
 use lagrange::report::derivation::{Format, document};
-use lagrange::{Checked, derive_with, generate, load};
+use lagrange::numeric::rescale::solve_at;
+use lagrange::numeric::solve::Settings as SolveSettings;
+use lagrange::{Checked, Scenario, derive_with, generate, load};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed, TestRunner};
 use std::path::{Path, PathBuf};
@@ -31,6 +34,9 @@ fn exercise(name: &str, text: &str) -> &'static str {
     }
     for lang in [Lang::Rust, Lang::C] {
         let _ = generate(&loaded, &GenerateOptions { lang, ..GenerateOptions::default() });
+    }
+    if let Ok(scenario) = Scenario::new(loaded, &[]) {
+        let _ = solve_at(&scenario.program, &scenario.system, &scenario.env, &SolveSettings::default());
     }
     match Checked::from_text(name, text) {
         Ok(mut checked) => {
