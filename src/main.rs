@@ -894,12 +894,8 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
-    // Every bench handles 2D rigid bodies: the work-precision sweep, formula accuracy and the
-    // velocity-level solvers; 3D ones (quaternion integration) not yet.
-    if let Err(e) = scenario.system.refuse_rigid_3d("bench") {
-        eprintln!("error: {}: {e}", args.file.display());
-        return ExitCode::from(1);
-    }
+    // Every bench handles rigid bodies, 2D and 3D: the work-precision sweep, formula accuracy
+    // (3D torques as world vectors) and the velocity-level solvers.
     if args.solvers {
         return cmd_bench_solvers(args, &scenario);
     }
