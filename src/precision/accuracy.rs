@@ -3,7 +3,10 @@
 //! hard states, with the f64 evaluation time beside it — speed and error side by side.
 //! Rigid bodies enter as `numeric::rows` lays them out: one angular slot per rigid body
 //! (1/I, τ, Jʷ in component 0), so the reference solve is the same code over more slots;
-//! their states draw θ anywhere on the circle and ω of the scene's angular speed.
+//! their states draw θ anywhere on the circle and ω of the scene's angular speed. A 3D rigid
+//! body has three slots, one per principal axis eₖ (1/Iₖ, eₖ·τ − (ω_b × I ω_b)ₖ, Jʷ·eₖ, the
+//! gyroscopic term in double-double too); its torque row is the world vector Σₖ τₖ eₖ, and
+//! its states draw a unit quaternion uniformly and ω per component.
 //!
 //! The f64 path is what `solve` and `simulate` use: the closed form λ J when the system has
 //! one constraint, else the rows and the λ solve. The reference evaluates the same
@@ -326,7 +329,7 @@ pub fn formula_accuracy(s: &Scenario, count: usize, seed: u64) -> Vec<AccuracyRo
                 if three {
                     // Normalised Gaussian components: uniform over the unit quaternions.
                     let mut q = [0.0; 4];
-                    while !(norm4(&q) > 1e-3) {
+                    while norm4(&q) <= 1e-3 {
                         q = std::array::from_fn(|_| rng.normal());
                     }
                     let size = norm4(&q);
