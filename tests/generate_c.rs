@@ -1,6 +1,8 @@
 //! `generate --lang c` against `generate --lang rust`, bit for bit: for every file in
-//! `constraints/` (and `constraints/hard/`, `constraints/joints/`, `constraints/rigid/` — θ, ω, τ, I and Jʷ too —
-//! and the hostile names of `tests/data`), the C
+//! `constraints/` (and `constraints/hard/`, `constraints/joints/`, `constraints/rigid/` —
+//! θ, ω, τ, I and Jʷ too; 3D bodies at random unit quaternions, with q, world ω and τ, the
+//! principal axes, the axis slots, world torques and α — and the hostile names of
+//! `tests/data`), the C
 //! module is compiled with `cc -std=c99 -Wall -Wextra -Werror -ffp-contract=off` (one
 //! invocation per file: each module is its own translation unit) and the Rust modules with
 //! `rustc -D warnings` (one invocation for all), both print every output at the same
@@ -41,8 +43,6 @@ fn files(rigid: bool) -> Vec<PathBuf> {
             .expect("constraints/")
             .filter_map(|e| e.ok().map(|e| e.path()))
             .filter(|p| p.extension().is_some_and(|x| x == "toml"))
-            // 3D rigid bodies (quaternions) are not generated yet (`tests/rigid3d.rs`).
-            .filter(|p| !(common::in_rigid_dirs(p) && common::is_3d(p)))
             .collect();
         here.sort();
         files.extend(here);
@@ -67,6 +67,11 @@ fn random_env(l: &Loaded, rng: &mut common::Rng) -> Env {
     let g = &l.system.graph;
     let mut env = Env::new();
     for (s, info) in g.symbols() {
+        if g.is_quaternion(s) {
+            // 3D rigid bodies: a random unit quaternion [w, x, y, z].
+            env.set(s, Value::Quaternion(common::random_quaternion(rng)));
+            continue;
+        }
         let value = match info.ty {
             Ty::Scalar
                 if matches!(
@@ -79,6 +84,10 @@ fn random_env(l: &Loaded, rng: &mut common::Rng) -> Env {
                 Value::Scalar(rng.uniform(0.5, 2.0))
             }
             Ty::Scalar => Value::Scalar(rng.uniform(-2.0, 2.0)),
+            // 3D principal moments, positive.
+            Ty::Vector if matches!(info.role, lagrange::expr::Role::Inertia { .. }) => {
+                Value::Vector(rng.uniform_vector(g.dim(), 0.5, 2.0))
+            }
             Ty::Vector => Value::Vector(rng.uniform_vector(g.dim(), -1.0, 1.0)),
         };
         env.set(s, value);
@@ -113,8 +122,12 @@ fn assignments(l: &Loaded, m: &Module, env: &Env, rust: bool) -> String {
                     let _ = write!(out, "s.{field}[{d}] = {x:?}; ");
                 }
             }
-            // `generate` refuses 3D rigid bodies: no state has a quaternion.
-            Some(Value::Quaternion(_)) | None => {}
+            Some(Value::Quaternion(q)) => {
+                for (d, x) in q.iter().enumerate() {
+                    let _ = write!(out, "s.{field}[{d}] = {x:?}; ");
+                }
+            }
+            None => {}
         }
     }
     if rust { format!("{{ let mut s = State::default(); {out}s }}") } else { out }
@@ -169,11 +182,27 @@ fn outputs(rust: &str) -> Vec<Output> {
         add(name, format!("{name}(&s).concat()"), format!("[{}][{dim}]", n.max(1)), n * dim);
     }
     add("inverse_masses", "inverse_masses(&s).to_vec()".into(), format!("[{}]", n.max(1)), n);
+    // 3D rigid bodies: q as 4 numbers, world vectors, the principal axes, three axis slots each.
+    let three = rust.contains("pub const ANGULAR_SLOTS: usize = ");
     if rust.contains("pub const RIGID: usize = ") {
         let r = count("pub const RIGID: usize = ");
-        for name in ["orientations", "angular_velocities", "external_torques", "applied_torques", "inverse_inertias"] {
-            add(name, format!("{name}(&s).to_vec()"), format!("[{r}]"), r);
+        if three {
+            add("orientations", "orientations(&s).concat()".into(), format!("[{r}][4]"), 4 * r);
+            for name in ["angular_velocities", "external_torques", "applied_torques"] {
+                add(name, format!("{name}(&s).concat()"), format!("[{r}][3]"), 3 * r);
+            }
+            add("body_axes", "body_axes(&s).concat().concat()".into(), format!("[{r}][3][3]"), 9 * r);
+            for name in ["axis_inverse_inertias", "axis_angular_velocities", "axis_torques"] {
+                add(name, format!("{name}(&s).to_vec()"), format!("[{}]", 3 * r), 3 * r);
+            }
+        } else {
+            for name in
+                ["orientations", "angular_velocities", "external_torques", "applied_torques", "inverse_inertias"]
+            {
+                add(name, format!("{name}(&s).to_vec()"), format!("[{r}]"), r);
+            }
         }
+        let r = if three { 3 * r } else { r };
         if rust.contains("pub fn angular_jacobian_blocks(") {
             let entries = count("pub const ANGULAR_BLOCKS: usize = ");
             add(
@@ -195,9 +224,15 @@ fn outputs(rust: &str) -> Vec<Output> {
     let mut slots = n;
     if rust.contains("pub const RIGID: usize = ") {
         let r = count("pub const RIGID: usize = ");
-        slots += r;
-        add("torques", "torques(&s).to_vec()".into(), format!("[{r}]"), r);
-        add("angular_accelerations", "angular_accelerations(&s).to_vec()".into(), format!("[{r}]"), r);
+        if three {
+            slots += 3 * r;
+            add("torques", "torques(&s).concat()".into(), format!("[{r}][3]"), 3 * r);
+            add("angular_accelerations", "angular_accelerations(&s).concat()".into(), format!("[{r}][3]"), 3 * r);
+        } else {
+            slots += r;
+            add("torques", "torques(&s).to_vec()".into(), format!("[{r}]"), r);
+            add("angular_accelerations", "angular_accelerations(&s).to_vec()".into(), format!("[{r}]"), r);
+        }
     }
     let len = 2 * k + 2 * slots * dim + 1;
     list.push(Output {
@@ -284,7 +319,7 @@ fn the_c_module_gives_the_rust_modules_numbers_bit_for_bit() {
                     "        {{\n        {};\n        {fill}\n        show(&out_{}[0]{}, {});\n        }}",
                     o.c_array,
                     o.name,
-                    if o.c_array.matches('[').count() > 1 { "[0]" } else { "" },
+                    "[0]".repeat(o.c_array.matches('[').count() - 1),
                     o.len
                 );
             }

@@ -13,7 +13,10 @@
 //! `jacobian_blocks`), `c_term`, `positions`, `velocities`, `external_forces`,
 //! `applied_forces`, `inverse_masses`; with rigid bodies also `orientations`,
 //! `angular_velocities`, `external_torques`, `applied_torques`, `inverse_inertias` and
-//! `angular_jacobian` (Jʷ), as the Rust module has them.
+//! `angular_jacobian` (Jʷ), as the Rust module has them. 3D rigid bodies likewise: q as
+//! `double[4]` ([w, x, y, z]) in `State`, `ANGULAR_SLOTS`, `orientations`, world-vector
+//! `angular_velocities`, `external_torques`, `applied_torques`, `body_axes`, and per axis
+//! slot `axis_inverse_inertias`, `axis_angular_velocities`, `axis_torques` and Jʷ·eₖ.
 //!
 //! With `--solver soft-step|pgs` the module also has the step (`step`, `step_with`,
 //! `step_settings_default`): the scene's `step_rows` over the Rust module's roots and the
@@ -89,7 +92,9 @@ pub(super) fn field_names(fields: &[Field]) -> Vec<String> {
 pub(super) fn slots(g: &Graph, fields: &[Field], c_names: &[String]) -> Vec<String> {
     let mut slots = Vec::new();
     for (f, name) in fields.iter().zip(c_names) {
-        if g.symbol(f.symbol).ty == Ty::Vector {
+        if g.is_quaternion(f.symbol) {
+            slots.extend((0..4).map(|k| format!("s->{name}[{k}]")));
+        } else if g.symbol(f.symbol).ty == Ty::Vector {
             slots.extend((0..g.dim()).map(|k| format!("s->{name}[{k}]")));
         } else {
             slots.push(format!("s->{name}"));
@@ -183,7 +188,13 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
     let _ = writeln!(out, "/* A state of the scene: every input of the formulas (the Rust module's fields). */");
     let _ = writeln!(out, "typedef struct State {{");
     for (f, name) in p.fields.iter().zip(p.c_names).filter(|(f, _)| f.array.is_none()) {
-        let ty = if g.symbol(f.symbol).ty == Ty::Vector { format!("[{dim}]") } else { String::new() };
+        let ty = if g.is_quaternion(f.symbol) {
+            "[4]".to_string()
+        } else if g.symbol(f.symbol).ty == Ty::Vector {
+            format!("[{dim}]")
+        } else {
+            String::new()
+        };
         let _ = writeln!(out, "    /* {} */\n    double {name}{ty};", c_comment(&f.doc));
     }
     for role in ["position", "velocity", "force", "mass"] {
@@ -259,15 +270,26 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
 }
 
 /// The rigid bodies' numbers and Jʷ, as the Rust module has them (nothing for point masses):
-/// `RIGID`, `RIGID_BODIES`, `orientations`, `angular_velocities`, `external_torques`,
-/// `applied_torques`, `inverse_inertias` and `angular_jacobian` (dense, K × RIGID) or
-/// `angular_jacobian_blocks` (with `ANGULAR_ROW` and `ANGULAR_SLOT`).
+/// 2D ([`rigid_2d`]) or 3D ([`rigid_3d`]), then [`angular_jacobian`].
 fn rigid(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
     let t = p.turns;
-    let (r, k) = (t.body.len(), p.layout.constraints);
+    let r = t.body.len();
     if r == 0 {
         return Ok(());
     }
+    if t.three.is_empty() {
+        rigid_2d(ctx, out, p)?;
+    } else {
+        rigid_3d(ctx, out, p)?;
+    }
+    angular_jacobian(ctx, out, p)
+}
+
+/// A 2D module's rigid bodies: `RIGID`, `RIGID_BODIES`, and θ, ω, τ, the scene's τ and 1/I
+/// per rigid body.
+fn rigid_2d(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
+    let t = p.turns;
+    let r = t.body.len();
     let bodies: Vec<String> = t.body.iter().map(usize::to_string).collect();
     let _ = writeln!(
         out,
@@ -286,6 +308,105 @@ const int RIGID_BODIES[{r}] = {{{}}};
     ] {
         scalars(ctx, out, &[what.to_string()], name, roots, r)?;
     }
+    Ok(())
+}
+
+/// A 3D module's rigid bodies, as the Rust module's: `RIGID`, `RIGID_BODIES`,
+/// `ANGULAR_SLOTS`; per rigid body q (4 doubles, [w, x, y, z]), ω, τ, the scene's τ (world
+/// vectors) and the principal axes (`body_axes`); per axis slot 1/Iₖ, eₖ·ω and
+/// eₖ·τ − (ω_b × I ω_b)ₖ, what the rows' solve reads.
+fn rigid_3d(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
+    let t = p.turns;
+    let r = t.three.len();
+    let bodies: Vec<String> = t.three.iter().map(|x| x.body.to_string()).collect();
+    let _ = writeln!(
+        out,
+        "/* The rigid bodies (3D): rigid body r is body RIGID_BODIES[r] (unit quaternion q = [w, x, y, z], omega and
+   tau in the world frame, principal moments [I1, I2, I3]); its principal axis k has the angular slot
+   BODIES + 3r + k of the rows' solve. */
+enum {{ RIGID = {r}, ANGULAR_SLOTS = {} }};
+const int RIGID_BODIES[{r}] = {{{}}};
+",
+        3 * r,
+        bodies.join(", ")
+    );
+    let name_of = |sym: Symbol| p.fields.iter().position(|f| f.symbol == sym).map(|i| p.c_names[i].clone());
+    let mut stores = Vec::new();
+    for (i, x) in t.three.iter().enumerate() {
+        let q = name_of(x.orientation).unwrap_or_default();
+        stores.extend((0..4).map(|c| format!("out[{i}][{c}] = s->{q}[{c}];")));
+    }
+    function(
+        out,
+        &["The orientation q = [w, x, y, z] (Hamilton, unit) of each rigid body.".to_string()],
+        "orientations",
+        &format!("double out[{r}][4]"),
+        &[],
+        &stores,
+    );
+    let vectors: [(&str, &str, Vec<Id>); 3] = [
+        (
+            "angular_velocities",
+            "The angular velocity omega (world frame) of each rigid body.",
+            t.three.iter().map(|x| x.angular_velocity).collect(),
+        ),
+        (
+            "external_torques",
+            "The external torque tau (world frame) on each rigid body (the state's torque fields).",
+            t.three.iter().map(|x| x.torque).collect(),
+        ),
+        (
+            "applied_torques",
+            "The scene's torques (world frame) at this state (zero for a rigid body it does not list).",
+            t.three.iter().map(|x| x.applied).collect(),
+        ),
+    ];
+    for (name, what, roots) in vectors {
+        let (lets, exprs) = ctx.body(&roots)?;
+        let stores: Vec<String> = (0..r)
+            .flat_map(|i| (0..3).map(move |d| (i, d)))
+            .map(|(i, d)| format!("out[{i}][{d}] = {};", exprs[i * 3 + d]))
+            .collect();
+        function(out, &[what.to_string()], name, &format!("double out[{r}][3]"), &lets, &stores);
+    }
+    let roots: Vec<Id> = t.three.iter().flat_map(|x| x.axes).collect();
+    let (lets, exprs) = ctx.body(&roots)?;
+    let mut stores = Vec::new();
+    for i in 0..r {
+        for a in 0..3 {
+            for d in 0..3 {
+                stores.push(format!("out[{i}][{a}][{d}] = {};", exprs[(i * 3 + a) * 3 + d]));
+            }
+        }
+    }
+    function(
+        out,
+        &["The principal axes R(q) e_k (out[r][k], the columns of R(q)) of each rigid body, in the world.".to_string()],
+        "body_axes",
+        &format!("double out[{r}][3][3]"),
+        &lets,
+        &stores,
+    );
+    let slots = 3 * r;
+    for (name, what, roots) in [
+        ("axis_inverse_inertias", "1/I_k of each axis slot (rigid body r's axis k at 3r + k).", &t.inverse_inertia),
+        ("axis_angular_velocities", "omega_k = e_k.omega of each axis slot.", &t.angular_velocity),
+        (
+            "axis_torques",
+            "e_k.tau - (omega_b x I omega_b)_k of each axis slot: the external torque with the gyroscopic term of Euler's equations in the body frame (omega_b = (e_j.omega)_j), from the state's torque fields.",
+            &t.torque,
+        ),
+    ] {
+        scalars(ctx, out, &[what.to_string()], name, roots, slots)?;
+    }
+    Ok(())
+}
+
+/// `angular_jacobian` (dense, K × angular slots) or `angular_jacobian_blocks` (with
+/// `ANGULAR_ROW` and `ANGULAR_SLOT`): Jʷ in 2D, Jʷ·eₖ per axis slot in 3D.
+fn angular_jacobian(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
+    let t = p.turns;
+    let (r, k) = (t.body.len(), p.layout.constraints);
     let entries = t.entries(p.formulas);
     let roots: Vec<Id> = entries.iter().map(|e| e.2).collect();
     let (lets, exprs) = ctx.body(&roots)?;
@@ -313,7 +434,12 @@ const int RIGID_BODIES[{r}] = {{{}}};
                         .push(format!("out[{row}][{slot}] = {};", at.map_or("0.0".to_string(), |i| exprs[i].clone())));
                 }
             }
-            let doc = ["The angular part of J (dC/dtheta over SCALE[k]): row k, column r is rigid body r.".to_string()];
+            let doc = if t.three.is_empty() {
+                ["The angular part of J (dC/dtheta over SCALE[k]): row k, column r is rigid body r.".to_string()]
+            } else {
+                ["The angular part of J on each principal axis (Jw.e_k): row k, column 3r + a is rigid body r's axis a."
+                    .to_string()]
+            };
             function(out, &doc, "angular_jacobian", &format!("double out[{}][{r}]", k.max(1)), &lets, &stores);
         }
     }

@@ -30,6 +30,7 @@ const SOLVE_DENSE_C: &str = include_str!("support/solve_dense.c");
 pub(super) fn emit(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
     let (n, k) = (p.layout.bodies, p.layout.constraints);
     let rigid = p.turns.body.len();
+    let three = !p.turns.three.is_empty();
     // Row k's entries: its bodies' J in the derivation's order, then Jʷ on its rigid bodies
     // (slot BODIES + r), as the Rust module's `rows` pushes them.
     let angular = p.turns.entries(p.formulas);
@@ -57,7 +58,9 @@ pub(super) fn emit(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(),
     out.push_str(ROWS_C);
     out.push('\n');
     rows_fn(out, p, &angular, entries);
-    if rigid > 0 {
+    if three {
+        rigid_3d_solution(out);
+    } else if rigid > 0 {
         rigid_solution(out);
     } else {
         scaling(out, p);
@@ -72,7 +75,23 @@ pub(super) fn emit(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(),
          out[i][d] = x.acceleration[i][d];\n        }}\n    }}\n}}\n",
         n1 = n.max(1)
     );
-    if rigid > 0 {
+    if three {
+        let _ = writeln!(
+            out,
+            "/* Sum_k e_k x_k: a vector given by its parts x on the axes e, in the world (the Rust module's world). */\n\
+             static void world(const double e[3][3], const double x[3], double out[3]) {{\n    \
+             for (int d = 0; d < 3; d++) {{\n        out[d] = 0.0;\n    }}\n    \
+             for (int k = 0; k < 3; k++) {{\n        for (int d = 0; d < 3; d++) {{\n            \
+             out[d] += x[k] * e[k][d];\n        }}\n    }}\n}}\n\n\
+             /* The angular accelerations alpha (world frame) of every rigid body (RIGID_BODIES), from the rows' solve:\n   \
+             sum_k e_k alpha_k over the principal axes e_k = R(q) e_k. */\n\
+             void angular_accelerations(const State *s, double out[RIGID][3]) {{\n    \
+             Solution x;\n    double e[RIGID][3][3];\n    solution(s, &x);\n    body_axes(s, e);\n    \
+             for (int r = 0; r < RIGID; r++) {{\n        double a[3];\n        \
+             for (int k = 0; k < 3; k++) {{\n            a[k] = x.acceleration[BODIES + 3 * r + k][0];\n        }}\n        \
+             world(e[r], a, out[r]);\n    }}\n}}\n"
+        );
+    } else if rigid > 0 {
         let _ = writeln!(
             out,
             "/* The angular accelerations (tau + sum_k lambda_k Jw_k)/I of every rigid body (RIGID_BODIES), from the rows' solve. */\n\
@@ -104,7 +123,18 @@ pub(super) fn emit(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(),
                 k1 = k.max(1),
                 n1 = n.max(1)
             );
-            if rigid > 0 {
+            if three {
+                let _ = writeln!(
+                    out,
+                    "/* The constraint torque sum_k lambda_k Jw_k (world frame, about the centre of mass) on every rigid\n   \
+                     body (RIGID_BODIES), from the rows' solve: sum_k e_k (its axis slots' parts). */\n\
+                     void torques(const State *s, double out[RIGID][3]) {{\n    \
+                     Solution x;\n    double e[RIGID][3][3];\n    solution(s, &x);\n    body_axes(s, e);\n    \
+                     for (int r = 0; r < RIGID; r++) {{\n        double t[3];\n        \
+                     for (int k = 0; k < 3; k++) {{\n            t[k] = x.force[BODIES + 3 * r + k][0];\n        }}\n        \
+                     world(e[r], t, out[r]);\n    }}\n}}\n"
+                );
+            } else if rigid > 0 {
                 let _ = writeln!(
                     out,
                     "/* The constraint torque sum_k lambda_k Jw_k on every rigid body (RIGID_BODIES), from the rows' solve. */\n\
@@ -115,12 +145,23 @@ pub(super) fn emit(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(),
             }
         }
     }
+    let rigid_bodies = p.turns.rigid_bodies();
     for (slot, name) in torque_fns.iter().enumerate() {
+        if three {
+            let _ = writeln!(
+                out,
+                "/* The constraint torque on rigid body `{}` (world frame, about its centre of mass). */\n\
+                 void {name}(const State *s, double out[3]) {{\n    double t[RIGID][3];\n    torques(s, t);\n    \
+                 for (int d = 0; d < 3; d++) {{\n        out[d] = t[{slot}][d];\n    }}\n}}\n",
+                super::c::c_comment(p.names.bodies[rigid_bodies[slot]])
+            );
+            continue;
+        }
         let _ = writeln!(
             out,
             "/* The constraint torque on rigid body `{}` (about its centre of mass). */\n\
              double {name}(const State *s) {{\n    double t[RIGID];\n    torques(s, t);\n    return t[{slot}];\n}}\n",
-            super::c::c_comment(p.names.bodies[p.turns.body[slot]])
+            super::c::c_comment(p.names.bodies[rigid_bodies[slot]])
         );
     }
     for (body, name) in force_fns.iter().enumerate() {
@@ -162,7 +203,8 @@ fn rows_fn(out: &mut String, p: &Parts<'_>, angular: &[(usize, usize, Id)], entr
                 body.push(format!("double jw[{}];", angular.len()));
                 body.push("angular_jacobian_blocks(s, jw);".into());
             } else {
-                body.push(format!("double jw[{k1}][RIGID];"));
+                let width = if p.turns.three.is_empty() { "RIGID" } else { "ANGULAR_SLOTS" };
+                body.push(format!("double jw[{k1}][{width}];"));
                 body.push("angular_jacobian(s, jw);".into());
             }
         }
@@ -323,6 +365,43 @@ void solution(const State *s, Solution *x) {
     external_forces(s, f);
     external_torques(s, tau);
     for (int i = 0; i < RIGID; i++) {
+        for (int d = 0; d < DIM; d++) {
+            v[BODIES + i][d] = 0.0;
+            f[BODIES + i][d] = 0.0;
+        }
+        v[BODIES + i][0] = omega[i];
+        f[BODIES + i][0] = tau[i];
+    }
+    positions(s, q);
+    solve_rows(&r, w, v, f, length_scale(q, BODIES), x);
+}
+
+",
+    );
+}
+
+/// `solution` with 3D rigid bodies: the solve over the slots (bodies, then each rigid body's
+/// three axis slots: 1/Iₖ, eₖ·ω, eₖ·τ − (ω_b × I ω_b)ₖ in component 0), in the file's length
+/// unit, as the Rust module's.
+fn rigid_3d_solution(out: &mut String) {
+    out.push_str(
+        "/* lambda, the constraint forces and torques and the accelerations at a state, with each inequality's contact
+   state and the status: what lagrange solve gives (see solve_rows). The solve runs over slots: the bodies
+   (1/m, v, F), then three per rigid body r, one per principal axis e_k = R(q) e_k at BODIES + 3r + k (1/I_k,
+   e_k.omega and e_k.tau - (omega_b x I omega_b)_k in component 0), so M stays diagonal; force and acceleration
+   there hold the axis' part of the constraint torque and of alpha (torques and angular_accelerations turn
+   them back into the world). Rigid bodies are solved in the file's length unit. */
+void solution(const State *s, Solution *x) {
+    Rows r;
+    double w[SLOTS], v[SLOTS][DIM], f[SLOTS][DIM], q[BODIES][DIM], omega[ANGULAR_SLOTS], tau[ANGULAR_SLOTS];
+    rows(s, &r);
+    inverse_masses(s, w);
+    axis_inverse_inertias(s, w + BODIES);
+    velocities(s, v);
+    axis_angular_velocities(s, omega);
+    external_forces(s, f);
+    axis_torques(s, tau);
+    for (int i = 0; i < ANGULAR_SLOTS; i++) {
         for (int d = 0; d < DIM; d++) {
             v[BODIES + i][d] = 0.0;
             f[BODIES + i][d] = 0.0;

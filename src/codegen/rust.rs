@@ -195,10 +195,6 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 /// derivation, specialised where asked, the scene's numbers as graph nodes, the plan (the
 /// state's fields and the layout), then the text in the chosen language.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
-    // The C module of 3D rigid bodies (quaternions in `State`) is not written yet.
-    if options.lang == Lang::C {
-        loaded.system.refuse_rigid_3d("generate --lang c")?;
-    }
     // The velocity-level step moves positions only: its rigid twin is not written yet.
     if options.solver.is_some() {
         loaded.system.refuse_rigid("generate --solver")?;
