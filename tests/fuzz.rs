@@ -14,9 +14,9 @@
 
 use lagrange::codegen::{Lang, Options as GenerateOptions};
 use lagrange::derive::Options as DeriveOptions;
-use lagrange::report::derivation::{Format, document};
 use lagrange::numeric::rescale::solve_at;
 use lagrange::numeric::solve::Settings as SolveSettings;
+use lagrange::report::derivation::{Format, document};
 use lagrange::{Checked, Scenario, derive_with, generate, load};
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngSeed, TestRunner};
