@@ -353,8 +353,11 @@ fn the_c_module_gives_the_rust_modules_numbers_bit_for_bit() {
     std::fs::write(&main_rs, rust_main).expect("write");
     let exe = dir.join("harness");
     let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
+    // Unoptimised: the harness of every module is the suite's longest compile (about four
+    // times shorter at opt-level 0), and Rust's floating point is the same IEEE operations
+    // at every level (no contraction), so the numbers compared bit for bit do not change.
     let built = Command::new(rustc)
-        .args(["--edition", "2021", "-C", "opt-level=1", "-D", "warnings", "-o"])
+        .args(["--edition", "2021", "-C", "opt-level=0", "-D", "warnings", "-o"])
         .arg(&exe)
         .arg(&main_rs)
         .output()
