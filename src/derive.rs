@@ -24,8 +24,9 @@
 //! the derivation's above) would avoid it, at the price of every lookup asking which layer,
 //! and belongs to `expr`. Beside the formulas the derivation owns what the documents show
 //! that is not a number, built only when asked ([`Options`]): the multiplier symbols
-//! `lambda_<name>` and the force sums Σₖ λₖ Jₖᵢ of several constraints, and each C̈ with
-//! Newton's law substituted (`--steps`).
+//! `lambda_<name>` and the force sums Σₖ λₖ Jₖᵢ in them (one constraint too: its documents
+//! print λ once and each force as λ J, so their size is linear in the bodies), and each C̈
+//! with Newton's law substituted (`--steps`).
 //!
 //! Names: ∇C is `gradient`, J = ∇C/κ is `jacobian` and c is `bias` here and in
 //! `numeric::rows`; the user-facing names stay (`derive --format json` calls J `"gradient"`
@@ -94,15 +95,15 @@ pub struct Derivation {
     pub forces: Option<Vec<(usize, Id)>>,
     /// `(body, torque λ Jʷ)` on each rigid body in closed form, when there is a single constraint.
     pub torques: Option<Vec<(usize, Id)>>,
-    /// With [`Options::document`] and several constraints: each one's multiplier λₖ, the
-    /// node of the scalar symbol `lambda_<name>`, by constraint (one constraint has λ in
-    /// closed form).
+    /// With [`Options::document`]: each constraint's multiplier λₖ, the node of the scalar
+    /// symbol `lambda_<name>`, by constraint (one constraint has λ in closed form too, in
+    /// [`lambda`](Self::lambda): the documents print that once, and the forces in the symbol).
     pub multipliers: Option<Vec<Id>>,
-    /// With [`Options::document`] and several constraints: `(body, Σₖ λₖ Jₖᵢ)` in the
-    /// multiplier symbols, for each body some constraint acts on, in body order.
+    /// With [`Options::document`]: `(body, Σₖ λₖ Jₖᵢ)` in the multiplier symbols, for each
+    /// body some constraint acts on, in body order (one constraint: λ J, not simplified).
     pub force_sums: Option<Vec<(usize, Id)>>,
-    /// With [`Options::document`] and several constraints: `(body, Σₖ λₖ Jʷₖᵢ)`, the torque
-    /// on each rigid body some constraint turns, in body order.
+    /// With [`Options::document`]: `(body, Σₖ λₖ Jʷₖᵢ)`, the torque on each rigid body some
+    /// constraint turns, in body order.
     pub torque_sums: Option<Vec<(usize, Id)>>,
     /// With [`Options::steps`]: each C̈ with Newton's law aᵢ = (Fᵢ + F_c,ᵢ)/mᵢ substituted
     /// for the accelerations, in the vector symbols `F_c` (one body) or `F_c_<body>`, and
@@ -125,8 +126,8 @@ pub struct Definition {
 /// What [`derive_with`] derives beyond the formulas (the numbers need none of it).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Options {
-    /// The multiplier symbols and force sums of several constraints (the text, LaTeX and
-    /// Markdown documents show them).
+    /// The multiplier symbols and force sums Σₖ λₖ Jₖᵢ (the text, LaTeX and Markdown
+    /// documents show them, for one constraint as λ J beside λ's closed form).
     pub document: bool,
     /// Newton's law substituted into each C̈ (`derive --steps` shows it).
     pub steps: bool,
@@ -269,7 +270,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     }
     let newton = if options.steps { Some(newton(system, g, &constraints)?) } else { None };
     let definitions = if options.document { Some(definitions(system, g, s)?) } else { None };
-    let (multipliers, force_sums, torque_sums) = if repeats && options.document {
+    let (multipliers, force_sums, torque_sums) = if options.document {
         let (multipliers, sums, torque_sums) = force_sums(system, g, s, &constraints)?;
         (Some(multipliers), Some(sums), Some(torque_sums))
     } else {
@@ -378,7 +379,7 @@ fn closed_form_lambda(g: &mut Graph, s: &mut Simplifier, b: Id, a: Id) -> Result
     Ok(if length(separated) < length(combined) { (separated, true) } else { (combined, false) })
 }
 
-/// The multiplier symbols `lambda_<name>` of several constraints, and the force on each body
+/// The multiplier symbols `lambda_<name>` of the constraints, and the force on each body
 /// as Σₖ λₖ Jₖᵢ in them (and the torque Σₖ λₖ Jʷₖᵢ on each rigid body). A component of a
 /// vector constraint `pin.x` has the multiplier `lambda_pin_x` (a name the language reads).
 #[allow(clippy::type_complexity)]

@@ -10,8 +10,9 @@ mod common;
 
 use common::{Rng, close, close_vec, random_env, scalar, vector};
 use lagrange::derive::{Derivation, derive};
+use lagrange::expr::eval::Value;
 use lagrange::expr::print::{Style, print};
-use lagrange::expr::{Id, Rational};
+use lagrange::expr::{Id, Rational, Role, Symbol, Ty};
 use lagrange::model::file::load;
 use lagrange::model::system::System;
 use std::process::Command;
@@ -115,8 +116,24 @@ fn json_of(path: &str) -> serde_json::Value {
     serde_json::from_slice(&out.stdout).expect("valid JSON")
 }
 
-/// Every string in the JSON that is an expression, with a label, parsed in `system`'s scope.
+/// The JSON's multiplier symbols (`"multipliers"`: constraint → symbol), declared as scalars
+/// in `system`'s scope so the forces written in them parse; by constraint name.
+fn declare_multipliers(system: &mut System, json: &serde_json::Value) -> Vec<(String, Symbol)> {
+    let mut out = Vec::new();
+    for (constraint, symbol) in json["multipliers"].as_object().expect("multipliers") {
+        let name = symbol.as_str().expect("a symbol's name");
+        let s = system.graph.declare(name, Ty::Scalar, Role::Parameter);
+        let id = system.graph.sym(s);
+        system.scope.insert(name, id);
+        out.push((constraint.clone(), s));
+    }
+    out
+}
+
+/// Every string in the JSON that is an expression, with a label, parsed in `system`'s scope
+/// (the multipliers declared first).
 fn json_expressions(system: &mut System, json: &serde_json::Value) -> Vec<(String, Id)> {
+    declare_multipliers(system, json);
     let mut parse = |label: String, v: &serde_json::Value| {
         let text = v.as_str().unwrap_or_else(|| panic!("{label} is not a string"));
         let id = system.expression(text).unwrap_or_else(|e| panic!("{label} = {text:?} does not parse again: {e}"));
@@ -163,6 +180,7 @@ fn json_expressions_parse_again_and_satisfy_the_derivation() {
         let json = json_of(path);
         let mut system = loaded(path);
         let parsed = json_expressions(&mut system, &json);
+        let multipliers = declare_multipliers(&mut system, &json);
         assert!(parsed.len() >= 8, "{path}: too few expressions in the JSON");
         let get = |label: &str| parsed.iter().find(|(l, _)| l == label).map(|p| p.1);
         let n = json["constraints"].as_array().map_or(0, Vec::len);
@@ -220,12 +238,16 @@ fn json_expressions_parse_again_and_satisfy_the_derivation() {
                 b[k] = scalar(&system, get(&format!("b[{k}]")).expect("b"), &env);
                 assert!(close(b[k], expected, 1e-12), "{path}: b[{k}]");
             }
-            // Where the JSON gives λ and forces (one constraint): λ = −b/A and
-            // force on body i = Σₖ λₖ Jₖᵢ.
+            // Where the JSON gives λ and forces (one constraint): λ = −b/A and force on
+            // body i = Σₖ λₖ Jₖᵢ, written in the multiplier's symbol: evaluated from the
+            // document alone, with the symbol bound to λ's value.
             if let Some(lambda) = json["lambda"].as_object() {
                 let name = lambda.keys().next().expect("one λ");
                 let l = scalar(&system, get(&format!("lambda.{name}")).expect("λ"), &env);
                 assert!(close(l, -b[0] / a[0][0], 1e-10), "{path}: λ ≠ −b/A");
+                let symbol = multipliers.iter().find(|m| m.0 == *name).expect("λ's symbol").1;
+                let mut env = env.clone();
+                env.set(symbol, Value::Scalar(l));
                 for &(i, j) in &directions[0] {
                     let f = vector(&system, get(&format!("forces.{}", bodies[i])).expect("force"), &env);
                     assert!(close_vec(f, common::scale3(l, j), 1e-12), "{path}: force on {} ≠ λ J", bodies[i]);

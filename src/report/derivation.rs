@@ -104,6 +104,10 @@ impl Doc {
                     doc.names.entry(id).or_insert_with(|| def.name.clone());
                 }
             }
+            // One constraint's multiplier is the λ printed once above its forces (`λ r`).
+            if let (Some(_), Some([only])) = (d.lambda, d.multipliers.as_deref()) {
+                doc.names.insert(*only, "lambda".to_string());
+            }
         }
         doc
     }
@@ -432,18 +436,13 @@ fn summary(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Resu
     }
     doc.heading(out, "The multiplier equation  A λ + b = 0");
     a_and_b(system, d, doc, out)?;
-    if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
+    if let Some(lambda) = d.lambda {
         doc.heading(out, "Multiplier and constraint force");
         doc.line(out, &doc.sym("lambda", ""), &doc.expr(g, lambda)?);
-        for &(body, f) in forces {
-            let name = &system.bodies[body].name;
-            doc.line(out, &doc.sym("force", name), &doc.expr(g, f)?);
-        }
-        torque_lines(system, d, doc, out)?;
+        wrench_lines(system, d, doc, out)
     } else {
-        forces_as_sums(system, d, doc, out)?;
+        forces_as_sums(system, d, doc, out)
     }
-    Ok(())
 }
 
 /// The angular part of constraint `k`'s direction on each rigid body it turns: ∂C/∂θ and,
@@ -470,14 +469,6 @@ fn angular_lines(
             let note = format!("angular direction, over {}, body {name}", dc.scale);
             doc.line(out, &doc.label(jw, &note), &doc.expr(g, dir)?);
         }
-    }
-    Ok(())
-}
-
-/// The constraint torque on each rigid body, λ Jʷ, for one constraint.
-fn torque_lines(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
-    for &(body, t) in d.torques.iter().flatten() {
-        doc.line(out, &doc.sym("torque", &system.bodies[body].name), &doc.expr(&d.graph, t)?);
     }
     Ok(())
 }
@@ -529,6 +520,13 @@ fn scale_note(one: bool, scale: &crate::expr::Rational) -> String {
 /// For several constraints: the force on each body as Σₖ λₖ Jₖᵢ, with named multipliers.
 fn forces_as_sums(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
     doc.heading(out, "Constraint forces (λ solves A λ = −b at a state: lagrange solve)");
+    wrench_lines(system, d, doc, out)
+}
+
+/// The force Σₖ λₖ Jₖᵢ on each body and the torque Σₖ λₖ Jʷₖᵢ on each rigid body, in the
+/// multiplier symbols: one constraint's is `λ J`, λ's closed form printed once before, so
+/// the document grows with each direction, never with λ repeated on every body.
+fn wrench_lines(system: &System, d: &Derivation, doc: &Doc, out: &mut String) -> Result<(), ReportError> {
     let sums = d.force_sums.as_ref().ok_or(ReportError::NotDerived("force sums"))?;
     for &(body, sum) in sums {
         doc.line(out, &doc.sym("force", &system.bodies[body].name), &doc.expr(&d.graph, sum)?);
@@ -641,17 +639,12 @@ fn steps_document(system: &System, d: &Derivation, doc: &Doc, out: &mut String) 
     }
     let g = &d.graph;
     a_and_b(system, d, doc, out)?;
-    if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
+    if let Some(lambda) = d.lambda {
         doc.para(out, "so λ = −b/A:");
         doc.line(out, &doc.sym("lambda", ""), &doc.expr(g, lambda)?);
         doc.heading(out, "The constraint force");
         doc.para(out, "Step 7. Magnitude λ times direction J:");
-        for &(body, f) in forces {
-            let name = &system.bodies[body].name;
-            doc.line(out, &doc.sym("force", name), &doc.expr(g, f)?);
-        }
-        torque_lines(system, d, doc, out)?;
-        Ok(())
+        wrench_lines(system, d, doc, out)
     } else {
         doc.para(
             out,
@@ -704,15 +697,12 @@ pub fn json(system: &System, d: &Derivation) -> Result<JsonDerivation, ReportErr
         "A": a,
         "b": b?,
     });
-    if let (Some(lambda), Some(forces)) = (d.lambda, &d.forces) {
+    // One constraint: λ in closed form once, and the forces and torques in its symbol.
+    let closed = d.lambda.is_some();
+    if let Some(lambda) = d.lambda {
         out["lambda"] = json!({ system.constraints[0].name.clone(): e.text(lambda)? });
-        out["forces"] = e.by_body(forces)?;
-        if let Some(torques) = d.torques.as_ref().filter(|t| !t.is_empty()) {
-            out["torques"] = e.by_body(torques)?;
-        }
-    } else {
-        json_sums(system, d, e, &mut out)?;
     }
+    json_sums(system, d, e, &mut out, closed)?;
     Ok(JsonDerivation { value: out })
 }
 
@@ -797,10 +787,20 @@ fn json_constraints(system: &System, d: &Derivation, e: &JsonText<'_>) -> Result
     Ok(constraints)
 }
 
-/// Several constraints: no closed form. The multipliers are named symbols, and the force on
-/// each body is Σₖ λₖ Jₖᵢ in them (as `derive` prints it), so the JSON parses again once
-/// the multiplier names are declared as scalars; likewise the torques on rigid bodies.
-fn json_sums(system: &System, d: &Derivation, e: &JsonText<'_>, out: &mut Value) -> Result<(), ReportError> {
+/// The multipliers as named symbols (`multipliers`: constraint → symbol), and the force on
+/// each body as Σₖ λₖ Jₖᵢ in them (as `derive` prints it), so the JSON parses again once
+/// the multiplier names are declared as scalars; likewise the torques on rigid bodies. With
+/// several constraints they are `force_sums` and `torque_sums` (λ solves A λ = −b at a
+/// state); with one (`closed`) `forces` and `torques`, λ's closed form being `lambda`, so
+/// a consumer evaluates λ once and each force from it: the document is self-contained and
+/// λ is not repeated on every body.
+fn json_sums(
+    system: &System,
+    d: &Derivation,
+    e: &JsonText<'_>,
+    out: &mut Value,
+    closed: bool,
+) -> Result<(), ReportError> {
     let names: Vec<String> = system.constraints.iter().map(|c| multiplier_name(&c.name)).collect();
     // Each body's terms from its own constraints' directions, gathered in one pass over the
     // constraints (a body's first direction in a constraint counts).
@@ -812,29 +812,34 @@ fn json_sums(system: &System, d: &Derivation, e: &JsonText<'_>, out: &mut Value)
                 continue;
             }
             last[body] = Some(k);
-            let j = e.text(j)?;
-            let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
-            terms[body].push(if atomic { format!("{}*{j}", names[k]) } else { format!("{}*({j})", names[k]) });
+            terms[body].push(times(&names[k], e.text(j)?));
         }
     }
     let multipliers: serde_json::Map<String, Value> =
         system.constraints.iter().zip(&names).map(|(c, n)| (c.name.clone(), json!(n))).collect();
+    let (forces, torques) = if closed { ("forces", "torques") } else { ("force_sums", "torque_sums") };
     out["multipliers"] = Value::Object(multipliers);
-    out["force_sums"] = sums_by_body(system, terms);
+    out[forces] = sums_by_body(system, terms);
     // Rigid bodies: the torque on each as Σₖ λₖ Jʷₖᵢ (absent without rigid bodies).
     let mut terms: Vec<Vec<String>> = vec![Vec::new(); system.bodies.len()];
     for (k, dc) in d.constraints.iter().enumerate() {
         for &(body, j) in &dc.angular {
             if let Some(list) = terms.get_mut(body) {
-                list.push(format!("{}*({})", names[k], e.text(j)?));
+                list.push(times(&names[k], e.text(j)?));
             }
         }
     }
     let torque_sums = sums_by_body(system, terms);
     if torque_sums.as_object().is_some_and(|m| !m.is_empty()) {
-        out["torque_sums"] = torque_sums;
+        out[torques] = torque_sums;
     }
     Ok(())
+}
+
+/// `lambda*j`, with `j` in parentheses unless it is a name.
+fn times(lambda: &str, j: String) -> String {
+    let atomic = j.chars().all(|ch| ch.is_alphanumeric() || ch == '_');
+    if atomic { format!("{lambda}*{j}") } else { format!("{lambda}*({j})") }
 }
 
 /// `{ body name: "t₁ + t₂ + …" }` over the bodies with terms.
