@@ -91,7 +91,9 @@ pub struct Derivation {
     pub b: Vec<Id>,
     /// λ in closed form, when there is a single constraint.
     pub lambda: Option<Id>,
-    /// `(body, force)` in closed form, when there is a single constraint.
+    /// `(body, force λ J)` in closed form, when there is a single constraint: simplified, except
+    /// where λ is kept separated or with [`Options::document`] (then the product λ J as it
+    /// stands, the same function).
     pub forces: Option<Vec<(usize, Id)>>,
     /// `(body, torque λ Jʷ)` on each rigid body in closed form, when there is a single constraint.
     pub torques: Option<Vec<(usize, Id)>>,
@@ -247,10 +249,12 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         let closed_form = || format!("λ and the forces of constraint `{}`", system.constraints[0].name);
         let (l, separated) = closed_form_lambda(g, s, b[0], a00).map_err(|e| located(e, Some(0), closed_form))?;
         // A separated λ stays a factor of each force and torque as written (λ J): simplified,
-        // the product would be put over λ's combined denominator again.
+        // the product would be put over λ's combined denominator again. The documents print
+        // λ J with λ as its symbol, so for them the product is not expanded either (the
+        // same function: `check` compares canonical forms).
         let mut wrench = |j: Id| -> Result<Id, DeriveError> {
             let product = g.mul(vec![l, j])?;
-            if separated {
+            if separated || options.document {
                 s.adopt(product);
                 return Ok(product);
             }
