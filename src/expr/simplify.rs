@@ -768,6 +768,9 @@ impl Simplifier {
             let Some((a, e)) = next else { return p };
             tried.push((a, e));
             let square = &self.radicals[&a].num;
+            if !may_divide(square, &p, a, e) {
+                continue;
+            }
             let (group, rest): (Vec<_>, Vec<_>) = p.0.iter().cloned().partition(|(m, _)| m.exponent(a) == e);
             let cofactor = sum_terms(group.into_iter().map(|(m, q)| (m.with_exponent(a, 0), q)).collect());
             if let Some(quotient) = cofactor.div_exact(square) {
@@ -1094,6 +1097,18 @@ fn scalar(c: &Canon) -> Frac {
         Canon::S(f) => f.clone(),
         Canon::V(_) => Frac::zero(),
     }
+}
+
+/// Whether `square` can divide the cofactor of `a^e` in `p` (its terms with that exponent,
+/// `a` taken out), decided without building the cofactor: `Poly::div_exact`'s first test,
+/// the square's leading monomial dividing the cofactor's, and for a one-term square the
+/// whole test (the cofactor's terms are distinct monomials, so every one must be divisible).
+/// Most negative powers have no such cofactor; this keeps their test from costing a sort
+/// and a division each.
+fn may_divide(square: &Poly, p: &Poly, a: Id, e: i32) -> bool {
+    let Some((lead, _)) = square.leading() else { return true };
+    let mut cofactor = p.0.iter().filter(|(m, _)| m.exponent(a) == e).map(|(m, _)| m.with_exponent(a, 0));
+    if square.len() == 1 { cofactor.all(|m| lead.divides(&m)) } else { cofactor.max().is_none_or(|m| lead.divides(&m)) }
 }
 
 /// The polynomial `Σ qᵢ mᵢ` of unsorted terms: sorted once, like terms collected.
