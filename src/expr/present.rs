@@ -73,10 +73,14 @@ impl Simplifier {
     /// `written` (a combination as the user wrote it) by its canonical form; the first
     /// one written wins.
     fn remember_orientation(&mut self, g: &Graph, written: Vec<(Id, Rational)>) {
+        let (written, _) = primitive_keeping_sign(written);
+        // The canonical form is the same primitive combination in node order, its first
+        // entry positive (what `canonical_primitive` of the sorted combination gives).
         let mut canonical = written.clone();
         canonical.sort_by(|x, y| g.cmp_nodes(x.0, y.0));
-        let (canonical, _) = canonical_primitive(canonical);
-        let (written, _) = primitive_keeping_sign(written);
+        if canonical.first().is_some_and(|(_, q)| q.is_negative()) {
+            canonical.iter_mut().for_each(|(_, q)| *q = q.neg());
+        }
         self.orientations.entry(canonical).or_insert(written);
     }
 
