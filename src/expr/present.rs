@@ -156,8 +156,11 @@ impl Simplifier {
         // Groups by the power of their roots (`x/|d|` before `y/|d|³`, as written by hand),
         // then in reading order of their numerators, then by their roots.
         let power = |f: &Frac| f.den.iter().filter(|(p, _)| p.as_atom().is_some()).map(|(_, e)| *e).sum::<u32>();
-        parts.sort_by(|a, b| {
-            power(&a.0).cmp(&power(&b.0)).then_with(|| cmp_poly_reading(g, &a.0.num, &b.0.num)).then_with(|| {
+        // Each numerator's reading keys are computed once, not at every comparison.
+        let mut keyed: Vec<(Vec<ReadingKey>, (Frac, Id))> =
+            parts.into_iter().map(|part| (reading_keys(g, &part.0.num), part)).collect();
+        keyed.sort_by(|(ka, a), (kb, b)| {
+            power(&a.0).cmp(&power(&b.0)).then_with(|| cmp_keys_reading(g, ka, kb)).then_with(|| {
                 let roots = |f: &Frac| f.den.iter().filter_map(|(p, _)| p.as_atom()).collect::<Vec<_>>();
                 let (ra, rb) = (roots(&a.0), roots(&b.0));
                 ra.iter()
@@ -167,7 +170,7 @@ impl Simplifier {
                     .unwrap_or(ra.len().cmp(&rb.len()))
             })
         });
-        let sum = g.add(parts.into_iter().map(|(_, n)| n).collect())?;
+        let sum = g.add(keyed.into_iter().map(|(_, (_, n))| n).collect())?;
         if single || f.den.is_empty() {
             return Ok(sum);
         }
@@ -225,9 +228,10 @@ impl Simplifier {
         if !q.is_one() {
             den.push(g.num(q.clone()));
         }
-        let mut dens: Vec<&(Poly, u32)> = factors.iter().collect();
-        dens.sort_by(|a, b| cmp_poly_reading(g, &a.0, &b.0));
-        for (factor, e) in dens {
+        let mut dens: Vec<(Vec<ReadingKey>, &(Poly, u32))> =
+            factors.iter().map(|f| (reading_keys(g, &f.0), f)).collect();
+        dens.sort_by(|(ka, _), (kb, _)| cmp_keys_reading(g, ka, kb));
+        for (_, (factor, e)) in dens {
             let node = match factor.as_atom() {
                 Some(a) => a,
                 None => self.build_poly(g, factor)?,
@@ -464,19 +468,23 @@ fn reading_order(g: &Graph, p: &Poly) -> Vec<(Mono, Rational)> {
     keyed.into_iter().map(|(_, t)| t.clone()).collect()
 }
 
-fn cmp_poly_reading(g: &Graph, a: &Poly, b: &Poly) -> Ordering {
-    let (ra, rb) = (reading_order(g, a), reading_order(g, b));
-    for (x, y) in ra.iter().zip(&rb) {
-        let o = cmp_mono_reading(g, &x.0, &y.0);
+/// A polynomial's reading keys in reading order: what two polynomials are compared by
+/// ([`cmp_keys_reading`]), computed once for each polynomial of a list to be sorted.
+fn reading_keys(g: &Graph, p: &Poly) -> Vec<ReadingKey> {
+    let mut keys: Vec<ReadingKey> = p.0.iter().map(|(m, _)| reading_key(g, m)).collect();
+    keys.sort_by(|a, b| cmp_reading_keys(g, a, b));
+    keys
+}
+
+/// Two polynomials in reading order, term by term, then the shorter first.
+fn cmp_keys_reading(g: &Graph, a: &[ReadingKey], b: &[ReadingKey]) -> Ordering {
+    for (x, y) in a.iter().zip(b) {
+        let o = cmp_reading_keys(g, x, y);
         if o != Ordering::Equal {
             return o;
         }
     }
-    ra.len().cmp(&rb.len())
-}
-
-fn cmp_mono_reading(g: &Graph, a: &Mono, b: &Mono) -> Ordering {
-    cmp_reading_keys(g, &reading_key(g, a), &reading_key(g, b))
+    a.len().cmp(&b.len())
 }
 
 /// What the reading order compares: the weighted degree, then the atoms with kinematic
