@@ -47,8 +47,8 @@ fn norm4(q: [f64; 4]) -> f64 {
 /// velocity solve projects onto C = 0 after every substep (measured: 1.1e-13 at most); the
 /// iterative solvers hold the joints to 5 mm, as in 2D (measured: 1.0e-3, 1.5e-3 and
 /// 1.2e-3 for the soft step, PGS and XPBD on the spinning top, whose tip carries its weight
-/// and the centripetal pull at 100 rad/s of spin, 0.4 rad a substep; 1.4e-4 at most on the
-/// joints).
+/// and the centripetal pull at 100 rad/s of spin, 0.4 rad a substep; 4.3e-5 at most on the
+/// joints, which start on their constraints in velocity too).
 fn bound(solver: Solver) -> f64 {
     match solver {
         Solver::Exact => 1e-9,
