@@ -23,8 +23,8 @@
 //! Not for 3D rigid bodies ([`Limit::Rigid3d`]): their step is nonlinear in φ and ω (the
 //! turn, the gyroscopic kick), so central differences leave an error in M, and the neutral
 //! modes of a free turn are defective eigenvalues at 1, which an error ε moves by about √ε:
-//! on the ball joint at rest ρ came out 1 + 2.6e-6 at 10⁻³ Hz, far past the tolerance,
-//! and the Schur iteration failed on most of its matrices. A body spinning about its
+//! on the ball joint's scene ρ came out 1 + 2.6e-6 at 10⁻³ Hz where the Schur iteration
+//! converged at all (allowed a hundred times the sweeps), far past the tolerance. A body spinning about its
 //! intermediate axis is also unstable in itself, which ρ would count against the solver.
 //! The 3D state is still right here (`step_jacobian`), for anyone who looks at M.
 //!
