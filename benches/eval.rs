@@ -377,9 +377,10 @@ fn revolute_by_hand(a: &Rigid2, b: &Rigid2) -> ([[f64; 2]; 2], [f64; 2]) {
     ([l, [-l[0], -l[1]]], [torque_a, torque_b])
 }
 
-/// The generated module's wrench: `dense_solution` (one program of A, b, J, Jʷ and a 2×2
-/// Cholesky), the forces and the torques from one solve; its rows' solve (`solution`, what
-/// `lagrange solve` gives) where Cholesky gives up, which this state never needs.
+/// The generated module's wrench: `dense_solution` (one program of A, b, J, Jʷ and the 2×2
+/// A λ = −b by Cramer's rule under L D Lᵀ's pivot rule), the forces and the torques from one
+/// solve; its rows' solve (`solution`, what `lagrange solve` gives) where that gives up,
+/// which this state never needs.
 #[inline(never)]
 fn revolute_generated(s: &revolute::State) -> ([[f64; 2]; 2], [f64; 2]) {
     match revolute::dense_solution(s) {

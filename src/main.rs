@@ -894,14 +894,7 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         Ok(s) => s,
         Err(code) => return code,
     };
-    // The work-precision sweep and formula accuracy handle rigid bodies, 2D and 3D (3D
-    // torques as world vectors); the velocity-level solver bench 2D ones only: on ball_3d it
-    // ran 10 minutes without an answer for 0.05 s simulated (issue 13, not looked into).
     if args.solvers {
-        if let Err(e) = scenario.system.refuse_rigid_3d("bench --solvers") {
-            eprintln!("error: {}: {e}", args.file.display());
-            return ExitCode::from(1);
-        }
         return cmd_bench_solvers(args, &scenario);
     }
     let max_states = lagrange::precision::accuracy::MAX_STATES;

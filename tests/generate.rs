@@ -1017,6 +1017,59 @@ fn a_redundant_system_gives_solves_minimum_norm_lambda() {
     agrees_with_solve("braced_square", &text, &[at_rest, spinning]);
 }
 
+/// Two equalities (a bead on the unit circle held at x = 1): the 2×2 `dense_solution`
+/// (Cramer's rule, the pivot rule multiplied out) answers at a regular state and hands over
+/// to `solution` where A is singular (the two gradients parallel at (1, 0)), nearly so
+/// (1 − cos² of their angle = 1e-12, below the rows' rank tolerance of 1e-10), or its
+/// numbers leave f64's range (|r| = 1e155: A overflows; 1e-170: A₀₀ underflows); λ and the
+/// forces are `solve`'s at every state either way.
+#[test]
+fn the_two_by_two_dense_solve_hands_over_where_a_is_singular_or_out_of_range() {
+    if common::skip_slow("the_two_by_two_dense_solve_hands_over_where_a_is_singular_or_out_of_range") {
+        return;
+    }
+    let text = "title = \"Bead on a circle held at x = 1\"\ndimension = 2\n\n[parameters]\nm = 1.5\n\n\
+                [[bodies]]\nname = \"p\"\nposition = \"r\"\nvelocity = \"v\"\nacceleration = \"a\"\nmass = \"m\"\nforce = \"F\"\n\n\
+                [[constraints]]\nname = \"circle\"\nexpr = \"dot(r, r) = 1\"\n\n[[constraints]]\nname = \"line\"\nexpr = \"r.x = 1\"\n";
+    let g = [0.0, -9.81];
+    let states: Vec<(bool, Vec<BodyState>)> = vec![
+        (true, vec![([0.8, 0.6], [0.3, -0.4], g)]),
+        (false, vec![([1.0, 0.0], [0.0, 1.0], g)]),
+        (false, vec![([1.0, 1e-6], [0.0, 1.0], g)]),
+        (false, vec![([0.6e155, 0.8e155], [0.8e155, -0.6e155], [0.0, -9.81e155])]),
+        (false, vec![([0.6e-170, 0.8e-170], [0.8e-170, -0.6e-170], [0.0, -9.81e-170])]),
+    ];
+    let l = load(text).expect("loads");
+    let m = module(&l, &Options::default()).expect("generates");
+    assert!(m.code.contains("pub fn dense_solution"), "two equalities take the dense path");
+    let d = derive(&l.system).expect("derives");
+    let (dir, mut main) = harness_start("generate_dense_2x2", &m.code);
+    let envs: Vec<Env> = states.iter().map(|(_, s)| state_of(&l, s)).collect();
+    for env in &envs {
+        let _ = writeln!(main, "    let s = {};", state_literal(&l, &m, env));
+        main.push_str(
+            "    show(&[dense_solution(&s).is_some() as u8 as f64]);\n    show(&lambda(&s));\n    show(&forces(&s).concat());\n",
+        );
+    }
+    main.push_str("}\n");
+    let stdout = compile_and_run(&dir, &main);
+    let mut lines = stdout.lines().map(numbers);
+    for ((dense, state), env) in states.iter().zip(&envs) {
+        let mut next = || lines.next().expect("one line per output");
+        let (flag, lambda, forces) = (next(), next(), next());
+        assert_eq!(flag, [f64::from(u8::from(*dense))], "at {state:?}: dense_solution answers: {dense}");
+        let want = solved(&l, &d, env);
+        let wanted_forces: Vec<f64> = want.constraint_force[..1].iter().flat_map(|f| f[..2].to_vec()).collect();
+        for (what, got, want) in [("lambda", &lambda, &want.lambda), ("forces", &forces, &wanted_forces)] {
+            let scale = want.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+            assert_eq!(got.len(), want.len(), "{what}");
+            for (x, y) in got.iter().zip(want) {
+                assert!((x - y).abs() <= 1e-9 * scale, "at {state:?}: {what} {got:?}, solve gives {want:?}");
+            }
+        }
+    }
+}
+
 /// A 2 000-link chain: its `State` holds the bodies' symbols in role arrays (8 000 named
 /// fields under `derive(PartialEq)` overflowed rustc's stack), the module compiles with
 /// warnings denied, unoptimised, and its forces on a 2 MiB thread agree with `solve` at the

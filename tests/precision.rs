@@ -85,3 +85,39 @@ fn a_sweep_that_cannot_run_is_refused_by_cause() {
     sweep.integrators.clear();
     assert_eq!(sweep.validate(), Err(SweepError::Empty));
 }
+
+/// A rigid body on a fixed axle through its centre, in 2D (a constant torque) and in 3D
+/// (spinning torque-free about no principal axis): its position never moves, so only its
+/// orientation tells the methods apart. The final-state error counts the turn from the
+/// reference orientation: every Euler run is off by more than 1e-6 rad and less at each
+/// smaller step (it counted positions only, and was 0 for every run).
+#[test]
+fn the_final_state_error_counts_orientations() {
+    let body = |dim: usize| {
+        let inertia = if dim == 2 { "0.5" } else { "[1.0, 2.0, 3.0]" };
+        let (zero, orientation, omega) =
+            if dim == 2 { ("[0, 0]", "0.0", "2.0") } else { ("[0, 0, 0]", "[1.0, 0.0, 0.0, 0.0]", "[1.0, 2.0, 0.5]") };
+        let torque = if dim == 2 { "\nforces = { T = \"0.3\" }" } else { "" };
+        format!(
+            "title = \"Axle\"\ndimension = {dim}\n\n[[bodies]]\nname = \"wheel\"\nposition = \"x\"\nvelocity = \"v\"\n\
+             acceleration = \"a\"\nmass = \"m\"\nforce = \"F\"\norientation = \"q\"\nangular_velocity = \"w\"\n\
+             angular_acceleration = \"alpha\"\ninertia = \"I\"\ntorque = \"T\"\n\n[[constraints]]\nname = \"axle\"\n\
+             expr = \"x = {zero}\"\n\n[scene]\ninitial = {{ x = {zero}, v = {zero}, m = 1.0, I = {inertia}, q = {orientation}, w = {omega} }}{torque}\n"
+        )
+    };
+    for dim in [2, 3] {
+        let text = body(dim);
+        let loaded = lagrange::model::file::load(&text).unwrap_or_else(|e| panic!("{e:?}\n{text}"));
+        let s = lagrange::scenario::Scenario::new(loaded, &[]).unwrap_or_else(|e| panic!("{e:?}"));
+        let wp = work_precision(&s, &Sweep::new(1e-2, 0.2)).expect("sweep");
+        let euler: Vec<f64> = wp
+            .rows
+            .iter()
+            .filter(|r| r.integrator == "euler" && r.stabilize == "projection")
+            .map(|r| r.final_error.expect("a final error"))
+            .collect();
+        assert_eq!(euler.len(), 4, "{dim}D");
+        assert!(euler.iter().all(|e| *e > 1e-6), "{dim}D: {euler:?}");
+        assert!(euler.windows(2).all(|w| w[1] < w[0]), "{dim}D: the error falls with the step: {euler:?}");
+    }
+}

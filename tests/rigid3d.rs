@@ -11,8 +11,9 @@
 //!   against central differences of C along a trajectory with an exact rotation
 //!   q(t) = exp(½ n φ(t)) q₀ about a random fixed axis n, φ = w t + ½ a t² (so ω = n φ̇,
 //!   α = n a); and Ċ/κ = Σ J·u over the rows' slots.
-//! - Refusals naming the body: a non-unit quaternion, `simulate --solver` (the velocity
-//!   level), `generate --solver`, `bench --solvers`.
+//! - Refusals naming the body: a non-unit quaternion, `generate --solver`; `bench --solvers`
+//!   runs them (without a stability limit, saying so).
+//! - Every scene of the joint library and the rigid-body files starts on its constraints.
 //! - `bench` (the work-precision sweep and formula accuracy) on the ball joint and the
 //!   spinning top: every run ok, each force and world torque at f64's precision against the
 //!   double-double reference.
@@ -374,14 +375,54 @@ fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
 
 #[test]
 fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
-    for args in [
-        &["bench", "constraints/joints/ball_3d.toml", "--solvers"][..],
-        &["generate", "constraints/joints/ball_3d.toml", "--solver", "soft-step"][..],
-    ] {
-        let (code, _, err) = lagrange(args);
-        assert_eq!(code, Some(1), "{args:?}: {err}");
-        assert!(err.contains("body `a`"), "{args:?}: {err}");
+    let args = ["generate", "constraints/joints/ball_3d.toml", "--solver", "soft-step"];
+    let (code, _, err) = lagrange(&args);
+    assert_eq!(code, Some(1), "{args:?}: {err}");
+    assert!(err.contains("body `a`"), "{args:?}: {err}");
+}
+
+/// `bench --solvers` on 3D rigid bodies (it hung for over ten minutes in the stability
+/// analysis's eigenvalues): every solver runs on the ball joint, the hinge and the spinning
+/// top, and the stable hertz is not computed, saying why, in text and JSON.
+#[test]
+fn the_solver_bench_runs_3d_bodies_without_a_stability_limit() {
+    for file in
+        ["constraints/joints/ball_3d.toml", "constraints/joints/hinge_3d.toml", "constraints/rigid/spinning_top.toml"]
+    {
+        let (code, out, err) = lagrange(&["bench", file, "--solvers", "--duration", "0.02", "--format", "json"]);
+        assert_eq!(code, Some(0), "{file}: {err}");
+        let v: serde_json::Value = serde_json::from_str(&out).expect("JSON");
+        let runs = v["runs"].as_array().expect("runs");
+        assert!(runs.len() >= 16 && runs.iter().all(|r| r["failure"].is_null()), "{file}: {runs:?}");
+        assert_eq!(v["stable_hertz"].as_array().map(Vec::len), Some(0), "{file}");
+        assert_eq!(v["stable_hertz_not_computed"], "3D rigid bodies", "{file}");
     }
+    let (code, out, err) = lagrange(&["bench", "constraints/joints/ball_3d.toml", "--solvers", "--duration", "0.02"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(out.contains("largest stable hertz: not computed (3D rigid bodies"), "{out}");
+}
+
+/// The scenes of the joint library and of the rigid-body files start on their constraints,
+/// in position and velocity: a start off them shows in every method's max |Ċ| and energy
+/// (the ball and distance joints started turning at ω = 1 with their centres at rest, their
+/// anchors apart at 0.8 m/s: `bench` gave every method max |Ċ| = 0.8).
+#[test]
+fn every_joint_and_rigid_scene_starts_on_its_constraints() {
+    let mut scenes = 0;
+    for dir in ["constraints/joints", "constraints/rigid"] {
+        let mut files: Vec<_> = std::fs::read_dir(dir).expect("dir").map(|e| e.expect("entry").path()).collect();
+        files.sort();
+        for path in files.iter().filter(|p| p.extension().is_some_and(|e| e == "toml")) {
+            let text = std::fs::read_to_string(path).expect("file");
+            let Ok(scenario) = lagrange::scenario::Scenario::new(load(&text).expect("valid file"), &[]) else {
+                continue;
+            };
+            scenes += 1;
+            let off = scenario.initial_offsets();
+            assert!(off.is_empty(), "{}: starts off {off:?}", path.display());
+        }
+    }
+    assert!(scenes >= 10, "only {scenes} scenes");
 }
 
 /// 3D torque expectations are world vectors compared component-wise: the ball joint's

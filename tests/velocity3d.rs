@@ -47,8 +47,8 @@ fn norm4(q: [f64; 4]) -> f64 {
 /// velocity solve projects onto C = 0 after every substep (measured: 1.1e-13 at most); the
 /// iterative solvers hold the joints to 5 mm, as in 2D (measured: 1.0e-3, 1.5e-3 and
 /// 1.2e-3 for the soft step, PGS and XPBD on the spinning top, whose tip carries its weight
-/// and the centripetal pull at 100 rad/s of spin, 0.4 rad a substep; 1.4e-4 at most on the
-/// joints).
+/// and the centripetal pull at 100 rad/s of spin, 0.4 rad a substep; 4.3e-5 at most on the
+/// joints, which start on their constraints in velocity too).
 fn bound(solver: Solver) -> f64 {
     match solver {
         Solver::Exact => 1e-9,
@@ -324,5 +324,50 @@ fn the_command_line_steps_a_3d_file_with_every_solver() {
         assert!((q.iter().map(|x| x * x).sum::<f64>().sqrt() - 1.0).abs() < 1e-12, "{solver}: |q1| = {q:?}");
         // The links turned about the hinge's z axis only (w1 = z at the start).
         assert!(q[1].abs() < 1e-9 && q[2].abs() < 1e-9 && q[3].abs() > 0.1, "{solver}: q1 = {q:?}");
+    }
+}
+
+/// The stability analysis's linearisation of a 3D step (`stability::step_jacobian`): the
+/// state holds a 3D body's rotation vector φ (from the orientation at the call) and ω, three
+/// numbers each, and the dynamics' orientations are as they were after it (every step folds
+/// φ into them; the columns were taken at drifting orientations, and φ⁺ was the last
+/// substep's turn only). A body at rest on an axle through its centre, turned, turns freely
+/// by dt ω: ∂φ⁺/∂φ = E, ∂φ⁺/∂ω = dt E, ∂ω⁺/∂ω = E, ∂ω⁺/∂φ = 0.
+#[test]
+fn the_step_jacobian_of_a_3d_body_is_its_free_turn() {
+    use lagrange::numeric::dynamics::Dynamics;
+    use lagrange::numeric::simulate::initial_state;
+    use lagrange::numeric::velocity::stability;
+    let q = rotation::normalise([0.9, 0.2, -0.3, 0.1]);
+    let text = "title = \"Axle\"\ndimension = 3\n\n[[bodies]]\nname = \"wheel\"\nposition = \"x\"\nvelocity = \"v\"\n\
+                acceleration = \"a\"\nmass = \"m\"\nforce = \"F\"\norientation = \"q\"\nangular_velocity = \"w\"\n\
+                angular_acceleration = \"alpha\"\ninertia = \"I\"\ntorque = \"T\"\n\n[[constraints]]\nname = \"axle\"\n\
+                expr = \"x = [0, 0, 0]\"\n\n[scene]\ninitial = { x = [0, 0, 0], v = [0, 0, 0], m = 1.0, I = [1.0, 2.0, 3.0], \
+                w = [0, 0, 0] }\n";
+    let s = scenario_of(text, &[("q", &q)]);
+    let dt = 1.0 / 60.0;
+    let settings = Settings::new(Solver::SoftStep, dt, 1.0);
+    // (x, φ) and (v, ω), three numbers each, and the axle's three warm-start impulses.
+    assert_eq!(stability::state_len(&s.system, &settings), 15);
+    let mut dynamics = Dynamics::new(&s.system, s.program.clone(), s.env.clone());
+    let before = dynamics.orientations().to_vec();
+    let (q0, v0, t) = initial_state(&s.system, &s.env);
+    let m = stability::step_jacobian(&mut dynamics, t, &q0, &v0, &[0.0; 3], &settings).expect("rows");
+    assert_eq!(m.shape(), (15, 15));
+    assert_eq!(dynamics.orientations(), &before[..], "the orientation is put back");
+    let (phi, omega) = (3, 9);
+    for i in 0..3 {
+        for j in 0..3 {
+            let e = if i == j { 1.0 } else { 0.0 };
+            for (what, row, col, want) in [
+                ("∂φ⁺/∂φ", phi, phi, e),
+                ("∂φ⁺/∂ω", phi, omega, dt * e),
+                ("∂ω⁺/∂ω", omega, omega, e),
+                ("∂ω⁺/∂φ", omega, phi, 0.0),
+            ] {
+                let got = m[(row + i, col + j)];
+                assert!((got - want).abs() < 1e-7, "{what} [{i}][{j}] = {got}, want {want}");
+            }
+        }
     }
 }

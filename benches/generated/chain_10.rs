@@ -707,44 +707,26 @@ pub fn dense_solution(s: &State) -> Option<([f64; 10], [[f64; 2]; 10])> {
     a[9][9] = x63 * (x26 + x26);
     let l = solve_dense(a, [-(s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1] + x63 * (s.r1[0] * s.F1[0] + s.r1[1] * s.F1[1])), -(x27 * x27 + x28 * x28 + (x63 * (s.F1[0] * x29 + s.F1[1] * x30) + x63 * (s.F2[0] * x0 + s.F2[1] * x1))), -(x31 * x31 + x32 * x32 + (x63 * (s.F2[0] * x33 + s.F2[1] * x34) + x63 * (s.F3[0] * x3 + s.F3[1] * x4))), -(x35 * x35 + x36 * x36 + (x63 * (s.F3[0] * x37 + s.F3[1] * x38) + x63 * (s.F4[0] * x6 + s.F4[1] * x7))), -(x39 * x39 + x40 * x40 + (x63 * (s.F4[0] * x41 + s.F4[1] * x42) + x63 * (s.F5[0] * x9 + s.F5[1] * x10))), -(x43 * x43 + x44 * x44 + (x63 * (s.F5[0] * x45 + s.F5[1] * x46) + x63 * (s.F6[0] * x12 + s.F6[1] * x13))), -(x47 * x47 + x48 * x48 + (x63 * (s.F6[0] * x49 + s.F6[1] * x50) + x63 * (s.F7[0] * x15 + s.F7[1] * x16))), -(x51 * x51 + x52 * x52 + (x63 * (s.F7[0] * x53 + s.F7[1] * x54) + x63 * (s.F8[0] * x18 + s.F8[1] * x19))), -(x55 * x55 + x56 * x56 + (x63 * (s.F8[0] * x57 + s.F8[1] * x58) + x63 * (s.F9[0] * x21 + s.F9[1] * x22))), -(x59 * x59 + x60 * x60 + (x63 * (s.F9[0] * x61 + s.F9[1] * x62) + x63 * (s.F10[0] * x24 + s.F10[1] * x25)))])?;
     let mut f = [[0.0; 2]; 10];
-    f[0][0] += l[0] * s.r1[0];
-    f[0][1] += l[0] * s.r1[1];
-    f[0][0] += l[1] * x29;
-    f[0][1] += l[1] * x30;
-    f[1][0] += l[1] * x0;
-    f[1][1] += l[1] * x1;
-    f[1][0] += l[2] * x33;
-    f[1][1] += l[2] * x34;
-    f[2][0] += l[2] * x3;
-    f[2][1] += l[2] * x4;
-    f[2][0] += l[3] * x37;
-    f[2][1] += l[3] * x38;
-    f[3][0] += l[3] * x6;
-    f[3][1] += l[3] * x7;
-    f[3][0] += l[4] * x41;
-    f[3][1] += l[4] * x42;
-    f[4][0] += l[4] * x9;
-    f[4][1] += l[4] * x10;
-    f[4][0] += l[5] * x45;
-    f[4][1] += l[5] * x46;
-    f[5][0] += l[5] * x12;
-    f[5][1] += l[5] * x13;
-    f[5][0] += l[6] * x49;
-    f[5][1] += l[6] * x50;
-    f[6][0] += l[6] * x15;
-    f[6][1] += l[6] * x16;
-    f[6][0] += l[7] * x53;
-    f[6][1] += l[7] * x54;
-    f[7][0] += l[7] * x18;
-    f[7][1] += l[7] * x19;
-    f[7][0] += l[8] * x57;
-    f[7][1] += l[8] * x58;
-    f[8][0] += l[8] * x21;
-    f[8][1] += l[8] * x22;
-    f[8][0] += l[9] * x61;
-    f[8][1] += l[9] * x62;
-    f[9][0] += l[9] * x24;
-    f[9][1] += l[9] * x25;
+    f[0][0] = l[0] * s.r1[0] + l[1] * x29;
+    f[0][1] = l[0] * s.r1[1] + l[1] * x30;
+    f[1][0] = l[1] * x0 + l[2] * x33;
+    f[1][1] = l[1] * x1 + l[2] * x34;
+    f[2][0] = l[2] * x3 + l[3] * x37;
+    f[2][1] = l[2] * x4 + l[3] * x38;
+    f[3][0] = l[3] * x6 + l[4] * x41;
+    f[3][1] = l[3] * x7 + l[4] * x42;
+    f[4][0] = l[4] * x9 + l[5] * x45;
+    f[4][1] = l[4] * x10 + l[5] * x46;
+    f[5][0] = l[5] * x12 + l[6] * x49;
+    f[5][1] = l[5] * x13 + l[6] * x50;
+    f[6][0] = l[6] * x15 + l[7] * x53;
+    f[6][1] = l[6] * x16 + l[7] * x54;
+    f[7][0] = l[7] * x18 + l[8] * x57;
+    f[7][1] = l[7] * x19 + l[8] * x58;
+    f[8][0] = l[8] * x21 + l[9] * x61;
+    f[8][1] = l[8] * x22 + l[9] * x62;
+    f[9][0] = l[9] * x24;
+    f[9][1] = l[9] * x25;
     Some((l, f))
 }
 
@@ -823,8 +805,32 @@ pub fn force_p10(s: &State) -> [f64; 2] {
 /// is needed: a diagonal entry that is not a positive normal number (its numbers out of f64's
 /// range), a pivot dᵢ at or below 1e-10 of its diagonal entry (the rows' rank tolerance on the
 /// unit-diagonal Ã: A singular, constraints redundant), or an answer that is not finite.
+///
+/// A 2×2 `a` (a 2D pin, two rods) takes the same factorisation multiplied out: d₀ = a₀₀ and
+/// d₁ = det/a₀₀ with det = a₀₀a₁₁ − a₁₀², so the pivot rule d₁ > 1e-10 a₁₁ reads
+/// det > 1e-10 a₀₀a₁₁, and x = adj(A) b / det (Cramer's rule) costs one division where the
+/// loops chain three. It also gives up where a₀₀a₁₁ leaves f64's normal range (overflowing,
+/// the pivot rule compares ∞ with ∞), which the loops need not: a hand-over, never a wrong
+/// answer.
 #[allow(dead_code, clippy::needless_range_loop)]
 fn solve_dense<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> Option<[f64; K]> {
+    if K == 2 {
+        let (p, q, r) = (a[0][0], a[1][1], a[1][0]);
+        let pq = p * q;
+        let det = pq - r * r;
+        let x = [(q * b[0] - r * b[1]) / det, (p * b[1] - r * b[0]) / det];
+        // Every check at once (`&`, one branch): a₀₀ and a₁₁ positive normal numbers (+∞ fails
+        // the det check), a₀₀a₁₁ normal, the pivot rule (false for a NaN), x finite.
+        let solved = (p >= f64::MIN_POSITIVE)
+            & (q >= f64::MIN_POSITIVE)
+            & (pq >= f64::MIN_POSITIVE)
+            & (det > 1e-10 * pq)
+            & x[0].is_finite()
+            & x[1].is_finite();
+        b[0] = x[0];
+        b[1] = x[1];
+        return if solved { Some(b) } else { None };
+    }
     for i in 0..K {
         let diagonal = a[i][i];
         if !(diagonal.is_normal() && diagonal > 0.0) {

@@ -118,21 +118,19 @@ pub fn constraint_rates(s: &State) -> [f64; 2] {
 /// - A[0][1] = (I1 sB.x sB.y sin(th2)² − I1 sB.x² sin(th2) cos(th2) + I1 sB.y² sin(th2) cos(th2) − I1 sB.x sB.y cos(th2)² + I2 sA.x sA.y sin(th1)² − I2 sA.x² sin(th1) cos(th1) + I2 sA.y² sin(th1) cos(th1) − I2 sA.x sA.y cos(th1)²)/(I1 I2)
 /// - A[1][1] = (I1 m1 m2 sB.y² sin(th2)² − 2 I1 m1 m2 sB.x sB.y sin(th2) cos(th2) + I1 m1 m2 sB.x² cos(th2)² + m1 I2 m2 sA.y² sin(th1)² − 2 m1 I2 m2 sA.x sA.y sin(th1) cos(th1) + m1 I2 m2 sA.x² cos(th1)² + I1 m1 I2 + I1 I2 m2)/(I1 I2 m1 m2)
 pub fn a_matrix(s: &State) -> [[f64; 2]; 2] {
-    let x0 = 1.0 / s.m1;
-    let x1 = 1.0 / s.m2;
-    let x2 = s.th1.cos();
-    let x3 = s.th1.sin();
-    let x4 = s.th2.cos();
-    let x5 = s.th2.sin();
-    let x6 = s.sA[0] * x3 + s.sA[1] * x2;
-    let x7 = s.sB[0] * x5 + s.sB[1] * x4;
-    let x8 = s.sA[0] * x2 - s.sA[1] * x3;
-    let x9 = s.sB[1] * x5 - s.sB[0] * x4;
-    let x10 = 1.0 / s.I1;
-    let x11 = 1.0 / s.I2;
-    let x12 = x0 + x1;
-    let x13 = x11 * (x7 * x9) + (x0 * 0.0 + x1 * -0.0 - x10 * (x6 * x8));
-    [[x7 * x7 * x11 + (x6 * x6 * x10 + x12), x13], [x13, x11 * (x9 * x9) + (x10 * (x8 * x8) + x12)]]
+    let x0 = s.th1.cos();
+    let x1 = s.th1.sin();
+    let x2 = s.th2.cos();
+    let x3 = s.th2.sin();
+    let x4 = s.sA[0] * x1 + s.sA[1] * x0;
+    let x5 = s.sB[0] * x3 + s.sB[1] * x2;
+    let x6 = s.sA[0] * x0 - s.sA[1] * x1;
+    let x7 = s.sB[1] * x3 - s.sB[0] * x2;
+    let x8 = 1.0 / s.I1;
+    let x9 = 1.0 / s.I2;
+    let x10 = 1.0 / s.m1 + 1.0 / s.m2;
+    let x11 = x9 * (x5 * x7) - x8 * (x4 * x6);
+    [[x5 * x5 * x9 + (x4 * x4 * x8 + x10), x11], [x11, x9 * (x7 * x7) + (x8 * (x6 * x6) + x10)]]
 }
 
 /// b of A λ + b = 0: bₖ = Σᵢ Jₖᵢ·Fᵢ / mᵢ + cₖ.
@@ -365,24 +363,18 @@ pub fn dense_solution(s: &State) -> Option<([f64; 2], [[f64; 2]; 2], [f64; 2])> 
     let x18 = x0 + x1;
     let mut a = [[0.0; 2]; 2];
     a[0][0] = x13 * x13 * x17 + (x12 * x12 * x16 + x18);
-    a[0][1] = x17 * (x13 * x15) + (x0 * 0.0 + x1 * -0.0 - x16 * (x12 * x14));
+    a[0][1] = x17 * (x13 * x15) - x16 * (x12 * x14);
     a[1][0] = a[0][1];
     a[1][1] = x17 * (x15 * x15) + (x16 * (x14 * x14) + x18);
-    let l = solve_dense(a, [-(x4 * x11 + (x3 * x7 - x2 * x8 - x5 * x10) + (x17 * (s.T2 * x13) + (x0 * (s.F1[0] + s.F1[1] * 0.0) + x1 * (s.F2[1] * 0.0 - s.F2[0]) - x16 * (s.T1 * x12)))), -(x4 * x10 - (x3 * x8 + x2 * x7 - x5 * x11) + (x17 * (s.T2 * x15) + (x16 * (s.T1 * x14) + (x0 * (s.F1[1] + s.F1[0] * 0.0) + x1 * (s.F2[0] * 0.0 - s.F2[1])))))])?;
+    let l = solve_dense(a, [-(x4 * x11 + (x3 * x7 - x2 * x8 - x5 * x10) + (x17 * (s.T2 * x13) + (s.F1[0] * x0 - s.F2[0] * x1 - x16 * (s.T1 * x12)))), -(x4 * x10 - (x3 * x8 + x2 * x7 - x5 * x11) + (x17 * (s.T2 * x15) + (x16 * (s.T1 * x14) + (s.F1[1] * x0 - s.F2[1] * x1))))])?;
     let mut f = [[0.0; 2]; 2];
-    f[0][0] += l[0] * 1.0;
-    f[0][1] += l[0] * 0.0;
-    f[1][0] += l[0] * (-1.0);
-    f[1][1] += l[0] * 0.0;
-    f[0][0] += l[1] * 0.0;
-    f[0][1] += l[1] * 1.0;
-    f[1][0] += l[1] * 0.0;
-    f[1][1] += l[1] * (-1.0);
+    f[0][0] = l[0];
+    f[0][1] = l[1];
+    f[1][0] = -l[0];
+    f[1][1] = -l[1];
     let mut t = [0.0; 2];
-    t[0] += l[0] * (-x12);
-    t[1] += l[0] * x13;
-    t[0] += l[1] * x14;
-    t[1] += l[1] * x15;
+    t[0] = l[0] * (-x12) + l[1] * x14;
+    t[1] = l[0] * x13 + l[1] * x15;
     Some((l, f, t))
 }
 
@@ -440,8 +432,32 @@ pub fn force_b(s: &State) -> [f64; 2] {
 /// is needed: a diagonal entry that is not a positive normal number (its numbers out of f64's
 /// range), a pivot dᵢ at or below 1e-10 of its diagonal entry (the rows' rank tolerance on the
 /// unit-diagonal Ã: A singular, constraints redundant), or an answer that is not finite.
+///
+/// A 2×2 `a` (a 2D pin, two rods) takes the same factorisation multiplied out: d₀ = a₀₀ and
+/// d₁ = det/a₀₀ with det = a₀₀a₁₁ − a₁₀², so the pivot rule d₁ > 1e-10 a₁₁ reads
+/// det > 1e-10 a₀₀a₁₁, and x = adj(A) b / det (Cramer's rule) costs one division where the
+/// loops chain three. It also gives up where a₀₀a₁₁ leaves f64's normal range (overflowing,
+/// the pivot rule compares ∞ with ∞), which the loops need not: a hand-over, never a wrong
+/// answer.
 #[allow(dead_code, clippy::needless_range_loop)]
 fn solve_dense<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> Option<[f64; K]> {
+    if K == 2 {
+        let (p, q, r) = (a[0][0], a[1][1], a[1][0]);
+        let pq = p * q;
+        let det = pq - r * r;
+        let x = [(q * b[0] - r * b[1]) / det, (p * b[1] - r * b[0]) / det];
+        // Every check at once (`&`, one branch): a₀₀ and a₁₁ positive normal numbers (+∞ fails
+        // the det check), a₀₀a₁₁ normal, the pivot rule (false for a NaN), x finite.
+        let solved = (p >= f64::MIN_POSITIVE)
+            & (q >= f64::MIN_POSITIVE)
+            & (pq >= f64::MIN_POSITIVE)
+            & (det > 1e-10 * pq)
+            & x[0].is_finite()
+            & x[1].is_finite();
+        b[0] = x[0];
+        b[1] = x[1];
+        return if solved { Some(b) } else { None };
+    }
     for i in 0..K {
         let diagonal = a[i][i];
         if !(diagonal.is_normal() && diagonal > 0.0) {

@@ -14,7 +14,7 @@
 use super::c::{Parts, function, list, paren};
 use super::layout::{JStorage, Lambda};
 use super::names::comment_text;
-use super::rust::{Ctx, GenerateError, formula, per_body_fns};
+use super::rust::{Ctx, GenerateError, formula, lambda_sum, per_body_fns};
 use crate::expr::Id;
 use std::fmt::Write;
 
@@ -662,15 +662,28 @@ fn dense(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateE
     lines.push(format!(
         "for (int i = 0; i < {n1}; i++) {{\n        for (int d = 0; d < DIM; d++) {{\n            f[i][d] = 0.0;\n        }}\n    }}"
     ));
+    // Each force and torque entry as one sum over its rows, the constant 0 entries left out.
+    let mut force: Vec<Vec<(usize, String)>> = vec![Vec::new(); p.layout.bodies * dim];
     for &(r, body, _) in &blocks {
         for d in 0..dim {
-            lines.push(format!("f[{body}][{d}] += l[{r}] * {};", paren(&next.next().unwrap_or_default())));
+            force[body * dim + d].push((r, next.next().unwrap_or_default()));
+        }
+    }
+    for (i, terms) in force.into_iter().enumerate() {
+        if let Some(sum) = lambda_sum(terms, paren) {
+            lines.push(format!("f[{}][{}] = {sum};", i / dim, i % dim));
         }
     }
     if rigid > 0 {
         lines.push("for (int r = 0; r < RIGID; r++) {\n        t[r] = 0.0;\n    }".into());
+        let mut torque: Vec<Vec<(usize, String)>> = vec![Vec::new(); rigid];
         for &(r, slot, _) in &angular {
-            lines.push(format!("t[{slot}] += l[{r}] * {};", paren(&next.next().unwrap_or_default())));
+            torque[slot].push((r, next.next().unwrap_or_default()));
+        }
+        for (slot, terms) in torque.into_iter().enumerate() {
+            if let Some(sum) = lambda_sum(terms, paren) {
+                lines.push(format!("t[{slot}] = {sum};"));
+            }
         }
     }
     lines.push("return 1;".into());

@@ -2002,16 +2002,29 @@ impl Ctx<'_> {
         }
         let b: Vec<String> = (0..k).map(|_| format!("-{}", operand(&next.next().unwrap_or_default()))).collect();
         lines.push(format!("let l = solve_dense(a, {})?;", array(&b)));
-        lines.push(format!("let mut f = [[0.0; {dim}]; {n}];"));
+        // Each force and torque entry as one sum over its rows, the constant 0 entries left out.
+        let mut force: Vec<Vec<(usize, String)>> = vec![Vec::new(); n * dim];
         for &(r, body, _) in &blocks {
             for d in 0..dim {
-                lines.push(format!("f[{body}][{d}] += l[{r}] * {};", operand(&next.next().unwrap_or_default())));
+                force[body * dim + d].push((r, next.next().unwrap_or_default()));
+            }
+        }
+        lines.push(format!("let mut f = [[0.0; {dim}]; {n}];"));
+        for (i, terms) in force.into_iter().enumerate() {
+            if let Some(sum) = lambda_sum(terms, operand) {
+                lines.push(format!("f[{}][{}] = {sum};", i / dim, i % dim));
             }
         }
         let result = if rigid > 0 {
-            lines.push(format!("let mut t = [0.0; {rigid}];"));
+            let mut torque: Vec<Vec<(usize, String)>> = vec![Vec::new(); rigid];
             for &(r, slot, _) in &angular {
-                lines.push(format!("t[{slot}] += l[{r}] * {};", operand(&next.next().unwrap_or_default())));
+                torque[slot].push((r, next.next().unwrap_or_default()));
+            }
+            lines.push(format!("let mut t = [0.0; {rigid}];"));
+            for (slot, terms) in torque.into_iter().enumerate() {
+                if let Some(sum) = lambda_sum(terms, operand) {
+                    lines.push(format!("t[{slot}] = {sum};"));
+                }
             }
             "Some((l, f, t))"
         } else {
@@ -2060,6 +2073,33 @@ impl Ctx<'_> {
         }
         Ok(())
     }
+}
+
+/// Σₖ λₖ eₖ, one entry of the forces or torques of `dense_solution` in either language, from
+/// its rows' (k, eₖ) in row order: `l[k]` where eₖ is the constant 1, `-l[k]` (`- l[k]` after
+/// the first term) where it is −1, `l[k] * eₖ` otherwise (`operand` parenthesises eₖ), and
+/// nothing where it is the constant 0; `None` where every eₖ is. Exact but for the sign of a
+/// zero: λ is finite by then, so a left-out λₖ·0 is ±0, as is the 0 the sum no longer starts
+/// from, and x·1 = x, x·(−1) = −x, y + x·(−1) = y − x bit for bit.
+pub(super) fn lambda_sum(terms: Vec<(usize, String)>, operand: fn(&str) -> String) -> Option<String> {
+    let mut sum = String::new();
+    for (k, e) in terms {
+        let term = match e.as_str() {
+            "0.0" | "-0.0" => continue,
+            "1.0" => format!("l[{k}]"),
+            "-1.0" if sum.is_empty() => format!("-l[{k}]"),
+            "-1.0" => {
+                sum.push_str(&format!(" - l[{k}]"));
+                continue;
+            }
+            _ => format!("l[{k}] * {}", operand(&e)),
+        };
+        if !sum.is_empty() {
+            sum.push_str(" + ");
+        }
+        sum.push_str(&term);
+    }
+    if sum.is_empty() { None } else { Some(sum) }
 }
 
 /// The names of `force_<body>` (every body) and `torque_<body>` (every rigid body), clear of
@@ -2162,7 +2202,7 @@ fn assembled_a(
             // Signs out of the dot: (−u)·w = −(u·w) exactly, and u is then shared with the
             // other constraint on this body (a chain's link k − 1 and k both see r₍ₖ₋₁₎ − rₖ).
             let ((nk, uk), (nj, uj)) = (split_sign(g, jk), split_sign(g, jj));
-            let dot = g.dot(uk, uj)?;
+            let Some(dot) = sparse_dot(g, uk, uj)? else { continue };
             let dot = if nk != nj { g.neg(dot) } else { dot };
             match by_mass.iter_mut().find(|e| e.0 == masses[body]) {
                 Some(e) => e.1.push(dot),
@@ -2189,6 +2229,9 @@ fn assembled_a(
                 }
                 continue;
             }
+            if g.is_zero(wk) || g.is_zero(wj) {
+                continue;
+            }
             let inv = g.powi(inertia, -1)?;
             terms.push(g.mul(vec![wk, wj, inv])?);
         }
@@ -2211,7 +2254,7 @@ fn assembled_b(
     for k in 0..f.bias.len() {
         let mut terms = Vec::new();
         for &(body, j) in &f.jacobian[k] {
-            let dot = g.dot(j, system.bodies[body].nodes.force)?;
+            let Some(dot) = sparse_dot(g, j, system.bodies[body].nodes.force)? else { continue };
             let inv = g.powi(masses[body], -1)?;
             terms.push(g.mul(vec![dot, inv])?);
         }
@@ -2226,6 +2269,9 @@ fn assembled_b(
                 }
                 continue;
             }
+            if g.is_zero(w) {
+                continue;
+            }
             let inv = g.powi(inertia, -1)?;
             terms.push(g.mul(vec![w, rigid.nodes.torque, inv])?);
         }
@@ -2233,6 +2279,37 @@ fn assembled_b(
         out.push(g.add(terms)?);
     }
     Ok(out)
+}
+
+/// u·w over the components that are not structurally 0, where u or w is a vector literal
+/// with a 0 entry (a unit axis of a vector constraint): a 0 entry lowers to the constant 0,
+/// and x·0 stays in the code (IEEE does not fold it: x may be ∞), so `0.0 * x` terms
+/// survived in A and b. `None` where every component is 0 (orthogonal unit axes); u·w as
+/// it was otherwise. Only the value at a non-finite x changes: that x shows in another term
+/// or the result does not depend on it.
+fn sparse_dot(g: &mut Graph, u: Id, w: Id) -> Result<Option<Id>, TypeError> {
+    let entries = |g: &Graph, v: Id| match g.node(v) {
+        crate::expr::Node::Vector(xs) if xs.len() == g.dim() => Some(xs.to_vec()),
+        _ => None,
+    };
+    let (eu, ew) = (entries(g, u), entries(g, w));
+    let zero_in = |g: &Graph, e: &Option<Vec<Id>>| e.as_ref().is_some_and(|xs| xs.iter().any(|&x| g.is_zero(x)));
+    if !zero_in(g, &eu) && !zero_in(g, &ew) {
+        return Ok(Some(g.dot(u, w)?));
+    }
+    let mut terms = Vec::new();
+    for (d, &axis) in crate::expr::Axis::ALL.iter().enumerate().take(g.dim()) {
+        let part = |g: &mut Graph, e: &Option<Vec<Id>>, v: Id| match e {
+            Some(xs) => Ok(xs[d]),
+            None => g.comp(v, axis),
+        };
+        let (a, b) = (part(g, &eu, u)?, part(g, &ew, w)?);
+        if g.is_zero(a) || g.is_zero(b) {
+            continue;
+        }
+        terms.push(g.mul(vec![a, b])?);
+    }
+    Ok(if terms.is_empty() { None } else { Some(g.add(terms)?) })
 }
 
 /// `(true, u)` when `id` is `−u`, else `(false, id)`.

@@ -131,7 +131,7 @@ impl System {
 /// A command that does not handle 3D rigid bodies yet, asked to run on one.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "`{command}` does not handle 3D rigid bodies yet (body `{body}` has a quaternion orientation); `lagrange derive`, `solve`, `check`, `simulate` (every solver), `bench` (without `--solvers`) and `generate` (Rust and C, without `--solver`) do"
+    "`{command}` does not handle 3D rigid bodies yet (body `{body}` has a quaternion orientation); `lagrange derive`, `solve`, `check`, `simulate` (every solver), `bench` (also `--solvers`) and `generate` (Rust and C, without `--solver`) do"
 )]
 pub struct NotYet3dRigid {
     pub command: &'static str,

@@ -200,6 +200,13 @@ impl<'s> Dynamics<'s> {
         &self.orientations
     }
 
+    /// Puts back orientations q₀ that [`orientations`](Dynamics::orientations) gave: the
+    /// stability analysis steps many states from the same orientation.
+    pub fn set_orientations(&mut self, orientations: &[[f64; 4]]) {
+        self.orientations.clear();
+        self.orientations.extend_from_slice(orientations);
+    }
+
     /// The start of a step: each 3D rigid body's rotation vector φ in `q` is folded into its
     /// orientation q₀ ← exp(φ) ⊗ q₀, renormalised, and φ set to zero.
     pub fn rebase(&mut self, q: &mut Vectors) {

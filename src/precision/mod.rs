@@ -5,9 +5,12 @@
 //! Work-precision. Every method runs the same scene for the same simulated time at ≥ 4
 //! step sizes; the reference is the same scene with RK4 + projection at a step 16 times
 //! finer than the finest of the sweep. Per run: wall time per simulated second, max |C|,
-//! max |Ċ|, the energy balance, and the final-state error max |qᵢ − qᵢ,ref| over the
-//! scene's size. Plotted as error against time (log-log), a method further down-left is
-//! better: less error for the same time.
+//! max |Ċ|, the energy balance, and the final-state error: max |qᵢ − qᵢ,ref| over the
+//! scene's size, or, where larger, a rigid body's turn from its reference orientation in
+//! radians (2D |θ − θ_ref|, 3D the angle of q q_ref*; a point at distance ℓ from the centre
+//! moves ℓ times that, so for a body of the scene's size the two measures agree). Plotted as
+//! error against time (log-log), a method further down-left is better: less error for the
+//! same time.
 //!
 //! The module is named for what it measures (work against precision); "bench" names the
 //! command and the timing benchmarks in `benches/`.
@@ -17,11 +20,14 @@
 pub mod accuracy;
 pub mod reference;
 
+use crate::expr::eval::Value;
+use crate::model::system::System;
 use crate::numeric::dynamics::SimError;
 use crate::numeric::integrate::Integrator;
+use crate::numeric::rotation::between_orientations;
 use crate::numeric::simulate::{MAX_STEPS, Summary};
 use crate::numeric::stabilize::Stabilize;
-use crate::numeric::vector::length_scale;
+use crate::numeric::vector::{length_scale, safe_norm};
 use crate::scenario::Scenario;
 
 /// What to sweep.
@@ -114,7 +120,8 @@ pub struct SweepRow {
     pub max_abs_c: f64,
     pub max_abs_c_dot: f64,
     pub energy_error: Option<f64>,
-    /// max |qᵢ − qᵢ,ref| / the scene's size; None when the run failed.
+    /// max |qᵢ − qᵢ,ref| / the scene's size, or a rigid body's turn from its reference
+    /// orientation (radians) where larger; None when the run failed.
     pub final_error: Option<f64>,
     /// Why the run stopped, if it did.
     pub failure: Option<SimError>,
@@ -130,6 +137,38 @@ pub struct WorkPrecision {
     /// final-state errors are then unknown).
     pub reference_error: Option<SimError>,
     pub rows: Vec<SweepRow>,
+}
+
+/// A rigid body's orientation at the end of a run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Orientation {
+    Angle(f64),
+    Quaternion([f64; 4]),
+}
+
+/// Each rigid body's final orientation (`Summary::final_state`, by its symbol's name), in
+/// the order of the bodies.
+fn orientations(system: &System, summary: &Summary) -> Vec<Orientation> {
+    let named = |name: &str| summary.final_state.iter().find(|(n, _)| n == name).map(|(_, v)| *v);
+    let rigid = system.bodies.iter().filter_map(|b| b.rigid.as_ref());
+    rigid
+        .filter_map(|r| match named(&system.graph.symbol(r.orientation).name)? {
+            Value::Scalar(theta) => Some(Orientation::Angle(theta)),
+            Value::Quaternion(q) => Some(Orientation::Quaternion(q)),
+            Value::Vector(_) => None,
+        })
+        .collect()
+}
+
+/// The angle (radians) of the turn from `b` to `a`: |θ_a − θ_b| in 2D, |log(q_a q_b*)| in
+/// 3D (the shorter way round).
+fn turn_between(a: Orientation, b: Orientation) -> f64 {
+    match (a, b) {
+        (Orientation::Angle(x), Orientation::Angle(y)) => (x - y).abs(),
+        (Orientation::Quaternion(x), Orientation::Quaternion(y)) => safe_norm(&between_orientations(y, x)),
+        // One body is one kind in both runs.
+        _ => f64::INFINITY,
+    }
 }
 
 fn steps_for(duration: f64, dt: f64) -> u64 {
@@ -160,6 +199,7 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
     let reference_position =
         reference.as_ref().map(|r| r.final_position[..bodies.min(r.final_position.len())].to_vec());
     let length = length_scale(reference_position.iter().flatten());
+    let reference_turns = reference.as_ref().map(|r| orientations(&scenario.system, r));
     let mut rows = Vec::new();
     for &integrator in &sweep.integrators {
         for &stabilize in &sweep.stabilizers {
@@ -167,14 +207,18 @@ pub fn work_precision(scenario: &Scenario, sweep: &Sweep) -> Result<WorkPrecisio
                 let steps = steps_for(sweep.duration, dt);
                 let row = match run(integrator, stabilize, dt) {
                     Ok(s) => {
-                        let error = reference_position.as_ref().map(|reference| {
-                            s.final_position
-                                .iter()
-                                .zip(reference)
-                                .flat_map(|(a, b)| (0..3).map(move |d| (a[d] - b[d]).abs()))
-                                .fold(0.0, f64::max)
-                                / length
-                        });
+                        let error =
+                            reference_position.as_ref().zip(reference_turns.as_ref()).map(|(reference, turns)| {
+                                let position = s
+                                    .final_position
+                                    .iter()
+                                    .zip(reference)
+                                    .flat_map(|(a, b)| (0..3).map(move |d| (a[d] - b[d]).abs()))
+                                    .fold(0.0, f64::max)
+                                    / length;
+                                let turned = orientations(&scenario.system, &s);
+                                turned.iter().zip(turns).map(|(a, b)| turn_between(*a, *b)).fold(position, f64::max)
+                            });
                         SweepRow {
                             integrator: integrator.name().into(),
                             stabilize: stabilize.name().into(),

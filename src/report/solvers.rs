@@ -1,12 +1,13 @@
 //! `bench --solvers` results (`numeric::velocity::bench`) as a text table, JSON
-//! (`{"title", "dt", "reference", "runs": [...], "stable_hertz": [...]}`) or CSV, and the
+//! (`{"title", "dt", "reference", "runs": [...], "stable_hertz": [...]}`, each limit a number
+//! or null with its kind beside it) or CSV, and the
 //! lines of its SVG (max |C| against time per step, one line per solver and stiffness,
 //! one point per substep count).
 //!
 //! Not here: running anything; writing files (`main.rs`).
 
-use crate::numeric::velocity::bench::{Entry, SolverBench};
-use crate::numeric::velocity::stability::MAX_HERTZ;
+use crate::numeric::velocity::bench::{Entry, NotAnalysed, SolverBench};
+use crate::numeric::velocity::stability::{Limit, MAX_HERTZ};
 use crate::report::plot::Line;
 use serde_json::{Value as Json, json};
 use std::fmt::Write;
@@ -33,13 +34,22 @@ pub fn json(bench: &SolverBench) -> Json {
     let stable: Vec<Json> = bench
         .stable_hertz
         .iter()
-        .map(|s| json!({"substeps": s.substeps, "relax": opt(s.relax), "no_relax": opt(s.no_relax)}))
+        .map(|s| {
+            json!({
+                "substeps": s.substeps, "relax": opt(s.relax.hertz()), "no_relax": opt(s.no_relax.hertz()),
+                "relax_limit": limit_kind(s.relax), "no_relax_limit": limit_kind(s.no_relax),
+            })
+        })
         .collect();
     json!({
         "title": bench.title, "dt": bench.dt, "damping_ratio": bench.damping_ratio,
         "reference": entry_json(&bench.reference),
         "runs": bench.entries.iter().map(entry_json).collect::<Vec<_>>(),
         "stable_hertz": stable,
+        "stable_hertz_not_computed": bench.not_analysed.map(|why| match why {
+            NotAnalysed::TooLarge => "too large",
+            NotAnalysed::Rigid3d => "3D rigid bodies",
+        }),
     })
 }
 
@@ -58,9 +68,24 @@ fn label(e: &Entry) -> String {
     }
 }
 
-/// "13.565 Hz", or what `None` means.
-fn stable(x: Option<f64>) -> String {
-    x.map_or(format!("stable up to {MAX_HERTZ:e} Hz (or unstable at any)"), |x| format!("{x:.3} Hz"))
+/// JSON's word for a limit: `"hertz"` (the number beside it), `"out of range"` or `"undefined"`.
+fn limit_kind(x: Limit) -> &'static str {
+    match x {
+        Limit::Hertz(_) => "hertz",
+        Limit::OutOfRange => "out of range",
+        Limit::NoRadius => "no radius",
+        Limit::Rigid3d => "3D rigid bodies",
+    }
+}
+
+/// "13.565 Hz", or why there is no number.
+fn stable(x: Limit) -> String {
+    match x {
+        Limit::Hertz(x) => format!("{x:.3} Hz"),
+        Limit::OutOfRange => format!("stable up to {MAX_HERTZ:e} Hz (or unstable at any)"),
+        Limit::NoRadius => "not defined (the linearised step has no spectral radius there)".to_string(),
+        Limit::Rigid3d => "not analysed (3D rigid bodies)".to_string(),
+    }
 }
 
 /// One line per run, the reference first, then the stable hertz.
@@ -91,8 +116,15 @@ pub fn text(bench: &SolverBench) -> String {
             e.failure.as_ref().map_or("ok".to_string(), |f| format!("stopped: {f}"))
         );
     }
-    if bench.stable_hertz.is_empty() {
-        s += "largest stable hertz: not computed (the state is too large for the eigenvalue analysis)\n";
+    if let Some(why) = bench.not_analysed {
+        s += match why {
+            NotAnalysed::TooLarge => {
+                "largest stable hertz: not computed (the state is too large for the eigenvalue analysis)\n"
+            }
+            NotAnalysed::Rigid3d => {
+                "largest stable hertz: not computed (3D rigid bodies: the linearised step's spectral radius does not decide their stability)\n"
+            }
+        };
     } else {
         s += "largest stable hertz of the soft step at the initial state (spectral radius ≤ 1, cap lifted):\n";
         for h in &bench.stable_hertz {

@@ -1,10 +1,20 @@
 /* L D L^T (the Rust module's solve_dense, its operations in its order): solves a x = b in
    place in b for a symmetric positive definite a (CONSTRAINTS x CONSTRAINTS, overwritten).
    0 where the rows' solve is needed: a diagonal entry that is not a positive normal number,
-   a pivot at or below 1e-10 of its diagonal entry (A singular), or an answer not finite. */
+   a pivot at or below 1e-10 of its diagonal entry (A singular), or an answer not finite.
+   2 x 2: the pivot rule multiplied out (det > 1e-10 a00 a11, a00 a11 normal) and Cramer's rule. */
 int solve_dense(double a[][CONSTRAINTS], double b[]) {
     const int k = CONSTRAINTS;
     int i, j, p;
+    if (k == 2) {
+        const double pp = a[0][0], q = a[1][1], r = a[1][0];
+        const double pq = pp * q;
+        const double det = pq - r * r;
+        const double x0 = (q * b[0] - r * b[1]) / det, x1 = (pp * b[1] - r * b[0]) / det;
+        b[0] = x0;
+        b[1] = x1;
+        return pp >= DBL_MIN && q >= DBL_MIN && pq >= DBL_MIN && det > 1e-10 * pq && isfinite(x0) && isfinite(x1);
+    }
     for (i = 0; i < k; i++) {
         const double diagonal = a[i][i];
         double d;

@@ -1,6 +1,7 @@
 //! Written into a generated module whose A is a small dense array and whose constraints are
-//! all equalities: `solve_dense`, L D Lᵀ (Cholesky without square roots) on the K×K array, the fast path before the rows'
-//! solve (`rows.rs`), which answers wherever this one gives up.
+//! all equalities: `solve_dense`, L D Lᵀ (Cholesky without square roots) on the K×K array
+//! (2×2: the same pivot rule multiplied out, and Cramer's rule), the fast path before the
+//! rows' solve (`rows.rs`), which answers wherever this one gives up.
 //!
 //! Included with `include_str!` from the first item on (this note is left out); compiled
 //! by the crate's tests. Not here: banded A (`solve_band.rs`), redundancy and inequalities
@@ -11,8 +12,32 @@
 /// is needed: a diagonal entry that is not a positive normal number (its numbers out of f64's
 /// range), a pivot dᵢ at or below 1e-10 of its diagonal entry (the rows' rank tolerance on the
 /// unit-diagonal Ã: A singular, constraints redundant), or an answer that is not finite.
+///
+/// A 2×2 `a` (a 2D pin, two rods) takes the same factorisation multiplied out: d₀ = a₀₀ and
+/// d₁ = det/a₀₀ with det = a₀₀a₁₁ − a₁₀², so the pivot rule d₁ > 1e-10 a₁₁ reads
+/// det > 1e-10 a₀₀a₁₁, and x = adj(A) b / det (Cramer's rule) costs one division where the
+/// loops chain three. It also gives up where a₀₀a₁₁ leaves f64's normal range (overflowing,
+/// the pivot rule compares ∞ with ∞), which the loops need not: a hand-over, never a wrong
+/// answer.
 #[allow(dead_code, clippy::needless_range_loop)]
 fn solve_dense<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> Option<[f64; K]> {
+    if K == 2 {
+        let (p, q, r) = (a[0][0], a[1][1], a[1][0]);
+        let pq = p * q;
+        let det = pq - r * r;
+        let x = [(q * b[0] - r * b[1]) / det, (p * b[1] - r * b[0]) / det];
+        // Every check at once (`&`, one branch): a₀₀ and a₁₁ positive normal numbers (+∞ fails
+        // the det check), a₀₀a₁₁ normal, the pivot rule (false for a NaN), x finite.
+        let solved = (p >= f64::MIN_POSITIVE)
+            & (q >= f64::MIN_POSITIVE)
+            & (pq >= f64::MIN_POSITIVE)
+            & (det > 1e-10 * pq)
+            & x[0].is_finite()
+            & x[1].is_finite();
+        b[0] = x[0];
+        b[1] = x[1];
+        return if solved { Some(b) } else { None };
+    }
     for i in 0..K {
         let diagonal = a[i][i];
         if !(diagonal.is_normal() && diagonal > 0.0) {

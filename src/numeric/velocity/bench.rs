@@ -1,7 +1,7 @@
 //! The solver bench (`lagrange bench FILE --solvers`): every velocity-level solver × substeps
 //! (× stiffness for the soft step) on one scene, next to the exact velocity solve at the
 //! finest substep as the reference, with the soft step's largest stable hertz at the initial
-//! state (`velocity::stability`).
+//! state (`velocity::stability`; not for 3D rigid bodies, whose runs it measures all the same).
 //!
 //! Per run: max |C| and max |Ċ| (C/κ, as the rows), the largest energy balance |E| relative
 //! to the larger of the largest kinetic energy and the work scale Σ|Fᵢ|·(scene size) + Σ|τᵢ|·1 rad (a scene
@@ -15,7 +15,7 @@
 //! Not here: text, JSON, CSV and SVG (`report::solvers`).
 
 use super::run::run;
-use super::stability::{largest_stable_hertz, state_len};
+use super::stability::{Limit, has_rigid_3d, largest_stable_hertz, state_len};
 use super::{Settings, Solver};
 use crate::expr::eval::Env;
 use crate::model::system::System;
@@ -86,12 +86,13 @@ pub struct Entry {
     pub failure: Option<SimError>,
 }
 
-/// The soft step's largest stable hertz at the initial state, per substep count.
+/// The soft step's largest stable hertz at the initial state, per substep count (a step
+/// that cannot be evaluated there counts as [`Limit::NoRadius`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct StableHertz {
     pub substeps: usize,
-    pub relax: Option<f64>,
-    pub no_relax: Option<f64>,
+    pub relax: Limit,
+    pub no_relax: Limit,
 }
 
 /// The bench's results.
@@ -102,8 +103,18 @@ pub struct SolverBench {
     pub damping_ratio: f64,
     pub reference: Entry,
     pub entries: Vec<Entry>,
-    /// Empty when the state is too large for the eigenvalue analysis.
+    /// Empty when not analysed (`not_analysed` says why).
     pub stable_hertz: Vec<StableHertz>,
+    pub not_analysed: Option<NotAnalysed>,
+}
+
+/// Why the bench has no stable hertz.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NotAnalysed {
+    /// The state is longer than [`Plan::stability_max_state`].
+    TooLarge,
+    /// The scene has 3D rigid bodies ([`Limit::Rigid3d`]).
+    Rigid3d,
 }
 
 /// Runs `settings`, recording λ over the second half; returns the entry and the final positions.
@@ -222,12 +233,19 @@ pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, SimErr
     }
     let mut stable_hertz = Vec::new();
     let probe = settings_for(Solver::SoftStep, 1, 60.0);
-    if state_len(scene.system, &probe) <= plan.stability_max_state {
+    let not_analysed = if has_rigid_3d(scene.system) {
+        Some(NotAnalysed::Rigid3d)
+    } else if state_len(scene.system, &probe) > plan.stability_max_state {
+        Some(NotAnalysed::TooLarge)
+    } else {
+        None
+    };
+    if not_analysed.is_none() {
         let mut dynamics = Dynamics::new(scene.system, scene.program.clone(), scene.env.clone());
         for &substeps in &plan.substeps {
             let mut limit = |relax: bool| {
                 let s = Settings { relax, ..settings_for(Solver::SoftStep, substeps, 60.0) };
-                largest_stable_hertz(&mut dynamics, t0, &q0, &v0, &s).ok().flatten()
+                largest_stable_hertz(&mut dynamics, t0, &q0, &v0, &s).unwrap_or(Limit::NoRadius)
             };
             let (relax, no_relax) = (limit(true), limit(false));
             stable_hertz.push(StableHertz { substeps, relax, no_relax });
@@ -240,5 +258,6 @@ pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, SimErr
         reference,
         entries,
         stable_hertz,
+        not_analysed,
     })
 }

@@ -206,7 +206,9 @@ fn remedy(dynamics: &mut Dynamics<'_>, t0: f64, q0: &[[f64; 3]], v0: &[[f64; 3]]
         return Remedy::SubstepsOrHertz;
     }
     match stability::largest_stable_hertz(dynamics, t0, q0, v0, s) {
-        Ok(Some(hertz)) if hertz < s.joint_hertz() => Remedy::StableUpTo { hertz, ran_at: s.joint_hertz() },
+        Ok(stability::Limit::Hertz(hertz)) if hertz < s.joint_hertz() => {
+            Remedy::StableUpTo { hertz, ran_at: s.joint_hertz() }
+        }
         _ => Remedy::SubstepsOrHertz,
     }
 }

@@ -7,6 +7,27 @@
 //! come from nalgebra (real Schur form), and the largest stable hertz is found by bisection
 //! on the joint stiffness with the quarter-substep-rate cap lifted.
 //!
+//! A 3D rigid body enters x as its world rotation vector φ and world ω (three components
+//! each, the first of its angular slots, `numeric::rows`), φ measured from the orientation
+//! the analysis starts at: the step folds φ into the dynamics' orientation at every substep
+//! (`Dynamics::rebase`), so each evaluation starts from that orientation again and turns
+//! its result back into a rotation vector from it. Without that the columns were taken at
+//! orientations that drifted from one evaluation to the next.
+//!
+//! The Schur iteration is bounded: nalgebra's `complex_eigenvalues` iterates until it
+//! converges, and on some matrices it never does (`bench --solvers` on a 3D ball joint ran
+//! for over ten minutes in it). A matrix that is not finite, or whose iteration does not
+//! converge, has no radius here, and the limit is then [`Limit::NoRadius`], said so in the
+//! reports, never a number.
+//!
+//! Not for 3D rigid bodies ([`Limit::Rigid3d`]): their step is nonlinear in φ and ω (the
+//! turn, the gyroscopic kick), so central differences leave an error in M, and the neutral
+//! modes of a free turn are defective eigenvalues at 1, which an error ε moves by about √ε:
+//! on the ball joint's scene ρ came out 1 + 2.6e-6 at 10⁻³ Hz where the Schur iteration
+//! converged at all (allowed a hundred times the sweeps), far past the tolerance. A body spinning about its
+//! intermediate axis is also unstable in itself, which ρ would count against the solver.
+//! The 3D state is still right here (`step_jacobian`), for anyone who looks at M.
+//!
 //! Catto's two-particle test (inverse masses 0.167 and 0.000995 hanging in a line, h = 1/60,
 //! ζ = 0, one substep, one iteration, rows in file order; `constraints/solvers/two_particles.toml`)
 //! gives 13.565 Hz without relax and 20.943 Hz with it; he found 13.5 and 20.5 by running
@@ -17,6 +38,8 @@
 use super::{Settings, Solver, Stepper};
 use crate::model::system::System;
 use crate::numeric::dynamics::{Dynamics, SimError};
+use crate::numeric::rotation::{between_orientations, turned};
+use crate::numeric::rows::{angular_bodies, angular_width};
 use nalgebra::DMatrix;
 
 /// Spectral radii up to 1 + this count as stable (round-off of a neutral mode).
@@ -27,12 +50,20 @@ fn carries_impulses(s: &Settings) -> bool {
     s.warm_start && matches!(s.solver, Solver::SoftStep | Solver::Pgs)
 }
 
-/// The components of each slot in the state: `dim` for a body's position, 1 for a rigid
-/// body's angle (component 0 of its angular slot, `numeric::rows`).
+/// The components of each slot in the state, one entry per slot of `numeric::rows`: `dim`
+/// for a body's position; a 2D rigid body's angle 1; a 3D rigid body's rotation vector 3 in
+/// its first angular slot and 0 in the other two (they hold nothing in a state).
 fn slot_components(system: &System) -> Vec<usize> {
     let dim = system.dim();
-    let angles = system.bodies.iter().filter(|b| b.rigid.is_some()).count();
-    std::iter::repeat_n(dim, system.bodies.len()).chain(std::iter::repeat_n(1, angles)).collect()
+    let rigid = angular_bodies(system).count();
+    let angular: &[usize] = if angular_width(system) == 3 { &[3, 0, 0] } else { &[1] };
+    let bodies = std::iter::repeat_n(dim, system.bodies.len());
+    bodies.chain(std::iter::repeat_n(angular, rigid).flatten().copied()).collect()
+}
+
+/// Whether `system` has a 3D rigid body (whose stability is not analysed, [`Limit::Rigid3d`]).
+pub fn has_rigid_3d(system: &System) -> bool {
+    angular_width(system) == 3 && angular_bodies(system).next().is_some()
 }
 
 /// The length of the state vector x = (q, v[, P]) of `system`.
@@ -42,8 +73,10 @@ pub fn state_len(system: &System, s: &Settings) -> usize {
 }
 
 /// The step's linear part at (t, q, v) with warm-start impulses `impulse`: the matrix
-/// ∂x⁺/∂x over x = (q, v[, P]) (a body's components up to the system's dimension, a rigid
-/// body's angle and angular velocity one each).
+/// ∂x⁺/∂x over x = (q, v[, P]) (a body's components up to the system's dimension, a 2D rigid
+/// body's angle and angular velocity one each, a 3D one's rotation vector from the
+/// dynamics' orientation at the call and its ω three each). The dynamics' orientations are
+/// as they were when it returns.
 pub fn step_jacobian(
     dynamics: &mut Dynamics<'_>,
     t: f64,
@@ -69,6 +102,10 @@ pub fn step_jacobian(
     }
     let mut stepper = Stepper::new(settings, rows, slots);
     let (mut qs, mut vs) = (vec![[0.0; 3]; slots], vec![[0.0; 3]; slots]);
+    // Each 3D rigid body's orientation at the call and its rotation vector's slot.
+    let base = dynamics.orientations().to_vec();
+    let width = angular_width(dynamics.system());
+    let turning: Vec<usize> = (0..base.len()).map(|r| dynamics.system().bodies.len() + r * width).collect();
     let mut image = |x: &[f64], out: &mut Vec<f64>| -> Result<(), SimError> {
         let mut at = 0;
         for (i, &c) in components.iter().enumerate() {
@@ -81,8 +118,16 @@ pub fn step_jacobian(
         } else {
             stepper.impulse.iter_mut().for_each(|p| *p = 0.0);
         }
-        let r = dynamics.rows(t, &qs, &vs)?;
-        stepper.step(dynamics, t, &mut qs, &mut vs, r)?;
+        let r = dynamics.rows(t, &qs, &vs);
+        let stepped = r.and_then(|r| stepper.step(dynamics, t, &mut qs, &mut vs, r));
+        // The step rebased each 3D body: its φ is from the last substep's orientation. As a
+        // rotation vector from the base again, and the base restored for the next image.
+        for (r, &slot) in turning.iter().enumerate() {
+            let now = turned(qs[slot], dynamics.orientations()[r]);
+            qs[slot] = between_orientations(base[r], now);
+        }
+        dynamics.set_orientations(&base);
+        stepped?;
         out.clear();
         flat(&qs, out);
         flat(&vs, out);
@@ -107,13 +152,24 @@ pub fn step_jacobian(
     Ok(m)
 }
 
-/// ρ(M): the largest modulus of the eigenvalues.
-pub fn spectral_radius(m: &DMatrix<f64>) -> f64 {
-    m.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max)
+/// ρ(M): the largest modulus of the eigenvalues; `None` where an entry of M is not finite or
+/// the Schur iteration does not converge within [`SCHUR_SWEEPS`] sweeps per row (nalgebra's
+/// own `complex_eigenvalues` would iterate for ever).
+pub fn spectral_radius(m: &DMatrix<f64>) -> Option<f64> {
+    if !m.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    let schur = nalgebra::Schur::try_new(m.clone(), f64::EPSILON, SCHUR_SWEEPS * m.nrows().max(1))?;
+    let radius = schur.complex_eigenvalues().iter().map(|z| z.norm()).fold(0.0, f64::max);
+    radius.is_finite().then_some(radius)
 }
 
+/// QR sweeps allowed per row of M: LAPACK's `dhseqr` allows 30; a matrix that needs more
+/// is one the shifts cannot split, not one that is nearly there.
+pub const SCHUR_SWEEPS: usize = 30;
+
 /// ρ of the soft step (or whichever solver `s` names) at (t, q, v) with zero warm-start
-/// impulses, at stiffness `hertz` uncapped.
+/// impulses, at stiffness `hertz` uncapped; `None` where it has none ([`spectral_radius`]).
 pub fn radius_at(
     dynamics: &mut Dynamics<'_>,
     t: f64,
@@ -121,47 +177,82 @@ pub fn radius_at(
     v: &[[f64; 3]],
     s: &Settings,
     hertz: f64,
-) -> Result<f64, SimError> {
+) -> Result<Option<f64>, SimError> {
     let settings = Settings { hertz, cap_hertz: false, ..*s };
     let impulse = vec![0.0; dynamics.system().constraints.len()];
     Ok(spectral_radius(&step_jacobian(dynamics, t, q, v, &impulse, &settings)?))
+}
+
+/// The soft step's stability limit at a state ([`largest_stable_hertz`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Limit {
+    /// Stable up to this stiffness (Hz, to 1e-6 relative), unstable just above it.
+    Hertz(f64),
+    /// No limit between 10⁻³ Hz and [`MAX_HERTZ`]: unstable already at the lowest stiffness,
+    /// or still stable at the highest.
+    OutOfRange,
+    /// Some stiffness of the search gave the step no spectral radius ([`spectral_radius`]):
+    /// stability is not defined by it there.
+    NoRadius,
+    /// The scene has 3D rigid bodies: not analysed (the module's note says why).
+    Rigid3d,
+}
+
+impl Limit {
+    /// The stiffness of [`Limit::Hertz`].
+    pub fn hertz(self) -> Option<f64> {
+        match self {
+            Limit::Hertz(h) => Some(h),
+            Limit::OutOfRange | Limit::NoRadius | Limit::Rigid3d => None,
+        }
+    }
 }
 
 /// Stiffnesses searched up to this (Hz): far beyond any substep rate an engine runs.
 pub const MAX_HERTZ: f64 = 1e4;
 
 /// The largest stiffness (Hz, uncapped) at which the step of `s` is stable at (t, q, v), to
-/// 1e-6 relative: `None` when it is unstable already at 10⁻³ Hz or still stable at
-/// [`MAX_HERTZ`].
+/// 1e-6 relative ([`Limit`]).
 pub fn largest_stable_hertz(
     dynamics: &mut Dynamics<'_>,
     t: f64,
     q: &[[f64; 3]],
     v: &[[f64; 3]],
     s: &Settings,
-) -> Result<Option<f64>, SimError> {
-    let stable = |h: f64, d: &mut Dynamics<'_>| -> Result<bool, SimError> {
-        Ok(radius_at(d, t, q, v, s, h)? <= 1.0 + STABLE_TOLERANCE)
+) -> Result<Limit, SimError> {
+    if has_rigid_3d(dynamics.system()) {
+        return Ok(Limit::Rigid3d);
+    }
+    // Some(stable) at stiffness h, None where the step has no radius there.
+    let stable = |h: f64, d: &mut Dynamics<'_>| -> Result<Option<bool>, SimError> {
+        Ok(radius_at(d, t, q, v, s, h)?.map(|rho| rho <= 1.0 + STABLE_TOLERANCE))
     };
     let (mut lo, mut hi) = (1e-3, 1.0);
-    if !stable(lo, dynamics)? {
-        return Ok(None);
+    match stable(lo, dynamics)? {
+        None => return Ok(Limit::NoRadius),
+        Some(false) => return Ok(Limit::OutOfRange),
+        Some(true) => {}
     }
     // Bracket by doubling, then bisect.
-    while stable(hi, dynamics)? {
+    loop {
+        match stable(hi, dynamics)? {
+            None => return Ok(Limit::NoRadius),
+            Some(false) => break,
+            Some(true) => {}
+        }
         lo = hi;
         hi *= 2.0;
         if hi > MAX_HERTZ {
-            return Ok(None);
+            return Ok(Limit::OutOfRange);
         }
     }
     while hi - lo > 1e-6 * hi {
         let mid = 0.5 * (lo + hi);
-        if stable(mid, dynamics)? {
-            lo = mid;
-        } else {
-            hi = mid;
+        match stable(mid, dynamics)? {
+            None => return Ok(Limit::NoRadius),
+            Some(true) => lo = mid,
+            Some(false) => hi = mid,
         }
     }
-    Ok(Some(lo))
+    Ok(Limit::Hertz(lo))
 }
