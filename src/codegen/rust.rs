@@ -671,7 +671,8 @@ struct StepPlaces<'a> {
 
 /// The scene's part of the step (`--solver`): its solver and default iterations, 1/κ as the
 /// library's rows use it, `step_rows` with the derivation of each row as comments, and the
-/// state's accessors the step's helper text calls (`time`, `put`, `prepared`).
+/// state's accessors the step's helper text calls (`time`, `put`, `prepare`; `step_rows` for
+/// the exact step).
 #[allow(clippy::too_many_arguments)]
 fn step_fns(
     out: &mut String,
@@ -697,6 +698,26 @@ fn step_fns(
         solver.name(),
         solver.default_iterations(),
         array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
+    );
+    // Where each row's entries are, as `Prepared` reads them.
+    let mut starts = vec![0];
+    let mut bodies = Vec::new();
+    for dirs in &formulas.jacobian {
+        bodies.extend(dirs.iter().map(|&(body, _)| body.to_string()));
+        starts.push(bodies.len());
+    }
+    let _ = writeln!(
+        out,
+        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on body `ROW_BODY[e]`.
+         const ENTRIES: usize = {};
+         const ROW_START: [usize; {}] = {};
+         const ROW_BODY: [usize; {}] = {};
+",
+        bodies.len(),
+        k + 1,
+        array(&starts.iter().map(usize::to_string).collect::<Vec<_>>()),
+        bodies.len(),
+        array(&bodies)
     );
     // The derivation, row by row: what the step's helper text computes from these numbers.
     let mut doc = vec![
@@ -728,7 +749,16 @@ fn step_fns(
         roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
         roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
     }
-    let (lets, exprs) = ctx.body(&roots)?;
+    // The acceleration-level term c is a root (so the shared values are the library's) but
+    // the step does not read it: its code is left out.
+    let mut wanted = Vec::with_capacity(roots.len());
+    wanted.resize(3 * layout.bodies, true);
+    for r in 0..k {
+        wanted.extend([true, true, false]);
+        wanted.extend(formulas.jacobian[r].iter().map(|_| true));
+    }
+    let exact = solver == Solver::Exact;
+    let (lets, exprs) = if exact { ctx.body(&roots)? } else { ctx.body_of(&roots, &wanted)? };
     let dim = layout.dim;
     let mut at = 0;
     let mut next = |n: usize| {
@@ -736,35 +766,64 @@ fn step_fns(
         at += n;
         part
     };
-    let _ = writeln!(out, "fn step_rows(s: &State) -> StepRows<DIM> {{");
-    for l in &lets {
-        let _ = writeln!(out, "    {l}");
-    }
-    let _ = writeln!(
-        out,
-        "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
-        n = layout.bodies
-    );
-    for _ in 0..layout.bodies {
-        let m = next(1);
-        let (v, f) = (next(dim), next(dim));
-        let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
-        let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
-    }
-    for r in 0..k {
-        let scalars = next(3);
-        let js: Vec<String> =
-            formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+    if exact {
+        let _ = writeln!(out, "fn step_rows(s: &State) -> StepRows<DIM> {{");
+        for l in &lets {
+            let _ = writeln!(out, "    {l}");
+        }
         let _ = writeln!(
             out,
-            "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
-            operand(&scalars[0]),
-            operand(&scalars[1]),
-            scalars[2],
-            array(&js)
+            "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
+            n = layout.bodies
         );
+        for _ in 0..layout.bodies {
+            let m = next(1);
+            let (v, f) = (next(dim), next(dim));
+            let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
+            let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
+        }
+        for r in 0..k {
+            let scalars = next(3);
+            let js: Vec<String> =
+                formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+            let _ = writeln!(
+                out,
+                "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
+                operand(&scalars[0]),
+                operand(&scalars[1]),
+                scalars[2],
+                array(&js)
+            );
+        }
+        let _ = writeln!(out, "    r\n}}\n");
+    } else {
+        let _ = writeln!(
+            out,
+            "/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
+             fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
+        );
+        for l in &lets {
+            let _ = writeln!(out, "    {l}");
+        }
+        let _ = writeln!(out, "    let mut v = [[0.0; DIM]; BODIES];");
+        for i in 0..layout.bodies {
+            let m = next(1);
+            let (v, f) = (next(dim), next(dim));
+            let _ = writeln!(out, "    p.inverse_mass[{i}] = 1.0 / {};", operand(&m[0]));
+            let _ = writeln!(out, "    v[{i}] = {};\n    p.force[{i}] = {};", array(&v), array(&f));
+        }
+        let mut e = 0;
+        for r in 0..k {
+            let scalars = next(3);
+            let _ = writeln!(out, "    p.value[{r}] = {} * INVERSE_SCALE[{r}];", operand(&scalars[0]));
+            let _ = writeln!(out, "    p.time_rate[{r}] = {} * INVERSE_SCALE[{r}];", operand(&scalars[1]));
+            for _ in &formulas.jacobian[r] {
+                let _ = writeln!(out, "    p.jacobian[{e}] = {};", array(&next(dim)));
+                e += 1;
+            }
+        }
+        let _ = writeln!(out, "    p.finish(&v);\n}}\n");
     }
-    let _ = writeln!(out, "    r\n}}\n");
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
     let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });
@@ -785,14 +844,6 @@ fn step_fns(
         let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
     }
     let _ = writeln!(out, "}}\n");
-    let _ = writeln!(
-        out,
-        "/// The rows of the state flattened for the step, with the scene's forces (`applied_forces`).\n\
-         #[allow(dead_code)]\n\
-         fn prepared(s: &State) -> Prepared<DIM> {{\n    \
-         let r = step_rows(s);\n    \
-         Prepared::new(&r.rows, &r.inverse_mass, &r.velocity, &r.force)\n}}\n"
-    );
     Ok(())
 }
 
@@ -2470,8 +2521,29 @@ impl Ctx<'_> {
 
     /// `let` statements and one expression per output component of `roots`.
     pub(super) fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
+        self.body_of(roots, &vec![true; roots.len()])
+    }
+
+    /// [`Ctx::body`] lowered over all of `roots` (so its shared values, and its numbers, are
+    /// those of the whole program) with code only for the roots `wanted` marks: the others'
+    /// expressions are empty and no `let` is written that only they use.
+    pub(super) fn body_of(&self, roots: &[Id], wanted: &[bool]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let p = Program::lower_in(self.g, roots, self.inputs)?;
         let uses = p.use_counts();
+        // The operations a wanted output depends on.
+        let mut live = vec![false; p.ops.len()];
+        for (range, _) in p.output_ranges.iter().zip(wanted).filter(|(_, w)| **w) {
+            for &o in &p.outputs[range.clone()] {
+                live[o as usize] = true;
+            }
+        }
+        for i in (0..p.ops.len()).rev() {
+            if live[i] {
+                for a in p.ops[i].operands() {
+                    live[a as usize] = true;
+                }
+            }
+        }
         // Each value: its text, precedence and inline depth.
         let mut text: Vec<(String, Prec, u32)> = Vec::new();
         let mut lets = Vec::new();
@@ -2554,7 +2626,9 @@ impl Ctx<'_> {
                 }
             };
             let simple = matches!(op, Op::Input(_) | Op::Const(_));
-            if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
+            if !live[i] {
+                text.push((String::new(), Prec::Atom, 0));
+            } else if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
                 self.spend(t.len())?;
                 let name = format!("x{}", lets.len());
                 lets.push(if self.c { format!("const double {name} = {t};") } else { format!("let {name} = {t};") });
@@ -2563,7 +2637,12 @@ impl Ctx<'_> {
                 text.push((t, prec, depth));
             }
         }
-        let exprs: Vec<String> = p.outputs.iter().map(|&o| text[o as usize].0.clone()).collect();
+        let mut exprs = Vec::with_capacity(p.outputs.len());
+        for (range, &w) in p.output_ranges.iter().zip(wanted) {
+            exprs.extend(
+                p.outputs[range.clone()].iter().map(|&o| if w { text[o as usize].0.clone() } else { String::new() }),
+            );
+        }
         self.spend(exprs.iter().map(String::len).sum())?;
         Ok((lets, exprs))
     }
