@@ -3599,170 +3599,47 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     p.inverse_mass[40] = 1.0 / 4021.0;
     v[40] = [s.v_p41[0], s.v_p41[1]];
     p.force[40] = [s.g[0] * 4021.0, s.g[1] * 4021.0];
-    p.value[0] = (x2 - 1.0) * INVERSE_SCALE[0];
-    p.time_rate[0] = (x125 * x126) * INVERSE_SCALE[0];
-    p.jacobian[0] = [x0 * x126, x1 * x126];
-    p.value[1] = (x5 - 1.0) * INVERSE_SCALE[1];
-    p.time_rate[1] = (x129 * x130) * INVERSE_SCALE[1];
-    p.jacobian[1] = [x3 * x131, x4 * x131];
-    p.jacobian[2] = [x3 * x130, x4 * x130];
-    p.value[2] = (x8 - 1.0) * INVERSE_SCALE[2];
-    p.time_rate[2] = (x134 * x135) * INVERSE_SCALE[2];
-    p.jacobian[3] = [x6 * x136, x7 * x136];
-    p.jacobian[4] = [x6 * x135, x7 * x135];
-    p.value[3] = (x11 - 1.0) * INVERSE_SCALE[3];
-    p.time_rate[3] = (x139 * x140) * INVERSE_SCALE[3];
-    p.jacobian[5] = [x9 * x141, x10 * x141];
-    p.jacobian[6] = [x9 * x140, x10 * x140];
-    p.value[4] = (x14 - 1.0) * INVERSE_SCALE[4];
-    p.time_rate[4] = (x144 * x145) * INVERSE_SCALE[4];
-    p.jacobian[7] = [x12 * x146, x13 * x146];
-    p.jacobian[8] = [x12 * x145, x13 * x145];
-    p.value[5] = (x17 - 1.0) * INVERSE_SCALE[5];
-    p.time_rate[5] = (x149 * x150) * INVERSE_SCALE[5];
-    p.jacobian[9] = [x15 * x151, x16 * x151];
-    p.jacobian[10] = [x15 * x150, x16 * x150];
-    p.value[6] = (x20 - 1.0) * INVERSE_SCALE[6];
-    p.time_rate[6] = (x154 * x155) * INVERSE_SCALE[6];
-    p.jacobian[11] = [x18 * x156, x19 * x156];
-    p.jacobian[12] = [x18 * x155, x19 * x155];
-    p.value[7] = (x23 - 1.0) * INVERSE_SCALE[7];
-    p.time_rate[7] = (x159 * x160) * INVERSE_SCALE[7];
-    p.jacobian[13] = [x21 * x161, x22 * x161];
-    p.jacobian[14] = [x21 * x160, x22 * x160];
-    p.value[8] = (x26 - 1.0) * INVERSE_SCALE[8];
-    p.time_rate[8] = (x164 * x165) * INVERSE_SCALE[8];
-    p.jacobian[15] = [x24 * x166, x25 * x166];
-    p.jacobian[16] = [x24 * x165, x25 * x165];
-    p.value[9] = (x29 - 1.0) * INVERSE_SCALE[9];
-    p.time_rate[9] = (x169 * x170) * INVERSE_SCALE[9];
-    p.jacobian[17] = [x27 * x171, x28 * x171];
-    p.jacobian[18] = [x27 * x170, x28 * x170];
-    p.value[10] = (x32 - 1.0) * INVERSE_SCALE[10];
-    p.time_rate[10] = (x174 * x175) * INVERSE_SCALE[10];
-    p.jacobian[19] = [x30 * x176, x31 * x176];
-    p.jacobian[20] = [x30 * x175, x31 * x175];
-    p.value[11] = (x35 - 1.0) * INVERSE_SCALE[11];
-    p.time_rate[11] = (x179 * x180) * INVERSE_SCALE[11];
-    p.jacobian[21] = [x33 * x181, x34 * x181];
-    p.jacobian[22] = [x33 * x180, x34 * x180];
-    p.value[12] = (x38 - 1.0) * INVERSE_SCALE[12];
-    p.time_rate[12] = (x184 * x185) * INVERSE_SCALE[12];
-    p.jacobian[23] = [x36 * x186, x37 * x186];
-    p.jacobian[24] = [x36 * x185, x37 * x185];
-    p.value[13] = (x41 - 1.0) * INVERSE_SCALE[13];
-    p.time_rate[13] = (x189 * x190) * INVERSE_SCALE[13];
-    p.jacobian[25] = [x39 * x191, x40 * x191];
-    p.jacobian[26] = [x39 * x190, x40 * x190];
-    p.value[14] = (x44 - 1.0) * INVERSE_SCALE[14];
-    p.time_rate[14] = (x194 * x195) * INVERSE_SCALE[14];
-    p.jacobian[27] = [x42 * x196, x43 * x196];
-    p.jacobian[28] = [x42 * x195, x43 * x195];
-    p.value[15] = (x47 - 1.0) * INVERSE_SCALE[15];
-    p.time_rate[15] = (x199 * x200) * INVERSE_SCALE[15];
-    p.jacobian[29] = [x45 * x201, x46 * x201];
-    p.jacobian[30] = [x45 * x200, x46 * x200];
-    p.value[16] = (x50 - 1.0) * INVERSE_SCALE[16];
-    p.time_rate[16] = (x204 * x205) * INVERSE_SCALE[16];
-    p.jacobian[31] = [x48 * x206, x49 * x206];
-    p.jacobian[32] = [x48 * x205, x49 * x205];
-    p.value[17] = (x53 - 1.0) * INVERSE_SCALE[17];
-    p.time_rate[17] = (x209 * x210) * INVERSE_SCALE[17];
-    p.jacobian[33] = [x51 * x211, x52 * x211];
-    p.jacobian[34] = [x51 * x210, x52 * x210];
-    p.value[18] = (x56 - 1.0) * INVERSE_SCALE[18];
-    p.time_rate[18] = (x214 * x215) * INVERSE_SCALE[18];
-    p.jacobian[35] = [x54 * x216, x55 * x216];
-    p.jacobian[36] = [x54 * x215, x55 * x215];
-    p.value[19] = (x59 - 1.0) * INVERSE_SCALE[19];
-    p.time_rate[19] = (x219 * x220) * INVERSE_SCALE[19];
-    p.jacobian[37] = [x57 * x221, x58 * x221];
-    p.jacobian[38] = [x57 * x220, x58 * x220];
-    p.value[20] = (x62 - 1.0) * INVERSE_SCALE[20];
-    p.time_rate[20] = (x224 * x225) * INVERSE_SCALE[20];
-    p.jacobian[39] = [x60 * x226, x61 * x226];
-    p.jacobian[40] = [x60 * x225, x61 * x225];
-    p.value[21] = (x65 - 1.0) * INVERSE_SCALE[21];
-    p.time_rate[21] = (x229 * x230) * INVERSE_SCALE[21];
-    p.jacobian[41] = [x63 * x231, x64 * x231];
-    p.jacobian[42] = [x63 * x230, x64 * x230];
-    p.value[22] = (x68 - 1.0) * INVERSE_SCALE[22];
-    p.time_rate[22] = (x234 * x235) * INVERSE_SCALE[22];
-    p.jacobian[43] = [x66 * x236, x67 * x236];
-    p.jacobian[44] = [x66 * x235, x67 * x235];
-    p.value[23] = (x71 - 1.0) * INVERSE_SCALE[23];
-    p.time_rate[23] = (x239 * x240) * INVERSE_SCALE[23];
-    p.jacobian[45] = [x69 * x241, x70 * x241];
-    p.jacobian[46] = [x69 * x240, x70 * x240];
-    p.value[24] = (x74 - 1.0) * INVERSE_SCALE[24];
-    p.time_rate[24] = (x244 * x245) * INVERSE_SCALE[24];
-    p.jacobian[47] = [x72 * x246, x73 * x246];
-    p.jacobian[48] = [x72 * x245, x73 * x245];
-    p.value[25] = (x77 - 1.0) * INVERSE_SCALE[25];
-    p.time_rate[25] = (x249 * x250) * INVERSE_SCALE[25];
-    p.jacobian[49] = [x75 * x251, x76 * x251];
-    p.jacobian[50] = [x75 * x250, x76 * x250];
-    p.value[26] = (x80 - 1.0) * INVERSE_SCALE[26];
-    p.time_rate[26] = (x254 * x255) * INVERSE_SCALE[26];
-    p.jacobian[51] = [x78 * x256, x79 * x256];
-    p.jacobian[52] = [x78 * x255, x79 * x255];
-    p.value[27] = (x83 - 1.0) * INVERSE_SCALE[27];
-    p.time_rate[27] = (x259 * x260) * INVERSE_SCALE[27];
-    p.jacobian[53] = [x81 * x261, x82 * x261];
-    p.jacobian[54] = [x81 * x260, x82 * x260];
-    p.value[28] = (x86 - 1.0) * INVERSE_SCALE[28];
-    p.time_rate[28] = (x264 * x265) * INVERSE_SCALE[28];
-    p.jacobian[55] = [x84 * x266, x85 * x266];
-    p.jacobian[56] = [x84 * x265, x85 * x265];
-    p.value[29] = (x89 - 1.0) * INVERSE_SCALE[29];
-    p.time_rate[29] = (x269 * x270) * INVERSE_SCALE[29];
-    p.jacobian[57] = [x87 * x271, x88 * x271];
-    p.jacobian[58] = [x87 * x270, x88 * x270];
-    p.value[30] = (x92 - 1.0) * INVERSE_SCALE[30];
-    p.time_rate[30] = (x274 * x275) * INVERSE_SCALE[30];
-    p.jacobian[59] = [x90 * x276, x91 * x276];
-    p.jacobian[60] = [x90 * x275, x91 * x275];
-    p.value[31] = (x95 - 1.0) * INVERSE_SCALE[31];
-    p.time_rate[31] = (x279 * x280) * INVERSE_SCALE[31];
-    p.jacobian[61] = [x93 * x281, x94 * x281];
-    p.jacobian[62] = [x93 * x280, x94 * x280];
-    p.value[32] = (x98 - 1.0) * INVERSE_SCALE[32];
-    p.time_rate[32] = (x284 * x285) * INVERSE_SCALE[32];
-    p.jacobian[63] = [x96 * x286, x97 * x286];
-    p.jacobian[64] = [x96 * x285, x97 * x285];
-    p.value[33] = (x101 - 1.0) * INVERSE_SCALE[33];
-    p.time_rate[33] = (x289 * x290) * INVERSE_SCALE[33];
-    p.jacobian[65] = [x99 * x291, x100 * x291];
-    p.jacobian[66] = [x99 * x290, x100 * x290];
-    p.value[34] = (x104 - 1.0) * INVERSE_SCALE[34];
-    p.time_rate[34] = (x294 * x295) * INVERSE_SCALE[34];
-    p.jacobian[67] = [x102 * x296, x103 * x296];
-    p.jacobian[68] = [x102 * x295, x103 * x295];
-    p.value[35] = (x107 - 1.0) * INVERSE_SCALE[35];
-    p.time_rate[35] = (x299 * x300) * INVERSE_SCALE[35];
-    p.jacobian[69] = [x105 * x301, x106 * x301];
-    p.jacobian[70] = [x105 * x300, x106 * x300];
-    p.value[36] = (x110 - 1.0) * INVERSE_SCALE[36];
-    p.time_rate[36] = (x304 * x305) * INVERSE_SCALE[36];
-    p.jacobian[71] = [x108 * x306, x109 * x306];
-    p.jacobian[72] = [x108 * x305, x109 * x305];
-    p.value[37] = (x113 - 1.0) * INVERSE_SCALE[37];
-    p.time_rate[37] = (x309 * x310) * INVERSE_SCALE[37];
-    p.jacobian[73] = [x111 * x311, x112 * x311];
-    p.jacobian[74] = [x111 * x310, x112 * x310];
-    p.value[38] = (x116 - 1.0) * INVERSE_SCALE[38];
-    p.time_rate[38] = (x314 * x315) * INVERSE_SCALE[38];
-    p.jacobian[75] = [x114 * x316, x115 * x316];
-    p.jacobian[76] = [x114 * x315, x115 * x315];
-    p.value[39] = (x119 - 1.0) * INVERSE_SCALE[39];
-    p.time_rate[39] = (x319 * x320) * INVERSE_SCALE[39];
-    p.jacobian[77] = [x117 * x321, x118 * x321];
-    p.jacobian[78] = [x117 * x320, x118 * x320];
-    p.value[40] = (x122 - 1.0) * INVERSE_SCALE[40];
-    p.time_rate[40] = (x324 * x325) * INVERSE_SCALE[40];
-    p.jacobian[79] = [x120 * x326, x121 * x326];
-    p.jacobian[80] = [x120 * x325, x121 * x325];
-    p.finish(&v);
+    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], (x125 * x126) * INVERSE_SCALE[0]), 0, [(0, [x0 * x126, x1 * x126])], &v);
+    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x129 * x130) * INVERSE_SCALE[1]), 1, [(0, [x3 * x131, x4 * x131]), (1, [x3 * x130, x4 * x130])], &v);
+    p.row(2, ((x8 - 1.0) * INVERSE_SCALE[2], (x134 * x135) * INVERSE_SCALE[2]), 3, [(1, [x6 * x136, x7 * x136]), (2, [x6 * x135, x7 * x135])], &v);
+    p.row(3, ((x11 - 1.0) * INVERSE_SCALE[3], (x139 * x140) * INVERSE_SCALE[3]), 5, [(2, [x9 * x141, x10 * x141]), (3, [x9 * x140, x10 * x140])], &v);
+    p.row(4, ((x14 - 1.0) * INVERSE_SCALE[4], (x144 * x145) * INVERSE_SCALE[4]), 7, [(3, [x12 * x146, x13 * x146]), (4, [x12 * x145, x13 * x145])], &v);
+    p.row(5, ((x17 - 1.0) * INVERSE_SCALE[5], (x149 * x150) * INVERSE_SCALE[5]), 9, [(4, [x15 * x151, x16 * x151]), (5, [x15 * x150, x16 * x150])], &v);
+    p.row(6, ((x20 - 1.0) * INVERSE_SCALE[6], (x154 * x155) * INVERSE_SCALE[6]), 11, [(5, [x18 * x156, x19 * x156]), (6, [x18 * x155, x19 * x155])], &v);
+    p.row(7, ((x23 - 1.0) * INVERSE_SCALE[7], (x159 * x160) * INVERSE_SCALE[7]), 13, [(6, [x21 * x161, x22 * x161]), (7, [x21 * x160, x22 * x160])], &v);
+    p.row(8, ((x26 - 1.0) * INVERSE_SCALE[8], (x164 * x165) * INVERSE_SCALE[8]), 15, [(7, [x24 * x166, x25 * x166]), (8, [x24 * x165, x25 * x165])], &v);
+    p.row(9, ((x29 - 1.0) * INVERSE_SCALE[9], (x169 * x170) * INVERSE_SCALE[9]), 17, [(8, [x27 * x171, x28 * x171]), (9, [x27 * x170, x28 * x170])], &v);
+    p.row(10, ((x32 - 1.0) * INVERSE_SCALE[10], (x174 * x175) * INVERSE_SCALE[10]), 19, [(9, [x30 * x176, x31 * x176]), (10, [x30 * x175, x31 * x175])], &v);
+    p.row(11, ((x35 - 1.0) * INVERSE_SCALE[11], (x179 * x180) * INVERSE_SCALE[11]), 21, [(10, [x33 * x181, x34 * x181]), (11, [x33 * x180, x34 * x180])], &v);
+    p.row(12, ((x38 - 1.0) * INVERSE_SCALE[12], (x184 * x185) * INVERSE_SCALE[12]), 23, [(11, [x36 * x186, x37 * x186]), (12, [x36 * x185, x37 * x185])], &v);
+    p.row(13, ((x41 - 1.0) * INVERSE_SCALE[13], (x189 * x190) * INVERSE_SCALE[13]), 25, [(12, [x39 * x191, x40 * x191]), (13, [x39 * x190, x40 * x190])], &v);
+    p.row(14, ((x44 - 1.0) * INVERSE_SCALE[14], (x194 * x195) * INVERSE_SCALE[14]), 27, [(13, [x42 * x196, x43 * x196]), (14, [x42 * x195, x43 * x195])], &v);
+    p.row(15, ((x47 - 1.0) * INVERSE_SCALE[15], (x199 * x200) * INVERSE_SCALE[15]), 29, [(14, [x45 * x201, x46 * x201]), (15, [x45 * x200, x46 * x200])], &v);
+    p.row(16, ((x50 - 1.0) * INVERSE_SCALE[16], (x204 * x205) * INVERSE_SCALE[16]), 31, [(15, [x48 * x206, x49 * x206]), (16, [x48 * x205, x49 * x205])], &v);
+    p.row(17, ((x53 - 1.0) * INVERSE_SCALE[17], (x209 * x210) * INVERSE_SCALE[17]), 33, [(16, [x51 * x211, x52 * x211]), (17, [x51 * x210, x52 * x210])], &v);
+    p.row(18, ((x56 - 1.0) * INVERSE_SCALE[18], (x214 * x215) * INVERSE_SCALE[18]), 35, [(17, [x54 * x216, x55 * x216]), (18, [x54 * x215, x55 * x215])], &v);
+    p.row(19, ((x59 - 1.0) * INVERSE_SCALE[19], (x219 * x220) * INVERSE_SCALE[19]), 37, [(18, [x57 * x221, x58 * x221]), (19, [x57 * x220, x58 * x220])], &v);
+    p.row(20, ((x62 - 1.0) * INVERSE_SCALE[20], (x224 * x225) * INVERSE_SCALE[20]), 39, [(19, [x60 * x226, x61 * x226]), (20, [x60 * x225, x61 * x225])], &v);
+    p.row(21, ((x65 - 1.0) * INVERSE_SCALE[21], (x229 * x230) * INVERSE_SCALE[21]), 41, [(20, [x63 * x231, x64 * x231]), (21, [x63 * x230, x64 * x230])], &v);
+    p.row(22, ((x68 - 1.0) * INVERSE_SCALE[22], (x234 * x235) * INVERSE_SCALE[22]), 43, [(21, [x66 * x236, x67 * x236]), (22, [x66 * x235, x67 * x235])], &v);
+    p.row(23, ((x71 - 1.0) * INVERSE_SCALE[23], (x239 * x240) * INVERSE_SCALE[23]), 45, [(22, [x69 * x241, x70 * x241]), (23, [x69 * x240, x70 * x240])], &v);
+    p.row(24, ((x74 - 1.0) * INVERSE_SCALE[24], (x244 * x245) * INVERSE_SCALE[24]), 47, [(23, [x72 * x246, x73 * x246]), (24, [x72 * x245, x73 * x245])], &v);
+    p.row(25, ((x77 - 1.0) * INVERSE_SCALE[25], (x249 * x250) * INVERSE_SCALE[25]), 49, [(24, [x75 * x251, x76 * x251]), (25, [x75 * x250, x76 * x250])], &v);
+    p.row(26, ((x80 - 1.0) * INVERSE_SCALE[26], (x254 * x255) * INVERSE_SCALE[26]), 51, [(25, [x78 * x256, x79 * x256]), (26, [x78 * x255, x79 * x255])], &v);
+    p.row(27, ((x83 - 1.0) * INVERSE_SCALE[27], (x259 * x260) * INVERSE_SCALE[27]), 53, [(26, [x81 * x261, x82 * x261]), (27, [x81 * x260, x82 * x260])], &v);
+    p.row(28, ((x86 - 1.0) * INVERSE_SCALE[28], (x264 * x265) * INVERSE_SCALE[28]), 55, [(27, [x84 * x266, x85 * x266]), (28, [x84 * x265, x85 * x265])], &v);
+    p.row(29, ((x89 - 1.0) * INVERSE_SCALE[29], (x269 * x270) * INVERSE_SCALE[29]), 57, [(28, [x87 * x271, x88 * x271]), (29, [x87 * x270, x88 * x270])], &v);
+    p.row(30, ((x92 - 1.0) * INVERSE_SCALE[30], (x274 * x275) * INVERSE_SCALE[30]), 59, [(29, [x90 * x276, x91 * x276]), (30, [x90 * x275, x91 * x275])], &v);
+    p.row(31, ((x95 - 1.0) * INVERSE_SCALE[31], (x279 * x280) * INVERSE_SCALE[31]), 61, [(30, [x93 * x281, x94 * x281]), (31, [x93 * x280, x94 * x280])], &v);
+    p.row(32, ((x98 - 1.0) * INVERSE_SCALE[32], (x284 * x285) * INVERSE_SCALE[32]), 63, [(31, [x96 * x286, x97 * x286]), (32, [x96 * x285, x97 * x285])], &v);
+    p.row(33, ((x101 - 1.0) * INVERSE_SCALE[33], (x289 * x290) * INVERSE_SCALE[33]), 65, [(32, [x99 * x291, x100 * x291]), (33, [x99 * x290, x100 * x290])], &v);
+    p.row(34, ((x104 - 1.0) * INVERSE_SCALE[34], (x294 * x295) * INVERSE_SCALE[34]), 67, [(33, [x102 * x296, x103 * x296]), (34, [x102 * x295, x103 * x295])], &v);
+    p.row(35, ((x107 - 1.0) * INVERSE_SCALE[35], (x299 * x300) * INVERSE_SCALE[35]), 69, [(34, [x105 * x301, x106 * x301]), (35, [x105 * x300, x106 * x300])], &v);
+    p.row(36, ((x110 - 1.0) * INVERSE_SCALE[36], (x304 * x305) * INVERSE_SCALE[36]), 71, [(35, [x108 * x306, x109 * x306]), (36, [x108 * x305, x109 * x305])], &v);
+    p.row(37, ((x113 - 1.0) * INVERSE_SCALE[37], (x309 * x310) * INVERSE_SCALE[37]), 73, [(36, [x111 * x311, x112 * x311]), (37, [x111 * x310, x112 * x310])], &v);
+    p.row(38, ((x116 - 1.0) * INVERSE_SCALE[38], (x314 * x315) * INVERSE_SCALE[38]), 75, [(37, [x114 * x316, x115 * x316]), (38, [x114 * x315, x115 * x315])], &v);
+    p.row(39, ((x119 - 1.0) * INVERSE_SCALE[39], (x319 * x320) * INVERSE_SCALE[39]), 77, [(38, [x117 * x321, x118 * x321]), (39, [x117 * x320, x118 * x320])], &v);
+    p.row(40, ((x122 - 1.0) * INVERSE_SCALE[40], (x324 * x325) * INVERSE_SCALE[40]), 79, [(39, [x120 * x326, x121 * x326]), (40, [x120 * x325, x121 * x325])], &v);
 }
 
 /// The state's time (0 when the file's state has none).
@@ -4533,6 +4410,29 @@ impl<const D: usize> Prepared<D> {
             self.time_rate[k] -= jv;
             self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
         }
+    }
+
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
+    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
+    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    #[inline(always)]
+    fn row<const E: usize>(
+        &mut self,
+        k: usize,
+        (value, rate): (f64, f64),
+        first: usize,
+        entries: [(usize, [f64; D]); E],
+        velocity: &[[f64; D]],
+    ) {
+        let (mut m, mut jv) = (0.0, 0.0);
+        for (e, (b, j)) in entries.iter().enumerate() {
+            self.jacobian[first + e] = *j;
+            m += self.inverse_mass[*b] * dot(j, j);
+            jv += dot(j, &velocity[*b]);
+        }
+        self.value[k] = value;
+        self.time_rate[k] = rate - jv;
+        self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
     }
 
     fn len(&self) -> usize {

@@ -448,14 +448,8 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     p.inverse_mass[1] = 1.0 / 1005.0251256281408;
     v[1] = [s.v_p2[0], s.v_p2[1]];
     p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
-    p.value[0] = (x2 - 1.0) * INVERSE_SCALE[0];
-    p.time_rate[0] = (x6 * x7) * INVERSE_SCALE[0];
-    p.jacobian[0] = [x0 * x7, x1 * x7];
-    p.value[1] = (x5 - 1.0) * INVERSE_SCALE[1];
-    p.time_rate[1] = (x10 * x11) * INVERSE_SCALE[1];
-    p.jacobian[1] = [x3 * x12, x4 * x12];
-    p.jacobian[2] = [x3 * x11, x4 * x11];
-    p.finish(&v);
+    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], (x6 * x7) * INVERSE_SCALE[0]), 0, [(0, [x0 * x7, x1 * x7])], &v);
+    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x10 * x11) * INVERSE_SCALE[1]), 1, [(0, [x3 * x12, x4 * x12]), (1, [x3 * x11, x4 * x11])], &v);
 }
 
 /// The state's time (0 when the file's state has none).
@@ -1148,6 +1142,29 @@ impl<const D: usize> Prepared<D> {
             self.time_rate[k] -= jv;
             self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
         }
+    }
+
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
+    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
+    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    #[inline(always)]
+    fn row<const E: usize>(
+        &mut self,
+        k: usize,
+        (value, rate): (f64, f64),
+        first: usize,
+        entries: [(usize, [f64; D]); E],
+        velocity: &[[f64; D]],
+    ) {
+        let (mut m, mut jv) = (0.0, 0.0);
+        for (e, (b, j)) in entries.iter().enumerate() {
+            self.jacobian[first + e] = *j;
+            m += self.inverse_mass[*b] * dot(j, j);
+            jv += dot(j, &velocity[*b]);
+        }
+        self.value[k] = value;
+        self.time_rate[k] = rate - jv;
+        self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
     }
 
     fn len(&self) -> usize {

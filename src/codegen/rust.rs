@@ -812,17 +812,20 @@ fn step_fns(
             let _ = writeln!(out, "    p.inverse_mass[{i}] = 1.0 / {};", operand(&m[0]));
             let _ = writeln!(out, "    v[{i}] = {};\n    p.force[{i}] = {};", array(&v), array(&f));
         }
-        let mut e = 0;
         for r in 0..k {
             let scalars = next(3);
-            let _ = writeln!(out, "    p.value[{r}] = {} * INVERSE_SCALE[{r}];", operand(&scalars[0]));
-            let _ = writeln!(out, "    p.time_rate[{r}] = {} * INVERSE_SCALE[{r}];", operand(&scalars[1]));
-            for _ in &formulas.jacobian[r] {
-                let _ = writeln!(out, "    p.jacobian[{e}] = {};", array(&next(dim)));
-                e += 1;
-            }
+            let js: Vec<String> =
+                formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+            let _ = writeln!(
+                out,
+                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {}, {}, &v);",
+                operand(&scalars[0]),
+                operand(&scalars[1]),
+                starts[r],
+                array(&js)
+            );
         }
-        let _ = writeln!(out, "    p.finish(&v);\n}}\n");
+        let _ = writeln!(out, "}}\n");
     }
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");

@@ -195,6 +195,29 @@ impl<const D: usize> Prepared<D> {
         }
     }
 
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
+    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
+    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    #[inline(always)]
+    fn row<const E: usize>(
+        &mut self,
+        k: usize,
+        (value, rate): (f64, f64),
+        first: usize,
+        entries: [(usize, [f64; D]); E],
+        velocity: &[[f64; D]],
+    ) {
+        let (mut m, mut jv) = (0.0, 0.0);
+        for (e, (b, j)) in entries.iter().enumerate() {
+            self.jacobian[first + e] = *j;
+            m += self.inverse_mass[*b] * dot(j, j);
+            jv += dot(j, &velocity[*b]);
+        }
+        self.value[k] = value;
+        self.time_rate[k] = rate - jv;
+        self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+    }
+
     fn len(&self) -> usize {
         CONSTRAINTS
     }
