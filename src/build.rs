@@ -120,7 +120,7 @@ impl Module {
         let text = read_text(path).map_err(BuildError::Read)?;
         let loaded =
             load(&text).map_err(|problems| BuildError::Invalid { path: path.clone(), text: text.clone(), problems })?;
-        let options = Options { specialize: self.specialize, solver: self.solver, lang: Lang::Rust };
+        let options = Options { specialize: self.specialize, solver: self.solver, lang: Lang::Rust, step_only: false };
         generate_module(&loaded, &options).map_err(|source| match &source {
             GenerateError::Derive(e) if e.constraint().is_some() => {
                 BuildError::Located { path: path.clone(), constraint: e.constraint().unwrap_or_default(), text, source }

@@ -62,6 +62,9 @@ pub struct Options {
     pub solver: Option<Solver>,
     /// The language written.
     pub lang: Lang,
+    /// Write the step and nothing else, each repeated row shape once over a table of its
+    /// instances (`generate --step-only`; Rust, with `solver` soft step or PGS).
+    pub step_only: bool,
 }
 
 /// The language of a generated module.
@@ -93,6 +96,10 @@ pub enum GenerateError {
         "--lang c writes the soft step and PGS; the exact step (its rows' solve) is generated in Rust only for now"
     )]
     CStep,
+    #[error(
+        "--step-only writes the soft step or PGS (--solver soft-step|pgs) in Rust; the exact step and C need the whole module"
+    )]
+    StepOnly,
     /// The formulas' code passed [`code_budget`] bytes.
     #[error(
         "the generated code is too large: its formulas pass {0} bytes (64 MiB, and 8 KiB more per body and \
@@ -195,6 +202,9 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 /// derivation, specialised where asked, the scene's numbers as graph nodes, the plan (the
 /// state's fields and the layout), then the text in the chosen language.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
+    if options.step_only && (options.lang != Lang::Rust || !options.solver.is_some_and(Solver::sweeps)) {
+        return Err(GenerateError::StepOnly);
+    }
     // The velocity-level step moves positions only: its rigid twin is not written yet.
     if options.solver.is_some() {
         loaded.system.refuse_rigid("generate --solver")?;
@@ -205,9 +215,10 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let scene = scene_numbers(loaded, &mut d.graph, &specialised)?;
     let plan = Plan::of(loaded, &d, &specialised);
     let formulas = &specialised.formulas;
-    match options.lang {
-        Lang::C => c_module(loaded, options, &d, formulas, &scene, &plan),
-        Lang::Rust => rust_module(loaded, options, &d, formulas, &scene, &plan),
+    match (options.lang, options.step_only) {
+        (Lang::Rust, true) => step_module(loaded, options, &d, formulas, &scene, &plan),
+        (Lang::C, _) => c_module(loaded, options, &d, formulas, &scene, &plan),
+        (Lang::Rust, false) => rust_module(loaded, options, &d, formulas, &scene, &plan),
     }
 }
 
@@ -659,7 +670,7 @@ fn ident_of(fields: &[Field], symbol: Symbol) -> &str {
 
 /// Where the step reads and writes the state: the time field (none when the file has no
 /// `t` in its state) and each body's position and velocity fields, in file order.
-struct StepPlaces<'a> {
+pub(super) struct StepPlaces<'a> {
     time: Option<&'a str>,
     position: Vec<&'a str>,
     velocity: Vec<&'a str>,
@@ -686,39 +697,7 @@ fn step_fns(
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let k = layout.constraints;
-    let _ = writeln!(
-        out,
-        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
-         pub const SOLVER: &str = \"{0}\";
-         /// Iterations per substep of `StepSettings::default()` for this solver.
-         pub const DEFAULT_ITERATIONS: usize = {1};
-         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
-         pub const INVERSE_SCALE: [f64; {k}] = {2};
-",
-        solver.name(),
-        solver.default_iterations(),
-        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
-    );
-    // Where each row's entries are, as `Prepared` reads them.
-    let mut starts = vec![0];
-    let mut bodies = Vec::new();
-    for dirs in &formulas.jacobian {
-        bodies.extend(dirs.iter().map(|&(body, _)| body.to_string()));
-        starts.push(bodies.len());
-    }
-    let _ = writeln!(
-        out,
-        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on body `ROW_BODY[e]`.
-         const ENTRIES: usize = {};
-         const ROW_START: [usize; {}] = {};
-         const ROW_BODY: [usize; {}] = {};
-",
-        bodies.len(),
-        k + 1,
-        array(&starts.iter().map(usize::to_string).collect::<Vec<_>>()),
-        bodies.len(),
-        array(&bodies)
-    );
+    let starts = step_constants(out, solver, inverse_scales, formulas, layout);
     // The derivation, row by row: what the step's helper text computes from these numbers.
     let mut doc = vec![
         "The rows the step solves, at a state: per body 1/m, v and F (the scene's, `applied_forces`), per row C/κ, Ċ/κ, c and J = ∇C/κ per body. Per row k".to_string(),
@@ -741,14 +720,7 @@ fn step_fns(
     // One function over the roots of the library's row program, in its order (per body its
     // mass, velocity and force; per row C, Ċ, c and J), so the shared values (one reciprocal
     // for a value divided twice or more) are the library's and the rows its numbers, bit for bit.
-    let mut roots = Vec::new();
-    for i in 0..layout.bodies {
-        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
-    }
-    for r in 0..k {
-        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
-        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
-    }
+    let roots = step_roots(places, formulas, layout);
     // The acceleration-level term c is a root (so the shared values are the library's) but
     // the step does not read it: its code is left out.
     let mut wanted = Vec::with_capacity(roots.len());
@@ -827,6 +799,178 @@ fn step_fns(
         }
         let _ = writeln!(out, "}}\n");
     }
+    step_accessors(out, places);
+    Ok(())
+}
+
+/// The roots of the library's row program in its order: per body its mass, velocity and
+/// force; per row C, Ċ, c and J.
+fn step_roots(places: &StepPlaces<'_>, formulas: &Formulas, layout: &Layout) -> Vec<Id> {
+    let mut roots = Vec::new();
+    for i in 0..layout.bodies {
+        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
+    }
+    for r in 0..layout.constraints {
+        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
+        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
+    }
+    roots
+}
+
+/// `--step-only`: the state, the step's constants, `positions` and `velocities`, the rows
+/// by shape (`shapes::step_by_shape`) and the step's helpers; none of the formulas' functions.
+fn step_module(
+    loaded: &Loaded,
+    options: &Options,
+    d: &Derivation,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<Module, GenerateError> {
+    let (system, g, fields, layout) = (&loaded.system, &d.graph, &plan.fields, &plan.layout);
+    let solver = options.solver.ok_or(GenerateError::StepOnly)?;
+    let (dim, n) = (layout.dim, layout.bodies);
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "// Generated by `lagrange generate --lang rust{} --solver {} --step-only`.",
+        if options.specialize { " --specialize" } else { "" },
+        solver.name()
+    );
+    let _ = writeln!(out, "// Scene: {}", comment_text(plan.title));
+    let _ = writeln!(out, "// Do not edit: regenerate. Self-contained: no dependency on lagrange or any crate.");
+    let _ = writeln!(
+        out,
+        "// {dim}D, {n} bodies, {} constraints; vectors are [f64; {dim}]. The velocity-level step only (`step`, \
+         `step_with`): each repeated row shape is written once, over a table of its instances.\n",
+        layout.constraints
+    );
+    let arrays = fields.iter().any(|f| f.array.is_some());
+    if arrays {
+        let _ = writeln!(
+            out,
+            "// State fields: time and parameters under their names; the bodies' positions, velocities, forces \
+             and masses in the arrays `position`, `velocity`, `force`, `mass`, in file order.\n"
+        );
+    } else {
+        field_names(&mut out, g, fields);
+    }
+    state(&mut out, g, fields, layout);
+    let listed: Vec<String> = plan.inequalities.iter().map(|b| b.to_string()).collect();
+    let _ = writeln!(
+        out,
+        "/// Which constraints are inequalities `C ≥ 0`, in file order.\npub const INEQUALITY: [bool; {}] = {};\n",
+        listed.len(),
+        array(&listed)
+    );
+    let slots = slot_exprs(g, fields);
+    let input_layout = Inputs::new(g, &plan.inputs())?;
+    let budget = code_budget(system);
+    let ctx = Ctx {
+        g,
+        inputs: &input_layout,
+        slots: &slots,
+        non_finite: Cell::new(0),
+        c: false,
+        room: Cell::new(budget),
+        budget,
+    };
+    let places = StepPlaces {
+        time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
+        position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
+        velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
+        mass: scene.masses.clone(),
+        velocity_node: scene.bodies.velocity.clone(),
+        applied: scene.bodies.applied.clone(),
+    };
+    // Positions and velocities per body, as the full module's functions give them.
+    for (name, what, idents) in
+        [("positions", "position", &places.position), ("velocities", "velocity", &places.velocity)]
+    {
+        let _ = writeln!(
+            out,
+            "/// The {what} of each body, in file order.\npub fn {name}(s: &State) -> [[f64; {dim}]; {n}] {{"
+        );
+        if arrays {
+            let _ = writeln!(out, "    s.{what}\n}}\n");
+        } else {
+            let items: Vec<String> = idents.iter().map(|i| format!("s.{i}")).collect();
+            let _ = writeln!(out, "    {}\n}}\n", array(&items));
+        }
+    }
+    let roots = step_roots(&places, formulas, layout);
+    super::shapes::step_by_shape(
+        &mut out,
+        &ctx,
+        system,
+        fields,
+        solver,
+        &inverse_scales(d),
+        &places,
+        formulas,
+        layout,
+        &roots,
+        arrays,
+    )?;
+    helper_texts(&mut out, Some(solver));
+    let mut warnings = Vec::new();
+    if ctx.non_finite.get() > 0 {
+        warnings.push(format!(
+            "constants of the formulas do not fit in f64 (written as f64::INFINITY, or NaN; {} place(s) in the code)",
+            ctx.non_finite.get()
+        ));
+    }
+    Ok(Module { code: out, fields: fields.iter().map(|f| (f.symbol, f.ident.clone())).collect(), warnings })
+}
+
+/// The step's constants: `SOLVER`, `DEFAULT_ITERATIONS`, `INVERSE_SCALE`, and where each
+/// row's Jacobian entries are (`ENTRIES`, `ROW_START`, `ROW_BODY`); returns `ROW_START`.
+pub(super) fn step_constants(
+    out: &mut String,
+    solver: Solver,
+    inverse_scales: &[f64],
+    formulas: &Formulas,
+    layout: &Layout,
+) -> Vec<usize> {
+    let k = layout.constraints;
+    let _ = writeln!(
+        out,
+        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
+         pub const SOLVER: &str = \"{0}\";
+         /// Iterations per substep of `StepSettings::default()` for this solver.
+         pub const DEFAULT_ITERATIONS: usize = {1};
+         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
+         pub const INVERSE_SCALE: [f64; {k}] = {2};
+",
+        solver.name(),
+        solver.default_iterations(),
+        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
+    );
+    // Where each row's entries are, as `Prepared` reads them.
+    let mut starts = vec![0];
+    let mut bodies = Vec::new();
+    for dirs in &formulas.jacobian {
+        bodies.extend(dirs.iter().map(|&(body, _)| body.to_string()));
+        starts.push(bodies.len());
+    }
+    let _ = writeln!(
+        out,
+        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on body `ROW_BODY[e]`.
+         const ENTRIES: usize = {};
+         const ROW_START: [usize; {}] = {};
+         const ROW_BODY: [usize; {}] = {};
+",
+        bodies.len(),
+        k + 1,
+        array(&starts.iter().map(usize::to_string).collect::<Vec<_>>()),
+        bodies.len(),
+        array(&bodies)
+    );
+    starts
+}
+
+/// The state's accessors the step's text calls: `time` and `put`.
+pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>) {
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
     let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });
@@ -843,11 +987,16 @@ fn step_fns(
             let _ = writeln!(out, "    let _ = t;");
         }
     }
-    for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
-        let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+    let arrays = places.position.iter().enumerate().all(|(i, p)| *p == format!("position[{i}]"))
+        && places.velocity.iter().enumerate().all(|(i, v)| *v == format!("velocity[{i}]"));
+    if arrays {
+        let _ = writeln!(out, "    s.position.copy_from_slice(q);\n    s.velocity.copy_from_slice(v);");
+    } else {
+        for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
+            let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+        }
     }
     let _ = writeln!(out, "}}\n");
-    Ok(())
 }
 
 /// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a field,
@@ -2532,6 +2681,13 @@ impl Ctx<'_> {
     /// expressions are empty and no `let` is written that only they use.
     pub(super) fn body_of(&self, roots: &[Id], wanted: &[bool]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let p = Program::lower_in(self.g, roots, self.inputs)?;
+        self.render(&p, wanted)
+    }
+
+    /// The text of a lowered program: `let` statements and one expression per output
+    /// component of the roots `wanted` marks (one flag per root, `p.output_ranges`), inputs
+    /// written as `self.slots` names them.
+    pub(super) fn render(&self, p: &Program, wanted: &[bool]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let uses = p.use_counts();
         // The operations a wanted output depends on.
         let mut live = vec![false; p.ops.len()];
