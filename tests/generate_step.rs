@@ -314,3 +314,33 @@ fn the_generated_exact_step_agrees_with_the_librarys_within_round_off() {
         }
     }
 }
+
+/// A step-only module writes each repeated shape once: the 30 × 30 grid's 1 711 rows and 870
+/// bodies are a handful of shape functions and its module a small fraction of the row-by-row
+/// one (8 MB).
+#[test]
+fn a_step_only_module_writes_each_shape_once() {
+    let l = loaded(Path::new("constraints/solvers/joint_grid_30.toml"));
+    let options = Options { solver: Some(Solver::SoftStep), step_only: true, ..Options::default() };
+    let code = module(&l, &options).expect("generates").code;
+    let shapes = code.matches("\nfn shape_").count();
+    assert!((4..=8).contains(&shapes), "{shapes} shapes");
+    assert!(code.len() < 200_000, "{} bytes", code.len());
+    assert!(!code.contains("pub fn lambda(") && code.contains("pub fn step("));
+}
+
+/// `--step-only` writes the soft step or PGS in Rust: without a solver, with the exact step
+/// or in C it is refused before anything is written.
+#[test]
+fn step_only_needs_the_soft_step_or_pgs_in_rust() {
+    use lagrange::codegen::{GenerateError, Lang};
+    let l = loaded(Path::new("constraints/solvers/two_particles.toml"));
+    let step_only = Options { step_only: true, ..Options::default() };
+    for options in [
+        step_only.clone(),
+        Options { solver: Some(Solver::Exact), ..step_only.clone() },
+        Options { solver: Some(Solver::SoftStep), lang: Lang::C, ..step_only },
+    ] {
+        assert_eq!(module(&l, &options).err(), Some(GenerateError::StepOnly), "{options:?}");
+    }
+}

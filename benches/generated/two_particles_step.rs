@@ -1277,9 +1277,12 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     let (mut q, mut v) = (positions(s), velocities(s));
     let mut p = Prepared::zeroed();
     prepare(s, &mut p);
+    // Ċ at the step's start, restitution's closing speed (read only with restitution).
     let mut start_rate = [0.0; CONSTRAINTS];
-    for (k, rate) in start_rate.iter_mut().enumerate() {
-        *rate = p.rate(k, &v);
+    if settings.restitution > 0.0 {
+        for (k, rate) in start_rate.iter_mut().enumerate() {
+            *rate = p.rate(k, &v);
+        }
     }
     for sub in 0..settings.substeps {
         p.kick(&mut v, h);
