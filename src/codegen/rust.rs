@@ -784,16 +784,14 @@ fn step_fns(
             let _ = writeln!(out, "    p.inverse_mass[{i}] = 1.0 / {};", operand(&m[0]));
             let _ = writeln!(out, "    v[{i}] = {};\n    p.force[{i}] = {};", array(&v), array(&f));
         }
-        for r in 0..k {
+        for (r, (dirs, start)) in formulas.jacobian.iter().zip(&starts).enumerate() {
             let scalars = next(3);
-            let js: Vec<String> =
-                formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+            let js: Vec<String> = dirs.iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
             let _ = writeln!(
                 out,
-                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {}, {}, &v);",
+                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {start}, {}, &v);",
                 operand(&scalars[0]),
                 operand(&scalars[1]),
-                starts[r],
                 array(&js)
             );
         }
