@@ -15,9 +15,11 @@
 //! slots per body, one per principal axis (`axis_slot`), and the torques and α come back as
 //! world vectors.
 //! With `--solver` the module also carries the velocity-level step an engine runs
-//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
-//! library's row roots in one function, so the library's numbers) and the helper text of
-//! `support/step.rs` and the solver's file.
+//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `prepare` (the
+//! library's row roots in one function, so the library's numbers, written into the step's
+//! arrays; the exact step's `step_rows`) and the helper text of `support/step.rs` and the
+//! solver's file. With `--step-only` the module is the step alone, its rows by shape
+//! (`shapes.rs`).
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
