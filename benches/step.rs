@@ -1,8 +1,9 @@
 //! The generated soft step against a handwritten Box2D-style step, in the same run.
 //!
-//! Two scenes of point masses joined by distance constraints (`constraints/solvers/`):
-//! Catto's two particles (2 bodies, 2 rows) and Solver2D's ball and chain (40 links and a
-//! 4 021 kg ball, 41 rows). Each is stepped by:
+//! Three scenes of point masses joined by distance constraints (`constraints/solvers/`):
+//! Catto's two particles (2 bodies, 2 rows), Solver2D's ball and chain (40 links and a
+//! 4 021 kg ball, 41 rows) and its joint grid of 30 × 30 (870 bodies below a fixed row,
+//! 1 711 rows; its module written with `--step-only`, the rows by shape). Each is stepped by:
 //! - `handwritten`: the soft step written by hand the way Box2D v3 writes it
 //!   (`src/solver.c` stages `b2IntegrateVelocitiesTask`, `b2WarmStartJointsTask`,
 //!   `b2SolveJointsTask`, `b2IntegratePositionsTask`, relax; `src/distance_joint.c`'s
@@ -59,6 +60,27 @@ macro_rules! generated {
 generated!(two_particles, "generated/two_particles_step.rs");
 generated!(ball_and_chain, "generated/ball_and_chain_step.rs");
 
+/// The 30 × 30 grid's step-only module (`--step-only`: its rows by shape).
+#[allow(dead_code, clippy::all)]
+mod joint_grid_30 {
+    include!("generated/joint_grid_30_step.rs");
+
+    /// The file's initial state: at rest at `q`, under g = (0, −10), anchors a1…a30 at (c, 0).
+    pub fn at_rest(q: &[[f64; 2]]) -> State {
+        let mut s = State::default();
+        s.g = [0.0, -10.0];
+        macro_rules! anchors {
+            ($($a:ident = $x:literal),*) => { $(s.$a = [$x, 0.0];)* };
+        }
+        anchors!(a1 = 0.0, a2 = 1.0, a3 = 2.0, a4 = 3.0, a5 = 4.0, a6 = 5.0, a7 = 6.0, a8 = 7.0, a9 = 8.0, a10 = 9.0);
+        anchors!(a11 = 10.0, a12 = 11.0, a13 = 12.0, a14 = 13.0, a15 = 14.0, a16 = 15.0, a17 = 16.0, a18 = 17.0);
+        anchors!(a19 = 18.0, a20 = 19.0, a21 = 20.0, a22 = 21.0, a23 = 22.0, a24 = 23.0, a25 = 24.0, a26 = 25.0);
+        anchors!(a27 = 26.0, a28 = 27.0, a29 = 28.0, a30 = 29.0);
+        put(&mut s, 0.0, q, &vec![[0.0; 2]; q.len()]);
+        s
+    }
+}
+
 fn main() {
     divan::main();
 }
@@ -113,26 +135,52 @@ struct World {
 }
 
 impl World {
+    /// Bodies at `q` of mass `mass` at rest under g = (0, −10), static anchors at `anchors`
+    /// (body `q.len() + j` is anchor j), and unit-length joints between the bodies `pairs`.
+    fn new(q: &[[f64; 2]], mass: &[f64], anchors: &[[f64; 2]], pairs: &[(usize, usize)]) -> World {
+        let (n, k) = (q.len(), pairs.len());
+        let statics = anchors.len();
+        let mut w = World {
+            dynamic: n,
+            q: q.iter().chain(anchors).copied().collect(),
+            v: vec![[0.0; 2]; n + statics],
+            inverse_mass: mass.iter().map(|m| 1.0 / m).chain(vec![0.0; statics]).collect(),
+            force: mass.iter().map(|m| [0.0, -10.0 * m]).chain(vec![[0.0; 2]; statics]).collect(),
+            joints: pairs.iter().map(|&(a, b)| Joint { a, b, length: 1.0, impulse: 0.0 }).collect(),
+            axis: vec![[0.0; 2]; k],
+            c: vec![0.0; k],
+            mass: vec![0.0; k],
+        };
+        w.prepare();
+        w
+    }
+
     /// A chain hanging from an anchor at the origin: body i at `q[i]` of mass `mass[i]`,
     /// joined to the one before (the first to the anchor) at unit length.
     fn chain(q: &[[f64; 2]], mass: &[f64]) -> World {
         let n = q.len();
-        let anchor = n;
-        let mut w = World {
-            dynamic: n,
-            q: q.iter().copied().chain([[0.0, 0.0]]).collect(),
-            v: vec![[0.0; 2]; n + 1],
-            inverse_mass: mass.iter().map(|m| 1.0 / m).chain([0.0]).collect(),
-            force: mass.iter().map(|m| [0.0, -10.0 * m]).chain([[0.0; 2]]).collect(),
-            joints: (0..n)
-                .map(|i| Joint { a: if i == 0 { anchor } else { i - 1 }, b: i, length: 1.0, impulse: 0.0 })
-                .collect(),
-            axis: vec![[0.0; 2]; n],
-            c: vec![0.0; n],
-            mass: vec![0.0; n],
-        };
-        w.prepare();
-        w
+        let pairs: Vec<(usize, usize)> = (0..n).map(|i| (if i == 0 { n } else { i - 1 }, i)).collect();
+        World::new(q, mass, &[[0.0, 0.0]], &pairs)
+    }
+
+    /// Solver2D's joint grid as `joint_grid_30.toml` writes it: `rows` × `columns` points of
+    /// 1 kg at (c, −r) below anchors at (c, 0), each joined to the one above and the one on
+    /// its left, in the file's order (per point: up, then left).
+    fn grid(rows: usize, columns: usize) -> World {
+        let at = |r: usize, c: usize| (r - 1) * columns + c;
+        let mut q = Vec::new();
+        let mut pairs = Vec::new();
+        for r in 1..=rows {
+            for c in 0..columns {
+                q.push([c as f64, -(r as f64)]);
+                pairs.push((if r == 1 { rows * columns + c } else { at(r - 1, c) }, at(r, c)));
+                if c > 0 {
+                    pairs.push((at(r, c - 1), at(r, c)));
+                }
+            }
+        }
+        let anchors: Vec<[f64; 2]> = (0..columns).map(|c| [c as f64, 0.0]).collect();
+        World::new(&q, &vec![1.0; q.len()], &anchors, &pairs)
     }
 
     /// The rows at the current positions (Box2D's prepare, here once per substep).
@@ -330,6 +378,38 @@ mod chain {
     #[divan::bench]
     fn library(bencher: Bencher) {
         let mut l = Library::new(include_str!("../constraints/solvers/ball_and_chain.toml"));
+        l.with(|stepper, dynamics, q, v, t| {
+            (0..WARM).for_each(|_| library_step(stepper, dynamics, q, v, t));
+            bencher.bench_local(|| library_step(stepper, dynamics, q, v, t));
+        });
+    }
+}
+
+mod grid_30 {
+    use super::*;
+
+    #[divan::bench]
+    fn handwritten(bencher: Bencher) {
+        let mut w = World::grid(29, 30);
+        (0..WARM).for_each(|_| w.step(DT));
+        bencher.bench_local(|| w.step(black_box(DT)));
+    }
+
+    #[divan::bench]
+    fn generated(bencher: Bencher) {
+        use super::joint_grid_30 as g;
+        let mut w = World::grid(29, 30);
+        let mut s = Box::new(g::at_rest(&w.q[..w.dynamic]));
+        let mut p = Box::new([0.0; g::CONSTRAINTS]);
+        (0..WARM).for_each(|_| g::step(&mut s, &mut p, DT));
+        (0..WARM).for_each(|_| w.step(DT));
+        agree("30 x 30 grid", &w, &g::positions(&s), &p[..]);
+        bencher.bench_local(|| g::step(&mut s, &mut p, black_box(DT)));
+    }
+
+    #[divan::bench(sample_count = 20)]
+    fn library(bencher: Bencher) {
+        let mut l = Library::new(include_str!("../constraints/solvers/joint_grid_30.toml"));
         l.with(|stepper, dynamics, q, v, t| {
             (0..WARM).for_each(|_| library_step(stepper, dynamics, q, v, t));
             bencher.bench_local(|| library_step(stepper, dynamics, q, v, t));

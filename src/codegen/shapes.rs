@@ -282,34 +282,37 @@ pub(super) fn step_by_shape(
     let _ = writeln!(out, "    let x = others(s);\n    let mut ev = [[0.0; DIM]; BODIES];");
     for (id, shape) in list.iter().enumerate() {
         let w = shape.bodies + shape.others;
-        let table = if w == 0 { "&[]".to_string() } else { format!("&SHAPE_{id}_TABLE[n * {w}..n * {w} + {w}]") };
-        let _ = writeln!(out, "    for (n, &i) in SHAPE_{id}_ITEMS.iter().enumerate() {{");
-        let _ = writeln!(out, "        let (o, i) = (shape_{id}(q, v, &x, {table}), i as usize);");
+        if w == 0 {
+            let _ = writeln!(out, "    for &i in SHAPE_{id}_ITEMS.iter() {{");
+            let _ = writeln!(out, "        let (o, i) = (shape_{id}(q, v, &x, &[]), i as usize);");
+        } else {
+            let _ = writeln!(
+                out,
+                "    for (&i, t) in SHAPE_{id}_ITEMS.iter().zip(SHAPE_{id}_TABLE.as_chunks::<{w}>().0) {{"
+            );
+            let _ = writeln!(out, "        let (o, i) = (shape_{id}(q, v, &x, t), i as usize);");
+        }
         let comps = |from: usize| array(&(from..from + dim).map(|c| format!("o[{c}]")).collect::<Vec<_>>());
         if !shape.is_row {
             let _ = writeln!(out, "        p.inverse_mass[i] = 1.0 / o[0];");
             let _ = writeln!(out, "        ev[i] = {};\n        p.force[i] = {};", comps(1), comps(1 + dim));
         } else {
+            // C/κ, Ċ/κ (into `time_rate`, which `finish` turns into ∂C/∂t) and J: a pass of
+            // its own, so the divisions of one row's m_eff do not wait on its J's.
             let entries = (shape.outputs.len() - 2) / dim;
-            let js: Vec<String> = (0..entries)
-                .map(|e| {
-                    format!(
-                        "(ROW_BODY[{}], {})",
-                        if e == 0 { "e".into() } else { format!("e + {e}") },
-                        comps(2 + e * dim)
-                    )
-                })
-                .collect();
             let _ = writeln!(out, "        let e = ROW_START[i];");
             let _ = writeln!(
                 out,
-                "        p.row(i, (o[0] * INVERSE_SCALE[i], o[1] * INVERSE_SCALE[i]), e, {}, &ev);",
-                array(&js)
+                "        p.value[i] = o[0] * INVERSE_SCALE[i];\n        p.time_rate[i] = o[1] * INVERSE_SCALE[i];"
             );
+            for e in 0..entries {
+                let at = if e == 0 { "e".to_string() } else { format!("e + {e}") };
+                let _ = writeln!(out, "        p.jacobian[{at}] = {};", comps(2 + e * dim));
+            }
         }
         let _ = writeln!(out, "    }}");
     }
-    let _ = writeln!(out, "}}\n");
+    let _ = writeln!(out, "    p.finish(&ev);\n}}\n");
     step_accessors(out, places);
     Ok(())
 }
@@ -370,11 +373,12 @@ fn shape_fn(
     let _ = writeln!(out, "/// Shape {id}: {what}.\n#[inline(always)]");
     let _ = writeln!(
         out,
-        "fn shape_{id}({}: &[[f64; DIM]], {}: &[[f64; DIM]], {}: &[f64], {}: &[u32]) -> [f64; {}] {{",
+        "fn shape_{id}({}: &[[f64; DIM]; BODIES], {}: &[[f64; DIM]; BODIES], {}: &[f64], {}: &[u32; {}]) -> [f64; {}] {{",
         param("q", reads(|s| matches!(s, Source::Position(..)))),
         param("v", reads(|s| matches!(s, Source::Velocity(..)))),
         param("x", reads(|s| matches!(s, Source::Other(..)))),
         if texts.is_empty() { "_t" } else { "t" },
+        nb + shape.others,
         exprs.len()
     );
     for l in &lets {
