@@ -67,6 +67,7 @@ pub struct Module {
     file: PathBuf,
     specialize: bool,
     solver: Option<Solver>,
+    step_only: bool,
     name: Option<String>,
     out_dir: Option<PathBuf>,
 }
@@ -75,7 +76,14 @@ impl Module {
     /// The module of a constraint file (a path relative to the crate's root, where cargo runs
     /// build scripts).
     pub fn new(file: impl AsRef<Path>) -> Module {
-        Module { file: file.as_ref().to_path_buf(), specialize: false, solver: None, name: None, out_dir: None }
+        Module {
+            file: file.as_ref().to_path_buf(),
+            specialize: false,
+            solver: None,
+            step_only: false,
+            name: None,
+            out_dir: None,
+        }
     }
 
     /// Substitute the file's parameter values before generating (`--specialize`).
@@ -87,6 +95,13 @@ impl Module {
     /// Write the velocity-level step of this solver too (`--solver`).
     pub fn solver(mut self, solver: Solver) -> Module {
         self.solver = Some(solver);
+        self
+    }
+
+    /// Write the step only, each repeated row shape once over a table of its instances
+    /// (`--step-only`; with `solver` the soft step or PGS).
+    pub fn step_only(mut self, yes: bool) -> Module {
+        self.step_only = yes;
         self
     }
 
@@ -120,7 +135,8 @@ impl Module {
         let text = read_text(path).map_err(BuildError::Read)?;
         let loaded =
             load(&text).map_err(|problems| BuildError::Invalid { path: path.clone(), text: text.clone(), problems })?;
-        let options = Options { specialize: self.specialize, solver: self.solver, lang: Lang::Rust };
+        let options =
+            Options { specialize: self.specialize, solver: self.solver, lang: Lang::Rust, step_only: self.step_only };
         generate_module(&loaded, &options).map_err(|source| match &source {
             GenerateError::Derive(e) if e.constraint().is_some() => {
                 BuildError::Located { path: path.clone(), constraint: e.constraint().unwrap_or_default(), text, source }

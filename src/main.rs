@@ -68,6 +68,10 @@ enum Command {
         /// for this solver (Box2D v3's soft step, PGS, or the exact velocity solve).
         #[arg(long, value_enum)]
         solver: Option<StepArg>,
+        /// Write the step only (`--solver soft-step|pgs`, Rust), each repeated row shape once
+        /// over a table of its instances: a small module for scenes of thousands of rows.
+        #[arg(long)]
+        step_only: bool,
     },
     /// Numbers at a state: C, Ċ and λ per constraint, force and acceleration per body.
     ///
@@ -428,12 +432,12 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> ExitCode {
     match cli.command {
         Command::Derive { file, format, steps } => cmd_derive(&file, format, steps),
-        Command::Generate { file, lang, output, specialize, solver } => {
+        Command::Generate { file, lang, output, specialize, solver, step_only } => {
             let lang = match lang {
                 LangArg::Rust => Lang::Rust,
                 LangArg::C => Lang::C,
             };
-            let options = Options { specialize, solver: solver.map(StepArg::solver), lang };
+            let options = Options { specialize, solver: solver.map(StepArg::solver), lang, step_only };
             cmd_generate(&file, output.as_deref(), &options)
         }
         Command::Solve { file, at, set, format } => match cmd_solve(&file, at.as_deref(), &set, format) {

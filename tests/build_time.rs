@@ -38,6 +38,7 @@ fn the_module_written_is_lagrange_generates_under_the_files_stem() {
         ("constraints/pendulum.toml", &[][..], "pendulum.rs"),
         ("constraints/chain_5.toml", &["--specialize"][..], "chain_5.rs"),
         ("constraints/bead_on_wire.toml", &["--solver", "soft-step"][..], "bead_on_wire.rs"),
+        ("constraints/solvers/two_particles.toml", &["--solver", "soft-step", "--step-only"][..], "two_particles.rs"),
     ] {
         let mut m = Module::new(file).out_dir(&dir);
         if flags.contains(&"--specialize") {
@@ -45,6 +46,9 @@ fn the_module_written_is_lagrange_generates_under_the_files_stem() {
         }
         if flags.contains(&"soft-step") {
             m = m.solver(Solver::SoftStep);
+        }
+        if flags.contains(&"--step-only") {
+            m = m.step_only(true);
         }
         assert_eq!(m.file_name(), name);
         let path = m.write().unwrap_or_else(|e| panic!("{file}: {e}"));

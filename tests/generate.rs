@@ -462,15 +462,28 @@ fn specialised_code_carries_no_parameters() {
 /// The modules the benchmarks include are what the generator writes today.
 #[test]
 fn checked_in_generated_code_is_current() {
-    for (file, generated) in [
-        ("constraints/bead_on_wire.toml", "benches/generated/bead_on_wire.rs"),
-        ("benches/data/chain_10.toml", "benches/generated/chain_10.rs"),
-        ("constraints/joints/revolute.toml", "benches/generated/revolute.rs"),
+    use lagrange::codegen::layout::Solver;
+    let soft = Some(Solver::SoftStep);
+    for (file, solver, step_only, generated) in [
+        ("constraints/bead_on_wire.toml", None, false, "benches/generated/bead_on_wire.rs"),
+        ("benches/data/chain_10.toml", None, false, "benches/generated/chain_10.rs"),
+        ("constraints/joints/revolute.toml", None, false, "benches/generated/revolute.rs"),
+        ("constraints/solvers/two_particles.toml", soft, false, "benches/generated/two_particles_step.rs"),
+        ("constraints/solvers/ball_and_chain.toml", soft, false, "benches/generated/ball_and_chain_step.rs"),
+        ("constraints/solvers/joint_grid_30.toml", soft, true, "benches/generated/joint_grid_30_step.rs"),
     ] {
         let l = loaded(Path::new(file));
-        let code = lagrange::codegen::generate(&l, &Options::default()).expect("generates");
+        let code =
+            lagrange::codegen::generate(&l, &Options { solver, step_only, ..Options::default() }).expect("generates");
         let on_disk = std::fs::read_to_string(generated).expect("checked-in module");
-        assert!(code == on_disk, "{generated} is stale: run `cargo run --release -- generate {file} -o {generated}`");
+        let mut flag = solver.map_or(String::new(), |s| format!(" --solver {}", s.name()));
+        if step_only {
+            flag.push_str(" --step-only");
+        }
+        assert!(
+            code == on_disk,
+            "{generated} is stale: run `cargo run --release -- generate {file}{flag} -o {generated}`"
+        );
     }
 }
 

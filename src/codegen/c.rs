@@ -19,7 +19,7 @@
 //! slot `axis_inverse_inertias`, `axis_angular_velocities`, `axis_torques` and Jʷ·eₖ.
 //!
 //! With `--solver soft-step|pgs` the module also has the step (`step`, `step_with`,
-//! `step_settings_default`): the scene's `step_rows` over the Rust module's roots and the
+//! `step_settings_default`): the scene's `step_rows` over the Rust module's roots (its `prepare`'s) and the
 //! text of `support/step.c`, the Rust step's operations in its order.
 //!
 //! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the rows'
@@ -486,7 +486,7 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
         n1 = n.max(1),
         e1 = entries.max(1)
     );
-    // The rows' roots in the library's order (as the Rust module's `step_rows`).
+    // The rows' roots in the library's order (as the Rust module's `prepare`).
     let mut roots = Vec::new();
     for i in 0..n {
         roots.extend([step.masses[i], p.bodies.velocity[i], p.bodies.applied[i]]);

@@ -18,6 +18,7 @@ mod c_solve;
 pub mod layout;
 mod names;
 pub mod rust;
+mod shapes;
 mod support;
 
 pub use rust::{GenerateError, Lang, Module, Options, generate, module};

@@ -15,9 +15,11 @@
 //! slots per body, one per principal axis (`axis_slot`), and the torques and α come back as
 //! world vectors.
 //! With `--solver` the module also carries the velocity-level step an engine runs
-//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
-//! library's row roots in one function, so the library's numbers) and the helper text of
-//! `support/step.rs` and the solver's file.
+//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `prepare` (the
+//! library's row roots in one function, so the library's numbers, written into the step's
+//! arrays; the exact step's `step_rows`) and the helper text of `support/step.rs` and the
+//! solver's file. With `--step-only` the module is the step alone, its rows by shape
+//! (`shapes.rs`).
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
@@ -62,6 +64,9 @@ pub struct Options {
     pub solver: Option<Solver>,
     /// The language written.
     pub lang: Lang,
+    /// Write the step and nothing else, each repeated row shape once over a table of its
+    /// instances (`generate --step-only`; Rust, with `solver` soft step or PGS).
+    pub step_only: bool,
 }
 
 /// The language of a generated module.
@@ -93,6 +98,10 @@ pub enum GenerateError {
         "--lang c writes the soft step and PGS; the exact step (its rows' solve) is generated in Rust only for now"
     )]
     CStep,
+    #[error(
+        "--step-only writes the soft step or PGS (--solver soft-step|pgs) in Rust; the exact step and C need the whole module"
+    )]
+    StepOnly,
     /// The formulas' code passed [`code_budget`] bytes.
     #[error(
         "the generated code is too large: its formulas pass {0} bytes (64 MiB, and 8 KiB more per body and \
@@ -195,6 +204,9 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 /// derivation, specialised where asked, the scene's numbers as graph nodes, the plan (the
 /// state's fields and the layout), then the text in the chosen language.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
+    if options.step_only && (options.lang != Lang::Rust || !options.solver.is_some_and(Solver::sweeps)) {
+        return Err(GenerateError::StepOnly);
+    }
     // The velocity-level step moves positions only: its rigid twin is not written yet.
     if options.solver.is_some() {
         loaded.system.refuse_rigid("generate --solver")?;
@@ -205,9 +217,10 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     let scene = scene_numbers(loaded, &mut d.graph, &specialised)?;
     let plan = Plan::of(loaded, &d, &specialised);
     let formulas = &specialised.formulas;
-    match options.lang {
-        Lang::C => c_module(loaded, options, &d, formulas, &scene, &plan),
-        Lang::Rust => rust_module(loaded, options, &d, formulas, &scene, &plan),
+    match (options.lang, options.step_only) {
+        (Lang::Rust, true) => step_module(loaded, options, &d, formulas, &scene, &plan),
+        (Lang::C, _) => c_module(loaded, options, &d, formulas, &scene, &plan),
+        (Lang::Rust, false) => rust_module(loaded, options, &d, formulas, &scene, &plan),
     }
 }
 
@@ -659,7 +672,7 @@ fn ident_of(fields: &[Field], symbol: Symbol) -> &str {
 
 /// Where the step reads and writes the state: the time field (none when the file has no
 /// `t` in its state) and each body's position and velocity fields, in file order.
-struct StepPlaces<'a> {
+pub(super) struct StepPlaces<'a> {
     time: Option<&'a str>,
     position: Vec<&'a str>,
     velocity: Vec<&'a str>,
@@ -671,7 +684,8 @@ struct StepPlaces<'a> {
 
 /// The scene's part of the step (`--solver`): its solver and default iterations, 1/κ as the
 /// library's rows use it, `step_rows` with the derivation of each row as comments, and the
-/// state's accessors the step's helper text calls (`time`, `put`, `prepared`).
+/// state's accessors the step's helper text calls (`time`, `put`, `prepare`; `step_rows` for
+/// the exact step).
 #[allow(clippy::too_many_arguments)]
 fn step_fns(
     out: &mut String,
@@ -685,19 +699,7 @@ fn step_fns(
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let k = layout.constraints;
-    let _ = writeln!(
-        out,
-        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
-         pub const SOLVER: &str = \"{0}\";
-         /// Iterations per substep of `StepSettings::default()` for this solver.
-         pub const DEFAULT_ITERATIONS: usize = {1};
-         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
-         pub const INVERSE_SCALE: [f64; {k}] = {2};
-",
-        solver.name(),
-        solver.default_iterations(),
-        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
-    );
+    let starts = step_constants(out, solver, inverse_scales, formulas, layout);
     // The derivation, row by row: what the step's helper text computes from these numbers.
     let mut doc = vec![
         "The rows the step solves, at a state: per body 1/m, v and F (the scene's, `applied_forces`), per row C/κ, Ċ/κ, c and J = ∇C/κ per body. Per row k".to_string(),
@@ -720,15 +722,17 @@ fn step_fns(
     // One function over the roots of the library's row program, in its order (per body its
     // mass, velocity and force; per row C, Ċ, c and J), so the shared values (one reciprocal
     // for a value divided twice or more) are the library's and the rows its numbers, bit for bit.
-    let mut roots = Vec::new();
-    for i in 0..layout.bodies {
-        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
-    }
+    let roots = step_roots(places, formulas, layout);
+    // The acceleration-level term c is a root (so the shared values are the library's) but
+    // the step does not read it: its code is left out.
+    let mut wanted = Vec::with_capacity(roots.len());
+    wanted.resize(3 * layout.bodies, true);
     for r in 0..k {
-        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
-        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
+        wanted.extend([true, true, false]);
+        wanted.extend(formulas.jacobian[r].iter().map(|_| true));
     }
-    let (lets, exprs) = ctx.body(&roots)?;
+    let exact = solver == Solver::Exact;
+    let (lets, exprs) = if exact { ctx.body(&roots)? } else { ctx.body_of(&roots, &wanted)? };
     let dim = layout.dim;
     let mut at = 0;
     let mut next = |n: usize| {
@@ -736,35 +740,237 @@ fn step_fns(
         at += n;
         part
     };
-    let _ = writeln!(out, "fn step_rows(s: &State) -> StepRows<DIM> {{");
-    for l in &lets {
-        let _ = writeln!(out, "    {l}");
+    if exact {
+        let _ = writeln!(out, "fn step_rows(s: &State) -> StepRows<DIM> {{");
+        for l in &lets {
+            let _ = writeln!(out, "    {l}");
+        }
+        let _ = writeln!(
+            out,
+            "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
+            n = layout.bodies
+        );
+        for _ in 0..layout.bodies {
+            let m = next(1);
+            let (v, f) = (next(dim), next(dim));
+            let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
+            let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
+        }
+        for r in 0..k {
+            let scalars = next(3);
+            let js: Vec<String> =
+                formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+            let _ = writeln!(
+                out,
+                "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
+                operand(&scalars[0]),
+                operand(&scalars[1]),
+                scalars[2],
+                array(&js)
+            );
+        }
+        let _ = writeln!(out, "    r\n}}\n");
+    } else {
+        let _ = writeln!(
+            out,
+            "/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
+             fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
+        );
+        for l in &lets {
+            let _ = writeln!(out, "    {l}");
+        }
+        let _ = writeln!(out, "    let mut v = [[0.0; DIM]; BODIES];");
+        for i in 0..layout.bodies {
+            let m = next(1);
+            let (v, f) = (next(dim), next(dim));
+            let _ = writeln!(out, "    p.inverse_mass[{i}] = 1.0 / {};", operand(&m[0]));
+            let _ = writeln!(out, "    v[{i}] = {};\n    p.force[{i}] = {};", array(&v), array(&f));
+        }
+        for (r, (dirs, start)) in formulas.jacobian.iter().zip(&starts).enumerate() {
+            let scalars = next(3);
+            let js: Vec<String> = dirs.iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+            let _ = writeln!(
+                out,
+                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {start}, {}, &v);",
+                operand(&scalars[0]),
+                operand(&scalars[1]),
+                array(&js)
+            );
+        }
+        let _ = writeln!(out, "}}\n");
+    }
+    step_accessors(out, places);
+    Ok(())
+}
+
+/// The roots of the library's row program in its order: per body its mass, velocity and
+/// force; per row C, Ċ, c and J.
+fn step_roots(places: &StepPlaces<'_>, formulas: &Formulas, layout: &Layout) -> Vec<Id> {
+    let mut roots = Vec::new();
+    for i in 0..layout.bodies {
+        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
+    }
+    for r in 0..layout.constraints {
+        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
+        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
+    }
+    roots
+}
+
+/// `--step-only`: the state, the step's constants, `positions` and `velocities`, the rows
+/// by shape (`shapes::step_by_shape`) and the step's helpers; none of the formulas' functions.
+fn step_module(
+    loaded: &Loaded,
+    options: &Options,
+    d: &Derivation,
+    formulas: &Formulas,
+    scene: &SceneNumbers,
+    plan: &Plan<'_>,
+) -> Result<Module, GenerateError> {
+    let (system, g, fields, layout) = (&loaded.system, &d.graph, &plan.fields, &plan.layout);
+    let solver = options.solver.ok_or(GenerateError::StepOnly)?;
+    let (dim, n) = (layout.dim, layout.bodies);
+    let mut out = String::new();
+    let _ = writeln!(
+        out,
+        "// Generated by `lagrange generate --lang rust{} --solver {} --step-only`.",
+        if options.specialize { " --specialize" } else { "" },
+        solver.name()
+    );
+    let _ = writeln!(out, "// Scene: {}", comment_text(plan.title));
+    let _ = writeln!(out, "// Do not edit: regenerate. Self-contained: no dependency on lagrange or any crate.");
+    let _ = writeln!(
+        out,
+        "// {dim}D, {n} bodies, {} constraints; vectors are [f64; {dim}]. The velocity-level step only (`step`, \
+         `step_with`): each repeated row shape is written once, over a table of its instances.\n",
+        layout.constraints
+    );
+    let arrays = fields.iter().any(|f| f.array.is_some());
+    if arrays {
+        let _ = writeln!(
+            out,
+            "// State fields: time and parameters under their names; the bodies' positions, velocities, forces \
+             and masses in the arrays `position`, `velocity`, `force`, `mass`, in file order.\n"
+        );
+    } else {
+        field_names(&mut out, g, fields);
+    }
+    state(&mut out, g, fields, layout);
+    let listed: Vec<String> = plan.inequalities.iter().map(|b| b.to_string()).collect();
+    let _ = writeln!(
+        out,
+        "/// Which constraints are inequalities `C ≥ 0`, in file order.\npub const INEQUALITY: [bool; {}] = {};\n",
+        listed.len(),
+        array(&listed)
+    );
+    let slots = slot_exprs(g, fields);
+    let input_layout = Inputs::new(g, &plan.inputs())?;
+    let budget = code_budget(system);
+    let ctx = Ctx {
+        g,
+        inputs: &input_layout,
+        slots: &slots,
+        non_finite: Cell::new(0),
+        c: false,
+        room: Cell::new(budget),
+        budget,
+    };
+    let places = StepPlaces {
+        time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
+        position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
+        velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
+        mass: scene.masses.clone(),
+        velocity_node: scene.bodies.velocity.clone(),
+        applied: scene.bodies.applied.clone(),
+    };
+    // Positions and velocities per body, as the full module's functions give them.
+    for (name, what, idents) in
+        [("positions", "position", &places.position), ("velocities", "velocity", &places.velocity)]
+    {
+        let _ = writeln!(
+            out,
+            "/// The {what} of each body, in file order.\npub fn {name}(s: &State) -> [[f64; {dim}]; {n}] {{"
+        );
+        if arrays {
+            let _ = writeln!(out, "    s.{what}\n}}\n");
+        } else {
+            let items: Vec<String> = idents.iter().map(|i| format!("s.{i}")).collect();
+            let _ = writeln!(out, "    {}\n}}\n", array(&items));
+        }
+    }
+    let roots = step_roots(&places, formulas, layout);
+    super::shapes::step_by_shape(
+        &mut out,
+        &ctx,
+        system,
+        fields,
+        solver,
+        &inverse_scales(d),
+        &places,
+        formulas,
+        layout,
+        &roots,
+        arrays,
+    )?;
+    helper_texts(&mut out, Some(solver));
+    let mut warnings = Vec::new();
+    if ctx.non_finite.get() > 0 {
+        warnings.push(format!(
+            "constants of the formulas do not fit in f64 (written as f64::INFINITY, or NaN; {} place(s) in the code)",
+            ctx.non_finite.get()
+        ));
+    }
+    Ok(Module { code: out, fields: fields.iter().map(|f| (f.symbol, f.ident.clone())).collect(), warnings })
+}
+
+/// The step's constants: `SOLVER`, `DEFAULT_ITERATIONS`, `INVERSE_SCALE`, and where each
+/// row's Jacobian entries are (`ENTRIES`, `ROW_START`, `ROW_BODY`); returns `ROW_START`.
+pub(super) fn step_constants(
+    out: &mut String,
+    solver: Solver,
+    inverse_scales: &[f64],
+    formulas: &Formulas,
+    layout: &Layout,
+) -> Vec<usize> {
+    let k = layout.constraints;
+    let _ = writeln!(
+        out,
+        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
+         pub const SOLVER: &str = \"{0}\";
+         /// Iterations per substep of `StepSettings::default()` for this solver.
+         pub const DEFAULT_ITERATIONS: usize = {1};
+         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
+         pub const INVERSE_SCALE: [f64; {k}] = {2};
+",
+        solver.name(),
+        solver.default_iterations(),
+        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
+    );
+    // Where each row's entries are, as `Prepared` reads them.
+    let mut starts = vec![0];
+    let mut bodies = Vec::new();
+    for dirs in &formulas.jacobian {
+        bodies.extend(dirs.iter().map(|&(body, _)| body.to_string()));
+        starts.push(bodies.len());
     }
     let _ = writeln!(
         out,
-        "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
-        n = layout.bodies
+        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on body `ROW_BODY[e]`.
+         const ENTRIES: usize = {};
+         const ROW_START: [usize; {}] = {};
+         const ROW_BODY: [usize; {}] = {};
+",
+        bodies.len(),
+        k + 1,
+        array(&starts.iter().map(usize::to_string).collect::<Vec<_>>()),
+        bodies.len(),
+        array(&bodies)
     );
-    for _ in 0..layout.bodies {
-        let m = next(1);
-        let (v, f) = (next(dim), next(dim));
-        let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
-        let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
-    }
-    for r in 0..k {
-        let scalars = next(3);
-        let js: Vec<String> =
-            formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
-        let _ = writeln!(
-            out,
-            "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
-            operand(&scalars[0]),
-            operand(&scalars[1]),
-            scalars[2],
-            array(&js)
-        );
-    }
-    let _ = writeln!(out, "    r\n}}\n");
+    starts
+}
+
+/// The state's accessors the step's text calls: `time` and `put`.
+pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>) {
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
     let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });
@@ -781,19 +987,16 @@ fn step_fns(
             let _ = writeln!(out, "    let _ = t;");
         }
     }
-    for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
-        let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+    let arrays = places.position.iter().enumerate().all(|(i, p)| *p == format!("position[{i}]"))
+        && places.velocity.iter().enumerate().all(|(i, v)| *v == format!("velocity[{i}]"));
+    if arrays {
+        let _ = writeln!(out, "    s.position.copy_from_slice(q);\n    s.velocity.copy_from_slice(v);");
+    } else {
+        for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
+            let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+        }
     }
     let _ = writeln!(out, "}}\n");
-    let _ = writeln!(
-        out,
-        "/// The rows of the state flattened for the step, with the scene's forces (`applied_forces`).\n\
-         #[allow(dead_code)]\n\
-         fn prepared(s: &State) -> Prepared<DIM> {{\n    \
-         let r = step_rows(s);\n    \
-         Prepared::new(&r.rows, &r.inverse_mass, &r.velocity, &r.force)\n}}\n"
-    );
-    Ok(())
 }
 
 /// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a field,
@@ -2547,8 +2750,36 @@ impl Ctx<'_> {
 
     /// `let` statements and one expression per output component of `roots`.
     pub(super) fn body(&self, roots: &[Id]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
+        self.body_of(roots, &vec![true; roots.len()])
+    }
+
+    /// [`Ctx::body`] lowered over all of `roots` (so its shared values, and its numbers, are
+    /// those of the whole program) with code only for the roots `wanted` marks: the others'
+    /// expressions are empty and no `let` is written that only they use.
+    pub(super) fn body_of(&self, roots: &[Id], wanted: &[bool]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let p = Program::lower_in(self.g, roots, self.inputs)?;
+        self.render(&p, wanted)
+    }
+
+    /// The text of a lowered program: `let` statements and one expression per output
+    /// component of the roots `wanted` marks (one flag per root, `p.output_ranges`), inputs
+    /// written as `self.slots` names them.
+    pub(super) fn render(&self, p: &Program, wanted: &[bool]) -> Result<(Vec<String>, Vec<String>), GenerateError> {
         let uses = p.use_counts();
+        // The operations a wanted output depends on.
+        let mut live = vec![false; p.ops.len()];
+        for (range, _) in p.output_ranges.iter().zip(wanted).filter(|(_, w)| **w) {
+            for &o in &p.outputs[range.clone()] {
+                live[o as usize] = true;
+            }
+        }
+        for i in (0..p.ops.len()).rev() {
+            if live[i] {
+                for a in p.ops[i].operands() {
+                    live[a as usize] = true;
+                }
+            }
+        }
         // Each value: its text, precedence and inline depth.
         let mut text: Vec<(String, Prec, u32)> = Vec::new();
         let mut lets = Vec::new();
@@ -2631,7 +2862,9 @@ impl Ctx<'_> {
                 }
             };
             let simple = matches!(op, Op::Input(_) | Op::Const(_));
-            if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
+            if !live[i] {
+                text.push((String::new(), Prec::Atom, 0));
+            } else if !simple && (uses[i] > 1 || depth > MAX_INLINE_DEPTH) {
                 self.spend(t.len())?;
                 let name = format!("x{}", lets.len());
                 lets.push(if self.c { format!("const double {name} = {t};") } else { format!("let {name} = {t};") });
@@ -2640,7 +2873,12 @@ impl Ctx<'_> {
                 text.push((t, prec, depth));
             }
         }
-        let exprs: Vec<String> = p.outputs.iter().map(|&o| text[o as usize].0.clone()).collect();
+        let mut exprs = Vec::with_capacity(p.outputs.len());
+        for (range, &w) in p.output_ranges.iter().zip(wanted) {
+            exprs.extend(
+                p.outputs[range.clone()].iter().map(|&o| if w { text[o as usize].0.clone() } else { String::new() }),
+            );
+        }
         self.spend(exprs.iter().map(String::len).sum())?;
         Ok((lets, exprs))
     }

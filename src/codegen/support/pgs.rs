@@ -29,7 +29,8 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v) = (positions(s), velocities(s));
-    let mut p = prepared(s);
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
     for sub in 0..settings.substeps {
         p.kick(&mut v, h);
         p.warm_start(&mut v, impulses);
@@ -42,6 +43,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         }
         drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v);
-        p = prepared(s);
+        prepare(s, &mut p);
     }
 }

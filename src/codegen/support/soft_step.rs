@@ -36,8 +36,15 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v) = (positions(s), velocities(s));
-    let mut p = prepared(s);
-    let start_rate: Vec<f64> = (0..p.len()).map(|k| p.rate(k, &v)).collect();
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
+    // Ċ at the step's start, restitution's closing speed (read only with restitution).
+    let mut start_rate = [0.0; CONSTRAINTS];
+    if settings.restitution > 0.0 {
+        for (k, rate) in start_rate.iter_mut().enumerate() {
+            *rate = p.rate(k, &v);
+        }
+    }
     for sub in 0..settings.substeps {
         p.kick(&mut v, h);
         p.warm_start(&mut v, impulses);
@@ -56,7 +63,7 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         }
         drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v);
-        p = prepared(s);
+        prepare(s, &mut p);
         if settings.relax {
             let pr = &p;
             for _ in 0..iterations {

@@ -108,8 +108,9 @@ impl StepSettings {
     }
 }
 
-/// The rows at a state as the step reads them (`step_rows`): per row C/κ, Ċ/κ, c, J; per
-/// body 1/m, v and the scene's force.
+/// The rows at a state as the exact step reads them (`step_rows`): per row C/κ, Ċ/κ, c, J;
+/// per body 1/m, v and the scene's force.
+#[allow(dead_code)]
 struct StepRows<const D: usize> {
     rows: Vec<Row<D>>,
     inverse_mass: Vec<f64>,
@@ -118,25 +119,25 @@ struct StepRows<const D: usize> {
 }
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
-/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries (body, Jᵢ); per body 1/m and F.
+/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on body
+/// `ROW_BODY[e]`); per body 1/m and F. Arrays of the module's sizes, filled in place
+/// (`prepare`), so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
-    /// Entries of row k: `start[k]..start[k + 1]`.
-    start: Vec<usize>,
-    body: Vec<usize>,
-    jacobian: Vec<[f64; D]>,
-    value: Vec<f64>,
+    jacobian: [[f64; D]; ENTRIES],
+    value: [f64; CONSTRAINTS],
     /// ∂C/∂t = Ċ − J·v at the evaluated state.
-    time_rate: Vec<f64>,
+    time_rate: [f64; CONSTRAINTS],
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
-    effective_mass: Vec<f64>,
-    inequality: Vec<bool>,
-    inverse_mass: Vec<f64>,
-    force: Vec<[f64; D]>,
+    effective_mass: [f64; CONSTRAINTS],
+    inequality: [bool; CONSTRAINTS],
+    inverse_mass: [f64; BODIES],
+    force: [[f64; D]; BODIES],
 }
 
 /// a·b, summed from 0 as the library sums its three components (the same number, zero's
 /// sign included).
+#[inline(always)]
 fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
     let mut s = 0.0;
     for d in 0..D {
@@ -147,54 +148,95 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
 
 #[allow(dead_code)]
 impl<const D: usize> Prepared<D> {
+    /// Room for the rows, to be filled by `prepare` (or `new`).
+    fn zeroed() -> Prepared<D> {
+        Prepared {
+            jacobian: [[0.0; D]; ENTRIES],
+            value: [0.0; CONSTRAINTS],
+            time_rate: [0.0; CONSTRAINTS],
+            effective_mass: [0.0; CONSTRAINTS],
+            inequality: INEQUALITY,
+            inverse_mass: [0.0; BODIES],
+            force: [[0.0; D]; BODIES],
+        }
+    }
+
     /// From the rows at a state with velocities `velocity`, the bodies' 1/m and forces.
     fn new(rows: &[Row<D>], inverse_mass: &[f64], velocity: &[[f64; D]], force: &[[f64; D]]) -> Prepared<D> {
-        let mut p = Prepared {
-            start: Vec::with_capacity(rows.len() + 1),
-            body: Vec::new(),
-            jacobian: Vec::new(),
-            value: Vec::with_capacity(rows.len()),
-            time_rate: Vec::with_capacity(rows.len()),
-            effective_mass: Vec::with_capacity(rows.len()),
-            inequality: Vec::with_capacity(rows.len()),
-            inverse_mass: inverse_mass.to_vec(),
-            force: force.to_vec(),
-        };
-        for row in rows {
-            p.start.push(p.body.len());
-            let (mut k, mut jv) = (0.0, 0.0);
-            for (b, j) in &row.jacobian {
-                p.body.push(*b);
-                p.jacobian.push(*j);
-                k += inverse_mass[*b] * dot(j, j);
-                jv += dot(j, &velocity[*b]);
+        let mut p = Prepared::zeroed();
+        let mut e = 0;
+        for (k, row) in rows.iter().enumerate() {
+            for (_, j) in &row.jacobian {
+                p.jacobian[e] = *j;
+                e += 1;
             }
-            p.value.push(row.value);
-            p.time_rate.push(row.rate - jv);
-            p.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
-            p.inequality.push(row.inequality);
+            p.value[k] = row.value;
+            p.time_rate[k] = row.rate;
         }
-        p.start.push(p.body.len());
+        p.inverse_mass.copy_from_slice(inverse_mass);
+        p.force.copy_from_slice(force);
+        p.finish(velocity);
         p
     }
 
+    /// With C/κ, J, 1/m and F in place and Ċ/κ in `time_rate`: each row's effective mass
+    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`.
+    #[inline(always)]
+    fn finish(&mut self, velocity: &[[f64; D]]) {
+        for k in 0..CONSTRAINTS {
+            let (mut m, mut jv) = (0.0, 0.0);
+            for e in ROW_START[k]..ROW_START[k + 1] {
+                let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
+                m += self.inverse_mass[b] * dot(j, j);
+                jv += dot(j, &velocity[b]);
+            }
+            self.time_rate[k] -= jv;
+            self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+        }
+    }
+
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
+    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
+    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    #[inline(always)]
+    fn row<const E: usize>(
+        &mut self,
+        k: usize,
+        (value, rate): (f64, f64),
+        first: usize,
+        entries: [(usize, [f64; D]); E],
+        velocity: &[[f64; D]],
+    ) {
+        let (mut m, mut jv) = (0.0, 0.0);
+        for (e, (b, j)) in entries.iter().enumerate() {
+            self.jacobian[first + e] = *j;
+            m += self.inverse_mass[*b] * dot(j, j);
+            jv += dot(j, &velocity[*b]);
+        }
+        self.value[k] = value;
+        self.time_rate[k] = rate - jv;
+        self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+    }
+
     fn len(&self) -> usize {
-        self.value.len()
+        CONSTRAINTS
     }
 
     /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
         let mut c = self.time_rate[k];
-        for e in self.start[k]..self.start[k + 1] {
-            c += dot(&self.jacobian[e], &u[self.body[e]]);
+        for e in ROW_START[k]..ROW_START[k + 1] {
+            c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
         }
         c
     }
 
     /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p.
+    #[inline(always)]
     fn apply(&self, k: usize, u: &mut [[f64; D]], p: f64) {
-        for e in self.start[k]..self.start[k + 1] {
-            let (b, j) = (self.body[e], &self.jacobian[e]);
+        for e in ROW_START[k]..ROW_START[k + 1] {
+            let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
             let s = self.inverse_mass[b] * p;
             for d in 0..D {
                 u[b][d] += s * j[d];

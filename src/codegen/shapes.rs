@@ -1,0 +1,405 @@
+//! The step's rows written once per shape: `lagrange generate FILE --solver soft-step|pgs
+//! --step-only`, a module with the step and nothing else, for scenes of thousands of rows.
+//!
+//! A scene repeats a few constraints over many bodies (a grid's 19 701 distance rows are
+//! two shapes and a hundred anchored ones), so the rows' code, written row by row, is
+//! megabytes. Here the program of the step's roots is lowered once over the whole scene
+//! (`numeric::program`, the library's row program: its shared values, and so its numbers,
+//! are the tape's), and each row — and each body's 1/m, v and F — is cut out of it as the
+//! operations its outputs depend on (its cone). Two cones with the same operations, the same
+//! constants and inputs of the same kinds in the same places are one shape: its function
+//! (`shape_N`) is written once, over a table of its instances (`SHAPE_N_ITEMS`: which rows
+//! or bodies; `SHAPE_N_TABLE`: per instance the bodies whose position or velocity it reads
+//! and where its other inputs — parameters, time — start in the flat vector `others`). A
+//! cone computes its values with the operations, and in the order, of the whole program, so
+//! the rows are the row-by-row module's bit for bit (`tests/generate_step.rs`).
+//!
+//! Design note: shapes are found on the lowered program, not on the expression graph
+//! (`expr::shape` renames derivations): the program is what is written and what fixes the
+//! numbers (which divisions share a reciprocal is decided over the whole program), and a
+//! parameter (an anchor) is an input here like a body's position, so rows that differ only
+//! in their parameters share a shape.
+//!
+//! Not here: the step itself (`support/step.rs`, `sweep.rs`, one file per solver), the
+//! row-by-row module (`rust.rs`), C (`--step-only` is Rust only).
+
+use super::layout::{Layout, Solver};
+use super::names::comment_text;
+use super::rust::{Ctx, Field, Formulas, GenerateError, StepPlaces, array, formula, step_accessors, step_constants};
+use crate::expr::graph::FastMap;
+use crate::expr::{Graph, Id, Ty};
+use crate::model::system::System;
+use crate::numeric::program::{Op, Program, Val};
+use std::cell::Cell;
+use std::fmt::Write;
+
+/// Where a shape's input comes from, for one instance: a component of the position or
+/// velocity of the instance's `b`-th body, or of its `o`-th other input symbol.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Source {
+    Position(u32, u32),
+    Velocity(u32, u32),
+    Other(u32, u32),
+}
+
+/// What an input slot of the module is: a body's position or velocity component, or a
+/// component of another symbol (its field's index among the module's fields).
+#[derive(Clone, Copy)]
+enum Slot {
+    Position(usize, u32),
+    Velocity(usize, u32),
+    Other(usize, u32),
+}
+
+/// A shape: its program over local inputs, and its instances.
+struct Shape {
+    ops: Vec<Op>,
+    sources: Vec<Source>,
+    outputs: Vec<Val>,
+    /// A row's shape (its outputs C, Ċ, J), else a body's (1/m, v, F).
+    is_row: bool,
+    /// Bodies and other symbols each instance names (the table's width is their sum).
+    bodies: usize,
+    others: usize,
+    /// The rows (or bodies) it is the shape of, and per instance its table entries.
+    items: Vec<usize>,
+    table: Vec<u32>,
+}
+
+/// The key two cones share when they are one shape.
+type Key = (bool, Vec<Op>, Vec<Source>, Vec<Val>);
+
+#[allow(clippy::too_many_arguments)]
+/// Cuts `items` (each a list of roots, as indices into the program's roots) out of the
+/// program `p` and groups them by shape. `others` maps a field to its first slot in the
+/// flat vector of other inputs, assigning one at first use.
+fn shapes(
+    p: &Program,
+    slots: &[Slot],
+    items: &[Vec<usize>],
+    rows: bool,
+    others: &mut FastMap<usize, u32>,
+    widths: &[usize],
+    next_other: &mut u32,
+    groups: &mut FastMap<Key, usize>,
+    out: &mut Vec<Shape>,
+) {
+    let mut mark = vec![u32::MAX; p.ops.len()];
+    let mut stack = Vec::new();
+    let mut cone = Vec::new();
+    for (item, roots) in items.iter().enumerate() {
+        // The item's cone, in program order.
+        cone.clear();
+        let outputs: Vec<Val> =
+            roots.iter().flat_map(|&r| p.outputs[p.output_ranges[r].clone()].iter().copied()).collect();
+        stack.extend(outputs.iter().copied());
+        while let Some(v) = stack.pop() {
+            if mark[v as usize] == item as u32 {
+                continue;
+            }
+            mark[v as usize] = item as u32;
+            cone.push(v);
+            stack.extend(p.ops[v as usize].operands());
+        }
+        cone.sort_unstable();
+        // Renumbered: local values, local inputs by first use, local bodies and others.
+        let mut local: FastMap<Val, Val> = FastMap::default();
+        let (mut ops, mut sources) = (Vec::with_capacity(cone.len()), Vec::new());
+        let (mut bodies, mut other_fields): (Vec<usize>, Vec<usize>) = (Vec::new(), Vec::new());
+        for &v in &cone {
+            let op = match p.ops[v as usize] {
+                Op::Input(j) => {
+                    let source = match slots[j as usize] {
+                        Slot::Position(b, c) | Slot::Velocity(b, c) => {
+                            let at = bodies.iter().position(|&x| x == b).unwrap_or_else(|| {
+                                bodies.push(b);
+                                bodies.len() - 1
+                            }) as u32;
+                            if matches!(slots[j as usize], Slot::Position(..)) {
+                                Source::Position(at, c)
+                            } else {
+                                Source::Velocity(at, c)
+                            }
+                        }
+                        Slot::Other(f, c) => {
+                            let at = other_fields.iter().position(|&x| x == f).unwrap_or_else(|| {
+                                other_fields.push(f);
+                                other_fields.len() - 1
+                            }) as u32;
+                            Source::Other(at, c)
+                        }
+                    };
+                    sources.push(source);
+                    Op::Input(sources.len() as u32 - 1)
+                }
+                op => renumber(op, &local),
+            };
+            local.insert(v, ops.len() as Val);
+            ops.push(op);
+        }
+        let local_outputs: Vec<Val> = outputs.iter().map(|o| local[o]).collect();
+        let key: Key = (rows, ops, sources, local_outputs);
+        let id = *groups.entry(key).or_insert_with_key(|key| {
+            out.push(Shape {
+                is_row: rows,
+                ops: key.1.clone(),
+                sources: key.2.clone(),
+                outputs: key.3.clone(),
+                bodies: bodies.len(),
+                others: other_fields.len(),
+                items: Vec::new(),
+                table: Vec::new(),
+            });
+            out.len() - 1
+        });
+        let shape = &mut out[id];
+        shape.items.push(item);
+        shape.table.extend(bodies.iter().map(|&b| b as u32));
+        for &f in &other_fields {
+            let at = *others.entry(f).or_insert_with(|| {
+                let at = *next_other;
+                *next_other += widths[f] as u32;
+                at
+            });
+            shape.table.push(at);
+        }
+    }
+}
+
+/// `op` with its operands renumbered by `local`.
+fn renumber(op: Op, local: &FastMap<Val, Val>) -> Op {
+    let m = |v: Val| local[&v];
+    match op {
+        Op::Input(_) | Op::Const(_) => op,
+        Op::Add(a, b) => Op::Add(m(a), m(b)),
+        Op::Sub(a, b) => Op::Sub(m(a), m(b)),
+        Op::Mul(a, b) => Op::Mul(m(a), m(b)),
+        Op::Div(a, b) => Op::Div(m(a), m(b)),
+        Op::Neg(a) => Op::Neg(m(a)),
+        Op::Powi(a, n) => Op::Powi(m(a), n),
+        Op::Powf(a, b) => Op::Powf(m(a), m(b)),
+        Op::Call(f, args) => Op::Call(f, args.map(m)),
+        Op::Norm2(a, b) => Op::Norm2(m(a), m(b)),
+        Op::Norm3(a, b, c) => Op::Norm3(m(a), m(b), m(c)),
+    }
+}
+
+/// What each input slot of the module is, in the order of its fields (`slot_exprs`'s).
+fn slot_kinds(g: &Graph, system: &System, fields: &[Field]) -> (Vec<Slot>, Vec<usize>) {
+    let (mut slots, mut widths) = (Vec::new(), Vec::new());
+    for (f, field) in fields.iter().enumerate() {
+        let width = if g.is_quaternion(field.symbol) {
+            4
+        } else if g.symbol(field.symbol).ty == Ty::Vector {
+            g.dim()
+        } else {
+            1
+        };
+        widths.push(width);
+        let position = system.bodies.iter().position(|b| b.position == field.symbol);
+        let velocity = system.bodies.iter().position(|b| b.velocity == field.symbol);
+        for c in 0..width as u32 {
+            slots.push(match (position, velocity) {
+                (Some(b), _) => Slot::Position(b, c),
+                (_, Some(b)) => Slot::Velocity(b, c),
+                _ => Slot::Other(f, c),
+            });
+        }
+    }
+    (slots, widths)
+}
+
+/// The module's step part with its rows by shape: the step's constants, the flat vector of
+/// other inputs (`others`), each shape's function and tables, `prepare` over them, and the
+/// state's accessors. `roots` are the step's roots in `step_fns`' order (per body m, v, F;
+/// per row C, Ċ, c, J).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn step_by_shape(
+    out: &mut String,
+    ctx: &Ctx<'_>,
+    system: &System,
+    fields: &[Field],
+    solver: Solver,
+    inverse_scales: &[f64],
+    places: &StepPlaces<'_>,
+    formulas: &Formulas,
+    layout: &Layout,
+    roots: &[Id],
+    arrays: bool,
+) -> Result<(), GenerateError> {
+    let g = ctx.g;
+    let (n, k, dim) = (layout.bodies, layout.constraints, layout.dim);
+    step_constants(out, solver, inverse_scales, formulas, layout);
+    let p = Program::lower_in(g, roots, ctx.inputs)?;
+    let (slots, widths) = slot_kinds(g, system, fields);
+    // Items: per body its m, v, F roots; per row C, Ċ and its J entries (c is not read).
+    let bodies: Vec<Vec<usize>> = (0..n).map(|i| vec![3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    let mut rows = Vec::with_capacity(k);
+    let mut at = 3 * n;
+    for dirs in &formulas.jacobian {
+        let mut item = vec![at, at + 1];
+        item.extend((0..dirs.len()).map(|e| at + 3 + e));
+        at += 3 + dirs.len();
+        rows.push(item);
+    }
+    let (mut others, mut next_other) = (FastMap::default(), 0u32);
+    let (mut groups, mut list) = (FastMap::default(), Vec::new());
+    shapes(&p, &slots, &bodies, false, &mut others, &widths, &mut next_other, &mut groups, &mut list);
+    shapes(&p, &slots, &rows, true, &mut others, &widths, &mut next_other, &mut groups, &mut list);
+    // The other inputs, flat, in the order of first use.
+    let mut order: Vec<(u32, usize)> = others.iter().map(|(&f, &at)| (at, f)).collect();
+    order.sort_unstable();
+    let mut items = Vec::new();
+    for &(_, f) in &order {
+        let ident = &fields[f].ident;
+        match widths[f] {
+            1 => items.push(format!("s.{ident}")),
+            w => items.extend((0..w).map(|c| format!("s.{ident}[{c}]"))),
+        }
+    }
+    let _ = writeln!(
+        out,
+        "/// The inputs the shapes read besides positions and velocities (parameters, time), flat.\n\
+         fn others(s: &State) -> [f64; {}] {{\n    {}{}\n}}\n",
+        items.len(),
+        if items.is_empty() { "let _ = s;\n    " } else { "" },
+        array(&items)
+    );
+    for (id, shape) in list.iter().enumerate() {
+        shape_fn(out, ctx, id, shape, formulas, system, g)?;
+    }
+    // `prepare`: the bodies' shapes, then the rows'.
+    let _ = writeln!(
+        out,
+        "/// The rows at the state, flattened for the step into `p` (nothing allocated): each shape's function over its instances.\n\
+         fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
+    );
+    if arrays {
+        let _ = writeln!(out, "    let (q, v) = (&s.position, &s.velocity);");
+    } else {
+        let _ = writeln!(out, "    let (q, v) = (&positions(s), &velocities(s));");
+    }
+    let _ = writeln!(out, "    let x = others(s);\n    let mut ev = [[0.0; DIM]; BODIES];");
+    for (id, shape) in list.iter().enumerate() {
+        let w = shape.bodies + shape.others;
+        if w == 0 {
+            let _ = writeln!(out, "    for &i in SHAPE_{id}_ITEMS.iter() {{");
+            let _ = writeln!(out, "        let (o, i) = (shape_{id}(q, v, &x, &[]), i as usize);");
+        } else {
+            let _ = writeln!(
+                out,
+                "    for (&i, t) in SHAPE_{id}_ITEMS.iter().zip(SHAPE_{id}_TABLE.as_chunks::<{w}>().0) {{"
+            );
+            let _ = writeln!(out, "        let (o, i) = (shape_{id}(q, v, &x, t), i as usize);");
+        }
+        let comps = |from: usize| array(&(from..from + dim).map(|c| format!("o[{c}]")).collect::<Vec<_>>());
+        if !shape.is_row {
+            let _ = writeln!(out, "        p.inverse_mass[i] = 1.0 / o[0];");
+            let _ = writeln!(out, "        ev[i] = {};\n        p.force[i] = {};", comps(1), comps(1 + dim));
+        } else {
+            // C/κ, Ċ/κ (into `time_rate`, which `finish` turns into ∂C/∂t) and J: a pass of
+            // its own, so the divisions of one row's m_eff do not wait on its J's.
+            let entries = (shape.outputs.len() - 2) / dim;
+            let _ = writeln!(out, "        let e = ROW_START[i];");
+            let _ = writeln!(
+                out,
+                "        p.value[i] = o[0] * INVERSE_SCALE[i];\n        p.time_rate[i] = o[1] * INVERSE_SCALE[i];"
+            );
+            for e in 0..entries {
+                let at = if e == 0 { "e".to_string() } else { format!("e + {e}") };
+                let _ = writeln!(out, "        p.jacobian[{at}] = {};", comps(2 + e * dim));
+            }
+        }
+        let _ = writeln!(out, "    }}");
+    }
+    let _ = writeln!(out, "    p.finish(&ev);\n}}\n");
+    step_accessors(out, places);
+    Ok(())
+}
+
+/// One shape's function and tables.
+fn shape_fn(
+    out: &mut String,
+    ctx: &Ctx<'_>,
+    id: usize,
+    shape: &Shape,
+    formulas: &Formulas,
+    system: &System,
+    g: &Graph,
+) -> Result<(), GenerateError> {
+    let nb = shape.bodies;
+    let texts: Vec<String> = shape
+        .sources
+        .iter()
+        .map(|s| match *s {
+            Source::Position(b, c) => format!("q[t[{b}] as usize][{c}]"),
+            Source::Velocity(b, c) => format!("v[t[{b}] as usize][{c}]"),
+            Source::Other(o, 0) => format!("x[t[{}] as usize]", nb + o as usize),
+            Source::Other(o, c) => format!("x[t[{}] as usize + {c}]", nb + o as usize),
+        })
+        .collect();
+    let program = Program {
+        ops: shape.ops.clone(),
+        n_inputs: shape.sources.len(),
+        input_ranges: Vec::new(),
+        outputs: shape.outputs.clone(),
+        output_ranges: (0..shape.outputs.len()).map(|i| i..i + 1).collect(),
+    };
+    let local = Ctx {
+        g: ctx.g,
+        inputs: ctx.inputs,
+        slots: &texts,
+        non_finite: Cell::new(0),
+        c: false,
+        room: Cell::new(ctx.room.get()),
+        budget: ctx.budget,
+    };
+    let (lets, exprs) = local.render(&program, &vec![true; shape.outputs.len()])?;
+    ctx.room.set(local.room.get());
+    ctx.non_finite.set(ctx.non_finite.get() + local.non_finite.get());
+    let first = shape.items[0];
+    let what = if shape.is_row {
+        format!(
+            "{} row(s) like `{}`: C = {}",
+            shape.items.len(),
+            comment_text(&system.constraints[first].name),
+            formula(g, formulas.c[first])
+        )
+    } else {
+        format!("{} bod(ies) like `{}`: 1/m, v and F", shape.items.len(), comment_text(&system.bodies[first].name))
+    };
+    let reads = |f: fn(&Source) -> bool| shape.sources.iter().any(f);
+    let param = |name: &str, used: bool| if used { name.to_string() } else { format!("_{name}") };
+    let _ = writeln!(out, "/// Shape {id}: {what}.\n#[inline(always)]");
+    let _ = writeln!(
+        out,
+        "fn shape_{id}({}: &[[f64; DIM]; BODIES], {}: &[[f64; DIM]; BODIES], {}: &[f64], {}: &[u32; {}]) -> [f64; {}] {{",
+        param("q", reads(|s| matches!(s, Source::Position(..)))),
+        param("v", reads(|s| matches!(s, Source::Velocity(..)))),
+        param("x", reads(|s| matches!(s, Source::Other(..)))),
+        if texts.is_empty() { "_t" } else { "t" },
+        nb + shape.others,
+        exprs.len()
+    );
+    for l in &lets {
+        let _ = writeln!(out, "    {l}");
+    }
+    let _ = writeln!(out, "    {}\n}}", array(&exprs));
+    let list = |xs: &mut dyn Iterator<Item = String>| xs.collect::<Vec<_>>().join(",");
+    let _ = writeln!(
+        out,
+        "const SHAPE_{id}_ITEMS: [u32; {}] = [{}];",
+        shape.items.len(),
+        list(&mut shape.items.iter().map(|i| i.to_string()))
+    );
+    if nb + shape.others > 0 {
+        let _ = writeln!(
+            out,
+            "const SHAPE_{id}_TABLE: [u32; {}] = [{}];",
+            shape.table.len(),
+            list(&mut shape.table.iter().map(|i| i.to_string()))
+        );
+    }
+    let _ = writeln!(out);
+    Ok(())
+}
