@@ -318,12 +318,10 @@ pub fn dense_solution(s: &State) -> Option<([f64; 2], [[f64; 2]; 2])> {
     a[1][1] = x19 * (x15 * x15 + x16 * x16) + (x17 * x17 + x18 * x18) * x20;
     let l = solve_dense(a, [-((s.v_p1[0] * s.v_p1[0] + s.v_p1[1] * s.v_p1[1]) * x7 - x6 * x6 / x2.powi(3) + x19 * (s.F_p1[0] * x8 + s.F_p1[1] * x9)), -((x10 * x10 + x11 * x11) * x13 - x12 * x12 / x5.powi(3) + (x19 * (s.F_p1[0] * x15 + s.F_p1[1] * x16) + x20 * (s.F_p2[0] * x17 + s.F_p2[1] * x18)))])?;
     let mut f = [[0.0; 2]; 2];
-    f[0][0] += l[0] * x8;
-    f[0][1] += l[0] * x9;
-    f[0][0] += l[1] * x15;
-    f[0][1] += l[1] * x16;
-    f[1][0] += l[1] * x17;
-    f[1][1] += l[1] * x18;
+    f[0][0] = l[0] * x8 + l[1] * x15;
+    f[0][1] = l[0] * x9 + l[1] * x16;
+    f[1][0] = l[1] * x17;
+    f[1][1] = l[1] * x18;
     Some((l, f))
 }
 
@@ -362,8 +360,32 @@ pub fn force_p2(s: &State) -> [f64; 2] {
 /// is needed: a diagonal entry that is not a positive normal number (its numbers out of f64's
 /// range), a pivot dᵢ at or below 1e-10 of its diagonal entry (the rows' rank tolerance on the
 /// unit-diagonal Ã: A singular, constraints redundant), or an answer that is not finite.
+///
+/// A 2×2 `a` (a 2D pin, two rods) takes the same factorisation multiplied out: d₀ = a₀₀ and
+/// d₁ = det/a₀₀ with det = a₀₀a₁₁ − a₁₀², so the pivot rule d₁ > 1e-10 a₁₁ reads
+/// det > 1e-10 a₀₀a₁₁, and x = adj(A) b / det (Cramer's rule) costs one division where the
+/// loops chain three. It also gives up where a₀₀a₁₁ leaves f64's normal range (overflowing,
+/// the pivot rule compares ∞ with ∞), which the loops need not: a hand-over, never a wrong
+/// answer.
 #[allow(dead_code, clippy::needless_range_loop)]
 fn solve_dense<const K: usize>(mut a: [[f64; K]; K], mut b: [f64; K]) -> Option<[f64; K]> {
+    if K == 2 {
+        let (p, q, r) = (a[0][0], a[1][1], a[1][0]);
+        let pq = p * q;
+        let det = pq - r * r;
+        let x = [(q * b[0] - r * b[1]) / det, (p * b[1] - r * b[0]) / det];
+        // Every check at once (`&`, one branch): a₀₀ and a₁₁ positive normal numbers (+∞ fails
+        // the det check), a₀₀a₁₁ normal, the pivot rule (false for a NaN), x finite.
+        let solved = (p >= f64::MIN_POSITIVE)
+            & (q >= f64::MIN_POSITIVE)
+            & (pq >= f64::MIN_POSITIVE)
+            & (det > 1e-10 * pq)
+            & x[0].is_finite()
+            & x[1].is_finite();
+        b[0] = x[0];
+        b[1] = x[1];
+        return if solved { Some(b) } else { None };
+    }
     for i in 0..K {
         let diagonal = a[i][i];
         if !(diagonal.is_normal() && diagonal > 0.0) {
