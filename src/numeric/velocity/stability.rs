@@ -191,8 +191,10 @@ pub enum Limit {
     /// No limit between 10⁻³ Hz and [`MAX_HERTZ`]: unstable already at the lowest stiffness,
     /// or still stable at the highest.
     OutOfRange,
-    /// Some stiffness of the search gave the step no spectral radius ([`spectral_radius`]):
-    /// stability is not defined by it there.
+    /// At some stiffness of the search the radius could not be computed
+    /// ([`spectral_radius`]: a step that is not finite, or a Schur iteration that did not
+    /// converge within its bound, as on `constraints/solvers/hanging_chain.toml`'s 500
+    /// numbers at every stiffness).
     NoRadius,
     /// The scene has 3D rigid bodies: not analysed (the module's note says why).
     Rigid3d,
