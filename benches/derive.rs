@@ -10,7 +10,8 @@
 //! `lagrange derive FILE` does after that: the text document (`report::derivation`), so the
 //! whole command is measured too, file reading and stdout aside. `rope_text`: a rope over
 //! pulleys through k = 1…8 segments (sums of norms), whose C̈ is linear in k (asserted).
-//! `revolute`: the 2D revolute joint between two rigid bodies beside the bead;
+//! `revolute`: the 2D revolute joint between two rigid bodies beside the bead, and `hinge_3d`
+//! the 3D hinge (`constraints/joints/hinge_3d.toml`);
 //! `rigid_chain_links`: N rigid rods on revolute joints (N = 10, 100, 1000), each next to its
 //! load-only baseline. Targets (issue 2): bead
 //! < 20 µs; chain linear in N, N = 200 < 4 ms, N = 1000 < 20 ms.
@@ -36,6 +37,7 @@ fn main() {
 const BEAD_2D: &str = include_str!("../constraints/bead_on_wire.toml");
 const BEAD_3D: &str = include_str!("../constraints/bead_on_sphere.toml");
 const REVOLUTE: &str = include_str!("../constraints/joints/revolute.toml");
+const HINGE_3D: &str = include_str!("../constraints/joints/hinge_3d.toml");
 
 fn load_and_derive(text: &str) -> usize {
     let loaded = load(text).expect("the file loads");
@@ -107,6 +109,21 @@ fn revolute(bencher: Bencher) {
 #[divan::bench]
 fn revolute_load_only(bencher: Bencher) {
     bencher.bench(|| load(black_box(REVOLUTE)).map(|l| l.system.graph.len()).unwrap_or(0));
+}
+
+/// A 3D hinge between two rigid bodies (a ball joint's three rows and two angular rows
+/// `dot(rot(q1, h1), rot(q2, b2)) = 0`; Jᵛ, the Jʷ vectors, the world inertia through the
+/// body axes), beside the bead and the revolute joint in the same run; `hinge_3d_load_only`
+/// is its baseline.
+#[divan::bench]
+fn hinge_3d(bencher: Bencher) {
+    assert_eq!(load_and_derive(HINGE_3D), 20, "A has 15 entries (upper triangle of 5 rows), b 5");
+    bencher.bench(|| load_and_derive(black_box(HINGE_3D)));
+}
+
+#[divan::bench]
+fn hinge_3d_load_only(bencher: Bencher) {
+    bencher.bench(|| load(black_box(HINGE_3D)).map(|l| l.system.graph.len()).unwrap_or(0));
 }
 
 /// An N-rod chain of rigid bodies on revolute joints, the first rod's upper end pinned at the
