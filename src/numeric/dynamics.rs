@@ -32,7 +32,7 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, angular_bodies, angular_width};
 use super::simulate::SettingsError;
-use super::solve::{Settings, Solution, SolveCache, solve_cached};
+use super::solve::{Settings, Solution, SolveCache, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
@@ -146,6 +146,10 @@ pub struct Dynamics<'s> {
     orientations: Vec<[f64; 4]>,
     /// The solve's accelerations folded into state slots (scratch of [`Dynamics::kick_at`]).
     folded: Vec<[f64; 3]>,
+    /// The answer of the last [`correct`](Dynamics::correct), and a solution handed back by
+    /// [`recycle_solution`](Dynamics::recycle_solution): buffers the solves fill in place.
+    correction: Solution,
+    spare_solution: Option<Solution>,
 }
 
 /// The state slot of each rigid body's angle or rotation vector (and angular velocity), in
@@ -183,6 +187,8 @@ impl<'s> Dynamics<'s> {
             position_rows: Vec::new(),
             orientations,
             folded: Vec::new(),
+            correction: Solution::default(),
+            spare_solution: None,
         }
     }
 
@@ -374,13 +380,24 @@ impl<'s> Dynamics<'s> {
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
         }
-        solve_cached(rows, &Settings::default(), &self.held, &mut self.solver)
+        let mut solution = self.spare_solution.take().unwrap_or_default();
+        solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
+        solution
+    }
+
+    /// Gives a solution of [`solve`](Dynamics::solve) back, so the next solve fills its
+    /// buffers (optional: dropping it is correct, only slower).
+    pub fn recycle_solution(&mut self, solution: Solution) {
+        self.spare_solution = Some(solution);
     }
 
     /// The solve of a correction (projection, SHAKE, velocity step: forces zeroed, c set to
-    /// the target), with no contact held: `solve::solve` through the run's cache.
-    pub fn correct(&mut self, rows: &Rows) -> Solution {
-        solve_cached(rows, &Settings::default(), &[], &mut self.solver)
+    /// the target), with no contact held: `solve::solve` through the run's cache, into a
+    /// buffer the dynamics keep (the caller may change it: it is scratch until the next
+    /// correction).
+    pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
+        solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
+        &mut self.correction
     }
 
     /// The way the last solve went (`solve::SolvePath`).
@@ -401,6 +418,7 @@ impl<'s> Dynamics<'s> {
         }
         let solution = self.solve(&mut rows);
         a.copy_from_slice(&solution.acceleration);
+        self.recycle_solution(solution);
         fold(&rows, a);
         Ok(rows)
     }

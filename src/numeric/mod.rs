@@ -14,6 +14,7 @@
 //! [`crate::expr::eval::Env`], results leave as plain numbers and diagnostics.
 
 pub mod banded;
+pub mod batch;
 pub mod contact;
 pub mod dynamics;
 pub mod integrate;

@@ -33,6 +33,7 @@ use crate::expr::eval::{Env, EvalError, Value, eval};
 use crate::expr::graph::SymbolWalk;
 use crate::expr::{Id, Rational, Symbol};
 use crate::model::system::System;
+use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::tape::{Scratch, Tape};
 use crate::numeric::vector::dot;
 use std::ops::Range;
@@ -131,6 +132,10 @@ pub struct RowProgram {
     /// C and J alone (with the principal axes they are projected on): what an iteration
     /// onto C = 0 reads ([`RowProgram::evaluate_positions_into`]).
     positions: Subprogram,
+    /// Every root again, shape by shape (`numeric::batch`), into `tape`'s output layout:
+    /// what [`evaluate_into`](RowProgram::evaluate_into) runs when the scene repeats a
+    /// shape (`None`: `tape` itself).
+    batched: Option<Batched>,
 }
 
 /// A tape of some of a [`RowProgram`]'s roots.
@@ -140,6 +145,8 @@ struct Subprogram {
     inputs: Vec<Symbol>,
     /// The tape's root of each of the program's roots (`usize::MAX`: not in it).
     root: Vec<usize>,
+    /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself).
+    batched: Option<Batched>,
 }
 
 impl Subprogram {
@@ -156,8 +163,48 @@ impl Subprogram {
         let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &ids).to_vec();
         // As for the whole program: the inputs are the roots' free symbols.
         let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
-        Subprogram { tape, inputs, root }
+        Subprogram { tape, inputs, root, batched: None }
     }
+}
+
+/// Symbol → its slots in `tape`'s inputs, whose symbols are `inputs` (every symbol a batch
+/// reads is one of them).
+fn input_slots<'t>(tape: &'t Tape, inputs: &[Symbol]) -> impl Fn(Symbol) -> Range<usize> + 't {
+    let at: std::collections::HashMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+    move |s| at.get(&s).map_or(0..0, |&i| tape.input_range(i))
+}
+
+/// The roots of a [`RowProgram`] in units of one shape each (`numeric::batch`): each body's
+/// mass, velocity and force, each rigid body's angular roots, each row's C, Ċ, c and J (or,
+/// with `positions`, C and J alone and then each principal axis), every root once.
+fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, positions: bool) -> Vec<Vec<usize>> {
+    let mut covered = vec![false; n_roots];
+    let mut units = Vec::new();
+    let mut take = |unit: Vec<usize>, units: &mut Vec<Vec<usize>>| {
+        let unit: Vec<usize> = unit.into_iter().filter(|&r| !std::mem::replace(&mut covered[r], true)).collect();
+        if !unit.is_empty() {
+            units.push(unit);
+        }
+    };
+    for layout in rows {
+        let mut unit = vec![layout.value];
+        if !positions {
+            unit.extend([layout.rate, layout.bias]);
+        }
+        unit.extend(layout.jacobian.clone());
+        take(unit, &mut units);
+    }
+    for b in bodies {
+        let axes = b.principal.map(|(_, axes)| axes.to_vec()).unwrap_or_default();
+        if positions {
+            for a in axes {
+                take(vec![a], &mut units);
+            }
+        } else {
+            take([b.mass, b.velocity, b.force].into_iter().chain(axes).collect(), &mut units);
+        }
+    }
+    units
 }
 
 /// Where one slot's numbers are among a [`RowProgram`]'s roots (and the tape's outputs): a
@@ -223,6 +270,9 @@ pub struct RowScratch {
     position_inputs: Vec<f64>,
     position_outputs: Vec<f64>,
     position_tape: Scratch,
+    /// The batched evaluations' buffers (empty without batches).
+    batched: Option<BatchedScratch>,
+    position_batched: Option<BatchedScratch>,
 }
 
 impl RowProgram {
@@ -319,8 +369,24 @@ impl RowProgram {
         let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
         let axes = bodies.iter().filter_map(|b| b.principal).flat_map(|(_, axes)| axes);
         let c_and_j = rows.iter().flat_map(|r| std::iter::once(r.value).chain(r.jacobian.clone()));
-        let positions = Subprogram::new(graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
-        RowProgram { roots, bodies, rows, tape, inputs, positions }
+        let mut positions = Subprogram::new(graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
+        let batched = Batched::new(
+            graph,
+            &roots,
+            &units(&bodies, &rows, roots.len(), false),
+            |r| tape.output_range(r).start,
+            input_slots(&tape, &inputs),
+        );
+        let p = &positions;
+        let batched_positions = Batched::new(
+            graph,
+            &roots,
+            &units(&bodies, &rows, roots.len(), true),
+            |r| p.tape.output_range(p.root[r]).start,
+            input_slots(&p.tape, &p.inputs),
+        );
+        positions.batched = batched_positions;
+        RowProgram { roots, bodies, rows, tape, inputs, positions, batched }
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
@@ -346,6 +412,8 @@ impl RowProgram {
             position_inputs: vec![0.0; self.positions.tape.input_len()],
             position_outputs: vec![0.0; self.positions.tape.output_len()],
             position_tape: self.positions.tape.scratch(),
+            batched: self.batched.as_ref().map(Batched::scratch),
+            position_batched: self.positions.batched.as_ref().map(Batched::scratch),
         }
     }
 
@@ -365,8 +433,16 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
-        load(system, env, &self.tape, &self.inputs, &mut scratch.inputs)?;
-        self.tape.eval(&scratch.inputs, &mut scratch.tape, &mut scratch.outputs);
+        match (&self.batched, &mut scratch.batched) {
+            (Some(batched), Some(buffers)) => {
+                load(system, env, &self.tape, &self.inputs, &mut scratch.inputs)?;
+                batched.eval(&scratch.inputs, buffers, &mut scratch.outputs);
+            }
+            _ => {
+                load(system, env, &self.tape, &self.inputs, &mut scratch.inputs)?;
+                self.tape.eval(&scratch.inputs, &mut scratch.tape, &mut scratch.outputs);
+            }
+        }
         let out = &scratch.outputs;
         let tape = &self.tape;
         let scalar = |root: usize| out[tape.output_range(root).start];
@@ -457,8 +533,16 @@ impl RowProgram {
         rows: &mut Vec<Row>,
     ) -> Result<(), EvalError> {
         let p = &self.positions;
-        load(system, env, &p.tape, &p.inputs, &mut scratch.position_inputs)?;
-        p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs);
+        match (&p.batched, &mut scratch.position_batched) {
+            (Some(batched), Some(buffers)) => {
+                load(system, env, &p.tape, &p.inputs, &mut scratch.position_inputs)?;
+                batched.eval(&scratch.position_inputs, buffers, &mut scratch.position_outputs);
+            }
+            _ => {
+                load(system, env, &p.tape, &p.inputs, &mut scratch.position_inputs)?;
+                p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs);
+            }
+        }
         let out = &scratch.position_outputs;
         let vector = |root: usize| {
             let mut x = [0.0; 3];
