@@ -138,8 +138,11 @@ fn batched_rows_are_the_interpreters_on_chains() {
     // the positions tape.
     let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
     let close3 = |a: &[f64; 3], b: &[f64; 3]| (0..3).all(|d| close(a[d], b[d]));
-    for n in [5, 40] {
-        let s = Scenario::new(load(&lagrange::scenario::chain(n)).expect("valid"), &[]).expect("derives");
+    // The point-mass chains, and a chain of rigid rods (bodies and their angular slots
+    // alike in role, not in type: never one batch).
+    let rods = std::fs::read_to_string("constraints/rigid/chain_20.toml").expect("file");
+    for (n, text) in [(5, lagrange::scenario::chain(5)), (40, lagrange::scenario::chain(40)), (20, rods)] {
+        let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
         let mut rng = common::Rng::new(11);
         let mut scratch = s.program.scratch();
         for _ in 0..5 {

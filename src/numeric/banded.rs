@@ -72,42 +72,6 @@ impl Banded {
         }
     }
 
-    /// r = b − A x, and whether every |rᵢ| is at most `tolerance` · (Σⱼ |Aᵢⱼ| |xⱼ| + |bᵢ|):
-    /// the componentwise backward error of x (Oettli–Prager 1964) at rounding level, when a
-    /// step of iterative refinement has nothing left to improve. One pass over the band.
-    /// `size` is scratch (resized to n).
-    pub fn residual(&self, x: &[f64], b: &[f64], r: &mut [f64], size: &mut Vec<f64>, tolerance: f64) -> bool {
-        let (n, w) = (self.n, self.w);
-        let (x, b, r) = (&x[..n], &b[..n], &mut r[..n]);
-        // r accumulates −A x, `size` Σ |A| |x| (the upper triangle's share arrives from later
-        // rows, so both are finished only when the pass is).
-        r.fill(0.0);
-        size.clear();
-        size.resize(n, 0.0);
-        for i in 0..n {
-            let lo = i.saturating_sub(w);
-            let row = &self.data[i * (w + 1) + w + lo - i..(i + 1) * (w + 1)];
-            let (left, diagonal) = row.split_at(i - lo);
-            let xi = x[i];
-            let (mut s, mut t) = (0.0, 0.0);
-            for (k, a) in left.iter().enumerate() {
-                let j = lo + k;
-                s += a * x[j];
-                t += a.abs() * x[j].abs();
-                r[j] -= a * xi;
-                size[j] += a.abs() * xi.abs();
-            }
-            r[i] -= s + diagonal[0] * xi;
-            size[i] += t + diagonal[0].abs() * xi.abs();
-        }
-        let mut small = true;
-        for ((ri, bi), si) in r.iter_mut().zip(b).zip(size.iter()) {
-            *ri += bi;
-            small &= ri.abs() <= tolerance * (si + bi.abs());
-        }
-        small
-    }
-
     /// The Cholesky factor, or the first row whose pivot (Schur complement) falls to
     /// `pivot_floor` or below: the matrix is then singular or too close to it to trust.
     pub fn cholesky(&self, pivot_floor: f64) -> Result<BandedCholesky, usize> {
@@ -270,32 +234,6 @@ mod tests {
         ch.solve_in_place(&mut b);
         for (got, want) in b.iter().zip(&x) {
             assert!((got - want).abs() < 1e-13, "{got} vs {want}");
-        }
-    }
-
-    #[test]
-    fn the_residual_says_when_refinement_has_nothing_to_improve() {
-        // A well-conditioned tridiagonal solved by its factor: residuals at rounding, so no
-        // refinement; the same x off by 1e-9 of itself: refine. The residual is b − A x.
-        let n = 50;
-        let mut a = Banded::zeros(n, 1);
-        for i in 0..n {
-            a.add(i, i, 2.0 + (i as f64).cos());
-            if i > 0 {
-                a.add(i, i - 1, -0.7);
-            }
-        }
-        let b: Vec<f64> = (0..n).map(|i| (i as f64 * 0.3).sin() + 0.1).collect();
-        let mut x = b.clone();
-        a.cholesky(1e-12).expect("positive definite").solve_in_place(&mut x);
-        let (mut r, mut size) = (vec![0.0; n], Vec::new());
-        assert!(a.residual(&x, &b, &mut r, &mut size, 12.0 * f64::EPSILON));
-        x[n / 2] *= 1.0 + 1e-9;
-        assert!(!a.residual(&x, &b, &mut r, &mut size, 12.0 * f64::EPSILON));
-        let mut ax = vec![0.0; n];
-        a.mul(&x, &mut ax);
-        for i in 0..n {
-            assert!((r[i] - (b[i] - ax[i])).abs() <= 1e-15, "row {i}");
         }
     }
 

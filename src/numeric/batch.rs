@@ -21,8 +21,9 @@
 use super::tape::{BatchScratch, Scratch, Tape};
 use crate::expr::graph::SymbolWalk;
 use crate::expr::shape::Shaper;
-use crate::expr::{Graph, Id, Symbol};
+use crate::expr::{Graph, Id, Symbol, Ty};
 use std::collections::HashMap;
+use std::ops::Range;
 
 /// Units of one shape are batched when there are at least this many: below, one tape of
 /// them costs about what a batch does, and a batch's register file (lanes of
@@ -67,7 +68,7 @@ pub struct BatchedScratch {
 
 impl Batched {
     /// Batches the `units` of `roots` (each a list of indices into `roots`); the output
-    /// components of root r go to `dest(r) ..` (as many as the root has), and the inputs
+    /// components of root r go to `dest(r)` (as many as the root has), and the inputs
     /// are read from a flat buffer where symbol s occupies `source(s)` (a tape's input
     /// layout over every symbol the roots read). `None` when no shape has [`BATCH_MIN`]
     /// units: one tape serves as well.
@@ -75,8 +76,8 @@ impl Batched {
         graph: &Graph,
         roots: &[Id],
         units: &[Vec<usize>],
-        dest: impl Fn(usize) -> usize,
-        source: impl Fn(Symbol) -> std::ops::Range<usize>,
+        dest: impl Fn(usize) -> Range<usize>,
+        source: impl Fn(Symbol) -> Range<usize>,
     ) -> Option<Batched> {
         let mut shaper = Shaper::default();
         let mut walk = SymbolWalk::default();
@@ -85,7 +86,11 @@ impl Batched {
         let mut groups: Vec<Vec<(usize, Vec<Symbol>)>> = Vec::new();
         for (u, unit) in units.iter().enumerate() {
             let ids: Vec<Id> = unit.iter().map(|&r| roots[r]).collect();
-            let shape = shaper.shape(graph, &ids);
+            let mut shape = shaper.shape(graph, &ids);
+            // A shape records each slot's role, not its type (a body's velocity and a rigid
+            // body's ω share a role's rank): the types too, so members read alike.
+            shape.key.push(u32::MAX);
+            shape.key.extend(shape.symbols.iter().map(|&s| u32::from(graph.symbol(s).ty == Ty::Vector)));
             let g = *by_key.entry(shape.key).or_insert_with(|| {
                 groups.push(Vec::new());
                 groups.len() - 1
@@ -107,14 +112,29 @@ impl Batched {
             let inputs = walk.free_symbols_of(graph, &ids).to_vec();
             // The roots' free symbols are the inputs, so lowering cannot fail.
             let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
+            let renamed =
+                |theirs: &[Symbol], sym: &Symbol| template.iter().position(|t| t == sym).map_or(*sym, |p| theirs[p]);
+            // Every member reads and writes as many numbers as the template: a guard, as the
+            // types are in the key.
+            let (group, odd): (Vec<_>, Vec<_>) = group.iter().partition(|(u, theirs)| {
+                inputs
+                    .iter()
+                    .enumerate()
+                    .all(|(i, sym)| source(renamed(theirs, sym)).len() == tape.input_range(i).len())
+                    && units[*u].iter().enumerate().all(|(j, &r)| dest(r).len() == tape.output_range(j).len())
+            });
+            rest_roots.extend(odd.iter().flat_map(|(u, _)| units[*u].iter().copied()));
+            if group.len() < BATCH_MIN {
+                rest_roots.extend(group.iter().flat_map(|(u, _)| units[*u].iter().copied()));
+                continue;
+            }
             let members = group.len();
             // A symbol in a slot of the template's shape is renamed to the member's symbol
             // in that slot; the others (parameters, t) are shared.
             let mut from = vec![0; tape.input_len() * members];
             for (s, (_, theirs)) in group.iter().enumerate() {
                 for (i, sym) in inputs.iter().enumerate() {
-                    let renamed = template.iter().position(|t| t == sym).map_or(*sym, |p| theirs[p]);
-                    for (j, at) in tape.input_range(i).zip(source(renamed)) {
+                    for (j, at) in tape.input_range(i).zip(source(renamed(theirs, sym))) {
                         from[j * members + s] = at;
                     }
                 }
@@ -124,7 +144,7 @@ impl Batched {
                 for (j, &r) in units[*u].iter().enumerate() {
                     let range = tape.output_range(j);
                     for (k, c) in range.clone().enumerate() {
-                        out[c * members + s] = dest(r) + k;
+                        out[c * members + s] = dest(r).start + k;
                     }
                 }
             }
@@ -142,7 +162,7 @@ impl Batched {
         let mut rest_dest = vec![0; rest.output_len()];
         for (j, &r) in rest_roots.iter().enumerate() {
             for (k, c) in rest.output_range(j).enumerate() {
-                rest_dest[c] = dest(r) + k;
+                rest_dest[c] = dest(r).start + k;
             }
         }
         Some(Batched { batches, rest, rest_source, rest_dest })
