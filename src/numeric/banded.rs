@@ -56,6 +56,16 @@ impl Banded {
     pub fn mul(&self, x: &[f64], y: &mut [f64]) {
         let (n, w) = (self.n, self.w);
         let (x, y) = (&x[..n], &mut y[..n]);
+        if w == 1 {
+            // A tridiagonal (chains): the loop below's sums in its order, row by row.
+            let d = &self.data[..2 * n];
+            for i in 0..n {
+                let s = if i > 0 { 0.0 + d[2 * i] * x[i - 1] } else { 0.0 };
+                let own = 0.0 + (s + d[2 * i + 1] * x[i]);
+                y[i] = if i + 1 < n { own + d[2 * i + 2] * x[i + 1] } else { own };
+            }
+            return;
+        }
         y.fill(0.0);
         for i in 0..n {
             let lo = i.saturating_sub(w);
@@ -230,6 +240,16 @@ mod tests {
         let x: Vec<f64> = (0..n).map(|i| (i as f64).sin() + 0.5).collect();
         let mut b = vec![0.0; n];
         a.mul(&x, &mut b);
+        // The tridiagonal product is the general band loop's, number for number.
+        let mut wide = Banded::zeros(n, 2);
+        for i in 0..n {
+            for j in i.saturating_sub(1)..=i {
+                wide.add(i, j, a.data[a.at(i, j)]);
+            }
+        }
+        let mut general = vec![0.0; n];
+        wide.mul(&x, &mut general);
+        assert_eq!(b, general);
         let ch = a.cholesky(1e-12).expect("positive definite");
         ch.solve_in_place(&mut b);
         for (got, want) in b.iter().zip(&x) {

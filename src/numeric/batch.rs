@@ -18,7 +18,7 @@
 //!
 //! Not here: what the roots mean (`numeric::rows`), the tape itself (`numeric::tape`).
 
-use super::tape::{BatchScratch, Scratch, Tape};
+use super::tape::{BatchScratch, LANES, Scratch, Tape};
 use crate::expr::graph::SymbolWalk;
 use crate::expr::shape::Shaper;
 use crate::expr::{Graph, Id, Symbol, Ty};
@@ -48,10 +48,26 @@ struct Batch {
     /// The first member's roots over its free symbols.
     tape: Tape,
     members: usize,
-    /// Where member s's input slot j is in the caller's flat inputs: `source[j · members + s]`.
+    /// Where each member's input slots are in the caller's flat inputs, chunk by chunk of
+    /// `LANES` members: in a chunk of `len` members from member c, slot j of member c + s
+    /// at `j · len + s` (structure of arrays within the chunk).
     source: Vec<usize>,
-    /// Where member s's output component c goes: `dest[c · members + s]`.
+    /// Where each member's output components go, laid out as `source`.
     dest: Vec<usize>,
+}
+
+/// `table` (slot j of member s at `j · members + s`) rearranged chunk by chunk of `LANES`
+/// members, structure of arrays within each chunk.
+fn chunked(table: &[usize], members: usize) -> Vec<usize> {
+    let slots = table.len() / members;
+    let mut out = Vec::with_capacity(table.len());
+    for first in (0..members).step_by(LANES) {
+        let len = LANES.min(members - first);
+        for j in 0..slots {
+            out.extend_from_slice(&table[j * members + first..j * members + first + len]);
+        }
+    }
+    out
 }
 
 /// Buffers of [`Batched::eval`], reused across evaluations.
@@ -148,7 +164,10 @@ impl Batched {
                     }
                 }
             }
-            batches.push(Batch { tape, members, source: from, dest: out });
+            // Chunk by chunk of `LANES` members (`chunked`), so a chunk's inputs, lanes and
+            // outputs stay in cache from gather to scatter.
+            let (source, dest) = (chunked(&from, members), chunked(&out, members));
+            batches.push(Batch { tape, members, source, dest });
         }
         let ids: Vec<Id> = rest_roots.iter().map(|&r| roots[r]).collect();
         let rest_inputs = walk.free_symbols_of(graph, &ids).to_vec();
@@ -171,8 +190,8 @@ impl Batched {
     /// Buffers for [`eval`](Batched::eval).
     pub fn scratch(&self) -> BatchedScratch {
         BatchedScratch {
-            inputs: self.batches.iter().map(|b| vec![0.0; b.tape.input_len() * b.members]).collect(),
-            outputs: self.batches.iter().map(|b| vec![0.0; b.tape.output_len() * b.members]).collect(),
+            inputs: self.batches.iter().map(|b| vec![0.0; b.tape.input_len() * b.members.min(LANES)]).collect(),
+            outputs: self.batches.iter().map(|b| vec![0.0; b.tape.output_len() * b.members.min(LANES)]).collect(),
             lanes: self.batches.iter().map(|b| b.tape.batch_scratch()).collect(),
             rest_inputs: vec![0.0; self.rest.input_len()],
             rest_outputs: vec![0.0; self.rest.output_len()],
@@ -184,13 +203,22 @@ impl Batched {
     /// place in `out`.
     pub fn eval(&self, inputs: &[f64], scratch: &mut BatchedScratch, out: &mut [f64]) {
         for (b, batch) in self.batches.iter().enumerate() {
-            let (lanes, outputs) = (&mut scratch.inputs[b], &mut scratch.outputs[b]);
-            for (x, &at) in lanes.iter_mut().zip(&batch.source) {
-                *x = inputs[at];
-            }
-            batch.tape.eval_batch_serial(batch.members, lanes, &mut scratch.lanes[b], outputs);
-            for (&d, &x) in batch.dest.iter().zip(outputs.iter()) {
-                out[d] = x;
+            let (n_in, n_out) = (batch.tape.input_len(), batch.tape.output_len());
+            let (mut source, mut dest) = (batch.source.as_slice(), batch.dest.as_slice());
+            for first in (0..batch.members).step_by(LANES) {
+                let len = LANES.min(batch.members - first);
+                let (lanes, outputs) = (&mut scratch.inputs[b][..n_in * len], &mut scratch.outputs[b][..n_out * len]);
+                let (here, rest) = source.split_at(n_in * len);
+                for (x, &at) in lanes.iter_mut().zip(here) {
+                    *x = inputs[at];
+                }
+                source = rest;
+                batch.tape.eval_batch_serial(len, lanes, &mut scratch.lanes[b], outputs);
+                let (here, rest) = dest.split_at(n_out * len);
+                for (&d, &x) in here.iter().zip(outputs.iter()) {
+                    out[d] = x;
+                }
+                dest = rest;
             }
         }
         for (x, &at) in scratch.rest_inputs.iter_mut().zip(&self.rest_source) {
