@@ -153,7 +153,9 @@ impl BandedCholesky {
             let l = &self.l[..2 * n];
             let mut previous = 0.0;
             for (i, xi) in x.iter_mut().enumerate() {
-                let s = if i > 0 { l[2 * i] * previous } else { 0.0 };
+                // As the general loop's `sum()`, which starts from −0 (so x − s turns a −0
+                // right-hand side into +0, as it always did).
+                let s = if i > 0 { -0.0 + l[2 * i] * previous } else { -0.0 };
                 *xi = (*xi - s) / l[2 * i + 1];
                 previous = *xi;
             }
@@ -251,6 +253,11 @@ mod tests {
         wide.mul(&x, &mut general);
         assert_eq!(b, general);
         let ch = a.cholesky(1e-12).expect("positive definite");
+        // A zero right-hand side of −0 solves to +0, as the general loop's sums give it (a
+        // λ printed as −0.0 would be news to a user).
+        let mut zeros = vec![-0.0; n];
+        ch.solve_in_place(&mut zeros);
+        assert!(zeros.iter().all(|z| z.to_bits() == 0), "{zeros:?}");
         ch.solve_in_place(&mut b);
         for (got, want) in b.iter().zip(&x) {
             assert!((got - want).abs() < 1e-13, "{got} vs {want}");

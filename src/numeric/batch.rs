@@ -4,7 +4,7 @@
 //! A scene repeats a few constraints over many bodies, and `expr::shape` says which: the
 //! roots of link k (C, Ċ, c, J) are those of link 2 with the bodies renamed. So the roots
 //! are taken in *units* (a row's roots, a body's mass, velocity and force), units of equal
-//! shape become the *members* of one [`Batch`] — the first member's roots compiled once,
+//! shape become the *members* of one batch — the first member's roots compiled once,
 //! each member's symbols gathered into its lane — and [`Tape::eval_batch_serial`] runs every
 //! instruction over all members at once (structure of arrays, vectorised). Dispatch then
 //! costs once per instruction of the shape rather than once per instruction of the scene,
