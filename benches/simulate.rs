@@ -77,6 +77,51 @@ fn lagrange_pendulum_step(bencher: divan::Bencher) {
 /// program and the state) is spread over them, as it is over a real run.
 const STEPS: u64 = 100;
 
+/// The pendulum for [`STEPS`] steps through `simulate` (Verlet + projection, as
+/// `lagrange simulate` runs it), beside [`handwritten_pendulum_steps`]: divide both by
+/// `STEPS` for the cost of a step.
+#[divan::bench(sample_count = 20)]
+fn pendulum_steps(bencher: divan::Bencher) {
+    let text = std::fs::read_to_string("constraints/pendulum.toml").expect("file");
+    let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
+    let mut settings = s.settings();
+    settings.integrator = Integrator::Verlet;
+    settings.stabilize = Stabilize::PROJECTION;
+    settings.steps = STEPS;
+    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+}
+
+/// The baseline of [`pendulum_steps`]: [`STEPS`] steps of [`handwritten_pendulum_step`]'s
+/// Verlet step with the closed-form λ and projection.
+#[divan::bench(sample_count = 20)]
+fn handwritten_pendulum_steps(bencher: divan::Bencher) {
+    let (l, m, g) = (1.0f64, 1.0f64, -9.81f64);
+    let dt = 1e-3;
+    let accel = |r: [f64; 2], v: [f64; 2]| {
+        let lambda = -(m * (v[0] * v[0] + v[1] * v[1]) + m * g * r[1]) / (r[0] * r[0] + r[1] * r[1]);
+        [lambda * r[0] / m, g + lambda * r[1] / m]
+    };
+    bencher.bench_local(|| {
+        let (mut r, mut v) = (divan::black_box([l, 0.0]), divan::black_box([0.0, 0.0]));
+        let mut a = accel(r, v);
+        for _ in 0..STEPS {
+            for d in 0..2 {
+                v[d] += 0.5 * dt * a[d];
+                r[d] += dt * v[d];
+            }
+            let k = l / (r[0] * r[0] + r[1] * r[1]).sqrt();
+            r = [r[0] * k, r[1] * k];
+            for d in 0..2 {
+                v[d] += 0.5 * dt * [0.0, g][d];
+            }
+            let along = (v[0] * r[0] + v[1] * r[1]) / (r[0] * r[0] + r[1] * r[1]);
+            v = [v[0] - along * r[0], v[1] - along * r[1]];
+            a = accel(r, v);
+        }
+        (r, v)
+    });
+}
+
 /// `simulate` of an N-link chain for [`STEPS`] Verlet + projection steps (RATTLE: the
 /// acceleration solve, drift, SHAKE, kick, velocity projection), beside
 /// [`handwritten_chain_steps`] doing the same work by hand: divide both by `STEPS` for the

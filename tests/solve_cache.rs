@@ -4,7 +4,8 @@
 //! the general solve gives, the positions tape the full tape's C and J to rounding, and the
 //! reused factorisation must be taken only where it is safe: every case that
 //! needs the general solve (an inequality, a number that is not finite, a row that carries
-//! no force, redundant rows, a dense block) goes there and is answered as before.
+//! no force, redundant rows) goes there and is answered as before. The batched rows of a
+//! chain (`numeric::batch`) are held to the interpreter.
 
 mod common;
 
@@ -107,12 +108,61 @@ fn every_case_the_cache_does_not_serve_goes_to_the_general_solve() {
     let (path, answer) = general(&|r| r.rows[8] = r.rows[7].clone(), &settings);
     assert_eq!(path, SolvePath::General);
     assert_eq!(answer.status, Status::MinimumNorm);
-    // A dense block: asked for, or chosen (a band of a quarter of the size or more).
-    let dense = Settings { method: Method::Dense, ..settings };
-    let (path, _) = general(&|_| {}, &dense);
-    assert_eq!(path, SolvePath::General);
+    // A singular dense block (two rows, so dense is chosen; the same link twice).
     let mut cache = SolveCache::default();
-    assert_eq!(solve_checked(&chain(2, 1), &settings, &mut cache), SolvePath::General);
+    let mut twice = chain(2, 1);
+    twice.rows[1] = twice.rows[0].clone();
+    assert_eq!(solve_checked(&twice, &settings, &mut cache), SolvePath::General);
+}
+
+#[test]
+fn dense_blocks_are_served_too_with_the_general_answer() {
+    // Asked for, or chosen (a band of a quarter of the size or more: the pendulum, a
+    // two-link chain): factored once, then reused while J and the masses stay.
+    let dense = Settings { method: Method::Dense, ..Settings::default() };
+    for (n, settings) in [(20, dense), (1, Settings::default()), (2, Settings::default())] {
+        let mut cache = SolveCache::default();
+        let rows = chain(n, 1);
+        assert_eq!(solve_checked(&rows, &settings, &mut cache), SolvePath::Factored, "n = {n}");
+        let mut other = rows.clone();
+        other.rows.iter_mut().for_each(|row| row.bias += 0.25);
+        assert_eq!(solve_checked(&other, &settings, &mut cache), SolvePath::Reused, "n = {n}");
+        assert_eq!(solve_checked(&chain(n, 2), &settings, &mut cache), SolvePath::Factored, "n = {n}");
+    }
+}
+
+#[test]
+fn batched_rows_are_the_interpreters_on_chains() {
+    // A chain's links and bodies are evaluated shape by shape (`numeric::batch`): the same
+    // numbers as the reference semantics, to rounding, at random states; so are C and J of
+    // the positions tape.
+    let close = |a: f64, b: f64| a == b || (a - b).abs() <= 1e-12 * a.abs().max(b.abs());
+    let close3 = |a: &[f64; 3], b: &[f64; 3]| (0..3).all(|d| close(a[d], b[d]));
+    // The point-mass chains, and a chain of rigid rods (bodies and their angular slots
+    // alike in role, not in type: never one batch).
+    let rods = std::fs::read_to_string("constraints/rigid/chain_20.toml").expect("file");
+    for (n, text) in [(5, lagrange::scenario::chain(5)), (40, lagrange::scenario::chain(40)), (20, rods)] {
+        let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
+        let mut rng = common::Rng::new(11);
+        let mut scratch = s.program.scratch();
+        for _ in 0..5 {
+            let env = common::random_env(&s.system, &mut rng);
+            let compiled = s.program.evaluate(&s.system, &env).expect("rows");
+            let reference = s.program.evaluate_interpreted(&s.system, &s.derivation, &env).expect("rows");
+            assert!(compiled.inverse_mass.iter().zip(&reference.inverse_mass).all(|(a, b)| close(*a, *b)));
+            assert!(compiled.force.iter().zip(&reference.force).all(|(a, b)| close3(a, b)));
+            assert!(compiled.velocity.iter().zip(&reference.velocity).all(|(a, b)| close3(a, b)));
+            let mut positions = Vec::new();
+            s.program.evaluate_positions_into(&s.system, &env, &mut scratch, &mut positions).expect("rows");
+            for ((a, b), p) in compiled.rows.iter().zip(&reference.rows).zip(&positions) {
+                let same_j = |x: &lagrange::numeric::rows::Row| {
+                    a.jacobian.iter().zip(&x.jacobian).all(|((i, u), (k, w))| i == k && close3(u, w))
+                };
+                assert!(close(a.value, b.value) && close(a.rate, b.rate) && close(a.bias, b.bias), "n = {n}");
+                assert!(same_j(b) && same_j(p) && close(a.value, p.value), "n = {n}: {a:?} vs {b:?}, {p:?}");
+            }
+        }
+    }
 }
 
 #[test]

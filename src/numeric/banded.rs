@@ -54,52 +54,119 @@ impl Banded {
 
     /// y = A x.
     pub fn mul(&self, x: &[f64], y: &mut [f64]) {
-        y.iter_mut().for_each(|v| *v = 0.0);
-        for i in 0..self.n {
-            let lo = i.saturating_sub(self.w);
-            let row = &self.data[i * (self.w + 1)..(i + 1) * (self.w + 1)];
-            let mut s = 0.0;
-            for j in lo..i {
-                let a = row[self.w + j - i];
-                s += a * x[j];
-                y[j] += a * x[i];
+        let (n, w) = (self.n, self.w);
+        let (x, y) = (&x[..n], &mut y[..n]);
+        if w == 1 {
+            // A tridiagonal (chains): the loop below's sums in its order, row by row.
+            let d = &self.data[..2 * n];
+            for i in 0..n {
+                let s = if i > 0 { 0.0 + d[2 * i] * x[i - 1] } else { 0.0 };
+                let own = 0.0 + (s + d[2 * i + 1] * x[i]);
+                y[i] = if i + 1 < n { own + d[2 * i + 2] * x[i + 1] } else { own };
             }
-            y[i] += s + row[self.w] * x[i];
+            return;
+        }
+        y.fill(0.0);
+        for i in 0..n {
+            let lo = i.saturating_sub(w);
+            // Row i's entries Aᵢⱼ for j in lo..i, then Aᵢᵢ.
+            let row = &self.data[i * (w + 1) + w + lo - i..(i + 1) * (w + 1)];
+            let (left, diagonal) = row.split_at(i - lo);
+            let xi = x[i];
+            let mut s = 0.0;
+            for (a, (xj, yj)) in left.iter().zip(x[lo..i].iter().zip(&mut y[lo..i])) {
+                s += a * xj;
+                *yj += a * xi;
+            }
+            y[i] += s + diagonal[0] * xi;
         }
     }
 
     /// The Cholesky factor, or the first row whose pivot (Schur complement) falls to
     /// `pivot_floor` or below: the matrix is then singular or too close to it to trust.
     pub fn cholesky(&self, pivot_floor: f64) -> Result<BandedCholesky, usize> {
+        let mut factor = BandedCholesky { n: self.n, w: self.w, l: Vec::new() };
+        self.cholesky_into(pivot_floor, &mut factor).map(|()| factor)
+    }
+
+    /// [`cholesky`](Banded::cholesky) into `factor`, reusing its storage.
+    pub fn cholesky_into(&self, pivot_floor: f64, factor: &mut BandedCholesky) -> Result<(), usize> {
         let (n, w) = (self.n, self.w);
-        let mut l = vec![0.0; n * (w + 1)];
-        let at = |i: usize, j: usize| i * (w + 1) + w + j - i;
+        factor.n = n;
+        factor.w = w;
+        let l = &mut factor.l;
+        l.clear();
+        l.resize(n * (w + 1), 0.0);
         for i in 0..n {
             let lo = i.saturating_sub(w);
             for j in lo..=i {
                 // Lᵢⱼ = (Aᵢⱼ − Σₖ Lᵢₖ Lⱼₖ) / Lⱼⱼ over the k both rows' bands share.
-                let mut s = self.data[at(i, j)];
-                for k in lo.max(j.saturating_sub(w))..j {
-                    s -= l[at(i, k)] * l[at(j, k)];
+                let mut s = self.data[i * (w + 1) + w + j - i];
+                let from = lo.max(j.saturating_sub(w));
+                let li = &l[i * (w + 1) + w + from - i..i * (w + 1) + w + j - i];
+                let lj = &l[j * (w + 1) + w + from - j..j * (w + 1) + w];
+                for (a, b) in li.iter().zip(lj) {
+                    s -= a * b;
                 }
                 if i == j {
                     if s.is_nan() || s <= pivot_floor {
                         return Err(i);
                     }
-                    l[at(i, i)] = s.sqrt();
+                    l[i * (w + 1) + w] = s.sqrt();
                 } else {
-                    l[at(i, j)] = s / l[at(j, j)];
+                    l[i * (w + 1) + w + j - i] = s / l[j * (w + 1) + w];
                 }
             }
         }
-        Ok(BandedCholesky { n, w, l })
+        Ok(())
+    }
+
+    /// The matrix's size and bandwidth.
+    pub fn shape(&self) -> (usize, usize) {
+        (self.n, self.w)
+    }
+
+    /// The band's storage (row i: Aᵢ,ᵢ₋w … Aᵢᵢ at `i (w + 1) ..`), to be filled in place by
+    /// a caller that knows where each entry goes ([`Banded::index`]).
+    pub fn data_mut(&mut self) -> &mut [f64] {
+        &mut self.data
+    }
+
+    /// Where Aᵢⱼ (i ≥ j, within the band) lives in [`data_mut`](Banded::data_mut).
+    pub fn index(&self, i: usize, j: usize) -> usize {
+        self.at(i, j)
     }
 }
 
 impl BandedCholesky {
+    /// An empty factor, to be filled by [`Banded::cholesky_into`].
+    pub fn empty() -> BandedCholesky {
+        BandedCholesky { n: 0, w: 0, l: Vec::new() }
+    }
+
     /// Overwrites `x` (the right-hand side) with the solution of L Lᵀ y = x.
     pub fn solve_in_place(&self, x: &mut [f64]) {
         let (n, w) = (self.n, self.w);
+        let x = &mut x[..n];
+        if w == 1 {
+            // A tridiagonal's factor (chains): the same sums as below, without the inner loops.
+            let l = &self.l[..2 * n];
+            let mut previous = 0.0;
+            for (i, xi) in x.iter_mut().enumerate() {
+                // As the general loop's `sum()`, which starts from −0 (so x − s turns a −0
+                // right-hand side into +0, as it always did).
+                let s = if i > 0 { -0.0 + l[2 * i] * previous } else { -0.0 };
+                *xi = (*xi - s) / l[2 * i + 1];
+                previous = *xi;
+            }
+            let mut next = 0.0;
+            for i in (0..n).rev() {
+                let v = (x[i] - next) / l[2 * i + 1];
+                x[i] = v;
+                next = if i > 0 { l[2 * i] * v } else { 0.0 };
+            }
+            return;
+        }
         // Row i of L is `l[i (w + 1) ..][..w + 1]`, entry (i, k) at w + k − i: the same sums
         // in the same order as indexing (i, k), on slices the compiler can keep in registers.
         for i in 0..n {
@@ -175,7 +242,22 @@ mod tests {
         let x: Vec<f64> = (0..n).map(|i| (i as f64).sin() + 0.5).collect();
         let mut b = vec![0.0; n];
         a.mul(&x, &mut b);
+        // The tridiagonal product is the general band loop's, number for number.
+        let mut wide = Banded::zeros(n, 2);
+        for i in 0..n {
+            for j in i.saturating_sub(1)..=i {
+                wide.add(i, j, a.data[a.at(i, j)]);
+            }
+        }
+        let mut general = vec![0.0; n];
+        wide.mul(&x, &mut general);
+        assert_eq!(b, general);
         let ch = a.cholesky(1e-12).expect("positive definite");
+        // A zero right-hand side of −0 solves to +0, as the general loop's sums give it (a
+        // λ printed as −0.0 would be news to a user).
+        let mut zeros = vec![-0.0; n];
+        ch.solve_in_place(&mut zeros);
+        assert!(zeros.iter().all(|z| z.to_bits() == 0), "{zeros:?}");
         ch.solve_in_place(&mut b);
         for (got, want) in b.iter().zip(&x) {
             assert!((got - want).abs() < 1e-13, "{got} vs {want}");

@@ -30,9 +30,9 @@ use super::contact::ContactState;
 use super::integrate::{Field, Vectors};
 use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
-use super::rows::{Row, RowProgram, RowScratch, Rows, angular_bodies, angular_width};
+use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
-use super::solve::{Settings, Solution, SolveCache, solve_cached};
+use super::solve::{Settings, Solution, SolveCache, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
@@ -146,6 +146,10 @@ pub struct Dynamics<'s> {
     orientations: Vec<[f64; 4]>,
     /// The solve's accelerations folded into state slots (scratch of [`Dynamics::kick_at`]).
     folded: Vec<[f64; 3]>,
+    /// The answer of the last [`correct`](Dynamics::correct), and a solution handed back by
+    /// [`recycle_solution`](Dynamics::recycle_solution): buffers the solves fill in place.
+    correction: Solution,
+    spare_solution: Option<Solution>,
 }
 
 /// The state slot of each rigid body's angle or rotation vector (and angular velocity), in
@@ -183,6 +187,8 @@ impl<'s> Dynamics<'s> {
             position_rows: Vec::new(),
             orientations,
             folded: Vec::new(),
+            correction: Solution::default(),
+            spare_solution: None,
         }
     }
 
@@ -279,13 +285,10 @@ impl<'s> Dynamics<'s> {
         Ok(unit)
     }
 
-    /// Puts (t, q, v) into the environment the tapes read.
-    fn set_state(&mut self, t: f64, q: &Vectors, v: &Vectors) {
-        self.env.set(self.system.time, Value::Scalar(t));
-        for (i, body) in self.system.bodies.iter().enumerate() {
-            self.env.set(body.position, Value::Vector(q[i]));
-            self.env.set(body.velocity, Value::Vector(v[i]));
-        }
+    /// Puts the rigid bodies' part of (t, q, v) into the environment the tapes read (the
+    /// time and the bodies' positions and velocities go to the tapes from the arrays:
+    /// `rows::State`).
+    fn set_state(&mut self, q: &Vectors, v: &Vectors) {
         // Rigid bodies' angles (3D: q = exp(φ) ⊗ q₀) and angular velocities, from their
         // angular slots after the bodies.
         let rigid = self.system.bodies.iter().filter_map(|b| b.rigid.as_ref());
@@ -310,13 +313,23 @@ impl<'s> Dynamics<'s> {
     /// for the error).
     pub fn positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<(), SimError> {
         self.evaluations += 1;
-        self.set_state(t, q, v);
+        self.set_state(q, v);
         self.program
-            .evaluate_positions_into(self.system, &self.env, &mut self.scratch, &mut self.position_rows)
+            .evaluate_positions_state_into(
+                self.system,
+                &self.env,
+                State { t, q, v },
+                &mut self.scratch,
+                &mut self.position_rows,
+            )
             .map_err(|error| SimError::Eval { time: t, error })?;
-        let finite =
-            |row: &Row| row.value.is_finite() && row.jacobian.iter().all(|(_, j)| j.iter().all(|x| x.is_finite()));
-        if !self.position_rows.iter().all(finite) {
+        let zero = |s: f64, x: &f64| s + x * 0.0;
+        let sum = self
+            .position_rows
+            .iter()
+            .fold(0.0, |s, row| row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(s, &row.value), zero));
+        // x·0 is 0 for every finite x and NaN otherwise: the sum is 0 when all are finite.
+        if sum != 0.0 {
             let rows = self.rows(t, q, v)?;
             self.recycle(rows);
         }
@@ -331,26 +344,28 @@ impl<'s> Dynamics<'s> {
     /// The rows at (t, q, v): the one place states become numbers.
     pub fn rows(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
         self.evaluations += 1;
-        self.set_state(t, q, v);
+        self.set_state(q, v);
         let mut rows = self.spare.pop().unwrap_or_default();
         self.program
-            .evaluate_into(self.system, &self.env, &mut self.scratch, &mut rows)
+            .evaluate_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
-        for (k, row) in rows.rows.iter().enumerate() {
-            let bad = [row.value, row.rate, row.bias]
-                .into_iter()
-                .chain(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied()))
-                .find(|x| !x.is_finite());
-            if let Some(value) = bad {
-                let constraint = self.system.constraints[k].name.clone();
-                return Err(SimError::NonFiniteRow { step: self.step, time: t, constraint, value });
+        if !all_finite(&rows) {
+            for (k, row) in rows.rows.iter().enumerate() {
+                let bad = [row.value, row.rate, row.bias]
+                    .into_iter()
+                    .chain(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied()))
+                    .find(|x| !x.is_finite());
+                if let Some(value) = bad {
+                    let constraint = self.system.constraints[k].name.clone();
+                    return Err(SimError::NonFiniteRow { step: self.step, time: t, constraint, value });
+                }
             }
-        }
-        for (i, ((f, v), w)) in rows.force.iter().zip(&rows.velocity).zip(&rows.inverse_mass).enumerate() {
-            if !(f.iter().chain(v).all(|x| x.is_finite()) && w.is_finite()) {
-                let body = slot_name(self.system, i);
-                return Err(SimError::NonFinite { step: self.step, time: t, body });
+            for (i, ((f, v), w)) in rows.force.iter().zip(&rows.velocity).zip(&rows.inverse_mass).enumerate() {
+                if !(f.iter().chain(v).all(|x| x.is_finite()) && w.is_finite()) {
+                    let body = slot_name(self.system, i);
+                    return Err(SimError::NonFinite { step: self.step, time: t, body });
+                }
             }
         }
         Ok(rows)
@@ -381,13 +396,24 @@ impl<'s> Dynamics<'s> {
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
         }
-        solve_cached(rows, &Settings::default(), &self.held, &mut self.solver)
+        let mut solution = self.spare_solution.take().unwrap_or_default();
+        solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
+        solution
+    }
+
+    /// Gives a solution of [`solve`](Dynamics::solve) back, so the next solve fills its
+    /// buffers (optional: dropping it is correct, only slower).
+    pub fn recycle_solution(&mut self, solution: Solution) {
+        self.spare_solution = Some(solution);
     }
 
     /// The solve of a correction (projection, SHAKE, velocity step: forces zeroed, c set to
-    /// the target), with no contact held: `solve::solve` through the run's cache.
-    pub fn correct(&mut self, rows: &Rows) -> Solution {
-        solve_cached(rows, &Settings::default(), &[], &mut self.solver)
+    /// the target), with no contact held: `solve::solve` through the run's cache, into a
+    /// buffer the dynamics keep (the caller may change it: it is scratch until the next
+    /// correction).
+    pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
+        solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
+        &mut self.correction
     }
 
     /// The way the last solve went (`solve::SolvePath`).
@@ -408,6 +434,7 @@ impl<'s> Dynamics<'s> {
         }
         let solution = self.solve(&mut rows);
         a.copy_from_slice(&solution.acceleration);
+        self.recycle_solution(solution);
         fold(&rows, a);
         Ok(rows)
     }
@@ -423,6 +450,17 @@ impl<'s> Dynamics<'s> {
         self.folded = a;
         Ok(())
     }
+}
+
+/// Whether every number of `rows` is finite, in one branch-free pass (x·0 is 0 for every
+/// finite x and NaN otherwise).
+fn all_finite(rows: &Rows) -> bool {
+    let zero = |s: f64, x: &f64| s + x * 0.0;
+    let rows_sum = rows.rows.iter().fold(0.0, |s, row| {
+        row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(zero(zero(s, &row.value), &row.rate), &row.bias), zero)
+    });
+    let bodies = rows.force.iter().chain(&rows.velocity).flatten().chain(&rows.inverse_mass).fold(rows_sum, zero);
+    bodies == 0.0
 }
 
 /// The body a slot of the rows belongs to: a body, or a rigid body's angular slot.

@@ -33,6 +33,7 @@ use crate::expr::eval::{Env, EvalError, Value, eval};
 use crate::expr::graph::SymbolWalk;
 use crate::expr::{Id, Rational, Symbol};
 use crate::model::system::System;
+use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::tape::{Scratch, Tape};
 use crate::numeric::vector::dot;
 use std::ops::Range;
@@ -126,11 +127,17 @@ pub struct RowProgram {
     rows: Vec<RowLayout>,
     /// Every root, compiled over `inputs`.
     tape: Tape,
-    /// The free symbols of the roots, in the tape's input order.
+    /// The free symbols of the roots, in the tape's input order, and where each comes from
+    /// in a state given as arrays.
     inputs: Vec<Symbol>,
+    sources: Vec<Source>,
     /// C and J alone (with the principal axes they are projected on): what an iteration
     /// onto C = 0 reads ([`RowProgram::evaluate_positions_into`]).
     positions: Subprogram,
+    /// Every root again, shape by shape (`numeric::batch`), into `tape`'s output layout:
+    /// what [`evaluate_into`](RowProgram::evaluate_into) runs when the scene repeats a
+    /// shape (`None`: `tape` itself).
+    batched: Option<Batched>,
 }
 
 /// A tape of some of a [`RowProgram`]'s roots.
@@ -140,11 +147,19 @@ struct Subprogram {
     inputs: Vec<Symbol>,
     /// The tape's root of each of the program's roots (`usize::MAX`: not in it).
     root: Vec<usize>,
+    sources: Vec<Source>,
+    /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself).
+    batched: Option<Batched>,
 }
 
 impl Subprogram {
     /// The roots `wanted` of `roots` (indices), compiled over their own free symbols.
-    fn new(graph: &crate::expr::Graph, roots: &[Id], wanted: impl IntoIterator<Item = usize>) -> Subprogram {
+    fn new(
+        system: &System,
+        graph: &crate::expr::Graph,
+        roots: &[Id],
+        wanted: impl IntoIterator<Item = usize>,
+    ) -> Subprogram {
         let mut root = vec![usize::MAX; roots.len()];
         let mut ids = Vec::new();
         for r in wanted {
@@ -156,8 +171,49 @@ impl Subprogram {
         let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &ids).to_vec();
         // As for the whole program: the inputs are the roots' free symbols.
         let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
-        Subprogram { tape, inputs, root }
+        let sources = sources(system, &inputs);
+        Subprogram { tape, inputs, root, sources, batched: None }
     }
+}
+
+/// Symbol → its slots in `tape`'s inputs, whose symbols are `inputs` (every symbol a batch
+/// reads is one of them).
+fn input_slots<'t>(tape: &'t Tape, inputs: &[Symbol]) -> impl Fn(Symbol) -> Range<usize> + 't {
+    let at: std::collections::HashMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+    move |s| at.get(&s).map_or(0..0, |&i| tape.input_range(i))
+}
+
+/// The roots of a [`RowProgram`] in units of one shape each (`numeric::batch`): each body's
+/// mass, velocity and force, each rigid body's angular roots, each row's C, Ċ, c and J (or,
+/// with `positions`, C and J alone and then each principal axis), every root once.
+fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, positions: bool) -> Vec<Vec<usize>> {
+    let mut covered = vec![false; n_roots];
+    let mut units = Vec::new();
+    let mut take = |unit: Vec<usize>, units: &mut Vec<Vec<usize>>| {
+        let unit: Vec<usize> = unit.into_iter().filter(|&r| !std::mem::replace(&mut covered[r], true)).collect();
+        if !unit.is_empty() {
+            units.push(unit);
+        }
+    };
+    for layout in rows {
+        let mut unit = vec![layout.value];
+        if !positions {
+            unit.extend([layout.rate, layout.bias]);
+        }
+        unit.extend(layout.jacobian.clone());
+        take(unit, &mut units);
+    }
+    for b in bodies {
+        let axes = b.principal.map(|(_, axes)| axes.to_vec()).unwrap_or_default();
+        if positions {
+            for a in axes {
+                take(vec![a], &mut units);
+            }
+        } else {
+            take([b.mass, b.velocity, b.force].into_iter().chain(axes).collect(), &mut units);
+        }
+    }
+    units
 }
 
 /// Where one slot's numbers are among a [`RowProgram`]'s roots (and the tape's outputs): a
@@ -196,21 +252,88 @@ fn push(roots: &mut Vec<Id>, id: Id) -> usize {
 /// `tape`'s inputs (the symbols `inputs`) from `env` into `buffer`.
 fn load(system: &System, env: &Env, tape: &Tape, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
     for (i, &s) in inputs.iter().enumerate() {
-        let slots = tape.input_range(i);
+        let slots = &mut buffer[tape.input_range(i)];
+        // Element by element: a copy of one to four numbers is cheaper inline than a call.
         match env.get(s) {
-            Some(Value::Scalar(x)) => buffer[slots].fill(x),
-            Some(Value::Vector(v)) => {
-                let n = slots.len();
-                buffer[slots].copy_from_slice(&v[..n]);
-            }
-            Some(Value::Quaternion(q)) => {
-                let n = slots.len();
-                buffer[slots].copy_from_slice(&q[..n]);
-            }
+            Some(Value::Scalar(x)) => slots.fill(x),
+            Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
+            Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
             None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
         }
     }
     Ok(())
+}
+
+/// Where a tape's input symbol comes from when the state is given as arrays
+/// ([`RowProgram::evaluate_state_into`]): a body's position or velocity (slot i of the
+/// state), the time, or the environment (parameters, masses, rigid bodies' angles).
+#[derive(Clone, Copy, Debug)]
+enum Source {
+    Position(usize),
+    Velocity(usize),
+    Time,
+    Env,
+}
+
+/// The [`Source`] of each of `inputs`.
+fn sources(system: &System, inputs: &[Symbol]) -> Vec<Source> {
+    let mut of = std::collections::HashMap::new();
+    for (i, body) in system.bodies.iter().enumerate() {
+        of.insert(body.position, Source::Position(i));
+        of.insert(body.velocity, Source::Velocity(i));
+    }
+    of.insert(system.time, Source::Time);
+    inputs.iter().map(|s| of.get(s).copied().unwrap_or(Source::Env)).collect()
+}
+
+/// A state given as arrays: time, and each body's position and velocity (slot i for body i,
+/// as a simulation keeps them; rigid bodies' angles are read from the environment).
+#[derive(Clone, Copy, Debug)]
+pub struct State<'a> {
+    pub t: f64,
+    pub q: &'a [[f64; 3]],
+    pub v: &'a [[f64; 3]],
+}
+
+/// `tape`'s inputs from `state` where `sources` says so, else from `env`.
+fn load_state(
+    system: &System,
+    env: &Env,
+    state: State<'_>,
+    tape: &Tape,
+    inputs: &[Symbol],
+    sources: &[Source],
+    buffer: &mut [f64],
+) -> Result<(), EvalError> {
+    // One to three components, copied by hand (a copy of a variable length is a call).
+    let copy = |slots: &mut [f64], x: &[f64; 3]| {
+        for (k, d) in slots.iter_mut().enumerate().take(3) {
+            *d = x[k];
+        }
+    };
+    for (i, (&s, source)) in inputs.iter().zip(sources).enumerate() {
+        let slots = &mut buffer[tape.input_range(i)];
+        match *source {
+            Source::Position(b) => copy(slots, &state.q[b]),
+            Source::Velocity(b) => copy(slots, &state.v[b]),
+            Source::Time => slots.fill(state.t),
+            Source::Env => match env.get(s) {
+                Some(Value::Scalar(x)) => slots.fill(x),
+                Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
+                Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
+                None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
+            },
+        }
+    }
+    Ok(())
+}
+
+/// The components of an output `range` of `out`, zero past them.
+fn components(out: &[f64], range: Range<usize>) -> [f64; 3] {
+    // By hand: a copy of a variable length (one to three) compiles to a call.
+    let x = &out[range];
+    let at = |k: usize| if k < x.len() { x[k] } else { 0.0 };
+    [at(0), at(1), at(2)]
 }
 
 /// Input and output buffers of [`RowProgram::evaluate_into`], reused across evaluations.
@@ -223,6 +346,9 @@ pub struct RowScratch {
     position_inputs: Vec<f64>,
     position_outputs: Vec<f64>,
     position_tape: Scratch,
+    /// The batched evaluations' buffers (empty without batches).
+    batched: Option<BatchedScratch>,
+    position_batched: Option<BatchedScratch>,
 }
 
 impl RowProgram {
@@ -319,8 +445,25 @@ impl RowProgram {
         let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
         let axes = bodies.iter().filter_map(|b| b.principal).flat_map(|(_, axes)| axes);
         let c_and_j = rows.iter().flat_map(|r| std::iter::once(r.value).chain(r.jacobian.clone()));
-        let positions = Subprogram::new(graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
-        RowProgram { roots, bodies, rows, tape, inputs, positions }
+        let mut positions = Subprogram::new(system, graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
+        let batched = Batched::new(
+            graph,
+            &roots,
+            &units(&bodies, &rows, roots.len(), false),
+            |r| tape.output_range(r),
+            input_slots(&tape, &inputs),
+        );
+        let p = &positions;
+        let batched_positions = Batched::new(
+            graph,
+            &roots,
+            &units(&bodies, &rows, roots.len(), true),
+            |r| p.tape.output_range(p.root[r]),
+            input_slots(&p.tape, &p.inputs),
+        );
+        positions.batched = batched_positions;
+        let sources = sources(system, &inputs);
+        RowProgram { roots, bodies, rows, tape, inputs, sources, positions, batched }
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
@@ -346,6 +489,8 @@ impl RowProgram {
             position_inputs: vec![0.0; self.positions.tape.input_len()],
             position_outputs: vec![0.0; self.positions.tape.output_len()],
             position_tape: self.positions.tape.scratch(),
+            batched: self.batched.as_ref().map(Batched::scratch),
+            position_batched: self.positions.batched.as_ref().map(Batched::scratch),
         }
     }
 
@@ -366,19 +511,37 @@ impl RowProgram {
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
         load(system, env, &self.tape, &self.inputs, &mut scratch.inputs)?;
-        self.tape.eval(&scratch.inputs, &mut scratch.tape, &mut scratch.outputs);
+        self.run_loaded(system, scratch, rows);
+        Ok(())
+    }
+
+    /// [`evaluate_into`](RowProgram::evaluate_into) at a state given as arrays (time,
+    /// bodies' positions and velocities; everything else from `env`): what a simulation
+    /// evaluates, without writing its state into an environment first.
+    pub fn evaluate_state_into(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        scratch: &mut RowScratch,
+        rows: &mut Rows,
+    ) -> Result<(), EvalError> {
+        load_state(system, env, state, &self.tape, &self.inputs, &self.sources, &mut scratch.inputs)?;
+        self.run_loaded(system, scratch, rows);
+        Ok(())
+    }
+
+    /// The rows from the inputs loaded in `scratch`.
+    fn run_loaded(&self, system: &System, scratch: &mut RowScratch, rows: &mut Rows) {
+        match (&self.batched, &mut scratch.batched) {
+            (Some(batched), Some(buffers)) => batched.eval(&scratch.inputs, buffers, &mut scratch.outputs),
+            _ => self.tape.eval(&scratch.inputs, &mut scratch.tape, &mut scratch.outputs),
+        }
         let out = &scratch.outputs;
         let tape = &self.tape;
         let scalar = |root: usize| out[tape.output_range(root).start];
-        let vector = |root: usize| {
-            let mut x = [0.0; 3];
-            let range = tape.output_range(root);
-            let n = range.len();
-            x[..n].copy_from_slice(&out[range]);
-            x
-        };
+        let vector = |root: usize| components(out, tape.output_range(root));
         self.fill(system, rows, scalar, vector);
-        Ok(())
     }
 
     /// `rows` from the roots' values (`scalar`, `vector` by root): the one assembly of the
@@ -458,15 +621,37 @@ impl RowProgram {
     ) -> Result<(), EvalError> {
         let p = &self.positions;
         load(system, env, &p.tape, &p.inputs, &mut scratch.position_inputs)?;
-        p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs);
+        self.positions_loaded(scratch, rows);
+        Ok(())
+    }
+
+    /// [`evaluate_positions_into`](RowProgram::evaluate_positions_into) at a state given as
+    /// arrays (see [`evaluate_state_into`](RowProgram::evaluate_state_into)).
+    pub fn evaluate_positions_state_into(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        scratch: &mut RowScratch,
+        rows: &mut Vec<Row>,
+    ) -> Result<(), EvalError> {
+        let p = &self.positions;
+        load_state(system, env, state, &p.tape, &p.inputs, &p.sources, &mut scratch.position_inputs)?;
+        self.positions_loaded(scratch, rows);
+        Ok(())
+    }
+
+    /// C/κ and J from the positions' inputs loaded in `scratch`.
+    fn positions_loaded(&self, scratch: &mut RowScratch, rows: &mut Vec<Row>) {
+        let p = &self.positions;
+        match (&p.batched, &mut scratch.position_batched) {
+            (Some(batched), Some(buffers)) => {
+                batched.eval(&scratch.position_inputs, buffers, &mut scratch.position_outputs)
+            }
+            _ => p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs),
+        }
         let out = &scratch.position_outputs;
-        let vector = |root: usize| {
-            let mut x = [0.0; 3];
-            let range = p.tape.output_range(p.root[root]);
-            let n = range.len();
-            x[..n].copy_from_slice(&out[range]);
-            x
-        };
+        let vector = |root: usize| components(out, p.tape.output_range(p.root[root]));
         rows.resize_with(self.rows.len(), Row::default);
         for (layout, row) in self.rows.iter().zip(rows.iter_mut()) {
             row.value = out[p.tape.output_range(p.root[layout.value]).start] * layout.inverse_scale;
@@ -475,14 +660,18 @@ impl RowProgram {
             row.inequality = layout.inequality;
             self.fill_jacobian(layout, row, &vector);
         }
-        Ok(())
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of
     /// the compiled path; `derivation` is the one the program was gathered from.
     pub fn evaluate_interpreted(&self, system: &System, derivation: &Derivation, env: &Env) -> Result<Rows, EvalError> {
         let values = eval(&derivation.graph, &self.roots, env)?;
-        let vector = |at: usize| values[at].vector().unwrap_or([f64::NAN; 3]);
+        // A scalar root read as a slot's vector (a 2D rigid body's ω, τ, Jʷ) is component 0,
+        // as the compiled path reads its one output.
+        let vector = |at: usize| match values[at] {
+            Value::Scalar(x) => [x, 0.0, 0.0],
+            other => other.vector().unwrap_or([f64::NAN; 3]),
+        };
         let scalar = |at: usize| values[at].scalar().unwrap_or(f64::NAN);
         let mut rows = Rows::default();
         self.fill(system, &mut rows, scalar, vector);

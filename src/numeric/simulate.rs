@@ -502,6 +502,7 @@ impl<'s> Simulation<'s> {
                 break;
             }
             self.a.copy_from_slice(&solution.acceleration);
+            self.dynamics.recycle_solution(solution);
             fold(&rows, &mut self.a);
             self.dynamics.step = n + 1;
             self.advance(rows, n, &reach)?;

@@ -174,14 +174,18 @@ fn enforce(row: &mut Row, bias: f64) {
 /// goes through the run's cache when `dynamics` is given.
 fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dynamics<'_>>) -> f64 {
     rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    let mut step = match dynamics {
+    let mut owned;
+    let solution = match dynamics {
         Some(dynamics) => dynamics.correct(rows),
-        None => solve(rows),
-    }
-    .acceleration;
-    fold(rows, &mut step);
+        None => {
+            owned = solve(rows);
+            &mut owned
+        }
+    };
+    let step = &mut solution.acceleration;
+    fold(rows, step);
     let mut largest = 0.0f64;
-    for (x, dx) in x.iter_mut().zip(&step) {
+    for (x, dx) in x.iter_mut().zip(step.iter()) {
         for d in 0..3 {
             if dx[d].is_finite() {
                 x[d] += dx[d];
@@ -304,9 +308,9 @@ pub fn shake_positions(
             }
         }
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        let mut step = dynamics.correct(start).acceleration;
-        fold(start, &mut step);
-        for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(&step) {
+        let step = &mut dynamics.correct(start).acceleration;
+        fold(start, step);
+        for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(step.iter()) {
             for d in 0..3 {
                 if dq[d].is_finite() {
                     q[d] += dq[d];

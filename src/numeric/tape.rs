@@ -425,6 +425,18 @@ impl Tape {
         );
     }
 
+    /// [`eval_batch`](Tape::eval_batch) on the calling thread whatever `n`: for batches
+    /// evaluated many times a second (a simulation's rows), where handing work to other
+    /// threads would cost more than it saves and the caller's thread is the one measured.
+    pub fn eval_batch_serial(&self, n: usize, inputs: &[f64], scratch: &mut BatchScratch, outputs: &mut [f64]) {
+        assert_eq!(inputs.len(), self.n_inputs * n, "input length");
+        assert_eq!(outputs.len(), self.outputs.len() * n, "output length");
+        assert_eq!(scratch.regs.len(), self.n_regs * LANES, "scratch made by another tape");
+        // SAFETY: `outputs` is `output_len · n` long (asserted) and borrowed mutably for the
+        // whole call; `inputs` is `input_len · n` long.
+        unsafe { self.run_range(&mut scratch.regs, inputs, OutPtr(outputs.as_mut_ptr()), n, 0..n) };
+    }
+
     /// Runs the states `range` lane by lane, writing their outputs into the rows at `out`.
     ///
     /// # Safety
