@@ -464,9 +464,17 @@ fn specialised_code_carries_no_parameters() {
 fn checked_in_generated_code_is_current() {
     use lagrange::codegen::layout::Solver;
     let soft = Some(Solver::SoftStep);
+    for (n, file) in [(10, "benches/data/chain_10.toml"), (100, "benches/data/chain_100.toml")] {
+        let on_disk = std::fs::read_to_string(file).expect("checked-in chain");
+        assert!(
+            on_disk == lagrange::scenario::chain(n),
+            "{file} is stale: run `cargo run --release --example chain -- {n} > {file}`"
+        );
+    }
     for (file, solver, step_only, generated) in [
         ("constraints/bead_on_wire.toml", None, false, "benches/generated/bead_on_wire.rs"),
         ("benches/data/chain_10.toml", None, false, "benches/generated/chain_10.rs"),
+        ("benches/data/chain_100.toml", None, false, "benches/generated/chain_100.rs"),
         ("constraints/joints/revolute.toml", None, false, "benches/generated/revolute.rs"),
         ("constraints/solvers/two_particles.toml", soft, false, "benches/generated/two_particles_step.rs"),
         ("constraints/solvers/ball_and_chain.toml", soft, false, "benches/generated/ball_and_chain_step.rs"),
