@@ -464,9 +464,17 @@ fn specialised_code_carries_no_parameters() {
 fn checked_in_generated_code_is_current() {
     use lagrange::codegen::layout::Solver;
     let soft = Some(Solver::SoftStep);
+    for (n, file) in [(10, "benches/data/chain_10.toml"), (100, "benches/data/chain_100.toml")] {
+        let on_disk = std::fs::read_to_string(file).expect("checked-in chain");
+        assert!(
+            on_disk == lagrange::scenario::chain(n),
+            "{file} is stale: run `cargo run --release --example chain -- {n} > {file}`"
+        );
+    }
     for (file, solver, step_only, generated) in [
         ("constraints/bead_on_wire.toml", None, false, "benches/generated/bead_on_wire.rs"),
         ("benches/data/chain_10.toml", None, false, "benches/generated/chain_10.rs"),
+        ("benches/data/chain_100.toml", None, false, "benches/generated/chain_100.rs"),
         ("constraints/joints/revolute.toml", None, false, "benches/generated/revolute.rs"),
         ("constraints/solvers/two_particles.toml", soft, false, "benches/generated/two_particles_step.rs"),
         ("constraints/solvers/ball_and_chain.toml", soft, false, "benches/generated/ball_and_chain_step.rs"),
@@ -613,12 +621,13 @@ fn a_chain_of_hundreds_of_links_runs_on_a_small_stack_and_agrees() {
     assert!(code.contains(&format!("pub const JACOBIAN_BLOCKS: usize = {};", 2 * BIG_LINKS - 1)));
     assert!(code.contains(&format!("pub fn a_band(s: &State) -> [[f64; 2]; {BIG_LINKS}]")));
     assert!(!code.contains("fn jacobian(") && !code.contains("fn a_matrix"), "no dense J or A");
-    // No array on the stack bigger than the state's own O(N) size (generic lengths skipped).
+    // No array on the stack bigger than the state's own O(N) size (6 N numbers; generic
+    // lengths skipped): the biggest is `band_system`'s, A's band and −b, 3 a row.
     for (at, _) in code.match_indices("[[f64; ") {
         let inner = code[at + 7..].split(']').next().and_then(|x| x.parse::<usize>().ok());
         let outer = code[at..].split("]; ").nth(1).and_then(|x| x.split(']').next()?.parse::<usize>().ok());
         if let (Some(inner), Some(outer)) = (inner, outer) {
-            assert!(inner * outer <= 2 * BIG_LINKS, "an array of {inner} × {outer} f64");
+            assert!(inner * outer <= 3 * BIG_LINKS, "an array of {inner} × {outer} f64");
         }
     }
 
@@ -1078,6 +1087,71 @@ fn the_two_by_two_dense_solve_hands_over_where_a_is_singular_or_out_of_range() {
             assert_eq!(got.len(), want.len(), "{what}");
             for (x, y) in got.iter().zip(want) {
                 assert!((x - y).abs() <= 1e-9 * scale, "at {state:?}: {what} {got:?}, solve gives {want:?}");
+            }
+        }
+    }
+}
+
+/// A chain's λ by L D Lᵀ of A's band (`band_lambda`, here `solve_tridiagonal`: 5 links with
+/// A a dense array, 20 with A its band) answers at a regular state and hands over to
+/// `solution` where A is singular (a link of length 0: two bodies at one place) or its
+/// numbers leave f64's range (lengths near 1e155: A overflows; 1e-170: its diagonal
+/// underflows); λ and the forces are `solve`'s at every state either way.
+#[test]
+fn the_band_solve_hands_over_where_a_is_singular_or_out_of_range() {
+    if common::skip_slow("the_band_solve_hands_over_where_a_is_singular_or_out_of_range") {
+        return;
+    }
+    for links in [5, 20] {
+        let l = load(&lagrange::scenario::chain(links)).expect("loads");
+        let m = module(&l, &Options::default()).expect("generates");
+        assert!(m.code.contains("solve_tridiagonal(&band_system(s))"), "a chain's A is tridiagonal");
+        assert_eq!(m.code.contains("pub fn dense_solution"), links <= 16, "A dense up to 16 links");
+        let d = derive(&l.system).expect("derives");
+        // A zig-zag, moving, under gravity and a sideways push: every entry non-trivial.
+        let zigzag = |scale: f64| -> Vec<BodyState> {
+            (0..links)
+                .map(|i| {
+                    let x = i as f64;
+                    let r = [0.5 * (x + 1.0) * scale, if i % 2 == 0 { 0.1 } else { -0.1 } * scale];
+                    (r, [0.1 * x.sin() * scale, -0.05 * x.cos() * scale], [0.3 * scale, -9.81 * scale])
+                })
+                .collect()
+        };
+        let mut coincident = zigzag(1.0);
+        coincident[3].0 = coincident[2].0;
+        let states: Vec<(bool, Vec<BodyState>)> =
+            vec![(true, zigzag(1.0)), (false, coincident), (false, zigzag(1e155)), (false, zigzag(1e-170))];
+        let (dir, mut main) = harness_start(format!("generate_band_hand_over_{links}"), &m.code);
+        let envs: Vec<Env> = states.iter().map(|(_, s)| state_of(&l, s)).collect();
+        for env in &envs {
+            let _ = writeln!(main, "    let s = {};", state_literal(&l, &m, env));
+            main.push_str(
+                "    show(&[band_lambda(&s).is_some() as u8 as f64]);\n    show(&lambda(&s));\n    show(&forces(&s).concat());\n",
+            );
+        }
+        main.push_str("}\n");
+        let stdout = compile_and_run(&dir, &main);
+        let mut lines = stdout.lines().map(numbers);
+        for (i, ((fast, _), env)) in states.iter().zip(&envs).enumerate() {
+            let mut next = || lines.next().expect("one line per output");
+            let (flag, lambda, forces) = (next(), next(), next());
+            assert_eq!(flag, [f64::from(u8::from(*fast))], "{links} links, state {i}: band_lambda answers: {fast}");
+            let want = solved(&l, &d, env);
+            let wanted_forces: Vec<f64> = want.constraint_force.iter().flat_map(|f| f[..2].to_vec()).collect();
+            for (what, got, want) in [("lambda", &lambda, &want.lambda), ("forces", &forces, &wanted_forces)] {
+                let scale = want.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+                assert!(
+                    want.iter().all(|x| x.is_finite()) && scale > 0.0,
+                    "{links} links, state {i}: solve gives {want:?}"
+                );
+                assert_eq!(got.len(), want.len(), "{what}");
+                for (x, y) in got.iter().zip(want) {
+                    assert!(
+                        (x - y).abs() <= 1e-9 * scale,
+                        "{links} links, state {i}: {what} {got:?}, solve gives {want:?}"
+                    );
+                }
             }
         }
     }

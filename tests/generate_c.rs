@@ -234,6 +234,29 @@ fn outputs(rust: &str) -> Vec<Output> {
             add("angular_accelerations", "angular_accelerations(&s).to_vec()".into(), format!("[{r}]"), r);
         }
     }
+    // λ by L D Lᵀ of A's band (systems of equalities): the rows it solves, and whether it
+    // answers (1, then λ) or gives up (0, then zeros).
+    if rust.contains("pub fn band_system(") {
+        let w = count("pub fn band_system(s: &State) -> [[f64; ");
+        list.push(Output {
+            name: "band_system",
+            rust: "band_system(&s).concat()".into(),
+            c_array: format!("double out_band_system[{k}][{w}]"),
+            len: k * w,
+            c_fill: None,
+        });
+        list.push(Output {
+            name: "band_lambda",
+            rust: format!("band_lambda(&s).map_or(vec![0.0; {}], |l| [1.0].into_iter().chain(l).collect())", k + 1),
+            c_array: format!("double out_band_lambda[{}]", k + 1),
+            len: k + 1,
+            c_fill: Some(
+                "out_band_lambda[0] = band_lambda(&s, out_band_lambda + 1);\n        \
+                 if (out_band_lambda[0] == 0.0) { for (int i = 1; i <= CONSTRAINTS; i++) { out_band_lambda[i] = 0.0; } }"
+                    .into(),
+            ),
+        });
+    }
     let len = 2 * k + 2 * slots * dim + 1;
     list.push(Output {
         name: "solution",

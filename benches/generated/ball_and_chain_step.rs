@@ -3,7 +3,7 @@
 // Do not edit: regenerate. Self-contained: no dependency on lagrange or any crate.
 // 2D, 41 bodies, 41 constraints; vectors are [f64; 2].
 // Convention: `constraints` is C as written (`lhs = rhs` and `lhs >= rhs` give C = lhs − rhs, `lhs <= rhs` gives C = rhs − lhs). `jacobian` is J = ∇C/κ, with κ = SCALE[k] the constant content of ∇C, and `c_term` and λ refer to C/κ, as `lagrange solve` and `derive --format json` do; the forces do not depend on κ.
-// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = 1; λ by band Cholesky.
+// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = 1; λ by L D Lᵀ on the band.
 // Outputs of more than 64 formulas are filled by private parts of at most 64: no function's stack grows with the system's size beyond its own O(K) arrays.
 
 // State fields: each symbol of the file under its own name where that is a Rust identifier (ASCII letters, digits, `_`; not a keyword), else its snake_case form (other letters as their code point, `λ` → `u3bb`; a keyword gets `_`; `_2`, `_3`, … where taken). Accelerations are not inputs. In the file → in `State`:
@@ -2692,15 +2692,571 @@ pub fn accelerations(s: &State) -> [[f64; 2]; 41] {
     a
 }
 
-/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular
-/// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).
+/// A λ = −b as `band_lambda` solves it: row k holds A[k][k], A[k][k + 1]
+/// (A's band, zeros past the last column) and −b[k], from one program of A and b as assembled
+/// (the numbers of A's entries and of `b_vector`).
+pub fn band_system(s: &State) -> [[f64; 3]; 41] {
+    let mut out = [[0.0; 3]; 41];
+    band_system_from_0(s, &mut out);
+    band_system_from_21(s, &mut out);
+    out
+}
+
+/// Items 0..21 of [`band_system`].
+#[inline(never)]
+fn band_system_from_0(s: &State, out: &mut [[f64; 3]]) {
+    let x0 = s.r_p1[0] - s.a1[0];
+    let x1 = s.r_p1[1] - s.a1[1];
+    let x2 = norm2(x0, x1);
+    let x3 = s.r_p2[0] - s.r_p1[0];
+    let x4 = s.r_p2[1] - s.r_p1[1];
+    let x5 = norm2(x3, x4);
+    let x6 = s.r_p3[0] - s.r_p2[0];
+    let x7 = s.r_p3[1] - s.r_p2[1];
+    let x8 = norm2(x6, x7);
+    let x9 = s.r_p4[0] - s.r_p3[0];
+    let x10 = s.r_p4[1] - s.r_p3[1];
+    let x11 = norm2(x9, x10);
+    let x12 = s.r_p5[0] - s.r_p4[0];
+    let x13 = s.r_p5[1] - s.r_p4[1];
+    let x14 = norm2(x12, x13);
+    let x15 = s.r_p6[0] - s.r_p5[0];
+    let x16 = s.r_p6[1] - s.r_p5[1];
+    let x17 = norm2(x15, x16);
+    let x18 = s.r_p7[0] - s.r_p6[0];
+    let x19 = s.r_p7[1] - s.r_p6[1];
+    let x20 = norm2(x18, x19);
+    let x21 = s.r_p8[0] - s.r_p7[0];
+    let x22 = s.r_p8[1] - s.r_p7[1];
+    let x23 = norm2(x21, x22);
+    let x24 = s.r_p9[0] - s.r_p8[0];
+    let x25 = s.r_p9[1] - s.r_p8[1];
+    let x26 = norm2(x24, x25);
+    let x27 = s.r_p10[0] - s.r_p9[0];
+    let x28 = s.r_p10[1] - s.r_p9[1];
+    let x29 = norm2(x27, x28);
+    let x30 = s.r_p11[0] - s.r_p10[0];
+    let x31 = s.r_p11[1] - s.r_p10[1];
+    let x32 = norm2(x30, x31);
+    let x33 = s.r_p12[0] - s.r_p11[0];
+    let x34 = s.r_p12[1] - s.r_p11[1];
+    let x35 = norm2(x33, x34);
+    let x36 = s.r_p13[0] - s.r_p12[0];
+    let x37 = s.r_p13[1] - s.r_p12[1];
+    let x38 = norm2(x36, x37);
+    let x39 = s.r_p14[0] - s.r_p13[0];
+    let x40 = s.r_p14[1] - s.r_p13[1];
+    let x41 = norm2(x39, x40);
+    let x42 = s.r_p15[0] - s.r_p14[0];
+    let x43 = s.r_p15[1] - s.r_p14[1];
+    let x44 = norm2(x42, x43);
+    let x45 = s.r_p16[0] - s.r_p15[0];
+    let x46 = s.r_p16[1] - s.r_p15[1];
+    let x47 = norm2(x45, x46);
+    let x48 = s.r_p17[0] - s.r_p16[0];
+    let x49 = s.r_p17[1] - s.r_p16[1];
+    let x50 = norm2(x48, x49);
+    let x51 = s.r_p18[0] - s.r_p17[0];
+    let x52 = s.r_p18[1] - s.r_p17[1];
+    let x53 = norm2(x51, x52);
+    let x54 = s.r_p19[0] - s.r_p18[0];
+    let x55 = s.r_p19[1] - s.r_p18[1];
+    let x56 = norm2(x54, x55);
+    let x57 = s.r_p20[0] - s.r_p19[0];
+    let x58 = s.r_p20[1] - s.r_p19[1];
+    let x59 = norm2(x57, x58);
+    let x60 = s.r_p21[0] - s.r_p20[0];
+    let x61 = s.r_p21[1] - s.r_p20[1];
+    let x62 = norm2(x60, x61);
+    let x63 = s.r_p22[0] - s.r_p21[0];
+    let x64 = s.r_p22[1] - s.r_p21[1];
+    let x65 = s.v_p1[0] * x0 + s.v_p1[1] * x1;
+    let x66 = 1.0 / x2;
+    let x67 = x0 * x66;
+    let x68 = x1 * x66;
+    let x69 = s.v_p2[0] - s.v_p1[0];
+    let x70 = s.v_p2[1] - s.v_p1[1];
+    let x71 = x3 * x69 + x4 * x70;
+    let x72 = 1.0 / x5;
+    let x73 = -x72;
+    let x74 = x3 * x73;
+    let x75 = x4 * x73;
+    let x76 = x3 * x72;
+    let x77 = x4 * x72;
+    let x78 = s.v_p3[0] - s.v_p2[0];
+    let x79 = s.v_p3[1] - s.v_p2[1];
+    let x80 = x6 * x78 + x7 * x79;
+    let x81 = 1.0 / x8;
+    let x82 = -x81;
+    let x83 = x6 * x82;
+    let x84 = x7 * x82;
+    let x85 = x6 * x81;
+    let x86 = x7 * x81;
+    let x87 = s.v_p4[0] - s.v_p3[0];
+    let x88 = s.v_p4[1] - s.v_p3[1];
+    let x89 = x9 * x87 + x10 * x88;
+    let x90 = 1.0 / x11;
+    let x91 = -x90;
+    let x92 = x9 * x91;
+    let x93 = x10 * x91;
+    let x94 = x9 * x90;
+    let x95 = x10 * x90;
+    let x96 = s.v_p5[0] - s.v_p4[0];
+    let x97 = s.v_p5[1] - s.v_p4[1];
+    let x98 = x12 * x96 + x13 * x97;
+    let x99 = 1.0 / x14;
+    let x100 = -x99;
+    let x101 = x12 * x100;
+    let x102 = x13 * x100;
+    let x103 = x12 * x99;
+    let x104 = x13 * x99;
+    let x105 = s.v_p6[0] - s.v_p5[0];
+    let x106 = s.v_p6[1] - s.v_p5[1];
+    let x107 = x15 * x105 + x16 * x106;
+    let x108 = 1.0 / x17;
+    let x109 = -x108;
+    let x110 = x15 * x109;
+    let x111 = x16 * x109;
+    let x112 = x15 * x108;
+    let x113 = x16 * x108;
+    let x114 = s.v_p7[0] - s.v_p6[0];
+    let x115 = s.v_p7[1] - s.v_p6[1];
+    let x116 = x18 * x114 + x19 * x115;
+    let x117 = 1.0 / x20;
+    let x118 = -x117;
+    let x119 = x18 * x118;
+    let x120 = x19 * x118;
+    let x121 = x18 * x117;
+    let x122 = x19 * x117;
+    let x123 = s.v_p8[0] - s.v_p7[0];
+    let x124 = s.v_p8[1] - s.v_p7[1];
+    let x125 = x21 * x123 + x22 * x124;
+    let x126 = 1.0 / x23;
+    let x127 = -x126;
+    let x128 = x21 * x127;
+    let x129 = x22 * x127;
+    let x130 = x21 * x126;
+    let x131 = x22 * x126;
+    let x132 = s.v_p9[0] - s.v_p8[0];
+    let x133 = s.v_p9[1] - s.v_p8[1];
+    let x134 = x24 * x132 + x25 * x133;
+    let x135 = 1.0 / x26;
+    let x136 = -x135;
+    let x137 = x24 * x136;
+    let x138 = x25 * x136;
+    let x139 = x24 * x135;
+    let x140 = x25 * x135;
+    let x141 = s.v_p10[0] - s.v_p9[0];
+    let x142 = s.v_p10[1] - s.v_p9[1];
+    let x143 = x27 * x141 + x28 * x142;
+    let x144 = 1.0 / x29;
+    let x145 = -x144;
+    let x146 = x27 * x145;
+    let x147 = x28 * x145;
+    let x148 = x27 * x144;
+    let x149 = x28 * x144;
+    let x150 = s.v_p11[0] - s.v_p10[0];
+    let x151 = s.v_p11[1] - s.v_p10[1];
+    let x152 = x30 * x150 + x31 * x151;
+    let x153 = 1.0 / x32;
+    let x154 = -x153;
+    let x155 = x30 * x154;
+    let x156 = x31 * x154;
+    let x157 = x30 * x153;
+    let x158 = x31 * x153;
+    let x159 = s.v_p12[0] - s.v_p11[0];
+    let x160 = s.v_p12[1] - s.v_p11[1];
+    let x161 = x33 * x159 + x34 * x160;
+    let x162 = 1.0 / x35;
+    let x163 = -x162;
+    let x164 = x33 * x163;
+    let x165 = x34 * x163;
+    let x166 = x33 * x162;
+    let x167 = x34 * x162;
+    let x168 = s.v_p13[0] - s.v_p12[0];
+    let x169 = s.v_p13[1] - s.v_p12[1];
+    let x170 = x36 * x168 + x37 * x169;
+    let x171 = 1.0 / x38;
+    let x172 = -x171;
+    let x173 = x36 * x172;
+    let x174 = x37 * x172;
+    let x175 = x36 * x171;
+    let x176 = x37 * x171;
+    let x177 = s.v_p14[0] - s.v_p13[0];
+    let x178 = s.v_p14[1] - s.v_p13[1];
+    let x179 = x39 * x177 + x40 * x178;
+    let x180 = 1.0 / x41;
+    let x181 = -x180;
+    let x182 = x39 * x181;
+    let x183 = x40 * x181;
+    let x184 = x39 * x180;
+    let x185 = x40 * x180;
+    let x186 = s.v_p15[0] - s.v_p14[0];
+    let x187 = s.v_p15[1] - s.v_p14[1];
+    let x188 = x42 * x186 + x43 * x187;
+    let x189 = 1.0 / x44;
+    let x190 = -x189;
+    let x191 = x42 * x190;
+    let x192 = x43 * x190;
+    let x193 = x42 * x189;
+    let x194 = x43 * x189;
+    let x195 = s.v_p16[0] - s.v_p15[0];
+    let x196 = s.v_p16[1] - s.v_p15[1];
+    let x197 = x45 * x195 + x46 * x196;
+    let x198 = 1.0 / x47;
+    let x199 = -x198;
+    let x200 = x45 * x199;
+    let x201 = x46 * x199;
+    let x202 = x45 * x198;
+    let x203 = x46 * x198;
+    let x204 = s.v_p17[0] - s.v_p16[0];
+    let x205 = s.v_p17[1] - s.v_p16[1];
+    let x206 = x48 * x204 + x49 * x205;
+    let x207 = 1.0 / x50;
+    let x208 = -x207;
+    let x209 = x48 * x208;
+    let x210 = x49 * x208;
+    let x211 = x48 * x207;
+    let x212 = x49 * x207;
+    let x213 = s.v_p18[0] - s.v_p17[0];
+    let x214 = s.v_p18[1] - s.v_p17[1];
+    let x215 = x51 * x213 + x52 * x214;
+    let x216 = 1.0 / x53;
+    let x217 = -x216;
+    let x218 = x51 * x217;
+    let x219 = x52 * x217;
+    let x220 = x51 * x216;
+    let x221 = x52 * x216;
+    let x222 = s.v_p19[0] - s.v_p18[0];
+    let x223 = s.v_p19[1] - s.v_p18[1];
+    let x224 = x54 * x222 + x55 * x223;
+    let x225 = 1.0 / x56;
+    let x226 = -x225;
+    let x227 = x54 * x226;
+    let x228 = x55 * x226;
+    let x229 = x54 * x225;
+    let x230 = x55 * x225;
+    let x231 = s.v_p20[0] - s.v_p19[0];
+    let x232 = s.v_p20[1] - s.v_p19[1];
+    let x233 = x57 * x231 + x58 * x232;
+    let x234 = 1.0 / x59;
+    let x235 = -x234;
+    let x236 = x57 * x235;
+    let x237 = x58 * x235;
+    let x238 = x57 * x234;
+    let x239 = x58 * x234;
+    let x240 = s.v_p21[0] - s.v_p20[0];
+    let x241 = s.v_p21[1] - s.v_p20[1];
+    let x242 = x60 * x240 + x61 * x241;
+    let x243 = 1.0 / x62;
+    let x244 = -x243;
+    let x245 = x60 * x244;
+    let x246 = x61 * x244;
+    let x247 = x60 * x243;
+    let x248 = x61 * x243;
+    let x249 = -1.0 / norm2(x63, x64);
+    let x250 = 1.0 / 6.0;
+    out[0] = [(x67 * x67 + x68 * x68) * x250, x250 * (x67 * x74 + x68 * x75), -((s.v_p1[0] * s.v_p1[0] + s.v_p1[1] * s.v_p1[1]) * x66 - x65 * x65 / x2.powi(3) + x250 * (s.F_p1[0] * x67 + s.F_p1[1] * x68))];
+    out[1] = [x250 * (x74 * x74 + x75 * x75 + (x76 * x76 + x77 * x77)), x250 * (x76 * x83 + x77 * x84), -((x69 * x69 + x70 * x70) * x72 - x71 * x71 / x5.powi(3) + (x250 * (s.F_p1[0] * x74 + s.F_p1[1] * x75) + x250 * (s.F_p2[0] * x76 + s.F_p2[1] * x77)))];
+    out[2] = [x250 * (x83 * x83 + x84 * x84 + (x85 * x85 + x86 * x86)), x250 * (x85 * x92 + x86 * x93), -((x78 * x78 + x79 * x79) * x81 - x80 * x80 / x8.powi(3) + (x250 * (s.F_p2[0] * x83 + s.F_p2[1] * x84) + x250 * (s.F_p3[0] * x85 + s.F_p3[1] * x86)))];
+    out[3] = [x250 * (x92 * x92 + x93 * x93 + (x94 * x94 + x95 * x95)), x250 * (x94 * x101 + x95 * x102), -((x87 * x87 + x88 * x88) * x90 - x89 * x89 / x11.powi(3) + (x250 * (s.F_p3[0] * x92 + s.F_p3[1] * x93) + x250 * (s.F_p4[0] * x94 + s.F_p4[1] * x95)))];
+    out[4] = [x250 * (x101 * x101 + x102 * x102 + (x103 * x103 + x104 * x104)), x250 * (x103 * x110 + x104 * x111), -((x96 * x96 + x97 * x97) * x99 - x98 * x98 / x14.powi(3) + (x250 * (s.F_p4[0] * x101 + s.F_p4[1] * x102) + x250 * (s.F_p5[0] * x103 + s.F_p5[1] * x104)))];
+    out[5] = [x250 * (x110 * x110 + x111 * x111 + (x112 * x112 + x113 * x113)), x250 * (x112 * x119 + x113 * x120), -((x105 * x105 + x106 * x106) * x108 - x107 * x107 / x17.powi(3) + (x250 * (s.F_p5[0] * x110 + s.F_p5[1] * x111) + x250 * (s.F_p6[0] * x112 + s.F_p6[1] * x113)))];
+    out[6] = [x250 * (x119 * x119 + x120 * x120 + (x121 * x121 + x122 * x122)), x250 * (x121 * x128 + x122 * x129), -((x114 * x114 + x115 * x115) * x117 - x116 * x116 / x20.powi(3) + (x250 * (s.F_p6[0] * x119 + s.F_p6[1] * x120) + x250 * (s.F_p7[0] * x121 + s.F_p7[1] * x122)))];
+    out[7] = [x250 * (x128 * x128 + x129 * x129 + (x130 * x130 + x131 * x131)), x250 * (x130 * x137 + x131 * x138), -((x123 * x123 + x124 * x124) * x126 - x125 * x125 / x23.powi(3) + (x250 * (s.F_p7[0] * x128 + s.F_p7[1] * x129) + x250 * (s.F_p8[0] * x130 + s.F_p8[1] * x131)))];
+    out[8] = [x250 * (x137 * x137 + x138 * x138 + (x139 * x139 + x140 * x140)), x250 * (x139 * x146 + x140 * x147), -((x132 * x132 + x133 * x133) * x135 - x134 * x134 / x26.powi(3) + (x250 * (s.F_p8[0] * x137 + s.F_p8[1] * x138) + x250 * (s.F_p9[0] * x139 + s.F_p9[1] * x140)))];
+    out[9] = [x250 * (x146 * x146 + x147 * x147 + (x148 * x148 + x149 * x149)), x250 * (x148 * x155 + x149 * x156), -((x141 * x141 + x142 * x142) * x144 - x143 * x143 / x29.powi(3) + (x250 * (s.F_p9[0] * x146 + s.F_p9[1] * x147) + x250 * (s.F_p10[0] * x148 + s.F_p10[1] * x149)))];
+    out[10] = [x250 * (x155 * x155 + x156 * x156 + (x157 * x157 + x158 * x158)), x250 * (x157 * x164 + x158 * x165), -((x150 * x150 + x151 * x151) * x153 - x152 * x152 / x32.powi(3) + (x250 * (s.F_p10[0] * x155 + s.F_p10[1] * x156) + x250 * (s.F_p11[0] * x157 + s.F_p11[1] * x158)))];
+    out[11] = [x250 * (x164 * x164 + x165 * x165 + (x166 * x166 + x167 * x167)), x250 * (x166 * x173 + x167 * x174), -((x159 * x159 + x160 * x160) * x162 - x161 * x161 / x35.powi(3) + (x250 * (s.F_p11[0] * x164 + s.F_p11[1] * x165) + x250 * (s.F_p12[0] * x166 + s.F_p12[1] * x167)))];
+    out[12] = [x250 * (x173 * x173 + x174 * x174 + (x175 * x175 + x176 * x176)), x250 * (x175 * x182 + x176 * x183), -((x168 * x168 + x169 * x169) * x171 - x170 * x170 / x38.powi(3) + (x250 * (s.F_p12[0] * x173 + s.F_p12[1] * x174) + x250 * (s.F_p13[0] * x175 + s.F_p13[1] * x176)))];
+    out[13] = [x250 * (x182 * x182 + x183 * x183 + (x184 * x184 + x185 * x185)), x250 * (x184 * x191 + x185 * x192), -((x177 * x177 + x178 * x178) * x180 - x179 * x179 / x41.powi(3) + (x250 * (s.F_p13[0] * x182 + s.F_p13[1] * x183) + x250 * (s.F_p14[0] * x184 + s.F_p14[1] * x185)))];
+    out[14] = [x250 * (x191 * x191 + x192 * x192 + (x193 * x193 + x194 * x194)), x250 * (x193 * x200 + x194 * x201), -((x186 * x186 + x187 * x187) * x189 - x188 * x188 / x44.powi(3) + (x250 * (s.F_p14[0] * x191 + s.F_p14[1] * x192) + x250 * (s.F_p15[0] * x193 + s.F_p15[1] * x194)))];
+    out[15] = [x250 * (x200 * x200 + x201 * x201 + (x202 * x202 + x203 * x203)), x250 * (x202 * x209 + x203 * x210), -((x195 * x195 + x196 * x196) * x198 - x197 * x197 / x47.powi(3) + (x250 * (s.F_p15[0] * x200 + s.F_p15[1] * x201) + x250 * (s.F_p16[0] * x202 + s.F_p16[1] * x203)))];
+    out[16] = [x250 * (x209 * x209 + x210 * x210 + (x211 * x211 + x212 * x212)), x250 * (x211 * x218 + x212 * x219), -((x204 * x204 + x205 * x205) * x207 - x206 * x206 / x50.powi(3) + (x250 * (s.F_p16[0] * x209 + s.F_p16[1] * x210) + x250 * (s.F_p17[0] * x211 + s.F_p17[1] * x212)))];
+    out[17] = [x250 * (x218 * x218 + x219 * x219 + (x220 * x220 + x221 * x221)), x250 * (x220 * x227 + x221 * x228), -((x213 * x213 + x214 * x214) * x216 - x215 * x215 / x53.powi(3) + (x250 * (s.F_p17[0] * x218 + s.F_p17[1] * x219) + x250 * (s.F_p18[0] * x220 + s.F_p18[1] * x221)))];
+    out[18] = [x250 * (x227 * x227 + x228 * x228 + (x229 * x229 + x230 * x230)), x250 * (x229 * x236 + x230 * x237), -((x222 * x222 + x223 * x223) * x225 - x224 * x224 / x56.powi(3) + (x250 * (s.F_p18[0] * x227 + s.F_p18[1] * x228) + x250 * (s.F_p19[0] * x229 + s.F_p19[1] * x230)))];
+    out[19] = [x250 * (x236 * x236 + x237 * x237 + (x238 * x238 + x239 * x239)), x250 * (x238 * x245 + x239 * x246), -((x231 * x231 + x232 * x232) * x234 - x233 * x233 / x59.powi(3) + (x250 * (s.F_p19[0] * x236 + s.F_p19[1] * x237) + x250 * (s.F_p20[0] * x238 + s.F_p20[1] * x239)))];
+    out[20] = [x250 * (x245 * x245 + x246 * x246 + (x247 * x247 + x248 * x248)), x250 * (x247 * (x63 * x249) + x248 * (x64 * x249)), -((x240 * x240 + x241 * x241) * x243 - x242 * x242 / x62.powi(3) + (x250 * (s.F_p20[0] * x245 + s.F_p20[1] * x246) + x250 * (s.F_p21[0] * x247 + s.F_p21[1] * x248)))];
+}
+
+/// Items 21..41 of [`band_system`].
+#[inline(never)]
+fn band_system_from_21(s: &State, out: &mut [[f64; 3]]) {
+    let x0 = s.r_p22[0] - s.r_p21[0];
+    let x1 = s.r_p22[1] - s.r_p21[1];
+    let x2 = norm2(x0, x1);
+    let x3 = s.r_p23[0] - s.r_p22[0];
+    let x4 = s.r_p23[1] - s.r_p22[1];
+    let x5 = norm2(x3, x4);
+    let x6 = s.r_p24[0] - s.r_p23[0];
+    let x7 = s.r_p24[1] - s.r_p23[1];
+    let x8 = norm2(x6, x7);
+    let x9 = s.r_p25[0] - s.r_p24[0];
+    let x10 = s.r_p25[1] - s.r_p24[1];
+    let x11 = norm2(x9, x10);
+    let x12 = s.r_p26[0] - s.r_p25[0];
+    let x13 = s.r_p26[1] - s.r_p25[1];
+    let x14 = norm2(x12, x13);
+    let x15 = s.r_p27[0] - s.r_p26[0];
+    let x16 = s.r_p27[1] - s.r_p26[1];
+    let x17 = norm2(x15, x16);
+    let x18 = s.r_p28[0] - s.r_p27[0];
+    let x19 = s.r_p28[1] - s.r_p27[1];
+    let x20 = norm2(x18, x19);
+    let x21 = s.r_p29[0] - s.r_p28[0];
+    let x22 = s.r_p29[1] - s.r_p28[1];
+    let x23 = norm2(x21, x22);
+    let x24 = s.r_p30[0] - s.r_p29[0];
+    let x25 = s.r_p30[1] - s.r_p29[1];
+    let x26 = norm2(x24, x25);
+    let x27 = s.r_p31[0] - s.r_p30[0];
+    let x28 = s.r_p31[1] - s.r_p30[1];
+    let x29 = norm2(x27, x28);
+    let x30 = s.r_p32[0] - s.r_p31[0];
+    let x31 = s.r_p32[1] - s.r_p31[1];
+    let x32 = norm2(x30, x31);
+    let x33 = s.r_p33[0] - s.r_p32[0];
+    let x34 = s.r_p33[1] - s.r_p32[1];
+    let x35 = norm2(x33, x34);
+    let x36 = s.r_p34[0] - s.r_p33[0];
+    let x37 = s.r_p34[1] - s.r_p33[1];
+    let x38 = norm2(x36, x37);
+    let x39 = s.r_p35[0] - s.r_p34[0];
+    let x40 = s.r_p35[1] - s.r_p34[1];
+    let x41 = norm2(x39, x40);
+    let x42 = s.r_p36[0] - s.r_p35[0];
+    let x43 = s.r_p36[1] - s.r_p35[1];
+    let x44 = norm2(x42, x43);
+    let x45 = s.r_p37[0] - s.r_p36[0];
+    let x46 = s.r_p37[1] - s.r_p36[1];
+    let x47 = norm2(x45, x46);
+    let x48 = s.r_p38[0] - s.r_p37[0];
+    let x49 = s.r_p38[1] - s.r_p37[1];
+    let x50 = norm2(x48, x49);
+    let x51 = s.r_p39[0] - s.r_p38[0];
+    let x52 = s.r_p39[1] - s.r_p38[1];
+    let x53 = norm2(x51, x52);
+    let x54 = s.r_p40[0] - s.r_p39[0];
+    let x55 = s.r_p40[1] - s.r_p39[1];
+    let x56 = norm2(x54, x55);
+    let x57 = s.r_p41[0] - s.r_p40[0];
+    let x58 = s.r_p41[1] - s.r_p40[1];
+    let x59 = norm2(x57, x58);
+    let x60 = s.v_p22[0] - s.v_p21[0];
+    let x61 = s.v_p22[1] - s.v_p21[1];
+    let x62 = x0 * x60 + x1 * x61;
+    let x63 = 1.0 / x2;
+    let x64 = -x63;
+    let x65 = x0 * x64;
+    let x66 = x1 * x64;
+    let x67 = x0 * x63;
+    let x68 = x1 * x63;
+    let x69 = s.v_p23[0] - s.v_p22[0];
+    let x70 = s.v_p23[1] - s.v_p22[1];
+    let x71 = x3 * x69 + x4 * x70;
+    let x72 = 1.0 / x5;
+    let x73 = -x72;
+    let x74 = x3 * x73;
+    let x75 = x4 * x73;
+    let x76 = x3 * x72;
+    let x77 = x4 * x72;
+    let x78 = s.v_p24[0] - s.v_p23[0];
+    let x79 = s.v_p24[1] - s.v_p23[1];
+    let x80 = x6 * x78 + x7 * x79;
+    let x81 = 1.0 / x8;
+    let x82 = -x81;
+    let x83 = x6 * x82;
+    let x84 = x7 * x82;
+    let x85 = x6 * x81;
+    let x86 = x7 * x81;
+    let x87 = s.v_p25[0] - s.v_p24[0];
+    let x88 = s.v_p25[1] - s.v_p24[1];
+    let x89 = x9 * x87 + x10 * x88;
+    let x90 = 1.0 / x11;
+    let x91 = -x90;
+    let x92 = x9 * x91;
+    let x93 = x10 * x91;
+    let x94 = x9 * x90;
+    let x95 = x10 * x90;
+    let x96 = s.v_p26[0] - s.v_p25[0];
+    let x97 = s.v_p26[1] - s.v_p25[1];
+    let x98 = x12 * x96 + x13 * x97;
+    let x99 = 1.0 / x14;
+    let x100 = -x99;
+    let x101 = x12 * x100;
+    let x102 = x13 * x100;
+    let x103 = x12 * x99;
+    let x104 = x13 * x99;
+    let x105 = s.v_p27[0] - s.v_p26[0];
+    let x106 = s.v_p27[1] - s.v_p26[1];
+    let x107 = x15 * x105 + x16 * x106;
+    let x108 = 1.0 / x17;
+    let x109 = -x108;
+    let x110 = x15 * x109;
+    let x111 = x16 * x109;
+    let x112 = x15 * x108;
+    let x113 = x16 * x108;
+    let x114 = s.v_p28[0] - s.v_p27[0];
+    let x115 = s.v_p28[1] - s.v_p27[1];
+    let x116 = x18 * x114 + x19 * x115;
+    let x117 = 1.0 / x20;
+    let x118 = -x117;
+    let x119 = x18 * x118;
+    let x120 = x19 * x118;
+    let x121 = x18 * x117;
+    let x122 = x19 * x117;
+    let x123 = s.v_p29[0] - s.v_p28[0];
+    let x124 = s.v_p29[1] - s.v_p28[1];
+    let x125 = x21 * x123 + x22 * x124;
+    let x126 = 1.0 / x23;
+    let x127 = -x126;
+    let x128 = x21 * x127;
+    let x129 = x22 * x127;
+    let x130 = x21 * x126;
+    let x131 = x22 * x126;
+    let x132 = s.v_p30[0] - s.v_p29[0];
+    let x133 = s.v_p30[1] - s.v_p29[1];
+    let x134 = x24 * x132 + x25 * x133;
+    let x135 = 1.0 / x26;
+    let x136 = -x135;
+    let x137 = x24 * x136;
+    let x138 = x25 * x136;
+    let x139 = x24 * x135;
+    let x140 = x25 * x135;
+    let x141 = s.v_p31[0] - s.v_p30[0];
+    let x142 = s.v_p31[1] - s.v_p30[1];
+    let x143 = x27 * x141 + x28 * x142;
+    let x144 = 1.0 / x29;
+    let x145 = -x144;
+    let x146 = x27 * x145;
+    let x147 = x28 * x145;
+    let x148 = x27 * x144;
+    let x149 = x28 * x144;
+    let x150 = s.v_p32[0] - s.v_p31[0];
+    let x151 = s.v_p32[1] - s.v_p31[1];
+    let x152 = x30 * x150 + x31 * x151;
+    let x153 = 1.0 / x32;
+    let x154 = -x153;
+    let x155 = x30 * x154;
+    let x156 = x31 * x154;
+    let x157 = x30 * x153;
+    let x158 = x31 * x153;
+    let x159 = s.v_p33[0] - s.v_p32[0];
+    let x160 = s.v_p33[1] - s.v_p32[1];
+    let x161 = x33 * x159 + x34 * x160;
+    let x162 = 1.0 / x35;
+    let x163 = -x162;
+    let x164 = x33 * x163;
+    let x165 = x34 * x163;
+    let x166 = x33 * x162;
+    let x167 = x34 * x162;
+    let x168 = s.v_p34[0] - s.v_p33[0];
+    let x169 = s.v_p34[1] - s.v_p33[1];
+    let x170 = x36 * x168 + x37 * x169;
+    let x171 = 1.0 / x38;
+    let x172 = -x171;
+    let x173 = x36 * x172;
+    let x174 = x37 * x172;
+    let x175 = x36 * x171;
+    let x176 = x37 * x171;
+    let x177 = s.v_p35[0] - s.v_p34[0];
+    let x178 = s.v_p35[1] - s.v_p34[1];
+    let x179 = x39 * x177 + x40 * x178;
+    let x180 = 1.0 / x41;
+    let x181 = -x180;
+    let x182 = x39 * x181;
+    let x183 = x40 * x181;
+    let x184 = x39 * x180;
+    let x185 = x40 * x180;
+    let x186 = s.v_p36[0] - s.v_p35[0];
+    let x187 = s.v_p36[1] - s.v_p35[1];
+    let x188 = x42 * x186 + x43 * x187;
+    let x189 = 1.0 / x44;
+    let x190 = -x189;
+    let x191 = x42 * x190;
+    let x192 = x43 * x190;
+    let x193 = x42 * x189;
+    let x194 = x43 * x189;
+    let x195 = s.v_p37[0] - s.v_p36[0];
+    let x196 = s.v_p37[1] - s.v_p36[1];
+    let x197 = x45 * x195 + x46 * x196;
+    let x198 = 1.0 / x47;
+    let x199 = -x198;
+    let x200 = x45 * x199;
+    let x201 = x46 * x199;
+    let x202 = x45 * x198;
+    let x203 = x46 * x198;
+    let x204 = s.v_p38[0] - s.v_p37[0];
+    let x205 = s.v_p38[1] - s.v_p37[1];
+    let x206 = x48 * x204 + x49 * x205;
+    let x207 = 1.0 / x50;
+    let x208 = -x207;
+    let x209 = x48 * x208;
+    let x210 = x49 * x208;
+    let x211 = x48 * x207;
+    let x212 = x49 * x207;
+    let x213 = s.v_p39[0] - s.v_p38[0];
+    let x214 = s.v_p39[1] - s.v_p38[1];
+    let x215 = x51 * x213 + x52 * x214;
+    let x216 = 1.0 / x53;
+    let x217 = -x216;
+    let x218 = x51 * x217;
+    let x219 = x52 * x217;
+    let x220 = x51 * x216;
+    let x221 = x52 * x216;
+    let x222 = s.v_p40[0] - s.v_p39[0];
+    let x223 = s.v_p40[1] - s.v_p39[1];
+    let x224 = x54 * x222 + x55 * x223;
+    let x225 = 1.0 / x56;
+    let x226 = -x225;
+    let x227 = x54 * x226;
+    let x228 = x55 * x226;
+    let x229 = x54 * x225;
+    let x230 = x55 * x225;
+    let x231 = s.v_p41[0] - s.v_p40[0];
+    let x232 = s.v_p41[1] - s.v_p40[1];
+    let x233 = x57 * x231 + x58 * x232;
+    let x234 = 1.0 / x59;
+    let x235 = -x234;
+    let x236 = x57 * x235;
+    let x237 = x58 * x235;
+    let x238 = x57 * x234;
+    let x239 = x58 * x234;
+    let x240 = 1.0 / 6.0;
+    let x241 = 1.0 / 4021.0;
+    out[21] = [x240 * (x65 * x65 + x66 * x66 + (x67 * x67 + x68 * x68)), (x67 * x74 + x68 * x75) * x240, -((x60 * x60 + x61 * x61) * x63 - x62 * x62 / x2.powi(3) + (x240 * (s.F_p21[0] * x65 + s.F_p21[1] * x66) + x240 * (s.F_p22[0] * x67 + s.F_p22[1] * x68)))];
+    out[22] = [x240 * (x74 * x74 + x75 * x75 + (x76 * x76 + x77 * x77)), x240 * (x76 * x83 + x77 * x84), -((x69 * x69 + x70 * x70) * x72 - x71 * x71 / x5.powi(3) + (x240 * (s.F_p22[0] * x74 + s.F_p22[1] * x75) + x240 * (s.F_p23[0] * x76 + s.F_p23[1] * x77)))];
+    out[23] = [x240 * (x83 * x83 + x84 * x84 + (x85 * x85 + x86 * x86)), x240 * (x85 * x92 + x86 * x93), -((x78 * x78 + x79 * x79) * x81 - x80 * x80 / x8.powi(3) + (x240 * (s.F_p23[0] * x83 + s.F_p23[1] * x84) + x240 * (s.F_p24[0] * x85 + s.F_p24[1] * x86)))];
+    out[24] = [x240 * (x92 * x92 + x93 * x93 + (x94 * x94 + x95 * x95)), x240 * (x94 * x101 + x95 * x102), -((x87 * x87 + x88 * x88) * x90 - x89 * x89 / x11.powi(3) + (x240 * (s.F_p24[0] * x92 + s.F_p24[1] * x93) + x240 * (s.F_p25[0] * x94 + s.F_p25[1] * x95)))];
+    out[25] = [x240 * (x101 * x101 + x102 * x102 + (x103 * x103 + x104 * x104)), x240 * (x103 * x110 + x104 * x111), -((x96 * x96 + x97 * x97) * x99 - x98 * x98 / x14.powi(3) + (x240 * (s.F_p25[0] * x101 + s.F_p25[1] * x102) + x240 * (s.F_p26[0] * x103 + s.F_p26[1] * x104)))];
+    out[26] = [x240 * (x110 * x110 + x111 * x111 + (x112 * x112 + x113 * x113)), x240 * (x112 * x119 + x113 * x120), -((x105 * x105 + x106 * x106) * x108 - x107 * x107 / x17.powi(3) + (x240 * (s.F_p26[0] * x110 + s.F_p26[1] * x111) + x240 * (s.F_p27[0] * x112 + s.F_p27[1] * x113)))];
+    out[27] = [x240 * (x119 * x119 + x120 * x120 + (x121 * x121 + x122 * x122)), x240 * (x121 * x128 + x122 * x129), -((x114 * x114 + x115 * x115) * x117 - x116 * x116 / x20.powi(3) + (x240 * (s.F_p27[0] * x119 + s.F_p27[1] * x120) + x240 * (s.F_p28[0] * x121 + s.F_p28[1] * x122)))];
+    out[28] = [x240 * (x128 * x128 + x129 * x129 + (x130 * x130 + x131 * x131)), x240 * (x130 * x137 + x131 * x138), -((x123 * x123 + x124 * x124) * x126 - x125 * x125 / x23.powi(3) + (x240 * (s.F_p28[0] * x128 + s.F_p28[1] * x129) + x240 * (s.F_p29[0] * x130 + s.F_p29[1] * x131)))];
+    out[29] = [x240 * (x137 * x137 + x138 * x138 + (x139 * x139 + x140 * x140)), x240 * (x139 * x146 + x140 * x147), -((x132 * x132 + x133 * x133) * x135 - x134 * x134 / x26.powi(3) + (x240 * (s.F_p29[0] * x137 + s.F_p29[1] * x138) + x240 * (s.F_p30[0] * x139 + s.F_p30[1] * x140)))];
+    out[30] = [x240 * (x146 * x146 + x147 * x147 + (x148 * x148 + x149 * x149)), x240 * (x148 * x155 + x149 * x156), -((x141 * x141 + x142 * x142) * x144 - x143 * x143 / x29.powi(3) + (x240 * (s.F_p30[0] * x146 + s.F_p30[1] * x147) + x240 * (s.F_p31[0] * x148 + s.F_p31[1] * x149)))];
+    out[31] = [x240 * (x155 * x155 + x156 * x156 + (x157 * x157 + x158 * x158)), x240 * (x157 * x164 + x158 * x165), -((x150 * x150 + x151 * x151) * x153 - x152 * x152 / x32.powi(3) + (x240 * (s.F_p31[0] * x155 + s.F_p31[1] * x156) + x240 * (s.F_p32[0] * x157 + s.F_p32[1] * x158)))];
+    out[32] = [x240 * (x164 * x164 + x165 * x165 + (x166 * x166 + x167 * x167)), x240 * (x166 * x173 + x167 * x174), -((x159 * x159 + x160 * x160) * x162 - x161 * x161 / x35.powi(3) + (x240 * (s.F_p32[0] * x164 + s.F_p32[1] * x165) + x240 * (s.F_p33[0] * x166 + s.F_p33[1] * x167)))];
+    out[33] = [x240 * (x173 * x173 + x174 * x174 + (x175 * x175 + x176 * x176)), x240 * (x175 * x182 + x176 * x183), -((x168 * x168 + x169 * x169) * x171 - x170 * x170 / x38.powi(3) + (x240 * (s.F_p33[0] * x173 + s.F_p33[1] * x174) + x240 * (s.F_p34[0] * x175 + s.F_p34[1] * x176)))];
+    out[34] = [x240 * (x182 * x182 + x183 * x183 + (x184 * x184 + x185 * x185)), x240 * (x184 * x191 + x185 * x192), -((x177 * x177 + x178 * x178) * x180 - x179 * x179 / x41.powi(3) + (x240 * (s.F_p34[0] * x182 + s.F_p34[1] * x183) + x240 * (s.F_p35[0] * x184 + s.F_p35[1] * x185)))];
+    out[35] = [x240 * (x191 * x191 + x192 * x192 + (x193 * x193 + x194 * x194)), x240 * (x193 * x200 + x194 * x201), -((x186 * x186 + x187 * x187) * x189 - x188 * x188 / x44.powi(3) + (x240 * (s.F_p35[0] * x191 + s.F_p35[1] * x192) + x240 * (s.F_p36[0] * x193 + s.F_p36[1] * x194)))];
+    out[36] = [x240 * (x200 * x200 + x201 * x201 + (x202 * x202 + x203 * x203)), x240 * (x202 * x209 + x203 * x210), -((x195 * x195 + x196 * x196) * x198 - x197 * x197 / x47.powi(3) + (x240 * (s.F_p36[0] * x200 + s.F_p36[1] * x201) + x240 * (s.F_p37[0] * x202 + s.F_p37[1] * x203)))];
+    out[37] = [x240 * (x209 * x209 + x210 * x210 + (x211 * x211 + x212 * x212)), x240 * (x211 * x218 + x212 * x219), -((x204 * x204 + x205 * x205) * x207 - x206 * x206 / x50.powi(3) + (x240 * (s.F_p37[0] * x209 + s.F_p37[1] * x210) + x240 * (s.F_p38[0] * x211 + s.F_p38[1] * x212)))];
+    out[38] = [x240 * (x218 * x218 + x219 * x219 + (x220 * x220 + x221 * x221)), x240 * (x220 * x227 + x221 * x228), -((x213 * x213 + x214 * x214) * x216 - x215 * x215 / x53.powi(3) + (x240 * (s.F_p38[0] * x218 + s.F_p38[1] * x219) + x240 * (s.F_p39[0] * x220 + s.F_p39[1] * x221)))];
+    out[39] = [x240 * (x227 * x227 + x228 * x228 + (x229 * x229 + x230 * x230)), x240 * (x229 * x236 + x230 * x237), -((x222 * x222 + x223 * x223) * x225 - x224 * x224 / x56.powi(3) + (x240 * (s.F_p39[0] * x227 + s.F_p39[1] * x228) + x240 * (s.F_p40[0] * x229 + s.F_p40[1] * x230)))];
+    out[40] = [x240 * (x236 * x236 + x237 * x237) + (x238 * x238 + x239 * x239) * x241, 0.0, -((x231 * x231 + x232 * x232) * x234 - x233 * x233 / x59.powi(3) + (x240 * (s.F_p40[0] * x236 + s.F_p40[1] * x237) + x241 * (s.F_p41[0] * x238 + s.F_p41[1] * x239)))];
+}
+
+/// The multipliers λ (for C/κ) by L D Lᵀ of `band_system`: A is tridiagonal, `solve_tridiagonal`, O(K).
+/// `None` where A is singular (a pivot at or below 1e-10 of its diagonal entry: redundant
+/// constraints) or its numbers leave f64's range.
+pub fn band_lambda(s: &State) -> Option<[f64; 41]> {
+    solve_tridiagonal(&band_system(s))
+}
+
+/// The multipliers λ (for C/κ): `band_lambda`, else the rows' solve (`solution`: the minimum-norm λ where
+/// A is singular, the change of length unit where its numbers overflow).
 pub fn lambda(s: &State) -> [f64; 41] {
-    let mut b = b_vector(s);
-    for x in b.iter_mut() {
-        *x = -*x;
-    }
-    let l = solve_band(a_band(s), b);
-    if l.iter().all(|x| x.is_finite()) {
+    if let Some(l) = band_lambda(s) {
         return l;
     }
     let mut l = [0.0; 41];
@@ -2927,45 +3483,42 @@ pub fn force_p41(s: &State) -> [f64; 2] {
     forces(s)[40]
 }
 
-/// Solves `a x = b` for a symmetric positive definite band matrix given as its upper band
-/// (`a[i][d]` = A[i][i + d]) by Cholesky, A = RᵀR, in place; NaN if A is not positive definite.
+/// Solves A x = r for a symmetric positive definite tridiagonal A given as its rows with r
+/// beside them: `a[k]` = [A[k][k], A[k][k + 1], r[k]] (A[K − 1][K] = 0), by A = L D Lᵀ with
+/// Lₖ = L[k][k − 1] = A[k − 1][k] / dₖ₋₁. `None` where the rows' solve is needed: a diagonal
+/// entry that is not a positive normal number, a pivot dₖ at or below 1e-10 of its diagonal
+/// entry (A singular to the rows' rank tolerance), or an answer that is not finite; the
+/// checks are gathered, not branched on.
 #[allow(clippy::needless_range_loop)]
-fn solve_band<const K: usize, const B: usize>(mut a: [[f64; B]; K], mut b: [f64; K]) -> [f64; K] {
-    let w = B - 1;
-    for i in 0..K {
-        for d in 0..B.min(K - i) {
-            let j = i + d;
-            // A[i][j] − Σₚ R[p][i] R[p][j] over the rows p < i whose band reaches column j.
-            let mut acc = a[i][d];
-            for p in j.saturating_sub(w)..i {
-                acc -= a[p][i - p] * a[p][j - p];
-            }
-            if d == 0 {
-                if !(acc > 0.0 && acc.is_finite()) {
-                    return [f64::NAN; K];
-                }
-                a[i][0] = acc.sqrt();
-            } else {
-                a[i][d] = acc / a[i][0];
-            }
-        }
+fn solve_tridiagonal<const K: usize>(a: &[[f64; 3]; K]) -> Option<[f64; K]> {
+    // 1/dₖ, Lₖ, and y (L y = r), then x in place of y.
+    let mut inv = [0.0; K];
+    let mut l = [0.0; K];
+    let mut x = [0.0; K];
+    let mut ok = true;
+    // Row k − 1's A[k − 1][k], 1/dₖ₋₁ and yₖ₋₁ (zero before the first row).
+    let (mut e, mut inv_prev, mut y_prev) = (0.0, 0.0, 0.0);
+    for k in 0..K {
+        let [diagonal, upper, r] = a[k];
+        // dₖ = A[k][k] − A[k − 1][k]² / dₖ₋₁, yₖ = rₖ − Lₖ yₖ₋₁.
+        let d = diagonal - e * e * inv_prev;
+        ok &= (diagonal >= f64::MIN_POSITIVE) & (d > 1e-10 * diagonal);
+        let lk = e * inv_prev;
+        let y = r - lk * y_prev;
+        inv[k] = 1.0 / d;
+        l[k] = lk;
+        x[k] = y;
+        (e, inv_prev, y_prev) = (upper, inv[k], y);
     }
-    // Rᵀ y = b, then R x = y (in place in b).
-    for i in 0..K {
-        let mut acc = b[i];
-        for p in i.saturating_sub(w)..i {
-            acc -= a[p][i - p] * b[p];
-        }
-        b[i] = acc / a[i][0];
+    // D Lᵀ x = y: x_{K−1} = y_{K−1} / d_{K−1}, xₖ = yₖ / dₖ − Lₖ₊₁ xₖ₊₁.
+    let mut next = 0.0;
+    for k in (0..K).rev() {
+        let xk = if k + 1 < K { x[k] * inv[k] - l[k + 1] * next } else { x[k] * inv[k] };
+        ok &= xk.is_finite();
+        x[k] = xk;
+        next = xk;
     }
-    for i in (0..K).rev() {
-        let mut acc = b[i];
-        for q in i + 1..K.min(i + B) {
-            acc -= a[i][q - i] * b[q];
-        }
-        b[i] = acc / a[i][0];
-    }
-    b
+    if ok { Some(x) } else { None }
 }
 
 /// The velocity-level solver of `step` (`lagrange generate --solver soft-step`).
@@ -4143,7 +4696,12 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
 }
 
 /// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+///
+/// Never inlined: `scaled_state` calls it once per number of the state, and rustc at
+/// opt-level 3 overflows its own stack (LLVM's scalar evolution recursing over the chained
+/// loops) on a 100-link chain's module when each call carries its two loops inline.
 #[allow(dead_code)]
+#[inline(never)]
 fn pow2(mut x: f64, mut e: i64) -> f64 {
     while e > 1000 {
         x *= 2f64.powi(1000);

@@ -608,6 +608,88 @@ pub fn accelerations(s: &State) -> [[f64; 2]; 10] {
     a
 }
 
+/// A λ = −b as `band_lambda` solves it: row k holds A[k][k], A[k][k + 1]
+/// (A's band, zeros past the last column) and −b[k], from one program of A and b as assembled
+/// (the numbers of A's entries and of `b_vector`).
+pub fn band_system(s: &State) -> [[f64; 3]; 10] {
+    let mut out = [[0.0; 3]; 10];
+    let x0 = s.r2[0] - s.r1[0];
+    let x1 = s.r2[1] - s.r1[1];
+    let x2 = x0 * x0 + x1 * x1;
+    let x3 = s.r3[0] - s.r2[0];
+    let x4 = s.r3[1] - s.r2[1];
+    let x5 = x3 * x3 + x4 * x4;
+    let x6 = s.r4[0] - s.r3[0];
+    let x7 = s.r4[1] - s.r3[1];
+    let x8 = x6 * x6 + x7 * x7;
+    let x9 = s.r5[0] - s.r4[0];
+    let x10 = s.r5[1] - s.r4[1];
+    let x11 = x9 * x9 + x10 * x10;
+    let x12 = s.r6[0] - s.r5[0];
+    let x13 = s.r6[1] - s.r5[1];
+    let x14 = x12 * x12 + x13 * x13;
+    let x15 = s.r7[0] - s.r6[0];
+    let x16 = s.r7[1] - s.r6[1];
+    let x17 = x15 * x15 + x16 * x16;
+    let x18 = s.r8[0] - s.r7[0];
+    let x19 = s.r8[1] - s.r7[1];
+    let x20 = x18 * x18 + x19 * x19;
+    let x21 = s.r9[0] - s.r8[0];
+    let x22 = s.r9[1] - s.r8[1];
+    let x23 = x21 * x21 + x22 * x22;
+    let x24 = s.r10[0] - s.r9[0];
+    let x25 = s.r10[1] - s.r9[1];
+    let x26 = x24 * x24 + x25 * x25;
+    let x27 = s.v2[0] - s.v1[0];
+    let x28 = s.v2[1] - s.v1[1];
+    let x29 = s.v3[0] - s.v2[0];
+    let x30 = s.v3[1] - s.v2[1];
+    let x31 = s.v4[0] - s.v3[0];
+    let x32 = s.v4[1] - s.v3[1];
+    let x33 = s.v5[0] - s.v4[0];
+    let x34 = s.v5[1] - s.v4[1];
+    let x35 = s.v6[0] - s.v5[0];
+    let x36 = s.v6[1] - s.v5[1];
+    let x37 = s.v7[0] - s.v6[0];
+    let x38 = s.v7[1] - s.v6[1];
+    let x39 = s.v8[0] - s.v7[0];
+    let x40 = s.v8[1] - s.v7[1];
+    let x41 = s.v9[0] - s.v8[0];
+    let x42 = s.v9[1] - s.v8[1];
+    let x43 = s.v10[0] - s.v9[0];
+    let x44 = s.v10[1] - s.v9[1];
+    let x45 = 1.0 / s.m;
+    out[0] = [(s.r1[0] * s.r1[0] + s.r1[1] * s.r1[1]) * x45, -(x45 * (s.r1[0] * x0 + s.r1[1] * x1)), -(s.v1[0] * s.v1[0] + s.v1[1] * s.v1[1] + x45 * (s.r1[0] * s.F1[0] + s.r1[1] * s.F1[1]))];
+    out[1] = [x45 * (x2 + x2), -(x45 * (x0 * x3 + x1 * x4)), -(x27 * x27 + x28 * x28 + (x45 * (s.F1[0] * (s.r1[0] - s.r2[0]) + s.F1[1] * (s.r1[1] - s.r2[1])) + x45 * (s.F2[0] * x0 + s.F2[1] * x1)))];
+    out[2] = [x45 * (x5 + x5), -(x45 * (x3 * x6 + x4 * x7)), -(x29 * x29 + x30 * x30 + (x45 * (s.F2[0] * (s.r2[0] - s.r3[0]) + s.F2[1] * (s.r2[1] - s.r3[1])) + x45 * (s.F3[0] * x3 + s.F3[1] * x4)))];
+    out[3] = [x45 * (x8 + x8), -(x45 * (x6 * x9 + x7 * x10)), -(x31 * x31 + x32 * x32 + (x45 * (s.F3[0] * (s.r3[0] - s.r4[0]) + s.F3[1] * (s.r3[1] - s.r4[1])) + x45 * (s.F4[0] * x6 + s.F4[1] * x7)))];
+    out[4] = [x45 * (x11 + x11), -(x45 * (x9 * x12 + x10 * x13)), -(x33 * x33 + x34 * x34 + (x45 * (s.F4[0] * (s.r4[0] - s.r5[0]) + s.F4[1] * (s.r4[1] - s.r5[1])) + x45 * (s.F5[0] * x9 + s.F5[1] * x10)))];
+    out[5] = [x45 * (x14 + x14), -(x45 * (x12 * x15 + x13 * x16)), -(x35 * x35 + x36 * x36 + (x45 * (s.F5[0] * (s.r5[0] - s.r6[0]) + s.F5[1] * (s.r5[1] - s.r6[1])) + x45 * (s.F6[0] * x12 + s.F6[1] * x13)))];
+    out[6] = [x45 * (x17 + x17), -(x45 * (x15 * x18 + x16 * x19)), -(x37 * x37 + x38 * x38 + (x45 * (s.F6[0] * (s.r6[0] - s.r7[0]) + s.F6[1] * (s.r6[1] - s.r7[1])) + x45 * (s.F7[0] * x15 + s.F7[1] * x16)))];
+    out[7] = [x45 * (x20 + x20), -(x45 * (x18 * x21 + x19 * x22)), -(x39 * x39 + x40 * x40 + (x45 * (s.F7[0] * (s.r7[0] - s.r8[0]) + s.F7[1] * (s.r7[1] - s.r8[1])) + x45 * (s.F8[0] * x18 + s.F8[1] * x19)))];
+    out[8] = [x45 * (x23 + x23), -(x45 * (x21 * x24 + x22 * x25)), -(x41 * x41 + x42 * x42 + (x45 * (s.F8[0] * (s.r8[0] - s.r9[0]) + s.F8[1] * (s.r8[1] - s.r9[1])) + x45 * (s.F9[0] * x21 + s.F9[1] * x22)))];
+    out[9] = [x45 * (x26 + x26), 0.0, -(x43 * x43 + x44 * x44 + (x45 * (s.F9[0] * (s.r9[0] - s.r10[0]) + s.F9[1] * (s.r9[1] - s.r10[1])) + x45 * (s.F10[0] * x24 + s.F10[1] * x25)))];
+    out
+}
+
+/// The multipliers λ (for C/κ) by L D Lᵀ of `band_system`: A is tridiagonal, `solve_tridiagonal`, O(K).
+/// `None` where A is singular (a pivot at or below 1e-10 of its diagonal entry: redundant
+/// constraints) or its numbers leave f64's range.
+pub fn band_lambda(s: &State) -> Option<[f64; 10]> {
+    solve_tridiagonal(&band_system(s))
+}
+
+/// The multipliers λ (for C/κ): `band_lambda`, else the rows' solve (`solution`: the minimum-norm λ where
+/// A is singular, the change of length unit where its numbers overflow).
+pub fn lambda(s: &State) -> [f64; 10] {
+    if let Some(l) = band_lambda(s) {
+        return l;
+    }
+    let mut l = [0.0; 10];
+    l.copy_from_slice(&solution(s).lambda);
+    l
+}
+
 /// λ, the constraint forces Σₖ λₖ Jₖᵢ of these equalities, from one program of A and b (as assembled)
 /// and J, and A λ = −b by L D Lᵀ (`solve_dense`); `None` where A is singular (redundant constraints) or its
 /// numbers leave f64's range: there `solution` (the rows' solve of `lagrange solve`) answers.
@@ -730,16 +812,6 @@ pub fn dense_solution(s: &State) -> Option<([f64; 10], [[f64; 2]; 10])> {
     Some((l, f))
 }
 
-/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.
-pub fn lambda(s: &State) -> [f64; 10] {
-    if let Some(x) = dense_solution(s) {
-        return x.0;
-    }
-    let mut l = [0.0; 10];
-    l.copy_from_slice(&solution(s).lambda);
-    l
-}
-
 /// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order): `dense_solution`, else `solution`.
 pub fn forces(s: &State) -> [[f64; 2]; 10] {
     if let Some(x) = dense_solution(s) {
@@ -798,6 +870,44 @@ pub fn force_p9(s: &State) -> [f64; 2] {
 /// The constraint force on body `p10`.
 pub fn force_p10(s: &State) -> [f64; 2] {
     forces(s)[9]
+}
+
+/// Solves A x = r for a symmetric positive definite tridiagonal A given as its rows with r
+/// beside them: `a[k]` = [A[k][k], A[k][k + 1], r[k]] (A[K − 1][K] = 0), by A = L D Lᵀ with
+/// Lₖ = L[k][k − 1] = A[k − 1][k] / dₖ₋₁. `None` where the rows' solve is needed: a diagonal
+/// entry that is not a positive normal number, a pivot dₖ at or below 1e-10 of its diagonal
+/// entry (A singular to the rows' rank tolerance), or an answer that is not finite; the
+/// checks are gathered, not branched on.
+#[allow(clippy::needless_range_loop)]
+fn solve_tridiagonal<const K: usize>(a: &[[f64; 3]; K]) -> Option<[f64; K]> {
+    // 1/dₖ, Lₖ, and y (L y = r), then x in place of y.
+    let mut inv = [0.0; K];
+    let mut l = [0.0; K];
+    let mut x = [0.0; K];
+    let mut ok = true;
+    // Row k − 1's A[k − 1][k], 1/dₖ₋₁ and yₖ₋₁ (zero before the first row).
+    let (mut e, mut inv_prev, mut y_prev) = (0.0, 0.0, 0.0);
+    for k in 0..K {
+        let [diagonal, upper, r] = a[k];
+        // dₖ = A[k][k] − A[k − 1][k]² / dₖ₋₁, yₖ = rₖ − Lₖ yₖ₋₁.
+        let d = diagonal - e * e * inv_prev;
+        ok &= (diagonal >= f64::MIN_POSITIVE) & (d > 1e-10 * diagonal);
+        let lk = e * inv_prev;
+        let y = r - lk * y_prev;
+        inv[k] = 1.0 / d;
+        l[k] = lk;
+        x[k] = y;
+        (e, inv_prev, y_prev) = (upper, inv[k], y);
+    }
+    // D Lᵀ x = y: x_{K−1} = y_{K−1} / d_{K−1}, xₖ = yₖ / dₖ − Lₖ₊₁ xₖ₊₁.
+    let mut next = 0.0;
+    for k in (0..K).rev() {
+        let xk = if k + 1 < K { x[k] * inv[k] - l[k + 1] * next } else { x[k] * inv[k] };
+        ok &= xk.is_finite();
+        x[k] = xk;
+        next = xk;
+    }
+    if ok { Some(x) } else { None }
 }
 
 /// Solves `a x = b` for a symmetric positive definite `a` by Cholesky in its square-root-free
@@ -1280,7 +1390,12 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
 }
 
 /// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+///
+/// Never inlined: `scaled_state` calls it once per number of the state, and rustc at
+/// opt-level 3 overflows its own stack (LLVM's scalar evolution recursing over the chained
+/// loops) on a 100-link chain's module when each call carries its two loops inline.
 #[allow(dead_code)]
+#[inline(never)]
 fn pow2(mut x: f64, mut e: i64) -> f64 {
     while e > 1000 {
         x *= 2f64.powi(1000);

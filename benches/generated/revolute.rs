@@ -338,6 +338,53 @@ pub fn angular_accelerations(s: &State) -> [f64; 2] {
     std::array::from_fn(|r| x.acceleration[BODIES + r][0])
 }
 
+/// A λ = −b as `band_lambda` solves it: row k holds A[k][k], A[k][k + 1]
+/// (A's band, zeros past the last column) and −b[k], from one program of A and b as assembled
+/// (the numbers of A's entries and of `b_vector`).
+pub fn band_system(s: &State) -> [[f64; 3]; 2] {
+    let mut out = [[0.0; 3]; 2];
+    let x0 = 1.0 / s.m1;
+    let x1 = 1.0 / s.m2;
+    let x2 = s.th1.cos();
+    let x3 = s.th1.sin();
+    let x4 = s.th2.cos();
+    let x5 = s.th2.sin();
+    let x6 = s.w1 * s.w1;
+    let x7 = s.sA[1] * x6;
+    let x8 = s.sA[0] * x6;
+    let x9 = s.w2 * s.w2;
+    let x10 = s.sB[1] * x9;
+    let x11 = s.sB[0] * x9;
+    let x12 = s.sA[0] * x3 + s.sA[1] * x2;
+    let x13 = s.sB[0] * x5 + s.sB[1] * x4;
+    let x14 = s.sA[0] * x2 - s.sA[1] * x3;
+    let x15 = s.sB[1] * x5 - s.sB[0] * x4;
+    let x16 = 1.0 / s.I1;
+    let x17 = 1.0 / s.I2;
+    let x18 = x0 + x1;
+    out[0] = [x13 * x13 * x17 + (x12 * x12 * x16 + x18), x17 * (x13 * x15) - x16 * (x12 * x14), -(x4 * x11 + (x3 * x7 - x2 * x8 - x5 * x10) + (x17 * (s.T2 * x13) + (s.F1[0] * x0 - s.F2[0] * x1 - x16 * (s.T1 * x12))))];
+    out[1] = [x17 * (x15 * x15) + (x16 * (x14 * x14) + x18), 0.0, -(x4 * x10 - (x3 * x8 + x2 * x7 - x5 * x11) + (x17 * (s.T2 * x15) + (x16 * (s.T1 * x14) + (s.F1[1] * x0 - s.F2[1] * x1))))];
+    out
+}
+
+/// The multipliers λ (for C/κ) by L D Lᵀ of `band_system`: A is tridiagonal, `solve_tridiagonal`, O(K).
+/// `None` where A is singular (a pivot at or below 1e-10 of its diagonal entry: redundant
+/// constraints) or its numbers leave f64's range.
+pub fn band_lambda(s: &State) -> Option<[f64; 2]> {
+    solve_tridiagonal(&band_system(s))
+}
+
+/// The multipliers λ (for C/κ): `band_lambda`, else the rows' solve (`solution`: the minimum-norm λ where
+/// A is singular, the change of length unit where its numbers overflow).
+pub fn lambda(s: &State) -> [f64; 2] {
+    if let Some(l) = band_lambda(s) {
+        return l;
+    }
+    let mut l = [0.0; 2];
+    l.copy_from_slice(&solution(s).lambda);
+    l
+}
+
 /// λ, the constraint forces Σₖ λₖ Jₖᵢ and torques Σₖ λₖ Jʷₖ of these equalities, from one program of A and b (as assembled)
 /// and J, and A λ = −b by L D Lᵀ (`solve_dense`); `None` where A is singular (redundant constraints) or its
 /// numbers leave f64's range: there `solution` (the rows' solve of `lagrange solve`) answers.
@@ -378,16 +425,6 @@ pub fn dense_solution(s: &State) -> Option<([f64; 2], [[f64; 2]; 2], [f64; 2])> 
     Some((l, f, t))
 }
 
-/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.
-pub fn lambda(s: &State) -> [f64; 2] {
-    if let Some(x) = dense_solution(s) {
-        return x.0;
-    }
-    let mut l = [0.0; 2];
-    l.copy_from_slice(&solution(s).lambda);
-    l
-}
-
 /// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order): `dense_solution`, else `solution`.
 pub fn forces(s: &State) -> [[f64; 2]; 2] {
     if let Some(x) = dense_solution(s) {
@@ -425,6 +462,44 @@ pub fn force_a(s: &State) -> [f64; 2] {
 /// The constraint force on body `b`.
 pub fn force_b(s: &State) -> [f64; 2] {
     forces(s)[1]
+}
+
+/// Solves A x = r for a symmetric positive definite tridiagonal A given as its rows with r
+/// beside them: `a[k]` = [A[k][k], A[k][k + 1], r[k]] (A[K − 1][K] = 0), by A = L D Lᵀ with
+/// Lₖ = L[k][k − 1] = A[k − 1][k] / dₖ₋₁. `None` where the rows' solve is needed: a diagonal
+/// entry that is not a positive normal number, a pivot dₖ at or below 1e-10 of its diagonal
+/// entry (A singular to the rows' rank tolerance), or an answer that is not finite; the
+/// checks are gathered, not branched on.
+#[allow(clippy::needless_range_loop)]
+fn solve_tridiagonal<const K: usize>(a: &[[f64; 3]; K]) -> Option<[f64; K]> {
+    // 1/dₖ, Lₖ, and y (L y = r), then x in place of y.
+    let mut inv = [0.0; K];
+    let mut l = [0.0; K];
+    let mut x = [0.0; K];
+    let mut ok = true;
+    // Row k − 1's A[k − 1][k], 1/dₖ₋₁ and yₖ₋₁ (zero before the first row).
+    let (mut e, mut inv_prev, mut y_prev) = (0.0, 0.0, 0.0);
+    for k in 0..K {
+        let [diagonal, upper, r] = a[k];
+        // dₖ = A[k][k] − A[k − 1][k]² / dₖ₋₁, yₖ = rₖ − Lₖ yₖ₋₁.
+        let d = diagonal - e * e * inv_prev;
+        ok &= (diagonal >= f64::MIN_POSITIVE) & (d > 1e-10 * diagonal);
+        let lk = e * inv_prev;
+        let y = r - lk * y_prev;
+        inv[k] = 1.0 / d;
+        l[k] = lk;
+        x[k] = y;
+        (e, inv_prev, y_prev) = (upper, inv[k], y);
+    }
+    // D Lᵀ x = y: x_{K−1} = y_{K−1} / d_{K−1}, xₖ = yₖ / dₖ − Lₖ₊₁ xₖ₊₁.
+    let mut next = 0.0;
+    for k in (0..K).rev() {
+        let xk = if k + 1 < K { x[k] * inv[k] - l[k + 1] * next } else { x[k] * inv[k] };
+        ok &= xk.is_finite();
+        x[k] = xk;
+        next = xk;
+    }
+    if ok { Some(x) } else { None }
 }
 
 /// Solves `a x = b` for a symmetric positive definite `a` by Cholesky in its square-root-free
@@ -907,7 +982,12 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
 }
 
 /// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+///
+/// Never inlined: `scaled_state` calls it once per number of the state, and rustc at
+/// opt-level 3 overflows its own stack (LLVM's scalar evolution recursing over the chained
+/// loops) on a 100-link chain's module when each call carries its two loops inline.
 #[allow(dead_code)]
+#[inline(never)]
 fn pow2(mut x: f64, mut e: i64) -> f64 {
     while e > 1000 {
         x *= 2f64.powi(1000);

@@ -286,6 +286,55 @@ pub fn accelerations(s: &State) -> [[f64; 2]; 2] {
     a
 }
 
+/// A λ = −b as `band_lambda` solves it: row k holds A[k][k], A[k][k + 1]
+/// (A's band, zeros past the last column) and −b[k], from one program of A and b as assembled
+/// (the numbers of A's entries and of `b_vector`).
+pub fn band_system(s: &State) -> [[f64; 3]; 2] {
+    let mut out = [[0.0; 3]; 2];
+    let x0 = s.r_p1[0] - s.a1[0];
+    let x1 = s.r_p1[1] - s.a1[1];
+    let x2 = norm2(x0, x1);
+    let x3 = s.r_p2[0] - s.r_p1[0];
+    let x4 = s.r_p2[1] - s.r_p1[1];
+    let x5 = norm2(x3, x4);
+    let x6 = s.v_p1[0] * x0 + s.v_p1[1] * x1;
+    let x7 = 1.0 / x2;
+    let x8 = x0 * x7;
+    let x9 = x1 * x7;
+    let x10 = s.v_p2[0] - s.v_p1[0];
+    let x11 = s.v_p2[1] - s.v_p1[1];
+    let x12 = x3 * x10 + x4 * x11;
+    let x13 = 1.0 / x5;
+    let x14 = -x13;
+    let x15 = x3 * x14;
+    let x16 = x4 * x14;
+    let x17 = x3 * x13;
+    let x18 = x4 * x13;
+    let x19 = 1.0 / 5.988023952095808;
+    let x20 = 1.0 / 1005.0251256281408;
+    out[0] = [(x8 * x8 + x9 * x9) * x19, x19 * (x8 * x15 + x9 * x16), -((s.v_p1[0] * s.v_p1[0] + s.v_p1[1] * s.v_p1[1]) * x7 - x6 * x6 / x2.powi(3) + x19 * (s.F_p1[0] * x8 + s.F_p1[1] * x9))];
+    out[1] = [x19 * (x15 * x15 + x16 * x16) + (x17 * x17 + x18 * x18) * x20, 0.0, -((x10 * x10 + x11 * x11) * x13 - x12 * x12 / x5.powi(3) + (x19 * (s.F_p1[0] * x15 + s.F_p1[1] * x16) + x20 * (s.F_p2[0] * x17 + s.F_p2[1] * x18)))];
+    out
+}
+
+/// The multipliers λ (for C/κ) by L D Lᵀ of `band_system`: A is tridiagonal, `solve_tridiagonal`, O(K).
+/// `None` where A is singular (a pivot at or below 1e-10 of its diagonal entry: redundant
+/// constraints) or its numbers leave f64's range.
+pub fn band_lambda(s: &State) -> Option<[f64; 2]> {
+    solve_tridiagonal(&band_system(s))
+}
+
+/// The multipliers λ (for C/κ): `band_lambda`, else the rows' solve (`solution`: the minimum-norm λ where
+/// A is singular, the change of length unit where its numbers overflow).
+pub fn lambda(s: &State) -> [f64; 2] {
+    if let Some(l) = band_lambda(s) {
+        return l;
+    }
+    let mut l = [0.0; 2];
+    l.copy_from_slice(&solution(s).lambda);
+    l
+}
+
 /// λ, the constraint forces Σₖ λₖ Jₖᵢ of these equalities, from one program of A and b (as assembled)
 /// and J, and A λ = −b by L D Lᵀ (`solve_dense`); `None` where A is singular (redundant constraints) or its
 /// numbers leave f64's range: there `solution` (the rows' solve of `lagrange solve`) answers.
@@ -325,16 +374,6 @@ pub fn dense_solution(s: &State) -> Option<([f64; 2], [[f64; 2]; 2])> {
     Some((l, f))
 }
 
-/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.
-pub fn lambda(s: &State) -> [f64; 2] {
-    if let Some(x) = dense_solution(s) {
-        return x.0;
-    }
-    let mut l = [0.0; 2];
-    l.copy_from_slice(&solution(s).lambda);
-    l
-}
-
 /// The constraint force Σₖ λₖ Jₖᵢ on every body (in file order): `dense_solution`, else `solution`.
 pub fn forces(s: &State) -> [[f64; 2]; 2] {
     if let Some(x) = dense_solution(s) {
@@ -353,6 +392,44 @@ pub fn force_p1(s: &State) -> [f64; 2] {
 /// The constraint force on body `p2`.
 pub fn force_p2(s: &State) -> [f64; 2] {
     forces(s)[1]
+}
+
+/// Solves A x = r for a symmetric positive definite tridiagonal A given as its rows with r
+/// beside them: `a[k]` = [A[k][k], A[k][k + 1], r[k]] (A[K − 1][K] = 0), by A = L D Lᵀ with
+/// Lₖ = L[k][k − 1] = A[k − 1][k] / dₖ₋₁. `None` where the rows' solve is needed: a diagonal
+/// entry that is not a positive normal number, a pivot dₖ at or below 1e-10 of its diagonal
+/// entry (A singular to the rows' rank tolerance), or an answer that is not finite; the
+/// checks are gathered, not branched on.
+#[allow(clippy::needless_range_loop)]
+fn solve_tridiagonal<const K: usize>(a: &[[f64; 3]; K]) -> Option<[f64; K]> {
+    // 1/dₖ, Lₖ, and y (L y = r), then x in place of y.
+    let mut inv = [0.0; K];
+    let mut l = [0.0; K];
+    let mut x = [0.0; K];
+    let mut ok = true;
+    // Row k − 1's A[k − 1][k], 1/dₖ₋₁ and yₖ₋₁ (zero before the first row).
+    let (mut e, mut inv_prev, mut y_prev) = (0.0, 0.0, 0.0);
+    for k in 0..K {
+        let [diagonal, upper, r] = a[k];
+        // dₖ = A[k][k] − A[k − 1][k]² / dₖ₋₁, yₖ = rₖ − Lₖ yₖ₋₁.
+        let d = diagonal - e * e * inv_prev;
+        ok &= (diagonal >= f64::MIN_POSITIVE) & (d > 1e-10 * diagonal);
+        let lk = e * inv_prev;
+        let y = r - lk * y_prev;
+        inv[k] = 1.0 / d;
+        l[k] = lk;
+        x[k] = y;
+        (e, inv_prev, y_prev) = (upper, inv[k], y);
+    }
+    // D Lᵀ x = y: x_{K−1} = y_{K−1} / d_{K−1}, xₖ = yₖ / dₖ − Lₖ₊₁ xₖ₊₁.
+    let mut next = 0.0;
+    for k in (0..K).rev() {
+        let xk = if k + 1 < K { x[k] * inv[k] - l[k + 1] * next } else { x[k] * inv[k] };
+        ok &= xk.is_finite();
+        x[k] = xk;
+        next = xk;
+    }
+    if ok { Some(x) } else { None }
 }
 
 /// Solves `a x = b` for a symmetric positive definite `a` by Cholesky in its square-root-free
@@ -897,7 +974,12 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
 }
 
 /// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+///
+/// Never inlined: `scaled_state` calls it once per number of the state, and rustc at
+/// opt-level 3 overflows its own stack (LLVM's scalar evolution recursing over the chained
+/// loops) on a 100-link chain's module when each call carries its two loops inline.
 #[allow(dead_code)]
+#[inline(never)]
 fn pow2(mut x: f64, mut e: i64) -> f64 {
     while e > 1000 {
         x *= 2f64.powi(1000);

@@ -2,11 +2,12 @@
 //! of length unit where the raw numbers overflow), `lambda`, `forces`, `force_<body>`,
 //! `accelerations` and, with rigid bodies, `torques`, `torque_<body>` and
 //! `angular_accelerations`, each following the same `Lambda` of the layout (the guarded
-//! closed form of one equality, L D Lᵀ of a small dense A, band Cholesky of a banded one,
-//! else the rows' solve) with the same operations in the same order, so with
-//! `-ffp-contract=off` the Rust module's numbers bit for bit. The shared text is
-//! `support/rows.c` (`solve_rows`, the Rust `solve_rows` re-stated), `support/solve_band.c`
-//! and `support/solve_dense.c`.
+//! closed form of one equality; for other equalities λ by L D Lᵀ on A's band, tridiagonal
+//! or wider, and a small dense A's forces by L D Lᵀ; else the rows' solve) with the same
+//! operations in the same order, so with `-ffp-contract=off` the Rust module's numbers bit
+//! for bit. The shared text is `support/rows.c` (`solve_rows`, the Rust `solve_rows`
+//! re-stated), `support/solve_tridiagonal.c`, `support/solve_band.c` and
+//! `support/solve_dense.c`.
 //!
 //! Not here: the formulas' functions (`codegen::c`), layout decisions (`codegen::layout`),
 //! the velocity-level step (`codegen::c`, `support/step.c`).
@@ -20,8 +21,10 @@ use std::fmt::Write;
 
 /// The rows' solve in C (`support/rows.c`).
 const ROWS_C: &str = include_str!("support/rows.c");
-/// Band Cholesky in C (`support/solve_band.c`).
+/// L D Lᵀ on a band in C (`support/solve_band.c`).
 const SOLVE_BAND_C: &str = include_str!("support/solve_band.c");
+/// L D Lᵀ of a tridiagonal A in C (`support/solve_tridiagonal.c`).
+const SOLVE_TRIDIAGONAL_C: &str = include_str!("support/solve_tridiagonal.c");
 /// L D Lᵀ in C (`support/solve_dense.c`).
 const SOLVE_DENSE_C: &str = include_str!("support/solve_dense.c");
 
@@ -105,8 +108,14 @@ pub(super) fn emit(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(),
         (Lambda::ClosedForm, Some(lambda), Some(forces)) => {
             return closed_form(ctx, out, p, lambda, forces, (&force_fns, &torque_fns));
         }
-        (Lambda::Band, _, _) => band(out, p),
-        (Lambda::Dense, _, _) => dense(ctx, out, p)?,
+        (Lambda::Band, _, _) => {
+            band_lambda(ctx, out, p)?;
+            band(out, p);
+        }
+        (Lambda::Dense, _, _) => {
+            band_lambda(ctx, out, p)?;
+            dense(ctx, out, p)?;
+        }
         _ => {
             let _ = writeln!(
                 out,
@@ -533,29 +542,61 @@ static int closed_form_holds(const State *s) {
     Ok(())
 }
 
-/// A banded system of equalities: λ by band Cholesky (`solution` where A is singular), the
-/// forces and torques Σₖ λₖ Jₖᵢ, Σₖ λₖ Jʷₖ over every entry as the Rust module sums them.
-fn band(out: &mut String, p: &Parts<'_>) {
-    let (dim, n, k) = (p.layout.dim, p.layout.bodies, p.layout.constraints);
-    out.push_str(SOLVE_BAND_C);
-    out.push('\n');
+/// The Rust module's `band_system`, `band_lambda` and `lambda` of a system of equalities
+/// (`Lambda::Band` and `Lambda::Dense`): A's band of the layout's bandwidth and −b as rows,
+/// one program of A and b as assembled, and L D Lᵀ written for that band
+/// (`solve_tridiagonal` when it is 1, else `solve_band`); `solution` where it gives up.
+fn band_lambda(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
+    let (k, w) = (p.layout.constraints, p.layout.bandwidth);
+    let mut roots: Vec<Id> = Vec::new();
+    let mut at: Vec<Vec<Option<usize>>> = vec![vec![None; w + 1]; k];
+    for (&(r, c, _), &id) in p.formulas.a.iter().zip(p.a_code) {
+        let (r, c) = (r.min(c), r.max(c));
+        at[r][c - r] = Some(roots.len());
+        roots.push(id);
+    }
+    let b_at = roots.len();
+    roots.extend(p.b_code);
+    let (lets, exprs) = ctx.body(&roots)?;
+    let mut stores = Vec::new();
+    for (r, row) in at.iter().enumerate() {
+        for (d, e) in row.iter().enumerate() {
+            stores.push(format!("out[{r}][{d}] = {};", e.map_or("0.0".to_string(), |i| exprs[i].clone())));
+        }
+        stores.push(format!("out[{r}][{}] = -{};", w + 1, paren(&exprs[b_at + r])));
+    }
+    let (solver, solve, how) = if w == 1 {
+        (SOLVE_TRIDIAGONAL_C, "solve_tridiagonal(a, out)", "tridiagonal (solve_tridiagonal, O(K))")
+    } else {
+        (SOLVE_BAND_C, "solve_band(a, out)", "on A's band (solve_band, O(K w^2))")
+    };
     let _ = writeln!(
         out,
-        "/* The multipliers lambda: the solution of A lambda = -b by band Cholesky, O(K w^2); where A is singular
-   (redundant constraints) the minimum-norm lambda of the rows' solve (solution). */
+        "/* Half-bandwidth of A as the lambda solve reads it: A[k][j] = 0 when |k - j| > LAMBDA_BANDWIDTH. */\n\
+         enum {{ LAMBDA_BANDWIDTH = {w} }};\n"
+    );
+    out.push_str(solver);
+    out.push('\n');
+    let doc = [
+        "A lambda = -b as band_lambda solves it: out[k][d] = A[k][k + d] for d <= LAMBDA_BANDWIDTH (zeros past the"
+            .to_string(),
+        "last column), out[k][LAMBDA_BANDWIDTH + 1] = -b[k]; one program of A and b as assembled.".to_string(),
+    ];
+    function(out, &doc, "band_system", &format!("double out[{k}][LAMBDA_BANDWIDTH + 2]"), &lets, &stores);
+    let _ = writeln!(
+        out,
+        "/* The multipliers lambda (for C/SCALE) by L D L^T of band_system, {how}; 0 where A is singular
+   (a pivot at or below 1e-10 of its diagonal entry: redundant constraints) or its numbers leave f64's range. */
+int band_lambda(const State *s, double out[{k}]) {{
+    double a[{k}][LAMBDA_BANDWIDTH + 2];
+    band_system(s, a);
+    return {solve};
+}}
+
+/* The multipliers lambda (for C/SCALE): band_lambda, else the rows' solve (solution: the minimum-norm lambda
+   where A is singular, the change of length unit where its numbers overflow). */
 void lambda(const State *s, double out[{k}]) {{
-    double a[{k}][A_BANDWIDTH + 1];
-    int finite = 1;
-    b_vector(s, out);
-    for (int i = 0; i < CONSTRAINTS; i++) {{
-        out[i] = -out[i];
-    }}
-    a_band(s, a);
-    solve_band(a, out);
-    for (int i = 0; i < CONSTRAINTS; i++) {{
-        finite = finite && isfinite(out[i]);
-    }}
-    if (!finite) {{
+    if (!band_lambda(s, out)) {{
         Solution x;
         solution(s, &x);
         for (int i = 0; i < CONSTRAINTS; i++) {{
@@ -565,6 +606,13 @@ void lambda(const State *s, double out[{k}]) {{
 }}
 "
     );
+    Ok(())
+}
+
+/// A banded system of equalities: the forces and torques Σₖ λₖ Jₖᵢ, Σₖ λₖ Jʷₖ of `lambda`
+/// over every entry as the Rust module sums them.
+fn band(out: &mut String, p: &Parts<'_>) {
+    let (dim, n, k) = (p.layout.dim, p.layout.bodies, p.layout.constraints);
     let each = match p.layout.j {
         JStorage::Blocks { count } => format!(
             "double j[{}][DIM];\n    jacobian_blocks(s, j);\n    \
@@ -628,7 +676,7 @@ void torques(const State *s, double out[RIGID]) {{
 }
 
 /// A small system of equalities: `dense_solution` (one program of A and b as assembled, J
-/// and Jʷ; L D Lᵀ), `lambda`, `forces` (and `torques`) with `solution` where it gives up.
+/// and Jʷ; L D Lᵀ), `forces` (and `torques`) with `solution` where it gives up.
 fn dense(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError> {
     let (dim, k, rigid) = (p.layout.dim, p.layout.constraints, p.turns.body.len());
     let n1 = p.layout.bodies.max(1);
@@ -706,19 +754,7 @@ fn dense(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateE
     let (t_decl, t_arg) = if rigid > 0 { ("    double t[RIGID];\n", ", t") } else { ("", "") };
     let _ = writeln!(
         out,
-        "/* The multipliers lambda (for C/SCALE): dense_solution, else (A singular) the minimum-norm lambda of solution. */
-void lambda(const State *s, double out[{k}]) {{
-    double f[{n1}][DIM];
-{t_decl}    if (!dense_solution(s, out, f{t_arg})) {{
-        Solution x;
-        solution(s, &x);
-        for (int i = 0; i < CONSTRAINTS; i++) {{
-            out[i] = x.lambda[i];
-        }}
-    }}
-}}
-
-/* The constraint force sum_k lambda_k J_ki on every body (in file order): dense_solution, else solution. */
+        "/* The constraint force sum_k lambda_k J_ki on every body (in file order): dense_solution, else solution. */
 void forces(const State *s, double out[{n1}][DIM]) {{
     double l[{k}];
 {t_decl}    if (!dense_solution(s, l, out{t_arg})) {{

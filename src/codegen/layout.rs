@@ -1,13 +1,14 @@
 //! How a generated module lays out a system: dense or banded A, on the stack or the heap,
 //! dense J or its blocks, outputs in one function or in parts. Decided once, from the
 //! derivation's sizes, before any text is written; every emitter (Rust, C) follows it.
-//! How λ is found ([`Lambda`]: a guarded closed form, band Cholesky, or the rows' solve
-//! that honours inequalities and redundancy) is decided here too.
+//! How λ is found ([`Lambda`]: a guarded closed form, L D Lᵀ on A's band of the bandwidth
+//! known here, or the rows' solve that honours inequalities and redundancy) is decided here
+//! too.
 //!
 //! Big systems must not need a big stack (a 1000-link chain's dense J alone is 16 MB), and
 //! code size should grow linearly with a chain's length. So A is a dense K×K array only up
 //! to [`MAX_DENSE_A`] constraints; past that a banded A (a chain listed in order) is written
-//! as its band and solved by band Cholesky, and an A that is not banded lives on the heap.
+//! as its band, and an A that is not banded lives on the heap.
 //! J is a dense array up to [`MAX_DENSE_J`] entries, past that the list of its non-zero
 //! blocks. An output of more than [`MAX_PART`] formulas is filled by parts of at most that
 //! many ([`parts`]). What stays on the stack is O(K + N).
@@ -80,12 +81,14 @@ pub enum Lambda {
     /// One equality: λ and the forces are closed formulas, used where their numbers are in
     /// range (A normal, b finite); elsewhere the rows' solve ([`Lambda::Rows`]) answers.
     ClosedForm,
-    /// Equalities only, A banded past [`MAX_DENSE_A`]: band Cholesky on A λ = −b, and the
-    /// rows' solve where it fails (a singular A).
+    /// Equalities only, A banded past [`MAX_DENSE_A`]: λ by L D Lᵀ on A's band
+    /// ([`Layout::bandwidth`]: a tridiagonal A gets the tridiagonal solve), and the rows'
+    /// solve where it gives up (A singular or its numbers out of range).
     Band,
-    /// Equalities only, A dense (at most [`MAX_DENSE_A`] constraints): Cholesky on A λ = −b
-    /// from one program of A, b, J (and Jʷ), and the rows' solve where it gives up (A
-    /// singular or its numbers out of range).
+    /// Equalities only, A dense (at most [`MAX_DENSE_A`] constraints): λ as for
+    /// [`Lambda::Band`] (L D Lᵀ on A's band, of half-bandwidth up to K − 1), the forces by
+    /// Cholesky on A λ = −b from one program of A, b, J (and Jʷ); the rows' solve where
+    /// either gives up.
     Dense,
     /// The rows' solve of every other system: the scaled solve of `lagrange solve`, with
     /// inequality rows (λ ≥ 0, contact states) and the minimum-norm λ of a singular A.
@@ -137,6 +140,9 @@ pub struct Layout {
     pub a: AStorage,
     pub j: JStorage,
     pub lambda: Lambda,
+    /// A's half-bandwidth: Aₖⱼ = 0 when |k − j| exceeds it (from the non-zero entries, so a
+    /// chain listed in order has 1 whatever its storage). The λ solve is written for it.
+    pub bandwidth: usize,
     /// Whether some output is filled by parts (said in the module's header).
     pub parted: bool,
 }
@@ -176,7 +182,7 @@ impl Layout {
             AStorage::Dense => Lambda::Dense,
             AStorage::Heap => Lambda::Rows,
         };
-        Layout { dim, bodies, constraints, a: a_storage, j, lambda, parted }
+        Layout { dim, bodies, constraints, a: a_storage, j, lambda, bandwidth, parted }
     }
 }
 
@@ -213,6 +219,9 @@ mod tests {
         assert_eq!(Layout::of(2, 17, 17, &chain(17), 33, false, false).a, AStorage::Band { bandwidth: 1 });
         let full: Vec<(usize, usize)> = (0..17).flat_map(|i| (i..17).map(move |j| (i, j))).collect();
         assert_eq!(Layout::of(2, 17, 17, &full, 17, false, false).a, AStorage::Heap);
+        // The λ solve's bandwidth is A's, whatever its storage.
+        assert_eq!(Layout::of(2, 10, 10, &chain(10), 19, false, false).bandwidth, 1);
+        assert_eq!(Layout::of(2, 17, 17, &full, 17, false, false).bandwidth, 16);
     }
 
     #[test]

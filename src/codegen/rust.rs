@@ -44,7 +44,7 @@ use super::layout::Solver;
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
+use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, SOLVE_TRIDIAGONAL, STEP, SWEEP};
 use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -1383,7 +1383,7 @@ fn header(out: &mut String, title: &str, specialize: bool, layout: &Layout, (rig
         AStorage::Band { bandwidth } => {
             let _ = writeln!(
                 out,
-                "// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = {bandwidth}; λ by band Cholesky."
+                "// A is banded: `a_band(s)[k][d]` = A[k][k + d] for d ≤ A_BANDWIDTH = {bandwidth}; λ by L D Lᵀ on the band."
             );
         }
         AStorage::Heap => {
@@ -1932,8 +1932,9 @@ impl Ctx<'_> {
     }
 
     /// `lambda`, `forces`, `force_<body>` and `accelerations`: closed formulas for one
-    /// equality (where their numbers are in range), band Cholesky for a banded system of
-    /// equalities, else the rows' solve; the band solve when the layout needs it.
+    /// equality (where their numbers are in range); for other systems of equalities λ by
+    /// L D Lᵀ on A's band (`band_lambda`) and the forces from it, or from `dense_solution`
+    /// for a small dense A; else the rows' solve. The solves' helpers the layout needs.
     #[allow(clippy::too_many_arguments)]
     fn solution(
         &self,
@@ -2030,8 +2031,14 @@ impl Ctx<'_> {
                     (&force_fns, &torque_fns),
                 );
             }
-            (Lambda::Band, _, _) => band_fns(out, layout, rigid),
-            (Lambda::Dense, _, _) => self.dense_solution(out, formulas, (a_code, b_code), layout, turns)?,
+            (Lambda::Band, _, _) => {
+                self.band_lambda(out, formulas, (a_code, b_code), layout)?;
+                band_fns(out, layout, rigid);
+            }
+            (Lambda::Dense, _, _) => {
+                self.band_lambda(out, formulas, (a_code, b_code), layout)?;
+                self.dense_solution(out, formulas, (a_code, b_code), layout, turns)?;
+            }
             _ => {
                 let _ = writeln!(
                     out,
@@ -2070,9 +2077,9 @@ impl Ctx<'_> {
                 comment_text(names.bodies[body])
             );
         }
-        if layout.lambda == Lambda::Band {
+        if matches!(layout.lambda, Lambda::Band | Lambda::Dense) {
             // Each helper file ends its last item with `}`; a blank line follows it.
-            out.push_str(SOLVE_BAND);
+            out.push_str(if layout.bandwidth == 1 { SOLVE_TRIDIAGONAL } else { SOLVE_BAND });
             out.push('\n');
         }
         if layout.lambda == Lambda::Dense {
@@ -2169,7 +2176,80 @@ impl Ctx<'_> {
         Ok(())
     }
 
-    /// `dense_solution`, `lambda`, `forces` (and `torques`) of a small system of equalities:
+    /// `band_system`, `band_lambda` and `lambda` of a system of equalities (`Lambda::Band` and
+    /// `Lambda::Dense`): A λ = −b written row by row as the solve reads it — A's band of the
+    /// layout's bandwidth w and −b, one program of A and b as assembled, straight into the
+    /// rows (in parts where the layout parts outputs) — and λ by L D Lᵀ written for that band:
+    /// `solve_tridiagonal` when w = 1 (no loop over a zero), else `solve_band`. `lambda` is
+    /// `band_lambda`, and `solution` (the rows' solve) where it gives up: A singular to the
+    /// rows' rank tolerance, or its numbers out of f64's range.
+    fn band_lambda(
+        &self,
+        out: &mut String,
+        formulas: &Formulas,
+        (a_code, b_code): (&[Id], &[Id]),
+        layout: &Layout,
+    ) -> Result<(), GenerateError> {
+        let (k, w) = (layout.constraints, layout.bandwidth);
+        let mut entry: HashMap<(usize, usize), Id> = HashMap::new();
+        for (&(r, c, _), &id) in formulas.a.iter().zip(a_code) {
+            entry.insert((r.min(c), r.max(c)), id);
+        }
+        // Row r: the columns of its non-zero band entries, their values, then b[r].
+        let columns = |r: usize| (r..=(r + w).min(k - 1)).filter(|c| entry.contains_key(&(r, *c))).collect::<Vec<_>>();
+        let items: Vec<Vec<Id>> =
+            (0..k).map(|r| columns(r).iter().map(|c| entry[&(r, *c)]).chain([b_code[r]]).collect()).collect();
+        let store = |r: usize, exprs: &[String]| {
+            let mut values = vec!["0.0".to_string(); w + 2];
+            let cols = columns(r);
+            for (c, e) in cols.iter().zip(exprs) {
+                values[c - r] = e.clone();
+            }
+            values[w + 1] = format!("-{}", operand(&exprs[cols.len()]));
+            format!("out[{r}] = {};", array(&values))
+        };
+        let band = match w {
+            0 => "A[k][k]".to_string(),
+            1 => "A[k][k], A[k][k + 1]".to_string(),
+            _ => format!("A[k][k], A[k][k + 1], …, A[k][k + {w}]"),
+        };
+        let doc = [
+            format!("A λ = −b as `band_lambda` solves it: row k holds {band}"),
+            "(A's band, zeros past the last column) and −b[k], from one program of A and b as assembled".to_string(),
+            "(the numbers of A's entries and of `b_vector`).".to_string(),
+        ];
+        let width = w + 2;
+        self.emit_items(
+            out,
+            &doc,
+            "band_system",
+            &format!("[[f64; {width}]; {k}]"),
+            &format!("[[0.0; {width}]; {k}]"),
+            &format!("[f64; {width}]"),
+            &items,
+            store,
+        )?;
+        let (solve, how) = if w == 1 {
+            ("solve_tridiagonal(&band_system(s))", "A is tridiagonal, `solve_tridiagonal`, O(K)")
+        } else {
+            ("solve_band(band_system(s))", "`solve_band` on A's band, O(K w²)")
+        };
+        let _ = writeln!(
+            out,
+            "/// The multipliers λ (for C/κ) by L D Lᵀ of `band_system`: {how}.\n\
+             /// `None` where A is singular (a pivot at or below 1e-10 of its diagonal entry: redundant\n\
+             /// constraints) or its numbers leave f64's range.\n\
+             pub fn band_lambda(s: &State) -> Option<[f64; {k}]> {{\n    {solve}\n}}\n\n\
+             /// The multipliers λ (for C/κ): `band_lambda`, else the rows' solve (`solution`: the minimum-norm λ where\n\
+             /// A is singular, the change of length unit where its numbers overflow).\n\
+             pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
+             if let Some(l) = band_lambda(s) {{\n        return l;\n    }}\n    \
+             let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
+        );
+        Ok(())
+    }
+
+    /// `dense_solution`, `forces` (and `torques`) of a small system of equalities:
     /// one program computes A and b (as assembled), J and Jʷ with their shared values, Cholesky
     /// solves A λ = −b, and the forces Σₖ λₖ Jₖᵢ and torques Σₖ λₖ Jʷₖ follow; where Cholesky
     /// gives up (A singular: redundant constraints; numbers out of range) the rows' solve answers.
@@ -2250,13 +2330,6 @@ impl Ctx<'_> {
             let _ = writeln!(out, "    {l}");
         }
         let _ = writeln!(out, "    {result}\n}}\n");
-        let _ = writeln!(
-            out,
-            "/// The multipliers λ (for C/κ): `dense_solution`, else (A singular) the minimum-norm λ of `solution`.\n\
-             pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-             if let Some(x) = dense_solution(s) {{\n        return x.0;\n    }}\n    \
-             let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
-        );
         let bodies_only = if rigid > 0 { "[..BODIES]" } else { "" };
         let _ = writeln!(
             out,
@@ -2326,21 +2399,10 @@ pub(super) fn per_body_fns(names: &Names<'_>, turns: &Turns) -> (Vec<String>, Ve
     (force_fns, torque_fns)
 }
 
-/// A banded system of equalities: `lambda` by band Cholesky (`solution` where A is singular),
-/// `forces` (and `torques`) Σₖ λₖ Jₖᵢ over J as the layout stores it.
+/// A banded system of equalities: `forces` (and `torques`) Σₖ λₖ Jₖᵢ of `lambda` over J as the
+/// layout stores it.
 fn band_fns(out: &mut String, layout: &Layout, rigid: usize) {
-    let (dim, n, k) = (layout.dim, layout.bodies, layout.constraints);
-    let _ = writeln!(
-        out,
-        "/// The multipliers λ: the solution of A λ = −b by band Cholesky, O(K w²); where A is singular\n\
-                     /// (redundant constraints) the minimum-norm λ of the rows' solve (`solution`).\n\
-                     pub fn lambda(s: &State) -> [f64; {k}] {{\n    \
-                     let mut b = b_vector(s);\n    \
-                     for x in b.iter_mut() {{\n        *x = -*x;\n    }}\n    \
-                     let l = solve_band(a_band(s), b);\n    \
-                     if l.iter().all(|x| x.is_finite()) {{\n        return l;\n    }}\n    \
-                     let mut l = [0.0; {k}];\n    l.copy_from_slice(&solution(s).lambda);\n    l\n}}\n"
-    );
+    let (dim, n) = (layout.dim, layout.bodies);
     if matches!(layout.j, JStorage::Blocks { .. }) {
         let _ = writeln!(
             out,

@@ -1,7 +1,7 @@
 //! The helper functions a generated module carries: the rows' solve of `lagrange solve`
 //! (scaled, with contact states, λ ≥ 0 on inequalities and the minimum-norm λ; every
-//! module), band Cholesky (the fast path of a banded A), dense Cholesky (of a small A of
-//! equalities), the range-safe norms and
+//! module), L D Lᵀ on A's band (the fast path of λ for equalities: tridiagonal or any
+//! band), dense L D Lᵀ (of a small A of equalities, with the forces), the range-safe norms and
 //! powers the formulas call, and with `--solver` the velocity-level step (shared pieces,
 //! the sequential-impulse sweep, and one file per solver).
 //!
@@ -18,8 +18,11 @@
 /// The solve of `lagrange solve` on a module's rows: `solve_rows`, its types and helpers.
 pub(super) const ROWS: &str = text(include_str!("rows.rs"));
 
-/// Banded A λ = −b (a chain listed in order): Cholesky on the band, O(K w²).
+/// A λ = −b as its band rows (`band_system`), A not tridiagonal: L D Lᵀ on the band, O(K w²).
 pub(super) const SOLVE_BAND: &str = text(include_str!("solve_band.rs"));
+
+/// A λ = −b as its rows (`band_system`), A tridiagonal (a chain listed in order): L D Lᵀ, O(K).
+pub(super) const SOLVE_TRIDIAGONAL: &str = text(include_str!("solve_tridiagonal.rs"));
 
 /// A small dense A λ = −b of equalities: Cholesky on the array, the fast path before `solve_rows`.
 pub(super) const SOLVE_DENSE: &str = text(include_str!("solve_dense.rs"));
@@ -78,16 +81,20 @@ mod solve_band;
 #[cfg(test)]
 #[allow(dead_code)]
 mod solve_dense;
+#[cfg(test)]
+#[allow(dead_code)]
+mod solve_tridiagonal;
 
 #[cfg(test)]
 mod tests {
-    use super::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
+    use super::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, SOLVE_TRIDIAGONAL, STEP, SWEEP};
 
     #[test]
     fn a_helper_is_its_file_without_the_note() {
         for (text, first) in [
             (ROWS, "/// Where an inequality row stands"),
-            (SOLVE_BAND, "/// Solves `a x = b` for a symmetric"),
+            (SOLVE_BAND, "/// Solves A x = r for a symmetric positive definite band matrix"),
+            (SOLVE_TRIDIAGONAL, "/// Solves A x = r for a symmetric positive definite tridiagonal"),
             (SOLVE_DENSE, "/// Solves `a x = b` for a symmetric positive definite `a` by Cholesky"),
             (HELPERS, "/// |(x, y)|"),
             (STEP, "/// Box2D's `b2Softness`"),

@@ -431,7 +431,12 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
 }
 
 /// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+///
+/// Never inlined: `scaled_state` calls it once per number of the state, and rustc at
+/// opt-level 3 overflows its own stack (LLVM's scalar evolution recursing over the chained
+/// loops) on a 100-link chain's module when each call carries its two loops inline.
 #[allow(dead_code)]
+#[inline(never)]
 fn pow2(mut x: f64, mut e: i64) -> f64 {
     while e > 1000 {
         x *= 2f64.powi(1000);

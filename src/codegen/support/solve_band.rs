@@ -1,46 +1,59 @@
-//! Written into a generated module whose A is banded (a chain listed in order):
-//! `solve_band`, Cholesky on the band, O(K w²).
+//! Written into a generated module whose constraints are all equalities and whose A is not
+//! tridiagonal (a banded A of half-bandwidth w ≥ 2, or a small dense one as its band of
+//! w = K − 1): `solve_band`, L D Lᵀ (Cholesky without square roots) on the band rows of the
+//! system A λ = −b that `band_system` writes, O(K w²), with 1/dᵢ kept so the solves
+//! multiply. The fast path before the rows' solve (`rows.rs`), which answers wherever this
+//! one gives up. A tridiagonal A takes `solve_tridiagonal.rs`, these operations with the
+//! loops over the band's zeros left out.
 //!
 //! Included with `include_str!` from the first item on (this note is left out); compiled
-//! by the crate's tests. Not here: dense A (`solve.rs`, `solve_heap.rs`).
+//! by the crate's tests. Not here: redundancy and inequalities (`rows.rs`).
 
-/// Solves `a x = b` for a symmetric positive definite band matrix given as its upper band
-/// (`a[i][d]` = A[i][i + d]) by Cholesky, A = RᵀR, in place; NaN if A is not positive definite.
+/// Solves A x = r for a symmetric positive definite band matrix A of half-bandwidth
+/// w = B − 2, given as its rows with r beside them: `a[i]` = [A[i][i], A[i][i + 1], …,
+/// A[i][i + w], r[i]] (zeros past the last column), by A = Rᵀ D R (R unit upper triangular),
+/// T = D R in place of A's band. `None` where the rows' solve is needed: a diagonal entry
+/// that is not a positive normal number (its numbers out of f64's range), a pivot dᵢ at or
+/// below 1e-10 of its diagonal entry (the rows' rank tolerance, as `solve_dense`: A singular,
+/// constraints redundant), or an answer that is not finite. The checks are gathered, not
+/// branched on: a module that gives up has the rows' solve to run anyway.
 #[allow(clippy::needless_range_loop)]
-fn solve_band<const K: usize, const B: usize>(mut a: [[f64; B]; K], mut b: [f64; K]) -> [f64; K] {
-    let w = B - 1;
+fn solve_band<const K: usize, const B: usize>(mut a: [[f64; B]; K]) -> Option<[f64; K]> {
+    let w = B - 2;
+    // 1/dᵢ of each pivot.
+    let mut inv = [0.0; K];
+    let mut ok = true;
     for i in 0..K {
-        for d in 0..B.min(K - i) {
+        for d in 0..(w + 1).min(K - i) {
             let j = i + d;
-            // A[i][j] − Σₚ R[p][i] R[p][j] over the rows p < i whose band reaches column j.
+            // T[i][j] = A[i][j] − Σₚ T[p][i] T[p][j] / dₚ over the rows p < i whose band reaches column j.
             let mut acc = a[i][d];
             for p in j.saturating_sub(w)..i {
-                acc -= a[p][i - p] * a[p][j - p];
+                acc -= a[p][i - p] * a[p][j - p] * inv[p];
             }
             if d == 0 {
-                if !(acc > 0.0 && acc.is_finite()) {
-                    return [f64::NAN; K];
-                }
-                a[i][0] = acc.sqrt();
-            } else {
-                a[i][d] = acc / a[i][0];
+                // dᵢ = T[i][i]: positive and above the rank tolerance, A[i][i] a normal number.
+                ok &= (a[i][0] >= f64::MIN_POSITIVE) & (acc > 1e-10 * a[i][0]);
+                inv[i] = 1.0 / acc;
             }
+            a[i][d] = acc;
         }
-    }
-    // Rᵀ y = b, then R x = y (in place in b).
-    for i in 0..K {
-        let mut acc = b[i];
+        // Rᵀ y = r: yᵢ = rᵢ − Σₚ R[p][i] yₚ with R[p][i] = T[p][i] / dₚ (y in place of r).
+        let mut y = a[i][B - 1];
         for p in i.saturating_sub(w)..i {
-            acc -= a[p][i - p] * b[p];
+            y -= a[p][i - p] * inv[p] * a[p][B - 1];
         }
-        b[i] = acc / a[i][0];
+        a[i][B - 1] = y;
     }
+    // D R x = y: xᵢ = yᵢ / dᵢ − Σ_q R[i][q] x_q.
+    let mut x = [0.0; K];
     for i in (0..K).rev() {
-        let mut acc = b[i];
-        for q in i + 1..K.min(i + B) {
-            acc -= a[i][q - i] * b[q];
+        let mut acc = a[i][B - 1] * inv[i];
+        for q in i + 1..K.min(i + w + 1) {
+            acc -= a[i][q - i] * inv[i] * x[q];
         }
-        b[i] = acc / a[i][0];
+        ok &= acc.is_finite();
+        x[i] = acc;
     }
-    b
+    if ok { Some(x) } else { None }
 }
