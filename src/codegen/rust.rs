@@ -42,7 +42,7 @@ use super::layout::Solver;
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
+use super::support::{EXACT, HELPERS, MOTION, MOTION_3D, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, STEP, SWEEP};
 use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -79,20 +79,12 @@ pub enum Lang {
 pub enum GenerateError {
     #[error(transparent)]
     Derive(#[from] DeriveError),
-    #[error(transparent)]
-    Rigid(#[from] crate::model::system::NotYetRigid),
-    #[error(transparent)]
-    Rigid3d(#[from] crate::model::system::NotYet3dRigid),
     #[error("internal type error: {0}")]
     Type(#[from] TypeError),
     #[error(transparent)]
     Lower(#[from] LowerError),
     #[error("parameter `{0}` has a value that cannot be written exactly (not finite, or too large)")]
     BadValue(String),
-    #[error(
-        "--lang c writes the soft step and PGS; the exact step (its rows' solve) is generated in Rust only for now"
-    )]
-    CStep,
     /// The formulas' code passed [`code_budget`] bytes.
     #[error(
         "the generated code is too large: its formulas pass {0} bytes (64 MiB, and 8 KiB more per body and \
@@ -195,10 +187,6 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 /// derivation, specialised where asked, the scene's numbers as graph nodes, the plan (the
 /// state's fields and the layout), then the text in the chosen language.
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
-    // The velocity-level step moves positions only: its rigid twin is not written yet.
-    if options.solver.is_some() {
-        loaded.system.refuse_rigid("generate --solver")?;
-    }
     // The module's own derivation: `--specialize` extends its graph.
     let mut d = derive(&loaded.system)?;
     let specialised = specialise(loaded, &mut d, options.specialize)?;
@@ -349,6 +337,7 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
                 turns.torque.push(w.torque);
                 turns.applied.push(applied);
                 turns.inverse_inertia.push(w.inverse_inertia);
+                turns.inertia.push(inertia);
             }
             continue;
         }
@@ -362,6 +351,7 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
             None => scalar_zero,
         });
         turns.inverse_inertia.push(g.powi(inertia, -1)?);
+        turns.inertia.push(inertia);
     }
     // 3D: Jʷ projected on each principal axis, the entry of the axis' slot.
     if !turns.three.is_empty() {
@@ -493,9 +483,6 @@ fn c_module(
     scene: &SceneNumbers,
     plan: &Plan<'_>,
 ) -> Result<Module, GenerateError> {
-    if options.solver == Some(Solver::Exact) {
-        return Err(GenerateError::CStep);
-    }
     let (system, g, fields) = (&loaded.system, &d.graph, &plan.fields);
     let c_names = super::c::field_names(fields);
     let c_slots = super::c::slots(g, fields, &c_names);
@@ -528,7 +515,13 @@ fn c_module(
             inverse_scales: inverse_scales(d),
             time: system.time,
             bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
-            masses: scene.masses.clone(),
+            turns: scene
+                .turns
+                .rigid_bodies()
+                .into_iter()
+                .filter_map(|b| system.bodies[b].rigid.as_ref().map(|r| (r.orientation, r.angular_velocity)))
+                .collect(),
+            roots: StepRoots::of(&plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
         }),
     };
     let code = super::c::emit(&ctx, &parts)?;
@@ -583,17 +576,20 @@ fn rust_module(
     }
     ctx.solution(&mut out, formulas, (&scene.a_code, &scene.b_code), &names, layout, &scene.turns)?;
     if let Some(solver) = options.solver {
-        let step = StepPlaces {
+        let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+        let turn = |body: usize| {
+            let rigid = system.bodies[body].rigid.as_ref();
+            rigid.map_or(("", ""), |r| (ident_of(fields, r.orientation), ident_of(fields, r.angular_velocity)))
+        };
+        let places = StepPlaces {
             time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
             position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
             velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
-            mass: scene.masses.clone(),
-            velocity_node: scene.bodies.velocity.clone(),
-            applied: scene.bodies.applied.clone(),
+            turn: scene.turns.rigid_bodies().into_iter().map(turn).collect(),
         };
-        step_fns(&mut out, &ctx, solver, &inverse_scales(d), &step, formulas, &names, layout)?;
+        step_fns(&mut out, &ctx, solver, &inverse_scales(d), &places, &step, formulas, &names, layout)?;
     }
-    helper_texts(&mut out, options.solver);
+    helper_texts(&mut out, options.solver, !scene.turns.three.is_empty());
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         let warning = format!(
@@ -631,14 +627,16 @@ fn formula_fns(
 }
 
 /// The helpers every module carries (the rows' solve, the norms), then the step's with
-/// `--solver`.
-fn helper_texts(out: &mut String, solver: Option<Solver>) {
+/// `--solver` (its motion of 3D rigid bodies where the module has them).
+fn helper_texts(out: &mut String, solver: Option<Solver>, three: bool) {
     out.push_str(ROWS);
     out.push('\n');
     out.push_str(HELPERS);
     if let Some(solver) = solver {
         out.push('\n');
         out.push_str(STEP);
+        out.push('\n');
+        out.push_str(if three { MOTION_3D } else { MOTION });
         if solver.sweeps() {
             out.push('\n');
             out.push_str(SWEEP);
@@ -658,20 +656,76 @@ fn ident_of(fields: &[Field], symbol: Symbol) -> &str {
 }
 
 /// Where the step reads and writes the state: the time field (none when the file has no
-/// `t` in its state) and each body's position and velocity fields, in file order.
+/// `t` in its state), each body's position and velocity fields, in file order, and each
+/// rigid body's orientation and angular velocity fields, in the order of their slots.
 struct StepPlaces<'a> {
     time: Option<&'a str>,
     position: Vec<&'a str>,
     velocity: Vec<&'a str>,
-    /// Each body's mass, velocity symbol and scene force as graph nodes (the rows' roots).
-    mass: Vec<Id>,
-    velocity_node: Vec<Id>,
-    applied: Vec<Id>,
+    /// Per rigid body: its orientation (θ, or q in 3D) and ω fields.
+    turn: Vec<(&'a str, &'a str)>,
+}
+
+/// The roots of the step's rows, in the order of the library's `numeric::rows::RowProgram`
+/// (per body m, v, F; per rigid body I, ω, τ, and in 3D its principal axes; per row C, Ċ, c,
+/// J per body, then Jʷ per rigid body it turns, once per angular slot), with where each
+/// row's angular entries go. Rust and C write the step's rows from the same list.
+pub(super) struct StepRoots {
+    pub(super) roots: Vec<Id>,
+    /// Per row, the slot of each angular entry (after its linear ones), in root order.
+    pub(super) angular_slots: Vec<Vec<usize>>,
+    /// Per rigid body: its first slot and whether it is 3D (three slots, one per axis).
+    pub(super) turns: Vec<(usize, bool)>,
+}
+
+impl StepRoots {
+    pub(super) fn of(layout: &Layout, masses: &[Id], bodies: &Bodies, turns: &Turns, formulas: &Formulas) -> StepRoots {
+        let n = layout.bodies;
+        let mut roots = Vec::new();
+        for ((&m, &v), &f) in masses.iter().zip(&bodies.velocity).zip(&bodies.applied).take(n) {
+            roots.extend([m, v, f]);
+        }
+        let three = !turns.three.is_empty();
+        let width = if three { 3 } else { 1 };
+        let mut rigid = Vec::new();
+        for (r, body) in turns.rigid_bodies().into_iter().enumerate() {
+            let slot = r * width;
+            rigid.push((body, n + slot, three));
+            if three {
+                // The moments, the world ω and τ, and the principal axes.
+                let t = &turns.three[r];
+                roots.extend([turns.inertia[slot], t.angular_velocity, t.applied]);
+                roots.extend(t.axes);
+            } else {
+                roots.extend([turns.inertia[slot], turns.angular_velocity[slot], turns.applied[slot]]);
+            }
+        }
+        let mut angular_slots = Vec::with_capacity(layout.constraints);
+        for r in 0..layout.constraints {
+            roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
+            roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
+            let mut slots = Vec::new();
+            for &(b, jw) in &formulas.angular[r] {
+                let Some(&(_, first, _)) = rigid.iter().find(|t| t.0 == b) else { continue };
+                for k in 0..width {
+                    roots.push(jw);
+                    slots.push(first + k);
+                }
+            }
+            angular_slots.push(slots);
+        }
+        StepRoots { roots, angular_slots, turns: rigid.into_iter().map(|(_, first, three)| (first, three)).collect() }
+    }
+
+    /// The step's slots: the bodies, then the rigid bodies' angular slots.
+    pub(super) fn slots(&self, bodies: usize) -> usize {
+        bodies + self.turns.iter().map(|&(_, three)| if three { 3 } else { 1 }).sum::<usize>()
+    }
 }
 
 /// The scene's part of the step (`--solver`): its solver and default iterations, 1/κ as the
 /// library's rows use it, `step_rows` with the derivation of each row as comments, and the
-/// state's accessors the step's helper text calls (`time`, `put`, `prepared`).
+/// state's accessors the step's helper text calls (`time`, `get`, `put`, `prepared`).
 #[allow(clippy::too_many_arguments)]
 fn step_fns(
     out: &mut String,
@@ -679,12 +733,16 @@ fn step_fns(
     solver: Solver,
     inverse_scales: &[f64],
     places: &StepPlaces<'_>,
+    step: &StepRoots,
     formulas: &Formulas,
     names: &Names<'_>,
     layout: &Layout,
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let k = layout.constraints;
+    let n = layout.bodies;
+    let slots = step.slots(n);
+    let three = step.turns.iter().any(|t| t.1);
     let _ = writeln!(
         out,
         "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
@@ -693,22 +751,32 @@ fn step_fns(
          pub const DEFAULT_ITERATIONS: usize = {1};
          /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
          pub const INVERSE_SCALE: [f64; {k}] = {2};
+         /// The step's slots: the bodies, then {3}.
+         pub const SLOTS: usize = {slots};
 ",
         solver.name(),
         solver.default_iterations(),
-        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
+        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>()),
+        if three {
+            "three per rigid body, one per principal axis eₖ = R(q) eₖ (1/Iₖ, eₖ·ω, eₖ·τ − (ω_b × I ω_b)ₖ, Jʷ·eₖ)"
+        } else {
+            "one per rigid body (1/I, ω, τ and Jʷ in component 0)"
+        }
     );
     // The derivation, row by row: what the step's helper text computes from these numbers.
     let mut doc = vec![
-        "The rows the step solves, at a state: per body 1/m, v and F (the scene's, `applied_forces`), per row C/κ, Ċ/κ, c and J = ∇C/κ per body. Per row k".to_string(),
+        "The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k".to_string(),
         "of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,"
             .to_string(),
-        "and the impulse ΔP the solver gives (see `step_with`); ΔP moves body i by Δvᵢ = Jᵢ ΔP / mᵢ.".to_string(),
+        "and the impulse ΔP the solver gives (see `step_with`); ΔP moves slot i by Δuᵢ = Jᵢ ΔP / mᵢ.".to_string(),
     ];
     for (r, dirs) in formulas.jacobian.iter().enumerate() {
         doc.push(format!("- row {r}, `{}`: C = {}", comment_text(names.constraints[r]), formula(g, formulas.c[r])));
         for &(body, id) in dirs {
             doc.push(format!("  J, body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
+        }
+        for &(body, id) in &formulas.angular[r] {
+            doc.push(format!("  Jʷ, body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
         }
         if let Some(&(_, _, a)) = formulas.a.iter().find(|e| e.0 == r && e.1 == r) {
             doc.push(format!("  J M⁻¹ Jᵀ = A[{r}][{r}] = {}", formula(g, a)));
@@ -717,18 +785,10 @@ fn step_fns(
     for line in &doc {
         let _ = writeln!(out, "/// {line}");
     }
-    // One function over the roots of the library's row program, in its order (per body its
-    // mass, velocity and force; per row C, Ċ, c and J), so the shared values (one reciprocal
-    // for a value divided twice or more) are the library's and the rows its numbers, bit for bit.
-    let mut roots = Vec::new();
-    for i in 0..layout.bodies {
-        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
-    }
-    for r in 0..k {
-        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
-        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
-    }
-    let (lets, exprs) = ctx.body(&roots)?;
+    // One function over the roots of the library's row program, in its order, so the shared
+    // values (one reciprocal for a value divided twice or more) are the library's and the
+    // rows its numbers, bit for bit.
+    let (lets, exprs) = ctx.body(&step.roots)?;
     let dim = layout.dim;
     let mut at = 0;
     let mut next = |n: usize| {
@@ -742,19 +802,50 @@ fn step_fns(
     }
     let _ = writeln!(
         out,
-        "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
-        n = layout.bodies
+        "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({slots}), velocity: Vec::with_capacity({slots}), force: Vec::with_capacity({slots}), axes: Vec::new() }};",
     );
-    for _ in 0..layout.bodies {
+    for _ in 0..n {
         let m = next(1);
         let (v, f) = (next(dim), next(dim));
         let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
         let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
+        if three {
+            let _ = writeln!(out, "    r.axes.push([0.0; DIM]);");
+        }
     }
-    for r in 0..k {
+    for (r, &(_, is_3d)) in step.turns.iter().enumerate() {
+        if is_3d {
+            // I, ω, τ and the axes of the body, then its three axis slots (`axis_slots`).
+            let (i, w, t) = (next(3), next(3), next(3));
+            let e = [next(3), next(3), next(3)];
+            let _ = writeln!(
+                out,
+                "    let axes_{r} = {};\n    axis_slots(&mut r, {}, {}, {}, axes_{r});",
+                array(&e.iter().map(|x| array(x)).collect::<Vec<_>>()),
+                array(&i),
+                array(&w),
+                array(&t)
+            );
+        } else {
+            let (i, w, t) = (next(1), next(1), next(1));
+            let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&i[0]));
+            let _ = writeln!(out, "    r.velocity.push([{}, 0.0]);\n    r.force.push([{}, 0.0]);", w[0], t[0]);
+        }
+    }
+    for (r, angular) in step.angular_slots.iter().enumerate() {
         let scalars = next(3);
-        let js: Vec<String> =
+        let mut js: Vec<String> =
             formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+        for &slot in angular {
+            if three {
+                // Jʷ·eₖ: the axis' part of the world vector Jʷ (the library's `fill_jacobian`).
+                let rigid = step.turns.iter().rposition(|t| t.0 <= slot).unwrap_or(0);
+                let axis = slot - step.turns[rigid].0;
+                js.push(format!("({slot}, [dot3(&axes_{rigid}[{axis}], &{}), 0.0, 0.0])", array(&next(dim))));
+            } else {
+                js.push(format!("({slot}, [{}, 0.0])", next(1)[0]));
+            }
+        }
         let _ = writeln!(
             out,
             "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
@@ -768,10 +859,42 @@ fn step_fns(
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
     let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });
+    // The state's slots: per body x and v; per 2D rigid body [θ, 0] and [ω, 0]; per 3D one the
+    // rotation vector φ since the orientation q₀ (zero) and the world ω, then two empty slots.
+    let mut get = Vec::new();
+    let mut put = Vec::new();
+    for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
+        get.push(format!("q.push(s.{p});\n    v.push(s.{v});"));
+        put.push(format!("s.{p} = q[{i}];\n    s.{v} = v[{i}];"));
+    }
+    let mut orientations = Vec::new();
+    for (r, (&(first, is_3d), &(o, w))) in step.turns.iter().zip(&places.turn).enumerate() {
+        if is_3d {
+            get.push(format!("q.extend([[0.0; 3]; 3]);\n    v.extend([s.{w}, [0.0; 3], [0.0; 3]]);"));
+            put.push(format!("s.{o} = turned(q[{first}], q0[{r}]);\n    s.{w} = v[{first}];"));
+            orientations.push(format!("s.{o}"));
+        } else {
+            get.push(format!("q.push([s.{o}, 0.0]);\n    v.push([s.{w}, 0.0]);"));
+            put.push(format!("s.{o} = q[{first}][0];\n    s.{w} = v[{first}][0];"));
+        }
+    }
     let _ = writeln!(
         out,
-        "/// Writes the time, the positions and the velocities (per body, in file order) into the state.\n\
-         fn put(s: &mut State, t: f64, q: &[[f64; DIM]], v: &[[f64; DIM]]) {{"
+        "/// The state's slots as the step moves them (the library's `numeric::simulate::initial_state`): per body x and v,\n\
+         /// then per rigid body [θ, 0] and [ω, 0] (3D: the rotation vector φ = 0 since its orientation q₀ and the world ω,\n\
+         /// then two empty slots), and the 3D rigid bodies' orientations q₀.\n\
+         #[allow(clippy::type_complexity)]\n\
+         fn get(s: &State) -> (Vec<[f64; DIM]>, Vec<[f64; DIM]>, Vec<[f64; 4]>) {{\n    \
+         let mut q: Vec<[f64; DIM]> = Vec::with_capacity(SLOTS);\n    \
+         let mut v: Vec<[f64; DIM]> = Vec::with_capacity(SLOTS);\n    \
+         {}\n    (q, v, vec!{})\n}}\n",
+        get.join("\n    "),
+        array(&orientations)
+    );
+    let _ = writeln!(
+        out,
+        "/// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).\n\
+         fn put(s: &mut State, t: f64, q: &[[f64; DIM]], v: &[[f64; DIM]], q0: &[[f64; 4]]) {{"
     );
     match places.time {
         Some(field) => {
@@ -781,8 +904,11 @@ fn step_fns(
             let _ = writeln!(out, "    let _ = t;");
         }
     }
-    for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
-        let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+    if !three {
+        let _ = writeln!(out, "    let _ = q0;");
+    }
+    for line in &put {
+        let _ = writeln!(out, "    {line}");
     }
     let _ = writeln!(out, "}}\n");
     let _ = writeln!(
@@ -790,8 +916,7 @@ fn step_fns(
         "/// The rows of the state flattened for the step, with the scene's forces (`applied_forces`).\n\
          #[allow(dead_code)]\n\
          fn prepared(s: &State) -> Prepared<DIM> {{\n    \
-         let r = step_rows(s);\n    \
-         Prepared::new(&r.rows, &r.inverse_mass, &r.velocity, &r.force)\n}}\n"
+         Prepared::new(&step_rows(s))\n}}\n"
     );
     Ok(())
 }
@@ -855,6 +980,8 @@ pub(super) struct Turns {
     /// The scene's torque expression (zero where it gives none).
     pub(super) applied: Vec<Id>,
     pub(super) inverse_inertia: Vec<Id>,
+    /// I (3D: the principal moments, a vector), the root the library's rows invert.
+    pub(super) inertia: Vec<Id>,
     /// 3D rigid bodies (empty in 2D): each one's three slots are axis slots, and the
     /// entries of Jʷ are `projected`.
     pub(super) three: Vec<Turn3>,

@@ -1,14 +1,16 @@
 //! Written into every module generated with `--solver`: the pieces of the velocity-level
 //! step that every solver shares — Box2D's softness (`b2MakeSoft`), the step's settings with
 //! Box2D v3's defaults, the rows of one substep flattened with their effective masses
-//! (`Prepared`), the kick of the external forces and the drift of the positions. The same
-//! operations in the same order as the library's `numeric::velocity` (`Softness`,
-//! `Settings`, `Prepared`), so a module's step gives the library's numbers.
+//! (`Prepared`, over the slots of `numeric::rows`: the bodies, then the rigid bodies' angular
+//! slots). The same operations in the same order as the library's `numeric::velocity`
+//! (`Softness`, `Settings`, `Prepared`), so a module's step gives the library's numbers.
 //!
 //! Included with `include_str!` from the first item on (this note is left out); compiled as part of every
 //! generated module of `tests/generate_step.rs` (it uses the module's items, so it is not a
-//! module of its own). Not here: the sequential-impulse sweep (`sweep.rs`), each solver's
-//! step (`soft_step.rs`, `pgs.rs`, `exact.rs`), the rows' formulas (generated).
+//! module of its own). Not here: the kick, the drift and the change between the state's and
+//! the rows' slots (`motion.rs`, or `motion_3d.rs` with 3D rigid bodies), the
+//! sequential-impulse sweep (`sweep.rs`), each solver's step (`soft_step.rs`, `pgs.rs`,
+//! `exact.rs`), the rows' formulas (generated).
 
 /// Box2D's `b2Softness`: a soft row of stiffness `hertz` and damping ratio ζ at substep h,
 /// as a bias rate on C/κ, a scale on the effective mass and a scale on the accumulated impulse.
@@ -109,16 +111,20 @@ impl StepSettings {
 }
 
 /// The rows at a state as the step reads them (`step_rows`): per row C/κ, Ċ/κ, c, J; per
-/// body 1/m, v and the scene's force.
+/// slot (the bodies, then the rigid bodies' angular slots, as `numeric::rows` lays them out)
+/// 1/m, v and the scene's force; with 3D rigid bodies each slot's principal axis (zero for a
+/// linear slot; empty otherwise).
 struct StepRows<const D: usize> {
     rows: Vec<Row<D>>,
     inverse_mass: Vec<f64>,
     velocity: Vec<[f64; D]>,
     force: Vec<[f64; D]>,
+    axes: Vec<[f64; D]>,
 }
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
-/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries (body, Jᵢ); per body 1/m and F.
+/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries (slot, Jᵢ: a body's Jᵛ or an angular slot's Jʷ);
+/// per slot 1/m (1/I) and F (τ).
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     /// Entries of row k: `start[k]..start[k + 1]`.
@@ -133,6 +139,13 @@ struct Prepared<const D: usize> {
     inequality: Vec<bool>,
     inverse_mass: Vec<f64>,
     force: Vec<[f64; D]>,
+    /// Per slot its principal axis (empty without 3D rigid bodies).
+    axes: Vec<[f64; D]>,
+    /// Per slot the velocity the rows were evaluated at (3D rigid bodies: the body-frame ω
+    /// their gyroscopic term was taken at; empty without 3D rigid bodies).
+    velocity: Vec<[f64; D]>,
+    /// The first 3D rigid body's first slot (`None` without 3D rigid bodies).
+    first: Option<usize>,
 }
 
 /// a·b, summed from 0 as the library sums its three components (the same number, zero's
@@ -147,8 +160,10 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
 
 #[allow(dead_code)]
 impl<const D: usize> Prepared<D> {
-    /// From the rows at a state with velocities `velocity`, the bodies' 1/m and forces.
-    fn new(rows: &[Row<D>], inverse_mass: &[f64], velocity: &[[f64; D]], force: &[[f64; D]]) -> Prepared<D> {
+    /// From the rows at a state (`step_rows`), evaluated at the velocities they carry.
+    fn new(r: &StepRows<D>) -> Prepared<D> {
+        let rows = &r.rows;
+        let first = r.axes.iter().position(|e| e.iter().any(|&x| x != 0.0));
         let mut p = Prepared {
             start: Vec::with_capacity(rows.len() + 1),
             body: Vec::new(),
@@ -157,8 +172,11 @@ impl<const D: usize> Prepared<D> {
             time_rate: Vec::with_capacity(rows.len()),
             effective_mass: Vec::with_capacity(rows.len()),
             inequality: Vec::with_capacity(rows.len()),
-            inverse_mass: inverse_mass.to_vec(),
-            force: force.to_vec(),
+            inverse_mass: r.inverse_mass.clone(),
+            force: r.force.clone(),
+            axes: r.axes.clone(),
+            velocity: if first.is_some() { r.velocity.clone() } else { Vec::new() },
+            first,
         };
         for row in rows {
             p.start.push(p.body.len());
@@ -166,8 +184,8 @@ impl<const D: usize> Prepared<D> {
             for (b, j) in &row.jacobian {
                 p.body.push(*b);
                 p.jacobian.push(*j);
-                k += inverse_mass[*b] * dot(j, j);
-                jv += dot(j, &velocity[*b]);
+                k += r.inverse_mass[*b] * dot(j, j);
+                jv += dot(j, &r.velocity[*b]);
             }
             p.value.push(row.value);
             p.time_rate.push(row.rate - jv);
@@ -199,24 +217,6 @@ impl<const D: usize> Prepared<D> {
             for d in 0..D {
                 u[b][d] += s * j[d];
             }
-        }
-    }
-
-    /// u += h M⁻¹ F: the external forces over one substep.
-    fn kick(&self, u: &mut [[f64; D]], h: f64) {
-        for ((u, f), w) in u.iter_mut().zip(&self.force).zip(&self.inverse_mass) {
-            for d in 0..D {
-                u[d] += h * w * f[d];
-            }
-        }
-    }
-}
-
-/// q += h u.
-fn drift<const D: usize>(q: &mut [[f64; D]], u: &[[f64; D]], h: f64) {
-    for (q, u) in q.iter_mut().zip(u) {
-        for d in 0..D {
-            q[d] += h * u[d];
         }
     }
 }
