@@ -11,8 +11,7 @@
 //!   against central differences of C along a trajectory with an exact rotation
 //!   q(t) = exp(½ n φ(t)) q₀ about a random fixed axis n, φ = w t + ½ a t² (so ω = n φ̇,
 //!   α = n a); and Ċ/κ = Σ J·u over the rows' slots.
-//! - Refusals naming the body: a non-unit quaternion, `simulate --solver` (the velocity
-//!   level), `bench --solvers`.
+//! - Refusals naming the body: a non-unit quaternion, `bench --solvers`.
 //! - `bench` (the work-precision sweep and formula accuracy) on the ball joint and the
 //!   spinning top: every run ok, each force and world torque at f64's precision against the
 //!   double-double reference.

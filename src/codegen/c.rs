@@ -18,13 +18,14 @@
 //! `angular_velocities`, `external_torques`, `applied_torques`, `body_axes`, and per axis
 //! slot `axis_inverse_inertias`, `axis_angular_velocities`, `axis_torques` and Jʷ·eₖ.
 //!
-//! With `--solver soft-step|pgs` the module also has the step (`step`, `step_with`,
-//! `step_settings_default`): the scene's `step_rows` over the Rust module's roots and the
-//! text of `support/step.c`, the Rust step's operations in its order.
+//! With `--solver soft-step|pgs|exact` the module also has the step (`step`, `step_with`,
+//! `step_settings_default`), for point masses and 2D and 3D rigid bodies: the scene's
+//! `step_rows` over the Rust module's roots (`StepRoots`), its state accessors, and the text
+//! of `support/motion.c` (or `motion_3d.c`), `support/step.c` and `sweep.c` or `exact.c`,
+//! the Rust step's operations in its order.
 //!
-//! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the rows'
-//! solve (the Rust module's `solution` and the exact step have no C twin yet), files or
-//! stdout.
+//! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the λ path
+//! (`codegen::c_solve`), files or stdout.
 
 use super::layout::{AStorage, JStorage, Layout, Solver};
 use super::names::{Namer, c_reserved, comment_text};

@@ -15,9 +15,11 @@
 //! slots per body, one per principal axis (`axis_slot`), and the torques and α come back as
 //! world vectors.
 //! With `--solver` the module also carries the velocity-level step an engine runs
-//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `step_rows` (the
-//! library's row roots in one function, so the library's numbers) and the helper text of
-//! `support/step.rs` and the solver's file.
+//! (`step(state, impulses, h)`, `step_with`, `StepSettings`), for point masses and 2D and 3D
+//! rigid bodies: the scene's `step_rows` (the library's row roots in one function, so the
+//! library's numbers, over its slots: the bodies, then the angular slots), the state's slots
+//! (`get`, `put`) and the helper text of `support/step.rs`, `motion.rs` (or `motion_3d.rs`)
+//! and the solver's file.
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
@@ -236,7 +238,7 @@ fn specialise(loaded: &Loaded, d: &mut Derivation, specialize: bool) -> Result<S
                     let q = exact(x).ok_or_else(bad)?;
                     g.num(q)
                 }
-                // A quaternion is never a parameter: 3D rigid bodies are refused before this.
+                // A quaternion is never a parameter (an orientation is part of the state).
                 Value::Quaternion(_) => return Err(bad()),
                 Value::Vector(_) => {
                     let mut entries = Vec::new();
@@ -745,15 +747,14 @@ fn step_fns(
     let three = step.turns.iter().any(|t| t.1);
     let _ = writeln!(
         out,
-        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
-         pub const SOLVER: &str = \"{0}\";
-         /// Iterations per substep of `StepSettings::default()` for this solver.
-         pub const DEFAULT_ITERATIONS: usize = {1};
-         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
-         pub const INVERSE_SCALE: [f64; {k}] = {2};
-         /// The step's slots: the bodies, then {3}.
-         pub const SLOTS: usize = {slots};
-",
+        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).\n\
+         pub const SOLVER: &str = \"{0}\";\n\
+         /// Iterations per substep of `StepSettings::default()` for this solver.\n\
+         pub const DEFAULT_ITERATIONS: usize = {1};\n\
+         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).\n\
+         pub const INVERSE_SCALE: [f64; {k}] = {2};\n\
+         /// The step's slots: the bodies, then {3}.\n\
+         pub const SLOTS: usize = {slots};\n",
         solver.name(),
         solver.default_iterations(),
         array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>()),
