@@ -25,9 +25,11 @@
 
 use super::layout::{Layout, Solver};
 use super::names::comment_text;
-use super::rust::{Ctx, Field, Formulas, GenerateError, StepPlaces, array, formula, step_accessors, step_constants};
+use super::rust::{
+    Ctx, Field, Formulas, GenerateError, StepPlaces, StepRoots, array, formula, step_accessors, step_constants,
+};
 use crate::expr::graph::FastMap;
-use crate::expr::{Graph, Id, Ty};
+use crate::expr::{Graph, Ty};
 use crate::model::system::System;
 use crate::numeric::program::{Op, Program, Val};
 use std::cell::Cell;
@@ -211,8 +213,8 @@ fn slot_kinds(g: &Graph, system: &System, fields: &[Field]) -> (Vec<Slot>, Vec<u
 
 /// The module's step part with its rows by shape: the step's constants, the flat vector of
 /// other inputs (`others`), each shape's function and tables, `prepare` over them, and the
-/// state's accessors. `roots` are the step's roots in `step_fns`' order (per body m, v, F;
-/// per row C, Ċ, c, J).
+/// state's accessors. `step` holds the step's roots in `step_fns`' order (per body m, v, F;
+/// per row C, Ċ, c, J): point masses only, no angular slot.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn step_by_shape(
     out: &mut String,
@@ -224,13 +226,13 @@ pub(super) fn step_by_shape(
     places: &StepPlaces<'_>,
     formulas: &Formulas,
     layout: &Layout,
-    roots: &[Id],
+    step: &StepRoots,
     arrays: bool,
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let (n, k, dim) = (layout.bodies, layout.constraints, layout.dim);
-    step_constants(out, solver, inverse_scales, formulas, layout);
-    let p = Program::lower_in(g, roots, ctx.inputs)?;
+    step_constants(out, solver, inverse_scales, step, formulas, layout);
+    let p = Program::lower_in(g, &step.roots, ctx.inputs)?;
     let (slots, widths) = slot_kinds(g, system, fields);
     // Items: per body its m, v, F roots; per row C, Ċ and its J entries (c is not read).
     let bodies: Vec<Vec<usize>> = (0..n).map(|i| vec![3 * i, 3 * i + 1, 3 * i + 2]).collect();
@@ -313,7 +315,7 @@ pub(super) fn step_by_shape(
         let _ = writeln!(out, "    }}");
     }
     let _ = writeln!(out, "    p.finish(&ev);\n}}\n");
-    step_accessors(out, places);
+    step_accessors(out, places, step);
     Ok(())
 }
 

@@ -83,7 +83,9 @@ fn stable(x: Limit) -> String {
     match x {
         Limit::Hertz(x) => format!("{x:.3} Hz"),
         Limit::OutOfRange => format!("stable up to {MAX_HERTZ:e} Hz (or unstable at any)"),
-        Limit::NoRadius => "not computed (the eigenvalue iteration did not converge, or the step is not finite there)".to_string(),
+        Limit::NoRadius => {
+            "not computed (the eigenvalue iteration did not converge, or the step is not finite there)".to_string()
+        }
         Limit::Rigid3d => "not analysed (3D rigid bodies)".to_string(),
     }
 }
