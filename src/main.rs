@@ -68,9 +68,8 @@ enum Command {
         /// for this solver (Box2D v3's soft step, PGS, or the exact velocity solve).
         #[arg(long, value_enum)]
         solver: Option<StepArg>,
-        /// Write the step only (`--solver soft-step|pgs`, Rust, point masses), each repeated
-        /// row shape once over a table of its instances: a small module for scenes of
-        /// thousands of rows.
+        /// Write the step only (`--solver soft-step|pgs`, Rust), each repeated row shape once
+        /// over a table of its instances: a small module for scenes of thousands of rows.
         #[arg(long)]
         step_only: bool,
     },

@@ -21,10 +21,10 @@
 //! scene's scale after 1 000 steps (the rigid 20-link chain; the ball joint 4.8e-13, the weld
 //! 7.0e-14, the spinning top 1.4e-14, the rest below 1e-17), asserted at 1e-9, with two files
 //! apart (see the test). The exact comparison leaves out three big scenes for time ([`left_out`]).
-//! The soft step's `--step-only` modules (rows by shape, point masses only) are held to the
-//! library the same way on seven point-mass files, bit for bit; a file with rigid bodies is
-//! refused with `--step-only`. The harness counts its allocations: the soft step and PGS
-//! allocate nothing in any of their 1 000 steps, rigid bodies included.
+//! The soft step's `--step-only` modules (rows by shape) are held to the library the same
+//! way on ten files, point masses and 2D and 3D rigid bodies, bit for bit. The harness
+//! counts its allocations: the soft step and PGS allocate nothing in any of their 1 000
+//! steps, rigid bodies included.
 //!
 //! Not here: the default module (`tests/generate.rs`), the snapshots (`tests/outputs.rs`).
 
@@ -375,7 +375,9 @@ fn bitwise_runs(solver: Solver, runs: Vec<(String, Run, Run)>, files: usize) {
 /// their rows are cut out of the same program, so the soft step stays the library's bit for
 /// bit: on Solver2D's point-mass scenes (the 30 × 30 grid's 1 711 rows and 870 bodies are a
 /// few shapes, its anchors per-instance parameters; the stack's contacts are inequality
-/// rows) and on files whose rows read the time and parameters.
+/// rows), on files whose rows read the time and parameters, and on rigid bodies (the 2D
+/// rigid chain, a 2D revolute joint from a random state and the 3D ball joint: angular
+/// slots, Jʷ projected on a 3D body's axes; the 20-link chain's links are one shape).
 #[test]
 fn the_step_only_soft_step_is_the_librarys_bit_for_bit() {
     if common::skip_slow("the_step_only_soft_step_is_the_librarys_bit_for_bit") {
@@ -389,6 +391,9 @@ fn the_step_only_soft_step_is_the_librarys_bit_for_bit() {
         "constraints/moving_circle.toml",
         "constraints/driven_pendulum.toml",
         "constraints/hard/bounce.toml",
+        "constraints/rigid/chain_20.toml",
+        "constraints/joints/revolute.toml",
+        "constraints/joints/ball_3d.toml",
     ]
     .iter()
     .map(PathBuf::from)
@@ -472,6 +477,14 @@ fn a_step_only_module_writes_each_shape_once() {
     assert!((4..=8).contains(&shapes), "{shapes} shapes");
     assert!(code.len() < 200_000, "{} bytes", code.len());
     assert!(!code.contains("pub fn lambda(") && code.contains("pub fn step("));
+    // Rigid bodies: the 10 × 10 rigid grid's 342 revolute rows and 90 bodies are a few dozen
+    // shapes (bodies, rigid bodies and rows by where they sit), a ninth of the 1.4 MB module.
+    let l = loaded(Path::new("constraints/solvers/rigid_grid_10.toml"));
+    let code = module(&l, &options).expect("generates").code;
+    let shapes = code.matches("\nfn shape_").count();
+    assert!((3..=30).contains(&shapes), "{shapes} shapes");
+    assert!(code.len() < 200_000, "{} bytes", code.len());
+    assert!(code.contains("pub fn orientations(") && code.contains("pub fn angular_velocities("));
 }
 
 /// `--step-only` writes the soft step or PGS in Rust: without a solver, with the exact step
@@ -487,21 +500,5 @@ fn step_only_needs_the_soft_step_or_pgs_in_rust() {
         Options { solver: Some(Solver::SoftStep), lang: Lang::C, ..step_only },
     ] {
         assert_eq!(module(&l, &options).err(), Some(GenerateError::StepOnly), "{options:?}");
-    }
-}
-
-/// `--step-only` cuts its rows out of the point masses' roots: a file with rigid bodies (2D
-/// or 3D) is refused, saying to generate the whole module, which has their step.
-#[test]
-fn step_only_refuses_rigid_bodies() {
-    use lagrange::codegen::GenerateError;
-    for file in ["constraints/rigid/rod_pinned.toml", "constraints/joints/ball_3d.toml"] {
-        let l = loaded(Path::new(file));
-        let options = Options { solver: Some(Solver::SoftStep), step_only: true, ..Options::default() };
-        let err = module(&l, &options).err();
-        assert_eq!(err, Some(GenerateError::StepOnlyRigid), "{file}");
-        assert!(err.is_some_and(|e| e.to_string().contains("without --step-only")), "{file}");
-        let whole = Options { step_only: false, ..options };
-        assert!(module(&l, &whole).is_ok_and(|m| m.code.contains("pub fn step(")), "{file}");
     }
 }

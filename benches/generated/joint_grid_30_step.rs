@@ -201,7 +201,7 @@ const SHAPE_5_TABLE: [u32; 3358] = [1,2,2,3,3,4,4,5,5,6,6,7,7,8,8,9,9,10,10,11,1
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let (q, v) = (&s.position, &s.velocity);
     let x = others(s);
-    let mut ev = [[0.0; DIM]; BODIES];
+    let mut ev = [[0.0; DIM]; SLOTS];
     for (&i, t) in SHAPE_0_ITEMS.iter().zip(SHAPE_0_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_0(q, v, &x, t), i as usize);
         p.inverse_mass[i] = 1.0 / o[0];

@@ -20,8 +20,7 @@
 //! library's numbers, over its slots — the bodies, then the angular slots — written into the
 //! step's fixed arrays; the exact step's `step_rows`), the state's slots (`get`, `put`) and
 //! the helper text of `support/step.rs`, `motion.rs` (or `motion_3d.rs`) and the solver's
-//! file. With `--step-only` the module is the step alone, its rows by shape (`shapes.rs`;
-//! point masses only).
+//! file. With `--step-only` the module is the step alone, its rows by shape (`shapes.rs`).
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
@@ -96,10 +95,6 @@ pub enum GenerateError {
         "--step-only writes the soft step or PGS (--solver soft-step|pgs) in Rust; the exact step and C need the whole module"
     )]
     StepOnly,
-    #[error(
-        "--step-only writes point masses only: this file has rigid bodies (generate the whole module with --solver, without --step-only)"
-    )]
-    StepOnlyRigid,
     /// The formulas' code passed [`code_budget`] bytes.
     #[error(
         "the generated code is too large: its formulas pass {0} bytes (64 MiB, and 8 KiB more per body and \
@@ -204,10 +199,6 @@ pub fn generate(loaded: &Loaded, options: &Options) -> Result<String, GenerateEr
 pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateError> {
     if options.step_only && (options.lang != Lang::Rust || !options.solver.is_some_and(Solver::sweeps)) {
         return Err(GenerateError::StepOnly);
-    }
-    // The step by shape cuts the rows out of the point masses' roots: no angular slots.
-    if options.step_only && loaded.system.bodies.iter().any(|b| b.rigid.is_some()) {
-        return Err(GenerateError::StepOnlyRigid);
     }
     // The module's own derivation: `--specialize` extends its graph.
     let mut d = derive(&loaded.system)?;
@@ -954,7 +945,7 @@ fn step_fns(
 
 /// `--step-only`: the state, the step's constants, `positions` and `velocities`, the rows
 /// by shape (`shapes::step_by_shape`) and the step's helpers; none of the formulas' functions.
-/// Point masses only (`module` refuses rigid bodies).
+/// With rigid bodies also `orientations` and `angular_velocities`, as the full module's.
 fn step_module(
     loaded: &Loaded,
     options: &Options,
@@ -1027,6 +1018,22 @@ fn step_module(
             let _ = writeln!(out, "    {}\n}}\n", array(&items));
         }
     }
+    // The rigid bodies' orientations and ω, in the order of their slots, as the full module's
+    // functions give them (2D: θ and ω; 3D: q and the world ω).
+    if !places.turn.is_empty() {
+        let three = !scene.turns.three.is_empty();
+        let (q, w) = if three { ("[f64; 4]", "[f64; 3]") } else { ("f64", "f64") };
+        let r = places.turn.len();
+        for (name, what, ty, at) in [("orientations", "orientation", q, 0), ("angular_velocities", "ω", w, 1)] {
+            let items: Vec<String> =
+                places.turn.iter().map(|t| format!("s.{}", if at == 0 { t.0 } else { t.1 })).collect();
+            let _ = writeln!(
+                out,
+                "/// The {what} of each rigid body, in file order.\npub fn {name}(s: &State) -> [{ty}; {r}] {{\n    {}\n}}\n",
+                array(&items)
+            );
+        }
+    }
     let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
     super::shapes::step_by_shape(
         &mut out,
@@ -1041,7 +1048,7 @@ fn step_module(
         &step,
         arrays,
     )?;
-    helper_texts(&mut out, Some(solver), false);
+    helper_texts(&mut out, Some(solver), !scene.turns.three.is_empty());
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         warnings.push(format!(
