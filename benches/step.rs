@@ -50,7 +50,8 @@ macro_rules! generated {
                 let mut s = State::default();
                 s.g = [0.0, -10.0];
                 s.a1 = [0.0, 0.0];
-                put(&mut s, 0.0, q, &vec![[0.0; 2]; q.len()]);
+                let q: &[[f64; 2]; SLOTS] = q.try_into().expect("one position per body");
+                put(&mut s, 0.0, q, &[[0.0; 2]; SLOTS], &[]);
                 s
             }
         }
@@ -76,7 +77,8 @@ mod joint_grid_30 {
         anchors!(a11 = 10.0, a12 = 11.0, a13 = 12.0, a14 = 13.0, a15 = 14.0, a16 = 15.0, a17 = 16.0, a18 = 17.0);
         anchors!(a19 = 18.0, a20 = 19.0, a21 = 20.0, a22 = 21.0, a23 = 22.0, a24 = 23.0, a25 = 24.0, a26 = 25.0);
         anchors!(a27 = 26.0, a28 = 27.0, a29 = 28.0, a30 = 29.0);
-        put(&mut s, 0.0, q, &vec![[0.0; 2]; q.len()]);
+        let q: &[[f64; 2]; SLOTS] = q.try_into().expect("one position per body");
+        put(&mut s, 0.0, q, &[[0.0; 2]; SLOTS], &[]);
         s
     }
 }

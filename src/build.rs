@@ -46,8 +46,8 @@ pub enum BuildError {
     /// located at that constraint's `expr`.
     #[error("{}", render_constraint(&path.display().to_string(), text, *constraint, &source.to_string()))]
     Located { path: PathBuf, text: String, constraint: usize, source: GenerateError },
-    /// The code could not be generated (a 3D rigid body in C, `--solver` with rigid bodies, a
-    /// parameter value that cannot be written, a module past the code budget).
+    /// The code could not be generated (a parameter value that cannot be written, a module
+    /// past the code budget).
     #[error("error: {}: {source}", path.display())]
     Generate { path: PathBuf, source: GenerateError },
     /// The module could not be written.

@@ -28,8 +28,6 @@ pub enum ScenarioError {
     Derive(#[from] DeriveError),
     #[error("initial state: {0}")]
     State(#[from] StateError),
-    #[error(transparent)]
-    Rigid(#[from] crate::model::system::NotYetRigid),
 }
 
 /// A derived system with its numbers.

@@ -346,16 +346,20 @@ fn every_rigid_file_derives_in_every_format() {
     }
 }
 
-/// Until a command handles rigid bodies it refuses them, naming the body: never a silent
-/// wrong answer.
+/// `generate --solver` writes the velocity-level step for rigid bodies too, in Rust and C,
+/// with their angular slots in the step's rows (`tests/generate_step.rs` and
+/// `tests/generate_c.rs` hold its numbers to the library's and to each other).
 #[test]
-fn the_commands_without_rigid_bodies_refuse_them() {
+fn generate_writes_the_step_of_rigid_bodies() {
     let rel = "constraints/rigid/rod_pinned.toml";
-    // The generated velocity-level step (`generate --solver`) is the one left.
-    let args = ["generate", rel, "--solver", "pgs"];
-    let (code, out, err) = lagrange(&args);
-    assert_ne!(code, Some(0), "lagrange {args:?} accepted a rigid body:\n{out}");
-    assert!(err.contains("does not handle rigid bodies yet (body `rod`"), "lagrange {args:?}:\n{err}");
+    for lang in ["rust", "c"] {
+        for solver in ["soft-step", "pgs", "exact"] {
+            let args = ["generate", rel, "--lang", lang, "--solver", solver];
+            let (code, out, err) = lagrange(&args);
+            assert_eq!(code, Some(0), "lagrange {args:?}:\n{err}");
+            assert!(out.contains("step_with(") && out.contains("SLOTS"), "lagrange {args:?}: no step");
+        }
+    }
 }
 
 /// Evaluates `expected` (parsed into the derivation's graph) and `derived` at random

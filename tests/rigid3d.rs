@@ -11,8 +11,9 @@
 //!   against central differences of C along a trajectory with an exact rotation
 //!   q(t) = exp(½ n φ(t)) q₀ about a random fixed axis n, φ = w t + ½ a t² (so ω = n φ̇,
 //!   α = n a); and Ċ/κ = Σ J·u over the rows' slots.
-//! - Refusals naming the body: a non-unit quaternion, `generate --solver`; `bench --solvers`
-//!   runs them (without a stability limit, saying so).
+//! - Refusals naming the body: a non-unit quaternion; `bench --solvers` runs them (without
+//!   a stability limit, saying so) and `generate --solver` writes their step
+//!   (`tests/generate_step.rs`).
 //! - Every scene of the joint library and the rigid-body files starts on its constraints.
 //! - `bench` (the work-precision sweep and formula accuracy) on the ball joint and the
 //!   spinning top: every run ok, each force and world torque at f64's precision against the
@@ -371,14 +372,6 @@ fn solve_reports_3d_torques_and_angular_accelerations_as_arrays() {
     }
     let reactions = json["reactions"].as_array().expect("reactions");
     assert!(reactions.iter().all(|r| r["torque"].as_array().is_some_and(|a| a.len() == 3)), "{reactions:?}");
-}
-
-#[test]
-fn commands_without_quaternions_refuse_3d_bodies_naming_them() {
-    let args = ["generate", "constraints/joints/ball_3d.toml", "--solver", "soft-step"];
-    let (code, _, err) = lagrange(&args);
-    assert_eq!(code, Some(1), "{args:?}: {err}");
-    assert!(err.contains("body `a`"), "{args:?}: {err}");
 }
 
 /// `bench --solvers` on 3D rigid bodies (it hung for over ten minutes in the stability

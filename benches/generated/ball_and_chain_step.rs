@@ -3522,20 +3522,26 @@ fn solve_tridiagonal<const K: usize>(a: &[[f64; 3]; K]) -> Option<[f64; K]> {
 }
 
 /// The velocity-level solver of `step` (`lagrange generate --solver soft-step`).
-         pub const SOLVER: &str = "soft-step";
-         /// Iterations per substep of `StepSettings::default()` for this solver.
-         pub const DEFAULT_ITERATIONS: usize = 1;
-         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
-         pub const INVERSE_SCALE: [f64; 41] = [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+pub const SOLVER: &str = "soft-step";
+/// Iterations per substep of `StepSettings::default()` for this solver.
+pub const DEFAULT_ITERATIONS: usize = 1;
+/// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
+pub const INVERSE_SCALE: [f64; 41] = [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0];
+/// The step's slots: the bodies (no rigid body here).
+pub const SLOTS: usize = 41;
+/// The 3D rigid bodies, whose orientations q₀ the step turns from.
+const ORIENTATIONS: usize = 0;
+/// The slots whose principal axes the rows carry (all of them with 3D rigid bodies, else none).
+const AXES: usize = 0;
 
-/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on body `ROW_BODY[e]`.
-         const ENTRIES: usize = 81;
-         const ROW_START: [usize; 42] = [0, 1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35, 37, 39, 41, 43, 45, 47, 49, 51, 53, 55, 57, 59, 61, 63, 65, 67, 69, 71, 73, 75, 77, 79, 81];
-         const ROW_BODY: [usize; 81] = [0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13, 14, 14, 15, 15, 16, 16, 17, 17, 18, 18, 19, 19, 20, 20, 21, 21, 22, 22, 23, 23, 24, 24, 25, 25, 26, 26, 27, 27, 28, 28, 29, 29, 30, 30, 31, 31, 32, 32, 33, 33, 34, 34, 35, 35, 36, 36, 37, 37, 38, 38, 39, 39, 40];
+/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.
+const ENTRIES: usize = 81;
+const ROW_START: [usize; 42] = [0, 1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35, 37, 39, 41, 43, 45, 47, 49, 51, 53, 55, 57, 59, 61, 63, 65, 67, 69, 71, 73, 75, 77, 79, 81];
+const ROW_BODY: [usize; 81] = [0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13, 14, 14, 15, 15, 16, 16, 17, 17, 18, 18, 19, 19, 20, 20, 21, 21, 22, 22, 23, 23, 24, 24, 25, 25, 26, 26, 27, 27, 28, 28, 29, 29, 30, 30, 31, 31, 32, 32, 33, 33, 34, 34, 35, 35, 36, 36, 37, 37, 38, 38, 39, 39, 40];
 
-/// The rows the step solves, at a state: per body 1/m, v and F (the scene's, `applied_forces`), per row C/κ, Ċ/κ, c and J = ∇C/κ per body. Per row k
+/// The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k
 /// of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,
-/// and the impulse ΔP the solver gives (see `step_with`); ΔP moves body i by Δvᵢ = Jᵢ ΔP / mᵢ.
+/// and the impulse ΔP the solver gives (see `step_with`); ΔP moves slot i by Δuᵢ = Jᵢ ΔP / mᵢ.
 /// - row 0, `link1`: C = |r_p1 − a1| − 1
 ///   J, body `p1`: (r_p1 − a1)/|r_p1 − a1|
 ///   J M⁻¹ Jᵀ = A[0][0] = 1/6
@@ -4028,7 +4034,7 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x324 = x120 * x322 + x121 * x323;
     let x325 = 1.0 / x122;
     let x326 = -x325;
-    let mut v = [[0.0; DIM]; BODIES];
+    let mut v = [[0.0; DIM]; SLOTS];
     p.inverse_mass[0] = 1.0 / 6.0;
     v[0] = [s.v_p1[0], s.v_p1[1]];
     p.force[0] = [x123, x124];
@@ -4200,9 +4206,18 @@ fn time(s: &State) -> f64 {
     s.t
 }
 
-/// Writes the time, the positions and the velocities (per body, in file order) into the state.
-fn put(s: &mut State, t: f64, q: &[[f64; DIM]], v: &[[f64; DIM]]) {
+/// The state's slots as the step moves them (the library's `numeric::simulate::initial_state`): per body x and v,
+/// then per rigid body [θ, 0] and [ω, 0] (3D: the rotation vector φ = 0 since its orientation q₀ and the world ω,
+/// then two empty slots), and the 3D rigid bodies' orientations q₀.
+#[allow(clippy::type_complexity)]
+fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIENTATIONS]) {
+    (positions(s), velocities(s), [])
+}
+
+/// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).
+fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
     s.t = t;
+    let _ = q0;
     s.r_p1 = q[0];
     s.v_p1 = v[0];
     s.r_p2 = q[1];
@@ -4884,19 +4899,22 @@ impl StepSettings {
 }
 
 /// The rows at a state as the exact step reads them (`step_rows`): per row C/κ, Ċ/κ, c, J;
-/// per body 1/m, v and the scene's force.
+/// per slot (the bodies, then the rigid bodies' angular slots, as `numeric::rows` lays them
+/// out) 1/m, v and the scene's force; with 3D rigid bodies each slot's principal axis (zero
+/// for a linear slot; empty otherwise).
 #[allow(dead_code)]
 struct StepRows<const D: usize> {
     rows: Vec<Row<D>>,
     inverse_mass: Vec<f64>,
     velocity: Vec<[f64; D]>,
     force: Vec<[f64; D]>,
+    axes: Vec<[f64; D]>,
 }
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
-/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on body
-/// `ROW_BODY[e]`); per body 1/m and F. Arrays of the module's sizes, filled in place
-/// (`prepare`), so a step allocates nothing.
+/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
+/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
@@ -4906,8 +4924,15 @@ struct Prepared<const D: usize> {
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     effective_mass: [f64; CONSTRAINTS],
     inequality: [bool; CONSTRAINTS],
-    inverse_mass: [f64; BODIES],
-    force: [[f64; D]; BODIES],
+    inverse_mass: [f64; SLOTS],
+    force: [[f64; D]; SLOTS],
+    /// Per slot its principal axis (`AXES` is 0 without 3D rigid bodies).
+    axes: [[f64; D]; AXES],
+    /// Per slot the velocity the rows were evaluated at (3D rigid bodies: the body-frame ω
+    /// their gyroscopic term was taken at; none without 3D rigid bodies).
+    velocity: [[f64; D]; AXES],
+    /// The first 3D rigid body's first slot (`None` without 3D rigid bodies).
+    first: Option<usize>,
 }
 
 /// a·b, summed from 0 as the library sums its three components (the same number, zero's
@@ -4931,16 +4956,19 @@ impl<const D: usize> Prepared<D> {
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
             inequality: INEQUALITY,
-            inverse_mass: [0.0; BODIES],
-            force: [[0.0; D]; BODIES],
+            inverse_mass: [0.0; SLOTS],
+            force: [[0.0; D]; SLOTS],
+            axes: [[0.0; D]; AXES],
+            velocity: [[0.0; D]; AXES],
+            first: None,
         }
     }
 
-    /// From the rows at a state with velocities `velocity`, the bodies' 1/m and forces.
-    fn new(rows: &[Row<D>], inverse_mass: &[f64], velocity: &[[f64; D]], force: &[[f64; D]]) -> Prepared<D> {
+    /// From the rows at a state (`step_rows`), evaluated at the velocities they carry.
+    fn new(r: &StepRows<D>) -> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
-        for (k, row) in rows.iter().enumerate() {
+        for (k, row) in r.rows.iter().enumerate() {
             for (_, j) in &row.jacobian {
                 p.jacobian[e] = *j;
                 e += 1;
@@ -4948,9 +4976,16 @@ impl<const D: usize> Prepared<D> {
             p.value[k] = row.value;
             p.time_rate[k] = row.rate;
         }
-        p.inverse_mass.copy_from_slice(inverse_mass);
-        p.force.copy_from_slice(force);
-        p.finish(velocity);
+        p.inverse_mass.copy_from_slice(&r.inverse_mass);
+        p.force.copy_from_slice(&r.force);
+        if !r.axes.is_empty() {
+            p.axes.copy_from_slice(&r.axes);
+            p.first = r.axes.iter().position(|e| e.iter().any(|&x| x != 0.0));
+            if p.first.is_some() {
+                p.velocity.copy_from_slice(&r.velocity);
+            }
+        }
+        p.finish(&r.velocity);
         p
     }
 
@@ -5018,8 +5053,11 @@ impl<const D: usize> Prepared<D> {
             }
         }
     }
+}
 
-    /// u += h M⁻¹ F: the external forces over one substep.
+#[allow(dead_code)]
+impl<const D: usize> Prepared<D> {
+    /// u += h M⁻¹ F: the external forces (and torques) over one substep.
     fn kick(&self, u: &mut [[f64; D]], h: f64) {
         for ((u, f), w) in u.iter_mut().zip(&self.force).zip(&self.inverse_mass) {
             for d in 0..D {
@@ -5027,16 +5065,31 @@ impl<const D: usize> Prepared<D> {
             }
         }
     }
-}
 
-/// q += h u.
-fn drift<const D: usize>(q: &mut [[f64; D]], u: &[[f64; D]], h: f64) {
-    for (q, u) in q.iter_mut().zip(u) {
-        for d in 0..D {
-            q[d] += h * u[d];
+    /// State slots into the rows' slots: the same slots without 3D rigid bodies.
+    fn to_axes(&self, _x: &mut [[f64; D]]) {}
+
+    /// The rows' slots into state slots: the same slots without 3D rigid bodies.
+    fn to_world(&self, _x: &mut [[f64; D]]) {}
+
+    /// q += h u.
+    fn drift(&self, q: &mut [[f64; D]], u: &[[f64; D]], h: f64) {
+        for (q, u) in q.iter_mut().zip(u) {
+            for d in 0..D {
+                q[d] += h * u[d];
+            }
         }
     }
 }
+
+/// A correction over the rows' slots into state slots (the rows' `axes`): nothing to turn
+/// without 3D rigid bodies.
+#[allow(dead_code)]
+fn fold<const D: usize>(_axes: &[[f64; D]], _x: &mut [[f64; D]]) {}
+
+/// The start of a substep: no orientation to fold in without 3D rigid bodies.
+#[allow(dead_code)]
+fn rebase<const D: usize>(_orientations: &mut [[f64; 4]], _q: &mut [[f64; D]], _fresh: bool) {}
 
 impl<const D: usize> Prepared<D> {
     /// Warm start: every row's accumulated impulse applied again.
@@ -5086,7 +5139,9 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 ///   integrate positions    q ← q + h u
 ///   relax (without bias)   per row: ΔP = −m_eff·(J u + ∂C/∂t)
 ///
-/// with the rows evaluated where each substep starts; then restitution for inequality rows
+/// over the slots of `numeric::rows` (a rigid body's angle and ω too; a 3D body's ω along its
+/// principal axes, its kick with the gyroscopic term at the implicit midpoint, its turn
+/// exact), with the rows evaluated where each substep starts; then restitution for inequality rows
 /// that closed faster than the threshold. Equality rows: b = biasRate·C/κ with the joint
 /// softness. Inequality rows: apart (C > 0) rigid and speculative, b = C/(κh); penetrating
 /// the contact softness, b = max(biasRate·C/κ, −3); P ≥ 0 on the accumulated impulse. The
@@ -5100,9 +5155,11 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         impulses.iter_mut().for_each(|p| *p = 0.0);
     }
     let t = time(s);
-    let (mut q, mut v) = (positions(s), velocities(s));
+    let (mut q, mut v, mut q0) = get(s);
     let mut p = Prepared::zeroed();
     prepare(s, &mut p);
+    // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
+    p.to_axes(&mut v);
     // Ċ at the step's start, restitution's closing speed (read only with restitution).
     let mut start_rate = [0.0; CONSTRAINTS];
     if settings.restitution > 0.0 {
@@ -5111,6 +5168,8 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         }
     }
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: the orientation folded in and renormalised, φ = 0 from here.
+        rebase(&mut q0, &mut q, sub == 0);
         p.kick(&mut v, h);
         p.warm_start(&mut v, impulses);
         for _ in 0..iterations {
@@ -5126,9 +5185,11 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
                 }
             });
         }
-        drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v);
+        p.to_world(&mut v);
+        p.drift(&mut q, &v, h);
+        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
         prepare(s, &mut p);
+        p.to_axes(&mut v);
         if settings.relax {
             let pr = &p;
             for _ in 0..iterations {
@@ -5151,5 +5212,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
             p.apply(k, &mut v, delta);
         }
     }
-    put(s, time(s), &q, &v);
+    p.to_world(&mut v);
+    put(s, time(s), &q, &v, &q0);
 }

@@ -18,17 +18,18 @@
 //! `angular_velocities`, `external_torques`, `applied_torques`, `body_axes`, and per axis
 //! slot `axis_inverse_inertias`, `axis_angular_velocities`, `axis_torques` and Jʷ·eₖ.
 //!
-//! With `--solver soft-step|pgs` the module also has the step (`step`, `step_with`,
-//! `step_settings_default`): the scene's `step_rows` over the Rust module's roots (its `prepare`'s) and the
-//! text of `support/step.c`, the Rust step's operations in its order.
+//! With `--solver soft-step|pgs|exact` the module also has the step (`step`, `step_with`,
+//! `step_settings_default`), for point masses and 2D and 3D rigid bodies: the scene's
+//! `step_rows` over the Rust module's roots (`StepRoots`, those of its `prepare` or
+//! `step_rows`), its state accessors, and the text of `support/motion.c` (or `motion_3d.c`),
+//! `support/step.c` and `sweep.c` or `exact.c`, the Rust step's operations in its order.
 //!
-//! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the rows'
-//! solve (the Rust module's `solution` and the exact step have no C twin yet), files or
-//! stdout.
+//! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the λ path
+//! (`codegen::c_solve`), files or stdout.
 
 use super::layout::{AStorage, JStorage, Layout, Solver};
 use super::names::{Namer, c_reserved, comment_text};
-use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, LengthPlace, Names, Prec, Turns, formula};
+use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, LengthPlace, Names, Prec, StepRoots, Turns, formula};
 use crate::expr::{Graph, Id, Symbol, Ty};
 use std::fmt::Write;
 
@@ -64,12 +65,22 @@ pub(super) struct StepParts {
     pub time: Symbol,
     /// Each body's position and velocity symbols.
     pub bodies: Vec<(Symbol, Symbol)>,
-    /// Each body's mass (the rows' root).
-    pub masses: Vec<Id>,
+    /// Each rigid body's orientation and angular velocity symbols, in the order of its slots.
+    pub turns: Vec<(Symbol, Symbol)>,
+    /// The rows' roots in the library's order (as the Rust module's `step_rows`).
+    pub roots: StepRoots,
 }
 
 /// The step's shared C (`support/step.c`): the Rust step's operations in its order.
 const STEP_C: &str = include_str!("support/step.c");
+/// The kick and drift over the slots (`support/motion.c`, no 3D rigid body).
+const MOTION_C: &str = include_str!("support/motion.c");
+/// The same with 3D rigid bodies (`support/motion_3d.c`).
+const MOTION_3D_C: &str = include_str!("support/motion_3d.c");
+/// The soft step and PGS (`support/sweep.c`).
+const SWEEP_C: &str = include_str!("support/sweep.c");
+/// The exact step (`support/exact.c`).
+const EXACT_C: &str = include_str!("support/exact.c");
 
 /// The C name of each field: the Rust one, unless C cannot have it (then `_`, and a suffix
 /// where taken). A role array's entry (`position[3]`) keeps its form.
@@ -447,14 +458,22 @@ fn angular_jacobian(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<()
 }
 
 /// The scene's part of the step in C (`step_rows`, the state's accessors, the row
-/// structure) and the shared text of `support/step.c`.
+/// structure) and the shared text: `support/step.c`, the motion of the slots
+/// (`support/motion.c`, or `motion_3d.c`), then the solver's (`sweep.c` or `exact.c`).
 fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> Result<(), GenerateError> {
     let (dim, n, k) = (p.layout.dim, p.layout.bodies, p.layout.constraints);
     let f = p.formulas;
-    let entries: usize = f.jacobian.iter().map(Vec::len).sum();
+    let roots = &step.roots;
+    let slots = roots.slots(n);
+    let rigid_3d = roots.three();
+    let (starts, bodies) = roots.entries(f);
+    let (starts, bodies): (Vec<String>, Vec<String>) =
+        (starts.iter().map(usize::to_string).collect(), bodies.iter().map(usize::to_string).collect());
+    let entries = bodies.len();
     let _ = writeln!(
         out,
-        "/* The velocity-level step: `lagrange generate --lang c --solver {}`. */\nenum {{ SOLVER_PGS = {}, DEFAULT_ITERATIONS = {} }};\n",
+        "/* The velocity-level step: `lagrange generate --lang c --solver {}`. */\n\
+         enum {{ SOLVER_PGS = {}, DEFAULT_ITERATIONS = {}, RIGID_3D = {rigid_3d} }};\n",
         step.solver.name(),
         i32::from(step.solver == Solver::Pgs),
         step.solver.default_iterations()
@@ -466,36 +485,30 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
         k.max(1),
         list(&inv, k)
     );
-    let mut starts = vec!["0".to_string()];
-    let mut bodies = Vec::new();
-    for dirs in &f.jacobian {
-        bodies.extend(dirs.iter().map(|d| d.0.to_string()));
-        starts.push(bodies.len().to_string());
-    }
-    let _ =
-        writeln!(out, "/* Row k's Jacobian entries are ROW_START[k] .. ROW_START[k + 1], on bodies ROW_BODY[e]. */");
+    let _ = writeln!(
+        out,
+        "/* Row k's Jacobian entries are ROW_START[k] .. ROW_START[k + 1], on slots ROW_BODY[e] (the bodies, then\n   \
+         the rigid bodies' angular slots). */"
+    );
     let _ = writeln!(out, "static const int ROW_START[{}] = {{{}}};", k + 1, starts.join(", "));
     let _ = writeln!(out, "static const int ROW_BODY[{}] = {{{}}};\n", entries.max(1), list(&bodies, entries));
     let _ = writeln!(
         out,
-        "/* The rows of a state as the step reads them: per row C/kappa, its rate, c, J per entry; per body\n   \
-         1/m, v and the scene's force; and the step's effective masses and dC/dt. */\n\
+        "/* The rows of a state as the step reads them: per row C/kappa, its rate, c, J per entry; per slot\n   \
+         1/m, v and the scene's force (a rigid body's 1/I, omega, tau), its principal axis (3D rigid bodies); and\n   \
+         the step's effective masses, dC/dt and first 3D slot. */\n\
          typedef struct Prepared {{\n    double value[{k1}], rate[{k1}], bias[{k1}], time_rate[{k1}], effective_mass[{k1}];\n    \
-         double inverse_mass[{n1}], velocity[{n1}][{dim}], force[{n1}][{dim}];\n    double jacobian[{e1}][{dim}];\n}} Prepared;\n",
+         double inverse_mass[{slots}], velocity[{slots}][{dim}], force[{slots}][{dim}], axes[{slots}][{dim}];\n    \
+         double jacobian[{e1}][{dim}];\n    int first;\n}} Prepared;\n",
         k1 = k.max(1),
-        n1 = n.max(1),
         e1 = entries.max(1)
     );
-    // The rows' roots in the library's order (as the Rust module's `prepare`).
-    let mut roots = Vec::new();
-    for i in 0..n {
-        roots.extend([step.masses[i], p.bodies.velocity[i], p.bodies.applied[i]]);
-    }
-    for r in 0..k {
-        roots.extend([f.c[r], f.c_dot[r], f.bias[r]]);
-        roots.extend(f.jacobian[r].iter().map(|&(_, j)| j));
-    }
-    let (lets, exprs) = ctx.body(&roots)?;
+    out.push_str(if rigid_3d > 0 { MOTION_3D_C } else { MOTION_C });
+    out.push('\n');
+    // The rows' roots in the library's order (as the Rust module's `prepare`): c, read by the
+    // exact step alone, is left out of the others' code.
+    let (lets, exprs) =
+        if step.solver == Solver::Exact { ctx.body(&roots.roots)? } else { ctx.body_of(&roots.roots, &roots.swept)? };
     let mut values = exprs.into_iter();
     let mut next = || values.next().unwrap_or_default();
     let mut stores = Vec::new();
@@ -507,15 +520,51 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
         for d in 0..dim {
             stores.push(format!("r->force[{i}][{d}] = {};", next()));
         }
+        if rigid_3d > 0 {
+            stores.push(format!("r->axes[{i}][0] = 0.0;\n    r->axes[{i}][1] = 0.0;\n    r->axes[{i}][2] = 0.0;"));
+        }
+    }
+    let vector = |next: &mut dyn FnMut() -> String| (0..3).map(|_| next()).collect::<Vec<_>>().join(", ");
+    for &(first, three) in &roots.turns {
+        if three {
+            // I, ω, τ and the axes, then the body's three axis slots.
+            let (i, w, t) = (vector(&mut next), vector(&mut next), vector(&mut next));
+            let e = [vector(&mut next), vector(&mut next), vector(&mut next)];
+            stores.push(format!(
+                "{{\n        const double m[3] = {{{i}}}, w[3] = {{{w}}}, tau[3] = {{{t}}};\n        \
+                 const double e[3][3] = {{{{{}}}, {{{}}}, {{{}}}}};\n        axis_slots(r, {first}, m, w, tau, e);\n    }}",
+                e[0], e[1], e[2]
+            ));
+        } else {
+            stores.push(format!("r->inverse_mass[{first}] = 1.0 / {};", paren(&next())));
+            stores.push(format!("r->velocity[{first}][0] = {};\n    r->velocity[{first}][1] = 0.0;", next()));
+            stores.push(format!("r->force[{first}][0] = {};\n    r->force[{first}][1] = 0.0;", next()));
+        }
     }
     let mut e = 0;
-    for r in 0..k {
+    for (r, angular) in roots.angular_slots.iter().enumerate() {
         stores.push(format!("r->value[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
         stores.push(format!("r->rate[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
-        stores.push(format!("r->bias[{r}] = {};", next()));
+        let bias = next();
+        if !bias.is_empty() {
+            stores.push(format!("r->bias[{r}] = {bias};"));
+        }
         for _ in &f.jacobian[r] {
             for d in 0..dim {
                 stores.push(format!("r->jacobian[{e}][{d}] = {};", next()));
+            }
+            e += 1;
+        }
+        for &slot in angular {
+            if rigid_3d > 0 {
+                // Jʷ·eₖ: the axis' part of the world vector Jʷ.
+                let jw = vector(&mut next);
+                stores.push(format!(
+                    "{{\n        const double jw[3] = {{{jw}}};\n        r->jacobian[{e}][0] = lg_dot3(r->axes[{slot}], jw);\n        \
+                     r->jacobian[{e}][1] = 0.0;\n        r->jacobian[{e}][2] = 0.0;\n    }}"
+                ));
+            } else {
+                stores.push(format!("r->jacobian[{e}][0] = {};\n    r->jacobian[{e}][1] = 0.0;", next()));
             }
             e += 1;
         }
@@ -539,6 +588,7 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
             let _ = writeln!(out, "    (void)s;\n    return 0.0;\n}}\n");
         }
     }
+    // The state's slots as the Rust module's `get` and `put` have them.
     let mut get = Vec::new();
     let mut put = Vec::new();
     for (i, &(q, v)) in step.bodies.iter().enumerate() {
@@ -548,18 +598,53 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
             put.push(format!("s->{q}[{d}] = q[{i}][{d}];\n    s->{v}[{d}] = v[{i}][{d}];"));
         }
     }
+    let mut r3 = 0;
+    for (&(first, three), &(o, w)) in roots.turns.iter().zip(&step.turns) {
+        let (o, w) = (name_of(o).unwrap_or_default(), name_of(w).unwrap_or_default());
+        if three {
+            for slot in first..first + 3 {
+                for d in 0..3 {
+                    get.push(format!("q[{slot}][{d}] = 0.0;"));
+                    let value = if slot == first { format!("s->{w}[{d}]") } else { "0.0".to_string() };
+                    get.push(format!("v[{slot}][{d}] = {value};"));
+                }
+            }
+            for d in 0..4 {
+                get.push(format!("q0[{r3}][{d}] = s->{o}[{d}];"));
+            }
+            put.push(format!("turned(q[{first}], q0[{r3}], s->{o});"));
+            for d in 0..3 {
+                put.push(format!("s->{w}[{d}] = v[{first}][{d}];"));
+            }
+            r3 += 1;
+        } else {
+            get.push(format!(
+                "q[{first}][0] = s->{o};\n    q[{first}][1] = 0.0;\n    v[{first}][0] = s->{w};\n    v[{first}][1] = 0.0;"
+            ));
+            put.push(format!("s->{o} = q[{first}][0];\n    s->{w} = v[{first}][0];"));
+        }
+    }
+    if rigid_3d == 0 {
+        get.push("(void)q0;".to_string());
+        put.push("(void)q0;".to_string());
+    }
     let _ = writeln!(
         out,
-        "static void state_get(const State *s, double q[][DIM], double v[][DIM]) {{\n    {}\n}}\n",
+        "/* The state's slots: per body x and v, per rigid body [theta, 0] and [omega, 0] (3D: the rotation vector\n   \
+         phi = 0 since its orientation q0 and the world omega, then two empty slots), and the 3D bodies' q0. */\n\
+         static void state_get(const State *s, double q[][DIM], double v[][DIM], double q0[][4]) {{\n    {}\n}}\n",
         get.join("\n    ")
     );
     let time = name_of(step.time).map_or("(void)t;".to_string(), |t| format!("s->{t} = t;"));
     let _ = writeln!(
         out,
-        "static void state_put(State *s, double t, double q[][DIM], double v[][DIM]) {{\n    {time}\n    {}\n}}\n",
+        "/* Writes the time and the slots into the state (3D: the orientation exp(phi) (x) q0). */\n\
+         static void state_put(State *s, double t, double q[][DIM], double v[][DIM], double q0[][4]) {{\n    {time}\n    {}\n}}\n",
         put.join("\n    ")
     );
     out.push_str(STEP_C);
+    out.push('\n');
+    out.push_str(if step.solver == Solver::Exact { EXACT_C } else { SWEEP_C });
     Ok(())
 }
 

@@ -15,11 +15,12 @@
 //! slots per body, one per principal axis (`axis_slot`), and the torques and α come back as
 //! world vectors.
 //! With `--solver` the module also carries the velocity-level step an engine runs
-//! (`step(state, impulses, h)`, `step_with`, `StepSettings`): the scene's `prepare` (the
-//! library's row roots in one function, so the library's numbers, written into the step's
-//! arrays; the exact step's `step_rows`) and the helper text of `support/step.rs` and the
-//! solver's file. With `--step-only` the module is the step alone, its rows by shape
-//! (`shapes.rs`).
+//! (`step(state, impulses, h)`, `step_with`, `StepSettings`), for point masses and 2D and 3D
+//! rigid bodies: the scene's `prepare` (the library's row roots in one function, so the
+//! library's numbers, over its slots — the bodies, then the angular slots — written into the
+//! step's fixed arrays; the exact step's `step_rows`), the state's slots (`get`, `put`) and
+//! the helper text of `support/step.rs`, `motion.rs` (or `motion_3d.rs`) and the solver's
+//! file. With `--step-only` the module is the step alone, its rows by shape (`shapes.rs`).
 //!
 //! The layout — dense or banded A, on the stack or the heap, dense J or its blocks, outputs
 //! in parts of at most `MAX_PART` formulas — is decided by [`super::layout`] before any text
@@ -44,7 +45,9 @@ use super::layout::Solver;
 use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
-use super::support::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, SOLVE_TRIDIAGONAL, STEP, SWEEP};
+use super::support::{
+    EXACT, HELPERS, MOTION, MOTION_3D, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, SOLVE_TRIDIAGONAL, STEP, SWEEP,
+};
 use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::Value;
 use crate::expr::print::{Style, print};
@@ -84,20 +87,12 @@ pub enum Lang {
 pub enum GenerateError {
     #[error(transparent)]
     Derive(#[from] DeriveError),
-    #[error(transparent)]
-    Rigid(#[from] crate::model::system::NotYetRigid),
-    #[error(transparent)]
-    Rigid3d(#[from] crate::model::system::NotYet3dRigid),
     #[error("internal type error: {0}")]
     Type(#[from] TypeError),
     #[error(transparent)]
     Lower(#[from] LowerError),
     #[error("parameter `{0}` has a value that cannot be written exactly (not finite, or too large)")]
     BadValue(String),
-    #[error(
-        "--lang c writes the soft step and PGS; the exact step (its rows' solve) is generated in Rust only for now"
-    )]
-    CStep,
     #[error(
         "--step-only writes the soft step or PGS (--solver soft-step|pgs) in Rust; the exact step and C need the whole module"
     )]
@@ -207,10 +202,6 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
     if options.step_only && (options.lang != Lang::Rust || !options.solver.is_some_and(Solver::sweeps)) {
         return Err(GenerateError::StepOnly);
     }
-    // The velocity-level step moves positions only: its rigid twin is not written yet.
-    if options.solver.is_some() {
-        loaded.system.refuse_rigid("generate --solver")?;
-    }
     // The module's own derivation: `--specialize` extends its graph.
     let mut d = derive(&loaded.system)?;
     let specialised = specialise(loaded, &mut d, options.specialize)?;
@@ -261,7 +252,7 @@ fn specialise(loaded: &Loaded, d: &mut Derivation, specialize: bool) -> Result<S
                     let q = exact(x).ok_or_else(bad)?;
                     g.num(q)
                 }
-                // A quaternion is never a parameter: 3D rigid bodies are refused before this.
+                // A quaternion is never a parameter (an orientation is part of the state).
                 Value::Quaternion(_) => return Err(bad()),
                 Value::Vector(_) => {
                     let mut entries = Vec::new();
@@ -362,6 +353,7 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
                 turns.torque.push(w.torque);
                 turns.applied.push(applied);
                 turns.inverse_inertia.push(w.inverse_inertia);
+                turns.inertia.push(inertia);
             }
             continue;
         }
@@ -375,6 +367,7 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
             None => scalar_zero,
         });
         turns.inverse_inertia.push(g.powi(inertia, -1)?);
+        turns.inertia.push(inertia);
     }
     // 3D: Jʷ projected on each principal axis, the entry of the axis' slot.
     if !turns.three.is_empty() {
@@ -506,9 +499,6 @@ fn c_module(
     scene: &SceneNumbers,
     plan: &Plan<'_>,
 ) -> Result<Module, GenerateError> {
-    if options.solver == Some(Solver::Exact) {
-        return Err(GenerateError::CStep);
-    }
     let (system, g, fields) = (&loaded.system, &d.graph, &plan.fields);
     let c_names = super::c::field_names(fields);
     let c_slots = super::c::slots(g, fields, &c_names);
@@ -541,7 +531,13 @@ fn c_module(
             inverse_scales: inverse_scales(d),
             time: system.time,
             bodies: system.bodies.iter().map(|b| (b.position, b.velocity)).collect(),
-            masses: scene.masses.clone(),
+            turns: scene
+                .turns
+                .rigid_bodies()
+                .into_iter()
+                .filter_map(|b| system.bodies[b].rigid.as_ref().map(|r| (r.orientation, r.angular_velocity)))
+                .collect(),
+            roots: StepRoots::of(&plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
         }),
     };
     let code = super::c::emit(&ctx, &parts)?;
@@ -596,17 +592,11 @@ fn rust_module(
     }
     ctx.solution(&mut out, formulas, (&scene.a_code, &scene.b_code), &names, layout, &scene.turns)?;
     if let Some(solver) = options.solver {
-        let step = StepPlaces {
-            time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
-            position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
-            velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
-            mass: scene.masses.clone(),
-            velocity_node: scene.bodies.velocity.clone(),
-            applied: scene.bodies.applied.clone(),
-        };
-        step_fns(&mut out, &ctx, solver, &inverse_scales(d), &step, formulas, &names, layout)?;
+        let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+        let places = StepPlaces::of(system, fields, &scene.turns);
+        step_fns(&mut out, &ctx, solver, &inverse_scales(d), &places, &step, formulas, &names, layout)?;
     }
-    helper_texts(&mut out, options.solver);
+    helper_texts(&mut out, options.solver, !scene.turns.three.is_empty());
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         let warning = format!(
@@ -644,14 +634,16 @@ fn formula_fns(
 }
 
 /// The helpers every module carries (the rows' solve, the norms), then the step's with
-/// `--solver`.
-fn helper_texts(out: &mut String, solver: Option<Solver>) {
+/// `--solver` (its motion of 3D rigid bodies where the module has them).
+fn helper_texts(out: &mut String, solver: Option<Solver>, three: bool) {
     out.push_str(ROWS);
     out.push('\n');
     out.push_str(HELPERS);
     if let Some(solver) = solver {
         out.push('\n');
         out.push_str(STEP);
+        out.push('\n');
+        out.push_str(if three { MOTION_3D } else { MOTION });
         if solver.sweeps() {
             out.push('\n');
             out.push_str(SWEEP);
@@ -671,21 +663,128 @@ fn ident_of(fields: &[Field], symbol: Symbol) -> &str {
 }
 
 /// Where the step reads and writes the state: the time field (none when the file has no
-/// `t` in its state) and each body's position and velocity fields, in file order.
+/// `t` in its state), each body's position and velocity fields, in file order, and each
+/// rigid body's orientation and angular velocity fields, in the order of their slots.
 pub(super) struct StepPlaces<'a> {
     time: Option<&'a str>,
     position: Vec<&'a str>,
     velocity: Vec<&'a str>,
-    /// Each body's mass, velocity symbol and scene force as graph nodes (the rows' roots).
-    mass: Vec<Id>,
-    velocity_node: Vec<Id>,
-    applied: Vec<Id>,
+    /// Per rigid body: its orientation (θ, or q in 3D) and ω fields.
+    turn: Vec<(&'a str, &'a str)>,
 }
 
-/// The scene's part of the step (`--solver`): its solver and default iterations, 1/κ as the
-/// library's rows use it, `step_rows` with the derivation of each row as comments, and the
-/// state's accessors the step's helper text calls (`time`, `put`, `prepare`; `step_rows` for
-/// the exact step).
+impl<'a> StepPlaces<'a> {
+    /// The places of the step's state in `fields`.
+    fn of(system: &crate::model::system::System, fields: &'a [Field], turns: &Turns) -> StepPlaces<'a> {
+        let turn = |body: usize| {
+            let rigid = system.bodies[body].rigid.as_ref();
+            rigid.map_or(("", ""), |r| (ident_of(fields, r.orientation), ident_of(fields, r.angular_velocity)))
+        };
+        StepPlaces {
+            time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
+            position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
+            velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
+            turn: turns.rigid_bodies().into_iter().map(turn).collect(),
+        }
+    }
+}
+
+/// The roots of the step's rows, in the order of the library's `numeric::rows::RowProgram`
+/// (per body m, v, F; per rigid body I, ω, τ, and in 3D its principal axes; per row C, Ċ, c,
+/// J per body, then Jʷ per rigid body it turns, once per angular slot), with where each
+/// row's angular entries go. Rust and C write the step's rows from the same list.
+pub(super) struct StepRoots {
+    pub(super) roots: Vec<Id>,
+    /// Per root, whether the soft step and PGS read it: all but each row's c (a root so that
+    /// the shared values are the library's, but only the exact step reads it).
+    pub(super) swept: Vec<bool>,
+    /// Per row, the slot of each angular entry (after its linear ones), in root order.
+    pub(super) angular_slots: Vec<Vec<usize>>,
+    /// Per rigid body: its first slot and whether it is 3D (three slots, one per axis).
+    pub(super) turns: Vec<(usize, bool)>,
+}
+
+impl StepRoots {
+    pub(super) fn of(layout: &Layout, masses: &[Id], bodies: &Bodies, turns: &Turns, formulas: &Formulas) -> StepRoots {
+        let n = layout.bodies;
+        let mut roots = Vec::new();
+        for ((&m, &v), &f) in masses.iter().zip(&bodies.velocity).zip(&bodies.applied).take(n) {
+            roots.extend([m, v, f]);
+        }
+        let three = !turns.three.is_empty();
+        let width = if three { 3 } else { 1 };
+        let mut rigid = Vec::new();
+        for (r, body) in turns.rigid_bodies().into_iter().enumerate() {
+            let slot = r * width;
+            rigid.push((body, n + slot, three));
+            if three {
+                // The moments, the world ω and τ, and the principal axes.
+                let t = &turns.three[r];
+                roots.extend([turns.inertia[slot], t.angular_velocity, t.applied]);
+                roots.extend(t.axes);
+            } else {
+                roots.extend([turns.inertia[slot], turns.angular_velocity[slot], turns.applied[slot]]);
+            }
+        }
+        let mut swept = vec![true; roots.len()];
+        let mut angular_slots = Vec::with_capacity(layout.constraints);
+        for r in 0..layout.constraints {
+            roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
+            swept.extend([true, true, false]);
+            roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
+            let mut slots = Vec::new();
+            for &(b, jw) in &formulas.angular[r] {
+                let Some(&(_, first, _)) = rigid.iter().find(|t| t.0 == b) else { continue };
+                for k in 0..width {
+                    roots.push(jw);
+                    slots.push(first + k);
+                }
+            }
+            swept.resize(roots.len(), true);
+            angular_slots.push(slots);
+        }
+        StepRoots {
+            roots,
+            swept,
+            angular_slots,
+            turns: rigid.into_iter().map(|(_, first, three)| (first, three)).collect(),
+        }
+    }
+
+    /// The step's slots: the bodies, then the rigid bodies' angular slots.
+    pub(super) fn slots(&self, bodies: usize) -> usize {
+        bodies + self.turns.iter().map(|&(_, three)| if three { 3 } else { 1 }).sum::<usize>()
+    }
+
+    /// The 3D rigid bodies (their slots' principal axes and orientations).
+    pub(super) fn three(&self) -> usize {
+        self.turns.iter().filter(|t| t.1).count()
+    }
+
+    /// Each row's Jacobian entries in the step's order (its bodies, then its angular slots),
+    /// as the slot of each: `ROW_START` (one more than the rows) and `ROW_BODY`.
+    pub(super) fn entries(&self, formulas: &Formulas) -> (Vec<usize>, Vec<usize>) {
+        let mut starts = vec![0];
+        let mut slots = Vec::new();
+        for (dirs, angular) in formulas.jacobian.iter().zip(&self.angular_slots) {
+            slots.extend(dirs.iter().map(|&(body, _)| body));
+            slots.extend(angular);
+            starts.push(slots.len());
+        }
+        (starts, slots)
+    }
+
+    /// The rigid body (its index among `turns`) and the axis of an angular slot.
+    fn axis_of(&self, slot: usize) -> (usize, usize) {
+        let rigid = self.turns.iter().rposition(|t| t.0 <= slot).unwrap_or(0);
+        (rigid, slot - self.turns.get(rigid).map_or(slot, |t| t.0))
+    }
+}
+
+/// The scene's part of the step (`--solver`): its constants, the derivation of each row as
+/// comments, `prepare` (the soft step and PGS: the rows written into the step's arrays;
+/// `step_rows` for the exact step) and the state's accessors the step's helper text calls
+/// (`time`, `get`, `put`).
 #[allow(clippy::too_many_arguments)]
 fn step_fns(
     out: &mut String,
@@ -693,24 +792,31 @@ fn step_fns(
     solver: Solver,
     inverse_scales: &[f64],
     places: &StepPlaces<'_>,
+    step: &StepRoots,
     formulas: &Formulas,
     names: &Names<'_>,
     layout: &Layout,
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let k = layout.constraints;
-    let starts = step_constants(out, solver, inverse_scales, formulas, layout);
+    let n = layout.bodies;
+    let slots = step.slots(n);
+    let three = step.three() > 0;
+    let starts = step_constants(out, solver, inverse_scales, step, formulas, layout);
     // The derivation, row by row: what the step's helper text computes from these numbers.
     let mut doc = vec![
-        "The rows the step solves, at a state: per body 1/m, v and F (the scene's, `applied_forces`), per row C/κ, Ċ/κ, c and J = ∇C/κ per body. Per row k".to_string(),
+        "The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k".to_string(),
         "of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,"
             .to_string(),
-        "and the impulse ΔP the solver gives (see `step_with`); ΔP moves body i by Δvᵢ = Jᵢ ΔP / mᵢ.".to_string(),
+        "and the impulse ΔP the solver gives (see `step_with`); ΔP moves slot i by Δuᵢ = Jᵢ ΔP / mᵢ.".to_string(),
     ];
     for (r, dirs) in formulas.jacobian.iter().enumerate() {
         doc.push(format!("- row {r}, `{}`: C = {}", comment_text(names.constraints[r]), formula(g, formulas.c[r])));
         for &(body, id) in dirs {
             doc.push(format!("  J, body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
+        }
+        for &(body, id) in &formulas.angular[r] {
+            doc.push(format!("  Jʷ, body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
         }
         if let Some(&(_, _, a)) = formulas.a.iter().find(|e| e.0 == r && e.1 == r) {
             doc.push(format!("  J M⁻¹ Jᵀ = A[{r}][{r}] = {}", formula(g, a)));
@@ -719,20 +825,12 @@ fn step_fns(
     for line in &doc {
         let _ = writeln!(out, "/// {line}");
     }
-    // One function over the roots of the library's row program, in its order (per body its
-    // mass, velocity and force; per row C, Ċ, c and J), so the shared values (one reciprocal
-    // for a value divided twice or more) are the library's and the rows its numbers, bit for bit.
-    let roots = step_roots(places, formulas, layout);
-    // The acceleration-level term c is a root (so the shared values are the library's) but
-    // the step does not read it: its code is left out.
-    let mut wanted = Vec::with_capacity(roots.len());
-    wanted.resize(3 * layout.bodies, true);
-    for r in 0..k {
-        wanted.extend([true, true, false]);
-        wanted.extend(formulas.jacobian[r].iter().map(|_| true));
-    }
+    // One function over the roots of the library's row program, in its order, so the shared
+    // values (one reciprocal for a value divided twice or more) are the library's and the
+    // rows its numbers, bit for bit. The acceleration-level term c is a root but only the
+    // exact step reads it: the soft step's and PGS's code leaves it out.
     let exact = solver == Solver::Exact;
-    let (lets, exprs) = if exact { ctx.body(&roots)? } else { ctx.body_of(&roots, &wanted)? };
+    let (lets, exprs) = if exact { ctx.body(&step.roots)? } else { ctx.body_of(&step.roots, &step.swept)? };
     let dim = layout.dim;
     let mut at = 0;
     let mut next = |n: usize| {
@@ -742,24 +840,80 @@ fn step_fns(
     };
     if exact {
         let _ = writeln!(out, "fn step_rows(s: &State) -> StepRows<DIM> {{");
-        for l in &lets {
-            let _ = writeln!(out, "    {l}");
-        }
+    } else {
         let _ = writeln!(
             out,
-            "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({n}), velocity: Vec::with_capacity({n}), force: Vec::with_capacity({n}) }};",
-            n = layout.bodies
+            "/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
+             fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
         );
-        for _ in 0..layout.bodies {
-            let m = next(1);
-            let (v, f) = (next(dim), next(dim));
+    }
+    for l in &lets {
+        let _ = writeln!(out, "    {l}");
+    }
+    if exact {
+        let _ = writeln!(
+            out,
+            "    let mut r = StepRows {{ rows: Vec::with_capacity({k}), inverse_mass: Vec::with_capacity({slots}), velocity: Vec::with_capacity({slots}), force: Vec::with_capacity({slots}), axes: Vec::new() }};",
+        );
+    } else {
+        // The velocities the rows are evaluated at (∂C/∂t = Ċ − J·v), per slot.
+        let _ = writeln!(out, "    let mut v = [[0.0; DIM]; SLOTS];");
+    }
+    for i in 0..n {
+        let m = next(1);
+        let (v, f) = (next(dim), next(dim));
+        if exact {
             let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&m[0]));
             let _ = writeln!(out, "    r.velocity.push({});\n    r.force.push({});", array(&v), array(&f));
+            if three {
+                let _ = writeln!(out, "    r.axes.push([0.0; DIM]);");
+            }
+        } else {
+            let _ = writeln!(out, "    p.inverse_mass[{i}] = 1.0 / {};", operand(&m[0]));
+            let _ = writeln!(out, "    v[{i}] = {};\n    p.force[{i}] = {};", array(&v), array(&f));
         }
-        for r in 0..k {
-            let scalars = next(3);
-            let js: Vec<String> =
-                formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+    }
+    for (r, &(first, is_3d)) in step.turns.iter().enumerate() {
+        if is_3d {
+            // I, ω, τ and the axes of the body, then its three axis slots (`axis_slots`).
+            let (i, w, t) = (next(3), next(3), next(3));
+            let e = [next(3), next(3), next(3)];
+            let axes = array(&e.iter().map(|x| array(x)).collect::<Vec<_>>());
+            let (i, w, t) = (array(&i), array(&w), array(&t));
+            if exact {
+                let _ =
+                    writeln!(out, "    let axes_{r} = {axes};\n    push_axis_slots(&mut r, {i}, {w}, {t}, axes_{r});");
+            } else {
+                let _ = writeln!(
+                    out,
+                    "    let axes_{r} = {axes};\n    p.axis_slots(&mut v, {first}, {i}, {w}, {t}, axes_{r});"
+                );
+            }
+        } else {
+            let (i, w, t) = (next(1), next(1), next(1));
+            if exact {
+                let _ = writeln!(out, "    r.inverse_mass.push(1.0 / {});", operand(&i[0]));
+                let _ = writeln!(out, "    r.velocity.push([{}, 0.0]);\n    r.force.push([{}, 0.0]);", w[0], t[0]);
+            } else {
+                let _ = writeln!(out, "    p.inverse_mass[{first}] = 1.0 / {};", operand(&i[0]));
+                let _ = writeln!(out, "    v[{first}] = [{}, 0.0];\n    p.force[{first}] = [{}, 0.0];", w[0], t[0]);
+            }
+        }
+    }
+    for (r, (angular, start)) in step.angular_slots.iter().zip(&starts).enumerate() {
+        let scalars = next(3);
+        let mut js: Vec<String> =
+            formulas.jacobian[r].iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+        for &slot in angular {
+            if three {
+                // Jʷ·eₖ: the axis' part of the world vector Jʷ (the library's `fill_jacobian`).
+                let (rigid, axis) = step.axis_of(slot);
+                js.push(format!("({slot}, [dot3(&axes_{rigid}[{axis}], &{}), 0.0, 0.0])", array(&next(dim))));
+            } else {
+                js.push(format!("({slot}, [{}, 0.0])", next(1)[0]));
+            }
+        }
+        if exact {
             let _ = writeln!(
                 out,
                 "    r.rows.push(Row {{ value: {} * INVERSE_SCALE[{r}], rate: {} * INVERSE_SCALE[{r}], bias: {}, inequality: INEQUALITY[{r}], jacobian: vec!{} }});",
@@ -768,27 +922,7 @@ fn step_fns(
                 scalars[2],
                 array(&js)
             );
-        }
-        let _ = writeln!(out, "    r\n}}\n");
-    } else {
-        let _ = writeln!(
-            out,
-            "/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
-             fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
-        );
-        for l in &lets {
-            let _ = writeln!(out, "    {l}");
-        }
-        let _ = writeln!(out, "    let mut v = [[0.0; DIM]; BODIES];");
-        for i in 0..layout.bodies {
-            let m = next(1);
-            let (v, f) = (next(dim), next(dim));
-            let _ = writeln!(out, "    p.inverse_mass[{i}] = 1.0 / {};", operand(&m[0]));
-            let _ = writeln!(out, "    v[{i}] = {};\n    p.force[{i}] = {};", array(&v), array(&f));
-        }
-        for (r, (dirs, start)) in formulas.jacobian.iter().zip(&starts).enumerate() {
-            let scalars = next(3);
-            let js: Vec<String> = dirs.iter().map(|&(body, _)| format!("({body}, {})", array(&next(dim)))).collect();
+        } else {
             let _ = writeln!(
                 out,
                 "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {start}, {}, &v);",
@@ -797,28 +931,23 @@ fn step_fns(
                 array(&js)
             );
         }
+    }
+    if exact {
+        let _ = writeln!(out, "    r\n}}\n");
+    } else {
+        if three {
+            // The body-frame ω the gyroscopic terms were taken at, for the kick.
+            let _ = writeln!(out, "    p.velocity = v;\n    p.first = first_angular(&p.axes);");
+        }
         let _ = writeln!(out, "}}\n");
     }
-    step_accessors(out, places);
+    step_accessors(out, places, step);
     Ok(())
-}
-
-/// The roots of the library's row program in its order: per body its mass, velocity and
-/// force; per row C, Ċ, c and J.
-fn step_roots(places: &StepPlaces<'_>, formulas: &Formulas, layout: &Layout) -> Vec<Id> {
-    let mut roots = Vec::new();
-    for i in 0..layout.bodies {
-        roots.extend([places.mass[i], places.velocity_node[i], places.applied[i]]);
-    }
-    for r in 0..layout.constraints {
-        roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
-        roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
-    }
-    roots
 }
 
 /// `--step-only`: the state, the step's constants, `positions` and `velocities`, the rows
 /// by shape (`shapes::step_by_shape`) and the step's helpers; none of the formulas' functions.
+/// With rigid bodies also `orientations` and `angular_velocities`, as the full module's.
 fn step_module(
     loaded: &Loaded,
     options: &Options,
@@ -875,14 +1004,7 @@ fn step_module(
         room: Cell::new(budget),
         budget,
     };
-    let places = StepPlaces {
-        time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
-        position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
-        velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
-        mass: scene.masses.clone(),
-        velocity_node: scene.bodies.velocity.clone(),
-        applied: scene.bodies.applied.clone(),
-    };
+    let places = StepPlaces::of(system, fields, &scene.turns);
     // Positions and velocities per body, as the full module's functions give them.
     for (name, what, idents) in
         [("positions", "position", &places.position), ("velocities", "velocity", &places.velocity)]
@@ -898,7 +1020,23 @@ fn step_module(
             let _ = writeln!(out, "    {}\n}}\n", array(&items));
         }
     }
-    let roots = step_roots(&places, formulas, layout);
+    // The rigid bodies' orientations and ω, in the order of their slots, as the full module's
+    // functions give them (2D: θ and ω; 3D: q and the world ω).
+    if !places.turn.is_empty() {
+        let three = !scene.turns.three.is_empty();
+        let (q, w) = if three { ("[f64; 4]", "[f64; 3]") } else { ("f64", "f64") };
+        let r = places.turn.len();
+        for (name, what, ty, at) in [("orientations", "orientation", q, 0), ("angular_velocities", "ω", w, 1)] {
+            let items: Vec<String> =
+                places.turn.iter().map(|t| format!("s.{}", if at == 0 { t.0 } else { t.1 })).collect();
+            let _ = writeln!(
+                out,
+                "/// The {what} of each rigid body, in file order.\npub fn {name}(s: &State) -> [{ty}; {r}] {{\n    {}\n}}\n",
+                array(&items)
+            );
+        }
+    }
+    let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
     super::shapes::step_by_shape(
         &mut out,
         &ctx,
@@ -909,10 +1047,10 @@ fn step_module(
         &places,
         formulas,
         layout,
-        &roots,
+        &step,
         arrays,
     )?;
-    helper_texts(&mut out, Some(solver));
+    helper_texts(&mut out, Some(solver), !scene.turns.three.is_empty());
     let mut warnings = Vec::new();
     if ctx.non_finite.get() > 0 {
         warnings.push(format!(
@@ -923,61 +1061,109 @@ fn step_module(
     Ok(Module { code: out, fields: fields.iter().map(|f| (f.symbol, f.ident.clone())).collect(), warnings })
 }
 
-/// The step's constants: `SOLVER`, `DEFAULT_ITERATIONS`, `INVERSE_SCALE`, and where each
-/// row's Jacobian entries are (`ENTRIES`, `ROW_START`, `ROW_BODY`); returns `ROW_START`.
+/// The step's constants: `SOLVER`, `DEFAULT_ITERATIONS`, `INVERSE_SCALE`, the slots
+/// (`SLOTS`, `ORIENTATIONS`, `AXES`), and where each row's Jacobian entries are (`ENTRIES`,
+/// `ROW_START`, `ROW_BODY`, over the slots); returns `ROW_START`.
 pub(super) fn step_constants(
     out: &mut String,
     solver: Solver,
     inverse_scales: &[f64],
+    step: &StepRoots,
     formulas: &Formulas,
     layout: &Layout,
 ) -> Vec<usize> {
     let k = layout.constraints;
+    let slots = step.slots(layout.bodies);
+    let three = step.three();
     let _ = writeln!(
         out,
-        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).
-         pub const SOLVER: &str = \"{0}\";
-         /// Iterations per substep of `StepSettings::default()` for this solver.
-         pub const DEFAULT_ITERATIONS: usize = {1};
-         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).
-         pub const INVERSE_SCALE: [f64; {k}] = {2};
-",
+        "/// The velocity-level solver of `step` (`lagrange generate --solver {0}`).\n\
+         pub const SOLVER: &str = \"{0}\";\n\
+         /// Iterations per substep of `StepSettings::default()` for this solver.\n\
+         pub const DEFAULT_ITERATIONS: usize = {1};\n\
+         /// 1/κ of each constraint, as the rows of the step scale C and Ċ (C/κ = C·INVERSE_SCALE[k]).\n\
+         pub const INVERSE_SCALE: [f64; {k}] = {2};\n\
+         /// The step's slots: {3}.\n\
+         pub const SLOTS: usize = {slots};\n\
+         /// The 3D rigid bodies, whose orientations q₀ the step turns from.\n\
+         const ORIENTATIONS: usize = {three};\n\
+         /// The slots whose principal axes the rows carry (all of them with 3D rigid bodies, else none).\n\
+         const AXES: usize = {4};\n",
         solver.name(),
         solver.default_iterations(),
-        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>())
+        array(&inverse_scales.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>()),
+        if three > 0 {
+            "the bodies, then three per rigid body, one per principal axis eₖ = R(q) eₖ (1/Iₖ, eₖ·ω, eₖ·τ − (ω_b × I ω_b)ₖ, Jʷ·eₖ)"
+        } else if !step.turns.is_empty() {
+            "the bodies, then one per rigid body (1/I, ω, τ and Jʷ in component 0)"
+        } else {
+            "the bodies (no rigid body here)"
+        },
+        if three > 0 { slots } else { 0 }
     );
     // Where each row's entries are, as `Prepared` reads them.
-    let mut starts = vec![0];
-    let mut bodies = Vec::new();
-    for dirs in &formulas.jacobian {
-        bodies.extend(dirs.iter().map(|&(body, _)| body.to_string()));
-        starts.push(bodies.len());
-    }
+    let (starts, bodies) = step.entries(formulas);
+    let list = |xs: &[usize]| array(&xs.iter().map(usize::to_string).collect::<Vec<_>>());
     let _ = writeln!(
         out,
-        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on body `ROW_BODY[e]`.
-         const ENTRIES: usize = {};
-         const ROW_START: [usize; {}] = {};
-         const ROW_BODY: [usize; {}] = {};
-",
+        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.\n\
+         const ENTRIES: usize = {};\n\
+         const ROW_START: [usize; {}] = {};\n\
+         const ROW_BODY: [usize; {}] = {};\n",
         bodies.len(),
         k + 1,
-        array(&starts.iter().map(usize::to_string).collect::<Vec<_>>()),
+        list(&starts),
         bodies.len(),
-        array(&bodies)
+        list(&bodies)
     );
     starts
 }
 
-/// The state's accessors the step's text calls: `time` and `put`.
-pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>) {
+/// The state's accessors the step's text calls: `time`, `get` (the state's slots) and `put`.
+pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &StepRoots) {
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
     let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });
+    // The state's slots: per body x and v; per 2D rigid body [θ, 0] and [ω, 0]; per 3D one the
+    // rotation vector φ since the orientation q₀ (zero) and the world ω, then two empty slots.
+    let (mut q, mut v, mut put) = (Vec::new(), Vec::new(), Vec::new());
+    for (p, w) in places.position.iter().zip(&places.velocity) {
+        q.push(format!("s.{p}"));
+        v.push(format!("s.{w}"));
+    }
+    let mut orientations = Vec::new();
+    for (r, (&(first, is_3d), &(o, w))) in step.turns.iter().zip(&places.turn).enumerate() {
+        if is_3d {
+            q.extend(["[0.0; 3]".to_string(), "[0.0; 3]".to_string(), "[0.0; 3]".to_string()]);
+            v.extend([format!("s.{w}"), "[0.0; 3]".to_string(), "[0.0; 3]".to_string()]);
+            put.push(format!("s.{o} = turned(q[{first}], q0[{r}]);\n    s.{w} = v[{first}];"));
+            orientations.push(format!("s.{o}"));
+        } else {
+            q.push(format!("[s.{o}, 0.0]"));
+            v.push(format!("[s.{w}, 0.0]"));
+            put.push(format!("s.{o} = q[{first}][0];\n    s.{w} = v[{first}][0];"));
+        }
+    }
+    // Point masses: the slots are the positions and velocities as the module gives them.
+    let (q, v) = if step.turns.is_empty() {
+        ("positions(s)".to_string(), "velocities(s)".to_string())
+    } else {
+        (array(&q), array(&v))
+    };
     let _ = writeln!(
         out,
-        "/// Writes the time, the positions and the velocities (per body, in file order) into the state.\n\
-         fn put(s: &mut State, t: f64, q: &[[f64; DIM]], v: &[[f64; DIM]]) {{"
+        "/// The state's slots as the step moves them (the library's `numeric::simulate::initial_state`): per body x and v,\n\
+         /// then per rigid body [θ, 0] and [ω, 0] (3D: the rotation vector φ = 0 since its orientation q₀ and the world ω,\n\
+         /// then two empty slots), and the 3D rigid bodies' orientations q₀.\n\
+         #[allow(clippy::type_complexity)]\n\
+         fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIENTATIONS]) {{\n    \
+         ({q}, {v}, {})\n}}\n",
+        array(&orientations)
+    );
+    let _ = writeln!(
+        out,
+        "/// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).\n\
+         fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {{"
     );
     match places.time {
         Some(field) => {
@@ -987,14 +1173,23 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>) {
             let _ = writeln!(out, "    let _ = t;");
         }
     }
+    if orientations.is_empty() {
+        let _ = writeln!(out, "    let _ = q0;");
+    }
     let arrays = places.position.iter().enumerate().all(|(i, p)| *p == format!("position[{i}]"))
         && places.velocity.iter().enumerate().all(|(i, v)| *v == format!("velocity[{i}]"));
-    if arrays {
+    let n = places.position.len();
+    if arrays && step.turns.is_empty() {
         let _ = writeln!(out, "    s.position.copy_from_slice(q);\n    s.velocity.copy_from_slice(v);");
+    } else if arrays {
+        let _ = writeln!(out, "    s.position.copy_from_slice(&q[..{n}]);\n    s.velocity.copy_from_slice(&v[..{n}]);");
     } else {
         for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
             let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
         }
+    }
+    for line in &put {
+        let _ = writeln!(out, "    {line}");
     }
     let _ = writeln!(out, "}}\n");
 }
@@ -1058,6 +1253,8 @@ pub(super) struct Turns {
     /// The scene's torque expression (zero where it gives none).
     pub(super) applied: Vec<Id>,
     pub(super) inverse_inertia: Vec<Id>,
+    /// I (3D: the principal moments, a vector), the root the library's rows invert.
+    pub(super) inertia: Vec<Id>,
     /// 3D rigid bodies (empty in 2D): each one's three slots are axis slots, and the
     /// entries of Jʷ are `projected`.
     pub(super) three: Vec<Turn3>,

@@ -12,7 +12,11 @@
 //! or bodies; `SHAPE_N_TABLE`: per instance the bodies whose position or velocity it reads
 //! and where its other inputs — parameters, time — start in the flat vector `others`). A
 //! cone computes its values with the operations, and in the order, of the whole program, so
-//! the rows are the row-by-row module's bit for bit (`tests/generate_step.rs`).
+//! the rows are the row-by-row module's bit for bit (`tests/generate_step.rs`). A rigid
+//! body's I, ω, τ (3D: and its principal axes) are an item of their own kind, written into
+//! its angular slots; a row's Jʷ entries follow its linear ones, a 3D body's projected on
+//! the slot's axis where `prepare` writes them, as the row-by-row module does. θ, ω and q
+//! are inputs of the "other" kind (their places in `others`).
 //!
 //! Design note: shapes are found on the lowered program, not on the expression graph
 //! (`expr::shape` renames derivations): the program is what is written and what fixes the
@@ -25,9 +29,11 @@
 
 use super::layout::{Layout, Solver};
 use super::names::comment_text;
-use super::rust::{Ctx, Field, Formulas, GenerateError, StepPlaces, array, formula, step_accessors, step_constants};
+use super::rust::{
+    Ctx, Field, Formulas, GenerateError, StepPlaces, StepRoots, array, formula, step_accessors, step_constants,
+};
 use crate::expr::graph::FastMap;
-use crate::expr::{Graph, Id, Ty};
+use crate::expr::{Graph, Ty};
 use crate::model::system::System;
 use crate::numeric::program::{Op, Program, Val};
 use std::cell::Cell;
@@ -51,13 +57,24 @@ enum Slot {
     Other(usize, u32),
 }
 
+/// What a shape's instances are, so what its outputs are.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Kind {
+    /// A body: m, v, F.
+    Body,
+    /// A rigid body's angular slots: I, ω, τ (2D, scalars), and in 3D its principal axes.
+    Rigid,
+    /// A row with this many linear Jacobian entries: C, Ċ, each entry's J, then its Jʷ (one
+    /// per angular slot).
+    Row(usize),
+}
+
 /// A shape: its program over local inputs, and its instances.
 struct Shape {
     ops: Vec<Op>,
     sources: Vec<Source>,
     outputs: Vec<Val>,
-    /// A row's shape (its outputs C, Ċ, J), else a body's (1/m, v, F).
-    is_row: bool,
+    kind: Kind,
     /// Bodies and other symbols each instance names (the table's width is their sum).
     bodies: usize,
     others: usize,
@@ -67,7 +84,7 @@ struct Shape {
 }
 
 /// The key two cones share when they are one shape.
-type Key = (bool, Vec<Op>, Vec<Source>, Vec<Val>);
+type Key = (Kind, Vec<Op>, Vec<Source>, Vec<Val>);
 
 #[allow(clippy::too_many_arguments)]
 /// Cuts `items` (each a list of roots, as indices into the program's roots) out of the
@@ -76,8 +93,7 @@ type Key = (bool, Vec<Op>, Vec<Source>, Vec<Val>);
 fn shapes(
     p: &Program,
     slots: &[Slot],
-    items: &[Vec<usize>],
-    rows: bool,
+    items: &[(Kind, Vec<usize>)],
     others: &mut FastMap<usize, u32>,
     widths: &[usize],
     next_other: &mut u32,
@@ -87,7 +103,7 @@ fn shapes(
     let mut mark = vec![u32::MAX; p.ops.len()];
     let mut stack = Vec::new();
     let mut cone = Vec::new();
-    for (item, roots) in items.iter().enumerate() {
+    for (item, (kind, roots)) in items.iter().enumerate() {
         // The item's cone, in program order.
         cone.clear();
         let outputs: Vec<Val> =
@@ -138,10 +154,10 @@ fn shapes(
             ops.push(op);
         }
         let local_outputs: Vec<Val> = outputs.iter().map(|o| local[o]).collect();
-        let key: Key = (rows, ops, sources, local_outputs);
+        let key: Key = (*kind, ops, sources, local_outputs);
         let id = *groups.entry(key).or_insert_with_key(|key| {
             out.push(Shape {
-                is_row: rows,
+                kind: *kind,
                 ops: key.1.clone(),
                 sources: key.2.clone(),
                 outputs: key.3.clone(),
@@ -211,8 +227,8 @@ fn slot_kinds(g: &Graph, system: &System, fields: &[Field]) -> (Vec<Slot>, Vec<u
 
 /// The module's step part with its rows by shape: the step's constants, the flat vector of
 /// other inputs (`others`), each shape's function and tables, `prepare` over them, and the
-/// state's accessors. `roots` are the step's roots in `step_fns`' order (per body m, v, F;
-/// per row C, Ċ, c, J).
+/// state's accessors. `step` holds the step's roots in `step_fns`' order (per body m, v, F;
+/// per rigid body I, ω, τ and in 3D its axes; per row C, Ċ, c, J, then Jʷ per angular slot).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn step_by_shape(
     out: &mut String,
@@ -224,28 +240,36 @@ pub(super) fn step_by_shape(
     places: &StepPlaces<'_>,
     formulas: &Formulas,
     layout: &Layout,
-    roots: &[Id],
+    step: &StepRoots,
     arrays: bool,
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let (n, k, dim) = (layout.bodies, layout.constraints, layout.dim);
-    step_constants(out, solver, inverse_scales, formulas, layout);
-    let p = Program::lower_in(g, roots, ctx.inputs)?;
+    step_constants(out, solver, inverse_scales, step, formulas, layout);
+    let p = Program::lower_in(g, &step.roots, ctx.inputs)?;
     let (slots, widths) = slot_kinds(g, system, fields);
-    // Items: per body its m, v, F roots; per row C, Ċ and its J entries (c is not read).
-    let bodies: Vec<Vec<usize>> = (0..n).map(|i| vec![3 * i, 3 * i + 1, 3 * i + 2]).collect();
+    // Items: per body its m, v, F roots; per rigid body I, ω, τ (and in 3D its three axes);
+    // per row C, Ċ, its J entries and its Jʷ, one per angular slot (c is not read).
+    let bodies: Vec<(Kind, Vec<usize>)> = (0..n).map(|i| (Kind::Body, vec![3 * i, 3 * i + 1, 3 * i + 2])).collect();
+    let three = step.three() > 0;
+    let per_rigid = if three { 6 } else { 3 };
+    let rigid: Vec<(Kind, Vec<usize>)> = (0..step.turns.len())
+        .map(|r| (Kind::Rigid, (0..per_rigid).map(|x| 3 * n + per_rigid * r + x).collect()))
+        .collect();
     let mut rows = Vec::with_capacity(k);
-    let mut at = 3 * n;
-    for dirs in &formulas.jacobian {
+    let mut at = 3 * n + per_rigid * step.turns.len();
+    for (dirs, angular) in formulas.jacobian.iter().zip(&step.angular_slots) {
+        let entries = dirs.len() + angular.len();
         let mut item = vec![at, at + 1];
-        item.extend((0..dirs.len()).map(|e| at + 3 + e));
-        at += 3 + dirs.len();
-        rows.push(item);
+        item.extend((0..entries).map(|e| at + 3 + e));
+        at += 3 + entries;
+        rows.push((Kind::Row(dirs.len()), item));
     }
     let (mut others, mut next_other) = (FastMap::default(), 0u32);
     let (mut groups, mut list) = (FastMap::default(), Vec::new());
-    shapes(&p, &slots, &bodies, false, &mut others, &widths, &mut next_other, &mut groups, &mut list);
-    shapes(&p, &slots, &rows, true, &mut others, &widths, &mut next_other, &mut groups, &mut list);
+    for items in [&bodies, &rigid, &rows] {
+        shapes(&p, &slots, items, &mut others, &widths, &mut next_other, &mut groups, &mut list);
+    }
     // The other inputs, flat, in the order of first use.
     let mut order: Vec<(u32, usize)> = others.iter().map(|(&f, &at)| (at, f)).collect();
     order.sort_unstable();
@@ -279,7 +303,7 @@ pub(super) fn step_by_shape(
     } else {
         let _ = writeln!(out, "    let (q, v) = (&positions(s), &velocities(s));");
     }
-    let _ = writeln!(out, "    let x = others(s);\n    let mut ev = [[0.0; DIM]; BODIES];");
+    let _ = writeln!(out, "    let x = others(s);\n    let mut ev = [[0.0; DIM]; SLOTS];");
     for (id, shape) in list.iter().enumerate() {
         let w = shape.bodies + shape.others;
         if w == 0 {
@@ -293,27 +317,64 @@ pub(super) fn step_by_shape(
             let _ = writeln!(out, "        let (o, i) = (shape_{id}(q, v, &x, t), i as usize);");
         }
         let comps = |from: usize| array(&(from..from + dim).map(|c| format!("o[{c}]")).collect::<Vec<_>>());
-        if !shape.is_row {
-            let _ = writeln!(out, "        p.inverse_mass[i] = 1.0 / o[0];");
-            let _ = writeln!(out, "        ev[i] = {};\n        p.force[i] = {};", comps(1), comps(1 + dim));
-        } else {
-            // C/κ, Ċ/κ (into `time_rate`, which `finish` turns into ∂C/∂t) and J: a pass of
-            // its own, so the divisions of one row's m_eff do not wait on its J's.
-            let entries = (shape.outputs.len() - 2) / dim;
-            let _ = writeln!(out, "        let e = ROW_START[i];");
-            let _ = writeln!(
-                out,
-                "        p.value[i] = o[0] * INVERSE_SCALE[i];\n        p.time_rate[i] = o[1] * INVERSE_SCALE[i];"
-            );
-            for e in 0..entries {
-                let at = if e == 0 { "e".to_string() } else { format!("e + {e}") };
-                let _ = writeln!(out, "        p.jacobian[{at}] = {};", comps(2 + e * dim));
+        let list = |from: usize, count: usize| (from..from + count).map(|c| format!("o[{c}]")).collect::<Vec<_>>();
+        match shape.kind {
+            Kind::Body => {
+                let _ = writeln!(out, "        p.inverse_mass[i] = 1.0 / o[0];");
+                let _ = writeln!(out, "        ev[i] = {};\n        p.force[i] = {};", comps(1), comps(1 + dim));
+            }
+            Kind::Rigid if three => {
+                // The body's three axis slots from its I, ω, τ and axes (`Prepared::axis_slots`).
+                let axes: Vec<String> = (0..3).map(|a| array(&list(9 + 3 * a, 3))).collect();
+                let _ = writeln!(
+                    out,
+                    "        p.axis_slots(&mut ev, BODIES + 3 * i, {}, {}, {}, {});",
+                    array(&list(0, 3)),
+                    array(&list(3, 3)),
+                    array(&list(6, 3)),
+                    array(&axes)
+                );
+            }
+            Kind::Rigid => {
+                let _ = writeln!(out, "        p.inverse_mass[BODIES + i] = 1.0 / o[0];");
+                let _ =
+                    writeln!(out, "        ev[BODIES + i] = [o[1], 0.0];\n        p.force[BODIES + i] = [o[2], 0.0];");
+            }
+            Kind::Row(linear) => {
+                // C/κ, Ċ/κ (into `time_rate`, which `finish` turns into ∂C/∂t) and J: a pass of
+                // its own, so the divisions of one row's m_eff do not wait on its J's. Jʷ after
+                // the linear entries: 2D one number per slot, 3D the world vector, projected
+                // on the slot's axis (`prepare` of the row-by-row module).
+                let width = if three { 3 } else { 1 };
+                let angular = (shape.outputs.len() - 2 - linear * dim) / width;
+                let _ = writeln!(out, "        let e = ROW_START[i];");
+                let _ = writeln!(
+                    out,
+                    "        p.value[i] = o[0] * INVERSE_SCALE[i];\n        p.time_rate[i] = o[1] * INVERSE_SCALE[i];"
+                );
+                for e in 0..linear + angular {
+                    let at = if e == 0 { "e".to_string() } else { format!("e + {e}") };
+                    let value = if e < linear {
+                        comps(2 + e * dim)
+                    } else if three {
+                        let from = 2 + linear * dim + (e - linear) * 3;
+                        format!("[dot3(&p.axes[ROW_BODY[{at}]], &{}), 0.0, 0.0]", array(&list(from, 3)))
+                    } else {
+                        format!("[o[{}], 0.0]", 2 + linear * dim + (e - linear))
+                    };
+                    let _ = writeln!(out, "        p.jacobian[{at}] = {value};");
+                }
             }
         }
         let _ = writeln!(out, "    }}");
     }
-    let _ = writeln!(out, "    p.finish(&ev);\n}}\n");
-    step_accessors(out, places);
+    let _ = writeln!(out, "    p.finish(&ev);");
+    if three {
+        // The body-frame ω the gyroscopic terms were taken at, for the kick.
+        let _ = writeln!(out, "    p.velocity = ev;\n    p.first = first_angular(&p.axes);");
+    }
+    let _ = writeln!(out, "}}\n");
+    step_accessors(out, places, step);
     Ok(())
 }
 
@@ -358,13 +419,19 @@ fn shape_fn(
     ctx.room.set(local.room.get());
     ctx.non_finite.set(ctx.non_finite.get() + local.non_finite.get());
     let first = shape.items[0];
-    let what = if shape.is_row {
+    let what = if let Kind::Row(_) = shape.kind {
         format!(
             "{} row(s) like `{}`: C = {}",
             shape.items.len(),
             comment_text(&system.constraints[first].name),
             formula(g, formulas.c[first])
         )
+    } else if shape.kind == Kind::Rigid {
+        // The item is the rigid body's index among the rigid bodies, in file order.
+        let body = system.bodies.iter().filter(|b| b.rigid.is_some()).nth(first);
+        let name = body.map_or(String::new(), |b| comment_text(&b.name));
+        let axes = if shape.outputs.len() > 3 { " and the principal axes" } else { "" };
+        format!("{} rigid bod(ies) like `{name}`: I, ω, τ{axes}", shape.items.len())
     } else {
         format!("{} bod(ies) like `{}`: 1/m, v and F", shape.items.len(), comment_text(&system.bodies[first].name))
     };

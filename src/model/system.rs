@@ -107,17 +107,6 @@ impl System {
         self.bodies.iter().any(|b| b.rigid.is_some())
     }
 
-    /// The first rigid body's name: the commands that do not handle rigid bodies yet refuse
-    /// a file with one, naming it ([`NotYetRigid`]), rather than give a wrong answer.
-    pub fn refuse_rigid(&self, command: &'static str) -> Result<(), NotYetRigid> {
-        match self.bodies.iter().find(|b| b.rigid.is_some()) {
-            Some(b) => Err(NotYetRigid { command, body: b.name.clone() }),
-            None => Ok(()),
-        }
-    }
-}
-
-impl System {
     /// The first 3D rigid body's name: the commands that handle 2D rigid bodies but not
     /// quaternions yet refuse a file with one, naming it ([`NotYet3dRigid`]).
     pub fn refuse_rigid_3d(&self, command: &'static str) -> Result<(), NotYet3dRigid> {
@@ -131,19 +120,9 @@ impl System {
 /// A command that does not handle 3D rigid bodies yet, asked to run on one.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "`{command}` does not handle 3D rigid bodies yet (body `{body}` has a quaternion orientation); `lagrange derive`, `solve`, `check`, `simulate` (every solver), `bench` (also `--solvers`) and `generate` (Rust and C, without `--solver`) do"
+    "`{command}` does not handle 3D rigid bodies yet (body `{body}` has a quaternion orientation); `lagrange derive`, `solve`, `check`, `simulate` (every solver), `bench` (also `--solvers`) and `generate` (Rust and C, with `--solver` too) do"
 )]
 pub struct NotYet3dRigid {
-    pub command: &'static str,
-    pub body: String,
-}
-
-/// A command that does not handle rigid bodies yet, asked to run on one.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "`{command}` does not handle rigid bodies yet (body `{body}` has an `orientation`); `lagrange derive` derives their formulas"
-)]
-pub struct NotYetRigid {
     pub command: &'static str,
     pub body: String,
 }

@@ -25,19 +25,26 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// One exact step of `dt` in `settings.substeps` substeps of h = dt/substeps, each: u ← v +
 /// h M⁻¹F (F: `applied_forces`, the scene's); A P = −(J u + ∂C/∂t + C/(κh)) with A = J M⁻¹ Jᵀ,
 /// an inequality row heading apart with its bias left out (P = 0) and the others P ≥ 0 by
-/// complementarity; u ← u + M⁻¹JᵀP; q ← q + h u; then Newton with the mass-weighted
+/// complementarity; u ← u + M⁻¹JᵀP; q ← q + h u (over the slots of `numeric::rows`: a rigid
+/// body's angle and ω too, a 3D body's turn exact); then Newton with the mass-weighted
 /// minimum-norm step Δq = M⁻¹Jᵀμ, (J M⁻¹ Jᵀ) μ = −C/κ, on the equalities and the violated
 /// inequalities, until every such row is within 10⁻¹³ of the scene's length of its surface
 /// (at most 20 iterations). Only `substeps` of the settings is read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
     let t = time(s);
-    let mut v = velocities(s);
+    let (mut q, mut v, mut q0) = get(s);
+    // Positions only: a rigid body's angle is no length.
     let length = length_scale(&positions(s));
-    let unforced = [[0.0; DIM]; BODIES];
+    let unforced = [[0.0; DIM]; SLOTS];
     for sub in 0..settings.substeps {
-        let StepRows { mut rows, inverse_mass: w, velocity: before, force } = step_rows(s);
-        let p = Prepared::new(&rows, &w, &before, &force);
+        // 3D rigid bodies: the orientation folded in and renormalised, φ = 0 from here.
+        rebase(&mut q0, &mut q, sub == 0);
+        let r = step_rows(s);
+        let p = Prepared::new(&r);
+        let StepRows { mut rows, inverse_mass: w, velocity: before, .. } = r;
+        // In the rows' slots (a 3D body's ω along its principal axes), as the solve's are.
+        p.to_axes(&mut v);
         p.kick(&mut v, h);
         for (k, row) in rows.iter_mut().enumerate() {
             // Target: ΔĊ = −(J u + ∂C/∂t + C/h), i.e. c = J u + ∂C/∂t + C/h.
@@ -57,10 +64,10 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
             }
         }
         impulses.copy_from_slice(&solution.lambda);
-        let mut q = positions(s);
-        drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v);
-        project(s, PROJECTION_TOLERANCE * length, PROJECTION_ITERATIONS);
+        p.to_world(&mut v);
+        p.drift(&mut q, &v, h);
+        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        project(s, (&mut q, &v, &q0), PROJECTION_TOLERANCE * length, PROJECTION_ITERATIONS);
     }
 }
 
@@ -93,12 +100,18 @@ fn distance<const D: usize>(row: &Row<D>) -> f64 {
 }
 
 /// Newton onto C = 0 (equalities and violated inequalities, μ ≥ 0 on those) until every
-/// such row is within `bound` of its surface or `max_iterations` are spent.
-fn project(s: &mut State, bound: f64, max_iterations: usize) {
-    let unforced = [[0.0; DIM]; BODIES];
+/// such row is within `bound` of its surface or `max_iterations` are spent; `q` (the state's
+/// slots, a 3D body's rotation vector since `q0`) and the state move together, `v` stays.
+fn project(
+    s: &mut State,
+    (q, v, q0): (&mut [[f64; DIM]; SLOTS], &[[f64; DIM]; SLOTS], &[[f64; 4]; ORIENTATIONS]),
+    bound: f64,
+    max_iterations: usize,
+) {
+    let unforced = [[0.0; DIM]; SLOTS];
     let mut iterations = 0;
     loop {
-        let StepRows { mut rows, inverse_mass: w, velocity: v, .. } = step_rows(s);
+        let StepRows { mut rows, inverse_mass: w, velocity: at, axes, .. } = step_rows(s);
         let enforced = |row: &Row<DIM>, d: f64| !row.inequality || d < 0.0;
         let mut residual = 0.0f64;
         for row in &rows {
@@ -118,16 +131,17 @@ fn project(s: &mut State, bound: f64, max_iterations: usize) {
                 leave_out(row);
             }
         }
-        let mut q = positions(s);
-        let solution = solve_rows(&rows, &w, &v, &unforced, length_scale(&q));
-        for (x, dx) in q.iter_mut().zip(&solution.acceleration) {
+        // Δq = M⁻¹Jᵀμ over the rows' slots, a 3D body's turn folded into a world rotation vector.
+        let mut step = solve_rows(&rows, &w, &at, &unforced, length_scale(&positions(s))).acceleration;
+        fold(&axes, &mut step);
+        for (x, dx) in q.iter_mut().zip(&step) {
             for d in 0..DIM {
                 if dx[d].is_finite() {
                     x[d] += dx[d];
                 }
             }
         }
-        put(s, time(s), &q, &v);
+        put(s, time(s), q, v, q0);
         iterations += 1;
     }
 }

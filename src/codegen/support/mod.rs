@@ -2,8 +2,9 @@
 //! (scaled, with contact states, λ ≥ 0 on inequalities and the minimum-norm λ; every
 //! module), L D Lᵀ on A's band (the fast path of λ for equalities: tridiagonal or any
 //! band), dense L D Lᵀ (of a small A of equalities, with the forces), the range-safe norms and
-//! powers the formulas call, and with `--solver` the velocity-level step (shared pieces,
-//! the sequential-impulse sweep, and one file per solver).
+//! powers the formulas call, and with `--solver` the velocity-level step (shared pieces, the
+//! motion of the slots — `motion_3d.rs` with 3D rigid bodies —, the sequential-impulse sweep,
+//! and one file per solver).
 //!
 //! Each lives in a real Rust file beside this one, included as text with `include_str!`
 //! and written into a module as it is: from the file's first item on, its `//!` note left
@@ -29,6 +30,13 @@ pub(super) const SOLVE_DENSE: &str = text(include_str!("solve_dense.rs"));
 
 /// The velocity-level step's shared pieces: softness, settings, the prepared rows (`--solver`).
 pub(super) const STEP: &str = text(include_str!("step.rs"));
+
+/// The kick and the drift over the slots (`--solver`, no 3D rigid body).
+pub(super) const MOTION: &str = text(include_str!("motion.rs"));
+
+/// The kick with the implicit-midpoint gyroscopic term, the exact turn and the changes
+/// between world and principal-axis slots (`--solver` with 3D rigid bodies).
+pub(super) const MOTION_3D: &str = text(include_str!("motion_3d.rs"));
 
 /// Warm start and the sequential-impulse sweep (`--solver soft-step` and `pgs`).
 pub(super) const SWEEP: &str = text(include_str!("sweep.rs"));
@@ -87,7 +95,10 @@ mod solve_tridiagonal;
 
 #[cfg(test)]
 mod tests {
-    use super::{EXACT, HELPERS, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, SOLVE_TRIDIAGONAL, STEP, SWEEP};
+    use super::{
+        EXACT, HELPERS, MOTION, MOTION_3D, PGS, ROWS, SOFT_STEP, SOLVE_BAND, SOLVE_DENSE, SOLVE_TRIDIAGONAL, STEP,
+        SWEEP,
+    };
 
     #[test]
     fn a_helper_is_its_file_without_the_note() {
@@ -99,6 +110,8 @@ mod tests {
             (HELPERS, "/// |(x, y)|"),
             (STEP, "/// Box2D's `b2Softness`"),
             (SWEEP, "impl<const D: usize> Prepared<D>"),
+            (MOTION, "#[allow(dead_code)]\nimpl<const D: usize> Prepared<D>"),
+            (MOTION_3D, "/// The Hamilton product"),
             (SOFT_STEP, "/// One soft step of `dt`"),
             (PGS, "/// One PGS step of `dt`"),
             (EXACT, "/// Relative tolerance"),

@@ -19,7 +19,9 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// sweeps over the rows in file order, row k taking ΔP = −m_eff·(J u + ∂C/∂t + b) with
 /// b = β·C/(κh) (an inequality row apart, C > 0, is speculative: b = C/(κh)), an inequality
 /// row clamping its accumulated impulse at P ≥ 0; then q ← q + h u, and the rows evaluated
-/// again. No softness and no relax pass. The state's time advances by h per substep; its
+/// again. Over the slots of `numeric::rows`: a rigid body's angle and ω too (a 3D body's ω
+/// along its principal axes, its kick with the gyroscopic term at the implicit midpoint, its
+/// turn exact). No softness and no relax pass. The state's time advances by h per substep; its
 /// force fields are not read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
@@ -28,10 +30,14 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         impulses.iter_mut().for_each(|p| *p = 0.0);
     }
     let t = time(s);
-    let (mut q, mut v) = (positions(s), velocities(s));
+    let (mut q, mut v, mut q0) = get(s);
     let mut p = Prepared::zeroed();
     prepare(s, &mut p);
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: the orientation folded in and renormalised, φ = 0 from here.
+        rebase(&mut q0, &mut q, sub == 0);
+        // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
+        p.to_axes(&mut v);
         p.kick(&mut v, h);
         p.warm_start(&mut v, impulses);
         let pr = &p;
@@ -41,8 +47,9 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
                 (bias, Softness::RIGID)
             });
         }
-        drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v);
+        p.to_world(&mut v);
+        p.drift(&mut q, &v, h);
+        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
         prepare(s, &mut p);
     }
 }

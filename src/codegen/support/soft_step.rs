@@ -21,7 +21,9 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 ///   integrate positions    q ← q + h u
 ///   relax (without bias)   per row: ΔP = −m_eff·(J u + ∂C/∂t)
 ///
-/// with the rows evaluated where each substep starts; then restitution for inequality rows
+/// over the slots of `numeric::rows` (a rigid body's angle and ω too; a 3D body's ω along its
+/// principal axes, its kick with the gyroscopic term at the implicit midpoint, its turn
+/// exact), with the rows evaluated where each substep starts; then restitution for inequality rows
 /// that closed faster than the threshold. Equality rows: b = biasRate·C/κ with the joint
 /// softness. Inequality rows: apart (C > 0) rigid and speculative, b = C/(κh); penetrating
 /// the contact softness, b = max(biasRate·C/κ, −3); P ≥ 0 on the accumulated impulse. The
@@ -35,9 +37,11 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         impulses.iter_mut().for_each(|p| *p = 0.0);
     }
     let t = time(s);
-    let (mut q, mut v) = (positions(s), velocities(s));
+    let (mut q, mut v, mut q0) = get(s);
     let mut p = Prepared::zeroed();
     prepare(s, &mut p);
+    // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
+    p.to_axes(&mut v);
     // Ċ at the step's start, restitution's closing speed (read only with restitution).
     let mut start_rate = [0.0; CONSTRAINTS];
     if settings.restitution > 0.0 {
@@ -46,6 +50,8 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         }
     }
     for sub in 0..settings.substeps {
+        // 3D rigid bodies: the orientation folded in and renormalised, φ = 0 from here.
+        rebase(&mut q0, &mut q, sub == 0);
         p.kick(&mut v, h);
         p.warm_start(&mut v, impulses);
         for _ in 0..iterations {
@@ -61,9 +67,11 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
                 }
             });
         }
-        drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v);
+        p.to_world(&mut v);
+        p.drift(&mut q, &v, h);
+        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
         prepare(s, &mut p);
+        p.to_axes(&mut v);
         if settings.relax {
             let pr = &p;
             for _ in 0..iterations {
@@ -86,5 +94,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
             p.apply(k, &mut v, delta);
         }
     }
-    put(s, time(s), &q, &v);
+    p.to_world(&mut v);
+    put(s, time(s), &q, &v, &q0);
 }

@@ -1,14 +1,16 @@
 //! Written into every module generated with `--solver`: the pieces of the velocity-level
 //! step that every solver shares — Box2D's softness (`b2MakeSoft`), the step's settings with
 //! Box2D v3's defaults, the rows of one substep flattened with their effective masses
-//! (`Prepared`), the kick of the external forces and the drift of the positions. The same
-//! operations in the same order as the library's `numeric::velocity` (`Softness`,
-//! `Settings`, `Prepared`), so a module's step gives the library's numbers.
+//! (`Prepared`, over the slots of `numeric::rows`: the bodies, then the rigid bodies' angular
+//! slots; arrays of the module's sizes that its `prepare` fills in place). The same operations in the same order as the library's `numeric::velocity`
+//! (`Softness`, `Settings`, `Prepared`), so a module's step gives the library's numbers.
 //!
 //! Included with `include_str!` from the first item on (this note is left out); compiled as part of every
 //! generated module of `tests/generate_step.rs` (it uses the module's items, so it is not a
-//! module of its own). Not here: the sequential-impulse sweep (`sweep.rs`), each solver's
-//! step (`soft_step.rs`, `pgs.rs`, `exact.rs`), the rows' formulas (generated).
+//! module of its own). Not here: the kick, the drift and the change between the state's and
+//! the rows' slots (`motion.rs`, or `motion_3d.rs` with 3D rigid bodies), the
+//! sequential-impulse sweep (`sweep.rs`), each solver's step (`soft_step.rs`, `pgs.rs`,
+//! `exact.rs`), the rows' formulas (generated).
 
 /// Box2D's `b2Softness`: a soft row of stiffness `hertz` and damping ratio ζ at substep h,
 /// as a bias rate on C/κ, a scale on the effective mass and a scale on the accumulated impulse.
@@ -109,19 +111,22 @@ impl StepSettings {
 }
 
 /// The rows at a state as the exact step reads them (`step_rows`): per row C/κ, Ċ/κ, c, J;
-/// per body 1/m, v and the scene's force.
+/// per slot (the bodies, then the rigid bodies' angular slots, as `numeric::rows` lays them
+/// out) 1/m, v and the scene's force; with 3D rigid bodies each slot's principal axis (zero
+/// for a linear slot; empty otherwise).
 #[allow(dead_code)]
 struct StepRows<const D: usize> {
     rows: Vec<Row<D>>,
     inverse_mass: Vec<f64>,
     velocity: Vec<[f64; D]>,
     force: Vec<[f64; D]>,
+    axes: Vec<[f64; D]>,
 }
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
-/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on body
-/// `ROW_BODY[e]`); per body 1/m and F. Arrays of the module's sizes, filled in place
-/// (`prepare`), so a step allocates nothing.
+/// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
+/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
@@ -131,8 +136,15 @@ struct Prepared<const D: usize> {
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     effective_mass: [f64; CONSTRAINTS],
     inequality: [bool; CONSTRAINTS],
-    inverse_mass: [f64; BODIES],
-    force: [[f64; D]; BODIES],
+    inverse_mass: [f64; SLOTS],
+    force: [[f64; D]; SLOTS],
+    /// Per slot its principal axis (`AXES` is 0 without 3D rigid bodies).
+    axes: [[f64; D]; AXES],
+    /// Per slot the velocity the rows were evaluated at (3D rigid bodies: the body-frame ω
+    /// their gyroscopic term was taken at; none without 3D rigid bodies).
+    velocity: [[f64; D]; AXES],
+    /// The first 3D rigid body's first slot (`None` without 3D rigid bodies).
+    first: Option<usize>,
 }
 
 /// a·b, summed from 0 as the library sums its three components (the same number, zero's
@@ -156,16 +168,19 @@ impl<const D: usize> Prepared<D> {
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
             inequality: INEQUALITY,
-            inverse_mass: [0.0; BODIES],
-            force: [[0.0; D]; BODIES],
+            inverse_mass: [0.0; SLOTS],
+            force: [[0.0; D]; SLOTS],
+            axes: [[0.0; D]; AXES],
+            velocity: [[0.0; D]; AXES],
+            first: None,
         }
     }
 
-    /// From the rows at a state with velocities `velocity`, the bodies' 1/m and forces.
-    fn new(rows: &[Row<D>], inverse_mass: &[f64], velocity: &[[f64; D]], force: &[[f64; D]]) -> Prepared<D> {
+    /// From the rows at a state (`step_rows`), evaluated at the velocities they carry.
+    fn new(r: &StepRows<D>) -> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
-        for (k, row) in rows.iter().enumerate() {
+        for (k, row) in r.rows.iter().enumerate() {
             for (_, j) in &row.jacobian {
                 p.jacobian[e] = *j;
                 e += 1;
@@ -173,9 +188,16 @@ impl<const D: usize> Prepared<D> {
             p.value[k] = row.value;
             p.time_rate[k] = row.rate;
         }
-        p.inverse_mass.copy_from_slice(inverse_mass);
-        p.force.copy_from_slice(force);
-        p.finish(velocity);
+        p.inverse_mass.copy_from_slice(&r.inverse_mass);
+        p.force.copy_from_slice(&r.force);
+        if !r.axes.is_empty() {
+            p.axes.copy_from_slice(&r.axes);
+            p.first = r.axes.iter().position(|e| e.iter().any(|&x| x != 0.0));
+            if p.first.is_some() {
+                p.velocity.copy_from_slice(&r.velocity);
+            }
+        }
+        p.finish(&r.velocity);
         p
     }
 
@@ -241,24 +263,6 @@ impl<const D: usize> Prepared<D> {
             for d in 0..D {
                 u[b][d] += s * j[d];
             }
-        }
-    }
-
-    /// u += h M⁻¹ F: the external forces over one substep.
-    fn kick(&self, u: &mut [[f64; D]], h: f64) {
-        for ((u, f), w) in u.iter_mut().zip(&self.force).zip(&self.inverse_mass) {
-            for d in 0..D {
-                u[d] += h * w * f[d];
-            }
-        }
-    }
-}
-
-/// q += h u.
-fn drift<const D: usize>(q: &mut [[f64; D]], u: &[[f64; D]], h: f64) {
-    for (q, u) in q.iter_mut().zip(u) {
-        for d in 0..D {
-            q[d] += h * u[d];
         }
     }
 }
