@@ -107,27 +107,6 @@ impl System {
         self.bodies.iter().any(|b| b.rigid.is_some())
     }
 
-    /// The first 3D rigid body's name: the commands that handle 2D rigid bodies but not
-    /// quaternions yet refuse a file with one, naming it ([`NotYet3dRigid`]).
-    pub fn refuse_rigid_3d(&self, command: &'static str) -> Result<(), NotYet3dRigid> {
-        match self.bodies.iter().find(|b| b.rigid.as_ref().is_some_and(|r| r.nodes.axes.is_some())) {
-            Some(b) => Err(NotYet3dRigid { command, body: b.name.clone() }),
-            None => Ok(()),
-        }
-    }
-}
-
-/// A command that does not handle 3D rigid bodies yet, asked to run on one.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "`{command}` does not handle 3D rigid bodies yet (body `{body}` has a quaternion orientation); `lagrange derive`, `solve`, `check`, `simulate` (every solver), `bench` (also `--solvers`) and `generate` (Rust and C, with `--solver` too) do"
-)]
-pub struct NotYet3dRigid {
-    pub command: &'static str,
-    pub body: String,
-}
-
-impl System {
     pub fn body_named(&self, name: &str) -> Option<usize> {
         self.bodies.iter().position(|b| b.name == name)
     }

@@ -73,10 +73,6 @@ pub enum SimError {
     Output(String),
     #[error("invalid settings: {0}")]
     Settings(#[from] SettingsError),
-    /// A solver that does not handle 3D rigid bodies yet (the velocity-level ones): refused
-    /// before any step.
-    #[error(transparent)]
-    Rigid3d(#[from] crate::model::system::NotYet3dRigid),
 }
 
 /// What would have kept a diverged velocity-level run stable ([`SimError::Diverged`]); its
