@@ -231,17 +231,22 @@ impl Simplifier {
     /// numerator carries the product of the other roots in every term and grows faster than
     /// the scene; this one is `−(n's numerator × d's denominator over n's)/(d's numerator)`,
     /// linear in the terms of `n` and `d`. Equal to the combined form as a function; `None`
-    /// where `d` has no such term (nothing to gain) or a form is too large. The caller
-    /// prints both and keeps the shorter.
-    pub fn separated_quotient(&mut self, g: &mut Graph, n: Id, d: Id) -> Result<Option<Id>, TypeError> {
+    /// where `d` has no such term (nothing to gain) or a form is too large. With it, the
+    /// number of different roots in `d`'s denominators. The caller prints both and keeps
+    /// the shorter.
+    pub fn separated_quotient(&mut self, g: &mut Graph, n: Id, d: Id) -> Result<Option<(Id, usize)>, TypeError> {
         if self.radicals.is_empty() || g.ty(n) != Ty::Scalar || g.ty(d) != Ty::Scalar {
             return Ok(None);
         }
         let (cn, cd) = (self.canon(g, n)?, self.canon(g, d)?);
         let (Canon::S(fnum), Canon::S(fden)) = (&*cn, &*cd) else { return Ok(None) };
-        if !fden.num.0.iter().any(|(m, _)| m.has_negative()) {
+        let mut roots: Vec<Id> =
+            (fden.num.0.iter()).flat_map(|(m, _)| m.split_negative().0.0).map(|(atom, _)| atom).collect();
+        if roots.is_empty() {
             return Ok(None);
         }
+        roots.sort_unstable();
+        roots.dedup();
         let top = crate::expr::poly::expand(&fden.den)
             .and_then(|den| fnum.mul(&Frac::poly(den)))
             .map(|top| top.scale(&Rational::int(-1)));
@@ -251,7 +256,7 @@ impl Simplifier {
         let bottom = self.laid_out(g, Rc::new(Canon::S(bottom)))?;
         let quotient = g.div(top, bottom)?;
         self.adopt(quotient);
-        Ok(Some(quotient))
+        Ok(Some((quotient, roots.len())))
     }
 
     /// The readable graph of the form `c`, remembered as simplified. What `build` lays out
