@@ -37,15 +37,21 @@ use crate::model::system::System;
 /// 2^±1022), so every partial product is exact and none overflows on the way.
 const POW2_CHUNK: i64 = 1000;
 
-/// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+/// x · 2ᵉ without an intermediate overflow or underflow of the factor. Once x is 0,
+/// infinite or NaN it stays so, and the chunks stop: a degree read from a row whose number
+/// underflowed to 0 at half the scale is log₂(x/0) = ∞, i.e. `i64::MAX`, which would
+/// otherwise loop 10¹⁶ times.
 pub fn pow2(mut x: f64, mut e: i64) -> f64 {
-    while e > POW2_CHUNK {
+    while e > POW2_CHUNK && x.is_finite() && x != 0.0 {
         x *= 2f64.powi(POW2_CHUNK as i32);
         e -= POW2_CHUNK;
     }
-    while e < -POW2_CHUNK {
+    while e < -POW2_CHUNK && x.is_finite() && x != 0.0 {
         x *= 2f64.powi(-POW2_CHUNK as i32);
         e += POW2_CHUNK;
+    }
+    if !(-POW2_CHUNK..=POW2_CHUNK).contains(&e) {
+        return x;
     }
     x * 2f64.powi(e as i32)
 }
@@ -103,10 +109,13 @@ fn degrees(at: &Rows, half: &Rows) -> Option<Vec<i64>> {
             .zip(&b.jacobian)
             .flat_map(|((_, x), (_, y))| (0..3).map(move |d| (x[d], y[d])))
             .find(|(x, _)| *x != 0.0)
-            .map(|(x, y)| (x / y).log2().round() as i64 + 1);
+            .map(|(x, y)| ((x / y).log2().round() as i64).saturating_add(1));
         let p = from_scalar.or(from_j).unwrap_or(0);
         let ok = scalars.iter().all(|&(x, y)| exact(x, y, p))
-            && a.jacobian.iter().zip(&b.jacobian).all(|((_, x), (_, y))| (0..3).all(|d| exact(x[d], y[d], p - 1)));
+            && a.jacobian
+                .iter()
+                .zip(&b.jacobian)
+                .all(|((_, x), (_, y))| (0..3).all(|d| exact(x[d], y[d], p.saturating_sub(1))));
         if !ok {
             return None;
         }
@@ -354,4 +363,31 @@ fn keep_raw_blocks(
     solution.diagnostics.extend(raw_solution.diagnostics.iter().filter(|d| about_kept(d)).cloned());
     solution.diagnostics.push(Diagnostic::MixedScales { raw: kept });
     solution.status = solution.diagnostics.iter().map(Diagnostic::status).max().unwrap_or_default();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::pow2;
+
+    /// `pow2` is exact multiplication by 2ᵉ across the whole range, and returns at once for
+    /// the saturated degrees a row that underflowed at half the scale gives (log₂(x/0) as
+    /// `i64::MAX`): before, those looped about 10¹⁶ times.
+    #[test]
+    fn pow2_is_exact_and_returns_at_once_at_saturated_exponents() {
+        for e in [-2000, -1074, -1000, -1, 0, 1, 1000, 1023, 2000] {
+            let x = 1.5f64;
+            let expected =
+                if e >= -1000 { x * 2f64.powi(e as i32) } else { x * 2f64.powi(-1000) * 2f64.powi(e as i32 + 1000) };
+            assert_eq!(pow2(x, e), expected, "e = {e}");
+        }
+        assert_eq!(pow2(f64::MIN_POSITIVE, 2044), 2f64.powi(1022));
+        assert_eq!(pow2(2f64.powi(1000), -2000), 2f64.powi(-1000));
+        assert_eq!(pow2(0.0, i64::MAX), 0.0);
+        assert_eq!(pow2(0.0, i64::MIN), 0.0);
+        assert_eq!(pow2(1.0, i64::MAX), f64::INFINITY);
+        assert_eq!(pow2(-1.0, i64::MAX), f64::NEG_INFINITY);
+        assert_eq!(pow2(1.0, i64::MIN), 0.0);
+        assert_eq!(pow2(f64::INFINITY, i64::MIN), f64::INFINITY);
+        assert!(pow2(f64::NAN, i64::MAX).is_nan());
+    }
 }
