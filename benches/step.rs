@@ -20,6 +20,22 @@
 //! - `library`: `lagrange simulate --solver soft-step`'s step (`numeric::velocity::Stepper`
 //!   over the compiled tape's rows), for scale.
 //!
+//! Two scenes of 2D rigid bodies joined by revolute joints: the rigid ball and chain (40
+//! capsule links and a disc of 4 021 kg, 41 joints, 82 rows) and the 10 × 10 rigid joint
+//! grid (90 discs below a fixed row, 171 joints, 342 rows; `--step-only`). Their
+//! `handwritten` step is Box2D v3's revolute joint written by hand (`src/revolute_joint.c`'s
+//! prepare, warm start and point-to-point solve: lever arms rA, rB, the separation, the 2×2
+//! K = [[mA + mB + iA rAy² + iB rBy², −iA rAx rAy − iB rBx rBy], [·, mA + mB + iA rAx² +
+//! iB rBx²]] and `b2MakeSoft`; no spring, motor or limit, no restitution), with lagrange's
+//! algorithm where the two differ, so that it agrees with the generated step (`agree_rigid`):
+//! the rows evaluated once per substep and after the positions move (Box2D rotates the
+//! prepared anchors by each body's turn since the step's start in every pass), θ += hω
+//! (Box2D integrates a rotation), and a pin's two rows solved one after the other with
+//! their diagonal masses 1/K₁₁, 1/K₂₂, as lagrange sweeps rows (Box2D solves the 2×2 block:
+//! its fixed point differs with softness, `numeric::velocity`'s note). `handwritten_block`
+//! is the same step with Box2D's block ΔP = −s_m K⁻¹(Ċ + biasRate·C) − s_i P (K⁻¹ once per
+//! substep): a different iteration, measured and not compared.
+//!
 //! Every sample is one step of 1/60 s with Box2D's defaults (4 substeps, one iteration,
 //! joints at 60 Hz capped at a quarter of the substep rate, ζ = 2, relax, warm start), from
 //! the state 100 steps after the scene's start and going on from there.

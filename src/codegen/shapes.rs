@@ -16,7 +16,9 @@
 //! body's I, ω, τ (3D: and its principal axes) are an item of their own kind, written into
 //! its angular slots; a row's Jʷ entries follow its linear ones, a 3D body's projected on
 //! the slot's axis where `prepare` writes them, as the row-by-row module does. θ, ω and q
-//! are inputs of the "other" kind (their places in `others`).
+//! are inputs of the "other" kind (their places in `others`), and so is a one-argument call
+//! of such a scalar (a rigid body's sin θ, cos θ): `others` evaluates it once per state,
+//! where each row of a shape would call it again (the same bits either way).
 //!
 //! Design note: shapes are found on the lowered program, not on the expression graph
 //! (`expr::shape` renames derivations): the program is what is written and what fixes the
@@ -105,7 +107,6 @@ struct Shape {
 /// The key two cones share when they are one shape.
 type Key = (Kind, Vec<Op>, Vec<Source>, Vec<Val>);
 
-#[allow(clippy::too_many_arguments)]
 /// The call `op` as an input of `others` when it is a one-argument function of a scalar
 /// component of a field other than a body's position or velocity (`sin θ`): the same
 /// function of the same number, so the same bits, once per state instead of once per row.
@@ -122,6 +123,7 @@ fn hoisted(p: &Program, slots: &[Slot], op: Op) -> Option<Other> {
 /// program `p` and groups them by shape. `others` maps an other input (a field, or a
 /// function of a field's component: [`hoisted`]) to its first slot in the flat vector of
 /// other inputs, assigning one at first use.
+#[allow(clippy::too_many_arguments)]
 fn shapes(
     p: &Program,
     slots: &[Slot],
