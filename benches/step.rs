@@ -20,6 +20,22 @@
 //! - `library`: `lagrange simulate --solver soft-step`'s step (`numeric::velocity::Stepper`
 //!   over the compiled tape's rows), for scale.
 //!
+//! Two scenes of 2D rigid bodies joined by revolute joints: the rigid ball and chain (40
+//! capsule links and a disc of 4 021 kg, 41 joints, 82 rows) and the 10 × 10 rigid joint
+//! grid (90 discs below a fixed row, 171 joints, 342 rows; `--step-only`). Their
+//! `handwritten` step is Box2D v3's revolute joint written by hand (`src/revolute_joint.c`'s
+//! prepare, warm start and point-to-point solve: lever arms rA, rB, the separation, the 2×2
+//! K = [[mA + mB + iA rAy² + iB rBy², −iA rAx rAy − iB rBx rBy], [·, mA + mB + iA rAx² +
+//! iB rBx²]] and `b2MakeSoft`; no spring, motor or limit, no restitution), with lagrange's
+//! algorithm where the two differ, so that it agrees with the generated step (`agree_rigid`):
+//! the rows evaluated once per substep and after the positions move (Box2D rotates the
+//! prepared anchors by each body's turn since the step's start in every pass), θ += hω
+//! (Box2D integrates a rotation), and a pin's two rows solved one after the other with
+//! their diagonal masses 1/K₁₁, 1/K₂₂, as lagrange sweeps rows (Box2D solves the 2×2 block:
+//! its fixed point differs with softness, `numeric::velocity`'s note). `handwritten_block`
+//! is the same step with Box2D's block ΔP = −s_m K⁻¹(Ċ + biasRate·C) − s_i P (K⁻¹ once per
+//! substep): a different iteration, measured and not compared.
+//!
 //! Every sample is one step of 1/60 s with Box2D's defaults (4 substeps, one iteration,
 //! joints at 60 Hz capped at a quarter of the substep rate, ζ = 2, relax, warm start), from
 //! the state 100 steps after the scene's start and going on from there.
@@ -82,6 +98,34 @@ mod joint_grid_30 {
         s
     }
 }
+
+/// A rigid scene's generated module (its bodies 2D rigid bodies), with a constructor of its
+/// state from the handwritten world's.
+macro_rules! generated_rigid {
+    ($name:ident, $file:literal) => {
+        #[allow(dead_code, clippy::all)]
+        mod $name {
+            include!($file);
+
+            /// The state at rest at positions `x` and angles `theta`, under g = (0, −10): the
+            /// slots are the bodies' positions, then per rigid body [θ, 0].
+            pub fn at_rest(x: &[[f64; 2]], theta: &[f64]) -> State {
+                let mut s = State::default();
+                s.g = [0.0, -10.0];
+                let mut q = [[0.0; 2]; SLOTS];
+                for (i, (x, th)) in x.iter().zip(theta).enumerate() {
+                    q[i] = *x;
+                    q[BODIES + i] = [*th, 0.0];
+                }
+                put(&mut s, 0.0, &q, &[[0.0; 2]; SLOTS], &[]);
+                s
+            }
+        }
+    };
+}
+
+generated_rigid!(rigid_ball_and_chain, "generated/rigid_ball_and_chain_step.rs");
+generated_rigid!(rigid_grid_10, "generated/rigid_grid_10_step.rs");
 
 fn main() {
     divan::main();
@@ -259,6 +303,249 @@ impl World {
     }
 }
 
+// ---- the handwritten step for rigid bodies and revolute joints ------------------------
+
+/// A revolute (point) joint: body a's point at `la` in a's frame on body b's point at `lb`
+/// (Box2D v3 `src/revolute_joint.c`'s point-to-point part; no spring, motor or limit).
+#[derive(Clone, Copy)]
+struct Pin {
+    a: usize,
+    b: usize,
+    la: [f64; 2],
+    lb: [f64; 2],
+    /// The accumulated linear impulse on b (Box2D's `linearImpulse`; −a's).
+    impulse: [f64; 2],
+}
+
+/// How a pin's two rows are solved: one after the other as lagrange sweeps them (`Rows`),
+/// or as Box2D's 2×2 block (`Block`).
+#[derive(Clone, Copy, PartialEq)]
+enum Pins {
+    Rows,
+    Block,
+}
+
+/// 2D rigid bodies and revolute joints, laid out as Box2D lays out a world: the first
+/// `dynamic` bodies move, the others are static (inverse mass and inertia 0, never
+/// integrated); an anchor in the world is a static body at the point.
+struct RigidWorld {
+    dynamic: usize,
+    x: Vec<[f64; 2]>,
+    theta: Vec<f64>,
+    v: Vec<[f64; 2]>,
+    w: Vec<f64>,
+    inverse_mass: Vec<f64>,
+    inverse_inertia: Vec<f64>,
+    /// External force per body (gravity times mass); no torque.
+    force: Vec<[f64; 2]>,
+    pins: Vec<Pin>,
+    pin_solve: Pins,
+    /// Per body (cos θ, sin θ) where the rows were evaluated (scratch of `prepare`).
+    rotation: Vec<[f64; 2]>,
+    /// Per pin, where the substep's rows were evaluated: the lever arms rA = R(θa) la and
+    /// rB = R(θb) lb, the separation C = (xb + rB) − (xa + rA), and either the two rows'
+    /// effective masses 1/K₁₁ and 1/K₂₂ (`Rows`) or K⁻¹ as [a, b, d] of [[a, b], [b, d]]
+    /// (`Block`).
+    ra: Vec<[f64; 2]>,
+    rb: Vec<[f64; 2]>,
+    c: Vec<[f64; 2]>,
+    mass: Vec<[f64; 3]>,
+}
+
+impl RigidWorld {
+    /// Bodies at `x` (angle 0, at rest) of masses `mass` and inertias `inertia` under
+    /// g = (0, −10), static anchors at `anchors` (body `x.len() + j` is anchor j), and `pins`.
+    fn new(x: &[[f64; 2]], mass: &[f64], inertia: &[f64], anchors: &[[f64; 2]], pins: Vec<Pin>) -> RigidWorld {
+        let (n, k) = (x.len(), pins.len());
+        let bodies = n + anchors.len();
+        let statics = vec![0.0; anchors.len()];
+        let mut w = RigidWorld {
+            dynamic: n,
+            x: x.iter().chain(anchors).copied().collect(),
+            theta: vec![0.0; bodies],
+            v: vec![[0.0; 2]; bodies],
+            w: vec![0.0; bodies],
+            inverse_mass: mass.iter().map(|m| 1.0 / m).chain(statics.clone()).collect(),
+            inverse_inertia: inertia.iter().map(|i| 1.0 / i).chain(statics).collect(),
+            force: mass.iter().map(|m| [0.0, -10.0 * m]).chain(vec![[0.0; 2]; anchors.len()]).collect(),
+            pins,
+            pin_solve: Pins::Rows,
+            rotation: vec![[1.0, 0.0]; bodies],
+            ra: vec![[0.0; 2]; k],
+            rb: vec![[0.0; 2]; k],
+            c: vec![[0.0; 2]; k],
+            mass: vec![[0.0; 3]; k],
+        };
+        w.prepare();
+        w
+    }
+
+    /// Solver2D's ball and chain as `rigid_ball_and_chain.toml` writes it: 40 capsule links
+    /// of length 1 along +x from an anchor at the origin, end to end, and a disc of radius 8
+    /// pinned at its rim to the last link's end.
+    fn ball_and_chain() -> RigidWorld {
+        let (link, link_inertia) = (5.981747704246811, 0.7478984966677974);
+        let (ball, ball_inertia) = (4021.238596594935, 128679.63509103793);
+        let mut x: Vec<[f64; 2]> = (0..40).map(|i| [i as f64 + 0.5, 0.0]).collect();
+        x.push([48.0, 0.0]);
+        let mut mass = vec![link; 40];
+        mass.push(ball);
+        let mut inertia = vec![link_inertia; 40];
+        inertia.push(ball_inertia);
+        let pin = |a, la, b, lb| Pin { a, b, la, lb, impulse: [0.0; 2] };
+        let mut pins = vec![pin(41, [0.0, 0.0], 0, [-0.5, 0.0])];
+        pins.extend((1..40).map(|i| pin(i - 1, [0.5, 0.0], i, [-0.5, 0.0])));
+        pins.push(pin(39, [0.5, 0.0], 40, [-8.0, 0.0]));
+        RigidWorld::new(&x, &mass, &inertia, &[[0.0, 0.0]], pins)
+    }
+
+    /// Box2D's joint grid as `rigid_grid_10.toml` writes it: discs of radius 0.4 (density 1)
+    /// at (c, −r) for r = 1…9, c = 0…9, each pinned at the midpoints to the one above (the
+    /// first row to world points at (c, −0.5)) and the one on its left, in the file's order
+    /// (per disc: up, then left).
+    fn grid() -> RigidWorld {
+        let (rows, columns) = (9, 10);
+        let at = |r: usize, c: usize| (r - 1) * columns + c;
+        let pin = |a, la, b, lb| Pin { a, b, la, lb, impulse: [0.0; 2] };
+        let (mut x, mut pins) = (Vec::new(), Vec::new());
+        for r in 1..=rows {
+            for c in 0..columns {
+                x.push([c as f64, -(r as f64)]);
+                pins.push(if r == 1 {
+                    pin(rows * columns + c, [0.0, 0.0], at(r, c), [0.0, 0.5])
+                } else {
+                    pin(at(r - 1, c), [0.0, -0.5], at(r, c), [0.0, 0.5])
+                });
+                if c > 0 {
+                    pins.push(pin(at(r, c - 1), [0.5, 0.0], at(r, c), [-0.5, 0.0]));
+                }
+            }
+        }
+        let anchors: Vec<[f64; 2]> = (0..columns).map(|c| [c as f64, -0.5]).collect();
+        let n = x.len();
+        RigidWorld::new(&x, &vec![0.5026548245743669; n], &vec![0.040212385965949365; n], &anchors, pins)
+    }
+
+    /// The rows at the current positions (Box2D's prepare, here once per substep): per pin
+    /// the lever arms, the separation and K = [[mA + mB + iA rAy² + iB rBy², −iA rAx rAy −
+    /// iB rBx rBy], [·, mA + mB + iA rAx² + iB rBx²]] (`b2SolveRevoluteJoint`'s K).
+    fn prepare(&mut self) {
+        for (r, &theta) in self.rotation.iter_mut().zip(&self.theta) {
+            let (s, c) = theta.sin_cos();
+            *r = [c, s];
+        }
+        let turn = |r: [f64; 2], l: [f64; 2]| [r[0] * l[0] - r[1] * l[1], r[1] * l[0] + r[0] * l[1]];
+        for (j, pin) in self.pins.iter().enumerate() {
+            let (a, b) = (pin.a, pin.b);
+            let ra = turn(self.rotation[a], pin.la);
+            let rb = turn(self.rotation[b], pin.lb);
+            let (xa, xb) = (self.x[a], self.x[b]);
+            self.c[j] = [xb[0] + rb[0] - (xa[0] + ra[0]), xb[1] + rb[1] - (xa[1] + ra[1])];
+            let (ma, mb, ia, ib) =
+                (self.inverse_mass[a], self.inverse_mass[b], self.inverse_inertia[a], self.inverse_inertia[b]);
+            let k11 = ma + mb + ia * ra[1] * ra[1] + ib * rb[1] * rb[1];
+            let k12 = -ia * ra[0] * ra[1] - ib * rb[0] * rb[1];
+            let k22 = ma + mb + ia * ra[0] * ra[0] + ib * rb[0] * rb[0];
+            self.mass[j] = match self.pin_solve {
+                Pins::Rows => [1.0 / k11, 0.0, 1.0 / k22],
+                Pins::Block => {
+                    let inv = 1.0 / (k11 * k22 - k12 * k12);
+                    [k22 * inv, -k12 * inv, k11 * inv]
+                }
+            };
+            self.ra[j] = ra;
+            self.rb[j] = rb;
+        }
+    }
+
+    /// Applies impulse `p` of pin j to its bodies: b gets p at rB, a gets −p at rA.
+    #[inline(always)]
+    fn apply(&mut self, j: usize, p: [f64; 2]) {
+        let (pin, ra, rb) = (self.pins[j], self.ra[j], self.rb[j]);
+        let (ma, ia) = (self.inverse_mass[pin.a], self.inverse_inertia[pin.a]);
+        let (mb, ib) = (self.inverse_mass[pin.b], self.inverse_inertia[pin.b]);
+        self.v[pin.a][0] -= ma * p[0];
+        self.v[pin.a][1] -= ma * p[1];
+        self.w[pin.a] -= ia * (ra[0] * p[1] - ra[1] * p[0]);
+        self.v[pin.b][0] += mb * p[0];
+        self.v[pin.b][1] += mb * p[1];
+        self.w[pin.b] += ib * (rb[0] * p[1] - rb[1] * p[0]);
+    }
+
+    /// One Gauss–Seidel pass over the pins with softness `soft`: Ċ = (vB + ωB × rB) −
+    /// (vA + ωA × rA); `Rows`: row x, then row y with the velocities row x left,
+    /// ΔPᵢ = −s_m·(Ċᵢ + biasRate·Cᵢ)/Kᵢᵢ − s_i·Pᵢ; `Block`: ΔP = −s_m·K⁻¹(Ċ + biasRate·C) −
+    /// s_i·P (`b2SolveRevoluteJoint`'s point-to-point block).
+    fn solve(&mut self, soft: Soft) {
+        for j in 0..self.pins.len() {
+            let pin = self.pins[j];
+            let (ra, rb, c, k) = (self.ra[j], self.rb[j], self.c[j], self.mass[j]);
+            let rate = |w: &RigidWorld, d: usize| {
+                let (va, vb, wa, wb) = (w.v[pin.a][d], w.v[pin.b][d], w.w[pin.a], w.w[pin.b]);
+                if d == 0 { vb - wb * rb[1] - (va - wa * ra[1]) } else { vb + wb * rb[0] - (va + wa * ra[0]) }
+            };
+            let old = self.pins[j].impulse;
+            match self.pin_solve {
+                Pins::Rows => {
+                    let px =
+                        -soft.mass_scale * k[0] * (rate(self, 0) + soft.bias_rate * c[0]) - soft.impulse_scale * old[0];
+                    self.apply(j, [px, 0.0]);
+                    let py =
+                        -soft.mass_scale * k[2] * (rate(self, 1) + soft.bias_rate * c[1]) - soft.impulse_scale * old[1];
+                    self.apply(j, [0.0, py]);
+                    self.pins[j].impulse = [old[0] + px, old[1] + py];
+                }
+                Pins::Block => {
+                    let (bx, by) = (rate(self, 0) + soft.bias_rate * c[0], rate(self, 1) + soft.bias_rate * c[1]);
+                    let p = [
+                        -soft.mass_scale * (k[0] * bx + k[1] * by) - soft.impulse_scale * old[0],
+                        -soft.mass_scale * (k[1] * bx + k[2] * by) - soft.impulse_scale * old[1],
+                    ];
+                    self.apply(j, p);
+                    self.pins[j].impulse = [old[0] + p[0], old[1] + p[1]];
+                }
+            }
+        }
+    }
+
+    /// One step of `dt` in 4 substeps (Box2D v3's `b2SolverStage_*` order).
+    fn step(&mut self, dt: f64) {
+        let substeps = 4;
+        let h = dt / substeps as f64;
+        let joint_soft = make_soft(60.0f64.min(0.25 / h), 2.0, h);
+        let rigid = Soft { bias_rate: 0.0, mass_scale: 1.0, impulse_scale: 0.0 };
+        for _ in 0..substeps {
+            // Integrate velocities (no torque).
+            for i in 0..self.dynamic {
+                let s = h * self.inverse_mass[i];
+                self.v[i][0] += s * self.force[i][0];
+                self.v[i][1] += s * self.force[i][1];
+            }
+            // Warm start.
+            for j in 0..self.pins.len() {
+                self.apply(j, self.pins[j].impulse);
+            }
+            // Solve, with the soft bias.
+            self.solve(joint_soft);
+            // Integrate positions: x += h v, θ += h ω (lagrange's; Box2D turns a rotation).
+            for i in 0..self.dynamic {
+                self.x[i][0] += h * self.v[i][0];
+                self.x[i][1] += h * self.v[i][1];
+                self.theta[i] += h * self.w[i];
+            }
+            self.prepare();
+            // Relax: rigid, no bias.
+            self.solve(rigid);
+        }
+    }
+
+    /// The impulses per row as lagrange's rows count them: its C is the file's lhs − rhs,
+    /// (xa + rA) − (xb + rB), the opposite of the separation, so its impulses are −P.
+    fn impulses(&self) -> Vec<f64> {
+        self.pins.iter().flat_map(|p| [-p.impulse[0], -p.impulse[1]]).collect()
+    }
+}
+
 // ---- the scenes -----------------------------------------------------------------------
 
 /// Catto's two particles: inverse masses 0.167 and 0.000995 hanging 1 m apart below the origin.
@@ -315,6 +602,20 @@ fn agree(name: &str, hand: &World, q: &[[f64; 2]], impulses: &[f64]) {
     let scale = impulses.iter().fold(1.0f64, |m, p| m.max(p.abs()));
     let dp = hand.impulses().iter().zip(impulses).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale;
     assert!(dq <= 1e-9 && dp <= 1e-9, "{name}: handwritten and generated steps part: {dq:e} m, {dp:e} of the impulses");
+}
+
+/// The handwritten rigid step and the generated one agree to round-off after `WARM` steps:
+/// positions within 1e-9 m, angles within 1e-9 rad, impulses within 1e-9 of the largest.
+fn agree_rigid(name: &str, hand: &RigidWorld, x: &[[f64; 2]], theta: &[f64], impulses: &[f64]) {
+    let n = hand.dynamic;
+    let dx = hand.x[..n].iter().zip(x).map(|(a, b)| (a[0] - b[0]).abs().max((a[1] - b[1]).abs())).fold(0.0, f64::max);
+    let dth = hand.theta[..n].iter().zip(theta).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let scale = impulses.iter().fold(1.0f64, |m, p| m.max(p.abs()));
+    let dp = hand.impulses().iter().zip(impulses).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale;
+    assert!(
+        dx <= 1e-9 && dth <= 1e-9 && dp <= 1e-9,
+        "{name}: handwritten and generated steps part: {dx:e} m, {dth:e} rad, {dp:e} of the impulses"
+    );
 }
 
 // ---- the benchmarks -------------------------------------------------------------------
@@ -418,3 +719,66 @@ mod grid_30 {
         });
     }
 }
+
+/// The rigid scenes' benchmarks: `handwritten` (the pins' rows one after the other, as
+/// lagrange sweeps them; checked against `generated`), `handwritten_block` (Box2D's 2×2
+/// block per pin: a different iteration, not compared), `generated` and `library`.
+macro_rules! rigid_benches {
+    ($name:ident, $module:ident, $world:expr, $file:literal, $label:literal) => {
+        mod $name {
+            use super::*;
+
+            #[divan::bench]
+            fn handwritten(bencher: Bencher) {
+                let mut w = $world;
+                (0..WARM).for_each(|_| w.step(DT));
+                bencher.bench_local(|| w.step(black_box(DT)));
+            }
+
+            #[divan::bench]
+            fn handwritten_block(bencher: Bencher) {
+                let mut w = $world;
+                w.pin_solve = Pins::Block;
+                w.prepare();
+                (0..WARM).for_each(|_| w.step(DT));
+                bencher.bench_local(|| w.step(black_box(DT)));
+            }
+
+            #[divan::bench]
+            fn generated(bencher: Bencher) {
+                use super::$module as g;
+                let mut w = $world;
+                let mut s = Box::new(g::at_rest(&w.x[..w.dynamic], &w.theta[..w.dynamic]));
+                let mut p = Box::new([0.0; g::CONSTRAINTS]);
+                (0..WARM).for_each(|_| g::step(&mut s, &mut p, DT));
+                (0..WARM).for_each(|_| w.step(DT));
+                agree_rigid($label, &w, &g::positions(&s), &g::orientations(&s), &p[..]);
+                bencher.bench_local(|| g::step(&mut s, &mut p, black_box(DT)));
+            }
+
+            #[divan::bench(sample_count = 20)]
+            fn library(bencher: Bencher) {
+                let mut l = Library::new(include_str!($file));
+                l.with(|stepper, dynamics, q, v, t| {
+                    (0..WARM).for_each(|_| library_step(stepper, dynamics, q, v, t));
+                    bencher.bench_local(|| library_step(stepper, dynamics, q, v, t));
+                });
+            }
+        }
+    };
+}
+
+rigid_benches!(
+    rigid_chain,
+    rigid_ball_and_chain,
+    RigidWorld::ball_and_chain(),
+    "../constraints/solvers/rigid_ball_and_chain.toml",
+    "rigid ball and chain"
+);
+rigid_benches!(
+    rigid_grid,
+    rigid_grid_10,
+    RigidWorld::grid(),
+    "../constraints/solvers/rigid_grid_10.toml",
+    "rigid grid 10 x 10"
+);

@@ -479,6 +479,13 @@ fn checked_in_generated_code_is_current() {
         ("constraints/solvers/two_particles.toml", soft, false, "benches/generated/two_particles_step.rs"),
         ("constraints/solvers/ball_and_chain.toml", soft, false, "benches/generated/ball_and_chain_step.rs"),
         ("constraints/solvers/joint_grid_30.toml", soft, true, "benches/generated/joint_grid_30_step.rs"),
+        (
+            "constraints/solvers/rigid_ball_and_chain.toml",
+            soft,
+            false,
+            "benches/generated/rigid_ball_and_chain_step.rs",
+        ),
+        ("constraints/solvers/rigid_grid_10.toml", soft, true, "benches/generated/rigid_grid_10_step.rs"),
     ] {
         let l = loaded(Path::new(file));
         let code =

@@ -502,3 +502,18 @@ fn step_only_needs_the_soft_step_or_pgs_in_rust() {
         assert_eq!(module(&l, &options).err(), Some(GenerateError::StepOnly), "{options:?}");
     }
 }
+
+/// `--step-only` takes a rigid body's sin θ and cos θ once per state (in `others`), not once
+/// per row that reads them: the 20-link chain's module calls each once per link, where its
+/// 40 rows called them for their bodies, 78 calls of each per `prepare` (same bits: the
+/// step-only test above).
+#[test]
+fn the_step_only_module_takes_each_angles_sine_and_cosine_once() {
+    let l = loaded(Path::new("constraints/rigid/chain_20.toml"));
+    let options = Options { solver: Some(Solver::SoftStep), step_only: true, ..Options::default() };
+    let code = lagrange::codegen::generate(&l, &options).expect("generates");
+    let rigid = l.system.bodies.iter().filter(|b| b.rigid.is_some()).count();
+    assert_eq!(rigid, 20);
+    assert_eq!(code.matches(".sin()").count(), rigid, "{code}");
+    assert_eq!(code.matches(".cos()").count(), rigid, "{code}");
+}

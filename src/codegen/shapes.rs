@@ -16,7 +16,9 @@
 //! body's I, ω, τ (3D: and its principal axes) are an item of their own kind, written into
 //! its angular slots; a row's Jʷ entries follow its linear ones, a 3D body's projected on
 //! the slot's axis where `prepare` writes them, as the row-by-row module does. θ, ω and q
-//! are inputs of the "other" kind (their places in `others`).
+//! are inputs of the "other" kind (their places in `others`), and so is a one-argument call
+//! of such a scalar (a rigid body's sin θ, cos θ): `others` evaluates it once per state,
+//! where each row of a shape would call it again (the same bits either way).
 //!
 //! Design note: shapes are found on the lowered program, not on the expression graph
 //! (`expr::shape` renames derivations): the program is what is written and what fixes the
@@ -33,7 +35,7 @@ use super::rust::{
     Ctx, Field, Formulas, GenerateError, StepPlaces, StepRoots, array, formula, step_accessors, step_constants,
 };
 use crate::expr::graph::FastMap;
-use crate::expr::{Graph, Ty};
+use crate::expr::{Func, Graph, Ty};
 use crate::model::system::System;
 use crate::numeric::program::{Op, Program, Val};
 use std::cell::Cell;
@@ -55,6 +57,25 @@ enum Slot {
     Position(usize, u32),
     Velocity(usize, u32),
     Other(usize, u32),
+}
+
+/// An input of the flat vector `others`: a field of the module (all its components), or a
+/// one-argument function of one scalar component of a field (`sin θ`, `cos θ` of a rigid
+/// body's angle), evaluated once per `prepare` instead of once per row that reads it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+enum Other {
+    Field(usize),
+    Call(Func, usize, u32),
+}
+
+impl Other {
+    /// How many numbers it takes in `others`.
+    fn width(self, widths: &[usize]) -> usize {
+        match self {
+            Other::Field(f) => widths[f],
+            Other::Call(..) => 1,
+        }
+    }
 }
 
 /// What a shape's instances are, so what its outputs are.
@@ -86,15 +107,28 @@ struct Shape {
 /// The key two cones share when they are one shape.
 type Key = (Kind, Vec<Op>, Vec<Source>, Vec<Val>);
 
-#[allow(clippy::too_many_arguments)]
+/// The call `op` as an input of `others` when it is a one-argument function of a scalar
+/// component of a field other than a body's position or velocity (`sin θ`): the same
+/// function of the same number, so the same bits, once per state instead of once per row.
+fn hoisted(p: &Program, slots: &[Slot], op: Op) -> Option<Other> {
+    let Op::Call(f, args) = op else { return None };
+    let Op::Input(j) = p.ops[args[0] as usize] else { return None };
+    match slots[j as usize] {
+        Slot::Other(field, c) if f.arity() == 1 => Some(Other::Call(f, field, c)),
+        _ => None,
+    }
+}
+
 /// Cuts `items` (each a list of roots, as indices into the program's roots) out of the
-/// program `p` and groups them by shape. `others` maps a field to its first slot in the
-/// flat vector of other inputs, assigning one at first use.
+/// program `p` and groups them by shape. `others` maps an other input (a field, or a
+/// function of a field's component: [`hoisted`]) to its first slot in the flat vector of
+/// other inputs, assigning one at first use.
+#[allow(clippy::too_many_arguments)]
 fn shapes(
     p: &Program,
     slots: &[Slot],
     items: &[(Kind, Vec<usize>)],
-    others: &mut FastMap<usize, u32>,
+    others: &mut FastMap<Other, u32>,
     widths: &[usize],
     next_other: &mut u32,
     groups: &mut FastMap<Key, usize>,
@@ -115,15 +149,29 @@ fn shapes(
             }
             mark[v as usize] = item as u32;
             cone.push(v);
-            stack.extend(p.ops[v as usize].operands());
+            // A hoisted call is a leaf of the cone: its argument is read in `others`.
+            if hoisted(p, slots, p.ops[v as usize]).is_none() {
+                stack.extend(p.ops[v as usize].operands());
+            }
         }
         cone.sort_unstable();
         // Renumbered: local values, local inputs by first use, local bodies and others.
         let mut local: FastMap<Val, Val> = FastMap::default();
         let (mut ops, mut sources) = (Vec::with_capacity(cone.len()), Vec::new());
-        let (mut bodies, mut other_fields): (Vec<usize>, Vec<usize>) = (Vec::new(), Vec::new());
+        let (mut bodies, mut other_fields): (Vec<usize>, Vec<Other>) = (Vec::new(), Vec::new());
+        let mut other_at = |o: Other| {
+            other_fields.iter().position(|&x| x == o).unwrap_or_else(|| {
+                other_fields.push(o);
+                other_fields.len() - 1
+            }) as u32
+        };
         for &v in &cone {
             let op = match p.ops[v as usize] {
+                op if hoisted(p, slots, op).is_some() => {
+                    let at = hoisted(p, slots, op).map_or(0, &mut other_at);
+                    sources.push(Source::Other(at, 0));
+                    Op::Input(sources.len() as u32 - 1)
+                }
                 Op::Input(j) => {
                     let source = match slots[j as usize] {
                         Slot::Position(b, c) | Slot::Velocity(b, c) => {
@@ -137,13 +185,7 @@ fn shapes(
                                 Source::Velocity(at, c)
                             }
                         }
-                        Slot::Other(f, c) => {
-                            let at = other_fields.iter().position(|&x| x == f).unwrap_or_else(|| {
-                                other_fields.push(f);
-                                other_fields.len() - 1
-                            }) as u32;
-                            Source::Other(at, c)
-                        }
+                        Slot::Other(f, c) => Source::Other(other_at(Other::Field(f)), c),
                     };
                     sources.push(source);
                     Op::Input(sources.len() as u32 - 1)
@@ -174,7 +216,7 @@ fn shapes(
         for &f in &other_fields {
             let at = *others.entry(f).or_insert_with(|| {
                 let at = *next_other;
-                *next_other += widths[f] as u32;
+                *next_other += f.width(widths) as u32;
                 at
             });
             shape.table.push(at);
@@ -271,19 +313,30 @@ pub(super) fn step_by_shape(
         shapes(&p, &slots, items, &mut others, &widths, &mut next_other, &mut groups, &mut list);
     }
     // The other inputs, flat, in the order of first use.
-    let mut order: Vec<(u32, usize)> = others.iter().map(|(&f, &at)| (at, f)).collect();
-    order.sort_unstable();
+    let mut order: Vec<(u32, Other)> = others.iter().map(|(&f, &at)| (at, f)).collect();
+    order.sort_unstable_by_key(|&(at, _)| at);
     let mut items = Vec::new();
-    for &(_, f) in &order {
-        let ident = &fields[f].ident;
-        match widths[f] {
-            1 => items.push(format!("s.{ident}")),
-            w => items.extend((0..w).map(|c| format!("s.{ident}[{c}]"))),
+    for &(_, other) in &order {
+        match other {
+            Other::Field(f) => {
+                let ident = &fields[f].ident;
+                match widths[f] {
+                    1 => items.push(format!("s.{ident}")),
+                    w => items.extend((0..w).map(|c| format!("s.{ident}[{c}]"))),
+                }
+            }
+            // `f64`'s method of the function's name, as the row-by-row module calls it.
+            Other::Call(func, f, c) => {
+                let ident = &fields[f].ident;
+                let x = if widths[f] == 1 { format!("s.{ident}") } else { format!("s.{ident}[{c}]") };
+                items.push(format!("{x}.{}()", func.name()));
+            }
         }
     }
     let _ = writeln!(
         out,
-        "/// The inputs the shapes read besides positions and velocities (parameters, time), flat.\n\
+        "/// The inputs the shapes read besides positions and velocities (parameters, time, angles, and the\n\
+         /// one-argument functions of them the rows call, such as a rigid body's sin θ and cos θ), flat.\n\
          fn others(s: &State) -> [f64; {}] {{\n    {}{}\n}}\n",
         items.len(),
         if items.is_empty() { "let _ = s;\n    " } else { "" },
