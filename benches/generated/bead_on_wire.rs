@@ -640,7 +640,9 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
     x
 }
 
-/// x · 2ᵉ without an intermediate overflow or underflow of the factor.
+/// x · 2ᵉ without an intermediate overflow or underflow of the factor; once x is 0, ∞ or
+/// NaN it stays so and the chunks stop (a row that underflowed to 0 at half the scale
+/// gives the degree `i64::MAX`).
 ///
 /// Never inlined: `scaled_state` calls it once per number of the state, and rustc at
 /// opt-level 3 overflows its own stack (LLVM's scalar evolution recursing over the chained
@@ -648,13 +650,16 @@ fn minimum_norm(a: &[Vec<f64>], rhs: &[f64], weight: &[f64], status: &mut Status
 #[allow(dead_code)]
 #[inline(never)]
 fn pow2(mut x: f64, mut e: i64) -> f64 {
-    while e > 1000 {
+    while e > 1000 && x.is_finite() && x != 0.0 {
         x *= 2f64.powi(1000);
         e -= 1000;
     }
-    while e < -1000 {
+    while e < -1000 && x.is_finite() && x != 0.0 {
         x *= 2f64.powi(-1000);
         e += 1000;
+    }
+    if !(-1000..=1000).contains(&e) {
+        return x;
     }
     x * 2f64.powi(e as i32)
 }
@@ -692,13 +697,13 @@ fn degrees<const D: usize>(at: &[Row<D>], half: &[Row<D>]) -> Option<Vec<i64>> {
             .zip(&b.jacobian)
             .flat_map(|((_, x), (_, y))| x.iter().zip(y).map(|(x, y)| (*x, *y)))
             .find(|(x, _)| *x != 0.0)
-            .map(|(x, y)| (x / y).log2().round() as i64 + 1);
+            .map(|(x, y)| ((x / y).log2().round() as i64).saturating_add(1));
         let p = from_scalar.or(from_j).unwrap_or(0);
         let ok = scalars.iter().all(|&(x, y)| exact(x, y, p))
             && a.jacobian
                 .iter()
                 .zip(&b.jacobian)
-                .all(|((_, x), (_, y))| x.iter().zip(y).all(|(x, y)| exact(*x, *y, p - 1)));
+                .all(|((_, x), (_, y))| x.iter().zip(y).all(|(x, y)| exact(*x, *y, p.saturating_sub(1))));
         if !ok {
             return None;
         }

@@ -193,7 +193,7 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
         if n == 1 { "y" } else { "ies" },
         if k == 1 { "" } else { "s" }
     );
-    out.push_str("#include <float.h>\n#include <math.h>\n#include <stdlib.h>\n\n");
+    out.push_str("#include <float.h>\n#include <limits.h>\n#include <math.h>\n#include <stdlib.h>\n\n");
     let _ = writeln!(out, "enum {{ DIM = {dim}, BODIES = {n}, CONSTRAINTS = {k} }};\n");
     // The state.
     let _ = writeln!(out, "/* A state of the scene: every input of the formulas (the Rust module's fields). */");

@@ -735,8 +735,8 @@ int degrees(const Rows *at, const Rows *half, long long p[]) {
             for (c = 0; c < DIM && !found; c++) {
                 if (at->jacobian[e][c] != 0.0) {
                     degree = lg_to_i64(round(log2(at->jacobian[e][c] / half->jacobian[e][c])));
-                    /* Rust's i64 addition wraps in a release build. */
-                    degree = (long long)((unsigned long long)degree + 1ULL);
+                    /* Saturating, as the Rust module's `saturating_add`. */
+                    degree = degree == LLONG_MAX ? LLONG_MAX : degree + 1;
                     found = 1;
                 }
             }
@@ -746,7 +746,7 @@ int degrees(const Rows *at, const Rows *half, long long p[]) {
         }
         for (e = SOLVE_START[q]; e < SOLVE_START[q + 1]; e++) {
             for (c = 0; c < DIM; c++) {
-                ok = ok && at->jacobian[e][c] == pow2(half->jacobian[e][c], (long long)((unsigned long long)degree - 1ULL));
+                ok = ok && at->jacobian[e][c] == pow2(half->jacobian[e][c], degree == LLONG_MIN ? LLONG_MIN : degree - 1);
             }
         }
         if (!ok) {
