@@ -26,6 +26,7 @@ pub mod rotation;
 pub mod rows;
 pub mod simulate;
 pub mod solve;
+pub mod sparse;
 pub mod stabilize;
 pub mod tape;
 pub mod vector;
