@@ -875,10 +875,29 @@ impl Factored {
     }
 }
 
+/// Which factorisation a [`SolveCache`] keeps (the plan [`Method::Auto`] made for the
+/// block's pattern), for tests of the choice and for profiles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Factorisation {
+    Band,
+    Sparse,
+    Dense,
+}
+
 impl SolveCache {
     /// The way the last solve went.
     pub fn last_path(&self) -> SolvePath {
         self.path
+    }
+
+    /// The factorisation kept, `None` when none is (nothing solved, or the last solve was
+    /// not a case the cache serves).
+    pub fn factorisation(&self) -> Option<Factorisation> {
+        self.entry.as_ref().map(|c| match c.factor {
+            Factor::Band { .. } => Factorisation::Band,
+            Factor::Sparse { .. } => Factorisation::Sparse,
+            Factor::Dense(_) => Factorisation::Dense,
+        })
     }
 }
 
