@@ -9,7 +9,10 @@
 //!   with |J| ≈ 1e155 or 1e-150 solve as well as |J| ≈ 1. λₖ = λ̃ₖ (√Âₖₖ⁻¹)/‖Jₖ‖ and the force
 //!   Σ λ̃ₖ J̃ₖᵢ comes straight from the scaled quantities.
 //! - Equalities. A is banded when constraints are numbered along a chain; the band Cholesky
-//!   (`numeric::banded`) is linear in the number of rows, dense Cholesky is the alternative.
+//!   (`numeric::banded`) is linear in the number of rows. Grids and meshes have no narrow
+//!   band: the sparse L D Lᵀ in an approximate minimum degree order (`numeric::sparse`)
+//!   serves them, and dense Cholesky small blocks. `plan` chooses once per pattern, by
+//!   counts of multiply–adds; a run's cache keeps the choice and the sparse analysis.
 //!   A small pivot (Ã singular within `rank_tolerance`: a redundant constraint, a singular
 //!   configuration) falls back to a dense eigendecomposition: the minimum-norm λ when the
 //!   system is consistent, least squares when not, always with a diagnostic naming the rows, the
@@ -84,18 +87,19 @@ const NULL_SHARE: f64 = 1e-6;
 
 /// The most rows a dense equality solve (or the minimum-norm solve of a singular block) may
 /// have: both cost n³ (a symmetric eigendecomposition, then a least squares over the null
-/// space), about a second here. A coupled block past it whose band solve does not apply is
-/// refused ([`Diagnostic::TooLarge`]), a deterministic bound rather than a timer.
+/// space), about a second here. A coupled block past it that is singular, or that neither
+/// the band nor the sparse factor serves, is refused ([`Diagnostic::TooLarge`]), a
+/// deterministic bound rather than a timer.
 pub const MAX_DENSE_ROWS: usize = 1000;
 
 /// Which factorisation the equality solve uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Method {
-    /// The cheapest of band Cholesky (after reverse Cuthill–McKee renumbering if that
-    /// narrows the band; only when the bandwidth is under a quarter of the size), the sparse
-    /// L D Lᵀ in an approximate minimum degree order, and dense Cholesky (up to
-    /// [`MAX_DENSE_ROWS`] rows), by their counts of multiply–adds; a narrow band is taken
-    /// at once.
+    /// A narrow band at once (chains); otherwise the sparse L D Lᵀ in an approximate
+    /// minimum degree order when its count of multiply–adds (weighted) is below both band
+    /// Cholesky's (after reverse Cuthill–McKee renumbering if that narrows the band; only
+    /// when the bandwidth is under a quarter of the size) and dense Cholesky's (up to
+    /// [`MAX_DENSE_ROWS`] rows); otherwise band when it fits, dense when not.
     #[default]
     Auto,
     /// Dense Cholesky (nalgebra), whatever the structure.
@@ -228,8 +232,9 @@ pub enum Diagnostic {
     /// The numbers overflow at this state; the solve ran in a length unit of 2^`exponent`
     /// (verified homogeneous) and was scaled back.
     Rescaled { exponent: i64 },
-    /// A coupled block of `rows` rows needs a dense solve (it is not banded, or it is
-    /// singular) past [`MAX_DENSE_ROWS`]: it is not solved, λ is 0 on it (`Failed`).
+    /// A coupled block of `rows` rows needs a dense solve (it is singular, or neither the
+    /// band nor the sparse factor serves it) past [`MAX_DENSE_ROWS`]: it is not solved, λ
+    /// is 0 on it (`Failed`).
     TooLarge { constraints: Vec<usize>, rows: usize },
     /// The scene has independent parts at length scales one unit cannot serve: these
     /// constraints (and their bodies) were solved in the caller's unit, the rest in the
@@ -705,15 +710,16 @@ pub enum SolvePath {
 }
 
 /// What repeated solves with the same J and masses share: the scaling of the rows
-/// (J/‖J‖ and Jacobi) and the Cholesky factor of Ã (band or dense). A run's solves come in
+/// (J/‖J‖ and Jacobi) and the factor of Ã (band, sparse or dense). A run's solves come in
 /// such series — the acceleration solve at the start of a step, every SHAKE iteration along
 /// the start's gradients, and the next step's start at the positions the velocity
 /// projection had — so most of them only substitute a right-hand side. When J changes but
 /// acts on the same bodies (every step of a run), the terms of Ã and where each goes in the
-/// band are kept, so a new factor costs the arithmetic alone.
+/// band or the sparse matrix are kept (with the sparse factor's order, elimination tree and
+/// pattern of L), so a new factor costs the arithmetic alone.
 ///
 /// It serves only equality rows whose numbers are all finite and usable, on a block the
-/// band or dense Cholesky factors; anything else goes to [`solve_holding`] unchanged. A
+/// band, sparse or dense factorisation factors; anything else goes to [`solve_holding`] unchanged. A
 /// solve it serves is the one `solve_holding` would compute, number for number (the same
 /// scaling, assembly, factor and refinement, made from inputs equal bit for bit).
 #[derive(Clone, Debug, Default)]
@@ -1182,7 +1188,8 @@ fn pivoting(
     None
 }
 
-/// Solves Ã μ = −b̃ on a block: band or dense Cholesky, an eigendecomposition when singular.
+/// Solves Ã μ = −b̃ on a block: band Cholesky, sparse L D Lᵀ or dense Cholesky
+/// ([`plan`]), an eigendecomposition when singular.
 pub(crate) fn equality(
     block: &Block,
     b: &[f64],
@@ -1243,10 +1250,10 @@ pub(crate) struct SparsePlan {
 
 /// The factorisation chosen for `block` ([`Method`]). `Auto` renumbers by reverse
 /// Cuthill–McKee when the given order's band is not under a quarter of the size, takes a
-/// narrow band at once,
-/// and otherwise analyses the sparse factor and takes the cheapest of band (when under a
-/// quarter of the size), sparse and dense (up to [`MAX_DENSE_ROWS`]) by their weighted
-/// counts of multiply–adds. A block no factor serves (dense past the bound, sparse past
+/// narrow band at once, and otherwise analyses the sparse factor and takes it when its
+/// weighted count of multiply–adds is below both the band's (when under a quarter of the
+/// size) and the dense one's (up to [`MAX_DENSE_ROWS`]); otherwise band when it fits, dense
+/// when not. A block no factor serves (dense past the bound, sparse past
 /// [`MAX_SPARSE_FLOPS`]) is planned dense, which [`equality`] refuses as too large.
 pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     let n = block.n;
@@ -1272,21 +1279,22 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
         Method::Sparse => return Plan::Sparse(sparse_plan(block, settings)),
         Method::Auto if band_fits && (bandwidth <= NARROW_BAND || n < RENUMBER_MIN_ROWS) => true,
         Method::Auto if n < RENUMBER_MIN_ROWS => false,
-        Method::Auto => {
-            let (mut sparse, targets) = SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q)));
-            let cubed = (n as f64).powi(3);
-            let band_cost = if band_fits { n as f64 * ((bandwidth + 1) as f64).powi(2) } else { f64::INFINITY };
-            let dense_cost = if n <= MAX_DENSE_ROWS { DENSE_COST * cubed / 3.0 } else { f64::INFINITY };
-            let sparse_cost =
-                if sparse.flops() <= MAX_SPARSE_FLOPS { SPARSE_COST * sparse.flops() } else { f64::INFINITY };
-            if sparse_cost < band_cost && sparse_cost < dense_cost {
-                return Plan::Sparse(
-                    fill_sparse(block, settings, &mut sparse, &targets)
-                        .then_some(SparsePlan { factor: sparse, targets }),
-                );
+        Method::Auto => match SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q))) {
+            None => band_fits,
+            Some((mut sparse, targets)) => {
+                let cubed = (n as f64).powi(3);
+                let band_cost = if band_fits { n as f64 * ((bandwidth + 1) as f64).powi(2) } else { f64::INFINITY };
+                let dense_cost = if n <= MAX_DENSE_ROWS { DENSE_COST * cubed / 3.0 } else { f64::INFINITY };
+                let sparse_cost =
+                    if sparse.flops() <= MAX_SPARSE_FLOPS { SPARSE_COST * sparse.flops() } else { f64::INFINITY };
+                if sparse_cost < band_cost && sparse_cost < dense_cost {
+                    let factored = fill_sparse(block, settings, &mut sparse, &targets);
+                    return Plan::Sparse(factored.then_some(SparsePlan { factor: sparse, targets }));
+                }
+                // As before the sparse factor: band when it fits, dense otherwise.
+                band_fits
             }
-            band_fits && band_cost <= dense_cost
-        }
+        },
     };
     if !banded {
         return Plan::Dense;
@@ -1308,7 +1316,7 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
 /// The sparse factor of `block`, `None` when it is singular ([`Method::Sparse`]: whatever
 /// its cost).
 fn sparse_plan(block: &Block, settings: &Settings) -> Option<SparsePlan> {
-    let (mut factor, targets) = SparseFactor::analyse(block.n, block.a.iter().map(|&(p, q, _)| (p, q)));
+    let (mut factor, targets) = SparseFactor::analyse(block.n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
     fill_sparse(block, settings, &mut factor, &targets).then_some(SparsePlan { factor, targets })
 }
 

@@ -34,7 +34,10 @@ pub struct SparseFactor {
     values: Vec<f64>,
     /// 0..nnz, QDLDL's indices of every entry for its value update.
     every: Vec<usize>,
-    ldl: QDLDLFactorisation<f64>,
+    /// Boxed: QDLDL's factorisation and workspace are many vectors, moved with the plan.
+    /// `None` only in a clone whose analysis QDLDL refused (it never does: see `analyse`),
+    /// which then never factors.
+    ldl: Option<Box<QDLDLFactorisation<f64>>>,
     /// Σⱼ (entries of column j of L)²: the multiplications of a factorisation, give or take.
     flops: f64,
 }
@@ -45,12 +48,16 @@ impl Clone for SparseFactor {
         // numbers over (a clone is rare: a cache copied whole).
         let entries =
             (0..self.n).flat_map(|j| self.rowval[self.colptr[j]..self.colptr[j + 1]].iter().map(move |&i| (i, j)));
-        let (mut copy, _) = SparseFactor::analyse(self.n, entries);
+        let Some((mut copy, _)) = SparseFactor::analyse(self.n, entries) else {
+            return SparseFactor { ldl: None, ..self.shallow() };
+        };
         copy.values.copy_from_slice(&self.values);
-        copy.ldl.update_values(&copy.every, &copy.values);
-        // A refused factor stays refused in the copy: only its numbers matter to callers
-        // that factored it successfully.
-        let _ = copy.ldl.refactor();
+        if let Some(ldl) = &mut copy.ldl {
+            ldl.update_values(&copy.every, &copy.values);
+            // A refused factor stays refused in the copy: callers use only factors that
+            // succeeded.
+            let _ = ldl.refactor();
+        }
         copy
     }
 }
@@ -65,12 +72,30 @@ pub struct SparseWork {
 }
 
 impl SparseFactor {
+    /// Everything but the factorisation.
+    fn shallow(&self) -> SparseFactor {
+        SparseFactor {
+            n: self.n,
+            colptr: self.colptr.clone(),
+            rowval: self.rowval.clone(),
+            values: self.values.clone(),
+            every: self.every.clone(),
+            ldl: None,
+            flops: self.flops,
+        }
+    }
+
     /// The analysis of the symmetric pattern whose entries are `entries` ((i, j) pairs of
     /// either triangle, repeats allowed; the diagonal is always included), with, for each
     /// entry in the order given, the place its value is summed into
-    /// ([`values_mut`](SparseFactor::values_mut)). The values start at zero.
-    pub fn analyse(n: usize, entries: impl Iterator<Item = (usize, usize)>) -> (SparseFactor, Vec<usize>) {
+    /// ([`values_mut`](SparseFactor::values_mut)). The values start at zero. `None` when
+    /// QDLDL refuses the pattern (it checks that it is square, upper triangular and has an
+    /// entry in every column, which this one always is) or an entry is out of range.
+    pub fn analyse(n: usize, entries: impl Iterator<Item = (usize, usize)>) -> Option<(SparseFactor, Vec<usize>)> {
         let pairs: Vec<(usize, usize)> = entries.map(|(i, j)| (i.min(j), i.max(j))).collect();
+        if pairs.iter().any(|&(_, j)| j >= n) {
+            return None;
+        }
         // Column j holds the rows i ≤ j: count, then fill, then sort and deduplicate each.
         let mut rows_of: Vec<Vec<usize>> = (0..n).map(|j| vec![j]).collect();
         for &(i, j) in &pairs {
@@ -104,15 +129,10 @@ impl SparseFactor {
         }
         let a = CscMatrix::new(n, n, colptr.clone(), rowval.clone(), shape);
         let settings = QDLDLSettings { logical: true, regularize_enable: false, ..QDLDLSettings::default() };
-        // The pattern is square, upper triangular, with a diagonal in every column: the
-        // only conditions QDLDL checks, so the analysis cannot fail.
-        let ldl = match QDLDLFactorisation::new(&a, Some(settings)) {
-            Ok(ldl) => ldl,
-            Err(_) => unreachable!("an upper triangle with its diagonal is always analysed"),
-        };
+        let ldl = Box::new(QDLDLFactorisation::new(&a, Some(settings)).ok()?);
         let flops = ldl.L.colptr.windows(2).map(|w| ((w[1] - w[0]) as f64).powi(2)).sum::<f64>() + n as f64;
         let every = (0..nnz).collect();
-        (SparseFactor { n, colptr, rowval, values, every, ldl, flops }, targets)
+        Some((SparseFactor { n, colptr, rowval, values, every, ldl: Some(ldl), flops }, targets))
     }
 
     /// The size n.
@@ -128,7 +148,7 @@ impl SparseFactor {
 
     /// The entries of L below its unit diagonal.
     pub fn factor_entries(&self) -> usize {
-        self.ldl.nnzL()
+        self.ldl.as_ref().map_or(0, |ldl| ldl.nnzL())
     }
 
     /// The values of A's upper triangle, at the places [`analyse`](SparseFactor::analyse)
@@ -141,8 +161,9 @@ impl SparseFactor {
     /// (or is not a number), the matrix then being singular to that tolerance; the factor
     /// must not be used then.
     pub fn factor(&mut self, pivot_floor: f64) -> bool {
-        self.ldl.update_values(&self.every, &self.values);
-        self.ldl.refactor().is_ok() && self.ldl.D.iter().all(|&d| d > pivot_floor && d.is_finite())
+        let Some(ldl) = &mut self.ldl else { return false };
+        ldl.update_values(&self.every, &self.values);
+        ldl.refactor().is_ok() && ldl.D.iter().all(|&d| d > pivot_floor && d.is_finite())
     }
 
     /// y = A x (A symmetric, from its upper triangle).
@@ -163,7 +184,8 @@ impl SparseFactor {
 
     /// Overwrites `x` with the solution of L D Lᵀ y = x in the permuted order.
     fn substitute(&self, x: &mut [f64]) {
-        let l = &self.ldl.L;
+        let Some(ldl) = &self.ldl else { return };
+        let l = &ldl.L;
         let (p, i, v) = (&l.colptr, &l.rowval, &l.nzval);
         for j in 0..self.n {
             let xj = x[j];
@@ -171,7 +193,7 @@ impl SparseFactor {
                 x[r] -= a * xj;
             }
         }
-        for (xj, &d) in x.iter_mut().zip(&self.ldl.Dinv) {
+        for (xj, &d) in x.iter_mut().zip(&ldl.Dinv) {
             *xj *= d;
         }
         for j in (0..self.n).rev() {
@@ -187,7 +209,12 @@ impl SparseFactor {
     /// with `work`'s buffers (no allocation once they have the size).
     pub fn solve_into(&self, rhs: &[f64], work: &mut SparseWork, x: &mut Vec<f64>) {
         let n = self.n;
-        let perm = &self.ldl.perm;
+        let Some(ldl) = &self.ldl else {
+            x.clear();
+            x.resize(n, 0.0);
+            return;
+        };
+        let perm = &ldl.perm;
         let SparseWork { permuted, ax, r, y } = work;
         // perm[new] = old.
         permuted.clear();
@@ -240,7 +267,7 @@ mod tests {
         }
         entries.push((n - 1, 0));
         values.push(-1.0);
-        let (mut f, targets) = SparseFactor::analyse(n, entries.iter().copied());
+        let (mut f, targets) = SparseFactor::analyse(n, entries.iter().copied()).expect("a valid pattern");
         for (&t, &v) in targets.iter().zip(&values) {
             f.values_mut()[t] += v;
         }
