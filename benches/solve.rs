@@ -162,3 +162,14 @@ fn grid_cached_refactor(bencher: Bencher, k: usize) {
         solve_cached(black_box(&states[turn]), &settings, &[], &mut cache)
     });
 }
+
+/// A step at rest: the run's cache with J unchanged, so every solve substitutes (twice,
+/// with the refinement) on the kept factor.
+#[divan::bench(args = [10, 30, 100])]
+fn grid_cached_reuse(bencher: Bencher, k: usize) {
+    let rows = grid(k, 0.3);
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    solve_cached(&rows, &settings, &[], &mut cache);
+    bencher.bench_local(|| solve_cached(black_box(&rows), &settings, &[], &mut cache));
+}

@@ -246,3 +246,28 @@ fn the_cache_reuses_the_sparse_analysis_with_the_general_answer() {
         assert_eq!(bits(&again), bits(&solve_holding(&other, &settings, &[])));
     }
 }
+
+#[test]
+fn the_joint_grid_file_solves_alike_with_the_sparse_factor_and_the_band() {
+    // `constraints/solvers/joint_grid_30.toml` at its initial state with random velocities
+    // and forces (the rows' c terms then carry every entry): 1 711 rows, past the dense
+    // bound, so the band (what `Auto` took before) is the reference.
+    let text = std::fs::read_to_string("constraints/solvers/joint_grid_30.toml").expect("the file");
+    let s =
+        lagrange::scenario::Scenario::new(lagrange::model::file::load(&text).expect("valid"), &[]).expect("derives");
+    let mut rows = s.program.evaluate(&s.system, &s.env).expect("rows");
+    let mut mix = Mix(9);
+    rows.velocity.iter_mut().for_each(|v| *v = [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), 0.0]);
+    for row in &mut rows.rows {
+        row.bias += mix.range(-1.0, 1.0);
+    }
+    assert_eq!(rows.rows.len(), 1711);
+    let band = solve_with(&rows, &with(Method::Banded));
+    let auto = solve_with(&rows, &with(Method::Auto));
+    assert_eq!((band.status, auto.status), (Status::Solved, Status::Solved));
+    let gap = lambda_gap(&auto, &band);
+    assert!(gap < 1e-11, "λ differs by {gap:e} of the largest");
+    let mut cache = SolveCache::default();
+    solve_cached(&rows, &Settings::default(), &[], &mut cache);
+    assert_eq!(cache.factorisation(), Some(Factorisation::Sparse));
+}

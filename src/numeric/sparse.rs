@@ -279,6 +279,10 @@ mod tests {
         for (g, w) in got.iter().zip(&want) {
             assert!((g - w).abs() < 1e-14, "{g} vs {w}");
         }
+        // A clone (analysed again) factors and solves alike.
+        let copy = f.clone();
+        assert_eq!(copy.solve(&b), got);
+        assert_eq!(copy.factor_entries(), f.factor_entries());
         // A singular matrix is refused.
         f.values_mut().fill(0.0);
         for (&t, &(i, j)) in targets.iter().zip(&entries) {
