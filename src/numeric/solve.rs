@@ -65,7 +65,7 @@ const SPARSE_COST: f64 = 2.0;
 /// vectorised kernels): the ratio `BAND_FRACTION` was measured at.
 const DENSE_COST: f64 = 0.2;
 /// The most multiply–adds a sparse factorisation may take (about thirty times a dense one
-/// of [`MAX_DENSE_ROWS`] rows, seconds here): past it the block is refused as too large, a
+/// of [`MAX_DENSE_ROWS`] rows, about ten seconds here): past it the block is refused as too large, a
 /// deterministic bound rather than a timer.
 pub const MAX_SPARSE_FLOPS: f64 = 1e10;
 /// Murty's pivoting gives up after `FLIPS_PER_ROW` · n + `FLIPS_BASE` flips: the least-index
