@@ -65,8 +65,8 @@ const SPARSE_COST: f64 = 2.0;
 /// vectorised kernels): the ratio `BAND_FRACTION` was measured at.
 const DENSE_COST: f64 = 0.2;
 /// The most multiply–adds a sparse factorisation may take (about thirty times a dense one
-/// of [`MAX_DENSE_ROWS`] rows, about ten seconds here): past it the block is refused as too large, a
-/// deterministic bound rather than a timer.
+/// of [`MAX_DENSE_ROWS`] rows, about ten seconds here): past it the block is refused as too
+/// large, a deterministic bound rather than a timer.
 pub const MAX_SPARSE_FLOPS: f64 = 1e10;
 /// Murty's pivoting gives up after `FLIPS_PER_ROW` · n + `FLIPS_BASE` flips: the least-index
 /// rule needs a few flips per row on a positive definite Ã, so the bound only stops a cycle
@@ -719,8 +719,8 @@ pub enum SolvePath {
 /// pattern of L), so a new factor costs the arithmetic alone.
 ///
 /// It serves only equality rows whose numbers are all finite and usable, on a block the
-/// band, sparse or dense factorisation factors; anything else goes to [`solve_holding`] unchanged. A
-/// solve it serves is the one `solve_holding` would compute, number for number (the same
+/// band, sparse or dense factorisation factors; anything else goes to [`solve_holding`]
+/// unchanged. A solve it serves is the one `solve_holding` would compute, number for number (the same
 /// scaling, assembly, factor and refinement, made from inputs equal bit for bit).
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
