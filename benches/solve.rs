@@ -1,4 +1,5 @@
-//! The λ solve of an N-link chain, dense Cholesky against the band Cholesky, with divan.
+//! The λ solve of an N-link chain, dense Cholesky against the band Cholesky, and of a k × k
+//! joint grid, the sparse L D Lᵀ against the band and dense Cholesky, with divan.
 //!
 //! `cargo bench --bench solve`. The rows are built directly (no derivation): a chain of N
 //! unit masses in a zig-zag, moving, under gravity, so A is tridiagonal and full of
@@ -14,7 +15,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use divan::{Bencher, black_box};
 use lagrange::numeric::rows::{Row, Rows};
-use lagrange::numeric::solve::{Method, Settings, solve_with};
+use lagrange::numeric::solve::{Method, Settings, SolveCache, solve_cached, solve_with};
 
 fn main() {
     divan::main();
@@ -73,4 +74,102 @@ fn auto_scrambled(bencher: Bencher, n: usize) {
     rows.rows = scrambled.into_iter().flatten().collect();
     let settings = Settings::default();
     bencher.bench(|| solve_with(black_box(&rows), &settings));
+}
+
+/// The joint grid of `constraints/solvers/joint_grid_K.toml` as rows: `k − 1` rows of `k`
+/// unit masses below a fixed top row, each joined to its right and lower neighbours (the
+/// top row to its anchors), positions bent by `phase` and moving, so every entry of Ã is
+/// non-trivial; Ã is not banded (its band after reverse Cuthill–McKee is about 2k wide).
+fn grid(k: usize, phase: f64) -> Rows {
+    let bodies = (k - 1) * k;
+    let at = |i: usize, j: usize| i * k + j;
+    let position: Vec<[f64; 2]> = (0..bodies)
+        .map(|b| {
+            let (i, j) = ((b / k) as f64, (b % k) as f64);
+            [j + 0.2 * (0.7 * i + phase).sin(), -(i + 1.0) + 0.2 * (0.9 * j + phase).cos()]
+        })
+        .collect();
+    let row = |a: [f64; 2], ia: Option<usize>, b: [f64; 2], ib: usize| {
+        let d = [b[0] - a[0], b[1] - a[1], 0.0];
+        let mut jacobian = Vec::new();
+        if let Some(ia) = ia {
+            jacobian.push((ia, [-d[0], -d[1], 0.0]));
+        }
+        jacobian.push((ib, d));
+        Row { value: 0.0, rate: 0.0, bias: 0.1 * (ib as f64).sin(), inequality: false, jacobian }
+    };
+    let mut rows = Vec::new();
+    for i in 0..k - 1 {
+        for j in 0..k {
+            if i == 0 {
+                rows.push(row([j as f64, 0.0], None, position[at(0, j)], at(0, j)));
+            } else {
+                rows.push(row(position[at(i - 1, j)], Some(at(i - 1, j)), position[at(i, j)], at(i, j)));
+            }
+            if j + 1 < k {
+                rows.push(row(position[at(i, j)], Some(at(i, j)), position[at(i, j + 1)], at(i, j + 1)));
+            }
+        }
+    }
+    let velocity = (0..bodies).map(|b| [0.1 * (b as f64).sin(), 0.1 * (b as f64).cos(), 0.0]).collect();
+    Rows {
+        dim: 2,
+        inverse_mass: vec![1.0; bodies],
+        velocity,
+        force: vec![[0.0, -10.0, 0.0]; bodies],
+        rows,
+        axes: Vec::new(),
+    }
+}
+
+/// The grid's solve with the sparse factor, analysis included (k = 30, 100: the files'
+/// 1 711 and 19 701 rows).
+#[divan::bench(args = [10, 20, 30, 100])]
+fn grid_sparse(bencher: Bencher, k: usize) {
+    let rows = grid(k, 0.3);
+    let settings = Settings { method: Method::Sparse, ..Settings::default() };
+    bencher.bench(|| solve_with(black_box(&rows), &settings));
+}
+
+/// The grid's solve with the band Cholesky after reverse Cuthill–McKee (what `Auto` took
+/// before the sparse factor).
+#[divan::bench(args = [10, 20, 30, 100], sample_count = 10, sample_size = 1)]
+fn grid_band(bencher: Bencher, k: usize) {
+    let rows = grid(k, 0.3);
+    let settings = Settings { method: Method::Banded, ..Settings::default() };
+    bencher.bench(|| solve_with(black_box(&rows), &settings));
+}
+
+/// The grid's solve with dense Cholesky, up to `MAX_DENSE_ROWS` rows (k = 20: 741 rows).
+#[divan::bench(args = [10, 20], sample_count = 10, sample_size = 1)]
+fn grid_dense(bencher: Bencher, k: usize) {
+    let rows = grid(k, 0.3);
+    let settings = Settings { method: Method::Dense, ..Settings::default() };
+    bencher.bench(|| solve_with(black_box(&rows), &settings));
+}
+
+/// What a simulation's step pays per solve on the grid: the run's cache with two states of
+/// the same grid in turn, so every solve is scaled, assembled and factored anew on the kept
+/// analysis (the sparse order and pattern of L, chosen by `Auto`).
+#[divan::bench(args = [10, 30, 100])]
+fn grid_cached_refactor(bencher: Bencher, k: usize) {
+    let states = [grid(k, 0.3), grid(k, 0.4)];
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    let mut turn = 0;
+    bencher.bench_local(|| {
+        turn ^= 1;
+        solve_cached(black_box(&states[turn]), &settings, &[], &mut cache)
+    });
+}
+
+/// A step at rest: the run's cache with J unchanged, so every solve substitutes (twice,
+/// with the refinement) on the kept factor.
+#[divan::bench(args = [10, 30, 100])]
+fn grid_cached_reuse(bencher: Bencher, k: usize) {
+    let rows = grid(k, 0.3);
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    solve_cached(&rows, &settings, &[], &mut cache);
+    bencher.bench_local(|| solve_cached(black_box(&rows), &settings, &[], &mut cache));
 }

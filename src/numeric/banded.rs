@@ -3,16 +3,15 @@
 //! A constraint couples to another only through a body they share, so the A of an N-link
 //! chain (constraints numbered along the chain) is tridiagonal: bandwidth w = 1. Cholesky
 //! of a band matrix keeps the band (no fill outside it), costing O(n w²) time and O(n w)
-//! memory instead of O(n³) and O(n²) dense. Design note: a general sparse Cholesky (faer,
-//! nalgebra-sparse) would also handle trees and meshes, but costs a heavy dependency or an
-//! ordering step; the band covers chains, ropes and stacks numbered in order, and the
-//! caller falls back to dense otherwise (`numeric::solve` picks by bandwidth).
+//! memory instead of O(n³) and O(n²) dense. Design note: the band covers chains, ropes and
+//! stacks; grids and meshes, whose band grows with the scene's width, take the sparse
+//! L D Lᵀ (`numeric::sparse`), small blocks dense Cholesky (`numeric::solve::plan` picks).
 //!
 //! Constraints numbered in another order (a shuffled chain, a tree) are renumbered by
 //! reverse Cuthill–McKee (Cuthill & McKee 1969; George 1971), which recovers the band of a
 //! chain exactly and keeps trees and meshes narrow.
 //!
-//! Not here: choosing between band and dense, rank-deficient systems (the caller falls back
+//! Not here: choosing between band, sparse and dense, rank-deficient systems (the caller falls back
 //! to a dense SVD when [`Banded::cholesky`] reports a small pivot).
 
 /// A symmetric n×n matrix with Aᵢⱼ = 0 for |i − j| > w, storing the lower band row by row.

@@ -9,7 +9,10 @@
 //!   with |J| ≈ 1e155 or 1e-150 solve as well as |J| ≈ 1. λₖ = λ̃ₖ (√Âₖₖ⁻¹)/‖Jₖ‖ and the force
 //!   Σ λ̃ₖ J̃ₖᵢ comes straight from the scaled quantities.
 //! - Equalities. A is banded when constraints are numbered along a chain; the band Cholesky
-//!   (`numeric::banded`) is linear in the number of rows, dense Cholesky is the alternative.
+//!   (`numeric::banded`) is linear in the number of rows. Grids and meshes have no narrow
+//!   band: the sparse L D Lᵀ in an approximate minimum degree order (`numeric::sparse`)
+//!   serves them, and dense Cholesky small blocks. `plan` chooses once per pattern, by
+//!   counts of multiply–adds; a run's cache keeps the choice and the sparse analysis.
 //!   A small pivot (Ã singular within `rank_tolerance`: a redundant constraint, a singular
 //!   configuration) falls back to a dense eigendecomposition: the minimum-norm λ when the
 //!   system is consistent, least squares when not, always with a diagnostic naming the rows, the
@@ -33,6 +36,7 @@ use super::banded::{Banded, BandedCholesky};
 use super::contact::{ContactState, classify_holding};
 use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
+use super::sparse::{SparseFactor, SparseWork};
 use nalgebra::{DMatrix, DVector};
 
 /// Default of [`Settings::rank_tolerance`]: a pivot of the unit-diagonal Ã at 1e-10 means a
@@ -46,9 +50,24 @@ pub const CONTACT_TOLERANCE: f64 = 1e-9;
 /// against dense n³/3, and below a quarter of the size the band path wins even against
 /// nalgebra's faster dense kernels (the `solve` benchmark's crossover).
 const BAND_FRACTION: usize = 4;
-/// Blocks smaller than this are not renumbered (reverse Cuthill–McKee): their dense solve
-/// takes microseconds, which the renumbering would not win back.
+/// Blocks smaller than this are not renumbered (reverse Cuthill–McKee) nor ordered for the
+/// sparse factor: their dense solve takes microseconds, which an ordering would not win back.
 const RENUMBER_MIN_ROWS: usize = 16;
+/// A band at most this wide (after renumbering) is taken without analysing the sparse
+/// factor: a chain's (1) or a ladder's band costs n (w + 1)² multiply–adds, which no order
+/// of a sparse factor beats by enough to pay for finding it.
+const NARROW_BAND: usize = 3;
+/// The sparse factor's multiply–adds cost about this many of the band's (indirect
+/// addressing, an elimination-tree walk per row; the `solve` benchmark's grid), so `Auto`
+/// weighs its count by it against the band's n (w + 1)².
+const SPARSE_COST: f64 = 2.0;
+/// Dense Cholesky's multiply–adds cost about this fraction of the band's (nalgebra's
+/// vectorised kernels): the ratio `BAND_FRACTION` was measured at.
+const DENSE_COST: f64 = 0.2;
+/// The most multiply–adds a sparse factorisation may take (about thirty times a dense one
+/// of [`MAX_DENSE_ROWS`] rows, about ten seconds here): past it the block is refused as too
+/// large, a deterministic bound rather than a timer.
+pub const MAX_SPARSE_FLOPS: f64 = 1e10;
 /// Murty's pivoting gives up after `FLIPS_PER_ROW` · n + `FLIPS_BASE` flips: the least-index
 /// rule needs a few flips per row on a positive definite Ã, so the bound only stops a cycle
 /// that rounding causes on a degenerate block.
@@ -68,15 +87,19 @@ const NULL_SHARE: f64 = 1e-6;
 
 /// The most rows a dense equality solve (or the minimum-norm solve of a singular block) may
 /// have: both cost n³ (a symmetric eigendecomposition, then a least squares over the null
-/// space), about a second here. A coupled block past it whose band solve does not apply is
-/// refused ([`Diagnostic::TooLarge`]), a deterministic bound rather than a timer.
+/// space), about a second here. A coupled block past it that is singular, or that neither
+/// the band nor the sparse factor serves, is refused ([`Diagnostic::TooLarge`]), a
+/// deterministic bound rather than a timer.
 pub const MAX_DENSE_ROWS: usize = 1000;
 
 /// Which factorisation the equality solve uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Method {
-    /// Band Cholesky when the bandwidth (after reverse Cuthill–McKee renumbering if that
-    /// narrows it) is under a quarter of the size, dense otherwise.
+    /// A narrow band at once (chains); otherwise the sparse L D Lᵀ in an approximate
+    /// minimum degree order when its count of multiply–adds (weighted) is below both band
+    /// Cholesky's (after reverse Cuthill–McKee renumbering if that narrows the band; only
+    /// when the bandwidth is under a quarter of the size) and dense Cholesky's (up to
+    /// [`MAX_DENSE_ROWS`] rows); otherwise band when it fits, dense when not.
     #[default]
     Auto,
     /// Dense Cholesky (nalgebra), whatever the structure.
@@ -84,6 +107,9 @@ pub enum Method {
     /// Band Cholesky (renumbered by reverse Cuthill–McKee if that narrows the band),
     /// whatever the bandwidth.
     Banded,
+    /// Sparse L D Lᵀ in an approximate minimum degree order (`numeric::sparse`), whatever
+    /// the structure.
+    Sparse,
 }
 
 /// Tolerances and choices of the solve. Build with `Settings::default()` and field updates,
@@ -206,8 +232,9 @@ pub enum Diagnostic {
     /// The numbers overflow at this state; the solve ran in a length unit of 2^`exponent`
     /// (verified homogeneous) and was scaled back.
     Rescaled { exponent: i64 },
-    /// A coupled block of `rows` rows needs a dense solve (it is not banded, or it is
-    /// singular) past [`MAX_DENSE_ROWS`]: it is not solved, λ is 0 on it (`Failed`).
+    /// A coupled block of `rows` rows needs a dense solve (it is singular, or neither the
+    /// band nor the sparse factor serves it) past [`MAX_DENSE_ROWS`]: it is not solved, λ
+    /// is 0 on it (`Failed`).
     TooLarge { constraints: Vec<usize>, rows: usize },
     /// The scene has independent parts at length scales one unit cannot serve: these
     /// constraints (and their bodies) were solved in the caller's unit, the rest in the
@@ -683,16 +710,17 @@ pub enum SolvePath {
 }
 
 /// What repeated solves with the same J and masses share: the scaling of the rows
-/// (J/‖J‖ and Jacobi) and the Cholesky factor of Ã (band or dense). A run's solves come in
+/// (J/‖J‖ and Jacobi) and the factor of Ã (band, sparse or dense). A run's solves come in
 /// such series — the acceleration solve at the start of a step, every SHAKE iteration along
 /// the start's gradients, and the next step's start at the positions the velocity
 /// projection had — so most of them only substitute a right-hand side. When J changes but
 /// acts on the same bodies (every step of a run), the terms of Ã and where each goes in the
-/// band are kept, so a new factor costs the arithmetic alone.
+/// band or the sparse matrix are kept (with the sparse factor's order, elimination tree and
+/// pattern of L), so a new factor costs the arithmetic alone.
 ///
 /// It serves only equality rows whose numbers are all finite and usable, on a block the
-/// band or dense Cholesky factors; anything else goes to [`solve_holding`] unchanged. A
-/// solve it serves is the one `solve_holding` would compute, number for number (the same
+/// band, sparse or dense factorisation factors; anything else goes to [`solve_holding`]
+/// unchanged. A solve it serves is the one `solve_holding` would compute, number for number (the same
 /// scaling, assembly, factor and refinement, made from inputs equal bit for bit).
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
@@ -702,6 +730,7 @@ pub struct SolveCache {
     rhs: Vec<f64>,
     mu: Vec<f64>,
     work: BandWork,
+    sparse_work: SparseWork,
 }
 
 /// One cached factorisation and the inputs it was made from.
@@ -726,6 +755,13 @@ enum Factor {
     /// The band Cholesky, with Ã's terms and the place in the band each is added to.
     Band {
         factor: BandFactor,
+        terms: Vec<Term>,
+        targets: Vec<usize>,
+    },
+    /// The sparse L D Lᵀ (its order, elimination tree and pattern of L analysed once), with
+    /// Ã's terms and the place in its matrix each is added to.
+    Sparse {
+        factor: SparseFactor,
         terms: Vec<Term>,
         targets: Vec<usize>,
     },
@@ -763,19 +799,35 @@ impl Factored {
     /// in place: the numbers of a fresh factorisation, from the kept terms. False when the
     /// rows are no longer a case the cache serves (the entry is then spent).
     fn refactor(&mut self, rows: &Rows, settings: &Settings) -> bool {
-        let Factor::Band { factor, terms, targets } = &mut self.factor else { return false };
+        if matches!(self.factor, Factor::Dense(_)) {
+            return false;
+        }
         let (mut diagnostics, mut status) = (Vec::new(), Status::Solved);
         self.scaled.refill(rows, &mut diagnostics, &mut status);
         if !diagnostics.is_empty() {
             return false;
         }
-        // Ã into the band, term by term in `assemble`'s order: the same sums as `plan`'s.
-        let data = factor.a.data_mut();
-        data.fill(0.0);
-        for (t, &at) in terms.iter().zip(targets.iter()) {
-            data[at] += term_value(&self.scaled, &rows.inverse_mass, t);
-        }
-        if factor.a.cholesky_into(settings.rank_tolerance, &mut factor.factor).is_err() {
+        // Ã term by term in `assemble`'s order: the same sums as `plan`'s.
+        let factored = match &mut self.factor {
+            Factor::Band { factor, terms, targets } => {
+                let data = factor.a.data_mut();
+                data.fill(0.0);
+                for (t, &at) in terms.iter().zip(targets.iter()) {
+                    data[at] += term_value(&self.scaled, &rows.inverse_mass, t);
+                }
+                factor.a.cholesky_into(settings.rank_tolerance, &mut factor.factor).is_ok()
+            }
+            Factor::Sparse { factor, terms, targets } => {
+                let values = factor.values_mut();
+                values.fill(0.0);
+                for (t, &at) in terms.iter().zip(targets.iter()) {
+                    values[at] += term_value(&self.scaled, &rows.inverse_mass, t);
+                }
+                factor.factor(settings.rank_tolerance)
+            }
+            Factor::Dense(_) => false,
+        };
+        if !factored {
             return false;
         }
         for (mine, (_, j)) in self.jacobian.iter_mut().zip(rows.rows.iter().flat_map(|row| &row.jacobian)) {
@@ -809,6 +861,10 @@ impl Factored {
                     .collect();
                 Factor::Band { factor, terms, targets }
             }
+            Plan::Sparse(Some(SparsePlan { factor, targets })) => {
+                // `targets` follow `block.a`, which is `terms` in order.
+                Factor::Sparse { factor, terms: terms(&scaled, rows.inverse_mass.len(), &index), targets }
+            }
             Plan::Dense if block.n <= MAX_DENSE_ROWS => Factor::Dense(DenseFactor::new(&block, settings)?),
             _ => return None,
         };
@@ -825,10 +881,29 @@ impl Factored {
     }
 }
 
+/// Which factorisation a [`SolveCache`] keeps (the plan [`Method::Auto`] made for the
+/// block's pattern), for tests of the choice and for profiles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Factorisation {
+    Band,
+    Sparse,
+    Dense,
+}
+
 impl SolveCache {
     /// The way the last solve went.
     pub fn last_path(&self) -> SolvePath {
         self.path
+    }
+
+    /// The factorisation kept, `None` when none is (nothing solved, or the last solve was
+    /// not a case the cache serves).
+    pub fn factorisation(&self) -> Option<Factorisation> {
+        self.entry.as_ref().map(|c| match c.factor {
+            Factor::Band { .. } => Factorisation::Band,
+            Factor::Sparse { .. } => Factorisation::Sparse,
+            Factor::Dense(_) => Factorisation::Dense,
+        })
     }
 }
 
@@ -878,6 +953,7 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
         cache.rhs.extend(c.index.iter().map(|&q| -b_entry(rows, &c.scaled, q)));
         match &c.factor {
             Factor::Band { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.work, &mut cache.mu),
+            Factor::Sparse { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.sparse_work, &mut cache.mu),
             Factor::Dense(factor) => cache.mu.extend(factor.solve(&cache.rhs)),
         }
         finite_in_place(&mut cache.mu, &c.index, &mut diagnostics, &mut status);
@@ -1112,7 +1188,8 @@ fn pivoting(
     None
 }
 
-/// Solves Ã μ = −b̃ on a block: band or dense Cholesky, an eigendecomposition when singular.
+/// Solves Ã μ = −b̃ on a block: band Cholesky, sparse L D Lᵀ or dense Cholesky
+/// ([`plan`]), an eigendecomposition when singular.
 pub(crate) fn equality(
     block: &Block,
     b: &[f64],
@@ -1135,7 +1212,10 @@ pub(crate) fn equality(
         Plan::Band(Some(factor)) => {
             return finite_or_zero(factor.solve(&rhs), index, diagnostics, status);
         }
-        Plan::Band(None) => {}
+        Plan::Sparse(Some(sparse)) => {
+            return finite_or_zero(sparse.factor.solve(&rhs), index, diagnostics, status);
+        }
+        Plan::Band(None) | Plan::Sparse(None) => {}
         Plan::Dense => {
             if n > MAX_DENSE_ROWS {
                 return too_large(diagnostics, status);
@@ -1152,21 +1232,35 @@ pub(crate) fn equality(
     finite_or_zero(x, index, diagnostics, status)
 }
 
-/// How [`equality`] factors a block: the band Cholesky (`Some` when its pivots all stay
-/// above the rank tolerance, `None` when one does not: the block is singular), or dense.
+/// How [`equality`] factors a block: the band Cholesky or the sparse L D Lᵀ (`Some` when
+/// their pivots all stay above the rank tolerance, `None` when one does not: the block is
+/// singular), or dense.
 pub(crate) enum Plan {
     Band(Option<BandFactor>),
+    Sparse(Option<SparsePlan>),
     Dense,
 }
 
-/// The factorisation chosen for `block` ([`Method`]; `Auto` renumbers by reverse
-/// Cuthill–McKee when the given order is not already narrow, then takes the band when it is
-/// under a quarter of the size).
+/// A block's sparse factor and, for each of its entries (`Block::a`, in order), the place
+/// its value is summed into.
+pub(crate) struct SparsePlan {
+    factor: SparseFactor,
+    targets: Vec<usize>,
+}
+
+/// The factorisation chosen for `block` ([`Method`]). `Auto` renumbers by reverse
+/// Cuthill–McKee when the given order's band is not under a quarter of the size, takes a
+/// narrow band at once, and otherwise analyses the sparse factor and takes it when its
+/// weighted count of multiply–adds is below both the band's (when under a quarter of the
+/// size) and the dense one's (up to [`MAX_DENSE_ROWS`]); otherwise band when it fits, dense
+/// when not. A block no factor serves (dense past the bound, sparse past
+/// [`MAX_SPARSE_FLOPS`]) is planned dense, which [`equality`] refuses as too large.
 pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     let n = block.n;
     let mut order: Option<Vec<usize>> = None;
     let mut bandwidth = block.bandwidth;
-    if settings.method != Method::Dense && BAND_FRACTION * bandwidth >= n && n >= RENUMBER_MIN_ROWS {
+    let renumber = matches!(settings.method, Method::Banded | Method::Auto);
+    if renumber && BAND_FRACTION * bandwidth >= n && n >= RENUMBER_MIN_ROWS {
         let rcm = super::banded::reverse_cuthill_mckee(n, block.a.iter().map(|&(p, q, _)| (p, q)));
         let mut position = vec![0; n];
         for (new, &old) in rcm.iter().enumerate() {
@@ -1178,10 +1272,29 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
             order = Some(rcm);
         }
     }
+    let band_fits = BAND_FRACTION * bandwidth < n;
     let banded = match settings.method {
         Method::Banded => true,
         Method::Dense => false,
-        Method::Auto => BAND_FRACTION * bandwidth < n,
+        Method::Sparse => return Plan::Sparse(sparse_plan(block, settings)),
+        Method::Auto if band_fits && (bandwidth <= NARROW_BAND || n < RENUMBER_MIN_ROWS) => true,
+        Method::Auto if n < RENUMBER_MIN_ROWS => false,
+        Method::Auto => match SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q))) {
+            None => band_fits,
+            Some((mut sparse, targets)) => {
+                let cubed = (n as f64).powi(3);
+                let band_cost = if band_fits { n as f64 * ((bandwidth + 1) as f64).powi(2) } else { f64::INFINITY };
+                let dense_cost = if n <= MAX_DENSE_ROWS { DENSE_COST * cubed / 3.0 } else { f64::INFINITY };
+                let sparse_cost =
+                    if sparse.flops() <= MAX_SPARSE_FLOPS { SPARSE_COST * sparse.flops() } else { f64::INFINITY };
+                if sparse_cost < band_cost && sparse_cost < dense_cost {
+                    let factored = fill_sparse(block, settings, &mut sparse, &targets);
+                    return Plan::Sparse(factored.then_some(SparsePlan { factor: sparse, targets }));
+                }
+                // As before the sparse factor: band when it fits, dense otherwise.
+                band_fits
+            }
+        },
     };
     if !banded {
         return Plan::Dense;
@@ -1198,6 +1311,24 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
         a.add(position[q], position[p], v);
     }
     Plan::Band(a.cholesky(settings.rank_tolerance).ok().map(|factor| BandFactor { position, a, factor }))
+}
+
+/// The sparse factor of `block`, `None` when it is singular ([`Method::Sparse`]: whatever
+/// its cost).
+fn sparse_plan(block: &Block, settings: &Settings) -> Option<SparsePlan> {
+    let (mut factor, targets) = SparseFactor::analyse(block.n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
+    fill_sparse(block, settings, &mut factor, &targets).then_some(SparsePlan { factor, targets })
+}
+
+/// Sums `block`'s entries into `factor` at `targets` (in `Block::a`'s order: the cache's
+/// refactorisation sums its terms in the same order) and factors it.
+fn fill_sparse(block: &Block, settings: &Settings, factor: &mut SparseFactor, targets: &[usize]) -> bool {
+    let values = factor.values_mut();
+    values.fill(0.0);
+    for (&at, &(_, _, v)) in targets.iter().zip(&block.a) {
+        values[at] += v;
+    }
+    factor.factor(settings.rank_tolerance)
 }
 
 /// A block's band Cholesky, in its (possibly renumbered) order: what a solve needs to be

@@ -6,8 +6,9 @@
 //! so every equality row ends the substep with Ċ = −C/h (a full position correction, the
 //! limit of Baumgarte's bias at β = 1) and inequality rows solve the complementarity problem
 //! P ≥ 0, J u + C/h ≥ 0, P·(J u + C/h) = 0 (rows already heading apart with the bias are
-//! left out). The solve is `numeric::solve`'s (band Cholesky on chains, dense otherwise,
-//! Clarabel and Murty for inequality rows): the rows get F = 0 and the bias c set to the
+//! left out). The solve is `numeric::solve`'s (band Cholesky on chains, sparse L D Lᵀ on
+//! grids, dense on small blocks, Clarabel and Murty for inequality rows, through the run's
+//! solve cache): the rows get F = 0 and the bias c set to the
 //! right-hand side, as `numeric::stabilize` does for its projections, so its "accelerations"
 //! M⁻¹JᵀP are the velocity changes. After each substep the positions are projected onto
 //! C = 0 (Newton with the mass-weighted minimum-norm step, `stabilize::project_positions`,
@@ -20,7 +21,6 @@ use super::Stepper;
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
 use crate::numeric::rows::Rows;
-use crate::numeric::solve::solve;
 use crate::numeric::stabilize::{Inequalities, project_positions};
 use crate::numeric::vector::length_scale;
 
@@ -63,7 +63,10 @@ pub fn step(
             }
         }
         rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        let solution = solve(&rows);
+        // Through the run's solve cache (`Dynamics::correct`, the projection's too): rows
+        // on the same bodies keep their factor's analysis (band places, or the sparse
+        // order and pattern of L), so each substep's solve is a numeric factorisation.
+        let solution = dynamics.correct(&rows);
         for (u, du) in v.iter_mut().zip(&solution.acceleration) {
             for d in 0..3 {
                 if du[d].is_finite() {
