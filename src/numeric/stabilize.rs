@@ -322,6 +322,107 @@ pub fn shake_positions(
     }
 }
 
+/// [`project_positions_along`] hands over to Newton when an iteration does not at least halve
+/// the residual: the quasi-Newton iteration contracts by about ‖ΔJ‖/‖J‖ (J's change over the
+/// substep), and a slower one costs more substitutions than Newton's factorisations.
+const CONTRACTION: f64 = 0.5;
+
+/// Quasi-Newton onto C = 0 along the rows `along` (their J, at the start of a substep, whose
+/// factor the run's solve cache holds from the velocity solve): Δq = M⁻¹Jₙᵀμ with
+/// (Jₙ M⁻¹ Jₙᵀ) μ = −C(q), positions only, until every row's distance |C|/‖J‖ at q is at
+/// most `bound`, as [`project_positions`] measures it. Its solves are substitutions with the
+/// cached factor. The full rows are evaluated at the starting q (returned as they are when
+/// it is on the surface already, as at rest) and at the final one; the iterations between
+/// read C and J alone (`Dynamics::positions`). Returns the rows at the final positions and
+/// the iterations taken. Equalities only: with an inequality constraint in the system it
+/// returns `None` at once. It also returns `None`, with `q` put back exactly where it was
+/// (kept in `start`), when the iteration is not converging fast: an iteration does not
+/// halve the residual, the residual is not finite, `max_iterations` are spent, or the rows
+/// cannot be evaluated past the starting q; the caller then takes [`project_positions`] from
+/// the same q. An evaluation error at the starting q is returned as [`project_positions`]
+/// would return it. `along`'s C, Ċ and c are overwritten; its J is kept.
+#[allow(clippy::too_many_arguments)]
+pub fn project_positions_along(
+    dynamics: &mut Dynamics<'_>,
+    t: f64,
+    q: &mut Vectors,
+    v: &Vectors,
+    along: &mut Rows,
+    bound: f64,
+    max_iterations: usize,
+    start: &mut Vec<[f64; 3]>,
+) -> Result<Option<(Rows, usize)>, SimError> {
+    if dynamics.system().constraints.iter().any(|c| c.inequality) || along.rows.iter().any(|r| r.inequality) {
+        return Ok(None);
+    }
+    // The largest distance to a surface; a NaN counts as infinitely far (f64::max drops it).
+    let residual_of = |rows: &[Row]| {
+        rows.iter()
+            .map(|row| distance(row).abs())
+            .fold(0.0f64, |r, s| if s.is_nan() { f64::INFINITY } else { r.max(s) })
+    };
+    let rows = dynamics.rows(t, q, v)?;
+    let mut previous = residual_of(&rows.rows);
+    if previous <= bound {
+        return Ok(Some((rows, 0)));
+    }
+    let go_on = previous.is_finite() && max_iterations > 0;
+    if go_on {
+        start.clear();
+        start.extend_from_slice(q);
+        for (old, new) in along.rows.iter_mut().zip(&rows.rows) {
+            // (Jₙ M⁻¹ Jₙᵀ) μ = −C(q): c = C(q).
+            enforce(old, new.value);
+        }
+    }
+    dynamics.recycle(rows);
+    if !go_on {
+        return Ok(None);
+    }
+    step_along(dynamics, q, along);
+    let mut iterations = 1;
+    loop {
+        // Past the starting q an evaluation error hands over to Newton from there.
+        let restore = |q: &mut Vectors| {
+            q.copy_from_slice(start);
+            Ok(None)
+        };
+        if dynamics.positions(t, q, v).is_err() {
+            return restore(q);
+        }
+        let residual = residual_of(dynamics.position_rows());
+        if residual <= bound {
+            return match dynamics.rows(t, q, v) {
+                Ok(rows) => Ok(Some((rows, iterations))),
+                Err(_) => restore(q),
+            };
+        }
+        if !(residual.is_finite() && residual <= CONTRACTION * previous) || iterations >= max_iterations {
+            return restore(q);
+        }
+        previous = residual;
+        for (old, new) in along.rows.iter_mut().zip(dynamics.position_rows()) {
+            enforce(old, new.value);
+        }
+        step_along(dynamics, q, along);
+        iterations += 1;
+    }
+}
+
+/// q += M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −c for the rows `along` (c set), through the run's cache.
+fn step_along(dynamics: &mut Dynamics<'_>, q: &mut Vectors, along: &mut Rows) {
+    along.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+    let step = &mut dynamics.correct(along).acceleration;
+    fold(along, step);
+    for (x, dx) in q.iter_mut().zip(step.iter()) {
+        for d in 0..3 {
+            if dx[d].is_finite() {
+                x[d] += dx[d];
+            }
+        }
+    }
+}
+
 /// Ċ of `rows` after the velocities changed from `before` to `after` (Ċ is affine in v:
 /// Ċ = Σᵢ Jᵢ·vᵢ + ∂C/∂t), without evaluating again.
 pub fn update_rates(rows: &mut Rows, before: &Vectors, after: &Vectors) {

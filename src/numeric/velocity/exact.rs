@@ -11,9 +11,13 @@
 //! solve cache): the rows get F = 0 and the bias c set to the
 //! right-hand side, as `numeric::stabilize` does for its projections, so its "accelerations"
 //! M⁻¹JᵀP are the velocity changes. After each substep the positions are projected onto
-//! C = 0 (Newton with the mass-weighted minimum-norm step, `stabilize::project_positions`,
-//! to 10⁻¹³ of the scene's size): the bias C/h alone leaves the O(h²) curvature error of
-//! the linearised step, the projection makes the joints exact.
+//! C = 0 with the mass-weighted minimum-norm step, to 10⁻¹³ of the scene's size: the bias
+//! C/h alone leaves the O(h²) curvature error of the linearised step, the projection makes
+//! the joints exact. The projection first iterates along the substep's J
+//! (`stabilize::project_positions_along`, a quasi-Newton iteration as SHAKE's, positions
+//! only), so the cache serves every iteration with the velocity solve's factor; where that
+//! is slow or diverges (a large substep), or with inequality rows, Newton from the same
+//! positions (`stabilize::project_positions`: J and a factorisation per iteration) does it.
 //!
 //! Not here: the iterative solvers; the acceleration-level run (`numeric::simulate`).
 
@@ -21,12 +25,16 @@ use super::Stepper;
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
 use crate::numeric::rows::Rows;
-use crate::numeric::stabilize::{Inequalities, project_positions};
+use crate::numeric::stabilize::{Inequalities, project_positions, project_positions_along};
 use crate::numeric::vector::length_scale;
 
 /// Relative tolerance and iteration cap of the projection after each substep.
 const PROJECTION_TOLERANCE: f64 = 1e-13;
 const PROJECTION_ITERATIONS: usize = 20;
+/// Iteration cap of the quasi-Newton projection along the substep's J before Newton takes
+/// over: it halves the residual at least per iteration, so from a substep's drift it either
+/// converges within a few or is slower than Newton.
+const ALONG_ITERATIONS: usize = 10;
 
 /// One exact velocity-level step (see the file's note).
 pub fn step(
@@ -77,17 +85,16 @@ pub fn step(
         s.impulse.copy_from_slice(&solution.lambda);
         s.prepared.to_world(v);
         s.prepared.drift(q, v, h);
-        dynamics.recycle(rows);
         let t1 = t + (sub + 1) as f64 * h;
-        (rows, _) = project_positions(
-            dynamics,
-            t1,
-            q,
-            v,
-            PROJECTION_TOLERANCE * length,
-            PROJECTION_ITERATIONS,
-            Inequalities::Violated,
-        )?;
+        let bound = PROJECTION_TOLERANCE * length;
+        // Along the substep's J first: the cache serves each iteration with the velocity
+        // solve's factor; Newton (a factorisation per iteration) where that is slow.
+        let along = project_positions_along(dynamics, t1, q, v, &mut rows, bound, ALONG_ITERATIONS, &mut s.saved)?;
+        dynamics.recycle(rows);
+        rows = match along {
+            Some((projected, _)) => projected,
+            None => project_positions(dynamics, t1, q, v, bound, PROJECTION_ITERATIONS, Inequalities::Violated)?.0,
+        };
     }
     dynamics.recycle(rows);
     Ok(())

@@ -435,7 +435,7 @@ pub struct Stepper {
     pub impulse: Vec<f64>,
     prepared: Prepared,
     /// The velocities at the start of the step (restitution), the positions before a
-    /// substep (XPBD).
+    /// substep (XPBD) or before its projection (the exact solve's, to fall back from).
     saved: Vec<[f64; 3]>,
     /// The positions the rows were evaluated at (XPBD).
     evaluated: Vec<[f64; 3]>,
