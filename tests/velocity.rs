@@ -9,7 +9,7 @@ mod common;
 use common::{impulse_system, scenario, velocity_steps};
 use lagrange::numeric::dynamics::{Dynamics, SimError};
 use lagrange::numeric::simulate::initial_state;
-use lagrange::numeric::solve::solve;
+use lagrange::numeric::solve::{SolvePath, solve};
 use lagrange::numeric::velocity::{Settings, Softness, Solver, Stepper, stability};
 use lagrange::scenario::Scenario;
 
@@ -463,4 +463,95 @@ fn removing_the_heavy_top_disc_does_not_launch_the_lower_ones() {
             }
         }
     }
+}
+
+/// Rows of a state, as the library lays them out.
+type RowList = Vec<lagrange::numeric::rows::Row>;
+
+/// One substep of the exact velocity solve by hand on scene `s`, from velocities `speed` ×
+/// a fixed pseudo-random field: the velocity solve onto Ċ = 0 at q (through the run's
+/// cache, as `exact::step` does), the drift q⁺ = q + h u, then the projection along the
+/// substep's J. Returns its outcome, q⁺, q after, the rows there and the bound (the
+/// solver's 1e-13 of the scene's size).
+#[allow(clippy::type_complexity)]
+fn exact_substep(
+    s: &Scenario,
+    speed: f64,
+    h: f64,
+) -> (Option<(lagrange::numeric::rows::Rows, usize)>, Vec<[f64; 3]>, Vec<[f64; 3]>, RowList, f64) {
+    use lagrange::numeric::stabilize::project_positions_along;
+    let (mut q, mut v, t) = initial_state(&s.system, &s.env);
+    for (i, u) in v.iter_mut().enumerate() {
+        let x = i as f64;
+        *u = [speed * (1.7 * x).sin(), speed * (2.3 * x).cos(), 0.0];
+    }
+    let bound = 1e-13 * lagrange::numeric::vector::length_scale(&q);
+    let mut dynamics = Dynamics::new(&s.system, s.program.clone(), s.env.clone());
+    let mut along = dynamics.rows(t, &q, &v).expect("rows");
+    for row in &mut along.rows {
+        // ΔĊ = −Ċ: c = Ċ.
+        (row.value, row.bias, row.rate) = (0.0, row.rate, 0.0);
+    }
+    along.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+    let dv = dynamics.correct(&along).acceleration.clone();
+    assert_eq!(dynamics.last_solve_path(), SolvePath::Factored);
+    for ((x, u), du) in q.iter_mut().zip(&mut v).zip(&dv) {
+        for d in 0..3 {
+            u[d] += du[d];
+            x[d] += h * u[d];
+        }
+    }
+    let drifted = q.clone();
+    let mut start = Vec::new();
+    let outcome = project_positions_along(&mut dynamics, t + h, &mut q, &v, &mut along, bound, 10, &mut start)
+        .expect("evaluates");
+    if outcome.is_some() {
+        // The iteration's solves were substitutions with the velocity solve's factor.
+        assert_eq!(dynamics.last_solve_path(), SolvePath::Reused);
+    }
+    let rows = dynamics.rows(t + h, &q, &v).expect("rows").rows;
+    (outcome, drifted, q, rows, bound)
+}
+
+#[test]
+fn the_exact_solves_projection_reuses_the_velocity_solves_factor_and_falls_back_to_newton() {
+    use lagrange::numeric::stabilize::{Inequalities, distance, project_positions};
+    let largest = |rows: &[lagrange::numeric::rows::Row]| rows.iter().map(|r| distance(r).abs()).fold(0.0, f64::max);
+    // The 30 × 30 joint grid swinging at 240 Hz substeps: along the substep's J, to the
+    // solver's bound, in a few substitutions.
+    let grid = scenario("constraints/solvers/joint_grid_30.toml");
+    let (outcome, drifted, q, rows, bound) = exact_substep(&grid, 1.0, 1.0 / 240.0);
+    let (returned, iterations) = outcome.expect("the quasi-Newton iteration converges");
+    assert!((1..=4).contains(&iterations), "{iterations} iterations");
+    assert!(largest(&returned.rows) <= bound && largest(&rows) <= bound, "{:e} > {bound:e}", largest(&rows));
+    assert!(drifted != q, "it moved");
+    // A run of it (g = (5, −10): the grid swings, J changes every substep): the joints hold.
+    let swinging = scenario_at("constraints/solvers/joint_grid_30.toml", &[("g", [5.0, -10.0])]);
+    let mut settings = Settings::new(Solver::Exact, 1.0 / 60.0, 1.0);
+    settings.steps = 30;
+    let (start, _, _) = initial_state(&swinging.system, &swinging.env);
+    let mut last = start.clone();
+    let summary = swinging
+        .simulate_velocity(settings, &mut |f| {
+            last.copy_from_slice(&f.position);
+            Ok(())
+        })
+        .unwrap_or_else(|f| panic!("{}", f.error));
+    assert!(last[0][0] - start[0][0] > 0.1, "the grid swings: {:?} from {:?}", last[0], start[0]);
+    assert!(summary.max_abs_c <= 1e-9, "swinging grid: |C| = {:e}", summary.max_abs_c);
+    // A pendulum of length 1 at r = (1, 0) moving at 3 m/s across the rod, one substep of
+    // 1 s: r⁺ = (1, 3), and no point r⁺ + α r₀ is at distance 1 (|r⁺|² ≥ 9), so the iteration
+    // along the start's J cannot converge. q is put back bit for bit, and Newton from there
+    // (along J at r⁺) meets the bound.
+    let pendulum = scenario_at("constraints/pendulum.toml", &[("r", [1.0, 0.0])]);
+    let (outcome, drifted, q, rows, bound) = exact_substep(&pendulum, 3.0, 1.0);
+    assert!(outcome.is_none(), "the quasi-Newton iteration hands over");
+    assert_eq!(drifted, q, "q put back");
+    assert!(largest(&rows) > 1.0, "r⁺ is off the circle: {:e}", largest(&rows));
+    let mut dynamics = Dynamics::new(&pendulum.system, pendulum.program.clone(), pendulum.env.clone());
+    let mut q = q;
+    let v = vec![[0.0; 3]; q.len()];
+    let (rows, _) =
+        project_positions(&mut dynamics, 1.0, &mut q, &v, bound, 20, Inequalities::Violated).expect("Newton projects");
+    assert!(largest(&rows.rows) <= bound, "Newton: {:e} > {bound:e}", largest(&rows.rows));
 }
