@@ -18,6 +18,9 @@
 //! only), so the cache serves every iteration with the velocity solve's factor; where that
 //! is slow or diverges (a large substep), or with inequality rows, Newton from the same
 //! positions (`stabilize::project_positions`: J and a factorisation per iteration) does it.
+//! Scenes of fewer than a thousand rows take Newton alone: the two land on different points
+//! of C = 0 (apart by about |C(q⁺)|·‖ΔJ‖/‖J‖ a substep: below the step's error, not round-off), and small scenes keep the
+//! trajectory the generated exact step reproduces.
 //!
 //! Not here: the iterative solvers; the acceleration-level run (`numeric::simulate`).
 
@@ -35,6 +38,14 @@ const PROJECTION_ITERATIONS: usize = 20;
 /// over: it halves the residual at least per iteration, so from a substep's drift it either
 /// converges within a few or is slower than Newton.
 const ALONG_ITERATIONS: usize = 10;
+/// The fewest rows for which the projection iterates along the substep's J first. Its limit
+/// is another point of C = 0 than Newton's (they part by about |C(q⁺)|·‖ΔJ‖/‖J‖ a
+/// substep, below the step's own error but not round-off), so small scenes keep Newton's
+/// trajectory, the one the generated exact step (`generate --solver exact`) reproduces;
+/// there a factorisation is cheap next to the row evaluations anyway. Grids and long chains
+/// (thousands of rows, where the factorisations dominate a swinging step) take the cheaper
+/// path.
+const ALONG_MIN_ROWS: usize = 1000;
 
 /// One exact velocity-level step (see the file's note).
 pub fn step(
@@ -89,7 +100,11 @@ pub fn step(
         let bound = PROJECTION_TOLERANCE * length;
         // Along the substep's J first: the cache serves each iteration with the velocity
         // solve's factor; Newton (a factorisation per iteration) where that is slow.
-        let along = project_positions_along(dynamics, t1, q, v, &mut rows, bound, ALONG_ITERATIONS, &mut s.saved)?;
+        let along = if rows.rows.len() >= ALONG_MIN_ROWS {
+            project_positions_along(dynamics, t1, q, v, &mut rows, bound, ALONG_ITERATIONS, &mut s.saved)?
+        } else {
+            None
+        };
         dynamics.recycle(rows);
         rows = match along {
             Some((projected, _)) => projected,
