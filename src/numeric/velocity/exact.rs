@@ -18,9 +18,10 @@
 //! only), so the cache serves every iteration with the velocity solve's factor; where that
 //! is slow or diverges (a large substep), or with inequality rows, Newton from the same
 //! positions (`stabilize::project_positions`: J and a factorisation per iteration) does it.
-//! Scenes of fewer than a thousand rows take Newton alone: the two land on different points
-//! of C = 0 (apart by about |C(q⁺)|·‖ΔJ‖/‖J‖ a substep: below the step's error, not round-off), and small scenes keep the
-//! trajectory the generated exact step reproduces.
+//! Scenes of fewer than a thousand rows take Newton alone: the two land on different
+//! points of C = 0 (apart by about |C(q⁺)|·‖ΔJ‖/‖J‖ a substep: below the step's error,
+//! not round-off), and small scenes keep the trajectory the generated exact step
+//! reproduces.
 //!
 //! Not here: the iterative solvers; the acceleration-level run (`numeric::simulate`).
 
