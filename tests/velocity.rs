@@ -533,7 +533,7 @@ fn the_exact_solves_projection_reuses_the_velocity_solves_factor_and_falls_back_
     let mut last = start.clone();
     let summary = swinging
         .simulate_velocity(settings, &mut |f| {
-            last.copy_from_slice(&f.position);
+            last.copy_from_slice(f.position);
             Ok(())
         })
         .unwrap_or_else(|f| panic!("{}", f.error));
