@@ -349,6 +349,43 @@ impl<'s> Dynamics<'s> {
         self.program
             .evaluate_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
+        self.checked(rows, t)
+    }
+
+    /// The rows at (t, q, v) from `rows`, whose C/κ and J are already those at (t, q) (an
+    /// evaluation at the same t and q, before a velocity step changed v): only Ċ, c and the
+    /// slots' numbers are evaluated (`RowProgram::evaluate_motion_state_into`), as
+    /// [`rows`](Dynamics::rows) would give them to rounding. `rows`' other numbers may have
+    /// been spent (a correction's C, Ċ and c) but for its `value`, which must be C/κ.
+    pub fn rows_moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: Rows) -> Result<Rows, SimError> {
+        self.moved(t, q, v, rows, true)
+    }
+
+    /// [`rows_moved`](Dynamics::rows_moved); `checked`: C and J are known to be finite.
+    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, mut rows: Rows, checked: bool) -> Result<Rows, SimError> {
+        self.evaluations += 1;
+        self.set_state(q, v);
+        let kept = self
+            .program
+            .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
+            .map_err(|error| SimError::Eval { time: t, error })?;
+        // C and J were checked when they were evaluated: the new numbers alone, and all of
+        // them again only to name what is not finite.
+        if kept && checked && motion_finite(&rows) { Ok(rows) } else { self.checked(rows, t) }
+    }
+
+    /// The rows at (t, q, v) after a [`positions`](Dynamics::positions) at the same t and q:
+    /// its C/κ and J are taken over and the rest evaluated ([`rows_moved`](Dynamics::rows_moved)).
+    pub fn rows_after_positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
+        let mut rows = self.spare.pop().unwrap_or_default();
+        std::mem::swap(&mut rows.rows, &mut self.position_rows);
+        // `positions` checked its C and J, but reports through a full evaluation that may
+        // round differently: checked again, as `rows` would.
+        self.moved(t, q, v, rows, false)
+    }
+
+    /// `rows` at time `t`, or the error that names the first number that is not finite.
+    fn checked(&self, rows: Rows, t: f64) -> Result<Rows, SimError> {
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
         if !all_finite(&rows) {
             for (k, row) in rows.rows.iter().enumerate() {
@@ -459,6 +496,14 @@ fn all_finite(rows: &Rows) -> bool {
     let rows_sum = rows.rows.iter().fold(0.0, |s, row| {
         row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(zero(zero(s, &row.value), &row.rate), &row.bias), zero)
     });
+    let bodies = rows.force.iter().chain(&rows.velocity).flatten().chain(&rows.inverse_mass).fold(rows_sum, zero);
+    bodies == 0.0
+}
+
+/// Whether Ċ, c and the slots' numbers of `rows` are finite ([`all_finite`] without C and J).
+fn motion_finite(rows: &Rows) -> bool {
+    let zero = |s: f64, x: &f64| s + x * 0.0;
+    let rows_sum = rows.rows.iter().fold(0.0, |s, row| zero(zero(s, &row.rate), &row.bias));
     let bodies = rows.force.iter().chain(&rows.velocity).flatten().chain(&rows.inverse_mass).fold(rows_sum, zero);
     bodies == 0.0
 }

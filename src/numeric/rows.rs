@@ -134,6 +134,10 @@ pub struct RowProgram {
     /// C and J alone (with the principal axes they are projected on): what an iteration
     /// onto C = 0 reads ([`RowProgram::evaluate_positions_into`]).
     positions: Subprogram,
+    /// Everything but C and J: each row's Ċ and c, each slot's mass, velocity and force —
+    /// what changes when only the velocities do ([`RowProgram::evaluate_motion_state_into`]).
+    /// `None` with 3D rigid bodies, whose slots read the principal axes too.
+    motion: Option<Subprogram>,
     /// Every root again, shape by shape (`numeric::batch`), into `tape`'s output layout:
     /// what [`evaluate_into`](RowProgram::evaluate_into) runs when the scene repeats a
     /// shape (`None`: `tape` itself).
@@ -147,6 +151,9 @@ struct Subprogram {
     inputs: Vec<Symbol>,
     /// The tape's root of each of the program's roots (`usize::MAX`: not in it).
     root: Vec<usize>,
+    /// Per program root, its first output component in the tape and how many it has (0:
+    /// not in it): the two lookups of `root` and `tape.output_range` in one.
+    place: Vec<(u32, u32)>,
     sources: Vec<Source>,
     /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself).
     batched: Option<Batched>,
@@ -172,7 +179,17 @@ impl Subprogram {
         // As for the whole program: the inputs are the roots' free symbols.
         let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
         let sources = sources(system, &inputs);
-        Subprogram { tape, inputs, root, sources, batched: None }
+        let place = root
+            .iter()
+            .map(|&r| {
+                if r == usize::MAX {
+                    return (0, 0);
+                }
+                let range = tape.output_range(r);
+                (range.start as u32, range.len() as u32)
+            })
+            .collect();
+        Subprogram { tape, inputs, root, place, sources, batched: None }
     }
 }
 
@@ -183,10 +200,23 @@ fn input_slots<'t>(tape: &'t Tape, inputs: &[Symbol]) -> impl Fn(Symbol) -> Rang
     move |s| at.get(&s).map_or(0..0, |&i| tape.input_range(i))
 }
 
+/// Which roots of a [`RowProgram`] a tape computes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Part {
+    /// Every root.
+    All,
+    /// Each row's C and J, and the principal axes.
+    Positions,
+    /// Each row's Ċ and c, each slot's mass, velocity and force (no 3D rigid body).
+    Motion,
+}
+
 /// The roots of a [`RowProgram`] in units of one shape each (`numeric::batch`): each body's
-/// mass, velocity and force, each rigid body's angular roots, each row's C, Ċ, c and J (or,
-/// with `positions`, C and J alone and then each principal axis), every root once.
-fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, positions: bool) -> Vec<Vec<usize>> {
+/// mass, velocity and force, each rigid body's angular roots, each row's C, Ċ, c and J (or
+/// the roots of `part` alone: C and J then each principal axis; Ċ and c then the slots'),
+/// every root once.
+fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, part: Part) -> Vec<Vec<usize>> {
+    let positions = part == Part::Positions;
     let mut covered = vec![false; n_roots];
     let mut units = Vec::new();
     let mut take = |unit: Vec<usize>, units: &mut Vec<Vec<usize>>| {
@@ -196,11 +226,11 @@ fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, positions: bo
         }
     };
     for layout in rows {
-        let mut unit = vec![layout.value];
-        if !positions {
-            unit.extend([layout.rate, layout.bias]);
-        }
-        unit.extend(layout.jacobian.clone());
+        let unit = match part {
+            Part::All => [layout.value, layout.rate, layout.bias].into_iter().chain(layout.jacobian.clone()).collect(),
+            Part::Positions => std::iter::once(layout.value).chain(layout.jacobian.clone()).collect(),
+            Part::Motion => vec![layout.rate, layout.bias],
+        };
         take(unit, &mut units);
     }
     for b in bodies {
@@ -328,6 +358,14 @@ fn load_state(
     Ok(())
 }
 
+/// The `len` (one to three) components of `out` from `start`, zero past them.
+#[inline]
+fn placed(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
+    let (start, len) = (start as usize, len as usize);
+    let at = |k: usize| if k < len { out[start + k] } else { 0.0 };
+    [at(0), at(1), at(2)]
+}
+
 /// The components of an output `range` of `out`, zero past them.
 fn components(out: &[f64], range: Range<usize>) -> [f64; 3] {
     // By hand: a copy of a variable length (one to three) compiles to a call.
@@ -349,6 +387,11 @@ pub struct RowScratch {
     /// The batched evaluations' buffers (empty without batches).
     batched: Option<BatchedScratch>,
     position_batched: Option<BatchedScratch>,
+    /// The same for the motion's subprogram (empty without one).
+    motion_inputs: Vec<f64>,
+    motion_outputs: Vec<f64>,
+    motion_tape: Option<Scratch>,
+    motion_batched: Option<BatchedScratch>,
 }
 
 impl RowProgram {
@@ -449,7 +492,7 @@ impl RowProgram {
         let batched = Batched::new(
             graph,
             &roots,
-            &units(&bodies, &rows, roots.len(), false),
+            &units(&bodies, &rows, roots.len(), Part::All),
             |r| tape.output_range(r),
             input_slots(&tape, &inputs),
         );
@@ -457,13 +500,28 @@ impl RowProgram {
         let batched_positions = Batched::new(
             graph,
             &roots,
-            &units(&bodies, &rows, roots.len(), true),
+            &units(&bodies, &rows, roots.len(), Part::Positions),
             |r| p.tape.output_range(p.root[r]),
             input_slots(&p.tape, &p.inputs),
         );
         positions.batched = batched_positions;
+        let motion = bodies.iter().all(|b| b.principal.is_none()).then(|| {
+            let rates = rows.iter().flat_map(|r| [r.rate, r.bias]);
+            let slots = bodies.iter().flat_map(|b| [b.mass, b.velocity, b.force]);
+            let mut m = Subprogram::new(system, graph, &roots, rates.chain(slots).collect::<Vec<_>>());
+            let p = &m;
+            let batched = Batched::new(
+                graph,
+                &roots,
+                &units(&bodies, &rows, roots.len(), Part::Motion),
+                |r| p.tape.output_range(p.root[r]),
+                input_slots(&p.tape, &p.inputs),
+            );
+            m.batched = batched;
+            m
+        });
         let sources = sources(system, &inputs);
-        RowProgram { roots, bodies, rows, tape, inputs, sources, positions, batched }
+        RowProgram { roots, bodies, rows, tape, inputs, sources, positions, motion, batched }
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
@@ -491,6 +549,10 @@ impl RowProgram {
             position_tape: self.positions.tape.scratch(),
             batched: self.batched.as_ref().map(Batched::scratch),
             position_batched: self.positions.batched.as_ref().map(Batched::scratch),
+            motion_inputs: self.motion.as_ref().map_or_else(Vec::new, |m| vec![0.0; m.tape.input_len()]),
+            motion_outputs: self.motion.as_ref().map_or_else(Vec::new, |m| vec![0.0; m.tape.output_len()]),
+            motion_tape: self.motion.as_ref().map(|m| m.tape.scratch()),
+            motion_batched: self.motion.as_ref().and_then(|m| m.batched.as_ref()).map(Batched::scratch),
         }
     }
 
@@ -529,6 +591,59 @@ impl RowProgram {
         load_state(system, env, state, &self.tape, &self.inputs, &self.sources, &mut scratch.inputs)?;
         self.run_loaded(system, scratch, rows);
         Ok(())
+    }
+
+    /// [`evaluate_state_into`](RowProgram::evaluate_state_into) for rows whose C/κ and J
+    /// are already those at `state`'s time and positions (the rows of an evaluation at the
+    /// same t and q, or [`evaluate_positions_state_into`](RowProgram::evaluate_positions_state_into)'s
+    /// rows with `rows.rows` swapped in): only what depends on the velocities is evaluated —
+    /// each row's Ċ and c, each slot's 1/m, v and F — and `value` and `jacobian` are kept.
+    /// The result is the full evaluation's, to rounding (C and J of the positions' tape, Ċ
+    /// and c of a tape of their own: see
+    /// [`evaluate_positions_into`](RowProgram::evaluate_positions_into)). Evaluates every
+    /// root when the program has no such tape (3D rigid bodies) or `rows` does not have
+    /// the system's rows; returns whether C and J were kept.
+    pub fn evaluate_motion_state_into(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        scratch: &mut RowScratch,
+        rows: &mut Rows,
+    ) -> Result<bool, EvalError> {
+        let (Some(m), Some(regs)) = (&self.motion, &mut scratch.motion_tape) else {
+            return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
+        };
+        if rows.rows.len() != self.rows.len() {
+            return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
+        }
+        load_state(system, env, state, &m.tape, &m.inputs, &m.sources, &mut scratch.motion_inputs)?;
+        match (&m.batched, &mut scratch.motion_batched) {
+            (Some(batched), Some(buffers)) => {
+                batched.eval(&scratch.motion_inputs, buffers, &mut scratch.motion_outputs)
+            }
+            _ => m.tape.eval(&scratch.motion_inputs, regs, &mut scratch.motion_outputs),
+        }
+        let out = &scratch.motion_outputs;
+        let at = |root: usize| m.place[root];
+        let scalar = |root: usize| out[at(root).0 as usize];
+        // As `fill` without 3D rigid bodies (so no principal axes).
+        rows.dim = system.dim();
+        rows.inverse_mass.clear();
+        rows.velocity.clear();
+        rows.force.clear();
+        rows.axes.clear();
+        for b in &self.bodies {
+            rows.inverse_mass.push(1.0 / scalar(b.mass));
+            rows.velocity.push(placed(out, at(b.velocity)));
+            rows.force.push(placed(out, at(b.force)));
+        }
+        for (layout, row) in self.rows.iter().zip(&mut rows.rows) {
+            row.rate = scalar(layout.rate) * layout.inverse_scale;
+            row.bias = scalar(layout.bias);
+            row.inequality = layout.inequality;
+        }
+        Ok(true)
     }
 
     /// The rows from the inputs loaded in `scratch`.
@@ -651,14 +766,23 @@ impl RowProgram {
             _ => p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs),
         }
         let out = &scratch.position_outputs;
-        let vector = |root: usize| components(out, p.tape.output_range(p.root[root]));
+        let vector = |root: usize| placed(out, p.place[root]);
+        // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
+        let plain = self.motion.is_some();
         rows.resize_with(self.rows.len(), Row::default);
         for (layout, row) in self.rows.iter().zip(rows.iter_mut()) {
-            row.value = out[p.tape.output_range(p.root[layout.value]).start] * layout.inverse_scale;
+            row.value = out[p.place[layout.value].0 as usize] * layout.inverse_scale;
             row.rate = 0.0;
             row.bias = 0.0;
             row.inequality = layout.inequality;
-            self.fill_jacobian(layout, row, &vector);
+            if plain && row.jacobian.len() == layout.bodies.len() {
+                // In place: the rows of the last evaluation have the same bodies.
+                for ((j, &slot), at) in row.jacobian.iter_mut().zip(&layout.bodies).zip(layout.jacobian.clone()) {
+                    *j = (slot, vector(at));
+                }
+            } else {
+                self.fill_jacobian(layout, row, &vector);
+            }
         }
     }
 
