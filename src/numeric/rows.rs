@@ -125,12 +125,10 @@ pub struct RowProgram {
     bodies: Vec<BodySlots>,
     /// What each constraint row is and where its numbers are among the roots.
     rows: Vec<RowLayout>,
-    /// Every root, compiled over `inputs`.
-    tape: Tape,
-    /// The free symbols of the roots, in the tape's input order, and where each comes from
-    /// in a state given as arrays.
-    inputs: Vec<Symbol>,
-    sources: Vec<Source>,
+    /// Every root, compiled over their free symbols (and, when the scene repeats a shape,
+    /// shape by shape: `numeric::batch`): what [`evaluate_into`](RowProgram::evaluate_into)
+    /// runs. Its root r is the program's root r.
+    all: Subprogram,
     /// C and J alone (with the principal axes they are projected on): what an iteration
     /// onto C = 0 reads ([`RowProgram::evaluate_positions_into`]).
     positions: Subprogram,
@@ -138,10 +136,6 @@ pub struct RowProgram {
     /// what changes when only the velocities do ([`RowProgram::evaluate_motion_state_into`]).
     /// `None` with 3D rigid bodies, whose slots read the principal axes too.
     motion: Option<Subprogram>,
-    /// Every root again, shape by shape (`numeric::batch`), into `tape`'s output layout:
-    /// what [`evaluate_into`](RowProgram::evaluate_into) runs when the scene repeats a
-    /// shape (`None`: `tape` itself).
-    batched: Option<Batched>,
 }
 
 /// A tape of some of a [`RowProgram`]'s roots.
@@ -155,11 +149,49 @@ struct Subprogram {
     /// not in it): the two lookups of `root` and `tape.output_range` in one.
     place: Vec<(u32, u32)>,
     sources: Vec<Source>,
-    /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself).
-    batched: Option<Batched>,
+    /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself),
+    /// reading its inputs as `flat` lays them out.
+    batched: Option<(Batched, Flat)>,
 }
 
 impl Subprogram {
+    /// Batches the roots in `units` (`numeric::batch`), when some shape repeats.
+    fn batch(&mut self, system: &System, graph: &crate::expr::Graph, roots: &[Id], units: &[Vec<usize>]) {
+        let flat = Flat::new(system, &self.tape, &self.sources);
+        let batched =
+            Batched::new(graph, roots, units, |r| self.tape.output_range(self.root[r]), flat.slots(&self.inputs));
+        self.batched = batched.map(|b| (b, flat));
+    }
+
+    /// The input buffer: the tape's own layout, or the batches' (`Flat`).
+    fn input_len(&self) -> usize {
+        self.batched.as_ref().map_or(self.tape.input_len(), |(_, flat)| flat.len)
+    }
+
+    /// The inputs from `env` into `buffer` (of [`input_len`](Subprogram::input_len)).
+    fn load(&self, system: &System, env: &Env, buffer: &mut [f64]) -> Result<(), EvalError> {
+        match &self.batched {
+            Some((_, flat)) => flat.load(system, env, &self.inputs, buffer),
+            None => load(system, env, &self.tape, &self.inputs, buffer),
+        }
+    }
+
+    /// The inputs from `state` and `env` into `buffer`.
+    fn load_state(&self, system: &System, env: &Env, state: State<'_>, buffer: &mut [f64]) -> Result<(), EvalError> {
+        match &self.batched {
+            Some((_, flat)) => flat.load_state(system, env, state, &self.inputs, buffer),
+            None => load_state(system, env, state, &self.tape, &self.inputs, &self.sources, buffer),
+        }
+    }
+
+    /// Every root from the loaded `inputs` into `outputs` (the tape's output layout).
+    fn run(&self, inputs: &[f64], tape: &mut Scratch, batched: Option<&mut BatchedScratch>, outputs: &mut [f64]) {
+        match (&self.batched, batched) {
+            (Some((b, _)), Some(buffers)) => b.eval(inputs, buffers, outputs),
+            _ => self.tape.eval(inputs, tape, outputs),
+        }
+    }
+
     /// The roots `wanted` of `roots` (indices), compiled over their own free symbols.
     fn new(
         system: &System,
@@ -193,11 +225,98 @@ impl Subprogram {
     }
 }
 
-/// Symbol → its slots in `tape`'s inputs, whose symbols are `inputs` (every symbol a batch
-/// reads is one of them).
-fn input_slots<'t>(tape: &'t Tape, inputs: &[Symbol]) -> impl Fn(Symbol) -> Range<usize> + 't {
-    let at: std::collections::HashMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
-    move |s| at.get(&s).map_or(0..0, |&i| tape.input_range(i))
+/// Where a batched evaluation reads its inputs (`numeric::batch` gathers them by index
+/// from one buffer): every body's position, then every body's velocity, three numbers a
+/// body as a simulation keeps them, so a state arrives in two block copies rather than
+/// symbol by symbol; then t; then the other input symbols (parameters, masses, rigid
+/// bodies' angles) one after the other.
+#[derive(Clone, Debug)]
+struct Flat {
+    bodies: usize,
+    /// Per input symbol of the tape, its slots in the buffer.
+    places: Vec<Range<usize>>,
+    /// The input symbols that come from the environment (indices into `places`).
+    env: Vec<usize>,
+    /// Whether some input is a position, a velocity (else that block is not copied).
+    positions: bool,
+    velocities: bool,
+    len: usize,
+}
+
+impl Flat {
+    fn new(system: &System, tape: &Tape, sources: &[Source]) -> Flat {
+        let n = system.bodies.len();
+        let mut len = 6 * n + 1;
+        let mut env = Vec::new();
+        let places = sources
+            .iter()
+            .enumerate()
+            .map(|(i, source)| {
+                let w = tape.input_range(i).len();
+                match *source {
+                    Source::Position(b) => 3 * b..3 * b + w,
+                    Source::Velocity(b) => 3 * (n + b)..3 * (n + b) + w,
+                    Source::Time => 6 * n..6 * n + 1,
+                    Source::Env => {
+                        env.push(i);
+                        len += w;
+                        len - w..len
+                    }
+                }
+            })
+            .collect();
+        let positions = sources.iter().any(|s| matches!(s, Source::Position(_)));
+        let velocities = sources.iter().any(|s| matches!(s, Source::Velocity(_)));
+        Flat { bodies: n, places, env, positions, velocities, len }
+    }
+
+    /// Symbol → its slots in the buffer (`inputs` are the tape's input symbols).
+    fn slots<'f>(&'f self, inputs: &[Symbol]) -> impl Fn(Symbol) -> Range<usize> + 'f {
+        let at: std::collections::HashMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+        move |s| at.get(&s).map_or(0..0, |&i| self.places[i].clone())
+    }
+
+    /// The buffer from `env` alone (`inputs` the tape's input symbols).
+    fn load(&self, system: &System, env: &Env, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
+        for (i, &s) in inputs.iter().enumerate() {
+            from_env(system, env, s, &mut buffer[self.places[i].clone()])?;
+        }
+        Ok(())
+    }
+
+    /// The buffer from `state` (positions, velocities, t) and `env` (the rest).
+    fn load_state(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        inputs: &[Symbol],
+        buffer: &mut [f64],
+    ) -> Result<(), EvalError> {
+        let n = self.bodies;
+        if self.positions {
+            buffer[..3 * n].copy_from_slice(state.q[..n].as_flattened());
+        }
+        if self.velocities {
+            buffer[3 * n..6 * n].copy_from_slice(state.v[..n].as_flattened());
+        }
+        buffer[6 * n] = state.t;
+        for &i in &self.env {
+            from_env(system, env, inputs[i], &mut buffer[self.places[i].clone()])?;
+        }
+        Ok(())
+    }
+}
+
+/// `slots` from symbol `s`'s value in `env`.
+fn from_env(system: &System, env: &Env, s: Symbol, slots: &mut [f64]) -> Result<(), EvalError> {
+    match env.get(s) {
+        Some(Value::Scalar(x)) => slots.fill(x),
+        Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
+        Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
+        None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
+    }
+    Ok(())
 }
 
 /// Which roots of a [`RowProgram`] a tape computes.
@@ -366,32 +485,39 @@ fn placed(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
     [at(0), at(1), at(2)]
 }
 
-/// The components of an output `range` of `out`, zero past them.
-fn components(out: &[f64], range: Range<usize>) -> [f64; 3] {
-    // By hand: a copy of a variable length (one to three) compiles to a call.
-    let x = &out[range];
-    let at = |k: usize| if k < x.len() { x[k] } else { 0.0 };
-    [at(0), at(1), at(2)]
-}
-
 /// Input and output buffers of [`RowProgram::evaluate_into`], reused across evaluations.
 #[derive(Clone, Debug)]
 pub struct RowScratch {
+    /// Every root's, the positions' and the motion's (none without its subprogram).
+    all: SubScratch,
+    positions: SubScratch,
+    motion: Option<SubScratch>,
+}
+
+/// The buffers of one [`Subprogram`].
+#[derive(Clone, Debug)]
+struct SubScratch {
     inputs: Vec<f64>,
     outputs: Vec<f64>,
     tape: Scratch,
-    /// The same for the positions' subprogram.
-    position_inputs: Vec<f64>,
-    position_outputs: Vec<f64>,
-    position_tape: Scratch,
-    /// The batched evaluations' buffers (empty without batches).
+    /// The batches' buffers (none without batches).
     batched: Option<BatchedScratch>,
-    position_batched: Option<BatchedScratch>,
-    /// The same for the motion's subprogram (empty without one).
-    motion_inputs: Vec<f64>,
-    motion_outputs: Vec<f64>,
-    motion_tape: Option<Scratch>,
-    motion_batched: Option<BatchedScratch>,
+}
+
+impl Subprogram {
+    fn scratch(&self) -> SubScratch {
+        SubScratch {
+            inputs: vec![0.0; self.input_len()],
+            outputs: vec![0.0; self.tape.output_len()],
+            tape: self.tape.scratch(),
+            batched: self.batched.as_ref().map(|(b, _)| b.scratch()),
+        }
+    }
+
+    /// Every root from the inputs loaded in `scratch` into its outputs (the tape's layout).
+    fn run_loaded(&self, scratch: &mut SubScratch) {
+        self.run(&scratch.inputs, &mut scratch.tape, scratch.batched.as_mut(), &mut scratch.outputs);
+    }
 }
 
 impl RowProgram {
@@ -483,45 +609,20 @@ impl RowProgram {
                 jacobian: start..roots.len(),
             });
         }
-        let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
-        // Every symbol a root reads is an input and each is listed once, so lowering cannot fail.
-        let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
+        let mut all = Subprogram::new(system, graph, &roots, 0..roots.len());
+        all.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::All));
         let axes = bodies.iter().filter_map(|b| b.principal).flat_map(|(_, axes)| axes);
         let c_and_j = rows.iter().flat_map(|r| std::iter::once(r.value).chain(r.jacobian.clone()));
         let mut positions = Subprogram::new(system, graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
-        let batched = Batched::new(
-            graph,
-            &roots,
-            &units(&bodies, &rows, roots.len(), Part::All),
-            |r| tape.output_range(r),
-            input_slots(&tape, &inputs),
-        );
-        let p = &positions;
-        let batched_positions = Batched::new(
-            graph,
-            &roots,
-            &units(&bodies, &rows, roots.len(), Part::Positions),
-            |r| p.tape.output_range(p.root[r]),
-            input_slots(&p.tape, &p.inputs),
-        );
-        positions.batched = batched_positions;
+        positions.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::Positions));
         let motion = bodies.iter().all(|b| b.principal.is_none()).then(|| {
             let rates = rows.iter().flat_map(|r| [r.rate, r.bias]);
             let slots = bodies.iter().flat_map(|b| [b.mass, b.velocity, b.force]);
             let mut m = Subprogram::new(system, graph, &roots, rates.chain(slots).collect::<Vec<_>>());
-            let p = &m;
-            let batched = Batched::new(
-                graph,
-                &roots,
-                &units(&bodies, &rows, roots.len(), Part::Motion),
-                |r| p.tape.output_range(p.root[r]),
-                input_slots(&p.tape, &p.inputs),
-            );
-            m.batched = batched;
+            m.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::Motion));
             m
         });
-        let sources = sources(system, &inputs);
-        RowProgram { roots, bodies, rows, tape, inputs, sources, positions, motion, batched }
+        RowProgram { roots, bodies, rows, all, positions, motion }
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
@@ -541,18 +642,9 @@ impl RowProgram {
     /// Buffers for [`evaluate_into`](RowProgram::evaluate_into).
     pub fn scratch(&self) -> RowScratch {
         RowScratch {
-            inputs: vec![0.0; self.tape.input_len()],
-            outputs: vec![0.0; self.tape.output_len()],
-            tape: self.tape.scratch(),
-            position_inputs: vec![0.0; self.positions.tape.input_len()],
-            position_outputs: vec![0.0; self.positions.tape.output_len()],
-            position_tape: self.positions.tape.scratch(),
-            batched: self.batched.as_ref().map(Batched::scratch),
-            position_batched: self.positions.batched.as_ref().map(Batched::scratch),
-            motion_inputs: self.motion.as_ref().map_or_else(Vec::new, |m| vec![0.0; m.tape.input_len()]),
-            motion_outputs: self.motion.as_ref().map_or_else(Vec::new, |m| vec![0.0; m.tape.output_len()]),
-            motion_tape: self.motion.as_ref().map(|m| m.tape.scratch()),
-            motion_batched: self.motion.as_ref().and_then(|m| m.batched.as_ref()).map(Batched::scratch),
+            all: self.all.scratch(),
+            positions: self.positions.scratch(),
+            motion: self.motion.as_ref().map(Subprogram::scratch),
         }
     }
 
@@ -572,7 +664,7 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
-        load(system, env, &self.tape, &self.inputs, &mut scratch.inputs)?;
+        self.all.load(system, env, &mut scratch.all.inputs)?;
         self.run_loaded(system, scratch, rows);
         Ok(())
     }
@@ -588,7 +680,7 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
-        load_state(system, env, state, &self.tape, &self.inputs, &self.sources, &mut scratch.inputs)?;
+        self.all.load_state(system, env, state, &mut scratch.all.inputs)?;
         self.run_loaded(system, scratch, rows);
         Ok(())
     }
@@ -611,20 +703,15 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<bool, EvalError> {
-        let (Some(m), Some(regs)) = (&self.motion, &mut scratch.motion_tape) else {
+        let (Some(m), Some(buffers)) = (&self.motion, &mut scratch.motion) else {
             return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
         };
         if rows.rows.len() != self.rows.len() {
             return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
         }
-        load_state(system, env, state, &m.tape, &m.inputs, &m.sources, &mut scratch.motion_inputs)?;
-        match (&m.batched, &mut scratch.motion_batched) {
-            (Some(batched), Some(buffers)) => {
-                batched.eval(&scratch.motion_inputs, buffers, &mut scratch.motion_outputs)
-            }
-            _ => m.tape.eval(&scratch.motion_inputs, regs, &mut scratch.motion_outputs),
-        }
-        let out = &scratch.motion_outputs;
+        m.load_state(system, env, state, &mut buffers.inputs)?;
+        m.run_loaded(buffers);
+        let out = &buffers.outputs;
         let at = |root: usize| m.place[root];
         let scalar = |root: usize| out[at(root).0 as usize];
         // As `fill` without 3D rigid bodies (so no principal axes).
@@ -648,14 +735,11 @@ impl RowProgram {
 
     /// The rows from the inputs loaded in `scratch`.
     fn run_loaded(&self, system: &System, scratch: &mut RowScratch, rows: &mut Rows) {
-        match (&self.batched, &mut scratch.batched) {
-            (Some(batched), Some(buffers)) => batched.eval(&scratch.inputs, buffers, &mut scratch.outputs),
-            _ => self.tape.eval(&scratch.inputs, &mut scratch.tape, &mut scratch.outputs),
-        }
-        let out = &scratch.outputs;
-        let tape = &self.tape;
-        let scalar = |root: usize| out[tape.output_range(root).start];
-        let vector = |root: usize| components(out, tape.output_range(root));
+        self.all.run_loaded(&mut scratch.all);
+        let out = &scratch.all.outputs;
+        let place = &self.all.place;
+        let scalar = |root: usize| out[place[root].0 as usize];
+        let vector = |root: usize| placed(out, place[root]);
         self.fill(system, rows, scalar, vector);
     }
 
@@ -735,7 +819,7 @@ impl RowProgram {
         rows: &mut Vec<Row>,
     ) -> Result<(), EvalError> {
         let p = &self.positions;
-        load(system, env, &p.tape, &p.inputs, &mut scratch.position_inputs)?;
+        p.load(system, env, &mut scratch.positions.inputs)?;
         self.positions_loaded(scratch, rows);
         Ok(())
     }
@@ -751,7 +835,7 @@ impl RowProgram {
         rows: &mut Vec<Row>,
     ) -> Result<(), EvalError> {
         let p = &self.positions;
-        load_state(system, env, state, &p.tape, &p.inputs, &p.sources, &mut scratch.position_inputs)?;
+        p.load_state(system, env, state, &mut scratch.positions.inputs)?;
         self.positions_loaded(scratch, rows);
         Ok(())
     }
@@ -759,13 +843,8 @@ impl RowProgram {
     /// C/κ and J from the positions' inputs loaded in `scratch`.
     fn positions_loaded(&self, scratch: &mut RowScratch, rows: &mut Vec<Row>) {
         let p = &self.positions;
-        match (&p.batched, &mut scratch.position_batched) {
-            (Some(batched), Some(buffers)) => {
-                batched.eval(&scratch.position_inputs, buffers, &mut scratch.position_outputs)
-            }
-            _ => p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs),
-        }
-        let out = &scratch.position_outputs;
+        p.run_loaded(&mut scratch.positions);
+        let out = &scratch.positions.outputs;
         let vector = |root: usize| placed(out, p.place[root]);
         // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
         let plain = self.motion.is_some();
