@@ -139,8 +139,10 @@ pub struct Dynamics<'s> {
     /// The factorisation shared by solves with the same J (`solve::SolveCache`): the step's
     /// acceleration solve, SHAKE's iterations, the velocity projection and the next start.
     solver: SolveCache,
-    /// The rows of the last [`positions`](Dynamics::positions).
+    /// The rows of the last [`positions`](Dynamics::positions), and whether all their
+    /// numbers were finite.
     position_rows: Vec<Row>,
+    positions_finite: bool,
     /// Per 3D rigid body (in the order of its angular slots), the orientation q₀ at the start
     /// of the step; the state's rotation vector φ turns it (`numeric::rotation`).
     orientations: Vec<[f64; 4]>,
@@ -185,6 +187,7 @@ impl<'s> Dynamics<'s> {
             held: Vec::new(),
             solver: SolveCache::default(),
             position_rows: Vec::new(),
+            positions_finite: false,
             orientations,
             folded: Vec::new(),
             correction: Solution::default(),
@@ -329,6 +332,7 @@ impl<'s> Dynamics<'s> {
             .iter()
             .fold(0.0, |s, row| row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(s, &row.value), zero));
         // x·0 is 0 for every finite x and NaN otherwise: the sum is 0 when all are finite.
+        self.positions_finite = sum == 0.0;
         if sum != 0.0 {
             let rows = self.rows(t, q, v)?;
             self.recycle(rows);
@@ -379,9 +383,10 @@ impl<'s> Dynamics<'s> {
     pub fn rows_after_positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
         let mut rows = self.spare.pop().unwrap_or_default();
         std::mem::swap(&mut rows.rows, &mut self.position_rows);
-        // `positions` checked its C and J, but reports through a full evaluation that may
-        // round differently: checked again, as `rows` would.
-        self.moved(t, q, v, rows, false)
+        // `positions` reports a C or J that is not finite through a full evaluation, which
+        // may round differently and pass: then they are checked again, as `rows` would.
+        let finite = std::mem::replace(&mut self.positions_finite, false);
+        self.moved(t, q, v, rows, finite)
     }
 
     /// `rows` at time `t`, or the error that names the first number that is not finite.
