@@ -340,7 +340,8 @@ impl<'s> Dynamics<'s> {
         Ok(())
     }
 
-    /// The rows of the last [`positions`](Dynamics::positions) (C/κ and J; Ċ and c are 0).
+    /// The rows of the last [`positions`](Dynamics::positions) (C/κ and J; Ċ and c are 0),
+    /// until [`rows_after_positions`](Dynamics::rows_after_positions) takes them.
     pub fn position_rows(&self) -> &[Row] {
         &self.position_rows
     }
