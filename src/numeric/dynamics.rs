@@ -1,8 +1,10 @@
 //! The equations of motion at a state: rows → λ → accelerations, behind one function.
 //!
-//! [`Dynamics::rows`] is the only place where a simulation turns a state (t, q, v) into
-//! numbers: [`RowProgram::evaluate_into`] runs the compiled tape into rows recycled from
-//! earlier evaluations ([`Dynamics::recycle`]), so a warm step allocates nothing there.
+//! [`Dynamics::rows`] is where a simulation turns a state (t, q, v) into numbers:
+//! [`RowProgram::evaluate_into`] runs the compiled tape into rows recycled from earlier
+//! evaluations ([`Dynamics::recycle`]), so a warm step allocates nothing there. Beside it,
+//! [`Dynamics::positions`] evaluates C and J alone, and [`Dynamics::rows_moved`] completes
+//! rows whose C and J are those of the state (only Ċ, c and the bodies' numbers again).
 //! [`Dynamics`] is a [`Field`] for the integrators, with the Baumgarte terms (when chosen)
 //! added to the bias c before the solve. [`Dynamics::choose_unit`] moves a scene whose
 //! lengths are far from 1 (|r| ≈ 1e155 or 1e-150) to a verified power-of-two unit
