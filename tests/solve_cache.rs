@@ -202,3 +202,58 @@ fn the_positions_tape_gives_the_rows_c_and_j_on_every_file() {
     }
     assert!(checked >= 25, "only {checked} files checked");
 }
+
+#[test]
+fn the_motion_tape_on_the_positions_rows_gives_the_full_rows_on_every_file() {
+    // What a simulation's step does at the end of SHAKE and at the next start: C and J of
+    // the positions' tape (or of the last evaluation), then Ċ, c and the slots' 1/m, v and F
+    // of a tape of their own. The numbers are the full evaluation's to rounding (relative
+    // 1e-13 against 1, as above) at 10 random states of every file; with 3D rigid bodies
+    // the whole rows are evaluated instead (said by the `false`).
+    use lagrange::numeric::rows::{Rows, State};
+    let close = |a: f64, b: f64| (a - b).abs() <= 1e-13 * a.abs().max(b.abs()).max(1.0);
+    let close3 = |x: &[f64; 3], y: &[f64; 3]| (0..3).all(|d| close(x[d], y[d]));
+    let files = common::constraint_files(&["constraints", "constraints/hard", "constraints/rigid"]);
+    let (mut kept, mut whole) = (0, 0);
+    for path in files {
+        let text = std::fs::read_to_string(&path).expect("file");
+        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
+        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+        let mut rng = common::Rng::new(12);
+        let mut scratch = s.program.scratch();
+        let mut rows = Rows::default();
+        for _ in 0..10 {
+            let env = common::random_env(&s.system, &mut rng);
+            let full = s.program.evaluate(&s.system, &env).expect("rows");
+            let (q, v, t) = lagrange::numeric::simulate::initial_state(&s.system, &env);
+            let state = State { t, q: &q, v: &v };
+            s.program
+                .evaluate_positions_state_into(&s.system, &env, state, &mut scratch, &mut rows.rows)
+                .expect("rows");
+            let only_motion =
+                s.program.evaluate_motion_state_into(&s.system, &env, state, &mut scratch, &mut rows).expect("rows");
+            let at = path.display();
+            assert_eq!(only_motion, s.system.bodies.iter().all(|b| b.rigid.is_none()) || s.system.dim() == 2, "{at}");
+            assert_eq!(rows.dim, full.dim, "{at}");
+            assert_eq!(rows.axes, full.axes, "{at}");
+            assert_eq!(rows.inverse_mass.len(), full.inverse_mass.len(), "{at}");
+            for (a, b) in rows.inverse_mass.iter().zip(&full.inverse_mass) {
+                assert!(close(*a, *b), "{at}: 1/m {a} vs {b}");
+            }
+            for (x, y) in rows.velocity.iter().zip(&full.velocity).chain(rows.force.iter().zip(&full.force)) {
+                assert!(close3(x, y), "{at}: v or F {x:?} vs {y:?}");
+            }
+            assert_eq!(rows.rows.len(), full.rows.len(), "{at}");
+            for (a, b) in rows.rows.iter().zip(&full.rows) {
+                let numbers = [(a.value, b.value), (a.rate, b.rate), (a.bias, b.bias)];
+                assert!(numbers.iter().all(|&(x, y)| close(x, y)), "{at}: {a:?} vs {b:?}");
+                assert_eq!(a.inequality, b.inequality, "{at}");
+                let same = a.jacobian.len() == b.jacobian.len()
+                    && a.jacobian.iter().zip(&b.jacobian).all(|((p, x), (q, y))| p == q && close3(x, y));
+                assert!(same, "{at}: J {a:?} vs {b:?}");
+            }
+            if only_motion { kept += 1 } else { whole += 1 }
+        }
+    }
+    assert!(kept >= 250 && whole >= 10, "{kept} states by the motion's tape, {whole} whole");
+}

@@ -22,3 +22,17 @@ mod shapes;
 mod support;
 
 pub use rust::{GenerateError, Lang, Module, Options, generate, module};
+
+/// The flags of `lagrange generate` a module was written with, after `--lang`, for its
+/// opening comment: regenerating with them writes the same module.
+fn flags(specialize: bool, solver: Option<layout::Solver>) -> String {
+    let mut out = String::new();
+    if specialize {
+        out.push_str(" --specialize");
+    }
+    if let Some(solver) = solver {
+        out.push_str(" --solver ");
+        out.push_str(solver.name());
+    }
+    out
+}

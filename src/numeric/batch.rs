@@ -40,6 +40,11 @@ pub struct Batched {
     rest_source: Vec<usize>,
     /// Where each of `rest`'s output components goes.
     rest_dest: Vec<usize>,
+    /// One past the largest index of any `source` and any `dest`: the least lengths of the
+    /// caller's inputs and outputs, checked once per evaluation so the gathers and
+    /// scatters need no check per number.
+    inputs_len: usize,
+    outputs_len: usize,
 }
 
 /// The members of one shape.
@@ -184,7 +189,10 @@ impl Batched {
                 rest_dest[c] = dest(r).start + k;
             }
         }
-        Some(Batched { batches, rest, rest_source, rest_dest })
+        let past = |table: &[usize]| table.iter().max().map_or(0, |&m| m + 1);
+        let inputs_len = batches.iter().map(|b| past(&b.source)).chain([past(&rest_source)]).max().unwrap_or(0);
+        let outputs_len = batches.iter().map(|b| past(&b.dest)).chain([past(&rest_dest)]).max().unwrap_or(0);
+        Some(Batched { batches, rest, rest_source, rest_dest, inputs_len, outputs_len })
     }
 
     /// Buffers for [`eval`](Batched::eval).
@@ -201,7 +209,12 @@ impl Batched {
 
     /// Every root, from the flat `inputs` (laid out as `source` said), each written to its
     /// place in `out`.
+    ///
+    /// # Panics
+    /// If `inputs` or `out` is shorter than the layouts [`new`](Batched::new) was given.
     pub fn eval(&self, inputs: &[f64], scratch: &mut BatchedScratch, out: &mut [f64]) {
+        assert!(inputs.len() >= self.inputs_len, "input length");
+        assert!(out.len() >= self.outputs_len, "output length");
         for (b, batch) in self.batches.iter().enumerate() {
             let (n_in, n_out) = (batch.tape.input_len(), batch.tape.output_len());
             let (mut source, mut dest) = (batch.source.as_slice(), batch.dest.as_slice());
@@ -210,13 +223,15 @@ impl Batched {
                 let (lanes, outputs) = (&mut scratch.inputs[b][..n_in * len], &mut scratch.outputs[b][..n_out * len]);
                 let (here, rest) = source.split_at(n_in * len);
                 for (x, &at) in lanes.iter_mut().zip(here) {
-                    *x = inputs[at];
+                    // SAFETY: every index of a `source` is below `inputs_len` (asserted).
+                    *x = unsafe { *inputs.get_unchecked(at) };
                 }
                 source = rest;
                 batch.tape.eval_batch_serial(len, lanes, &mut scratch.lanes[b], outputs);
                 let (here, rest) = dest.split_at(n_out * len);
                 for (&d, &x) in here.iter().zip(outputs.iter()) {
-                    out[d] = x;
+                    // SAFETY: every index of a `dest` is below `outputs_len` (asserted).
+                    unsafe { *out.get_unchecked_mut(d) = x };
                 }
                 dest = rest;
             }

@@ -1,8 +1,10 @@
 //! The equations of motion at a state: rows → λ → accelerations, behind one function.
 //!
-//! [`Dynamics::rows`] is the only place where a simulation turns a state (t, q, v) into
-//! numbers: [`RowProgram::evaluate_into`] runs the compiled tape into rows recycled from
-//! earlier evaluations ([`Dynamics::recycle`]), so a warm step allocates nothing there.
+//! [`Dynamics::rows`] is where a simulation turns a state (t, q, v) into numbers:
+//! [`RowProgram::evaluate_into`] runs the compiled tape into rows recycled from earlier
+//! evaluations ([`Dynamics::recycle`]), so a warm step allocates nothing there. Beside it,
+//! [`Dynamics::positions`] evaluates C and J alone, and [`Dynamics::rows_moved`] completes
+//! rows whose C and J are those of the state (only Ċ, c and the bodies' numbers again).
 //! [`Dynamics`] is a [`Field`] for the integrators, with the Baumgarte terms (when chosen)
 //! added to the bias c before the solve. [`Dynamics::choose_unit`] moves a scene whose
 //! lengths are far from 1 (|r| ≈ 1e155 or 1e-150) to a verified power-of-two unit
@@ -135,8 +137,10 @@ pub struct Dynamics<'s> {
     /// The factorisation shared by solves with the same J (`solve::SolveCache`): the step's
     /// acceleration solve, SHAKE's iterations, the velocity projection and the next start.
     solver: SolveCache,
-    /// The rows of the last [`positions`](Dynamics::positions).
+    /// The rows of the last [`positions`](Dynamics::positions), and whether all their
+    /// numbers were finite.
     position_rows: Vec<Row>,
+    positions_finite: bool,
     /// Per 3D rigid body (in the order of its angular slots), the orientation q₀ at the start
     /// of the step; the state's rotation vector φ turns it (`numeric::rotation`).
     orientations: Vec<[f64; 4]>,
@@ -181,6 +185,7 @@ impl<'s> Dynamics<'s> {
             held: Vec::new(),
             solver: SolveCache::default(),
             position_rows: Vec::new(),
+            positions_finite: false,
             orientations,
             folded: Vec::new(),
             correction: Solution::default(),
@@ -325,6 +330,7 @@ impl<'s> Dynamics<'s> {
             .iter()
             .fold(0.0, |s, row| row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(s, &row.value), zero));
         // x·0 is 0 for every finite x and NaN otherwise: the sum is 0 when all are finite.
+        self.positions_finite = sum == 0.0;
         if sum != 0.0 {
             let rows = self.rows(t, q, v)?;
             self.recycle(rows);
@@ -332,7 +338,8 @@ impl<'s> Dynamics<'s> {
         Ok(())
     }
 
-    /// The rows of the last [`positions`](Dynamics::positions) (C/κ and J; Ċ and c are 0).
+    /// The rows of the last [`positions`](Dynamics::positions) (C/κ and J; Ċ and c are 0),
+    /// until [`rows_after_positions`](Dynamics::rows_after_positions) takes them.
     pub fn position_rows(&self) -> &[Row] {
         &self.position_rows
     }
@@ -345,6 +352,44 @@ impl<'s> Dynamics<'s> {
         self.program
             .evaluate_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
+        self.checked(rows, t)
+    }
+
+    /// The rows at (t, q, v) from `rows`, whose C/κ and J are already those at (t, q) (an
+    /// evaluation at the same t and q, before a velocity step changed v): only Ċ, c and the
+    /// slots' numbers are evaluated (`RowProgram::evaluate_motion_state_into`), as
+    /// [`rows`](Dynamics::rows) would give them to rounding. `rows`' other numbers may have
+    /// been spent (a correction's C, Ċ and c) but for its `value`, which must be C/κ.
+    pub fn rows_moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: Rows) -> Result<Rows, SimError> {
+        self.moved(t, q, v, rows, true)
+    }
+
+    /// [`rows_moved`](Dynamics::rows_moved); `checked`: C and J are known to be finite.
+    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, mut rows: Rows, checked: bool) -> Result<Rows, SimError> {
+        self.evaluations += 1;
+        self.set_state(q, v);
+        let kept = self
+            .program
+            .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
+            .map_err(|error| SimError::Eval { time: t, error })?;
+        // C and J were checked when they were evaluated: the new numbers alone, and all of
+        // them again only to name what is not finite.
+        if kept && checked && motion_finite(&rows) { Ok(rows) } else { self.checked(rows, t) }
+    }
+
+    /// The rows at (t, q, v) after a [`positions`](Dynamics::positions) at the same t and q:
+    /// its C/κ and J are taken over and the rest evaluated ([`rows_moved`](Dynamics::rows_moved)).
+    pub fn rows_after_positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
+        let mut rows = self.spare.pop().unwrap_or_default();
+        std::mem::swap(&mut rows.rows, &mut self.position_rows);
+        // `positions` reports a C or J that is not finite through a full evaluation, which
+        // may round differently and pass: then they are checked again, as `rows` would.
+        let finite = std::mem::replace(&mut self.positions_finite, false);
+        self.moved(t, q, v, rows, finite)
+    }
+
+    /// `rows` at time `t`, or the error that names the first number that is not finite.
+    fn checked(&self, rows: Rows, t: f64) -> Result<Rows, SimError> {
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
         if !all_finite(&rows) {
             for (k, row) in rows.rows.iter().enumerate() {
@@ -455,6 +500,14 @@ fn all_finite(rows: &Rows) -> bool {
     let rows_sum = rows.rows.iter().fold(0.0, |s, row| {
         row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(zero(zero(s, &row.value), &row.rate), &row.bias), zero)
     });
+    let bodies = rows.force.iter().chain(&rows.velocity).flatten().chain(&rows.inverse_mass).fold(rows_sum, zero);
+    bodies == 0.0
+}
+
+/// Whether Ċ, c and the slots' numbers of `rows` are finite ([`all_finite`] without C and J).
+fn motion_finite(rows: &Rows) -> bool {
+    let zero = |s: f64, x: &f64| s + x * 0.0;
+    let rows_sum = rows.rows.iter().fold(0.0, |s, row| zero(zero(s, &row.rate), &row.bias));
     let bodies = rows.force.iter().chain(&rows.velocity).flatten().chain(&rows.inverse_mass).fold(rows_sum, zero);
     bodies == 0.0
 }

@@ -125,19 +125,17 @@ pub struct RowProgram {
     bodies: Vec<BodySlots>,
     /// What each constraint row is and where its numbers are among the roots.
     rows: Vec<RowLayout>,
-    /// Every root, compiled over `inputs`.
-    tape: Tape,
-    /// The free symbols of the roots, in the tape's input order, and where each comes from
-    /// in a state given as arrays.
-    inputs: Vec<Symbol>,
-    sources: Vec<Source>,
+    /// Every root, compiled over their free symbols (and, when the scene repeats a shape,
+    /// shape by shape: `numeric::batch`): what [`evaluate_into`](RowProgram::evaluate_into)
+    /// runs. Its root r is the program's root r.
+    all: Subprogram,
     /// C and J alone (with the principal axes they are projected on): what an iteration
     /// onto C = 0 reads ([`RowProgram::evaluate_positions_into`]).
     positions: Subprogram,
-    /// Every root again, shape by shape (`numeric::batch`), into `tape`'s output layout:
-    /// what [`evaluate_into`](RowProgram::evaluate_into) runs when the scene repeats a
-    /// shape (`None`: `tape` itself).
-    batched: Option<Batched>,
+    /// Everything but C and J: each row's Ċ and c, each slot's mass, velocity and force —
+    /// what changes when only the velocities do ([`RowProgram::evaluate_motion_state_into`]).
+    /// `None` with 3D rigid bodies, whose slots read the principal axes too.
+    motion: Option<Subprogram>,
 }
 
 /// A tape of some of a [`RowProgram`]'s roots.
@@ -147,12 +145,53 @@ struct Subprogram {
     inputs: Vec<Symbol>,
     /// The tape's root of each of the program's roots (`usize::MAX`: not in it).
     root: Vec<usize>,
+    /// Per program root, its first output component in the tape and how many it has (0:
+    /// not in it): the two lookups of `root` and `tape.output_range` in one.
+    place: Vec<(u32, u32)>,
     sources: Vec<Source>,
-    /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself).
-    batched: Option<Batched>,
+    /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself),
+    /// reading its inputs as `flat` lays them out.
+    batched: Option<(Batched, Flat)>,
 }
 
 impl Subprogram {
+    /// Batches the roots in `units` (`numeric::batch`), when some shape repeats.
+    fn batch(&mut self, system: &System, graph: &crate::expr::Graph, roots: &[Id], units: &[Vec<usize>]) {
+        let flat = Flat::new(system, &self.tape, &self.sources);
+        let batched =
+            Batched::new(graph, roots, units, |r| self.tape.output_range(self.root[r]), flat.slots(&self.inputs));
+        self.batched = batched.map(|b| (b, flat));
+    }
+
+    /// The input buffer: the tape's own layout, or the batches' (`Flat`).
+    fn input_len(&self) -> usize {
+        self.batched.as_ref().map_or(self.tape.input_len(), |(_, flat)| flat.len)
+    }
+
+    /// The inputs from `env` into `buffer` (of [`input_len`](Subprogram::input_len)).
+    fn load(&self, system: &System, env: &Env, buffer: &mut [f64]) -> Result<(), EvalError> {
+        match &self.batched {
+            Some((_, flat)) => flat.load(system, env, &self.inputs, buffer),
+            None => load(system, env, &self.tape, &self.inputs, buffer),
+        }
+    }
+
+    /// The inputs from `state` and `env` into `buffer`.
+    fn load_state(&self, system: &System, env: &Env, state: State<'_>, buffer: &mut [f64]) -> Result<(), EvalError> {
+        match &self.batched {
+            Some((_, flat)) => flat.load_state(system, env, state, &self.inputs, buffer),
+            None => load_state(system, env, state, &self.tape, &self.inputs, &self.sources, buffer),
+        }
+    }
+
+    /// Every root from the loaded `inputs` into `outputs` (the tape's output layout).
+    fn run(&self, inputs: &[f64], tape: &mut Scratch, batched: Option<&mut BatchedScratch>, outputs: &mut [f64]) {
+        match (&self.batched, batched) {
+            (Some((b, _)), Some(buffers)) => b.eval(inputs, buffers, outputs),
+            _ => self.tape.eval(inputs, tape, outputs),
+        }
+    }
+
     /// The roots `wanted` of `roots` (indices), compiled over their own free symbols.
     fn new(
         system: &System,
@@ -172,21 +211,131 @@ impl Subprogram {
         // As for the whole program: the inputs are the roots' free symbols.
         let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
         let sources = sources(system, &inputs);
-        Subprogram { tape, inputs, root, sources, batched: None }
+        let place = root
+            .iter()
+            .map(|&r| {
+                if r == usize::MAX {
+                    return (0, 0);
+                }
+                let range = tape.output_range(r);
+                (range.start as u32, range.len() as u32)
+            })
+            .collect();
+        Subprogram { tape, inputs, root, place, sources, batched: None }
     }
 }
 
-/// Symbol → its slots in `tape`'s inputs, whose symbols are `inputs` (every symbol a batch
-/// reads is one of them).
-fn input_slots<'t>(tape: &'t Tape, inputs: &[Symbol]) -> impl Fn(Symbol) -> Range<usize> + 't {
-    let at: std::collections::HashMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
-    move |s| at.get(&s).map_or(0..0, |&i| tape.input_range(i))
+/// Where a batched evaluation reads its inputs (`numeric::batch` gathers them by index
+/// from one buffer): every body's position, then every body's velocity, three numbers a
+/// body as a simulation keeps them, so a state arrives in two block copies rather than
+/// symbol by symbol; then t; then the other input symbols (parameters, masses, rigid
+/// bodies' angles) one after the other.
+#[derive(Clone, Debug)]
+struct Flat {
+    bodies: usize,
+    /// Per input symbol of the tape, its slots in the buffer.
+    places: Vec<Range<usize>>,
+    /// The input symbols that come from the environment (indices into `places`).
+    env: Vec<usize>,
+    /// Whether some input is a position, a velocity (else that block is not copied).
+    positions: bool,
+    velocities: bool,
+    len: usize,
+}
+
+impl Flat {
+    fn new(system: &System, tape: &Tape, sources: &[Source]) -> Flat {
+        let n = system.bodies.len();
+        let mut len = 6 * n + 1;
+        let mut env = Vec::new();
+        let places = sources
+            .iter()
+            .enumerate()
+            .map(|(i, source)| {
+                let w = tape.input_range(i).len();
+                match *source {
+                    Source::Position(b) => 3 * b..3 * b + w,
+                    Source::Velocity(b) => 3 * (n + b)..3 * (n + b) + w,
+                    Source::Time => 6 * n..6 * n + 1,
+                    Source::Env => {
+                        env.push(i);
+                        len += w;
+                        len - w..len
+                    }
+                }
+            })
+            .collect();
+        let positions = sources.iter().any(|s| matches!(s, Source::Position(_)));
+        let velocities = sources.iter().any(|s| matches!(s, Source::Velocity(_)));
+        Flat { bodies: n, places, env, positions, velocities, len }
+    }
+
+    /// Symbol → its slots in the buffer (`inputs` are the tape's input symbols).
+    fn slots<'f>(&'f self, inputs: &[Symbol]) -> impl Fn(Symbol) -> Range<usize> + 'f {
+        let at: std::collections::HashMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+        move |s| at.get(&s).map_or(0..0, |&i| self.places[i].clone())
+    }
+
+    /// The buffer from `env` alone (`inputs` the tape's input symbols).
+    fn load(&self, system: &System, env: &Env, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
+        for (i, &s) in inputs.iter().enumerate() {
+            from_env(system, env, s, &mut buffer[self.places[i].clone()])?;
+        }
+        Ok(())
+    }
+
+    /// The buffer from `state` (positions, velocities, t) and `env` (the rest).
+    fn load_state(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        inputs: &[Symbol],
+        buffer: &mut [f64],
+    ) -> Result<(), EvalError> {
+        let n = self.bodies;
+        if self.positions {
+            buffer[..3 * n].copy_from_slice(state.q[..n].as_flattened());
+        }
+        if self.velocities {
+            buffer[3 * n..6 * n].copy_from_slice(state.v[..n].as_flattened());
+        }
+        buffer[6 * n] = state.t;
+        for &i in &self.env {
+            from_env(system, env, inputs[i], &mut buffer[self.places[i].clone()])?;
+        }
+        Ok(())
+    }
+}
+
+/// `slots` from symbol `s`'s value in `env`.
+fn from_env(system: &System, env: &Env, s: Symbol, slots: &mut [f64]) -> Result<(), EvalError> {
+    match env.get(s) {
+        Some(Value::Scalar(x)) => slots.fill(x),
+        Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
+        Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
+        None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
+    }
+    Ok(())
+}
+
+/// Which roots of a [`RowProgram`] a tape computes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Part {
+    /// Every root.
+    All,
+    /// Each row's C and J, and the principal axes.
+    Positions,
+    /// Each row's Ċ and c, each slot's mass, velocity and force (no 3D rigid body).
+    Motion,
 }
 
 /// The roots of a [`RowProgram`] in units of one shape each (`numeric::batch`): each body's
-/// mass, velocity and force, each rigid body's angular roots, each row's C, Ċ, c and J (or,
-/// with `positions`, C and J alone and then each principal axis), every root once.
-fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, positions: bool) -> Vec<Vec<usize>> {
+/// mass, velocity and force, each rigid body's angular roots, each row's C, Ċ, c and J (or
+/// the roots of `part` alone: C and J then each principal axis; Ċ and c then the slots'),
+/// every root once.
+fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, part: Part) -> Vec<Vec<usize>> {
+    let positions = part == Part::Positions;
     let mut covered = vec![false; n_roots];
     let mut units = Vec::new();
     let mut take = |unit: Vec<usize>, units: &mut Vec<Vec<usize>>| {
@@ -196,11 +345,11 @@ fn units(bodies: &[BodySlots], rows: &[RowLayout], n_roots: usize, positions: bo
         }
     };
     for layout in rows {
-        let mut unit = vec![layout.value];
-        if !positions {
-            unit.extend([layout.rate, layout.bias]);
-        }
-        unit.extend(layout.jacobian.clone());
+        let unit = match part {
+            Part::All => [layout.value, layout.rate, layout.bias].into_iter().chain(layout.jacobian.clone()).collect(),
+            Part::Positions => std::iter::once(layout.value).chain(layout.jacobian.clone()).collect(),
+            Part::Motion => vec![layout.rate, layout.bias],
+        };
         take(unit, &mut units);
     }
     for b in bodies {
@@ -328,27 +477,47 @@ fn load_state(
     Ok(())
 }
 
-/// The components of an output `range` of `out`, zero past them.
-fn components(out: &[f64], range: Range<usize>) -> [f64; 3] {
-    // By hand: a copy of a variable length (one to three) compiles to a call.
-    let x = &out[range];
-    let at = |k: usize| if k < x.len() { x[k] } else { 0.0 };
+/// The `len` (one to three) components of `out` from `start`, zero past them.
+#[inline]
+fn placed(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
+    let (start, len) = (start as usize, len as usize);
+    let at = |k: usize| if k < len { out[start + k] } else { 0.0 };
     [at(0), at(1), at(2)]
 }
 
 /// Input and output buffers of [`RowProgram::evaluate_into`], reused across evaluations.
 #[derive(Clone, Debug)]
 pub struct RowScratch {
+    /// Every root's, the positions' and the motion's (none without its subprogram).
+    all: SubScratch,
+    positions: SubScratch,
+    motion: Option<SubScratch>,
+}
+
+/// The buffers of one [`Subprogram`].
+#[derive(Clone, Debug)]
+struct SubScratch {
     inputs: Vec<f64>,
     outputs: Vec<f64>,
     tape: Scratch,
-    /// The same for the positions' subprogram.
-    position_inputs: Vec<f64>,
-    position_outputs: Vec<f64>,
-    position_tape: Scratch,
-    /// The batched evaluations' buffers (empty without batches).
+    /// The batches' buffers (none without batches).
     batched: Option<BatchedScratch>,
-    position_batched: Option<BatchedScratch>,
+}
+
+impl Subprogram {
+    fn scratch(&self) -> SubScratch {
+        SubScratch {
+            inputs: vec![0.0; self.input_len()],
+            outputs: vec![0.0; self.tape.output_len()],
+            tape: self.tape.scratch(),
+            batched: self.batched.as_ref().map(|(b, _)| b.scratch()),
+        }
+    }
+
+    /// Every root from the inputs loaded in `scratch` into its outputs (the tape's layout).
+    fn run_loaded(&self, scratch: &mut SubScratch) {
+        self.run(&scratch.inputs, &mut scratch.tape, scratch.batched.as_mut(), &mut scratch.outputs);
+    }
 }
 
 impl RowProgram {
@@ -440,30 +609,20 @@ impl RowProgram {
                 jacobian: start..roots.len(),
             });
         }
-        let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
-        // Every symbol a root reads is an input and each is listed once, so lowering cannot fail.
-        let tape = Tape::compile(graph, &roots, &inputs).expect("the inputs are the roots' free symbols");
+        let mut all = Subprogram::new(system, graph, &roots, 0..roots.len());
+        all.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::All));
         let axes = bodies.iter().filter_map(|b| b.principal).flat_map(|(_, axes)| axes);
         let c_and_j = rows.iter().flat_map(|r| std::iter::once(r.value).chain(r.jacobian.clone()));
         let mut positions = Subprogram::new(system, graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
-        let batched = Batched::new(
-            graph,
-            &roots,
-            &units(&bodies, &rows, roots.len(), false),
-            |r| tape.output_range(r),
-            input_slots(&tape, &inputs),
-        );
-        let p = &positions;
-        let batched_positions = Batched::new(
-            graph,
-            &roots,
-            &units(&bodies, &rows, roots.len(), true),
-            |r| p.tape.output_range(p.root[r]),
-            input_slots(&p.tape, &p.inputs),
-        );
-        positions.batched = batched_positions;
-        let sources = sources(system, &inputs);
-        RowProgram { roots, bodies, rows, tape, inputs, sources, positions, batched }
+        positions.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::Positions));
+        let motion = bodies.iter().all(|b| b.principal.is_none()).then(|| {
+            let rates = rows.iter().flat_map(|r| [r.rate, r.bias]);
+            let slots = bodies.iter().flat_map(|b| [b.mass, b.velocity, b.force]);
+            let mut m = Subprogram::new(system, graph, &roots, rates.chain(slots).collect::<Vec<_>>());
+            m.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::Motion));
+            m
+        });
+        RowProgram { roots, bodies, rows, all, positions, motion }
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,
@@ -483,14 +642,9 @@ impl RowProgram {
     /// Buffers for [`evaluate_into`](RowProgram::evaluate_into).
     pub fn scratch(&self) -> RowScratch {
         RowScratch {
-            inputs: vec![0.0; self.tape.input_len()],
-            outputs: vec![0.0; self.tape.output_len()],
-            tape: self.tape.scratch(),
-            position_inputs: vec![0.0; self.positions.tape.input_len()],
-            position_outputs: vec![0.0; self.positions.tape.output_len()],
-            position_tape: self.positions.tape.scratch(),
-            batched: self.batched.as_ref().map(Batched::scratch),
-            position_batched: self.positions.batched.as_ref().map(Batched::scratch),
+            all: self.all.scratch(),
+            positions: self.positions.scratch(),
+            motion: self.motion.as_ref().map(Subprogram::scratch),
         }
     }
 
@@ -510,7 +664,7 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
-        load(system, env, &self.tape, &self.inputs, &mut scratch.inputs)?;
+        self.all.load(system, env, &mut scratch.all.inputs)?;
         self.run_loaded(system, scratch, rows);
         Ok(())
     }
@@ -526,21 +680,66 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
-        load_state(system, env, state, &self.tape, &self.inputs, &self.sources, &mut scratch.inputs)?;
+        self.all.load_state(system, env, state, &mut scratch.all.inputs)?;
         self.run_loaded(system, scratch, rows);
         Ok(())
     }
 
+    /// [`evaluate_state_into`](RowProgram::evaluate_state_into) for rows whose C/κ and J
+    /// are already those at `state`'s time and positions (the rows of an evaluation at the
+    /// same t and q, or [`evaluate_positions_state_into`](RowProgram::evaluate_positions_state_into)'s
+    /// rows with `rows.rows` swapped in): only what depends on the velocities is evaluated —
+    /// each row's Ċ and c, each slot's 1/m, v and F — and `value` and `jacobian` are kept.
+    /// The result is the full evaluation's, to rounding (C and J of the positions' tape, Ċ
+    /// and c of a tape of their own: see
+    /// [`evaluate_positions_into`](RowProgram::evaluate_positions_into)). Evaluates every
+    /// root when the program has no such tape (3D rigid bodies) or `rows` does not have
+    /// the system's rows; returns whether C and J were kept.
+    pub fn evaluate_motion_state_into(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        scratch: &mut RowScratch,
+        rows: &mut Rows,
+    ) -> Result<bool, EvalError> {
+        let (Some(m), Some(buffers)) = (&self.motion, &mut scratch.motion) else {
+            return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
+        };
+        if rows.rows.len() != self.rows.len() {
+            return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
+        }
+        m.load_state(system, env, state, &mut buffers.inputs)?;
+        m.run_loaded(buffers);
+        let out = &buffers.outputs;
+        let at = |root: usize| m.place[root];
+        let scalar = |root: usize| out[at(root).0 as usize];
+        // As `fill` without 3D rigid bodies (so no principal axes).
+        rows.dim = system.dim();
+        rows.inverse_mass.clear();
+        rows.velocity.clear();
+        rows.force.clear();
+        rows.axes.clear();
+        for b in &self.bodies {
+            rows.inverse_mass.push(1.0 / scalar(b.mass));
+            rows.velocity.push(placed(out, at(b.velocity)));
+            rows.force.push(placed(out, at(b.force)));
+        }
+        for (layout, row) in self.rows.iter().zip(&mut rows.rows) {
+            row.rate = scalar(layout.rate) * layout.inverse_scale;
+            row.bias = scalar(layout.bias);
+            row.inequality = layout.inequality;
+        }
+        Ok(true)
+    }
+
     /// The rows from the inputs loaded in `scratch`.
     fn run_loaded(&self, system: &System, scratch: &mut RowScratch, rows: &mut Rows) {
-        match (&self.batched, &mut scratch.batched) {
-            (Some(batched), Some(buffers)) => batched.eval(&scratch.inputs, buffers, &mut scratch.outputs),
-            _ => self.tape.eval(&scratch.inputs, &mut scratch.tape, &mut scratch.outputs),
-        }
-        let out = &scratch.outputs;
-        let tape = &self.tape;
-        let scalar = |root: usize| out[tape.output_range(root).start];
-        let vector = |root: usize| components(out, tape.output_range(root));
+        self.all.run_loaded(&mut scratch.all);
+        let out = &scratch.all.outputs;
+        let place = &self.all.place;
+        let scalar = |root: usize| out[place[root].0 as usize];
+        let vector = |root: usize| placed(out, place[root]);
         self.fill(system, rows, scalar, vector);
     }
 
@@ -620,7 +819,7 @@ impl RowProgram {
         rows: &mut Vec<Row>,
     ) -> Result<(), EvalError> {
         let p = &self.positions;
-        load(system, env, &p.tape, &p.inputs, &mut scratch.position_inputs)?;
+        p.load(system, env, &mut scratch.positions.inputs)?;
         self.positions_loaded(scratch, rows);
         Ok(())
     }
@@ -636,7 +835,7 @@ impl RowProgram {
         rows: &mut Vec<Row>,
     ) -> Result<(), EvalError> {
         let p = &self.positions;
-        load_state(system, env, state, &p.tape, &p.inputs, &p.sources, &mut scratch.position_inputs)?;
+        p.load_state(system, env, state, &mut scratch.positions.inputs)?;
         self.positions_loaded(scratch, rows);
         Ok(())
     }
@@ -644,21 +843,25 @@ impl RowProgram {
     /// C/κ and J from the positions' inputs loaded in `scratch`.
     fn positions_loaded(&self, scratch: &mut RowScratch, rows: &mut Vec<Row>) {
         let p = &self.positions;
-        match (&p.batched, &mut scratch.position_batched) {
-            (Some(batched), Some(buffers)) => {
-                batched.eval(&scratch.position_inputs, buffers, &mut scratch.position_outputs)
-            }
-            _ => p.tape.eval(&scratch.position_inputs, &mut scratch.position_tape, &mut scratch.position_outputs),
-        }
-        let out = &scratch.position_outputs;
-        let vector = |root: usize| components(out, p.tape.output_range(p.root[root]));
+        p.run_loaded(&mut scratch.positions);
+        let out = &scratch.positions.outputs;
+        let vector = |root: usize| placed(out, p.place[root]);
+        // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
+        let plain = self.motion.is_some();
         rows.resize_with(self.rows.len(), Row::default);
         for (layout, row) in self.rows.iter().zip(rows.iter_mut()) {
-            row.value = out[p.tape.output_range(p.root[layout.value]).start] * layout.inverse_scale;
+            row.value = out[p.place[layout.value].0 as usize] * layout.inverse_scale;
             row.rate = 0.0;
             row.bias = 0.0;
             row.inequality = layout.inequality;
-            self.fill_jacobian(layout, row, &vector);
+            if plain && row.jacobian.len() == layout.bodies.len() {
+                // In place: the rows of the last evaluation have the same bodies.
+                for ((j, &slot), at) in row.jacobian.iter_mut().zip(&layout.bodies).zip(layout.jacobian.clone()) {
+                    *j = (slot, vector(at));
+                }
+            } else {
+                self.fill_jacobian(layout, row, &vector);
+            }
         }
     }
 

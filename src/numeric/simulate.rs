@@ -325,6 +325,12 @@ pub struct Simulation<'s> {
     /// What the observer sees when the run works in another unit: the state, rows and λ
     /// converted back (buffers reused from step to step).
     shown: Shown,
+    /// The rows at the end of the last step, at the positions and time the next step starts
+    /// from (C/κ and J; the rest was spent by the velocity step): the next step evaluates
+    /// only what the velocities change (`Dynamics::rows_moved`). `None`: evaluate them all.
+    carried: Option<Rows>,
+    /// C/κ of the end rows, kept across the velocity step that overwrites it.
+    values: Vec<f64>,
 }
 
 #[derive(Default)]
@@ -363,6 +369,8 @@ impl<'s> Simulation<'s> {
             three_d,
             unit,
             shown: Shown::default(),
+            carried: None,
+            values: Vec::new(),
         })
     }
 
@@ -371,6 +379,7 @@ impl<'s> Simulation<'s> {
         let start = Instant::now();
         let system = self.dynamics.system();
         let s = self.settings;
+        self.carried = None;
         let mut summary = Summary {
             integrator: s.integrator.name().into(),
             stabilize: s.stabilize.name().into(),
@@ -466,7 +475,11 @@ impl<'s> Simulation<'s> {
             self.dynamics.step = n;
             // 3D rigid bodies: the rotation vectors of the last step into the orientations.
             self.dynamics.rebase(&mut self.q);
-            let mut rows = self.dynamics.rows(t, &self.q, &self.v)?;
+            // C and J at these positions came with the last step's end rows, if it kept them.
+            let mut rows = match self.carried.take() {
+                Some(end) => self.dynamics.rows_moved(t, &self.q, &self.v, end)?,
+                None => self.dynamics.rows(t, &self.q, &self.v)?,
+            };
             let (c_max, c_dot_max) = self.drift(&rows, n, t, &reach)?;
             summary.max_abs_c = summary.max_abs_c.max(c_max);
             summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
@@ -604,6 +617,10 @@ impl<'s> Simulation<'s> {
         let velocity_step = |dynamics: &mut Dynamics<'_>, end: &mut Rows, v: &mut Vectors, equalities: bool| {
             velocity_step(end, v, equalities, reach.touch, s.restitution, reach.bounce_speed, dynamics);
         };
+        // The velocity step spends the end rows' C, Ċ and c but keeps J, and the positions
+        // stay where the rows were evaluated: with C put back they serve the next start
+        // (not with 3D rigid bodies, whose orientations are rebased there).
+        let keep = !self.three_d;
         if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) = (s.integrator, s.stabilize) {
             // RATTLE: drift, SHAKE along the start's gradients, kick, velocity projection.
             if self.three_d {
@@ -640,8 +657,9 @@ impl<'s> Simulation<'s> {
                 }
             }
             update_rates(&mut end, &self.half, &self.v);
+            self.save_values(&end);
             velocity_step(&mut self.dynamics, &mut end, &mut self.v, true);
-            self.dynamics.recycle(end);
+            self.carry(end, keep);
             self.dynamics.recycle(rows);
             return self.check_finite(n + 1, t1);
         }
@@ -657,18 +675,41 @@ impl<'s> Simulation<'s> {
         match s.stabilize {
             Stabilize::Projection { tolerance, max_iterations } => {
                 let mut end = self.project(t1, reach.length, tolerance, max_iterations)?;
+                self.save_values(&end);
                 velocity_step(&mut self.dynamics, &mut end, &mut self.v, true);
-                self.dynamics.recycle(end);
+                self.carry(end, keep);
             }
             _ if has_inequalities => {
                 let mut end = self.dynamics.rows(t1, &self.q, &self.v)?;
+                self.save_values(&end);
                 velocity_step(&mut self.dynamics, &mut end, &mut self.v, false);
-                self.dynamics.recycle(end);
+                self.carry(end, keep);
             }
             _ => {}
         }
         self.dynamics.recycle(rows);
         Ok(())
+    }
+}
+
+impl Simulation<'_> {
+    /// Keeps C/κ of `end` before a velocity step spends it ([`carry`](Simulation::carry)).
+    fn save_values(&mut self, end: &Rows) {
+        self.values.clear();
+        self.values.extend(end.rows.iter().map(|row| row.value));
+    }
+
+    /// The end rows after the velocity step: with their C/κ put back, the next step's start
+    /// (`keep`), else recycled.
+    fn carry(&mut self, mut end: Rows, keep: bool) {
+        if keep && end.rows.len() == self.values.len() {
+            for (row, &c) in end.rows.iter_mut().zip(&self.values) {
+                row.value = c;
+            }
+            self.carried = Some(end);
+        } else {
+            self.dynamics.recycle(end);
+        }
     }
 }
 

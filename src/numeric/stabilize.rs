@@ -262,8 +262,9 @@ pub fn project_positions(
 /// and restitution), so violated inequalities are left to [`project_positions`]. `start` holds
 /// the rows at the start of the step (its C, Ċ and c are overwritten; its J is kept).
 /// An iteration reads C and J alone (`Dynamics::positions`), and its solve has the start's
-/// J, so the run's solve cache serves it with the start's factor; the full rows are
-/// evaluated once, at the final positions, and returned.
+/// J, so the run's solve cache serves it with the start's factor; at the final positions
+/// the rows are completed from the last iteration's C and J (`Dynamics::rows_after_positions`)
+/// and returned.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
@@ -292,7 +293,8 @@ pub fn shake_positions(
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
-            return Ok((dynamics.rows(t, q, v_half)?, iterations));
+            // C and J are those just evaluated: Ċ, c and the bodies' numbers are added.
+            return Ok((dynamics.rows_after_positions(t, q, v_half)?, iterations));
         }
         previous = residual;
         for (k, ((old, new), constraint)) in
