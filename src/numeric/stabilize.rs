@@ -334,8 +334,9 @@ const CONTRACTION: f64 = 0.5;
 /// (Jₙ M⁻¹ Jₙᵀ) μ = −C(q), positions only, until every row's distance |C|/‖J‖ at q is at
 /// most `bound`, as [`project_positions`] measures it. Its solves are substitutions with the
 /// cached factor. The full rows are evaluated at the starting q (returned as they are when
-/// it is on the surface already, as at rest) and at the final one; the iterations between
-/// read C and J alone (`Dynamics::positions`). Returns the rows at the final positions and
+/// it is on the surface already, as at rest); the iterations read C and J alone
+/// (`Dynamics::positions`), and at the final positions the rows are completed from the last
+/// one's (`Dynamics::rows_after_positions`). Returns the rows at the final positions and
 /// the iterations taken. Equalities only: with an inequality constraint in the system it
 /// returns `None` at once. It also returns `None`, with `q` put back exactly where it was
 /// (kept in `start`), when the iteration is not converging fast: an iteration does not
@@ -394,7 +395,8 @@ pub fn project_positions_along(
         }
         let residual = residual_of(dynamics.position_rows());
         if residual <= bound {
-            return match dynamics.rows(t, q, v) {
+            // C and J are those just evaluated: Ċ, c and the bodies' numbers are added.
+            return match dynamics.rows_after_positions(t, q, v) {
                 Ok(rows) => Ok(Some((rows, iterations))),
                 Err(_) => restore(q),
             };
