@@ -232,8 +232,8 @@ impl Simplifier {
     /// the scene; this one is `−(n's numerator × d's denominator over n's)/(d's numerator)`,
     /// linear in the terms of `n` and `d`. Equal to the combined form as a function; `None`
     /// where `d` has no such term (nothing to gain) or a form is too large. With it, the
-    /// number of different roots in `d`'s denominators. The caller prints both and keeps
-    /// the shorter.
+    /// number of different roots in `d`'s denominators. The caller keeps the shorter form
+    /// (over two or more roots this one, without building the combined form).
     pub fn separated_quotient(&mut self, g: &mut Graph, n: Id, d: Id) -> Result<Option<(Id, usize)>, TypeError> {
         if self.radicals.is_empty() || g.ty(n) != Ty::Scalar || g.ty(d) != Ty::Scalar {
             return Ok(None);
