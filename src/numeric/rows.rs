@@ -308,7 +308,9 @@ impl Flat {
     }
 }
 
-/// `slots` from symbol `s`'s value in `env`.
+/// `slots` from symbol `s`'s value in `env`, element by element (a copy of one to four
+/// numbers is cheaper inline than a call).
+#[inline]
 fn from_env(system: &System, env: &Env, s: Symbol, slots: &mut [f64]) -> Result<(), EvalError> {
     match env.get(s) {
         Some(Value::Scalar(x)) => slots.fill(x),
@@ -401,14 +403,7 @@ fn push(roots: &mut Vec<Id>, id: Id) -> usize {
 /// `tape`'s inputs (the symbols `inputs`) from `env` into `buffer`.
 fn load(system: &System, env: &Env, tape: &Tape, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
     for (i, &s) in inputs.iter().enumerate() {
-        let slots = &mut buffer[tape.input_range(i)];
-        // Element by element: a copy of one to four numbers is cheaper inline than a call.
-        match env.get(s) {
-            Some(Value::Scalar(x)) => slots.fill(x),
-            Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
-            Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
-            None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
-        }
+        from_env(system, env, s, &mut buffer[tape.input_range(i)])?;
     }
     Ok(())
 }
