@@ -5,8 +5,19 @@
 //! registers for it: inputs first, then constants, then temporaries, which are reused as
 //! soon as their last reader has run. Products read by a single sum or negation are fused
 //! into it (`a·b + c·d`, `−(a·b)`: same roundings, no FMA), which halves the instruction count
-//! of dot products. [`Tape::eval`] then runs one forward loop over the instruction slice —
-//! no recursion, no allocation (the registers live in a [`Scratch`]).
+//! of dot products. Before registers are allocated, a value read by one instruction only is
+//! moved to just before its reader, the operand with the longest chain of operations last
+//! (`tree_order`: the same operations in another order).
+//!
+//! [`Tape::eval`] runs its own form of the instructions (`steps`), one forward loop —
+//! no recursion, no allocation (the registers live in a [`Scratch`], which keeps the
+//! constants between calls). Per state, time goes to dispatch and to chains of dependent
+//! operations, so the steps cut both: two independent sums, differences or products of
+//! adjacent instructions are one step, and an operand that is the previous step's result is
+//! read from the accumulator, a local the compiler keeps in a machine register, rather
+//! than through a store and a load (each result is still stored for later readers). The
+//! steps perform the instructions' operations on the same operands (a commutative one may
+//! take them swapped): results are bitwise those of the lanes below.
 //!
 //! [`Tape::eval_batch`] evaluates many states at once, stored as structure of arrays
 //! (input slot `j` of state `s` at `inputs[j * n + s]`, outputs alike). It runs each
@@ -101,10 +112,305 @@ struct Inst {
     e: u32,
 }
 
+/// What a single-state [`Step`] computes. `A`, `B`, `C` variants read that operand from the
+/// accumulator — the previous step's result, still in a machine register — instead of the
+/// register file: a chain of dependent steps then waits for each operation, not for each
+/// operation and a store-to-load round trip through memory. The `2` variants are two
+/// independent operations of one kind in one dispatch. One flat `u8` list: one jump table,
+/// no payload to decode.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+enum S {
+    Add,
+    AddA,
+    Sub,
+    SubA,
+    SubB,
+    Mul,
+    MulA,
+    Div,
+    DivA,
+    DivB,
+    Neg,
+    NegA,
+    Powi,
+    PowiA,
+    Powf,
+    Sqrt,
+    SqrtA,
+    Call,
+    Norm2,
+    Norm3,
+    Sq,
+    SqA,
+    SqAddSq,
+    SqAddSqA,
+    MulMulAdd,
+    MulMulAddA,
+    MulMulSub,
+    MulMulSubA,
+    MulAdd,
+    MulAddA,
+    MulAddC,
+    MulSub,
+    MulSubA,
+    SubMul,
+    SubMulA,
+    SubMulB,
+    NegMul,
+    NegMulA,
+    NegDiv,
+    NegDivA,
+    NegDivB,
+    /// `r[d2] = a + b`, then `r[d] = c + e`.
+    Add2,
+    /// `r[d2] = a − b`, then `r[d] = c − e`.
+    Sub2,
+    /// `r[d2] = a·b`, then `r[d] = c·e`.
+    Mul2,
+}
+
+/// One instruction of single-state evaluation: `r[d] = op(a, b, c, e)` (operands as in
+/// [`Inst`], or the accumulator where `op` says so), and the result becomes the accumulator.
+#[derive(Clone, Copy, Debug)]
+struct Step {
+    op: S,
+    /// The function of `S::Call`.
+    f: Func,
+    imm: i32,
+    d: u32,
+    a: u32,
+    b: u32,
+    c: u32,
+    e: u32,
+    /// The first result of a `2` step; `d` otherwise.
+    d2: u32,
+}
+
+/// The single-state steps of `code`: adjacent independent sums, differences and products
+/// paired, then each operand that is the previous step's result read from the accumulator.
+/// Operations are those of `code`, operand for operand, except that an accumulator operand
+/// of a commutative operation may be swapped into the first place (`x + y` and `y + x` are
+/// the same number, bit for bit; only which NaN payload is returned may differ, which Rust
+/// leaves unspecified).
+fn steps(code: &[Inst]) -> Vec<Step> {
+    let plain = |i: &Inst| {
+        let (op, f) = match i.code {
+            Code::Add => (S::Add, Func::Sqrt),
+            Code::Sub => (S::Sub, Func::Sqrt),
+            Code::Mul => (S::Mul, Func::Sqrt),
+            Code::Div => (S::Div, Func::Sqrt),
+            Code::Neg => (S::Neg, Func::Sqrt),
+            Code::Powi => (S::Powi, Func::Sqrt),
+            Code::Powf => (S::Powf, Func::Sqrt),
+            Code::Sqrt => (S::Sqrt, Func::Sqrt),
+            Code::Call(f) => (S::Call, f),
+            Code::Norm2 => (S::Norm2, Func::Sqrt),
+            Code::Norm3 => (S::Norm3, Func::Sqrt),
+            Code::Sq => (S::Sq, Func::Sqrt),
+            Code::SqAddSq => (S::SqAddSq, Func::Sqrt),
+            Code::MulMulAdd => (S::MulMulAdd, Func::Sqrt),
+            Code::MulMulSub => (S::MulMulSub, Func::Sqrt),
+            Code::MulAdd => (S::MulAdd, Func::Sqrt),
+            Code::MulSub => (S::MulSub, Func::Sqrt),
+            Code::SubMul => (S::SubMul, Func::Sqrt),
+            Code::NegMul => (S::NegMul, Func::Sqrt),
+            Code::NegDiv => (S::NegDiv, Func::Sqrt),
+        };
+        Step { op, f, imm: i.imm, d: i.d, a: i.a, b: i.b, c: i.c, e: i.e, d2: i.d }
+    };
+    let mut out: Vec<Step> = Vec::with_capacity(code.len());
+    let mut k = 0;
+    while k < code.len() {
+        let (i, j) = (code[k], code.get(k + 1));
+        let pair = match (i.code, j) {
+            (Code::Add, Some(j)) if j.code == Code::Add => Some((S::Add2, j)),
+            (Code::Sub, Some(j)) if j.code == Code::Sub => Some((S::Sub2, j)),
+            (Code::Mul, Some(j)) if j.code == Code::Mul => Some((S::Mul2, j)),
+            _ => None,
+        };
+        // The second must not read the first's result: both are computed before either is
+        // stored.
+        match pair {
+            Some((op, j)) if j.a != i.d && j.b != i.d => {
+                out.push(Step { op, f: Func::Sqrt, imm: 0, d: j.d, a: i.a, b: i.b, c: j.a, e: j.b, d2: i.d });
+                k += 2;
+            }
+            _ => {
+                out.push(plain(&i));
+                k += 1;
+            }
+        }
+    }
+    // The accumulator holds the previous step's result, stored at its `d`.
+    for k in 1..out.len() {
+        let acc = out[k - 1].d;
+        let s = &mut out[k];
+        let op = s.op;
+        let (a, b, c, e) = (s.a == acc, s.b == acc, s.c == acc, s.e == acc);
+        let swap_ab = |s: &mut Step| std::mem::swap(&mut s.a, &mut s.b);
+        s.op = match op {
+            S::Add | S::Mul | S::NegMul if a || b => {
+                if !a {
+                    swap_ab(s);
+                }
+                match op {
+                    S::Add => S::AddA,
+                    S::Mul => S::MulA,
+                    _ => S::NegMulA,
+                }
+            }
+            S::Sub if a => S::SubA,
+            S::Sub if b => S::SubB,
+            S::Div if a => S::DivA,
+            S::Div if b => S::DivB,
+            S::NegDiv if a => S::NegDivA,
+            S::NegDiv if b => S::NegDivB,
+            S::Neg if a => S::NegA,
+            S::Powi if a => S::PowiA,
+            S::Sqrt if a => S::SqrtA,
+            S::Sq if a => S::SqA,
+            S::SqAddSq if a || c => {
+                if !a {
+                    std::mem::swap(&mut s.a, &mut s.c);
+                    s.b = s.a;
+                    s.e = s.c;
+                }
+                S::SqAddSqA
+            }
+            S::MulMulAdd if a || b || c || e => {
+                if !(a || b) {
+                    std::mem::swap(&mut s.a, &mut s.c);
+                    std::mem::swap(&mut s.b, &mut s.e);
+                }
+                if s.a != acc {
+                    swap_ab(s);
+                }
+                S::MulMulAddA
+            }
+            S::MulMulSub | S::MulAdd | S::MulSub if a || b => {
+                if !a {
+                    swap_ab(s);
+                }
+                match op {
+                    S::MulMulSub => S::MulMulSubA,
+                    S::MulAdd => S::MulAddA,
+                    _ => S::MulSubA,
+                }
+            }
+            S::MulAdd if c => S::MulAddC,
+            S::SubMul if a => S::SubMulA,
+            S::SubMul if b || c => {
+                if !b {
+                    std::mem::swap(&mut s.b, &mut s.c);
+                }
+                S::SubMulB
+            }
+            op => op,
+        };
+    }
+    out
+}
+
+/// `virt` (instructions over values, producers first) reordered so that a value read by one
+/// instruction only is computed just before it, its operands' in operand order: the last
+/// one computed is then the previous step's result, which single-state evaluation keeps in
+/// a machine register ([`steps`]). A reordering of the same operations: no result changes.
+/// Only producers that already come before their reader move, so a malformed program stays
+/// malformed (and is refused).
+fn tree_order(virt: Vec<(usize, Code, i32, [Val; 4])>, n: usize, outputs: &[Val]) -> Vec<(usize, Code, i32, [Val; 4])> {
+    // The instruction computing each value, and how many instructions read it.
+    let mut at = vec![usize::MAX; n];
+    for (k, (i, ..)) in virt.iter().enumerate() {
+        at[*i] = k;
+    }
+    let operands = |args: &[Val; 4]| {
+        let mut seen: Vec<Val> = Vec::with_capacity(4);
+        for &a in args {
+            if !seen.contains(&a) {
+                seen.push(a);
+            }
+        }
+        seen
+    };
+    let mut readers = vec![0u32; n];
+    let mut reader = vec![usize::MAX; n];
+    for (k, (_, _, _, args)) in virt.iter().enumerate() {
+        for a in operands(args) {
+            readers[a as usize] += 1;
+            reader[a as usize] = k;
+        }
+    }
+    for &o in outputs {
+        readers[o as usize] += 1;
+    }
+    let deferred: Vec<bool> = virt
+        .iter()
+        .enumerate()
+        .map(|(k, (i, ..))| readers[*i] == 1 && reader[*i] != usize::MAX && reader[*i] > k)
+        .collect();
+    // The longest chain of operations ending at each instruction (a division or a function
+    // counting as several): the longest operand is computed last, so the accumulator carries
+    // the critical path and shorter ones have their values stored in time.
+    let mut height = vec![0u32; virt.len()];
+    for k in 0..virt.len() {
+        let own = match virt[k].1 {
+            Code::Div | Code::NegDiv | Code::Sqrt | Code::Norm2 | Code::Norm3 => 4,
+            Code::Call(_) | Code::Powf | Code::Powi => 8,
+            _ => 1,
+        };
+        let below = operands(&virt[k].3)
+            .into_iter()
+            .filter(|&a| at[a as usize] < k)
+            .map(|a| height[at[a as usize]])
+            .max()
+            .unwrap_or(0);
+        height[k] = below + own;
+    }
+    let mut order: Vec<usize> = Vec::with_capacity(virt.len());
+    let mut taken = vec![false; virt.len()];
+    // Post-order with an explicit stack: deep expressions must not overflow the call stack.
+    let mut stack: Vec<(usize, bool)> = Vec::new();
+    for k in 0..virt.len() {
+        if deferred[k] {
+            continue;
+        }
+        taken[k] = true;
+        stack.push((k, false));
+        while let Some((x, expanded)) = stack.pop() {
+            if expanded {
+                order.push(x);
+                continue;
+            }
+            stack.push((x, true));
+            let mut pulled: Vec<usize> = operands(&virt[x].3)
+                .into_iter()
+                .map(|a| at[a as usize])
+                .filter(|&q| q != usize::MAX && q < x && deferred[q] && !taken[q])
+                .collect();
+            // Highest last (stable: ties in operand order); pushed in reverse, so they run
+            // in that order.
+            pulled.sort_by_key(|&q| height[q]);
+            for &q in pulled.iter().rev() {
+                taken[q] = true;
+                stack.push((q, false));
+            }
+        }
+    }
+    // Deferred instructions whose reader comes first (a malformed program) keep their place
+    // at the end, where register allocation finds the forward reference.
+    order.extend((0..virt.len()).filter(|&k| !taken[k]));
+    let mut virt: Vec<Option<_>> = virt.into_iter().map(Some).collect();
+    order.into_iter().filter_map(|k| virt[k].take()).collect()
+}
+
 /// A compiled set of expressions. Immutable; share it between threads freely.
 #[derive(Clone, Debug)]
 pub struct Tape {
+    /// The instructions of batched evaluation.
     code: Vec<Inst>,
+    /// The same instructions for single-state evaluation ([`steps`]).
+    steps: Vec<Step>,
     n_inputs: usize,
     /// Values of registers `n_inputs .. n_inputs + consts.len()`.
     consts: Vec<f64>,
@@ -115,12 +421,22 @@ pub struct Tape {
     input_ranges: Vec<Range<usize>>,
     /// Where each register lives in batched evaluation.
     homes: Vec<Home>,
+    /// Unique to the compilation (clones share it: they hold the same constants).
+    id: u64,
 }
+
+/// No tape's [`Tape::id`].
+const NO_TAPE: u64 = 0;
+
+/// The next [`Tape::id`].
+static NEXT_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(NO_TAPE + 1);
 
 /// Registers for single-state evaluation; make one with [`Tape::scratch`] and reuse it.
 #[derive(Clone, Debug)]
 pub struct Scratch {
     regs: Vec<f64>,
+    /// The [`Tape::id`] whose constants the registers hold.
+    tape: u64,
 }
 
 /// Registers for one lane of batched evaluation; make one with [`Tape::batch_scratch`].
@@ -225,6 +541,7 @@ impl Tape {
         // Sums come after their products, so a product is absorbed before it would be emitted
         // only if we look ahead: drop absorbed products now.
         virt.retain(|(i, ..)| !absorbed[*i]);
+        let virt = tree_order(virt, n, &p.outputs);
         // Last reader of each value; outputs are read at the end.
         let mut last = vec![0usize; n];
         for (k, (_, _, _, args)) in virt.iter().enumerate() {
@@ -279,6 +596,9 @@ impl Tape {
                 && p.outputs.iter().all(|&o| valid(reg[o as usize])),
             "malformed program: an operand is not computed before it is used"
         );
+        let steps = steps(&code);
+        // The single-state steps use `code`'s register numbers, regrouped.
+        assert!(steps.iter().all(|s| [s.d, s.a, s.b, s.c, s.e, s.d2].into_iter().all(valid)));
         let outputs: Vec<u32> = p.outputs.iter().map(|&o| reg[o as usize]).collect();
         // Batched homes: inputs stay in the caller's rows; a computed output is written
         // straight into its output row (its register is never reused: outputs are read "at
@@ -291,6 +611,7 @@ impl Tape {
             }
         }
         Tape {
+            steps,
             code,
             n_inputs: p.n_inputs,
             consts,
@@ -299,6 +620,7 @@ impl Tape {
             output_ranges: p.output_ranges.clone(),
             input_ranges: p.input_ranges.clone(),
             homes,
+            id: NEXT_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed),
         }
     }
 
@@ -329,7 +651,7 @@ impl Tape {
 
     /// Registers for [`eval`](Tape::eval).
     pub fn scratch(&self) -> Scratch {
-        Scratch { regs: vec![0.0; self.n_regs] }
+        Scratch { regs: vec![0.0; self.n_regs], tape: NO_TAPE }
     }
 
     /// Registers for the serial part of [`eval_batch`](Tape::eval_batch).
@@ -341,53 +663,104 @@ impl Tape {
     ///
     /// # Panics
     /// If `inputs` is not [`input_len`](Tape::input_len) long, `outputs` not
-    /// [`output_len`](Tape::output_len) long, or `scratch` was made by a different tape.
+    /// [`output_len`](Tape::output_len) long, or `scratch` was made by a tape with another
+    /// number of registers (one scratch may serve tapes of one size in turn).
     pub fn eval(&self, inputs: &[f64], scratch: &mut Scratch, outputs: &mut [f64]) {
         assert_eq!(inputs.len(), self.n_inputs, "input length");
         assert_eq!(outputs.len(), self.outputs.len(), "output length");
         assert_eq!(scratch.regs.len(), self.n_regs, "scratch made by another tape");
+        // The constants stay in the registers from one call to the next (no step writes
+        // them): loaded when the scratch last served another tape.
+        if scratch.tape != self.id {
+            scratch.regs[self.n_inputs..self.n_inputs + self.consts.len()].copy_from_slice(&self.consts);
+            scratch.tape = self.id;
+        }
         let r = scratch.regs.as_mut_slice();
-        for (d, &x) in r.iter_mut().zip(inputs) {
-            *d = x;
+        if inputs.len() <= 16 {
+            // A short copy in line: a call to `memcpy` costs more than the copy.
+            for k in 0..inputs.len() {
+                // SAFETY: `k < inputs.len() = n_inputs ≤ n_regs = r.len()` (asserted above).
+                unsafe { *r.get_unchecked_mut(k) = *inputs.get_unchecked(k) };
+            }
+        } else {
+            r[..self.n_inputs].copy_from_slice(inputs);
         }
-        for (d, &x) in r[self.n_inputs..].iter_mut().zip(&self.consts) {
-            *d = x;
-        }
-        for i in &self.code {
-            // SAFETY: `from_program` only writes register numbers below `n_regs` into `code`, and
-            // `r` has exactly `n_regs` registers (asserted above).
+        // The previous step's result (`A`, `B`, `C` steps read it here rather than from `r`).
+        let mut acc = 0.0;
+        for s in &self.steps {
+            // SAFETY: `from_program` only writes register numbers below `n_regs` into `steps`
+            // (asserted there), and `r` has exactly `n_regs` registers (asserted above).
             let reg = |k: u32| unsafe { *r.get_unchecked(k as usize) };
-            let (a, b) = (reg(i.a), reg(i.b));
-            let x = match i.code {
-                Code::Add => a + b,
-                Code::Sub => a - b,
-                Code::Mul => a * b,
-                Code::Div => a / b,
-                Code::Neg => -a,
-                Code::Powi => a.powi(i.imm),
-                Code::Powf => eval::pow(a, b),
-                Code::Sqrt => a.sqrt(),
-                Code::Call(f) => f.apply(&[a, b]),
-                Code::Norm2 => norm2(a, b),
-                Code::Norm3 => norm3(a, b, reg(i.c)),
-                Code::Sq => a * a,
-                Code::SqAddSq => {
-                    let c = reg(i.c);
+            let x = match s.op {
+                S::Add => reg(s.a) + reg(s.b),
+                S::AddA => acc + reg(s.b),
+                S::Sub => reg(s.a) - reg(s.b),
+                S::SubA => acc - reg(s.b),
+                S::SubB => reg(s.a) - acc,
+                S::Mul => reg(s.a) * reg(s.b),
+                S::MulA => acc * reg(s.b),
+                S::Div => reg(s.a) / reg(s.b),
+                S::DivA => acc / reg(s.b),
+                S::DivB => reg(s.a) / acc,
+                S::Neg => -reg(s.a),
+                S::NegA => -acc,
+                S::Powi => reg(s.a).powi(s.imm),
+                S::PowiA => acc.powi(s.imm),
+                S::Powf => eval::pow(reg(s.a), reg(s.b)),
+                S::Sqrt => reg(s.a).sqrt(),
+                S::SqrtA => acc.sqrt(),
+                S::Call => s.f.apply(&[reg(s.a), reg(s.b)]),
+                S::Norm2 => norm2(reg(s.a), reg(s.b)),
+                S::Norm3 => norm3(reg(s.a), reg(s.b), reg(s.c)),
+                S::Sq => {
+                    let a = reg(s.a);
+                    a * a
+                }
+                S::SqA => acc * acc,
+                S::SqAddSq => {
+                    let (a, c) = (reg(s.a), reg(s.c));
                     a * a + c * c
                 }
-                Code::MulMulAdd => a * b + reg(i.c) * reg(i.e),
-                Code::MulMulSub => a * b - reg(i.c) * reg(i.e),
-                Code::MulAdd => a * b + reg(i.c),
-                Code::MulSub => a * b - reg(i.c),
-                Code::SubMul => a - b * reg(i.c),
-                Code::NegMul => -(a * b),
-                Code::NegDiv => -(a / b),
+                S::SqAddSqA => {
+                    let c = reg(s.c);
+                    acc * acc + c * c
+                }
+                S::MulMulAdd => reg(s.a) * reg(s.b) + reg(s.c) * reg(s.e),
+                S::MulMulAddA => acc * reg(s.b) + reg(s.c) * reg(s.e),
+                S::MulMulSub => reg(s.a) * reg(s.b) - reg(s.c) * reg(s.e),
+                S::MulMulSubA => acc * reg(s.b) - reg(s.c) * reg(s.e),
+                S::MulAdd => reg(s.a) * reg(s.b) + reg(s.c),
+                S::MulAddA => acc * reg(s.b) + reg(s.c),
+                S::MulAddC => reg(s.a) * reg(s.b) + acc,
+                S::MulSub => reg(s.a) * reg(s.b) - reg(s.c),
+                S::MulSubA => acc * reg(s.b) - reg(s.c),
+                S::SubMul => reg(s.a) - reg(s.b) * reg(s.c),
+                S::SubMulA => acc - reg(s.b) * reg(s.c),
+                S::SubMulB => reg(s.a) - acc * reg(s.c),
+                S::NegMul => -(reg(s.a) * reg(s.b)),
+                S::NegMulA => -(acc * reg(s.b)),
+                S::NegDiv => -(reg(s.a) / reg(s.b)),
+                S::NegDivA => -(acc / reg(s.b)),
+                S::NegDivB => -(reg(s.a) / acc),
+                S::Add2 | S::Sub2 | S::Mul2 => {
+                    let (a, b, c, e) = (reg(s.a), reg(s.b), reg(s.c), reg(s.e));
+                    let (first, second) = match s.op {
+                        S::Add2 => (a + b, c + e),
+                        S::Sub2 => (a - b, c - e),
+                        _ => (a * b, c * e),
+                    };
+                    // SAFETY: as above.
+                    unsafe { *r.get_unchecked_mut(s.d2 as usize) = first };
+                    second
+                }
             };
             // SAFETY: as above.
-            unsafe { *r.get_unchecked_mut(i.d as usize) = x };
+            unsafe { *r.get_unchecked_mut(s.d as usize) = x };
+            acc = x;
         }
         for (o, &reg) in outputs.iter_mut().zip(&self.outputs) {
-            *o = r[reg as usize];
+            // SAFETY: `from_program` asserts every output register is below `n_regs`.
+            *o = unsafe { *r.get_unchecked(reg as usize) };
         }
     }
 
