@@ -603,20 +603,13 @@ fn product(ld: &[f64], md: usize, p: usize, height: usize, width: usize, c: &mut
         cj.fill(0.0);
         let mut k = 0;
         while k + 4 <= wd {
-            let col = |t: usize| &ld[(k + t) * md + p + j..(k + t + 1) * md];
-            let (a0, a1, a2, a3) = (col(0), col(1), col(2), col(3));
-            let (b0, b1, b2, b3) = (a0[0], a1[0], a2[0], a3[0]);
-            for ((((c, &x0), &x1), &x2), &x3) in cj.iter_mut().zip(a0).zip(a1).zip(a2).zip(a3) {
-                *c += (x0 * b0 + x1 * b1) + (x2 * b2 + x3 * b3);
-            }
+            let at = |t: usize| (k + t) * md + p + j;
+            four(cj, [&ld[at(0)..], &ld[at(1)..], &ld[at(2)..], &ld[at(3)..]], 1.0);
             k += 4;
         }
         while k < wd {
             let a = &ld[k * md + p + j..(k + 1) * md];
-            let b = a[0];
-            for (c, &x) in cj.iter_mut().zip(a) {
-                *c += x * b;
-            }
+            one(cj, a, 1.0);
             k += 1;
         }
     }
@@ -628,21 +621,36 @@ fn product(ld: &[f64], md: usize, p: usize, height: usize, width: usize, c: &mut
 fn subtract_columns(left: &[f64], m: usize, j: usize, column: &mut [f64]) {
     let mut k = 0;
     while k + 4 <= j {
-        let col = |t: usize| &left[(k + t) * m + j..(k + t + 1) * m];
-        let (a0, a1, a2, a3) = (col(0), col(1), col(2), col(3));
-        let (b0, b1, b2, b3) = (a0[0], a1[0], a2[0], a3[0]);
-        for ((((c, &x0), &x1), &x2), &x3) in column.iter_mut().zip(a0).zip(a1).zip(a2).zip(a3) {
-            *c -= (x0 * b0 + x1 * b1) + (x2 * b2 + x3 * b3);
-        }
+        let at = |t: usize| (k + t) * m + j;
+        four(column, [&left[at(0)..], &left[at(1)..], &left[at(2)..], &left[at(3)..]], -1.0);
         k += 4;
     }
     while k < j {
-        let a = &left[k * m + j..(k + 1) * m];
-        let b = a[0];
-        for (c, &x) in column.iter_mut().zip(a) {
-            *c -= x * b;
-        }
+        one(column, &left[k * m + j..(k + 1) * m], -1.0);
         k += 1;
+    }
+}
+
+/// c += sign (a₀ a₀[0] + a₁ a₁[0] + a₂ a₂[0] + a₃ a₃[0]) over c's length (each aₜ at least
+/// as long): four columns a pass, indexed over one length so the loop vectorises.
+#[inline(always)]
+fn four(c: &mut [f64], a: [&[f64]; 4], sign: f64) {
+    let len = c.len();
+    let (a0, a1, a2, a3) = (&a[0][..len], &a[1][..len], &a[2][..len], &a[3][..len]);
+    let (b0, b1, b2, b3) = (sign * a0[0], sign * a1[0], sign * a2[0], sign * a3[0]);
+    for i in 0..len {
+        c[i] += (a0[i] * b0 + a1[i] * b1) + (a2[i] * b2 + a3[i] * b3);
+    }
+}
+
+/// c += sign a a[0] over c's length.
+#[inline(always)]
+fn one(c: &mut [f64], a: &[f64], sign: f64) {
+    let len = c.len();
+    let a = &a[..len];
+    let b = sign * a[0];
+    for i in 0..len {
+        c[i] += a[i] * b;
     }
 }
 
