@@ -41,6 +41,20 @@ pub struct SparseFactor {
     colptr: Vec<usize>,
     rowval: Vec<usize>,
     values: Vec<f64>,
+    /// The order, the supernodes and their blocks (boxed: many vectors, moved with the
+    /// plan).
+    blocks: Box<Blocks>,
+    /// Whether `lx` holds the factor of the current values.
+    factored: bool,
+    /// The entries of L below its diagonal.
+    entries: usize,
+    /// Σⱼ (entries of column j of L)²: the multiplications of a factorisation, give or take.
+    flops: f64,
+}
+
+/// A [`SparseFactor`]'s order, supernodes and blocks of L.
+#[derive(Clone, Debug)]
+struct Blocks {
     /// perm[new] = old: the fill-reducing order.
     perm: Vec<usize>,
     /// Supernode s is the columns `first[s]..first[s + 1]` (in the new order).
@@ -59,12 +73,6 @@ pub struct SparseFactor {
     place: Vec<usize>,
     /// The entries of each row of A (both triangles), for the residual's rounding.
     row_entries: Vec<usize>,
-    /// Whether `lx` holds the factor of the current values.
-    factored: bool,
-    /// The entries of L below its diagonal.
-    entries: usize,
-    /// Σⱼ (entries of column j of L)²: the multiplications of a factorisation, give or take.
-    flops: f64,
     scratch: Scratch,
 }
 
@@ -241,19 +249,21 @@ impl SparseFactor {
             colptr,
             rowval,
             values,
-            perm: ldl.perm.clone(),
-            first,
-            rowptr,
-            rows,
-            lx: vec![0.0; lxptr[supernodes]],
-            lxptr,
-            of,
-            place,
-            row_entries,
+            blocks: Box::new(Blocks {
+                perm: ldl.perm.clone(),
+                first,
+                rowptr,
+                rows,
+                lx: vec![0.0; lxptr[supernodes]],
+                lxptr,
+                of,
+                place,
+                row_entries,
+                scratch,
+            }),
             factored: false,
             entries: ldl.nnzL(),
             flops,
-            scratch,
         };
         Some((factor, targets))
     }
@@ -276,7 +286,7 @@ impl SparseFactor {
 
     /// The number of supernodes (groups of columns of L with one pattern).
     pub fn supernodes(&self) -> usize {
-        self.first.len() - 1
+        self.blocks.first.len() - 1
     }
 
     /// The values of A's upper triangle, at the places [`analyse`](SparseFactor::analyse)
@@ -318,7 +328,8 @@ impl SparseFactor {
     /// The left-looking supernodal factorisation of `values` into `lx`.
     #[inline(always)]
     fn factor_supernodes(&mut self, pivot_floor: f64) -> bool {
-        let SparseFactor { first, rowptr, rows, lxptr, lx, of, place, values, scratch, .. } = self;
+        let values = &self.values;
+        let Blocks { first, rowptr, rows, lxptr, lx, of, place, scratch, .. } = &mut *self.blocks;
         let Scratch { relative, places, update, head, next, position } = scratch;
         // A, permuted, into the blocks.
         lx.fill(0.0);
@@ -444,9 +455,9 @@ impl SparseFactor {
     fn substitute_any(&self, x: &mut [f64], gathered: &mut Vec<f64>) {
         // L z = x: each supernode solves its columns (contiguous in x), then passes their
         // products to the rows below.
-        for s in 0..self.first.len() - 1 {
+        for s in 0..self.blocks.first.len() - 1 {
             let (mine, ls, w) = self.supernode(s);
-            let (f, m) = (self.first[s], mine.len());
+            let (f, m) = (self.blocks.first[s], mine.len());
             for j in 0..w {
                 let column = &ls[j * m + j..j * m + w];
                 let zj = x[f + j] / column[0];
@@ -479,9 +490,9 @@ impl SparseFactor {
         }
         // Lᵀ y = z, the supernodes in reverse, each column a dot product with the rows
         // below it (already solved).
-        for s in (0..self.first.len() - 1).rev() {
+        for s in (0..self.blocks.first.len() - 1).rev() {
             let (mine, ls, w) = self.supernode(s);
-            let (f, m) = (self.first[s], mine.len());
+            let (f, m) = (self.blocks.first[s], mine.len());
             gathered.clear();
             gathered.extend(mine[w..].iter().map(|&r| x[r]));
             for j in (0..w).rev() {
@@ -495,9 +506,9 @@ impl SparseFactor {
     /// Supernode s's rows, block and number of columns.
     fn supernode(&self, s: usize) -> (&[usize], &[f64], usize) {
         (
-            &self.rows[self.rowptr[s]..self.rowptr[s + 1]],
-            &self.lx[self.lxptr[s]..self.lxptr[s + 1]],
-            self.first[s + 1] - self.first[s],
+            &self.blocks.rows[self.blocks.rowptr[s]..self.blocks.rowptr[s + 1]],
+            &self.blocks.lx[self.blocks.lxptr[s]..self.blocks.lxptr[s + 1]],
+            self.blocks.first[s + 1] - self.blocks.first[s],
         )
     }
 
@@ -511,7 +522,7 @@ impl SparseFactor {
         if !self.factored {
             return;
         }
-        let perm = &self.perm;
+        let perm = &self.blocks.perm;
         let SparseWork { permuted, ax, bound, r, gathered } = work;
         // perm[new] = old.
         permuted.clear();
@@ -528,7 +539,7 @@ impl SparseFactor {
         self.mul_bounded(x, ax, bound);
         let unit = f64::EPSILON / 2.0;
         let noise = (0..n).all(|i| {
-            let k = (self.row_entries[i] + 1) as f64;
+            let k = (self.blocks.row_entries[i] + 1) as f64;
             (rhs[i] - ax[i]).abs() <= k * unit * (bound[i] + rhs[i].abs())
         });
         if noise {
