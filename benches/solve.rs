@@ -1,5 +1,5 @@
 //! The λ solve of an N-link chain, dense Cholesky against the band Cholesky, and of a k × k
-//! joint grid, the sparse L D Lᵀ against the band and dense Cholesky, with divan.
+//! joint grid, the sparse Cholesky against the band and dense Cholesky, with divan.
 //!
 //! `cargo bench --bench solve`. The rows are built directly (no derivation): a chain of N
 //! unit masses in a zig-zag, moving, under gravity, so A is tridiagonal and full of

@@ -1,4 +1,4 @@
-//! The sparse L D Lᵀ of the λ solve (`numeric::sparse`, chosen by `solve::plan` for blocks
+//! The sparse Cholesky of the λ solve (`numeric::sparse`, chosen by `solve::plan` for blocks
 //! that are not banded): its λ agrees with the dense Cholesky's to round-off (relative to
 //! the largest λ) on random sparse systems and on joint grids, a singular block falls back
 //! to the minimum-norm solve as the band and dense ones do, the plan takes the sparse factor

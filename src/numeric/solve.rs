@@ -10,7 +10,7 @@
 //!   Σ λ̃ₖ J̃ₖᵢ comes straight from the scaled quantities.
 //! - Equalities. A is banded when constraints are numbered along a chain; the band Cholesky
 //!   (`numeric::banded`) is linear in the number of rows. Grids and meshes have no narrow
-//!   band: the sparse L D Lᵀ in an approximate minimum degree order (`numeric::sparse`)
+//!   band: the sparse Cholesky in an approximate minimum degree order (`numeric::sparse`)
 //!   serves them, and dense Cholesky small blocks. `plan` chooses once per pattern, by
 //!   counts of multiply–adds; a run's cache keeps the choice and the sparse analysis.
 //!   A small pivot (Ã singular within `rank_tolerance`: a redundant constraint, a singular
@@ -95,7 +95,7 @@ pub const MAX_DENSE_ROWS: usize = 1000;
 /// Which factorisation the equality solve uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Method {
-    /// A narrow band at once (chains); otherwise the sparse L D Lᵀ in an approximate
+    /// A narrow band at once (chains); otherwise the sparse Cholesky in an approximate
     /// minimum degree order when its count of multiply–adds (weighted) is below both band
     /// Cholesky's (after reverse Cuthill–McKee renumbering if that narrows the band; only
     /// when the bandwidth is under a quarter of the size) and dense Cholesky's (up to
@@ -758,7 +758,7 @@ enum Factor {
         terms: Vec<Term>,
         targets: Vec<usize>,
     },
-    /// The sparse L D Lᵀ (its order, elimination tree and pattern of L analysed once), with
+    /// The sparse Cholesky (its order, supernodes and pattern of L analysed once), with
     /// Ã's terms and the place in its matrix each is added to.
     Sparse {
         factor: SparseFactor,
@@ -1188,7 +1188,7 @@ fn pivoting(
     None
 }
 
-/// Solves Ã μ = −b̃ on a block: band Cholesky, sparse L D Lᵀ or dense Cholesky
+/// Solves Ã μ = −b̃ on a block: band Cholesky, sparse Cholesky or dense Cholesky
 /// ([`plan`]), an eigendecomposition when singular.
 pub(crate) fn equality(
     block: &Block,
@@ -1232,7 +1232,7 @@ pub(crate) fn equality(
     finite_or_zero(x, index, diagnostics, status)
 }
 
-/// How [`equality`] factors a block: the band Cholesky or the sparse L D Lᵀ (`Some` when
+/// How [`equality`] factors a block: the band Cholesky or the sparse Cholesky (`Some` when
 /// their pivots all stay above the rank tolerance, `None` when one does not: the block is
 /// singular), or dense.
 pub(crate) enum Plan {
