@@ -3534,10 +3534,14 @@ const ORIENTATIONS: usize = 0;
 /// The slots whose principal axes the rows carry (all of them with 3D rigid bodies, else none).
 const AXES: usize = 0;
 
-/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.
+/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`, in the
+/// step's order (the last term of a row's Ċ the velocity the row before wrote last: `velocity::entry_order`).
 const ENTRIES: usize = 81;
 const ROW_START: [usize; 42] = [0, 1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35, 37, 39, 41, 43, 45, 47, 49, 51, 53, 55, 57, 59, 61, 63, 65, 67, 69, 71, 73, 75, 77, 79, 81];
-const ROW_BODY: [usize; 81] = [0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13, 14, 14, 15, 15, 16, 16, 17, 17, 18, 18, 19, 19, 20, 20, 21, 21, 22, 22, 23, 23, 24, 24, 25, 25, 26, 26, 27, 27, 28, 28, 29, 29, 30, 30, 31, 31, 32, 32, 33, 33, 34, 34, 35, 35, 36, 36, 37, 37, 38, 38, 39, 39, 40];
+const ROW_BODY: [usize; 81] = [0, 1, 0, 2, 1, 3, 2, 4, 3, 5, 4, 6, 5, 7, 6, 8, 7, 9, 8, 10, 9, 11, 10, 12, 11, 13, 12, 14, 13, 15, 14, 16, 15, 17, 16, 18, 17, 19, 18, 20, 19, 21, 20, 22, 21, 23, 22, 24, 23, 25, 24, 26, 25, 27, 26, 28, 27, 29, 28, 30, 29, 31, 30, 32, 31, 33, 32, 34, 33, 35, 34, 36, 35, 37, 36, 38, 37, 39, 38, 40, 39];
+/// Per entry in the derivation's order (a row's bodies, then its angular slots), its place in the step's.
+#[allow(dead_code)]
+const ENTRY_AT: [usize; 81] = [0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15, 18, 17, 20, 19, 22, 21, 24, 23, 26, 25, 28, 27, 30, 29, 32, 31, 34, 33, 36, 35, 38, 37, 40, 39, 42, 41, 44, 43, 46, 45, 48, 47, 50, 49, 52, 51, 54, 53, 56, 55, 58, 57, 60, 59, 62, 61, 64, 63, 66, 65, 68, 67, 70, 69, 72, 71, 74, 73, 76, 75, 78, 77, 80, 79];
 
 /// The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k
 /// of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,
@@ -4159,46 +4163,46 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     v[40] = [s.v_p41[0], s.v_p41[1]];
     p.force[40] = [s.g[0] * 4021.0, s.g[1] * 4021.0];
     p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], (x125 * x126) * INVERSE_SCALE[0]), 0, [(0, [x0 * x126, x1 * x126])], &v);
-    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x129 * x130) * INVERSE_SCALE[1]), 1, [(0, [x3 * x131, x4 * x131]), (1, [x3 * x130, x4 * x130])], &v);
-    p.row(2, ((x8 - 1.0) * INVERSE_SCALE[2], (x134 * x135) * INVERSE_SCALE[2]), 3, [(1, [x6 * x136, x7 * x136]), (2, [x6 * x135, x7 * x135])], &v);
-    p.row(3, ((x11 - 1.0) * INVERSE_SCALE[3], (x139 * x140) * INVERSE_SCALE[3]), 5, [(2, [x9 * x141, x10 * x141]), (3, [x9 * x140, x10 * x140])], &v);
-    p.row(4, ((x14 - 1.0) * INVERSE_SCALE[4], (x144 * x145) * INVERSE_SCALE[4]), 7, [(3, [x12 * x146, x13 * x146]), (4, [x12 * x145, x13 * x145])], &v);
-    p.row(5, ((x17 - 1.0) * INVERSE_SCALE[5], (x149 * x150) * INVERSE_SCALE[5]), 9, [(4, [x15 * x151, x16 * x151]), (5, [x15 * x150, x16 * x150])], &v);
-    p.row(6, ((x20 - 1.0) * INVERSE_SCALE[6], (x154 * x155) * INVERSE_SCALE[6]), 11, [(5, [x18 * x156, x19 * x156]), (6, [x18 * x155, x19 * x155])], &v);
-    p.row(7, ((x23 - 1.0) * INVERSE_SCALE[7], (x159 * x160) * INVERSE_SCALE[7]), 13, [(6, [x21 * x161, x22 * x161]), (7, [x21 * x160, x22 * x160])], &v);
-    p.row(8, ((x26 - 1.0) * INVERSE_SCALE[8], (x164 * x165) * INVERSE_SCALE[8]), 15, [(7, [x24 * x166, x25 * x166]), (8, [x24 * x165, x25 * x165])], &v);
-    p.row(9, ((x29 - 1.0) * INVERSE_SCALE[9], (x169 * x170) * INVERSE_SCALE[9]), 17, [(8, [x27 * x171, x28 * x171]), (9, [x27 * x170, x28 * x170])], &v);
-    p.row(10, ((x32 - 1.0) * INVERSE_SCALE[10], (x174 * x175) * INVERSE_SCALE[10]), 19, [(9, [x30 * x176, x31 * x176]), (10, [x30 * x175, x31 * x175])], &v);
-    p.row(11, ((x35 - 1.0) * INVERSE_SCALE[11], (x179 * x180) * INVERSE_SCALE[11]), 21, [(10, [x33 * x181, x34 * x181]), (11, [x33 * x180, x34 * x180])], &v);
-    p.row(12, ((x38 - 1.0) * INVERSE_SCALE[12], (x184 * x185) * INVERSE_SCALE[12]), 23, [(11, [x36 * x186, x37 * x186]), (12, [x36 * x185, x37 * x185])], &v);
-    p.row(13, ((x41 - 1.0) * INVERSE_SCALE[13], (x189 * x190) * INVERSE_SCALE[13]), 25, [(12, [x39 * x191, x40 * x191]), (13, [x39 * x190, x40 * x190])], &v);
-    p.row(14, ((x44 - 1.0) * INVERSE_SCALE[14], (x194 * x195) * INVERSE_SCALE[14]), 27, [(13, [x42 * x196, x43 * x196]), (14, [x42 * x195, x43 * x195])], &v);
-    p.row(15, ((x47 - 1.0) * INVERSE_SCALE[15], (x199 * x200) * INVERSE_SCALE[15]), 29, [(14, [x45 * x201, x46 * x201]), (15, [x45 * x200, x46 * x200])], &v);
-    p.row(16, ((x50 - 1.0) * INVERSE_SCALE[16], (x204 * x205) * INVERSE_SCALE[16]), 31, [(15, [x48 * x206, x49 * x206]), (16, [x48 * x205, x49 * x205])], &v);
-    p.row(17, ((x53 - 1.0) * INVERSE_SCALE[17], (x209 * x210) * INVERSE_SCALE[17]), 33, [(16, [x51 * x211, x52 * x211]), (17, [x51 * x210, x52 * x210])], &v);
-    p.row(18, ((x56 - 1.0) * INVERSE_SCALE[18], (x214 * x215) * INVERSE_SCALE[18]), 35, [(17, [x54 * x216, x55 * x216]), (18, [x54 * x215, x55 * x215])], &v);
-    p.row(19, ((x59 - 1.0) * INVERSE_SCALE[19], (x219 * x220) * INVERSE_SCALE[19]), 37, [(18, [x57 * x221, x58 * x221]), (19, [x57 * x220, x58 * x220])], &v);
-    p.row(20, ((x62 - 1.0) * INVERSE_SCALE[20], (x224 * x225) * INVERSE_SCALE[20]), 39, [(19, [x60 * x226, x61 * x226]), (20, [x60 * x225, x61 * x225])], &v);
-    p.row(21, ((x65 - 1.0) * INVERSE_SCALE[21], (x229 * x230) * INVERSE_SCALE[21]), 41, [(20, [x63 * x231, x64 * x231]), (21, [x63 * x230, x64 * x230])], &v);
-    p.row(22, ((x68 - 1.0) * INVERSE_SCALE[22], (x234 * x235) * INVERSE_SCALE[22]), 43, [(21, [x66 * x236, x67 * x236]), (22, [x66 * x235, x67 * x235])], &v);
-    p.row(23, ((x71 - 1.0) * INVERSE_SCALE[23], (x239 * x240) * INVERSE_SCALE[23]), 45, [(22, [x69 * x241, x70 * x241]), (23, [x69 * x240, x70 * x240])], &v);
-    p.row(24, ((x74 - 1.0) * INVERSE_SCALE[24], (x244 * x245) * INVERSE_SCALE[24]), 47, [(23, [x72 * x246, x73 * x246]), (24, [x72 * x245, x73 * x245])], &v);
-    p.row(25, ((x77 - 1.0) * INVERSE_SCALE[25], (x249 * x250) * INVERSE_SCALE[25]), 49, [(24, [x75 * x251, x76 * x251]), (25, [x75 * x250, x76 * x250])], &v);
-    p.row(26, ((x80 - 1.0) * INVERSE_SCALE[26], (x254 * x255) * INVERSE_SCALE[26]), 51, [(25, [x78 * x256, x79 * x256]), (26, [x78 * x255, x79 * x255])], &v);
-    p.row(27, ((x83 - 1.0) * INVERSE_SCALE[27], (x259 * x260) * INVERSE_SCALE[27]), 53, [(26, [x81 * x261, x82 * x261]), (27, [x81 * x260, x82 * x260])], &v);
-    p.row(28, ((x86 - 1.0) * INVERSE_SCALE[28], (x264 * x265) * INVERSE_SCALE[28]), 55, [(27, [x84 * x266, x85 * x266]), (28, [x84 * x265, x85 * x265])], &v);
-    p.row(29, ((x89 - 1.0) * INVERSE_SCALE[29], (x269 * x270) * INVERSE_SCALE[29]), 57, [(28, [x87 * x271, x88 * x271]), (29, [x87 * x270, x88 * x270])], &v);
-    p.row(30, ((x92 - 1.0) * INVERSE_SCALE[30], (x274 * x275) * INVERSE_SCALE[30]), 59, [(29, [x90 * x276, x91 * x276]), (30, [x90 * x275, x91 * x275])], &v);
-    p.row(31, ((x95 - 1.0) * INVERSE_SCALE[31], (x279 * x280) * INVERSE_SCALE[31]), 61, [(30, [x93 * x281, x94 * x281]), (31, [x93 * x280, x94 * x280])], &v);
-    p.row(32, ((x98 - 1.0) * INVERSE_SCALE[32], (x284 * x285) * INVERSE_SCALE[32]), 63, [(31, [x96 * x286, x97 * x286]), (32, [x96 * x285, x97 * x285])], &v);
-    p.row(33, ((x101 - 1.0) * INVERSE_SCALE[33], (x289 * x290) * INVERSE_SCALE[33]), 65, [(32, [x99 * x291, x100 * x291]), (33, [x99 * x290, x100 * x290])], &v);
-    p.row(34, ((x104 - 1.0) * INVERSE_SCALE[34], (x294 * x295) * INVERSE_SCALE[34]), 67, [(33, [x102 * x296, x103 * x296]), (34, [x102 * x295, x103 * x295])], &v);
-    p.row(35, ((x107 - 1.0) * INVERSE_SCALE[35], (x299 * x300) * INVERSE_SCALE[35]), 69, [(34, [x105 * x301, x106 * x301]), (35, [x105 * x300, x106 * x300])], &v);
-    p.row(36, ((x110 - 1.0) * INVERSE_SCALE[36], (x304 * x305) * INVERSE_SCALE[36]), 71, [(35, [x108 * x306, x109 * x306]), (36, [x108 * x305, x109 * x305])], &v);
-    p.row(37, ((x113 - 1.0) * INVERSE_SCALE[37], (x309 * x310) * INVERSE_SCALE[37]), 73, [(36, [x111 * x311, x112 * x311]), (37, [x111 * x310, x112 * x310])], &v);
-    p.row(38, ((x116 - 1.0) * INVERSE_SCALE[38], (x314 * x315) * INVERSE_SCALE[38]), 75, [(37, [x114 * x316, x115 * x316]), (38, [x114 * x315, x115 * x315])], &v);
-    p.row(39, ((x119 - 1.0) * INVERSE_SCALE[39], (x319 * x320) * INVERSE_SCALE[39]), 77, [(38, [x117 * x321, x118 * x321]), (39, [x117 * x320, x118 * x320])], &v);
-    p.row(40, ((x122 - 1.0) * INVERSE_SCALE[40], (x324 * x325) * INVERSE_SCALE[40]), 79, [(39, [x120 * x326, x121 * x326]), (40, [x120 * x325, x121 * x325])], &v);
+    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x129 * x130) * INVERSE_SCALE[1]), 1, [(1, [x3 * x130, x4 * x130]), (0, [x3 * x131, x4 * x131])], &v);
+    p.row(2, ((x8 - 1.0) * INVERSE_SCALE[2], (x134 * x135) * INVERSE_SCALE[2]), 3, [(2, [x6 * x135, x7 * x135]), (1, [x6 * x136, x7 * x136])], &v);
+    p.row(3, ((x11 - 1.0) * INVERSE_SCALE[3], (x139 * x140) * INVERSE_SCALE[3]), 5, [(3, [x9 * x140, x10 * x140]), (2, [x9 * x141, x10 * x141])], &v);
+    p.row(4, ((x14 - 1.0) * INVERSE_SCALE[4], (x144 * x145) * INVERSE_SCALE[4]), 7, [(4, [x12 * x145, x13 * x145]), (3, [x12 * x146, x13 * x146])], &v);
+    p.row(5, ((x17 - 1.0) * INVERSE_SCALE[5], (x149 * x150) * INVERSE_SCALE[5]), 9, [(5, [x15 * x150, x16 * x150]), (4, [x15 * x151, x16 * x151])], &v);
+    p.row(6, ((x20 - 1.0) * INVERSE_SCALE[6], (x154 * x155) * INVERSE_SCALE[6]), 11, [(6, [x18 * x155, x19 * x155]), (5, [x18 * x156, x19 * x156])], &v);
+    p.row(7, ((x23 - 1.0) * INVERSE_SCALE[7], (x159 * x160) * INVERSE_SCALE[7]), 13, [(7, [x21 * x160, x22 * x160]), (6, [x21 * x161, x22 * x161])], &v);
+    p.row(8, ((x26 - 1.0) * INVERSE_SCALE[8], (x164 * x165) * INVERSE_SCALE[8]), 15, [(8, [x24 * x165, x25 * x165]), (7, [x24 * x166, x25 * x166])], &v);
+    p.row(9, ((x29 - 1.0) * INVERSE_SCALE[9], (x169 * x170) * INVERSE_SCALE[9]), 17, [(9, [x27 * x170, x28 * x170]), (8, [x27 * x171, x28 * x171])], &v);
+    p.row(10, ((x32 - 1.0) * INVERSE_SCALE[10], (x174 * x175) * INVERSE_SCALE[10]), 19, [(10, [x30 * x175, x31 * x175]), (9, [x30 * x176, x31 * x176])], &v);
+    p.row(11, ((x35 - 1.0) * INVERSE_SCALE[11], (x179 * x180) * INVERSE_SCALE[11]), 21, [(11, [x33 * x180, x34 * x180]), (10, [x33 * x181, x34 * x181])], &v);
+    p.row(12, ((x38 - 1.0) * INVERSE_SCALE[12], (x184 * x185) * INVERSE_SCALE[12]), 23, [(12, [x36 * x185, x37 * x185]), (11, [x36 * x186, x37 * x186])], &v);
+    p.row(13, ((x41 - 1.0) * INVERSE_SCALE[13], (x189 * x190) * INVERSE_SCALE[13]), 25, [(13, [x39 * x190, x40 * x190]), (12, [x39 * x191, x40 * x191])], &v);
+    p.row(14, ((x44 - 1.0) * INVERSE_SCALE[14], (x194 * x195) * INVERSE_SCALE[14]), 27, [(14, [x42 * x195, x43 * x195]), (13, [x42 * x196, x43 * x196])], &v);
+    p.row(15, ((x47 - 1.0) * INVERSE_SCALE[15], (x199 * x200) * INVERSE_SCALE[15]), 29, [(15, [x45 * x200, x46 * x200]), (14, [x45 * x201, x46 * x201])], &v);
+    p.row(16, ((x50 - 1.0) * INVERSE_SCALE[16], (x204 * x205) * INVERSE_SCALE[16]), 31, [(16, [x48 * x205, x49 * x205]), (15, [x48 * x206, x49 * x206])], &v);
+    p.row(17, ((x53 - 1.0) * INVERSE_SCALE[17], (x209 * x210) * INVERSE_SCALE[17]), 33, [(17, [x51 * x210, x52 * x210]), (16, [x51 * x211, x52 * x211])], &v);
+    p.row(18, ((x56 - 1.0) * INVERSE_SCALE[18], (x214 * x215) * INVERSE_SCALE[18]), 35, [(18, [x54 * x215, x55 * x215]), (17, [x54 * x216, x55 * x216])], &v);
+    p.row(19, ((x59 - 1.0) * INVERSE_SCALE[19], (x219 * x220) * INVERSE_SCALE[19]), 37, [(19, [x57 * x220, x58 * x220]), (18, [x57 * x221, x58 * x221])], &v);
+    p.row(20, ((x62 - 1.0) * INVERSE_SCALE[20], (x224 * x225) * INVERSE_SCALE[20]), 39, [(20, [x60 * x225, x61 * x225]), (19, [x60 * x226, x61 * x226])], &v);
+    p.row(21, ((x65 - 1.0) * INVERSE_SCALE[21], (x229 * x230) * INVERSE_SCALE[21]), 41, [(21, [x63 * x230, x64 * x230]), (20, [x63 * x231, x64 * x231])], &v);
+    p.row(22, ((x68 - 1.0) * INVERSE_SCALE[22], (x234 * x235) * INVERSE_SCALE[22]), 43, [(22, [x66 * x235, x67 * x235]), (21, [x66 * x236, x67 * x236])], &v);
+    p.row(23, ((x71 - 1.0) * INVERSE_SCALE[23], (x239 * x240) * INVERSE_SCALE[23]), 45, [(23, [x69 * x240, x70 * x240]), (22, [x69 * x241, x70 * x241])], &v);
+    p.row(24, ((x74 - 1.0) * INVERSE_SCALE[24], (x244 * x245) * INVERSE_SCALE[24]), 47, [(24, [x72 * x245, x73 * x245]), (23, [x72 * x246, x73 * x246])], &v);
+    p.row(25, ((x77 - 1.0) * INVERSE_SCALE[25], (x249 * x250) * INVERSE_SCALE[25]), 49, [(25, [x75 * x250, x76 * x250]), (24, [x75 * x251, x76 * x251])], &v);
+    p.row(26, ((x80 - 1.0) * INVERSE_SCALE[26], (x254 * x255) * INVERSE_SCALE[26]), 51, [(26, [x78 * x255, x79 * x255]), (25, [x78 * x256, x79 * x256])], &v);
+    p.row(27, ((x83 - 1.0) * INVERSE_SCALE[27], (x259 * x260) * INVERSE_SCALE[27]), 53, [(27, [x81 * x260, x82 * x260]), (26, [x81 * x261, x82 * x261])], &v);
+    p.row(28, ((x86 - 1.0) * INVERSE_SCALE[28], (x264 * x265) * INVERSE_SCALE[28]), 55, [(28, [x84 * x265, x85 * x265]), (27, [x84 * x266, x85 * x266])], &v);
+    p.row(29, ((x89 - 1.0) * INVERSE_SCALE[29], (x269 * x270) * INVERSE_SCALE[29]), 57, [(29, [x87 * x270, x88 * x270]), (28, [x87 * x271, x88 * x271])], &v);
+    p.row(30, ((x92 - 1.0) * INVERSE_SCALE[30], (x274 * x275) * INVERSE_SCALE[30]), 59, [(30, [x90 * x275, x91 * x275]), (29, [x90 * x276, x91 * x276])], &v);
+    p.row(31, ((x95 - 1.0) * INVERSE_SCALE[31], (x279 * x280) * INVERSE_SCALE[31]), 61, [(31, [x93 * x280, x94 * x280]), (30, [x93 * x281, x94 * x281])], &v);
+    p.row(32, ((x98 - 1.0) * INVERSE_SCALE[32], (x284 * x285) * INVERSE_SCALE[32]), 63, [(32, [x96 * x285, x97 * x285]), (31, [x96 * x286, x97 * x286])], &v);
+    p.row(33, ((x101 - 1.0) * INVERSE_SCALE[33], (x289 * x290) * INVERSE_SCALE[33]), 65, [(33, [x99 * x290, x100 * x290]), (32, [x99 * x291, x100 * x291])], &v);
+    p.row(34, ((x104 - 1.0) * INVERSE_SCALE[34], (x294 * x295) * INVERSE_SCALE[34]), 67, [(34, [x102 * x295, x103 * x295]), (33, [x102 * x296, x103 * x296])], &v);
+    p.row(35, ((x107 - 1.0) * INVERSE_SCALE[35], (x299 * x300) * INVERSE_SCALE[35]), 69, [(35, [x105 * x300, x106 * x300]), (34, [x105 * x301, x106 * x301])], &v);
+    p.row(36, ((x110 - 1.0) * INVERSE_SCALE[36], (x304 * x305) * INVERSE_SCALE[36]), 71, [(36, [x108 * x305, x109 * x305]), (35, [x108 * x306, x109 * x306])], &v);
+    p.row(37, ((x113 - 1.0) * INVERSE_SCALE[37], (x309 * x310) * INVERSE_SCALE[37]), 73, [(37, [x111 * x310, x112 * x310]), (36, [x111 * x311, x112 * x311])], &v);
+    p.row(38, ((x116 - 1.0) * INVERSE_SCALE[38], (x314 * x315) * INVERSE_SCALE[38]), 75, [(38, [x114 * x315, x115 * x315]), (37, [x114 * x316, x115 * x316])], &v);
+    p.row(39, ((x119 - 1.0) * INVERSE_SCALE[39], (x319 * x320) * INVERSE_SCALE[39]), 77, [(39, [x117 * x320, x118 * x320]), (38, [x117 * x321, x118 * x321])], &v);
+    p.row(40, ((x122 - 1.0) * INVERSE_SCALE[40], (x324 * x325) * INVERSE_SCALE[40]), 79, [(40, [x120 * x325, x121 * x325]), (39, [x120 * x326, x121 * x326])], &v);
 }
 
 /// The state's time (0 when the file's state has none).
@@ -4918,8 +4922,9 @@ struct StepRows<const D: usize> {
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
 /// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
-/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
-/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ, in the step's order: `ENTRY_AT`);
+/// per slot 1/m (1/I) and F (τ). Arrays of the module's sizes, filled in place (`prepare`),
+/// so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
@@ -4940,12 +4945,12 @@ struct Prepared<const D: usize> {
     first: Option<usize>,
 }
 
-/// a·b, summed from 0 as the library sums its three components (the same number, zero's
-/// sign included).
+/// a·b, summed from the first product as the library's `velocity::dot_in` sums the scene's
+/// components (the same number, zero's sign included).
 #[inline(always)]
 fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    let mut s = 0.0;
-    for d in 0..D {
+    let mut s = a[0] * b[0];
+    for d in 1..D {
         s += a[d] * b[d];
     }
     s
@@ -4974,8 +4979,9 @@ impl<const D: usize> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
         for (k, row) in r.rows.iter().enumerate() {
+            // The derivation's order into the step's (`ENTRY_AT`).
             for (_, j) in &row.jacobian {
-                p.jacobian[e] = *j;
+                p.jacobian[ENTRY_AT[e]] = *j;
                 e += 1;
             }
             p.value[k] = row.value;
@@ -5037,7 +5043,9 @@ impl<const D: usize> Prepared<D> {
         CONSTRAINTS
     }
 
-    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
+    /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
+    /// wrote last is the last term).
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
         let mut c = self.time_rate[k];

@@ -516,10 +516,14 @@ const ORIENTATIONS: usize = 0;
 /// The slots whose principal axes the rows carry (all of them with 3D rigid bodies, else none).
 const AXES: usize = 0;
 
-/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.
+/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`, in the
+/// step's order (the last term of a row's Ċ the velocity the row before wrote last: `velocity::entry_order`).
 const ENTRIES: usize = 3;
 const ROW_START: [usize; 3] = [0, 1, 3];
-const ROW_BODY: [usize; 3] = [0, 0, 1];
+const ROW_BODY: [usize; 3] = [0, 1, 0];
+/// Per entry in the derivation's order (a row's bodies, then its angular slots), its place in the step's.
+#[allow(dead_code)]
+const ENTRY_AT: [usize; 3] = [0, 2, 1];
 
 /// The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k
 /// of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,
@@ -554,7 +558,7 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     v[1] = [s.v_p2[0], s.v_p2[1]];
     p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
     p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], (x6 * x7) * INVERSE_SCALE[0]), 0, [(0, [x0 * x7, x1 * x7])], &v);
-    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x10 * x11) * INVERSE_SCALE[1]), 1, [(0, [x3 * x12, x4 * x12]), (1, [x3 * x11, x4 * x11])], &v);
+    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x10 * x11) * INVERSE_SCALE[1]), 1, [(1, [x3 * x11, x4 * x11]), (0, [x3 * x12, x4 * x12])], &v);
 }
 
 /// The state's time (0 when the file's state has none).
@@ -1196,8 +1200,9 @@ struct StepRows<const D: usize> {
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
 /// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
-/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
-/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ, in the step's order: `ENTRY_AT`);
+/// per slot 1/m (1/I) and F (τ). Arrays of the module's sizes, filled in place (`prepare`),
+/// so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
@@ -1218,12 +1223,12 @@ struct Prepared<const D: usize> {
     first: Option<usize>,
 }
 
-/// a·b, summed from 0 as the library sums its three components (the same number, zero's
-/// sign included).
+/// a·b, summed from the first product as the library's `velocity::dot_in` sums the scene's
+/// components (the same number, zero's sign included).
 #[inline(always)]
 fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    let mut s = 0.0;
-    for d in 0..D {
+    let mut s = a[0] * b[0];
+    for d in 1..D {
         s += a[d] * b[d];
     }
     s
@@ -1252,8 +1257,9 @@ impl<const D: usize> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
         for (k, row) in r.rows.iter().enumerate() {
+            // The derivation's order into the step's (`ENTRY_AT`).
             for (_, j) in &row.jacobian {
-                p.jacobian[e] = *j;
+                p.jacobian[ENTRY_AT[e]] = *j;
                 e += 1;
             }
             p.value[k] = row.value;
@@ -1315,7 +1321,9 @@ impl<const D: usize> Prepared<D> {
         CONSTRAINTS
     }
 
-    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
+    /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
+    /// wrote last is the last term).
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
         let mut c = self.time_rate[k];

@@ -761,9 +761,11 @@ impl StepRoots {
         self.turns.iter().filter(|t| t.1).count()
     }
 
-    /// Each row's Jacobian entries in the step's order (its bodies, then its angular slots),
-    /// as the slot of each: `ROW_START` (one more than the rows) and `ROW_BODY`.
-    pub(super) fn entries(&self, formulas: &Formulas) -> (Vec<usize>, Vec<usize>) {
+    /// Each row's Jacobian entries as the step keeps them: `ROW_START` (one more than the
+    /// rows), the slot of each in the step's order (`ROW_BODY`: the library's
+    /// `velocity::entry_orders` of the derivation's order, a row's bodies, then its angular
+    /// slots) and, per entry in the derivation's order, its place in the step's (`ENTRY_AT`).
+    pub(super) fn entries(&self, formulas: &Formulas) -> (Vec<usize>, Vec<usize>, Vec<usize>) {
         let mut starts = vec![0];
         let mut slots = Vec::new();
         for (dirs, angular) in formulas.jacobian.iter().zip(&self.angular_slots) {
@@ -771,7 +773,12 @@ impl StepRoots {
             slots.extend(angular);
             starts.push(slots.len());
         }
-        (starts, slots)
+        let order = crate::numeric::velocity::entry_orders(&starts, &slots);
+        let mut at = vec![0; order.len()];
+        for (place, &e) in order.iter().enumerate() {
+            at[e] = place;
+        }
+        (starts, order.iter().map(|&e| slots[e]).collect(), at)
     }
 
     /// The rigid body (its index among `turns`) and the axis of an angular slot.
@@ -802,7 +809,7 @@ fn step_fns(
     let n = layout.bodies;
     let slots = step.slots(n);
     let three = step.three() > 0;
-    let starts = step_constants(out, solver, inverse_scales, step, formulas, layout);
+    let (starts, entry_at) = step_constants(out, solver, inverse_scales, step, formulas, layout);
     // The derivation, row by row: what the step's helper text computes from these numbers.
     let mut doc = vec![
         "The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k".to_string(),
@@ -923,12 +930,17 @@ fn step_fns(
                 array(&js)
             );
         } else {
+            // The entries in the step's order (`ENTRY_AT`), as `p.row` stores and sums them.
+            let mut kept = vec![String::new(); js.len()];
+            for (e, j) in js.into_iter().enumerate() {
+                kept[entry_at[start + e] - start] = j;
+            }
             let _ = writeln!(
                 out,
                 "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {start}, {}, &v);",
                 operand(&scalars[0]),
                 operand(&scalars[1]),
-                array(&js)
+                array(&kept)
             );
         }
     }
@@ -1057,7 +1069,7 @@ fn step_module(
 
 /// The step's constants: `SOLVER`, `DEFAULT_ITERATIONS`, `INVERSE_SCALE`, the slots
 /// (`SLOTS`, `ORIENTATIONS`, `AXES`), and where each row's Jacobian entries are (`ENTRIES`,
-/// `ROW_START`, `ROW_BODY`, over the slots); returns `ROW_START`.
+/// `ROW_START`, `ROW_BODY`, over the slots, and `ENTRY_AT`); returns `ROW_START` and `ENTRY_AT`.
 pub(super) fn step_constants(
     out: &mut String,
     solver: Solver,
@@ -1065,7 +1077,7 @@ pub(super) fn step_constants(
     step: &StepRoots,
     formulas: &Formulas,
     layout: &Layout,
-) -> Vec<usize> {
+) -> (Vec<usize>, Vec<usize>) {
     let k = layout.constraints;
     let slots = step.slots(layout.bodies);
     let three = step.three();
@@ -1096,21 +1108,27 @@ pub(super) fn step_constants(
         if three > 0 { slots } else { 0 }
     );
     // Where each row's entries are, as `Prepared` reads them.
-    let (starts, bodies) = step.entries(formulas);
+    let (starts, bodies, at) = step.entries(formulas);
     let list = |xs: &[usize]| array(&xs.iter().map(usize::to_string).collect::<Vec<_>>());
     let _ = writeln!(
         out,
-        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.\n\
+        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`, in the\n\
+         /// step's order (the last term of a row's Ċ the velocity the row before wrote last: `velocity::entry_order`).\n\
          const ENTRIES: usize = {};\n\
          const ROW_START: [usize; {}] = {};\n\
-         const ROW_BODY: [usize; {}] = {};\n",
+         const ROW_BODY: [usize; {}] = {};\n\
+         /// Per entry in the derivation's order (a row's bodies, then its angular slots), its place in the step's.\n\
+         #[allow(dead_code)]\n\
+         const ENTRY_AT: [usize; {}] = {};\n",
         bodies.len(),
         k + 1,
         list(&starts),
         bodies.len(),
-        list(&bodies)
+        list(&bodies),
+        at.len(),
+        list(&at)
     );
-    starts
+    (starts, at)
 }
 
 /// The state's accessors the step's text calls: `time`, `get` (the state's slots) and `put`.

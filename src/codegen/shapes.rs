@@ -287,7 +287,10 @@ pub(super) fn step_by_shape(
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let (n, k, dim) = (layout.bodies, layout.constraints, layout.dim);
-    step_constants(out, solver, inverse_scales, step, formulas, layout);
+    let (_, entry_at) = step_constants(out, solver, inverse_scales, step, formulas, layout);
+    // Rows whose entries the step keeps in the derivation's order store entry e of a row at
+    // `ROW_START[i] + e`, the others through `ENTRY_AT` (`velocity::entry_order`).
+    let in_order = entry_at.iter().enumerate().all(|(e, &at)| e == at);
     let p = Program::lower_in(g, &step.roots, ctx.inputs)?;
     let (slots, widths) = slot_kinds(g, system, fields);
     // Items: per body its m, v, F roots; per rigid body I, ω, τ (and in 3D its three axes);
@@ -407,6 +410,7 @@ pub(super) fn step_by_shape(
                 );
                 for e in 0..linear + angular {
                     let at = if e == 0 { "e".to_string() } else { format!("e + {e}") };
+                    let at = if in_order { at } else { format!("ENTRY_AT[{at}]") };
                     let value = if e < linear {
                         comps(2 + e * dim)
                     } else if three {

@@ -23,10 +23,11 @@ StepSettings step_settings_default(void) {
     return s;
 }
 
+/* a.b summed from the first product, as the library's velocity::dot_in. */
 static double lg_dot(const double *a, const double *b) {
-    double s = 0.0;
+    double s = a[0] * b[0];
     int d;
-    for (d = 0; d < DIM; d++) {
+    for (d = 1; d < DIM; d++) {
         s += a[d] * b[d];
     }
     return s;
@@ -48,6 +49,7 @@ static void prepare(const State *s, Prepared *p) {
     p->first = first_angular(p);
 }
 
+/* dC/dt + sum of J_i.u_i, in that order over the entries in the step's order. */
 static double row_rate(const Prepared *p, int k, double u[][DIM]) {
     double c = p->time_rate[k];
     int e;

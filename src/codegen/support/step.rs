@@ -125,8 +125,9 @@ struct StepRows<const D: usize> {
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
 /// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
-/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
-/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ, in the step's order: `ENTRY_AT`);
+/// per slot 1/m (1/I) and F (τ). Arrays of the module's sizes, filled in place (`prepare`),
+/// so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
@@ -147,12 +148,12 @@ struct Prepared<const D: usize> {
     first: Option<usize>,
 }
 
-/// a·b, summed from 0 as the library sums its three components (the same number, zero's
-/// sign included).
+/// a·b, summed from the first product as the library's `velocity::dot_in` sums the scene's
+/// components (the same number, zero's sign included).
 #[inline(always)]
 fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    let mut s = 0.0;
-    for d in 0..D {
+    let mut s = a[0] * b[0];
+    for d in 1..D {
         s += a[d] * b[d];
     }
     s
@@ -181,8 +182,9 @@ impl<const D: usize> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
         for (k, row) in r.rows.iter().enumerate() {
+            // The derivation's order into the step's (`ENTRY_AT`).
             for (_, j) in &row.jacobian {
-                p.jacobian[e] = *j;
+                p.jacobian[ENTRY_AT[e]] = *j;
                 e += 1;
             }
             p.value[k] = row.value;
@@ -244,7 +246,9 @@ impl<const D: usize> Prepared<D> {
         CONSTRAINTS
     }
 
-    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
+    /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
+    /// wrote last is the last term).
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
         let mut c = self.time_rate[k];
