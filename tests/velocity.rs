@@ -597,3 +597,18 @@ proptest::proptest! {
         }
     }
 }
+
+/// A row whose C reads no time has ∂C/∂t = 0 exactly in the step (`velocity::steady_rows`);
+/// a moving constraint keeps its ∂C/∂t (through a definition of t, too).
+#[test]
+fn only_rows_that_read_no_time_are_steady() {
+    use lagrange::numeric::velocity::steady_rows;
+    let steady = |path: &str| {
+        let text = std::fs::read_to_string(path).expect("file");
+        steady_rows(&lagrange::model::file::load(&text).expect("valid file").system)
+    };
+    assert_eq!(steady("constraints/solvers/two_particles.toml"), vec![true, true]);
+    assert!(steady("constraints/solvers/rigid_ball_and_chain.toml").iter().all(|&s| s));
+    assert_eq!(steady("constraints/moving_circle.toml"), vec![false]);
+    assert_eq!(steady("constraints/driven_pendulum.toml"), vec![false]);
+}

@@ -498,7 +498,15 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
         "/* In the step's order: the last term of a row's rate is the velocity the row before wrote last (the\n   \
          library's velocity::entry_order). Per entry in the derivation's order, its place in the step's. */"
     );
-    let _ = writeln!(out, "const int ENTRY_AT[{}] = {{{}}};\n", entries.max(1), list(&at, entries));
+    let _ = writeln!(out, "const int ENTRY_AT[{}] = {{{}}};", entries.max(1), list(&at, entries));
+    let steady: Vec<String> = roots.steady.iter().map(|&b| i32::from(b).to_string()).collect();
+    let _ = writeln!(
+        out,
+        "/* Per row, whether its C reads no time: dC/dt = 0 exactly (velocity::steady_rows). */\n\
+         static const int STEADY[{}] = {{{}}};\n",
+        k.max(1),
+        list(&steady, k)
+    );
     let _ = writeln!(
         out,
         "/* The rows of a state as the step reads them: per row C/kappa, its rate, c, J per entry; per slot\n   \
@@ -552,7 +560,13 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
     let mut e_at = 0;
     for (r, angular) in roots.angular_slots.iter().enumerate() {
         stores.push(format!("r->value[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
-        stores.push(format!("r->rate[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
+        // A steady row's rate is not read by the soft step and PGS (its code is left out).
+        let rate = next();
+        if rate.is_empty() {
+            stores.push(format!("r->rate[{r}] = 0.0;"));
+        } else {
+            stores.push(format!("r->rate[{r}] = {} * INVERSE_SCALE[{r}];", paren(&rate)));
+        }
         let bias = next();
         if !bias.is_empty() {
             stores.push(format!("r->bias[{r}] = {bias};"));

@@ -537,7 +537,7 @@ fn c_module(
                 .into_iter()
                 .filter_map(|b| system.bodies[b].rigid.as_ref().map(|r| (r.orientation, r.angular_velocity)))
                 .collect(),
-            roots: StepRoots::of(&plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
+            roots: StepRoots::of(&loaded.system, &plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
         }),
     };
     let code = super::c::emit(&ctx, &parts)?;
@@ -592,7 +592,7 @@ fn rust_module(
     }
     ctx.solution(&mut out, formulas, (&scene.a_code, &scene.b_code), &names, layout, &scene.turns)?;
     if let Some(solver) = options.solver {
-        let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+        let step = StepRoots::of(&loaded.system, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
         let places = StepPlaces::of(system, fields, &scene.turns);
         step_fns(&mut out, &ctx, solver, &inverse_scales(d), &places, &step, formulas, &names, layout)?;
     }
@@ -702,11 +702,22 @@ pub(super) struct StepRoots {
     pub(super) angular_slots: Vec<Vec<usize>>,
     /// Per rigid body: its first slot and whether it is 3D (three slots, one per axis).
     pub(super) turns: Vec<(usize, bool)>,
+    /// Per row, whether its C reads no time (`numeric::velocity::steady_rows`): ∂C/∂t = 0,
+    /// so the soft step and PGS leave its Ċ out (`swept`).
+    pub(super) steady: Vec<bool>,
 }
 
 impl StepRoots {
-    pub(super) fn of(layout: &Layout, masses: &[Id], bodies: &Bodies, turns: &Turns, formulas: &Formulas) -> StepRoots {
+    pub(super) fn of(
+        system: &crate::model::system::System,
+        layout: &Layout,
+        masses: &[Id],
+        bodies: &Bodies,
+        turns: &Turns,
+        formulas: &Formulas,
+    ) -> StepRoots {
         let n = layout.bodies;
+        let steady = crate::numeric::velocity::steady_rows(system);
         let mut roots = Vec::new();
         for ((&m, &v), &f) in masses.iter().zip(&bodies.velocity).zip(&bodies.applied).take(n) {
             roots.extend([m, v, f]);
@@ -730,7 +741,7 @@ impl StepRoots {
         let mut angular_slots = Vec::with_capacity(layout.constraints);
         for r in 0..layout.constraints {
             roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
-            swept.extend([true, true, false]);
+            swept.extend([true, !steady.get(r).copied().unwrap_or(false), false]);
             roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
             let mut slots = Vec::new();
             for &(b, jw) in &formulas.angular[r] {
@@ -748,6 +759,7 @@ impl StepRoots {
             swept,
             angular_slots,
             turns: rigid.into_iter().map(|(_, first, three)| (first, three)).collect(),
+            steady: (0..layout.constraints).map(|r| steady.get(r).copied().unwrap_or(false)).collect(),
         }
     }
 
@@ -935,11 +947,16 @@ fn step_fns(
             for (e, j) in js.into_iter().enumerate() {
                 kept[entry_at[start + e] - start] = j;
             }
+            // A steady row's Ċ is not read (its code is left out: `swept`).
+            let rate = if scalars[1].is_empty() {
+                "0.0".to_string()
+            } else {
+                format!("{} * INVERSE_SCALE[{r}]", operand(&scalars[1]))
+            };
             let _ = writeln!(
                 out,
-                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {start}, {}, &v);",
+                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {rate}), {start}, {}, &v);",
                 operand(&scalars[0]),
-                operand(&scalars[1]),
                 array(&kept)
             );
         }
@@ -1042,7 +1059,7 @@ fn step_module(
             );
         }
     }
-    let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+    let step = StepRoots::of(&loaded.system, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
     super::shapes::step_by_shape(
         &mut out,
         &ctx,
@@ -1119,14 +1136,18 @@ pub(super) fn step_constants(
          const ROW_BODY: [usize; {}] = {};\n\
          /// Per entry in the derivation's order (a row's bodies, then its angular slots), its place in the step's.\n\
          #[allow(dead_code)]\n\
-         const ENTRY_AT: [usize; {}] = {};\n",
+         const ENTRY_AT: [usize; {}] = {};\n\
+         /// Per row, whether its C reads no time: ∂C/∂t = 0 exactly (`numeric::velocity::steady_rows`).\n\
+         #[allow(dead_code)]\n\
+         const STEADY: [bool; {k}] = {};\n",
         bodies.len(),
         k + 1,
         list(&starts),
         bodies.len(),
         list(&bodies),
         at.len(),
-        list(&at)
+        list(&at),
+        array(&step.steady.iter().map(bool::to_string).collect::<Vec<_>>())
     );
     (starts, at)
 }

@@ -41,9 +41,12 @@ static void prepare(const State *s, Prepared *p) {
         double m = 0.0, jv = 0.0;
         for (e = ROW_START[k]; e < ROW_START[k + 1]; e++) {
             m += p->inverse_mass[ROW_BODY[e]] * lg_dot(p->jacobian[e], p->jacobian[e]);
-            jv += lg_dot(p->jacobian[e], p->velocity[ROW_BODY[e]]);
+            if (!STEADY[k]) {
+                jv += lg_dot(p->jacobian[e], p->velocity[ROW_BODY[e]]);
+            }
         }
-        p->time_rate[k] = p->rate[k] - jv;
+        /* 0 exactly where C reads no time. */
+        p->time_rate[k] = STEADY[k] ? 0.0 : p->rate[k] - jv;
         p->effective_mass[k] = (m > 0.0 && isfinite(m)) ? 1.0 / m : 0.0;
     }
     p->first = first_angular(p);

@@ -132,7 +132,7 @@ struct StepRows<const D: usize> {
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
     value: [f64; CONSTRAINTS],
-    /// ∂C/∂t = Ċ − J·v at the evaluated state.
+    /// ∂C/∂t = Ċ − J·v at the evaluated state (0 on a `STEADY` row).
     time_rate: [f64; CONSTRAINTS],
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     effective_mass: [f64; CONSTRAINTS],
@@ -204,7 +204,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// With C/κ, J, 1/m and F in place and Ċ/κ in `time_rate`: each row's effective mass
-    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`.
+    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity` (0 on a
+    /// `STEADY` row, whose C reads no time).
     #[inline(always)]
     fn finish(&mut self, velocity: &[[f64; D]]) {
         for k in 0..CONSTRAINTS {
@@ -212,16 +213,19 @@ impl<const D: usize> Prepared<D> {
             for e in ROW_START[k]..ROW_START[k + 1] {
                 let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
                 m += self.inverse_mass[b] * dot(j, j);
-                jv += dot(j, &velocity[b]);
+                if !STEADY[k] {
+                    jv += dot(j, &velocity[b]);
+                }
             }
-            self.time_rate[k] -= jv;
+            self.time_rate[k] = if STEADY[k] { 0.0 } else { self.time_rate[k] - jv };
             self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
         }
     }
 
-    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
-    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
-    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` (not read on a `STEADY` row) and its
+    /// Jacobian `entries` (body, Jᵢ), stored from entry `first` on, with its effective mass
+    /// and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`: `finish`'s operations for
+    /// one row, its bodies' 1/m in place.
     #[inline(always)]
     fn row<const E: usize>(
         &mut self,
@@ -235,10 +239,12 @@ impl<const D: usize> Prepared<D> {
         for (e, (b, j)) in entries.iter().enumerate() {
             self.jacobian[first + e] = *j;
             m += self.inverse_mass[*b] * dot(j, j);
-            jv += dot(j, &velocity[*b]);
+            if !STEADY[k] {
+                jv += dot(j, &velocity[*b]);
+            }
         }
         self.value[k] = value;
-        self.time_rate[k] = rate - jv;
+        self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
         self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
     }
 

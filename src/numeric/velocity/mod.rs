@@ -9,7 +9,8 @@
 //! C/κ, Ċ/κ and J = ∇C/κ per slot, per slot 1/m, v and F. The rows are evaluated at the
 //! positions each substep starts from and held fixed within the substep, as Box2D holds a
 //! joint's anchors between position updates. Ċ at any velocity u is J·u + ∂C/∂t, with
-//! ∂C/∂t = Ċ − J·v taken from the rows (so moving constraints work). A row's impulse P acts
+//! ∂C/∂t = Ċ − J·v taken from the rows (so moving constraints work), and 0 exactly for a row
+//! whose C reads no time ([`steady_rows`]). A row's impulse P acts
 //! as Δvᵢ = (1/mᵢ) Jᵢ P; with J = ∇C/κ, P refers to C/κ as λ does, and P/h ≈ λ.
 //!
 //! Rigid bodies (2D) need nothing of their own: a state's slots are the bodies, then one
@@ -65,6 +66,8 @@ use super::integrate::Vectors;
 use super::rotation;
 use super::rows::Rows;
 use super::simulate::SettingsError;
+use crate::expr::graph::SymbolWalk;
+use crate::model::system::System;
 
 /// Which velocity-level solver a run uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -268,7 +271,7 @@ pub struct Prepared {
     pub body: Vec<usize>,
     pub jacobian: Vec<[f64; 3]>,
     pub value: Vec<f64>,
-    /// ∂C/∂t = Ċ − J·v at the evaluated state.
+    /// ∂C/∂t = Ċ − J·v at the evaluated state (0 on a steady row).
     pub time_rate: Vec<f64>,
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     pub effective_mass: Vec<f64>,
@@ -282,8 +285,19 @@ pub struct Prepared {
     pub velocity: Vec<[f64; 3]>,
     /// The first 3D rigid body's first slot (`None` without 3D rigid bodies).
     pub first: Option<usize>,
+    /// Per row, whether its C reads no time ([`steady_rows`]): its ∂C/∂t is 0 exactly, taken
+    /// as 0 rather than as Ċ − J·v (round-off that reads the velocities). Empty: none.
+    pub steady: Vec<bool>,
     /// Scratch: one row's entries in [`entry_order`].
     order: Vec<usize>,
+}
+
+/// Per constraint of `system` (one row each), whether its C reads no time, so that
+/// ∂C/∂t = 0 exactly ([`Prepared::steady`]; a generated module's `STEADY`, which leaves such
+/// a row's Ċ out of its code).
+pub fn steady_rows(system: &System) -> Vec<bool> {
+    let mut walk = SymbolWalk::default();
+    system.constraints.iter().map(|c| !walk.free_symbols(&system.graph, c.c).contains(&system.time)).collect()
 }
 
 /// a·b over the first `dim` components, summed from the first product (no leading zero): the
@@ -355,7 +369,8 @@ impl Prepared {
         self.dim = rows.dim;
         let dim = rows.dim;
         let mut previous = 0;
-        for row in &rows.rows {
+        for (r, row) in rows.rows.iter().enumerate() {
+            let steady = self.steady.get(r).copied().unwrap_or(false);
             let at = self.body.len();
             self.start.push(at);
             self.order.clear();
@@ -367,10 +382,12 @@ impl Prepared {
                 self.body.push(*b);
                 self.jacobian.push(*j);
                 k += rows.inverse_mass[*b] * dot_in(dim, j, j);
-                jv += dot_in(dim, j, &rows.velocity[*b]);
+                if !steady {
+                    jv += dot_in(dim, j, &rows.velocity[*b]);
+                }
             }
             self.value.push(row.value);
-            self.time_rate.push(row.rate - jv);
+            self.time_rate.push(if steady { 0.0 } else { row.rate - jv });
             self.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
             self.inequality.push(row.inequality);
         }
@@ -540,6 +557,9 @@ impl Stepper {
         v: &mut Vectors,
         rows: Rows,
     ) -> Result<(), SimError> {
+        if self.prepared.steady.len() != rows.rows.len() {
+            self.prepared.steady = steady_rows(dynamics.system());
+        }
         match self.settings.solver {
             Solver::SoftStep => soft_step::step(self, dynamics, t, q, v, rows),
             Solver::Pgs => pgs::step(self, dynamics, t, q, v, rows),
