@@ -286,7 +286,8 @@ pub struct Prepared {
     /// The first 3D rigid body's first slot (`None` without 3D rigid bodies).
     pub first: Option<usize>,
     /// Per row, whether its C reads no time ([`steady_rows`]): its ∂C/∂t is 0 exactly, taken
-    /// as 0 rather than as Ċ − J·v (round-off that reads the velocities). Empty: none.
+    /// as 0 rather than as Ċ − J·v (round-off that reads the velocities). Empty, or not one
+    /// per row: none.
     pub steady: Vec<bool>,
     /// Scratch: one row's entries in [`entry_order`].
     order: Vec<usize>,
@@ -369,8 +370,10 @@ impl Prepared {
         self.dim = rows.dim;
         let dim = rows.dim;
         let mut previous = 0;
+        // The flags are the system's, one per row; rows of another count take none.
+        let flags = self.steady.len() == rows.rows.len();
         for (r, row) in rows.rows.iter().enumerate() {
-            let steady = self.steady.get(r).copied().unwrap_or(false);
+            let steady = flags && self.steady[r];
             let at = self.body.len();
             self.start.push(at);
             self.order.clear();
@@ -557,7 +560,8 @@ impl Stepper {
         v: &mut Vectors,
         rows: Rows,
     ) -> Result<(), SimError> {
-        if self.prepared.steady.len() != rows.rows.len() {
+        // Once per stepper: which rows have ∂C/∂t = 0 exactly.
+        if self.prepared.steady.is_empty() {
             self.prepared.steady = steady_rows(dynamics.system());
         }
         match self.settings.solver {
