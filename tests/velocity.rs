@@ -555,3 +555,60 @@ fn the_exact_solves_projection_reuses_the_velocity_solves_factor_and_falls_back_
         project_positions(&mut dynamics, 1.0, &mut q, &v, bound, 20, Inequalities::Violated).expect("Newton projects");
     assert!(largest(&rows.rows) <= bound, "Newton: {:e} > {bound:e}", largest(&rows.rows));
 }
+
+proptest::proptest! {
+    /// The order the step keeps a row's entries in (`velocity::entry_orders`, shared by the
+    /// library's `Prepared` and a generated module's `ROW_BODY`): each row's own entries,
+    /// those on slots the row before does not touch first in their order, then the others in
+    /// the order the row before keeps its slots — so the velocity it wrote last is Ċ's last term.
+    #[test]
+    fn entry_orders_put_the_slots_the_row_before_wrote_last(
+        rows in proptest::collection::vec(proptest::collection::btree_set(0usize..8, 0..5), 1..12),
+        seed in proptest::prelude::any::<u64>(),
+    ) {
+        use lagrange::numeric::velocity::entry_orders;
+        // Each row's slots in a shuffled order (the derivation's need not be ascending).
+        let mut starts = vec![0];
+        let mut slots = Vec::new();
+        for (k, row) in rows.iter().enumerate() {
+            let mut row: Vec<usize> = row.iter().copied().collect();
+            let n = row.len().max(1);
+            row.rotate_left((seed as usize).wrapping_add(k) % n);
+            slots.extend(row);
+            starts.push(slots.len());
+        }
+        let order = entry_orders(&starts, &slots);
+        proptest::prop_assert_eq!(order.len(), slots.len());
+        let kept: Vec<usize> = order.iter().map(|&e| slots[e]).collect();
+        for k in 0..rows.len() {
+            let (a, b) = (starts[k], starts[k + 1]);
+            let mut mine: Vec<usize> = order[a..b].to_vec();
+            mine.sort_unstable();
+            proptest::prop_assert_eq!(mine, (a..b).collect::<Vec<_>>(), "row {} keeps its own entries", k);
+            let previous: &[usize] = if k == 0 { &[] } else { &kept[starts[k - 1]..a] };
+            let shared: Vec<usize> = kept[a..b].iter().copied().filter(|s| previous.contains(s)).collect();
+            let fresh = (b - a) - shared.len();
+            // The fresh ones first, in the derivation's order.
+            proptest::prop_assert!(kept[a..a + fresh].iter().all(|s| !previous.contains(s)));
+            proptest::prop_assert!(order[a..a + fresh].windows(2).all(|w| w[0] < w[1]));
+            // The shared ones last, in the order the row before keeps them.
+            let expected: Vec<usize> = previous.iter().copied().filter(|s| shared.contains(s)).collect();
+            proptest::prop_assert_eq!(&kept[a + fresh..b], &expected[..]);
+        }
+    }
+}
+
+/// A row whose C reads no time has ∂C/∂t = 0 exactly in the step (`velocity::steady_rows`);
+/// a moving constraint keeps its ∂C/∂t (through a definition of t, too).
+#[test]
+fn only_rows_that_read_no_time_are_steady() {
+    use lagrange::numeric::velocity::steady_rows;
+    let steady = |path: &str| {
+        let text = std::fs::read_to_string(path).expect("file");
+        steady_rows(&lagrange::model::file::load(&text).expect("valid file").system)
+    };
+    assert_eq!(steady("constraints/solvers/two_particles.toml"), vec![true, true]);
+    assert!(steady("constraints/solvers/rigid_ball_and_chain.toml").iter().all(|&s| s));
+    assert_eq!(steady("constraints/moving_circle.toml"), vec![false]);
+    assert_eq!(steady("constraints/driven_pendulum.toml"), vec![false]);
+}

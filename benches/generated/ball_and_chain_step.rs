@@ -3534,10 +3534,17 @@ const ORIENTATIONS: usize = 0;
 /// The slots whose principal axes the rows carry (all of them with 3D rigid bodies, else none).
 const AXES: usize = 0;
 
-/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.
+/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`, in the
+/// step's order (the last term of a row's Ċ the velocity the row before wrote last: `velocity::entry_order`).
 const ENTRIES: usize = 81;
 const ROW_START: [usize; 42] = [0, 1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31, 33, 35, 37, 39, 41, 43, 45, 47, 49, 51, 53, 55, 57, 59, 61, 63, 65, 67, 69, 71, 73, 75, 77, 79, 81];
-const ROW_BODY: [usize; 81] = [0, 0, 1, 1, 2, 2, 3, 3, 4, 4, 5, 5, 6, 6, 7, 7, 8, 8, 9, 9, 10, 10, 11, 11, 12, 12, 13, 13, 14, 14, 15, 15, 16, 16, 17, 17, 18, 18, 19, 19, 20, 20, 21, 21, 22, 22, 23, 23, 24, 24, 25, 25, 26, 26, 27, 27, 28, 28, 29, 29, 30, 30, 31, 31, 32, 32, 33, 33, 34, 34, 35, 35, 36, 36, 37, 37, 38, 38, 39, 39, 40];
+const ROW_BODY: [usize; 81] = [0, 1, 0, 2, 1, 3, 2, 4, 3, 5, 4, 6, 5, 7, 6, 8, 7, 9, 8, 10, 9, 11, 10, 12, 11, 13, 12, 14, 13, 15, 14, 16, 15, 17, 16, 18, 17, 19, 18, 20, 19, 21, 20, 22, 21, 23, 22, 24, 23, 25, 24, 26, 25, 27, 26, 28, 27, 29, 28, 30, 29, 31, 30, 32, 31, 33, 32, 34, 33, 35, 34, 36, 35, 37, 36, 38, 37, 39, 38, 40, 39];
+/// Per entry in the derivation's order (a row's bodies, then its angular slots), its place in the step's.
+#[allow(dead_code)]
+const ENTRY_AT: [usize; 81] = [0, 2, 1, 4, 3, 6, 5, 8, 7, 10, 9, 12, 11, 14, 13, 16, 15, 18, 17, 20, 19, 22, 21, 24, 23, 26, 25, 28, 27, 30, 29, 32, 31, 34, 33, 36, 35, 38, 37, 40, 39, 42, 41, 44, 43, 46, 45, 48, 47, 50, 49, 52, 51, 54, 53, 56, 55, 58, 57, 60, 59, 62, 61, 64, 63, 66, 65, 68, 67, 70, 69, 72, 71, 74, 73, 76, 75, 78, 77, 80, 79];
+/// Per row, whether its C reads no time: ∂C/∂t = 0 exactly (`numeric::velocity::steady_rows`).
+#[allow(dead_code)]
+const STEADY: [bool; 41] = [true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true];
 
 /// The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k
 /// of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,
@@ -3832,208 +3839,87 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x122 = norm2(x120, x121);
     let x123 = s.g[0] * 6.0;
     let x124 = s.g[1] * 6.0;
-    let x125 = s.v_p1[0] * x0 + s.v_p1[1] * x1;
-    let x126 = 1.0 / x2;
-    let x127 = s.v_p2[0] - s.v_p1[0];
-    let x128 = s.v_p2[1] - s.v_p1[1];
-    let x129 = x3 * x127 + x4 * x128;
-    let x130 = 1.0 / x5;
+    let x125 = 1.0 / x2;
+    let x126 = 1.0 / x5;
+    let x127 = -x126;
+    let x128 = 1.0 / x8;
+    let x129 = -x128;
+    let x130 = 1.0 / x11;
     let x131 = -x130;
-    let x132 = s.v_p3[0] - s.v_p2[0];
-    let x133 = s.v_p3[1] - s.v_p2[1];
-    let x134 = x6 * x132 + x7 * x133;
-    let x135 = 1.0 / x8;
-    let x136 = -x135;
-    let x137 = s.v_p4[0] - s.v_p3[0];
-    let x138 = s.v_p4[1] - s.v_p3[1];
-    let x139 = x9 * x137 + x10 * x138;
-    let x140 = 1.0 / x11;
+    let x132 = 1.0 / x14;
+    let x133 = -x132;
+    let x134 = 1.0 / x17;
+    let x135 = -x134;
+    let x136 = 1.0 / x20;
+    let x137 = -x136;
+    let x138 = 1.0 / x23;
+    let x139 = -x138;
+    let x140 = 1.0 / x26;
     let x141 = -x140;
-    let x142 = s.v_p5[0] - s.v_p4[0];
-    let x143 = s.v_p5[1] - s.v_p4[1];
-    let x144 = x12 * x142 + x13 * x143;
-    let x145 = 1.0 / x14;
-    let x146 = -x145;
-    let x147 = s.v_p6[0] - s.v_p5[0];
-    let x148 = s.v_p6[1] - s.v_p5[1];
-    let x149 = x15 * x147 + x16 * x148;
-    let x150 = 1.0 / x17;
+    let x142 = 1.0 / x29;
+    let x143 = -x142;
+    let x144 = 1.0 / x32;
+    let x145 = -x144;
+    let x146 = 1.0 / x35;
+    let x147 = -x146;
+    let x148 = 1.0 / x38;
+    let x149 = -x148;
+    let x150 = 1.0 / x41;
     let x151 = -x150;
-    let x152 = s.v_p7[0] - s.v_p6[0];
-    let x153 = s.v_p7[1] - s.v_p6[1];
-    let x154 = x18 * x152 + x19 * x153;
-    let x155 = 1.0 / x20;
-    let x156 = -x155;
-    let x157 = s.v_p8[0] - s.v_p7[0];
-    let x158 = s.v_p8[1] - s.v_p7[1];
-    let x159 = x21 * x157 + x22 * x158;
-    let x160 = 1.0 / x23;
+    let x152 = 1.0 / x44;
+    let x153 = -x152;
+    let x154 = 1.0 / x47;
+    let x155 = -x154;
+    let x156 = 1.0 / x50;
+    let x157 = -x156;
+    let x158 = 1.0 / x53;
+    let x159 = -x158;
+    let x160 = 1.0 / x56;
     let x161 = -x160;
-    let x162 = s.v_p9[0] - s.v_p8[0];
-    let x163 = s.v_p9[1] - s.v_p8[1];
-    let x164 = x24 * x162 + x25 * x163;
-    let x165 = 1.0 / x26;
-    let x166 = -x165;
-    let x167 = s.v_p10[0] - s.v_p9[0];
-    let x168 = s.v_p10[1] - s.v_p9[1];
-    let x169 = x27 * x167 + x28 * x168;
-    let x170 = 1.0 / x29;
+    let x162 = 1.0 / x59;
+    let x163 = -x162;
+    let x164 = 1.0 / x62;
+    let x165 = -x164;
+    let x166 = 1.0 / x65;
+    let x167 = -x166;
+    let x168 = 1.0 / x68;
+    let x169 = -x168;
+    let x170 = 1.0 / x71;
     let x171 = -x170;
-    let x172 = s.v_p11[0] - s.v_p10[0];
-    let x173 = s.v_p11[1] - s.v_p10[1];
-    let x174 = x30 * x172 + x31 * x173;
-    let x175 = 1.0 / x32;
-    let x176 = -x175;
-    let x177 = s.v_p12[0] - s.v_p11[0];
-    let x178 = s.v_p12[1] - s.v_p11[1];
-    let x179 = x33 * x177 + x34 * x178;
-    let x180 = 1.0 / x35;
+    let x172 = 1.0 / x74;
+    let x173 = -x172;
+    let x174 = 1.0 / x77;
+    let x175 = -x174;
+    let x176 = 1.0 / x80;
+    let x177 = -x176;
+    let x178 = 1.0 / x83;
+    let x179 = -x178;
+    let x180 = 1.0 / x86;
     let x181 = -x180;
-    let x182 = s.v_p13[0] - s.v_p12[0];
-    let x183 = s.v_p13[1] - s.v_p12[1];
-    let x184 = x36 * x182 + x37 * x183;
-    let x185 = 1.0 / x38;
-    let x186 = -x185;
-    let x187 = s.v_p14[0] - s.v_p13[0];
-    let x188 = s.v_p14[1] - s.v_p13[1];
-    let x189 = x39 * x187 + x40 * x188;
-    let x190 = 1.0 / x41;
+    let x182 = 1.0 / x89;
+    let x183 = -x182;
+    let x184 = 1.0 / x92;
+    let x185 = -x184;
+    let x186 = 1.0 / x95;
+    let x187 = -x186;
+    let x188 = 1.0 / x98;
+    let x189 = -x188;
+    let x190 = 1.0 / x101;
     let x191 = -x190;
-    let x192 = s.v_p15[0] - s.v_p14[0];
-    let x193 = s.v_p15[1] - s.v_p14[1];
-    let x194 = x42 * x192 + x43 * x193;
-    let x195 = 1.0 / x44;
-    let x196 = -x195;
-    let x197 = s.v_p16[0] - s.v_p15[0];
-    let x198 = s.v_p16[1] - s.v_p15[1];
-    let x199 = x45 * x197 + x46 * x198;
-    let x200 = 1.0 / x47;
+    let x192 = 1.0 / x104;
+    let x193 = -x192;
+    let x194 = 1.0 / x107;
+    let x195 = -x194;
+    let x196 = 1.0 / x110;
+    let x197 = -x196;
+    let x198 = 1.0 / x113;
+    let x199 = -x198;
+    let x200 = 1.0 / x116;
     let x201 = -x200;
-    let x202 = s.v_p17[0] - s.v_p16[0];
-    let x203 = s.v_p17[1] - s.v_p16[1];
-    let x204 = x48 * x202 + x49 * x203;
-    let x205 = 1.0 / x50;
-    let x206 = -x205;
-    let x207 = s.v_p18[0] - s.v_p17[0];
-    let x208 = s.v_p18[1] - s.v_p17[1];
-    let x209 = x51 * x207 + x52 * x208;
-    let x210 = 1.0 / x53;
-    let x211 = -x210;
-    let x212 = s.v_p19[0] - s.v_p18[0];
-    let x213 = s.v_p19[1] - s.v_p18[1];
-    let x214 = x54 * x212 + x55 * x213;
-    let x215 = 1.0 / x56;
-    let x216 = -x215;
-    let x217 = s.v_p20[0] - s.v_p19[0];
-    let x218 = s.v_p20[1] - s.v_p19[1];
-    let x219 = x57 * x217 + x58 * x218;
-    let x220 = 1.0 / x59;
-    let x221 = -x220;
-    let x222 = s.v_p21[0] - s.v_p20[0];
-    let x223 = s.v_p21[1] - s.v_p20[1];
-    let x224 = x60 * x222 + x61 * x223;
-    let x225 = 1.0 / x62;
-    let x226 = -x225;
-    let x227 = s.v_p22[0] - s.v_p21[0];
-    let x228 = s.v_p22[1] - s.v_p21[1];
-    let x229 = x63 * x227 + x64 * x228;
-    let x230 = 1.0 / x65;
-    let x231 = -x230;
-    let x232 = s.v_p23[0] - s.v_p22[0];
-    let x233 = s.v_p23[1] - s.v_p22[1];
-    let x234 = x66 * x232 + x67 * x233;
-    let x235 = 1.0 / x68;
-    let x236 = -x235;
-    let x237 = s.v_p24[0] - s.v_p23[0];
-    let x238 = s.v_p24[1] - s.v_p23[1];
-    let x239 = x69 * x237 + x70 * x238;
-    let x240 = 1.0 / x71;
-    let x241 = -x240;
-    let x242 = s.v_p25[0] - s.v_p24[0];
-    let x243 = s.v_p25[1] - s.v_p24[1];
-    let x244 = x72 * x242 + x73 * x243;
-    let x245 = 1.0 / x74;
-    let x246 = -x245;
-    let x247 = s.v_p26[0] - s.v_p25[0];
-    let x248 = s.v_p26[1] - s.v_p25[1];
-    let x249 = x75 * x247 + x76 * x248;
-    let x250 = 1.0 / x77;
-    let x251 = -x250;
-    let x252 = s.v_p27[0] - s.v_p26[0];
-    let x253 = s.v_p27[1] - s.v_p26[1];
-    let x254 = x78 * x252 + x79 * x253;
-    let x255 = 1.0 / x80;
-    let x256 = -x255;
-    let x257 = s.v_p28[0] - s.v_p27[0];
-    let x258 = s.v_p28[1] - s.v_p27[1];
-    let x259 = x81 * x257 + x82 * x258;
-    let x260 = 1.0 / x83;
-    let x261 = -x260;
-    let x262 = s.v_p29[0] - s.v_p28[0];
-    let x263 = s.v_p29[1] - s.v_p28[1];
-    let x264 = x84 * x262 + x85 * x263;
-    let x265 = 1.0 / x86;
-    let x266 = -x265;
-    let x267 = s.v_p30[0] - s.v_p29[0];
-    let x268 = s.v_p30[1] - s.v_p29[1];
-    let x269 = x87 * x267 + x88 * x268;
-    let x270 = 1.0 / x89;
-    let x271 = -x270;
-    let x272 = s.v_p31[0] - s.v_p30[0];
-    let x273 = s.v_p31[1] - s.v_p30[1];
-    let x274 = x90 * x272 + x91 * x273;
-    let x275 = 1.0 / x92;
-    let x276 = -x275;
-    let x277 = s.v_p32[0] - s.v_p31[0];
-    let x278 = s.v_p32[1] - s.v_p31[1];
-    let x279 = x93 * x277 + x94 * x278;
-    let x280 = 1.0 / x95;
-    let x281 = -x280;
-    let x282 = s.v_p33[0] - s.v_p32[0];
-    let x283 = s.v_p33[1] - s.v_p32[1];
-    let x284 = x96 * x282 + x97 * x283;
-    let x285 = 1.0 / x98;
-    let x286 = -x285;
-    let x287 = s.v_p34[0] - s.v_p33[0];
-    let x288 = s.v_p34[1] - s.v_p33[1];
-    let x289 = x99 * x287 + x100 * x288;
-    let x290 = 1.0 / x101;
-    let x291 = -x290;
-    let x292 = s.v_p35[0] - s.v_p34[0];
-    let x293 = s.v_p35[1] - s.v_p34[1];
-    let x294 = x102 * x292 + x103 * x293;
-    let x295 = 1.0 / x104;
-    let x296 = -x295;
-    let x297 = s.v_p36[0] - s.v_p35[0];
-    let x298 = s.v_p36[1] - s.v_p35[1];
-    let x299 = x105 * x297 + x106 * x298;
-    let x300 = 1.0 / x107;
-    let x301 = -x300;
-    let x302 = s.v_p37[0] - s.v_p36[0];
-    let x303 = s.v_p37[1] - s.v_p36[1];
-    let x304 = x108 * x302 + x109 * x303;
-    let x305 = 1.0 / x110;
-    let x306 = -x305;
-    let x307 = s.v_p38[0] - s.v_p37[0];
-    let x308 = s.v_p38[1] - s.v_p37[1];
-    let x309 = x111 * x307 + x112 * x308;
-    let x310 = 1.0 / x113;
-    let x311 = -x310;
-    let x312 = s.v_p39[0] - s.v_p38[0];
-    let x313 = s.v_p39[1] - s.v_p38[1];
-    let x314 = x114 * x312 + x115 * x313;
-    let x315 = 1.0 / x116;
-    let x316 = -x315;
-    let x317 = s.v_p40[0] - s.v_p39[0];
-    let x318 = s.v_p40[1] - s.v_p39[1];
-    let x319 = x117 * x317 + x118 * x318;
-    let x320 = 1.0 / x119;
-    let x321 = -x320;
-    let x322 = s.v_p41[0] - s.v_p40[0];
-    let x323 = s.v_p41[1] - s.v_p40[1];
-    let x324 = x120 * x322 + x121 * x323;
-    let x325 = 1.0 / x122;
-    let x326 = -x325;
+    let x202 = 1.0 / x119;
+    let x203 = -x202;
+    let x204 = 1.0 / x122;
+    let x205 = -x204;
     let mut v = [[0.0; DIM]; SLOTS];
     p.inverse_mass[0] = 1.0 / 6.0;
     v[0] = [s.v_p1[0], s.v_p1[1]];
@@ -4158,47 +4044,47 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     p.inverse_mass[40] = 1.0 / 4021.0;
     v[40] = [s.v_p41[0], s.v_p41[1]];
     p.force[40] = [s.g[0] * 4021.0, s.g[1] * 4021.0];
-    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], (x125 * x126) * INVERSE_SCALE[0]), 0, [(0, [x0 * x126, x1 * x126])], &v);
-    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x129 * x130) * INVERSE_SCALE[1]), 1, [(0, [x3 * x131, x4 * x131]), (1, [x3 * x130, x4 * x130])], &v);
-    p.row(2, ((x8 - 1.0) * INVERSE_SCALE[2], (x134 * x135) * INVERSE_SCALE[2]), 3, [(1, [x6 * x136, x7 * x136]), (2, [x6 * x135, x7 * x135])], &v);
-    p.row(3, ((x11 - 1.0) * INVERSE_SCALE[3], (x139 * x140) * INVERSE_SCALE[3]), 5, [(2, [x9 * x141, x10 * x141]), (3, [x9 * x140, x10 * x140])], &v);
-    p.row(4, ((x14 - 1.0) * INVERSE_SCALE[4], (x144 * x145) * INVERSE_SCALE[4]), 7, [(3, [x12 * x146, x13 * x146]), (4, [x12 * x145, x13 * x145])], &v);
-    p.row(5, ((x17 - 1.0) * INVERSE_SCALE[5], (x149 * x150) * INVERSE_SCALE[5]), 9, [(4, [x15 * x151, x16 * x151]), (5, [x15 * x150, x16 * x150])], &v);
-    p.row(6, ((x20 - 1.0) * INVERSE_SCALE[6], (x154 * x155) * INVERSE_SCALE[6]), 11, [(5, [x18 * x156, x19 * x156]), (6, [x18 * x155, x19 * x155])], &v);
-    p.row(7, ((x23 - 1.0) * INVERSE_SCALE[7], (x159 * x160) * INVERSE_SCALE[7]), 13, [(6, [x21 * x161, x22 * x161]), (7, [x21 * x160, x22 * x160])], &v);
-    p.row(8, ((x26 - 1.0) * INVERSE_SCALE[8], (x164 * x165) * INVERSE_SCALE[8]), 15, [(7, [x24 * x166, x25 * x166]), (8, [x24 * x165, x25 * x165])], &v);
-    p.row(9, ((x29 - 1.0) * INVERSE_SCALE[9], (x169 * x170) * INVERSE_SCALE[9]), 17, [(8, [x27 * x171, x28 * x171]), (9, [x27 * x170, x28 * x170])], &v);
-    p.row(10, ((x32 - 1.0) * INVERSE_SCALE[10], (x174 * x175) * INVERSE_SCALE[10]), 19, [(9, [x30 * x176, x31 * x176]), (10, [x30 * x175, x31 * x175])], &v);
-    p.row(11, ((x35 - 1.0) * INVERSE_SCALE[11], (x179 * x180) * INVERSE_SCALE[11]), 21, [(10, [x33 * x181, x34 * x181]), (11, [x33 * x180, x34 * x180])], &v);
-    p.row(12, ((x38 - 1.0) * INVERSE_SCALE[12], (x184 * x185) * INVERSE_SCALE[12]), 23, [(11, [x36 * x186, x37 * x186]), (12, [x36 * x185, x37 * x185])], &v);
-    p.row(13, ((x41 - 1.0) * INVERSE_SCALE[13], (x189 * x190) * INVERSE_SCALE[13]), 25, [(12, [x39 * x191, x40 * x191]), (13, [x39 * x190, x40 * x190])], &v);
-    p.row(14, ((x44 - 1.0) * INVERSE_SCALE[14], (x194 * x195) * INVERSE_SCALE[14]), 27, [(13, [x42 * x196, x43 * x196]), (14, [x42 * x195, x43 * x195])], &v);
-    p.row(15, ((x47 - 1.0) * INVERSE_SCALE[15], (x199 * x200) * INVERSE_SCALE[15]), 29, [(14, [x45 * x201, x46 * x201]), (15, [x45 * x200, x46 * x200])], &v);
-    p.row(16, ((x50 - 1.0) * INVERSE_SCALE[16], (x204 * x205) * INVERSE_SCALE[16]), 31, [(15, [x48 * x206, x49 * x206]), (16, [x48 * x205, x49 * x205])], &v);
-    p.row(17, ((x53 - 1.0) * INVERSE_SCALE[17], (x209 * x210) * INVERSE_SCALE[17]), 33, [(16, [x51 * x211, x52 * x211]), (17, [x51 * x210, x52 * x210])], &v);
-    p.row(18, ((x56 - 1.0) * INVERSE_SCALE[18], (x214 * x215) * INVERSE_SCALE[18]), 35, [(17, [x54 * x216, x55 * x216]), (18, [x54 * x215, x55 * x215])], &v);
-    p.row(19, ((x59 - 1.0) * INVERSE_SCALE[19], (x219 * x220) * INVERSE_SCALE[19]), 37, [(18, [x57 * x221, x58 * x221]), (19, [x57 * x220, x58 * x220])], &v);
-    p.row(20, ((x62 - 1.0) * INVERSE_SCALE[20], (x224 * x225) * INVERSE_SCALE[20]), 39, [(19, [x60 * x226, x61 * x226]), (20, [x60 * x225, x61 * x225])], &v);
-    p.row(21, ((x65 - 1.0) * INVERSE_SCALE[21], (x229 * x230) * INVERSE_SCALE[21]), 41, [(20, [x63 * x231, x64 * x231]), (21, [x63 * x230, x64 * x230])], &v);
-    p.row(22, ((x68 - 1.0) * INVERSE_SCALE[22], (x234 * x235) * INVERSE_SCALE[22]), 43, [(21, [x66 * x236, x67 * x236]), (22, [x66 * x235, x67 * x235])], &v);
-    p.row(23, ((x71 - 1.0) * INVERSE_SCALE[23], (x239 * x240) * INVERSE_SCALE[23]), 45, [(22, [x69 * x241, x70 * x241]), (23, [x69 * x240, x70 * x240])], &v);
-    p.row(24, ((x74 - 1.0) * INVERSE_SCALE[24], (x244 * x245) * INVERSE_SCALE[24]), 47, [(23, [x72 * x246, x73 * x246]), (24, [x72 * x245, x73 * x245])], &v);
-    p.row(25, ((x77 - 1.0) * INVERSE_SCALE[25], (x249 * x250) * INVERSE_SCALE[25]), 49, [(24, [x75 * x251, x76 * x251]), (25, [x75 * x250, x76 * x250])], &v);
-    p.row(26, ((x80 - 1.0) * INVERSE_SCALE[26], (x254 * x255) * INVERSE_SCALE[26]), 51, [(25, [x78 * x256, x79 * x256]), (26, [x78 * x255, x79 * x255])], &v);
-    p.row(27, ((x83 - 1.0) * INVERSE_SCALE[27], (x259 * x260) * INVERSE_SCALE[27]), 53, [(26, [x81 * x261, x82 * x261]), (27, [x81 * x260, x82 * x260])], &v);
-    p.row(28, ((x86 - 1.0) * INVERSE_SCALE[28], (x264 * x265) * INVERSE_SCALE[28]), 55, [(27, [x84 * x266, x85 * x266]), (28, [x84 * x265, x85 * x265])], &v);
-    p.row(29, ((x89 - 1.0) * INVERSE_SCALE[29], (x269 * x270) * INVERSE_SCALE[29]), 57, [(28, [x87 * x271, x88 * x271]), (29, [x87 * x270, x88 * x270])], &v);
-    p.row(30, ((x92 - 1.0) * INVERSE_SCALE[30], (x274 * x275) * INVERSE_SCALE[30]), 59, [(29, [x90 * x276, x91 * x276]), (30, [x90 * x275, x91 * x275])], &v);
-    p.row(31, ((x95 - 1.0) * INVERSE_SCALE[31], (x279 * x280) * INVERSE_SCALE[31]), 61, [(30, [x93 * x281, x94 * x281]), (31, [x93 * x280, x94 * x280])], &v);
-    p.row(32, ((x98 - 1.0) * INVERSE_SCALE[32], (x284 * x285) * INVERSE_SCALE[32]), 63, [(31, [x96 * x286, x97 * x286]), (32, [x96 * x285, x97 * x285])], &v);
-    p.row(33, ((x101 - 1.0) * INVERSE_SCALE[33], (x289 * x290) * INVERSE_SCALE[33]), 65, [(32, [x99 * x291, x100 * x291]), (33, [x99 * x290, x100 * x290])], &v);
-    p.row(34, ((x104 - 1.0) * INVERSE_SCALE[34], (x294 * x295) * INVERSE_SCALE[34]), 67, [(33, [x102 * x296, x103 * x296]), (34, [x102 * x295, x103 * x295])], &v);
-    p.row(35, ((x107 - 1.0) * INVERSE_SCALE[35], (x299 * x300) * INVERSE_SCALE[35]), 69, [(34, [x105 * x301, x106 * x301]), (35, [x105 * x300, x106 * x300])], &v);
-    p.row(36, ((x110 - 1.0) * INVERSE_SCALE[36], (x304 * x305) * INVERSE_SCALE[36]), 71, [(35, [x108 * x306, x109 * x306]), (36, [x108 * x305, x109 * x305])], &v);
-    p.row(37, ((x113 - 1.0) * INVERSE_SCALE[37], (x309 * x310) * INVERSE_SCALE[37]), 73, [(36, [x111 * x311, x112 * x311]), (37, [x111 * x310, x112 * x310])], &v);
-    p.row(38, ((x116 - 1.0) * INVERSE_SCALE[38], (x314 * x315) * INVERSE_SCALE[38]), 75, [(37, [x114 * x316, x115 * x316]), (38, [x114 * x315, x115 * x315])], &v);
-    p.row(39, ((x119 - 1.0) * INVERSE_SCALE[39], (x319 * x320) * INVERSE_SCALE[39]), 77, [(38, [x117 * x321, x118 * x321]), (39, [x117 * x320, x118 * x320])], &v);
-    p.row(40, ((x122 - 1.0) * INVERSE_SCALE[40], (x324 * x325) * INVERSE_SCALE[40]), 79, [(39, [x120 * x326, x121 * x326]), (40, [x120 * x325, x121 * x325])], &v);
+    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], 0.0), 0, [(0, [x0 * x125, x1 * x125])], &v);
+    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], 0.0), 1, [(1, [x3 * x126, x4 * x126]), (0, [x3 * x127, x4 * x127])], &v);
+    p.row(2, ((x8 - 1.0) * INVERSE_SCALE[2], 0.0), 3, [(2, [x6 * x128, x7 * x128]), (1, [x6 * x129, x7 * x129])], &v);
+    p.row(3, ((x11 - 1.0) * INVERSE_SCALE[3], 0.0), 5, [(3, [x9 * x130, x10 * x130]), (2, [x9 * x131, x10 * x131])], &v);
+    p.row(4, ((x14 - 1.0) * INVERSE_SCALE[4], 0.0), 7, [(4, [x12 * x132, x13 * x132]), (3, [x12 * x133, x13 * x133])], &v);
+    p.row(5, ((x17 - 1.0) * INVERSE_SCALE[5], 0.0), 9, [(5, [x15 * x134, x16 * x134]), (4, [x15 * x135, x16 * x135])], &v);
+    p.row(6, ((x20 - 1.0) * INVERSE_SCALE[6], 0.0), 11, [(6, [x18 * x136, x19 * x136]), (5, [x18 * x137, x19 * x137])], &v);
+    p.row(7, ((x23 - 1.0) * INVERSE_SCALE[7], 0.0), 13, [(7, [x21 * x138, x22 * x138]), (6, [x21 * x139, x22 * x139])], &v);
+    p.row(8, ((x26 - 1.0) * INVERSE_SCALE[8], 0.0), 15, [(8, [x24 * x140, x25 * x140]), (7, [x24 * x141, x25 * x141])], &v);
+    p.row(9, ((x29 - 1.0) * INVERSE_SCALE[9], 0.0), 17, [(9, [x27 * x142, x28 * x142]), (8, [x27 * x143, x28 * x143])], &v);
+    p.row(10, ((x32 - 1.0) * INVERSE_SCALE[10], 0.0), 19, [(10, [x30 * x144, x31 * x144]), (9, [x30 * x145, x31 * x145])], &v);
+    p.row(11, ((x35 - 1.0) * INVERSE_SCALE[11], 0.0), 21, [(11, [x33 * x146, x34 * x146]), (10, [x33 * x147, x34 * x147])], &v);
+    p.row(12, ((x38 - 1.0) * INVERSE_SCALE[12], 0.0), 23, [(12, [x36 * x148, x37 * x148]), (11, [x36 * x149, x37 * x149])], &v);
+    p.row(13, ((x41 - 1.0) * INVERSE_SCALE[13], 0.0), 25, [(13, [x39 * x150, x40 * x150]), (12, [x39 * x151, x40 * x151])], &v);
+    p.row(14, ((x44 - 1.0) * INVERSE_SCALE[14], 0.0), 27, [(14, [x42 * x152, x43 * x152]), (13, [x42 * x153, x43 * x153])], &v);
+    p.row(15, ((x47 - 1.0) * INVERSE_SCALE[15], 0.0), 29, [(15, [x45 * x154, x46 * x154]), (14, [x45 * x155, x46 * x155])], &v);
+    p.row(16, ((x50 - 1.0) * INVERSE_SCALE[16], 0.0), 31, [(16, [x48 * x156, x49 * x156]), (15, [x48 * x157, x49 * x157])], &v);
+    p.row(17, ((x53 - 1.0) * INVERSE_SCALE[17], 0.0), 33, [(17, [x51 * x158, x52 * x158]), (16, [x51 * x159, x52 * x159])], &v);
+    p.row(18, ((x56 - 1.0) * INVERSE_SCALE[18], 0.0), 35, [(18, [x54 * x160, x55 * x160]), (17, [x54 * x161, x55 * x161])], &v);
+    p.row(19, ((x59 - 1.0) * INVERSE_SCALE[19], 0.0), 37, [(19, [x57 * x162, x58 * x162]), (18, [x57 * x163, x58 * x163])], &v);
+    p.row(20, ((x62 - 1.0) * INVERSE_SCALE[20], 0.0), 39, [(20, [x60 * x164, x61 * x164]), (19, [x60 * x165, x61 * x165])], &v);
+    p.row(21, ((x65 - 1.0) * INVERSE_SCALE[21], 0.0), 41, [(21, [x63 * x166, x64 * x166]), (20, [x63 * x167, x64 * x167])], &v);
+    p.row(22, ((x68 - 1.0) * INVERSE_SCALE[22], 0.0), 43, [(22, [x66 * x168, x67 * x168]), (21, [x66 * x169, x67 * x169])], &v);
+    p.row(23, ((x71 - 1.0) * INVERSE_SCALE[23], 0.0), 45, [(23, [x69 * x170, x70 * x170]), (22, [x69 * x171, x70 * x171])], &v);
+    p.row(24, ((x74 - 1.0) * INVERSE_SCALE[24], 0.0), 47, [(24, [x72 * x172, x73 * x172]), (23, [x72 * x173, x73 * x173])], &v);
+    p.row(25, ((x77 - 1.0) * INVERSE_SCALE[25], 0.0), 49, [(25, [x75 * x174, x76 * x174]), (24, [x75 * x175, x76 * x175])], &v);
+    p.row(26, ((x80 - 1.0) * INVERSE_SCALE[26], 0.0), 51, [(26, [x78 * x176, x79 * x176]), (25, [x78 * x177, x79 * x177])], &v);
+    p.row(27, ((x83 - 1.0) * INVERSE_SCALE[27], 0.0), 53, [(27, [x81 * x178, x82 * x178]), (26, [x81 * x179, x82 * x179])], &v);
+    p.row(28, ((x86 - 1.0) * INVERSE_SCALE[28], 0.0), 55, [(28, [x84 * x180, x85 * x180]), (27, [x84 * x181, x85 * x181])], &v);
+    p.row(29, ((x89 - 1.0) * INVERSE_SCALE[29], 0.0), 57, [(29, [x87 * x182, x88 * x182]), (28, [x87 * x183, x88 * x183])], &v);
+    p.row(30, ((x92 - 1.0) * INVERSE_SCALE[30], 0.0), 59, [(30, [x90 * x184, x91 * x184]), (29, [x90 * x185, x91 * x185])], &v);
+    p.row(31, ((x95 - 1.0) * INVERSE_SCALE[31], 0.0), 61, [(31, [x93 * x186, x94 * x186]), (30, [x93 * x187, x94 * x187])], &v);
+    p.row(32, ((x98 - 1.0) * INVERSE_SCALE[32], 0.0), 63, [(32, [x96 * x188, x97 * x188]), (31, [x96 * x189, x97 * x189])], &v);
+    p.row(33, ((x101 - 1.0) * INVERSE_SCALE[33], 0.0), 65, [(33, [x99 * x190, x100 * x190]), (32, [x99 * x191, x100 * x191])], &v);
+    p.row(34, ((x104 - 1.0) * INVERSE_SCALE[34], 0.0), 67, [(34, [x102 * x192, x103 * x192]), (33, [x102 * x193, x103 * x193])], &v);
+    p.row(35, ((x107 - 1.0) * INVERSE_SCALE[35], 0.0), 69, [(35, [x105 * x194, x106 * x194]), (34, [x105 * x195, x106 * x195])], &v);
+    p.row(36, ((x110 - 1.0) * INVERSE_SCALE[36], 0.0), 71, [(36, [x108 * x196, x109 * x196]), (35, [x108 * x197, x109 * x197])], &v);
+    p.row(37, ((x113 - 1.0) * INVERSE_SCALE[37], 0.0), 73, [(37, [x111 * x198, x112 * x198]), (36, [x111 * x199, x112 * x199])], &v);
+    p.row(38, ((x116 - 1.0) * INVERSE_SCALE[38], 0.0), 75, [(38, [x114 * x200, x115 * x200]), (37, [x114 * x201, x115 * x201])], &v);
+    p.row(39, ((x119 - 1.0) * INVERSE_SCALE[39], 0.0), 77, [(39, [x117 * x202, x118 * x202]), (38, [x117 * x203, x118 * x203])], &v);
+    p.row(40, ((x122 - 1.0) * INVERSE_SCALE[40], 0.0), 79, [(40, [x120 * x204, x121 * x204]), (39, [x120 * x205, x121 * x205])], &v);
 }
 
 /// The state's time (0 when the file's state has none).
@@ -4918,13 +4804,14 @@ struct StepRows<const D: usize> {
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
 /// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
-/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
-/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ, in the step's order: `ENTRY_AT`);
+/// per slot 1/m (1/I) and F (τ). Arrays of the module's sizes, filled in place (`prepare`),
+/// so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
     value: [f64; CONSTRAINTS],
-    /// ∂C/∂t = Ċ − J·v at the evaluated state.
+    /// ∂C/∂t = Ċ − J·v at the evaluated state (0 on a `STEADY` row).
     time_rate: [f64; CONSTRAINTS],
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     effective_mass: [f64; CONSTRAINTS],
@@ -4940,12 +4827,12 @@ struct Prepared<const D: usize> {
     first: Option<usize>,
 }
 
-/// a·b, summed from 0 as the library sums its three components (the same number, zero's
-/// sign included).
+/// a·b, summed from the first product as the library's `velocity::dot_in` sums the scene's
+/// components (the same number, zero's sign included).
 #[inline(always)]
 fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    let mut s = 0.0;
-    for d in 0..D {
+    let mut s = a[0] * b[0];
+    for d in 1..D {
         s += a[d] * b[d];
     }
     s
@@ -4974,8 +4861,9 @@ impl<const D: usize> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
         for (k, row) in r.rows.iter().enumerate() {
+            // The derivation's order into the step's (`ENTRY_AT`).
             for (_, j) in &row.jacobian {
-                p.jacobian[e] = *j;
+                p.jacobian[ENTRY_AT[e]] = *j;
                 e += 1;
             }
             p.value[k] = row.value;
@@ -4995,7 +4883,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// With C/κ, J, 1/m and F in place and Ċ/κ in `time_rate`: each row's effective mass
-    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`.
+    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity` (0 on a
+    /// `STEADY` row, whose C reads no time).
     #[inline(always)]
     fn finish(&mut self, velocity: &[[f64; D]]) {
         for k in 0..CONSTRAINTS {
@@ -5003,16 +4892,19 @@ impl<const D: usize> Prepared<D> {
             for e in ROW_START[k]..ROW_START[k + 1] {
                 let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
                 m += self.inverse_mass[b] * dot(j, j);
-                jv += dot(j, &velocity[b]);
+                if !STEADY[k] {
+                    jv += dot(j, &velocity[b]);
+                }
             }
-            self.time_rate[k] -= jv;
+            self.time_rate[k] = if STEADY[k] { 0.0 } else { self.time_rate[k] - jv };
             self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
         }
     }
 
-    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
-    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
-    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` (not read on a `STEADY` row) and its
+    /// Jacobian `entries` (body, Jᵢ), stored from entry `first` on, with its effective mass
+    /// and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`: `finish`'s operations for
+    /// one row, its bodies' 1/m in place.
     #[inline(always)]
     fn row<const E: usize>(
         &mut self,
@@ -5026,10 +4918,12 @@ impl<const D: usize> Prepared<D> {
         for (e, (b, j)) in entries.iter().enumerate() {
             self.jacobian[first + e] = *j;
             m += self.inverse_mass[*b] * dot(j, j);
-            jv += dot(j, &velocity[*b]);
+            if !STEADY[k] {
+                jv += dot(j, &velocity[*b]);
+            }
         }
         self.value[k] = value;
-        self.time_rate[k] = rate - jv;
+        self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
         self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
     }
 
@@ -5037,7 +4931,9 @@ impl<const D: usize> Prepared<D> {
         CONSTRAINTS
     }
 
-    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
+    /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
+    /// wrote last is the last term).
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
         let mut c = self.time_rate[k];

@@ -516,10 +516,17 @@ const ORIENTATIONS: usize = 0;
 /// The slots whose principal axes the rows carry (all of them with 3D rigid bodies, else none).
 const AXES: usize = 0;
 
-/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.
+/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`, in the
+/// step's order (the last term of a row's Ċ the velocity the row before wrote last: `velocity::entry_order`).
 const ENTRIES: usize = 3;
 const ROW_START: [usize; 3] = [0, 1, 3];
-const ROW_BODY: [usize; 3] = [0, 0, 1];
+const ROW_BODY: [usize; 3] = [0, 1, 0];
+/// Per entry in the derivation's order (a row's bodies, then its angular slots), its place in the step's.
+#[allow(dead_code)]
+const ENTRY_AT: [usize; 3] = [0, 2, 1];
+/// Per row, whether its C reads no time: ∂C/∂t = 0 exactly (`numeric::velocity::steady_rows`).
+#[allow(dead_code)]
+const STEADY: [bool; 2] = [true, true];
 
 /// The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k
 /// of the step: effective mass m_eff = 1/(J M⁻¹ Jᵀ) = 1/A[k][k] (Σᵢ |Jᵢ|²/mᵢ, from these J), ∂C/∂t = Ċ − J·v,
@@ -539,13 +546,9 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x3 = s.r_p2[0] - s.r_p1[0];
     let x4 = s.r_p2[1] - s.r_p1[1];
     let x5 = norm2(x3, x4);
-    let x6 = s.v_p1[0] * x0 + s.v_p1[1] * x1;
-    let x7 = 1.0 / x2;
-    let x8 = s.v_p2[0] - s.v_p1[0];
-    let x9 = s.v_p2[1] - s.v_p1[1];
-    let x10 = x3 * x8 + x4 * x9;
-    let x11 = 1.0 / x5;
-    let x12 = -x11;
+    let x6 = 1.0 / x2;
+    let x7 = 1.0 / x5;
+    let x8 = -x7;
     let mut v = [[0.0; DIM]; SLOTS];
     p.inverse_mass[0] = 1.0 / 5.988023952095808;
     v[0] = [s.v_p1[0], s.v_p1[1]];
@@ -553,8 +556,8 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     p.inverse_mass[1] = 1.0 / 1005.0251256281408;
     v[1] = [s.v_p2[0], s.v_p2[1]];
     p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
-    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], (x6 * x7) * INVERSE_SCALE[0]), 0, [(0, [x0 * x7, x1 * x7])], &v);
-    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], (x10 * x11) * INVERSE_SCALE[1]), 1, [(0, [x3 * x12, x4 * x12]), (1, [x3 * x11, x4 * x11])], &v);
+    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], 0.0), 0, [(0, [x0 * x6, x1 * x6])], &v);
+    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], 0.0), 1, [(1, [x3 * x7, x4 * x7]), (0, [x3 * x8, x4 * x8])], &v);
 }
 
 /// The state's time (0 when the file's state has none).
@@ -1196,13 +1199,14 @@ struct StepRows<const D: usize> {
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
 /// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
-/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
-/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ, in the step's order: `ENTRY_AT`);
+/// per slot 1/m (1/I) and F (τ). Arrays of the module's sizes, filled in place (`prepare`),
+/// so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
     value: [f64; CONSTRAINTS],
-    /// ∂C/∂t = Ċ − J·v at the evaluated state.
+    /// ∂C/∂t = Ċ − J·v at the evaluated state (0 on a `STEADY` row).
     time_rate: [f64; CONSTRAINTS],
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     effective_mass: [f64; CONSTRAINTS],
@@ -1218,12 +1222,12 @@ struct Prepared<const D: usize> {
     first: Option<usize>,
 }
 
-/// a·b, summed from 0 as the library sums its three components (the same number, zero's
-/// sign included).
+/// a·b, summed from the first product as the library's `velocity::dot_in` sums the scene's
+/// components (the same number, zero's sign included).
 #[inline(always)]
 fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    let mut s = 0.0;
-    for d in 0..D {
+    let mut s = a[0] * b[0];
+    for d in 1..D {
         s += a[d] * b[d];
     }
     s
@@ -1252,8 +1256,9 @@ impl<const D: usize> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
         for (k, row) in r.rows.iter().enumerate() {
+            // The derivation's order into the step's (`ENTRY_AT`).
             for (_, j) in &row.jacobian {
-                p.jacobian[e] = *j;
+                p.jacobian[ENTRY_AT[e]] = *j;
                 e += 1;
             }
             p.value[k] = row.value;
@@ -1273,7 +1278,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// With C/κ, J, 1/m and F in place and Ċ/κ in `time_rate`: each row's effective mass
-    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`.
+    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity` (0 on a
+    /// `STEADY` row, whose C reads no time).
     #[inline(always)]
     fn finish(&mut self, velocity: &[[f64; D]]) {
         for k in 0..CONSTRAINTS {
@@ -1281,16 +1287,19 @@ impl<const D: usize> Prepared<D> {
             for e in ROW_START[k]..ROW_START[k + 1] {
                 let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
                 m += self.inverse_mass[b] * dot(j, j);
-                jv += dot(j, &velocity[b]);
+                if !STEADY[k] {
+                    jv += dot(j, &velocity[b]);
+                }
             }
-            self.time_rate[k] -= jv;
+            self.time_rate[k] = if STEADY[k] { 0.0 } else { self.time_rate[k] - jv };
             self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
         }
     }
 
-    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
-    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
-    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` (not read on a `STEADY` row) and its
+    /// Jacobian `entries` (body, Jᵢ), stored from entry `first` on, with its effective mass
+    /// and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`: `finish`'s operations for
+    /// one row, its bodies' 1/m in place.
     #[inline(always)]
     fn row<const E: usize>(
         &mut self,
@@ -1304,10 +1313,12 @@ impl<const D: usize> Prepared<D> {
         for (e, (b, j)) in entries.iter().enumerate() {
             self.jacobian[first + e] = *j;
             m += self.inverse_mass[*b] * dot(j, j);
-            jv += dot(j, &velocity[*b]);
+            if !STEADY[k] {
+                jv += dot(j, &velocity[*b]);
+            }
         }
         self.value[k] = value;
-        self.time_rate[k] = rate - jv;
+        self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
         self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
     }
 
@@ -1315,7 +1326,9 @@ impl<const D: usize> Prepared<D> {
         CONSTRAINTS
     }
 
-    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
+    /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
+    /// wrote last is the last term).
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
         let mut c = self.time_rate[k];

@@ -466,9 +466,10 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
     let roots = &step.roots;
     let slots = roots.slots(n);
     let rigid_3d = roots.three();
-    let (starts, bodies) = roots.entries(f);
+    let (starts, bodies, entry_at) = roots.entries(f);
     let (starts, bodies): (Vec<String>, Vec<String>) =
         (starts.iter().map(usize::to_string).collect(), bodies.iter().map(usize::to_string).collect());
+    let at: Vec<String> = entry_at.iter().map(usize::to_string).collect();
     let entries = bodies.len();
     let _ = writeln!(
         out,
@@ -491,7 +492,21 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
          the rigid bodies' angular slots). */"
     );
     let _ = writeln!(out, "static const int ROW_START[{}] = {{{}}};", k + 1, starts.join(", "));
-    let _ = writeln!(out, "static const int ROW_BODY[{}] = {{{}}};\n", entries.max(1), list(&bodies, entries));
+    let _ = writeln!(out, "static const int ROW_BODY[{}] = {{{}}};", entries.max(1), list(&bodies, entries));
+    let _ = writeln!(
+        out,
+        "/* In the step's order: the last term of a row's rate is the velocity the row before wrote last (the\n   \
+         library's velocity::entry_order). Per entry in the derivation's order, its place in the step's. */"
+    );
+    let _ = writeln!(out, "const int ENTRY_AT[{}] = {{{}}};", entries.max(1), list(&at, entries));
+    let steady: Vec<String> = roots.steady.iter().map(|&b| i32::from(b).to_string()).collect();
+    let _ = writeln!(
+        out,
+        "/* Per row, whether its C reads no time: dC/dt = 0 exactly (velocity::steady_rows). */\n\
+         static const int STEADY[{}] = {{{}}};\n",
+        k.max(1),
+        list(&steady, k)
+    );
     let _ = writeln!(
         out,
         "/* The rows of a state as the step reads them: per row C/kappa, its rate, c, J per entry; per slot\n   \
@@ -541,21 +556,30 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
             stores.push(format!("r->force[{first}][0] = {};\n    r->force[{first}][1] = 0.0;", next()));
         }
     }
-    let mut e = 0;
+    // Entry e_at in the derivation's order is kept at ENTRY_AT[e_at] (the step's order).
+    let mut e_at = 0;
     for (r, angular) in roots.angular_slots.iter().enumerate() {
         stores.push(format!("r->value[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
-        stores.push(format!("r->rate[{r}] = {} * INVERSE_SCALE[{r}];", paren(&next())));
+        // A steady row's rate is not read by the soft step and PGS (its code is left out).
+        let rate = next();
+        if rate.is_empty() {
+            stores.push(format!("r->rate[{r}] = 0.0;"));
+        } else {
+            stores.push(format!("r->rate[{r}] = {} * INVERSE_SCALE[{r}];", paren(&rate)));
+        }
         let bias = next();
         if !bias.is_empty() {
             stores.push(format!("r->bias[{r}] = {bias};"));
         }
         for _ in &f.jacobian[r] {
+            let e = entry_at[e_at];
             for d in 0..dim {
                 stores.push(format!("r->jacobian[{e}][{d}] = {};", next()));
             }
-            e += 1;
+            e_at += 1;
         }
         for &slot in angular {
+            let e = entry_at[e_at];
             if rigid_3d > 0 {
                 // Jʷ·eₖ: the axis' part of the world vector Jʷ.
                 let jw = vector(&mut next);
@@ -566,7 +590,7 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
             } else {
                 stores.push(format!("r->jacobian[{e}][0] = {};\n    r->jacobian[{e}][1] = 0.0;", next()));
             }
-            e += 1;
+            e_at += 1;
         }
     }
     let _ = writeln!(out, "/* The rows at a state (the Rust module's step_rows, one program over the same roots). */");

@@ -537,7 +537,7 @@ fn c_module(
                 .into_iter()
                 .filter_map(|b| system.bodies[b].rigid.as_ref().map(|r| (r.orientation, r.angular_velocity)))
                 .collect(),
-            roots: StepRoots::of(&plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
+            roots: StepRoots::of(&loaded.system, &plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
         }),
     };
     let code = super::c::emit(&ctx, &parts)?;
@@ -592,7 +592,7 @@ fn rust_module(
     }
     ctx.solution(&mut out, formulas, (&scene.a_code, &scene.b_code), &names, layout, &scene.turns)?;
     if let Some(solver) = options.solver {
-        let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+        let step = StepRoots::of(&loaded.system, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
         let places = StepPlaces::of(system, fields, &scene.turns);
         step_fns(&mut out, &ctx, solver, &inverse_scales(d), &places, &step, formulas, &names, layout)?;
     }
@@ -702,11 +702,22 @@ pub(super) struct StepRoots {
     pub(super) angular_slots: Vec<Vec<usize>>,
     /// Per rigid body: its first slot and whether it is 3D (three slots, one per axis).
     pub(super) turns: Vec<(usize, bool)>,
+    /// Per row, whether its C reads no time (`numeric::velocity::steady_rows`): ∂C/∂t = 0,
+    /// so the soft step and PGS leave its Ċ out (`swept`).
+    pub(super) steady: Vec<bool>,
 }
 
 impl StepRoots {
-    pub(super) fn of(layout: &Layout, masses: &[Id], bodies: &Bodies, turns: &Turns, formulas: &Formulas) -> StepRoots {
+    pub(super) fn of(
+        system: &crate::model::system::System,
+        layout: &Layout,
+        masses: &[Id],
+        bodies: &Bodies,
+        turns: &Turns,
+        formulas: &Formulas,
+    ) -> StepRoots {
         let n = layout.bodies;
+        let steady = crate::numeric::velocity::steady_rows(system);
         let mut roots = Vec::new();
         for ((&m, &v), &f) in masses.iter().zip(&bodies.velocity).zip(&bodies.applied).take(n) {
             roots.extend([m, v, f]);
@@ -730,7 +741,7 @@ impl StepRoots {
         let mut angular_slots = Vec::with_capacity(layout.constraints);
         for r in 0..layout.constraints {
             roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
-            swept.extend([true, true, false]);
+            swept.extend([true, !steady.get(r).copied().unwrap_or(false), false]);
             roots.extend(formulas.jacobian[r].iter().map(|&(_, j)| j));
             let mut slots = Vec::new();
             for &(b, jw) in &formulas.angular[r] {
@@ -748,6 +759,7 @@ impl StepRoots {
             swept,
             angular_slots,
             turns: rigid.into_iter().map(|(_, first, three)| (first, three)).collect(),
+            steady: (0..layout.constraints).map(|r| steady.get(r).copied().unwrap_or(false)).collect(),
         }
     }
 
@@ -761,9 +773,11 @@ impl StepRoots {
         self.turns.iter().filter(|t| t.1).count()
     }
 
-    /// Each row's Jacobian entries in the step's order (its bodies, then its angular slots),
-    /// as the slot of each: `ROW_START` (one more than the rows) and `ROW_BODY`.
-    pub(super) fn entries(&self, formulas: &Formulas) -> (Vec<usize>, Vec<usize>) {
+    /// Each row's Jacobian entries as the step keeps them: `ROW_START` (one more than the
+    /// rows), the slot of each in the step's order (`ROW_BODY`: the library's
+    /// `velocity::entry_orders` of the derivation's order, a row's bodies, then its angular
+    /// slots) and, per entry in the derivation's order, its place in the step's (`ENTRY_AT`).
+    pub(super) fn entries(&self, formulas: &Formulas) -> (Vec<usize>, Vec<usize>, Vec<usize>) {
         let mut starts = vec![0];
         let mut slots = Vec::new();
         for (dirs, angular) in formulas.jacobian.iter().zip(&self.angular_slots) {
@@ -771,7 +785,12 @@ impl StepRoots {
             slots.extend(angular);
             starts.push(slots.len());
         }
-        (starts, slots)
+        let order = crate::numeric::velocity::entry_orders(&starts, &slots);
+        let mut at = vec![0; order.len()];
+        for (place, &e) in order.iter().enumerate() {
+            at[e] = place;
+        }
+        (starts, order.iter().map(|&e| slots[e]).collect(), at)
     }
 
     /// The rigid body (its index among `turns`) and the axis of an angular slot.
@@ -802,7 +821,7 @@ fn step_fns(
     let n = layout.bodies;
     let slots = step.slots(n);
     let three = step.three() > 0;
-    let starts = step_constants(out, solver, inverse_scales, step, formulas, layout);
+    let (starts, entry_at) = step_constants(out, solver, inverse_scales, step, formulas, layout);
     // The derivation, row by row: what the step's helper text computes from these numbers.
     let mut doc = vec![
         "The rows the step solves, at a state: per slot 1/m, v and F (the scene's, `applied_forces`; a rigid body's angular slot 1/I, ω, τ), per row C/κ, Ċ/κ, c and J = ∇C/κ per slot (Jʷ in an angular slot). Per row k".to_string(),
@@ -923,12 +942,22 @@ fn step_fns(
                 array(&js)
             );
         } else {
+            // The entries in the step's order (`ENTRY_AT`), as `p.row` stores and sums them.
+            let mut kept = vec![String::new(); js.len()];
+            for (e, j) in js.into_iter().enumerate() {
+                kept[entry_at[start + e] - start] = j;
+            }
+            // A steady row's Ċ is not read (its code is left out: `swept`).
+            let rate = if scalars[1].is_empty() {
+                "0.0".to_string()
+            } else {
+                format!("{} * INVERSE_SCALE[{r}]", operand(&scalars[1]))
+            };
             let _ = writeln!(
                 out,
-                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {} * INVERSE_SCALE[{r}]), {start}, {}, &v);",
+                "    p.row({r}, ({} * INVERSE_SCALE[{r}], {rate}), {start}, {}, &v);",
                 operand(&scalars[0]),
-                operand(&scalars[1]),
-                array(&js)
+                array(&kept)
             );
         }
     }
@@ -1030,7 +1059,7 @@ fn step_module(
             );
         }
     }
-    let step = StepRoots::of(layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+    let step = StepRoots::of(&loaded.system, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
     super::shapes::step_by_shape(
         &mut out,
         &ctx,
@@ -1057,7 +1086,7 @@ fn step_module(
 
 /// The step's constants: `SOLVER`, `DEFAULT_ITERATIONS`, `INVERSE_SCALE`, the slots
 /// (`SLOTS`, `ORIENTATIONS`, `AXES`), and where each row's Jacobian entries are (`ENTRIES`,
-/// `ROW_START`, `ROW_BODY`, over the slots); returns `ROW_START`.
+/// `ROW_START`, `ROW_BODY`, over the slots, and `ENTRY_AT`); returns `ROW_START` and `ENTRY_AT`.
 pub(super) fn step_constants(
     out: &mut String,
     solver: Solver,
@@ -1065,7 +1094,7 @@ pub(super) fn step_constants(
     step: &StepRoots,
     formulas: &Formulas,
     layout: &Layout,
-) -> Vec<usize> {
+) -> (Vec<usize>, Vec<usize>) {
     let k = layout.constraints;
     let slots = step.slots(layout.bodies);
     let three = step.three();
@@ -1096,21 +1125,31 @@ pub(super) fn step_constants(
         if three > 0 { slots } else { 0 }
     );
     // Where each row's entries are, as `Prepared` reads them.
-    let (starts, bodies) = step.entries(formulas);
+    let (starts, bodies, at) = step.entries(formulas);
     let list = |xs: &[usize]| array(&xs.iter().map(usize::to_string).collect::<Vec<_>>());
     let _ = writeln!(
         out,
-        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`.\n\
+        "/// Jacobian entries of all rows; row k's are `ROW_START[k]..ROW_START[k + 1]`, entry e on slot `ROW_BODY[e]`, in the\n\
+         /// step's order (the last term of a row's Ċ the velocity the row before wrote last: `velocity::entry_order`).\n\
          const ENTRIES: usize = {};\n\
          const ROW_START: [usize; {}] = {};\n\
-         const ROW_BODY: [usize; {}] = {};\n",
+         const ROW_BODY: [usize; {}] = {};\n\
+         /// Per entry in the derivation's order (a row's bodies, then its angular slots), its place in the step's.\n\
+         #[allow(dead_code)]\n\
+         const ENTRY_AT: [usize; {}] = {};\n\
+         /// Per row, whether its C reads no time: ∂C/∂t = 0 exactly (`numeric::velocity::steady_rows`).\n\
+         #[allow(dead_code)]\n\
+         const STEADY: [bool; {k}] = {};\n",
         bodies.len(),
         k + 1,
         list(&starts),
         bodies.len(),
-        list(&bodies)
+        list(&bodies),
+        at.len(),
+        list(&at),
+        array(&step.steady.iter().map(bool::to_string).collect::<Vec<_>>())
     );
-    starts
+    (starts, at)
 }
 
 /// The state's accessors the step's text calls: `time`, `get` (the state's slots) and `put`.

@@ -85,9 +85,9 @@ enum Kind {
     Body,
     /// A rigid body's angular slots: I, ω, τ (2D, scalars), and in 3D its principal axes.
     Rigid,
-    /// A row with this many linear Jacobian entries: C, Ċ, each entry's J, then its Jʷ (one
-    /// per angular slot).
-    Row(usize),
+    /// A row with this many linear Jacobian entries: C, Ċ (not on a steady row, the flag:
+    /// `StepRoots::steady`), each entry's J, then its Jʷ (one per angular slot).
+    Row(usize, bool),
 }
 
 /// A shape: its program over local inputs, and its instances.
@@ -287,7 +287,10 @@ pub(super) fn step_by_shape(
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let (n, k, dim) = (layout.bodies, layout.constraints, layout.dim);
-    step_constants(out, solver, inverse_scales, step, formulas, layout);
+    let (_, entry_at) = step_constants(out, solver, inverse_scales, step, formulas, layout);
+    // Rows whose entries the step keeps in the derivation's order store entry e of a row at
+    // `ROW_START[i] + e`, the others through `ENTRY_AT` (`velocity::entry_order`).
+    let in_order = entry_at.iter().enumerate().all(|(e, &at)| e == at);
     let p = Program::lower_in(g, &step.roots, ctx.inputs)?;
     let (slots, widths) = slot_kinds(g, system, fields);
     // Items: per body its m, v, F roots; per rigid body I, ω, τ (and in 3D its three axes);
@@ -300,12 +303,13 @@ pub(super) fn step_by_shape(
         .collect();
     let mut rows = Vec::with_capacity(k);
     let mut at = 3 * n + per_rigid * step.turns.len();
-    for (dirs, angular) in formulas.jacobian.iter().zip(&step.angular_slots) {
+    for ((dirs, angular), &steady) in formulas.jacobian.iter().zip(&step.angular_slots).zip(&step.steady) {
         let entries = dirs.len() + angular.len();
-        let mut item = vec![at, at + 1];
+        // A steady row's Ċ is not read: its cone leaves it out.
+        let mut item = if steady { vec![at] } else { vec![at, at + 1] };
         item.extend((0..entries).map(|e| at + 3 + e));
         at += 3 + entries;
-        rows.push((Kind::Row(dirs.len()), item));
+        rows.push((Kind::Row(dirs.len(), steady), item));
     }
     let (mut others, mut next_other) = (FastMap::default(), 0u32);
     let (mut groups, mut list) = (FastMap::default(), Vec::new());
@@ -393,27 +397,29 @@ pub(super) fn step_by_shape(
                 let _ =
                     writeln!(out, "        ev[BODIES + i] = [o[1], 0.0];\n        p.force[BODIES + i] = [o[2], 0.0];");
             }
-            Kind::Row(linear) => {
+            Kind::Row(linear, steady) => {
                 // C/κ, Ċ/κ (into `time_rate`, which `finish` turns into ∂C/∂t) and J: a pass of
                 // its own, so the divisions of one row's m_eff do not wait on its J's. Jʷ after
                 // the linear entries: 2D one number per slot, 3D the world vector, projected
                 // on the slot's axis (`prepare` of the row-by-row module).
                 let width = if three { 3 } else { 1 };
-                let angular = (shape.outputs.len() - 2 - linear * dim) / width;
+                let base = if steady { 1 } else { 2 };
+                let angular = (shape.outputs.len() - base - linear * dim) / width;
                 let _ = writeln!(out, "        let e = ROW_START[i];");
-                let _ = writeln!(
-                    out,
-                    "        p.value[i] = o[0] * INVERSE_SCALE[i];\n        p.time_rate[i] = o[1] * INVERSE_SCALE[i];"
-                );
+                let _ = writeln!(out, "        p.value[i] = o[0] * INVERSE_SCALE[i];");
+                if !steady {
+                    let _ = writeln!(out, "        p.time_rate[i] = o[1] * INVERSE_SCALE[i];");
+                }
                 for e in 0..linear + angular {
                     let at = if e == 0 { "e".to_string() } else { format!("e + {e}") };
+                    let at = if in_order { at } else { format!("ENTRY_AT[{at}]") };
                     let value = if e < linear {
-                        comps(2 + e * dim)
+                        comps(base + e * dim)
                     } else if three {
-                        let from = 2 + linear * dim + (e - linear) * 3;
+                        let from = base + linear * dim + (e - linear) * 3;
                         format!("[dot3(&p.axes[ROW_BODY[{at}]], &{}), 0.0, 0.0]", array(&list(from, 3)))
                     } else {
-                        format!("[o[{}], 0.0]", 2 + linear * dim + (e - linear))
+                        format!("[o[{}], 0.0]", base + linear * dim + (e - linear))
                     };
                     let _ = writeln!(out, "        p.jacobian[{at}] = {value};");
                 }
@@ -472,7 +478,7 @@ fn shape_fn(
     ctx.room.set(local.room.get());
     ctx.non_finite.set(ctx.non_finite.get() + local.non_finite.get());
     let first = shape.items[0];
-    let what = if let Kind::Row(_) = shape.kind {
+    let what = if let Kind::Row(..) = shape.kind {
         format!(
             "{} row(s) like `{}`: C = {}",
             shape.items.len(),

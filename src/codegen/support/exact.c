@@ -16,9 +16,10 @@ static void solve_input(const Prepared *p, Rows *rows) {
         rows->bias[k] = p->bias[k];
         rows->inequality[k] = INEQUALITY[k];
     }
+    /* The solve's entries in the derivation's order, the step's at ENTRY_AT. */
     for (e = 0; e < ROW_ENTRIES; e++) {
         for (d = 0; d < DIM; d++) {
-            rows->jacobian[e][d] = p->jacobian[e][d];
+            rows->jacobian[e][d] = p->jacobian[ENTRY_AT[e]][d];
         }
     }
 }

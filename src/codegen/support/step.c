@@ -23,10 +23,11 @@ StepSettings step_settings_default(void) {
     return s;
 }
 
+/* a.b summed from the first product, as the library's velocity::dot_in. */
 static double lg_dot(const double *a, const double *b) {
-    double s = 0.0;
+    double s = a[0] * b[0];
     int d;
-    for (d = 0; d < DIM; d++) {
+    for (d = 1; d < DIM; d++) {
         s += a[d] * b[d];
     }
     return s;
@@ -40,14 +41,18 @@ static void prepare(const State *s, Prepared *p) {
         double m = 0.0, jv = 0.0;
         for (e = ROW_START[k]; e < ROW_START[k + 1]; e++) {
             m += p->inverse_mass[ROW_BODY[e]] * lg_dot(p->jacobian[e], p->jacobian[e]);
-            jv += lg_dot(p->jacobian[e], p->velocity[ROW_BODY[e]]);
+            if (!STEADY[k]) {
+                jv += lg_dot(p->jacobian[e], p->velocity[ROW_BODY[e]]);
+            }
         }
-        p->time_rate[k] = p->rate[k] - jv;
+        /* 0 exactly where C reads no time. */
+        p->time_rate[k] = STEADY[k] ? 0.0 : p->rate[k] - jv;
         p->effective_mass[k] = (m > 0.0 && isfinite(m)) ? 1.0 / m : 0.0;
     }
     p->first = first_angular(p);
 }
 
+/* dC/dt + sum of J_i.u_i, in that order over the entries in the step's order. */
 static double row_rate(const Prepared *p, int k, double u[][DIM]) {
     double c = p->time_rate[k];
     int e;

@@ -125,13 +125,14 @@ struct StepRows<const D: usize> {
 
 /// The rows of one substep, flattened: per row its C/κ, ∂C/∂t, effective mass
 /// 1/(J M⁻¹ Jᵀ) and its Jacobian entries `ROW_START[k]..ROW_START[k + 1]` (entry e on slot
-/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ); per slot 1/m (1/I) and F (τ). Arrays
-/// of the module's sizes, filled in place (`prepare`), so a step allocates nothing.
+/// `ROW_BODY[e]`: a body's Jᵛ or an angular slot's Jʷ, in the step's order: `ENTRY_AT`);
+/// per slot 1/m (1/I) and F (τ). Arrays of the module's sizes, filled in place (`prepare`),
+/// so a step allocates nothing.
 #[allow(dead_code)]
 struct Prepared<const D: usize> {
     jacobian: [[f64; D]; ENTRIES],
     value: [f64; CONSTRAINTS],
-    /// ∂C/∂t = Ċ − J·v at the evaluated state.
+    /// ∂C/∂t = Ċ − J·v at the evaluated state (0 on a `STEADY` row).
     time_rate: [f64; CONSTRAINTS],
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     effective_mass: [f64; CONSTRAINTS],
@@ -147,12 +148,12 @@ struct Prepared<const D: usize> {
     first: Option<usize>,
 }
 
-/// a·b, summed from 0 as the library sums its three components (the same number, zero's
-/// sign included).
+/// a·b, summed from the first product as the library's `velocity::dot_in` sums the scene's
+/// components (the same number, zero's sign included).
 #[inline(always)]
 fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
-    let mut s = 0.0;
-    for d in 0..D {
+    let mut s = a[0] * b[0];
+    for d in 1..D {
         s += a[d] * b[d];
     }
     s
@@ -181,8 +182,9 @@ impl<const D: usize> Prepared<D> {
         let mut p = Prepared::zeroed();
         let mut e = 0;
         for (k, row) in r.rows.iter().enumerate() {
+            // The derivation's order into the step's (`ENTRY_AT`).
             for (_, j) in &row.jacobian {
-                p.jacobian[e] = *j;
+                p.jacobian[ENTRY_AT[e]] = *j;
                 e += 1;
             }
             p.value[k] = row.value;
@@ -202,7 +204,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// With C/κ, J, 1/m and F in place and Ċ/κ in `time_rate`: each row's effective mass
-    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`.
+    /// 1/Σᵢ |Jᵢ|²/mᵢ and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity` (0 on a
+    /// `STEADY` row, whose C reads no time).
     #[inline(always)]
     fn finish(&mut self, velocity: &[[f64; D]]) {
         for k in 0..CONSTRAINTS {
@@ -210,16 +213,19 @@ impl<const D: usize> Prepared<D> {
             for e in ROW_START[k]..ROW_START[k + 1] {
                 let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
                 m += self.inverse_mass[b] * dot(j, j);
-                jv += dot(j, &velocity[b]);
+                if !STEADY[k] {
+                    jv += dot(j, &velocity[b]);
+                }
             }
-            self.time_rate[k] -= jv;
+            self.time_rate[k] = if STEADY[k] { 0.0 } else { self.time_rate[k] - jv };
             self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
         }
     }
 
-    /// Row k at a state: C/κ `value`, Ċ/κ `rate` and its Jacobian `entries` (body, Jᵢ), stored
-    /// from entry `first` on, with its effective mass and ∂C/∂t = Ċ/κ − J·v at the evaluated
-    /// velocities `velocity`: `finish`'s operations for one row, its bodies' 1/m in place.
+    /// Row k at a state: C/κ `value`, Ċ/κ `rate` (not read on a `STEADY` row) and its
+    /// Jacobian `entries` (body, Jᵢ), stored from entry `first` on, with its effective mass
+    /// and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`: `finish`'s operations for
+    /// one row, its bodies' 1/m in place.
     #[inline(always)]
     fn row<const E: usize>(
         &mut self,
@@ -233,10 +239,12 @@ impl<const D: usize> Prepared<D> {
         for (e, (b, j)) in entries.iter().enumerate() {
             self.jacobian[first + e] = *j;
             m += self.inverse_mass[*b] * dot(j, j);
-            jv += dot(j, &velocity[*b]);
+            if !STEADY[k] {
+                jv += dot(j, &velocity[*b]);
+            }
         }
         self.value[k] = value;
-        self.time_rate[k] = rate - jv;
+        self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
         self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
     }
 
@@ -244,7 +252,9 @@ impl<const D: usize> Prepared<D> {
         CONSTRAINTS
     }
 
-    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
+    /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
+    /// wrote last is the last term).
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
         let mut c = self.time_rate[k];

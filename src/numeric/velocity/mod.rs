@@ -9,7 +9,8 @@
 //! C/κ, Ċ/κ and J = ∇C/κ per slot, per slot 1/m, v and F. The rows are evaluated at the
 //! positions each substep starts from and held fixed within the substep, as Box2D holds a
 //! joint's anchors between position updates. Ċ at any velocity u is J·u + ∂C/∂t, with
-//! ∂C/∂t = Ċ − J·v taken from the rows (so moving constraints work). A row's impulse P acts
+//! ∂C/∂t = Ċ − J·v taken from the rows (so moving constraints work), and 0 exactly for a row
+//! whose C reads no time ([`steady_rows`]). A row's impulse P acts
 //! as Δvᵢ = (1/mᵢ) Jᵢ P; with J = ∇C/κ, P refers to C/κ as λ does, and P/h ≈ λ.
 //!
 //! Rigid bodies (2D) need nothing of their own: a state's slots are the bodies, then one
@@ -65,7 +66,8 @@ use super::integrate::Vectors;
 use super::rotation;
 use super::rows::Rows;
 use super::simulate::SettingsError;
-use super::vector::dot;
+use crate::expr::graph::SymbolWalk;
+use crate::model::system::System;
 
 /// Which velocity-level solver a run uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -259,15 +261,17 @@ impl Settings {
 
 /// The rows of one substep, flattened for the sequential-impulse loops: per row its C/κ,
 /// ∂C/∂t, effective mass 1/(J M⁻¹ Jᵀ) and its Jacobian entries (slot, Jᵢ: a body's Jᵛ or an
-/// angular slot's Jʷ); per slot 1/m (1/I) and F (τ).
+/// angular slot's Jʷ) in the order of [`entry_order`]; per slot 1/m (1/I) and F (τ).
 #[derive(Clone, Debug, Default)]
 pub struct Prepared {
+    /// The scene's dimension: a product Jᵢ·uᵢ sums this many components ([`dot_in`]).
+    pub dim: usize,
     /// Entries of row k: `start[k]..start[k + 1]`.
     pub start: Vec<usize>,
     pub body: Vec<usize>,
     pub jacobian: Vec<[f64; 3]>,
     pub value: Vec<f64>,
-    /// ∂C/∂t = Ċ − J·v at the evaluated state.
+    /// ∂C/∂t = Ċ − J·v at the evaluated state (0 on a steady row).
     pub time_rate: Vec<f64>,
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     pub effective_mass: Vec<f64>,
@@ -281,6 +285,69 @@ pub struct Prepared {
     pub velocity: Vec<[f64; 3]>,
     /// The first 3D rigid body's first slot (`None` without 3D rigid bodies).
     pub first: Option<usize>,
+    /// Per row, whether its C reads no time ([`steady_rows`]): its ∂C/∂t is 0 exactly, taken
+    /// as 0 rather than as Ċ − J·v (round-off that reads the velocities). Empty, or not one
+    /// per row: none.
+    pub steady: Vec<bool>,
+    /// Scratch: one row's entries in [`entry_order`].
+    order: Vec<usize>,
+}
+
+/// Per constraint of `system` (one row each), whether its C reads no time, so that
+/// ∂C/∂t = 0 exactly ([`Prepared::steady`]; a generated module's `STEADY`, which leaves such
+/// a row's Ċ out of its code).
+pub fn steady_rows(system: &System) -> Vec<bool> {
+    let mut walk = SymbolWalk::default();
+    system.constraints.iter().map(|c| !walk.free_symbols(&system.graph, c.c).contains(&system.time)).collect()
+}
+
+/// a·b over the first `dim` components, summed from the first product (no leading zero): the
+/// sum a generated module of that dimension writes (its `dot`), zero's sign included.
+#[inline(always)]
+pub fn dot_in(dim: usize, a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    let mut s = a[0] * b[0];
+    for d in 1..dim.min(3) {
+        s += a[d] * b[d];
+    }
+    s
+}
+
+/// The order in which the step keeps a row's Jacobian entries (in [`Prepared`] and a generated
+/// module's `ROW_BODY`), so that a Gauss–Seidel sweep's Ċ = ∂C/∂t + Σᵢ Jᵢ·uᵢ, summed in that
+/// order, adds the velocity the previous row wrote last as its last term: after a row whose
+/// entries are on the slots `previous` (in its order), first the row's entries on slots the
+/// previous row does not touch, in the derivation's order, then those it does, in the order
+/// the previous row applied them. Pushes onto `order` the indices `0..len` of the row's
+/// entries (entry e on slot `slot(e)`). A chain's row k (bodies k − 1 and k, after a row that
+/// wrote k − 1 last) sums its body k first: the path from one row's impulse to the next row's
+/// is one product and two additions, as a handwritten n·(v_b − v_a) (Box2D
+/// `b2SolveDistanceJoint`) has it.
+pub fn entry_order(previous: &[usize], len: usize, slot: impl Fn(usize) -> usize, order: &mut Vec<usize>) {
+    order.extend((0..len).filter(|&e| !previous.contains(&slot(e))));
+    for (i, p) in previous.iter().enumerate() {
+        if !previous[..i].contains(p) {
+            order.extend((0..len).filter(|&e| slot(e) == *p));
+        }
+    }
+}
+
+/// [`entry_order`] over all rows, each after the one before it (row 0 after none): rows k's
+/// entries are `starts[k]..starts[k + 1]` on the slots `slots`; returns per place of the
+/// step's order the index of the entry there in the derivation's order.
+pub fn entry_orders(starts: &[usize], slots: &[usize]) -> Vec<usize> {
+    let mut order = Vec::with_capacity(slots.len());
+    let mut kept: Vec<usize> = Vec::new();
+    for k in 0..starts.len().saturating_sub(1) {
+        let (a, b) = (starts[k], starts[k + 1]);
+        let at = order.len();
+        let previous = std::mem::take(&mut kept);
+        entry_order(&previous, b - a, |e| slots[a + e], &mut order);
+        for e in &mut order[at..] {
+            *e += a;
+        }
+        kept = order[at..].iter().map(|&e| slots[e]).collect();
+    }
+    order
 }
 
 impl Prepared {
@@ -300,17 +367,30 @@ impl Prepared {
         if self.first.is_some() {
             self.velocity.clone_from(&rows.velocity);
         }
-        for row in &rows.rows {
-            self.start.push(self.body.len());
+        self.dim = rows.dim;
+        let dim = rows.dim;
+        let mut previous = 0;
+        // The flags are the system's, one per row; rows of another count take none.
+        let flags = self.steady.len() == rows.rows.len();
+        for (r, row) in rows.rows.iter().enumerate() {
+            let steady = flags && self.steady[r];
+            let at = self.body.len();
+            self.start.push(at);
+            self.order.clear();
+            entry_order(&self.body[previous..at], row.jacobian.len(), |e| row.jacobian[e].0, &mut self.order);
+            previous = at;
             let (mut k, mut jv) = (0.0, 0.0);
-            for (b, j) in &row.jacobian {
+            for &e in &self.order {
+                let (b, j) = (&row.jacobian[e].0, &row.jacobian[e].1);
                 self.body.push(*b);
                 self.jacobian.push(*j);
-                k += rows.inverse_mass[*b] * dot(j, j);
-                jv += dot(j, &rows.velocity[*b]);
+                k += rows.inverse_mass[*b] * dot_in(dim, j, j);
+                if !steady {
+                    jv += dot_in(dim, j, &rows.velocity[*b]);
+                }
             }
             self.value.push(row.value);
-            self.time_rate.push(row.rate - jv);
+            self.time_rate.push(if steady { 0.0 } else { row.rate - jv });
             self.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
             self.inequality.push(row.inequality);
         }
@@ -325,11 +405,12 @@ impl Prepared {
         self.value.is_empty()
     }
 
-    /// Ċₖ at velocities `u`: Σᵢ Jₖᵢ·uᵢ + ∂Cₖ/∂t.
+    /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the entries in
+    /// [`entry_order`], each product over the scene's components ([`dot_in`]).
     pub fn rate(&self, k: usize, u: &Vectors) -> f64 {
         let mut c = self.time_rate[k];
         for e in self.start[k]..self.start[k + 1] {
-            c += dot(&self.jacobian[e], &u[self.body[e]]);
+            c += dot_in(self.dim, &self.jacobian[e], &u[self.body[e]]);
         }
         c
     }
@@ -479,6 +560,10 @@ impl Stepper {
         v: &mut Vectors,
         rows: Rows,
     ) -> Result<(), SimError> {
+        // Once per stepper: which rows have ∂C/∂t = 0 exactly.
+        if self.prepared.steady.is_empty() {
+            self.prepared.steady = steady_rows(dynamics.system());
+        }
         match self.settings.solver {
             Solver::SoftStep => soft_step::step(self, dynamics, t, q, v, rows),
             Solver::Pgs => pgs::step(self, dynamics, t, q, v, rows),
