@@ -1049,26 +1049,41 @@ fn finish_into(
     let lambda = &mut out.lambda;
     lambda.clear();
     lambda.resize(k, 0.0);
-    debug_assert_eq!(index.len(), mu.len());
-    for (&q, &m) in index.iter().zip(mu) {
-        let l = scaled.unscale(q, m);
-        lambda[q] = l;
-        // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
-        // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
-        if m != 0.0 && !l.is_normal() {
-            diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: l });
-        }
-    }
-    // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
     let constraint_force = &mut out.constraint_force;
     constraint_force.clear();
     constraint_force.resize(n_bodies, [0.0; 3]);
-    for (&q, &m) in index.iter().zip(mu) {
-        for (body, j) in scaled.jacobian(q) {
+    debug_assert_eq!(index.len(), mu.len());
+    // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
+    // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
+    let out_of_range = |q: usize, m: f64, l: f64, diagnostics: &mut Vec<Diagnostic>| {
+        if m != 0.0 && !l.is_normal() {
+            diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: l });
+        }
+    };
+    // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow. Row by row, each row's parts in order.
+    let add = |constraint_force: &mut [[f64; 3]], m: f64, parts: &[(usize, [f64; 3])]| {
+        for (body, j) in parts {
             let f = &mut constraint_force[*body];
             f[0] += m * j[0];
             f[1] += m * j[1];
             f[2] += m * j[2];
+        }
+    };
+    if index.len() == k {
+        // Every row takes part (`index` is 0..k, as in every cached solve): one pass along
+        // the scaled parts, the same numbers in the same order as the loop below.
+        let mut from = 0;
+        for (q, ((l, &m), to)) in lambda.iter_mut().zip(mu).zip(&scaled.start[1..]).enumerate() {
+            *l = scaled.unscale(q, m);
+            out_of_range(q, m, *l, &mut diagnostics);
+            add(constraint_force, m, &scaled.parts[from..*to]);
+            from = *to;
+        }
+    } else {
+        for (&q, &m) in index.iter().zip(mu) {
+            lambda[q] = scaled.unscale(q, m);
+            out_of_range(q, m, lambda[q], &mut diagnostics);
+            add(constraint_force, m, scaled.jacobian(q));
         }
     }
     out.acceleration.clear();
