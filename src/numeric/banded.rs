@@ -90,12 +90,42 @@ impl Banded {
 
     /// [`cholesky`](Banded::cholesky) into `factor`, reusing its storage.
     pub fn cholesky_into(&self, pivot_floor: f64, factor: &mut BandedCholesky) -> Result<(), usize> {
+        factor.n = self.n;
+        factor.w = self.w;
+        factor.l.clear();
+        factor.l.resize(self.n * (self.w + 1), 0.0);
+        if self.w == 1 {
+            self.tridiagonal_factor(pivot_floor, &mut factor.l)
+        } else {
+            self.band_factor(pivot_floor, &mut factor.l)
+        }
+    }
+
+    /// A tridiagonal's factor (chains) into `l` (zeroed, of the band's size): the general
+    /// loop's sums in its order, without its inner loops. Row i's off-diagonal
+    /// Lᵢ,ᵢ₋₁ = Aᵢ,ᵢ₋₁/Lᵢ₋₁,ᵢ₋₁ (nothing to subtract: the rows share no earlier column), then
+    /// Lᵢᵢ = √(Aᵢᵢ − Lᵢ,ᵢ₋₁²).
+    fn tridiagonal_factor(&self, pivot_floor: f64, l: &mut [f64]) -> Result<(), usize> {
+        let n = self.n;
+        let (a, l) = (&self.data[..2 * n], &mut l[..2 * n]);
+        for i in 0..n {
+            let mut s = a[2 * i + 1];
+            if i > 0 {
+                let below = a[2 * i] / l[2 * i - 1];
+                l[2 * i] = below;
+                s -= below * below;
+            }
+            if s.is_nan() || s <= pivot_floor {
+                return Err(i);
+            }
+            l[2 * i + 1] = s.sqrt();
+        }
+        Ok(())
+    }
+
+    /// The factor of any bandwidth into `l` (zeroed, of the band's size).
+    fn band_factor(&self, pivot_floor: f64, l: &mut [f64]) -> Result<(), usize> {
         let (n, w) = (self.n, self.w);
-        factor.n = n;
-        factor.w = w;
-        let l = &mut factor.l;
-        l.clear();
-        l.resize(n * (w + 1), 0.0);
         for i in 0..n {
             let lo = i.saturating_sub(w);
             for j in lo..=i {
@@ -260,6 +290,29 @@ mod tests {
         ch.solve_in_place(&mut b);
         for (got, want) in b.iter().zip(&x) {
             assert!((got - want).abs() < 1e-13, "{got} vs {want}");
+        }
+    }
+
+    proptest::proptest! {
+        /// The tridiagonal factor is the general loop's bit for bit, and fails at the same
+        /// row (matrices near singular and indefinite included).
+        #[test]
+        fn tridiagonal_factor_is_the_general_one(
+            entries in proptest::collection::vec((0.0f64..4.0, -2.0f64..2.0), 1..40),
+        ) {
+            let n = entries.len();
+            let mut a = Banded::zeros(n, 1);
+            for (i, &(d, e)) in entries.iter().enumerate() {
+                a.add(i, i, d);
+                if i > 0 {
+                    a.add(i, i - 1, e);
+                }
+            }
+            let (mut fast, mut general) = (vec![0.0; 2 * n], vec![0.0; 2 * n]);
+            let (got, want) = (a.tridiagonal_factor(1e-10, &mut fast), a.band_factor(1e-10, &mut general));
+            proptest::prop_assert_eq!(got, want);
+            let bits = |l: &[f64]| l.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            proptest::prop_assert_eq!(bits(&fast), bits(&general));
         }
     }
 
