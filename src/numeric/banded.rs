@@ -65,6 +65,19 @@ impl Banded {
             }
             return;
         }
+        if w == 0 {
+            // A diagonal (rows on disjoint bodies: a pendulum): the loop below's sums.
+            for ((yi, xi), d) in y.iter_mut().zip(x).zip(&self.data[..n]) {
+                *yi = 0.0 + (0.0 + d * xi);
+            }
+            return;
+        }
+        self.band_mul(x, y);
+    }
+
+    /// y = A x for any bandwidth (`x` and `y` of the matrix's size).
+    fn band_mul(&self, x: &[f64], y: &mut [f64]) {
+        let (n, w) = (self.n, self.w);
         y.fill(0.0);
         for i in 0..n {
             let lo = i.saturating_sub(w);
@@ -90,12 +103,54 @@ impl Banded {
 
     /// [`cholesky`](Banded::cholesky) into `factor`, reusing its storage.
     pub fn cholesky_into(&self, pivot_floor: f64, factor: &mut BandedCholesky) -> Result<(), usize> {
+        factor.n = self.n;
+        factor.w = self.w;
+        factor.l.clear();
+        factor.l.resize(self.n * (self.w + 1), 0.0);
+        match self.w {
+            0 => self.diagonal_factor(pivot_floor, &mut factor.l),
+            1 => self.tridiagonal_factor(pivot_floor, &mut factor.l),
+            _ => self.band_factor(pivot_floor, &mut factor.l),
+        }
+    }
+
+    /// A diagonal's factor (rows on disjoint bodies: a pendulum) into `l` (of the band's
+    /// size): Lᵢᵢ = √Aᵢᵢ, as the general loop takes it.
+    fn diagonal_factor(&self, pivot_floor: f64, l: &mut [f64]) -> Result<(), usize> {
+        for (i, (li, &s)) in l.iter_mut().zip(&self.data[..self.n]).enumerate() {
+            if s.is_nan() || s <= pivot_floor {
+                return Err(i);
+            }
+            *li = s.sqrt();
+        }
+        Ok(())
+    }
+
+    /// A tridiagonal's factor (chains) into `l` (zeroed, of the band's size): the general
+    /// loop's sums in its order, without its inner loops. Row i's off-diagonal
+    /// Lᵢ,ᵢ₋₁ = Aᵢ,ᵢ₋₁/Lᵢ₋₁,ᵢ₋₁ (nothing to subtract: the rows share no earlier column), then
+    /// Lᵢᵢ = √(Aᵢᵢ − Lᵢ,ᵢ₋₁²).
+    fn tridiagonal_factor(&self, pivot_floor: f64, l: &mut [f64]) -> Result<(), usize> {
+        let n = self.n;
+        let (a, l) = (&self.data[..2 * n], &mut l[..2 * n]);
+        for i in 0..n {
+            let mut s = a[2 * i + 1];
+            if i > 0 {
+                let below = a[2 * i] / l[2 * i - 1];
+                l[2 * i] = below;
+                s -= below * below;
+            }
+            if s.is_nan() || s <= pivot_floor {
+                return Err(i);
+            }
+            l[2 * i + 1] = s.sqrt();
+        }
+        Ok(())
+    }
+
+    /// The factor of any bandwidth into `l` (zeroed, of the band's size).
+    fn band_factor(&self, pivot_floor: f64, l: &mut [f64]) -> Result<(), usize> {
         let (n, w) = (self.n, self.w);
-        factor.n = n;
-        factor.w = w;
-        let l = &mut factor.l;
-        l.clear();
-        l.resize(n * (w + 1), 0.0);
         for i in 0..n {
             let lo = i.saturating_sub(w);
             for j in lo..=i {
@@ -166,6 +221,22 @@ impl BandedCholesky {
             }
             return;
         }
+        if w == 0 {
+            // A diagonal's factor: the general loop's two divisions, the first after
+            // subtracting its empty sum (−0, which turns a −0 right-hand side into +0).
+            for (xi, l) in x.iter_mut().zip(&self.l[..n]) {
+                *xi = ((*xi - -0.0) / l) / l;
+            }
+            return;
+        }
+        self.band_solve(x);
+    }
+
+    /// [`solve_in_place`](BandedCholesky::solve_in_place) for any bandwidth (`x` of the
+    /// factor's size).
+    fn band_solve(&self, x: &mut [f64]) {
+        let (n, w) = (self.n, self.w);
+        let x = &mut x[..n];
         // Row i of L is `l[i (w + 1) ..][..w + 1]`, entry (i, k) at w + k − i: the same sums
         // in the same order as indexing (i, k), on slices the compiler can keep in registers.
         for i in 0..n {
@@ -260,6 +331,65 @@ mod tests {
         ch.solve_in_place(&mut b);
         for (got, want) in b.iter().zip(&x) {
             assert!((got - want).abs() < 1e-13, "{got} vs {want}");
+        }
+    }
+
+    proptest::proptest! {
+        /// The tridiagonal factor is the general loop's bit for bit, and fails at the same
+        /// row (matrices near singular and indefinite included).
+        #[test]
+        fn tridiagonal_factor_is_the_general_one(
+            entries in proptest::collection::vec((0.0f64..4.0, -2.0f64..2.0), 1..40),
+        ) {
+            let n = entries.len();
+            let mut a = Banded::zeros(n, 1);
+            for (i, &(d, e)) in entries.iter().enumerate() {
+                a.add(i, i, d);
+                if i > 0 {
+                    a.add(i, i - 1, e);
+                }
+            }
+            let (mut fast, mut general) = (vec![0.0; 2 * n], vec![0.0; 2 * n]);
+            let (got, want) = (a.tridiagonal_factor(1e-10, &mut fast), a.band_factor(1e-10, &mut general));
+            proptest::prop_assert_eq!(got, want);
+            let bits = |l: &[f64]| l.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            proptest::prop_assert_eq!(bits(&fast), bits(&general));
+        }
+    }
+
+    proptest::proptest! {
+        /// A diagonal's product, factor and solve are the general loops' bit for bit (a −0
+        /// right-hand side included), and its factor fails at the same row.
+        #[test]
+        fn diagonal_paths_are_the_general_ones(
+            entries in proptest::collection::vec((-0.5f64..4.0, -3.0f64..3.0), 1..20),
+            negative_zero in 0usize..20,
+        ) {
+            let n = entries.len();
+            let mut a = Banded::zeros(n, 0);
+            for (i, &(d, _)) in entries.iter().enumerate() {
+                a.add(i, i, d);
+            }
+            let mut x: Vec<f64> = entries.iter().map(|&(_, x)| x).collect();
+            if negative_zero < n {
+                x[negative_zero] = -0.0;
+            }
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            let (mut fast, mut general) = (vec![1.0; n], vec![2.0; n]);
+            a.mul(&x, &mut fast);
+            a.band_mul(&x, &mut general);
+            proptest::prop_assert_eq!(bits(&fast), bits(&general));
+            let (mut fast, mut general) = (vec![0.0; n], vec![0.0; n]);
+            let (got, want) = (a.diagonal_factor(1e-10, &mut fast), a.band_factor(1e-10, &mut general));
+            proptest::prop_assert_eq!(got, want);
+            proptest::prop_assert_eq!(bits(&fast), bits(&general));
+            if got.is_ok() {
+                let factor = BandedCholesky { n, w: 0, l: fast };
+                let (mut fast, mut general) = (x.clone(), x.clone());
+                factor.solve_in_place(&mut fast);
+                factor.band_solve(&mut general);
+                proptest::prop_assert_eq!(bits(&fast), bits(&general));
+            }
         }
     }
 

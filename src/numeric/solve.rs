@@ -309,16 +309,23 @@ fn bad_inverse_mass(w: f64) -> Option<NonFinite> {
 fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Option<(RowPart, NonFinite)> {
     // The common case first, without branches: x·0 is 0 for every finite x and NaN
     // otherwise, so the sum is 0 exactly when every number is finite (and every mass ≥ 0).
-    let zero = |s: f64, x: &f64| s + x * 0.0;
-    let mut sum = zero(0.0, &row.bias);
+    // Written out rather than as a chain of iterators: this runs for every row of every
+    // factorisation.
+    let mut sum = 0.0 + row.bias * 0.0;
     let mut masses = true;
     for (body, j) in &row.jacobian {
-        let w = rows.inverse_mass[*body];
+        let (w, v, f) = (rows.inverse_mass[*body], &rows.velocity[*body], &rows.force[*body]);
         masses &= w >= 0.0;
-        sum = j.iter().chain(&rows.velocity[*body]).chain(&rows.force[*body]).fold(zero(sum, &w), zero);
+        sum += w * 0.0;
+        for x in [j, v, f] {
+            sum += x[0] * 0.0;
+            sum += x[1] * 0.0;
+            sum += x[2] * 0.0;
+        }
     }
     if check_value {
-        sum = zero(zero(sum, &row.value), &row.rate);
+        sum += row.value * 0.0;
+        sum += row.rate * 0.0;
     }
     if sum == 0.0 && masses {
         return None;
@@ -779,20 +786,35 @@ impl Factored {
 
     /// The rows are those the factor was made from, bit for bit.
     fn matches(&self, rows: &Rows, settings: &Settings) -> bool {
-        let bits = |j: &[f64; 3]| j.map(f64::to_bits);
         self.settings_match(rows, settings)
             && self.inverse_mass.iter().zip(&rows.inverse_mass).all(|(a, b)| *a == b.to_bits())
-            && self
-                .jacobian
-                .iter()
-                .zip(rows.rows.iter().flat_map(|row| &row.jacobian))
-                .all(|((s, a), (t, b))| s == t && *a == bits(b))
+            && self.same_parts(rows, true)
     }
 
     /// The rows act on the same slots in the same order (J's values may differ).
     fn same_pattern(&self, rows: &Rows, settings: &Settings) -> bool {
-        self.settings_match(rows, settings)
-            && self.jacobian.iter().zip(rows.rows.iter().flat_map(|row| &row.jacobian)).all(|((s, _), (t, _))| s == t)
+        self.settings_match(rows, settings) && self.same_parts(rows, false)
+    }
+
+    /// Row by row, the kept parts against `rows`' (each row's length already equal,
+    /// [`settings_match`](Factored::settings_match)): the same slots, and with `values` the
+    /// same bits of J. A loop per row over plain slices: this runs at every reused solve.
+    fn same_parts(&self, rows: &Rows, values: bool) -> bool {
+        let mut kept = self.jacobian.as_slice();
+        for row in &rows.rows {
+            let Some((mine, rest)) = kept.split_at_checked(row.jacobian.len()) else {
+                return false;
+            };
+            kept = rest;
+            for ((s, a), (t, b)) in mine.iter().zip(&row.jacobian) {
+                let same =
+                    s == t && (!values || (a[0] == b[0].to_bits() && a[1] == b[1].to_bits() && a[2] == b[2].to_bits()));
+                if !same {
+                    return false;
+                }
+            }
+        }
+        kept.is_empty()
     }
 
     /// Scales, assembles and factors `rows` (of [`same_pattern`](Factored::same_pattern))
@@ -949,8 +971,8 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
     diagnostics.clear();
     cache.mu.clear();
     if !c.index.is_empty() {
-        cache.rhs.clear();
-        cache.rhs.extend(c.index.iter().map(|&q| -b_entry(rows, &c.scaled, q)));
+        // Every row takes part (`index` is 0..k): b̃ row by row along the scaled parts.
+        negated_right_hand_side(rows, &c.scaled, &mut cache.rhs);
         match &c.factor {
             Factor::Band { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.work, &mut cache.mu),
             Factor::Sparse { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.sparse_work, &mut cache.mu),
@@ -970,9 +992,29 @@ fn right_hand_side(rows: &Rows, scaled: &Scaled, index: &[usize]) -> Vec<f64> {
 
 /// b̃ of row `q`.
 fn b_entry(rows: &Rows, scaled: &Scaled, q: usize) -> f64 {
-    let ext: f64 =
-        scaled.jacobian(q).iter().map(|(body, j)| dot(j, &rows.force[*body]) * rows.inverse_mass[*body]).sum();
-    ext + scaled.scale(q, rows.rows[q].bias)
+    b_of(rows, scaled.jacobian(q), rows.rows[q].bias, scaled.norm[q], scaled.jacobi[q])
+}
+
+/// b̃ of a row from its scaled parts, its c term, ‖J‖ and 1/√Â: Σᵢ J̃ᵢ·Fᵢ wᵢ summed from −0
+/// (as `Iterator::sum` of f64 does), plus c̃ ([`Scaled::scale`]).
+fn b_of(rows: &Rows, parts: &[(usize, [f64; 3])], bias: f64, norm: f64, jacobi: f64) -> f64 {
+    let mut ext = -0.0;
+    for (body, j) in parts {
+        ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
+    }
+    ext + (bias / norm) * jacobi
+}
+
+/// −b̃ of every row into `rhs` (the cached solve, where every row takes part): the numbers
+/// of [`b_entry`], walking the scaled parts in order.
+fn negated_right_hand_side(rows: &Rows, scaled: &Scaled, rhs: &mut Vec<f64>) {
+    rhs.clear();
+    let mut from = 0;
+    for (q, (row, to)) in rows.rows.iter().zip(&scaled.start[1..]).enumerate() {
+        let parts = &scaled.parts[from..*to];
+        from = *to;
+        rhs.push(-b_of(rows, parts, row.bias, scaled.norm[q], scaled.jacobi[q]));
+    }
 }
 
 /// The solution from the scaled multipliers `mu` of the rows `index`: λ, forces,
@@ -1007,33 +1049,60 @@ fn finish_into(
     let lambda = &mut out.lambda;
     lambda.clear();
     lambda.resize(k, 0.0);
-    for (p, &q) in index.iter().enumerate() {
-        lambda[q] = scaled.unscale(q, mu[p]);
-        // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
-        // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
-        if mu[p] != 0.0 && !lambda[q].is_normal() {
-            diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: lambda[q] });
-        }
-    }
-    // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow.
     let constraint_force = &mut out.constraint_force;
     constraint_force.clear();
     constraint_force.resize(n_bodies, [0.0; 3]);
-    for (&q, &m) in index.iter().zip(mu) {
-        for (body, j) in scaled.jacobian(q) {
+    debug_assert_eq!(index.len(), mu.len());
+    // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
+    // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
+    let out_of_range = |q: usize, m: f64, l: f64, diagnostics: &mut Vec<Diagnostic>| {
+        if m != 0.0 && !l.is_normal() {
+            diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: l });
+        }
+    };
+    // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow. Row by row, each row's parts in order.
+    let add = |constraint_force: &mut [[f64; 3]], m: f64, parts: &[(usize, [f64; 3])]| {
+        for (body, j) in parts {
             let f = &mut constraint_force[*body];
-            for d in 0..3 {
-                f[d] += m * j[d];
-            }
+            f[0] += m * j[0];
+            f[1] += m * j[1];
+            f[2] += m * j[2];
+        }
+    };
+    if index.len() == k {
+        // Every row takes part (`index` is 0..k, as in every cached solve): one pass along
+        // the scaled parts, the same numbers in the same order as the loop below.
+        let mut from = 0;
+        for (q, ((l, &m), to)) in lambda.iter_mut().zip(mu).zip(&scaled.start[1..]).enumerate() {
+            *l = scaled.unscale(q, m);
+            out_of_range(q, m, *l, &mut diagnostics);
+            add(constraint_force, m, &scaled.parts[from..*to]);
+            from = *to;
+        }
+    } else {
+        for (&q, &m) in index.iter().zip(mu) {
+            lambda[q] = scaled.unscale(q, m);
+            out_of_range(q, m, lambda[q], &mut diagnostics);
+            add(constraint_force, m, scaled.jacobian(q));
         }
     }
     out.acceleration.clear();
-    out.acceleration.extend((0..n_bodies).map(|i| {
-        let (f, fc, w) = (rows.force[i], constraint_force[i], rows.inverse_mass[i]);
-        [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]
-    }));
+    out.acceleration.extend(
+        rows.force
+            .iter()
+            .zip(constraint_force.iter())
+            .zip(&rows.inverse_mass)
+            .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
+    );
     out.active.clear();
-    out.active.extend((0..k).map(|q| scaled.usable[q] && (!rows.rows[q].inequality || lambda[q] > 0.0)));
+    out.active.extend(
+        scaled
+            .usable
+            .iter()
+            .zip(&rows.rows)
+            .zip(lambda.iter())
+            .map(|((u, row), l)| *u && (!row.inequality || *l > 0.0)),
+    );
     out.diagnostics = diagnostics;
     out.status = status;
 }
