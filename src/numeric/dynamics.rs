@@ -170,7 +170,10 @@ impl<'s> Dynamics<'s> {
     /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
-        let scratch = program.scratch();
+        let mut scratch = program.scratch();
+        // `env`'s parameters and masses stay until `reset` or `choose_unit` replaces them:
+        // loaded at the first evaluation, not at every one.
+        scratch.hold_constants();
         let orientations = orientations_of(system, &env);
         Dynamics {
             system,
@@ -198,6 +201,7 @@ impl<'s> Dynamics<'s> {
     pub fn reset(&mut self, env: Env) {
         self.orientations = orientations_of(self.system, &env);
         self.env = env;
+        self.scratch.hold_constants();
         self.held.clear();
     }
 
@@ -282,6 +286,7 @@ impl<'s> Dynamics<'s> {
         let unit = Unit::verified(&self.program, self.system, env, k).map_err(eval_error)?;
         if let Some(unit) = &unit {
             self.env = unit.to_unit(&self.env);
+            self.scratch.hold_constants();
         }
         Ok(unit)
     }
