@@ -149,9 +149,9 @@ struct Subprogram {
     /// not in it): the two lookups of `root` and `tape.output_range` in one.
     place: Vec<(u32, u32)>,
     sources: Vec<Source>,
-    /// The inputs (indices) that are not constants of a run (`Source::Env`): what a state
-    /// evaluation loads once the constants are held ([`RowScratch::hold_constants`]).
-    varying: Vec<usize>,
+    /// The inputs that are not constants of a run (`Source::Env`), with their slots: what
+    /// a state evaluation loads once the constants are held ([`RowScratch::hold_constants`]).
+    varying: Vec<Load>,
     /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself),
     /// reading its inputs as `flat` lays them out.
     batched: Option<(Batched, Flat)>,
@@ -194,16 +194,7 @@ impl Subprogram {
         let held = hold && scratch.constants;
         match &self.batched {
             Some((_, flat)) => flat.load_state(system, env, state, &self.inputs, held, buffer)?,
-            None if held => load_state(
-                system,
-                env,
-                state,
-                &self.tape,
-                &self.inputs,
-                &self.sources,
-                self.varying.iter().copied(),
-                buffer,
-            )?,
+            None if held => load_varying(system, env, state, &self.inputs, &self.varying, buffer)?,
             None => {
                 let all = 0..self.inputs.len();
                 load_state(system, env, state, &self.tape, &self.inputs, &self.sources, all, buffer)?
@@ -240,7 +231,13 @@ impl Subprogram {
         // As for the whole program: the inputs are the roots' free symbols.
         let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
         let sources = sources(system, &inputs);
-        let varying = (0..inputs.len()).filter(|&i| !matches!(sources[i], Source::Env)).collect();
+        let varying = (0..inputs.len())
+            .filter(|&i| !matches!(sources[i], Source::Env))
+            .map(|i| {
+                let range = tape.input_range(i);
+                Load { input: i, source: sources[i], start: range.start, len: range.len() }
+            })
+            .collect();
         let place = root
             .iter()
             .map(|&r| {
@@ -515,6 +512,44 @@ fn load_state(
                 Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
                 None => return Err(EvalError::Missing(system.graph.symbol(inputs[i]).name.clone())),
             },
+        }
+    }
+    Ok(())
+}
+
+/// One input a state evaluation loads: `input` (an index into the tape's inputs), where it
+/// comes from, and its slots `start..start + len` in the input buffer.
+#[derive(Clone, Copy, Debug)]
+struct Load {
+    input: usize,
+    source: Source,
+    start: usize,
+    len: usize,
+}
+
+/// The inputs `loads` from `state`, or `env` for the rigid bodies' angles (`inputs`: the
+/// tape's input symbols), as [`load_state`] loads them.
+fn load_varying(
+    system: &System,
+    env: &Env,
+    state: State<'_>,
+    inputs: &[Symbol],
+    loads: &[Load],
+    buffer: &mut [f64],
+) -> Result<(), EvalError> {
+    // One to three components, copied by hand (a copy of a variable length is a call).
+    let copy = |slots: &mut [f64], x: &[f64; 3]| {
+        for (d, x) in slots.iter_mut().zip(x) {
+            *d = *x;
+        }
+    };
+    for load in loads {
+        let slots = &mut buffer[load.start..load.start + load.len];
+        match load.source {
+            Source::Position(b) => copy(slots, &state.q[b]),
+            Source::Velocity(b) => copy(slots, &state.v[b]),
+            Source::Time => slots.fill(state.t),
+            Source::Angle | Source::Env => from_env(system, env, inputs[load.input], slots)?,
         }
     }
     Ok(())
