@@ -118,6 +118,9 @@ pub struct Dynamics<'s> {
     /// so that a step allocates nothing once the pool is warm.
     spare: Vec<Rows>,
     env: Env,
+    /// Whether the system has rigid bodies, whose angles [`set_state`](Dynamics::set_state)
+    /// writes into `env` at every evaluation (without, it has nothing to do).
+    rigid: bool,
     /// Added to the bias of every row before the acceleration solve (None: no Baumgarte).
     pub baumgarte: Option<BaumgarteTerms>,
     /// Whether an external force depends on a velocity (damping, drag). When not, Verlet's
@@ -181,6 +184,7 @@ impl<'s> Dynamics<'s> {
             scratch,
             spare: Vec::new(),
             env,
+            rigid: system.has_rigid_bodies(),
             baumgarte: None,
             velocity_dependent_forces: true,
             evaluations: 0,
@@ -295,6 +299,9 @@ impl<'s> Dynamics<'s> {
     /// time and the bodies' positions and velocities go to the tapes from the arrays:
     /// `rows::State`).
     fn set_state(&mut self, q: &Vectors, v: &Vectors) {
+        if !self.rigid {
+            return;
+        }
         // Rigid bodies' angles (3D: q = exp(φ) ⊗ q₀) and angular velocities, from their
         // angular slots after the bodies.
         let rigid = self.system.bodies.iter().filter_map(|b| b.rigid.as_ref());

@@ -818,16 +818,21 @@ impl RowProgram {
         let out = &buffers.outputs;
         let at = |root: usize| m.place[root];
         let scalar = |root: usize| out[at(root).0 as usize];
-        // As `fill` without 3D rigid bodies (so no principal axes).
+        // As `fill` without 3D rigid bodies (so no principal axes); in place when `rows`
+        // has the slots already (the rows of the last evaluation).
         rows.dim = system.dim();
-        rows.inverse_mass.clear();
-        rows.velocity.clear();
-        rows.force.clear();
         rows.axes.clear();
-        for b in &self.bodies {
-            rows.inverse_mass.push(1.0 / scalar(b.mass));
-            rows.velocity.push(placed(out, at(b.velocity)));
-            rows.force.push(placed(out, at(b.force)));
+        let n = self.bodies.len();
+        if rows.inverse_mass.len() != n || rows.velocity.len() != n || rows.force.len() != n {
+            rows.inverse_mass.resize(n, 0.0);
+            rows.velocity.resize(n, [0.0; 3]);
+            rows.force.resize(n, [0.0; 3]);
+        }
+        let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
+        for (b, ((w, u), f)) in self.bodies.iter().zip(slots) {
+            *w = 1.0 / scalar(b.mass);
+            *u = placed(out, at(b.velocity));
+            *f = placed(out, at(b.force));
         }
         for (layout, row) in self.rows.iter().zip(&mut rows.rows) {
             row.rate = scalar(layout.rate) * layout.inverse_scale;
