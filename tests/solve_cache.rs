@@ -257,3 +257,70 @@ fn the_motion_tape_on_the_positions_rows_gives_the_full_rows_on_every_file() {
     }
     assert!(kept >= 250 && whole >= 10, "{kept} states by the motion's tape, {whole} whole");
 }
+
+#[test]
+fn held_constants_give_the_rows_of_a_fresh_load_on_every_file() {
+    // A simulation's scratch keeps the run's constants (parameters, masses, given forces)
+    // loaded once (`RowScratch::hold_constants`) and reads only the state and the rigid
+    // bodies' angles at each evaluation. Its rows must be those of a scratch that loads
+    // everything every time, bit for bit: at several states with the same constants (the
+    // rigid bodies' angles and angular velocities changed through the environment), after
+    // an evaluation from an environment alone in between (which overwrites the buffers),
+    // and with new constants after `hold_constants` again.
+    use lagrange::expr::eval::Env;
+    use lagrange::numeric::rows::{Rows, State};
+    let bits = |r: &Rows| {
+        let rows = r.rows.iter().flat_map(|row| {
+            [row.value, row.rate, row.bias].into_iter().chain(row.jacobian.iter().flat_map(|(_, j)| *j))
+        });
+        let slots =
+            r.inverse_mass.iter().copied().chain(r.velocity.iter().chain(&r.force).chain(&r.axes).flatten().copied());
+        rows.chain(slots).map(f64::to_bits).collect::<Vec<_>>()
+    };
+    let files = common::constraint_files(&["constraints", "constraints/hard", "constraints/rigid"]);
+    let mut checked = 0;
+    for path in files {
+        let text = std::fs::read_to_string(&path).expect("file");
+        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
+        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+        let at = path.display();
+        let mut rng = common::Rng::new(16);
+        let (mut held, mut fresh) = (s.program.scratch(), s.program.scratch());
+        let (mut a, mut b) = (Rows::default(), Rows::default());
+        for _ in 0..3 {
+            let constants = common::random_env(&s.system, &mut rng);
+            held.hold_constants();
+            for k in 0..3 {
+                // Another state and other angles, the same constants.
+                let other = common::random_env(&s.system, &mut rng);
+                let mut env: Env = constants.clone();
+                for rigid in s.system.bodies.iter().filter_map(|b| b.rigid.as_ref()) {
+                    for symbol in [rigid.orientation, rigid.angular_velocity] {
+                        if let Some(value) = other.get(symbol) {
+                            env.set(symbol, value);
+                        }
+                    }
+                }
+                let (q, v, t) = lagrange::numeric::simulate::initial_state(&s.system, &other);
+                let state = State { t, q: &q, v: &v };
+                if k == 1 {
+                    s.program.evaluate_into(&s.system, &other, &mut held, &mut a).expect("rows");
+                    s.program.evaluate_positions_into(&s.system, &other, &mut held, &mut a.rows).expect("rows");
+                }
+                s.program.evaluate_state_into(&s.system, &env, state, &mut held, &mut a).expect("rows");
+                s.program.evaluate_state_into(&s.system, &env, state, &mut fresh, &mut b).expect("rows");
+                assert_eq!(bits(&a), bits(&b), "{at}: all rows");
+                s.program.evaluate_positions_state_into(&s.system, &env, state, &mut held, &mut a.rows).expect("rows");
+                s.program.evaluate_positions_state_into(&s.system, &env, state, &mut fresh, &mut b.rows).expect("rows");
+                assert_eq!(bits(&a), bits(&b), "{at}: C and J");
+                let kept_a =
+                    s.program.evaluate_motion_state_into(&s.system, &env, state, &mut held, &mut a).expect("rows");
+                let kept_b =
+                    s.program.evaluate_motion_state_into(&s.system, &env, state, &mut fresh, &mut b).expect("rows");
+                assert_eq!((kept_a, bits(&a)), (kept_b, bits(&b)), "{at}: the motion's rows");
+            }
+        }
+        checked += 1;
+    }
+    assert!(checked >= 25, "only {checked} files checked");
+}

@@ -118,6 +118,9 @@ pub struct Dynamics<'s> {
     /// so that a step allocates nothing once the pool is warm.
     spare: Vec<Rows>,
     env: Env,
+    /// Whether the system has rigid bodies, whose angles [`set_state`](Dynamics::set_state)
+    /// writes into `env` at every evaluation (without, it has nothing to do).
+    rigid: bool,
     /// Added to the bias of every row before the acceleration solve (None: no Baumgarte).
     pub baumgarte: Option<BaumgarteTerms>,
     /// Whether an external force depends on a velocity (damping, drag). When not, Verlet's
@@ -170,7 +173,10 @@ impl<'s> Dynamics<'s> {
     /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
-        let scratch = program.scratch();
+        let mut scratch = program.scratch();
+        // `env`'s parameters and masses stay until `reset` or `choose_unit` replaces them:
+        // loaded at the first evaluation, not at every one.
+        scratch.hold_constants();
         let orientations = orientations_of(system, &env);
         Dynamics {
             system,
@@ -178,6 +184,7 @@ impl<'s> Dynamics<'s> {
             scratch,
             spare: Vec::new(),
             env,
+            rigid: system.has_rigid_bodies(),
             baumgarte: None,
             velocity_dependent_forces: true,
             evaluations: 0,
@@ -198,6 +205,7 @@ impl<'s> Dynamics<'s> {
     pub fn reset(&mut self, env: Env) {
         self.orientations = orientations_of(self.system, &env);
         self.env = env;
+        self.scratch.hold_constants();
         self.held.clear();
     }
 
@@ -282,6 +290,7 @@ impl<'s> Dynamics<'s> {
         let unit = Unit::verified(&self.program, self.system, env, k).map_err(eval_error)?;
         if let Some(unit) = &unit {
             self.env = unit.to_unit(&self.env);
+            self.scratch.hold_constants();
         }
         Ok(unit)
     }
@@ -290,6 +299,9 @@ impl<'s> Dynamics<'s> {
     /// time and the bodies' positions and velocities go to the tapes from the arrays:
     /// `rows::State`).
     fn set_state(&mut self, q: &Vectors, v: &Vectors) {
+        if !self.rigid {
+            return;
+        }
         // Rigid bodies' angles (3D: q = exp(φ) ⊗ q₀) and angular velocities, from their
         // angular slots after the bodies.
         let rigid = self.system.bodies.iter().filter_map(|b| b.rigid.as_ref());

@@ -149,6 +149,9 @@ struct Subprogram {
     /// not in it): the two lookups of `root` and `tape.output_range` in one.
     place: Vec<(u32, u32)>,
     sources: Vec<Source>,
+    /// The inputs that are not constants of a run (`Source::Env`), with their slots: what
+    /// a state evaluation loads once the constants are held ([`RowScratch::hold_constants`]).
+    varying: Vec<Load>,
     /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself),
     /// reading its inputs as `flat` lays them out.
     batched: Option<(Batched, Flat)>,
@@ -176,12 +179,29 @@ impl Subprogram {
         }
     }
 
-    /// The inputs from `state` and `env` into `buffer`.
-    fn load_state(&self, system: &System, env: &Env, state: State<'_>, buffer: &mut [f64]) -> Result<(), EvalError> {
+    /// The inputs from `state` and `env` into `scratch`'s buffer; the constants of a run
+    /// (`Source::Env`) only when they are not held there already (`hold`: they are to be
+    /// kept, see [`RowScratch::hold_constants`]).
+    fn load_state(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        hold: bool,
+        scratch: &mut SubScratch,
+    ) -> Result<(), EvalError> {
+        let buffer = &mut scratch.inputs;
+        let held = hold && scratch.constants;
         match &self.batched {
-            Some((_, flat)) => flat.load_state(system, env, state, &self.inputs, buffer),
-            None => load_state(system, env, state, &self.tape, &self.inputs, &self.sources, buffer),
+            Some((_, flat)) => flat.load_state(system, env, state, &self.inputs, held, buffer)?,
+            None if held => load_varying(system, env, state, &self.inputs, &self.varying, buffer)?,
+            None => {
+                let all = 0..self.inputs.len();
+                load_state(system, env, state, &self.tape, &self.inputs, &self.sources, all, buffer)?
+            }
         }
+        scratch.constants = hold;
+        Ok(())
     }
 
     /// Every root from the loaded `inputs` into `outputs` (the tape's output layout).
@@ -211,6 +231,13 @@ impl Subprogram {
         // As for the whole program: the inputs are the roots' free symbols.
         let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
         let sources = sources(system, &inputs);
+        let varying = (0..inputs.len())
+            .filter(|&i| !matches!(sources[i], Source::Env))
+            .map(|i| {
+                let range = tape.input_range(i);
+                Load { input: i, source: sources[i], start: range.start, len: range.len() }
+            })
+            .collect();
         let place = root
             .iter()
             .map(|&r| {
@@ -221,7 +248,7 @@ impl Subprogram {
                 (range.start as u32, range.len() as u32)
             })
             .collect();
-        Subprogram { tape, inputs, root, place, sources, batched: None }
+        Subprogram { tape, inputs, root, place, sources, varying, batched: None }
     }
 }
 
@@ -235,8 +262,11 @@ struct Flat {
     bodies: usize,
     /// Per input symbol of the tape, its slots in the buffer.
     places: Vec<Range<usize>>,
-    /// The input symbols that come from the environment (indices into `places`).
+    /// The input symbols that are constants of a run (`Source::Env`: indices into `places`).
     env: Vec<usize>,
+    /// The rigid bodies' angles and angular velocities among the inputs (`Source::Angle`),
+    /// which the environment gives per state.
+    angles: Vec<usize>,
     /// Whether some input is a position, a velocity (else that block is not copied).
     positions: bool,
     velocities: bool,
@@ -247,7 +277,7 @@ impl Flat {
     fn new(system: &System, tape: &Tape, sources: &[Source]) -> Flat {
         let n = system.bodies.len();
         let mut len = 6 * n + 1;
-        let mut env = Vec::new();
+        let (mut env, mut angles) = (Vec::new(), Vec::new());
         let places = sources
             .iter()
             .enumerate()
@@ -257,8 +287,11 @@ impl Flat {
                     Source::Position(b) => 3 * b..3 * b + w,
                     Source::Velocity(b) => 3 * (n + b)..3 * (n + b) + w,
                     Source::Time => 6 * n..6 * n + 1,
-                    Source::Env => {
-                        env.push(i);
+                    Source::Env | Source::Angle => {
+                        match source {
+                            Source::Env => env.push(i),
+                            _ => angles.push(i),
+                        }
                         len += w;
                         len - w..len
                     }
@@ -267,7 +300,7 @@ impl Flat {
             .collect();
         let positions = sources.iter().any(|s| matches!(s, Source::Position(_)));
         let velocities = sources.iter().any(|s| matches!(s, Source::Velocity(_)));
-        Flat { bodies: n, places, env, positions, velocities, len }
+        Flat { bodies: n, places, env, angles, positions, velocities, len }
     }
 
     /// Symbol → its slots in the buffer (`inputs` are the tape's input symbols).
@@ -284,13 +317,15 @@ impl Flat {
         Ok(())
     }
 
-    /// The buffer from `state` (positions, velocities, t) and `env` (the rest).
+    /// The buffer from `state` (positions, velocities, t) and `env` (the rest; not the
+    /// constants of a run when they are `held` in `buffer` already).
     fn load_state(
         &self,
         system: &System,
         env: &Env,
         state: State<'_>,
         inputs: &[Symbol],
+        held: bool,
         buffer: &mut [f64],
     ) -> Result<(), EvalError> {
         let n = self.bodies;
@@ -301,7 +336,8 @@ impl Flat {
             buffer[3 * n..6 * n].copy_from_slice(state.v[..n].as_flattened());
         }
         buffer[6 * n] = state.t;
-        for &i in &self.env {
+        let constants = if held { &[][..] } else { &self.env[..] };
+        for &i in constants.iter().chain(&self.angles) {
             from_env(system, env, inputs[i], &mut buffer[self.places[i].clone()])?;
         }
         Ok(())
@@ -410,12 +446,15 @@ fn load(system: &System, env: &Env, tape: &Tape, inputs: &[Symbol], buffer: &mut
 
 /// Where a tape's input symbol comes from when the state is given as arrays
 /// ([`RowProgram::evaluate_state_into`]): a body's position or velocity (slot i of the
-/// state), the time, or the environment (parameters, masses, rigid bodies' angles).
+/// state), the time, or the environment: a rigid body's angle (orientation) or angular
+/// velocity, which the environment gives per state, or a constant of a run (parameters,
+/// masses, given forces), which a scratch may hold between evaluations.
 #[derive(Clone, Copy, Debug)]
 enum Source {
     Position(usize),
     Velocity(usize),
     Time,
+    Angle,
     Env,
 }
 
@@ -425,6 +464,10 @@ fn sources(system: &System, inputs: &[Symbol]) -> Vec<Source> {
     for (i, body) in system.bodies.iter().enumerate() {
         of.insert(body.position, Source::Position(i));
         of.insert(body.velocity, Source::Velocity(i));
+    }
+    for rigid in system.bodies.iter().filter_map(|b| b.rigid.as_ref()) {
+        of.insert(rigid.orientation, Source::Angle);
+        of.insert(rigid.angular_velocity, Source::Angle);
     }
     of.insert(system.time, Source::Time);
     inputs.iter().map(|s| of.get(s).copied().unwrap_or(Source::Env)).collect()
@@ -439,7 +482,8 @@ pub struct State<'a> {
     pub v: &'a [[f64; 3]],
 }
 
-/// `tape`'s inputs from `state` where `sources` says so, else from `env`.
+/// `tape`'s inputs `which` (indices) from `state` where `sources` says so, else from `env`.
+#[allow(clippy::too_many_arguments)]
 fn load_state(
     system: &System,
     env: &Env,
@@ -447,6 +491,7 @@ fn load_state(
     tape: &Tape,
     inputs: &[Symbol],
     sources: &[Source],
+    which: impl IntoIterator<Item = usize>,
     buffer: &mut [f64],
 ) -> Result<(), EvalError> {
     // One to three components, copied by hand (a copy of a variable length is a call).
@@ -455,18 +500,56 @@ fn load_state(
             *d = x[k];
         }
     };
-    for (i, (&s, source)) in inputs.iter().zip(sources).enumerate() {
+    for i in which {
         let slots = &mut buffer[tape.input_range(i)];
-        match *source {
+        match sources[i] {
             Source::Position(b) => copy(slots, &state.q[b]),
             Source::Velocity(b) => copy(slots, &state.v[b]),
             Source::Time => slots.fill(state.t),
-            Source::Env => match env.get(s) {
+            Source::Angle | Source::Env => match env.get(inputs[i]) {
                 Some(Value::Scalar(x)) => slots.fill(x),
                 Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
                 Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
-                None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
+                None => return Err(EvalError::Missing(system.graph.symbol(inputs[i]).name.clone())),
             },
+        }
+    }
+    Ok(())
+}
+
+/// One input a state evaluation loads: `input` (an index into the tape's inputs), where it
+/// comes from, and its slots `start..start + len` in the input buffer.
+#[derive(Clone, Copy, Debug)]
+struct Load {
+    input: usize,
+    source: Source,
+    start: usize,
+    len: usize,
+}
+
+/// The inputs `loads` from `state`, or `env` for the rigid bodies' angles (`inputs`: the
+/// tape's input symbols), as [`load_state`] loads them.
+fn load_varying(
+    system: &System,
+    env: &Env,
+    state: State<'_>,
+    inputs: &[Symbol],
+    loads: &[Load],
+    buffer: &mut [f64],
+) -> Result<(), EvalError> {
+    // One to three components, copied by hand (a copy of a variable length is a call).
+    let copy = |slots: &mut [f64], x: &[f64; 3]| {
+        for (d, x) in slots.iter_mut().zip(x) {
+            *d = *x;
+        }
+    };
+    for load in loads {
+        let slots = &mut buffer[load.start..load.start + load.len];
+        match load.source {
+            Source::Position(b) => copy(slots, &state.q[b]),
+            Source::Velocity(b) => copy(slots, &state.v[b]),
+            Source::Time => slots.fill(state.t),
+            Source::Angle | Source::Env => from_env(system, env, inputs[load.input], slots)?,
         }
     }
     Ok(())
@@ -487,6 +570,26 @@ pub struct RowScratch {
     all: SubScratch,
     positions: SubScratch,
     motion: Option<SubScratch>,
+    /// Whether the state evaluations keep the constants of a run in the input buffers
+    /// ([`hold_constants`](RowScratch::hold_constants)).
+    hold: bool,
+}
+
+impl RowScratch {
+    /// From now on the evaluations at a state given as arrays
+    /// ([`RowProgram::evaluate_state_into`] and its `positions` and `motion` kin) load the
+    /// constants of a run — every input the environment gives but the rigid bodies' angles
+    /// and angular velocities: parameters, masses, given forces — at their first evaluation
+    /// with this scratch and keep them, rather than reading them from the environment at
+    /// every evaluation. The caller's environment must give the same constants until it calls
+    /// this again (which loads them afresh at the next evaluation). An evaluation from an
+    /// environment alone ([`RowProgram::evaluate_into`]) loads everything, as without this.
+    pub fn hold_constants(&mut self) {
+        self.hold = true;
+        for s in std::iter::once(&mut self.all).chain(Some(&mut self.positions)).chain(self.motion.as_mut()) {
+            s.constants = false;
+        }
+    }
 }
 
 /// The buffers of one [`Subprogram`].
@@ -497,6 +600,9 @@ struct SubScratch {
     tape: Scratch,
     /// The batches' buffers (none without batches).
     batched: Option<BatchedScratch>,
+    /// Whether `inputs` holds the constants of a run, loaded by a state evaluation that
+    /// keeps them ([`RowScratch::hold_constants`]).
+    constants: bool,
 }
 
 impl Subprogram {
@@ -506,6 +612,7 @@ impl Subprogram {
             outputs: vec![0.0; self.tape.output_len()],
             tape: self.tape.scratch(),
             batched: self.batched.as_ref().map(|(b, _)| b.scratch()),
+            constants: false,
         }
     }
 
@@ -640,6 +747,7 @@ impl RowProgram {
             all: self.all.scratch(),
             positions: self.positions.scratch(),
             motion: self.motion.as_ref().map(Subprogram::scratch),
+            hold: false,
         }
     }
 
@@ -659,6 +767,7 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
+        scratch.all.constants = false;
         self.all.load(system, env, &mut scratch.all.inputs)?;
         self.run_loaded(system, scratch, rows);
         Ok(())
@@ -675,7 +784,7 @@ impl RowProgram {
         scratch: &mut RowScratch,
         rows: &mut Rows,
     ) -> Result<(), EvalError> {
-        self.all.load_state(system, env, state, &mut scratch.all.inputs)?;
+        self.all.load_state(system, env, state, scratch.hold, &mut scratch.all)?;
         self.run_loaded(system, scratch, rows);
         Ok(())
     }
@@ -704,21 +813,26 @@ impl RowProgram {
         if rows.rows.len() != self.rows.len() {
             return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
         }
-        m.load_state(system, env, state, &mut buffers.inputs)?;
+        m.load_state(system, env, state, scratch.hold, buffers)?;
         m.run_loaded(buffers);
         let out = &buffers.outputs;
         let at = |root: usize| m.place[root];
         let scalar = |root: usize| out[at(root).0 as usize];
-        // As `fill` without 3D rigid bodies (so no principal axes).
+        // As `fill` without 3D rigid bodies (so no principal axes); in place when `rows`
+        // has the slots already (the rows of the last evaluation).
         rows.dim = system.dim();
-        rows.inverse_mass.clear();
-        rows.velocity.clear();
-        rows.force.clear();
         rows.axes.clear();
-        for b in &self.bodies {
-            rows.inverse_mass.push(1.0 / scalar(b.mass));
-            rows.velocity.push(placed(out, at(b.velocity)));
-            rows.force.push(placed(out, at(b.force)));
+        let n = self.bodies.len();
+        if rows.inverse_mass.len() != n || rows.velocity.len() != n || rows.force.len() != n {
+            rows.inverse_mass.resize(n, 0.0);
+            rows.velocity.resize(n, [0.0; 3]);
+            rows.force.resize(n, [0.0; 3]);
+        }
+        let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
+        for (b, ((w, u), f)) in self.bodies.iter().zip(slots) {
+            *w = 1.0 / scalar(b.mass);
+            *u = placed(out, at(b.velocity));
+            *f = placed(out, at(b.force));
         }
         for (layout, row) in self.rows.iter().zip(&mut rows.rows) {
             row.rate = scalar(layout.rate) * layout.inverse_scale;
@@ -814,6 +928,7 @@ impl RowProgram {
         rows: &mut Vec<Row>,
     ) -> Result<(), EvalError> {
         let p = &self.positions;
+        scratch.positions.constants = false;
         p.load(system, env, &mut scratch.positions.inputs)?;
         self.positions_loaded(scratch, rows);
         Ok(())
@@ -830,7 +945,7 @@ impl RowProgram {
         rows: &mut Vec<Row>,
     ) -> Result<(), EvalError> {
         let p = &self.positions;
-        p.load_state(system, env, state, &mut scratch.positions.inputs)?;
+        p.load_state(system, env, state, scratch.hold, &mut scratch.positions)?;
         self.positions_loaded(scratch, rows);
         Ok(())
     }
