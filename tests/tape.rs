@@ -234,10 +234,8 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
         tapes.push((Tape::compile(&system.graph, &roots, &syms).expect("compiles"), 0));
     }
     // Shapes the random ones may miss: a square sum reading the previous result.
-    for text in ["(l + k)^2 + (k * l)^2"] {
-        let root = system.expression(text).unwrap_or_else(|e| panic!("{text}: {e}"));
-        tapes.push((Tape::compile(&system.graph, &[root], &syms).expect("compiles"), 0));
-    }
+    let square_sum = system.expression("(l + k)^2 + (k * l)^2").expect("expr");
+    tapes.push((Tape::compile(&system.graph, &[square_sum], &syms).expect("compiles"), 0));
     // Row tapes as simulations compile them (A and b of a chain, a rigid joint's rows), whose
     // step sequences the superinstructions were chosen from.
     let files =

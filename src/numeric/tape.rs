@@ -16,8 +16,12 @@
 //! adjacent instructions are one step, and an operand that is the previous step's result is
 //! read from the accumulator, a local the compiler keeps in a machine register, rather
 //! than through a store and a load (each result is still stored for later readers). The
-//! steps perform the instructions' operations on the same operands (a commutative one may
-//! take them swapped): results are bitwise those of the lanes below.
+//! sequences of steps frequent in row tapes (a chain's `d·d`, `−(dₖ·dₖ₊₁)/m`, joint rows'
+//! alternating multiply-adds) are merged into superinstructions, one dispatch each. What
+//! bounds a step is loads (its register numbers, then its operands), so a step's register
+//! numbers are read two at a time. The steps perform the instructions' operations on the
+//! same operands in the same order (a commutative one may take them swapped): results are
+//! bitwise those of the lanes below.
 //!
 //! [`Tape::eval_batch`] evaluates many states at once, stored as structure of arrays
 //! (input slot `j` of state `s` at `inputs[j * n + s]`, outputs alike). It runs each
