@@ -231,16 +231,66 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
             let text = if rng.below(2) == 0 { scalar(&mut rng, 4) } else { vector(&mut rng, 4) };
             roots.push(system.expression(&text).unwrap_or_else(|e| panic!("{text}: {e}")));
         }
-        tapes.push(Tape::compile(&system.graph, &roots, &syms).expect("compiles"));
+        tapes.push((Tape::compile(&system.graph, &roots, &syms).expect("compiles"), 0));
+    }
+    // Shapes the random ones may miss: a square sum reading the previous result.
+    let square_sum = system.expression("(l + k)^2 + (k * l)^2").expect("expr");
+    tapes.push((Tape::compile(&system.graph, &[square_sum], &syms).expect("compiles"), 0));
+    // Row tapes as simulations compile them (A and b of a chain, a rigid joint's rows), whose
+    // step sequences the superinstructions were chosen from.
+    let files =
+        [include_str!("../benches/data/chain_10.toml"), include_str!("../constraints/rigid/door_two_hinges.toml")];
+    let mut graphs = Vec::new();
+    for text in files {
+        let d = derive(&load(text).expect("loads").system).expect("derives");
+        let mut sets: Vec<Vec<Id>> = vec![d.a.iter().map(|x| x.2).chain(d.b.iter().copied()).collect()];
+        for dc in &d.constraints {
+            sets.push(std::iter::once(dc.bias).chain(dc.jacobian.iter().map(|x| x.1)).collect());
+        }
+        for roots in sets {
+            tapes.push((Tape::compile(&d.graph, &roots, &all_symbols(&d.graph)).expect("compiles"), graphs.len() + 1));
+        }
+        graphs.push(d.graph);
+    }
+    // Every step kind of single-state evaluation is among these tapes (their debug form
+    // names the steps).
+    let listed: String = tapes.iter().map(|(t, _)| format!("{t:?}")).collect();
+    for kind in [
+        "Add2",
+        "Sub2",
+        "Mul2",
+        "AddA",
+        "SubA",
+        "SubB",
+        "MulA",
+        "DivA",
+        "DivB",
+        "SqAddSqA",
+        "MulMulAddA",
+        "MulAddC",
+        "SubMulA",
+        "SubMulB",
+        "NegMulA",
+        "MulAMulA",
+        "MulMulAddNegMulA",
+        "MulMulAddANegMulA",
+        "Sub2SqAddSqA",
+        "MulMulAddAMulAddCMulA",
+        "SubMulAMulAddC",
+        "MulAddCSubMulA",
+    ] {
+        assert!(listed.contains(&format!("op: {kind},")), "no tape runs the step {kind}");
     }
     let states = 20;
-    for (t, tape) in tapes.iter().enumerate() {
+    for (t, (tape, source)) in tapes.iter().enumerate() {
+        let graph = if *source == 0 { &system.graph } else { &graphs[source - 1] };
+        let syms = all_symbols(graph);
         let mut scratch = tape.scratch();
         let mut soa_in = vec![0.0; tape.input_len() * states];
         let mut single = vec![0.0; tape.output_len() * states];
         let mut out = vec![0.0; tape.output_len()];
         for s in 0..states {
-            let (_, flat) = random_state(&system.graph, &syms, &mut rng);
+            let (_, flat) = random_state(graph, &syms, &mut rng);
             tape.eval(&flat, &mut scratch, &mut out);
             for (j, x) in flat.iter().enumerate() {
                 soa_in[j * states + s] = *x;

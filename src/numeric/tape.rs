@@ -16,8 +16,12 @@
 //! adjacent instructions are one step, and an operand that is the previous step's result is
 //! read from the accumulator, a local the compiler keeps in a machine register, rather
 //! than through a store and a load (each result is still stored for later readers). The
-//! steps perform the instructions' operations on the same operands (a commutative one may
-//! take them swapped): results are bitwise those of the lanes below.
+//! sequences of steps frequent in row tapes (a chain's `d·d`, `−(dₖ·dₖ₊₁)/m`, joint rows'
+//! alternating multiply-adds) are merged into superinstructions, one dispatch each. What
+//! bounds a step is loads (its register numbers, then its operands), so a step's register
+//! numbers are read two at a time. The steps perform the instructions' operations on the
+//! same operands in the same order (a commutative one may take them swapped): results are
+//! bitwise those of the lanes below.
 //!
 //! [`Tape::eval_batch`] evaluates many states at once, stored as structure of arrays
 //! (input slot `j` of state `s` at `inputs[j * n + s]`, outputs alike). It runs each
@@ -168,6 +172,25 @@ enum S {
     Sub2,
     /// `r[d2] = a·b`, then `r[d] = c·e`.
     Mul2,
+    // Superinstructions: two or three steps that follow each other often in row tapes, the
+    // later ones reading the earlier's result as their accumulator. Each part is computed
+    // and stored in turn, as the separate steps would.
+    /// `MulA`, `MulA`: `r[d2] = acc·b`, then `r[d] = r[d2]·c`.
+    MulAMulA,
+    /// `MulMulAdd`, `NegMulA`: `r[d2] = a·b + c·e`, then `r[d] = −(r[d2]·g)`.
+    MulMulAddNegMulA,
+    /// `MulMulAddA`, `NegMulA`: `r[d2] = acc·b + c·e`, then `r[d] = −(r[d2]·g)`.
+    MulMulAddANegMulA,
+    /// `Sub2`, `SqAddSqA` (the two differences squared): `r[d3] = a − b`, `r[d2] = c − e`,
+    /// then `r[d] = r[d2]·r[d2] + r[d3]·r[d3]`.
+    Sub2SqAddSqA,
+    /// `MulMulAddA`, `MulAddC`, `MulA`: `r[d3] = acc·b + c·e`, `r[d2] = g·h + r[d3]`, then
+    /// `r[d] = r[d2]·k`.
+    MulMulAddAMulAddCMulA,
+    /// `SubMulA`, `MulAddC`: `r[d2] = acc − b·c`, then `r[d] = g·h + r[d2]`.
+    SubMulAMulAddC,
+    /// `MulAddC`, `SubMulA`: `r[d2] = a·b + acc`, then `r[d] = r[d2] − g·h`.
+    MulAddCSubMulA,
 }
 
 /// One instruction of single-state evaluation: `r[d] = op(a, b, c, e)` (operands as in
@@ -183,8 +206,48 @@ struct Step {
     b: u32,
     c: u32,
     e: u32,
-    /// The first result of a `2` step; `d` otherwise.
+    /// The first result of a `2` step, the second-last of a superinstruction; `d` otherwise.
     d2: u32,
+    /// The first result of a three-part superinstruction; `d` otherwise.
+    d3: u32,
+    /// Operands of a superinstruction's later parts; `a` otherwise.
+    g: u32,
+    h: u32,
+    k: u32,
+}
+
+/// A [`Step`] as [`Tape::eval`] reads it: register numbers in pairs, each pair one load
+/// (single-state evaluation issues more loads than anything else: a step's register numbers,
+/// then its operands).
+#[derive(Clone, Copy, Debug)]
+struct Packed {
+    op: S,
+    f: Func,
+    imm: i32,
+    d: u32,
+    k: u32,
+    /// `a` in the low half, `b` in the high half; and so on.
+    ab: u64,
+    ce: u64,
+    gh: u64,
+    d23: u64,
+}
+
+impl From<&Step> for Packed {
+    fn from(s: &Step) -> Packed {
+        let pair = |lo: u32, hi: u32| u64::from(lo) | (u64::from(hi) << 32);
+        Packed {
+            op: s.op,
+            f: s.f,
+            imm: s.imm,
+            d: s.d,
+            k: s.k,
+            ab: pair(s.a, s.b),
+            ce: pair(s.c, s.e),
+            gh: pair(s.g, s.h),
+            d23: pair(s.d2, s.d3),
+        }
+    }
 }
 
 /// The single-state steps of `code`: adjacent independent sums, differences and products
@@ -217,7 +280,7 @@ fn steps(code: &[Inst]) -> Vec<Step> {
             Code::NegMul => (S::NegMul, Func::Sqrt),
             Code::NegDiv => (S::NegDiv, Func::Sqrt),
         };
-        Step { op, f, imm: i.imm, d: i.d, a: i.a, b: i.b, c: i.c, e: i.e, d2: i.d }
+        Step { op, f, imm: i.imm, d: i.d, a: i.a, b: i.b, c: i.c, e: i.e, d2: i.d, d3: i.d, g: i.a, h: i.a, k: i.a }
     };
     let mut out: Vec<Step> = Vec::with_capacity(code.len());
     let mut k = 0;
@@ -233,7 +296,21 @@ fn steps(code: &[Inst]) -> Vec<Step> {
         // stored.
         match pair {
             Some((op, j)) if j.a != i.d && j.b != i.d => {
-                out.push(Step { op, f: Func::Sqrt, imm: 0, d: j.d, a: i.a, b: i.b, c: j.a, e: j.b, d2: i.d });
+                out.push(Step {
+                    op,
+                    f: Func::Sqrt,
+                    imm: 0,
+                    d: j.d,
+                    a: i.a,
+                    b: i.b,
+                    c: j.a,
+                    e: j.b,
+                    d2: i.d,
+                    d3: j.d,
+                    g: i.a,
+                    h: i.a,
+                    k: i.a,
+                });
                 k += 2;
             }
             _ => {
@@ -308,6 +385,44 @@ fn steps(code: &[Inst]) -> Vec<Step> {
             }
             op => op,
         };
+    }
+    fuse(out)
+}
+
+/// `steps` with the frequent sequences of row tapes merged into superinstructions: one
+/// dispatch for two or three steps. Each part still reads its operands and stores its result
+/// in turn, so the operations, their operands and their order are those of the steps merged.
+fn fuse(steps: Vec<Step>) -> Vec<Step> {
+    let mut out = Vec::with_capacity(steps.len());
+    let mut k = 0;
+    while k < steps.len() {
+        let s = steps[k];
+        let (t, u) = (steps.get(k + 1), steps.get(k + 2));
+        let ops = (s.op, t.map(|t| t.op), u.map(|u| u.op));
+        let (step, n) = match (ops, t, u) {
+            ((S::MulMulAddA, Some(S::MulAddC), Some(S::MulA)), Some(t), Some(u)) => {
+                let op = S::MulMulAddAMulAddCMulA;
+                (Step { op, d3: s.d, d2: t.d, d: u.d, g: t.a, h: t.b, k: u.b, ..s }, 3)
+            }
+            ((S::MulA, Some(S::MulA), _), Some(t), _) => (Step { op: S::MulAMulA, d2: s.d, d: t.d, c: t.b, ..s }, 2),
+            ((S::MulMulAdd | S::MulMulAddA, Some(S::NegMulA), _), Some(t), _) => {
+                let op = if s.op == S::MulMulAdd { S::MulMulAddNegMulA } else { S::MulMulAddANegMulA };
+                (Step { op, d2: s.d, d: t.d, g: t.b, ..s }, 2)
+            }
+            // The square sum must read both differences: the second as its accumulator.
+            ((S::Sub2, Some(S::SqAddSqA), _), Some(t), _) if t.c == s.d2 => {
+                (Step { op: S::Sub2SqAddSqA, d3: s.d2, d2: s.d, d: t.d, ..s }, 2)
+            }
+            ((S::SubMulA, Some(S::MulAddC), _), Some(t), _) => {
+                (Step { op: S::SubMulAMulAddC, d2: s.d, d: t.d, g: t.a, h: t.b, ..s }, 2)
+            }
+            ((S::MulAddC, Some(S::SubMulA), _), Some(t), _) => {
+                (Step { op: S::MulAddCSubMulA, d2: s.d, d: t.d, g: t.b, h: t.c, ..s }, 2)
+            }
+            _ => (s, 1),
+        };
+        out.push(step);
+        k += n;
     }
     out
 }
@@ -410,7 +525,7 @@ pub struct Tape {
     /// The instructions of batched evaluation.
     code: Vec<Inst>,
     /// The same instructions for single-state evaluation ([`steps`]).
-    steps: Vec<Step>,
+    steps: Vec<Packed>,
     n_inputs: usize,
     /// Values of registers `n_inputs .. n_inputs + consts.len()`.
     consts: Vec<f64>,
@@ -598,7 +713,8 @@ impl Tape {
         );
         let steps = steps(&code);
         // The single-state steps use `code`'s register numbers, regrouped.
-        assert!(steps.iter().all(|s| [s.d, s.a, s.b, s.c, s.e, s.d2].into_iter().all(valid)));
+        assert!(steps.iter().all(|s| [s.d, s.a, s.b, s.c, s.e, s.d2, s.d3, s.g, s.h, s.k].into_iter().all(valid)));
+        let steps = steps.iter().map(Packed::from).collect();
         let outputs: Vec<u32> = p.outputs.iter().map(|&o| reg[o as usize]).collect();
         // Batched homes: inputs stay in the caller's rows; a computed output is written
         // straight into its output row (its register is never reused: outputs are read "at
@@ -687,75 +803,262 @@ impl Tape {
         }
         // The previous step's result (`A`, `B`, `C` steps read it here rather than from `r`).
         let mut acc = 0.0;
+        // Every register access of the loop goes through `regs`, so reads and stores of one
+        // step may interleave.
+        let regs = r.as_mut_ptr();
         for s in &self.steps {
             // SAFETY: `from_program` only writes register numbers below `n_regs` into `steps`
             // (asserted there), and `r` has exactly `n_regs` registers (asserted above).
-            let reg = |k: u32| unsafe { *r.get_unchecked(k as usize) };
+            let reg = |k: u32| unsafe { *regs.add(k as usize) };
+            // SAFETY: as above.
+            let set = |k: u32, x: f64| unsafe { *regs.add(k as usize) = x };
+            // One load for two register numbers: volatile, so it is not split back into two.
+            // SAFETY: a plain read of a field of `s`.
+            let pair = |p: &u64| {
+                let x = unsafe { std::ptr::read_volatile(p) };
+                (x as u32, (x >> 32) as u32)
+            };
             let x = match s.op {
-                S::Add => reg(s.a) + reg(s.b),
-                S::AddA => acc + reg(s.b),
-                S::Sub => reg(s.a) - reg(s.b),
-                S::SubA => acc - reg(s.b),
-                S::SubB => reg(s.a) - acc,
-                S::Mul => reg(s.a) * reg(s.b),
-                S::MulA => acc * reg(s.b),
-                S::Div => reg(s.a) / reg(s.b),
-                S::DivA => acc / reg(s.b),
-                S::DivB => reg(s.a) / acc,
-                S::Neg => -reg(s.a),
+                S::Add => {
+                    let (a, b) = pair(&s.ab);
+                    reg(a) + reg(b)
+                }
+                S::AddA => {
+                    let (_, b) = pair(&s.ab);
+                    acc + reg(b)
+                }
+                S::Sub => {
+                    let (a, b) = pair(&s.ab);
+                    reg(a) - reg(b)
+                }
+                S::SubA => {
+                    let (_, b) = pair(&s.ab);
+                    acc - reg(b)
+                }
+                S::SubB => {
+                    let (a, _) = pair(&s.ab);
+                    reg(a) - acc
+                }
+                S::Mul => {
+                    let (a, b) = pair(&s.ab);
+                    reg(a) * reg(b)
+                }
+                S::MulA => {
+                    let (_, b) = pair(&s.ab);
+                    acc * reg(b)
+                }
+                S::Div => {
+                    let (a, b) = pair(&s.ab);
+                    reg(a) / reg(b)
+                }
+                S::DivA => {
+                    let (_, b) = pair(&s.ab);
+                    acc / reg(b)
+                }
+                S::DivB => {
+                    let (a, _) = pair(&s.ab);
+                    reg(a) / acc
+                }
+                S::Neg => {
+                    let (a, _) = pair(&s.ab);
+                    -reg(a)
+                }
                 S::NegA => -acc,
-                S::Powi => reg(s.a).powi(s.imm),
+                S::Powi => {
+                    let (a, _) = pair(&s.ab);
+                    reg(a).powi(s.imm)
+                }
                 S::PowiA => acc.powi(s.imm),
-                S::Powf => eval::pow(reg(s.a), reg(s.b)),
-                S::Sqrt => reg(s.a).sqrt(),
+                S::Powf => {
+                    let (a, b) = pair(&s.ab);
+                    eval::pow(reg(a), reg(b))
+                }
+                S::Sqrt => {
+                    let (a, _) = pair(&s.ab);
+                    reg(a).sqrt()
+                }
                 S::SqrtA => acc.sqrt(),
-                S::Call => s.f.apply(&[reg(s.a), reg(s.b)]),
-                S::Norm2 => norm2(reg(s.a), reg(s.b)),
-                S::Norm3 => norm3(reg(s.a), reg(s.b), reg(s.c)),
+                S::Call => {
+                    let (a, b) = pair(&s.ab);
+                    s.f.apply(&[reg(a), reg(b)])
+                }
+                S::Norm2 => {
+                    let (a, b) = pair(&s.ab);
+                    norm2(reg(a), reg(b))
+                }
+                S::Norm3 => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    norm3(reg(a), reg(b), reg(c))
+                }
                 S::Sq => {
-                    let a = reg(s.a);
+                    let (a, _) = pair(&s.ab);
+                    let a = reg(a);
                     a * a
                 }
                 S::SqA => acc * acc,
                 S::SqAddSq => {
-                    let (a, c) = (reg(s.a), reg(s.c));
+                    let (a, _) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    let (a, c) = (reg(a), reg(c));
                     a * a + c * c
                 }
                 S::SqAddSqA => {
-                    let c = reg(s.c);
+                    let (c, _) = pair(&s.ce);
+                    let c = reg(c);
                     acc * acc + c * c
                 }
-                S::MulMulAdd => reg(s.a) * reg(s.b) + reg(s.c) * reg(s.e),
-                S::MulMulAddA => acc * reg(s.b) + reg(s.c) * reg(s.e),
-                S::MulMulSub => reg(s.a) * reg(s.b) - reg(s.c) * reg(s.e),
-                S::MulMulSubA => acc * reg(s.b) - reg(s.c) * reg(s.e),
-                S::MulAdd => reg(s.a) * reg(s.b) + reg(s.c),
-                S::MulAddA => acc * reg(s.b) + reg(s.c),
-                S::MulAddC => reg(s.a) * reg(s.b) + acc,
-                S::MulSub => reg(s.a) * reg(s.b) - reg(s.c),
-                S::MulSubA => acc * reg(s.b) - reg(s.c),
-                S::SubMul => reg(s.a) - reg(s.b) * reg(s.c),
-                S::SubMulA => acc - reg(s.b) * reg(s.c),
-                S::SubMulB => reg(s.a) - acc * reg(s.c),
-                S::NegMul => -(reg(s.a) * reg(s.b)),
-                S::NegMulA => -(acc * reg(s.b)),
-                S::NegDiv => -(reg(s.a) / reg(s.b)),
-                S::NegDivA => -(acc / reg(s.b)),
-                S::NegDivB => -(reg(s.a) / acc),
+                S::MulMulAdd => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    reg(a) * reg(b) + reg(c) * reg(e)
+                }
+                S::MulMulAddA => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    acc * reg(b) + reg(c) * reg(e)
+                }
+                S::MulMulSub => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    reg(a) * reg(b) - reg(c) * reg(e)
+                }
+                S::MulMulSubA => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    acc * reg(b) - reg(c) * reg(e)
+                }
+                S::MulAdd => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    reg(a) * reg(b) + reg(c)
+                }
+                S::MulAddA => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    acc * reg(b) + reg(c)
+                }
+                S::MulAddC => {
+                    let (a, b) = pair(&s.ab);
+                    reg(a) * reg(b) + acc
+                }
+                S::MulSub => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    reg(a) * reg(b) - reg(c)
+                }
+                S::MulSubA => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    acc * reg(b) - reg(c)
+                }
+                S::SubMul => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    reg(a) - reg(b) * reg(c)
+                }
+                S::SubMulA => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    acc - reg(b) * reg(c)
+                }
+                S::SubMulB => {
+                    let (a, _) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    reg(a) - acc * reg(c)
+                }
+                S::NegMul => {
+                    let (a, b) = pair(&s.ab);
+                    -(reg(a) * reg(b))
+                }
+                S::NegMulA => {
+                    let (_, b) = pair(&s.ab);
+                    -(acc * reg(b))
+                }
+                S::NegDiv => {
+                    let (a, b) = pair(&s.ab);
+                    -(reg(a) / reg(b))
+                }
+                S::NegDivA => {
+                    let (_, b) = pair(&s.ab);
+                    -(acc / reg(b))
+                }
+                S::NegDivB => {
+                    let (a, _) = pair(&s.ab);
+                    -(reg(a) / acc)
+                }
                 S::Add2 | S::Sub2 | S::Mul2 => {
-                    let (a, b, c, e) = (reg(s.a), reg(s.b), reg(s.c), reg(s.e));
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    let (d2, _) = pair(&s.d23);
+                    let (a, b, c, e) = (reg(a), reg(b), reg(c), reg(e));
                     let (first, second) = match s.op {
                         S::Add2 => (a + b, c + e),
                         S::Sub2 => (a - b, c - e),
                         _ => (a * b, c * e),
                     };
-                    // SAFETY: as above.
-                    unsafe { *r.get_unchecked_mut(s.d2 as usize) = first };
+                    set(d2, first);
                     second
                 }
+                // Superinstructions: each part computed, then stored, in turn; a later part
+                // reads registers only after the earlier parts' stores.
+                S::MulAMulA => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    let (d2, _) = pair(&s.d23);
+                    let x = acc * reg(b);
+                    set(d2, x);
+                    x * reg(c)
+                }
+                S::MulMulAddNegMulA | S::MulMulAddANegMulA => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    let (g, _) = pair(&s.gh);
+                    let (d2, _) = pair(&s.d23);
+                    let first = if s.op == S::MulMulAddNegMulA { reg(a) } else { acc };
+                    let x = first * reg(b) + reg(c) * reg(e);
+                    set(d2, x);
+                    -(x * reg(g))
+                }
+                S::Sub2SqAddSqA => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    let (d2, d3) = pair(&s.d23);
+                    let (x, y) = (reg(a) - reg(b), reg(c) - reg(e));
+                    set(d3, x);
+                    set(d2, y);
+                    y * y + x * x
+                }
+                S::MulMulAddAMulAddCMulA => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    let (g, h) = pair(&s.gh);
+                    let (d2, d3) = pair(&s.d23);
+                    let x = acc * reg(b) + reg(c) * reg(e);
+                    set(d3, x);
+                    let y = reg(g) * reg(h) + x;
+                    set(d2, y);
+                    y * reg(s.k)
+                }
+                S::SubMulAMulAddC => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    let (g, h) = pair(&s.gh);
+                    let (d2, _) = pair(&s.d23);
+                    let x = acc - reg(b) * reg(c);
+                    set(d2, x);
+                    reg(g) * reg(h) + x
+                }
+                S::MulAddCSubMulA => {
+                    let (a, b) = pair(&s.ab);
+                    let (g, h) = pair(&s.gh);
+                    let (d2, _) = pair(&s.d23);
+                    let x = reg(a) * reg(b) + acc;
+                    set(d2, x);
+                    x - reg(g) * reg(h)
+                }
             };
-            // SAFETY: as above.
-            unsafe { *r.get_unchecked_mut(s.d as usize) = x };
+            set(s.d, x);
             acc = x;
         }
         for (o, &reg) in outputs.iter_mut().zip(&self.outputs) {
