@@ -152,12 +152,8 @@ fn compiled_rows_agree_with_the_interpreter_on_every_file() {
     // The simulation's rows come from the compiled tape; the interpreter is the reference
     // semantics. They may round differently (x·y⁻¹ is lowered to x/y), never by more than a
     // few ulps: relative 1e-12 at 20 random states of every file with a scene.
-    let files = common::constraint_files(&["constraints", "constraints/hard"]);
     let mut checked = 0;
-    for path in files {
-        let text = std::fs::read_to_string(&path).expect("file");
-        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
-        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard"]) {
         let mut rng = common::Rng::new(7);
         for _ in 0..20 {
             let env = common::random_env(&s.system, &mut rng);

@@ -171,12 +171,8 @@ fn the_positions_tape_gives_the_rows_c_and_j_on_every_file() {
     // a subexpression differently and round an ulp apart (bead_on_ellipse's C did), never
     // more than a few: relative 1e-13 (against 1) at 10 random states of every file.
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-13 * a.abs().max(b.abs()).max(1.0);
-    let files = common::constraint_files(&["constraints", "constraints/hard", "constraints/rigid"]);
     let mut checked = 0;
-    for path in files {
-        let text = std::fs::read_to_string(&path).expect("file");
-        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
-        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard", "constraints/rigid"]) {
         let mut rng = common::Rng::new(11);
         let mut scratch = s.program.scratch();
         let mut positions = Vec::new();
@@ -213,12 +209,8 @@ fn the_motion_tape_on_the_positions_rows_gives_the_full_rows_on_every_file() {
     use lagrange::numeric::rows::{Rows, State};
     let close = |a: f64, b: f64| (a - b).abs() <= 1e-13 * a.abs().max(b.abs()).max(1.0);
     let close3 = |x: &[f64; 3], y: &[f64; 3]| (0..3).all(|d| close(x[d], y[d]));
-    let files = common::constraint_files(&["constraints", "constraints/hard", "constraints/rigid"]);
     let (mut kept, mut whole) = (0, 0);
-    for path in files {
-        let text = std::fs::read_to_string(&path).expect("file");
-        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
-        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard", "constraints/rigid"]) {
         let mut rng = common::Rng::new(12);
         let mut scratch = s.program.scratch();
         let mut rows = Rows::default();
@@ -277,12 +269,8 @@ fn held_constants_give_the_rows_of_a_fresh_load_on_every_file() {
             r.inverse_mass.iter().copied().chain(r.velocity.iter().chain(&r.force).chain(&r.axes).flatten().copied());
         rows.chain(slots).map(f64::to_bits).collect::<Vec<_>>()
     };
-    let files = common::constraint_files(&["constraints", "constraints/hard", "constraints/rigid"]);
     let mut checked = 0;
-    for path in files {
-        let text = std::fs::read_to_string(&path).expect("file");
-        let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
-        let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard", "constraints/rigid"]) {
         let at = path.display();
         let mut rng = common::Rng::new(16);
         let (mut held, mut fresh) = (s.program.scratch(), s.program.scratch());

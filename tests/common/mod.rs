@@ -77,6 +77,16 @@ pub fn constraint_files(dirs: &[&str]) -> Vec<std::path::PathBuf> {
     files
 }
 
+/// Every file of `dirs` (sorted) that loads and has a scene to run, with its path; files
+/// without a scene (no initial state) or that do not load are left out.
+pub fn scenarios(dirs: &[&str]) -> impl Iterator<Item = (std::path::PathBuf, Scenario)> {
+    constraint_files(dirs).into_iter().filter_map(|path| {
+        let text = std::fs::read_to_string(&path).expect("file");
+        let s = Scenario::new(load(&text).ok()?, &[]).ok()?;
+        Some((path, s))
+    })
+}
+
 /// A random state for every symbol of `system`: vectors in `[-1, 1)ᵈ`, masses and scalar
 /// parameters in `[0.5, 2)`, `t` in `[-1, 1)`.
 pub fn random_env(system: &System, rng: &mut Rng) -> Env {
