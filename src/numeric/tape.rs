@@ -327,14 +327,18 @@ fn steps(code: &[Inst]) -> Vec<Step> {
         let (a, b, c, e) = (s.a == acc, s.b == acc, s.c == acc, s.e == acc);
         let swap_ab = |s: &mut Step| std::mem::swap(&mut s.a, &mut s.b);
         s.op = match op {
-            S::Add | S::Mul | S::NegMul if a || b => {
+            // A commutative first pair (a + b, a·b, −a·b, a·b ± …): the accumulator goes to `a`.
+            S::Add | S::Mul | S::NegMul | S::MulMulSub | S::MulAdd | S::MulSub if a || b => {
                 if !a {
                     swap_ab(s);
                 }
                 match op {
                     S::Add => S::AddA,
                     S::Mul => S::MulA,
-                    _ => S::NegMulA,
+                    S::NegMul => S::NegMulA,
+                    S::MulMulSub => S::MulMulSubA,
+                    S::MulAdd => S::MulAddA,
+                    _ => S::MulSubA,
                 }
             }
             S::Sub if a => S::SubA,
@@ -364,16 +368,6 @@ fn steps(code: &[Inst]) -> Vec<Step> {
                     swap_ab(s);
                 }
                 S::MulMulAddA
-            }
-            S::MulMulSub | S::MulAdd | S::MulSub if a || b => {
-                if !a {
-                    swap_ab(s);
-                }
-                match op {
-                    S::MulMulSub => S::MulMulSubA,
-                    S::MulAdd => S::MulAddA,
-                    _ => S::MulSubA,
-                }
             }
             S::MulAdd if c => S::MulAddC,
             S::SubMul if a => S::SubMulA,
