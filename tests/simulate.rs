@@ -433,3 +433,116 @@ fn a_steps_start_rows_are_the_rows_at_its_state() {
         assert_eq!(frames, 201, "{path}");
     }
 }
+
+/// A number from a wide range of magnitudes and both signs, sometimes 0, ±∞ or NaN
+/// (`special`), from 64 random bits.
+fn wide(bits: u64, special: bool) -> f64 {
+    let (sign, exponent, mantissa) = (bits & 1, (bits >> 1) % 700, (bits >> 11) as f64 / (1u64 << 53) as f64);
+    let x = (1.0 + mantissa) * 2f64.powi(exponent as i32 - 350);
+    let x = if sign == 1 { -x } else { x };
+    match (bits >> 60) % 16 {
+        0 => 0.0,
+        1 if special => f64::INFINITY,
+        2 if special => f64::NAN,
+        3..=8 => (1.0 + mantissa) * if sign == 1 { -1.0 } else { 1.0 },
+        _ => x,
+    }
+}
+
+#[test]
+fn one_row_on_one_body_is_solved_as_the_general_solve_solves_it() {
+    // `numeric::single` (the pendulum's and the bead's solve, in closed form) must give the
+    // numbers of the general solve bit for bit wherever it answers, and answer wherever the
+    // general solve has nothing to report about rows of its shape: random rows over
+    // magnitudes 2^±350 (the scaling's reciprocal and division ranges, overflowing and
+    // zero gradients, zero and negative masses, infinite and NaN numbers), one to three
+    // slots, the row on any of them.
+    use lagrange::numeric::rows::{Row, Rows};
+    use lagrange::numeric::single::{is_single, solve_single};
+    use lagrange::numeric::solve::{Settings, Solution, SolveCache, solve_cached, solve_holding};
+    let mut rng = common::Rng::new(16);
+    let settings = Settings::default();
+    let bits = |s: &Solution| {
+        let forces = s.acceleration.iter().chain(&s.constraint_force).flatten();
+        s.lambda.iter().chain(forces).map(|x| x.to_bits()).collect::<Vec<_>>()
+    };
+    let (mut taken, mut declined) = (0, 0);
+    for case in 0..20_000 {
+        let special = case % 4 == 0;
+        let slots = 1 + (rng.next_u64() % 3) as usize;
+        let body = (rng.next_u64() % slots as u64) as usize;
+        let two_d = case % 2 == 0;
+        let mut numbers = (0..4 + 7 * slots).map(|_| wide(rng.next_u64(), special));
+        let mut next = || numbers.next().unwrap_or(0.0);
+        let (value, rate, bias) = (next(), next(), next());
+        // Masses ≥ 0 mostly, a negative one now and then.
+        let inverse_mass = (0..slots).map(|_| if special { next() } else { next().abs() }).collect();
+        let mut vector = || [next(), next(), if two_d { 0.0 } else { next() }];
+        let jacobian = vec![(body, vector())];
+        let row = Row { value, rate, bias, inequality: false, jacobian };
+        let velocity = (0..slots).map(|_| vector()).collect();
+        let force = (0..slots).map(|_| vector()).collect();
+        let rows =
+            Rows { dim: if two_d { 2 } else { 3 }, inverse_mass, velocity, force, rows: vec![row], axes: vec![] };
+        assert!(is_single(&rows));
+        let general = solve_holding(&rows, &settings, &[]);
+        let cached = solve_cached(&rows, &settings, &[], &mut SolveCache::default());
+        let mut single = Solution::default();
+        if solve_single(&rows, &settings, &mut single) {
+            taken += 1;
+            assert_eq!(bits(&single), bits(&general), "case {case}: {rows:?}");
+            assert_eq!(bits(&single), bits(&cached), "case {case}: {rows:?}");
+            let rest = |s: &Solution| (s.active.clone(), s.status, s.contacts.clone(), s.diagnostics.clone());
+            assert_eq!(rest(&single), rest(&general), "case {case}: {rows:?}");
+            assert!(general.diagnostics.is_empty(), "case {case}: {:?}", general.diagnostics);
+        } else {
+            declined += 1;
+            assert_eq!(single, Solution::default(), "case {case}: a declined solve leaves its output");
+            let finite = |x: &[f64; 3]| x.iter().all(|c| c.is_finite());
+            let all_finite = rows.velocity.iter().chain(&rows.force).all(finite)
+                && rows.inverse_mass.iter().all(|w| w.is_finite())
+                && rows.rows[0].bias.is_finite();
+            assert!(!general.diagnostics.is_empty() || !all_finite, "case {case} declined: {rows:?}");
+        }
+    }
+    assert!(taken > 5_000 && declined > 1_000, "taken {taken}, declined {declined}");
+}
+
+#[test]
+fn other_shapes_go_to_the_general_solve() {
+    // Two rows, a row on two slots, an inequality, a dense or sparse method: not the
+    // closed form's to answer.
+    use lagrange::numeric::rows::{Row, Rows};
+    use lagrange::numeric::single::{is_single, solve_single};
+    use lagrange::numeric::solve::{Method, Settings, Solution};
+    let row =
+        |jacobian: Vec<(usize, [f64; 3])>, inequality| Row { value: 0.1, rate: 0.2, bias: 0.3, inequality, jacobian };
+    let rows = |rows: Vec<Row>| Rows {
+        dim: 2,
+        inverse_mass: vec![1.0, 0.5],
+        velocity: vec![[0.1, 0.2, 0.0], [0.3, 0.4, 0.0]],
+        force: vec![[0.0, -9.81, 0.0], [0.0, -4.9, 0.0]],
+        rows,
+        axes: vec![],
+    };
+    let one = rows(vec![row(vec![(1, [1.0, 2.0, 0.0])], false)]);
+    let default = Settings::default();
+    assert!(is_single(&one) && solve_single(&one, &default, &mut Solution::default()));
+    for settings in [Settings { method: Method::Banded, ..default }] {
+        assert!(solve_single(&one, &settings, &mut Solution::default()));
+    }
+    for settings in [Settings { method: Method::Dense, ..default }, Settings { method: Method::Sparse, ..default }] {
+        assert!(!solve_single(&one, &settings, &mut Solution::default()), "{:?}", settings.method);
+    }
+    for other in [
+        rows(vec![row(vec![(0, [1.0, 0.0, 0.0])], false), row(vec![(1, [0.0, 1.0, 0.0])], false)]),
+        rows(vec![row(vec![(0, [1.0, 0.0, 0.0]), (1, [-1.0, 0.0, 0.0])], false)]),
+        rows(vec![row(vec![(1, [1.0, 2.0, 0.0])], true)]),
+        rows(vec![]),
+    ] {
+        assert!(!is_single(&other));
+        let mut out = Solution::default();
+        assert!(!solve_single(&other, &default, &mut out));
+        assert_eq!(out, Solution::default());
+    }
+}

@@ -34,6 +34,7 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
+use super::single::solve_single;
 use super::solve::{Settings, Solution, SolveCache, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -450,7 +451,10 @@ impl<'s> Dynamics<'s> {
             }
         }
         let mut solution = self.spare_solution.take().unwrap_or_default();
-        solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
+        // One row on one body: the same numbers in closed form (`numeric::single`).
+        if !solve_single(rows, &Settings::default(), &mut solution) {
+            solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
+        }
         solution
     }
 
@@ -465,11 +469,14 @@ impl<'s> Dynamics<'s> {
     /// buffer the dynamics keep (the caller may change it: it is scratch until the next
     /// correction).
     pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
-        solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
+        if !solve_single(rows, &Settings::default(), &mut self.correction) {
+            solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
+        }
         &mut self.correction
     }
 
-    /// The way the last solve went (`solve::SolvePath`).
+    /// The way the last solve through the cache went (`solve::SolvePath`; a one-row solve,
+    /// `numeric::single`, does not go through it).
     pub fn last_solve_path(&self) -> super::solve::SolvePath {
         self.solver.last_path()
     }

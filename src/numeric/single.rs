@@ -1,0 +1,126 @@
+//! One row on one body (a pendulum, a bead): the λ solve of `numeric::solve` for a 1 × 1
+//! system, in closed form and without its bookkeeping.
+//!
+//! The general solve (`solve::solve_cached_into`) scales the row to a unit diagonal, keeps
+//! a factor cache (the bits of J and 1/m compared at every call), assembles Ã, factors its
+//! band, substitutes with one step of refinement and unscales λ: a few dozen operations of
+//! arithmetic for one row, inside a few hundred instructions of buffers, loops and checks.
+//! [`solve_single`] does the same arithmetic in the same order — row norm, Ĵ = J/‖J‖,
+//! Â, J̃ = Ĵ/√Â, Ã = J̃·J̃ w, L = √Ã, the two divisions of each substitution, the refinement
+//! x += A⁻¹(b − A x), λ = λ̃/(‖J‖√Â), the forces and accelerations — so its numbers are the
+//! general solve's bit for bit (a property test holds it to `solve_holding` and
+//! `solve_cached`, `tests/solve_single.rs`).
+//!
+//! It serves only the plain case and declines everything else, which the caller then hands
+//! to the general solve: an inequality row, a number that is not finite, a negative mass, a
+//! zero or overflowing gradient, a pivot at or below the rank tolerance (singular), λ out of
+//! the f64 range, and settings other than the band or automatic method. Every diagnostic is
+//! therefore the general solve's; this path never makes one.
+//!
+//! Not here: more than one row (the general solve), contacts, the decision of when to call
+//! it (`Dynamics::solve`, `Dynamics::correct`: at every solve, as the check is cheaper than
+//! any bookkeeping it saves).
+
+use super::rows::Rows;
+use super::solve::{Method, Settings, Solution, Status, row_norm};
+use super::vector::dot;
+
+/// Norms whose reciprocal is a normal number: the general solve scales Ĵ = J·(1/‖J‖) there
+/// and J/‖J‖ outside (`solve::Scaled`), and so does this one.
+const RECIPROCAL_NORMS: std::ops::RangeInclusive<f64> = 1e-300..=1e300;
+
+/// Whether `rows` are one equality row acting on one slot: the shape [`solve_single`] serves
+/// (it may still decline such rows for their numbers).
+pub fn is_single(rows: &Rows) -> bool {
+    matches!(rows.rows.as_slice(), [row] if row.jacobian.len() == 1 && !row.inequality)
+}
+
+/// λ for one equality row on one slot, into `out` — the numbers of `solve::solve_cached`
+/// (and so of `solve::solve_holding`) bit for bit. Returns false, with `out` untouched, where
+/// the general solve must answer: rows of another shape ([`is_single`]), a number that is not
+/// finite, a negative mass, a zero gradient, a singular pivot, λ out of range, a dense or
+/// sparse `settings.method`.
+pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> bool {
+    let [row] = rows.rows.as_slice() else {
+        return false;
+    };
+    let [(body, j)] = row.jacobian.as_slice() else {
+        return false;
+    };
+    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) {
+        return false;
+    }
+    let body = *body;
+    let Some(&w) = rows.inverse_mass.get(body) else {
+        return false;
+    };
+    // Every number finite (x·0 is 0 for finite x and NaN otherwise), every slot's velocity
+    // and force included: the general solve's cache serves nothing less.
+    let mut zero = row.bias * 0.0 + w * 0.0 + j[0] * 0.0 + j[1] * 0.0 + j[2] * 0.0;
+    for x in rows.velocity.iter().chain(&rows.force) {
+        zero += x[0] * 0.0 + x[1] * 0.0 + x[2] * 0.0;
+    }
+    if zero != 0.0 || w < 0.0 {
+        return false;
+    }
+    // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
+    let norm = row_norm(&row.jacobian);
+    if !(norm.is_finite() && norm != 0.0) {
+        return false;
+    }
+    let inverse = 1.0 / norm;
+    let u = if RECIPROCAL_NORMS.contains(&norm) { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
+    let a_hat = 0.0 + dot(&u, &u) * w;
+    if !(a_hat > 0.0 && a_hat.is_finite()) {
+        return false;
+    }
+    let jacobi = 1.0 / a_hat.sqrt();
+    let jt = u.map(|x| x * jacobi);
+    // Ã = J̃·J̃ w (one term, added to a zero band) and its factor L = √Ã.
+    let a = 0.0 + dot(&jt, &jt) * w;
+    if a.is_nan() || a <= settings.rank_tolerance {
+        return false;
+    }
+    let l = a.sqrt();
+    // −b̃ = −(J̃·F w + c/‖J‖/√Â), the sum of the forces' part started from −0.
+    let b = (-0.0 + dot(&jt, &rows.force[body]) * w) + (row.bias / norm) * jacobi;
+    let rhs = -b;
+    // L Lᵀ x = −b̃ (forward and back: a division each, after subtracting the empty sum −0),
+    // then one step of refinement x += A⁻¹(−b̃ − A x).
+    let mut mu = ((rhs - -0.0) / l) / l;
+    let residual = rhs - (0.0 + (0.0 + a * mu));
+    mu += ((residual - -0.0) / l) / l;
+    if !mu.is_finite() {
+        return false;
+    }
+    // λ = λ̃/(‖J‖√Â); out of the f64 range the general solve says so in a diagnostic.
+    let lambda = (mu * jacobi) / norm;
+    if mu != 0.0 && !lambda.is_normal() {
+        return false;
+    }
+    out.lambda.clear();
+    out.lambda.push(lambda);
+    out.active.clear();
+    out.active.push(true);
+    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w per slot.
+    let n = rows.inverse_mass.len();
+    out.constraint_force.clear();
+    out.constraint_force.resize(n, [0.0; 3]);
+    let force = &mut out.constraint_force[body];
+    for d in 0..3 {
+        force[d] += mu * jt[d];
+    }
+    out.acceleration.clear();
+    out.acceleration.extend(
+        rows.force
+            .iter()
+            .zip(&out.constraint_force)
+            .zip(&rows.inverse_mass)
+            .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
+    );
+    out.diagnostics.clear();
+    out.status = Status::Solved;
+    out.contacts.clear();
+    out.contacts.push(None);
+    true
+}
