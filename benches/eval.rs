@@ -180,6 +180,43 @@ fn bead_batch_tape_one_core(b: Bencher, n: usize) {
     });
 }
 
+/// A few states at once (`FEW`: what a caller with a handful of bodies or candidate states
+/// has), beside the handwritten loop over the same layout: per state, the tape's call and
+/// dispatch are shared by the states and their divisions overlap, as the handwritten
+/// loop's do.
+const FEW: [usize; 4] = [1, 2, 4, 8];
+
+#[divan::bench(name = "bead_few_1_handwritten", args = FEW)]
+fn bead_few_handwritten(b: Bencher, n: usize) {
+    let inputs = bead_states(n);
+    let mut out = vec![0.0; 2 * n];
+    b.counter(ItemsCount::new(n)).bench_local(|| bead_batch_by_hand(n, black_box(&inputs), &mut out));
+}
+
+#[divan::bench(name = "bead_few_2_tape", args = FEW)]
+fn bead_few_tape(b: Bencher, n: usize) {
+    let tape = bead_tape();
+    let inputs = bead_states(n);
+    let mut out = vec![0.0; 2 * n];
+    let mut scratch = tape.batch_scratch();
+    b.counter(ItemsCount::new(n)).bench_local(|| tape.eval_batch_serial(n, black_box(&inputs), &mut scratch, &mut out));
+}
+
+/// The same few states through [`Tape::eval_few`]: every register holds the `K` states'
+/// values, one call and one dispatch per instruction for all of them.
+#[divan::bench(name = "bead_few_3_tape_few", consts = [2, 4, 8])]
+fn bead_few_tape_few<const K: usize>(b: Bencher) {
+    let tape = bead_tape();
+    let soa = bead_states(K);
+    let inputs: Vec<[f64; K]> = (0..7).map(|j| std::array::from_fn(|s| soa[j * K + s])).collect();
+    let mut out = [[0.0; K]; 2];
+    let mut scratch = tape.few_scratch::<K>();
+    b.counter(ItemsCount::new(K)).bench_local(|| {
+        tape.eval_few(black_box(&inputs), &mut scratch, &mut out);
+        black_box(out)
+    });
+}
+
 // ---- the 10-link chain: A and b -----------------------------------------------------------
 
 const LINKS: usize = 10;

@@ -302,6 +302,19 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
         let mut batch = vec![0.0; single.len()];
         tape.eval_batch(states, &soa_in, &mut tape.batch_scratch(), &mut batch);
         assert!(same_bits(&batch, &single), "tape {t}: single-state steps differ from the lanes");
+        // A few states at once (`eval_few`), four at a time through one scratch.
+        let mut few = tape.few_scratch::<4>();
+        let mut got = vec![0.0; single.len()];
+        for group in 0..states / 4 {
+            let inputs: Vec<[f64; 4]> =
+                (0..tape.input_len()).map(|j| std::array::from_fn(|s| soa_in[j * states + 4 * group + s])).collect();
+            let mut out = vec![[0.0; 4]; tape.output_len()];
+            tape.eval_few(&inputs, &mut few, &mut out);
+            for (k, x) in out.iter().enumerate() {
+                got[k * states + 4 * group..][..4].copy_from_slice(x);
+            }
+        }
+        assert!(same_bits(&got, &single), "tape {t}: eval_few differs from single-state evaluation");
     }
     // Two tapes of one register count and different constants through one scratch.
     let r = system.bodies[0].position;
@@ -316,6 +329,12 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
     for (tape, want) in [(&a, 28.0), (&b, 42.0), (&a, 28.0), (&a.clone(), 28.0), (&b, 42.0)] {
         tape.eval(&[1.0, 2.0, 3.0], &mut scratch, &mut out);
         assert_eq!(out[0], want);
+    }
+    let mut few = a.few_scratch::<2>();
+    for (tape, want) in [(&a, 28.0), (&b, 42.0), (&a, 28.0), (&b, 42.0)] {
+        let mut out = [[0.0; 2]];
+        tape.eval_few(&[[1.0, 1.0], [2.0, 2.0], [3.0, 3.0]], &mut few, &mut out);
+        assert_eq!(out, [[want, want]]);
     }
 }
 
@@ -333,6 +352,9 @@ fn norm_does_not_overflow_or_underflow() {
         let soa = [3.0 * scale, 1.0, 0.0, 0.0, 4.0 * scale, 0.0];
         tape.eval_batch(2, &soa, &mut tape.batch_scratch(), &mut batch);
         assert_eq!(batch, [out[0], 1.0]);
+        let mut few = [[0.0; 2]];
+        tape.eval_few(&[[3.0 * scale, 1.0], [0.0, 0.0], [4.0 * scale, 0.0]], &mut tape.few_scratch(), &mut few);
+        assert_eq!(few, [[out[0], 1.0]]);
     }
 }
 

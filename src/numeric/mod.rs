@@ -33,4 +33,4 @@ pub mod tape;
 pub mod vector;
 pub mod velocity;
 
-pub use tape::{BatchScratch, Scratch, Tape, TapeError};
+pub use tape::{BatchScratch, FewScratch, Scratch, Tape, TapeError};

@@ -51,14 +51,17 @@ pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> boo
         return false;
     }
     let body = *body;
-    let Some(&w) = rows.inverse_mass.get(body) else {
+    let n = rows.inverse_mass.len();
+    if body >= n || rows.velocity.len() != n || rows.force.len() != n {
         return false;
-    };
+    }
+    let w = rows.inverse_mass[body];
     // Every number finite (x·0 is 0 for finite x and NaN otherwise), every slot's velocity
     // and force included: the general solve's cache serves nothing less.
     let mut zero = row.bias * 0.0 + w * 0.0 + j[0] * 0.0 + j[1] * 0.0 + j[2] * 0.0;
-    for x in rows.velocity.iter().chain(&rows.force) {
-        zero += x[0] * 0.0 + x[1] * 0.0 + x[2] * 0.0;
+    for i in 0..n {
+        let (v, f) = (&rows.velocity[i], &rows.force[i]);
+        zero += (v[0] * 0.0 + v[1] * 0.0 + v[2] * 0.0) + (f[0] * 0.0 + f[1] * 0.0 + f[2] * 0.0);
     }
     if zero != 0.0 || w < 0.0 {
         return false;
@@ -102,22 +105,15 @@ pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> boo
     out.lambda.push(lambda);
     out.active.clear();
     out.active.push(true);
-    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w per slot.
-    let n = rows.inverse_mass.len();
-    out.constraint_force.clear();
+    // Σ λ J = λ̃ J̃ on the row's slot, added to a zero force; a = (F + Σ λ J) w per slot.
     out.constraint_force.resize(n, [0.0; 3]);
-    let force = &mut out.constraint_force[body];
-    for d in 0..3 {
-        force[d] += mu * jt[d];
+    out.acceleration.resize(n, [0.0; 3]);
+    for i in 0..n {
+        let fc = if i == body { [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]] } else { [0.0; 3] };
+        let (f, w) = (&rows.force[i], rows.inverse_mass[i]);
+        out.constraint_force[i] = fc;
+        out.acceleration[i] = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
     }
-    out.acceleration.clear();
-    out.acceleration.extend(
-        rows.force
-            .iter()
-            .zip(&out.constraint_force)
-            .zip(&rows.inverse_mass)
-            .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
-    );
     out.diagnostics.clear();
     out.status = Status::Solved;
     out.contacts.clear();

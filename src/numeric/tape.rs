@@ -554,6 +554,14 @@ pub struct BatchScratch {
     regs: Vec<f64>,
 }
 
+/// Registers for [`Tape::eval_few`]: `K` states in each; make one with [`Tape::few_scratch`].
+#[derive(Clone, Debug)]
+pub struct FewScratch<const K: usize> {
+    regs: Vec<[f64; K]>,
+    /// The [`Tape::id`] whose constants the registers hold.
+    tape: u64,
+}
+
 impl Tape {
     /// Compiles `roots` over the input layout `inputs`: symbol `inputs[i]` occupies the slots
     /// [`input_range(i)`](Tape::input_range) (one for a scalar, `dim` for a vector).
@@ -762,6 +770,11 @@ impl Tape {
     /// Registers for [`eval`](Tape::eval).
     pub fn scratch(&self) -> Scratch {
         Scratch { regs: vec![0.0; self.n_regs], tape: NO_TAPE }
+    }
+
+    /// Registers for [`eval_few`](Tape::eval_few) over `K` states.
+    pub fn few_scratch<const K: usize>(&self) -> FewScratch<K> {
+        FewScratch { regs: vec![[0.0; K]; self.n_regs], tape: NO_TAPE }
     }
 
     /// Registers for the serial part of [`eval_batch`](Tape::eval_batch).
@@ -1105,6 +1118,98 @@ impl Tape {
         // SAFETY: `outputs` is `output_len · n` long (asserted) and borrowed mutably for the
         // whole call; `inputs` is `input_len · n` long.
         unsafe { self.run_range(&mut scratch.regs, inputs, OutPtr(outputs.as_mut_ptr()), n, 0..n) };
+    }
+
+    /// Evaluates every root at `K` states at once (a few: 2 to 8), each register holding the
+    /// `K` states' values: `inputs[j][s]` is input slot `j` of state `s`, `outputs[k][s]`
+    /// output component `k` of state `s`. The results are bitwise those of
+    /// [`eval`](Tape::eval) at each state (the lanes' instructions, `K` at a time).
+    ///
+    /// For callers with a handful of states (a few bodies, candidate states of a search):
+    /// one call and one dispatch per instruction serve all `K`, and their divisions and
+    /// square roots, independent, overlap in the processor, where `K` calls of
+    /// [`eval`](Tape::eval) would each wait on their own. Nothing is allocated; the
+    /// constants stay in the scratch between calls, as [`eval`](Tape::eval)'s do.
+    ///
+    /// # Panics
+    /// If `inputs` is not [`input_len`](Tape::input_len) long, `outputs` not
+    /// [`output_len`](Tape::output_len) long, or `scratch` was made by a tape with another
+    /// number of registers.
+    pub fn eval_few<const K: usize>(&self, inputs: &[[f64; K]], scratch: &mut FewScratch<K>, outputs: &mut [[f64; K]]) {
+        assert_eq!(inputs.len(), self.n_inputs, "input length");
+        assert_eq!(outputs.len(), self.outputs.len(), "output length");
+        assert_eq!(scratch.regs.len(), self.n_regs, "scratch made by another tape");
+        let r = scratch.regs.as_mut_slice();
+        if scratch.tape != self.id {
+            for (x, &c) in r[self.n_inputs..].iter_mut().zip(&self.consts) {
+                *x = [c; K];
+            }
+            scratch.tape = self.id;
+        }
+        r[..self.n_inputs].copy_from_slice(inputs);
+        let regs = r.as_mut_ptr();
+        // SAFETY: `from_program` asserts every register number of `code` is below `n_regs`,
+        // and the scratch has exactly `n_regs` registers (asserted above).
+        let reg = |k: u32| unsafe { *regs.add(k as usize) };
+        for i in &self.code {
+            // Operands by value (the destination is never an operand), then one store.
+            let (a, b) = (reg(i.a), reg(i.b));
+            let x: [f64; K] = match i.code {
+                Code::Add => std::array::from_fn(|s| a[s] + b[s]),
+                Code::Sub => std::array::from_fn(|s| a[s] - b[s]),
+                Code::Mul => std::array::from_fn(|s| a[s] * b[s]),
+                Code::Div => std::array::from_fn(|s| a[s] / b[s]),
+                Code::Neg => std::array::from_fn(|s| -a[s]),
+                Code::Sq => std::array::from_fn(|s| a[s] * a[s]),
+                Code::SqAddSq => {
+                    let c = reg(i.c);
+                    std::array::from_fn(|s| a[s] * a[s] + c[s] * c[s])
+                }
+                Code::Powi => std::array::from_fn(|s| a[s].powi(i.imm)),
+                Code::Powf => std::array::from_fn(|s| eval::pow(a[s], b[s])),
+                Code::Sqrt => std::array::from_fn(|s| a[s].sqrt()),
+                Code::Call(f) => std::array::from_fn(|s| f.apply(&[a[s], b[s]])),
+                Code::MulMulAdd => {
+                    let (c, e) = (reg(i.c), reg(i.e));
+                    std::array::from_fn(|s| a[s] * b[s] + c[s] * e[s])
+                }
+                Code::MulMulSub => {
+                    let (c, e) = (reg(i.c), reg(i.e));
+                    std::array::from_fn(|s| a[s] * b[s] - c[s] * e[s])
+                }
+                Code::MulAdd => {
+                    let c = reg(i.c);
+                    std::array::from_fn(|s| a[s] * b[s] + c[s])
+                }
+                Code::MulSub => {
+                    let c = reg(i.c);
+                    std::array::from_fn(|s| a[s] * b[s] - c[s])
+                }
+                Code::SubMul => {
+                    let c = reg(i.c);
+                    std::array::from_fn(|s| a[s] - b[s] * c[s])
+                }
+                Code::NegMul => std::array::from_fn(|s| -(a[s] * b[s])),
+                Code::NegDiv => std::array::from_fn(|s| -(a[s] / b[s])),
+                // As the lanes: the plain formula, then the rare overflow cases again.
+                Code::Norm2 => std::array::from_fn(|s| {
+                    let o = (a[s] * a[s] + b[s] * b[s]).sqrt();
+                    if o.is_finite() && o >= 1e-150 { o } else { norm2(a[s], b[s]) }
+                }),
+                Code::Norm3 => {
+                    let c = reg(i.c);
+                    std::array::from_fn(|s| {
+                        let o = (a[s] * a[s] + b[s] * b[s] + c[s] * c[s]).sqrt();
+                        if o.is_finite() && o >= 1e-150 { o } else { norm3(a[s], b[s], c[s]) }
+                    })
+                }
+            };
+            // SAFETY: as `reg`.
+            unsafe { *regs.add(i.d as usize) = x };
+        }
+        for (o, &k) in outputs.iter_mut().zip(&self.outputs) {
+            *o = reg(k);
+        }
     }
 
     /// Runs the states `range` lane by lane, writing their outputs into the rows at `out`.
