@@ -6,6 +6,9 @@
 //! `benches/generated/`, kept current by `tests/generate.rs`), the compiled tape for one
 //! state, and the tape batched over many states (structure of arrays).
 //!
+//! The bead also runs over a few states at once (`bead_few_*`: 1 to 8): the handwritten loop,
+//! `eval_batch_serial`, and `Tape::eval_few`, whose registers hold all the states' values.
+//!
 //! The bead's batch also runs on one core (calls below `PARALLEL_MIN`), so the tape's own
 //! speed can be told from what rayon adds or, on a busy machine, costs.
 //!

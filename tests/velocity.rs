@@ -494,7 +494,12 @@ fn exact_substep(
     }
     along.force.iter_mut().for_each(|f| *f = [0.0; 3]);
     let dv = dynamics.correct(&along).acceleration.clone();
-    assert_eq!(dynamics.last_solve_path(), SolvePath::Factored);
+    // One row on one slot (the pendulum) is solved in closed form (`numeric::single`, the
+    // same numbers), not through the cache: the cache's path is asserted for the others.
+    let cached = !lagrange::numeric::single::is_single(&along);
+    if cached {
+        assert_eq!(dynamics.last_solve_path(), SolvePath::Factored);
+    }
     for ((x, u), du) in q.iter_mut().zip(&mut v).zip(&dv) {
         for d in 0..3 {
             u[d] += du[d];
@@ -505,7 +510,7 @@ fn exact_substep(
     let mut start = Vec::new();
     let outcome = project_positions_along(&mut dynamics, t + h, &mut q, &v, &mut along, bound, 10, &mut start)
         .expect("evaluates");
-    if outcome.is_some() {
+    if outcome.is_some() && cached {
         // The iteration's solves were substitutions with the velocity solve's factor.
         assert_eq!(dynamics.last_solve_path(), SolvePath::Reused);
     }
