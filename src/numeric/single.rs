@@ -9,7 +9,7 @@
 //! Â, J̃ = Ĵ/√Â, Ã = J̃·J̃ w, L = √Ã, the two divisions of each substitution, the refinement
 //! x += A⁻¹(b − A x), λ = λ̃/(‖J‖√Â), the forces and accelerations — so its numbers are the
 //! general solve's bit for bit (a property test holds it to `solve_holding` and
-//! `solve_cached`, `tests/solve_single.rs`).
+//! `solve_cached`, `tests/simulate.rs`).
 //!
 //! It serves only the plain case and declines everything else, which the caller then hands
 //! to the general solve: an inequality row, a number that is not finite, a negative mass, a
