@@ -116,7 +116,10 @@ impl Banded {
             1 => {
                 self.tridiagonal_factor(pivot_floor, &mut factor.l)?;
                 // Off the factor's chain of square roots: n independent divisions.
-                factor.inverse.extend(factor.l[..2 * self.n].iter().skip(1).step_by(2).map(|d| 1.0 / d));
+                factor.inverse.resize(self.n, 0.0);
+                for (i, r) in factor.inverse.iter_mut().enumerate() {
+                    *r = 1.0 / factor.l[2 * i + 1];
+                }
                 Ok(())
             }
             _ => self.band_factor(pivot_floor, &mut factor.l),
