@@ -337,14 +337,9 @@ impl<'s> Dynamics<'s> {
                 &mut self.position_rows,
             )
             .map_err(|error| SimError::Eval { time: t, error })?;
-        let zero = |s: f64, x: &f64| s + x * 0.0;
-        let sum = self
-            .position_rows
-            .iter()
-            .fold(0.0, |s, row| row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(s, &row.value), zero));
-        // x·0 is 0 for every finite x and NaN otherwise: the sum is 0 when all are finite.
-        self.positions_finite = sum == 0.0;
-        if sum != 0.0 {
+        let finite = self.position_rows.iter().fold(true, |ok, row| ok & row.value.is_finite() & parts_finite(row));
+        self.positions_finite = finite;
+        if !finite {
             let rows = self.rows(t, q, v)?;
             self.recycle(rows);
         }
@@ -512,23 +507,32 @@ impl<'s> Dynamics<'s> {
     }
 }
 
-/// Whether every number of `rows` is finite, in one branch-free pass (x·0 is 0 for every
-/// finite x and NaN otherwise).
+/// Whether every component of a row's J is finite.
+fn parts_finite(row: &Row) -> bool {
+    row.jacobian.iter().fold(true, |ok, (_, j)| ok & j[0].is_finite() & j[1].is_finite() & j[2].is_finite())
+}
+
+/// Whether every slot's 1/m, velocity and force is finite.
+fn slots_finite(rows: &Rows) -> bool {
+    let three = |ok: bool, x: &[f64; 3]| ok & x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
+    let vectors = rows.force.iter().chain(&rows.velocity).fold(true, three);
+    rows.inverse_mass.iter().fold(vectors, |ok, w| ok & w.is_finite())
+}
+
+/// Whether every number of `rows` is finite, in one branch-free pass. The tests are
+/// combined with `&`, not summed (x·0 is 0 exactly when x is finite, but a sum of them is one
+/// chain of dependent additions, which made these checks a visible part of a chain's step).
 fn all_finite(rows: &Rows) -> bool {
-    let zero = |s: f64, x: &f64| s + x * 0.0;
-    let rows_sum = rows.rows.iter().fold(0.0, |s, row| {
-        row.jacobian.iter().flat_map(|(_, j)| j).fold(zero(zero(zero(s, &row.value), &row.rate), &row.bias), zero)
+    let finite = rows.rows.iter().fold(true, |ok, row| {
+        ok & row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & parts_finite(row)
     });
-    let bodies = rows.force.iter().chain(&rows.velocity).flatten().chain(&rows.inverse_mass).fold(rows_sum, zero);
-    bodies == 0.0
+    finite & slots_finite(rows)
 }
 
 /// Whether Ċ, c and the slots' numbers of `rows` are finite ([`all_finite`] without C and J).
 fn motion_finite(rows: &Rows) -> bool {
-    let zero = |s: f64, x: &f64| s + x * 0.0;
-    let rows_sum = rows.rows.iter().fold(0.0, |s, row| zero(zero(s, &row.rate), &row.bias));
-    let bodies = rows.force.iter().chain(&rows.velocity).flatten().chain(&rows.inverse_mass).fold(rows_sum, zero);
-    bodies == 0.0
+    let finite = rows.rows.iter().fold(true, |ok, row| ok & row.rate.is_finite() & row.bias.is_finite());
+    finite & slots_finite(rows)
 }
 
 /// The body a slot of the rows belongs to: a body, or a rigid body's angular slot.

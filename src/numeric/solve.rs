@@ -305,29 +305,31 @@ fn bad_inverse_mass(w: f64) -> Option<NonFinite> {
 }
 
 /// The first non-finite number of `row` (and the bodies it acts on), in the order the
-/// solve needs them; C and Ċ only for inequalities (`check_value`).
-fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Option<(RowPart, NonFinite)> {
-    // The common case first, without branches: x·0 is 0 for every finite x and NaN
-    // otherwise, so the sum is 0 exactly when every number is finite (and every mass ≥ 0).
-    // Written out rather than as a chain of iterators: this runs for every row of every
-    // factorisation.
-    let mut sum = 0.0 + row.bias * 0.0;
-    let mut masses = true;
+/// solve needs them; C and Ċ only for inequalities (`check_value`). With `motion_finite`
+/// the caller has found every velocity and force finite already (the cached solve's
+/// `servable`), so the common case's test leaves them out.
+fn non_finite_part(
+    rows: &Rows,
+    row: &super::rows::Row,
+    check_value: bool,
+    motion_finite: bool,
+) -> Option<(RowPart, NonFinite)> {
+    // The common case first, without branches: every number finite and every mass ≥ 0.
+    // Tests combined with `&` (one chain of single-cycle steps, not of additions). Written
+    // out rather than as a chain of iterators: this runs for every row of every factorisation.
+    let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
+    let mut ok = row.bias.is_finite();
     for (body, j) in &row.jacobian {
-        let (w, v, f) = (rows.inverse_mass[*body], &rows.velocity[*body], &rows.force[*body]);
-        masses &= w >= 0.0;
-        sum += w * 0.0;
-        for x in [j, v, f] {
-            sum += x[0] * 0.0;
-            sum += x[1] * 0.0;
-            sum += x[2] * 0.0;
+        let w = rows.inverse_mass[*body];
+        ok &= (w >= 0.0) & w.is_finite() & finite3(j);
+        if !motion_finite {
+            ok &= finite3(&rows.velocity[*body]) & finite3(&rows.force[*body]);
         }
     }
     if check_value {
-        sum += row.value * 0.0;
-        sum += row.rate * 0.0;
+        ok &= row.value.is_finite() & row.rate.is_finite();
     }
-    if sum == 0.0 && masses {
+    if ok {
         return None;
     }
     if let Some(c) = NonFinite::of_all(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied())) {
@@ -497,12 +499,13 @@ impl Scaled {
     /// Scales `rows`; rows that cannot carry a force get a diagnostic and `usable = false`.
     pub fn new(rows: &Rows, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) -> Scaled {
         let mut s = Scaled::default();
-        s.refill(rows, diagnostics, status);
+        s.refill(rows, false, diagnostics, status);
         s
     }
 
-    /// [`new`](Scaled::new) into `self`'s buffers (no allocation once they have the rows' size).
-    fn refill(&mut self, rows: &Rows, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) {
+    /// [`new`](Scaled::new) into `self`'s buffers (no allocation once they have the rows' size);
+    /// `motion_finite`: every velocity and force is known to be finite (see [`non_finite_part`]).
+    fn refill(&mut self, rows: &Rows, motion_finite: bool, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) {
         let k = rows.rows.len();
         for v in [&mut self.norm, &mut self.jacobi] {
             v.clear();
@@ -518,7 +521,7 @@ impl Scaled {
         for (q, row) in rows.rows.iter().enumerate() {
             self.start.push(self.parts.len());
             // An inequality also needs C and Ċ to be classified.
-            if let Some((part, cause)) = non_finite_part(rows, row, row.inequality) {
+            if let Some((part, cause)) = non_finite_part(rows, row, row.inequality, motion_finite) {
                 diagnostics.push(Diagnostic::NonFiniteRow { constraint: q, part, cause });
                 *status = (*status).max(Status::Failed);
                 continue;
@@ -825,7 +828,8 @@ impl Factored {
             return false;
         }
         let (mut diagnostics, mut status) = (Vec::new(), Status::Solved);
-        self.scaled.refill(rows, &mut diagnostics, &mut status);
+        // `solve_cached_into` served the rows: every velocity and force is finite.
+        self.scaled.refill(rows, true, &mut diagnostics, &mut status);
         if !diagnostics.is_empty() {
             return false;
         }
