@@ -1625,9 +1625,10 @@ fn minimum_norm(
 /// The rows named are those with a visible part (`NULL_SHARE`) in the null space, found by
 /// two inverse iterations of the regularised factor from a fixed random vector (the null
 /// part grows by 1/ε² against at most 1/σ² elsewhere); the rank is not computed.
-/// `None` when the block has no sparse analysis within [`MAX_SPARSE_FLOPS`], the regularised
-/// factor fails, or the residual stays above the consistency bound (rows that contradict
-/// each other: their least squares needs the eigendecomposition).
+/// `None` when the block has no sparse analysis within [`MAX_SPARSE_FLOPS`] and cheaper than
+/// a dense factor (as [`plan`] weighs them), the regularised factor fails, or the residual
+/// stays above the consistency bound (rows that contradict each other: their least squares
+/// needs the eigendecomposition).
 fn sparse_minimum_norm(
     block: &Block,
     rhs: &[f64],
@@ -1638,7 +1639,10 @@ fn sparse_minimum_norm(
 ) -> Option<Vec<f64>> {
     let n = block.n;
     let (mut factor, targets) = SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
-    if factor.flops() > MAX_SPARSE_FLOPS {
+    // As `plan` weighs them: a block whose sparse factor costs more than a dense one is dense
+    // (all pairs of a cluster of bodies), and its n³ is what the size limit refuses.
+    let dense_cost = DENSE_COST * (n as f64).powi(3) / 3.0;
+    if factor.flops() > MAX_SPARSE_FLOPS || SPARSE_COST * factor.flops() > dense_cost {
         return None;
     }
     let top = block.weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
