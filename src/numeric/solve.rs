@@ -1295,6 +1295,8 @@ pub(crate) fn equality(
         *status = (*status).max(Status::Failed);
         vec![0.0; n]
     };
+    // The sparse analysis of a block found singular, for its minimum norm.
+    let mut sparse = None;
     match plan(block, settings) {
         Plan::Band(Some(factor)) => {
             return finite_or_zero(factor.solve(&rhs), index, diagnostics, status);
@@ -1303,6 +1305,7 @@ pub(crate) fn equality(
             return finite_or_zero(sparse.factor.solve(&rhs), index, diagnostics, status);
         }
         Plan::Band(None) | Plan::Sparse(None) => {}
+        Plan::Singular(analysed) => sparse = Some(analysed),
         Plan::Dense => {
             if n > MAX_DENSE_ROWS {
                 return too_large(diagnostics, status);
@@ -1315,7 +1318,7 @@ pub(crate) fn equality(
     if n > MAX_DENSE_ROWS {
         // Singular past the dense decomposition: the minimum norm by the sparse factor of a
         // regularised Ã, when the rows are consistent.
-        return match sparse_minimum_norm(block, &rhs, index, settings, diagnostics, status) {
+        return match sparse_minimum_norm(block, sparse, &rhs, index, settings, diagnostics, status) {
             Some(x) => finite_or_zero(x, index, diagnostics, status),
             None => too_large(diagnostics, status),
         };
@@ -1326,10 +1329,13 @@ pub(crate) fn equality(
 
 /// How [`equality`] factors a block: the band Cholesky or the sparse Cholesky (`Some` when
 /// their pivots all stay above the rank tolerance, `None` when one does not: the block is
-/// singular), or dense.
+/// singular; the sparse one `None` also when it has no analysis), or dense.
 pub(crate) enum Plan {
     Band(Option<BandFactor>),
     Sparse(Option<SparsePlan>),
+    /// The sparse factor's analysis of a block its pivots found singular, for
+    /// [`sparse_minimum_norm`] to factor the regularised Ã with.
+    Singular(SparsePlan),
     Dense,
 }
 
@@ -1368,7 +1374,7 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     let banded = match settings.method {
         Method::Banded => true,
         Method::Dense => false,
-        Method::Sparse => return Plan::Sparse(sparse_plan(block, settings)),
+        Method::Sparse => return sparse_plan(block, settings),
         Method::Auto if band_fits && (bandwidth <= NARROW_BAND || n < RENUMBER_MIN_ROWS) => true,
         Method::Auto if n < RENUMBER_MIN_ROWS => false,
         Method::Auto => match SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q))) {
@@ -1381,7 +1387,7 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
                     if sparse.flops() <= MAX_SPARSE_FLOPS { SPARSE_COST * sparse.flops() } else { f64::INFINITY };
                 if sparse_cost < band_cost && sparse_cost < dense_cost {
                     let factored = fill_sparse(block, settings, &mut sparse, &targets);
-                    return Plan::Sparse(factored.then_some(SparsePlan { factor: sparse, targets }));
+                    return sparse_outcome(factored, SparsePlan { factor: sparse, targets });
                 }
                 // As before the sparse factor: band when it fits, dense otherwise.
                 band_fits
@@ -1405,11 +1411,21 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     Plan::Band(a.cholesky(settings.rank_tolerance).ok().map(|factor| BandFactor { position, a, factor }))
 }
 
-/// The sparse factor of `block`, `None` when it is singular ([`Method::Sparse`]: whatever
-/// its cost).
-fn sparse_plan(block: &Block, settings: &Settings) -> Option<SparsePlan> {
-    let (mut factor, targets) = SparseFactor::analyse(block.n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
-    fill_sparse(block, settings, &mut factor, &targets).then_some(SparsePlan { factor, targets })
+/// The sparse factor of `block` ([`Method::Sparse`]: whatever its cost), or its analysis
+/// when it is singular.
+fn sparse_plan(block: &Block, settings: &Settings) -> Plan {
+    match SparseFactor::analyse(block.n, block.a.iter().map(|&(p, q, _)| (p, q))) {
+        None => Plan::Sparse(None),
+        Some((mut factor, targets)) => {
+            let factored = fill_sparse(block, settings, &mut factor, &targets);
+            sparse_outcome(factored, SparsePlan { factor, targets })
+        }
+    }
+}
+
+/// The sparse factor when it `factored`, its analysis as [`Plan::Singular`] when not.
+fn sparse_outcome(factored: bool, plan: SparsePlan) -> Plan {
+    if factored { Plan::Sparse(Some(plan)) } else { Plan::Singular(plan) }
 }
 
 /// Sums `block`'s entries into `factor` at `targets` (in `Block::a`'s order: the cache's
@@ -1614,7 +1630,8 @@ fn minimum_norm(
 }
 
 /// The minimum-norm λ of a singular, consistent block too large for the dense
-/// eigendecomposition of [`minimum_norm`], by iterated Tikhonov regularisation on the
+/// eigendecomposition of [`minimum_norm`] (`analysed`: its sparse analysis, when the plan
+/// made one), by iterated Tikhonov regularisation on the
 /// sparse factor (the proximal-point iteration; Hanke and Groetsch, "Nonstationary
 /// iterated Tikhonov regularization", J. Optim. Theory Appl. 98, 1998):
 /// μ₀ = 0, μₖ₊₁ = μₖ + (Ã + ε W²)⁻¹ (rhs − Ã μₖ), with W the rows' weights (see
@@ -1631,6 +1648,7 @@ fn minimum_norm(
 /// needs the eigendecomposition).
 fn sparse_minimum_norm(
     block: &Block,
+    analysed: Option<SparsePlan>,
     rhs: &[f64],
     index: &[usize],
     settings: &Settings,
@@ -1638,7 +1656,13 @@ fn sparse_minimum_norm(
     status: &mut Status,
 ) -> Option<Vec<f64>> {
     let n = block.n;
-    let (mut factor, targets) = SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
+    let SparsePlan { mut factor, targets } = match analysed {
+        Some(plan) => plan,
+        None => {
+            let (factor, targets) = SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
+            SparsePlan { factor, targets }
+        }
+    };
     // As `plan` weighs them: a block whose sparse factor costs more than a dense one is dense
     // (all pairs of a cluster of bodies), and its n³ is what the size limit refuses.
     let dense_cost = DENSE_COST * (n as f64).powi(3) / 3.0;
