@@ -35,7 +35,7 @@ use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
 use super::single::solve_single;
-use super::solve::{Settings, Solution, SolveCache, solve_cached_into};
+use super::solve::{Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 
@@ -72,6 +72,10 @@ pub enum SimError {
         "the scene's independent parts differ in size beyond what one length unit can serve (about 2^{small} and 2^{large}): a run in a unit near the larger would lose the smaller below f64's range; simulate them as separate files"
     )]
     MixedScales { small: i64, large: i64 },
+    #[error(
+        "step {step}: {rows} coupled rows could not be solved — they are redundant and contradict each other, or no sparse factor serves them, and a dense solve is limited to {limit} rows; the run stops rather than step on without those constraints (check the file for a duplicated or conflicting constraint)"
+    )]
+    TooLarge { step: u64, rows: usize, limit: usize },
     #[error("cannot write the output: {0}")]
     Output(String),
     #[error("invalid settings: {0}")]
@@ -154,6 +158,21 @@ pub struct Dynamics<'s> {
     /// [`recycle_solution`](Dynamics::recycle_solution): buffers the solves fill in place.
     correction: Solution,
     spare_solution: Option<Solution>,
+    /// A solve that left a block unsolved ([`Diagnostic::TooLarge`]): the step and its rows.
+    /// The next evaluation stops the run with [`SimError::TooLarge`] instead of stepping on
+    /// with λ = 0 on them, as if those constraints were not there.
+    refused: Option<(u64, usize)>,
+}
+
+/// The rows of a block `solution` left unsolved as too large ([`Diagnostic::TooLarge`]).
+fn refused_rows(solution: &Solution) -> Option<usize> {
+    if solution.status != Status::Failed {
+        return None;
+    }
+    solution.diagnostics.iter().find_map(|d| match d {
+        Diagnostic::TooLarge { rows, .. } => Some(*rows),
+        _ => None,
+    })
 }
 
 /// The state slot of each rigid body's angle or rotation vector (and angular velocity), in
@@ -198,6 +217,7 @@ impl<'s> Dynamics<'s> {
             folded: Vec::new(),
             correction: Solution::default(),
             spare_solution: None,
+            refused: None,
         }
     }
 
@@ -354,6 +374,7 @@ impl<'s> Dynamics<'s> {
 
     /// The rows at (t, q, v): the one place states become numbers.
     pub fn rows(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
+        self.refusal()?;
         self.evaluations += 1;
         self.set_state(q, v);
         let mut rows = self.spare.pop().unwrap_or_default();
@@ -374,6 +395,7 @@ impl<'s> Dynamics<'s> {
 
     /// [`rows_moved`](Dynamics::rows_moved); `checked`: C and J are known to be finite.
     fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, mut rows: Rows, checked: bool) -> Result<Rows, SimError> {
+        self.refusal()?;
         self.evaluations += 1;
         self.set_state(q, v);
         let kept = self
@@ -449,6 +471,9 @@ impl<'s> Dynamics<'s> {
         // One row on one body: the same numbers in closed form (`numeric::single`).
         if !solve_single(rows, &Settings::default(), &mut solution) {
             solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
+            if self.refused.is_none() {
+                self.refused = refused_rows(&solution).map(|rows| (self.step, rows));
+            }
         }
         solution
     }
@@ -466,8 +491,19 @@ impl<'s> Dynamics<'s> {
     pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
         if !solve_single(rows, &Settings::default(), &mut self.correction) {
             solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
+            if self.refused.is_none() {
+                self.refused = refused_rows(&self.correction).map(|rows| (self.step, rows));
+            }
         }
         &mut self.correction
+    }
+
+    /// [`SimError::TooLarge`] once a solve has left a block unsolved.
+    fn refusal(&self) -> Result<(), SimError> {
+        match self.refused {
+            Some((step, rows)) => Err(SimError::TooLarge { step, rows, limit: MAX_DENSE_ROWS }),
+            None => Ok(()),
+        }
     }
 
     /// The way the last solve through the cache went (`solve::SolvePath`; a one-row solve,

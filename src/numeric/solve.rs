@@ -84,6 +84,19 @@ const CONSISTENCY: f64 = 1e-2;
 /// A row takes part in a null vector of Ã (it is named as redundant) when its component is
 /// above `NULL_SHARE` of the vector's largest: smaller ones are rounding.
 const NULL_SHARE: f64 = 1e-6;
+/// ε of the regularised factor Ã + ε W² that solves singular blocks past [`MAX_DENSE_ROWS`]
+/// ([`sparse_minimum_norm`]), relative to Ã's unit diagonal: each solve shrinks the error
+/// along an eigenvalue σ of the weighted Ã by ε/(σ + ε), so the eigenvalues a grid or a
+/// chain of joints has (1e-4 and up at ten thousand rows) converge in a few solves, while
+/// the residual's rounding in the null space (≈ 1e-16) grows by 1/ε into λ's split among
+/// the redundant rows only (1e-8 of λ; the impulse Jᵀλ has no null-space part).
+const REGULARISATION: f64 = 1e-8;
+/// The most regularised solves [`sparse_minimum_norm`] takes; it stops earlier as soon as a
+/// solve no longer halves the residual (it is then at its rounding).
+const REGULARISED_SOLVES: usize = 40;
+/// Weights of rows (λₖ/λ̃ₖ) below this fraction of the largest would make ε Wₖ² vanish
+/// beside rounding: [`sparse_minimum_norm`] then minimises the norm of the scaled λ̃.
+const WEIGHT_RANGE: f64 = 1e-4;
 
 /// The most rows a dense equality solve (or the minimum-norm solve of a singular block) may
 /// have: both cost n³ (a symmetric eigendecomposition, then a least squares over the null
@@ -219,6 +232,10 @@ pub enum Diagnostic {
     /// the system is consistent: the minimum-norm λ. `rank` of `size` rows; `condition`
     /// estimates σ_max/σ_min of the rest.
     Redundant { constraints: Vec<usize>, rank: usize, size: usize, condition: f64 },
+    /// As [`Diagnostic::Redundant`] for a block of `size` rows past [`MAX_DENSE_ROWS`]: the
+    /// minimum-norm λ by `solves` regularised sparse solves (`sparse_minimum_norm`); the rank
+    /// is not computed.
+    RedundantSparse { constraints: Vec<usize>, size: usize, solves: usize },
     /// As [`Diagnostic::Redundant`], but the rows contradict each other: the least-squares
     /// minimum-norm λ, with the relative residual left.
     Inconsistent { constraints: Vec<usize>, rank: usize, size: usize, condition: f64, residual: f64 },
@@ -369,7 +386,7 @@ impl Diagnostic {
                 Status::Failed
             }
             Diagnostic::ZeroGradient { .. } | Diagnostic::InfiniteMass { .. } => Status::Singular,
-            Diagnostic::Redundant { .. } => Status::MinimumNorm,
+            Diagnostic::Redundant { .. } | Diagnostic::RedundantSparse { .. } => Status::MinimumNorm,
             Diagnostic::Inconsistent { .. } => Status::Inconsistent,
             Diagnostic::QpFailed { status: QpStatus::Infeasible | QpStatus::Unbounded, .. } => Status::Inconsistent,
             Diagnostic::QpFailed { .. } => Status::Failed,
@@ -396,6 +413,7 @@ impl Diagnostic {
             | Diagnostic::OffConstraint { constraint, .. }
             | Diagnostic::NonFiniteLambda { constraint } => std::slice::from_ref(constraint),
             Diagnostic::Redundant { constraints, .. }
+            | Diagnostic::RedundantSparse { constraints, .. }
             | Diagnostic::Inconsistent { constraints, .. }
             | Diagnostic::QpFailed { constraints, .. }
             | Diagnostic::QpInaccurate { constraints, .. }
@@ -1281,6 +1299,8 @@ pub(crate) fn equality(
         *status = (*status).max(Status::Failed);
         vec![0.0; n]
     };
+    // The sparse analysis of a block found singular, for its minimum norm.
+    let mut sparse = None;
     match plan(block, settings) {
         Plan::Band(Some(factor)) => {
             return finite_or_zero(factor.solve(&rhs), index, diagnostics, status);
@@ -1289,6 +1309,7 @@ pub(crate) fn equality(
             return finite_or_zero(sparse.factor.solve(&rhs), index, diagnostics, status);
         }
         Plan::Band(None) | Plan::Sparse(None) => {}
+        Plan::Singular(analysed) => sparse = Some(analysed),
         Plan::Dense => {
             if n > MAX_DENSE_ROWS {
                 return too_large(diagnostics, status);
@@ -1299,7 +1320,12 @@ pub(crate) fn equality(
         }
     }
     if n > MAX_DENSE_ROWS {
-        return too_large(diagnostics, status);
+        // Singular past the dense decomposition: the minimum norm by the sparse factor of a
+        // regularised Ã, when the rows are consistent.
+        return match sparse_minimum_norm(block, sparse, &rhs, index, settings, diagnostics, status) {
+            Some(x) => finite_or_zero(x, index, diagnostics, status),
+            None => too_large(diagnostics, status),
+        };
     }
     let x = minimum_norm(&dense(block), &rhs, &block.weight, index, settings, diagnostics, status);
     finite_or_zero(x, index, diagnostics, status)
@@ -1307,10 +1333,13 @@ pub(crate) fn equality(
 
 /// How [`equality`] factors a block: the band Cholesky or the sparse Cholesky (`Some` when
 /// their pivots all stay above the rank tolerance, `None` when one does not: the block is
-/// singular), or dense.
+/// singular; the sparse one `None` also when it has no analysis), or dense.
 pub(crate) enum Plan {
     Band(Option<BandFactor>),
     Sparse(Option<SparsePlan>),
+    /// The sparse factor's analysis of a block its pivots found singular, for
+    /// [`sparse_minimum_norm`] to factor the regularised Ã with.
+    Singular(SparsePlan),
     Dense,
 }
 
@@ -1349,7 +1378,7 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     let banded = match settings.method {
         Method::Banded => true,
         Method::Dense => false,
-        Method::Sparse => return Plan::Sparse(sparse_plan(block, settings)),
+        Method::Sparse => return sparse_plan(block, settings),
         Method::Auto if band_fits && (bandwidth <= NARROW_BAND || n < RENUMBER_MIN_ROWS) => true,
         Method::Auto if n < RENUMBER_MIN_ROWS => false,
         Method::Auto => match SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q))) {
@@ -1362,7 +1391,7 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
                     if sparse.flops() <= MAX_SPARSE_FLOPS { SPARSE_COST * sparse.flops() } else { f64::INFINITY };
                 if sparse_cost < band_cost && sparse_cost < dense_cost {
                     let factored = fill_sparse(block, settings, &mut sparse, &targets);
-                    return Plan::Sparse(factored.then_some(SparsePlan { factor: sparse, targets }));
+                    return sparse_outcome(factored, SparsePlan { factor: sparse, targets });
                 }
                 // As before the sparse factor: band when it fits, dense otherwise.
                 band_fits
@@ -1386,11 +1415,21 @@ pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     Plan::Band(a.cholesky(settings.rank_tolerance).ok().map(|factor| BandFactor { position, a, factor }))
 }
 
-/// The sparse factor of `block`, `None` when it is singular ([`Method::Sparse`]: whatever
-/// its cost).
-fn sparse_plan(block: &Block, settings: &Settings) -> Option<SparsePlan> {
-    let (mut factor, targets) = SparseFactor::analyse(block.n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
-    fill_sparse(block, settings, &mut factor, &targets).then_some(SparsePlan { factor, targets })
+/// The sparse factor of `block` ([`Method::Sparse`]: whatever its cost), or its analysis
+/// when it is singular.
+fn sparse_plan(block: &Block, settings: &Settings) -> Plan {
+    match SparseFactor::analyse(block.n, block.a.iter().map(|&(p, q, _)| (p, q))) {
+        None => Plan::Sparse(None),
+        Some((mut factor, targets)) => {
+            let factored = fill_sparse(block, settings, &mut factor, &targets);
+            sparse_outcome(factored, SparsePlan { factor, targets })
+        }
+    }
+}
+
+/// The sparse factor when it `factored`, its analysis as [`Plan::Singular`] when not.
+fn sparse_outcome(factored: bool, plan: SparsePlan) -> Plan {
+    if factored { Plan::Sparse(Some(plan)) } else { Plan::Singular(plan) }
 }
 
 /// Sums `block`'s entries into `factor` at `targets` (in `Block::a`'s order: the cache's
@@ -1592,4 +1631,108 @@ fn minimum_norm(
     });
     *status = (*status).max(if consistent { Status::MinimumNorm } else { Status::Inconsistent });
     mu.iter().copied().collect()
+}
+
+/// The minimum-norm λ of a singular, consistent block too large for the dense
+/// eigendecomposition of [`minimum_norm`] (`analysed`: its sparse analysis, when the plan
+/// made one), by iterated Tikhonov regularisation on the
+/// sparse factor (the proximal-point iteration; Hanke and Groetsch, "Nonstationary
+/// iterated Tikhonov regularization", J. Optim. Theory Appl. 98, 1998):
+/// μ₀ = 0, μₖ₊₁ = μₖ + (Ã + ε W²)⁻¹ (rhs − Ã μₖ), with W the rows' weights (see
+/// [`minimum_norm`]). In ν = W μ this is νₖ₊₁ = νₖ + (B + ε)⁻¹ (c − B νₖ) for
+/// B = W⁻¹ Ã W⁻¹: the iterates stay in the range of B, where the solution of least ‖ν‖ =
+/// ‖W μ‖ lies, and converge to it ([`REGULARISATION`] for the rate).
+///
+/// The rows named are those with a visible part (`NULL_SHARE`) in the null space, found by
+/// two inverse iterations of the regularised factor from a fixed random vector (the null
+/// part grows by 1/ε² against at most 1/σ² elsewhere); the rank is not computed.
+/// `None` when the block has no sparse analysis within [`MAX_SPARSE_FLOPS`] and cheaper than
+/// a dense factor (as [`plan`] weighs them), the regularised factor fails, or the residual
+/// stays above the consistency bound (rows that contradict each other: their least squares
+/// needs the eigendecomposition).
+fn sparse_minimum_norm(
+    block: &Block,
+    analysed: Option<SparsePlan>,
+    rhs: &[f64],
+    index: &[usize],
+    settings: &Settings,
+    diagnostics: &mut Vec<Diagnostic>,
+    status: &mut Status,
+) -> Option<Vec<f64>> {
+    let n = block.n;
+    let SparsePlan { mut factor, targets } = match analysed {
+        Some(plan) => plan,
+        None => {
+            let (factor, targets) = SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
+            SparsePlan { factor, targets }
+        }
+    };
+    // As `plan` weighs them: a block whose sparse factor costs more than a dense one is dense
+    // (all pairs of a cluster of bodies), and its n³ is what the size limit refuses.
+    let dense_cost = DENSE_COST * (n as f64).powi(3) / 3.0;
+    if factor.flops() > MAX_SPARSE_FLOPS || SPARSE_COST * factor.flops() > dense_cost {
+        return None;
+    }
+    let top = block.weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+    let mut w2: Vec<f64> = block.weight.iter().map(|x| (x / top) * (x / top)).collect();
+    if w2.len() != n || !w2.iter().all(|x| x.is_finite() && x.sqrt() >= WEIGHT_RANGE) {
+        w2 = vec![1.0; n];
+    }
+    // Ã + ε W² into the factor: Ã's entries at their places, then ε Wₚ² on each diagonal
+    // (the first place an entry (p, p) was given: they all sum into one).
+    let values = factor.values_mut();
+    values.fill(0.0);
+    let mut diagonal = vec![usize::MAX; n];
+    for (&at, &(p, q, v)) in targets.iter().zip(&block.a) {
+        values[at] += v;
+        if p == q && diagonal[p] == usize::MAX {
+            diagonal[p] = at;
+        }
+    }
+    for (p, &at) in diagonal.iter().enumerate() {
+        // Ã has a unit diagonal: every row has its entry.
+        *values.get_mut(at)? += REGULARISATION * w2[p];
+    }
+    if !factor.factor(0.0) {
+        return None;
+    }
+    let mut mu = vec![0.0; n];
+    let mut residual: Vec<f64> = rhs.to_vec();
+    let mut size = rhs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let mut left = size;
+    let mut solves = 0;
+    let entry = block.a.iter().fold(0.0f64, |m, &(_, _, v)| m.max(v.abs()));
+    while solves < REGULARISED_SOLVES && left > 0.0 {
+        let step = factor.solve(&residual);
+        let trial: Vec<f64> = mu.iter().zip(&step).map(|(m, s)| m + s).collect();
+        let ax = super::qp::sym_mul(n, &block.a, &trial);
+        let next: Vec<f64> = rhs.iter().zip(&ax).map(|(r, a)| r - a).collect();
+        let now = next.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        solves += 1;
+        if !now.is_finite() || now > 0.5 * left {
+            // No longer halving: the last iterate is at its rounding (or this one is worse).
+            if now < left && now.is_finite() {
+                (mu, left) = (trial, now);
+            }
+            break;
+        }
+        (mu, residual, left) = (trial, next, now);
+    }
+    size += entry * mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let consistent = left <= settings.contact_tolerance.sqrt() * CONSISTENCY * size || size == 0.0;
+    if !consistent || !mu.iter().all(|x| x.is_finite()) {
+        return None;
+    }
+    // The null space's rows: two inverse iterations in the weighted norm from a fixed vector.
+    let mut rng = super::random::Rng::new(0x5EED_F00D);
+    let mut y: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+    for _ in 0..2 {
+        let weighted: Vec<f64> = y.iter().zip(&w2).map(|(v, w)| v * w).collect();
+        y = factor.solve(&weighted);
+    }
+    let peak = y.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let constraints: Vec<usize> = (0..n).filter(|&p| y[p].abs() > NULL_SHARE * peak).map(|p| index[p]).collect();
+    diagnostics.push(Diagnostic::RedundantSparse { constraints, size: n, solves });
+    *status = (*status).max(Status::MinimumNorm);
+    Some(mu)
 }

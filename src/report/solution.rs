@@ -316,6 +316,10 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
             "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; consistent: the λ of least norm √(Σ λ²), λ for C/κ (the pseudo-inverse's)",
             list(constraints)
         ),
+        Diagnostic::RedundantSparse { constraints, size, solves } => format!(
+            "redundant or singular constraints ({}) in a block of {size} rows, past the {MAX_DENSE_ROWS} of the dense decomposition: rank not computed; consistent: the λ of least norm √(Σ λ²), λ for C/κ, by {solves} regularised sparse solves",
+            list(constraints)
+        ),
         Diagnostic::Inconsistent { constraints, rank, size, condition, residual } => format!(
             "redundant or singular constraints ({}): rank {rank} of {size}, condition of the rest ≈ {condition:.1e}; inconsistent (relative residual {residual:.1e}), the least-squares λ of least norm √(Σ λ²), λ for C/κ",
             list(constraints)
