@@ -69,8 +69,12 @@ struct Blocks {
     lx: Vec<f64>,
     /// The supernode of each column (new order).
     of: Vec<usize>,
-    /// For each entry of `values`, the place in `lx` it is summed into.
-    place: Vec<usize>,
+    /// The entries of A each supernode's block starts from, grouped by supernode
+    /// (`assembly[assembly_ptr[s]..assembly_ptr[s + 1]]`, in `values`' order within a group):
+    /// (index in `values`, place in `lx` it is summed into). A block is zeroed and filled
+    /// just before it is factored, while it is about to be in cache anyway.
+    assembly: Vec<(usize, usize)>,
+    assembly_ptr: Vec<usize>,
     /// The entries of each row of A (both triangles), for the residual's rounding.
     row_entries: Vec<usize>,
     scratch: Scratch,
@@ -217,18 +221,27 @@ impl SparseFactor {
                 }
             }
         }
-        let mut place = Vec::with_capacity(nnz);
+        let mut assembly = Vec::with_capacity(nnz);
+        let mut assembly_ptr = vec![0; supernodes + 1];
         for j in 0..n {
-            for &i in &rowval[colptr[j]..colptr[j + 1]] {
+            for (e, &i) in rowval[colptr[j]..colptr[j + 1]].iter().enumerate() {
                 let (a, b) = (inverse[i], inverse[j]);
                 let (r, c) = (a.max(b), a.min(b));
                 let s = of[c];
                 let mine = &rows[rowptr[s]..rowptr[s + 1]];
                 // Present: r is in the pattern of L's column c, so in its supernode's rows.
                 let k = mine.binary_search(&r).ok()?;
-                place.push(lxptr[s] + k + (c - first[s]) * mine.len());
+                assembly.push((s, colptr[j] + e, lxptr[s] + k + (c - first[s]) * mine.len()));
+                assembly_ptr[s + 1] += 1;
             }
         }
+        // Grouped by supernode, `values`' order kept within each (a stable sort): every
+        // place receives its entries in the same order as summing over `values` would.
+        assembly.sort_by_key(|&(s, _, _)| s);
+        for s in 0..supernodes {
+            assembly_ptr[s + 1] += assembly_ptr[s];
+        }
+        let assembly: Vec<(usize, usize)> = assembly.into_iter().map(|(_, e, at)| (e, at)).collect();
         // The largest update: a descendant's rows below a supernode's first column by the
         // supernode's columns among them.
         let (mut tallest, mut widest) = (0, 0);
@@ -257,7 +270,8 @@ impl SparseFactor {
                 lx: vec![0.0; lxptr[supernodes]],
                 lxptr,
                 of,
-                place,
+                assembly,
+                assembly_ptr,
                 row_entries,
                 scratch,
             }),
@@ -329,15 +343,15 @@ impl SparseFactor {
     #[inline(always)]
     fn factor_supernodes(&mut self, pivot_floor: f64) -> bool {
         let values = &self.values;
-        let Blocks { first, rowptr, rows, lxptr, lx, of, place, scratch, .. } = &mut *self.blocks;
+        let Blocks { first, rowptr, rows, lxptr, lx, of, assembly, assembly_ptr, scratch, .. } = &mut *self.blocks;
         let Scratch { relative, places, update, head, next, position } = scratch;
-        // A, permuted, into the blocks.
-        lx.fill(0.0);
-        for (&at, &v) in place.iter().zip(values.iter()) {
-            lx[at] += v;
-        }
         head.fill(NONE);
         for s in 0..first.len() - 1 {
+            // Its block of A, permuted (nothing else writes to it before this supernode).
+            lx[lxptr[s]..lxptr[s + 1]].fill(0.0);
+            for &(e, at) in &assembly[assembly_ptr[s]..assembly_ptr[s + 1]] {
+                lx[at] += values[e];
+            }
             let (f, l) = (first[s], first[s + 1]);
             let w = l - f;
             let mine = &rows[rowptr[s]..rowptr[s + 1]];
