@@ -3712,6 +3712,13 @@ const STEADY: [bool; 41] = [true, true, true, true, true, true, true, true, true
 ///   J, body `p40`: −(r_p41 − r_p40)/|r_p41 − r_p40|
 ///   J, body `p41`: (r_p41 − r_p40)/|r_p41 − r_p40|
 ///   J M⁻¹ Jᵀ = A[40][40] = 4027/24126
+/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
+/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
+#[inline(always)]
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    prepare(s, p);
+}
+
 /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.r_p1[0] - s.a1[0];
@@ -5246,7 +5253,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;

@@ -209,19 +209,25 @@ const SHAPE_5_TABLE: [u32; 3358] = [1,2,2,3,3,4,4,5,5,6,6,7,7,8,8,9,9,10,10,11,1
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let (q, v) = (&s.position, &s.velocity);
     let x = others(s);
-    let mut ev = [[0.0; DIM]; SLOTS];
     for (&i, t) in SHAPE_0_ITEMS.iter().zip(SHAPE_0_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_0(q, v, &x, t), i as usize);
         p.inverse_mass[i] = 1.0 / o[0];
-        ev[i] = [o[1], o[2]];
         p.force[i] = [o[3], o[4]];
     }
     for (&i, t) in SHAPE_1_ITEMS.iter().zip(SHAPE_1_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_1(q, v, &x, t), i as usize);
         p.inverse_mass[i] = 1.0 / o[0];
-        ev[i] = [o[1], o[2]];
         p.force[i] = [o[3], o[4]];
     }
+    let _ = (q, v, &x);
+    prepare_moved(s, p);
+}
+
+/// The rows after the positions moved within a step: the rows' shapes (the bodies' 1/m and F read neither
+/// positions, velocities nor the time).
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    let (q, v) = (&s.position, &s.velocity);
+    let x = others(s);
     for (&i, t) in SHAPE_2_ITEMS.iter().zip(SHAPE_2_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_2(q, v, &x, t), i as usize);
         let e = ROW_START[i];
@@ -248,7 +254,7 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
         p.jacobian[e] = [o[1], o[2]];
         p.jacobian[e + 1] = [o[3], o[4]];
     }
-    p.finish(&ev);
+    p.finish(&[]);
 }
 
 /// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
@@ -1279,7 +1285,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;

@@ -5902,6 +5902,13 @@ const STEADY: [bool; 82] = [true, true, true, true, true, true, true, true, true
 ///   Jʷ, body `l40`: cos(th_l40)/2
 ///   Jʷ, body `ball`: 8 cos(th_ball)
 ///   J M⁻¹ Jᵀ = A[81][81] = 200000000000 (128969350552050046074509390853582388586572777918750 cos(th_l40)² + 191893081849510627400957189877922998138255115296 cos(th_ball)² + 64596148263321274726333725221932788191796568159467)/77164786715280316923363090236566401698873156947102488963934929
+/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
+/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
+#[inline(always)]
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    prepare(s, p);
+}
+
 /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.g[0] * 5.981747704246811;
@@ -7801,7 +7808,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;

@@ -1863,31 +1863,35 @@ const SHAPE_19_TABLE: [u32; 480] = [0,10,92,93,112,113,1,11,94,95,114,115,2,12,9
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let (q, v) = (&positions(s), &velocities(s));
     let x = others(s);
-    let mut ev = [[0.0; DIM]; SLOTS];
     for (&i, t) in SHAPE_0_ITEMS.iter().zip(SHAPE_0_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_0(q, v, &x, t), i as usize);
         p.inverse_mass[i] = 1.0 / o[0];
-        ev[i] = [o[1], o[2]];
         p.force[i] = [o[3], o[4]];
     }
     for (&i, t) in SHAPE_1_ITEMS.iter().zip(SHAPE_1_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_1(q, v, &x, t), i as usize);
         p.inverse_mass[i] = 1.0 / o[0];
-        ev[i] = [o[1], o[2]];
         p.force[i] = [o[3], o[4]];
     }
     for (&i, t) in SHAPE_2_ITEMS.iter().zip(SHAPE_2_TABLE.as_chunks::<1>().0) {
         let (o, i) = (shape_2(q, v, &x, t), i as usize);
         p.inverse_mass[BODIES + i] = 1.0 / o[0];
-        ev[BODIES + i] = [o[1], 0.0];
         p.force[BODIES + i] = [o[2], 0.0];
     }
     for (&i, t) in SHAPE_3_ITEMS.iter().zip(SHAPE_3_TABLE.as_chunks::<1>().0) {
         let (o, i) = (shape_3(q, v, &x, t), i as usize);
         p.inverse_mass[BODIES + i] = 1.0 / o[0];
-        ev[BODIES + i] = [o[1], 0.0];
         p.force[BODIES + i] = [o[2], 0.0];
     }
+    let _ = (q, v, &x);
+    prepare_moved(s, p);
+}
+
+/// The rows after the positions moved within a step: the rows' shapes (the bodies' 1/m and F read neither
+/// positions, velocities nor the time).
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    let (q, v) = (&positions(s), &velocities(s));
+    let x = others(s);
     for (&i, t) in SHAPE_4_ITEMS.iter().zip(SHAPE_4_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_4(q, v, &x, t), i as usize);
         let e = ROW_START[i];
@@ -2010,7 +2014,7 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
         p.jacobian[ENTRY_AT[e + 2]] = [o[5], 0.0];
         p.jacobian[ENTRY_AT[e + 3]] = [o[6], 0.0];
     }
-    p.finish(&ev);
+    p.finish(&[]);
 }
 
 /// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
@@ -3727,7 +3731,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;

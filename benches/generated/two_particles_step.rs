@@ -538,6 +538,13 @@ const STEADY: [bool; 2] = [true, true];
 ///   J, body `p1`: −(r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J, body `p2`: (r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J M⁻¹ Jᵀ = A[1][1] = 157970804621911954375000000000/940330394487407031884723016279
+/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
+/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
+#[inline(always)]
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    prepare(s, p);
+}
+
 /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.r_p1[0] - s.a1[0];
@@ -1563,7 +1570,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;

@@ -741,6 +741,13 @@ pub(super) struct StepRoots {
     /// time): then the rows a step leaves are the rows of the next step's start, bit for bit,
     /// while the other inputs are unchanged (`KEEP`, `Stepper`).
     pub(super) keep: bool,
+    /// Whether the bodies' m and F (and the rigid bodies' I and τ) read neither positions,
+    /// orientations, velocities nor the time, so a step's positions leave them unchanged
+    /// (`--step-only`'s `prepare_moved` leaves them out).
+    pub(super) still: bool,
+    /// Whether a row's evaluation reads the velocities (a row's ∂C/∂t, or a 3D body's
+    /// gyroscopic term): not when every row is steady and no body is 3D.
+    pub(super) velocities: bool,
 }
 
 impl StepRoots {
@@ -779,10 +786,14 @@ impl StepRoots {
         let mut walk = crate::expr::graph::SymbolWalk::default();
         let moving = |role: Role| matches!(role, Role::Velocity { .. } | Role::AngularVelocity { .. } | Role::Time);
         let velocities = three || steady.len() != layout.constraints || !steady.iter().all(|&s| s);
-        let keep = !velocities
-            && !roots.chunks_exact(3).any(|c| {
-                [c[0], c[2]].iter().any(|&id| walk.free_symbols(g, id).iter().any(|&s| moving(g.symbol(s).role)))
-            });
+        let mut reads = |roles: &dyn Fn(Role) -> bool| {
+            roots.chunks_exact(3).any(|c| {
+                [c[0], c[2]].iter().any(|&id| walk.free_symbols(g, id).iter().any(|&s| roles(g.symbol(s).role)))
+            })
+        };
+        let keep = !velocities && !reads(&moving);
+        let still =
+            !three && !reads(&|role| moving(role) || matches!(role, Role::Position { .. } | Role::Orientation { .. }));
         let mut swept = vec![true; roots.len()];
         let mut angular_slots = Vec::with_capacity(layout.constraints);
         for r in 0..layout.constraints {
@@ -807,6 +818,8 @@ impl StepRoots {
             turns: rigid.into_iter().map(|(_, first, three)| (first, three)).collect(),
             steady: (0..layout.constraints).map(|r| steady.get(r).copied().unwrap_or(false)).collect(),
             keep,
+            still,
+            velocities,
         }
     }
 
@@ -909,7 +922,11 @@ fn step_fns(
     } else {
         let _ = writeln!(
             out,
-            "/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
+            "/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there\n\
+             /// the bodies' 1/m and F where they read neither positions, velocities nor the time).\n\
+             #[inline(always)]\n\
+             fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {{\n    prepare(s, p);\n}}\n\n\
+             /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
              fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
         );
     }

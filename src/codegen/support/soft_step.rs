@@ -76,7 +76,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;
