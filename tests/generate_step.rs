@@ -24,7 +24,10 @@
 //! The soft step's `--step-only` modules (rows by shape) are held to the library the same
 //! way on ten files, point masses and 2D and 3D rigid bodies, bit for bit. The harness
 //! counts its allocations: the soft step and PGS allocate nothing in any of their 1 000
-//! steps, rigid bodies included.
+//! steps, rigid bodies included. The soft step and PGS run through the module's `Stepper`
+//! (the rows the last step left kept where `KEEP`), and after the checkpoints each module
+//! checks `Stepper` against `step` bit for bit over three steps with its first body moved
+//! between them.
 //!
 //! Not here: the default module (`tests/generate.rs`), the snapshots (`tests/outputs.rs`).
 
@@ -545,4 +548,32 @@ fn the_step_only_module_takes_each_angles_sine_and_cosine_once() {
     assert_eq!(rigid, 20);
     assert_eq!(code.matches(".sin()").count(), rigid, "{code}");
     assert_eq!(code.matches(".cos()").count(), rigid, "{code}");
+}
+
+/// `Stepper` keeps the rows where they read neither velocities nor time, and only there: on
+/// Solver2D's scenes of point masses and 2D rigid bodies (`KEEP`), not on a moving
+/// constraint (the driven pendulum's C reads t), a 3D body (its gyroscopic term reads ω) or
+/// a force that reads a velocity. What it compares before using them is every field but the
+/// time and the velocities: the parameters and positions, never `v`.
+#[test]
+fn the_stepper_keeps_rows_that_read_neither_velocities_nor_time() {
+    let keep = |file: &str| {
+        let l = loaded(Path::new(file));
+        let options = Options { solver: Some(Solver::SoftStep), ..Options::default() };
+        let code = lagrange::codegen::generate(&l, &options).expect("generates");
+        assert!(code.contains("pub struct Stepper"), "{file}");
+        (code.contains("const KEEP: bool = true;"), code)
+    };
+    for file in ["constraints/solvers/two_particles.toml", "constraints/solvers/rigid_ball_and_chain.toml"] {
+        assert!(keep(file).0, "{file}");
+    }
+    // C reads t; a 3D body; a drag force F = m g − c v.
+    for file in
+        ["constraints/driven_pendulum.toml", "constraints/joints/ball_3d.toml", "constraints/damped_pendulum.toml"]
+    {
+        assert!(!keep(file).0, "{file}");
+    }
+    let (_, code) = keep("constraints/solvers/two_particles.toml");
+    assert!(code.contains("same(&a.g, &b.g)") && code.contains("same(&a.r_p1, &b.r_p1)"));
+    assert!(!code.contains("same(&a.v_p1"));
 }
