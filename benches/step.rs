@@ -15,8 +15,10 @@
 //!   baseline for the same work, and it agrees with the generated step to round-off
 //!   (checked before the samples: `agree`).
 //! - `generated`: `lagrange generate FILE --solver soft-step`'s module, checked in under
-//!   `benches/generated/` (kept current by `tests/generate.rs`), its `step(state,
-//!   impulses, dt)`.
+//!   `benches/generated/` (kept current by `tests/generate.rs`), stepped by its `Stepper`
+//!   (the impulses and the rows the last step left, as the handwritten world keeps them:
+//!   the rows evaluated once per substep; `step(state, impulses, dt)` evaluates them once
+//!   more, at its start).
 //! - `library`: `lagrange simulate --solver soft-step`'s step (`numeric::velocity::Stepper`
 //!   over the compiled tape's rows), for scale.
 //!
@@ -636,12 +638,12 @@ mod two {
         use super::two_particles as g;
         let (q, m) = two_particles_start();
         let mut s = g::at_rest(&q);
-        let mut p = [0.0; g::CONSTRAINTS];
-        (0..WARM).for_each(|_| g::step(&mut s, &mut p, DT));
+        let mut p = g::Stepper::new();
+        (0..WARM).for_each(|_| p.step(&mut s, DT));
         let mut w = World::chain(&q, &m);
         (0..WARM).for_each(|_| w.step(DT));
-        agree("two particles", &w, &g::positions(&s), &p);
-        bencher.bench_local(|| g::step(&mut s, &mut p, black_box(DT)));
+        agree("two particles", &w, &g::positions(&s), &p.impulses);
+        bencher.bench_local(|| p.step(&mut s, black_box(DT)));
     }
 
     #[divan::bench]
@@ -670,12 +672,12 @@ mod chain {
         use super::ball_and_chain as g;
         let (q, m) = ball_and_chain_start();
         let mut s = g::at_rest(&q);
-        let mut p = [0.0; g::CONSTRAINTS];
-        (0..WARM).for_each(|_| g::step(&mut s, &mut p, DT));
+        let mut p = g::Stepper::new();
+        (0..WARM).for_each(|_| p.step(&mut s, DT));
         let mut w = World::chain(&q, &m);
         (0..WARM).for_each(|_| w.step(DT));
-        agree("ball and chain", &w, &g::positions(&s), &p);
-        bencher.bench_local(|| g::step(&mut s, &mut p, black_box(DT)));
+        agree("ball and chain", &w, &g::positions(&s), &p.impulses);
+        bencher.bench_local(|| p.step(&mut s, black_box(DT)));
     }
 
     #[divan::bench]
@@ -703,11 +705,11 @@ mod grid_30 {
         use super::joint_grid_30 as g;
         let mut w = World::grid(29, 30);
         let mut s = Box::new(g::at_rest(&w.q[..w.dynamic]));
-        let mut p = Box::new([0.0; g::CONSTRAINTS]);
-        (0..WARM).for_each(|_| g::step(&mut s, &mut p, DT));
+        let mut p = Box::new(g::Stepper::new());
+        (0..WARM).for_each(|_| p.step(&mut s, DT));
         (0..WARM).for_each(|_| w.step(DT));
-        agree("30 x 30 grid", &w, &g::positions(&s), &p[..]);
-        bencher.bench_local(|| g::step(&mut s, &mut p, black_box(DT)));
+        agree("30 x 30 grid", &w, &g::positions(&s), &p.impulses[..]);
+        bencher.bench_local(|| p.step(&mut s, black_box(DT)));
     }
 
     #[divan::bench(sample_count = 20)]
@@ -749,11 +751,11 @@ macro_rules! rigid_benches {
                 use super::$module as g;
                 let mut w = $world;
                 let mut s = Box::new(g::at_rest(&w.x[..w.dynamic], &w.theta[..w.dynamic]));
-                let mut p = Box::new([0.0; g::CONSTRAINTS]);
-                (0..WARM).for_each(|_| g::step(&mut s, &mut p, DT));
+                let mut p = Box::new(g::Stepper::new());
+                (0..WARM).for_each(|_| p.step(&mut s, DT));
                 (0..WARM).for_each(|_| w.step(DT));
-                agree_rigid($label, &w, &g::positions(&s), &g::orientations(&s), &p[..]);
-                bencher.bench_local(|| g::step(&mut s, &mut p, black_box(DT)));
+                agree_rigid($label, &w, &g::positions(&s), &g::orientations(&s), &p.impulses[..]);
+                bencher.bench_local(|| p.step(&mut s, black_box(DT)));
             }
 
             #[divan::bench(sample_count = 20)]

@@ -24,7 +24,10 @@
 //! The soft step's `--step-only` modules (rows by shape) are held to the library the same
 //! way on ten files, point masses and 2D and 3D rigid bodies, bit for bit. The harness
 //! counts its allocations: the soft step and PGS allocate nothing in any of their 1 000
-//! steps, rigid bodies included.
+//! steps, rigid bodies included. The soft step and PGS run through the module's `Stepper`
+//! (the rows the last step left kept where `KEEP`), and after the checkpoints each module
+//! checks `Stepper` against `step` bit for bit over three steps with its first body moved
+//! between them.
 //!
 //! Not here: the default module (`tests/generate.rs`), the snapshots (`tests/outputs.rs`).
 
@@ -189,15 +192,19 @@ fn library_run(s: &Scenario, solver: Solver) -> Run {
     out
 }
 
-/// The harness lines that run one module's step and print its checkpoints.
-fn harness_case(name: &str, l: &Loaded, m: &Module, s: &Scenario) -> String {
+/// The harness lines that run one module's step and print its checkpoints. The soft step and
+/// PGS run by the module's `Stepper` (the rows the last step left kept); after the
+/// checkpoints they print whether `Stepper` and `step` then agree bit for bit over three
+/// steps with the first body moved by 1 mm before the second (the kept rows dropped).
+fn harness_case(name: &str, l: &Loaded, m: &Module, s: &Scenario, sweeps: bool) -> String {
     let literal = state_literal(l, m, &s.env);
     let time = m.fields.iter().find(|f| f.0 == l.system.time).map(|f| f.1.clone());
     let t0 = lagrange::numeric::simulate::initial_state(&s.system, &s.env).2;
     let mut h = String::new();
+    let impulses = if sweeps { "let mut w = Stepper::new();" } else { "let mut p = [0.0; CONSTRAINTS];" };
     let _ = writeln!(
         h,
-        "    {{\n        use {name}::*;\n        let mut s = {literal};\n        let mut p = [0.0; CONSTRAINTS];\n        \
+        "    {{\n        use {name}::*;\n        let mut s = {literal};\n        {impulses}\n        \
          let mut allocations = 0;"
     );
     let _ = writeln!(h, "        for n in 0..{STEPS}usize {{");
@@ -207,9 +214,13 @@ fn harness_case(name: &str, l: &Loaded, m: &Module, s: &Scenario) -> String {
     // The step's allocations, counted by the harness's allocator (`ALLOCATIONS`).
     let _ = writeln!(
         h,
-        "            let before = ALLOCATIONS.load(Relaxed);\n            step(&mut s, &mut p, {:?});\n            \
+        "            let before = ALLOCATIONS.load(Relaxed);\n            {};\n            \
          allocations += ALLOCATIONS.load(Relaxed) - before;",
-        s.scene.dt
+        if sweeps {
+            format!("w.step(&mut s, {:?})", s.scene.dt)
+        } else {
+            format!("step(&mut s, &mut p, {:?})", s.scene.dt)
+        }
     );
     // The rigid bodies' θ and ω (3D: q and the world ω) after the bodies' x and v.
     let (orientations, angular) = match (l.system.has_rigid_bodies(), l.system.dim()) {
@@ -222,9 +233,27 @@ fn harness_case(name: &str, l: &Loaded, m: &Module, s: &Scenario) -> String {
         "            if {CHECKPOINTS:?}.contains(&(n + 1)) {{\n                \
          let mut x: Vec<f64> = positions(&s).concat();\n                {orientations}\n                \
          x.extend(velocities(&s).concat());\n                {angular}\n                \
-         x.extend(p);\n                println!(\"{name} {{x:?}}\");\n            }}\n        }}\n        \
-         println!(\"{name} allocations {{allocations}}\");\n    }}"
+         x.extend({});\n                println!(\"{name} {{x:?}}\");\n            }}\n        }}\n        \
+         println!(\"{name} allocations {{allocations}}\");",
+        if sweeps { "w.impulses" } else { "p" }
     );
+    if sweeps {
+        let body = m.fields.iter().find(|f| f.0 == l.system.bodies[0].position).map(|f| f.1.clone());
+        let nudge = body.map_or(String::new(), |b| format!("a.{b}[0] += 1e-3;\n                s.{b}[0] += 1e-3;"));
+        let _ = writeln!(
+            h,
+            "        let (mut a, mut p) = (s, w.impulses);\n        \
+             for n in 0..3 {{\n            if n == 1 {{\n                {nudge}\n            }}\n            \
+             step(&mut a, &mut p, {dt:?});\n            w.step(&mut s, {dt:?});\n        }}\n        \
+             let bits = |x: Vec<f64>| x.iter().map(|x| x.to_bits()).collect::<Vec<_>>();\n        \
+             let same = bits(positions(&a).concat()) == bits(positions(&s).concat())\n            \
+             && bits(velocities(&a).concat()) == bits(velocities(&s).concat())\n            \
+             && bits(p.to_vec()) == bits(w.impulses.to_vec());\n        \
+             println!(\"{name} kept {{same}}\");",
+            dt = s.scene.dt
+        );
+    }
+    h.push_str("    }\n");
     h
 }
 
@@ -295,7 +324,7 @@ fn runs_of(solver: Solver, step_only: bool, files: &[PathBuf]) -> Vec<(String, R
         let file = dir.join(format!("{name}.rs"));
         std::fs::write(&file, &m.code).expect("write module");
         let _ = writeln!(main, "pub mod {name} {{\n    include!({file:?});\n}}");
-        body.push_str(&harness_case(&name, &l, &m, &s));
+        body.push_str(&harness_case(&name, &l, &m, &s, solver.sweeps()));
         cases.push((name, library_run(&s, solver)));
     }
     let _ = write!(main, "\nfn main() {{\n{body}}}\n");
@@ -332,6 +361,9 @@ fn runs_of(solver: Solver, step_only: bool, files: &[PathBuf]) -> Vec<(String, R
             // The exact step's rows are `Vec`s for `solve_rows`: its count shows the counter counts.
             if solver.sweeps() {
                 assert_eq!(count, "0", "{name}: the {} step allocated over {STEPS} steps", solver.name());
+                // `Stepper` and `step` the same bits, the kept rows dropped where a body moved.
+                let line = lines.next().expect("the kept line");
+                assert_eq!(line, format!("{name} kept true"), "{name}: `Stepper` and `step` part");
             } else {
                 assert_ne!(count, "0", "{name}: no allocation counted in the exact step");
             }
@@ -516,4 +548,32 @@ fn the_step_only_module_takes_each_angles_sine_and_cosine_once() {
     assert_eq!(rigid, 20);
     assert_eq!(code.matches(".sin()").count(), rigid, "{code}");
     assert_eq!(code.matches(".cos()").count(), rigid, "{code}");
+}
+
+/// `Stepper` keeps the rows where they read neither velocities nor time, and only there: on
+/// Solver2D's scenes of point masses and 2D rigid bodies (`KEEP`), not on a moving
+/// constraint (the driven pendulum's C reads t), a 3D body (its gyroscopic term reads ω) or
+/// a force that reads a velocity. What it compares before using them is every field but the
+/// time and the velocities: the parameters and positions, never `v`.
+#[test]
+fn the_stepper_keeps_rows_that_read_neither_velocities_nor_time() {
+    let keep = |file: &str| {
+        let l = loaded(Path::new(file));
+        let options = Options { solver: Some(Solver::SoftStep), ..Options::default() };
+        let code = lagrange::codegen::generate(&l, &options).expect("generates");
+        assert!(code.contains("pub struct Stepper"), "{file}");
+        (code.contains("const KEEP: bool = true;"), code)
+    };
+    for file in ["constraints/solvers/two_particles.toml", "constraints/solvers/rigid_ball_and_chain.toml"] {
+        assert!(keep(file).0, "{file}");
+    }
+    // C reads t; a 3D body; a drag force F = m g − c v.
+    for file in
+        ["constraints/driven_pendulum.toml", "constraints/joints/ball_3d.toml", "constraints/damped_pendulum.toml"]
+    {
+        assert!(!keep(file).0, "{file}");
+    }
+    let (_, code) = keep("constraints/solvers/two_particles.toml");
+    assert!(code.contains("same(&a.g, &b.g)") && code.contains("same(&a.r_p1, &b.r_p1)"));
+    assert!(!code.contains("same(&a.v_p1"));
 }

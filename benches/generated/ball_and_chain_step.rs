@@ -3712,6 +3712,13 @@ const STEADY: [bool; 41] = [true, true, true, true, true, true, true, true, true
 ///   J, body `p40`: −(r_p41 − r_p40)/|r_p41 − r_p40|
 ///   J, body `p41`: (r_p41 − r_p40)/|r_p41 − r_p40|
 ///   J M⁻¹ Jᵀ = A[40][40] = 4027/24126
+/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
+/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
+#[inline(always)]
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    prepare(s, p);
+}
+
 /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.r_p1[0] - s.a1[0];
@@ -4085,6 +4092,107 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     p.row(38, ((x116 - 1.0) * INVERSE_SCALE[38], 0.0), 75, [(38, [x114 * x200, x115 * x200]), (37, [x114 * x201, x115 * x201])], &v);
     p.row(39, ((x119 - 1.0) * INVERSE_SCALE[39], 0.0), 77, [(39, [x117 * x202, x118 * x202]), (38, [x117 * x203, x118 * x203])], &v);
     p.row(40, ((x122 - 1.0) * INVERSE_SCALE[40], 0.0), 79, [(40, [x120 * x204, x121 * x204]), (39, [x120 * x205, x121 * x205])], &v);
+}
+
+/// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
+/// step's start while the state's other fields are unchanged (`Stepper`).
+#[allow(dead_code)]
+const KEEP: bool = true;
+
+/// Whether the fields of `a` the rows read are those of `b` bit for bit: every field but the time and the
+/// velocities.
+#[allow(dead_code)]
+fn same_inputs(a: &State, b: &State) -> bool {
+    same(&a.a1, &b.a1)
+        && same(&a.g, &b.g)
+        && same(&a.r_p1, &b.r_p1)
+        && same(&a.F_p1, &b.F_p1)
+        && same(&a.r_p2, &b.r_p2)
+        && same(&a.F_p2, &b.F_p2)
+        && same(&a.r_p3, &b.r_p3)
+        && same(&a.F_p3, &b.F_p3)
+        && same(&a.r_p4, &b.r_p4)
+        && same(&a.F_p4, &b.F_p4)
+        && same(&a.r_p5, &b.r_p5)
+        && same(&a.F_p5, &b.F_p5)
+        && same(&a.r_p6, &b.r_p6)
+        && same(&a.F_p6, &b.F_p6)
+        && same(&a.r_p7, &b.r_p7)
+        && same(&a.F_p7, &b.F_p7)
+        && same(&a.r_p8, &b.r_p8)
+        && same(&a.F_p8, &b.F_p8)
+        && same(&a.r_p9, &b.r_p9)
+        && same(&a.F_p9, &b.F_p9)
+        && same(&a.r_p10, &b.r_p10)
+        && same(&a.F_p10, &b.F_p10)
+        && same(&a.r_p11, &b.r_p11)
+        && same(&a.F_p11, &b.F_p11)
+        && same(&a.r_p12, &b.r_p12)
+        && same(&a.F_p12, &b.F_p12)
+        && same(&a.r_p13, &b.r_p13)
+        && same(&a.F_p13, &b.F_p13)
+        && same(&a.r_p14, &b.r_p14)
+        && same(&a.F_p14, &b.F_p14)
+        && same(&a.r_p15, &b.r_p15)
+        && same(&a.F_p15, &b.F_p15)
+        && same(&a.r_p16, &b.r_p16)
+        && same(&a.F_p16, &b.F_p16)
+        && same(&a.r_p17, &b.r_p17)
+        && same(&a.F_p17, &b.F_p17)
+        && same(&a.r_p18, &b.r_p18)
+        && same(&a.F_p18, &b.F_p18)
+        && same(&a.r_p19, &b.r_p19)
+        && same(&a.F_p19, &b.F_p19)
+        && same(&a.r_p20, &b.r_p20)
+        && same(&a.F_p20, &b.F_p20)
+        && same(&a.r_p21, &b.r_p21)
+        && same(&a.F_p21, &b.F_p21)
+        && same(&a.r_p22, &b.r_p22)
+        && same(&a.F_p22, &b.F_p22)
+        && same(&a.r_p23, &b.r_p23)
+        && same(&a.F_p23, &b.F_p23)
+        && same(&a.r_p24, &b.r_p24)
+        && same(&a.F_p24, &b.F_p24)
+        && same(&a.r_p25, &b.r_p25)
+        && same(&a.F_p25, &b.F_p25)
+        && same(&a.r_p26, &b.r_p26)
+        && same(&a.F_p26, &b.F_p26)
+        && same(&a.r_p27, &b.r_p27)
+        && same(&a.F_p27, &b.F_p27)
+        && same(&a.r_p28, &b.r_p28)
+        && same(&a.F_p28, &b.F_p28)
+        && same(&a.r_p29, &b.r_p29)
+        && same(&a.F_p29, &b.F_p29)
+        && same(&a.r_p30, &b.r_p30)
+        && same(&a.F_p30, &b.F_p30)
+        && same(&a.r_p31, &b.r_p31)
+        && same(&a.F_p31, &b.F_p31)
+        && same(&a.r_p32, &b.r_p32)
+        && same(&a.F_p32, &b.F_p32)
+        && same(&a.r_p33, &b.r_p33)
+        && same(&a.F_p33, &b.F_p33)
+        && same(&a.r_p34, &b.r_p34)
+        && same(&a.F_p34, &b.F_p34)
+        && same(&a.r_p35, &b.r_p35)
+        && same(&a.F_p35, &b.F_p35)
+        && same(&a.r_p36, &b.r_p36)
+        && same(&a.F_p36, &b.F_p36)
+        && same(&a.r_p37, &b.r_p37)
+        && same(&a.F_p37, &b.F_p37)
+        && same(&a.r_p38, &b.r_p38)
+        && same(&a.F_p38, &b.F_p38)
+        && same(&a.r_p39, &b.r_p39)
+        && same(&a.F_p39, &b.F_p39)
+        && same(&a.r_p40, &b.r_p40)
+        && same(&a.F_p40, &b.F_p40)
+        && same(&a.r_p41, &b.r_p41)
+        && same(&a.F_p41, &b.F_p41)
+}
+
+/// The same bits in `a` and `b`, compared without a branch per number.
+#[allow(dead_code)]
+fn same(a: &[f64], b: &[f64]) -> bool {
+    a.iter().zip(b).fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))
 }
 
 /// The state's time (0 when the file's state has none).
@@ -4992,6 +5100,56 @@ fn fold<const D: usize>(_axes: &[[f64; D]], _x: &mut [[f64; D]]) {}
 #[allow(dead_code)]
 fn rebase<const D: usize>(_orientations: &mut [[f64; 4]], _q: &mut [[f64; D]], _fresh: bool) {}
 
+/// A step that keeps what the next step starts from: the accumulated impulses (the
+/// warm-start storage) and the rows at the state the last step left, so a step evaluates the
+/// rows once per substep (where `step` evaluates them once more, at its start), as an engine
+/// keeps its joints' prepared rows. The rows are kept only where they read neither the
+/// velocities nor the time (`KEEP`), and serve only while every other field of the state is
+/// what the last step left, bit for bit (`same_inputs`): move a body or change a parameter
+/// between steps and the next step evaluates them again. So `Stepper::step` gives `step`'s
+/// numbers bit for bit. Large scenes: `Box::new(Stepper::new())` keeps it off the stack.
+#[allow(dead_code)]
+pub struct Stepper {
+    /// The accumulated impulse of each row (for C/κ; P/h ≈ λ), as `step`'s `impulses`.
+    pub impulses: [f64; CONSTRAINTS],
+    /// The rows at `left`, when `kept`.
+    rows: Prepared<DIM>,
+    /// The state as the last step left it.
+    left: State,
+    kept: bool,
+}
+
+#[allow(dead_code)]
+impl Stepper {
+    /// No impulses and no rows yet.
+    pub fn new() -> Stepper {
+        Stepper { impulses: [0.0; CONSTRAINTS], rows: Prepared::zeroed(), left: State::default(), kept: false }
+    }
+
+    /// One step of `dt` with the defaults (`StepSettings::default()`), as `step`.
+    pub fn step(&mut self, s: &mut State, dt: f64) {
+        self.step_with(s, dt, &StepSettings::default());
+    }
+
+    /// One step of `dt` with `settings`, as `step_with`.
+    pub fn step_with(&mut self, s: &mut State, dt: f64, settings: &StepSettings) {
+        if !(self.kept && same_inputs(s, &self.left)) {
+            prepare(s, &mut self.rows);
+        }
+        steps(s, &mut self.impulses, &mut self.rows, dt, settings);
+        self.kept = KEEP;
+        if KEEP {
+            self.left = *s;
+        }
+    }
+}
+
+impl Default for Stepper {
+    fn default() -> Stepper {
+        Stepper::new()
+    }
+}
+
 impl<const D: usize> Prepared<D> {
     /// Warm start: every row's accumulated impulse applied again.
     fn warm_start(&self, u: &mut [[f64; D]], impulse: &[f64]) {
@@ -5048,6 +5206,14 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// the contact softness, b = max(biasRate·C/κ, −3); P ≥ 0 on the accumulated impulse. The
 /// state's time advances by h per substep; its force fields are not read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
+    steps(s, impulses, &mut p, dt, settings);
+}
+
+/// `step_with` from the rows `p` at the state `s`, leaving in `p` the rows at the state it
+/// ends at (a substep's end, before its relax pass: where the library's next step starts).
+fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>, dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
     let iterations = settings.iterations;
     let joint = settings.joint_softness(h);
@@ -5057,8 +5223,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v, mut q0) = get(s);
-    let mut p = Prepared::zeroed();
-    prepare(s, &mut p);
     // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
     p.to_axes(&mut v);
     // Ċ at the step's start, restitution's closing speed (read only with restitution).
@@ -5075,7 +5239,7 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.warm_start(&mut v, impulses);
         for _ in 0..iterations {
             // Box2D's `useBias = true`.
-            let pr = &p;
+            let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
                 if !pr.inequality[k] {
                     (joint.bias_rate * c, joint)
@@ -5089,10 +5253,10 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, &mut p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
-            let pr = &p;
+            let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
                     if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }

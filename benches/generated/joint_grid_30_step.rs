@@ -209,19 +209,25 @@ const SHAPE_5_TABLE: [u32; 3358] = [1,2,2,3,3,4,4,5,5,6,6,7,7,8,8,9,9,10,10,11,1
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let (q, v) = (&s.position, &s.velocity);
     let x = others(s);
-    let mut ev = [[0.0; DIM]; SLOTS];
     for (&i, t) in SHAPE_0_ITEMS.iter().zip(SHAPE_0_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_0(q, v, &x, t), i as usize);
         p.inverse_mass[i] = 1.0 / o[0];
-        ev[i] = [o[1], o[2]];
         p.force[i] = [o[3], o[4]];
     }
     for (&i, t) in SHAPE_1_ITEMS.iter().zip(SHAPE_1_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_1(q, v, &x, t), i as usize);
         p.inverse_mass[i] = 1.0 / o[0];
-        ev[i] = [o[1], o[2]];
         p.force[i] = [o[3], o[4]];
     }
+    let _ = (q, v, &x);
+    prepare_moved(s, p);
+}
+
+/// The rows after the positions moved within a step: the rows' shapes (the bodies' 1/m and F read neither
+/// positions, velocities nor the time).
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    let (q, v) = (&s.position, &s.velocity);
+    let x = others(s);
     for (&i, t) in SHAPE_2_ITEMS.iter().zip(SHAPE_2_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_2(q, v, &x, t), i as usize);
         let e = ROW_START[i];
@@ -248,7 +254,57 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
         p.jacobian[e] = [o[1], o[2]];
         p.jacobian[e + 1] = [o[3], o[4]];
     }
-    p.finish(&ev);
+    p.finish(&[]);
+}
+
+/// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
+/// step's start while the state's other fields are unchanged (`Stepper`).
+#[allow(dead_code)]
+const KEEP: bool = true;
+
+/// Whether the fields of `a` the rows read are those of `b` bit for bit: every field but the time and the
+/// velocities.
+#[allow(dead_code)]
+fn same_inputs(a: &State, b: &State) -> bool {
+    same(&a.a1, &b.a1)
+        && same(&a.a10, &b.a10)
+        && same(&a.a11, &b.a11)
+        && same(&a.a12, &b.a12)
+        && same(&a.a13, &b.a13)
+        && same(&a.a14, &b.a14)
+        && same(&a.a15, &b.a15)
+        && same(&a.a16, &b.a16)
+        && same(&a.a17, &b.a17)
+        && same(&a.a18, &b.a18)
+        && same(&a.a19, &b.a19)
+        && same(&a.a2, &b.a2)
+        && same(&a.a20, &b.a20)
+        && same(&a.a21, &b.a21)
+        && same(&a.a22, &b.a22)
+        && same(&a.a23, &b.a23)
+        && same(&a.a24, &b.a24)
+        && same(&a.a25, &b.a25)
+        && same(&a.a26, &b.a26)
+        && same(&a.a27, &b.a27)
+        && same(&a.a28, &b.a28)
+        && same(&a.a29, &b.a29)
+        && same(&a.a3, &b.a3)
+        && same(&a.a30, &b.a30)
+        && same(&a.a4, &b.a4)
+        && same(&a.a5, &b.a5)
+        && same(&a.a6, &b.a6)
+        && same(&a.a7, &b.a7)
+        && same(&a.a8, &b.a8)
+        && same(&a.a9, &b.a9)
+        && same(&a.g, &b.g)
+        && same(a.position.as_flattened(), b.position.as_flattened())
+        && same(a.force.as_flattened(), b.force.as_flattened())
+}
+
+/// The same bits in `a` and `b`, compared without a branch per number.
+#[allow(dead_code)]
+fn same(a: &[f64], b: &[f64]) -> bool {
+    a.iter().zip(b).fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))
 }
 
 /// The state's time (0 when the file's state has none).
@@ -1076,6 +1132,56 @@ fn fold<const D: usize>(_axes: &[[f64; D]], _x: &mut [[f64; D]]) {}
 #[allow(dead_code)]
 fn rebase<const D: usize>(_orientations: &mut [[f64; 4]], _q: &mut [[f64; D]], _fresh: bool) {}
 
+/// A step that keeps what the next step starts from: the accumulated impulses (the
+/// warm-start storage) and the rows at the state the last step left, so a step evaluates the
+/// rows once per substep (where `step` evaluates them once more, at its start), as an engine
+/// keeps its joints' prepared rows. The rows are kept only where they read neither the
+/// velocities nor the time (`KEEP`), and serve only while every other field of the state is
+/// what the last step left, bit for bit (`same_inputs`): move a body or change a parameter
+/// between steps and the next step evaluates them again. So `Stepper::step` gives `step`'s
+/// numbers bit for bit. Large scenes: `Box::new(Stepper::new())` keeps it off the stack.
+#[allow(dead_code)]
+pub struct Stepper {
+    /// The accumulated impulse of each row (for C/κ; P/h ≈ λ), as `step`'s `impulses`.
+    pub impulses: [f64; CONSTRAINTS],
+    /// The rows at `left`, when `kept`.
+    rows: Prepared<DIM>,
+    /// The state as the last step left it.
+    left: State,
+    kept: bool,
+}
+
+#[allow(dead_code)]
+impl Stepper {
+    /// No impulses and no rows yet.
+    pub fn new() -> Stepper {
+        Stepper { impulses: [0.0; CONSTRAINTS], rows: Prepared::zeroed(), left: State::default(), kept: false }
+    }
+
+    /// One step of `dt` with the defaults (`StepSettings::default()`), as `step`.
+    pub fn step(&mut self, s: &mut State, dt: f64) {
+        self.step_with(s, dt, &StepSettings::default());
+    }
+
+    /// One step of `dt` with `settings`, as `step_with`.
+    pub fn step_with(&mut self, s: &mut State, dt: f64, settings: &StepSettings) {
+        if !(self.kept && same_inputs(s, &self.left)) {
+            prepare(s, &mut self.rows);
+        }
+        steps(s, &mut self.impulses, &mut self.rows, dt, settings);
+        self.kept = KEEP;
+        if KEEP {
+            self.left = *s;
+        }
+    }
+}
+
+impl Default for Stepper {
+    fn default() -> Stepper {
+        Stepper::new()
+    }
+}
+
 impl<const D: usize> Prepared<D> {
     /// Warm start: every row's accumulated impulse applied again.
     fn warm_start(&self, u: &mut [[f64; D]], impulse: &[f64]) {
@@ -1132,6 +1238,14 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// the contact softness, b = max(biasRate·C/κ, −3); P ≥ 0 on the accumulated impulse. The
 /// state's time advances by h per substep; its force fields are not read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
+    steps(s, impulses, &mut p, dt, settings);
+}
+
+/// `step_with` from the rows `p` at the state `s`, leaving in `p` the rows at the state it
+/// ends at (a substep's end, before its relax pass: where the library's next step starts).
+fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>, dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
     let iterations = settings.iterations;
     let joint = settings.joint_softness(h);
@@ -1141,8 +1255,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v, mut q0) = get(s);
-    let mut p = Prepared::zeroed();
-    prepare(s, &mut p);
     // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
     p.to_axes(&mut v);
     // Ċ at the step's start, restitution's closing speed (read only with restitution).
@@ -1159,7 +1271,7 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.warm_start(&mut v, impulses);
         for _ in 0..iterations {
             // Box2D's `useBias = true`.
-            let pr = &p;
+            let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
                 if !pr.inequality[k] {
                     (joint.bias_rate * c, joint)
@@ -1173,10 +1285,10 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, &mut p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
-            let pr = &p;
+            let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
                     if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }

@@ -5902,6 +5902,13 @@ const STEADY: [bool; 82] = [true, true, true, true, true, true, true, true, true
 ///   Jʷ, body `l40`: cos(th_l40)/2
 ///   Jʷ, body `ball`: 8 cos(th_ball)
 ///   J M⁻¹ Jᵀ = A[81][81] = 200000000000 (128969350552050046074509390853582388586572777918750 cos(th_l40)² + 191893081849510627400957189877922998138255115296 cos(th_ball)² + 64596148263321274726333725221932788191796568159467)/77164786715280316923363090236566401698873156947102488963934929
+/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
+/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
+#[inline(always)]
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    prepare(s, p);
+}
+
 /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.g[0] * 5.981747704246811;
@@ -6477,6 +6484,188 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     p.row(79, ((0.5 * (x237 + (x231 + (x234 - x240)))) * INVERSE_SCALE[79], 0.0), 312, [(39, [0.0, -1.0]), (80, [x241, 0.0]), (38, [0.0, 1.0]), (79, [x235, 0.0])], &v);
     p.row(80, ((0.5 * (x242 * 16.0 + (x236 + (x238 - s.x_ball[0] * 2.0)))) * INVERSE_SCALE[80], 0.0), 316, [(40, [-1.0, 0.0]), (81, [-(x243 * 8.0), 0.0]), (39, [1.0, 0.0]), (80, [x239, 0.0])], &v);
     p.row(81, ((0.5 * (x243 * 16.0 + (x237 + (x240 - s.x_ball[1] * 2.0)))) * INVERSE_SCALE[81], 0.0), 320, [(40, [0.0, -1.0]), (81, [x242 * 8.0, 0.0]), (39, [0.0, 1.0]), (80, [x241, 0.0])], &v);
+}
+
+/// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
+/// step's start while the state's other fields are unchanged (`Stepper`).
+#[allow(dead_code)]
+const KEEP: bool = true;
+
+/// Whether the fields of `a` the rows read are those of `b` bit for bit: every field but the time and the
+/// velocities.
+#[allow(dead_code)]
+fn same_inputs(a: &State, b: &State) -> bool {
+    same(&a.g, &b.g)
+        && same(&a.x_l1, &b.x_l1)
+        && same(&a.F_l1, &b.F_l1)
+        && same(&[a.th_l1], &[b.th_l1])
+        && same(&[a.T_l1], &[b.T_l1])
+        && same(&a.x_l2, &b.x_l2)
+        && same(&a.F_l2, &b.F_l2)
+        && same(&[a.th_l2], &[b.th_l2])
+        && same(&[a.T_l2], &[b.T_l2])
+        && same(&a.x_l3, &b.x_l3)
+        && same(&a.F_l3, &b.F_l3)
+        && same(&[a.th_l3], &[b.th_l3])
+        && same(&[a.T_l3], &[b.T_l3])
+        && same(&a.x_l4, &b.x_l4)
+        && same(&a.F_l4, &b.F_l4)
+        && same(&[a.th_l4], &[b.th_l4])
+        && same(&[a.T_l4], &[b.T_l4])
+        && same(&a.x_l5, &b.x_l5)
+        && same(&a.F_l5, &b.F_l5)
+        && same(&[a.th_l5], &[b.th_l5])
+        && same(&[a.T_l5], &[b.T_l5])
+        && same(&a.x_l6, &b.x_l6)
+        && same(&a.F_l6, &b.F_l6)
+        && same(&[a.th_l6], &[b.th_l6])
+        && same(&[a.T_l6], &[b.T_l6])
+        && same(&a.x_l7, &b.x_l7)
+        && same(&a.F_l7, &b.F_l7)
+        && same(&[a.th_l7], &[b.th_l7])
+        && same(&[a.T_l7], &[b.T_l7])
+        && same(&a.x_l8, &b.x_l8)
+        && same(&a.F_l8, &b.F_l8)
+        && same(&[a.th_l8], &[b.th_l8])
+        && same(&[a.T_l8], &[b.T_l8])
+        && same(&a.x_l9, &b.x_l9)
+        && same(&a.F_l9, &b.F_l9)
+        && same(&[a.th_l9], &[b.th_l9])
+        && same(&[a.T_l9], &[b.T_l9])
+        && same(&a.x_l10, &b.x_l10)
+        && same(&a.F_l10, &b.F_l10)
+        && same(&[a.th_l10], &[b.th_l10])
+        && same(&[a.T_l10], &[b.T_l10])
+        && same(&a.x_l11, &b.x_l11)
+        && same(&a.F_l11, &b.F_l11)
+        && same(&[a.th_l11], &[b.th_l11])
+        && same(&[a.T_l11], &[b.T_l11])
+        && same(&a.x_l12, &b.x_l12)
+        && same(&a.F_l12, &b.F_l12)
+        && same(&[a.th_l12], &[b.th_l12])
+        && same(&[a.T_l12], &[b.T_l12])
+        && same(&a.x_l13, &b.x_l13)
+        && same(&a.F_l13, &b.F_l13)
+        && same(&[a.th_l13], &[b.th_l13])
+        && same(&[a.T_l13], &[b.T_l13])
+        && same(&a.x_l14, &b.x_l14)
+        && same(&a.F_l14, &b.F_l14)
+        && same(&[a.th_l14], &[b.th_l14])
+        && same(&[a.T_l14], &[b.T_l14])
+        && same(&a.x_l15, &b.x_l15)
+        && same(&a.F_l15, &b.F_l15)
+        && same(&[a.th_l15], &[b.th_l15])
+        && same(&[a.T_l15], &[b.T_l15])
+        && same(&a.x_l16, &b.x_l16)
+        && same(&a.F_l16, &b.F_l16)
+        && same(&[a.th_l16], &[b.th_l16])
+        && same(&[a.T_l16], &[b.T_l16])
+        && same(&a.x_l17, &b.x_l17)
+        && same(&a.F_l17, &b.F_l17)
+        && same(&[a.th_l17], &[b.th_l17])
+        && same(&[a.T_l17], &[b.T_l17])
+        && same(&a.x_l18, &b.x_l18)
+        && same(&a.F_l18, &b.F_l18)
+        && same(&[a.th_l18], &[b.th_l18])
+        && same(&[a.T_l18], &[b.T_l18])
+        && same(&a.x_l19, &b.x_l19)
+        && same(&a.F_l19, &b.F_l19)
+        && same(&[a.th_l19], &[b.th_l19])
+        && same(&[a.T_l19], &[b.T_l19])
+        && same(&a.x_l20, &b.x_l20)
+        && same(&a.F_l20, &b.F_l20)
+        && same(&[a.th_l20], &[b.th_l20])
+        && same(&[a.T_l20], &[b.T_l20])
+        && same(&a.x_l21, &b.x_l21)
+        && same(&a.F_l21, &b.F_l21)
+        && same(&[a.th_l21], &[b.th_l21])
+        && same(&[a.T_l21], &[b.T_l21])
+        && same(&a.x_l22, &b.x_l22)
+        && same(&a.F_l22, &b.F_l22)
+        && same(&[a.th_l22], &[b.th_l22])
+        && same(&[a.T_l22], &[b.T_l22])
+        && same(&a.x_l23, &b.x_l23)
+        && same(&a.F_l23, &b.F_l23)
+        && same(&[a.th_l23], &[b.th_l23])
+        && same(&[a.T_l23], &[b.T_l23])
+        && same(&a.x_l24, &b.x_l24)
+        && same(&a.F_l24, &b.F_l24)
+        && same(&[a.th_l24], &[b.th_l24])
+        && same(&[a.T_l24], &[b.T_l24])
+        && same(&a.x_l25, &b.x_l25)
+        && same(&a.F_l25, &b.F_l25)
+        && same(&[a.th_l25], &[b.th_l25])
+        && same(&[a.T_l25], &[b.T_l25])
+        && same(&a.x_l26, &b.x_l26)
+        && same(&a.F_l26, &b.F_l26)
+        && same(&[a.th_l26], &[b.th_l26])
+        && same(&[a.T_l26], &[b.T_l26])
+        && same(&a.x_l27, &b.x_l27)
+        && same(&a.F_l27, &b.F_l27)
+        && same(&[a.th_l27], &[b.th_l27])
+        && same(&[a.T_l27], &[b.T_l27])
+        && same(&a.x_l28, &b.x_l28)
+        && same(&a.F_l28, &b.F_l28)
+        && same(&[a.th_l28], &[b.th_l28])
+        && same(&[a.T_l28], &[b.T_l28])
+        && same(&a.x_l29, &b.x_l29)
+        && same(&a.F_l29, &b.F_l29)
+        && same(&[a.th_l29], &[b.th_l29])
+        && same(&[a.T_l29], &[b.T_l29])
+        && same(&a.x_l30, &b.x_l30)
+        && same(&a.F_l30, &b.F_l30)
+        && same(&[a.th_l30], &[b.th_l30])
+        && same(&[a.T_l30], &[b.T_l30])
+        && same(&a.x_l31, &b.x_l31)
+        && same(&a.F_l31, &b.F_l31)
+        && same(&[a.th_l31], &[b.th_l31])
+        && same(&[a.T_l31], &[b.T_l31])
+        && same(&a.x_l32, &b.x_l32)
+        && same(&a.F_l32, &b.F_l32)
+        && same(&[a.th_l32], &[b.th_l32])
+        && same(&[a.T_l32], &[b.T_l32])
+        && same(&a.x_l33, &b.x_l33)
+        && same(&a.F_l33, &b.F_l33)
+        && same(&[a.th_l33], &[b.th_l33])
+        && same(&[a.T_l33], &[b.T_l33])
+        && same(&a.x_l34, &b.x_l34)
+        && same(&a.F_l34, &b.F_l34)
+        && same(&[a.th_l34], &[b.th_l34])
+        && same(&[a.T_l34], &[b.T_l34])
+        && same(&a.x_l35, &b.x_l35)
+        && same(&a.F_l35, &b.F_l35)
+        && same(&[a.th_l35], &[b.th_l35])
+        && same(&[a.T_l35], &[b.T_l35])
+        && same(&a.x_l36, &b.x_l36)
+        && same(&a.F_l36, &b.F_l36)
+        && same(&[a.th_l36], &[b.th_l36])
+        && same(&[a.T_l36], &[b.T_l36])
+        && same(&a.x_l37, &b.x_l37)
+        && same(&a.F_l37, &b.F_l37)
+        && same(&[a.th_l37], &[b.th_l37])
+        && same(&[a.T_l37], &[b.T_l37])
+        && same(&a.x_l38, &b.x_l38)
+        && same(&a.F_l38, &b.F_l38)
+        && same(&[a.th_l38], &[b.th_l38])
+        && same(&[a.T_l38], &[b.T_l38])
+        && same(&a.x_l39, &b.x_l39)
+        && same(&a.F_l39, &b.F_l39)
+        && same(&[a.th_l39], &[b.th_l39])
+        && same(&[a.T_l39], &[b.T_l39])
+        && same(&a.x_l40, &b.x_l40)
+        && same(&a.F_l40, &b.F_l40)
+        && same(&[a.th_l40], &[b.th_l40])
+        && same(&[a.T_l40], &[b.T_l40])
+        && same(&a.x_ball, &b.x_ball)
+        && same(&a.F_ball, &b.F_ball)
+        && same(&[a.th_ball], &[b.th_ball])
+        && same(&[a.T_ball], &[b.T_ball])
+}
+
+/// The same bits in `a` and `b`, compared without a branch per number.
+#[allow(dead_code)]
+fn same(a: &[f64], b: &[f64]) -> bool {
+    a.iter().zip(b).fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))
 }
 
 /// The state's time (0 when the file's state has none).
@@ -7466,6 +7655,56 @@ fn fold<const D: usize>(_axes: &[[f64; D]], _x: &mut [[f64; D]]) {}
 #[allow(dead_code)]
 fn rebase<const D: usize>(_orientations: &mut [[f64; 4]], _q: &mut [[f64; D]], _fresh: bool) {}
 
+/// A step that keeps what the next step starts from: the accumulated impulses (the
+/// warm-start storage) and the rows at the state the last step left, so a step evaluates the
+/// rows once per substep (where `step` evaluates them once more, at its start), as an engine
+/// keeps its joints' prepared rows. The rows are kept only where they read neither the
+/// velocities nor the time (`KEEP`), and serve only while every other field of the state is
+/// what the last step left, bit for bit (`same_inputs`): move a body or change a parameter
+/// between steps and the next step evaluates them again. So `Stepper::step` gives `step`'s
+/// numbers bit for bit. Large scenes: `Box::new(Stepper::new())` keeps it off the stack.
+#[allow(dead_code)]
+pub struct Stepper {
+    /// The accumulated impulse of each row (for C/κ; P/h ≈ λ), as `step`'s `impulses`.
+    pub impulses: [f64; CONSTRAINTS],
+    /// The rows at `left`, when `kept`.
+    rows: Prepared<DIM>,
+    /// The state as the last step left it.
+    left: State,
+    kept: bool,
+}
+
+#[allow(dead_code)]
+impl Stepper {
+    /// No impulses and no rows yet.
+    pub fn new() -> Stepper {
+        Stepper { impulses: [0.0; CONSTRAINTS], rows: Prepared::zeroed(), left: State::default(), kept: false }
+    }
+
+    /// One step of `dt` with the defaults (`StepSettings::default()`), as `step`.
+    pub fn step(&mut self, s: &mut State, dt: f64) {
+        self.step_with(s, dt, &StepSettings::default());
+    }
+
+    /// One step of `dt` with `settings`, as `step_with`.
+    pub fn step_with(&mut self, s: &mut State, dt: f64, settings: &StepSettings) {
+        if !(self.kept && same_inputs(s, &self.left)) {
+            prepare(s, &mut self.rows);
+        }
+        steps(s, &mut self.impulses, &mut self.rows, dt, settings);
+        self.kept = KEEP;
+        if KEEP {
+            self.left = *s;
+        }
+    }
+}
+
+impl Default for Stepper {
+    fn default() -> Stepper {
+        Stepper::new()
+    }
+}
+
 impl<const D: usize> Prepared<D> {
     /// Warm start: every row's accumulated impulse applied again.
     fn warm_start(&self, u: &mut [[f64; D]], impulse: &[f64]) {
@@ -7522,6 +7761,14 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// the contact softness, b = max(biasRate·C/κ, −3); P ≥ 0 on the accumulated impulse. The
 /// state's time advances by h per substep; its force fields are not read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
+    steps(s, impulses, &mut p, dt, settings);
+}
+
+/// `step_with` from the rows `p` at the state `s`, leaving in `p` the rows at the state it
+/// ends at (a substep's end, before its relax pass: where the library's next step starts).
+fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>, dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
     let iterations = settings.iterations;
     let joint = settings.joint_softness(h);
@@ -7531,8 +7778,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v, mut q0) = get(s);
-    let mut p = Prepared::zeroed();
-    prepare(s, &mut p);
     // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
     p.to_axes(&mut v);
     // Ċ at the step's start, restitution's closing speed (read only with restitution).
@@ -7549,7 +7794,7 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.warm_start(&mut v, impulses);
         for _ in 0..iterations {
             // Box2D's `useBias = true`.
-            let pr = &p;
+            let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
                 if !pr.inequality[k] {
                     (joint.bias_rate * c, joint)
@@ -7563,10 +7808,10 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, &mut p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
-            let pr = &p;
+            let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
                     if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }

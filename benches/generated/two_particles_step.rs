@@ -538,6 +538,13 @@ const STEADY: [bool; 2] = [true, true];
 ///   J, body `p1`: −(r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J, body `p2`: (r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J M⁻¹ Jᵀ = A[1][1] = 157970804621911954375000000000/940330394487407031884723016279
+/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
+/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
+#[inline(always)]
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
+    prepare(s, p);
+}
+
 /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
 fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.r_p1[0] - s.a1[0];
@@ -558,6 +565,29 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
     p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], 0.0), 0, [(0, [x0 * x6, x1 * x6])], &v);
     p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], 0.0), 1, [(1, [x3 * x7, x4 * x7]), (0, [x3 * x8, x4 * x8])], &v);
+}
+
+/// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
+/// step's start while the state's other fields are unchanged (`Stepper`).
+#[allow(dead_code)]
+const KEEP: bool = true;
+
+/// Whether the fields of `a` the rows read are those of `b` bit for bit: every field but the time and the
+/// velocities.
+#[allow(dead_code)]
+fn same_inputs(a: &State, b: &State) -> bool {
+    same(&a.a1, &b.a1)
+        && same(&a.g, &b.g)
+        && same(&a.r_p1, &b.r_p1)
+        && same(&a.F_p1, &b.F_p1)
+        && same(&a.r_p2, &b.r_p2)
+        && same(&a.F_p2, &b.F_p2)
+}
+
+/// The same bits in `a` and `b`, compared without a branch per number.
+#[allow(dead_code)]
+fn same(a: &[f64], b: &[f64]) -> bool {
+    a.iter().zip(b).fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))
 }
 
 /// The state's time (0 when the file's state has none).
@@ -1387,6 +1417,56 @@ fn fold<const D: usize>(_axes: &[[f64; D]], _x: &mut [[f64; D]]) {}
 #[allow(dead_code)]
 fn rebase<const D: usize>(_orientations: &mut [[f64; 4]], _q: &mut [[f64; D]], _fresh: bool) {}
 
+/// A step that keeps what the next step starts from: the accumulated impulses (the
+/// warm-start storage) and the rows at the state the last step left, so a step evaluates the
+/// rows once per substep (where `step` evaluates them once more, at its start), as an engine
+/// keeps its joints' prepared rows. The rows are kept only where they read neither the
+/// velocities nor the time (`KEEP`), and serve only while every other field of the state is
+/// what the last step left, bit for bit (`same_inputs`): move a body or change a parameter
+/// between steps and the next step evaluates them again. So `Stepper::step` gives `step`'s
+/// numbers bit for bit. Large scenes: `Box::new(Stepper::new())` keeps it off the stack.
+#[allow(dead_code)]
+pub struct Stepper {
+    /// The accumulated impulse of each row (for C/κ; P/h ≈ λ), as `step`'s `impulses`.
+    pub impulses: [f64; CONSTRAINTS],
+    /// The rows at `left`, when `kept`.
+    rows: Prepared<DIM>,
+    /// The state as the last step left it.
+    left: State,
+    kept: bool,
+}
+
+#[allow(dead_code)]
+impl Stepper {
+    /// No impulses and no rows yet.
+    pub fn new() -> Stepper {
+        Stepper { impulses: [0.0; CONSTRAINTS], rows: Prepared::zeroed(), left: State::default(), kept: false }
+    }
+
+    /// One step of `dt` with the defaults (`StepSettings::default()`), as `step`.
+    pub fn step(&mut self, s: &mut State, dt: f64) {
+        self.step_with(s, dt, &StepSettings::default());
+    }
+
+    /// One step of `dt` with `settings`, as `step_with`.
+    pub fn step_with(&mut self, s: &mut State, dt: f64, settings: &StepSettings) {
+        if !(self.kept && same_inputs(s, &self.left)) {
+            prepare(s, &mut self.rows);
+        }
+        steps(s, &mut self.impulses, &mut self.rows, dt, settings);
+        self.kept = KEEP;
+        if KEEP {
+            self.left = *s;
+        }
+    }
+}
+
+impl Default for Stepper {
+    fn default() -> Stepper {
+        Stepper::new()
+    }
+}
+
 impl<const D: usize> Prepared<D> {
     /// Warm start: every row's accumulated impulse applied again.
     fn warm_start(&self, u: &mut [[f64; D]], impulse: &[f64]) {
@@ -1443,6 +1523,14 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// the contact softness, b = max(biasRate·C/κ, −3); P ≥ 0 on the accumulated impulse. The
 /// state's time advances by h per substep; its force fields are not read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
+    steps(s, impulses, &mut p, dt, settings);
+}
+
+/// `step_with` from the rows `p` at the state `s`, leaving in `p` the rows at the state it
+/// ends at (a substep's end, before its relax pass: where the library's next step starts).
+fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>, dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
     let iterations = settings.iterations;
     let joint = settings.joint_softness(h);
@@ -1452,8 +1540,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v, mut q0) = get(s);
-    let mut p = Prepared::zeroed();
-    prepare(s, &mut p);
     // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
     p.to_axes(&mut v);
     // Ċ at the step's start, restitution's closing speed (read only with restitution).
@@ -1470,7 +1556,7 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.warm_start(&mut v, impulses);
         for _ in 0..iterations {
             // Box2D's `useBias = true`.
-            let pr = &p;
+            let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
                 if !pr.inequality[k] {
                     (joint.bias_rate * c, joint)
@@ -1484,10 +1570,10 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, &mut p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
-            let pr = &p;
+            let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
                     if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }

@@ -537,7 +537,7 @@ fn c_module(
                 .into_iter()
                 .filter_map(|b| system.bodies[b].rigid.as_ref().map(|r| (r.orientation, r.angular_velocity)))
                 .collect(),
-            roots: StepRoots::of(&loaded.system, &plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
+            roots: StepRoots::of(&loaded.system, g, &plan.layout, &scene.masses, &scene.bodies, &scene.turns, formulas),
         }),
     };
     let code = super::c::emit(&ctx, &parts)?;
@@ -592,7 +592,7 @@ fn rust_module(
     }
     ctx.solution(&mut out, formulas, (&scene.a_code, &scene.b_code), &names, layout, &scene.turns)?;
     if let Some(solver) = options.solver {
-        let step = StepRoots::of(&loaded.system, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+        let step = StepRoots::of(&loaded.system, g, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
         let places = StepPlaces::of(system, fields, &scene.turns);
         step_fns(&mut out, &ctx, solver, &inverse_scales(d), &places, &step, formulas, &names, layout)?;
     }
@@ -671,6 +671,9 @@ pub(super) struct StepPlaces<'a> {
     velocity: Vec<&'a str>,
     /// Per rigid body: its orientation (θ, or q in 3D) and ω fields.
     turn: Vec<(&'a str, &'a str)>,
+    /// What `same_inputs` compares: per field but the time and the velocities (a role array
+    /// once), its numbers as a slice of `a` and of `b`.
+    inputs: Vec<(String, String)>,
 }
 
 impl<'a> StepPlaces<'a> {
@@ -680,7 +683,35 @@ impl<'a> StepPlaces<'a> {
             let rigid = system.bodies[body].rigid.as_ref();
             rigid.map_or(("", ""), |r| (ident_of(fields, r.orientation), ident_of(fields, r.angular_velocity)))
         };
+        let g = &system.graph;
+        let mut inputs = Vec::new();
+        let mut arrays = Vec::new();
+        for f in fields {
+            let slice = |x: &str| match f.array {
+                Some(("mass", _)) => format!("&{x}.mass"),
+                Some((name, _)) => format!("{x}.{name}.as_flattened()"),
+                None if g.symbol(f.symbol).ty == Ty::Scalar && !g.is_quaternion(f.symbol) => {
+                    format!("&[{x}.{}]", f.ident)
+                }
+                None => format!("&{x}.{}", f.ident),
+            };
+            match f.array {
+                Some(("velocity", _)) => continue,
+                Some((name, _)) if arrays.contains(&name) => continue,
+                Some((name, _)) => arrays.push(name),
+                None if matches!(
+                    g.symbol(f.symbol).role,
+                    Role::Time | Role::Velocity { .. } | Role::AngularVelocity { .. }
+                ) =>
+                {
+                    continue;
+                }
+                None => {}
+            }
+            inputs.push((slice("a"), slice("b")));
+        }
         StepPlaces {
+            inputs,
             time: fields.iter().find(|f| f.symbol == system.time).map(|f| f.ident.as_str()),
             position: system.bodies.iter().map(|b| ident_of(fields, b.position)).collect(),
             velocity: system.bodies.iter().map(|b| ident_of(fields, b.velocity)).collect(),
@@ -705,11 +736,24 @@ pub(super) struct StepRoots {
     /// Per row, whether its C reads no time (`numeric::velocity::steady_rows`): ∂C/∂t = 0,
     /// so the soft step and PGS leave its Ċ out (`swept`).
     pub(super) steady: Vec<bool>,
+    /// Whether the rows read neither the velocities nor the time (every row steady, no 3D
+    /// rigid body, each body's m and F and each rigid body's I and τ free of velocities and
+    /// time): then the rows a step leaves are the rows of the next step's start, bit for bit,
+    /// while the other inputs are unchanged (`KEEP`, `Stepper`).
+    pub(super) keep: bool,
+    /// Whether the bodies' m and F (and the rigid bodies' I and τ) read neither positions,
+    /// orientations, velocities nor the time, so a step's positions leave them unchanged
+    /// (`--step-only`'s `prepare_moved` leaves them out).
+    pub(super) still: bool,
+    /// Whether a row's evaluation reads the velocities (a row's ∂C/∂t, or a 3D body's
+    /// gyroscopic term): not when every row is steady and no body is 3D.
+    pub(super) velocities: bool,
 }
 
 impl StepRoots {
     pub(super) fn of(
         system: &crate::model::system::System,
+        g: &Graph,
         layout: &Layout,
         masses: &[Id],
         bodies: &Bodies,
@@ -737,6 +781,19 @@ impl StepRoots {
                 roots.extend([turns.inertia[slot], turns.angular_velocity[slot], turns.applied[slot]]);
             }
         }
+        // The bodies' m, v, F (and I, ω, τ): all but the velocities must be free of velocities
+        // and time for the rows to be kept.
+        let mut walk = crate::expr::graph::SymbolWalk::default();
+        let moving = |role: Role| matches!(role, Role::Velocity { .. } | Role::AngularVelocity { .. } | Role::Time);
+        let velocities = three || steady.len() != layout.constraints || !steady.iter().all(|&s| s);
+        let mut reads = |roles: &dyn Fn(Role) -> bool| {
+            roots.chunks_exact(3).any(|c| {
+                [c[0], c[2]].iter().any(|&id| walk.free_symbols(g, id).iter().any(|&s| roles(g.symbol(s).role)))
+            })
+        };
+        let keep = !velocities && !reads(&moving);
+        let still =
+            !three && !reads(&|role| moving(role) || matches!(role, Role::Position { .. } | Role::Orientation { .. }));
         let mut swept = vec![true; roots.len()];
         let mut angular_slots = Vec::with_capacity(layout.constraints);
         for r in 0..layout.constraints {
@@ -760,6 +817,9 @@ impl StepRoots {
             angular_slots,
             turns: rigid.into_iter().map(|(_, first, three)| (first, three)).collect(),
             steady: (0..layout.constraints).map(|r| steady.get(r).copied().unwrap_or(false)).collect(),
+            keep,
+            still,
+            velocities,
         }
     }
 
@@ -862,7 +922,11 @@ fn step_fns(
     } else {
         let _ = writeln!(
             out,
-            "/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
+            "/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there\n\
+             /// the bodies' 1/m and F where they read neither positions, velocities nor the time).\n\
+             #[inline(always)]\n\
+             fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {{\n    prepare(s, p);\n}}\n\n\
+             /// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).\n\
              fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
         );
     }
@@ -1059,7 +1123,7 @@ fn step_module(
             );
         }
     }
-    let step = StepRoots::of(&loaded.system, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
+    let step = StepRoots::of(&loaded.system, g, layout, &scene.masses, &scene.bodies, &scene.turns, formulas);
     super::shapes::step_by_shape(
         &mut out,
         &ctx,
@@ -1154,6 +1218,24 @@ pub(super) fn step_constants(
 
 /// The state's accessors the step's text calls: `time`, `get` (the state's slots) and `put`.
 pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &StepRoots) {
+    let same: Vec<String> = places.inputs.iter().map(|(a, b)| format!("same({a}, {b})")).collect();
+    let _ = writeln!(
+        out,
+        "/// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next\n\
+         /// step's start while the state's other fields are unchanged (`Stepper`).\n\
+         #[allow(dead_code)]\n\
+         const KEEP: bool = {};\n\n\
+         /// Whether the fields of `a` the rows read are those of `b` bit for bit: every field but the time and the\n\
+         /// velocities.\n\
+         #[allow(dead_code)]\n\
+         fn same_inputs(a: &State, b: &State) -> bool {{\n    {}\n}}\n\n\
+         /// The same bits in `a` and `b`, compared without a branch per number.\n\
+         #[allow(dead_code)]\n\
+         fn same(a: &[f64], b: &[f64]) -> bool {{\n    \
+         a.iter().zip(b).fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))\n}}\n",
+        step.keep,
+        if same.is_empty() { "let _ = (a, b);\n    true".to_string() } else { same.join("\n        && ") }
+    );
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
     let _ = writeln!(out, "    {}{time}\n}}\n", if places.time.is_none() { "let _ = s;\n    " } else { "" });

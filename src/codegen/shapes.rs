@@ -90,6 +90,12 @@ enum Kind {
     Row(usize, bool),
 }
 
+impl Kind {
+    fn is_row(&self) -> bool {
+        matches!(self, Kind::Row(..))
+    }
+}
+
 /// A shape: its program over local inputs, and its instances.
 struct Shape {
     ops: Vec<Op>,
@@ -349,19 +355,37 @@ pub(super) fn step_by_shape(
     for (id, shape) in list.iter().enumerate() {
         shape_fn(out, ctx, id, shape, formulas, system, g)?;
     }
-    // `prepare`: the bodies' shapes, then the rows'.
+    // `prepare`: the bodies' shapes, then the rows'. Where no row reads the velocities, the
+    // velocities the rows were evaluated at (`ev`) are not kept; where the bodies' items
+    // cannot change with the positions, `prepare_moved` (the rows after a substep's drift)
+    // leaves them out, and `prepare` is the bodies, then `prepare_moved`.
+    let split = step.still && !step.velocities;
+    let prelude = if arrays {
+        "    let (q, v) = (&s.position, &s.velocity);\n    let x = others(s);"
+    } else {
+        "    let (q, v) = (&positions(s), &velocities(s));\n    let x = others(s);"
+    };
     let _ = writeln!(
         out,
         "/// The rows at the state, flattened for the step into `p` (nothing allocated): each shape's function over its instances.\n\
-         fn prepare(s: &State, p: &mut Prepared<DIM>) {{"
+         fn prepare(s: &State, p: &mut Prepared<DIM>) {{\n{prelude}"
     );
-    if arrays {
-        let _ = writeln!(out, "    let (q, v) = (&s.position, &s.velocity);");
-    } else {
-        let _ = writeln!(out, "    let (q, v) = (&positions(s), &velocities(s));");
+    if step.velocities {
+        let _ = writeln!(out, "    let mut ev = [[0.0; DIM]; SLOTS];");
     }
-    let _ = writeln!(out, "    let x = others(s);\n    let mut ev = [[0.0; DIM]; SLOTS];");
+    let ev = |x: String| if step.velocities { x } else { String::new() };
+    let mut moved = !split;
     for (id, shape) in list.iter().enumerate() {
+        if !moved && (shape.kind.is_row() || id + 1 == list.len()) {
+            moved = true;
+            let _ = writeln!(
+                out,
+                "    let _ = (q, v, &x);\n    prepare_moved(s, p);\n}}\n\n\
+                 /// The rows after the positions moved within a step: the rows' shapes (the bodies' 1/m and F read neither\n\
+                 /// positions, velocities nor the time).\n\
+                 fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {{\n{prelude}"
+            );
+        }
         let w = shape.bodies + shape.others;
         if w == 0 {
             let _ = writeln!(out, "    for &i in SHAPE_{id}_ITEMS.iter() {{");
@@ -378,7 +402,8 @@ pub(super) fn step_by_shape(
         match shape.kind {
             Kind::Body => {
                 let _ = writeln!(out, "        p.inverse_mass[i] = 1.0 / o[0];");
-                let _ = writeln!(out, "        ev[i] = {};\n        p.force[i] = {};", comps(1), comps(1 + dim));
+                let _ = write!(out, "{}", ev(format!("        ev[i] = {};\n", comps(1))));
+                let _ = writeln!(out, "        p.force[i] = {};", comps(1 + dim));
             }
             Kind::Rigid if three => {
                 // The body's three axis slots from its I, ω, τ and axes (`Prepared::axis_slots`).
@@ -394,8 +419,8 @@ pub(super) fn step_by_shape(
             }
             Kind::Rigid => {
                 let _ = writeln!(out, "        p.inverse_mass[BODIES + i] = 1.0 / o[0];");
-                let _ =
-                    writeln!(out, "        ev[BODIES + i] = [o[1], 0.0];\n        p.force[BODIES + i] = [o[2], 0.0];");
+                let _ = write!(out, "{}", ev("        ev[BODIES + i] = [o[1], 0.0];\n".to_string()));
+                let _ = writeln!(out, "        p.force[BODIES + i] = [o[2], 0.0];");
             }
             Kind::Row(linear, steady) => {
                 // C/κ, Ċ/κ (into `time_rate`, which `finish` turns into ∂C/∂t) and J: a pass of
@@ -427,12 +452,20 @@ pub(super) fn step_by_shape(
         }
         let _ = writeln!(out, "    }}");
     }
-    let _ = writeln!(out, "    p.finish(&ev);");
+    let _ = writeln!(out, "    p.finish({});", if step.velocities { "&ev" } else { "&[]" });
     if three {
         // The body-frame ω the gyroscopic terms were taken at, for the kick.
         let _ = writeln!(out, "    p.velocity = ev;\n    p.first = first_angular(&p.axes);");
     }
     let _ = writeln!(out, "}}\n");
+    if !split {
+        let _ = writeln!(
+            out,
+            "/// The rows after the positions moved within a step: all of `prepare`.\n\
+             #[inline(always)]\n\
+             fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {{\n    prepare(s, p);\n}}\n"
+        );
+    }
     step_accessors(out, places, step);
     Ok(())
 }

@@ -109,7 +109,7 @@ mod tests {
             (SOLVE_DENSE, "/// Solves `a x = b` for a symmetric positive definite `a` by Cholesky"),
             (HELPERS, "/// |(x, y)|"),
             (STEP, "/// Box2D's `b2Softness`"),
-            (SWEEP, "impl<const D: usize> Prepared<D>"),
+            (SWEEP, "/// A step that keeps what the next step starts from"),
             (MOTION, "#[allow(dead_code)]\nimpl<const D: usize> Prepared<D>"),
             (MOTION_3D, "/// The Hamilton product"),
             (SOFT_STEP, "/// One soft step of `dt`"),

@@ -24,6 +24,14 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// turn exact). No softness and no relax pass. The state's time advances by h per substep; its
 /// force fields are not read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
+    steps(s, impulses, &mut p, dt, settings);
+}
+
+/// `step_with` from the rows `p` at the state `s`, leaving in `p` the rows at the state it
+/// ends at (its last substep's end).
+fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>, dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
     let beta = settings.baumgarte;
     if !settings.warm_start {
@@ -31,8 +39,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v, mut q0) = get(s);
-    let mut p = Prepared::zeroed();
-    prepare(s, &mut p);
     for sub in 0..settings.substeps {
         // 3D rigid bodies: the orientation folded in and renormalised, φ = 0 from here.
         rebase(&mut q0, &mut q, sub == 0);
@@ -40,7 +46,7 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.to_axes(&mut v);
         p.kick(&mut v, h);
         p.warm_start(&mut v, impulses);
-        let pr = &p;
+        let pr = &*p;
         for _ in 0..settings.iterations {
             pr.sweep(&mut v, impulses, |k, c| {
                 let bias = if pr.inequality[k] && c > 0.0 { c / h } else { beta * c / h };
@@ -50,6 +56,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, &mut p);
+        prepare_moved(s, p);
     }
 }

@@ -29,6 +29,14 @@ pub fn step(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64) {
 /// the contact softness, b = max(biasRate·C/κ, −3); P ≥ 0 on the accumulated impulse. The
 /// state's time advances by h per substep; its force fields are not read.
 pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, settings: &StepSettings) {
+    let mut p = Prepared::zeroed();
+    prepare(s, &mut p);
+    steps(s, impulses, &mut p, dt, settings);
+}
+
+/// `step_with` from the rows `p` at the state `s`, leaving in `p` the rows at the state it
+/// ends at (a substep's end, before its relax pass: where the library's next step starts).
+fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>, dt: f64, settings: &StepSettings) {
     let h = dt / settings.substeps as f64;
     let iterations = settings.iterations;
     let joint = settings.joint_softness(h);
@@ -38,8 +46,6 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
     }
     let t = time(s);
     let (mut q, mut v, mut q0) = get(s);
-    let mut p = Prepared::zeroed();
-    prepare(s, &mut p);
     // In the rows' slots (a 3D body's ω along its principal axes) for the sweeps.
     p.to_axes(&mut v);
     // Ċ at the step's start, restitution's closing speed (read only with restitution).
@@ -56,7 +62,7 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.warm_start(&mut v, impulses);
         for _ in 0..iterations {
             // Box2D's `useBias = true`.
-            let pr = &p;
+            let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
                 if !pr.inequality[k] {
                     (joint.bias_rate * c, joint)
@@ -70,10 +76,10 @@ pub fn step_with(s: &mut State, impulses: &mut [f64; CONSTRAINTS], dt: f64, sett
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
         put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
-        prepare(s, &mut p);
+        prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
-            let pr = &p;
+            let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
                     if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }

@@ -6,6 +6,56 @@
 //! generated module of `tests/generate_step.rs` (it uses the module's items, so it is not a
 //! module of its own). Not here: the bias and softness of each row (each solver's step).
 
+/// A step that keeps what the next step starts from: the accumulated impulses (the
+/// warm-start storage) and the rows at the state the last step left, so a step evaluates the
+/// rows once per substep (where `step` evaluates them once more, at its start), as an engine
+/// keeps its joints' prepared rows. The rows are kept only where they read neither the
+/// velocities nor the time (`KEEP`), and serve only while every other field of the state is
+/// what the last step left, bit for bit (`same_inputs`): move a body or change a parameter
+/// between steps and the next step evaluates them again. So `Stepper::step` gives `step`'s
+/// numbers bit for bit. Large scenes: `Box::new(Stepper::new())` keeps it off the stack.
+#[allow(dead_code)]
+pub struct Stepper {
+    /// The accumulated impulse of each row (for C/κ; P/h ≈ λ), as `step`'s `impulses`.
+    pub impulses: [f64; CONSTRAINTS],
+    /// The rows at `left`, when `kept`.
+    rows: Prepared<DIM>,
+    /// The state as the last step left it.
+    left: State,
+    kept: bool,
+}
+
+#[allow(dead_code)]
+impl Stepper {
+    /// No impulses and no rows yet.
+    pub fn new() -> Stepper {
+        Stepper { impulses: [0.0; CONSTRAINTS], rows: Prepared::zeroed(), left: State::default(), kept: false }
+    }
+
+    /// One step of `dt` with the defaults (`StepSettings::default()`), as `step`.
+    pub fn step(&mut self, s: &mut State, dt: f64) {
+        self.step_with(s, dt, &StepSettings::default());
+    }
+
+    /// One step of `dt` with `settings`, as `step_with`.
+    pub fn step_with(&mut self, s: &mut State, dt: f64, settings: &StepSettings) {
+        if !(self.kept && same_inputs(s, &self.left)) {
+            prepare(s, &mut self.rows);
+        }
+        steps(s, &mut self.impulses, &mut self.rows, dt, settings);
+        self.kept = KEEP;
+        if KEEP {
+            self.left = *s;
+        }
+    }
+}
+
+impl Default for Stepper {
+    fn default() -> Stepper {
+        Stepper::new()
+    }
+}
+
 impl<const D: usize> Prepared<D> {
     /// Warm start: every row's accumulated impulse applied again.
     fn warm_start(&self, u: &mut [[f64; D]], impulse: &[f64]) {
