@@ -15,14 +15,19 @@ use lagrange::numeric::simulate::Summary;
 use lagrange::numeric::solve::{Diagnostic, MAX_DENSE_ROWS, Solution, Status, solve};
 use lagrange::numeric::velocity::{Settings as VelocitySettings, Solver};
 use lagrange::scenario::Scenario;
+use std::process::Command;
 
 const GRID: &str = include_str!("../constraints/solvers/joint_grid_30.toml");
+
+/// The grid's text with `h1_1` written again as `h1_1_twin`, of length `length`.
+fn twin_text(length: &str) -> String {
+    format!("{GRID}\n[[constraints]]\nname = \"h1_1_twin\"\nexpr = \"norm(r_p1_1 - r_p1_0) = {length}\"\n")
+}
 
 /// The grid with `h1_1` (the first row's first horizontal link) written again as
 /// `h1_1_twin`, of length `length` (1.0 is the same constraint).
 fn grid_with_twin(length: &str) -> Scenario {
-    let text = format!("{GRID}\n[[constraints]]\nname = \"h1_1_twin\"\nexpr = \"norm(r_p1_1 - r_p1_0) = {length}\"\n");
-    Scenario::new(load(&text).expect("valid file"), &[]).expect("derives")
+    Scenario::new(load(&twin_text(length)).expect("valid file"), &[]).expect("derives")
 }
 
 fn solve_at_start(s: &Scenario) -> Solution {
@@ -115,4 +120,27 @@ fn contradicting_rows_past_the_dense_limit_stop_the_run_with_an_error() {
     settings.steps = 3;
     let failure = clash.simulate_velocity(settings, &mut |_| Ok(())).expect_err("stops");
     assert!(matches!(failure.error, SimError::TooLarge { .. }), "{}", failure.error);
+}
+
+/// Runs the command line on the grid with a twin of `length` written to a temporary file:
+/// exit code, stdout and stderr.
+fn cli(length: &str, args: &[&str]) -> (Option<i32>, String, String) {
+    let path = std::env::temp_dir().join(format!("lagrange-twin-{length}-{}.toml", std::process::id()));
+    std::fs::write(&path, twin_text(length)).expect("writes the file");
+    let file = path.to_str().expect("utf-8");
+    let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).args(args).arg(file).output().expect("runs");
+    let _ = std::fs::remove_file(&path);
+    (out.status.code(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+}
+
+#[test]
+fn the_command_line_names_the_redundant_rows_and_stops_on_the_contradicting_ones() {
+    let (code, stdout, stderr) = cli("1.0", &["solve"]);
+    assert_eq!(code, Some(0), "{stdout}{stderr}");
+    assert!(stdout.contains("minimum-norm"), "{stdout}");
+    let line = stdout.lines().find(|l| l.contains("regularised sparse solves")).unwrap_or_default();
+    assert!(line.contains("`h1_1`") && line.contains("`h1_1_twin`") && line.contains("1712 rows"), "{stdout}");
+    let (code, stdout, stderr) = cli("1.5", &["simulate", "--steps", "3"]);
+    assert_eq!(code, Some(2), "a simulation that stopped: {stdout}{stderr}");
+    assert!(stderr.contains("1712 coupled rows could not be solved"), "{stderr}");
 }
