@@ -56,14 +56,12 @@ pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> boo
         return false;
     }
     let w = rows.inverse_mass[body];
-    // Every number finite (x·0 is 0 for finite x and NaN otherwise), every slot's velocity
-    // and force included: the general solve's cache serves nothing less.
-    let mut zero = row.bias * 0.0 + w * 0.0 + j[0] * 0.0 + j[1] * 0.0 + j[2] * 0.0;
-    for i in 0..n {
-        let (v, f) = (&rows.velocity[i], &rows.force[i]);
-        zero += (v[0] * 0.0 + v[1] * 0.0 + v[2] * 0.0) + (f[0] * 0.0 + f[1] * 0.0 + f[2] * 0.0);
-    }
-    if zero != 0.0 || w < 0.0 {
+    // Every number finite, every slot's velocity and force included: the general solve's
+    // cache serves nothing less (`is_finite` joined by `&`, as `dynamics::all_finite`: no
+    // chain of dependent additions).
+    let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
+    let slots = rows.velocity.iter().zip(&rows.force).fold(true, |ok, (v, f)| ok & finite3(v) & finite3(f));
+    if !(slots & row.bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
         return false;
     }
     // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.

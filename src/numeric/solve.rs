@@ -1435,12 +1435,16 @@ fn sparse_outcome(factored: bool, plan: SparsePlan) -> Plan {
 /// Sums `block`'s entries into `factor` at `targets` (in `Block::a`'s order: the cache's
 /// refactorisation sums its terms in the same order) and factors it.
 fn fill_sparse(block: &Block, settings: &Settings, factor: &mut SparseFactor, targets: &[usize]) -> bool {
-    let values = factor.values_mut();
+    sum_entries(block, factor.values_mut(), targets);
+    factor.factor(settings.rank_tolerance)
+}
+
+/// Zeroes `values` and sums `block`'s entries into them at `targets` (in `Block::a`'s order).
+fn sum_entries(block: &Block, values: &mut [f64], targets: &[usize]) {
     values.fill(0.0);
     for (&at, &(_, _, v)) in targets.iter().zip(&block.a) {
         values[at] += v;
     }
-    factor.factor(settings.rank_tolerance)
 }
 
 /// A block's band Cholesky, in its (possibly renumbered) order: what a solve needs to be
@@ -1681,10 +1685,9 @@ fn sparse_minimum_norm(
     // Ã + ε W² into the factor: Ã's entries at their places, then ε Wₚ² on each diagonal
     // (the first place an entry (p, p) was given: they all sum into one).
     let values = factor.values_mut();
-    values.fill(0.0);
+    sum_entries(block, values, &targets);
     let mut diagonal = vec![usize::MAX; n];
-    for (&at, &(p, q, v)) in targets.iter().zip(&block.a) {
-        values[at] += v;
+    for (&at, &(p, q, _)) in targets.iter().zip(&block.a) {
         if p == q && diagonal[p] == usize::MAX {
             diagonal[p] = at;
         }
