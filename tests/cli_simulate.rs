@@ -193,3 +193,21 @@ fn simulate_says_how_far_off_the_initial_state_is() {
     assert!(on.status.success() && !String::from_utf8_lossy(&on.stderr).contains("off constraint"));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A scene at rest has a kinetic energy of rounding size: its energy balance is measured
+/// against the forces' work scale Σ|F|·size (it read 1.5e15 against the kinetic energy of
+/// Catto's two particles hanging still, and 1.0 for the exact velocity solve).
+#[test]
+fn a_scene_at_rest_reports_its_energy_balance_against_the_work_scale() {
+    for solver in [None, Some("exact-velocity")] {
+        let mut args = vec!["simulate", "constraints/solvers/two_particles.toml", "--steps", "20"];
+        args.extend(solver.iter().flat_map(|s| ["--solver", *s]));
+        let out = lagrange(&[&args[..], &["--format", "json"]].concat());
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+        let drift = json["energy_rel_drift"].as_f64().expect("reported");
+        assert!(drift <= 1e-12, "{solver:?}: energy balance {drift:e} of the scale");
+        let text = lagrange(&args);
+        assert!(String::from_utf8_lossy(&text.stdout).contains("of the energy scale"), "{solver:?}");
+    }
+}

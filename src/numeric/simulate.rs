@@ -212,7 +212,8 @@ pub struct Summary {
     pub max_abs_c: f64,
     /// max of |Ċ/κ| (inequalities: only while touching and closing).
     pub max_abs_c_dot: f64,
-    /// max |E| / max T; None when a constraint depends on time.
+    /// max |E| / max(max T, [`work_scale`] at step 0) (max |E| where both are 0); None
+    /// when a constraint depends on time.
     pub energy_rel_drift: Option<f64>,
     /// The energy balance E at the end, and max T (±∞ when outside the f64 range in the
     /// scene's unit; the ratio above is always finite).
@@ -494,12 +495,12 @@ impl<'s> Simulation<'s> {
             summary.max_kinetic = energy_back(balance.max_kinetic);
             let energy_error = energy_back(energy_error);
             summary.final_energy_error = energy_error;
+            if n == 0 {
+                balance.work_scale = work_scale(&rows.force, system.bodies.len(), length);
+            }
             summary.energy_rel_drift = energy_reported.then(|| {
-                if balance.max_kinetic > 0.0 {
-                    balance.max_error / balance.max_kinetic
-                } else {
-                    energy_back(balance.max_error)
-                }
+                let scale = balance.max_kinetic.max(balance.work_scale);
+                if scale > 0.0 { balance.max_error / scale } else { energy_back(balance.max_error) }
             });
             let solution = self.dynamics.solve(&mut rows);
             // The active set for the step to come: contacts that push are held.
@@ -723,6 +724,15 @@ struct Reach {
     bounce_speed: f64,
 }
 
+/// The energy a scene's forces can exchange over its size: Σ|Fᵢ|·size over the bodies'
+/// slots plus Σ|τᵢ|·1 rad over the rotation slots after them. The energy balance is reported
+/// relative to the larger of this and the largest kinetic energy: a scene at rest has no
+/// kinetic energy to compare with (its balance over the rounding-level T would read 1e13).
+pub(crate) fn work_scale(force: &[[f64; 3]], bodies: usize, size: f64) -> f64 {
+    let (forces, torques) = force.split_at(bodies.min(force.len()));
+    forces.iter().map(safe_norm).sum::<f64>() * size + torques.iter().map(safe_norm).sum::<f64>()
+}
+
 /// The energy balance's running sums: E(t) = T − T₀ − ∫ F·v dt, the integral by the
 /// trapezoid with its Euler–Maclaurin end correction.
 #[derive(Default)]
@@ -732,6 +742,8 @@ struct EnergyBalance {
     work: f64,
     max_error: f64,
     max_kinetic: f64,
+    /// [`work_scale`] at step 0.
+    work_scale: f64,
     /// P at steps n−2 and n−1, and dP/dt at step 0, for the end correction.
     power_2: f64,
     power_1: f64,

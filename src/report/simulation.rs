@@ -73,7 +73,7 @@ pub fn text(summary: &Summary, dim: usize) -> String {
     );
     s += &format!("  max |C|   {:.3e}\n  max |Ċ|   {:.3e}\n", summary.max_abs_c, summary.max_abs_c_dot);
     match summary.energy_rel_drift {
-        Some(e) => s += &format!("  energy balance  {e:.3e} of the largest kinetic energy\n"),
+        Some(e) => s += &format!("  energy balance  {e:.3e} of the energy scale (max kinetic energy or Σ|F|·size)\n"),
         None => s += "  energy balance  not reported (a constraint depends on t and does work)\n",
     }
     if summary.unit_exponent != 0 {

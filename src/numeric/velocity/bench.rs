@@ -4,8 +4,8 @@
 //! state (`velocity::stability`; not for 3D rigid bodies, whose runs it measures all the same).
 //!
 //! Per run: max |C| and max |Ċ| (C/κ, as the rows), the largest energy balance |E| relative
-//! to the larger of the largest kinetic energy and the work scale Σ|Fᵢ|·(scene size) + Σ|τᵢ|·1 rad (a scene
-//! at rest has no kinetic energy to compare with), the jitter (the spread max − min of each row's λ = P/h over the
+//! to the larger of the largest kinetic energy and the work scale (the run's
+//! `energy_rel_drift`, `simulate::work_scale`), the jitter (the spread max − min of each row's λ = P/h over the
 //! second half of the run, relative to the largest mean |λ|: 0 for a scene at rest solved
 //! exactly), the final state's distance from the reference run relative to the scene's size
 //! (the bodies' positions: a rigid body's angle enters through the points its joints hold),
@@ -124,23 +124,8 @@ fn measure(scene: Scene<'_>, settings: Settings) -> (Entry, Option<Vec<[f64; 3]>
     let (mut lo, mut hi, mut sum, mut count) =
         (vec![f64::INFINITY; rows], vec![f64::NEG_INFINITY; rows], vec![0.0; rows], 0u64);
     let dynamics = Dynamics::new(scene.system, scene.program.clone(), scene.env.clone());
-    let (mut energy, mut kinetic, mut work_scale) = (0.0f64, 0.0f64, 0.0f64);
     let bodies = scene.system.bodies.len();
     let result = run(dynamics, scene.env, settings, &mut |frame| {
-        let size = frame.position[..bodies].iter().map(safe_norm).fold(0.0, f64::max);
-        if frame.step == 0 {
-            let (forces, torques) = frame.rows.force.split_at(bodies);
-            work_scale =
-                forces.iter().map(safe_norm).sum::<f64>() * size + torques.iter().map(|t| t[0].abs()).sum::<f64>();
-        }
-        let t: f64 = frame
-            .velocity
-            .iter()
-            .zip(&frame.rows.inverse_mass)
-            .map(|(v, w)| 0.5 * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) / w)
-            .sum();
-        kinetic = kinetic.max(t);
-        energy = energy.max(frame.energy_error.abs());
         if frame.step > half {
             for (k, &l) in frame.lambda.iter().enumerate() {
                 lo[k] = lo[k].min(l);
@@ -171,10 +156,7 @@ fn measure(scene: Scene<'_>, settings: Settings) -> (Entry, Option<Vec<[f64; 3]>
         steps,
         max_abs_c: summary.max_abs_c,
         max_abs_c_dot: summary.max_abs_c_dot,
-        energy_drift: summary.energy_rel_drift.map(|_| {
-            let scale = kinetic.max(work_scale);
-            if scale > 0.0 { energy / scale } else { energy }
-        }),
+        energy_drift: summary.energy_rel_drift,
         jitter,
         deviation: None,
         seconds_per_step: summary.wall_seconds / steps.max(1) as f64,

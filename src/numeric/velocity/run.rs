@@ -21,7 +21,9 @@ use super::{Settings, Solver, Stepper, stability};
 use crate::expr::eval::Env;
 use crate::numeric::dynamics::{Dynamics, Remedy, SimError, slot_name};
 use crate::numeric::rotation;
-use crate::numeric::simulate::{Failure, Frame, Sample, Summary, final_state, initial_state, time_dependent};
+use crate::numeric::simulate::{
+    Failure, Frame, Sample, Summary, final_state, initial_state, time_dependent, work_scale,
+};
 use crate::numeric::solve::CONTACT_TOLERANCE;
 use crate::numeric::stabilize::distance;
 use crate::numeric::vector::{dot, length_scale};
@@ -85,6 +87,8 @@ fn run_inner(
     let stride = (s.steps / s.samples.max(1) as u64).max(1);
     let plotted = bodies.min(8);
     let (mut kinetic0, mut work, mut max_energy_error, mut max_kinetic) = (0.0, 0.0, 0.0f64, 0.0f64);
+    // `simulate::work_scale` at step 0: the balance's scale for a scene at rest.
+    let mut scale0 = 0.0f64;
     // The last recorded state's positions and forces (slots), for the work over a step.
     let (mut q_1, mut force_1) = (q.clone(), vec![[0.0; 3]; q.len()]);
     let mut lambda = vec![0.0; system.constraints.len()];
@@ -163,8 +167,12 @@ fn run_inner(
         max_kinetic = max_kinetic.max(kinetic);
         summary.max_kinetic = max_kinetic;
         summary.final_energy_error = energy_error;
+        if n == 0 {
+            scale0 = work_scale(&rows.force, bodies, length);
+        }
+        let scale = max_kinetic.max(scale0);
         summary.energy_rel_drift =
-            energy_reported.then(|| if max_kinetic > 0.0 { max_energy_error / max_kinetic } else { max_energy_error });
+            energy_reported.then(|| if scale > 0.0 { max_energy_error / scale } else { max_energy_error });
         if n.is_multiple_of(stride) || n == s.steps {
             summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: q[..plotted].to_vec() });
         }
