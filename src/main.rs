@@ -142,10 +142,10 @@ struct BenchArgs {
     /// The constraint file (TOML) with a [scene].
     file: PathBuf,
     /// The middle step size; the sweep runs 4, 2, 1 and ½ times it (default: the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     dt: Option<f64>,
     /// Simulated time per run (default: the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     duration: Option<f64>,
     /// Random (and as many hard) states for the formula accuracy, at most 100000.
     #[arg(long, default_value_t = 200)]
@@ -173,19 +173,19 @@ struct SimulateArgs {
     #[arg(long, value_enum, default_value_t = StabilizeArg::Projection)]
     stabilize: StabilizeArg,
     /// Baumgarte damping ratio ζ (α = ζω).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, allow_negative_numbers = true)]
     zeta: f64,
     /// Baumgarte frequency relative to the step, ω·dt (β = ω).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, allow_negative_numbers = true)]
     omega_dt: f64,
     /// Projection tolerance, relative to the scene's size.
-    #[arg(long, default_value_t = lagrange::numeric::stabilize::PROJECTION_TOLERANCE)]
+    #[arg(long, default_value_t = lagrange::numeric::stabilize::PROJECTION_TOLERANCE, allow_negative_numbers = true)]
     tolerance: f64,
     /// Time step (overrides the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     dt: Option<f64>,
     /// Simulated time (overrides the scene's).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     duration: Option<f64>,
     /// Number of steps (overrides --duration).
     #[arg(long)]
@@ -220,13 +220,13 @@ struct VelocityArgs {
     #[arg(long)]
     iterations: Option<usize>,
     /// Stiffness of the soft step's joints (Box2D: 60 Hz, capped at a quarter of the substep rate).
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = 60.0, allow_negative_numbers = true)]
     hertz: f64,
     /// Damping ratio ζ of the soft step's joints (Box2D: 2).
-    #[arg(long, default_value_t = 2.0)]
+    #[arg(long, default_value_t = 2.0, allow_negative_numbers = true)]
     damping_ratio: f64,
     /// XPBD compliance α of every row (0: rigid).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     compliance: f64,
     /// Skip the soft step's relax pass.
     #[arg(long)]

@@ -93,9 +93,17 @@ pub enum Remedy {
     /// A soft step the stability analysis could not place (too large a scene, no limit found).
     #[error("; try more --substeps or a lower --hertz")]
     SubstepsOrHertz,
-    /// PGS, XPBD or the exact velocity solve.
+    /// XPBD or the exact velocity solve.
     #[error("; try more --substeps or a smaller --dt")]
     SubstepsOrDt,
+    /// PGS: its sweeps left part of the impulses unsolved, and the part of the Baumgarte
+    /// bias β·C/h they leave in the velocities adds up over the substeps, so more substeps
+    /// make it worse (Catto's two particles diverge sooner at 100 substeps than at 4, and
+    /// hold at 32 iterations: `tests/velocity_solvers.rs`).
+    #[error(
+        "; try more --iterations: Gauss–Seidel converges slowly across a large mass ratio, and the Baumgarte bias it leaves unsolved adds up (more --substeps do not help)"
+    )]
+    Iterations,
 }
 
 /// Baumgarte's terms b += 2αĊ + β²C, stored as (2α, β²).

@@ -122,6 +122,15 @@ pub enum SettingsError {
     /// A velocity-level run with zero iterations per substep.
     #[error("--iterations must be at least 1, found 0")]
     Iterations,
+    /// A velocity-level run of more substeps (steps × substeps) than [`MAX_STEPS`].
+    #[error(
+        "the run would take {substeps:.3e} substeps (steps × --substeps), more than the maximum of {} (numeric::simulate::MAX_STEPS); use fewer --substeps, a larger --dt or a shorter --duration",
+        MAX_STEPS
+    )]
+    TooManySubsteps { substeps: f64 },
+    /// More iterations a substep than [`MAX_ITERATIONS`].
+    #[error("--iterations must be at most {max}, found {found}")]
+    TooManyIterations { found: usize, max: usize },
     /// The soft step's stiffness is not a finite positive frequency.
     #[error("--hertz must be finite and positive, found {0}")]
     Hertz(f64),
@@ -135,6 +144,10 @@ pub enum SettingsError {
     #[error("the Baumgarte factor must lie in [0, 1], found {0}")]
     Baumgarte(f64),
 }
+
+/// The most iterations a substep of a velocity-level run may take (PGS's default is 8;
+/// Box2D v2.4's velocity iterations 8): a larger count is a typo, not a setting.
+pub const MAX_ITERATIONS: usize = 10_000;
 
 /// The most steps one run takes (`simulate`, and each run of `bench`): a run asked for more
 /// (`--duration inf`, a scene `dt = 1e-320`) is refused before it starts, never run for

@@ -63,11 +63,14 @@ pub fn velocity_settings(s: &VelocitySettings) -> String {
 
 /// A few lines: method, drift, energy, cost, final state.
 pub fn text(summary: &Summary, dim: usize) -> String {
+    // The simulated time as written, or in scientific notation far from 1 (1e-300 · 3 would
+    // print three hundred digits).
+    let t = summary.duration;
+    let t = if t == 0.0 || (1e-4..1e7).contains(&t.abs()) { format!("{t}") } else { format!("{t:e}") };
     let mut s = format!(
-        "{} steps (dt = {:e}, t = {}) with {} + {}\n",
+        "{} steps (dt = {:e}, t = {t}) with {} + {}\n",
         summary.steps,
         summary.dt,
-        summary.duration,
         summary.integrator,
         stabilization(summary)
     );

@@ -65,7 +65,7 @@ use super::dynamics::{Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rotation;
 use super::rows::Rows;
-use super::simulate::SettingsError;
+use super::simulate::{MAX_ITERATIONS, MAX_STEPS, SettingsError};
 use crate::expr::graph::SymbolWalk;
 use crate::model::system::System;
 
@@ -211,6 +211,13 @@ impl Settings {
         }
         if self.iterations == Some(0) {
             return bad(E::Iterations);
+        }
+        if self.iterations() > MAX_ITERATIONS {
+            return bad(E::TooManyIterations { found: self.iterations(), max: MAX_ITERATIONS });
+        }
+        let substeps = self.steps as f64 * self.substeps as f64;
+        if substeps > MAX_STEPS as f64 {
+            return bad(E::TooManySubsteps { substeps });
         }
         if !(self.hertz.is_finite() && self.hertz > 0.0) {
             return bad(E::Hertz(self.hertz));

@@ -114,10 +114,10 @@ fn run_inner(
         for (k, row) in rows.rows.iter().enumerate() {
             let d = distance(row);
             if d.abs() > bound && (!row.inequality || d < 0.0) {
-                let remedy = if s.solver == Solver::SoftStep && !three_d {
-                    remedy(dynamics, t0, &q0, &v0, &s)
-                } else {
-                    Remedy::SubstepsOrDt
+                let remedy = match s.solver {
+                    Solver::SoftStep if !three_d => remedy(dynamics, t0, &q0, &v0, &s),
+                    Solver::Pgs => Remedy::Iterations,
+                    _ => Remedy::SubstepsOrDt,
                 };
                 return Err(SimError::Diverged {
                     step: n,
