@@ -338,8 +338,13 @@ fn the_command_line_refuses_bad_flags_and_reports_a_divergence() {
         ("--hertz=-1", "--hertz must be finite and positive, found -1"),
         ("--substeps=0", "--substeps must be at least 1, found 0"),
         ("--damping-ratio=-0.5", "--damping-ratio must be finite and at least 0, found -0.5"),
+        ("--damping-ratio -1", "--damping-ratio must be finite and at least 0, found -1"),
+        ("--substeps=1000000", "1.000e10 substeps (steps × --substeps), more than the maximum"),
+        ("--iterations=100000", "--iterations must be at most 10000, found 100000"),
     ] {
-        let out = run(&["simulate", "constraints/pendulum.toml", "--solver", "soft-step", flag]);
+        let mut args = vec!["simulate", "constraints/pendulum.toml", "--solver", "soft-step"];
+        args.extend(flag.split(' '));
+        let out = run(&args);
         assert_eq!(out.status.code(), Some(2), "{flag}");
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert!(stderr.contains(message), "{stderr}");
