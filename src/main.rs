@@ -28,9 +28,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Derive constraint forces from constraints written as text.
 ///
-/// A constraint file (TOML) declares bodies (point masses), parameters and position
-/// constraints such as `dot(r,r) = l^2`. lagrange differentiates each constraint twice in
-/// time, finds the force directions ∇C, and solves for the Lagrange multipliers λ.
+/// A constraint file (TOML) declares bodies (point masses, 2D and 3D rigid bodies, joints),
+/// parameters and position constraints such as `dot(r,r) = l^2`. lagrange differentiates
+/// each constraint twice in time, finds the force directions ∇C, and solves for the Lagrange
+/// multipliers λ; it simulates the scene (at the acceleration level, or with the
+/// velocity-level solvers an engine runs) and writes the formulas and the step as Rust or C.
 #[derive(Parser, Debug)]
 #[command(name = "lagrange", version, about, long_about, after_long_help = EXIT_CODES)]
 struct Cli {
