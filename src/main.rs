@@ -329,11 +329,58 @@ Exit codes:
      a constraint with a zero gradient cannot hold (singular); the diagnostics name the
      cause (an undefined 0/0, an overflow, the constraints at fault)";
 
-/// Runs of at least this many steps show a progress bar (on a terminal): shorter ones end
-/// within about a second.
-const PROGRESS_MIN_STEPS: u64 = 20_000;
-/// The progress bar moves every this many steps, so drawing it costs nothing measurable.
-const PROGRESS_EVERY: u64 = 1000;
+/// A run shows a progress bar (on a terminal) once it has taken this long: shorter ones end
+/// without one, and a long one shows it whatever its number of steps (a 100 × 100 rigid grid
+/// takes seconds a step).
+const PROGRESS_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
+/// The bar is looked at about this often: the clock is read only every `stride` steps, the
+/// stride chosen from the steps' speed so far, so a 3 µs pendulum step pays one comparison.
+const PROGRESS_PERIOD: f64 = 0.1;
+
+/// The progress bar of a run of `steps` steps, shown once it has taken [`PROGRESS_AFTER`].
+struct Progress {
+    steps: u64,
+    start: std::time::Instant,
+    next: u64,
+    bar: Option<indicatif::ProgressBar>,
+}
+
+impl Progress {
+    /// None off a terminal (a pipe, a file, a test).
+    fn new(steps: u64) -> Option<Progress> {
+        use std::io::IsTerminal;
+        std::io::stderr().is_terminal().then(|| Progress {
+            steps,
+            start: std::time::Instant::now(),
+            next: 1,
+            bar: None,
+        })
+    }
+
+    /// Step `step` is done.
+    fn at(&mut self, step: u64) {
+        if step < self.next {
+            return;
+        }
+        let elapsed = self.start.elapsed();
+        if self.bar.is_none() && elapsed >= PROGRESS_AFTER {
+            self.bar = Some(indicatif::ProgressBar::new(self.steps));
+        }
+        if let Some(bar) = &self.bar {
+            bar.set_position(step);
+        }
+        // The steps that take about PROGRESS_PERIOD at the speed so far.
+        let per_step = elapsed.as_secs_f64() / step.max(1) as f64;
+        let stride = if per_step > 0.0 { (PROGRESS_PERIOD / per_step).clamp(1.0, 1e6) as u64 } else { 1000 };
+        self.next = step + stride;
+    }
+
+    fn finish(self) {
+        if let Some(bar) = self.bar {
+            bar.finish_and_clear();
+        }
+    }
+}
 
 /// Files with at least this many constraints show a spinner while they derive and print (on
 /// a terminal): a 10⁴-link chain takes about a second, so smaller files end before it would
@@ -762,14 +809,10 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Some(Ok(w)) => Some(w),
         Some(Err(code)) => return code,
     };
-    use std::io::IsTerminal;
-    let bar = (std::io::stderr().is_terminal() && settings.steps >= PROGRESS_MIN_STEPS)
-        .then(|| indicatif::ProgressBar::new(settings.steps));
+    let mut progress = Progress::new(settings.steps);
     let mut observe = |frame: &lagrange::numeric::simulate::Frame| {
-        if let Some(bar) = &bar
-            && frame.step.is_multiple_of(PROGRESS_EVERY)
-        {
-            bar.set_position(frame.step);
+        if let Some(progress) = &mut progress {
+            progress.at(frame.step);
         }
         csv.as_mut().map_or(Ok(()), |w| w.frame(frame)).map_err(|e| e.to_string())
     };
@@ -777,8 +820,8 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         None => scenario.simulate(settings, &mut observe),
         Some(v) => scenario.simulate_velocity(v, &mut observe),
     };
-    if let Some(bar) = bar {
-        bar.finish_and_clear();
+    if let Some(progress) = progress {
+        progress.finish();
     }
     // A CSV that could not be written whole (`--csv /dev/full`) is a failed write: exit 1.
     let csv_failed = if let Some(Err(e)) = csv.as_mut().map(|w| w.flush()) {

@@ -211,3 +211,19 @@ fn a_scene_at_rest_reports_its_energy_balance_against_the_work_scale() {
         assert!(String::from_utf8_lossy(&text.stdout).contains("of the energy scale"), "{solver:?}");
     }
 }
+
+/// A large scene's text summary names the first symbols of its final state and how many
+/// more there are, not a line of every body (the JSON has them all).
+#[test]
+fn a_large_scene_text_summary_keeps_its_final_line_short() {
+    let file = "constraints/solvers/rigid_grid_10.toml";
+    let out = lagrange(&["simulate", file, "--solver", "soft-step", "--steps", "2"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let last = text.lines().last().expect("a final line");
+    assert!(last.contains("and 344 more (all of them: --format json or --csv)"), "{last}");
+    assert!(last.len() < 2000, "{} bytes", last.len());
+    let json = lagrange(&["simulate", file, "--solver", "soft-step", "--steps", "2", "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&json.stdout).expect("json");
+    assert_eq!(json["final"].as_object().map(|o| o.len()), Some(360));
+}

@@ -90,8 +90,15 @@ pub fn text(summary: &Summary, dim: usize) -> String {
         "  wall time {:.3} s ({:.3e} s per simulated second, {} row evaluations)\n  final:",
         summary.wall_seconds, per_second, summary.evaluations
     );
-    for (name, v) in &summary.final_state {
+    for (name, v) in summary.final_state.iter().take(FINAL_SHOWN) {
         s += &format!(" {name} = {}", value_json(v, dim));
+    }
+    if let Some(more) = summary.final_state.len().checked_sub(FINAL_SHOWN).filter(|&n| n > 0) {
+        s += &format!(" … and {more} more (all of them: --format json or --csv)");
     }
     s
 }
+
+/// The text summary's `final:` line shows this many symbols: a 100 × 100 grid's 20 000
+/// would be a line of a megabyte (the JSON and the CSV have them all).
+const FINAL_SHOWN: usize = 16;
