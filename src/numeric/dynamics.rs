@@ -357,7 +357,8 @@ impl<'s> Dynamics<'s> {
                 &mut self.position_rows,
             )
             .map_err(|error| SimError::Eval { time: t, error })?;
-        let finite = self.position_rows.iter().fold(true, |ok, row| ok & row.value.is_finite() & parts_finite(row));
+        // Found as the rows were filled: C/κ and every component of J.
+        let finite = self.scratch.finite();
         self.positions_finite = finite;
         if !finite {
             let rows = self.rows(t, q, v)?;
@@ -381,7 +382,8 @@ impl<'s> Dynamics<'s> {
         self.program
             .evaluate_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
-        self.checked(rows, t)
+        let finite = self.scratch.finite();
+        self.checked(rows, t, finite)
     }
 
     /// The rows at (t, q, v) from `rows`, whose C/κ and J are already those at (t, q) (an
@@ -402,9 +404,15 @@ impl<'s> Dynamics<'s> {
             .program
             .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
-        // C and J were checked when they were evaluated: the new numbers alone, and all of
-        // them again only to name what is not finite.
-        if kept && checked && motion_finite(&rows) { Ok(rows) } else { self.checked(rows, t) }
+        // C and J were checked when they were evaluated: the new numbers alone (found as
+        // they were filled), and all of them again only to name what is not finite.
+        let finite = self.scratch.finite();
+        if kept && checked && finite {
+            return Ok(rows);
+        }
+        // Kept C and J not known to be finite: every number is looked at.
+        let finite = if kept { all_finite(&rows) } else { finite };
+        self.checked(rows, t, finite)
     }
 
     /// The rows at (t, q, v) after a [`positions`](Dynamics::positions) at the same t and q:
@@ -418,10 +426,11 @@ impl<'s> Dynamics<'s> {
         self.moved(t, q, v, rows, finite)
     }
 
-    /// `rows` at time `t`, or the error that names the first number that is not finite.
-    fn checked(&self, rows: Rows, t: f64) -> Result<Rows, SimError> {
+    /// `rows` at time `t`, or the error that names the first number that is not finite
+    /// (`finite`: whether every number of `rows` is, as `all_finite` says).
+    fn checked(&self, rows: Rows, t: f64, finite: bool) -> Result<Rows, SimError> {
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
-        if !all_finite(&rows) {
+        if !finite {
             for (k, row) in rows.rows.iter().enumerate() {
                 let bad = [row.value, row.rate, row.bias]
                     .into_iter()
@@ -562,12 +571,6 @@ fn all_finite(rows: &Rows) -> bool {
     let finite = rows.rows.iter().fold(true, |ok, row| {
         ok & row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & parts_finite(row)
     });
-    finite & slots_finite(rows)
-}
-
-/// Whether Ċ, c and the slots' numbers of `rows` are finite ([`all_finite`] without C and J).
-fn motion_finite(rows: &Rows) -> bool {
-    let finite = rows.rows.iter().fold(true, |ok, row| ok & row.rate.is_finite() & row.bias.is_finite());
     finite & slots_finite(rows)
 }
 
