@@ -34,7 +34,7 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
-use super::single::solve_single;
+use super::single::{SingleScaling, solve_single_with};
 use super::solve::{Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -158,6 +158,8 @@ pub struct Dynamics<'s> {
     /// [`recycle_solution`](Dynamics::recycle_solution): buffers the solves fill in place.
     correction: Solution,
     spare_solution: Option<Solution>,
+    /// The one-row solve's last scaling (`numeric::single`), reused at the same J and 1/m.
+    single: SingleScaling,
     /// A solve that left a block unsolved ([`Diagnostic::TooLarge`]): the step and its rows.
     /// The next evaluation stops the run with [`SimError::TooLarge`] instead of stepping on
     /// with λ = 0 on them, as if those constraints were not there.
@@ -217,6 +219,7 @@ impl<'s> Dynamics<'s> {
             folded: Vec::new(),
             correction: Solution::default(),
             spare_solution: None,
+            single: SingleScaling::default(),
             refused: None,
         }
     }
@@ -478,7 +481,7 @@ impl<'s> Dynamics<'s> {
         }
         let mut solution = self.spare_solution.take().unwrap_or_default();
         // One row on one body: the same numbers in closed form (`numeric::single`).
-        if !solve_single(rows, &Settings::default(), &mut solution) {
+        if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut solution) {
             solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
             if self.refused.is_none() {
                 self.refused = refused_rows(&solution).map(|rows| (self.step, rows));
@@ -498,7 +501,7 @@ impl<'s> Dynamics<'s> {
     /// buffer the dynamics keep (the caller may change it: it is scratch until the next
     /// correction).
     pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
-        if !solve_single(rows, &Settings::default(), &mut self.correction) {
+        if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut self.correction) {
             solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
             if self.refused.is_none() {
                 self.refused = refused_rows(&self.correction).map(|rows| (self.step, rows));

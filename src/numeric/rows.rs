@@ -1038,9 +1038,11 @@ impl RowProgram {
         let scalar = |root: usize| out[place[root].0 as usize];
         let vector = |root: usize| placed(out, place[root]);
         self.fill(system, rows, scalar, vector);
-        scratch.finite = rows.rows.iter().all(|row| {
-            row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & entries_finite(row)
-        }) && rows.inverse_mass.iter().all(|w| w.is_finite())
+        scratch.finite = rows
+            .rows
+            .iter()
+            .all(|row| row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & entries_finite(row))
+            && rows.inverse_mass.iter().all(|w| w.is_finite())
             && rows.velocity.iter().chain(&rows.force).all(finite3);
     }
 
