@@ -458,9 +458,12 @@ fn one_row_on_one_body_is_solved_as_the_general_solve_solves_it() {
     // zero gradients, zero and negative masses, infinite and NaN numbers), one to three
     // slots, the row on any of them.
     use lagrange::numeric::rows::{Row, Rows};
-    use lagrange::numeric::single::{is_single, solve_single};
+    use lagrange::numeric::single::{SingleScaling, is_single, solve_single, solve_single_with};
     use lagrange::numeric::solve::{Settings, Solution, SolveCache, solve_cached, solve_holding};
     let mut rng = common::Rng::new(16);
+    // A scaling kept across every case, as a simulation keeps it: reused where J and 1/m
+    // repeat bit for bit, the answer must be the fresh one's.
+    let mut kept = SingleScaling::default();
     let settings = Settings::default();
     let bits = |s: &Solution| {
         let forces = s.acceleration.iter().chain(&s.constraint_force).flatten();
@@ -488,7 +491,22 @@ fn one_row_on_one_body_is_solved_as_the_general_solve_solves_it() {
         let general = solve_holding(&rows, &settings, &[]);
         let cached = solve_cached(&rows, &settings, &[], &mut SolveCache::default());
         let mut single = Solution::default();
-        if solve_single(&rows, &settings, &mut single) {
+        let answered = solve_single(&rows, &settings, &mut single);
+        // The same rows with the scaling kept from the case before (a miss), then again (a
+        // hit), then with new forces and bias at the same J and masses (a hit).
+        for _ in 0..2 {
+            let mut with = Solution::default();
+            assert_eq!(solve_single_with(&rows, &settings, &mut kept, &mut with), answered, "case {case}");
+            assert_eq!((bits(&with), with.status), (bits(&single), single.status), "case {case}");
+        }
+        let mut moved = rows.clone();
+        moved.rows[0].bias = wide(rng.next_u64(), special);
+        moved.force[body] = [wide(rng.next_u64(), special), wide(rng.next_u64(), special), 0.0];
+        let (mut fresh, mut with) = (Solution::default(), Solution::default());
+        let fresh_answered = solve_single(&moved, &settings, &mut fresh);
+        assert_eq!(solve_single_with(&moved, &settings, &mut kept, &mut with), fresh_answered, "case {case}");
+        assert_eq!(bits(&with), bits(&fresh), "case {case}");
+        if answered {
             taken += 1;
             assert_eq!(bits(&single), bits(&general), "case {case}: {rows:?}");
             assert_eq!(bits(&single), bits(&cached), "case {case}: {rows:?}");

@@ -312,3 +312,58 @@ fn held_constants_give_the_rows_of_a_fresh_load_on_every_file() {
     }
     assert!(checked >= 25, "only {checked} files checked");
 }
+
+#[test]
+fn an_evaluation_says_whether_every_number_it_wrote_is_finite() {
+    // `RowScratch::finite` is found as the rows are filled, and a simulation trusts it
+    // instead of looking at the rows again (`Dynamics`): it must say what a look at the
+    // numbers written says — every number of a full evaluation, C and J of the positions'
+    // tape, Ċ, c and the slots' numbers of the motion tape — at ordinary states and at
+    // states with a position or velocity made NaN or infinite, on every file.
+    use lagrange::numeric::rows::{Row, Rows, State};
+    let finite3 = |x: &[f64; 3]| x.iter().all(|c| c.is_finite());
+    let entries = |row: &Row| row.jacobian.iter().all(|(_, j)| finite3(j));
+    let slots = |rows: &Rows| {
+        rows.inverse_mass.iter().all(|w| w.is_finite()) && rows.velocity.iter().chain(&rows.force).all(finite3)
+    };
+    let (mut checked, mut poisoned) = (0, 0);
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard", "constraints/rigid"]) {
+        let at = path.display();
+        let mut rng = common::Rng::new(18);
+        let mut scratch = s.program.scratch();
+        let mut rows = Rows::default();
+        for case in 0..8 {
+            let env = common::random_env(&s.system, &mut rng);
+            let (mut q, mut v, t) = lagrange::numeric::simulate::initial_state(&s.system, &env);
+            if case % 2 == 1 {
+                let bad = [f64::NAN, f64::INFINITY, f64::NEG_INFINITY][case % 3];
+                let slot = (rng.next_u64() % s.system.bodies.len() as u64) as usize;
+                let d = (rng.next_u64() % s.system.dim() as u64) as usize;
+                if case % 4 == 1 {
+                    q[slot][d] = bad
+                } else {
+                    v[slot][d] = bad
+                }
+                poisoned += 1;
+            }
+            let state = State { t, q: &q, v: &v };
+            s.program.evaluate_state_into(&s.system, &env, state, &mut scratch, &mut rows).expect("rows");
+            let all =
+                rows.rows.iter().all(|r| r.value.is_finite() && r.rate.is_finite() && r.bias.is_finite() && entries(r));
+            assert_eq!(scratch.finite(), all && slots(&rows), "{at} case {case}: full");
+            s.program
+                .evaluate_positions_state_into(&s.system, &env, state, &mut scratch, &mut rows.rows)
+                .expect("rows");
+            let positions = rows.rows.iter().all(|r| r.value.is_finite() && entries(r));
+            assert_eq!(scratch.finite(), positions, "{at} case {case}: positions");
+            let kept =
+                s.program.evaluate_motion_state_into(&s.system, &env, state, &mut scratch, &mut rows).expect("rows");
+            let motion = rows.rows.iter().all(|r| r.rate.is_finite() && r.bias.is_finite()) && slots(&rows);
+            let written =
+                if kept { motion } else { motion && rows.rows.iter().all(|r| r.value.is_finite() && entries(r)) };
+            assert_eq!(scratch.finite(), written, "{at} case {case}: motion");
+            checked += 1;
+        }
+    }
+    assert!(checked >= 200 && poisoned >= 100, "checked {checked}, poisoned {poisoned}");
+}

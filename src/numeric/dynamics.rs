@@ -34,7 +34,7 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
-use super::single::solve_single;
+use super::single::{SingleScaling, solve_single_with};
 use super::solve::{Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -166,6 +166,8 @@ pub struct Dynamics<'s> {
     /// [`recycle_solution`](Dynamics::recycle_solution): buffers the solves fill in place.
     correction: Solution,
     spare_solution: Option<Solution>,
+    /// The one-row solve's last scaling (`numeric::single`), reused at the same J and 1/m.
+    single: SingleScaling,
     /// A solve that left a block unsolved ([`Diagnostic::TooLarge`]): the step and its rows.
     /// The next evaluation stops the run with [`SimError::TooLarge`] instead of stepping on
     /// with λ = 0 on them, as if those constraints were not there.
@@ -225,6 +227,7 @@ impl<'s> Dynamics<'s> {
             folded: Vec::new(),
             correction: Solution::default(),
             spare_solution: None,
+            single: SingleScaling::default(),
             refused: None,
         }
     }
@@ -365,7 +368,8 @@ impl<'s> Dynamics<'s> {
                 &mut self.position_rows,
             )
             .map_err(|error| SimError::Eval { time: t, error })?;
-        let finite = self.position_rows.iter().fold(true, |ok, row| ok & row.value.is_finite() & parts_finite(row));
+        // Found as the rows were filled: C/κ and every component of J.
+        let finite = self.scratch.finite();
         self.positions_finite = finite;
         if !finite {
             let rows = self.rows(t, q, v)?;
@@ -389,7 +393,8 @@ impl<'s> Dynamics<'s> {
         self.program
             .evaluate_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
-        self.checked(rows, t)
+        let finite = self.scratch.finite();
+        self.checked(rows, t, finite)
     }
 
     /// The rows at (t, q, v) from `rows`, whose C/κ and J are already those at (t, q) (an
@@ -410,9 +415,15 @@ impl<'s> Dynamics<'s> {
             .program
             .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
-        // C and J were checked when they were evaluated: the new numbers alone, and all of
-        // them again only to name what is not finite.
-        if kept && checked && motion_finite(&rows) { Ok(rows) } else { self.checked(rows, t) }
+        // C and J were checked when they were evaluated: the new numbers alone (found as
+        // they were filled), and all of them again only to name what is not finite.
+        let finite = self.scratch.finite();
+        if kept && checked && finite {
+            return Ok(rows);
+        }
+        // Kept C and J not known to be finite: every number is looked at.
+        let finite = if kept { all_finite(&rows) } else { finite };
+        self.checked(rows, t, finite)
     }
 
     /// The rows at (t, q, v) after a [`positions`](Dynamics::positions) at the same t and q:
@@ -426,10 +437,11 @@ impl<'s> Dynamics<'s> {
         self.moved(t, q, v, rows, finite)
     }
 
-    /// `rows` at time `t`, or the error that names the first number that is not finite.
-    fn checked(&self, rows: Rows, t: f64) -> Result<Rows, SimError> {
+    /// `rows` at time `t`, or the error that names the first number that is not finite
+    /// (`finite`: whether every number of `rows` is, as `all_finite` says).
+    fn checked(&self, rows: Rows, t: f64, finite: bool) -> Result<Rows, SimError> {
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
-        if !all_finite(&rows) {
+        if !finite {
             for (k, row) in rows.rows.iter().enumerate() {
                 let bad = [row.value, row.rate, row.bias]
                     .into_iter()
@@ -477,7 +489,7 @@ impl<'s> Dynamics<'s> {
         }
         let mut solution = self.spare_solution.take().unwrap_or_default();
         // One row on one body: the same numbers in closed form (`numeric::single`).
-        if !solve_single(rows, &Settings::default(), &mut solution) {
+        if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut solution) {
             solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
             if self.refused.is_none() {
                 self.refused = refused_rows(&solution).map(|rows| (self.step, rows));
@@ -497,7 +509,7 @@ impl<'s> Dynamics<'s> {
     /// buffer the dynamics keep (the caller may change it: it is scratch until the next
     /// correction).
     pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
-        if !solve_single(rows, &Settings::default(), &mut self.correction) {
+        if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut self.correction) {
             solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
             if self.refused.is_none() {
                 self.refused = refused_rows(&self.correction).map(|rows| (self.step, rows));
@@ -570,12 +582,6 @@ fn all_finite(rows: &Rows) -> bool {
     let finite = rows.rows.iter().fold(true, |ok, row| {
         ok & row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & parts_finite(row)
     });
-    finite & slots_finite(rows)
-}
-
-/// Whether Ċ, c and the slots' numbers of `rows` are finite ([`all_finite`] without C and J).
-fn motion_finite(rows: &Rows) -> bool {
-    let finite = rows.rows.iter().fold(true, |ok, row| ok & row.rate.is_finite() & row.bias.is_finite());
     finite & slots_finite(rows)
 }
 

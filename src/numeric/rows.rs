@@ -155,6 +155,86 @@ struct Subprogram {
     /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself),
     /// reading its inputs as `flat` lays them out.
     batched: Option<(Batched, Flat)>,
+    /// Where `tape` leaves each number `Rows` reads, in the order they are filled (`None`
+    /// with 3D rigid bodies, whose slots are projected on their axes by `fill`).
+    places: Option<Places>,
+}
+
+/// Where a [`Subprogram`]'s outputs hold the numbers of the rows and slots, listed in the
+/// order `Rows` is filled (each row's C, Ċ, c; every row's J entries in turn; each slot's
+/// 1/m, v, F), so one pass down these lists fills `Rows` with no lookup through the
+/// program's roots and no test of a slot's kind. Only for scenes without 3D rigid bodies,
+/// whose every slot is a plain (1/m, v, F) and every J entry its root's value.
+#[derive(Clone, Debug, Default)]
+struct Places {
+    /// Per row: the output of C, Ċ, c (`ABSENT`: not a root of this tape).
+    value: Vec<u32>,
+    rate: Vec<u32>,
+    bias: Vec<u32>,
+    /// Every row's J entries in turn (`RowLayout::bodies.len()` a row): first output, width.
+    jacobian: Vec<(u32, u32)>,
+    /// Per slot: the output of 1/m's m, and v's and F's first output and width.
+    mass: Vec<u32>,
+    velocity: Vec<(u32, u32)>,
+    force: Vec<(u32, u32)>,
+    /// The width every J entry has (the dimension, for point masses alone), or 0 when
+    /// they differ (2D rigid bodies' Jʷ is one number): the fill then reads each entry
+    /// without testing its width.
+    width: u32,
+}
+
+/// A root a tape does not compute, in [`Places`].
+const ABSENT: u32 = u32::MAX;
+
+impl Places {
+    /// The places of `sub`'s outputs for `rows` and `bodies` (none of them a principal axis).
+    fn new(sub: &Subprogram, bodies: &[BodySlots], rows: &[RowLayout]) -> Places {
+        let scalar = |root: usize| match sub.place[root] {
+            (_, 0) => ABSENT,
+            (start, _) => start,
+        };
+        let jacobian: Vec<(u32, u32)> =
+            rows.iter().flat_map(|r| r.jacobian.clone()).map(|root| sub.place[root]).collect();
+        let width = match jacobian.first() {
+            Some(&(_, w)) if jacobian.iter().all(|&(_, x)| x == w) => w,
+            _ => 0,
+        };
+        Places {
+            value: rows.iter().map(|r| scalar(r.value)).collect(),
+            rate: rows.iter().map(|r| scalar(r.rate)).collect(),
+            bias: rows.iter().map(|r| scalar(r.bias)).collect(),
+            jacobian,
+            width,
+            mass: bodies.iter().map(|b| scalar(b.mass)).collect(),
+            velocity: bodies.iter().map(|b| sub.place[b.velocity]).collect(),
+            force: bodies.iter().map(|b| sub.place[b.force]).collect(),
+        }
+    }
+}
+
+/// The vector at `(start, len)` of `out` (one to three components, zero past them): what
+/// [`placed`] reads, with one test of the width rather than one per component.
+#[inline]
+fn vector_at(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
+    let s = start as usize;
+    match len {
+        2 => {
+            let x = &out[s..s + 2];
+            [x[0], x[1], 0.0]
+        }
+        3 => {
+            let x = &out[s..s + 3];
+            [x[0], x[1], x[2]]
+        }
+        1 => [out[s], 0.0, 0.0],
+        _ => [0.0; 3],
+    }
+}
+
+/// Whether the three components are finite (combined with `&`: no branch).
+#[inline]
+fn finite3(x: &[f64; 3]) -> bool {
+    x[0].is_finite() & x[1].is_finite() & x[2].is_finite()
 }
 
 impl Subprogram {
@@ -248,7 +328,7 @@ impl Subprogram {
                 (range.start as u32, range.len() as u32)
             })
             .collect();
-        Subprogram { tape, inputs, root, place, sources, varying, batched: None }
+        Subprogram { tape, inputs, root, place, sources, varying, batched: None, places: None }
     }
 }
 
@@ -563,6 +643,56 @@ fn placed(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
     [at(0), at(1), at(2)]
 }
 
+/// Row `row`'s J entries on `slots` from `out` at `places` (one each, all of width `width`
+/// when it is not 0), in place when the row has that many already; whether every
+/// component is finite.
+#[inline]
+fn fill_entries(row: &mut Row, slots: &[usize], places: &[(u32, u32)], width: u32, out: &[f64]) -> bool {
+    if row.jacobian.len() == slots.len() {
+        match width {
+            2 => return entries_of_width::<2>(row, slots, places, out),
+            3 => return entries_of_width::<3>(row, slots, places, out),
+            _ => {}
+        }
+    }
+    let mut finite = true;
+    if row.jacobian.len() == slots.len() {
+        for ((j, &slot), &at) in row.jacobian.iter_mut().zip(slots).zip(places) {
+            let x = vector_at(out, at);
+            finite &= finite3(&x);
+            *j = (slot, x);
+        }
+    } else {
+        row.jacobian.clear();
+        for (&slot, &at) in slots.iter().zip(places) {
+            let x = vector_at(out, at);
+            finite &= finite3(&x);
+            row.jacobian.push((slot, x));
+        }
+    }
+    finite
+}
+
+/// [`fill_entries`] in place, every entry `W` wide: each read without a test of its width.
+#[inline]
+fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[(u32, u32)], out: &[f64]) -> bool {
+    let mut finite = true;
+    for ((j, &slot), &(start, _)) in row.jacobian.iter_mut().zip(slots).zip(places) {
+        let s = start as usize;
+        let x = &out[s..s + W];
+        let mut v = [0.0; 3];
+        v[..W].copy_from_slice(x);
+        finite &= finite3(&v);
+        *j = (slot, v);
+    }
+    finite
+}
+
+/// Whether every component of a row's J is finite.
+fn entries_finite(row: &Row) -> bool {
+    row.jacobian.iter().fold(true, |ok, (_, j)| ok & finite3(j))
+}
+
 /// Input and output buffers of [`RowProgram::evaluate_into`], reused across evaluations.
 #[derive(Clone, Debug)]
 pub struct RowScratch {
@@ -573,6 +703,8 @@ pub struct RowScratch {
     /// Whether the state evaluations keep the constants of a run in the input buffers
     /// ([`hold_constants`](RowScratch::hold_constants)).
     hold: bool,
+    /// Whether every number the last evaluation wrote is finite ([`finite`](RowScratch::finite)).
+    finite: bool,
 }
 
 impl RowScratch {
@@ -589,6 +721,15 @@ impl RowScratch {
         for s in std::iter::once(&mut self.all).chain(Some(&mut self.positions)).chain(self.motion.as_mut()) {
             s.constants = false;
         }
+    }
+
+    /// Whether every number the last evaluation with this scratch wrote into its rows is
+    /// finite: all of them, or for an
+    /// [`evaluate_motion_state_into`](RowProgram::evaluate_motion_state_into) that kept C
+    /// and J, the numbers it wrote (Ċ, c, each slot's 1/m, v and F). Found as the rows are
+    /// filled, so a caller that must not pass a NaN on needs no second pass over them.
+    pub fn finite(&self) -> bool {
+        self.finite
     }
 }
 
@@ -724,6 +865,12 @@ impl RowProgram {
             m.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::Motion));
             m
         });
+        let mut motion = motion;
+        if bodies.iter().all(|b| b.principal.is_none()) {
+            for sub in [&mut all, &mut positions].into_iter().chain(motion.as_mut()) {
+                sub.places = Some(Places::new(sub, &bodies, &rows));
+            }
+        }
         RowProgram { roots, bodies, rows, all, positions, motion }
     }
 
@@ -748,6 +895,7 @@ impl RowProgram {
             positions: self.positions.scratch(),
             motion: self.motion.as_ref().map(Subprogram::scratch),
             hold: false,
+            finite: false,
         }
     }
 
@@ -813,15 +961,31 @@ impl RowProgram {
         if rows.rows.len() != self.rows.len() {
             return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
         }
+        // A motion tape exists only without 3D rigid bodies, so its places are known.
+        let Some(places) = &m.places else {
+            return self.evaluate_state_into(system, env, state, scratch, rows).map(|()| false);
+        };
         m.load_state(system, env, state, scratch.hold, buffers)?;
         m.run_loaded(buffers);
         let out = &buffers.outputs;
-        let at = |root: usize| m.place[root];
-        let scalar = |root: usize| out[at(root).0 as usize];
         // As `fill` without 3D rigid bodies (so no principal axes); in place when `rows`
         // has the slots already (the rows of the last evaluation).
         rows.dim = system.dim();
         rows.axes.clear();
+        let mut finite = self.fill_slots(places, out, rows);
+        for (k, (layout, row)) in self.rows.iter().zip(&mut rows.rows).enumerate() {
+            row.rate = out[places.rate[k] as usize] * layout.inverse_scale;
+            row.bias = out[places.bias[k] as usize];
+            row.inequality = layout.inequality;
+            finite &= row.rate.is_finite() & row.bias.is_finite();
+        }
+        scratch.finite = finite;
+        Ok(true)
+    }
+
+    /// Each slot's 1/m, v and F from a tape's outputs along its [`Places`], in place when
+    /// `rows` has the slots already; whether every one is finite.
+    fn fill_slots(&self, places: &Places, out: &[f64], rows: &mut Rows) -> bool {
         let n = self.bodies.len();
         if rows.inverse_mass.len() != n || rows.velocity.len() != n || rows.force.len() != n {
             rows.inverse_mass.resize(n, 0.0);
@@ -829,27 +993,57 @@ impl RowProgram {
             rows.force.resize(n, [0.0; 3]);
         }
         let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
-        for (b, ((w, u), f)) in self.bodies.iter().zip(slots) {
-            *w = 1.0 / scalar(b.mass);
-            *u = placed(out, at(b.velocity));
-            *f = placed(out, at(b.force));
+        let at = places.mass.iter().zip(&places.velocity).zip(&places.force);
+        let mut finite = true;
+        for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
+            *w = 1.0 / out[m as usize];
+            *u = vector_at(out, v);
+            *f = vector_at(out, force);
+            finite &= w.is_finite() & finite3(u) & finite3(f);
         }
-        for (layout, row) in self.rows.iter().zip(&mut rows.rows) {
-            row.rate = scalar(layout.rate) * layout.inverse_scale;
-            row.bias = scalar(layout.bias);
+        finite
+    }
+
+    /// Every row's C, Ċ, c and J and every slot's numbers from the full tape's outputs along
+    /// its [`Places`] (no 3D rigid body): `fill`'s numbers in one pass, in place where
+    /// `rows` has the shape already; whether every number is finite.
+    fn fill_plain(&self, system: &System, places: &Places, out: &[f64], rows: &mut Rows) -> bool {
+        rows.dim = system.dim();
+        rows.axes.clear();
+        let mut finite = self.fill_slots(places, out, rows);
+        rows.rows.resize_with(self.rows.len(), Row::default);
+        let mut entries = places.jacobian.as_slice();
+        for (k, (layout, row)) in self.rows.iter().zip(&mut rows.rows).enumerate() {
+            row.value = out[places.value[k] as usize] * layout.inverse_scale;
+            row.rate = out[places.rate[k] as usize] * layout.inverse_scale;
+            row.bias = out[places.bias[k] as usize];
             row.inequality = layout.inequality;
+            finite &= row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite();
+            let (here, rest) = entries.split_at(layout.bodies.len());
+            entries = rest;
+            finite &= fill_entries(row, &layout.bodies, here, places.width, out);
         }
-        Ok(true)
+        finite
     }
 
     /// The rows from the inputs loaded in `scratch`.
     fn run_loaded(&self, system: &System, scratch: &mut RowScratch, rows: &mut Rows) {
         self.all.run_loaded(&mut scratch.all);
         let out = &scratch.all.outputs;
+        if let Some(places) = &self.all.places {
+            scratch.finite = self.fill_plain(system, places, out, rows);
+            return;
+        }
         let place = &self.all.place;
         let scalar = |root: usize| out[place[root].0 as usize];
         let vector = |root: usize| placed(out, place[root]);
         self.fill(system, rows, scalar, vector);
+        scratch.finite = rows
+            .rows
+            .iter()
+            .all(|row| row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & entries_finite(row))
+            && rows.inverse_mass.iter().all(|w| w.is_finite())
+            && rows.velocity.iter().chain(&rows.force).all(finite3);
     }
 
     /// `rows` from the roots' values (`scalar`, `vector` by root): the one assembly of the
@@ -955,10 +1149,26 @@ impl RowProgram {
         let p = &self.positions;
         p.run_loaded(&mut scratch.positions);
         let out = &scratch.positions.outputs;
-        let vector = |root: usize| placed(out, p.place[root]);
-        // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
-        let plain = self.motion.is_some();
         rows.resize_with(self.rows.len(), Row::default);
+        if let Some(places) = &p.places {
+            // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
+            let mut finite = true;
+            let mut entries = places.jacobian.as_slice();
+            for (k, (layout, row)) in self.rows.iter().zip(rows.iter_mut()).enumerate() {
+                row.value = out[places.value[k] as usize] * layout.inverse_scale;
+                row.rate = 0.0;
+                row.bias = 0.0;
+                row.inequality = layout.inequality;
+                finite &= row.value.is_finite();
+                let (here, rest) = entries.split_at(layout.bodies.len());
+                entries = rest;
+                finite &= fill_entries(row, &layout.bodies, here, places.width, out);
+            }
+            scratch.finite = finite;
+            return;
+        }
+        let vector = |root: usize| placed(out, p.place[root]);
+        let plain = self.motion.is_some();
         for (layout, row) in self.rows.iter().zip(rows.iter_mut()) {
             row.value = out[p.place[layout.value].0 as usize] * layout.inverse_scale;
             row.rate = 0.0;
@@ -973,6 +1183,7 @@ impl RowProgram {
                 self.fill_jacobian(layout, row, &vector);
             }
         }
+        scratch.finite = rows.iter().all(|row| row.value.is_finite() & entries_finite(row));
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of

@@ -17,6 +17,13 @@
 //! the f64 range, and settings other than the band or automatic method. Every diagnostic is
 //! therefore the general solve's; this path never makes one.
 //!
+//! The scaling (‖J‖, Ĵ, Â, J̃, Ã and its root: three square roots and two divisions in one
+//! chain) depends on J and 1/m alone, and a simulation solves at one J several times — the
+//! step's start, SHAKE's iterations along the start's gradient, and the velocity projection
+//! at q⁺, which is the next start's J — so [`solve_single_with`] keeps the last scaling in a
+//! [`SingleScaling`] and reuses it while J and 1/m are the same bit for bit, as the general
+//! solve's cache reuses its factor: the same numbers, computed once.
+//!
 //! Not here: more than one row (the general solve), contacts, the decision of when to call
 //! it (`Dynamics::solve`, `Dynamics::correct`: at every solve, as the check is cheaper than
 //! any bookkeeping it saves).
@@ -35,12 +42,64 @@ pub fn is_single(rows: &Rows) -> bool {
     matches!(rows.rows.as_slice(), [row] if row.jacobian.len() == 1 && !row.inequality)
 }
 
+/// The scaling of the last row [`solve_single_with`] solved, keyed by the bits of its J and
+/// 1/m: ‖J‖, 1/√Â, J̃ = Ĵ/√Â and Ã = J̃·J̃ w with its root L.
+#[derive(Clone, Debug, Default)]
+pub struct SingleScaling {
+    /// The bits of J's components and of 1/m the numbers below are for (`None`: none yet).
+    key: Option<([u64; 3], u64)>,
+    norm: f64,
+    jacobi: f64,
+    jt: [f64; 3],
+    a: f64,
+    l: f64,
+}
+
+impl SingleScaling {
+    /// The scaling of J on a slot of inverse mass `w` (finite, w ≥ 0), computed in the
+    /// general solve's order, or `None` where it declines (a zero or overflowing gradient, Â
+    /// not positive and finite); kept for the next call with the same bits.
+    fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
+        let key = (j.map(f64::to_bits), w.to_bits());
+        if self.key == Some(key) {
+            return Some(self);
+        }
+        self.key = None;
+        // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
+        let norm = row_norm(row);
+        if !(norm.is_finite() && norm != 0.0) {
+            return None;
+        }
+        let inverse = 1.0 / norm;
+        let u = if RECIPROCAL_NORMS.contains(&norm) { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
+        let a_hat = 0.0 + dot(&u, &u) * w;
+        if !(a_hat > 0.0 && a_hat.is_finite()) {
+            return None;
+        }
+        let jacobi = 1.0 / a_hat.sqrt();
+        let jt = u.map(|x| x * jacobi);
+        // Ã = J̃·J̃ w (one term, added to a zero band) and its factor L = √Ã (used only when
+        // Ã passes the caller's rank tolerance).
+        let a = 0.0 + dot(&jt, &jt) * w;
+        *self = SingleScaling { key: Some(key), norm, jacobi, jt, a, l: a.sqrt() };
+        Some(self)
+    }
+}
+
+/// [`solve_single_with`] without a kept scaling: every call scales its row afresh.
+pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> bool {
+    solve_single_with(rows, settings, &mut SingleScaling::default(), out)
+}
+
 /// λ for one equality row on one slot, into `out` — the numbers of `solve::solve_cached`
 /// (and so of `solve::solve_holding`) bit for bit. Returns false, with `out` untouched, where
 /// the general solve must answer: rows of another shape ([`is_single`]), a number that is not
 /// finite, a negative mass, a zero gradient, a singular pivot, λ out of range, a dense or
 /// sparse `settings.method`.
-pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> bool {
+///
+/// `scaling` keeps the row's scaling for the next call at the same J and 1/m (bit for bit):
+/// the numbers are the same either way.
+pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleScaling, out: &mut Solution) -> bool {
     let [row] = rows.rows.as_slice() else {
         return false;
     };
@@ -64,25 +123,12 @@ pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> boo
     if !(slots & row.bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
         return false;
     }
-    // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
-    let norm = row_norm(&row.jacobian);
-    if !(norm.is_finite() && norm != 0.0) {
+    let Some(&SingleScaling { norm, jacobi, jt, a, l, .. }) = scaling.of(&row.jacobian, j, w) else {
         return false;
-    }
-    let inverse = 1.0 / norm;
-    let u = if RECIPROCAL_NORMS.contains(&norm) { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
-    let a_hat = 0.0 + dot(&u, &u) * w;
-    if !(a_hat > 0.0 && a_hat.is_finite()) {
-        return false;
-    }
-    let jacobi = 1.0 / a_hat.sqrt();
-    let jt = u.map(|x| x * jacobi);
-    // Ã = J̃·J̃ w (one term, added to a zero band) and its factor L = √Ã.
-    let a = 0.0 + dot(&jt, &jt) * w;
+    };
     if a.is_nan() || a <= settings.rank_tolerance {
         return false;
     }
-    let l = a.sqrt();
     // −b̃ = −(J̃·F w + c/‖J‖/√Â), the sum of the forces' part started from −0.
     let b = (-0.0 + dot(&jt, &rows.force[body]) * w) + (row.bias / norm) * jacobi;
     let rhs = -b;
