@@ -791,7 +791,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Err(code) => return code,
     };
     let velocity = match args.velocity.settings(settings.dt, settings.steps, settings.restitution) {
-        Ok(v) => v,
+        Ok(v) => v.map(|v| lagrange::numeric::velocity::Settings { samples: settings.samples, ..v }),
         Err(e) => {
             errln!("error: {e}");
             return ExitCode::from(2);
@@ -880,6 +880,10 @@ fn simulate_settings(
             max_iterations: lagrange::numeric::stabilize::PROJECTION_ITERATIONS,
         },
     };
+    // The samples feed the plot alone: without --plot a step keeps none (a Vec a step).
+    if args.plot.is_none() {
+        settings.samples = 0;
+    }
     settings.validate().map_err(|e| {
         errln!("error: {}", SimError::Settings(e));
         ExitCode::from(2)
