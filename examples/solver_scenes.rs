@@ -11,7 +11,11 @@
 //! cargo run --example solver_scenes -- stack            > constraints/solvers/stack.toml
 //! cargo run --example solver_scenes -- rigid_ball_and_chain > constraints/solvers/rigid_ball_and_chain.toml
 //! cargo run --example solver_scenes -- rigid_grid 10    > constraints/solvers/rigid_grid_10.toml
+//! cargo run --release --example solver_scenes -- rigid_grid 100 > rigid_grid_100.toml  # not checked in
 //! ```
+//!
+//! The 100 x 100 rigid grid (Box2D's `joint_grid`, 39 402 rows, 6.5 MB) is not in
+//! `constraints/solvers/`: `examples/engine-step/build.rs` writes it from `rigid_grid`.
 //!
 //! Point masses joined by distance constraints `norm(rᵢ − rⱼ) = l` (C = |d| − l, the
 //! separation Box2D's distance joint solves for), under g = 10 m/s² as in Solver2D, stepped
@@ -339,8 +343,9 @@ fn rigid_ball_and_chain() -> String {
 /// Box2D's `joint_grid` benchmark scaled down: n × n discs of radius 0.4 at density 1, 1 m
 /// apart in the vertical plane, each pinned by revolute joints to its right and lower
 /// neighbours at the midpoints, the top row fixed (its discs are the ground: the joints
-/// below them pin to world points).
-fn rigid_grid(n: usize) -> String {
+/// below them pin to world points). Public for `examples/engine-step/build.rs`, which writes
+/// the 100 x 100 grid at build time from this same function.
+pub fn rigid_grid(n: usize) -> String {
     let (m, i) = disc_mass(0.4, 1.0);
     let index = |row: usize, col: usize| (row - 1) * n + col;
     let mut bodies = Vec::new();
