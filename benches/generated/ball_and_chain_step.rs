@@ -4103,90 +4103,92 @@ const KEEP: bool = true;
 /// velocities.
 #[allow(dead_code)]
 fn same_inputs(a: &State, b: &State) -> bool {
-    same(&a.a1, &b.a1)
-        && same(&a.g, &b.g)
-        && same(&a.r_p1, &b.r_p1)
-        && same(&a.F_p1, &b.F_p1)
-        && same(&a.r_p2, &b.r_p2)
-        && same(&a.F_p2, &b.F_p2)
-        && same(&a.r_p3, &b.r_p3)
-        && same(&a.F_p3, &b.F_p3)
-        && same(&a.r_p4, &b.r_p4)
-        && same(&a.F_p4, &b.F_p4)
-        && same(&a.r_p5, &b.r_p5)
-        && same(&a.F_p5, &b.F_p5)
-        && same(&a.r_p6, &b.r_p6)
-        && same(&a.F_p6, &b.F_p6)
-        && same(&a.r_p7, &b.r_p7)
-        && same(&a.F_p7, &b.F_p7)
-        && same(&a.r_p8, &b.r_p8)
-        && same(&a.F_p8, &b.F_p8)
-        && same(&a.r_p9, &b.r_p9)
-        && same(&a.F_p9, &b.F_p9)
-        && same(&a.r_p10, &b.r_p10)
-        && same(&a.F_p10, &b.F_p10)
-        && same(&a.r_p11, &b.r_p11)
-        && same(&a.F_p11, &b.F_p11)
-        && same(&a.r_p12, &b.r_p12)
-        && same(&a.F_p12, &b.F_p12)
-        && same(&a.r_p13, &b.r_p13)
-        && same(&a.F_p13, &b.F_p13)
-        && same(&a.r_p14, &b.r_p14)
-        && same(&a.F_p14, &b.F_p14)
-        && same(&a.r_p15, &b.r_p15)
-        && same(&a.F_p15, &b.F_p15)
-        && same(&a.r_p16, &b.r_p16)
-        && same(&a.F_p16, &b.F_p16)
-        && same(&a.r_p17, &b.r_p17)
-        && same(&a.F_p17, &b.F_p17)
-        && same(&a.r_p18, &b.r_p18)
-        && same(&a.F_p18, &b.F_p18)
-        && same(&a.r_p19, &b.r_p19)
-        && same(&a.F_p19, &b.F_p19)
-        && same(&a.r_p20, &b.r_p20)
-        && same(&a.F_p20, &b.F_p20)
-        && same(&a.r_p21, &b.r_p21)
-        && same(&a.F_p21, &b.F_p21)
-        && same(&a.r_p22, &b.r_p22)
-        && same(&a.F_p22, &b.F_p22)
-        && same(&a.r_p23, &b.r_p23)
-        && same(&a.F_p23, &b.F_p23)
-        && same(&a.r_p24, &b.r_p24)
-        && same(&a.F_p24, &b.F_p24)
-        && same(&a.r_p25, &b.r_p25)
-        && same(&a.F_p25, &b.F_p25)
-        && same(&a.r_p26, &b.r_p26)
-        && same(&a.F_p26, &b.F_p26)
-        && same(&a.r_p27, &b.r_p27)
-        && same(&a.F_p27, &b.F_p27)
-        && same(&a.r_p28, &b.r_p28)
-        && same(&a.F_p28, &b.F_p28)
-        && same(&a.r_p29, &b.r_p29)
-        && same(&a.F_p29, &b.F_p29)
-        && same(&a.r_p30, &b.r_p30)
-        && same(&a.F_p30, &b.F_p30)
-        && same(&a.r_p31, &b.r_p31)
-        && same(&a.F_p31, &b.F_p31)
-        && same(&a.r_p32, &b.r_p32)
-        && same(&a.F_p32, &b.F_p32)
-        && same(&a.r_p33, &b.r_p33)
-        && same(&a.F_p33, &b.F_p33)
-        && same(&a.r_p34, &b.r_p34)
-        && same(&a.F_p34, &b.F_p34)
-        && same(&a.r_p35, &b.r_p35)
-        && same(&a.F_p35, &b.F_p35)
-        && same(&a.r_p36, &b.r_p36)
-        && same(&a.F_p36, &b.F_p36)
-        && same(&a.r_p37, &b.r_p37)
-        && same(&a.F_p37, &b.F_p37)
-        && same(&a.r_p38, &b.r_p38)
-        && same(&a.F_p38, &b.F_p38)
-        && same(&a.r_p39, &b.r_p39)
-        && same(&a.F_p39, &b.F_p39)
-        && same(&a.r_p40, &b.r_p40)
-        && same(&a.F_p40, &b.F_p40)
-        && same(&a.r_p41, &b.r_p41)
-        && same(&a.F_p41, &b.F_p41)
+    let mut all = true;
+    all &= same(&a.a1, &b.a1);
+    all &= same(&a.g, &b.g);
+    all &= same(&a.r_p1, &b.r_p1);
+    all &= same(&a.F_p1, &b.F_p1);
+    all &= same(&a.r_p2, &b.r_p2);
+    all &= same(&a.F_p2, &b.F_p2);
+    all &= same(&a.r_p3, &b.r_p3);
+    all &= same(&a.F_p3, &b.F_p3);
+    all &= same(&a.r_p4, &b.r_p4);
+    all &= same(&a.F_p4, &b.F_p4);
+    all &= same(&a.r_p5, &b.r_p5);
+    all &= same(&a.F_p5, &b.F_p5);
+    all &= same(&a.r_p6, &b.r_p6);
+    all &= same(&a.F_p6, &b.F_p6);
+    all &= same(&a.r_p7, &b.r_p7);
+    all &= same(&a.F_p7, &b.F_p7);
+    all &= same(&a.r_p8, &b.r_p8);
+    all &= same(&a.F_p8, &b.F_p8);
+    all &= same(&a.r_p9, &b.r_p9);
+    all &= same(&a.F_p9, &b.F_p9);
+    all &= same(&a.r_p10, &b.r_p10);
+    all &= same(&a.F_p10, &b.F_p10);
+    all &= same(&a.r_p11, &b.r_p11);
+    all &= same(&a.F_p11, &b.F_p11);
+    all &= same(&a.r_p12, &b.r_p12);
+    all &= same(&a.F_p12, &b.F_p12);
+    all &= same(&a.r_p13, &b.r_p13);
+    all &= same(&a.F_p13, &b.F_p13);
+    all &= same(&a.r_p14, &b.r_p14);
+    all &= same(&a.F_p14, &b.F_p14);
+    all &= same(&a.r_p15, &b.r_p15);
+    all &= same(&a.F_p15, &b.F_p15);
+    all &= same(&a.r_p16, &b.r_p16);
+    all &= same(&a.F_p16, &b.F_p16);
+    all &= same(&a.r_p17, &b.r_p17);
+    all &= same(&a.F_p17, &b.F_p17);
+    all &= same(&a.r_p18, &b.r_p18);
+    all &= same(&a.F_p18, &b.F_p18);
+    all &= same(&a.r_p19, &b.r_p19);
+    all &= same(&a.F_p19, &b.F_p19);
+    all &= same(&a.r_p20, &b.r_p20);
+    all &= same(&a.F_p20, &b.F_p20);
+    all &= same(&a.r_p21, &b.r_p21);
+    all &= same(&a.F_p21, &b.F_p21);
+    all &= same(&a.r_p22, &b.r_p22);
+    all &= same(&a.F_p22, &b.F_p22);
+    all &= same(&a.r_p23, &b.r_p23);
+    all &= same(&a.F_p23, &b.F_p23);
+    all &= same(&a.r_p24, &b.r_p24);
+    all &= same(&a.F_p24, &b.F_p24);
+    all &= same(&a.r_p25, &b.r_p25);
+    all &= same(&a.F_p25, &b.F_p25);
+    all &= same(&a.r_p26, &b.r_p26);
+    all &= same(&a.F_p26, &b.F_p26);
+    all &= same(&a.r_p27, &b.r_p27);
+    all &= same(&a.F_p27, &b.F_p27);
+    all &= same(&a.r_p28, &b.r_p28);
+    all &= same(&a.F_p28, &b.F_p28);
+    all &= same(&a.r_p29, &b.r_p29);
+    all &= same(&a.F_p29, &b.F_p29);
+    all &= same(&a.r_p30, &b.r_p30);
+    all &= same(&a.F_p30, &b.F_p30);
+    all &= same(&a.r_p31, &b.r_p31);
+    all &= same(&a.F_p31, &b.F_p31);
+    all &= same(&a.r_p32, &b.r_p32);
+    all &= same(&a.F_p32, &b.F_p32);
+    all &= same(&a.r_p33, &b.r_p33);
+    all &= same(&a.F_p33, &b.F_p33);
+    all &= same(&a.r_p34, &b.r_p34);
+    all &= same(&a.F_p34, &b.F_p34);
+    all &= same(&a.r_p35, &b.r_p35);
+    all &= same(&a.F_p35, &b.F_p35);
+    all &= same(&a.r_p36, &b.r_p36);
+    all &= same(&a.F_p36, &b.F_p36);
+    all &= same(&a.r_p37, &b.r_p37);
+    all &= same(&a.F_p37, &b.F_p37);
+    all &= same(&a.r_p38, &b.r_p38);
+    all &= same(&a.F_p38, &b.F_p38);
+    all &= same(&a.r_p39, &b.r_p39);
+    all &= same(&a.F_p39, &b.F_p39);
+    all &= same(&a.r_p40, &b.r_p40);
+    all &= same(&a.F_p40, &b.F_p40);
+    all &= same(&a.r_p41, &b.r_p41);
+    all &= same(&a.F_p41, &b.F_p41);
+    all
 }
 
 /// The same bits in `a` and `b`, compared without a branch per number.

@@ -6495,171 +6495,173 @@ const KEEP: bool = true;
 /// velocities.
 #[allow(dead_code)]
 fn same_inputs(a: &State, b: &State) -> bool {
-    same(&a.g, &b.g)
-        && same(&a.x_l1, &b.x_l1)
-        && same(&a.F_l1, &b.F_l1)
-        && same(&[a.th_l1], &[b.th_l1])
-        && same(&[a.T_l1], &[b.T_l1])
-        && same(&a.x_l2, &b.x_l2)
-        && same(&a.F_l2, &b.F_l2)
-        && same(&[a.th_l2], &[b.th_l2])
-        && same(&[a.T_l2], &[b.T_l2])
-        && same(&a.x_l3, &b.x_l3)
-        && same(&a.F_l3, &b.F_l3)
-        && same(&[a.th_l3], &[b.th_l3])
-        && same(&[a.T_l3], &[b.T_l3])
-        && same(&a.x_l4, &b.x_l4)
-        && same(&a.F_l4, &b.F_l4)
-        && same(&[a.th_l4], &[b.th_l4])
-        && same(&[a.T_l4], &[b.T_l4])
-        && same(&a.x_l5, &b.x_l5)
-        && same(&a.F_l5, &b.F_l5)
-        && same(&[a.th_l5], &[b.th_l5])
-        && same(&[a.T_l5], &[b.T_l5])
-        && same(&a.x_l6, &b.x_l6)
-        && same(&a.F_l6, &b.F_l6)
-        && same(&[a.th_l6], &[b.th_l6])
-        && same(&[a.T_l6], &[b.T_l6])
-        && same(&a.x_l7, &b.x_l7)
-        && same(&a.F_l7, &b.F_l7)
-        && same(&[a.th_l7], &[b.th_l7])
-        && same(&[a.T_l7], &[b.T_l7])
-        && same(&a.x_l8, &b.x_l8)
-        && same(&a.F_l8, &b.F_l8)
-        && same(&[a.th_l8], &[b.th_l8])
-        && same(&[a.T_l8], &[b.T_l8])
-        && same(&a.x_l9, &b.x_l9)
-        && same(&a.F_l9, &b.F_l9)
-        && same(&[a.th_l9], &[b.th_l9])
-        && same(&[a.T_l9], &[b.T_l9])
-        && same(&a.x_l10, &b.x_l10)
-        && same(&a.F_l10, &b.F_l10)
-        && same(&[a.th_l10], &[b.th_l10])
-        && same(&[a.T_l10], &[b.T_l10])
-        && same(&a.x_l11, &b.x_l11)
-        && same(&a.F_l11, &b.F_l11)
-        && same(&[a.th_l11], &[b.th_l11])
-        && same(&[a.T_l11], &[b.T_l11])
-        && same(&a.x_l12, &b.x_l12)
-        && same(&a.F_l12, &b.F_l12)
-        && same(&[a.th_l12], &[b.th_l12])
-        && same(&[a.T_l12], &[b.T_l12])
-        && same(&a.x_l13, &b.x_l13)
-        && same(&a.F_l13, &b.F_l13)
-        && same(&[a.th_l13], &[b.th_l13])
-        && same(&[a.T_l13], &[b.T_l13])
-        && same(&a.x_l14, &b.x_l14)
-        && same(&a.F_l14, &b.F_l14)
-        && same(&[a.th_l14], &[b.th_l14])
-        && same(&[a.T_l14], &[b.T_l14])
-        && same(&a.x_l15, &b.x_l15)
-        && same(&a.F_l15, &b.F_l15)
-        && same(&[a.th_l15], &[b.th_l15])
-        && same(&[a.T_l15], &[b.T_l15])
-        && same(&a.x_l16, &b.x_l16)
-        && same(&a.F_l16, &b.F_l16)
-        && same(&[a.th_l16], &[b.th_l16])
-        && same(&[a.T_l16], &[b.T_l16])
-        && same(&a.x_l17, &b.x_l17)
-        && same(&a.F_l17, &b.F_l17)
-        && same(&[a.th_l17], &[b.th_l17])
-        && same(&[a.T_l17], &[b.T_l17])
-        && same(&a.x_l18, &b.x_l18)
-        && same(&a.F_l18, &b.F_l18)
-        && same(&[a.th_l18], &[b.th_l18])
-        && same(&[a.T_l18], &[b.T_l18])
-        && same(&a.x_l19, &b.x_l19)
-        && same(&a.F_l19, &b.F_l19)
-        && same(&[a.th_l19], &[b.th_l19])
-        && same(&[a.T_l19], &[b.T_l19])
-        && same(&a.x_l20, &b.x_l20)
-        && same(&a.F_l20, &b.F_l20)
-        && same(&[a.th_l20], &[b.th_l20])
-        && same(&[a.T_l20], &[b.T_l20])
-        && same(&a.x_l21, &b.x_l21)
-        && same(&a.F_l21, &b.F_l21)
-        && same(&[a.th_l21], &[b.th_l21])
-        && same(&[a.T_l21], &[b.T_l21])
-        && same(&a.x_l22, &b.x_l22)
-        && same(&a.F_l22, &b.F_l22)
-        && same(&[a.th_l22], &[b.th_l22])
-        && same(&[a.T_l22], &[b.T_l22])
-        && same(&a.x_l23, &b.x_l23)
-        && same(&a.F_l23, &b.F_l23)
-        && same(&[a.th_l23], &[b.th_l23])
-        && same(&[a.T_l23], &[b.T_l23])
-        && same(&a.x_l24, &b.x_l24)
-        && same(&a.F_l24, &b.F_l24)
-        && same(&[a.th_l24], &[b.th_l24])
-        && same(&[a.T_l24], &[b.T_l24])
-        && same(&a.x_l25, &b.x_l25)
-        && same(&a.F_l25, &b.F_l25)
-        && same(&[a.th_l25], &[b.th_l25])
-        && same(&[a.T_l25], &[b.T_l25])
-        && same(&a.x_l26, &b.x_l26)
-        && same(&a.F_l26, &b.F_l26)
-        && same(&[a.th_l26], &[b.th_l26])
-        && same(&[a.T_l26], &[b.T_l26])
-        && same(&a.x_l27, &b.x_l27)
-        && same(&a.F_l27, &b.F_l27)
-        && same(&[a.th_l27], &[b.th_l27])
-        && same(&[a.T_l27], &[b.T_l27])
-        && same(&a.x_l28, &b.x_l28)
-        && same(&a.F_l28, &b.F_l28)
-        && same(&[a.th_l28], &[b.th_l28])
-        && same(&[a.T_l28], &[b.T_l28])
-        && same(&a.x_l29, &b.x_l29)
-        && same(&a.F_l29, &b.F_l29)
-        && same(&[a.th_l29], &[b.th_l29])
-        && same(&[a.T_l29], &[b.T_l29])
-        && same(&a.x_l30, &b.x_l30)
-        && same(&a.F_l30, &b.F_l30)
-        && same(&[a.th_l30], &[b.th_l30])
-        && same(&[a.T_l30], &[b.T_l30])
-        && same(&a.x_l31, &b.x_l31)
-        && same(&a.F_l31, &b.F_l31)
-        && same(&[a.th_l31], &[b.th_l31])
-        && same(&[a.T_l31], &[b.T_l31])
-        && same(&a.x_l32, &b.x_l32)
-        && same(&a.F_l32, &b.F_l32)
-        && same(&[a.th_l32], &[b.th_l32])
-        && same(&[a.T_l32], &[b.T_l32])
-        && same(&a.x_l33, &b.x_l33)
-        && same(&a.F_l33, &b.F_l33)
-        && same(&[a.th_l33], &[b.th_l33])
-        && same(&[a.T_l33], &[b.T_l33])
-        && same(&a.x_l34, &b.x_l34)
-        && same(&a.F_l34, &b.F_l34)
-        && same(&[a.th_l34], &[b.th_l34])
-        && same(&[a.T_l34], &[b.T_l34])
-        && same(&a.x_l35, &b.x_l35)
-        && same(&a.F_l35, &b.F_l35)
-        && same(&[a.th_l35], &[b.th_l35])
-        && same(&[a.T_l35], &[b.T_l35])
-        && same(&a.x_l36, &b.x_l36)
-        && same(&a.F_l36, &b.F_l36)
-        && same(&[a.th_l36], &[b.th_l36])
-        && same(&[a.T_l36], &[b.T_l36])
-        && same(&a.x_l37, &b.x_l37)
-        && same(&a.F_l37, &b.F_l37)
-        && same(&[a.th_l37], &[b.th_l37])
-        && same(&[a.T_l37], &[b.T_l37])
-        && same(&a.x_l38, &b.x_l38)
-        && same(&a.F_l38, &b.F_l38)
-        && same(&[a.th_l38], &[b.th_l38])
-        && same(&[a.T_l38], &[b.T_l38])
-        && same(&a.x_l39, &b.x_l39)
-        && same(&a.F_l39, &b.F_l39)
-        && same(&[a.th_l39], &[b.th_l39])
-        && same(&[a.T_l39], &[b.T_l39])
-        && same(&a.x_l40, &b.x_l40)
-        && same(&a.F_l40, &b.F_l40)
-        && same(&[a.th_l40], &[b.th_l40])
-        && same(&[a.T_l40], &[b.T_l40])
-        && same(&a.x_ball, &b.x_ball)
-        && same(&a.F_ball, &b.F_ball)
-        && same(&[a.th_ball], &[b.th_ball])
-        && same(&[a.T_ball], &[b.T_ball])
+    let mut all = true;
+    all &= same(&a.g, &b.g);
+    all &= same(&a.x_l1, &b.x_l1);
+    all &= same(&a.F_l1, &b.F_l1);
+    all &= same(&[a.th_l1], &[b.th_l1]);
+    all &= same(&[a.T_l1], &[b.T_l1]);
+    all &= same(&a.x_l2, &b.x_l2);
+    all &= same(&a.F_l2, &b.F_l2);
+    all &= same(&[a.th_l2], &[b.th_l2]);
+    all &= same(&[a.T_l2], &[b.T_l2]);
+    all &= same(&a.x_l3, &b.x_l3);
+    all &= same(&a.F_l3, &b.F_l3);
+    all &= same(&[a.th_l3], &[b.th_l3]);
+    all &= same(&[a.T_l3], &[b.T_l3]);
+    all &= same(&a.x_l4, &b.x_l4);
+    all &= same(&a.F_l4, &b.F_l4);
+    all &= same(&[a.th_l4], &[b.th_l4]);
+    all &= same(&[a.T_l4], &[b.T_l4]);
+    all &= same(&a.x_l5, &b.x_l5);
+    all &= same(&a.F_l5, &b.F_l5);
+    all &= same(&[a.th_l5], &[b.th_l5]);
+    all &= same(&[a.T_l5], &[b.T_l5]);
+    all &= same(&a.x_l6, &b.x_l6);
+    all &= same(&a.F_l6, &b.F_l6);
+    all &= same(&[a.th_l6], &[b.th_l6]);
+    all &= same(&[a.T_l6], &[b.T_l6]);
+    all &= same(&a.x_l7, &b.x_l7);
+    all &= same(&a.F_l7, &b.F_l7);
+    all &= same(&[a.th_l7], &[b.th_l7]);
+    all &= same(&[a.T_l7], &[b.T_l7]);
+    all &= same(&a.x_l8, &b.x_l8);
+    all &= same(&a.F_l8, &b.F_l8);
+    all &= same(&[a.th_l8], &[b.th_l8]);
+    all &= same(&[a.T_l8], &[b.T_l8]);
+    all &= same(&a.x_l9, &b.x_l9);
+    all &= same(&a.F_l9, &b.F_l9);
+    all &= same(&[a.th_l9], &[b.th_l9]);
+    all &= same(&[a.T_l9], &[b.T_l9]);
+    all &= same(&a.x_l10, &b.x_l10);
+    all &= same(&a.F_l10, &b.F_l10);
+    all &= same(&[a.th_l10], &[b.th_l10]);
+    all &= same(&[a.T_l10], &[b.T_l10]);
+    all &= same(&a.x_l11, &b.x_l11);
+    all &= same(&a.F_l11, &b.F_l11);
+    all &= same(&[a.th_l11], &[b.th_l11]);
+    all &= same(&[a.T_l11], &[b.T_l11]);
+    all &= same(&a.x_l12, &b.x_l12);
+    all &= same(&a.F_l12, &b.F_l12);
+    all &= same(&[a.th_l12], &[b.th_l12]);
+    all &= same(&[a.T_l12], &[b.T_l12]);
+    all &= same(&a.x_l13, &b.x_l13);
+    all &= same(&a.F_l13, &b.F_l13);
+    all &= same(&[a.th_l13], &[b.th_l13]);
+    all &= same(&[a.T_l13], &[b.T_l13]);
+    all &= same(&a.x_l14, &b.x_l14);
+    all &= same(&a.F_l14, &b.F_l14);
+    all &= same(&[a.th_l14], &[b.th_l14]);
+    all &= same(&[a.T_l14], &[b.T_l14]);
+    all &= same(&a.x_l15, &b.x_l15);
+    all &= same(&a.F_l15, &b.F_l15);
+    all &= same(&[a.th_l15], &[b.th_l15]);
+    all &= same(&[a.T_l15], &[b.T_l15]);
+    all &= same(&a.x_l16, &b.x_l16);
+    all &= same(&a.F_l16, &b.F_l16);
+    all &= same(&[a.th_l16], &[b.th_l16]);
+    all &= same(&[a.T_l16], &[b.T_l16]);
+    all &= same(&a.x_l17, &b.x_l17);
+    all &= same(&a.F_l17, &b.F_l17);
+    all &= same(&[a.th_l17], &[b.th_l17]);
+    all &= same(&[a.T_l17], &[b.T_l17]);
+    all &= same(&a.x_l18, &b.x_l18);
+    all &= same(&a.F_l18, &b.F_l18);
+    all &= same(&[a.th_l18], &[b.th_l18]);
+    all &= same(&[a.T_l18], &[b.T_l18]);
+    all &= same(&a.x_l19, &b.x_l19);
+    all &= same(&a.F_l19, &b.F_l19);
+    all &= same(&[a.th_l19], &[b.th_l19]);
+    all &= same(&[a.T_l19], &[b.T_l19]);
+    all &= same(&a.x_l20, &b.x_l20);
+    all &= same(&a.F_l20, &b.F_l20);
+    all &= same(&[a.th_l20], &[b.th_l20]);
+    all &= same(&[a.T_l20], &[b.T_l20]);
+    all &= same(&a.x_l21, &b.x_l21);
+    all &= same(&a.F_l21, &b.F_l21);
+    all &= same(&[a.th_l21], &[b.th_l21]);
+    all &= same(&[a.T_l21], &[b.T_l21]);
+    all &= same(&a.x_l22, &b.x_l22);
+    all &= same(&a.F_l22, &b.F_l22);
+    all &= same(&[a.th_l22], &[b.th_l22]);
+    all &= same(&[a.T_l22], &[b.T_l22]);
+    all &= same(&a.x_l23, &b.x_l23);
+    all &= same(&a.F_l23, &b.F_l23);
+    all &= same(&[a.th_l23], &[b.th_l23]);
+    all &= same(&[a.T_l23], &[b.T_l23]);
+    all &= same(&a.x_l24, &b.x_l24);
+    all &= same(&a.F_l24, &b.F_l24);
+    all &= same(&[a.th_l24], &[b.th_l24]);
+    all &= same(&[a.T_l24], &[b.T_l24]);
+    all &= same(&a.x_l25, &b.x_l25);
+    all &= same(&a.F_l25, &b.F_l25);
+    all &= same(&[a.th_l25], &[b.th_l25]);
+    all &= same(&[a.T_l25], &[b.T_l25]);
+    all &= same(&a.x_l26, &b.x_l26);
+    all &= same(&a.F_l26, &b.F_l26);
+    all &= same(&[a.th_l26], &[b.th_l26]);
+    all &= same(&[a.T_l26], &[b.T_l26]);
+    all &= same(&a.x_l27, &b.x_l27);
+    all &= same(&a.F_l27, &b.F_l27);
+    all &= same(&[a.th_l27], &[b.th_l27]);
+    all &= same(&[a.T_l27], &[b.T_l27]);
+    all &= same(&a.x_l28, &b.x_l28);
+    all &= same(&a.F_l28, &b.F_l28);
+    all &= same(&[a.th_l28], &[b.th_l28]);
+    all &= same(&[a.T_l28], &[b.T_l28]);
+    all &= same(&a.x_l29, &b.x_l29);
+    all &= same(&a.F_l29, &b.F_l29);
+    all &= same(&[a.th_l29], &[b.th_l29]);
+    all &= same(&[a.T_l29], &[b.T_l29]);
+    all &= same(&a.x_l30, &b.x_l30);
+    all &= same(&a.F_l30, &b.F_l30);
+    all &= same(&[a.th_l30], &[b.th_l30]);
+    all &= same(&[a.T_l30], &[b.T_l30]);
+    all &= same(&a.x_l31, &b.x_l31);
+    all &= same(&a.F_l31, &b.F_l31);
+    all &= same(&[a.th_l31], &[b.th_l31]);
+    all &= same(&[a.T_l31], &[b.T_l31]);
+    all &= same(&a.x_l32, &b.x_l32);
+    all &= same(&a.F_l32, &b.F_l32);
+    all &= same(&[a.th_l32], &[b.th_l32]);
+    all &= same(&[a.T_l32], &[b.T_l32]);
+    all &= same(&a.x_l33, &b.x_l33);
+    all &= same(&a.F_l33, &b.F_l33);
+    all &= same(&[a.th_l33], &[b.th_l33]);
+    all &= same(&[a.T_l33], &[b.T_l33]);
+    all &= same(&a.x_l34, &b.x_l34);
+    all &= same(&a.F_l34, &b.F_l34);
+    all &= same(&[a.th_l34], &[b.th_l34]);
+    all &= same(&[a.T_l34], &[b.T_l34]);
+    all &= same(&a.x_l35, &b.x_l35);
+    all &= same(&a.F_l35, &b.F_l35);
+    all &= same(&[a.th_l35], &[b.th_l35]);
+    all &= same(&[a.T_l35], &[b.T_l35]);
+    all &= same(&a.x_l36, &b.x_l36);
+    all &= same(&a.F_l36, &b.F_l36);
+    all &= same(&[a.th_l36], &[b.th_l36]);
+    all &= same(&[a.T_l36], &[b.T_l36]);
+    all &= same(&a.x_l37, &b.x_l37);
+    all &= same(&a.F_l37, &b.F_l37);
+    all &= same(&[a.th_l37], &[b.th_l37]);
+    all &= same(&[a.T_l37], &[b.T_l37]);
+    all &= same(&a.x_l38, &b.x_l38);
+    all &= same(&a.F_l38, &b.F_l38);
+    all &= same(&[a.th_l38], &[b.th_l38]);
+    all &= same(&[a.T_l38], &[b.T_l38]);
+    all &= same(&a.x_l39, &b.x_l39);
+    all &= same(&a.F_l39, &b.F_l39);
+    all &= same(&[a.th_l39], &[b.th_l39]);
+    all &= same(&[a.T_l39], &[b.T_l39]);
+    all &= same(&a.x_l40, &b.x_l40);
+    all &= same(&a.F_l40, &b.F_l40);
+    all &= same(&[a.th_l40], &[b.th_l40]);
+    all &= same(&[a.T_l40], &[b.T_l40]);
+    all &= same(&a.x_ball, &b.x_ball);
+    all &= same(&a.F_ball, &b.F_ball);
+    all &= same(&[a.th_ball], &[b.th_ball]);
+    all &= same(&[a.T_ball], &[b.T_ball]);
+    all
 }
 
 /// The same bits in `a` and `b`, compared without a branch per number.

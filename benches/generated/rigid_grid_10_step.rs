@@ -2026,367 +2026,369 @@ const KEEP: bool = true;
 /// velocities.
 #[allow(dead_code)]
 fn same_inputs(a: &State, b: &State) -> bool {
-    same(&a.g, &b.g)
-        && same(&a.x_d1_0, &b.x_d1_0)
-        && same(&a.F_d1_0, &b.F_d1_0)
-        && same(&[a.th_d1_0], &[b.th_d1_0])
-        && same(&[a.T_d1_0], &[b.T_d1_0])
-        && same(&a.x_d1_1, &b.x_d1_1)
-        && same(&a.F_d1_1, &b.F_d1_1)
-        && same(&[a.th_d1_1], &[b.th_d1_1])
-        && same(&[a.T_d1_1], &[b.T_d1_1])
-        && same(&a.x_d1_2, &b.x_d1_2)
-        && same(&a.F_d1_2, &b.F_d1_2)
-        && same(&[a.th_d1_2], &[b.th_d1_2])
-        && same(&[a.T_d1_2], &[b.T_d1_2])
-        && same(&a.x_d1_3, &b.x_d1_3)
-        && same(&a.F_d1_3, &b.F_d1_3)
-        && same(&[a.th_d1_3], &[b.th_d1_3])
-        && same(&[a.T_d1_3], &[b.T_d1_3])
-        && same(&a.x_d1_4, &b.x_d1_4)
-        && same(&a.F_d1_4, &b.F_d1_4)
-        && same(&[a.th_d1_4], &[b.th_d1_4])
-        && same(&[a.T_d1_4], &[b.T_d1_4])
-        && same(&a.x_d1_5, &b.x_d1_5)
-        && same(&a.F_d1_5, &b.F_d1_5)
-        && same(&[a.th_d1_5], &[b.th_d1_5])
-        && same(&[a.T_d1_5], &[b.T_d1_5])
-        && same(&a.x_d1_6, &b.x_d1_6)
-        && same(&a.F_d1_6, &b.F_d1_6)
-        && same(&[a.th_d1_6], &[b.th_d1_6])
-        && same(&[a.T_d1_6], &[b.T_d1_6])
-        && same(&a.x_d1_7, &b.x_d1_7)
-        && same(&a.F_d1_7, &b.F_d1_7)
-        && same(&[a.th_d1_7], &[b.th_d1_7])
-        && same(&[a.T_d1_7], &[b.T_d1_7])
-        && same(&a.x_d1_8, &b.x_d1_8)
-        && same(&a.F_d1_8, &b.F_d1_8)
-        && same(&[a.th_d1_8], &[b.th_d1_8])
-        && same(&[a.T_d1_8], &[b.T_d1_8])
-        && same(&a.x_d1_9, &b.x_d1_9)
-        && same(&a.F_d1_9, &b.F_d1_9)
-        && same(&[a.th_d1_9], &[b.th_d1_9])
-        && same(&[a.T_d1_9], &[b.T_d1_9])
-        && same(&a.x_d2_0, &b.x_d2_0)
-        && same(&a.F_d2_0, &b.F_d2_0)
-        && same(&[a.th_d2_0], &[b.th_d2_0])
-        && same(&[a.T_d2_0], &[b.T_d2_0])
-        && same(&a.x_d2_1, &b.x_d2_1)
-        && same(&a.F_d2_1, &b.F_d2_1)
-        && same(&[a.th_d2_1], &[b.th_d2_1])
-        && same(&[a.T_d2_1], &[b.T_d2_1])
-        && same(&a.x_d2_2, &b.x_d2_2)
-        && same(&a.F_d2_2, &b.F_d2_2)
-        && same(&[a.th_d2_2], &[b.th_d2_2])
-        && same(&[a.T_d2_2], &[b.T_d2_2])
-        && same(&a.x_d2_3, &b.x_d2_3)
-        && same(&a.F_d2_3, &b.F_d2_3)
-        && same(&[a.th_d2_3], &[b.th_d2_3])
-        && same(&[a.T_d2_3], &[b.T_d2_3])
-        && same(&a.x_d2_4, &b.x_d2_4)
-        && same(&a.F_d2_4, &b.F_d2_4)
-        && same(&[a.th_d2_4], &[b.th_d2_4])
-        && same(&[a.T_d2_4], &[b.T_d2_4])
-        && same(&a.x_d2_5, &b.x_d2_5)
-        && same(&a.F_d2_5, &b.F_d2_5)
-        && same(&[a.th_d2_5], &[b.th_d2_5])
-        && same(&[a.T_d2_5], &[b.T_d2_5])
-        && same(&a.x_d2_6, &b.x_d2_6)
-        && same(&a.F_d2_6, &b.F_d2_6)
-        && same(&[a.th_d2_6], &[b.th_d2_6])
-        && same(&[a.T_d2_6], &[b.T_d2_6])
-        && same(&a.x_d2_7, &b.x_d2_7)
-        && same(&a.F_d2_7, &b.F_d2_7)
-        && same(&[a.th_d2_7], &[b.th_d2_7])
-        && same(&[a.T_d2_7], &[b.T_d2_7])
-        && same(&a.x_d2_8, &b.x_d2_8)
-        && same(&a.F_d2_8, &b.F_d2_8)
-        && same(&[a.th_d2_8], &[b.th_d2_8])
-        && same(&[a.T_d2_8], &[b.T_d2_8])
-        && same(&a.x_d2_9, &b.x_d2_9)
-        && same(&a.F_d2_9, &b.F_d2_9)
-        && same(&[a.th_d2_9], &[b.th_d2_9])
-        && same(&[a.T_d2_9], &[b.T_d2_9])
-        && same(&a.x_d3_0, &b.x_d3_0)
-        && same(&a.F_d3_0, &b.F_d3_0)
-        && same(&[a.th_d3_0], &[b.th_d3_0])
-        && same(&[a.T_d3_0], &[b.T_d3_0])
-        && same(&a.x_d3_1, &b.x_d3_1)
-        && same(&a.F_d3_1, &b.F_d3_1)
-        && same(&[a.th_d3_1], &[b.th_d3_1])
-        && same(&[a.T_d3_1], &[b.T_d3_1])
-        && same(&a.x_d3_2, &b.x_d3_2)
-        && same(&a.F_d3_2, &b.F_d3_2)
-        && same(&[a.th_d3_2], &[b.th_d3_2])
-        && same(&[a.T_d3_2], &[b.T_d3_2])
-        && same(&a.x_d3_3, &b.x_d3_3)
-        && same(&a.F_d3_3, &b.F_d3_3)
-        && same(&[a.th_d3_3], &[b.th_d3_3])
-        && same(&[a.T_d3_3], &[b.T_d3_3])
-        && same(&a.x_d3_4, &b.x_d3_4)
-        && same(&a.F_d3_4, &b.F_d3_4)
-        && same(&[a.th_d3_4], &[b.th_d3_4])
-        && same(&[a.T_d3_4], &[b.T_d3_4])
-        && same(&a.x_d3_5, &b.x_d3_5)
-        && same(&a.F_d3_5, &b.F_d3_5)
-        && same(&[a.th_d3_5], &[b.th_d3_5])
-        && same(&[a.T_d3_5], &[b.T_d3_5])
-        && same(&a.x_d3_6, &b.x_d3_6)
-        && same(&a.F_d3_6, &b.F_d3_6)
-        && same(&[a.th_d3_6], &[b.th_d3_6])
-        && same(&[a.T_d3_6], &[b.T_d3_6])
-        && same(&a.x_d3_7, &b.x_d3_7)
-        && same(&a.F_d3_7, &b.F_d3_7)
-        && same(&[a.th_d3_7], &[b.th_d3_7])
-        && same(&[a.T_d3_7], &[b.T_d3_7])
-        && same(&a.x_d3_8, &b.x_d3_8)
-        && same(&a.F_d3_8, &b.F_d3_8)
-        && same(&[a.th_d3_8], &[b.th_d3_8])
-        && same(&[a.T_d3_8], &[b.T_d3_8])
-        && same(&a.x_d3_9, &b.x_d3_9)
-        && same(&a.F_d3_9, &b.F_d3_9)
-        && same(&[a.th_d3_9], &[b.th_d3_9])
-        && same(&[a.T_d3_9], &[b.T_d3_9])
-        && same(&a.x_d4_0, &b.x_d4_0)
-        && same(&a.F_d4_0, &b.F_d4_0)
-        && same(&[a.th_d4_0], &[b.th_d4_0])
-        && same(&[a.T_d4_0], &[b.T_d4_0])
-        && same(&a.x_d4_1, &b.x_d4_1)
-        && same(&a.F_d4_1, &b.F_d4_1)
-        && same(&[a.th_d4_1], &[b.th_d4_1])
-        && same(&[a.T_d4_1], &[b.T_d4_1])
-        && same(&a.x_d4_2, &b.x_d4_2)
-        && same(&a.F_d4_2, &b.F_d4_2)
-        && same(&[a.th_d4_2], &[b.th_d4_2])
-        && same(&[a.T_d4_2], &[b.T_d4_2])
-        && same(&a.x_d4_3, &b.x_d4_3)
-        && same(&a.F_d4_3, &b.F_d4_3)
-        && same(&[a.th_d4_3], &[b.th_d4_3])
-        && same(&[a.T_d4_3], &[b.T_d4_3])
-        && same(&a.x_d4_4, &b.x_d4_4)
-        && same(&a.F_d4_4, &b.F_d4_4)
-        && same(&[a.th_d4_4], &[b.th_d4_4])
-        && same(&[a.T_d4_4], &[b.T_d4_4])
-        && same(&a.x_d4_5, &b.x_d4_5)
-        && same(&a.F_d4_5, &b.F_d4_5)
-        && same(&[a.th_d4_5], &[b.th_d4_5])
-        && same(&[a.T_d4_5], &[b.T_d4_5])
-        && same(&a.x_d4_6, &b.x_d4_6)
-        && same(&a.F_d4_6, &b.F_d4_6)
-        && same(&[a.th_d4_6], &[b.th_d4_6])
-        && same(&[a.T_d4_6], &[b.T_d4_6])
-        && same(&a.x_d4_7, &b.x_d4_7)
-        && same(&a.F_d4_7, &b.F_d4_7)
-        && same(&[a.th_d4_7], &[b.th_d4_7])
-        && same(&[a.T_d4_7], &[b.T_d4_7])
-        && same(&a.x_d4_8, &b.x_d4_8)
-        && same(&a.F_d4_8, &b.F_d4_8)
-        && same(&[a.th_d4_8], &[b.th_d4_8])
-        && same(&[a.T_d4_8], &[b.T_d4_8])
-        && same(&a.x_d4_9, &b.x_d4_9)
-        && same(&a.F_d4_9, &b.F_d4_9)
-        && same(&[a.th_d4_9], &[b.th_d4_9])
-        && same(&[a.T_d4_9], &[b.T_d4_9])
-        && same(&a.x_d5_0, &b.x_d5_0)
-        && same(&a.F_d5_0, &b.F_d5_0)
-        && same(&[a.th_d5_0], &[b.th_d5_0])
-        && same(&[a.T_d5_0], &[b.T_d5_0])
-        && same(&a.x_d5_1, &b.x_d5_1)
-        && same(&a.F_d5_1, &b.F_d5_1)
-        && same(&[a.th_d5_1], &[b.th_d5_1])
-        && same(&[a.T_d5_1], &[b.T_d5_1])
-        && same(&a.x_d5_2, &b.x_d5_2)
-        && same(&a.F_d5_2, &b.F_d5_2)
-        && same(&[a.th_d5_2], &[b.th_d5_2])
-        && same(&[a.T_d5_2], &[b.T_d5_2])
-        && same(&a.x_d5_3, &b.x_d5_3)
-        && same(&a.F_d5_3, &b.F_d5_3)
-        && same(&[a.th_d5_3], &[b.th_d5_3])
-        && same(&[a.T_d5_3], &[b.T_d5_3])
-        && same(&a.x_d5_4, &b.x_d5_4)
-        && same(&a.F_d5_4, &b.F_d5_4)
-        && same(&[a.th_d5_4], &[b.th_d5_4])
-        && same(&[a.T_d5_4], &[b.T_d5_4])
-        && same(&a.x_d5_5, &b.x_d5_5)
-        && same(&a.F_d5_5, &b.F_d5_5)
-        && same(&[a.th_d5_5], &[b.th_d5_5])
-        && same(&[a.T_d5_5], &[b.T_d5_5])
-        && same(&a.x_d5_6, &b.x_d5_6)
-        && same(&a.F_d5_6, &b.F_d5_6)
-        && same(&[a.th_d5_6], &[b.th_d5_6])
-        && same(&[a.T_d5_6], &[b.T_d5_6])
-        && same(&a.x_d5_7, &b.x_d5_7)
-        && same(&a.F_d5_7, &b.F_d5_7)
-        && same(&[a.th_d5_7], &[b.th_d5_7])
-        && same(&[a.T_d5_7], &[b.T_d5_7])
-        && same(&a.x_d5_8, &b.x_d5_8)
-        && same(&a.F_d5_8, &b.F_d5_8)
-        && same(&[a.th_d5_8], &[b.th_d5_8])
-        && same(&[a.T_d5_8], &[b.T_d5_8])
-        && same(&a.x_d5_9, &b.x_d5_9)
-        && same(&a.F_d5_9, &b.F_d5_9)
-        && same(&[a.th_d5_9], &[b.th_d5_9])
-        && same(&[a.T_d5_9], &[b.T_d5_9])
-        && same(&a.x_d6_0, &b.x_d6_0)
-        && same(&a.F_d6_0, &b.F_d6_0)
-        && same(&[a.th_d6_0], &[b.th_d6_0])
-        && same(&[a.T_d6_0], &[b.T_d6_0])
-        && same(&a.x_d6_1, &b.x_d6_1)
-        && same(&a.F_d6_1, &b.F_d6_1)
-        && same(&[a.th_d6_1], &[b.th_d6_1])
-        && same(&[a.T_d6_1], &[b.T_d6_1])
-        && same(&a.x_d6_2, &b.x_d6_2)
-        && same(&a.F_d6_2, &b.F_d6_2)
-        && same(&[a.th_d6_2], &[b.th_d6_2])
-        && same(&[a.T_d6_2], &[b.T_d6_2])
-        && same(&a.x_d6_3, &b.x_d6_3)
-        && same(&a.F_d6_3, &b.F_d6_3)
-        && same(&[a.th_d6_3], &[b.th_d6_3])
-        && same(&[a.T_d6_3], &[b.T_d6_3])
-        && same(&a.x_d6_4, &b.x_d6_4)
-        && same(&a.F_d6_4, &b.F_d6_4)
-        && same(&[a.th_d6_4], &[b.th_d6_4])
-        && same(&[a.T_d6_4], &[b.T_d6_4])
-        && same(&a.x_d6_5, &b.x_d6_5)
-        && same(&a.F_d6_5, &b.F_d6_5)
-        && same(&[a.th_d6_5], &[b.th_d6_5])
-        && same(&[a.T_d6_5], &[b.T_d6_5])
-        && same(&a.x_d6_6, &b.x_d6_6)
-        && same(&a.F_d6_6, &b.F_d6_6)
-        && same(&[a.th_d6_6], &[b.th_d6_6])
-        && same(&[a.T_d6_6], &[b.T_d6_6])
-        && same(&a.x_d6_7, &b.x_d6_7)
-        && same(&a.F_d6_7, &b.F_d6_7)
-        && same(&[a.th_d6_7], &[b.th_d6_7])
-        && same(&[a.T_d6_7], &[b.T_d6_7])
-        && same(&a.x_d6_8, &b.x_d6_8)
-        && same(&a.F_d6_8, &b.F_d6_8)
-        && same(&[a.th_d6_8], &[b.th_d6_8])
-        && same(&[a.T_d6_8], &[b.T_d6_8])
-        && same(&a.x_d6_9, &b.x_d6_9)
-        && same(&a.F_d6_9, &b.F_d6_9)
-        && same(&[a.th_d6_9], &[b.th_d6_9])
-        && same(&[a.T_d6_9], &[b.T_d6_9])
-        && same(&a.x_d7_0, &b.x_d7_0)
-        && same(&a.F_d7_0, &b.F_d7_0)
-        && same(&[a.th_d7_0], &[b.th_d7_0])
-        && same(&[a.T_d7_0], &[b.T_d7_0])
-        && same(&a.x_d7_1, &b.x_d7_1)
-        && same(&a.F_d7_1, &b.F_d7_1)
-        && same(&[a.th_d7_1], &[b.th_d7_1])
-        && same(&[a.T_d7_1], &[b.T_d7_1])
-        && same(&a.x_d7_2, &b.x_d7_2)
-        && same(&a.F_d7_2, &b.F_d7_2)
-        && same(&[a.th_d7_2], &[b.th_d7_2])
-        && same(&[a.T_d7_2], &[b.T_d7_2])
-        && same(&a.x_d7_3, &b.x_d7_3)
-        && same(&a.F_d7_3, &b.F_d7_3)
-        && same(&[a.th_d7_3], &[b.th_d7_3])
-        && same(&[a.T_d7_3], &[b.T_d7_3])
-        && same(&a.x_d7_4, &b.x_d7_4)
-        && same(&a.F_d7_4, &b.F_d7_4)
-        && same(&[a.th_d7_4], &[b.th_d7_4])
-        && same(&[a.T_d7_4], &[b.T_d7_4])
-        && same(&a.x_d7_5, &b.x_d7_5)
-        && same(&a.F_d7_5, &b.F_d7_5)
-        && same(&[a.th_d7_5], &[b.th_d7_5])
-        && same(&[a.T_d7_5], &[b.T_d7_5])
-        && same(&a.x_d7_6, &b.x_d7_6)
-        && same(&a.F_d7_6, &b.F_d7_6)
-        && same(&[a.th_d7_6], &[b.th_d7_6])
-        && same(&[a.T_d7_6], &[b.T_d7_6])
-        && same(&a.x_d7_7, &b.x_d7_7)
-        && same(&a.F_d7_7, &b.F_d7_7)
-        && same(&[a.th_d7_7], &[b.th_d7_7])
-        && same(&[a.T_d7_7], &[b.T_d7_7])
-        && same(&a.x_d7_8, &b.x_d7_8)
-        && same(&a.F_d7_8, &b.F_d7_8)
-        && same(&[a.th_d7_8], &[b.th_d7_8])
-        && same(&[a.T_d7_8], &[b.T_d7_8])
-        && same(&a.x_d7_9, &b.x_d7_9)
-        && same(&a.F_d7_9, &b.F_d7_9)
-        && same(&[a.th_d7_9], &[b.th_d7_9])
-        && same(&[a.T_d7_9], &[b.T_d7_9])
-        && same(&a.x_d8_0, &b.x_d8_0)
-        && same(&a.F_d8_0, &b.F_d8_0)
-        && same(&[a.th_d8_0], &[b.th_d8_0])
-        && same(&[a.T_d8_0], &[b.T_d8_0])
-        && same(&a.x_d8_1, &b.x_d8_1)
-        && same(&a.F_d8_1, &b.F_d8_1)
-        && same(&[a.th_d8_1], &[b.th_d8_1])
-        && same(&[a.T_d8_1], &[b.T_d8_1])
-        && same(&a.x_d8_2, &b.x_d8_2)
-        && same(&a.F_d8_2, &b.F_d8_2)
-        && same(&[a.th_d8_2], &[b.th_d8_2])
-        && same(&[a.T_d8_2], &[b.T_d8_2])
-        && same(&a.x_d8_3, &b.x_d8_3)
-        && same(&a.F_d8_3, &b.F_d8_3)
-        && same(&[a.th_d8_3], &[b.th_d8_3])
-        && same(&[a.T_d8_3], &[b.T_d8_3])
-        && same(&a.x_d8_4, &b.x_d8_4)
-        && same(&a.F_d8_4, &b.F_d8_4)
-        && same(&[a.th_d8_4], &[b.th_d8_4])
-        && same(&[a.T_d8_4], &[b.T_d8_4])
-        && same(&a.x_d8_5, &b.x_d8_5)
-        && same(&a.F_d8_5, &b.F_d8_5)
-        && same(&[a.th_d8_5], &[b.th_d8_5])
-        && same(&[a.T_d8_5], &[b.T_d8_5])
-        && same(&a.x_d8_6, &b.x_d8_6)
-        && same(&a.F_d8_6, &b.F_d8_6)
-        && same(&[a.th_d8_6], &[b.th_d8_6])
-        && same(&[a.T_d8_6], &[b.T_d8_6])
-        && same(&a.x_d8_7, &b.x_d8_7)
-        && same(&a.F_d8_7, &b.F_d8_7)
-        && same(&[a.th_d8_7], &[b.th_d8_7])
-        && same(&[a.T_d8_7], &[b.T_d8_7])
-        && same(&a.x_d8_8, &b.x_d8_8)
-        && same(&a.F_d8_8, &b.F_d8_8)
-        && same(&[a.th_d8_8], &[b.th_d8_8])
-        && same(&[a.T_d8_8], &[b.T_d8_8])
-        && same(&a.x_d8_9, &b.x_d8_9)
-        && same(&a.F_d8_9, &b.F_d8_9)
-        && same(&[a.th_d8_9], &[b.th_d8_9])
-        && same(&[a.T_d8_9], &[b.T_d8_9])
-        && same(&a.x_d9_0, &b.x_d9_0)
-        && same(&a.F_d9_0, &b.F_d9_0)
-        && same(&[a.th_d9_0], &[b.th_d9_0])
-        && same(&[a.T_d9_0], &[b.T_d9_0])
-        && same(&a.x_d9_1, &b.x_d9_1)
-        && same(&a.F_d9_1, &b.F_d9_1)
-        && same(&[a.th_d9_1], &[b.th_d9_1])
-        && same(&[a.T_d9_1], &[b.T_d9_1])
-        && same(&a.x_d9_2, &b.x_d9_2)
-        && same(&a.F_d9_2, &b.F_d9_2)
-        && same(&[a.th_d9_2], &[b.th_d9_2])
-        && same(&[a.T_d9_2], &[b.T_d9_2])
-        && same(&a.x_d9_3, &b.x_d9_3)
-        && same(&a.F_d9_3, &b.F_d9_3)
-        && same(&[a.th_d9_3], &[b.th_d9_3])
-        && same(&[a.T_d9_3], &[b.T_d9_3])
-        && same(&a.x_d9_4, &b.x_d9_4)
-        && same(&a.F_d9_4, &b.F_d9_4)
-        && same(&[a.th_d9_4], &[b.th_d9_4])
-        && same(&[a.T_d9_4], &[b.T_d9_4])
-        && same(&a.x_d9_5, &b.x_d9_5)
-        && same(&a.F_d9_5, &b.F_d9_5)
-        && same(&[a.th_d9_5], &[b.th_d9_5])
-        && same(&[a.T_d9_5], &[b.T_d9_5])
-        && same(&a.x_d9_6, &b.x_d9_6)
-        && same(&a.F_d9_6, &b.F_d9_6)
-        && same(&[a.th_d9_6], &[b.th_d9_6])
-        && same(&[a.T_d9_6], &[b.T_d9_6])
-        && same(&a.x_d9_7, &b.x_d9_7)
-        && same(&a.F_d9_7, &b.F_d9_7)
-        && same(&[a.th_d9_7], &[b.th_d9_7])
-        && same(&[a.T_d9_7], &[b.T_d9_7])
-        && same(&a.x_d9_8, &b.x_d9_8)
-        && same(&a.F_d9_8, &b.F_d9_8)
-        && same(&[a.th_d9_8], &[b.th_d9_8])
-        && same(&[a.T_d9_8], &[b.T_d9_8])
-        && same(&a.x_d9_9, &b.x_d9_9)
-        && same(&a.F_d9_9, &b.F_d9_9)
-        && same(&[a.th_d9_9], &[b.th_d9_9])
-        && same(&[a.T_d9_9], &[b.T_d9_9])
+    let mut all = true;
+    all &= same(&a.g, &b.g);
+    all &= same(&a.x_d1_0, &b.x_d1_0);
+    all &= same(&a.F_d1_0, &b.F_d1_0);
+    all &= same(&[a.th_d1_0], &[b.th_d1_0]);
+    all &= same(&[a.T_d1_0], &[b.T_d1_0]);
+    all &= same(&a.x_d1_1, &b.x_d1_1);
+    all &= same(&a.F_d1_1, &b.F_d1_1);
+    all &= same(&[a.th_d1_1], &[b.th_d1_1]);
+    all &= same(&[a.T_d1_1], &[b.T_d1_1]);
+    all &= same(&a.x_d1_2, &b.x_d1_2);
+    all &= same(&a.F_d1_2, &b.F_d1_2);
+    all &= same(&[a.th_d1_2], &[b.th_d1_2]);
+    all &= same(&[a.T_d1_2], &[b.T_d1_2]);
+    all &= same(&a.x_d1_3, &b.x_d1_3);
+    all &= same(&a.F_d1_3, &b.F_d1_3);
+    all &= same(&[a.th_d1_3], &[b.th_d1_3]);
+    all &= same(&[a.T_d1_3], &[b.T_d1_3]);
+    all &= same(&a.x_d1_4, &b.x_d1_4);
+    all &= same(&a.F_d1_4, &b.F_d1_4);
+    all &= same(&[a.th_d1_4], &[b.th_d1_4]);
+    all &= same(&[a.T_d1_4], &[b.T_d1_4]);
+    all &= same(&a.x_d1_5, &b.x_d1_5);
+    all &= same(&a.F_d1_5, &b.F_d1_5);
+    all &= same(&[a.th_d1_5], &[b.th_d1_5]);
+    all &= same(&[a.T_d1_5], &[b.T_d1_5]);
+    all &= same(&a.x_d1_6, &b.x_d1_6);
+    all &= same(&a.F_d1_6, &b.F_d1_6);
+    all &= same(&[a.th_d1_6], &[b.th_d1_6]);
+    all &= same(&[a.T_d1_6], &[b.T_d1_6]);
+    all &= same(&a.x_d1_7, &b.x_d1_7);
+    all &= same(&a.F_d1_7, &b.F_d1_7);
+    all &= same(&[a.th_d1_7], &[b.th_d1_7]);
+    all &= same(&[a.T_d1_7], &[b.T_d1_7]);
+    all &= same(&a.x_d1_8, &b.x_d1_8);
+    all &= same(&a.F_d1_8, &b.F_d1_8);
+    all &= same(&[a.th_d1_8], &[b.th_d1_8]);
+    all &= same(&[a.T_d1_8], &[b.T_d1_8]);
+    all &= same(&a.x_d1_9, &b.x_d1_9);
+    all &= same(&a.F_d1_9, &b.F_d1_9);
+    all &= same(&[a.th_d1_9], &[b.th_d1_9]);
+    all &= same(&[a.T_d1_9], &[b.T_d1_9]);
+    all &= same(&a.x_d2_0, &b.x_d2_0);
+    all &= same(&a.F_d2_0, &b.F_d2_0);
+    all &= same(&[a.th_d2_0], &[b.th_d2_0]);
+    all &= same(&[a.T_d2_0], &[b.T_d2_0]);
+    all &= same(&a.x_d2_1, &b.x_d2_1);
+    all &= same(&a.F_d2_1, &b.F_d2_1);
+    all &= same(&[a.th_d2_1], &[b.th_d2_1]);
+    all &= same(&[a.T_d2_1], &[b.T_d2_1]);
+    all &= same(&a.x_d2_2, &b.x_d2_2);
+    all &= same(&a.F_d2_2, &b.F_d2_2);
+    all &= same(&[a.th_d2_2], &[b.th_d2_2]);
+    all &= same(&[a.T_d2_2], &[b.T_d2_2]);
+    all &= same(&a.x_d2_3, &b.x_d2_3);
+    all &= same(&a.F_d2_3, &b.F_d2_3);
+    all &= same(&[a.th_d2_3], &[b.th_d2_3]);
+    all &= same(&[a.T_d2_3], &[b.T_d2_3]);
+    all &= same(&a.x_d2_4, &b.x_d2_4);
+    all &= same(&a.F_d2_4, &b.F_d2_4);
+    all &= same(&[a.th_d2_4], &[b.th_d2_4]);
+    all &= same(&[a.T_d2_4], &[b.T_d2_4]);
+    all &= same(&a.x_d2_5, &b.x_d2_5);
+    all &= same(&a.F_d2_5, &b.F_d2_5);
+    all &= same(&[a.th_d2_5], &[b.th_d2_5]);
+    all &= same(&[a.T_d2_5], &[b.T_d2_5]);
+    all &= same(&a.x_d2_6, &b.x_d2_6);
+    all &= same(&a.F_d2_6, &b.F_d2_6);
+    all &= same(&[a.th_d2_6], &[b.th_d2_6]);
+    all &= same(&[a.T_d2_6], &[b.T_d2_6]);
+    all &= same(&a.x_d2_7, &b.x_d2_7);
+    all &= same(&a.F_d2_7, &b.F_d2_7);
+    all &= same(&[a.th_d2_7], &[b.th_d2_7]);
+    all &= same(&[a.T_d2_7], &[b.T_d2_7]);
+    all &= same(&a.x_d2_8, &b.x_d2_8);
+    all &= same(&a.F_d2_8, &b.F_d2_8);
+    all &= same(&[a.th_d2_8], &[b.th_d2_8]);
+    all &= same(&[a.T_d2_8], &[b.T_d2_8]);
+    all &= same(&a.x_d2_9, &b.x_d2_9);
+    all &= same(&a.F_d2_9, &b.F_d2_9);
+    all &= same(&[a.th_d2_9], &[b.th_d2_9]);
+    all &= same(&[a.T_d2_9], &[b.T_d2_9]);
+    all &= same(&a.x_d3_0, &b.x_d3_0);
+    all &= same(&a.F_d3_0, &b.F_d3_0);
+    all &= same(&[a.th_d3_0], &[b.th_d3_0]);
+    all &= same(&[a.T_d3_0], &[b.T_d3_0]);
+    all &= same(&a.x_d3_1, &b.x_d3_1);
+    all &= same(&a.F_d3_1, &b.F_d3_1);
+    all &= same(&[a.th_d3_1], &[b.th_d3_1]);
+    all &= same(&[a.T_d3_1], &[b.T_d3_1]);
+    all &= same(&a.x_d3_2, &b.x_d3_2);
+    all &= same(&a.F_d3_2, &b.F_d3_2);
+    all &= same(&[a.th_d3_2], &[b.th_d3_2]);
+    all &= same(&[a.T_d3_2], &[b.T_d3_2]);
+    all &= same(&a.x_d3_3, &b.x_d3_3);
+    all &= same(&a.F_d3_3, &b.F_d3_3);
+    all &= same(&[a.th_d3_3], &[b.th_d3_3]);
+    all &= same(&[a.T_d3_3], &[b.T_d3_3]);
+    all &= same(&a.x_d3_4, &b.x_d3_4);
+    all &= same(&a.F_d3_4, &b.F_d3_4);
+    all &= same(&[a.th_d3_4], &[b.th_d3_4]);
+    all &= same(&[a.T_d3_4], &[b.T_d3_4]);
+    all &= same(&a.x_d3_5, &b.x_d3_5);
+    all &= same(&a.F_d3_5, &b.F_d3_5);
+    all &= same(&[a.th_d3_5], &[b.th_d3_5]);
+    all &= same(&[a.T_d3_5], &[b.T_d3_5]);
+    all &= same(&a.x_d3_6, &b.x_d3_6);
+    all &= same(&a.F_d3_6, &b.F_d3_6);
+    all &= same(&[a.th_d3_6], &[b.th_d3_6]);
+    all &= same(&[a.T_d3_6], &[b.T_d3_6]);
+    all &= same(&a.x_d3_7, &b.x_d3_7);
+    all &= same(&a.F_d3_7, &b.F_d3_7);
+    all &= same(&[a.th_d3_7], &[b.th_d3_7]);
+    all &= same(&[a.T_d3_7], &[b.T_d3_7]);
+    all &= same(&a.x_d3_8, &b.x_d3_8);
+    all &= same(&a.F_d3_8, &b.F_d3_8);
+    all &= same(&[a.th_d3_8], &[b.th_d3_8]);
+    all &= same(&[a.T_d3_8], &[b.T_d3_8]);
+    all &= same(&a.x_d3_9, &b.x_d3_9);
+    all &= same(&a.F_d3_9, &b.F_d3_9);
+    all &= same(&[a.th_d3_9], &[b.th_d3_9]);
+    all &= same(&[a.T_d3_9], &[b.T_d3_9]);
+    all &= same(&a.x_d4_0, &b.x_d4_0);
+    all &= same(&a.F_d4_0, &b.F_d4_0);
+    all &= same(&[a.th_d4_0], &[b.th_d4_0]);
+    all &= same(&[a.T_d4_0], &[b.T_d4_0]);
+    all &= same(&a.x_d4_1, &b.x_d4_1);
+    all &= same(&a.F_d4_1, &b.F_d4_1);
+    all &= same(&[a.th_d4_1], &[b.th_d4_1]);
+    all &= same(&[a.T_d4_1], &[b.T_d4_1]);
+    all &= same(&a.x_d4_2, &b.x_d4_2);
+    all &= same(&a.F_d4_2, &b.F_d4_2);
+    all &= same(&[a.th_d4_2], &[b.th_d4_2]);
+    all &= same(&[a.T_d4_2], &[b.T_d4_2]);
+    all &= same(&a.x_d4_3, &b.x_d4_3);
+    all &= same(&a.F_d4_3, &b.F_d4_3);
+    all &= same(&[a.th_d4_3], &[b.th_d4_3]);
+    all &= same(&[a.T_d4_3], &[b.T_d4_3]);
+    all &= same(&a.x_d4_4, &b.x_d4_4);
+    all &= same(&a.F_d4_4, &b.F_d4_4);
+    all &= same(&[a.th_d4_4], &[b.th_d4_4]);
+    all &= same(&[a.T_d4_4], &[b.T_d4_4]);
+    all &= same(&a.x_d4_5, &b.x_d4_5);
+    all &= same(&a.F_d4_5, &b.F_d4_5);
+    all &= same(&[a.th_d4_5], &[b.th_d4_5]);
+    all &= same(&[a.T_d4_5], &[b.T_d4_5]);
+    all &= same(&a.x_d4_6, &b.x_d4_6);
+    all &= same(&a.F_d4_6, &b.F_d4_6);
+    all &= same(&[a.th_d4_6], &[b.th_d4_6]);
+    all &= same(&[a.T_d4_6], &[b.T_d4_6]);
+    all &= same(&a.x_d4_7, &b.x_d4_7);
+    all &= same(&a.F_d4_7, &b.F_d4_7);
+    all &= same(&[a.th_d4_7], &[b.th_d4_7]);
+    all &= same(&[a.T_d4_7], &[b.T_d4_7]);
+    all &= same(&a.x_d4_8, &b.x_d4_8);
+    all &= same(&a.F_d4_8, &b.F_d4_8);
+    all &= same(&[a.th_d4_8], &[b.th_d4_8]);
+    all &= same(&[a.T_d4_8], &[b.T_d4_8]);
+    all &= same(&a.x_d4_9, &b.x_d4_9);
+    all &= same(&a.F_d4_9, &b.F_d4_9);
+    all &= same(&[a.th_d4_9], &[b.th_d4_9]);
+    all &= same(&[a.T_d4_9], &[b.T_d4_9]);
+    all &= same(&a.x_d5_0, &b.x_d5_0);
+    all &= same(&a.F_d5_0, &b.F_d5_0);
+    all &= same(&[a.th_d5_0], &[b.th_d5_0]);
+    all &= same(&[a.T_d5_0], &[b.T_d5_0]);
+    all &= same(&a.x_d5_1, &b.x_d5_1);
+    all &= same(&a.F_d5_1, &b.F_d5_1);
+    all &= same(&[a.th_d5_1], &[b.th_d5_1]);
+    all &= same(&[a.T_d5_1], &[b.T_d5_1]);
+    all &= same(&a.x_d5_2, &b.x_d5_2);
+    all &= same(&a.F_d5_2, &b.F_d5_2);
+    all &= same(&[a.th_d5_2], &[b.th_d5_2]);
+    all &= same(&[a.T_d5_2], &[b.T_d5_2]);
+    all &= same(&a.x_d5_3, &b.x_d5_3);
+    all &= same(&a.F_d5_3, &b.F_d5_3);
+    all &= same(&[a.th_d5_3], &[b.th_d5_3]);
+    all &= same(&[a.T_d5_3], &[b.T_d5_3]);
+    all &= same(&a.x_d5_4, &b.x_d5_4);
+    all &= same(&a.F_d5_4, &b.F_d5_4);
+    all &= same(&[a.th_d5_4], &[b.th_d5_4]);
+    all &= same(&[a.T_d5_4], &[b.T_d5_4]);
+    all &= same(&a.x_d5_5, &b.x_d5_5);
+    all &= same(&a.F_d5_5, &b.F_d5_5);
+    all &= same(&[a.th_d5_5], &[b.th_d5_5]);
+    all &= same(&[a.T_d5_5], &[b.T_d5_5]);
+    all &= same(&a.x_d5_6, &b.x_d5_6);
+    all &= same(&a.F_d5_6, &b.F_d5_6);
+    all &= same(&[a.th_d5_6], &[b.th_d5_6]);
+    all &= same(&[a.T_d5_6], &[b.T_d5_6]);
+    all &= same(&a.x_d5_7, &b.x_d5_7);
+    all &= same(&a.F_d5_7, &b.F_d5_7);
+    all &= same(&[a.th_d5_7], &[b.th_d5_7]);
+    all &= same(&[a.T_d5_7], &[b.T_d5_7]);
+    all &= same(&a.x_d5_8, &b.x_d5_8);
+    all &= same(&a.F_d5_8, &b.F_d5_8);
+    all &= same(&[a.th_d5_8], &[b.th_d5_8]);
+    all &= same(&[a.T_d5_8], &[b.T_d5_8]);
+    all &= same(&a.x_d5_9, &b.x_d5_9);
+    all &= same(&a.F_d5_9, &b.F_d5_9);
+    all &= same(&[a.th_d5_9], &[b.th_d5_9]);
+    all &= same(&[a.T_d5_9], &[b.T_d5_9]);
+    all &= same(&a.x_d6_0, &b.x_d6_0);
+    all &= same(&a.F_d6_0, &b.F_d6_0);
+    all &= same(&[a.th_d6_0], &[b.th_d6_0]);
+    all &= same(&[a.T_d6_0], &[b.T_d6_0]);
+    all &= same(&a.x_d6_1, &b.x_d6_1);
+    all &= same(&a.F_d6_1, &b.F_d6_1);
+    all &= same(&[a.th_d6_1], &[b.th_d6_1]);
+    all &= same(&[a.T_d6_1], &[b.T_d6_1]);
+    all &= same(&a.x_d6_2, &b.x_d6_2);
+    all &= same(&a.F_d6_2, &b.F_d6_2);
+    all &= same(&[a.th_d6_2], &[b.th_d6_2]);
+    all &= same(&[a.T_d6_2], &[b.T_d6_2]);
+    all &= same(&a.x_d6_3, &b.x_d6_3);
+    all &= same(&a.F_d6_3, &b.F_d6_3);
+    all &= same(&[a.th_d6_3], &[b.th_d6_3]);
+    all &= same(&[a.T_d6_3], &[b.T_d6_3]);
+    all &= same(&a.x_d6_4, &b.x_d6_4);
+    all &= same(&a.F_d6_4, &b.F_d6_4);
+    all &= same(&[a.th_d6_4], &[b.th_d6_4]);
+    all &= same(&[a.T_d6_4], &[b.T_d6_4]);
+    all &= same(&a.x_d6_5, &b.x_d6_5);
+    all &= same(&a.F_d6_5, &b.F_d6_5);
+    all &= same(&[a.th_d6_5], &[b.th_d6_5]);
+    all &= same(&[a.T_d6_5], &[b.T_d6_5]);
+    all &= same(&a.x_d6_6, &b.x_d6_6);
+    all &= same(&a.F_d6_6, &b.F_d6_6);
+    all &= same(&[a.th_d6_6], &[b.th_d6_6]);
+    all &= same(&[a.T_d6_6], &[b.T_d6_6]);
+    all &= same(&a.x_d6_7, &b.x_d6_7);
+    all &= same(&a.F_d6_7, &b.F_d6_7);
+    all &= same(&[a.th_d6_7], &[b.th_d6_7]);
+    all &= same(&[a.T_d6_7], &[b.T_d6_7]);
+    all &= same(&a.x_d6_8, &b.x_d6_8);
+    all &= same(&a.F_d6_8, &b.F_d6_8);
+    all &= same(&[a.th_d6_8], &[b.th_d6_8]);
+    all &= same(&[a.T_d6_8], &[b.T_d6_8]);
+    all &= same(&a.x_d6_9, &b.x_d6_9);
+    all &= same(&a.F_d6_9, &b.F_d6_9);
+    all &= same(&[a.th_d6_9], &[b.th_d6_9]);
+    all &= same(&[a.T_d6_9], &[b.T_d6_9]);
+    all &= same(&a.x_d7_0, &b.x_d7_0);
+    all &= same(&a.F_d7_0, &b.F_d7_0);
+    all &= same(&[a.th_d7_0], &[b.th_d7_0]);
+    all &= same(&[a.T_d7_0], &[b.T_d7_0]);
+    all &= same(&a.x_d7_1, &b.x_d7_1);
+    all &= same(&a.F_d7_1, &b.F_d7_1);
+    all &= same(&[a.th_d7_1], &[b.th_d7_1]);
+    all &= same(&[a.T_d7_1], &[b.T_d7_1]);
+    all &= same(&a.x_d7_2, &b.x_d7_2);
+    all &= same(&a.F_d7_2, &b.F_d7_2);
+    all &= same(&[a.th_d7_2], &[b.th_d7_2]);
+    all &= same(&[a.T_d7_2], &[b.T_d7_2]);
+    all &= same(&a.x_d7_3, &b.x_d7_3);
+    all &= same(&a.F_d7_3, &b.F_d7_3);
+    all &= same(&[a.th_d7_3], &[b.th_d7_3]);
+    all &= same(&[a.T_d7_3], &[b.T_d7_3]);
+    all &= same(&a.x_d7_4, &b.x_d7_4);
+    all &= same(&a.F_d7_4, &b.F_d7_4);
+    all &= same(&[a.th_d7_4], &[b.th_d7_4]);
+    all &= same(&[a.T_d7_4], &[b.T_d7_4]);
+    all &= same(&a.x_d7_5, &b.x_d7_5);
+    all &= same(&a.F_d7_5, &b.F_d7_5);
+    all &= same(&[a.th_d7_5], &[b.th_d7_5]);
+    all &= same(&[a.T_d7_5], &[b.T_d7_5]);
+    all &= same(&a.x_d7_6, &b.x_d7_6);
+    all &= same(&a.F_d7_6, &b.F_d7_6);
+    all &= same(&[a.th_d7_6], &[b.th_d7_6]);
+    all &= same(&[a.T_d7_6], &[b.T_d7_6]);
+    all &= same(&a.x_d7_7, &b.x_d7_7);
+    all &= same(&a.F_d7_7, &b.F_d7_7);
+    all &= same(&[a.th_d7_7], &[b.th_d7_7]);
+    all &= same(&[a.T_d7_7], &[b.T_d7_7]);
+    all &= same(&a.x_d7_8, &b.x_d7_8);
+    all &= same(&a.F_d7_8, &b.F_d7_8);
+    all &= same(&[a.th_d7_8], &[b.th_d7_8]);
+    all &= same(&[a.T_d7_8], &[b.T_d7_8]);
+    all &= same(&a.x_d7_9, &b.x_d7_9);
+    all &= same(&a.F_d7_9, &b.F_d7_9);
+    all &= same(&[a.th_d7_9], &[b.th_d7_9]);
+    all &= same(&[a.T_d7_9], &[b.T_d7_9]);
+    all &= same(&a.x_d8_0, &b.x_d8_0);
+    all &= same(&a.F_d8_0, &b.F_d8_0);
+    all &= same(&[a.th_d8_0], &[b.th_d8_0]);
+    all &= same(&[a.T_d8_0], &[b.T_d8_0]);
+    all &= same(&a.x_d8_1, &b.x_d8_1);
+    all &= same(&a.F_d8_1, &b.F_d8_1);
+    all &= same(&[a.th_d8_1], &[b.th_d8_1]);
+    all &= same(&[a.T_d8_1], &[b.T_d8_1]);
+    all &= same(&a.x_d8_2, &b.x_d8_2);
+    all &= same(&a.F_d8_2, &b.F_d8_2);
+    all &= same(&[a.th_d8_2], &[b.th_d8_2]);
+    all &= same(&[a.T_d8_2], &[b.T_d8_2]);
+    all &= same(&a.x_d8_3, &b.x_d8_3);
+    all &= same(&a.F_d8_3, &b.F_d8_3);
+    all &= same(&[a.th_d8_3], &[b.th_d8_3]);
+    all &= same(&[a.T_d8_3], &[b.T_d8_3]);
+    all &= same(&a.x_d8_4, &b.x_d8_4);
+    all &= same(&a.F_d8_4, &b.F_d8_4);
+    all &= same(&[a.th_d8_4], &[b.th_d8_4]);
+    all &= same(&[a.T_d8_4], &[b.T_d8_4]);
+    all &= same(&a.x_d8_5, &b.x_d8_5);
+    all &= same(&a.F_d8_5, &b.F_d8_5);
+    all &= same(&[a.th_d8_5], &[b.th_d8_5]);
+    all &= same(&[a.T_d8_5], &[b.T_d8_5]);
+    all &= same(&a.x_d8_6, &b.x_d8_6);
+    all &= same(&a.F_d8_6, &b.F_d8_6);
+    all &= same(&[a.th_d8_6], &[b.th_d8_6]);
+    all &= same(&[a.T_d8_6], &[b.T_d8_6]);
+    all &= same(&a.x_d8_7, &b.x_d8_7);
+    all &= same(&a.F_d8_7, &b.F_d8_7);
+    all &= same(&[a.th_d8_7], &[b.th_d8_7]);
+    all &= same(&[a.T_d8_7], &[b.T_d8_7]);
+    all &= same(&a.x_d8_8, &b.x_d8_8);
+    all &= same(&a.F_d8_8, &b.F_d8_8);
+    all &= same(&[a.th_d8_8], &[b.th_d8_8]);
+    all &= same(&[a.T_d8_8], &[b.T_d8_8]);
+    all &= same(&a.x_d8_9, &b.x_d8_9);
+    all &= same(&a.F_d8_9, &b.F_d8_9);
+    all &= same(&[a.th_d8_9], &[b.th_d8_9]);
+    all &= same(&[a.T_d8_9], &[b.T_d8_9]);
+    all &= same(&a.x_d9_0, &b.x_d9_0);
+    all &= same(&a.F_d9_0, &b.F_d9_0);
+    all &= same(&[a.th_d9_0], &[b.th_d9_0]);
+    all &= same(&[a.T_d9_0], &[b.T_d9_0]);
+    all &= same(&a.x_d9_1, &b.x_d9_1);
+    all &= same(&a.F_d9_1, &b.F_d9_1);
+    all &= same(&[a.th_d9_1], &[b.th_d9_1]);
+    all &= same(&[a.T_d9_1], &[b.T_d9_1]);
+    all &= same(&a.x_d9_2, &b.x_d9_2);
+    all &= same(&a.F_d9_2, &b.F_d9_2);
+    all &= same(&[a.th_d9_2], &[b.th_d9_2]);
+    all &= same(&[a.T_d9_2], &[b.T_d9_2]);
+    all &= same(&a.x_d9_3, &b.x_d9_3);
+    all &= same(&a.F_d9_3, &b.F_d9_3);
+    all &= same(&[a.th_d9_3], &[b.th_d9_3]);
+    all &= same(&[a.T_d9_3], &[b.T_d9_3]);
+    all &= same(&a.x_d9_4, &b.x_d9_4);
+    all &= same(&a.F_d9_4, &b.F_d9_4);
+    all &= same(&[a.th_d9_4], &[b.th_d9_4]);
+    all &= same(&[a.T_d9_4], &[b.T_d9_4]);
+    all &= same(&a.x_d9_5, &b.x_d9_5);
+    all &= same(&a.F_d9_5, &b.F_d9_5);
+    all &= same(&[a.th_d9_5], &[b.th_d9_5]);
+    all &= same(&[a.T_d9_5], &[b.T_d9_5]);
+    all &= same(&a.x_d9_6, &b.x_d9_6);
+    all &= same(&a.F_d9_6, &b.F_d9_6);
+    all &= same(&[a.th_d9_6], &[b.th_d9_6]);
+    all &= same(&[a.T_d9_6], &[b.T_d9_6]);
+    all &= same(&a.x_d9_7, &b.x_d9_7);
+    all &= same(&a.F_d9_7, &b.F_d9_7);
+    all &= same(&[a.th_d9_7], &[b.th_d9_7]);
+    all &= same(&[a.T_d9_7], &[b.T_d9_7]);
+    all &= same(&a.x_d9_8, &b.x_d9_8);
+    all &= same(&a.F_d9_8, &b.F_d9_8);
+    all &= same(&[a.th_d9_8], &[b.th_d9_8]);
+    all &= same(&[a.T_d9_8], &[b.T_d9_8]);
+    all &= same(&a.x_d9_9, &b.x_d9_9);
+    all &= same(&a.F_d9_9, &b.F_d9_9);
+    all &= same(&[a.th_d9_9], &[b.th_d9_9]);
+    all &= same(&[a.T_d9_9], &[b.T_d9_9]);
+    all
 }
 
 /// The same bits in `a` and `b`, compared without a branch per number.

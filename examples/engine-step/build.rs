@@ -5,8 +5,8 @@
 //!   `constraints/solvers/joint_grid_100.toml` (distance rows);
 //! - `rigid_grid.rs` and `initial_rigid.rs`: Box2D's `joint_grid` as rigid discs on revolute
 //!   joints, the scene `cargo run --example solver_scenes -- rigid_grid N` writes (its text
-//!   comes from that example's `rigid_grid`, included below), N = 100 or the environment's
-//!   `RIGID_GRID`.
+//!   comes from that example's `rigid_grid`, included below), N = 30 or the environment's
+//!   `RIGID_GRID` (100 for Box2D's grid).
 //!
 //! An initial state is `State::default()` with every nonzero value of the file's `[scene]`
 //! assigned (parameters, orientations, angular velocities) and, in a big scene, the bodies'
@@ -36,7 +36,8 @@ fn main() {
     write(&points, &out, "joint_grid_100.rs", "initial_points.rs", "");
     let n: usize = match std::env::var("RIGID_GRID") {
         Ok(n) => n.parse().ok().filter(|&n| n >= 2).expect("RIGID_GRID is a grid size of at least 2"),
-        Err(_) => 100,
+        // 30 builds in about a minute; Box2D's 100 takes about 20 minutes (README).
+        Err(_) => 30,
     };
     let rigid = scenes::rigid_grid(n);
     write(

@@ -1216,6 +1216,23 @@ pub(super) fn step_constants(
     (starts, at)
 }
 
+/// Past this many comparisons `same_inputs` is a list of statements, not one expression:
+/// rustc parses a chain of `&&` by recursion, and 20 000 of them (a 100 × 100 grid of rigid
+/// discs, one per angle and torque field) overflow its default stack.
+const SAME_CHAIN_MAX: usize = 64;
+
+/// The body of `same_inputs` from its comparisons.
+fn same_body(same: &[String]) -> String {
+    match same.len() {
+        0 => "let _ = (a, b);\n    true".to_string(),
+        n if n <= SAME_CHAIN_MAX => same.join("\n        && "),
+        _ => {
+            let each: Vec<String> = same.iter().map(|s| format!("all &= {s};")).collect();
+            format!("let mut all = true;\n    {}\n    all", each.join("\n    "))
+        }
+    }
+}
+
 /// The state's accessors the step's text calls: `time`, `get` (the state's slots) and `put`.
 pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &StepRoots) {
     let same: Vec<String> = places.inputs.iter().map(|(a, b)| format!("same({a}, {b})")).collect();
@@ -1234,7 +1251,7 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
          fn same(a: &[f64], b: &[f64]) -> bool {{\n    \
          a.iter().zip(b).fold(true, |same, (x, y)| same & (x.to_bits() == y.to_bits()))\n}}\n",
         step.keep,
-        if same.is_empty() { "let _ = (a, b);\n    true".to_string() } else { same.join("\n        && ") }
+        same_body(&same)
     );
     let time = places.time.map_or("0.0".to_string(), |t| format!("s.{t}"));
     let _ = writeln!(out, "/// The state's time (0 when the file's state has none).\nfn time(s: &State) -> f64 {{");
