@@ -1787,6 +1787,8 @@ pub(crate) struct Regularised {
     diagonal: Vec<usize>,
     /// The block rows with a visible part in the null space (`NULL_SHARE`).
     null_rows: Vec<usize>,
+    /// The largest |Ãₚq|, for the rounding of a residual.
+    entry: f64,
 }
 
 /// Buffers of [`Regularised::minimum_norm`].
@@ -1827,7 +1829,8 @@ impl Regularised {
         if diagonal.contains(&usize::MAX) {
             return None;
         }
-        let mut regularised = Regularised { factor, targets, a: block.a.clone(), diagonal, null_rows: Vec::new() };
+        let mut regularised =
+            Regularised { factor, targets, a: block.a.clone(), diagonal, null_rows: Vec::new(), entry: 0.0 };
         regularised.refactor(&block.weight).then_some(regularised)
     }
 
@@ -1855,13 +1858,16 @@ impl Regularised {
         // vector.
         let mut rng = super::random::Rng::new(0x5EED_F00D);
         let mut y: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let mut work = SparseWork::default();
         for _ in 0..2 {
+            // The substitutions alone: which rows a null vector shows in needs no refinement.
             let weighted: Vec<f64> = y.iter().enumerate().map(|(p, v)| v * w2(p)).collect();
-            y = self.factor.solve(&weighted);
+            self.factor.substitute_into(&weighted, &mut work, &mut y);
         }
         let peak = y.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         self.null_rows.clear();
         self.null_rows.extend((0..n).filter(|&p| y[p].abs() > NULL_SHARE * peak));
+        self.entry = self.a.iter().fold(0.0f64, |m, &(_, _, v)| m.max(v.abs()));
         true
     }
 
@@ -1884,9 +1890,10 @@ impl Regularised {
         let size = rhs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let mut left = size;
         let mut solves = 0;
-        let entry = self.a.iter().fold(0.0f64, |m, &(_, _, v)| m.max(v.abs()));
+        let entry = self.entry;
         while solves < REGULARISED_SOLVES && left > 0.0 {
-            self.factor.solve_into(residual, sparse, step);
+            // The substitutions alone: the iteration refines against Ã itself.
+            self.factor.substitute_into(residual, sparse, step);
             trial.clear();
             trial.extend(mu.iter().zip(step.iter()).map(|(m, s)| m + s));
             // Ã x in `qp::sym_mul`'s order.
