@@ -3,7 +3,9 @@
 //! regularised Ã (and its analysis), so a solve with the same J only iterates on it and a
 //! new J of the same pattern only refactors it, with the general solve's answer bit for bit;
 //! rows that contradict each other are refused by the kept factor and answered by the
-//! general solve (which refuses them as too large).
+//! general solve (which refuses them as too large). Within the dense bound a block that is
+//! singular whatever its numbers takes the regularised factor in the cache too (the general
+//! solve keeps the eigendecomposition, for its rank and condition).
 //!
 //! The block is a braced grid of point masses: each joined by distance rows to its right
 //! and lower neighbours and across both diagonals of each cell (the top row to fixed
@@ -157,14 +159,49 @@ fn rows_that_contradict_each_other_are_refused_by_the_kept_factor() {
     assert_general(&served, &rows, "consistent again");
 }
 
+/// The largest |a − b| over the largest |b|.
+fn gap(a: &[f64], b: &[f64]) -> f64 {
+    let top = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f64, f64::max) / top
+}
+
 #[test]
-fn a_redundant_block_within_the_dense_bound_is_left_to_the_general_solve() {
-    // 9 × 10 bodies, about 340 rows: the eigendecomposition's (rank and condition reported).
-    let rows = braced(10, 3);
-    assert!(rows.rows.len() <= MAX_DENSE_ROWS);
+fn a_block_within_the_dense_bound_singular_whatever_its_numbers_takes_the_regularised_factor_too() {
+    // 9 × 10 bodies, 333 rows on 180 velocity components: the general solve takes the
+    // eigendecomposition (rank and condition, what `lagrange solve` shows), a run's cache
+    // the regularised sparse factor: the same minimum-norm λ but for the regularisation's
+    // share (ε = 1e-8) in the redundant rows' split, the same accelerations to rounding.
+    let settings = Settings::default();
     let mut cache = SolveCache::default();
-    let cached = solve_cached(&rows, &Settings::default(), &[], &mut cache);
-    assert_eq!(cache.last_path(), SolvePath::General);
-    assert!(cached.diagnostics.iter().any(|d| matches!(d, Diagnostic::Redundant { .. })), "{:?}", cached.diagnostics);
-    assert_general(&cached, &rows, "dense");
+    for seed in 0..3 {
+        let rows = braced(10, 3 + seed);
+        assert!(rows.rows.len() <= MAX_DENSE_ROWS && rows.rows.len() > 2 * rows.inverse_mass.len());
+        let cached = solve_cached(&rows, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Factored, "seed {seed}");
+        assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+        assert_eq!(cached.status, Status::MinimumNorm);
+        assert!(
+            cached.diagnostics.iter().any(|d| matches!(d, Diagnostic::RedundantSparse { .. })),
+            "{:?}",
+            cached.diagnostics
+        );
+        let general = solve_holding(&rows, &settings, &[]);
+        assert_eq!(general.status, Status::MinimumNorm);
+        assert!(
+            general.diagnostics.iter().any(|d| matches!(d, Diagnostic::Redundant { rank, size, .. }
+                if *rank < *size && *size == rows.rows.len())),
+            "{:?}",
+            general.diagnostics
+        );
+        let lambda = gap(&cached.lambda, &general.lambda);
+        assert!(lambda < 1e-6, "seed {seed}: λ apart by {lambda:e} of the largest");
+        let flat = |s: &Solution| s.acceleration.iter().flatten().copied().collect::<Vec<f64>>();
+        let acceleration = gap(&flat(&cached), &flat(&general));
+        assert!(acceleration < 1e-9, "seed {seed}: accelerations apart by {acceleration:e} of the largest");
+        // The same J: the kept factor serves.
+        let mut other = rows.clone();
+        other.force.iter_mut().for_each(|f| f[1] -= 2.0);
+        solve_cached(&other, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Reused);
+    }
 }

@@ -765,8 +765,8 @@ pub enum SolvePath {
     /// cache's own buffers when the rows act on the same bodies as before).
     Factored,
     /// Not a case the cache serves (an inequality row, a number that is not finite, a row
-    /// that cannot carry a force, a singular block within [`MAX_DENSE_ROWS`], a dense one
-    /// past it, rows of a singular block past it that contradict each other):
+    /// that cannot carry a force, a block within [`MAX_DENSE_ROWS`] singular by its numbers
+    /// only, a dense one past it, rows of a singular block that contradict each other):
     /// [`solve_holding`].
     General,
 }
@@ -786,8 +786,14 @@ pub enum SolvePath {
 /// the factor of Ã + ε W² is kept, refactored in place on a new J while the block is singular
 /// whatever its numbers, [`Block::columns`], and each solve checks its residual, leaving
 /// rows that contradict each other to the general solve); anything else goes to
-/// [`solve_holding`] unchanged. A solve it serves is the one `solve_holding` would compute, number for number (the same
-/// scaling, assembly, factor and refinement, made from inputs equal bit for bit).
+/// [`solve_holding`] unchanged. A solve it serves is the one `solve_holding` would compute,
+/// number for number (the same scaling, assembly, factor and refinement, made from inputs
+/// equal bit for bit), with one exception: a block within [`MAX_DENSE_ROWS`] singular
+/// whatever its numbers (more rows than velocity components, a small rigid grid) takes the
+/// regularised sparse factor here, the eigendecomposition there (which reports the rank and
+/// condition `lagrange solve` shows): the same minimum-norm λ but for the regularisation's
+/// share in the redundant rows' split, [`Diagnostic::RedundantSparse`] instead of
+/// [`Diagnostic::Redundant`].
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
     entry: Option<Factored>,
@@ -833,9 +839,10 @@ enum Factor {
         targets: Vec<usize>,
     },
     Dense(DenseFactor),
-    /// A singular block past [`MAX_DENSE_ROWS`]: the factor of Ã + ε W² its minimum norm
-    /// iterates with ([`sparse_minimum_norm`]), with Ã's terms (in the order of its entries
-    /// and their places).
+    /// A singular block past [`MAX_DENSE_ROWS`], or within it when singular whatever its
+    /// numbers: the factor of Ã + ε W² its minimum norm iterates with
+    /// ([`sparse_minimum_norm`]), with Ã's terms (in the order of its entries and their
+    /// places).
     Singular {
         regularised: Regularised,
         terms: Vec<Term>,
@@ -922,7 +929,6 @@ impl Factored {
                 // (singular by the numbers alone) the plan is made again.
                 let n = self.index.len();
                 if !matches!(settings.method, Method::Auto | Method::Sparse)
-                    || n <= MAX_DENSE_ROWS
                     || n <= columns(&self.scaled, &rows.inverse_mass, &self.index)
                 {
                     return false;
@@ -956,7 +962,26 @@ impl Factored {
         }
         let index: Vec<usize> = (0..rows.rows.len()).collect();
         let block = assemble(&scaled, &rows.inverse_mass, &index);
-        let factor = match plan(&block, settings) {
+        let planned = plan(&block, settings);
+        let sparse_method = matches!(settings.method, Method::Auto | Method::Sparse);
+        let factor = match planned {
+            // Singular whatever its numbers within the dense bound (a small rigid grid): the
+            // run takes the regularised sparse factor too, where the general solve takes the
+            // eigendecomposition (for its rank and condition): the same minimum-norm λ to
+            // the regularisation's 1e-8 in the redundant rows' split, the same impulses to
+            // rounding, at a sparse factor's cost instead of n³ per solve.
+            Plan::Singular(_) | Plan::Band(None) | Plan::Sparse(None) | Plan::Dense
+                if block.n <= MAX_DENSE_ROWS && sparse_method && structurally_singular(&block) =>
+            {
+                let analysed = match planned {
+                    Plan::Singular(analysed) => Some(analysed),
+                    _ => None,
+                };
+                Factor::Singular {
+                    regularised: Regularised::new(&block, analysed)?,
+                    terms: terms(&scaled, rows.inverse_mass.len(), &index),
+                }
+            }
             Plan::Band(Some(factor)) => {
                 let terms = terms(&scaled, rows.inverse_mass.len(), &index);
                 let targets = terms
@@ -1004,8 +1029,8 @@ pub enum Factorisation {
     Band,
     Sparse,
     Dense,
-    /// The sparse factor of the regularised Ã of a singular block past [`MAX_DENSE_ROWS`]
-    /// (its minimum norm by iterated solves).
+    /// The sparse factor of the regularised Ã of a singular block past [`MAX_DENSE_ROWS`],
+    /// or within it when singular whatever its numbers (its minimum norm by iterated solves).
     RegularisedSparse,
 }
 
