@@ -782,9 +782,9 @@ pub enum SolvePath {
 ///
 /// It serves only equality rows whose numbers are all finite and usable, on a block the
 /// band, sparse or dense factorisation factors, or a singular one past [`MAX_DENSE_ROWS`]
-/// whose minimum norm the regularised sparse factor iterates to ([`sparse_minimum_norm`]:
+/// whose minimum norm the regularised sparse factor iterates to (`sparse_minimum_norm`:
 /// the factor of Ã + ε W² is kept, refactored in place on a new J while the block is singular
-/// whatever its numbers, [`Block::columns`], and each solve checks its residual, leaving
+/// whatever its numbers, `Block::columns`, and each solve checks its residual, leaving
 /// rows that contradict each other to the general solve); anything else goes to
 /// [`solve_holding`] unchanged. A solve it serves is the one `solve_holding` would compute,
 /// number for number (the same scaling, assembly, factor and refinement, made from inputs
