@@ -91,6 +91,12 @@ const NULL_SHARE: f64 = 1e-6;
 /// the residual's rounding in the null space (≈ 1e-16) grows by 1/ε into λ's split among
 /// the redundant rows only (1e-8 of λ; the impulse Jᵀλ has no null-space part).
 const REGULARISATION: f64 = 1e-8;
+/// The rounding of a residual rhs − Ã μ [`sparse_minimum_norm`] allows beside its
+/// consistency bound on rhs, in ulps of max|Ã|·max|μ|: a consistent block's iterate stops at
+/// a few ulps per entry of a row (tens); rows that contradict each other by r₀ make μ grow by
+/// r₀/ε a solve (1e8 r₀), so ITERATE_ROUNDING · 2⁻⁵² · 1e8 r₀ ≈ 1e-4 r₀ per solve, forty solves
+/// at most, stays below the r₀ they leave.
+const ITERATE_ROUNDING: f64 = 1e4;
 /// The most regularised solves [`sparse_minimum_norm`] takes; it stops earlier as soon as a
 /// solve no longer halves the residual (it is then at its rounding).
 const REGULARISED_SOLVES: usize = 40;
@@ -612,6 +618,32 @@ pub(crate) struct Block {
     /// Per block row, λₖ/λ̃ₖ = 1/(‖Jₖ‖√Âₖₖ): the weights that make a minimum-norm λ̃ the
     /// minimum-norm λ of C/κ (see [`minimum_norm`]).
     pub weight: Vec<f64>,
+    /// The velocity components (slot and axis) with a non-zero part of J̃ and a non-zero
+    /// inverse mass: rank Ã ≤ `columns`, so more rows than that are redundant whatever the
+    /// numbers ([`structurally_singular`]).
+    pub columns: usize,
+}
+
+/// Whether `block` has more rows than velocity components its rows move: Ã = J̃ M⁻¹ J̃ᵀ is
+/// then singular in exact arithmetic (rank Ã ≤ rank J̃ ≤ `columns`), so a factorisation
+/// that does not find it singular found a rounding accident, and [`plan`] goes to the
+/// minimum norm without trying one (a rigid grid's redundant loops).
+fn structurally_singular(block: &Block) -> bool {
+    block.n > block.columns
+}
+
+/// [`Block::columns`] of the rows `index`.
+fn columns(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -> usize {
+    // One bit per axis of each slot.
+    let mut moved = vec![0u8; inverse_mass.len()];
+    for &k in index {
+        for &(b, j) in scaled.jacobian(k) {
+            if inverse_mass[b] != 0.0 {
+                moved[b] |= u8::from(j[0] != 0.0) | (u8::from(j[1] != 0.0) << 1) | (u8::from(j[2] != 0.0) << 2);
+            }
+        }
+    }
+    moved.iter().map(|m| m.count_ones() as usize).sum()
 }
 
 /// One term J̃ₚᵢ·J̃qᵢ wᵢ of Ã: block rows `lo` ≤ `hi`, the two parts' places in
@@ -671,7 +703,8 @@ pub(crate) fn assemble(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -
     let bandwidth = terms.iter().map(|t| t.hi - t.lo).max().unwrap_or(0);
     let a = terms.iter().map(|t| (t.lo, t.hi, term_value(scaled, inverse_mass, t))).collect();
     let weight = index.iter().map(|&k| scaled.unscale(k, 1.0)).collect();
-    Block { n: index.len(), bandwidth, a, weight }
+    let columns = columns(scaled, inverse_mass, index);
+    Block { n: index.len(), bandwidth, a, weight, columns }
 }
 
 /// Solves for λ at `rows` with the default settings.
@@ -732,7 +765,8 @@ pub enum SolvePath {
     /// cache's own buffers when the rows act on the same bodies as before).
     Factored,
     /// Not a case the cache serves (an inequality row, a number that is not finite, a row
-    /// that cannot carry a force, a singular block, a dense one past [`MAX_DENSE_ROWS`]):
+    /// that cannot carry a force, a block within [`MAX_DENSE_ROWS`] singular by its numbers
+    /// only, a dense one past it, rows of a singular block that contradict each other):
     /// [`solve_holding`].
     General,
 }
@@ -747,9 +781,19 @@ pub enum SolvePath {
 /// pattern of L), so a new factor costs the arithmetic alone.
 ///
 /// It serves only equality rows whose numbers are all finite and usable, on a block the
-/// band, sparse or dense factorisation factors; anything else goes to [`solve_holding`]
-/// unchanged. A solve it serves is the one `solve_holding` would compute, number for number (the same
-/// scaling, assembly, factor and refinement, made from inputs equal bit for bit).
+/// band, sparse or dense factorisation factors, or a singular one past [`MAX_DENSE_ROWS`]
+/// whose minimum norm the regularised sparse factor iterates to (`sparse_minimum_norm`:
+/// the factor of Ã + ε W² is kept, refactored in place on a new J while the block is singular
+/// whatever its numbers, `Block::columns`, and each solve checks its residual, leaving
+/// rows that contradict each other to the general solve); anything else goes to
+/// [`solve_holding`] unchanged. A solve it serves is the one `solve_holding` would compute,
+/// number for number (the same scaling, assembly, factor and refinement, made from inputs
+/// equal bit for bit), with one exception: a block within [`MAX_DENSE_ROWS`] singular
+/// whatever its numbers (more rows than velocity components, a small rigid grid) takes the
+/// regularised sparse factor here, the eigendecomposition there (which reports the rank and
+/// condition `lagrange solve` shows): the same minimum-norm λ but for the regularisation's
+/// share in the redundant rows' split, [`Diagnostic::RedundantSparse`] instead of
+/// [`Diagnostic::Redundant`].
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
     entry: Option<Factored>,
@@ -759,6 +803,7 @@ pub struct SolveCache {
     mu: Vec<f64>,
     work: BandWork,
     sparse_work: SparseWork,
+    regularised_work: RegularisedWork,
 }
 
 /// One cached factorisation and the inputs it was made from.
@@ -794,6 +839,14 @@ enum Factor {
         targets: Vec<usize>,
     },
     Dense(DenseFactor),
+    /// A singular block past [`MAX_DENSE_ROWS`], or within it when singular whatever its
+    /// numbers: the factor of Ã + ε W² its minimum norm iterates with
+    /// ([`sparse_minimum_norm`]), with Ã's terms (in the order of its entries and their
+    /// places).
+    Singular {
+        regularised: Regularised,
+        terms: Vec<Term>,
+    },
 }
 
 impl Factored {
@@ -870,6 +923,22 @@ impl Factored {
                 factor.factor(settings.rank_tolerance)
             }
             Factor::Dense(_) => false,
+            Factor::Singular { regularised, terms } => {
+                // `plan`'s way to the regularised factor without a factorisation that fails:
+                // singular whatever the numbers, past the dense decomposition. Otherwise
+                // (singular by the numbers alone) the plan is made again.
+                let n = self.index.len();
+                if !matches!(settings.method, Method::Auto | Method::Sparse)
+                    || n <= columns(&self.scaled, &rows.inverse_mass, &self.index)
+                {
+                    return false;
+                }
+                for (entry, t) in regularised.a.iter_mut().zip(terms.iter()) {
+                    entry.2 = term_value(&self.scaled, &rows.inverse_mass, t);
+                }
+                let weight: Vec<f64> = self.index.iter().map(|&k| self.scaled.unscale(k, 1.0)).collect();
+                regularised.refactor(&weight)
+            }
         };
         if !factored {
             return false;
@@ -893,7 +962,26 @@ impl Factored {
         }
         let index: Vec<usize> = (0..rows.rows.len()).collect();
         let block = assemble(&scaled, &rows.inverse_mass, &index);
-        let factor = match plan(&block, settings) {
+        let planned = plan(&block, settings);
+        let sparse_method = matches!(settings.method, Method::Auto | Method::Sparse);
+        let factor = match planned {
+            // Singular whatever its numbers within the dense bound (a small rigid grid): the
+            // run takes the regularised sparse factor too, where the general solve takes the
+            // eigendecomposition (for its rank and condition): the same minimum-norm λ to
+            // the regularisation's 1e-8 in the redundant rows' split, the same impulses to
+            // rounding, at a sparse factor's cost instead of n³ per solve.
+            Plan::Singular(_) | Plan::Band(None) | Plan::Sparse(None) | Plan::Dense
+                if block.n <= MAX_DENSE_ROWS && sparse_method && structurally_singular(&block) =>
+            {
+                let analysed = match planned {
+                    Plan::Singular(analysed) => Some(analysed),
+                    _ => None,
+                };
+                Factor::Singular {
+                    regularised: Regularised::new(&block, analysed)?,
+                    terms: terms(&scaled, rows.inverse_mass.len(), &index),
+                }
+            }
             Plan::Band(Some(factor)) => {
                 let terms = terms(&scaled, rows.inverse_mass.len(), &index);
                 let targets = terms
@@ -910,6 +998,15 @@ impl Factored {
                 Factor::Sparse { factor, terms: terms(&scaled, rows.inverse_mass.len(), &index), targets }
             }
             Plan::Dense if block.n <= MAX_DENSE_ROWS => Factor::Dense(DenseFactor::new(&block, settings)?),
+            // Singular past the dense decomposition: `equality`'s regularised factor.
+            Plan::Singular(analysed) if block.n > MAX_DENSE_ROWS => Factor::Singular {
+                regularised: Regularised::new(&block, Some(analysed))?,
+                terms: terms(&scaled, rows.inverse_mass.len(), &index),
+            },
+            Plan::Band(None) | Plan::Sparse(None) if block.n > MAX_DENSE_ROWS => Factor::Singular {
+                regularised: Regularised::new(&block, None)?,
+                terms: terms(&scaled, rows.inverse_mass.len(), &index),
+            },
             _ => return None,
         };
         Some(Factored {
@@ -932,6 +1029,9 @@ pub enum Factorisation {
     Band,
     Sparse,
     Dense,
+    /// The sparse factor of the regularised Ã of a singular block past [`MAX_DENSE_ROWS`],
+    /// or within it when singular whatever its numbers (its minimum norm by iterated solves).
+    RegularisedSparse,
 }
 
 impl SolveCache {
@@ -947,6 +1047,7 @@ impl SolveCache {
             Factor::Band { .. } => Factorisation::Band,
             Factor::Sparse { .. } => Factorisation::Sparse,
             Factor::Dense(_) => Factorisation::Dense,
+            Factor::Singular { .. } => Factorisation::RegularisedSparse,
         })
     }
 }
@@ -999,6 +1100,20 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
             Factor::Band { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.work, &mut cache.mu),
             Factor::Sparse { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.sparse_work, &mut cache.mu),
             Factor::Dense(factor) => cache.mu.extend(factor.solve(&cache.rhs)),
+            Factor::Singular { regularised, .. } => {
+                match regularised.minimum_norm(&cache.rhs, settings, &mut cache.regularised_work, &mut cache.mu) {
+                    Some(solves) => {
+                        diagnostics.push(regularised.diagnostic(&c.index, solves));
+                        status = status.max(Status::MinimumNorm);
+                    }
+                    None => {
+                        // Rows that contradict each other here: the general solve says so.
+                        cache.path = SolvePath::General;
+                        *out = solve_holding(rows, settings, held);
+                        return;
+                    }
+                }
+            }
         }
         finite_in_place(&mut cache.mu, &c.index, &mut diagnostics, &mut status);
     }
@@ -1227,6 +1342,8 @@ fn solve_subset(
             .map(|&(p, q, v)| (position[p], position[q], v))
             .collect(),
         weight: rows.iter().map(|&p| block.weight[p]).collect(),
+        // A subset of the rows moves a subset of the components: still a bound on the rank.
+        columns: block.columns,
     };
     let sub_b: Vec<f64> = rows.iter().map(|&p| b[p]).collect();
     let sub_index: Vec<usize> = rows.iter().map(|&p| index[p]).collect();
@@ -1359,6 +1476,15 @@ pub(crate) struct SparsePlan {
 /// [`MAX_SPARSE_FLOPS`]) is planned dense, which [`equality`] refuses as too large.
 pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     let n = block.n;
+    if matches!(settings.method, Method::Auto | Method::Sparse) && n > MAX_DENSE_ROWS && structurally_singular(block) {
+        // Singular whatever the numbers, past the dense decomposition: straight to the
+        // regularised sparse factor (no factorisation that can only fail, or pass by a
+        // rounding accident).
+        return match SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q))) {
+            Some((factor, targets)) => Plan::Singular(SparsePlan { factor, targets }),
+            None => Plan::Dense,
+        };
+    }
     let mut order: Option<Vec<usize>> = None;
     let mut bandwidth = block.bandwidth;
     let renumber = matches!(settings.method, Method::Banded | Method::Auto);
@@ -1663,79 +1789,174 @@ fn sparse_minimum_norm(
     diagnostics: &mut Vec<Diagnostic>,
     status: &mut Status,
 ) -> Option<Vec<f64>> {
-    let n = block.n;
-    let SparsePlan { mut factor, targets } = match analysed {
-        Some(plan) => plan,
-        None => {
-            let (factor, targets) = SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
-            SparsePlan { factor, targets }
-        }
-    };
-    // As `plan` weighs them: a block whose sparse factor costs more than a dense one is dense
-    // (all pairs of a cluster of bodies), and its n³ is what the size limit refuses.
-    let dense_cost = DENSE_COST * (n as f64).powi(3) / 3.0;
-    if factor.flops() > MAX_SPARSE_FLOPS || SPARSE_COST * factor.flops() > dense_cost {
-        return None;
-    }
-    let top = block.weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
-    let mut w2: Vec<f64> = block.weight.iter().map(|x| (x / top) * (x / top)).collect();
-    if w2.len() != n || !w2.iter().all(|x| x.is_finite() && x.sqrt() >= WEIGHT_RANGE) {
-        w2 = vec![1.0; n];
-    }
-    // Ã + ε W² into the factor: Ã's entries at their places, then ε Wₚ² on each diagonal
-    // (the first place an entry (p, p) was given: they all sum into one).
-    let values = factor.values_mut();
-    sum_entries(block, values, &targets);
-    let mut diagonal = vec![usize::MAX; n];
-    for (&at, &(p, q, _)) in targets.iter().zip(&block.a) {
-        if p == q && diagonal[p] == usize::MAX {
-            diagonal[p] = at;
-        }
-    }
-    for (p, &at) in diagonal.iter().enumerate() {
-        // Ã has a unit diagonal: every row has its entry.
-        *values.get_mut(at)? += REGULARISATION * w2[p];
-    }
-    if !factor.factor(0.0) {
-        return None;
-    }
-    let mut mu = vec![0.0; n];
-    let mut residual: Vec<f64> = rhs.to_vec();
-    let mut size = rhs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let mut left = size;
-    let mut solves = 0;
-    let entry = block.a.iter().fold(0.0f64, |m, &(_, _, v)| m.max(v.abs()));
-    while solves < REGULARISED_SOLVES && left > 0.0 {
-        let step = factor.solve(&residual);
-        let trial: Vec<f64> = mu.iter().zip(&step).map(|(m, s)| m + s).collect();
-        let ax = super::qp::sym_mul(n, &block.a, &trial);
-        let next: Vec<f64> = rhs.iter().zip(&ax).map(|(r, a)| r - a).collect();
-        let now = next.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        solves += 1;
-        if !now.is_finite() || now > 0.5 * left {
-            // No longer halving: the last iterate is at its rounding (or this one is worse).
-            if now < left && now.is_finite() {
-                (mu, left) = (trial, now);
-            }
-            break;
-        }
-        (mu, residual, left) = (trial, next, now);
-    }
-    size += entry * mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let consistent = left <= settings.contact_tolerance.sqrt() * CONSISTENCY * size || size == 0.0;
-    if !consistent || !mu.iter().all(|x| x.is_finite()) {
-        return None;
-    }
-    // The null space's rows: two inverse iterations in the weighted norm from a fixed vector.
-    let mut rng = super::random::Rng::new(0x5EED_F00D);
-    let mut y: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
-    for _ in 0..2 {
-        let weighted: Vec<f64> = y.iter().zip(&w2).map(|(v, w)| v * w).collect();
-        y = factor.solve(&weighted);
-    }
-    let peak = y.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-    let constraints: Vec<usize> = (0..n).filter(|&p| y[p].abs() > NULL_SHARE * peak).map(|p| index[p]).collect();
-    diagnostics.push(Diagnostic::RedundantSparse { constraints, size: n, solves });
+    let regularised = Regularised::new(block, analysed)?;
+    let mut mu = Vec::new();
+    let solves = regularised.minimum_norm(rhs, settings, &mut RegularisedWork::default(), &mut mu)?;
+    diagnostics.push(regularised.diagnostic(index, solves));
     *status = (*status).max(Status::MinimumNorm);
     Some(mu)
+}
+
+/// The factor of Ã + ε W² of a singular block (see [`sparse_minimum_norm`]) and what its
+/// solves need: made once per J and masses, and kept by a run's [`SolveCache`] (its analysis
+/// too, while the pattern stays), since the iteration needs no more than it.
+#[derive(Clone, Debug)]
+pub(crate) struct Regularised {
+    factor: SparseFactor,
+    /// For each of Ã's entries (`a`, in order), the place in `factor` it is summed into.
+    targets: Vec<usize>,
+    /// Ã's entries (`Block::a`), for the residuals.
+    a: Vec<(usize, usize, f64)>,
+    /// The place in `factor` of each row's diagonal entry (the first place an entry (p, p)
+    /// was given: they all sum into one).
+    diagonal: Vec<usize>,
+    /// The block rows with a visible part in the null space (`NULL_SHARE`).
+    null_rows: Vec<usize>,
+    /// The largest |Ãₚq|, for the rounding of a residual.
+    entry: f64,
+}
+
+/// Buffers of [`Regularised::minimum_norm`].
+#[derive(Clone, Debug, Default)]
+struct RegularisedWork {
+    residual: Vec<f64>,
+    step: Vec<f64>,
+    trial: Vec<f64>,
+    ax: Vec<f64>,
+    sparse: SparseWork,
+}
+
+impl Regularised {
+    /// The regularised factor of `block` (`analysed`: its sparse analysis, when the plan made
+    /// one); `None` as [`sparse_minimum_norm`] says.
+    fn new(block: &Block, analysed: Option<SparsePlan>) -> Option<Regularised> {
+        let n = block.n;
+        let SparsePlan { factor, targets } = match analysed {
+            Some(plan) => plan,
+            None => {
+                let (factor, targets) = SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q)))?;
+                SparsePlan { factor, targets }
+            }
+        };
+        // As `plan` weighs them: a block whose sparse factor costs more than a dense one is
+        // dense (all pairs of a cluster of bodies), and its n³ is what the size limit refuses.
+        let dense_cost = DENSE_COST * (n as f64).powi(3) / 3.0;
+        if factor.flops() > MAX_SPARSE_FLOPS || SPARSE_COST * factor.flops() > dense_cost {
+            return None;
+        }
+        let mut diagonal = vec![usize::MAX; n];
+        for (&at, &(p, q, _)) in targets.iter().zip(&block.a) {
+            if p == q && diagonal[p] == usize::MAX {
+                diagonal[p] = at;
+            }
+        }
+        // Ã has a unit diagonal: every row has its entry.
+        if diagonal.contains(&usize::MAX) {
+            return None;
+        }
+        let mut regularised =
+            Regularised { factor, targets, a: block.a.clone(), diagonal, null_rows: Vec::new(), entry: 0.0 };
+        regularised.refactor(&block.weight).then_some(regularised)
+    }
+
+    /// Ã + ε W² into the factor from `a` (Ã's entries at their places, then ε Wₚ² on each
+    /// diagonal), for the rows' `weight`, factored, and the null space's rows found: false
+    /// when the factorisation fails.
+    fn refactor(&mut self, weight: &[f64]) -> bool {
+        let n = self.diagonal.len();
+        let top = weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+        let values = self.factor.values_mut();
+        values.fill(0.0);
+        for (&at, &(_, _, v)) in self.targets.iter().zip(&self.a) {
+            values[at] += v;
+        }
+        let w2 = |p: usize| (weight[p] / top) * (weight[p] / top);
+        let weighted = weight.len() == n && (0..n).all(|p| w2(p).is_finite() && w2(p).sqrt() >= WEIGHT_RANGE);
+        let w2 = |p: usize| if weighted { w2(p) } else { 1.0 };
+        for (p, &at) in self.diagonal.iter().enumerate() {
+            values[at] += REGULARISATION * w2(p);
+        }
+        if !self.factor.factor(0.0) {
+            return false;
+        }
+        // The null space's rows: two inverse iterations in the weighted norm from a fixed
+        // vector.
+        let mut rng = super::random::Rng::new(0x5EED_F00D);
+        let mut y: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let mut work = SparseWork::default();
+        for _ in 0..2 {
+            // The substitutions alone: which rows a null vector shows in needs no refinement.
+            let weighted: Vec<f64> = y.iter().enumerate().map(|(p, v)| v * w2(p)).collect();
+            self.factor.substitute_into(&weighted, &mut work, &mut y);
+        }
+        let peak = y.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        self.null_rows.clear();
+        self.null_rows.extend((0..n).filter(|&p| y[p].abs() > NULL_SHARE * peak));
+        self.entry = self.a.iter().fold(0.0f64, |m, &(_, _, v)| m.max(v.abs()));
+        true
+    }
+
+    /// The minimum-norm μ of Ã μ = `rhs` into `mu` by the iterated Tikhonov solves (see
+    /// [`sparse_minimum_norm`]), and their number; `None` when the residual stays above the
+    /// consistency bound (rows that contradict each other) or μ is not finite.
+    fn minimum_norm(
+        &self,
+        rhs: &[f64],
+        settings: &Settings,
+        work: &mut RegularisedWork,
+        mu: &mut Vec<f64>,
+    ) -> Option<usize> {
+        let n = self.diagonal.len();
+        let RegularisedWork { residual, step, trial, ax, sparse } = work;
+        mu.clear();
+        mu.resize(n, 0.0);
+        residual.clear();
+        residual.extend_from_slice(rhs);
+        let size = rhs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let mut left = size;
+        let mut solves = 0;
+        let entry = self.entry;
+        while solves < REGULARISED_SOLVES && left > 0.0 {
+            // The substitutions alone: the iteration refines against Ã itself.
+            self.factor.substitute_into(residual, sparse, step);
+            trial.clear();
+            trial.extend(mu.iter().zip(step.iter()).map(|(m, s)| m + s));
+            // Ã x in `qp::sym_mul`'s order.
+            ax.clear();
+            ax.resize(n, 0.0);
+            for &(i, j, v) in &self.a {
+                ax[i] += v * trial[j];
+                if i != j {
+                    ax[j] += v * trial[i];
+                }
+            }
+            let now = rhs.iter().zip(ax.iter()).fold(0.0f64, |m, (r, a)| m.max((r - a).abs()));
+            solves += 1;
+            if !now.is_finite() || now > 0.5 * left {
+                // No longer halving: the last iterate is at its rounding (or this one is worse).
+                if now < left && now.is_finite() {
+                    std::mem::swap(mu, trial);
+                    left = now;
+                }
+                break;
+            }
+            std::mem::swap(mu, trial);
+            residual.clear();
+            residual.extend(rhs.iter().zip(ax.iter()).map(|(r, a)| r - a));
+            left = now;
+        }
+        // Against the right-hand side as the dense solve weighs it, and against the rounding
+        // of Ã μ: not √tolerance of |Ã||μ|, since rows that contradict each other leave their
+        // residual's null part r₀ in every step, which adds r₀/ε to μ each time, so that bound
+        // would grow past any residual (random c terms on a braced grid passed it).
+        let rounding = ITERATE_ROUNDING * f64::EPSILON * entry * mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let consistent = left <= settings.contact_tolerance.sqrt() * CONSISTENCY * size + rounding || size == 0.0;
+        (consistent && mu.iter().all(|x| x.is_finite())).then_some(solves)
+    }
+
+    /// The diagnostic of a solve of `solves` regularised solves, the rows named by `index`.
+    fn diagnostic(&self, index: &[usize], solves: usize) -> Diagnostic {
+        let constraints = self.null_rows.iter().map(|&p| index[p]).collect();
+        Diagnostic::RedundantSparse { constraints, size: self.diagonal.len(), solves }
+    }
 }

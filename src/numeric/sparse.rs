@@ -590,6 +590,24 @@ impl SparseFactor {
         }
     }
 
+    /// A x = `rhs` by the two substitutions alone, without refinement (for a caller that
+    /// iterates on its own residuals), into `x`, with `work`'s buffers.
+    pub fn substitute_into(&self, rhs: &[f64], work: &mut SparseWork, x: &mut Vec<f64>) {
+        x.clear();
+        x.resize(self.n, 0.0);
+        if !self.factored {
+            return;
+        }
+        let perm = &self.blocks.perm;
+        let SparseWork { permuted, gathered, .. } = work;
+        permuted.clear();
+        permuted.extend(perm.iter().map(|&old| rhs[old]));
+        self.substitute(permuted, gathered);
+        for (&old, &value) in perm.iter().zip(permuted.iter()) {
+            x[old] = value;
+        }
+    }
+
     /// [`solve_into`](SparseFactor::solve_into) into a new vector.
     pub fn solve(&self, rhs: &[f64]) -> Vec<f64> {
         let mut x = Vec::new();

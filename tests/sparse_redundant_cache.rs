@@ -1,0 +1,207 @@
+//! The run's solve cache on a redundant block past the dense decomposition
+//! (`solve::MAX_DENSE_ROWS`), as a rigid joint grid is: it keeps the factor of the
+//! regularised Ã (and its analysis), so a solve with the same J only iterates on it and a
+//! new J of the same pattern only refactors it, with the general solve's answer bit for bit;
+//! rows that contradict each other are refused by the kept factor and answered by the
+//! general solve (which refuses them as too large). Within the dense bound a block that is
+//! singular whatever its numbers takes the regularised factor in the cache too (the general
+//! solve keeps the eigendecomposition, for its rank and condition).
+//!
+//! The block is a braced grid of point masses: each joined by distance rows to its right
+//! and lower neighbours and across both diagonals of each cell (the top row to fixed
+//! anchors), about four rows per body on its two velocity components, so Ã is singular
+//! whatever the numbers. Consistent c terms are J w for a random w (in the range of J, so
+//! A λ = −(J M⁻¹ F + c) has a solution); random ones contradict.
+
+use lagrange::numeric::rows::{Row, Rows};
+use lagrange::numeric::solve::{
+    Diagnostic, Factorisation, MAX_DENSE_ROWS, Settings, Solution, SolveCache, SolvePath, Status, solve_cached,
+    solve_holding,
+};
+
+/// A small SplitMix64 for the systems' numbers.
+struct Mix(u64);
+
+impl Mix {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    /// Uniform in [lo, hi).
+    fn range(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+}
+
+/// The braced grid: `k − 1` rows of `k` point masses below fixed anchors, positions
+/// jittered, masses, velocities and forces drawn from `seed`, c terms consistent (J w).
+fn braced(k: usize, seed: u64) -> Rows {
+    let mut mix = Mix(seed);
+    let bodies = (k - 1) * k;
+    let at = |i: usize, j: usize| i * k + j;
+    let position: Vec<[f64; 2]> = (0..bodies)
+        .map(|b| [(b % k) as f64 + mix.range(-0.1, 0.1), -((b / k) as f64 + 1.0) + mix.range(-0.1, 0.1)])
+        .collect();
+    // The point of (i, j), i = −1 being the anchors' row.
+    let point = |i: isize, j: usize| if i < 0 { [j as f64, 0.0] } else { position[at(i as usize, j)] };
+    let body = |i: isize, j: usize| (i >= 0).then(|| at(i as usize, j));
+    let mut pairs = Vec::new();
+    for i in 0..(k - 1) as isize {
+        for j in 0..k {
+            pairs.push(((i - 1, j), (i, j)));
+            if j + 1 < k {
+                pairs.push(((i, j), (i, j + 1)));
+                pairs.push(((i - 1, j), (i, j + 1)));
+                pairs.push(((i - 1, j + 1), (i, j)));
+            }
+        }
+    }
+    let w: Vec<[f64; 3]> = (0..bodies).map(|_| [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), 0.0]).collect();
+    let rows = pairs
+        .iter()
+        .map(|&((ia, ja), (ib, jb))| {
+            let (a, b) = (point(ia, ja), point(ib, jb));
+            let d = [b[0] - a[0], b[1] - a[1], 0.0];
+            let mut jacobian = Vec::new();
+            if let Some(a) = body(ia, ja) {
+                jacobian.push((a, [-d[0], -d[1], 0.0]));
+            }
+            jacobian.push((body(ib, jb).expect("a body"), d));
+            let bias = jacobian.iter().map(|(s, j)| j[0] * w[*s][0] + j[1] * w[*s][1]).sum();
+            Row { value: 0.0, rate: 0.0, bias, inequality: false, jacobian }
+        })
+        .collect();
+    Rows {
+        dim: 2,
+        inverse_mass: (0..bodies).map(|_| 1.0 / mix.range(0.5, 2.0)).collect(),
+        velocity: (0..bodies).map(|_| [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), 0.0]).collect(),
+        force: vec![[0.0, -10.0, 0.0]; bodies],
+        rows,
+        axes: Vec::new(),
+    }
+}
+
+fn bits(s: &Solution) -> Vec<u64> {
+    s.lambda.iter().chain(s.acceleration.iter().flatten()).map(|x| x.to_bits()).collect()
+}
+
+/// The cached solve is the general one: λ and accelerations bit for bit, status and
+/// diagnostics equal.
+fn assert_general(cached: &Solution, rows: &Rows, what: &str) {
+    let general = solve_holding(rows, &Settings::default(), &[]);
+    assert_eq!(bits(cached), bits(&general), "{what}");
+    assert_eq!((cached.status, &cached.diagnostics), (general.status, &general.diagnostics), "{what}");
+}
+
+#[test]
+fn the_cache_keeps_the_regularised_factor_of_a_redundant_block_with_the_general_answer() {
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    for seed in 0..3 {
+        // Another state of the same grid: the same pattern, other numbers.
+        let rows = braced(17, 20 + seed);
+        assert!(rows.rows.len() > MAX_DENSE_ROWS && rows.rows.len() > 2 * rows.inverse_mass.len());
+        let cached = solve_cached(&rows, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Factored, "seed {seed}");
+        assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+        assert_eq!(cached.status, Status::MinimumNorm, "{:?}", cached.diagnostics);
+        assert!(
+            cached
+                .diagnostics
+                .iter()
+                .any(|d| matches!(d, Diagnostic::RedundantSparse { size, .. } if *size == rows.rows.len())),
+            "{:?}",
+            cached.diagnostics
+        );
+        assert_general(&cached, &rows, &format!("seed {seed}, factored"));
+        // The same J with other forces and c terms (still consistent): the kept factor serves.
+        let mut other = rows.clone();
+        other.force.iter_mut().for_each(|f| f[0] += 1.0);
+        for row in &mut other.rows {
+            row.bias *= -0.5;
+        }
+        let again = solve_cached(&other, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Reused, "seed {seed}");
+        assert_general(&again, &other, &format!("seed {seed}, reused"));
+    }
+}
+
+#[test]
+fn rows_that_contradict_each_other_are_refused_by_the_kept_factor() {
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    let rows = braced(17, 7);
+    solve_cached(&rows, &settings, &[], &mut cache);
+    assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+    // The same J with c terms drawn at random: no λ satisfies them all; the kept factor's
+    // residual shows it and the general solve answers (too large for its least squares).
+    let mut clash = rows.clone();
+    let mut mix = Mix(99);
+    for row in &mut clash.rows {
+        row.bias = mix.range(-1.0, 1.0);
+    }
+    let refused = solve_cached(&clash, &settings, &[], &mut cache);
+    assert_eq!(cache.last_path(), SolvePath::General);
+    assert_eq!(refused.status, Status::Failed);
+    assert!(
+        refused.diagnostics.iter().any(|d| matches!(d, Diagnostic::TooLarge { rows, .. } if *rows == clash.rows.len())),
+        "{:?}",
+        refused.diagnostics
+    );
+    assert_general(&refused, &clash, "contradicting rows");
+    // Consistent again with the same J: the factor is still there and serves.
+    let served = solve_cached(&rows, &settings, &[], &mut cache);
+    assert_eq!(cache.last_path(), SolvePath::Reused);
+    assert_general(&served, &rows, "consistent again");
+}
+
+/// The largest |a − b| over the largest |b|.
+fn gap(a: &[f64], b: &[f64]) -> f64 {
+    let top = b.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0f64, f64::max) / top
+}
+
+#[test]
+fn a_block_within_the_dense_bound_singular_whatever_its_numbers_takes_the_regularised_factor_too() {
+    // 9 × 10 bodies, 333 rows on 180 velocity components: the general solve takes the
+    // eigendecomposition (rank and condition, what `lagrange solve` shows), a run's cache
+    // the regularised sparse factor: the same minimum-norm λ but for the regularisation's
+    // share (ε = 1e-8) in the redundant rows' split, the same accelerations to rounding.
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    for seed in 0..3 {
+        let rows = braced(10, 3 + seed);
+        assert!(rows.rows.len() <= MAX_DENSE_ROWS && rows.rows.len() > 2 * rows.inverse_mass.len());
+        let cached = solve_cached(&rows, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Factored, "seed {seed}");
+        assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+        assert_eq!(cached.status, Status::MinimumNorm);
+        assert!(
+            cached.diagnostics.iter().any(|d| matches!(d, Diagnostic::RedundantSparse { .. })),
+            "{:?}",
+            cached.diagnostics
+        );
+        let general = solve_holding(&rows, &settings, &[]);
+        assert_eq!(general.status, Status::MinimumNorm);
+        assert!(
+            general.diagnostics.iter().any(|d| matches!(d, Diagnostic::Redundant { rank, size, .. }
+                if *rank < *size && *size == rows.rows.len())),
+            "{:?}",
+            general.diagnostics
+        );
+        let lambda = gap(&cached.lambda, &general.lambda);
+        assert!(lambda < 1e-6, "seed {seed}: λ apart by {lambda:e} of the largest");
+        let flat = |s: &Solution| s.acceleration.iter().flatten().copied().collect::<Vec<f64>>();
+        let acceleration = gap(&flat(&cached), &flat(&general));
+        assert!(acceleration < 1e-9, "seed {seed}: accelerations apart by {acceleration:e} of the largest");
+        // The same J: the kept factor serves.
+        let mut other = rows.clone();
+        other.force.iter_mut().for_each(|f| f[1] -= 2.0);
+        solve_cached(&other, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Reused);
+    }
+}
