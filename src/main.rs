@@ -1,7 +1,7 @@
 //! The `lagrange` command line: parse arguments, call the library, print. Nothing else.
 
 /// mimalloc: a derivation allocates and frees many small forms; with it a derivation takes
-/// 15–18 % fewer instructions than with the system allocator (README, Speed).
+/// 15–18 % fewer instructions than with the system allocator (docs/speed.md).
 #[global_allocator]
 static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
