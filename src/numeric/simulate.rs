@@ -225,7 +225,7 @@ pub struct Summary {
     pub max_abs_c: f64,
     /// max of |Ċ/κ| (inequalities: only while touching and closing).
     pub max_abs_c_dot: f64,
-    /// max |E| / max(max T, [`work_scale`] at step 0) (max |E| where both are 0); None
+    /// max |E| / max(max T, `work_scale` at step 0) (max |E| where both are 0); None
     /// when a constraint depends on time.
     pub energy_rel_drift: Option<f64>,
     /// The energy balance E at the end, and max T (±∞ when outside the f64 range in the
