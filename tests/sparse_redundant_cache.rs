@@ -13,38 +13,21 @@
 //! whatever the numbers. Consistent c terms are J w for a random w (in the range of J, so
 //! A λ = −(J M⁻¹ F + c) has a solution); random ones contradict.
 
+use lagrange::numeric::random::Rng;
 use lagrange::numeric::rows::{Row, Rows};
 use lagrange::numeric::solve::{
     Diagnostic, Factorisation, MAX_DENSE_ROWS, Settings, Solution, SolveCache, SolvePath, Status, solve_cached,
     solve_holding,
 };
 
-/// A small SplitMix64 for the systems' numbers.
-struct Mix(u64);
-
-impl Mix {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in [lo, hi).
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
-
 /// The braced grid: `k − 1` rows of `k` point masses below fixed anchors, positions
 /// jittered, masses, velocities and forces drawn from `seed`, c terms consistent (J w).
 fn braced(k: usize, seed: u64) -> Rows {
-    let mut mix = Mix(seed);
+    let mut mix = Rng::new(seed);
     let bodies = (k - 1) * k;
     let at = |i: usize, j: usize| i * k + j;
     let position: Vec<[f64; 2]> = (0..bodies)
-        .map(|b| [(b % k) as f64 + mix.range(-0.1, 0.1), -((b / k) as f64 + 1.0) + mix.range(-0.1, 0.1)])
+        .map(|b| [(b % k) as f64 + mix.uniform(-0.1, 0.1), -((b / k) as f64 + 1.0) + mix.uniform(-0.1, 0.1)])
         .collect();
     // The point of (i, j), i = −1 being the anchors' row.
     let point = |i: isize, j: usize| if i < 0 { [j as f64, 0.0] } else { position[at(i as usize, j)] };
@@ -60,7 +43,7 @@ fn braced(k: usize, seed: u64) -> Rows {
             }
         }
     }
-    let w: Vec<[f64; 3]> = (0..bodies).map(|_| [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), 0.0]).collect();
+    let w: Vec<[f64; 3]> = (0..bodies).map(|_| [mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0), 0.0]).collect();
     let rows = pairs
         .iter()
         .map(|&((ia, ja), (ib, jb))| {
@@ -77,8 +60,8 @@ fn braced(k: usize, seed: u64) -> Rows {
         .collect();
     Rows {
         dim: 2,
-        inverse_mass: (0..bodies).map(|_| 1.0 / mix.range(0.5, 2.0)).collect(),
-        velocity: (0..bodies).map(|_| [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), 0.0]).collect(),
+        inverse_mass: (0..bodies).map(|_| 1.0 / mix.uniform(0.5, 2.0)).collect(),
+        velocity: (0..bodies).map(|_| [mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0), 0.0]).collect(),
         force: vec![[0.0, -10.0, 0.0]; bodies],
         rows,
         axes: Vec::new(),
@@ -140,9 +123,9 @@ fn rows_that_contradict_each_other_are_refused_by_the_kept_factor() {
     // The same J with c terms drawn at random: no λ satisfies them all; the kept factor's
     // residual shows it and the general solve answers (too large for its least squares).
     let mut clash = rows.clone();
-    let mut mix = Mix(99);
+    let mut mix = Rng::new(99);
     for row in &mut clash.rows {
-        row.bias = mix.range(-1.0, 1.0);
+        row.bias = mix.uniform(-1.0, 1.0);
     }
     let refused = solve_cached(&clash, &settings, &[], &mut cache);
     assert_eq!(cache.last_path(), SolvePath::General);

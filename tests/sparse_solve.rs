@@ -5,6 +5,7 @@
 //! for a grid and the band for a chain, and the run's cache reuses the sparse analysis with
 //! the general solve's answer bit for bit.
 
+use lagrange::numeric::random::Rng;
 use lagrange::numeric::rows::{Row, Rows};
 use lagrange::numeric::solve::{
     Diagnostic, Factorisation, Method, Settings, Solution, SolveCache, SolvePath, Status, solve_cached, solve_holding,
@@ -12,47 +13,29 @@ use lagrange::numeric::solve::{
 };
 use proptest::prelude::*;
 
-/// A small SplitMix64 for the systems' numbers.
-struct Mix(u64);
-
-impl Mix {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in [lo, hi).
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-}
-
 /// A joint grid after Solver2D's (`constraints/solvers/joint_grid_*.toml`): `k − 1` rows of
 /// `k` point masses below a fixed top row, each joined by a distance row to its right and
 /// lower neighbours (the top row to its anchors), positions jittered and masses, velocities,
 /// forces and c terms drawn from `seed`, so every entry of Ã is non-trivial.
 fn grid(k: usize, seed: u64) -> Rows {
-    let mut mix = Mix(seed);
+    let mut mix = Rng::new(seed);
     let at = |i: usize, j: usize| i * k + j;
     let bodies = (k - 1) * k;
     let position: Vec<[f64; 2]> = (0..bodies)
         .map(|b| {
             let (i, j) = (b / k, b % k);
-            [j as f64 + mix.range(-0.2, 0.2), -(i as f64 + 1.0) + mix.range(-0.2, 0.2)]
+            [j as f64 + mix.uniform(-0.2, 0.2), -(i as f64 + 1.0) + mix.uniform(-0.2, 0.2)]
         })
         .collect();
     // A distance row from `a` (a body, or an anchor when `ia` is `None`) to body `ib`.
-    let row = |a: [f64; 2], ia: Option<usize>, b: [f64; 2], ib: usize, mix: &mut Mix| {
+    let row = |a: [f64; 2], ia: Option<usize>, b: [f64; 2], ib: usize, mix: &mut Rng| {
         let d = [b[0] - a[0], b[1] - a[1], 0.0];
         let mut jacobian = Vec::new();
         if let Some(ia) = ia {
             jacobian.push((ia, [-d[0], -d[1], 0.0]));
         }
         jacobian.push((ib, d));
-        Row { value: 0.0, rate: 0.0, bias: mix.range(-1.0, 1.0), inequality: false, jacobian }
+        Row { value: 0.0, rate: 0.0, bias: mix.uniform(-1.0, 1.0), inequality: false, jacobian }
     };
     let mut rows = Vec::new();
     for i in 0..k - 1 {
@@ -70,8 +53,8 @@ fn grid(k: usize, seed: u64) -> Rows {
     }
     Rows {
         dim: 2,
-        inverse_mass: (0..bodies).map(|_| 1.0 / mix.range(0.5, 2.0)).collect(),
-        velocity: (0..bodies).map(|_| [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), 0.0]).collect(),
+        inverse_mass: (0..bodies).map(|_| 1.0 / mix.uniform(0.5, 2.0)).collect(),
+        velocity: (0..bodies).map(|_| [mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0), 0.0]).collect(),
         force: vec![[0.0, -10.0, 0.0]; bodies],
         rows,
         axes: Vec::new(),
@@ -80,11 +63,11 @@ fn grid(k: usize, seed: u64) -> Rows {
 
 /// An N-link chain of point masses in 2D, links in order.
 fn chain(n: usize, seed: u64) -> Rows {
-    let mut mix = Mix(seed);
+    let mut mix = Rng::new(seed);
     let mut at = [0.0f64, 0.0];
     let mut position = Vec::new();
     for _ in 0..n {
-        let angle: f64 = mix.range(-1.5, 1.5);
+        let angle: f64 = mix.uniform(-1.5, 1.5);
         at = [at[0] + angle.cos(), at[1] + angle.sin()];
         position.push(at);
     }
@@ -96,7 +79,7 @@ fn chain(n: usize, seed: u64) -> Rows {
             if k > 0 {
                 jacobian.insert(0, (k - 1, [-d[0], -d[1], 0.0]));
             }
-            Row { value: 0.0, rate: 0.0, bias: mix.range(-1.0, 1.0), inequality: false, jacobian }
+            Row { value: 0.0, rate: 0.0, bias: mix.uniform(-1.0, 1.0), inequality: false, jacobian }
         })
         .collect();
     Rows {
@@ -113,25 +96,26 @@ fn chain(n: usize, seed: u64) -> Rows {
 /// random gradient: fewer rows than the bodies' 3 × `bodies` coordinates, so Ã is positive
 /// definite (almost surely) and sparse, in no banded order.
 fn scattered(bodies: usize, rows: usize, seed: u64) -> Rows {
-    let mut mix = Mix(seed);
+    let mut mix = Rng::new(seed);
     let rows = (0..rows)
         .map(|_| {
-            let count = 1 + (mix.next() * 3.0) as usize;
-            let mut on: Vec<usize> = (0..count).map(|_| (mix.next() * bodies as f64) as usize % bodies).collect();
+            let count = 1 + (mix.uniform(0.0, 1.0) * 3.0) as usize;
+            let mut on: Vec<usize> =
+                (0..count).map(|_| (mix.uniform(0.0, 1.0) * bodies as f64) as usize % bodies).collect();
             on.sort_unstable();
             on.dedup();
             let jacobian = on
                 .into_iter()
-                .map(|b| (b, [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), mix.range(-1.0, 1.0)]))
+                .map(|b| (b, [mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0)]))
                 .collect();
-            Row { value: 0.0, rate: 0.0, bias: mix.range(-1.0, 1.0), inequality: false, jacobian }
+            Row { value: 0.0, rate: 0.0, bias: mix.uniform(-1.0, 1.0), inequality: false, jacobian }
         })
         .collect();
     Rows {
         dim: 3,
-        inverse_mass: (0..bodies).map(|_| 1.0 / mix.range(0.1, 10.0)).collect(),
+        inverse_mass: (0..bodies).map(|_| 1.0 / mix.uniform(0.1, 10.0)).collect(),
         velocity: vec![[0.0; 3]; bodies],
-        force: (0..bodies).map(|_| [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), mix.range(-1.0, 1.0)]).collect(),
+        force: (0..bodies).map(|_| [mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0)]).collect(),
         rows,
         axes: Vec::new(),
     }
@@ -256,10 +240,10 @@ fn the_joint_grid_file_solves_alike_with_the_sparse_factor_and_the_band() {
     let s =
         lagrange::scenario::Scenario::new(lagrange::model::file::load(&text).expect("valid"), &[]).expect("derives");
     let mut rows = s.program.evaluate(&s.system, &s.env).expect("rows");
-    let mut mix = Mix(9);
-    rows.velocity.iter_mut().for_each(|v| *v = [mix.range(-1.0, 1.0), mix.range(-1.0, 1.0), 0.0]);
+    let mut mix = Rng::new(9);
+    rows.velocity.iter_mut().for_each(|v| *v = [mix.uniform(-1.0, 1.0), mix.uniform(-1.0, 1.0), 0.0]);
     for row in &mut rows.rows {
-        row.bias += mix.range(-1.0, 1.0);
+        row.bias += mix.uniform(-1.0, 1.0);
     }
     assert_eq!(rows.rows.len(), 1711);
     let band = solve_with(&rows, &with(Method::Banded));
