@@ -594,6 +594,49 @@ impl Scaled {
         self.start.push(self.parts.len());
     }
 
+    /// [`refill`](Scaled::refill) of rows that act on the same slots in the same order as
+    /// those `self` was filled from, every row of which was usable, with every velocity and
+    /// force finite and no inequality (`SolveCache`'s refactorisation): each row's parts
+    /// overwritten in place, the same operations in the same order, so the same bits. False
+    /// (`self` then spent) when a row is no longer usable, where `refill` would give a
+    /// diagnostic.
+    fn rescale_in_place(&mut self, rows: &Rows) -> bool {
+        let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
+        for (q, (row, bounds)) in rows.rows.iter().zip(self.start.windows(2)).enumerate() {
+            // `non_finite_part`'s test with the motion known finite.
+            let mut ok = row.bias.is_finite();
+            for (body, j) in &row.jacobian {
+                let w = rows.inverse_mass[*body];
+                ok &= (w >= 0.0) & w.is_finite() & finite3(j);
+            }
+            if !ok {
+                return false;
+            }
+            let norm = row_norm(&row.jacobian);
+            if !norm.is_finite() || norm == 0.0 {
+                return false;
+            }
+            let inverse = 1.0 / norm;
+            let reciprocal = RECIPROCAL_NORMS.contains(&norm);
+            let mut a_kk = 0.0;
+            let parts = &mut self.parts[bounds[0]..bounds[1]];
+            for ((_, u), (b, j)) in parts.iter_mut().zip(&row.jacobian) {
+                *u = if reciprocal { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
+                a_kk += dot(u, u) * rows.inverse_mass[*b];
+            }
+            if !(a_kk > 0.0 && a_kk.is_finite()) {
+                return false;
+            }
+            let d = 1.0 / a_kk.sqrt();
+            for (_, u) in parts.iter_mut() {
+                *u = u.map(|x| x * d);
+            }
+            self.norm[q] = norm;
+            self.jacobi[q] = d;
+        }
+        true
+    }
+
     /// J̃ₖ per body (empty when row k is not usable).
     pub fn jacobian(&self, k: usize) -> &[(usize, [f64; 3])] {
         &self.parts[self.start[k]..self.start[k + 1]]
@@ -806,6 +849,17 @@ pub struct SolveCache {
     regularised_work: RegularisedWork,
 }
 
+/// How a solve's rows compare with a cached entry's ([`Factored::compare_taking`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Likeness {
+    /// J and the masses bit for bit: the factor serves.
+    Same,
+    /// The same slots in the same order, other numbers: refactored in place.
+    SamePattern,
+    /// Another pattern or other settings: a new entry.
+    Different,
+}
+
 /// One cached factorisation and the inputs it was made from.
 #[derive(Clone, Debug)]
 struct Factored {
@@ -858,54 +912,65 @@ impl Factored {
             && self.lengths.iter().zip(&rows.rows).all(|(n, row)| *n == row.jacobian.len())
     }
 
-    /// The rows are those the factor was made from, bit for bit.
-    fn matches(&self, rows: &Rows, settings: &Settings) -> bool {
-        self.settings_match(rows, settings)
-            && self.inverse_mass.iter().zip(&rows.inverse_mass).all(|(a, b)| *a == b.to_bits())
-            && self.same_parts(rows, true)
-    }
-
-    /// The rows act on the same slots in the same order (J's values may differ).
-    fn same_pattern(&self, rows: &Rows, settings: &Settings) -> bool {
-        self.settings_match(rows, settings) && self.same_parts(rows, false)
-    }
-
-    /// Row by row, the kept parts against `rows`' (each row's length already equal,
-    /// [`settings_match`](Factored::settings_match)): the same slots, and with `values` the
-    /// same bits of J. A loop per row over plain slices: this runs at every reused solve.
-    fn same_parts(&self, rows: &Rows, values: bool) -> bool {
-        let mut kept = self.jacobian.as_slice();
+    /// How `rows` compare with the rows the entry was made from, in one walk along J (a run
+    /// changes J at every step, and this runs at every solve): [`Likeness::Same`] bit for
+    /// bit, [`Likeness::SamePattern`] when they act on the same slots in the same order,
+    /// else [`Likeness::Different`]. From the first number that differs on, the walk stores
+    /// the rows' bits as the entry's (the masses' too): on `SamePattern` the entry then holds
+    /// the rows' J and masses, as [`refactor`](Factored::refactor) needs, and on
+    /// `Different` (or a refactorisation that fails) the entry is made anew anyway.
+    fn compare_taking(&mut self, rows: &Rows, settings: &Settings) -> Likeness {
+        if !self.settings_match(rows, settings) {
+            return Likeness::Different;
+        }
+        let mut same = true;
+        for (mine, w) in self.inverse_mass.iter_mut().zip(&rows.inverse_mass) {
+            let bits = w.to_bits();
+            if *mine != bits {
+                *mine = bits;
+                same = false;
+            }
+        }
+        // Row by row over plain slices (each row's length already equal, `settings_match`).
+        let mut kept = self.jacobian.as_mut_slice();
         for row in &rows.rows {
-            let Some((mine, rest)) = kept.split_at_checked(row.jacobian.len()) else {
-                return false;
+            let Some((mine, rest)) = kept.split_at_mut_checked(row.jacobian.len()) else {
+                return Likeness::Different;
             };
             kept = rest;
-            for ((s, a), (t, b)) in mine.iter().zip(&row.jacobian) {
-                let same =
-                    s == t && (!values || (a[0] == b[0].to_bits() && a[1] == b[1].to_bits() && a[2] == b[2].to_bits()));
-                if !same {
-                    return false;
+            for ((s, a), (t, b)) in mine.iter_mut().zip(&row.jacobian) {
+                if s != t {
+                    return Likeness::Different;
+                }
+                let bits = b.map(f64::to_bits);
+                if *a != bits {
+                    *a = bits;
+                    same = false;
                 }
             }
         }
-        kept.is_empty()
+        match (kept.is_empty(), same) {
+            (false, _) => Likeness::Different,
+            (true, true) => Likeness::Same,
+            (true, false) => Likeness::SamePattern,
+        }
     }
 
-    /// Scales, assembles and factors `rows` (of [`same_pattern`](Factored::same_pattern))
+    /// Scales, assembles and factors `rows` (of [`Likeness::SamePattern`], their bits already
+    /// taken by [`compare_taking`](Factored::compare_taking))
     /// in place: the numbers of a fresh factorisation, from the kept terms. False when the
     /// rows are no longer a case the cache serves (the entry is then spent).
     fn refactor(&mut self, rows: &Rows, settings: &Settings) -> bool {
         if matches!(self.factor, Factor::Dense(_)) {
             return false;
         }
-        let (mut diagnostics, mut status) = (Vec::new(), Status::Solved);
-        // `solve_cached_into` served the rows: every velocity and force is finite.
-        self.scaled.refill(rows, true, &mut diagnostics, &mut status);
-        if !diagnostics.is_empty() {
+        // `solve_cached_into` served the rows (every velocity and force finite, no
+        // inequality), and every row of the entry is usable.
+        if !self.scaled.rescale_in_place(rows) {
             return false;
         }
         // Ã term by term in `assemble`'s order: the same sums as `plan`'s.
-        let factored = match &mut self.factor {
+        match &mut self.factor {
             Factor::Band { factor, terms, targets } => {
                 let data = factor.a.data_mut();
                 data.fill(0.0);
@@ -939,17 +1004,7 @@ impl Factored {
                 let weight: Vec<f64> = self.index.iter().map(|&k| self.scaled.unscale(k, 1.0)).collect();
                 regularised.refactor(&weight)
             }
-        };
-        if !factored {
-            return false;
         }
-        for (mine, (_, j)) in self.jacobian.iter_mut().zip(rows.rows.iter().flat_map(|row| &row.jacobian)) {
-            mine.1 = j.map(f64::to_bits);
-        }
-        for (mine, w) in self.inverse_mass.iter_mut().zip(&rows.inverse_mass) {
-            *mine = w.to_bits();
-        }
-        true
     }
 
     /// A new entry for `rows`, or `None` when they are not a case the cache serves.
@@ -1072,12 +1127,12 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
         *out = solve_holding(rows, settings, held);
         return;
     }
-    let reused = cache.entry.as_ref().is_some_and(|c| c.matches(rows, settings));
-    if reused {
+    let likeness = cache.entry.as_mut().map_or(Likeness::Different, |c| c.compare_taking(rows, settings));
+    if likeness == Likeness::Same {
         cache.path = SolvePath::Reused;
     } else {
         let refactored = match &mut cache.entry {
-            Some(c) if c.same_pattern(rows, settings) => c.refactor(rows, settings),
+            Some(c) if likeness == Likeness::SamePattern => c.refactor(rows, settings),
             _ => false,
         };
         if !refactored {
@@ -1958,5 +2013,90 @@ impl Regularised {
     fn diagnostic(&self, index: &[usize], solves: usize) -> Diagnostic {
         let constraints = self.null_rows.iter().map(|&p| index[p]).collect();
         Diagnostic::RedundantSparse { constraints, size: self.diagonal.len(), solves }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::numeric::rows::Row;
+    use proptest::prelude::*;
+
+    /// A chain of `masses.len()` point masses in 2D, the first hung from a fixed point: row 0
+    /// acts on body 0, row k on bodies k − 1 and k, with the gradients `dirs`.
+    fn chain(masses: &[f64], dirs: &[[f64; 2]]) -> Rows {
+        let rows = dirs
+            .iter()
+            .enumerate()
+            .map(|(k, d)| {
+                let j = [d[0], d[1], 0.0];
+                let jacobian = if k == 0 { vec![(0, j)] } else { vec![(k - 1, j.map(|x| -x)), (k, j)] };
+                Row { value: 0.0, rate: 0.0, bias: 0.1 * k as f64, inequality: false, jacobian }
+            })
+            .collect();
+        let n = masses.len();
+        Rows {
+            dim: 2,
+            inverse_mass: masses.to_vec(),
+            velocity: vec![[0.5, -0.25, 0.0]; n],
+            force: vec![[0.0, -9.81, 0.0]; n],
+            rows,
+            axes: Vec::new(),
+        }
+    }
+
+    /// A run of same-pattern rows (a chain of `n`), each state with other numbers, some with
+    /// one number the cache cannot serve (an inverse mass zero, NaN, infinite or slightly
+    /// negative, which keeps Ã positive definite so only the check on the masses finds it; a
+    /// gradient zero, NaN or infinite). Short chains take the dense factor, which is made
+    /// anew; longer ones the band or sparse factor, refactored in place.
+    fn runs() -> impl Strategy<Value = Vec<Rows>> {
+        (2usize..80).prop_flat_map(|n| {
+            let component = prop_oneof![0.1..2.0f64, -2.0..-0.1f64];
+            let state = (
+                prop::collection::vec(0.1..2.0f64, n),
+                prop::collection::vec([component.clone(), component], n),
+                prop::option::of((0..2 * n, 0..4usize)),
+            )
+                .prop_map(move |(mut masses, mut dirs, bad)| {
+                    if let Some((at, kind)) = bad {
+                        if at < n {
+                            masses[at] = [0.0, f64::NAN, f64::INFINITY, -1e-3][kind];
+                        } else {
+                            let d = &mut dirs[at - n];
+                            *d = [[0.0, 0.0], [f64::NAN, d[1]], [d[0], f64::INFINITY], [d[0], d[1]]][kind];
+                        }
+                    }
+                    chain(&masses, &dirs)
+                });
+            prop::collection::vec(state, 1..8)
+        })
+    }
+
+    proptest! {
+        /// Refactored in place along a run whose J changes at every state (the solve cache's
+        /// `compare_taking` and `Scaled::rescale_in_place`), with states the cache cannot
+        /// serve in between, the answer is the general solve's bit for bit, and a state it
+        /// can serve after one it could not is factored again.
+        #[test]
+        fn a_run_of_same_pattern_rows_gives_the_general_answer(run in runs(), sparse in any::<bool>()) {
+            let settings = Settings { method: if sparse { Method::Sparse } else { Method::Auto }, ..Settings::default() };
+            let mut cache = SolveCache::default();
+            let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            let bits3 = |x: &[[f64; 3]]| x.iter().flat_map(|v| v.map(f64::to_bits)).collect::<Vec<_>>();
+            for rows in &run {
+                let cached = solve_cached(rows, &settings, &[], &mut cache);
+                let general = solve_holding(rows, &settings, &[]);
+                prop_assert_eq!(bits(&cached.lambda), bits(&general.lambda));
+                prop_assert_eq!(bits3(&cached.constraint_force), bits3(&general.constraint_force));
+                prop_assert_eq!(bits3(&cached.acceleration), bits3(&general.acceleration));
+                prop_assert_eq!(&cached.active, &general.active);
+                prop_assert_eq!(&cached.diagnostics, &general.diagnostics);
+                prop_assert_eq!(cached.status, general.status);
+                if general.diagnostics.is_empty() {
+                    prop_assert_ne!(cache.last_path(), SolvePath::General);
+                }
+            }
+        }
     }
 }
