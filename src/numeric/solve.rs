@@ -328,15 +328,8 @@ fn bad_inverse_mass(w: f64) -> Option<NonFinite> {
 }
 
 /// The first non-finite number of `row` (and the bodies it acts on), in the order the
-/// solve needs them; C and Ċ only for inequalities (`check_value`). With `motion_finite`
-/// the caller has found every velocity and force finite already (the cached solve's
-/// `servable`), so the common case's test leaves them out.
-fn non_finite_part(
-    rows: &Rows,
-    row: &super::rows::Row,
-    check_value: bool,
-    motion_finite: bool,
-) -> Option<(RowPart, NonFinite)> {
+/// solve needs them; C and Ċ only for inequalities (`check_value`).
+fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Option<(RowPart, NonFinite)> {
     // The common case first, without branches: every number finite and every mass ≥ 0.
     // Tests combined with `&` (one chain of single-cycle steps, not of additions). Written
     // out rather than as a chain of iterators: this runs for every row of every factorisation.
@@ -345,9 +338,7 @@ fn non_finite_part(
     for (body, j) in &row.jacobian {
         let w = rows.inverse_mass[*body];
         ok &= (w >= 0.0) & w.is_finite() & finite3(j);
-        if !motion_finite {
-            ok &= finite3(&rows.velocity[*body]) & finite3(&rows.force[*body]);
-        }
+        ok &= finite3(&rows.velocity[*body]) & finite3(&rows.force[*body]);
     }
     if check_value {
         ok &= row.value.is_finite() & row.rate.is_finite();
@@ -523,13 +514,12 @@ impl Scaled {
     /// Scales `rows`; rows that cannot carry a force get a diagnostic and `usable = false`.
     pub fn new(rows: &Rows, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) -> Scaled {
         let mut s = Scaled::default();
-        s.refill(rows, false, diagnostics, status);
+        s.refill(rows, diagnostics, status);
         s
     }
 
-    /// [`new`](Scaled::new) into `self`'s buffers (no allocation once they have the rows' size);
-    /// `motion_finite`: every velocity and force is known to be finite (see [`non_finite_part`]).
-    fn refill(&mut self, rows: &Rows, motion_finite: bool, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) {
+    /// [`new`](Scaled::new) into `self`'s buffers (no allocation once they have the rows' size).
+    fn refill(&mut self, rows: &Rows, diagnostics: &mut Vec<Diagnostic>, status: &mut Status) {
         let k = rows.rows.len();
         for v in [&mut self.norm, &mut self.jacobi] {
             v.clear();
@@ -545,7 +535,7 @@ impl Scaled {
         for (q, row) in rows.rows.iter().enumerate() {
             self.start.push(self.parts.len());
             // An inequality also needs C and Ċ to be classified.
-            if let Some((part, cause)) = non_finite_part(rows, row, row.inequality, motion_finite) {
+            if let Some((part, cause)) = non_finite_part(rows, row, row.inequality) {
                 diagnostics.push(Diagnostic::NonFiniteRow { constraint: q, part, cause });
                 *status = (*status).max(Status::Failed);
                 continue;
