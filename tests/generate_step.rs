@@ -432,9 +432,53 @@ fn the_step_only_soft_step_is_the_librarys_bit_for_bit() {
     ]
     .iter()
     .map(PathBuf::from)
+    .chain([big_rigid_grid()])
     .collect();
     let n = files.len();
     bitwise_runs(Solver::SoftStep, runs_of(Solver::SoftStep, true, &files), n);
+}
+
+/// `examples/solver_scenes.rs`, for its `rigid_grid` (its other scenes and its `main` unused).
+#[allow(dead_code)]
+#[path = "../examples/solver_scenes.rs"]
+mod scenes;
+
+/// Box2D's joint grid as rigid discs, 13 × 13 (156 bodies, 600 revolute rows), written into
+/// the test's temporary directory: past `layout::MAX_STATE_FIELDS` inputs, so its `State`
+/// holds the bodies' x, v, F and the rigid bodies' θ, ω, τ in role arrays.
+fn big_rigid_grid() -> PathBuf {
+    let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rigid_grid_13.toml");
+    std::fs::write(&path, scenes::rigid_grid(13)).expect("writes the scene");
+    path
+}
+
+/// A big scene of 2D rigid bodies keeps their θ, ω and τ in role arrays indexed by the rigid
+/// bodies' order, in the Rust step-only module and in the C module alike; its step is the
+/// library's bit for bit (the step-only test above runs it 1 000 steps).
+#[test]
+fn a_big_rigid_scene_keeps_its_angles_in_role_arrays() {
+    use lagrange::codegen::Lang;
+    let l = loaded(&big_rigid_grid());
+    let rigid = l.system.bodies.iter().filter(|b| b.rigid.is_some()).count();
+    assert_eq!(rigid, 156);
+    let options = Options { solver: Some(Solver::SoftStep), step_only: true, ..Options::default() };
+    let m = module(&l, &options).expect("generates");
+    for role in ["angle", "angular_velocity", "torque"] {
+        assert!(m.code.contains(&format!("    pub {role}: [f64; {rigid}],")), "{role}");
+    }
+    // Body i's θ is the entry of its place among the rigid bodies (here every body is rigid).
+    for (i, b) in l.system.bodies.iter().enumerate() {
+        let r = b.rigid.as_ref().expect("rigid");
+        let field = |s| m.fields.iter().find(|f| f.0 == s).map(|f| f.1.as_str());
+        assert_eq!(field(r.orientation), Some(format!("angle[{i}]").as_str()));
+        assert_eq!(field(r.angular_velocity), Some(format!("angular_velocity[{i}]").as_str()));
+    }
+    assert!(!m.code.contains("pub th_"), "no named angle fields");
+    let c = module(&l, &Options { solver: Some(Solver::SoftStep), lang: Lang::C, ..Options::default() })
+        .expect("generates C");
+    for role in ["angle", "angular_velocity", "torque"] {
+        assert!(c.code.contains(&format!("    double {role}[{rigid}];")), "C {role}");
+    }
 }
 
 #[test]
