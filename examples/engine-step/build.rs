@@ -65,10 +65,11 @@ fn write(text: &str, out: &Path, name: &str, initial: &str, extra: &str) {
     let mut init = format!(
         "{extra}/// The file's initial state.\npub fn initial() -> State {{\n    let mut s = State::default();\n"
     );
-    // One assignment per scalar or vector field the scene gives a nonzero value (the bodies'
-    // arrays as constants below): a rigid grid's 2 x 9 900 zero angles and rates stay default.
+    // One assignment per scalar or vector field or role array entry (a rigid body's
+    // `angle[r]`) the scene gives a nonzero value (the bodies' positions and velocities as
+    // constants below): a rigid grid's 2 x 9 900 zero angles and rates stay default.
     for (symbol, field) in &m.fields {
-        if field.contains('[') {
+        if field.starts_with("position[") || field.starts_with("velocity[") {
             continue;
         }
         match s.env.get(*symbol) {

@@ -8,6 +8,10 @@
 //! λ ≥ 0 on inequalities, the minimum-norm λ of redundant constraints), with `lambda`,
 //! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
+//! A big `State` (past `layout::MAX_STATE_FIELDS` inputs) holds the bodies' symbols in role
+//! arrays ([`ROLE_ARRAYS`]): `position[i]`, `velocity[i]`, `force[i]` by body, `mass[j]` by
+//! mass symbol, and the 2D rigid bodies' `angle[r]`, `angular_velocity[r]`, `torque[r]` by
+//! rigid body (the r-th in file order, its angular slot) and `inertia[j]` by inertia symbol.
 //! Rigid bodies (2D) add their θ, ω, τ (and I) to `State`, Jʷ (`angular_jacobian`), the
 //! constraint torques and α: the rows' solve runs over the library's slots (bodies, then one
 //! angular slot per rigid body), so its numbers are `lagrange solve`'s. 3D rigid bodies add
@@ -175,8 +179,8 @@ pub(super) struct Field {
     /// The field's name, or `array[index]` for a symbol held in a role array.
     pub(super) ident: String,
     pub(super) doc: String,
-    /// The role array (`position`, `velocity`, `force`, `mass`) that holds it, with its
-    /// index, when the layout puts bodies' symbols in arrays.
+    /// The role array ([`ROLE_ARRAYS`]) that holds it, with its index, when the layout puts
+    /// bodies' symbols in arrays.
     pub(super) array: Option<(&'static str, usize)>,
 }
 
@@ -1066,9 +1070,13 @@ fn step_module(
         let _ = writeln!(
             out,
             "// State fields: time and parameters under their names; the bodies' positions, velocities, forces \
-             and masses in the arrays `position`, `velocity`, `force`, `mass`, in file order; 2D rigid bodies' \
-             θ, ω, τ and inertias in `angle`, `angular_velocity`, `torque`, `inertia`, in the rigid bodies' \
-             file order.\n"
+             and masses in the arrays `position`, `velocity`, `force`, `mass`, in file order{}.\n",
+            if fields.iter().any(|f| f.array.is_some_and(|a| a.0 == "angle")) {
+                "; the 2D rigid bodies' θ, ω, τ and inertias in `angle`, `angular_velocity`, `torque`, `inertia`, \
+                 in the rigid bodies' file order"
+            } else {
+                ""
+            }
         );
     } else {
         field_names(&mut out, g, fields);
@@ -2975,8 +2983,9 @@ fn exact(x: f64) -> Option<Rational> {
 /// The fields of `State`: every symbol but accelerations and substituted ones. A name that
 /// is a Rust identifier as written keeps it (`R`, `F`, `r`); any other becomes [`snake`] of
 /// it, with `_2`, `_3`, … in file order where that is taken (names kept as written first).
-/// With `arrays`, the bodies' positions, velocities, forces and mass symbols are entries of
-/// the role arrays [`ROLE_ARRAYS`] instead (whose names no field takes).
+/// With `arrays`, the bodies' positions, velocities, forces and mass symbols, and the 2D
+/// rigid bodies' θ, ω, τ and inertia symbols, are entries of the role arrays [`ROLE_ARRAYS`]
+/// instead (whose names no field takes; the rigid ones only where there are 2D rigid bodies).
 fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, arrays: bool) -> Vec<Field> {
     // 2D rigid bodies' θ, ω, τ sit at their rigid body's place among the rigid bodies (the
     // order of the angular slots: body order); 3D ones (q, world ω, τ) keep their fields.
@@ -3056,7 +3065,9 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, array
 }
 
 /// The role arrays of a big `State`, with their doc: body i's symbol of that role is entry i
-/// (masses: the mass symbols in file order).
+/// (masses: the mass symbols in file order); the r-th 2D rigid body in file order (its
+/// angular slot `BODIES + r`) has its θ, ω, τ at entry r (inertias: the inertia symbols in
+/// file order).
 pub(super) const ROLE_ARRAYS: [(&str, &str); 8] = [
     ("position", "The bodies' positions, body i at entry i"),
     ("velocity", "The bodies' velocities, body i at entry i"),
