@@ -25,7 +25,8 @@
 //! was already 16, and of today's changes only the tridiagonal reciprocals moved a file
 //! (the 5-link chain, 4.4e-13 → 3.8e-13). The exact comparison leaves out three big scenes for time ([`left_out`]).
 //! The soft step's `--step-only` modules (rows by shape) are held to the library the same
-//! way on ten files, point masses and 2D and 3D rigid bodies, bit for bit. The harness
+//! way on eleven files, point masses and 2D and 3D rigid bodies, bit for bit (the eleventh a
+//! 13 × 13 rigid grid, past `layout::MAX_STATE_FIELDS` inputs: its θ, ω, τ in role arrays). The harness
 //! counts its allocations: the soft step and PGS allocate nothing in any of their 1 000
 //! steps, rigid bodies included. The soft step and PGS run through the module's `Stepper`
 //! (the rows the last step left kept where `KEEP`), and after the checkpoints each module
@@ -412,7 +413,8 @@ fn bitwise_runs(solver: Solver, runs: Vec<(String, Run, Run)>, files: usize) {
 /// few shapes, its anchors per-instance parameters; the stack's contacts are inequality
 /// rows), on files whose rows read the time and parameters, and on rigid bodies (the 2D
 /// rigid chain, a 2D revolute joint from a random state and the 3D ball joint: angular
-/// slots, Jʷ projected on a 3D body's axes; the 20-link chain's links are one shape).
+/// slots, Jʷ projected on a 3D body's axes; the 20-link chain's links are one shape), and on
+/// a rigid scene big enough for role arrays ([`big_rigid_grid`]).
 #[test]
 fn the_step_only_soft_step_is_the_librarys_bit_for_bit() {
     if common::skip_slow("the_step_only_soft_step_is_the_librarys_bit_for_bit") {

@@ -9,7 +9,7 @@
 //! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
 //! A big `State` (past `layout::MAX_STATE_FIELDS` inputs) holds the bodies' symbols in role
-//! arrays ([`ROLE_ARRAYS`]): `position[i]`, `velocity[i]`, `force[i]` by body, `mass[j]` by
+//! arrays (`ROLE_ARRAYS`): `position[i]`, `velocity[i]`, `force[i]` by body, `mass[j]` by
 //! mass symbol, and the 2D rigid bodies' `angle[r]`, `angular_velocity[r]`, `torque[r]` by
 //! rigid body (the r-th in file order, its angular slot) and `inertia[j]` by inertia symbol.
 //! Rigid bodies (2D) add their θ, ω, τ (and I) to `State`, Jʷ (`angular_jacobian`), the
