@@ -25,7 +25,8 @@
 //! was already 16, and of today's changes only the tridiagonal reciprocals moved a file
 //! (the 5-link chain, 4.4e-13 → 3.8e-13). The exact comparison leaves out three big scenes for time ([`left_out`]).
 //! The soft step's `--step-only` modules (rows by shape) are held to the library the same
-//! way on ten files, point masses and 2D and 3D rigid bodies, bit for bit. The harness
+//! way on eleven files, point masses and 2D and 3D rigid bodies, bit for bit (the eleventh a
+//! 13 × 13 rigid grid, past `layout::MAX_STATE_FIELDS` inputs: its θ, ω, τ in role arrays). The harness
 //! counts its allocations: the soft step and PGS allocate nothing in any of their 1 000
 //! steps, rigid bodies included. The soft step and PGS run through the module's `Stepper`
 //! (the rows the last step left kept where `KEEP`), and after the checkpoints each module
@@ -412,7 +413,8 @@ fn bitwise_runs(solver: Solver, runs: Vec<(String, Run, Run)>, files: usize) {
 /// few shapes, its anchors per-instance parameters; the stack's contacts are inequality
 /// rows), on files whose rows read the time and parameters, and on rigid bodies (the 2D
 /// rigid chain, a 2D revolute joint from a random state and the 3D ball joint: angular
-/// slots, Jʷ projected on a 3D body's axes; the 20-link chain's links are one shape).
+/// slots, Jʷ projected on a 3D body's axes; the 20-link chain's links are one shape), and on
+/// a rigid scene big enough for role arrays ([`big_rigid_grid`]).
 #[test]
 fn the_step_only_soft_step_is_the_librarys_bit_for_bit() {
     if common::skip_slow("the_step_only_soft_step_is_the_librarys_bit_for_bit") {
@@ -432,9 +434,53 @@ fn the_step_only_soft_step_is_the_librarys_bit_for_bit() {
     ]
     .iter()
     .map(PathBuf::from)
+    .chain([big_rigid_grid()])
     .collect();
     let n = files.len();
     bitwise_runs(Solver::SoftStep, runs_of(Solver::SoftStep, true, &files), n);
+}
+
+/// `examples/solver_scenes.rs`, for its `rigid_grid` (its other scenes and its `main` unused).
+#[allow(dead_code)]
+#[path = "../examples/solver_scenes.rs"]
+mod scenes;
+
+/// Box2D's joint grid as rigid discs, 13 × 13 (156 bodies, 600 revolute rows), written into
+/// the test's temporary directory: past `layout::MAX_STATE_FIELDS` inputs, so its `State`
+/// holds the bodies' x, v, F and the rigid bodies' θ, ω, τ in role arrays.
+fn big_rigid_grid() -> PathBuf {
+    let path = Path::new(env!("CARGO_TARGET_TMPDIR")).join("rigid_grid_13.toml");
+    std::fs::write(&path, scenes::rigid_grid(13)).expect("writes the scene");
+    path
+}
+
+/// A big scene of 2D rigid bodies keeps their θ, ω and τ in role arrays indexed by the rigid
+/// bodies' order, in the Rust step-only module and in the C module alike; its step is the
+/// library's bit for bit (the step-only test above runs it 1 000 steps).
+#[test]
+fn a_big_rigid_scene_keeps_its_angles_in_role_arrays() {
+    use lagrange::codegen::Lang;
+    let l = loaded(&big_rigid_grid());
+    let rigid = l.system.bodies.iter().filter(|b| b.rigid.is_some()).count();
+    assert_eq!(rigid, 156);
+    let options = Options { solver: Some(Solver::SoftStep), step_only: true, ..Options::default() };
+    let m = module(&l, &options).expect("generates");
+    for role in ["angle", "angular_velocity", "torque"] {
+        assert!(m.code.contains(&format!("    pub {role}: [f64; {rigid}],")), "{role}");
+    }
+    // Body i's θ is the entry of its place among the rigid bodies (here every body is rigid).
+    for (i, b) in l.system.bodies.iter().enumerate() {
+        let r = b.rigid.as_ref().expect("rigid");
+        let field = |s| m.fields.iter().find(|f| f.0 == s).map(|f| f.1.as_str());
+        assert_eq!(field(r.orientation), Some(format!("angle[{i}]").as_str()));
+        assert_eq!(field(r.angular_velocity), Some(format!("angular_velocity[{i}]").as_str()));
+    }
+    assert!(!m.code.contains("pub th_"), "no named angle fields");
+    let c = module(&l, &Options { solver: Some(Solver::SoftStep), lang: Lang::C, ..Options::default() })
+        .expect("generates C");
+    for role in ["angle", "angular_velocity", "torque"] {
+        assert!(c.code.contains(&format!("    double {role}[{rigid}];")), "C {role}");
+    }
 }
 
 #[test]

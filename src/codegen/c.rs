@@ -29,7 +29,10 @@
 
 use super::layout::{AStorage, JStorage, Layout, Solver};
 use super::names::{Namer, c_reserved, comment_text};
-use super::rust::{Bodies, Ctx, Field, Formulas, GenerateError, LengthPlace, Names, Prec, StepRoots, Turns, formula};
+use super::rust::{
+    Bodies, Ctx, Field, Formulas, GenerateError, LengthPlace, Names, Prec, ROLE_ARRAYS, StepRoots, Turns, formula,
+    scalar_role,
+};
 use crate::expr::{Graph, Id, Symbol, Ty};
 use std::fmt::Write;
 
@@ -208,10 +211,10 @@ pub(super) fn emit(ctx: &Ctx<'_>, p: &Parts<'_>) -> Result<String, GenerateError
         };
         let _ = writeln!(out, "    /* {} */\n    double {name}{ty};", c_comment(&f.doc));
     }
-    for role in ["position", "velocity", "force", "mass"] {
+    for (role, _) in ROLE_ARRAYS {
         let len = p.fields.iter().filter(|f| f.array.is_some_and(|a| a.0 == role)).count();
         if len > 0 {
-            let shape = if role == "mass" { format!("[{len}]") } else { format!("[{len}][{dim}]") };
+            let shape = if scalar_role(role) { format!("[{len}]") } else { format!("[{len}][{dim}]") };
             let _ = writeln!(out, "    double {role}{shape};");
         }
     }

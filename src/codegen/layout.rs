@@ -36,7 +36,8 @@ pub const MAX_PART: usize = 64;
 /// Most fields of a `State` struct with one field per symbol. rustc's derives of
 /// `PartialEq` and `Debug` recurse over the fields: a 2 000-link chain's 8 000 fields
 /// overflow its stack, 1 700 links' compile; 1 024 keeps far from that edge while every
-/// shipped scene keeps named fields. Past it the bodies' symbols live in role arrays.
+/// shipped scene keeps named fields. Past it the bodies' symbols (and 2D rigid bodies' θ, ω,
+/// τ, I) live in role arrays.
 pub const MAX_STATE_FIELDS: usize = 1024;
 
 /// How `State` holds the inputs.
@@ -45,7 +46,9 @@ pub enum StateStorage {
     /// One field per symbol.
     Fields,
     /// Positions, velocities, forces and mass symbols as arrays indexed by body (or mass
-    /// symbol); time and parameters stay fields. Past [`MAX_STATE_FIELDS`] fields.
+    /// symbol), and 2D rigid bodies' θ, ω, τ and inertia symbols as arrays indexed by rigid
+    /// body (or inertia symbol); time, parameters and 3D rigid bodies' q, ω, τ stay fields.
+    /// Past [`MAX_STATE_FIELDS`] fields.
     Arrays,
 }
 

@@ -8,6 +8,10 @@
 //! λ ≥ 0 on inequalities, the minimum-norm λ of redundant constraints), with `lambda`,
 //! `forces`, `force_<body>` and `accelerations` beside it. One equality keeps its closed
 //! forms, guarded: where their numbers leave f64's range the scaled solve answers.
+//! A big `State` (past `layout::MAX_STATE_FIELDS` inputs) holds the bodies' symbols in role
+//! arrays (`ROLE_ARRAYS`): `position[i]`, `velocity[i]`, `force[i]` by body, `mass[j]` by
+//! mass symbol, and the 2D rigid bodies' `angle[r]`, `angular_velocity[r]`, `torque[r]` by
+//! rigid body (the r-th in file order, its angular slot) and `inertia[j]` by inertia symbol.
 //! Rigid bodies (2D) add their θ, ω, τ (and I) to `State`, Jʷ (`angular_jacobian`), the
 //! constraint torques and α: the rows' solve runs over the library's slots (bodies, then one
 //! angular slot per rigid body), so its numbers are `lagrange solve`'s. 3D rigid bodies add
@@ -175,8 +179,8 @@ pub(super) struct Field {
     /// The field's name, or `array[index]` for a symbol held in a role array.
     pub(super) ident: String,
     pub(super) doc: String,
-    /// The role array (`position`, `velocity`, `force`, `mass`) that holds it, with its
-    /// index, when the layout puts bodies' symbols in arrays.
+    /// The role array ([`ROLE_ARRAYS`]) that holds it, with its index, when the layout puts
+    /// bodies' symbols in arrays.
     pub(super) array: Option<(&'static str, usize)>,
 }
 
@@ -688,7 +692,7 @@ impl<'a> StepPlaces<'a> {
         let mut arrays = Vec::new();
         for f in fields {
             let slice = |x: &str| match f.array {
-                Some(("mass", _)) => format!("&{x}.mass"),
+                Some((name, _)) if scalar_role(name) => format!("&{x}.{name}"),
                 Some((name, _)) => format!("{x}.{name}.as_flattened()"),
                 None if g.symbol(f.symbol).ty == Ty::Scalar && !g.is_quaternion(f.symbol) => {
                     format!("&[{x}.{}]", f.ident)
@@ -696,7 +700,7 @@ impl<'a> StepPlaces<'a> {
                 None => format!("&{x}.{}", f.ident),
             };
             match f.array {
-                Some(("velocity", _)) => continue,
+                Some(("velocity" | "angular_velocity", _)) => continue,
                 Some((name, _)) if arrays.contains(&name) => continue,
                 Some((name, _)) => arrays.push(name),
                 None if matches!(
@@ -1066,7 +1070,13 @@ fn step_module(
         let _ = writeln!(
             out,
             "// State fields: time and parameters under their names; the bodies' positions, velocities, forces \
-             and masses in the arrays `position`, `velocity`, `force`, `mass`, in file order.\n"
+             and masses in the arrays `position`, `velocity`, `force`, `mass`, in file order{}.\n",
+            if fields.iter().any(|f| f.array.is_some_and(|a| a.0 == "angle")) {
+                "; the 2D rigid bodies' θ, ω, τ and inertias in `angle`, `angular_velocity`, `torque`, `inertia`, \
+                 in the rigid bodies' file order"
+            } else {
+                ""
+            }
         );
     } else {
         field_names(&mut out, g, fields);
@@ -1116,10 +1126,13 @@ fn step_module(
         for (name, what, ty, at) in [("orientations", "orientation", q, 0), ("angular_velocities", "ω", w, 1)] {
             let items: Vec<String> =
                 places.turn.iter().map(|t| format!("s.{}", if at == 0 { t.0 } else { t.1 })).collect();
+            // A role array in the order of the rigid bodies is returned whole.
+            let role = if at == 0 { "angle" } else { "angular_velocity" };
+            let whole = items.iter().enumerate().all(|(i, x)| *x == format!("s.{role}[{i}]"));
+            let value = if whole { format!("s.{role}") } else { array(&items) };
             let _ = writeln!(
                 out,
-                "/// The {what} of each rigid body, in file order.\npub fn {name}(s: &State) -> [{ty}; {r}] {{\n    {}\n}}\n",
-                array(&items)
+                "/// The {what} of each rigid body, in file order.\npub fn {name}(s: &State) -> [{ty}; {r}] {{\n    {value}\n}}\n"
             );
         }
     }
@@ -1276,11 +1289,29 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
             put.push(format!("s.{o} = q[{first}][0];\n    s.{w} = v[{first}][0];"));
         }
     }
+    let n = places.position.len();
+    // Bodies and 2D rigid bodies in role arrays, the r-th rigid body at slot n + r: `get` and
+    // `put` copy the arrays.
+    let arrays = places.position.iter().enumerate().all(|(i, p)| *p == format!("position[{i}]"))
+        && places.velocity.iter().enumerate().all(|(i, v)| *v == format!("velocity[{i}]"));
+    let rigid_arrays = arrays
+        && !step.turns.is_empty()
+        && step.turns.iter().zip(&places.turn).enumerate().all(|(r, (&(first, is_3d), &(o, w)))| {
+            !is_3d && first == n + r && o == format!("angle[{r}]") && w == format!("angular_velocity[{r}]")
+        });
     // Point masses: the slots are the positions and velocities as the module gives them.
-    let (q, v) = if step.turns.is_empty() {
-        ("positions(s)".to_string(), "velocities(s)".to_string())
+    let slots = if step.turns.is_empty() {
+        format!("(positions(s), velocities(s), {})", array(&orientations))
+    } else if rigid_arrays {
+        format!(
+            "let (mut q, mut v) = ([[0.0; DIM]; SLOTS], [[0.0; DIM]; SLOTS]);\n    \
+             q[..{n}].copy_from_slice(&s.position);\n    v[..{n}].copy_from_slice(&s.velocity);\n    \
+             for (x, a) in q[{n}..].iter_mut().zip(&s.angle) {{\n        *x = [*a, 0.0];\n    }}\n    \
+             for (x, w) in v[{n}..].iter_mut().zip(&s.angular_velocity) {{\n        *x = [*w, 0.0];\n    }}\n    \
+             (q, v, [])"
+        )
     } else {
-        (array(&q), array(&v))
+        format!("({}, {}, {})", array(&q), array(&v), array(&orientations))
     };
     let _ = writeln!(
         out,
@@ -1289,8 +1320,7 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
          /// then two empty slots), and the 3D rigid bodies' orientations q₀.\n\
          #[allow(clippy::type_complexity)]\n\
          fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIENTATIONS]) {{\n    \
-         ({q}, {v}, {})\n}}\n",
-        array(&orientations)
+         {slots}\n}}\n"
     );
     let _ = writeln!(
         out,
@@ -1308,9 +1338,6 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
     if orientations.is_empty() {
         let _ = writeln!(out, "    let _ = q0;");
     }
-    let arrays = places.position.iter().enumerate().all(|(i, p)| *p == format!("position[{i}]"))
-        && places.velocity.iter().enumerate().all(|(i, v)| *v == format!("velocity[{i}]"));
-    let n = places.position.len();
     if arrays && step.turns.is_empty() {
         let _ = writeln!(out, "    s.position.copy_from_slice(q);\n    s.velocity.copy_from_slice(v);");
     } else if arrays {
@@ -1320,8 +1347,16 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
             let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
         }
     }
-    for line in &put {
-        let _ = writeln!(out, "    {line}");
+    if rigid_arrays {
+        let _ = writeln!(
+            out,
+            "    for (a, x) in s.angle.iter_mut().zip(&q[{n}..]) {{\n        *a = x[0];\n    }}\n    \
+             for (w, x) in s.angular_velocity.iter_mut().zip(&v[{n}..]) {{\n        *w = x[0];\n    }}"
+        );
+    } else {
+        for line in &put {
+            let _ = writeln!(out, "    {line}");
+        }
     }
     let _ = writeln!(out, "}}\n");
 }
@@ -1797,7 +1832,7 @@ fn state(out: &mut String, g: &Graph, fields: &[Field], layout: &Layout) {
         if len == 0 {
             continue;
         }
-        let (ty, zero) = if name == "mass" {
+        let (ty, zero) = if scalar_role(name) {
             (format!("[f64; {len}]"), format!("[0.0; {len}]"))
         } else {
             (format!("[[f64; {dim}]; {len}]"), format!("[[0.0; {dim}]; {len}]"))
@@ -2948,10 +2983,29 @@ fn exact(x: f64) -> Option<Rational> {
 /// The fields of `State`: every symbol but accelerations and substituted ones. A name that
 /// is a Rust identifier as written keeps it (`R`, `F`, `r`); any other becomes [`snake`] of
 /// it, with `_2`, `_3`, … in file order where that is taken (names kept as written first).
-/// With `arrays`, the bodies' positions, velocities, forces and mass symbols are entries of
-/// the role arrays [`ROLE_ARRAYS`] instead (whose names no field takes).
+/// With `arrays`, the bodies' positions, velocities, forces and mass symbols, and the 2D
+/// rigid bodies' θ, ω, τ and inertia symbols, are entries of the role arrays [`ROLE_ARRAYS`]
+/// instead (whose names no field takes; the rigid ones only where there are 2D rigid bodies).
 fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, arrays: bool) -> Vec<Field> {
-    let reserved: Vec<&str> = if arrays { ROLE_ARRAYS.iter().map(|r| r.0).collect() } else { Vec::new() };
+    // 2D rigid bodies' θ, ω, τ sit at their rigid body's place among the rigid bodies (the
+    // order of the angular slots: body order); 3D ones (q, world ω, τ) keep their fields.
+    let mut rigid: Vec<usize> = g
+        .symbols()
+        .filter_map(|(_, info)| match info.role {
+            Role::Orientation { body } if arrays && g.dim() == 2 => Some(body),
+            _ => None,
+        })
+        .collect();
+    rigid.sort_unstable();
+    rigid.dedup();
+    let turn = |body: usize| rigid.binary_search(&body).ok();
+    // The rigid roles' names are taken only where there are 2D rigid bodies.
+    let reserved: Vec<&str> = match arrays {
+        true => {
+            ROLE_ARRAYS.iter().map(|r| r.0).filter(|r| !rigid.is_empty() || !scalar_role(r) || *r == "mass").collect()
+        }
+        false => Vec::new(),
+    };
     let keep = |name: &str| super::names::as_written(name).filter(|n| !reserved.contains(n)).map(str::to_string);
     let mut kept: Vec<String> = g
         .symbols()
@@ -2962,7 +3016,7 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, array
     let kept: Vec<&str> = kept.iter().map(String::as_str).collect();
     let mut namer = Namer::new(&kept);
     let mut fields = Vec::new();
-    let mut masses = 0;
+    let (mut masses, mut inertias) = (0, 0);
     for (symbol, info) in g.symbols() {
         if substituted.contains(&symbol) {
             continue;
@@ -2991,6 +3045,13 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, array
                 masses += 1;
                 Some(("mass", masses - 1))
             }
+            Role::Orientation { body } => turn(body).map(|r| ("angle", r)),
+            Role::AngularVelocity { body } => turn(body).map(|r| ("angular_velocity", r)),
+            Role::Torque { body } => turn(body).map(|r| ("torque", r)),
+            Role::Inertia { .. } if !rigid.is_empty() => {
+                inertias += 1;
+                Some(("inertia", inertias - 1))
+            }
             _ => None,
         };
         let ident = match (array, keep(&info.name)) {
@@ -3004,13 +3065,24 @@ fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, array
 }
 
 /// The role arrays of a big `State`, with their doc: body i's symbol of that role is entry i
-/// (masses: the mass symbols in file order).
-const ROLE_ARRAYS: [(&str, &str); 4] = [
+/// (masses: the mass symbols in file order); the r-th 2D rigid body in file order (its
+/// angular slot `BODIES + r`) has its θ, ω, τ at entry r (inertias: the inertia symbols in
+/// file order).
+pub(super) const ROLE_ARRAYS: [(&str, &str); 8] = [
     ("position", "The bodies' positions, body i at entry i"),
     ("velocity", "The bodies' velocities, body i at entry i"),
     ("force", "The external forces on the bodies, body i at entry i"),
     ("mass", "The mass symbols, in file order"),
+    ("angle", "The 2D rigid bodies' angles θ, the r-th rigid body (in file order) at entry r"),
+    ("angular_velocity", "The 2D rigid bodies' angular velocities ω, the r-th rigid body at entry r"),
+    ("torque", "The external torques on the 2D rigid bodies, the r-th rigid body at entry r"),
+    ("inertia", "The 2D rigid bodies' inertia symbols, in file order"),
 ];
+
+/// Whether a role array holds scalars (one `f64` per entry) rather than vectors.
+pub(super) fn scalar_role(name: &str) -> bool {
+    matches!(name, "mass" | "angle" | "angular_velocity" | "torque" | "inertia")
+}
 
 /// The Rust expression of every input slot, in slot order.
 fn slot_exprs(g: &Graph, fields: &[Field]) -> Vec<String> {

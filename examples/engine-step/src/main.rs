@@ -18,7 +18,7 @@
 //! --solver soft-step --steps 500` ends at the same bits).
 //!
 //! Run: `cargo run --release` in this directory (the rigid grid 30 x 30: it builds in about a
-//! minute); `RIGID_GRID=100 cargo run --release` builds Box2D's 100 x 100 (about 20 minutes). `cargo run --release -- points` or `-- rigid`
+//! minute); `RIGID_GRID=100 cargo run --release` builds Box2D's 100 x 100 (its 5.7 MB module about 2 minutes of rustc). `cargo run --release -- points` or `-- rigid`
 //! runs one of the two.
 
 #[allow(dead_code, clippy::all)]
