@@ -327,23 +327,76 @@ fn bad_inverse_mass(w: f64) -> Option<NonFinite> {
     }
 }
 
-/// The first non-finite number of `row` (and the bodies it acts on), in the order the
-/// solve needs them; C and Ċ only for inequalities (`check_value`).
-fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Option<(RowPart, NonFinite)> {
-    // The common case first, without branches: every number finite and every mass ≥ 0.
-    // Tests combined with `&` (one chain of single-cycle steps, not of additions). Written
-    // out rather than as a chain of iterators: this runs for every row of every factorisation.
+/// Whether `row`'s c term and J, its bodies' inverse masses (finite, ≥ 0), with `motion`
+/// their velocities and forces, and with `check_value` its C and Ċ are all finite: the
+/// common case of [`non_finite_part`], without branches. Tests combined with `&` (one chain
+/// of single-cycle steps, not of additions). Written out rather than as a chain of
+/// iterators: this runs for every row of every factorisation.
+#[inline]
+fn row_sound(rows: &Rows, row: &super::rows::Row, check_value: bool, motion: bool) -> bool {
     let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
     let mut ok = row.bias.is_finite();
     for (body, j) in &row.jacobian {
         let w = rows.inverse_mass[*body];
         ok &= (w >= 0.0) & w.is_finite() & finite3(j);
-        ok &= finite3(&rows.velocity[*body]) & finite3(&rows.force[*body]);
+        if motion {
+            ok &= finite3(&rows.velocity[*body]) & finite3(&rows.force[*body]);
+        }
     }
     if check_value {
         ok &= row.value.is_finite() & row.rate.is_finite();
     }
-    if ok {
+    ok
+}
+
+/// Why a row with finite numbers cannot be scaled ([`scale_row`]).
+enum Unscalable {
+    /// ‖J‖ overflows (finite components).
+    Overflow,
+    /// ‖J‖ = 0.
+    Zero,
+    /// Âₖₖ is not positive and finite (every body it acts on has infinite mass).
+    InfiniteMass,
+}
+
+/// Row `row` scaled into `parts` (one per J entry, in order; their slots left as they are):
+/// Ĵ = J/‖J‖ (times 1/‖J‖ where that is a normal number), Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ, J̃ = Ĵ/√Âₖₖ;
+/// returns ‖J‖ and 1/√Âₖₖ. `parts` holds Ĵ when the row is unscalable at Âₖₖ.
+#[inline]
+fn scale_row(
+    row: &super::rows::Row,
+    inverse_mass: &[f64],
+    parts: &mut [(usize, [f64; 3])],
+) -> Result<(f64, f64), Unscalable> {
+    let norm = row_norm(&row.jacobian);
+    if !norm.is_finite() {
+        return Err(Unscalable::Overflow);
+    }
+    if norm == 0.0 {
+        return Err(Unscalable::Zero);
+    }
+    let inverse = 1.0 / norm;
+    let reciprocal = RECIPROCAL_NORMS.contains(&norm);
+    let mut a_kk = 0.0;
+    for ((_, u), (b, j)) in parts.iter_mut().zip(&row.jacobian) {
+        *u = if reciprocal { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
+        a_kk += dot(u, u) * inverse_mass[*b];
+    }
+    if !(a_kk > 0.0 && a_kk.is_finite()) {
+        return Err(Unscalable::InfiniteMass);
+    }
+    let d = 1.0 / a_kk.sqrt();
+    for (_, u) in parts.iter_mut() {
+        *u = u.map(|x| x * d);
+    }
+    Ok((norm, d))
+}
+
+/// The first non-finite number of `row` (and the bodies it acts on), in the order the
+/// solve needs them; C and Ċ only for inequalities (`check_value`).
+fn non_finite_part(rows: &Rows, row: &super::rows::Row, check_value: bool) -> Option<(RowPart, NonFinite)> {
+    // The common case first, without branches.
+    if row_sound(rows, row, check_value, true) {
         return None;
     }
     if let Some(c) = NonFinite::of_all(row.jacobian.iter().flat_map(|(_, j)| j.iter().copied())) {
@@ -540,46 +593,28 @@ impl Scaled {
                 *status = (*status).max(Status::Failed);
                 continue;
             }
-            let norm = row_norm(&row.jacobian);
-            if !norm.is_finite() {
-                // Finite components whose norm overflows (row_norm scales, so this is rare).
-                diagnostics.push(Diagnostic::NonFiniteRow {
-                    constraint: q,
-                    part: RowPart::Gradient,
-                    cause: NonFinite::Overflow,
-                });
-                *status = (*status).max(Status::Failed);
-                continue;
-            }
-            if norm == 0.0 {
-                diagnostics.push(Diagnostic::ZeroGradient { constraint: q, unsatisfiable: row.bias != 0.0 });
-                *status = (*status).max(Status::Singular);
-                continue;
-            }
-            // Ĵ = J/‖J‖, and Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ.
             let first = self.parts.len();
-            let inverse = 1.0 / norm;
-            let reciprocal = RECIPROCAL_NORMS.contains(&norm);
-            let mut a_kk = 0.0;
-            for (b, j) in &row.jacobian {
-                let u = if reciprocal { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
-                a_kk += dot(&u, &u) * rows.inverse_mass[*b];
-                self.parts.push((*b, u));
-            }
-            if !(a_kk > 0.0 && a_kk.is_finite()) {
-                self.parts.truncate(first);
-                diagnostics.push(Diagnostic::InfiniteMass { constraint: q });
-                *status = (*status).max(Status::Singular);
-                continue;
-            }
-            // J̃ = Ĵ/√Âₖₖ.
-            let d = 1.0 / a_kk.sqrt();
-            for (_, u) in &mut self.parts[first..] {
-                *u = u.map(|x| x * d);
-            }
-            self.norm[q] = norm;
-            self.jacobi[q] = d;
-            self.usable[q] = true;
+            self.parts.extend(row.jacobian.iter().map(|&(b, _)| (b, [0.0; 3])));
+            let (diagnostic, worst) = match scale_row(row, &rows.inverse_mass, &mut self.parts[first..]) {
+                Ok((norm, d)) => {
+                    self.norm[q] = norm;
+                    self.jacobi[q] = d;
+                    self.usable[q] = true;
+                    continue;
+                }
+                // Finite components whose norm overflows (row_norm scales, so this is rare).
+                Err(Unscalable::Overflow) => (
+                    Diagnostic::NonFiniteRow { constraint: q, part: RowPart::Gradient, cause: NonFinite::Overflow },
+                    Status::Failed,
+                ),
+                Err(Unscalable::Zero) => {
+                    (Diagnostic::ZeroGradient { constraint: q, unsatisfiable: row.bias != 0.0 }, Status::Singular)
+                }
+                Err(Unscalable::InfiniteMass) => (Diagnostic::InfiniteMass { constraint: q }, Status::Singular),
+            };
+            self.parts.truncate(first);
+            diagnostics.push(diagnostic);
+            *status = (*status).max(worst);
         }
         self.start.push(self.parts.len());
     }
@@ -591,38 +626,15 @@ impl Scaled {
     /// (`self` then spent) when a row is no longer usable, where `refill` would give a
     /// diagnostic.
     fn rescale_in_place(&mut self, rows: &Rows) -> bool {
-        let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
         for (q, (row, bounds)) in rows.rows.iter().zip(self.start.windows(2)).enumerate() {
-            // `non_finite_part`'s test with the motion known finite.
-            let mut ok = row.bias.is_finite();
-            for (body, j) in &row.jacobian {
-                let w = rows.inverse_mass[*body];
-                ok &= (w >= 0.0) & w.is_finite() & finite3(j);
-            }
-            if !ok {
+            // The motion is known finite (the cache's entry check).
+            if !row_sound(rows, row, false, false) {
                 return false;
             }
-            let norm = row_norm(&row.jacobian);
-            if !norm.is_finite() || norm == 0.0 {
-                return false;
+            match scale_row(row, &rows.inverse_mass, &mut self.parts[bounds[0]..bounds[1]]) {
+                Ok((norm, d)) => (self.norm[q], self.jacobi[q]) = (norm, d),
+                Err(_) => return false,
             }
-            let inverse = 1.0 / norm;
-            let reciprocal = RECIPROCAL_NORMS.contains(&norm);
-            let mut a_kk = 0.0;
-            let parts = &mut self.parts[bounds[0]..bounds[1]];
-            for ((_, u), (b, j)) in parts.iter_mut().zip(&row.jacobian) {
-                *u = if reciprocal { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
-                a_kk += dot(u, u) * rows.inverse_mass[*b];
-            }
-            if !(a_kk > 0.0 && a_kk.is_finite()) {
-                return false;
-            }
-            let d = 1.0 / a_kk.sqrt();
-            for (_, u) in parts.iter_mut() {
-                *u = u.map(|x| x * d);
-            }
-            self.norm[q] = norm;
-            self.jacobi[q] = d;
         }
         true
     }
