@@ -880,6 +880,21 @@ fn simulate_settings(
             max_iterations: lagrange::numeric::stabilize::PROJECTION_ITERATIONS,
         },
     };
+    // Every drift-control flag is checked, whichever --stabilize runs (as the velocity-level
+    // flags are, whichever --solver), so a typo never passes silently.
+    let flags = [
+        Stabilize::Baumgarte { zeta: args.zeta, omega_dt: args.omega_dt },
+        Stabilize::Projection {
+            tolerance: args.tolerance,
+            max_iterations: lagrange::numeric::stabilize::PROJECTION_ITERATIONS,
+        },
+    ];
+    for flag in flags {
+        flag.validate().map_err(|e| {
+            errln!("error: {}", SimError::Settings(e.into()));
+            ExitCode::from(2)
+        })?;
+    }
     // The samples feed the plot alone: without --plot a step keeps none (a Vec a step).
     if args.plot.is_none() {
         settings.samples = 0;

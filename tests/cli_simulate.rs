@@ -71,6 +71,26 @@ fn simulate_rejects_bad_settings_before_running() {
     let out = lagrange(&["simulate", "constraints/pendulum.toml", "--dt=-1"]);
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("step must be finite and positive"));
+    // A drift-control flag out of range is refused whichever --stabilize runs: a typo never
+    // passes silently (as the velocity-level flags, checked whichever --solver runs).
+    for (args, message) in [
+        (&["--zeta", "-1"][..], "ζ (--zeta) must be finite and at least 0, found -1"),
+        (&["--zeta", "-1", "--stabilize", "baumgarte"][..], "ζ (--zeta) must be finite and at least 0, found -1"),
+        (&["--omega-dt", "2"][..], "ω·dt (--omega-dt) must lie in (0, 1], found 2"),
+        (&["--tolerance", "0", "--stabilize", "none"][..], "(--tolerance) must be finite and positive, found 0"),
+        (&["--tolerance", "inf", "--solver", "pgs"][..], "(--tolerance) must be finite and positive, found inf"),
+    ] {
+        let mut all = vec!["simulate", "constraints/pendulum.toml", "--steps", "10"];
+        all.extend_from_slice(args);
+        let out = lagrange(&all);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        assert!(
+            String::from_utf8_lossy(&out.stderr).contains(message),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(out.stdout.is_empty(), "{args:?}: nothing ran");
+    }
 }
 
 #[test]

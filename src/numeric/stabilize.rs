@@ -123,13 +123,13 @@ impl Stabilize {
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum StabilizeError {
     /// Baumgarte's ζ is negative or not finite.
-    #[error("the Baumgarte damping ratio must be finite and ≥ 0, found {0}")]
+    #[error("the Baumgarte damping ratio ζ (--zeta) must be finite and at least 0, found {0}")]
     Damping(f64),
     /// Baumgarte's ω·dt is outside (0, 1].
-    #[error("the Baumgarte frequency ω·dt must lie in (0, 1], found {0}")]
+    #[error("the Baumgarte frequency ω·dt (--omega-dt) must lie in (0, 1], found {0}")]
     Frequency(f64),
     /// The projection tolerance is not a finite positive number.
-    #[error("the projection tolerance must be positive, found {0}")]
+    #[error("the projection tolerance (--tolerance) must be finite and positive, found {0}")]
     Tolerance(f64),
     /// The projection may take no Newton iteration.
     #[error("the projection needs at least one iteration")]
