@@ -15,6 +15,7 @@
 
 pub mod banded;
 pub mod batch;
+mod chain;
 pub mod contact;
 pub mod dynamics;
 pub mod integrate;
