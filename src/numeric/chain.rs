@@ -6,12 +6,11 @@
 //! Design note. The general solve of a chain is correct and linear but walks the rows many
 //! times: a finiteness check, the scaling (‖J‖, J/‖J‖, Jacobi), Ã term by term through a list
 //! of terms, the band factor, the right-hand side, each substitution, then λ and the forces.
-//! Here one pass does, for each row, the check, the scaling, the row's two entries of Ã, the
-//! row of the factor and of the forward substitution (the factor of row k needs only rows up
-//! to k, so the independent scaling of the next rows overlaps the factor's chain of a
-//! division and a square root); a second the backward substitution; a third the refinement's
-//! residual with its forward substitution; a fourth its backward substitution; a fifth λ and
-//! the forces. Every number is the general solve's bit for bit: the same operations
+//! Here one pass does, for each row, the check, the scaling and the row's two entries of Ã;
+//! a second the row of the factor (the factor of row k needs only rows up to k), −b̃ and the
+//! forward substitution; a third the backward substitution; a fourth the refinement's
+//! residual with its forward substitution; a fifth its backward substitution; a sixth λ and
+//! the forces. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
 //! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
 //! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
 //! terms go — which a property test over random chains holds it to (`tests/chain_solve.rs`).
@@ -236,58 +235,82 @@ impl Chain {
         true
     }
 
-    /// Rows `from..` scaled, assembled and factored (their J's bits taken), and every row's
-    /// −b̃ and forward substitution, in one pass. False when a row is not usable or a pivot
-    /// falls to the rank tolerance (the general solve has a diagnostic or a fallback).
+    /// Rows `from..` scaled and assembled (their J's bits taken), then factored, with every
+    /// row's −b̃ and forward substitution. False when a row is not usable or a pivot falls to
+    /// the rank tolerance (the general solve has a diagnostic or a fallback).
+    ///
+    /// Two passes: the scaling's rows are independent (each a chain of two square roots and
+    /// two divisions of its own, which overlap from row to row), the factor's rows one chain
+    /// through every row (a division and a square root each, then 1/Lₖₖ). Interleaved in one
+    /// pass they ran no faster (the `solve` benchmark's `chain_5_cached_refactored`).
     fn factor_and_forward(&mut self, rows: &Rows, settings: &Settings, from: usize) -> bool {
+        self.scale_and_assemble(rows, from) && self.factor_from(rows, settings.rank_tolerance, from)
+    }
+
+    /// Rows `from..` scaled and their entries of Ã assembled, their J's bits taken.
+    fn scale_and_assemble(&mut self, rows: &Rows, from: usize) -> bool {
         let w = &rows.inverse_mass;
-        let floor = settings.rank_tolerance;
-        let mut previous = 0.0;
-        for (q, row) in rows.rows.iter().enumerate() {
-            let (lo, hi) = (self.start[q], self.start[q + 1]);
-            if q >= from {
-                for (bits, (_, j)) in self.bits[lo..hi].iter_mut().zip(&row.jacobian) {
-                    *bits = j.map(f64::to_bits);
-                }
-                // The motion is known finite (`servable`).
-                if !row_sound(rows, row, false, false) {
-                    return false;
-                }
-                let Ok((norm, d)) = scale_row(row, w, &mut self.parts[lo..hi]) else {
-                    return false;
-                };
-                (self.norm[q], self.jacobi[q]) = (norm, d);
-                // Ãₖₖ and Ãₖ,ₖ₋₁ as `assemble`'s terms sum them: slot by slot in increasing
-                // order, from +0 (the band's zeros).
-                let mut diagonal = 0.0;
-                for (b, u) in &self.parts[lo..hi] {
-                    diagonal += dot(u, u) * w[*b];
-                }
-                let mut below = 0.0;
-                if q > 0 {
-                    let (mine, before) = (&self.parts[lo..hi], &self.parts[self.start[q - 1]..lo]);
-                    let (mut x, mut y) = (0, 0);
-                    while x < before.len() && y < mine.len() {
-                        let (s, t) = (before[x].0, mine[y].0);
-                        if s == t {
-                            below += dot(&before[x].1, &mine[y].1) * w[s];
-                        }
-                        x += usize::from(s <= t);
-                        y += usize::from(t <= s);
-                    }
-                }
-                (self.a[2 * q], self.a[2 * q + 1]) = (below, diagonal);
-                let above = if q > 0 { self.l[2 * q - 1] } else { 1.0 };
-                let Some((l_below, l_diagonal)) = tridiagonal_factor_row(below, diagonal, above, q > 0, floor) else {
-                    return false;
-                };
-                (self.l[2 * q], self.l[2 * q + 1]) = (l_below, l_diagonal);
-                self.inverse[q] = 1.0 / l_diagonal;
+        let Chain { start, parts, bits, norm, jacobi, a, .. } = self;
+        for (q, row) in rows.rows.iter().enumerate().skip(from) {
+            let (lo, hi) = (start[q], start[q + 1]);
+            for (bits, (_, j)) in bits[lo..hi].iter_mut().zip(&row.jacobian) {
+                *bits = j.map(f64::to_bits);
             }
-            let rhs = -b_of(rows, &self.parts[lo..hi], row.bias, self.norm[q], self.jacobi[q]);
-            self.rhs[q] = rhs;
-            previous = forward_row(&self.l, &self.inverse, q, rhs, previous);
-            self.y[q] = previous;
+            // The motion is known finite (`servable`).
+            if !row_sound(rows, row, false, false) {
+                return false;
+            }
+            let Ok((n, d)) = scale_row(row, w, &mut parts[lo..hi]) else {
+                return false;
+            };
+            (norm[q], jacobi[q]) = (n, d);
+            // Ãₖₖ and Ãₖ,ₖ₋₁ as `assemble`'s terms sum them: slot by slot in increasing
+            // order, from +0 (the band's zeros).
+            let (before, mine) = parts[..hi].split_at(lo);
+            let mut diagonal = 0.0;
+            for (b, u) in mine {
+                diagonal += dot(u, u) * w[*b];
+            }
+            let mut below = 0.0;
+            if q > 0 {
+                let before = &before[start[q - 1]..];
+                let (mut x, mut y) = (0, 0);
+                while x < before.len() && y < mine.len() {
+                    let (s, t) = (before[x].0, mine[y].0);
+                    if s == t {
+                        below += dot(&before[x].1, &mine[y].1) * w[s];
+                    }
+                    x += usize::from(s <= t);
+                    y += usize::from(t <= s);
+                }
+            }
+            (a[2 * q], a[2 * q + 1]) = (below, diagonal);
+        }
+        true
+    }
+
+    /// The factor's rows `from..` (`banded`'s tridiagonal factor, row by row) and every
+    /// row's −b̃ and forward substitution, in one pass: two chains through the rows side by
+    /// side.
+    fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize) -> bool {
+        let k = rows.rows.len();
+        let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
+        let (a, l, inverse) = (&a[..2 * k], &mut l[..2 * k], &mut inverse[..k]);
+        let mut previous = 0.0;
+        for (q, (row, bounds)) in rows.rows.iter().zip(start.windows(2)).enumerate() {
+            if q >= from {
+                let above = if q > 0 { l[2 * q - 1] } else { 1.0 };
+                let Some((l_below, l_diagonal)) = tridiagonal_factor_row(a[2 * q], a[2 * q + 1], above, q > 0, floor)
+                else {
+                    return false;
+                };
+                (l[2 * q], l[2 * q + 1]) = (l_below, l_diagonal);
+                inverse[q] = 1.0 / l_diagonal;
+            }
+            let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm[q], jacobi[q]);
+            rhs[q] = b;
+            previous = forward_row(l, inverse, q, b, previous);
+            y[q] = previous;
         }
         true
     }
