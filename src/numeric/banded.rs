@@ -141,12 +141,11 @@ impl Banded {
         let (a, l) = (&self.data[..2 * n], &mut l[..2 * n]);
         for i in 0..n {
             let above = if i > 0 { l[2 * i - 1] } else { 1.0 };
-            let (below, diagonal) =
-                tridiagonal_factor_row(a[2 * i], a[2 * i + 1], above, i > 0, pivot_floor).ok_or(i)?;
+            let (below, diagonal) = tridiagonal_factor_row(a[2 * i], a[2 * i + 1], above, i > 0, pivot_floor);
             if i > 0 {
                 l[2 * i] = below;
             }
-            l[2 * i + 1] = diagonal;
+            l[2 * i + 1] = diagonal.ok_or(i)?;
         }
         Ok(())
     }
@@ -253,9 +252,9 @@ impl BandedCholesky {
 /// Row i of a tridiagonal's factor (chains), from Aᵢ,ᵢ₋₁ (`below`, when `has_below`), Aᵢᵢ
 /// and Lᵢ₋₁,ᵢ₋₁ (`above`): Lᵢ,ᵢ₋₁ = Aᵢ,ᵢ₋₁/Lᵢ₋₁,ᵢ₋₁ (nothing to subtract: the rows share no
 /// earlier column), then Lᵢᵢ = √(Aᵢᵢ − Lᵢ,ᵢ₋₁²): the general loop's sums in its order, without
-/// its inner loops. `None` when the pivot falls to `pivot_floor` or below (or is NaN). The one
-/// form of these operations: [`Banded::cholesky_into`] and the chain solve
-/// (`numeric::chain`, which factors as it assembles) both run it.
+/// its inner loops. Lᵢᵢ is `None` when the pivot falls to `pivot_floor` or below (or is NaN).
+/// The one form of these operations: [`Banded::cholesky_into`] and the chain solve
+/// (`numeric::chain`) both run it.
 #[inline]
 pub(crate) fn tridiagonal_factor_row(
     below: f64,
@@ -263,7 +262,7 @@ pub(crate) fn tridiagonal_factor_row(
     above: f64,
     has_below: bool,
     pivot_floor: f64,
-) -> Option<(f64, f64)> {
+) -> (f64, Option<f64>) {
     let mut s = diagonal;
     let mut l = 0.0;
     if has_below {
@@ -271,9 +270,9 @@ pub(crate) fn tridiagonal_factor_row(
         s -= l * l;
     }
     if s.is_nan() || s <= pivot_floor {
-        return None;
+        return (l, None);
     }
-    Some((l, s.sqrt()))
+    (l, Some(s.sqrt()))
 }
 
 /// Row i of a tridiagonal factor's forward substitution (L y = x, `l` the factor's band as

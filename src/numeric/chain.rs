@@ -300,7 +300,7 @@ impl Chain {
         for (q, (row, bounds)) in rows.rows.iter().zip(start.windows(2)).enumerate() {
             if q >= from {
                 let above = if q > 0 { l[2 * q - 1] } else { 1.0 };
-                let Some((l_below, l_diagonal)) = tridiagonal_factor_row(a[2 * q], a[2 * q + 1], above, q > 0, floor)
+                let (l_below, Some(l_diagonal)) = tridiagonal_factor_row(a[2 * q], a[2 * q + 1], above, q > 0, floor)
                 else {
                     return false;
                 };
