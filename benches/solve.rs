@@ -7,6 +7,12 @@
 //! difference is the factorisation: O(N³) dense against O(N) banded. Dense stops at
 //! N = 1000 (N = 10 000 would need 800 MB and minutes). `auto_scrambled` lists the links
 //! out of order, so the band has to be found by renumbering.
+//!
+//! `chain_*` is the solve alone of the same chain's rows against a handwritten tridiagonal
+//! solve of them (`chain_1_handwritten`: A = J M⁻¹ Jᵀ and b = J M⁻¹ F + c assembled from the
+//! rows' J, Thomas's algorithm, the accelerations): the library's `solve_with` (the fast
+//! path for chains, `numeric::chain`), the general solve it stands in for (`solve_general`),
+//! and a run's cache with J kept (reused) or changing at every solve (refactored).
 
 /// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
 /// many small forms).
@@ -15,7 +21,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use divan::{Bencher, black_box};
 use lagrange::numeric::rows::{Row, Rows};
-use lagrange::numeric::solve::{Method, Settings, SolveCache, solve_cached, solve_with};
+use lagrange::numeric::solve::{Method, Settings, SolveCache, solve_cached, solve_general, solve_with};
 
 fn main() {
     divan::main();
@@ -172,4 +178,105 @@ fn grid_cached_reuse(bencher: Bencher, k: usize) {
     let mut cache = SolveCache::default();
     solve_cached(&rows, &settings, &[], &mut cache);
     bencher.bench_local(|| solve_cached(black_box(&rows), &settings, &[], &mut cache));
+}
+
+/// The baseline of the `chain_*` benchmarks: the chain's rows solved by hand, as an engine
+/// programmer would for a chain known to be one: Aₖₖ = Σᵢ Jₖᵢ·Jₖᵢ wᵢ, Aₖ,ₖ₋₁ = Jₖ₋₁,ₖ₋₁·Jₖ,ₖ₋₁ wₖ₋₁
+/// (the body the two links share), bₖ = Σᵢ Jₖᵢ·Fᵢ wᵢ + cₖ, Thomas's algorithm for A λ = −b,
+/// then aᵢ = (Fᵢ + Σₖ λₖ Jₖᵢ) wᵢ. No scaling, no checks, no refinement.
+#[divan::bench(name = "chain_1_handwritten", args = [10, 100, 1000, 10000])]
+fn chain_handwritten(bencher: Bencher, n: usize) {
+    let rows = chain(n);
+    let dot = |a: &[f64; 3], b: &[f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let (mut lower, mut diag, mut rhs, mut lambda) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let mut acceleration = vec![[0.0; 3]; n];
+    bencher.bench_local(|| {
+        let rows = black_box(&rows);
+        let w = &rows.inverse_mass;
+        for (k, row) in rows.rows.iter().enumerate() {
+            let (mut a, mut b) = (0.0, row.bias);
+            for (i, j) in &row.jacobian {
+                a += dot(j, j) * w[*i];
+                b += dot(j, &rows.force[*i]) * w[*i];
+            }
+            diag[k] = a;
+            rhs[k] = -b;
+            lower[k] = if k > 0 {
+                // Row k's first entry and row k − 1's last are on the body they share.
+                let ((i, j), (_, p)) =
+                    (row.jacobian[0], rows.rows[k - 1].jacobian[rows.rows[k - 1].jacobian.len() - 1]);
+                dot(&p, &j) * w[i]
+            } else {
+                0.0
+            };
+        }
+        for k in 1..n {
+            let m = lower[k] / diag[k - 1];
+            diag[k] -= m * lower[k];
+            rhs[k] -= m * rhs[k - 1];
+        }
+        lambda[n - 1] = rhs[n - 1] / diag[n - 1];
+        for k in (0..n - 1).rev() {
+            lambda[k] = (rhs[k] - lower[k + 1] * lambda[k + 1]) / diag[k];
+        }
+        for (a, f) in acceleration.iter_mut().zip(&rows.force) {
+            *a = *f;
+        }
+        for (row, l) in rows.rows.iter().zip(&lambda) {
+            for (i, j) in &row.jacobian {
+                for d in 0..3 {
+                    acceleration[*i][d] += l * j[d] * w[*i];
+                }
+            }
+        }
+        acceleration[n - 1]
+    });
+}
+
+/// `solve_with` of the chain's rows: the fast path for chains (`numeric::chain`).
+#[divan::bench(name = "chain_2_solve_with", args = [10, 100, 1000, 10000])]
+fn chain_solve_with(bencher: Bencher, n: usize) {
+    let rows = chain(n);
+    let settings = Settings::default();
+    bencher.bench(|| solve_with(black_box(&rows), &settings).acceleration[n - 1]);
+}
+
+/// The general solve the fast path stands in for (`solve_general`: scaling buffers, terms of
+/// Ã, the plan, the band factor, its refinement): the same numbers bit for bit.
+#[divan::bench(name = "chain_3_general", args = [10, 100, 1000, 10000])]
+fn chain_general(bencher: Bencher, n: usize) {
+    let rows = chain(n);
+    let settings = Settings::default();
+    bencher.bench(|| solve_general(black_box(&rows), &settings, &[]).acceleration[n - 1]);
+}
+
+/// A run's cache with J kept (a SHAKE iteration, a step's start): the substitutions alone.
+#[divan::bench(name = "chain_4_cached_reused", args = [10, 100, 1000, 10000])]
+fn chain_cached_reused(bencher: Bencher, n: usize) {
+    let rows = chain(n);
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    solve_cached(&rows, &settings, &[], &mut cache);
+    bencher.bench_local(|| solve_cached(black_box(&rows), &settings, &[], &mut cache).acceleration[n - 1]);
+}
+
+/// A run's cache with J changing at every solve (two states in turn, J differing from the
+/// first row): scaled, assembled and factored anew each time.
+#[divan::bench(name = "chain_5_cached_refactored", args = [10, 100, 1000, 10000])]
+fn chain_cached_refactored(bencher: Bencher, n: usize) {
+    let first = chain(n);
+    let mut second = first.clone();
+    for row in &mut second.rows {
+        for (_, j) in &mut row.jacobian {
+            j[0] *= 1.0 + 1e-9;
+        }
+    }
+    let states = [first, second];
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    let mut turn = 0;
+    bencher.bench_local(|| {
+        turn ^= 1;
+        solve_cached(black_box(&states[turn]), &settings, &[], &mut cache).acceleration[n - 1]
+    });
 }

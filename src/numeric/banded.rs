@@ -59,13 +59,7 @@ impl Banded {
         let (n, w) = (self.n, self.w);
         let (x, y) = (&x[..n], &mut y[..n]);
         if w == 1 {
-            // A tridiagonal (chains): the loop below's sums in its order, row by row.
-            let d = &self.data[..2 * n];
-            for i in 0..n {
-                let s = if i > 0 { 0.0 + d[2 * i] * x[i - 1] } else { 0.0 };
-                let own = 0.0 + (s + d[2 * i + 1] * x[i]);
-                y[i] = if i + 1 < n { own + d[2 * i + 2] * x[i + 1] } else { own };
-            }
+            tridiagonal_mul(&self.data[..2 * n], x, y);
             return;
         }
         if w == 0 {
@@ -146,16 +140,12 @@ impl Banded {
         let n = self.n;
         let (a, l) = (&self.data[..2 * n], &mut l[..2 * n]);
         for i in 0..n {
-            let mut s = a[2 * i + 1];
+            let above = if i > 0 { l[2 * i - 1] } else { 1.0 };
+            let (below, diagonal) = tridiagonal_factor_row(a[2 * i], a[2 * i + 1], above, i > 0, pivot_floor);
             if i > 0 {
-                let below = a[2 * i] / l[2 * i - 1];
                 l[2 * i] = below;
-                s -= below * below;
             }
-            if s.is_nan() || s <= pivot_floor {
-                return Err(i);
-            }
-            l[2 * i + 1] = s.sqrt();
+            l[2 * i + 1] = diagonal.ok_or(i)?;
         }
         Ok(())
     }
@@ -215,26 +205,13 @@ impl BandedCholesky {
         let (n, w) = (self.n, self.w);
         let x = &mut x[..n];
         if w == 1 {
-            // A tridiagonal's factor (chains): the general loop's sums in its order, each
-            // row multiplied by 1/Lᵢᵢ rather than divided by Lᵢᵢ. Every row waits on the one
-            // before, so the loop runs at the latency of its chain: a multiplication is a
-            // third of a division's (within an ulp of it; the refinement that follows every
-            // solve takes up the difference).
             let (l, inverse) = (&self.l[..2 * n], &self.inverse[..n]);
             let mut previous = 0.0;
             for (i, xi) in x.iter_mut().enumerate() {
-                // As the general loop's `sum()`, which starts from −0 (so x − s turns a −0
-                // right-hand side into +0, as it always did).
-                let s = if i > 0 { -0.0 + l[2 * i] * previous } else { -0.0 };
-                *xi = (*xi - s) * inverse[i];
+                *xi = forward_row(l, inverse, i, *xi, previous);
                 previous = *xi;
             }
-            let mut next = 0.0;
-            for i in (0..n).rev() {
-                let v = (x[i] - next) * inverse[i];
-                x[i] = v;
-                next = if i > 0 { l[2 * i] * v } else { 0.0 };
-            }
+            tridiagonal_backward(l, inverse, x);
             return;
         }
         if w == 0 {
@@ -269,6 +246,74 @@ impl BandedCholesky {
                 *xk -= l * xi;
             }
         }
+    }
+}
+
+/// Row i of a tridiagonal's factor (chains), from Aᵢ,ᵢ₋₁ (`below`, when `has_below`), Aᵢᵢ
+/// and Lᵢ₋₁,ᵢ₋₁ (`above`): Lᵢ,ᵢ₋₁ = Aᵢ,ᵢ₋₁/Lᵢ₋₁,ᵢ₋₁ (nothing to subtract: the rows share no
+/// earlier column), then Lᵢᵢ = √(Aᵢᵢ − Lᵢ,ᵢ₋₁²): the general loop's sums in its order, without
+/// its inner loops. Lᵢᵢ is `None` when the pivot falls to `pivot_floor` or below (or is NaN).
+/// The one form of these operations: [`Banded::cholesky_into`] and the chain solve
+/// (`numeric::chain`) both run it.
+#[inline]
+pub(crate) fn tridiagonal_factor_row(
+    below: f64,
+    diagonal: f64,
+    above: f64,
+    has_below: bool,
+    pivot_floor: f64,
+) -> (f64, Option<f64>) {
+    let mut s = diagonal;
+    let mut l = 0.0;
+    if has_below {
+        l = below / above;
+        s -= l * l;
+    }
+    if s.is_nan() || s <= pivot_floor {
+        return (l, None);
+    }
+    (l, Some(s.sqrt()))
+}
+
+/// Row i of a tridiagonal factor's forward substitution (L y = x, `l` the factor's band as
+/// [`BandedCholesky`] stores it, `inverse` its 1/Lᵢᵢ): yᵢ = (xᵢ − Lᵢ,ᵢ₋₁ yᵢ₋₁)/Lᵢᵢ from
+/// yᵢ₋₁ = `previous`, multiplied by 1/Lᵢᵢ rather than divided by Lᵢᵢ. Every row waits on the
+/// one before, so the loop runs at the latency of its chain: a multiplication is a third of
+/// a division's (within an ulp of it; the refinement that follows every solve takes up the
+/// difference). The sum starts from −0 as the general loop's `sum()` does (so x − s turns a
+/// −0 right-hand side into +0, as it always did).
+#[inline]
+pub(crate) fn forward_row(l: &[f64], inverse: &[f64], i: usize, x: f64, previous: f64) -> f64 {
+    let s = if i > 0 { -0.0 + l[2 * i] * previous } else { -0.0 };
+    (x - s) * inverse[i]
+}
+
+/// The backward substitution Lᵀ x = y of a tridiagonal factor in place (after
+/// [`forward_row`] over every row), multiplying by 1/Lᵢᵢ.
+#[inline]
+pub(crate) fn tridiagonal_backward(l: &[f64], inverse: &[f64], x: &mut [f64]) {
+    let mut next = 0.0;
+    for i in (0..x.len()).rev() {
+        let v = (x[i] - next) * inverse[i];
+        x[i] = v;
+        next = if i > 0 { l[2 * i] * v } else { 0.0 };
+    }
+}
+
+/// Row i of y = A x for a tridiagonal A stored as [`Banded`] stores it (`d[2i]` = Aᵢ,ᵢ₋₁,
+/// `d[2i + 1]` = Aᵢᵢ): the general loop's sums in its order.
+#[inline]
+pub(crate) fn tridiagonal_mul_row(d: &[f64], x: &[f64], i: usize) -> f64 {
+    let n = x.len();
+    let s = if i > 0 { 0.0 + d[2 * i] * x[i - 1] } else { 0.0 };
+    let own = 0.0 + (s + d[2 * i + 1] * x[i]);
+    if i + 1 < n { own + d[2 * i + 2] * x[i + 1] } else { own }
+}
+
+/// y = A x for a tridiagonal A (chains) stored as [`Banded`] stores it, row by row.
+fn tridiagonal_mul(d: &[f64], x: &[f64], y: &mut [f64]) {
+    for (i, yi) in y.iter_mut().enumerate() {
+        *yi = tridiagonal_mul_row(d, x, i);
     }
 }
 

@@ -5,7 +5,7 @@
 //! constants, scalar-level CSE); [`tape`] allocates registers for it and evaluates it at one
 //! state or at many (structure of arrays, vectorised lanes, rayon for large batches). The Rust
 //! generator (`codegen`) starts from the same program. [`rows`] evaluates a derivation's rows
-//! (C, Ċ, J, c) at a state, shape by shape where the scene repeats one ([`batch`]); [`solve`] finds the multipliers ([`single`] for one row on one body, [`banded`], [`sparse`], [`qp`], [`contact`],
+//! (C, Ċ, J, c) at a state, shape by shape where the scene repeats one ([`batch`]); [`solve`] finds the multipliers ([`single`] for one row on one body, `chain` for rows that form a chain in their order, [`banded`], [`sparse`], [`qp`], [`contact`],
 //! [`rescale`]). [`dynamics`], [`integrate`], [`stabilize`] and [`simulate`] step a scene.
 //! [`rotation`] moves 3D rigid bodies' quaternions and holds the
 //! implicit gyroscopic kick. [`vector`] holds the small vector arithmetic they share, [`random`] the one seeded generator.
@@ -15,6 +15,7 @@
 
 pub mod banded;
 pub mod batch;
+mod chain;
 pub mod contact;
 pub mod dynamics;
 pub mod integrate;

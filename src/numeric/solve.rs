@@ -333,7 +333,7 @@ fn bad_inverse_mass(w: f64) -> Option<NonFinite> {
 /// of single-cycle steps, not of additions). Written out rather than as a chain of
 /// iterators: this runs for every row of every factorisation.
 #[inline]
-fn row_sound(rows: &Rows, row: &super::rows::Row, check_value: bool, motion: bool) -> bool {
+pub(super) fn row_sound(rows: &Rows, row: &super::rows::Row, check_value: bool, motion: bool) -> bool {
     let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
     let mut ok = row.bias.is_finite();
     for (body, j) in &row.jacobian {
@@ -350,7 +350,7 @@ fn row_sound(rows: &Rows, row: &super::rows::Row, check_value: bool, motion: boo
 }
 
 /// Why a row with finite numbers cannot be scaled ([`scale_row`]).
-enum Unscalable {
+pub(super) enum Unscalable {
     /// ‖J‖ overflows (finite components).
     Overflow,
     /// ‖J‖ = 0.
@@ -363,7 +363,7 @@ enum Unscalable {
 /// Ĵ = J/‖J‖ (times 1/‖J‖ where that is a normal number), Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ, J̃ = Ĵ/√Âₖₖ;
 /// returns ‖J‖ and 1/√Âₖₖ. `parts` holds Ĵ when the row is unscalable at Âₖₖ.
 #[inline]
-fn scale_row(
+pub(super) fn scale_row(
     row: &super::rows::Row,
     inverse_mass: &[f64],
     parts: &mut [(usize, [f64; 3])],
@@ -767,6 +767,25 @@ pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
 /// (`contact::classify_holding`): they stay candidates, λ ≥ 0, and leave only when λ would
 /// turn negative or they open.
 pub fn solve_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Solution {
+    // Equality rows that form a chain in their order: the same numbers in a few passes
+    // (`numeric::chain`), declined wherever this solve would say more.
+    if let Some(solution) = super::chain::solve(rows, settings) {
+        return solution;
+    }
+    solve_general(rows, settings, held)
+}
+
+/// Whether [`solve_holding`] answers `rows` by its fast path for chains (`numeric::chain`):
+/// for the tests of the switch.
+#[doc(hidden)]
+pub fn chain_serves(rows: &Rows, settings: &Settings) -> bool {
+    super::chain::solve(rows, settings).is_some()
+}
+
+/// [`solve_holding`] without its fast path for chains (`numeric::chain`): the reference that
+/// path is held to, bit for bit (`tests/chain_solve.rs`).
+#[doc(hidden)]
+pub fn solve_general(rows: &Rows, settings: &Settings, held: &[bool]) -> Solution {
     let k = rows.rows.len();
     let mut diagnostics = Vec::new();
     let mut status = Status::Solved;
@@ -849,6 +868,8 @@ pub struct SolveCache {
     work: BandWork,
     sparse_work: SparseWork,
     regularised_work: RegularisedWork,
+    /// The factor of rows that form a chain in their order (`numeric::chain`), tried first.
+    chain: super::chain::Chain,
 }
 
 /// How a solve's rows compare with a cached entry's ([`Factored::compare_taking`]).
@@ -1100,6 +1121,9 @@ impl SolveCache {
     /// The factorisation kept, `None` when none is (nothing solved, or the last solve was
     /// not a case the cache serves).
     pub fn factorisation(&self) -> Option<Factorisation> {
+        if self.chain.is_kept() {
+            return Some(Factorisation::Band);
+        }
         self.entry.as_ref().map(|c| match c.factor {
             Factor::Band { .. } => Factorisation::Band,
             Factor::Sparse { .. } => Factorisation::Sparse,
@@ -1127,6 +1151,11 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
     if !servable {
         cache.path = SolvePath::General;
         *out = solve_holding(rows, settings, held);
+        return;
+    }
+    // A chain in its order: the tridiagonal in place (`numeric::chain`), the same numbers.
+    if let Some(path) = cache.chain.solve_into(rows, settings, out) {
+        cache.path = path;
         return;
     }
     let likeness = cache.entry.as_mut().map_or(Likeness::Different, |c| c.compare_taking(rows, settings));
@@ -1191,7 +1220,7 @@ fn b_entry(rows: &Rows, scaled: &Scaled, q: usize) -> f64 {
 
 /// b̃ of a row from its scaled parts, its c term, ‖J‖ and 1/√Â: Σᵢ J̃ᵢ·Fᵢ wᵢ summed from −0
 /// (as `Iterator::sum` of f64 does), plus c̃ ([`Scaled::scale`]).
-fn b_of(rows: &Rows, parts: &[(usize, [f64; 3])], bias: f64, norm: f64, jacobi: f64) -> f64 {
+pub(super) fn b_of(rows: &Rows, parts: &[(usize, [f64; 3])], bias: f64, norm: f64, jacobi: f64) -> f64 {
     let mut ext = -0.0;
     for (body, j) in parts {
         ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];

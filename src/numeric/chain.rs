@@ -1,0 +1,385 @@
+//! The λ solve of equality rows that form a chain in their given order (Ã tridiagonal: a
+//! slot is acted on by one row or by two consecutive ones), assembled, factored and solved in
+//! place in a few passes along the rows, instead of the general solve's scaling buffers,
+//! term lists, band matrix and permutations (`numeric::solve`).
+//!
+//! Design note. The general solve of a chain is correct and linear but walks the rows many
+//! times: a finiteness check, the scaling (‖J‖, J/‖J‖, Jacobi), Ã term by term through a list
+//! of terms, the band factor, the right-hand side, each substitution, then λ and the forces.
+//! Here one pass does, for each row, the check, the scaling and the row's two entries of Ã;
+//! a second the row of the factor (the factor of row k needs only rows up to k), −b̃ and the
+//! forward substitution; a third the backward substitution; a fourth the refinement's
+//! residual with its forward substitution; a fifth its backward substitution; a sixth λ and
+//! the forces. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
+//! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
+//! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
+//! terms go — which a property test over random chains holds it to (`tests/chain_solve.rs`).
+//!
+//! It serves only what the general solve would answer with the tridiagonal band Cholesky and
+//! no diagnostic but a λ out of range: equality rows, every number finite, every row usable
+//! (a finite, non-zero ‖J‖ and a positive, finite Âₖₖ), each row's slots in increasing order,
+//! the band of width exactly 1 in the given order, [`Method::Banded`] or [`Method::Auto`]
+//! with more than four rows (fewer go dense), no pivot at or below the rank tolerance, past
+//! [`MAX_DENSE_ROWS`] rows under `Auto` no more rows than the velocity components they move
+//! (`solve::structurally_singular`), and every multiplier finite. Anything else declines,
+//! leaving the answer to the general solve (with its diagnostics, the renumbering, the
+//! eigendecomposition or the regularised factor). Kept in a run's `SolveCache`, it keeps the
+//! bits of J and the masses it was made from and refactors from the first row whose J
+//! changed: the rows before keep their scaling, Ã and factor rows, which depend on nothing
+//! after them.
+//!
+//! Not here: evaluating rows (`numeric::rows`), inequality rows, other bandwidths.
+
+use super::banded::{forward_row, tridiagonal_backward, tridiagonal_factor_row, tridiagonal_mul_row};
+use super::rows::Rows;
+use super::solve::{
+    Diagnostic, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, row_sound, scale_row,
+};
+use super::vector::dot;
+
+/// No row yet, in [`Chain::first`].
+const NONE: usize = usize::MAX;
+
+/// A chain's scaling, Ã and factor, with the J and masses they were made from and the
+/// buffers of its substitutions (see the module note).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Chain {
+    /// Whether the fields below hold the scaling and factor of `bits` and `mass_bits` under
+    /// `rank_tolerance` and `method`.
+    valid: bool,
+    rank_tolerance: u64,
+    method: Method,
+    /// Row k's entries are `start[k]..start[k + 1]` of `parts` and `bits`.
+    start: Vec<usize>,
+    /// J̃ per entry (slot, J/‖J‖/√Âₖₖ), as `solve::Scaled` keeps it.
+    parts: Vec<(usize, [f64; 3])>,
+    /// The bits of J per entry and of 1/m per slot the scaling was made from.
+    bits: Vec<[u64; 3]>,
+    mass_bits: Vec<u64>,
+    /// ‖Jₖ‖ and 1/√Âₖₖ per row.
+    norm: Vec<f64>,
+    jacobi: Vec<f64>,
+    /// Ã and its factor L as `banded::Banded` and `BandedCholesky` store a tridiagonal
+    /// (row k: entry (k, k − 1) at 2k, (k, k) at 2k + 1), with 1/Lₖₖ.
+    a: Vec<f64>,
+    l: Vec<f64>,
+    inverse: Vec<f64>,
+    /// −b̃, the solution and the refinement's correction.
+    rhs: Vec<f64>,
+    y: Vec<f64>,
+    r: Vec<f64>,
+    /// Per slot, the first row acting on it (the pattern check), and which of its velocity
+    /// components the rows move (`solve::columns`).
+    first: Vec<usize>,
+    moved: Vec<u8>,
+}
+
+/// Whether every row is an equality with a finite c term and every velocity and force is
+/// finite: what `solve_cached_into` checks before anything is cached.
+pub(crate) fn servable(rows: &Rows) -> bool {
+    let finite = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
+    rows.rows.iter().all(|row| !row.inequality && row.bias.is_finite())
+        && rows.velocity.iter().all(finite)
+        && rows.force.iter().all(finite)
+}
+
+/// The general solve's answer at `rows` when they form a chain it serves (module note), or
+/// `None`: `solve_holding`'s fast path.
+pub(crate) fn solve(rows: &Rows, settings: &Settings) -> Option<Solution> {
+    if !servable(rows) || !allowed(settings.method, rows.rows.len()) {
+        return None;
+    }
+    let mut out = Solution::default();
+    Chain::default().solve_into(rows, settings, &mut out).map(|_| out)
+}
+
+/// Whether the general solve takes the tridiagonal band for a chain of `k` rows under
+/// `method` (`solve::plan`: `Auto` takes dense Cholesky up to four rows, where the band is
+/// not under a quarter of the size).
+fn allowed(method: Method, k: usize) -> bool {
+    match method {
+        Method::Banded => k > 0,
+        Method::Auto => k > 4,
+        Method::Dense | Method::Sparse => false,
+    }
+}
+
+impl Chain {
+    /// Whether a factor is kept (for `SolveCache::factorisation`).
+    pub(crate) fn is_kept(&self) -> bool {
+        self.valid
+    }
+
+    /// Solves `rows` (already [`servable`]) into `out` when they are a chain this path serves,
+    /// reusing the kept scaling and factor up to the first row whose J changed; `None` (the
+    /// kept factor dropped, `out` untouched) otherwise.
+    pub(crate) fn solve_into(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<SolvePath> {
+        let k = rows.rows.len();
+        if !allowed(settings.method, k) {
+            self.valid = false;
+            return None;
+        }
+        let from = match self.unchanged_rows(rows, settings) {
+            Some(from) => from,
+            None => {
+                if !self.take_pattern(rows) {
+                    self.valid = false;
+                    return None;
+                }
+                self.rank_tolerance = settings.rank_tolerance.to_bits();
+                self.method = settings.method;
+                0
+            }
+        };
+        // Invalid until the factor is whole again.
+        self.valid = false;
+        if !self.factor_and_forward(rows, settings, from) {
+            return None;
+        }
+        if from < k && settings.method == Method::Auto && k > MAX_DENSE_ROWS && k > self.columns(rows) {
+            return None;
+        }
+        self.valid = true;
+        self.substitute();
+        if !self.y.iter().all(|m| m.is_finite()) {
+            // `solve::finite_in_place` has a diagnostic for it.
+            return None;
+        }
+        self.finish(rows, out);
+        Some(if from == k { SolvePath::Reused } else { SolvePath::Factored })
+    }
+
+    /// The first row whose J differs from the kept one's bits (`k` when none does, 0 when a
+    /// mass or the settings did), or `None` when no factor is kept or the rows act on other
+    /// slots: a new pattern.
+    fn unchanged_rows(&mut self, rows: &Rows, settings: &Settings) -> Option<usize> {
+        let k = rows.rows.len();
+        if !self.valid || self.start.len() != k + 1 || self.mass_bits.len() != rows.inverse_mass.len() {
+            return None;
+        }
+        let mut from = k;
+        for (q, row) in rows.rows.iter().enumerate() {
+            let (lo, hi) = (self.start[q], self.start[q + 1]);
+            if hi - lo != row.jacobian.len() {
+                return None;
+            }
+            for ((slot, bits), (s, j)) in
+                self.parts[lo..hi].iter().map(|p| p.0).zip(&self.bits[lo..hi]).zip(&row.jacobian)
+            {
+                if slot != *s {
+                    return None;
+                }
+                if from == k && *bits != j.map(f64::to_bits) {
+                    from = q;
+                }
+            }
+        }
+        let mut masses_same = true;
+        for (mine, w) in self.mass_bits.iter_mut().zip(&rows.inverse_mass) {
+            let bits = w.to_bits();
+            masses_same &= *mine == bits;
+            *mine = bits;
+        }
+        let settings_same = self.rank_tolerance == settings.rank_tolerance.to_bits() && self.method == settings.method;
+        if !(masses_same && settings_same) {
+            self.rank_tolerance = settings.rank_tolerance.to_bits();
+            self.method = settings.method;
+            from = 0;
+        }
+        Some(from)
+    }
+
+    /// Takes the rows' pattern when it is a chain this path serves: each row's slots in
+    /// increasing order, every slot acted on by one row or two consecutive ones, and two
+    /// consecutive rows sharing a slot somewhere (the band is exactly 1 wide: a band of 0,
+    /// rows on disjoint slots, takes the general solve's diagonal kernels).
+    fn take_pattern(&mut self, rows: &Rows) -> bool {
+        let (k, slots) = (rows.rows.len(), rows.inverse_mass.len());
+        self.first.clear();
+        self.first.resize(slots, NONE);
+        self.start.clear();
+        self.parts.clear();
+        let mut shared = false;
+        for (q, row) in rows.rows.iter().enumerate() {
+            self.start.push(self.parts.len());
+            let mut previous = None;
+            for &(s, _) in &row.jacobian {
+                if s >= slots || previous.is_some_and(|p| p >= s) {
+                    return false;
+                }
+                previous = Some(s);
+                match self.first[s] {
+                    NONE => self.first[s] = q,
+                    f if f + 1 == q => shared = true,
+                    _ => return false,
+                }
+                self.parts.push((s, [0.0; 3]));
+            }
+        }
+        self.start.push(self.parts.len());
+        if !shared {
+            return false;
+        }
+        self.bits.clear();
+        self.bits.resize(self.parts.len(), [0; 3]);
+        self.mass_bits.clear();
+        self.mass_bits.extend(rows.inverse_mass.iter().map(|w| w.to_bits()));
+        for v in [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r] {
+            v.clear();
+            v.resize(k, 0.0);
+        }
+        for v in [&mut self.a, &mut self.l] {
+            v.clear();
+            v.resize(2 * k, 0.0);
+        }
+        true
+    }
+
+    /// Rows `from..` scaled and assembled (their J's bits taken), then factored, with every
+    /// row's −b̃ and forward substitution. False when a row is not usable or a pivot falls to
+    /// the rank tolerance (the general solve has a diagnostic or a fallback).
+    ///
+    /// Two passes: the scaling's rows are independent (each a chain of two square roots and
+    /// two divisions of its own, which overlap from row to row), the factor's rows one chain
+    /// through every row (a division and a square root each, then 1/Lₖₖ). Interleaved in one
+    /// pass they ran no faster (the `solve` benchmark's `chain_5_cached_refactored`).
+    fn factor_and_forward(&mut self, rows: &Rows, settings: &Settings, from: usize) -> bool {
+        self.scale_and_assemble(rows, from) && self.factor_from(rows, settings.rank_tolerance, from)
+    }
+
+    /// Rows `from..` scaled and their entries of Ã assembled, their J's bits taken.
+    fn scale_and_assemble(&mut self, rows: &Rows, from: usize) -> bool {
+        let w = &rows.inverse_mass;
+        let Chain { start, parts, bits, norm, jacobi, a, .. } = self;
+        for (q, row) in rows.rows.iter().enumerate().skip(from) {
+            let (lo, hi) = (start[q], start[q + 1]);
+            for (bits, (_, j)) in bits[lo..hi].iter_mut().zip(&row.jacobian) {
+                *bits = j.map(f64::to_bits);
+            }
+            // The motion is known finite (`servable`).
+            if !row_sound(rows, row, false, false) {
+                return false;
+            }
+            let Ok((n, d)) = scale_row(row, w, &mut parts[lo..hi]) else {
+                return false;
+            };
+            (norm[q], jacobi[q]) = (n, d);
+            // Ãₖₖ and Ãₖ,ₖ₋₁ as `assemble`'s terms sum them: slot by slot in increasing
+            // order, from +0 (the band's zeros).
+            let (before, mine) = parts[..hi].split_at(lo);
+            let mut diagonal = 0.0;
+            for (b, u) in mine {
+                diagonal += dot(u, u) * w[*b];
+            }
+            let mut below = 0.0;
+            if q > 0 {
+                let before = &before[start[q - 1]..];
+                let (mut x, mut y) = (0, 0);
+                while x < before.len() && y < mine.len() {
+                    let (s, t) = (before[x].0, mine[y].0);
+                    if s == t {
+                        below += dot(&before[x].1, &mine[y].1) * w[s];
+                    }
+                    x += usize::from(s <= t);
+                    y += usize::from(t <= s);
+                }
+            }
+            (a[2 * q], a[2 * q + 1]) = (below, diagonal);
+        }
+        true
+    }
+
+    /// The factor's rows `from..` (`banded`'s tridiagonal factor, row by row) and every
+    /// row's −b̃ and forward substitution, in one pass: two chains through the rows side by
+    /// side.
+    fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize) -> bool {
+        let k = rows.rows.len();
+        let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
+        let (a, l, inverse) = (&a[..2 * k], &mut l[..2 * k], &mut inverse[..k]);
+        let mut previous = 0.0;
+        for (q, (row, bounds)) in rows.rows.iter().zip(start.windows(2)).enumerate() {
+            if q >= from {
+                let above = if q > 0 { l[2 * q - 1] } else { 1.0 };
+                let (l_below, Some(l_diagonal)) = tridiagonal_factor_row(a[2 * q], a[2 * q + 1], above, q > 0, floor)
+                else {
+                    return false;
+                };
+                (l[2 * q], l[2 * q + 1]) = (l_below, l_diagonal);
+                inverse[q] = 1.0 / l_diagonal;
+            }
+            let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm[q], jacobi[q]);
+            rhs[q] = b;
+            previous = forward_row(l, inverse, q, b, previous);
+            y[q] = previous;
+        }
+        true
+    }
+
+    /// The backward substitution, then one step of iterative refinement, y += Ã⁻¹ (−b̃ − Ã y),
+    /// as `solve::BandFactor::solve_into` takes it.
+    fn substitute(&mut self) {
+        let (l, inverse) = (&self.l, &self.inverse);
+        tridiagonal_backward(l, inverse, &mut self.y);
+        let mut previous = 0.0;
+        for (i, r) in self.r.iter_mut().enumerate() {
+            let residual = self.rhs[i] - tridiagonal_mul_row(&self.a, &self.y, i);
+            previous = forward_row(l, inverse, i, residual, previous);
+            *r = previous;
+        }
+        tridiagonal_backward(l, inverse, &mut self.r);
+        self.y.iter_mut().zip(&self.r).for_each(|(u, v)| *u += v);
+    }
+
+    /// [`Block::columns`](super::solve) of the kept scaled rows: the velocity components
+    /// with a non-zero part of J̃ and a non-zero inverse mass.
+    fn columns(&mut self, rows: &Rows) -> usize {
+        self.moved.clear();
+        self.moved.resize(rows.inverse_mass.len(), 0);
+        for &(b, j) in &self.parts {
+            if rows.inverse_mass[b] != 0.0 {
+                self.moved[b] |= u8::from(j[0] != 0.0) | (u8::from(j[1] != 0.0) << 1) | (u8::from(j[2] != 0.0) << 2);
+            }
+        }
+        self.moved.iter().map(|m| m.count_ones() as usize).sum()
+    }
+
+    /// λ, the forces and the accelerations from μ = `y`, as `solve::finish_into` makes them
+    /// when every row takes part: λₖ = (μₖ/√Âₖₖ)/‖Jₖ‖ with a diagnostic where it leaves the
+    /// normal range, Σₖ μₖ J̃ₖᵢ row by row, (Fᵢ + fᵢ) wᵢ.
+    fn finish(&self, rows: &Rows, out: &mut Solution) {
+        let k = rows.rows.len();
+        let mut diagnostics = std::mem::take(&mut out.diagnostics);
+        diagnostics.clear();
+        out.lambda.clear();
+        out.lambda.resize(k, 0.0);
+        let force = &mut out.constraint_force;
+        force.clear();
+        force.resize(rows.inverse_mass.len(), [0.0; 3]);
+        for (q, (l, &m)) in out.lambda.iter_mut().zip(&self.y).enumerate() {
+            *l = (m * self.jacobi[q]) / self.norm[q];
+            if m != 0.0 && !l.is_normal() {
+                diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: *l });
+            }
+            for (body, j) in &self.parts[self.start[q]..self.start[q + 1]] {
+                let f = &mut force[*body];
+                f[0] += m * j[0];
+                f[1] += m * j[1];
+                f[2] += m * j[2];
+            }
+        }
+        out.acceleration.clear();
+        out.acceleration.extend(
+            rows.force
+                .iter()
+                .zip(force.iter())
+                .zip(&rows.inverse_mass)
+                .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
+        );
+        out.active.clear();
+        out.active.resize(k, true);
+        out.diagnostics = diagnostics;
+        out.status = Status::Solved;
+        out.contacts.clear();
+        out.contacts.resize(k, None);
+    }
+}

@@ -1,0 +1,265 @@
+//! The fast path of the solve for chains (`numeric::chain`: rows that form a chain in their
+//! order, their tridiagonal Ã assembled, factored and solved in place) against the general
+//! solve it stands in for (`solve::solve_general`): the same numbers bit for bit, on random
+//! chains over 2^±300 in J, 2^±40 in the masses, with pinned and infinite-mass bodies, in 2D
+//! and 3D, uncached and through a run's cache; and the switch: taken exactly where the
+//! general solve would answer with the band factor and nothing to say, declined (and the
+//! general answer given) for every other case — an inequality, a number that is not finite,
+//! a zero gradient, redundant rows, a slot order the band needs renumbered, four rows or
+//! fewer under `Auto`, the dense and sparse methods, a band wider than one, and a block past
+//! `MAX_DENSE_ROWS` that is singular whatever its numbers.
+
+use lagrange::numeric::random::Rng;
+use lagrange::numeric::rows::{Row, Rows};
+use lagrange::numeric::solve::{
+    Method, Settings, Solution, SolveCache, SolvePath, chain_serves, solve_cached, solve_general, solve_with,
+};
+
+/// Equal number for number (bits, so a −0 for a +0 counts too), diagnostics and status too.
+fn assert_same(a: &Solution, b: &Solution, what: &str) {
+    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let bits3 = |x: &[[f64; 3]]| x.iter().flat_map(|v| v.map(f64::to_bits)).collect::<Vec<_>>();
+    assert_eq!(bits(&a.lambda), bits(&b.lambda), "{what}: λ");
+    assert_eq!(bits3(&a.acceleration), bits3(&b.acceleration), "{what}: accelerations");
+    assert_eq!(bits3(&a.constraint_force), bits3(&b.constraint_force), "{what}: forces");
+    assert_eq!(
+        (&a.active, &a.diagnostics, a.status, &a.contacts),
+        (&b.active, &b.diagnostics, b.status, &b.contacts),
+        "{what}"
+    );
+}
+
+/// 2^e for an integer e.
+fn pow2(e: i32) -> f64 {
+    2f64.powi(e)
+}
+
+/// A random chain of `n` rows: row k acts on slots k − 1 and k (row 0 on slot 0 alone, or on
+/// an anchor slot `n` when `anchored`), J of random direction and a magnitude 2^±300 per row,
+/// masses 2^±40 (some slots of infinite mass, 1/m = 0, when `pinned`), random velocities,
+/// forces and c terms.
+fn random_chain(rng: &mut Rng, n: usize, dim: usize, anchored: bool, pinned: bool) -> Rows {
+    let slots = if anchored { n + 1 } else { n };
+    let inverse_mass: Vec<f64> = (0..slots)
+        .map(|_| if pinned && rng.uniform(0.0, 1.0) < 0.2 { 0.0 } else { pow2(rng.uniform(-40.0, 40.0) as i32) })
+        .collect();
+    let rows = (0..n)
+        .map(|k| {
+            let scale = pow2(rng.uniform(-300.0, 300.0) as i32);
+            let d = rng.normal_vector(dim, scale);
+            let mut jacobian = Vec::new();
+            if k > 0 {
+                jacobian.push((k - 1, d.map(|x| -x)));
+            } else if anchored {
+                // The anchor slot comes last, so row 0 lists its slots in increasing order.
+            }
+            jacobian.push((k, d));
+            if k == 0 && anchored {
+                jacobian.push((n, rng.normal_vector(dim, scale)));
+            }
+            Row {
+                value: rng.normal() * 1e-3,
+                rate: rng.normal() * 1e-3,
+                bias: rng.normal() * pow2(rng.uniform(-20.0, 20.0) as i32),
+                inequality: false,
+                jacobian,
+            }
+        })
+        .collect();
+    Rows {
+        dim,
+        inverse_mass,
+        velocity: (0..slots).map(|_| rng.normal_vector(dim, 1.0)).collect(),
+        force: (0..slots).map(|_| rng.normal_vector(dim, 10.0)).collect(),
+        rows,
+        axes: Vec::new(),
+    }
+}
+
+/// Settings of each method the switch looks at.
+fn settings(method: Method) -> Settings {
+    Settings { method, ..Settings::default() }
+}
+
+/// Solves `rows` with `solve_with` and through a fresh cache and checks both against the
+/// general solve; returns whether the fast path served.
+fn check(rows: &Rows, settings: &Settings, what: &str) -> bool {
+    let general = solve_general(rows, settings, &[]);
+    assert_same(&solve_with(rows, settings), &general, what);
+    let mut cache = SolveCache::default();
+    assert_same(&solve_cached(rows, settings, &[], &mut cache), &general, what);
+    chain_serves(rows, settings)
+}
+
+#[test]
+fn random_chains_solve_as_the_general_solve_bit_for_bit_and_take_the_fast_path() {
+    let mut rng = Rng::new(16);
+    for case in 0..600 {
+        let n = 5 + (rng.next_u64() % 60) as usize;
+        let dim = if case % 3 == 0 { 3 } else { 2 };
+        let (anchored, pinned) = (case % 4 == 1, case % 5 == 2);
+        let rows = random_chain(&mut rng, n, dim, anchored, pinned);
+        let method = if case % 2 == 0 { Method::Auto } else { Method::Banded };
+        let what = format!("case {case}, n = {n}, {method:?}");
+        // Every row is usable unless a row acts only on infinite masses.
+        let usable = rows.rows.iter().all(|r| r.jacobian.iter().any(|(b, _)| rows.inverse_mass[*b] != 0.0));
+        let served = check(&rows, &settings(method), &what);
+        if usable && !pinned {
+            assert!(served, "{what}: a plain chain takes the fast path");
+        }
+    }
+}
+
+#[test]
+fn the_fast_path_declines_every_case_the_general_solve_answers_otherwise() {
+    let mut rng = Rng::new(7);
+    let auto = settings(Method::Auto);
+    for case in 0..40 {
+        let base = random_chain(&mut rng, 12, 2, false, false);
+        assert!(check(&base, &auto, "plain"), "case {case}");
+        assert!(check(&base, &settings(Method::Banded), "banded"), "case {case}");
+        let mut declined: Vec<(&str, Rows, Settings)> = Vec::new();
+        let changed = |f: &dyn Fn(&mut Rows)| {
+            let mut rows = base.clone();
+            f(&mut rows);
+            rows
+        };
+        declined.push(("dense", base.clone(), settings(Method::Dense)));
+        declined.push(("sparse", base.clone(), settings(Method::Sparse)));
+        declined.push(("inequality", changed(&|r| r.rows[3].inequality = true), auto));
+        declined.push(("NaN in J", changed(&|r| r.rows[5].jacobian[1].1[0] = f64::NAN), auto));
+        declined.push(("∞ in c", changed(&|r| r.rows[2].bias = f64::INFINITY), auto));
+        declined.push(("NaN velocity", changed(&|r| r.velocity[7][1] = f64::NAN), auto));
+        declined.push(("∞ force", changed(&|r| r.force[0][0] = f64::NEG_INFINITY), auto));
+        declined.push(("negative mass", changed(&|r| r.inverse_mass[4] = -1.0), auto));
+        declined.push((
+            "zero gradient",
+            changed(&|r| r.rows[6].jacobian.iter_mut().for_each(|e| e.1 = [0.0; 3])),
+            auto,
+        ));
+        declined.push((
+            "infinite masses under a row",
+            changed(&|r| {
+                r.inverse_mass[8] = 0.0;
+                r.inverse_mass[9] = 0.0;
+            }),
+            auto,
+        ));
+        declined.push((
+            "overflowing gradient",
+            changed(&|r| r.rows[1].jacobian[0].1 = [f64::MAX, f64::MAX, 0.0]),
+            auto,
+        ));
+        // Row 4 again as row 5: redundant, a pivot of 0 (the eigendecomposition's minimum
+        // norm), and the band is 2 wide from there.
+        declined.push(("redundant", changed(&|r| r.rows[5] = r.rows[4].clone()), auto));
+        // Rows 4 and 5 swapped: the band needs renumbering.
+        declined.push(("out of order", changed(&|r| r.rows.swap(4, 5)), auto));
+        declined.push(("slots in decreasing order", changed(&|r| r.rows[3].jacobian.reverse()), auto));
+        declined.push(("four rows", changed(&|r| r.rows.truncate(4)), auto));
+        declined.push((
+            "disjoint rows",
+            changed(&|r| {
+                for (k, row) in r.rows.iter_mut().enumerate() {
+                    row.jacobian.truncate(1);
+                    row.jacobian[0].0 = k;
+                }
+            }),
+            auto,
+        ));
+        // Every slot acted on by up to three rows: a band of width 2.
+        declined.push((
+            "wider band",
+            changed(&|r| {
+                for k in 2..r.rows.len() {
+                    let d = r.rows[k].jacobian[1].1;
+                    r.rows[k].jacobian = vec![(k - 2, d), (k - 1, d.map(|x| -x)), (k, d)];
+                }
+            }),
+            auto,
+        ));
+        for (what, rows, settings) in &declined {
+            assert!(!check(rows, settings, what), "case {case}: {what} declines");
+        }
+        // Four rows under the band method: the band serves them.
+        assert!(check(&changed(&|r| r.rows.truncate(4)), &settings(Method::Banded), "four rows banded"));
+    }
+}
+
+/// A chain along x alone whose every other slot is pinned: as many rows as velocity
+/// components only up to the pins, so past `MAX_DENSE_ROWS` rows `Auto` takes the
+/// regularised factor without trying the band (singular whatever its numbers); under the
+/// band method the band factor decides.
+#[test]
+fn a_long_chain_singular_whatever_its_numbers_is_left_to_the_general_solve() {
+    let n = 1003;
+    let mut rows = random_chain(&mut Rng::new(3), n, 2, false, false);
+    for (k, row) in rows.rows.iter_mut().enumerate() {
+        for (_, j) in row.jacobian.iter_mut() {
+            j[1] = 0.0;
+        }
+        row.jacobian.iter_mut().for_each(|(_, j)| j[0] = if j[0] < 0.0 { -1.0 - k as f64 * 1e-3 } else { 1.0 });
+    }
+    for (s, w) in rows.inverse_mass.iter_mut().enumerate() {
+        if s % 2 == 1 {
+            *w = 0.0;
+        }
+    }
+    assert!(!check(&rows, &settings(Method::Auto), "structurally singular"));
+    check(&rows, &settings(Method::Banded), "structurally singular, banded");
+    // The same chain with every slot free: served.
+    let free = Rows { inverse_mass: vec![1.0; n], ..rows };
+    assert!(check(&free, &settings(Method::Auto), "long chain"));
+}
+
+/// A run's cache: the same pattern with J changed from a random row on, the masses, the
+/// forces and c alone, another rank tolerance; each solve the general one's bits, reused
+/// exactly when J, the masses and the settings stay.
+#[test]
+fn the_cached_chain_refactors_from_the_first_changed_row_and_reuses_only_when_nothing_changed() {
+    let mut rng = Rng::new(99);
+    for case in 0..60 {
+        let n = 5 + (rng.next_u64() % 40) as usize;
+        let settings = if case % 2 == 0 { Settings::default() } else { self::settings(Method::Banded) };
+        let mut rows = random_chain(&mut rng, n, 2, case % 3 == 0, false);
+        let mut cache = SolveCache::default();
+        let mut solve = |rows: &Rows, settings: &Settings, what: &str| {
+            assert_same(&solve_cached(rows, settings, &[], &mut cache), &solve_general(rows, settings, &[]), what);
+            cache.last_path()
+        };
+        assert_eq!(solve(&rows, &settings, "first"), SolvePath::Factored, "case {case}");
+        for step in 0..6 {
+            let what = format!("case {case}, step {step}");
+            // New forces, velocities and c: reused.
+            for row in rows.rows.iter_mut() {
+                row.bias = rng.normal();
+            }
+            rows.force.iter_mut().for_each(|f| *f = rng.normal_vector(2, 3.0));
+            assert_eq!(solve(&rows, &settings, &what), SolvePath::Reused, "{what}");
+            match step % 3 {
+                0 => {
+                    // J from a random row on.
+                    let from = (rng.next_u64() % n as u64) as usize;
+                    for row in &mut rows.rows[from..] {
+                        for (_, j) in row.jacobian.iter_mut() {
+                            j[0] *= 1.0 + 1e-3 * rng.normal();
+                        }
+                    }
+                }
+                1 => rows.inverse_mass[(rng.next_u64() % n as u64) as usize] *= 2.0,
+                _ => {
+                    let j = &mut rows.rows[n - 1].jacobian[0].1[1];
+                    *j = f64::from_bits(j.to_bits() + 1);
+                }
+            }
+            assert_eq!(solve(&rows, &settings, &what), SolvePath::Factored, "{what}");
+        }
+        let strict = Settings { rank_tolerance: 1e-3, ..settings };
+        assert_ne!(solve(&rows, &strict, "strict"), SolvePath::Reused, "case {case}");
+        // A case it declines, then the chain again: answered as the general solve each time.
+        let mut contact = rows.clone();
+        contact.rows[2].inequality = true;
+        solve(&contact, &settings, "inequality");
+        solve(&rows, &settings, "back");
+    }
+}
