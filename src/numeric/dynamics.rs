@@ -162,10 +162,12 @@ pub struct Dynamics<'s> {
     orientations: Vec<[f64; 4]>,
     /// The solve's accelerations folded into state slots (scratch of [`Dynamics::kick_at`]).
     folded: Vec<[f64; 3]>,
-    /// The answer of the last [`correct`](Dynamics::correct), and a solution handed back by
-    /// [`recycle_solution`](Dynamics::recycle_solution): buffers the solves fill in place.
+    /// The answers of the last [`correct`](Dynamics::correct) and the last
+    /// [`solve`](Dynamics::solve): buffers the solves fill in place, read where they are
+    /// (a solution is seven vectors: moving one in and out of the dynamics at every solve
+    /// was a visible part of a pendulum's step).
     correction: Solution,
-    spare_solution: Option<Solution>,
+    solution: Solution,
     /// The one-row solve's last scaling (`numeric::single`), reused at the same J and 1/m.
     single: SingleScaling,
     /// A solve that left a block unsolved ([`Diagnostic::TooLarge`]): the step and its rows.
@@ -226,7 +228,7 @@ impl<'s> Dynamics<'s> {
             orientations,
             folded: Vec::new(),
             correction: Solution::default(),
-            spare_solution: None,
+            solution: Solution::default(),
             single: SingleScaling::default(),
             refused: None,
         }
@@ -279,16 +281,13 @@ impl<'s> Dynamics<'s> {
     /// contact that was not held is left to its impulse (holding it as an equality would
     /// fold its correction into the velocity before the bounce).
     pub fn hold(&mut self, rows: &Rows, solution: &Solution) {
-        self.held.resize(rows.rows.len(), false);
-        for (k, row) in rows.rows.iter().enumerate() {
-            let pushing = row.inequality && solution.lambda[k] > 0.0;
-            self.held[k] = pushing
-                && match solution.contacts[k] {
-                    Some(ContactState::Resting | ContactState::Penetrating) => true,
-                    Some(ContactState::Closing) => self.held[k],
-                    _ => false,
-                };
-        }
+        update_held(&mut self.held, rows, solution);
+    }
+
+    /// [`hold`](Dynamics::hold) with the answer of the last [`solve`](Dynamics::solve), which
+    /// must have been at `rows`.
+    pub fn hold_solved(&mut self, rows: &Rows) {
+        update_held(&mut self.held, rows, &self.solution);
     }
 
     /// Releases every held contact (a new run, or a caller that keeps no active set).
@@ -330,10 +329,15 @@ impl<'s> Dynamics<'s> {
     /// Puts the rigid bodies' part of (t, q, v) into the environment the tapes read (the
     /// time and the bodies' positions and velocities go to the tapes from the arrays:
     /// `rows::State`).
+    #[inline]
     fn set_state(&mut self, q: &Vectors, v: &Vectors) {
-        if !self.rigid {
-            return;
+        if self.rigid {
+            self.set_angles(q, v);
         }
+    }
+
+    /// [`set_state`](Dynamics::set_state)'s work, with rigid bodies.
+    fn set_angles(&mut self, q: &Vectors, v: &Vectors) {
         // Rigid bodies' angles (3D: q = exp(φ) ⊗ q₀) and angular velocities, from their
         // angular slots after the bodies.
         let rigid = self.system.bodies.iter().filter_map(|b| b.rigid.as_ref());
@@ -473,7 +477,7 @@ impl<'s> Dynamics<'s> {
     /// Solves for λ at `rows` (Baumgarte terms added first when set), the held contacts
     /// touching whatever their distance (`solve::solve_holding`): the solve at the start of
     /// a step, which decides what stays held ([`Dynamics::hold`]).
-    pub fn solve(&mut self, rows: &mut Rows) -> Solution {
+    pub fn solve(&mut self, rows: &mut Rows) -> &Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
             for (k, row) in rows.rows.iter_mut().enumerate() {
                 // A closing contact that is not held is the impulse's (Ċ⁺ = −eĊ at the step's
@@ -487,21 +491,20 @@ impl<'s> Dynamics<'s> {
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
         }
-        let mut solution = self.spare_solution.take().unwrap_or_default();
+        let solution = &mut self.solution;
         // One row on one body: the same numbers in closed form (`numeric::single`).
-        if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut solution) {
-            solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
+        if !solve_single_with(rows, &Settings::default(), &mut self.single, solution) {
+            solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, solution);
             if self.refused.is_none() {
-                self.refused = refused_rows(&solution).map(|rows| (self.step, rows));
+                self.refused = refused_rows(solution).map(|rows| (self.step, rows));
             }
         }
-        solution
+        &self.solution
     }
 
-    /// Gives a solution of [`solve`](Dynamics::solve) back, so the next solve fills its
-    /// buffers (optional: dropping it is correct, only slower).
-    pub fn recycle_solution(&mut self, solution: Solution) {
-        self.spare_solution = Some(solution);
+    /// The answer of the last [`solve`](Dynamics::solve) (empty before the first).
+    pub fn solution(&self) -> &Solution {
+        &self.solution
     }
 
     /// The solve of a correction (projection, SHAKE, velocity step: forces zeroed, c set to
@@ -543,9 +546,7 @@ impl<'s> Dynamics<'s> {
                 row.inequality = false;
             }
         }
-        let solution = self.solve(&mut rows);
-        a.copy_from_slice(&solution.acceleration);
-        self.recycle_solution(solution);
+        a.copy_from_slice(&self.solve(&mut rows).acceleration);
         fold(&rows, a);
         Ok(rows)
     }
@@ -560,6 +561,20 @@ impl<'s> Dynamics<'s> {
         self.recycle(rows);
         self.folded = a;
         Ok(())
+    }
+}
+
+/// The active set after the solve `solution` at `rows` (see [`Dynamics::hold`]).
+fn update_held(held: &mut Vec<bool>, rows: &Rows, solution: &Solution) {
+    held.resize(rows.rows.len(), false);
+    for (k, row) in rows.rows.iter().enumerate() {
+        let pushing = row.inequality && solution.lambda[k] > 0.0;
+        held[k] = pushing
+            && match solution.contacts[k] {
+                Some(ContactState::Resting | ContactState::Penetrating) => true,
+                Some(ContactState::Closing) => held[k],
+                _ => false,
+            };
     }
 }
 

@@ -345,6 +345,8 @@ pub struct Simulation<'s> {
     carried: Option<Rows>,
     /// C/κ of the end rows, kept across the velocity step that overwrites it.
     values: Vec<f64>,
+    /// Whether some constraint is an inequality (found once, not at every step).
+    has_inequalities: bool,
 }
 
 #[derive(Default)]
@@ -370,6 +372,7 @@ impl<'s> Simulation<'s> {
         dynamics.baumgarte = settings.stabilize.baumgarte_terms(settings.dt);
         let n = q.len();
         let three_d = !dynamics.orientations().is_empty();
+        let has_inequalities = dynamics.system().constraints.iter().any(|c| c.inequality);
         Ok(Simulation {
             dynamics,
             settings,
@@ -385,6 +388,7 @@ impl<'s> Simulation<'s> {
             shown: Shown::default(),
             carried: None,
             values: Vec::new(),
+            has_inequalities,
         })
     }
 
@@ -515,21 +519,20 @@ impl<'s> Simulation<'s> {
                 let scale = balance.max_kinetic.max(balance.work_scale);
                 if scale > 0.0 { balance.max_error / scale } else { energy_back(balance.max_error) }
             });
-            let solution = self.dynamics.solve(&mut rows);
+            self.dynamics.solve(&mut rows);
             // The active set for the step to come: contacts that push are held.
-            self.dynamics.hold(&rows, &solution);
+            self.dynamics.hold_solved(&rows);
             if n.is_multiple_of(stride) || n == s.steps {
                 let position = self.q[..plotted].iter().map(|x| unit.as_ref().map_or(*x, |u| u.vector(*x)));
                 summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: position.collect() });
             }
-            self.show(n, t, &rows, &solution.lambda, energy_error, observe)?;
+            self.show(n, t, &rows, energy_error, observe)?;
             summary.steps = n;
             summary.duration = n as f64 * s.dt;
             if n == s.steps {
                 break;
             }
-            self.a.copy_from_slice(&solution.acceleration);
-            self.dynamics.recycle_solution(solution);
+            self.a.copy_from_slice(&self.dynamics.solution().acceleration);
             fold(&rows, &mut self.a);
             self.dynamics.step = n + 1;
             self.advance(rows, n, &reach)?;
@@ -576,16 +579,17 @@ impl<'s> Simulation<'s> {
         Ok((c_max, c_dot_max))
     }
 
-    /// Hands the state of step `n` to the observer, in the caller's unit.
+    /// Hands the state of step `n` to the observer, in the caller's unit (λ of the step's
+    /// solve, `Dynamics::solution`).
     fn show(
         &mut self,
         n: u64,
         t: f64,
         rows: &Rows,
-        lambda: &[f64],
         energy_error: f64,
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<(), SimError> {
+        let lambda = &self.dynamics.solution().lambda;
         let frame = match &self.unit {
             None => Frame {
                 step: n,
@@ -626,7 +630,7 @@ impl<'s> Simulation<'s> {
     /// then stabilise and resolve contacts as the settings say.
     fn advance(&mut self, mut rows: Rows, n: u64, reach: &Reach) -> Result<(), SimError> {
         let s = self.settings;
-        let has_inequalities = self.dynamics.system().constraints.iter().any(|c| c.inequality);
+        let has_inequalities = self.has_inequalities;
         let (t, t1) = (self.t0 + n as f64 * s.dt, self.t0 + (n + 1) as f64 * s.dt);
         let velocity_step = |dynamics: &mut Dynamics<'_>, end: &mut Rows, v: &mut Vectors, equalities: bool| {
             velocity_step(end, v, equalities, reach.touch, s.restitution, reach.bounce_speed, dynamics);
