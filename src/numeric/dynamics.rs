@@ -329,7 +329,7 @@ impl<'s> Dynamics<'s> {
     /// Puts the rigid bodies' part of (t, q, v) into the environment the tapes read (the
     /// time and the bodies' positions and velocities go to the tapes from the arrays:
     /// `rows::State`).
-    #[inline]
+    #[inline(always)]
     fn set_state(&mut self, q: &Vectors, v: &Vectors) {
         if self.rigid {
             self.set_angles(q, v);
@@ -337,6 +337,7 @@ impl<'s> Dynamics<'s> {
     }
 
     /// [`set_state`](Dynamics::set_state)'s work, with rigid bodies.
+    #[inline(never)]
     fn set_angles(&mut self, q: &Vectors, v: &Vectors) {
         // Rigid bodies' angles (3D: q = exp(φ) ⊗ q₀) and angular velocities, from their
         // angular slots after the bodies.

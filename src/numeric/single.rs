@@ -59,11 +59,18 @@ impl SingleScaling {
     /// The scaling of J on a slot of inverse mass `w` (finite, w ≥ 0), computed in the
     /// general solve's order, or `None` where it declines (a zero or overflowing gradient, Â
     /// not positive and finite); kept for the next call with the same bits.
+    #[inline]
     fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
         let key = (j.map(f64::to_bits), w.to_bits());
         if self.key == Some(key) {
             return Some(self);
         }
+        self.scale(row, j, w, key)
+    }
+
+    /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits).
+    #[inline(never)]
+    fn scale(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64, key: ([u64; 3], u64)) -> Option<&SingleScaling> {
         self.key = None;
         // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
         let norm = row_norm(row);
