@@ -70,7 +70,13 @@ impl SingleScaling {
 
     /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits).
     #[inline(never)]
-    fn scale(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64, key: ([u64; 3], u64)) -> Option<&SingleScaling> {
+    fn scale(
+        &mut self,
+        row: &[(usize, [f64; 3])],
+        j: &[f64; 3],
+        w: f64,
+        key: ([u64; 3], u64),
+    ) -> Option<&SingleScaling> {
         self.key = None;
         // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
         let norm = row_norm(row);
