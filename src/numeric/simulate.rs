@@ -488,11 +488,16 @@ impl<'s> Simulation<'s> {
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
         let plotted = system.bodies.len().min(PLOTTED_BODIES);
         let mut balance = EnergyBalance::default();
+        // The next sampled step, a multiple of `stride` (counted, rather than a division
+        // of n at every step).
+        let mut next_sample = 0;
         for n in 0..=s.steps {
             let t = self.t0 + n as f64 * s.dt;
             self.dynamics.step = n;
             // 3D rigid bodies: the rotation vectors of the last step into the orientations.
-            self.dynamics.rebase(&mut self.q);
+            if self.three_d {
+                self.dynamics.rebase(&mut self.q);
+            }
             // C and J at these positions came with the last step's end rows, if it kept them.
             let mut rows = match self.carried.take() {
                 Some(end) => self.dynamics.rows_moved(t, &self.q, &self.v, end)?,
@@ -522,7 +527,11 @@ impl<'s> Simulation<'s> {
             self.dynamics.solve(&mut rows);
             // The active set for the step to come: contacts that push are held.
             self.dynamics.hold_solved(&rows);
-            if n.is_multiple_of(stride) || n == s.steps {
+            let sampled = n == next_sample;
+            if sampled {
+                next_sample += stride;
+            }
+            if sampled || n == s.steps {
                 let position = self.q[..plotted].iter().map(|x| unit.as_ref().map_or(*x, |u| u.vector(*x)));
                 summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: position.collect() });
             }
