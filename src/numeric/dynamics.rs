@@ -407,34 +407,49 @@ impl<'s> Dynamics<'s> {
     /// slots' numbers are evaluated (`RowProgram::evaluate_motion_state_into`), as
     /// [`rows`](Dynamics::rows) would give them to rounding. `rows`' other numbers may have
     /// been spent (a correction's C, Ċ and c) but for its `value`, which must be C/κ.
-    pub fn rows_moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: Rows) -> Result<Rows, SimError> {
+    pub fn rows_moved(&mut self, t: f64, q: &Vectors, v: &Vectors, mut rows: Rows) -> Result<Rows, SimError> {
+        self.moved(t, q, v, &mut rows, true)?;
+        Ok(rows)
+    }
+
+    /// [`rows_moved`](Dynamics::rows_moved) in place: `rows` becomes the rows at (t, q, v)
+    /// (what a run loop that keeps its rows in its own buffers calls: a `Rows` moved by
+    /// value through a `Result` is a copy of its header each time).
+    pub fn rows_moved_into(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows) -> Result<(), SimError> {
         self.moved(t, q, v, rows, true)
     }
 
-    /// [`rows_moved`](Dynamics::rows_moved); `checked`: C and J are known to be finite.
-    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, mut rows: Rows, checked: bool) -> Result<Rows, SimError> {
+    /// [`rows_moved_into`](Dynamics::rows_moved_into); `checked`: C and J are known to be finite.
+    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows, checked: bool) -> Result<(), SimError> {
         self.refusal()?;
         self.evaluations += 1;
         self.set_state(q, v);
         let kept = self
             .program
-            .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
+            .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
         // C and J were checked when they were evaluated: the new numbers alone (found as
         // they were filled), and all of them again only to name what is not finite.
         let finite = self.scratch.finite();
         if kept && checked && finite {
-            return Ok(rows);
+            return Ok(());
         }
         // Kept C and J not known to be finite: every number is looked at.
-        let finite = if kept { all_finite(&rows) } else { finite };
-        self.checked(rows, t, finite)
+        let finite = if kept { all_finite(rows) } else { finite };
+        self.check(rows, t, finite)
     }
 
     /// The rows at (t, q, v) after a [`positions`](Dynamics::positions) at the same t and q:
     /// its C/κ and J are taken over and the rest evaluated ([`rows_moved`](Dynamics::rows_moved)).
     pub fn rows_after_positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
         let mut rows = self.spare.pop().unwrap_or_default();
+        self.rows_after_positions_into(t, q, v, &mut rows)?;
+        Ok(rows)
+    }
+
+    /// [`rows_after_positions`](Dynamics::rows_after_positions) into `rows` (whatever it
+    /// held: its buffers are reused).
+    pub fn rows_after_positions_into(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows) -> Result<(), SimError> {
         std::mem::swap(&mut rows.rows, &mut self.position_rows);
         // `positions` reports a C or J that is not finite through a full evaluation, which
         // may round differently and pass: then they are checked again, as `rows` would.
@@ -445,6 +460,12 @@ impl<'s> Dynamics<'s> {
     /// `rows` at time `t`, or the error that names the first number that is not finite
     /// (`finite`: whether every number of `rows` is, as `all_finite` says).
     fn checked(&self, rows: Rows, t: f64, finite: bool) -> Result<Rows, SimError> {
+        self.check(&rows, t, finite)?;
+        Ok(rows)
+    }
+
+    /// [`checked`](Dynamics::checked) without taking the rows.
+    fn check(&self, rows: &Rows, t: f64, finite: bool) -> Result<(), SimError> {
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
         if !finite {
             for (k, row) in rows.rows.iter().enumerate() {
@@ -464,7 +485,7 @@ impl<'s> Dynamics<'s> {
                 }
             }
         }
-        Ok(rows)
+        Ok(())
     }
 
     /// Gives rows back for reuse by the next [`rows`](Dynamics::rows) (optional: dropping
