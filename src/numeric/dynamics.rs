@@ -449,7 +449,13 @@ impl<'s> Dynamics<'s> {
 
     /// [`rows_after_positions`](Dynamics::rows_after_positions) into `rows` (whatever it
     /// held: its buffers are reused).
-    pub fn rows_after_positions_into(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows) -> Result<(), SimError> {
+    pub fn rows_after_positions_into(
+        &mut self,
+        t: f64,
+        q: &Vectors,
+        v: &Vectors,
+        rows: &mut Rows,
+    ) -> Result<(), SimError> {
         std::mem::swap(&mut rows.rows, &mut self.position_rows);
         // `positions` reports a C or J that is not finite through a full evaluation, which
         // may round differently and pass: then they are checked again, as `rows` would.
