@@ -444,8 +444,8 @@ impl<'s> Simulation<'s> {
     }
 
     /// With 3D rigid bodies, the first part of Euler's and Verlet's step: the kick v += h a₀
-    /// with the gyroscopic term at the implicit midpoint (`rotation::kick`, `rows` the
-    /// start's; h = dt for Euler, dt/2 for Verlet), then the drift q += dt v.
+    /// with the gyroscopic term at the implicit midpoint (`rotation::kick` at the start's
+    /// rows; h = dt for Euler, dt/2 for Verlet), then the drift q += dt v.
     fn first_kick(&mut self, h: f64) {
         self.half.copy_from_slice(&self.v);
         kick(&self.start, h, &self.a, &self.half, &mut self.v);
