@@ -77,24 +77,25 @@ fn lagrange_pendulum_step(bencher: divan::Bencher) {
 /// program and the state) is spread over them, as it is over a real run.
 const STEPS: u64 = 100;
 
-/// The pendulum for [`STEPS`] steps through `simulate` (Verlet + projection, as
+/// The pendulum for `steps` steps through `simulate` (Verlet + projection, as
 /// `lagrange simulate` runs it), beside [`handwritten_pendulum_steps`]: divide both by
-/// `STEPS` for the cost of a step.
-#[divan::bench(sample_count = 20)]
-fn pendulum_steps(bencher: divan::Bencher) {
+/// `steps` for the cost of a step. At [`STEPS`] the setting up of the run
+/// ([`lagrange_pendulum_step`]) is a few percent of a sample; at 1 000 it is below one.
+#[divan::bench(args = [STEPS, 1000], sample_count = 20)]
+fn pendulum_steps(bencher: divan::Bencher, steps: u64) {
     let text = std::fs::read_to_string("constraints/pendulum.toml").expect("file");
     let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
     let mut settings = s.settings();
     settings.integrator = Integrator::Verlet;
     settings.stabilize = Stabilize::PROJECTION;
-    settings.steps = STEPS;
+    settings.steps = steps;
     bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
 }
 
-/// The baseline of [`pendulum_steps`]: [`STEPS`] steps of [`handwritten_pendulum_step`]'s
+/// The baseline of [`pendulum_steps`]: `steps` steps of [`handwritten_pendulum_step`]'s
 /// Verlet step with the closed-form λ and projection.
-#[divan::bench(sample_count = 20)]
-fn handwritten_pendulum_steps(bencher: divan::Bencher) {
+#[divan::bench(args = [STEPS, 1000], sample_count = 20)]
+fn handwritten_pendulum_steps(bencher: divan::Bencher, steps: u64) {
     let (l, m, g) = (1.0f64, 1.0f64, -9.81f64);
     let dt = 1e-3;
     let accel = |r: [f64; 2], v: [f64; 2]| {
@@ -104,7 +105,7 @@ fn handwritten_pendulum_steps(bencher: divan::Bencher) {
     bencher.bench_local(|| {
         let (mut r, mut v) = (divan::black_box([l, 0.0]), divan::black_box([0.0, 0.0]));
         let mut a = accel(r, v);
-        for _ in 0..STEPS {
+        for _ in 0..steps {
             for d in 0..2 {
                 v[d] += 0.5 * dt * a[d];
                 r[d] += dt * v[d];

@@ -469,6 +469,15 @@ fn one_row_on_one_body_is_solved_as_the_general_solve_solves_it() {
         let forces = s.acceleration.iter().chain(&s.constraint_force).flatten();
         s.lambda.iter().chain(forces).map(|x| x.to_bits()).collect::<Vec<_>>()
     };
+    // Every field, numbers by their bits (a NaN equals itself).
+    let whole = |s: &Solution| {
+        let sizes = [s.lambda.len(), s.constraint_force.len(), s.acceleration.len()];
+        (bits(s), sizes, s.active.clone(), s.status, s.contacts.clone(), s.diagnostics.clone())
+    };
+    // One output kept across every case, as `Dynamics` keeps its solutions: it holds the
+    // case before's answer, or a general solve's of other shapes with its diagnostics, and
+    // the one-row solve writes over it in place where the shape allows.
+    let mut reused = Solution::default();
     let (mut taken, mut declined) = (0, 0);
     for case in 0..20_000 {
         let special = case % 4 == 0;
@@ -492,6 +501,14 @@ fn one_row_on_one_body_is_solved_as_the_general_solve_solves_it() {
         let cached = solve_cached(&rows, &settings, &[], &mut SolveCache::default());
         let mut single = Solution::default();
         let answered = solve_single(&rows, &settings, &mut single);
+        let before = whole(&reused);
+        assert_eq!(solve_single(&rows, &settings, &mut reused), answered, "case {case}");
+        if answered {
+            assert_eq!(whole(&reused), whole(&single), "case {case}: an answer over another");
+        } else {
+            assert_eq!(whole(&reused), before, "case {case}: a declined solve leaves its output");
+            reused = general.clone();
+        }
         // The same rows with the scaling kept from the case before (a miss), then again (a
         // hit), then with new forces and bias at the same J and masses (a hit).
         for _ in 0..2 {

@@ -162,10 +162,12 @@ pub struct Dynamics<'s> {
     orientations: Vec<[f64; 4]>,
     /// The solve's accelerations folded into state slots (scratch of [`Dynamics::kick_at`]).
     folded: Vec<[f64; 3]>,
-    /// The answer of the last [`correct`](Dynamics::correct), and a solution handed back by
-    /// [`recycle_solution`](Dynamics::recycle_solution): buffers the solves fill in place.
+    /// The answers of the last [`correct`](Dynamics::correct) and the last
+    /// [`solve`](Dynamics::solve): buffers the solves fill in place, read where they are
+    /// (a solution is seven vectors: moving one in and out of the dynamics at every solve
+    /// was a visible part of a pendulum's step).
     correction: Solution,
-    spare_solution: Option<Solution>,
+    solution: Solution,
     /// The one-row solve's last scaling (`numeric::single`), reused at the same J and 1/m.
     single: SingleScaling,
     /// A solve that left a block unsolved ([`Diagnostic::TooLarge`]): the step and its rows.
@@ -226,7 +228,7 @@ impl<'s> Dynamics<'s> {
             orientations,
             folded: Vec::new(),
             correction: Solution::default(),
-            spare_solution: None,
+            solution: Solution::default(),
             single: SingleScaling::default(),
             refused: None,
         }
@@ -279,16 +281,13 @@ impl<'s> Dynamics<'s> {
     /// contact that was not held is left to its impulse (holding it as an equality would
     /// fold its correction into the velocity before the bounce).
     pub fn hold(&mut self, rows: &Rows, solution: &Solution) {
-        self.held.resize(rows.rows.len(), false);
-        for (k, row) in rows.rows.iter().enumerate() {
-            let pushing = row.inequality && solution.lambda[k] > 0.0;
-            self.held[k] = pushing
-                && match solution.contacts[k] {
-                    Some(ContactState::Resting | ContactState::Penetrating) => true,
-                    Some(ContactState::Closing) => self.held[k],
-                    _ => false,
-                };
-        }
+        update_held(&mut self.held, rows, solution);
+    }
+
+    /// [`hold`](Dynamics::hold) with the answer of the last [`solve`](Dynamics::solve), which
+    /// must have been at `rows`.
+    pub fn hold_solved(&mut self, rows: &Rows) {
+        update_held(&mut self.held, rows, &self.solution);
     }
 
     /// Releases every held contact (a new run, or a caller that keeps no active set).
@@ -330,10 +329,16 @@ impl<'s> Dynamics<'s> {
     /// Puts the rigid bodies' part of (t, q, v) into the environment the tapes read (the
     /// time and the bodies' positions and velocities go to the tapes from the arrays:
     /// `rows::State`).
+    #[inline(always)]
     fn set_state(&mut self, q: &Vectors, v: &Vectors) {
-        if !self.rigid {
-            return;
+        if self.rigid {
+            self.set_angles(q, v);
         }
+    }
+
+    /// [`set_state`](Dynamics::set_state)'s work, with rigid bodies.
+    #[inline(never)]
+    fn set_angles(&mut self, q: &Vectors, v: &Vectors) {
         // Rigid bodies' angles (3D: q = exp(φ) ⊗ q₀) and angular velocities, from their
         // angular slots after the bodies.
         let rigid = self.system.bodies.iter().filter_map(|b| b.rigid.as_ref());
@@ -402,34 +407,55 @@ impl<'s> Dynamics<'s> {
     /// slots' numbers are evaluated (`RowProgram::evaluate_motion_state_into`), as
     /// [`rows`](Dynamics::rows) would give them to rounding. `rows`' other numbers may have
     /// been spent (a correction's C, Ċ and c) but for its `value`, which must be C/κ.
-    pub fn rows_moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: Rows) -> Result<Rows, SimError> {
+    pub fn rows_moved(&mut self, t: f64, q: &Vectors, v: &Vectors, mut rows: Rows) -> Result<Rows, SimError> {
+        self.moved(t, q, v, &mut rows, true)?;
+        Ok(rows)
+    }
+
+    /// [`rows_moved`](Dynamics::rows_moved) in place: `rows` becomes the rows at (t, q, v)
+    /// (what a run loop that keeps its rows in its own buffers calls: a `Rows` moved by
+    /// value through a `Result` is a copy of its header each time).
+    pub fn rows_moved_into(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows) -> Result<(), SimError> {
         self.moved(t, q, v, rows, true)
     }
 
-    /// [`rows_moved`](Dynamics::rows_moved); `checked`: C and J are known to be finite.
-    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, mut rows: Rows, checked: bool) -> Result<Rows, SimError> {
+    /// [`rows_moved_into`](Dynamics::rows_moved_into); `checked`: C and J are known to be finite.
+    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows, checked: bool) -> Result<(), SimError> {
         self.refusal()?;
         self.evaluations += 1;
         self.set_state(q, v);
         let kept = self
             .program
-            .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, &mut rows)
+            .evaluate_motion_state_into(self.system, &self.env, State { t, q, v }, &mut self.scratch, rows)
             .map_err(|error| SimError::Eval { time: t, error })?;
         // C and J were checked when they were evaluated: the new numbers alone (found as
         // they were filled), and all of them again only to name what is not finite.
         let finite = self.scratch.finite();
         if kept && checked && finite {
-            return Ok(rows);
+            return Ok(());
         }
         // Kept C and J not known to be finite: every number is looked at.
-        let finite = if kept { all_finite(&rows) } else { finite };
-        self.checked(rows, t, finite)
+        let finite = if kept { all_finite(rows) } else { finite };
+        self.check(rows, t, finite)
     }
 
     /// The rows at (t, q, v) after a [`positions`](Dynamics::positions) at the same t and q:
     /// its C/κ and J are taken over and the rest evaluated ([`rows_moved`](Dynamics::rows_moved)).
     pub fn rows_after_positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<Rows, SimError> {
         let mut rows = self.spare.pop().unwrap_or_default();
+        self.rows_after_positions_into(t, q, v, &mut rows)?;
+        Ok(rows)
+    }
+
+    /// [`rows_after_positions`](Dynamics::rows_after_positions) into `rows` (whatever it
+    /// held: its buffers are reused).
+    pub fn rows_after_positions_into(
+        &mut self,
+        t: f64,
+        q: &Vectors,
+        v: &Vectors,
+        rows: &mut Rows,
+    ) -> Result<(), SimError> {
         std::mem::swap(&mut rows.rows, &mut self.position_rows);
         // `positions` reports a C or J that is not finite through a full evaluation, which
         // may round differently and pass: then they are checked again, as `rows` would.
@@ -440,6 +466,12 @@ impl<'s> Dynamics<'s> {
     /// `rows` at time `t`, or the error that names the first number that is not finite
     /// (`finite`: whether every number of `rows` is, as `all_finite` says).
     fn checked(&self, rows: Rows, t: f64, finite: bool) -> Result<Rows, SimError> {
+        self.check(&rows, t, finite)?;
+        Ok(rows)
+    }
+
+    /// [`checked`](Dynamics::checked) without taking the rows.
+    fn check(&self, rows: &Rows, t: f64, finite: bool) -> Result<(), SimError> {
         // Nothing non-finite reaches the solve (an SVD of NaNs need not even terminate).
         if !finite {
             for (k, row) in rows.rows.iter().enumerate() {
@@ -459,7 +491,7 @@ impl<'s> Dynamics<'s> {
                 }
             }
         }
-        Ok(rows)
+        Ok(())
     }
 
     /// Gives rows back for reuse by the next [`rows`](Dynamics::rows) (optional: dropping
@@ -473,7 +505,7 @@ impl<'s> Dynamics<'s> {
     /// Solves for λ at `rows` (Baumgarte terms added first when set), the held contacts
     /// touching whatever their distance (`solve::solve_holding`): the solve at the start of
     /// a step, which decides what stays held ([`Dynamics::hold`]).
-    pub fn solve(&mut self, rows: &mut Rows) -> Solution {
+    pub fn solve(&mut self, rows: &mut Rows) -> &Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
             for (k, row) in rows.rows.iter_mut().enumerate() {
                 // A closing contact that is not held is the impulse's (Ċ⁺ = −eĊ at the step's
@@ -487,21 +519,20 @@ impl<'s> Dynamics<'s> {
                 row.bias += two_alpha * row.rate + beta_squared * row.value;
             }
         }
-        let mut solution = self.spare_solution.take().unwrap_or_default();
+        let solution = &mut self.solution;
         // One row on one body: the same numbers in closed form (`numeric::single`).
-        if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut solution) {
-            solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, &mut solution);
+        if !solve_single_with(rows, &Settings::default(), &mut self.single, solution) {
+            solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, solution);
             if self.refused.is_none() {
-                self.refused = refused_rows(&solution).map(|rows| (self.step, rows));
+                self.refused = refused_rows(solution).map(|rows| (self.step, rows));
             }
         }
-        solution
+        &self.solution
     }
 
-    /// Gives a solution of [`solve`](Dynamics::solve) back, so the next solve fills its
-    /// buffers (optional: dropping it is correct, only slower).
-    pub fn recycle_solution(&mut self, solution: Solution) {
-        self.spare_solution = Some(solution);
+    /// The answer of the last [`solve`](Dynamics::solve) (empty before the first).
+    pub fn solution(&self) -> &Solution {
+        &self.solution
     }
 
     /// The solve of a correction (projection, SHAKE, velocity step: forces zeroed, c set to
@@ -543,9 +574,7 @@ impl<'s> Dynamics<'s> {
                 row.inequality = false;
             }
         }
-        let solution = self.solve(&mut rows);
-        a.copy_from_slice(&solution.acceleration);
-        self.recycle_solution(solution);
+        a.copy_from_slice(&self.solve(&mut rows).acceleration);
         fold(&rows, a);
         Ok(rows)
     }
@@ -560,6 +589,20 @@ impl<'s> Dynamics<'s> {
         self.recycle(rows);
         self.folded = a;
         Ok(())
+    }
+}
+
+/// The active set after the solve `solution` at `rows` (see [`Dynamics::hold`]).
+fn update_held(held: &mut Vec<bool>, rows: &Rows, solution: &Solution) {
+    held.resize(rows.rows.len(), false);
+    for (k, row) in rows.rows.iter().enumerate() {
+        let pushing = row.inequality && solution.lambda[k] > 0.0;
+        held[k] = pushing
+            && match solution.contacts[k] {
+                Some(ContactState::Resting | ContactState::Penetrating) => true,
+                Some(ContactState::Closing) => held[k],
+                _ => false,
+            };
     }
 }
 

@@ -339,12 +339,19 @@ pub struct Simulation<'s> {
     /// What the observer sees when the run works in another unit: the state, rows and λ
     /// converted back (buffers reused from step to step).
     shown: Shown,
-    /// The rows at the end of the last step, at the positions and time the next step starts
-    /// from (C/κ and J; the rest was spent by the velocity step): the next step evaluates
-    /// only what the velocities change (`Dynamics::rows_moved`). `None`: evaluate them all.
-    carried: Option<Rows>,
+    /// The rows of the step's start, and of its end (after the step: at the positions and
+    /// time the next step starts from, C/κ and J; the rest was spent by the velocity step).
+    /// Kept here and swapped, never moved by value: a `Rows` moved through a `Result` is a
+    /// copy each time, a few of them a step.
+    start: Rows,
+    end: Rows,
+    /// Whether `end` serves the next step's start, which then evaluates only what the
+    /// velocities change (`Dynamics::rows_moved_into`); else every row is evaluated.
+    carried: bool,
     /// C/κ of the end rows, kept across the velocity step that overwrites it.
     values: Vec<f64>,
+    /// Whether some constraint is an inequality (found once, not at every step).
+    has_inequalities: bool,
 }
 
 #[derive(Default)]
@@ -370,6 +377,7 @@ impl<'s> Simulation<'s> {
         dynamics.baumgarte = settings.stabilize.baumgarte_terms(settings.dt);
         let n = q.len();
         let three_d = !dynamics.orientations().is_empty();
+        let has_inequalities = dynamics.system().constraints.iter().any(|c| c.inequality);
         Ok(Simulation {
             dynamics,
             settings,
@@ -383,8 +391,11 @@ impl<'s> Simulation<'s> {
             three_d,
             unit,
             shown: Shown::default(),
-            carried: None,
+            start: Rows::default(),
+            end: Rows::default(),
+            carried: false,
             values: Vec::new(),
+            has_inequalities,
         })
     }
 
@@ -393,7 +404,7 @@ impl<'s> Simulation<'s> {
         let start = Instant::now();
         let system = self.dynamics.system();
         let s = self.settings;
-        self.carried = None;
+        self.carried = false;
         let mut summary = Summary {
             integrator: s.integrator.name().into(),
             stabilize: s.stabilize.name().into(),
@@ -433,11 +444,11 @@ impl<'s> Simulation<'s> {
     }
 
     /// With 3D rigid bodies, the first part of Euler's and Verlet's step: the kick v += h a₀
-    /// with the gyroscopic term at the implicit midpoint (`rotation::kick`, `rows` the
-    /// start's; h = dt for Euler, dt/2 for Verlet), then the drift q += dt v.
-    fn first_kick(&mut self, rows: &Rows, h: f64) {
+    /// with the gyroscopic term at the implicit midpoint (`rotation::kick` at the start's
+    /// rows; h = dt for Euler, dt/2 for Verlet), then the drift q += dt v.
+    fn first_kick(&mut self, h: f64) {
         self.half.copy_from_slice(&self.v);
-        kick(rows, h, &self.a, &self.half, &mut self.v);
+        kick(&self.start, h, &self.a, &self.half, &mut self.v);
         add_scaled(&mut self.q, self.settings.dt, &self.v);
     }
 
@@ -484,20 +495,31 @@ impl<'s> Simulation<'s> {
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
         let plotted = system.bodies.len().min(PLOTTED_BODIES);
         let mut balance = EnergyBalance::default();
+        // The next sampled step, a multiple of `stride` (counted, rather than a division
+        // of n at every step).
+        let mut next_sample = 0;
         for n in 0..=s.steps {
             let t = self.t0 + n as f64 * s.dt;
             self.dynamics.step = n;
             // 3D rigid bodies: the rotation vectors of the last step into the orientations.
-            self.dynamics.rebase(&mut self.q);
-            // C and J at these positions came with the last step's end rows, if it kept them.
-            let mut rows = match self.carried.take() {
-                Some(end) => self.dynamics.rows_moved(t, &self.q, &self.v, end)?,
-                None => self.dynamics.rows(t, &self.q, &self.v)?,
-            };
-            let (c_max, c_dot_max) = self.drift(&rows, n, t, &reach)?;
+            if self.three_d {
+                self.dynamics.rebase(&mut self.q);
+            }
+            // C and J at these positions came with the last step's end rows, if it kept them:
+            // they become the start's, and the start's buffers the end's for the step to come.
+            if std::mem::take(&mut self.carried) {
+                std::mem::swap(&mut self.start, &mut self.end);
+                self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)?;
+            } else {
+                let rows = self.dynamics.rows(t, &self.q, &self.v)?;
+                let old = std::mem::replace(&mut self.start, rows);
+                self.dynamics.recycle(old);
+            }
+            let rows = &self.start;
+            let (c_max, c_dot_max) = self.drift(rows, n, t, &reach)?;
             summary.max_abs_c = summary.max_abs_c.max(c_max);
             summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
-            let (energy_error, accel) = balance.record(&rows, n, s.dt);
+            let (energy_error, accel) = balance.record(rows, n, s.dt);
             if n == 0 {
                 let speed = self.v.iter().map(safe_norm).fold(0.0, f64::max);
                 // Approaches slower than what ten steps of the external forces build up do not bounce.
@@ -515,24 +537,27 @@ impl<'s> Simulation<'s> {
                 let scale = balance.max_kinetic.max(balance.work_scale);
                 if scale > 0.0 { balance.max_error / scale } else { energy_back(balance.max_error) }
             });
-            let solution = self.dynamics.solve(&mut rows);
+            self.dynamics.solve(&mut self.start);
             // The active set for the step to come: contacts that push are held.
-            self.dynamics.hold(&rows, &solution);
-            if n.is_multiple_of(stride) || n == s.steps {
+            self.dynamics.hold_solved(&self.start);
+            let sampled = n == next_sample;
+            if sampled {
+                next_sample += stride;
+            }
+            if sampled || n == s.steps {
                 let position = self.q[..plotted].iter().map(|x| unit.as_ref().map_or(*x, |u| u.vector(*x)));
                 summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: position.collect() });
             }
-            self.show(n, t, &rows, &solution.lambda, energy_error, observe)?;
+            self.show(n, t, energy_error, observe)?;
             summary.steps = n;
             summary.duration = n as f64 * s.dt;
             if n == s.steps {
                 break;
             }
-            self.a.copy_from_slice(&solution.acceleration);
-            self.dynamics.recycle_solution(solution);
-            fold(&rows, &mut self.a);
+            copy_vectors(&mut self.a, &self.dynamics.solution().acceleration);
+            fold(&self.start, &mut self.a);
             self.dynamics.step = n + 1;
-            self.advance(rows, n, &reach)?;
+            self.advance(n, &reach)?;
         }
         Ok(())
     }
@@ -576,16 +601,17 @@ impl<'s> Simulation<'s> {
         Ok((c_max, c_dot_max))
     }
 
-    /// Hands the state of step `n` to the observer, in the caller's unit.
+    /// Hands the state of step `n` to the observer, in the caller's unit (its rows are the
+    /// start's, λ of the step's solve, `Dynamics::solution`).
     fn show(
         &mut self,
         n: u64,
         t: f64,
-        rows: &Rows,
-        lambda: &[f64],
         energy_error: f64,
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<(), SimError> {
+        let lambda = &self.dynamics.solution().lambda;
+        let rows = &self.start;
         let frame = match &self.unit {
             None => Frame {
                 step: n,
@@ -622,11 +648,12 @@ impl<'s> Simulation<'s> {
         observe(&frame).map_err(SimError::Output)
     }
 
-    /// From step `n` (its `rows`, its accelerations in `self.a`) to step n + 1: integrate,
-    /// then stabilise and resolve contacts as the settings say.
-    fn advance(&mut self, mut rows: Rows, n: u64, reach: &Reach) -> Result<(), SimError> {
+    /// From step `n` (its rows in `self.start`, its accelerations in `self.a`) to step
+    /// n + 1: integrate, then stabilise and resolve contacts as the settings say; the rows
+    /// at the end, where there are any, in `self.end`.
+    fn advance(&mut self, n: u64, reach: &Reach) -> Result<(), SimError> {
         let s = self.settings;
-        let has_inequalities = self.dynamics.system().constraints.iter().any(|c| c.inequality);
+        let has_inequalities = self.has_inequalities;
         let (t, t1) = (self.t0 + n as f64 * s.dt, self.t0 + (n + 1) as f64 * s.dt);
         let velocity_step = |dynamics: &mut Dynamics<'_>, end: &mut Rows, v: &mut Vectors, equalities: bool| {
             velocity_step(end, v, equalities, reach.touch, s.restitution, reach.bounce_speed, dynamics);
@@ -638,25 +665,27 @@ impl<'s> Simulation<'s> {
         if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) = (s.integrator, s.stabilize) {
             // RATTLE: drift, SHAKE along the start's gradients, kick, velocity projection.
             if self.three_d {
-                self.first_kick(&rows, 0.5 * s.dt);
+                self.first_kick(0.5 * s.dt);
             } else {
                 Stepper::verlet_drift(s.dt, &mut self.q, &mut self.v, &self.a);
             }
-            let (mut end, _) = shake_positions(
+            shake_positions(
                 &mut self.dynamics,
                 t1,
                 s.dt,
                 &mut self.q,
                 &mut self.v,
-                &mut rows,
+                &mut self.start,
+                &mut self.end,
                 reach.length,
                 tolerance,
                 max_iterations,
             )?;
             if has_inequalities {
-                end = self.project(t1, reach.length, tolerance, max_iterations)?;
+                let projected = self.project(t1, reach.length, tolerance, max_iterations)?;
+                self.replace_end(projected);
             }
-            self.half.copy_from_slice(&self.v);
+            copy_vectors(&mut self.half, &self.v);
             if self.three_d {
                 self.second_kick(t1, s.dt)?;
             } else if self.dynamics.velocity_dependent_forces {
@@ -664,23 +693,22 @@ impl<'s> Simulation<'s> {
             } else {
                 // v⁺ = v½ + dt/2 M⁻¹F(q⁺): the constraint part of the kick is what the
                 // velocity projection below removes anyway, so no solve is needed here.
-                for ((v, f), w) in self.v.iter_mut().zip(&end.force).zip(&end.inverse_mass) {
+                for ((v, f), w) in self.v.iter_mut().zip(&self.end.force).zip(&self.end.inverse_mass) {
                     for d in 0..3 {
                         v[d] += 0.5 * s.dt * f[d] * w;
                     }
                 }
             }
-            update_rates(&mut end, &self.half, &self.v);
-            self.save_values(&end);
-            velocity_step(&mut self.dynamics, &mut end, &mut self.v, true);
-            self.carry(end, keep);
-            self.dynamics.recycle(rows);
+            update_rates(&mut self.end, &self.half, &self.v);
+            self.save_values();
+            velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
+            self.carry(keep);
             return self.check_finite(n + 1, t1);
         }
         match s.integrator {
-            Integrator::Euler if self.three_d => self.first_kick(&rows, s.dt),
+            Integrator::Euler if self.three_d => self.first_kick(s.dt),
             Integrator::Verlet if self.three_d => {
-                self.first_kick(&rows, 0.5 * s.dt);
+                self.first_kick(0.5 * s.dt);
                 self.second_kick(t1, s.dt)?;
             }
             _ => self.stepper.step(&mut self.dynamics, t, s.dt, &mut self.q, &mut self.v, &self.a)?,
@@ -688,42 +716,58 @@ impl<'s> Simulation<'s> {
         self.check_finite(n + 1, t1)?;
         match s.stabilize {
             Stabilize::Projection { tolerance, max_iterations } => {
-                let mut end = self.project(t1, reach.length, tolerance, max_iterations)?;
-                self.save_values(&end);
-                velocity_step(&mut self.dynamics, &mut end, &mut self.v, true);
-                self.carry(end, keep);
+                let projected = self.project(t1, reach.length, tolerance, max_iterations)?;
+                self.replace_end(projected);
+                self.save_values();
+                velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
+                self.carry(keep);
             }
             _ if has_inequalities => {
-                let mut end = self.dynamics.rows(t1, &self.q, &self.v)?;
-                self.save_values(&end);
-                velocity_step(&mut self.dynamics, &mut end, &mut self.v, false);
-                self.carry(end, keep);
+                let rows = self.dynamics.rows(t1, &self.q, &self.v)?;
+                self.replace_end(rows);
+                self.save_values();
+                velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, false);
+                self.carry(keep);
             }
             _ => {}
         }
-        self.dynamics.recycle(rows);
         Ok(())
     }
 }
 
 impl Simulation<'_> {
-    /// Keeps C/κ of `end` before a velocity step spends it ([`carry`](Simulation::carry)).
-    fn save_values(&mut self, end: &Rows) {
+    /// `rows` become the end rows; the buffers they replace go back to the dynamics.
+    fn replace_end(&mut self, rows: Rows) {
+        let old = std::mem::replace(&mut self.end, rows);
+        self.dynamics.recycle(old);
+    }
+
+    /// Keeps C/κ of the end rows before a velocity step spends it ([`carry`](Simulation::carry)).
+    fn save_values(&mut self) {
         self.values.clear();
-        self.values.extend(end.rows.iter().map(|row| row.value));
+        self.values.extend(self.end.rows.iter().map(|row| row.value));
     }
 
     /// The end rows after the velocity step: with their C/κ put back, the next step's start
-    /// (`keep`), else recycled.
-    fn carry(&mut self, mut end: Rows, keep: bool) {
-        if keep && end.rows.len() == self.values.len() {
-            for (row, &c) in end.rows.iter_mut().zip(&self.values) {
+    /// (`keep`), else left as scratch.
+    fn carry(&mut self, keep: bool) {
+        if keep && self.end.rows.len() == self.values.len() {
+            for (row, &c) in self.end.rows.iter_mut().zip(&self.values) {
                 row.value = c;
             }
-            self.carried = Some(end);
-        } else {
-            self.dynamics.recycle(end);
+            self.carried = true;
         }
+    }
+}
+
+/// `to = from` (of equal lengths): one or two slots (a pendulum, a bead, a double pendulum)
+/// by assignment, more as one block copy — a call to `memcpy` costs more than copying one
+/// slot, and the compiler makes one of any loop that copies.
+fn copy_vectors(to: &mut Vectors, from: &Vectors) {
+    match (to, from) {
+        ([t], [f]) => *t = *f,
+        ([t0, t1], [f0, f1]) => (*t0, *t1) = (*f0, *f1),
+        (to, from) => to.copy_from_slice(from),
     }
 }
 

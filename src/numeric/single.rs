@@ -59,11 +59,24 @@ impl SingleScaling {
     /// The scaling of J on a slot of inverse mass `w` (finite, w ≥ 0), computed in the
     /// general solve's order, or `None` where it declines (a zero or overflowing gradient, Â
     /// not positive and finite); kept for the next call with the same bits.
+    #[inline]
     fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
         let key = (j.map(f64::to_bits), w.to_bits());
         if self.key == Some(key) {
             return Some(self);
         }
+        self.scale(row, j, w, key)
+    }
+
+    /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits).
+    #[inline(never)]
+    fn scale(
+        &mut self,
+        row: &[(usize, [f64; 3])],
+        j: &[f64; 3],
+        w: f64,
+        key: ([u64; 3], u64),
+    ) -> Option<&SingleScaling> {
         self.key = None;
         // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
         let norm = row_norm(row);
@@ -119,7 +132,10 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
     // cache serves nothing less (`is_finite` joined by `&`, as `dynamics::all_finite`: no
     // chain of dependent additions).
     let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
-    let slots = rows.velocity.iter().zip(&rows.force).fold(true, |ok, (v, f)| ok & finite3(v) & finite3(f));
+    let mut slots = true;
+    for i in 0..n {
+        slots &= finite3(&rows.velocity[i]) & finite3(&rows.force[i]);
+    }
     if !(slots & row.bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
         return false;
     }
@@ -145,22 +161,34 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
     if mu != 0.0 && !lambda.is_normal() {
         return false;
     }
-    out.lambda.clear();
-    out.lambda.push(lambda);
-    out.active.clear();
-    out.active.push(true);
-    // Σ λ J = λ̃ J̃ on the row's slot, added to a zero force; a = (F + Σ λ J) w per slot.
-    out.constraint_force.resize(n, [0.0; 3]);
-    out.acceleration.resize(n, [0.0; 3]);
-    for i in 0..n {
-        let fc = if i == body { [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]] } else { [0.0; 3] };
-        let (f, w) = (&rows.force[i], rows.inverse_mass[i]);
-        out.constraint_force[i] = fc;
-        out.acceleration[i] = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    // The answer in place when `out` has the shape already (the last solve's: a run solves
+    // the same system again and again), else sized first.
+    if out.lambda.len() != 1 || out.active.len() != 1 || out.contacts.len() != 1 {
+        out.lambda.clear();
+        out.lambda.push(0.0);
+        out.active.clear();
+        out.active.push(true);
+        out.contacts.clear();
+        out.contacts.push(None);
     }
-    out.diagnostics.clear();
+    out.lambda[0] = lambda;
+    out.active[0] = true;
+    out.contacts[0] = None;
+    if out.constraint_force.len() != n || out.acceleration.len() != n {
+        out.constraint_force.resize(n, [0.0; 3]);
+        out.acceleration.resize(n, [0.0; 3]);
+    }
+    // Σ λ J = λ̃ J̃ on the row's slot, added to a zero force; a = (F + Σ λ J) w per slot.
+    let slots =
+        out.constraint_force.iter_mut().zip(&mut out.acceleration).zip(rows.force.iter().zip(&rows.inverse_mass));
+    for (i, ((fc_out, a_out), (f, &w))) in slots.enumerate() {
+        let fc = if i == body { [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]] } else { [0.0; 3] };
+        *fc_out = fc;
+        *a_out = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    }
+    if !out.diagnostics.is_empty() {
+        out.diagnostics.clear();
+    }
     out.status = Status::Solved;
-    out.contacts.clear();
-    out.contacts.push(None);
     true
 }

@@ -263,8 +263,9 @@ pub fn project_positions(
 /// the rows at the start of the step (its C, Ċ and c are overwritten; its J is kept).
 /// An iteration reads C and J alone (`Dynamics::positions`), and its solve has the start's
 /// J, so the run's solve cache serves it with the start's factor; at the final positions
-/// the rows are completed from the last iteration's C and J (`Dynamics::rows_after_positions`)
-/// and returned.
+/// the rows are completed from the last iteration's C and J
+/// (`Dynamics::rows_after_positions_into`) into `end` (whatever it held: its buffers are
+/// reused). Returns the iterations taken.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
@@ -273,10 +274,11 @@ pub fn shake_positions(
     q: &mut Vectors,
     v_half: &mut Vectors,
     start: &mut Rows,
+    end: &mut Rows,
     length: f64,
     tolerance: f64,
     max_iterations: usize,
-) -> Result<(Rows, usize), SimError> {
+) -> Result<usize, SimError> {
     let system = dynamics.system();
     let bound = tolerance * length;
     let mut iterations = 0;
@@ -294,7 +296,8 @@ pub fn shake_positions(
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
             // C and J are those just evaluated: Ċ, c and the bodies' numbers are added.
-            return Ok((dynamics.rows_after_positions(t, q, v_half)?, iterations));
+            dynamics.rows_after_positions_into(t, q, v_half, end)?;
+            return Ok(iterations);
         }
         previous = residual;
         for (k, ((old, new), constraint)) in
