@@ -1693,6 +1693,40 @@ const ENTRY_AT: [usize; 1328] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 10, 9, 11, 12, 14, 1
 #[allow(dead_code)]
 const STEADY: [bool; 342] = [true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true, true];
 
+/// Per entry (in the step's order), the components of its J that can be nonzero, bit d for component d: the
+/// structural zeros of the rows as written (`numeric::velocity::pattern`), which Ċ and an impulse leave out.
+#[allow(dead_code)]
+const ENTRY_MASK: [u8; 1328] = [1, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 2, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1, 1, 1, 1, 1, 2, 2, 1, 1, 1, 1, 1, 1, 2, 1, 2, 1];
+/// Per row, its kind: the `ENTRY_MASK` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`).
+const ROW_KIND: [u8; 342] = [0, 1, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3, 2, 4, 2, 3];
+
+#[allow(dead_code)]
+impl Prepared<DIM> {
+    /// Ċₖ at velocities `u` (`rate_in`), with row k's masks as its kind's constants.
+    #[inline(always)]
+    fn rate(&self, k: usize, u: &[[f64; DIM]]) -> f64 {
+        match ROW_KIND[k] {
+            0 => self.rate_in(k, &[1, 1], u),
+            1 => self.rate_in(k, &[2, 1], u),
+            2 => self.rate_in(k, &[1, 1, 1, 1], u),
+            3 => self.rate_in(k, &[2, 1, 2, 1], u),
+            _ => self.rate_in(k, &[2, 2, 1, 1], u),
+        }
+    }
+
+    /// Applies an impulse `p` of row k (`apply_in`), with its masks as its kind's constants.
+    #[inline(always)]
+    fn apply(&self, k: usize, u: &mut [[f64; DIM]], p: f64) {
+        match ROW_KIND[k] {
+            0 => self.apply_in(k, &[1, 1], u, p),
+            1 => self.apply_in(k, &[2, 1], u, p),
+            2 => self.apply_in(k, &[1, 1, 1, 1], u, p),
+            3 => self.apply_in(k, &[2, 1, 2, 1], u, p),
+            _ => self.apply_in(k, &[2, 2, 1, 1], u, p),
+        }
+    }
+}
+
 /// The inputs the shapes read besides positions and velocities (parameters, time, angles, and the
 /// one-argument functions of them the rows call, such as a rigid body's sin θ and cos θ), flat.
 fn others(s: &State) -> [f64; 272] {
@@ -3426,6 +3460,22 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
     s
 }
 
+/// a·b over the components in `m` (bit d: component d), summed from the first of them, as
+/// the library's `velocity::dot_masked` (the same number, zero's sign included): `dot`
+/// without the products of J's structural zeros. With `m` a constant every test folds away.
+#[inline(always)]
+fn dot_masked<const D: usize>(m: u8, a: &[f64; D], b: &[f64; D]) -> f64 {
+    let mut s = 0.0;
+    let mut first = true;
+    for d in 0..D {
+        if m >> d & 1 != 0 {
+            s = if first { a[d] * b[d] } else { s + a[d] * b[d] };
+            first = false;
+        }
+    }
+    s
+}
+
 #[allow(dead_code)]
 impl<const D: usize> Prepared<D> {
     /// Room for the rows, to be filled by `prepare` (or `new`).
@@ -3481,7 +3531,7 @@ impl<const D: usize> Prepared<D> {
                 let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
                 m += self.inverse_mass[b] * dot(j, j);
                 if !STEADY[k] {
-                    jv += dot(j, &velocity[b]);
+                    jv += dot_masked(ENTRY_MASK[e], j, &velocity[b]);
                 }
             }
             self.time_rate[k] = if STEADY[k] { 0.0 } else { self.time_rate[k] - jv };
@@ -3507,7 +3557,7 @@ impl<const D: usize> Prepared<D> {
             self.jacobian[first + e] = *j;
             m += self.inverse_mass[*b] * dot(j, j);
             if !STEADY[k] {
-                jv += dot(j, &velocity[*b]);
+                jv += dot_masked(ENTRY_MASK[first + e], j, &velocity[*b]);
             }
         }
         self.value[k] = value;
@@ -3521,24 +3571,30 @@ impl<const D: usize> Prepared<D> {
 
     /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
     /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
-    /// wrote last is the last term).
+    /// wrote last is the last term), each product over the components of its entry's mask
+    /// (`masks`: the row's `ENTRY_MASK`, as constants where `rate` calls it by the row's kind).
     #[inline(always)]
-    fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
+    fn rate_in(&self, k: usize, masks: &[u8], u: &[[f64; D]]) -> f64 {
+        let first = ROW_START[k];
         let mut c = self.time_rate[k];
-        for e in ROW_START[k]..ROW_START[k + 1] {
-            c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
+        for (e, &m) in masks.iter().enumerate() {
+            c += dot_masked(m, &self.jacobian[first + e], &u[ROW_BODY[first + e]]);
         }
         c
     }
 
-    /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p.
+    /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components of each entry's
+    /// mask (`masks`, as for `rate_in`; s·0 would leave uᵢ as it is but for a zero's sign).
     #[inline(always)]
-    fn apply(&self, k: usize, u: &mut [[f64; D]], p: f64) {
-        for e in ROW_START[k]..ROW_START[k + 1] {
-            let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
+    fn apply_in(&self, k: usize, masks: &[u8], u: &mut [[f64; D]], p: f64) {
+        let first = ROW_START[k];
+        for (e, &m) in masks.iter().enumerate() {
+            let (b, j) = (ROW_BODY[first + e], &self.jacobian[first + e]);
             let s = self.inverse_mass[b] * p;
             for d in 0..D {
-                u[b][d] += s * j[d];
+                if m >> d & 1 != 0 {
+                    u[b][d] += s * j[d];
+                }
             }
         }
     }
@@ -3630,9 +3686,9 @@ impl Default for Stepper {
     }
 }
 
-impl<const D: usize> Prepared<D> {
+impl Prepared<DIM> {
     /// Warm start: every row's accumulated impulse applied again.
-    fn warm_start(&self, u: &mut [[f64; D]], impulse: &[f64]) {
+    fn warm_start(&self, u: &mut [[f64; DIM]], impulse: &[f64]) {
         for (k, &p) in impulse.iter().enumerate() {
             if p != 0.0 {
                 self.apply(k, u, p);
@@ -3644,7 +3700,7 @@ impl<const D: usize> Prepared<D> {
     /// b and softness s that `law(k, C/κ)` gives, takes ΔP = −s_m·m_eff·(Ċ + b) − s_i·P
     /// (Box2D `b2SolveDistanceJoint`); an inequality row clamps its accumulated impulse at
     /// P ≥ 0 (Box2D `b2SolveContact`).
-    fn sweep(&self, u: &mut [[f64; D]], impulse: &mut [f64], mut law: impl FnMut(usize, f64) -> (f64, Softness)) {
+    fn sweep(&self, u: &mut [[f64; DIM]], impulse: &mut [f64], mut law: impl FnMut(usize, f64) -> (f64, Softness)) {
         for (k, impulse) in impulse.iter_mut().enumerate() {
             let m = self.effective_mass[k];
             if m == 0.0 {

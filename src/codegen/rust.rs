@@ -46,7 +46,7 @@
 //! files or stdout (`main.rs`), evaluation (`numeric`).
 
 use super::layout::Solver;
-use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
+use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, MAX_ROW_KINDS, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
 use super::support::{
@@ -752,6 +752,8 @@ pub(super) struct StepRoots {
     /// Whether a row's evaluation reads the velocities (a row's ∂C/∂t, or a 3D body's
     /// gyroscopic term): not when every row is steady and no body is 3D.
     pub(super) velocities: bool,
+    /// The structural zeros of each row's J (`numeric::velocity::pattern`, the library's).
+    pub(super) pattern: crate::numeric::velocity::pattern::Pattern,
 }
 
 impl StepRoots {
@@ -824,6 +826,7 @@ impl StepRoots {
             keep,
             still,
             velocities,
+            pattern: crate::numeric::velocity::pattern::Pattern::of(system),
         }
     }
 
@@ -855,6 +858,17 @@ impl StepRoots {
             at[e] = place;
         }
         (starts, order.iter().map(|&e| slots[e]).collect(), at)
+    }
+
+    /// Per entry in the step's order (`entries`' `ROW_START` and `ROW_BODY`), the components
+    /// of its J that can be nonzero (`ENTRY_MASK`: bit d for component d), as the library's
+    /// `Prepared` keeps them.
+    pub(super) fn masks(&self, starts: &[usize], slots: &[usize]) -> Vec<u8> {
+        let mut masks = Vec::with_capacity(slots.len());
+        for (k, w) in starts.windows(2).enumerate() {
+            masks.extend(slots[w[0]..w[1]].iter().map(|&slot| self.pattern.mask(k, slot)));
+        }
+        masks
     }
 
     /// The rigid body (its index among `turns`) and the axis of an angular slot.
@@ -1226,7 +1240,85 @@ pub(super) fn step_constants(
         list(&at),
         array(&step.steady.iter().map(bool::to_string).collect::<Vec<_>>())
     );
+    row_kinds(out, &step.masks(&starts, &bodies), &starts);
     (starts, at)
+}
+
+/// Each row's kind, the masks of its entries (`ROW_KIND`, at most `MAX_ROW_KINDS` of them;
+/// the others read `ENTRY_MASK`), and `Prepared::rate` and `Prepared::apply` by kind: each
+/// kind's call takes its masks as constants, so its products are written for its pattern
+/// (no branch on a structural zero, no product by one).
+fn row_kinds(out: &mut String, masks: &[u8], starts: &[usize]) {
+    let mut kinds: Vec<&[u8]> = Vec::new();
+    let mut row_kind = Vec::with_capacity(starts.len().saturating_sub(1));
+    for w in starts.windows(2) {
+        let m = &masks[w[0]..w[1]];
+        let kind = match kinds.iter().position(|k| *k == m) {
+            Some(i) => i,
+            None if kinds.len() < MAX_ROW_KINDS => {
+                kinds.push(m);
+                kinds.len() - 1
+            }
+            None => MAX_ROW_KINDS,
+        };
+        row_kind.push(kind);
+    }
+    let list = |xs: &mut dyn Iterator<Item = String>| array(&xs.collect::<Vec<_>>());
+    let _ = writeln!(
+        out,
+        "/// Per entry (in the step's order), the components of its J that can be nonzero, bit d for component d: the\n\
+         /// structural zeros of the rows as written (`numeric::velocity::pattern`), which Ċ and an impulse leave out.\n\
+         #[allow(dead_code)]\n\
+         const ENTRY_MASK: [u8; {}] = {};\n\
+         /// Per row, its kind: the `ENTRY_MASK` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`){}.\n\
+         const ROW_KIND: [u8; {}] = {};\n",
+        masks.len(),
+        list(&mut masks.iter().map(u8::to_string)),
+        if kinds.len() == MAX_ROW_KINDS && row_kind.contains(&MAX_ROW_KINDS) {
+            format!("; {MAX_ROW_KINDS}: a row past the kinds written, its masks read from `ENTRY_MASK`")
+        } else {
+            String::new()
+        },
+        row_kind.len(),
+        list(&mut row_kind.iter().map(usize::to_string)),
+    );
+    // The arms: each kind's masks; the last kind takes every other value when no row is past
+    // the kinds written (one kind: no branch).
+    let overflow = row_kind.contains(&MAX_ROW_KINDS);
+    let arms = |call: &str| {
+        let mut text = String::new();
+        for (i, k) in kinds.iter().enumerate() {
+            let pattern = if i + 1 == kinds.len() && !overflow { "_".to_string() } else { i.to_string() };
+            let m = list(&mut k.iter().map(u8::to_string));
+            let _ = writeln!(text, "            {pattern} => {},", call.replace("MASKS", &format!("&{m}")));
+        }
+        if overflow || kinds.is_empty() {
+            let _ = writeln!(
+                text,
+                "            _ => {},",
+                call.replace("MASKS", "&ENTRY_MASK[ROW_START[k]..ROW_START[k + 1]]")
+            );
+        }
+        text
+    };
+    let _ = writeln!(
+        out,
+        "#[allow(dead_code)]\n\
+         impl Prepared<DIM> {{\n    \
+         /// Ċₖ at velocities `u` (`rate_in`), with row k's masks as its kind's constants.\n    \
+         #[inline(always)]\n    \
+         fn rate(&self, k: usize, u: &[[f64; DIM]]) -> f64 {{\n        \
+         match ROW_KIND[k] {{\n{}        }}\n    \
+         }}\n\n    \
+         /// Applies an impulse `p` of row k (`apply_in`), with its masks as its kind's constants.\n    \
+         #[inline(always)]\n    \
+         fn apply(&self, k: usize, u: &mut [[f64; DIM]], p: f64) {{\n        \
+         match ROW_KIND[k] {{\n{}        }}\n    \
+         }}\n\
+         }}\n",
+        arms("self.rate_in(k, MASKS, u)"),
+        arms("self.apply_in(k, MASKS, u, p)")
+    );
 }
 
 /// Past this many comparisons `same_inputs` is a list of statements, not one expression:

@@ -159,6 +159,22 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
     s
 }
 
+/// a·b over the components in `m` (bit d: component d), summed from the first of them, as
+/// the library's `velocity::dot_masked` (the same number, zero's sign included): `dot`
+/// without the products of J's structural zeros. With `m` a constant every test folds away.
+#[inline(always)]
+fn dot_masked<const D: usize>(m: u8, a: &[f64; D], b: &[f64; D]) -> f64 {
+    let mut s = 0.0;
+    let mut first = true;
+    for d in 0..D {
+        if m >> d & 1 != 0 {
+            s = if first { a[d] * b[d] } else { s + a[d] * b[d] };
+            first = false;
+        }
+    }
+    s
+}
+
 #[allow(dead_code)]
 impl<const D: usize> Prepared<D> {
     /// Room for the rows, to be filled by `prepare` (or `new`).
@@ -214,7 +230,7 @@ impl<const D: usize> Prepared<D> {
                 let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
                 m += self.inverse_mass[b] * dot(j, j);
                 if !STEADY[k] {
-                    jv += dot(j, &velocity[b]);
+                    jv += dot_masked(ENTRY_MASK[e], j, &velocity[b]);
                 }
             }
             self.time_rate[k] = if STEADY[k] { 0.0 } else { self.time_rate[k] - jv };
@@ -240,7 +256,7 @@ impl<const D: usize> Prepared<D> {
             self.jacobian[first + e] = *j;
             m += self.inverse_mass[*b] * dot(j, j);
             if !STEADY[k] {
-                jv += dot(j, &velocity[*b]);
+                jv += dot_masked(ENTRY_MASK[first + e], j, &velocity[*b]);
             }
         }
         self.value[k] = value;
@@ -254,24 +270,30 @@ impl<const D: usize> Prepared<D> {
 
     /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the row's entries
     /// as they are kept (the library's `velocity::entry_order`: the velocity the row before
-    /// wrote last is the last term).
+    /// wrote last is the last term), each product over the components of its entry's mask
+    /// (`masks`: the row's `ENTRY_MASK`, as constants where `rate` calls it by the row's kind).
     #[inline(always)]
-    fn rate(&self, k: usize, u: &[[f64; D]]) -> f64 {
+    fn rate_in(&self, k: usize, masks: &[u8], u: &[[f64; D]]) -> f64 {
+        let first = ROW_START[k];
         let mut c = self.time_rate[k];
-        for e in ROW_START[k]..ROW_START[k + 1] {
-            c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
+        for (e, &m) in masks.iter().enumerate() {
+            c += dot_masked(m, &self.jacobian[first + e], &u[ROW_BODY[first + e]]);
         }
         c
     }
 
-    /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p.
+    /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components of each entry's
+    /// mask (`masks`, as for `rate_in`; s·0 would leave uᵢ as it is but for a zero's sign).
     #[inline(always)]
-    fn apply(&self, k: usize, u: &mut [[f64; D]], p: f64) {
-        for e in ROW_START[k]..ROW_START[k + 1] {
-            let (b, j) = (ROW_BODY[e], &self.jacobian[e]);
+    fn apply_in(&self, k: usize, masks: &[u8], u: &mut [[f64; D]], p: f64) {
+        let first = ROW_START[k];
+        for (e, &m) in masks.iter().enumerate() {
+            let (b, j) = (ROW_BODY[first + e], &self.jacobian[first + e]);
             let s = self.inverse_mass[b] * p;
             for d in 0..D {
-                u[b][d] += s * j[d];
+                if m >> d & 1 != 0 {
+                    u[b][d] += s * j[d];
+                }
             }
         }
     }
