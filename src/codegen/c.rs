@@ -470,7 +470,8 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
     let slots = roots.slots(n);
     let rigid_3d = roots.three();
     let (starts, bodies, entry_at) = roots.entries(f);
-    let masks: Vec<String> = roots.masks(&starts, &bodies).iter().map(u8::to_string).collect();
+    let masks: Vec<String> =
+        roots.codes(&starts, &bodies, &entry_at).iter().map(|&c| super::rust::entry_mask(c).to_string()).collect();
     let (starts, bodies): (Vec<String>, Vec<String>) =
         (starts.iter().map(usize::to_string).collect(), bodies.iter().map(usize::to_string).collect());
     let at: Vec<String> = entry_at.iter().map(usize::to_string).collect();

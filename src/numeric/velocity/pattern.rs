@@ -5,8 +5,8 @@
 //! Gauss–Seidel row that multiplies by such a 0 waits on the velocities the rows before it
 //! moved by 0 (u_y += (w·ΔP)·0), where a handwritten row (Box2D's
 //! Ċₓ = (v_bx − ω_b r_By) − (v_ax − ω_a r_Ay)) reads no v_y; so the library's sweep and a
-//! generated step (`codegen`: `ENTRY_MASK`, `ROW_KIND`) take the same products over the
-//! same components.
+//! generated step (`codegen`: Rust's `ENTRY_CODE` and `ROW_KIND`, C's `ENTRY_MASK`) take the
+//! same products over the same components.
 //!
 //! What leaving a component out changes, exactly: a product 0·u is ±0 for a finite u, and
 //! s + (±0) is s except that −0 + (+0) is +0; so a sum without it is the sum with it but
