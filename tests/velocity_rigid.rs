@@ -488,3 +488,54 @@ fn a_box_dropped_on_a_corner_comes_to_rest_on_its_side() {
         assert!(last[2] == 0.0 && last[3] == 0.0, "{name}: the upper corners push: {last:?}");
     }
 }
+
+/// J's structural zeros (`velocity::pattern`) are zeros: on every rigid scene and every file
+/// of `constraints/` that loads with a state, each component the pattern leaves out of a row's
+/// entry is exactly 0 in the rows the library evaluates; and a revolute pin's row `NAME.x`
+/// keeps only the x component of its linear entries (the lever the step's speed rests on).
+#[test]
+fn the_patterns_structural_zeros_are_zeros() {
+    use lagrange::numeric::velocity::pattern::Pattern;
+    let mut checked = 0;
+    for dir in ["constraints", "constraints/rigid", "constraints/solvers"] {
+        let mut files: Vec<_> = std::fs::read_dir(dir)
+            .expect("constraints/")
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+            .collect();
+        files.sort();
+        for path in files {
+            let text = std::fs::read_to_string(&path).expect("readable");
+            let Ok(loaded) = lagrange::model::file::load(&text) else { continue };
+            let Ok(s) = lagrange::scenario::Scenario::new(loaded, &[]) else { continue };
+            let Ok(rows) = s.program.evaluate(&s.system, &s.env) else { continue };
+            let pattern = Pattern::of(&s.system);
+            for (k, row) in rows.rows.iter().enumerate() {
+                for (slot, j) in &row.jacobian {
+                    let mask = pattern.mask(k, *slot);
+                    assert_ne!(mask, 0, "{}: row {k}, slot {slot}", path.display());
+                    for (d, x) in j.iter().enumerate() {
+                        assert!(
+                            mask >> d & 1 != 0 || *x == 0.0,
+                            "{}: row {k}, slot {slot}: J{d} = {x}",
+                            path.display()
+                        );
+                    }
+                }
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked >= 40, "{checked} files checked");
+    let text = std::fs::read_to_string("constraints/solvers/rigid_ball_and_chain.toml").expect("readable");
+    let s = lagrange::scenario::Scenario::new(lagrange::model::file::load(&text).expect("loads"), &[]).expect("scene");
+    let pattern = Pattern::of(&s.system);
+    let bodies = s.system.bodies.len();
+    for (k, c) in s.system.constraints.iter().enumerate() {
+        let want = if c.name.ends_with(".x") { 0b01 } else { 0b10 };
+        for &b in &c.bodies {
+            assert_eq!(pattern.mask(k, b), want, "{}", c.name);
+        }
+        assert_eq!(pattern.mask(k, bodies), 1, "an angular slot: component 0");
+    }
+}

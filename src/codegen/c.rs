@@ -470,6 +470,8 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
     let slots = roots.slots(n);
     let rigid_3d = roots.three();
     let (starts, bodies, entry_at) = roots.entries(f);
+    let masks: Vec<String> =
+        roots.codes(&starts, &bodies, &entry_at).iter().map(|&c| super::rust::entry_mask(c).to_string()).collect();
     let (starts, bodies): (Vec<String>, Vec<String>) =
         (starts.iter().map(usize::to_string).collect(), bodies.iter().map(usize::to_string).collect());
     let at: Vec<String> = entry_at.iter().map(usize::to_string).collect();
@@ -502,6 +504,12 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
          library's velocity::entry_order). Per entry in the derivation's order, its place in the step's. */"
     );
     let _ = writeln!(out, "const int ENTRY_AT[{}] = {{{}}};", entries.max(1), list(&at, entries));
+    let _ = writeln!(
+        out,
+        "/* Per entry in the step's order, the components of its J that can be nonzero (bit d: component d): the\n   \
+         structural zeros of the rows as written (velocity::pattern), which the rate and an impulse leave out. */"
+    );
+    let _ = writeln!(out, "static const unsigned char ENTRY_MASK[{}] = {{{}}};", entries.max(1), list(&masks, entries));
     let steady: Vec<String> = roots.steady.iter().map(|&b| i32::from(b).to_string()).collect();
     let _ = writeln!(
         out,

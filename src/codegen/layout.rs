@@ -40,6 +40,13 @@ pub const MAX_PART: usize = 64;
 /// τ, I) live in role arrays.
 pub const MAX_STATE_FIELDS: usize = 1024;
 
+/// Most row kinds (distinct patterns of structural zeros over a row's entries) a step module
+/// writes its rows' products for, each kind's code specialised to its pattern (`ROW_KIND`):
+/// a scene of a few joint types has a handful (a pin's x and y rows, with two bodies or one);
+/// each kind is one more copy of a row's Ċ and impulse in the sweep, so past 32 the other
+/// rows read their masks from `ENTRY_MASK` as they run (the same operations, the same bits).
+pub const MAX_ROW_KINDS: usize = 32;
+
 /// How `State` holds the inputs.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum StateStorage {

@@ -46,7 +46,7 @@
 //! files or stdout (`main.rs`), evaluation (`numeric`).
 
 use super::layout::Solver;
-use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, StateStorage};
+use super::layout::{self, AStorage, JStorage, Lambda, Layout, MAX_PART, MAX_ROW_KINDS, StateStorage};
 use super::names::Namer;
 pub use super::names::{comment_text, snake};
 use super::support::{
@@ -752,6 +752,12 @@ pub(super) struct StepRoots {
     /// Whether a row's evaluation reads the velocities (a row's ∂C/∂t, or a 3D body's
     /// gyroscopic term): not when every row is steady and no body is 3D.
     pub(super) velocities: bool,
+    /// The structural zeros of each row's J (`numeric::velocity::pattern`, the library's).
+    pub(super) pattern: crate::numeric::velocity::pattern::Pattern,
+    /// Per entry in the derivation's order, its components that are the constant ±1 (two
+    /// bits per component, as `ENTRY_CODE`: 2 for +1, 3 for −1, 0 otherwise): a pin's
+    /// linear entry [±1, 0], whose products the step writes without the multiplication.
+    pub(super) units: Vec<u8>,
 }
 
 impl StepRoots {
@@ -800,6 +806,29 @@ impl StepRoots {
             !three && !reads(&|role| moving(role) || matches!(role, Role::Position { .. } | Role::Orientation { .. }));
         let mut swept = vec![true; roots.len()];
         let mut angular_slots = Vec::with_capacity(layout.constraints);
+        let mut units = Vec::new();
+        // Component d of J the constant ±1 (a vector literal's entry; an angular slot's Jʷ).
+        let unit = |id: Id| match g.as_num(id) {
+            Some(q) if *q == Rational::ONE => 2,
+            Some(q) if *q == Rational::int(-1) => 3,
+            _ => 0,
+        };
+        for r in 0..layout.constraints {
+            for &(_, j) in &formulas.jacobian[r] {
+                let mut code = 0u8;
+                if let crate::expr::Node::Vector(xs) = g.node(j) {
+                    for (d, &x) in xs.iter().enumerate().take(layout.dim) {
+                        code |= unit(x) << (2 * d);
+                    }
+                }
+                units.push(code);
+            }
+            for &(b, jw) in &formulas.angular[r] {
+                if rigid.iter().any(|t| t.0 == b) {
+                    units.extend(std::iter::repeat_n(if three { 0 } else { unit(jw) }, width));
+                }
+            }
+        }
         for r in 0..layout.constraints {
             roots.extend([formulas.c[r], formulas.c_dot[r], formulas.bias[r]]);
             swept.extend([true, !steady.get(r).copied().unwrap_or(false), false]);
@@ -824,6 +853,8 @@ impl StepRoots {
             keep,
             still,
             velocities,
+            pattern: crate::numeric::velocity::pattern::Pattern::of(system),
+            units,
         }
     }
 
@@ -855,6 +886,27 @@ impl StepRoots {
             at[e] = place;
         }
         (starts, order.iter().map(|&e| slots[e]).collect(), at)
+    }
+
+    /// Per entry in the step's order (`entries`' `ROW_START`, `ROW_BODY` and `ENTRY_AT`), its
+    /// components in two bits each (`ENTRY_CODE`): 0 a structural zero (the library's
+    /// `velocity::pattern`, as its `Prepared` keeps it), 2 the constant +1, 3 the constant
+    /// −1, 1 any other number. `entry_mask` turns a code into the library's mask.
+    pub(super) fn codes(&self, starts: &[usize], slots: &[usize], at: &[usize]) -> Vec<u8> {
+        let mut codes = vec![0; slots.len()];
+        for (k, w) in starts.windows(2).enumerate() {
+            for (e, &place) in at.iter().enumerate().take(w[1]).skip(w[0]) {
+                let mask = self.pattern.mask(k, slots[place]);
+                let units = self.units.get(e).copied().unwrap_or(0);
+                for d in 0..3 {
+                    if mask >> d & 1 != 0 {
+                        let unit = units >> (2 * d) & 3;
+                        codes[place] |= (if unit == 0 { 1 } else { unit }) << (2 * d);
+                    }
+                }
+            }
+        }
+        codes
     }
 
     /// The rigid body (its index among `turns`) and the axis of an angular slot.
@@ -1226,7 +1278,123 @@ pub(super) fn step_constants(
         list(&at),
         array(&step.steady.iter().map(bool::to_string).collect::<Vec<_>>())
     );
+    row_kinds(out, &step.codes(&starts, &bodies, &at), &starts, layout.dim);
     (starts, at)
+}
+
+/// A component code's mask (`ENTRY_CODE` → `ENTRY_MASK`): bit d where component d is not a
+/// structural zero.
+pub(super) fn entry_mask(code: u8) -> u8 {
+    (0..3).filter(|d| code >> (2 * d) & 3 != 0).fold(0, |m, d| m | 1 << d)
+}
+
+/// Each row's kind, the codes of its entries (`ROW_KIND`, at most `MAX_ROW_KINDS` of them;
+/// the others read `ENTRY_CODE` as they run), and `Prepared::rate` and `Prepared::apply` by
+/// kind: each kind's call takes its codes as constants, so its products are written for its
+/// pattern — no branch on a component, no product by a structural zero or by ±1 (x·1 = x
+/// and x·(−1) = −x exactly: the same bits without the multiplication). A kind whose every
+/// component is some other number keeps the loop over the row's entries (`rate_dense`:
+/// unrolled, the compiler packs two entries' products into one vector and lengthens the
+/// path from the row before's impulse).
+fn row_kinds(out: &mut String, codes: &[u8], starts: &[usize], dim: usize) {
+    let mut kinds: Vec<&[u8]> = Vec::new();
+    let mut row_kind = Vec::with_capacity(starts.len().saturating_sub(1));
+    for w in starts.windows(2) {
+        let c = &codes[w[0]..w[1]];
+        let kind = match kinds.iter().position(|k| *k == c) {
+            Some(i) => i,
+            None if kinds.len() < MAX_ROW_KINDS => {
+                kinds.push(c);
+                kinds.len() - 1
+            }
+            None => MAX_ROW_KINDS,
+        };
+        row_kind.push(kind);
+    }
+    let list = |xs: &mut dyn Iterator<Item = String>| array(&xs.collect::<Vec<_>>());
+    let dense = (0..dim).fold(0u8, |c, d| c | 1 << (2 * d));
+    let _ = writeln!(
+        out,
+        "/// Per entry (in the step's order), two bits per component of its J: 0 a structural zero of the rows as written\n\
+         /// (`numeric::velocity::pattern`, left out of Ċ and an impulse), 2 the constant +1, 3 the constant −1, 1 any other.\n\
+         #[allow(dead_code)]\n\
+         const ENTRY_CODE: [u8; {}] = {};\n\
+         /// Per row, its kind: the `ENTRY_CODE` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`){}.\n\
+         #[allow(dead_code)]\n\
+         const ROW_KIND: [u8; {}] = {};\n",
+        codes.len(),
+        list(&mut codes.iter().map(u8::to_string)),
+        if row_kind.contains(&MAX_ROW_KINDS) {
+            format!("; {MAX_ROW_KINDS}: a row past the kinds written, its codes read from `ENTRY_CODE`")
+        } else {
+            String::new()
+        },
+        row_kind.len(),
+        list(&mut row_kind.iter().map(usize::to_string)),
+    );
+    // The arms: each kind's codes; the last kind takes every other value when no row is past
+    // the kinds written (one kind: no branch).
+    let overflow = row_kind.contains(&MAX_ROW_KINDS);
+    let arms = |coded: &str, loop_: &str| {
+        let call = |k: &[u8]| {
+            if k.iter().all(|&c| c == dense) {
+                loop_.to_string()
+            } else if k.len() <= 16 {
+                // The codes as one constant, a byte each from the lowest (`rate_of`).
+                let bytes = k.iter().rev().map(|c| format!("{c:02x}")).collect::<Vec<_>>().join("_");
+                coded.replace("_in(k, CODES", &format!("_of::<{}, 0x{bytes}>(k", k.len()))
+            } else {
+                coded.replace("CODES", &format!("&{}", list(&mut k.iter().map(u8::to_string))))
+            }
+        };
+        // Without rows past the kinds, the last kind's arm is `_` and takes every kind with
+        // the same call (all dense kinds: the loop, no branch).
+        let last = (!overflow).then(|| kinds.last().map(|k| call(k))).flatten();
+        let mut arms = Vec::new();
+        for (i, k) in kinds.iter().enumerate() {
+            let call = call(k);
+            if i + 1 == kinds.len() && !overflow {
+                arms.push(format!("_ => {call}"));
+            } else if last.as_ref() != Some(&call) {
+                arms.push(format!("{i} => {call}"));
+            }
+        }
+        if overflow || kinds.is_empty() {
+            arms.push(format!("_ => {}", coded.replace("CODES", "&ENTRY_CODE[ROW_START[k]..ROW_START[k + 1]]")));
+        }
+        // One arm: the call itself.
+        match &arms[..] {
+            [one] => format!("{}\n", one.trim_start_matches("_ => ")),
+            _ => format!(
+                "match ROW_KIND[k] {{\n{}        }}\n",
+                arms.iter().map(|a| format!("            {a},\n")).collect::<String>()
+            ),
+        }
+    };
+    let _ = writeln!(
+        out,
+        "#[allow(dead_code)]\n\
+         impl Prepared<DIM> {{\n    \
+         /// Ċₖ at velocities `u` (`rate_in`), with row k's codes as its kind's constants.\n    \
+         #[inline(always)]\n    \
+         fn rate(&self, k: usize, u: &[[f64; DIM]]) -> f64 {{\n        \
+         {}    \
+         }}\n\n    \
+         /// Applies an impulse `p` of row k (`apply_in`), with its codes as its kind's constants.\n    \
+         #[inline(always)]\n    \
+         fn apply(&self, k: usize, u: &mut [[f64; DIM]], p: f64) {{\n        \
+         {}    \
+         }}\n\n    \
+         /// Σᵢ |Jᵢ|²/mᵢ of row k (`mass_in`), with its codes as its kind's constants.\n    \
+         #[inline(always)]\n    \
+         fn mass(&self, k: usize) -> f64 {{\n        \
+         {}    \
+         }}\n\
+         }}\n",
+        arms("self.rate_in(k, CODES, u)", "self.rate_dense(k, u)"),
+        arms("self.apply_in(k, CODES, u, p)", "self.apply_dense(k, u, p)"),
+        arms("self.mass_in(k, CODES)", "self.mass_dense(k)")
+    );
 }
 
 /// Past this many comparisons `same_inputs` is a list of statements, not one expression:

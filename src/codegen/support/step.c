@@ -33,6 +33,20 @@ static double lg_dot(const double *a, const double *b) {
     return s;
 }
 
+/* a.b over the components in m (bit d: component d), summed from the first of them, as the library's
+   velocity::dot_masked: lg_dot without the products of J's structural zeros. */
+static double lg_dot_masked(int m, const double *a, const double *b) {
+    double s = 0.0;
+    int d, first = 1;
+    for (d = 0; d < DIM; d++) {
+        if ((m >> d) & 1) {
+            s = first ? a[d] * b[d] : s + a[d] * b[d];
+            first = 0;
+        }
+    }
+    return s;
+}
+
 /* The rows of one substep with their effective masses (from step_rows). */
 static void prepare(const State *s, Prepared *p) {
     int k, e;
@@ -42,7 +56,7 @@ static void prepare(const State *s, Prepared *p) {
         for (e = ROW_START[k]; e < ROW_START[k + 1]; e++) {
             m += p->inverse_mass[ROW_BODY[e]] * lg_dot(p->jacobian[e], p->jacobian[e]);
             if (!STEADY[k]) {
-                jv += lg_dot(p->jacobian[e], p->velocity[ROW_BODY[e]]);
+                jv += lg_dot_masked(ENTRY_MASK[e], p->jacobian[e], p->velocity[ROW_BODY[e]]);
             }
         }
         /* 0 exactly where C reads no time. */
@@ -52,12 +66,13 @@ static void prepare(const State *s, Prepared *p) {
     p->first = first_angular(p);
 }
 
-/* dC/dt + sum of J_i.u_i, in that order over the entries in the step's order. */
+/* dC/dt + sum of J_i.u_i, in that order over the entries in the step's order, each product over the
+   components of the entry's ENTRY_MASK. */
 static double row_rate(const Prepared *p, int k, double u[][DIM]) {
     double c = p->time_rate[k];
     int e;
     for (e = ROW_START[k]; e < ROW_START[k + 1]; e++) {
-        c += lg_dot(p->jacobian[e], u[ROW_BODY[e]]);
+        c += lg_dot_masked(ENTRY_MASK[e], p->jacobian[e], u[ROW_BODY[e]]);
     }
     return c;
 }

@@ -27,13 +27,16 @@ static Softness make_soft(double hertz, double zeta, double h) {
     return s;
 }
 
+/* u_i += (1/m_i) J_i impulse over the components of each entry's ENTRY_MASK. */
 static void apply(const Prepared *p, int k, double u[][DIM], double impulse) {
     int e, d;
     for (e = ROW_START[k]; e < ROW_START[k + 1]; e++) {
         const int b = ROW_BODY[e];
         const double s = p->inverse_mass[b] * impulse;
         for (d = 0; d < DIM; d++) {
-            u[b][d] += s * p->jacobian[e][d];
+            if ((ENTRY_MASK[e] >> d) & 1) {
+                u[b][d] += s * p->jacobian[e][d];
+            }
         }
     }
 }

@@ -56,9 +56,9 @@ impl Default for Stepper {
     }
 }
 
-impl<const D: usize> Prepared<D> {
+impl Prepared<DIM> {
     /// Warm start: every row's accumulated impulse applied again.
-    fn warm_start(&self, u: &mut [[f64; D]], impulse: &[f64]) {
+    fn warm_start(&self, u: &mut [[f64; DIM]], impulse: &[f64]) {
         for (k, &p) in impulse.iter().enumerate() {
             if p != 0.0 {
                 self.apply(k, u, p);
@@ -70,7 +70,7 @@ impl<const D: usize> Prepared<D> {
     /// b and softness s that `law(k, C/κ)` gives, takes ΔP = −s_m·m_eff·(Ċ + b) − s_i·P
     /// (Box2D `b2SolveDistanceJoint`); an inequality row clamps its accumulated impulse at
     /// P ≥ 0 (Box2D `b2SolveContact`).
-    fn sweep(&self, u: &mut [[f64; D]], impulse: &mut [f64], mut law: impl FnMut(usize, f64) -> (f64, Softness)) {
+    fn sweep(&self, u: &mut [[f64; DIM]], impulse: &mut [f64], mut law: impl FnMut(usize, f64) -> (f64, Softness)) {
         for (k, impulse) in impulse.iter_mut().enumerate() {
             let m = self.effective_mass[k];
             if m == 0.0 {

@@ -55,6 +55,7 @@
 
 pub mod bench;
 pub mod exact;
+pub mod pattern;
 pub mod pgs;
 pub mod run;
 pub mod soft_step;
@@ -68,6 +69,7 @@ use super::rows::Rows;
 use super::simulate::{MAX_ITERATIONS, MAX_STEPS, SettingsError};
 use crate::expr::graph::SymbolWalk;
 use crate::model::system::System;
+use pattern::{Pattern, full};
 
 /// Which velocity-level solver a run uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -268,15 +270,20 @@ impl Settings {
 
 /// The rows of one substep, flattened for the sequential-impulse loops: per row its C/κ,
 /// ∂C/∂t, effective mass 1/(J M⁻¹ Jᵀ) and its Jacobian entries (slot, Jᵢ: a body's Jᵛ or an
-/// angular slot's Jʷ) in the order of [`entry_order`]; per slot 1/m (1/I) and F (τ).
+/// angular slot's Jʷ) in the order of [`entry_order`], each with the components that can be
+/// nonzero ([`Pattern`]); per slot 1/m (1/I) and F (τ).
 #[derive(Clone, Debug, Default)]
 pub struct Prepared {
-    /// The scene's dimension: a product Jᵢ·uᵢ sums this many components ([`dot_in`]).
+    /// The scene's dimension: an effective mass sums this many squares per entry ([`dot_in`]).
     pub dim: usize,
     /// Entries of row k: `start[k]..start[k + 1]`.
     pub start: Vec<usize>,
     pub body: Vec<usize>,
     pub jacobian: Vec<[f64; 3]>,
+    /// Per entry, the components of its J that can be nonzero (bit d: component d; the
+    /// [`Pattern`]'s, every component of the dimension for rows it does not describe): the
+    /// products Ċ and an impulse take ([`dot_masked`], [`Prepared::apply`]).
+    pub mask: Vec<u8>,
     pub value: Vec<f64>,
     /// ∂C/∂t = Ċ − J·v at the evaluated state (0 on a steady row).
     pub time_rate: Vec<f64>,
@@ -296,6 +303,9 @@ pub struct Prepared {
     /// as 0 rather than as Ċ − J·v (round-off that reads the velocities). Empty, or not one
     /// per row: none.
     pub steady: Vec<bool>,
+    /// The system's structural zeros of J ([`Pattern::of`]; `Stepper::step` sets it once).
+    /// Empty, or not one row per row: every component.
+    pub pattern: Pattern,
     /// Scratch: one row's entries in [`entry_order`].
     order: Vec<usize>,
 }
@@ -317,6 +327,30 @@ pub fn dot_in(dim: usize, a: &[f64; 3], b: &[f64; 3]) -> f64 {
         s += a[d] * b[d];
     }
     s
+}
+
+/// a·b over the components in `mask` (bit d: component d), summed from the first of them:
+/// [`dot_in`]'s sum without the products of the components left out (a structural zero of
+/// J: see [`pattern`] for what that changes, the sign of an exact zero at most, for finite
+/// numbers); what a generated module's `dot_masked` writes.
+#[inline(always)]
+pub fn dot_masked(mask: u8, a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    match mask {
+        0b011 => a[0] * b[0] + a[1] * b[1],
+        0b111 => a[0] * b[0] + a[1] * b[1] + a[2] * b[2],
+        0b001 => a[0] * b[0],
+        0b010 => a[1] * b[1],
+        0b100 => a[2] * b[2],
+        _ => {
+            let mut s = 0.0;
+            let mut first = true;
+            for d in (0..3).filter(|d| mask >> d & 1 != 0) {
+                s = if first { a[d] * b[d] } else { s + a[d] * b[d] };
+                first = false;
+            }
+            s
+        }
+    }
 }
 
 /// The order in which the step keeps a row's Jacobian entries (in [`Prepared`] and a generated
@@ -363,6 +397,7 @@ impl Prepared {
         self.start.clear();
         self.body.clear();
         self.jacobian.clear();
+        self.mask.clear();
         self.value.clear();
         self.time_rate.clear();
         self.effective_mass.clear();
@@ -377,8 +412,10 @@ impl Prepared {
         self.dim = rows.dim;
         let dim = rows.dim;
         let mut previous = 0;
-        // The flags are the system's, one per row; rows of another count take none.
+        // The flags and the pattern are the system's, one per row; rows of another count
+        // take neither.
         let flags = self.steady.len() == rows.rows.len();
+        let pattern = self.pattern.len() == rows.rows.len();
         for (r, row) in rows.rows.iter().enumerate() {
             let steady = flags && self.steady[r];
             let at = self.body.len();
@@ -389,11 +426,15 @@ impl Prepared {
             let (mut k, mut jv) = (0.0, 0.0);
             for &e in &self.order {
                 let (b, j) = (&row.jacobian[e].0, &row.jacobian[e].1);
+                let mask = if pattern { self.pattern.mask(r, *b) } else { full(dim) };
                 self.body.push(*b);
                 self.jacobian.push(*j);
+                self.mask.push(mask);
+                // Every component: the squares of the structural zeros add +0 to a sum ≥ +0,
+                // so the mask would give the same bits.
                 k += rows.inverse_mass[*b] * dot_in(dim, j, j);
                 if !steady {
-                    jv += dot_in(dim, j, &rows.velocity[*b]);
+                    jv += dot_masked(mask, j, &rows.velocity[*b]);
                 }
             }
             self.value.push(row.value);
@@ -413,22 +454,26 @@ impl Prepared {
     }
 
     /// Ċₖ at velocities `u`: ∂Cₖ/∂t + Σᵢ Jₖᵢ·uᵢ, summed in that order over the entries in
-    /// [`entry_order`], each product over the scene's components ([`dot_in`]).
+    /// [`entry_order`], each product over its entry's components that can be nonzero
+    /// ([`dot_masked`]).
     pub fn rate(&self, k: usize, u: &Vectors) -> f64 {
         let mut c = self.time_rate[k];
         for e in self.start[k]..self.start[k + 1] {
-            c += dot_in(self.dim, &self.jacobian[e], &u[self.body[e]]);
+            c += dot_masked(self.mask[e], &self.jacobian[e], &u[self.body[e]]);
         }
         c
     }
 
-    /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p.
+    /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components of Jₖᵢ that can
+    /// be nonzero (adding s·0 would leave uᵢ as it is, but for the sign of a zero).
     pub fn apply(&self, k: usize, u: &mut Vectors, p: f64) {
         for e in self.start[k]..self.start[k + 1] {
-            let (b, j) = (self.body[e], &self.jacobian[e]);
+            let (b, j, mask) = (self.body[e], &self.jacobian[e], self.mask[e]);
             let s = self.inverse_mass[b] * p;
             for d in 0..3 {
-                u[b][d] += s * j[d];
+                if mask >> d & 1 != 0 {
+                    u[b][d] += s * j[d];
+                }
             }
         }
     }
@@ -567,9 +612,10 @@ impl Stepper {
         v: &mut Vectors,
         rows: Rows,
     ) -> Result<(), SimError> {
-        // Once per stepper: which rows have ∂C/∂t = 0 exactly.
+        // Once per stepper: which rows have ∂C/∂t = 0 exactly, and J's structural zeros.
         if self.prepared.steady.is_empty() {
             self.prepared.steady = steady_rows(dynamics.system());
+            self.prepared.pattern = Pattern::of(dynamics.system());
         }
         match self.settings.solver {
             Solver::SoftStep => soft_step::step(self, dynamics, t, q, v, rows),

@@ -1,0 +1,144 @@
+//! Which components of each row's J can be nonzero, known from the constraints as written,
+//! before any number: the structural zeros the step's loops leave out. A revolute pin's row
+//! `NAME.x` reads only the x components of its bodies' positions, so its linear entries are
+//! [±1, 0] and its Ċ reads no v_y; an angular slot holds Jʷ in component 0 only. A
+//! Gauss–Seidel row that multiplies by such a 0 waits on the velocities the rows before it
+//! moved by 0 (u_y += (w·ΔP)·0), where a handwritten row (Box2D's
+//! Ċₓ = (v_bx − ω_b r_By) − (v_ax − ω_a r_Ay)) reads no v_y; so the library's sweep and a
+//! generated step (`codegen`: Rust's `ENTRY_CODE` and `ROW_KIND`, C's `ENTRY_MASK`) take the
+//! same products over the same components.
+//!
+//! What leaving a component out changes, exactly: a product 0·u is ±0 for a finite u, and
+//! s + (±0) is s except that −0 + (+0) is +0; so a sum without it is the sum with it but
+//! for the sign of an exact zero, and for a u that is ±∞ or NaN (which the product would
+//! make NaN). An effective mass Σ wᵢ|Jᵢ|² does not change at all (each square is ≥ +0).
+//! The library and the generated Rust and C leave out the same components, so they stay
+//! one computation, bit for bit.
+//!
+//! The analysis is over C as the system holds it (definitions substituted, before
+//! simplification), conservative: component d of body b's J is a structural zero when C
+//! reads no path to component d of b's position — through a component `r.y`, a vector
+//! literal's entry, a sum's or a product's vector part, `perp`; a norm, a dot or cross
+//! product, `rot`, a power or a function reads every component of what it is given. The
+//! derivation's J = ∇C/κ cannot be nonzero where C does not read. A row evaluated from
+//! another system (other rows) takes every component.
+//!
+//! Not here: the loops that use the masks (`Prepared`, the generated step), numbers.
+
+use crate::expr::graph::FastSet;
+use crate::expr::{Graph, Id, Node, Role, Ty};
+use crate::model::system::System;
+
+/// Every component of a `dim`-dimensional entry: bits 0..dim.
+pub fn full(dim: usize) -> u8 {
+    ((1u32 << dim.min(3)) - 1) as u8
+}
+
+/// The structurally nonzero components of each row's Jacobian entries: per constraint, per
+/// body whose position its C reads, a mask (bit d: component d may be nonzero); an angular
+/// slot (a rigid body's Jʷ, or Jʷ·eₖ in 3D) is component 0 alone.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Pattern {
+    dim: usize,
+    bodies: usize,
+    /// Per row, `(body, mask)` for each body its C reads, by body.
+    rows: Vec<Vec<(usize, u8)>>,
+}
+
+impl Pattern {
+    /// The pattern of `system`'s constraints (one row each, in order).
+    pub fn of(system: &System) -> Pattern {
+        let g = &system.graph;
+        let mut walk = Walk::default();
+        let rows = system.constraints.iter().map(|c| walk.reads(g, c.c)).collect();
+        Pattern { dim: g.dim(), bodies: system.bodies.len(), rows }
+    }
+
+    /// Rows of this pattern.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// The components of row `row`'s entry on slot `slot` (a body, or past the bodies an
+    /// angular slot) that can be nonzero; every component where the pattern does not know
+    /// the row or the body (never 0: an entry the derivation keeps is read by its C).
+    pub fn mask(&self, row: usize, slot: usize) -> u8 {
+        let all = full(self.dim);
+        if slot >= self.bodies {
+            return 1;
+        }
+        let Some(bodies) = self.rows.get(row) else { return all };
+        match bodies.iter().find(|e| e.0 == slot) {
+            Some(&(_, m)) if m & all != 0 => m & all,
+            _ => all,
+        }
+    }
+}
+
+/// Which components of which bodies' positions an expression reads (scratch reused over
+/// the constraints).
+#[derive(Default)]
+struct Walk {
+    /// `(node, component)`: component d of a vector node, or `u8::MAX` for all of it (a
+    /// scalar node, or every component of a vector).
+    seen: FastSet<(Id, u8)>,
+    stack: Vec<(Id, u8)>,
+}
+
+const ALL: u8 = u8::MAX;
+
+impl Walk {
+    /// `(body, mask)` by body: the components of each body's position `root` reads.
+    fn reads(&mut self, g: &Graph, root: Id) -> Vec<(usize, u8)> {
+        self.seen.clear();
+        self.stack.clear();
+        self.stack.push((root, ALL));
+        let mut out: Vec<(usize, u8)> = Vec::new();
+        while let Some((id, which)) = self.stack.pop() {
+            if !self.seen.insert((id, which)) {
+                continue;
+            }
+            let node = g.node(id);
+            match node {
+                Node::Num(_) => {}
+                Node::Sym(s) => {
+                    if let Role::Position { body } = g.symbol(*s).role {
+                        let bits = if which == ALL { ALL } else { 1u8 << which };
+                        match out.iter_mut().find(|e| e.0 == body) {
+                            Some(e) => e.1 |= bits,
+                            None => out.push((body, bits)),
+                        }
+                    }
+                }
+                Node::Vector(xs) => {
+                    if which == ALL {
+                        self.stack.extend(xs.iter().map(|&x| (x, ALL)));
+                    } else if let Some(&x) = xs.get(which as usize) {
+                        self.stack.push((x, ALL));
+                    }
+                }
+                // A sum of vectors: its component d is the terms' component d.
+                Node::Add(xs) => self.stack.extend(xs.iter().map(|&x| (x, which))),
+                // A product: every scalar factor, and the vector factor's component d.
+                Node::Mul(xs) => {
+                    for &x in xs.iter() {
+                        let w = if g.ty(x) == Ty::Vector { which } else { ALL };
+                        self.stack.push((x, w));
+                    }
+                }
+                Node::Comp(a, axis) => self.stack.push((*a, axis.index() as u8)),
+                // perp([x, y]) = [−y, x].
+                Node::Perp(u) => self.stack.push((*u, if which < 2 { which ^ 1 } else { ALL })),
+                Node::Pow(_) | Node::Dot(_) | Node::Cross(_) | Node::Norm(_) | Node::Call(..) | Node::Rot(_) => {
+                    self.stack.extend(node.children().iter().map(|&x| (x, ALL)));
+                }
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+}
