@@ -43,6 +43,9 @@ pub struct Pattern {
     bodies: usize,
     /// Per row, `(body, mask)` for each body its C reads, by body.
     rows: Vec<Vec<(usize, u8)>>,
+    /// No structural zero anywhere and no angular slot: [`mask`](Pattern::mask) is every
+    /// component throughout (point masses on distance rows), so a caller may skip it.
+    dense: bool,
 }
 
 impl Pattern {
@@ -50,8 +53,16 @@ impl Pattern {
     pub fn of(system: &System) -> Pattern {
         let g = &system.graph;
         let mut walk = Walk::default();
-        let rows = system.constraints.iter().map(|c| walk.reads(g, c.c)).collect();
-        Pattern { dim: g.dim(), bodies: system.bodies.len(), rows }
+        let rows: Vec<Vec<(usize, u8)>> = system.constraints.iter().map(|c| walk.reads(g, c.c)).collect();
+        let all = full(g.dim());
+        let dense = !system.has_rigid_bodies() && rows.iter().flatten().all(|&(_, m)| m & all == all);
+        Pattern { dim: g.dim(), bodies: system.bodies.len(), rows, dense }
+    }
+
+    /// Whether [`mask`](Pattern::mask) is every component of the dimension for every row and
+    /// slot: no structural zero and no rigid body's angular slot.
+    pub fn is_dense(&self) -> bool {
+        self.dense
     }
 
     /// Rows of this pattern.
