@@ -17,6 +17,7 @@ pub mod banded;
 pub mod batch;
 pub mod contact;
 pub mod dynamics;
+pub(crate) mod gram;
 pub mod integrate;
 pub mod program;
 pub mod qp;
