@@ -155,7 +155,9 @@ impl Gram {
         let weighted = weight.len() == n && (0..n).all(|p| relative(p).is_finite() && relative(p) >= weight_range);
         self.weight.clear();
         self.weight.extend((0..n).map(|p| if weighted { relative(p) } else { 1.0 }));
-        let mut diagonal = vec![0.0; self.columns];
+        let mut diagonal = std::mem::take(&mut self.scale2);
+        diagonal.clear();
+        diagonal.resize(self.columns, 0.0);
         for p in 0..n {
             let w = self.weight[p];
             for e in self.start[p]..self.start[p + 1] {
@@ -166,8 +168,11 @@ impl Gram {
                 diagonal[self.column[e]] += g * g;
             }
         }
-        self.scale2.clear();
-        self.scale2.extend(diagonal.iter().map(|d| 1.0 / d));
+        // 1/Hₐₐ in place.
+        for d in diagonal.iter_mut() {
+            *d = 1.0 / *d;
+        }
+        self.scale2 = diagonal;
         if !self.scale2.iter().all(|s| s.is_normal()) {
             return false;
         }
@@ -237,6 +242,8 @@ pub(crate) struct BodySpace {
     null_rows: Vec<usize>,
     /// G's values the factor was made from (a stale factor serves while G stays near them).
     factored: Vec<f64>,
+    /// ẑ of the last minimum norm (μ = Ŵ⁻¹ G' ẑ): a warm start for the next.
+    last: Vec<f64>,
 }
 
 /// Buffers of [`BodySpace::minimum_norm`].
@@ -249,6 +256,8 @@ pub(crate) struct BodySpaceWork {
     rows: Vec<f64>,
     columns: Vec<f64>,
     solved: Vec<f64>,
+    /// ẑ of the last pseudo-inverse application.
+    z: Vec<f64>,
     sparse: SparseWork,
 }
 
@@ -284,7 +293,8 @@ impl BodySpace {
     /// pattern is refused.
     pub(crate) fn new(gram: Gram, pivot_floor: f64, null_share: f64) -> Option<BodySpace> {
         let (factor, targets) = SparseFactor::analyse(gram.columns, gram.pairs())?;
-        let mut body = BodySpace { gram, factor, targets, null_rows: Vec::new(), factored: Vec::new() };
+        let mut body =
+            BodySpace { gram, factor, targets, null_rows: Vec::new(), factored: Vec::new(), last: Vec::new() };
         body.refactor(pivot_floor, null_share).then_some(body)
     }
 
@@ -337,7 +347,7 @@ impl BodySpace {
     /// step = Ŵ⁻¹ G' H'⁻¹ S² H'⁻¹ G'ᵀ Ŵ⁻¹ r: the weighted pseudo-inverse of Ã applied to r
     /// (see the file's note; S² = 1/diag H undoes the column scaling between the solves).
     fn pseudo_inverse(&self, r: &[f64], work: &mut BodySpaceWork) {
-        let BodySpaceWork { step, rows, columns, solved, sparse, .. } = work;
+        let BodySpaceWork { step, rows, columns, solved, z, sparse, .. } = work;
         rows.clear();
         rows.extend(r.iter().zip(&self.gram.weight).map(|(r, w)| r / w));
         self.gram.transpose_mul(rows, columns);
@@ -345,8 +355,8 @@ impl BodySpace {
         for (x, s) in solved.iter_mut().zip(&self.gram.scale2) {
             *x *= s;
         }
-        self.factor.substitute_into(solved, sparse, columns);
-        self.gram.mul(columns, step);
+        self.factor.substitute_into(solved, sparse, z);
+        self.gram.mul(z, step);
         for (x, w) in step.iter_mut().zip(&self.gram.weight) {
             *x /= w;
         }
@@ -371,23 +381,45 @@ impl BodySpace {
     /// halving, or `bounds.solves` are spent; with how it ended. With the factor of this
     /// G one application lands within rounding times H's condition, the next at rounding;
     /// with a factor of a nearby G (stale) each application shrinks the error by about
-    /// the factor's relative error times that condition.
+    /// the factor's relative error times that condition. `warm`: start from μ₀ = Ŵ⁻¹ G' ẑ
+    /// with the ẑ of the last call instead of 0 (in the subspace of this G's minimum norm
+    /// whatever ẑ is, so the limit is the same; a grid at rest starts at its answer).
     pub(crate) fn minimum_norm(
-        &self,
+        &mut self,
         rhs: &[f64],
         bounds: &Bounds,
         work: &mut BodySpaceWork,
         mu: &mut Vec<f64>,
+        warm: bool,
     ) -> Iterated {
         let n = self.gram.rows();
-        mu.clear();
-        mu.resize(n, 0.0);
         let mut residual = std::mem::take(&mut work.residual);
-        residual.clear();
-        residual.extend_from_slice(rhs);
+        let mut z = std::mem::take(&mut self.last);
         let size = rhs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
-        let mut left = size;
-        let (mut solves, mut converged) = (0, size == 0.0);
+        let mut left = f64::INFINITY;
+        if warm && z.len() == self.gram.columns {
+            let BodySpaceWork { ax, rows, columns, .. } = work;
+            self.gram.mul(&z, mu);
+            for (x, w) in mu.iter_mut().zip(&self.gram.weight) {
+                *x /= w;
+            }
+            self.a_mul(mu, ax, rows, columns);
+            left = rhs.iter().zip(ax.iter()).fold(0.0f64, |m, (r, a)| m.max((r - a).abs()));
+            residual.clear();
+            residual.extend(rhs.iter().zip(ax.iter()).map(|(r, a)| r - a));
+        }
+        if !(left.is_finite() && left <= size) {
+            // Cold: μ₀ = 0.
+            z.clear();
+            z.resize(self.gram.columns, 0.0);
+            mu.clear();
+            mu.resize(n, 0.0);
+            residual.clear();
+            residual.extend_from_slice(rhs);
+            left = size;
+        }
+        let top = mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let (mut solves, mut converged) = (0, left <= CONVERGED_ULPS * f64::EPSILON * (top + size));
         while solves < bounds.solves && !converged {
             self.pseudo_inverse(&residual, work);
             let BodySpaceWork { step, trial, ax, rows, columns, .. } = work;
@@ -396,15 +428,18 @@ impl BodySpace {
             self.a_mul(trial, ax, rows, columns);
             let now = rhs.iter().zip(ax.iter()).fold(0.0f64, |m, (r, a)| m.max((r - a).abs()));
             solves += 1;
+            let accept = |z: &mut Vec<f64>, step: &[f64]| z.iter_mut().zip(step).for_each(|(z, s)| *z += s);
             if !now.is_finite() || now > 0.5 * left {
                 // No longer halving: the last iterate is at its rounding (or this one worse).
                 if now < left && now.is_finite() {
                     std::mem::swap(mu, trial);
+                    accept(&mut z, &work.z);
                     left = now;
                 }
                 break;
             }
             std::mem::swap(mu, trial);
+            accept(&mut z, &work.z);
             residual.clear();
             residual.extend(rhs.iter().zip(ax.iter()).map(|(r, a)| r - a));
             left = now;
@@ -412,6 +447,7 @@ impl BodySpace {
             converged = left <= CONVERGED_ULPS * f64::EPSILON * (top + size);
         }
         work.residual = residual;
+        self.last = z;
         let top = mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let rounding = bounds.rounding * f64::EPSILON * top;
         let consistent =

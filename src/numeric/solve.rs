@@ -910,6 +910,8 @@ struct Factored {
     factor: Factor,
     /// The body-space factor was kept for a J it was not made from ([`SolvePath::Stale`]).
     stale: bool,
+    /// Buffers of a body-space refactorisation: the rows' weights and parts' ranges.
+    spare: (Vec<f64>, Vec<std::ops::Range<usize>>),
 }
 
 /// A cached factor of Ã.
@@ -1040,11 +1042,17 @@ impl Factored {
                 {
                     return false;
                 }
-                let weight: Vec<f64> = self.index.iter().map(|&k| self.scaled.unscale(k, 1.0)).collect();
-                let ranges: Vec<_> = self.index.iter().map(|&k| self.scaled.range(k)).collect();
+                // In the entry's own buffers: a grid's weights and ranges are large enough that
+                // allocating them at every substep pays for fresh pages.
+                let (weight, ranges) = &mut self.spare;
+                weight.clear();
+                weight.extend(self.index.iter().map(|&k| self.scaled.unscale(k, 1.0)));
+                ranges.clear();
+                ranges.extend(self.index.iter().map(|&k| self.scaled.range(k)));
+                let (weight, ranges) = (&*weight, &*ranges);
                 let gram = body.gram_mut();
-                if !(gram.same_columns(self.scaled.parts(), &ranges, &rows.inverse_mass)
-                    && gram.fill(self.scaled.parts(), &rows.inverse_mass, &weight, WEIGHT_RANGE))
+                if !(gram.same_columns(self.scaled.parts(), ranges, &rows.inverse_mass)
+                    && gram.fill(self.scaled.parts(), &rows.inverse_mass, weight, WEIGHT_RANGE))
                 {
                     return false;
                 }
@@ -1142,6 +1150,7 @@ impl Factored {
             index,
             factor,
             stale: false,
+            spare: (Vec::new(), Vec::new()),
         })
     }
 }
@@ -1230,8 +1239,10 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
             Factor::Sparse { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.sparse_work, &mut cache.mu),
             Factor::Dense(factor) => cache.mu.extend(factor.solve(&cache.rhs)),
             Factor::BodySpace { body } => {
+                // A stale factor starts from the last answer's ẑ (a grid at rest: at its
+                // answer); a fresh one from 0, as the general solve.
                 let mut done =
-                    body.minimum_norm(&cache.rhs, &body_bounds(settings), &mut cache.body_work, &mut cache.mu);
+                    body.minimum_norm(&cache.rhs, &body_bounds(settings), &mut cache.body_work, &mut cache.mu, c.stale);
                 if c.stale && !(done.converged && done.consistent) {
                     // The kept factor is too far from this J: factored now, and solved as a
                     // fresh factor solves (the general solve's numbers).
@@ -1243,7 +1254,13 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
                         *out = solve_holding(rows, settings, held);
                         return;
                     }
-                    done = body.minimum_norm(&cache.rhs, &body_bounds(settings), &mut cache.body_work, &mut cache.mu);
+                    done = body.minimum_norm(
+                        &cache.rhs,
+                        &body_bounds(settings),
+                        &mut cache.body_work,
+                        &mut cache.mu,
+                        false,
+                    );
                 }
                 if !done.consistent {
                     // Rows that contradict each other here: the general solve says so.
@@ -1948,8 +1965,8 @@ fn sparse_minimum_norm(
     status: &mut Status,
 ) -> Option<Vec<f64>> {
     let mut mu = Vec::new();
-    if let Some(body) = body_space(block, settings) {
-        let done = body.minimum_norm(rhs, &body_bounds(settings), &mut BodySpaceWork::default(), &mut mu);
+    if let Some(mut body) = body_space(block, settings) {
+        let done = body.minimum_norm(rhs, &body_bounds(settings), &mut BodySpaceWork::default(), &mut mu, false);
         if done.consistent {
             diagnostics.push(body_diagnostic(&body, index, done.solves));
             *status = (*status).max(Status::MinimumNorm);
