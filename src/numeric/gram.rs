@@ -55,6 +55,8 @@ pub(crate) struct Gram {
     weight: Vec<f64>,
     /// s² per column: 1/Hₐₐ.
     scale2: Vec<f64>,
+    /// A buffer of [`fill`](Gram::fill): √(1/m) per slot, then s per column.
+    root: Vec<f64>,
 }
 
 /// The moved axes of every slot: `parts` are the scaled rows' parts (slot, J̃ᵢ) of the
@@ -119,6 +121,7 @@ impl Gram {
             source,
             weight: Vec::new(),
             scale2: Vec::new(),
+            root: Vec::new(),
         };
         gram.fill(parts, inverse_mass, weight, weight_range).then_some(gram)
     }
@@ -155,31 +158,38 @@ impl Gram {
         let weighted = weight.len() == n && (0..n).all(|p| relative(p).is_finite() && relative(p) >= weight_range);
         self.weight.clear();
         self.weight.extend((0..n).map(|p| if weighted { relative(p) } else { 1.0 }));
+        // √(1/m) per slot once, 1/Ŵ per row once: the loop over the entries multiplies only.
+        let mut root = std::mem::take(&mut self.root);
+        root.clear();
+        root.extend(inverse_mass.iter().map(|w| w.sqrt()));
         let mut diagonal = std::mem::take(&mut self.scale2);
         diagonal.clear();
         diagonal.resize(self.columns, 0.0);
         for p in 0..n {
-            let w = self.weight[p];
-            for e in self.start[p]..self.start[p + 1] {
-                let (place, axis) = self.source[e];
+            let inverse = 1.0 / self.weight[p];
+            let (from, to) = (self.start[p], self.start[p + 1]);
+            for ((g, &(place, axis)), &c) in
+                self.g[from..to].iter_mut().zip(&self.source[from..to]).zip(&self.column[from..to])
+            {
                 let (slot, j) = &parts[place];
-                let g = j[axis] * inverse_mass[*slot].sqrt() / w;
-                self.g[e] = g;
-                diagonal[self.column[e]] += g * g;
+                *g = j[axis] * root[*slot] * inverse;
+                diagonal[c] += *g * *g;
             }
         }
-        // 1/Hₐₐ in place.
+        // s = 1/√Hₐₐ into `root` (now per column), s² = 1/Hₐₐ kept.
+        root.clear();
+        root.extend(diagonal.iter().map(|d| 1.0 / d.sqrt()));
         for d in diagonal.iter_mut() {
             *d = 1.0 / *d;
         }
         self.scale2 = diagonal;
-        if !self.scale2.iter().all(|s| s.is_normal()) {
-            return false;
+        let mut finite = self.scale2.iter().all(|s| s.is_normal());
+        for (g, &c) in self.g.iter_mut().zip(&self.column) {
+            *g *= root[c];
+            finite &= g.is_finite();
         }
-        for (g, c) in self.g.iter_mut().zip(&self.column) {
-            *g *= self.scale2[*c].sqrt();
-        }
-        self.g.iter().all(|g| g.is_finite())
+        self.root = root;
+        finite
     }
 
     /// The pairs of columns whose products H sums, in the order [`assemble`](Gram::assemble)
@@ -286,6 +296,9 @@ pub(crate) struct Bounds {
 /// The residual counts as at its rounding within this many ulps of max|μ| + max|rhs| (Ã's
 /// entries are at most one): a row of a grid sums a dozen terms, each rounded once.
 const CONVERGED_ULPS: f64 = 64.0;
+/// A residual within this many ulps (of the same) is at its rounding however the iteration
+/// ended: stopped improving there, or a warm start already there.
+const ROUNDING_ULPS: f64 = 4.0 * CONVERGED_ULPS;
 
 impl BodySpace {
     /// The factor of `gram`'s H'; `None` when a pivot falls to `pivot_floor` (G lacks full
@@ -419,6 +432,10 @@ impl BodySpace {
             left = size;
         }
         let top = mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        // A warm start within the bound the iteration stops at is an answer (cold: only when
+        // the right-hand side is zero). Not within the looser bound it may end at: a grid at
+        // rest starts a few hundred ulps off (its c terms move by rounding), and one more
+        // application takes it to one or two.
         let (mut solves, mut converged) = (0, left <= CONVERGED_ULPS * f64::EPSILON * (top + size));
         while solves < bounds.solves && !converged {
             self.pseudo_inverse(&residual, work);
@@ -453,7 +470,7 @@ impl BodySpace {
         let consistent =
             (left <= bounds.consistency * size + rounding || size == 0.0) && mu.iter().all(|x| x.is_finite());
         // Stopped by no longer halving: at the rounding too when within a few times its bound.
-        converged |= left <= 4.0 * CONVERGED_ULPS * f64::EPSILON * (top + size);
+        converged |= left <= ROUNDING_ULPS * f64::EPSILON * (top + size);
         Iterated { solves, converged, consistent }
     }
 }

@@ -1034,12 +1034,10 @@ impl Factored {
             }
             Factor::Dense(_) => false,
             Factor::BodySpace { body } => {
-                // As `Factor::Singular`: singular whatever the numbers, the same components
-                // moved (G's pattern), else the plan is made again.
-                let n = self.index.len();
-                if !matches!(settings.method, Method::Auto | Method::Sparse)
-                    || n <= columns(&self.scaled, &rows.inverse_mass, &self.index)
-                {
+                // As `Factor::Singular`: singular whatever the numbers (the same components
+                // moved, `Gram::same_columns`, by the same rows: still more rows than
+                // components), G's pattern the same, else the plan is made again.
+                if !matches!(settings.method, Method::Auto | Method::Sparse) {
                     return false;
                 }
                 // In the entry's own buffers: a grid's weights and ranges are large enough that
