@@ -1,11 +1,17 @@
 //! The run's solve cache on a redundant block past the dense decomposition
-//! (`solve::MAX_DENSE_ROWS`), as a rigid joint grid is: it keeps the factor of the
-//! regularised Ã (and its analysis), so a solve with the same J only iterates on it and a
+//! (`solve::MAX_DENSE_ROWS`), as a rigid joint grid is: it keeps the factor its minimum norm
+//! iterates with (and its analysis), so a solve with the same J only iterates on it and a
 //! new J of the same pattern only refactors it, with the general solve's answer bit for bit;
 //! rows that contradict each other are refused by the kept factor and answered by the
 //! general solve (which refuses them as too large). Within the dense bound a block that is
-//! singular whatever its numbers takes the regularised factor in the cache too (the general
+//! singular whatever its numbers takes the sparse factor in the cache too (the general
 //! solve keeps the eigendecomposition, for its rank and condition).
+//!
+//! The braced grid holds every point mass, so the cache (and the general solve past the
+//! dense bound) take the minimum norm in the bodies' velocity space (`numeric::gram`), and
+//! keep its factor for a J that moved in its last bits (a grid at rest): both sides of those
+//! switches are tested here, with a pendulum hung from the grid (a body the rows do not hold)
+//! for the regularised factor.
 //!
 //! The block is a braced grid of point masses: each joined by distance rows to its right
 //! and lower neighbours and across both diagonals of each cell (the top row to fixed
@@ -81,7 +87,7 @@ fn assert_general(cached: &Solution, rows: &Rows, what: &str) {
 }
 
 #[test]
-fn the_cache_keeps_the_regularised_factor_of_a_redundant_block_with_the_general_answer() {
+fn the_cache_keeps_the_factor_of_a_redundant_block_with_the_general_answer() {
     let settings = Settings::default();
     let mut cache = SolveCache::default();
     for seed in 0..3 {
@@ -90,7 +96,7 @@ fn the_cache_keeps_the_regularised_factor_of_a_redundant_block_with_the_general_
         assert!(rows.rows.len() > MAX_DENSE_ROWS && rows.rows.len() > 2 * rows.inverse_mass.len());
         let cached = solve_cached(&rows, &settings, &[], &mut cache);
         assert_eq!(cache.last_path(), SolvePath::Factored, "seed {seed}");
-        assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+        assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
         assert_eq!(cached.status, Status::MinimumNorm, "{:?}", cached.diagnostics);
         assert!(
             cached
@@ -119,7 +125,7 @@ fn rows_that_contradict_each_other_are_refused_by_the_kept_factor() {
     let mut cache = SolveCache::default();
     let rows = braced(17, 7);
     solve_cached(&rows, &settings, &[], &mut cache);
-    assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+    assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
     // The same J with c terms drawn at random: no λ satisfies them all; the kept factor's
     // residual shows it and the general solve answers (too large for its least squares).
     let mut clash = rows.clone();
@@ -149,11 +155,10 @@ fn gap(a: &[f64], b: &[f64]) -> f64 {
 }
 
 #[test]
-fn a_block_within_the_dense_bound_singular_whatever_its_numbers_takes_the_regularised_factor_too() {
+fn a_block_within_the_dense_bound_singular_whatever_its_numbers_takes_the_sparse_factor_too() {
     // 9 × 10 bodies, 333 rows on 180 velocity components: the general solve takes the
     // eigendecomposition (rank and condition, what `lagrange solve` shows), a run's cache
-    // the regularised sparse factor: the same minimum-norm λ but for the regularisation's
-    // share (ε = 1e-8) in the redundant rows' split, the same accelerations to rounding.
+    // the body-space sparse factor: the same minimum-norm λ and accelerations to rounding.
     let settings = Settings::default();
     let mut cache = SolveCache::default();
     for seed in 0..3 {
@@ -161,7 +166,7 @@ fn a_block_within_the_dense_bound_singular_whatever_its_numbers_takes_the_regula
         assert!(rows.rows.len() <= MAX_DENSE_ROWS && rows.rows.len() > 2 * rows.inverse_mass.len());
         let cached = solve_cached(&rows, &settings, &[], &mut cache);
         assert_eq!(cache.last_path(), SolvePath::Factored, "seed {seed}");
-        assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+        assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
         assert_eq!(cached.status, Status::MinimumNorm);
         assert!(
             cached.diagnostics.iter().any(|d| matches!(d, Diagnostic::RedundantSparse { .. })),
@@ -186,5 +191,105 @@ fn a_block_within_the_dense_bound_singular_whatever_its_numbers_takes_the_regula
         other.force.iter_mut().for_each(|f| f[1] -= 2.0);
         solve_cached(&other, &settings, &[], &mut cache);
         assert_eq!(cache.last_path(), SolvePath::Reused);
+    }
+}
+
+/// The braced grid with a pendulum: one more point mass hung by one slanted distance row
+/// from the last body, so of its two velocity components the rows move, one is held by no
+/// row and G lacks full column rank.
+fn with_pendulum(mut rows: Rows) -> Rows {
+    let last = rows.inverse_mass.len() - 1;
+    rows.inverse_mass.push(1.0);
+    rows.velocity.push([0.0, 0.0, 0.0]);
+    rows.force.push([0.0, -10.0, 0.0]);
+    rows.rows.push(Row {
+        value: 0.0,
+        rate: 0.0,
+        bias: 0.0,
+        inequality: false,
+        jacobian: vec![(last, [0.6, 0.8, 0.0]), (last + 1, [-0.6, -0.8, 0.0])],
+    });
+    rows
+}
+
+#[test]
+fn a_body_no_row_holds_takes_the_regularised_factor() {
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    // Held: the body-space factor, in the cache and in the general solve (bit for bit).
+    let rows = braced(17, 5);
+    let held = solve_cached(&rows, &settings, &[], &mut cache);
+    assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
+    assert_general(&held, &rows, "held");
+    // Not held: the regularised factor, the same answer as the general solve's, and the
+    // minimum norm of the two agree on the grid's rows.
+    let hung = with_pendulum(rows.clone());
+    let loose = solve_cached(&hung, &settings, &[], &mut cache);
+    assert_eq!(cache.last_path(), SolvePath::Factored);
+    assert_eq!(cache.factorisation(), Some(Factorisation::RegularisedSparse));
+    assert_eq!(loose.status, Status::MinimumNorm, "{:?}", loose.diagnostics);
+    assert_general(&loose, &hung, "hung");
+    // Held again: the body-space factor is made anew.
+    solve_cached(&rows, &settings, &[], &mut cache);
+    assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
+}
+
+/// Every J entry of `rows` times (1 + `relative`·u) for u from `seed` in [−1, 1].
+fn nudged(rows: &Rows, relative: f64, seed: u64) -> Rows {
+    let mut mix = Rng::new(seed);
+    let mut out = rows.clone();
+    for row in &mut out.rows {
+        for (_, j) in &mut row.jacobian {
+            for x in j.iter_mut().take(2) {
+                *x *= 1.0 + relative * mix.uniform(-1.0, 1.0);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_stale_body_space_factor_serves_a_j_that_moved_in_its_last_bits() {
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    let rows = braced(17, 11);
+    solve_cached(&rows, &settings, &[], &mut cache);
+    assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
+    let flat = |s: &Solution| s.acceleration.iter().flatten().copied().collect::<Vec<f64>>();
+    for (round, relative) in [1e-15, 1e-14, 1e-13].into_iter().enumerate() {
+        // J moved by rounding (a grid at rest): the kept factor iterates to this J's
+        // answer, the general solve's to rounding times the condition (the same minimum
+        // norm: no ε; two fresh solves of J apart by 1e-15 differ as much).
+        let moved = nudged(&rows, relative, round as u64);
+        let stale = solve_cached(&moved, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Stale, "{relative:e}");
+        let general = solve_holding(&moved, &settings, &[]);
+        assert_eq!(stale.status, general.status);
+        let lambda = gap(&stale.lambda, &general.lambda);
+        assert!(lambda < 1e-10, "{relative:e}: λ apart by {lambda:e} of the largest");
+        let acceleration = gap(&flat(&stale), &flat(&general));
+        assert!(acceleration < 1e-10, "{relative:e}: accelerations apart by {acceleration:e}");
+    }
+    // J moved by more than `STALE_CHANGE`: factored, the general answer bit for bit.
+    let far = nudged(&rows, 1e-6, 9);
+    let fresh = solve_cached(&far, &settings, &[], &mut cache);
+    assert_eq!(cache.last_path(), SolvePath::Factored);
+    assert_general(&fresh, &far, "moved by 1e-6");
+}
+
+#[test]
+fn the_body_space_minimum_norm_is_the_eigendecomposition_s() {
+    // Within the dense bound the general solve takes the eigendecomposition: the body-space
+    // minimum norm has no regularisation's share, so λ agrees to rounding times the
+    // condition.
+    let settings = Settings::default();
+    for seed in 0..3 {
+        let rows = braced(8, 40 + seed);
+        let mut cache = SolveCache::default();
+        let cached = solve_cached(&rows, &settings, &[], &mut cache);
+        assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
+        let general = solve_holding(&rows, &settings, &[]);
+        let lambda = gap(&cached.lambda, &general.lambda);
+        assert!(lambda < 1e-10, "seed {seed}: λ apart by {lambda:e} of the largest");
     }
 }

@@ -18,6 +18,7 @@ pub mod batch;
 mod chain;
 pub mod contact;
 pub mod dynamics;
+pub(crate) mod gram;
 pub mod integrate;
 pub mod program;
 pub mod qp;

@@ -26,6 +26,11 @@
 //!   pivoting (exact, terminates for positive definite Ã) starts from its guess, for blocks
 //!   of up to 64 rows.
 //!
+//! Singular blocks past the dense decomposition (and, in a run's cache, within it when
+//! singular whatever their numbers) take their minimum norm from a sparse factor: of the Gram
+//! matrix of the velocity components their rows move when those rows hold every one
+//! (`numeric::gram`), of a regularised Ã otherwise (`sparse_minimum_norm`).
+//!
 //! Minimum norm is that of λ for C/κ (what the pseudo-inverse of the unscaled A gives): the
 //! eigendecomposition runs on the scaled Ã, and the null-space part is then chosen to minimise ‖λ‖ with
 //! λₖ = λ̃ₖ/(‖Jₖ‖√Âₖₖ) (see `minimum_norm`).
@@ -34,6 +39,7 @@
 
 use super::banded::{Banded, BandedCholesky};
 use super::contact::{ContactState, classify_holding};
+use super::gram::{BodySpace, BodySpaceWork, Bounds, Gram};
 use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use super::sparse::{SparseFactor, SparseWork};
@@ -239,8 +245,8 @@ pub enum Diagnostic {
     /// estimates σ_max/σ_min of the rest.
     Redundant { constraints: Vec<usize>, rank: usize, size: usize, condition: f64 },
     /// As [`Diagnostic::Redundant`] for a block of `size` rows past [`MAX_DENSE_ROWS`]: the
-    /// minimum-norm λ by `solves` regularised sparse solves (`sparse_minimum_norm`); the rank
-    /// is not computed.
+    /// minimum-norm λ by `solves` sparse solves (`sparse_minimum_norm`: applications of the
+    /// body-space pseudo-inverse, or regularised solves); the rank is not computed.
     RedundantSparse { constraints: Vec<usize>, size: usize, solves: usize },
     /// As [`Diagnostic::Redundant`], but the rows contradict each other: the least-squares
     /// minimum-norm λ, with the relative residual left.
@@ -639,6 +645,16 @@ impl Scaled {
         true
     }
 
+    /// Every row's J̃ per body in one buffer (row k at [`range`](Scaled::range)).
+    pub(crate) fn parts(&self) -> &[(usize, [f64; 3])] {
+        &self.parts
+    }
+
+    /// The places of row k's parts in [`parts`](Scaled::parts).
+    pub(crate) fn range(&self, k: usize) -> std::ops::Range<usize> {
+        self.start[k]..self.start[k + 1]
+    }
+
     /// J̃ₖ per body (empty when row k is not usable).
     pub fn jacobian(&self, k: usize) -> &[(usize, [f64; 3])] {
         &self.parts[self.start[k]..self.start[k + 1]]
@@ -667,6 +683,9 @@ pub(crate) struct Block {
     /// inverse mass: rank Ã ≤ `columns`, so more rows than that are redundant whatever the
     /// numbers ([`structurally_singular`]).
     pub columns: usize,
+    /// G = Ŵ⁻¹ J̃ M^{-1/2} of a block singular whatever its numbers, for its minimum norm in
+    /// the bodies' velocity space (`numeric::gram`); `None` otherwise.
+    pub gram: Option<Gram>,
 }
 
 /// Whether `block` has more rows than velocity components its rows move: Ã = J̃ M⁻¹ J̃ᵀ is
@@ -747,9 +766,17 @@ pub(crate) fn assemble(scaled: &Scaled, inverse_mass: &[f64], index: &[usize]) -
     let terms = terms(scaled, inverse_mass.len(), index);
     let bandwidth = terms.iter().map(|t| t.hi - t.lo).max().unwrap_or(0);
     let a = terms.iter().map(|t| (t.lo, t.hi, term_value(scaled, inverse_mass, t))).collect();
-    let weight = index.iter().map(|&k| scaled.unscale(k, 1.0)).collect();
+    let weight: Vec<f64> = index.iter().map(|&k| scaled.unscale(k, 1.0)).collect();
     let columns = columns(scaled, inverse_mass, index);
-    Block { n: index.len(), bandwidth, a, weight, columns }
+    let n = index.len();
+    let gram = (n > columns).then(|| gram(scaled, inverse_mass, index, &weight)).flatten();
+    Block { n, bandwidth, a, weight, columns, gram }
+}
+
+/// G of the rows `index` with their weights (see `numeric::gram`).
+fn gram(scaled: &Scaled, inverse_mass: &[f64], index: &[usize], weight: &[f64]) -> Option<Gram> {
+    let ranges: Vec<_> = index.iter().map(|&k| scaled.range(k)).collect();
+    Gram::new(scaled.parts(), &ranges, inverse_mass, weight, WEIGHT_RANGE)
 }
 
 /// Solves for λ at `rows` with the default settings.
@@ -828,6 +855,10 @@ pub enum SolvePath {
     /// J or the masses changed: scaled, assembled and factored anew, and cached (in the
     /// cache's own buffers when the rows act on the same bodies as before).
     Factored,
+    /// J changed by less than [`STALE_CHANGE`] on a block the body-space factor serves:
+    /// scaled anew, the kept factor iterated to this J's minimum norm (at rounding, or it is
+    /// factored after all and the path is [`SolvePath::Factored`]).
+    Stale,
     /// Not a case the cache serves (an inequality row, a number that is not finite, a row
     /// that cannot carry a force, a block within [`MAX_DENSE_ROWS`] singular by its numbers
     /// only, a dense one past it, rows of a singular block that contradict each other):
@@ -868,6 +899,7 @@ pub struct SolveCache {
     work: BandWork,
     sparse_work: SparseWork,
     regularised_work: RegularisedWork,
+    body_work: BodySpaceWork,
     /// The factor of rows that form a chain in their order (`numeric::chain`), tried first.
     chain: super::chain::Chain,
 }
@@ -897,6 +929,10 @@ struct Factored {
     /// 0..k: every row takes part.
     index: Vec<usize>,
     factor: Factor,
+    /// The body-space factor was kept for a J it was not made from ([`SolvePath::Stale`]).
+    stale: bool,
+    /// Buffers of a body-space refactorisation: the rows' weights and parts' ranges.
+    spare: (Vec<f64>, Vec<std::ops::Range<usize>>),
 }
 
 /// A cached factor of Ã.
@@ -923,6 +959,12 @@ enum Factor {
     Singular {
         regularised: Regularised,
         terms: Vec<Term>,
+    },
+    /// A block singular whatever its numbers whose rows hold every component they move:
+    /// the factor of the Gram matrix of its velocity components (`numeric::gram`), tried
+    /// before [`Factor::Singular`].
+    BodySpace {
+        body: BodySpace,
     },
 }
 
@@ -984,6 +1026,7 @@ impl Factored {
     /// in place: the numbers of a fresh factorisation, from the kept terms. False when the
     /// rows are no longer a case the cache serves (the entry is then spent).
     fn refactor(&mut self, rows: &Rows, settings: &Settings) -> bool {
+        self.stale = false;
         if matches!(self.factor, Factor::Dense(_)) {
             return false;
         }
@@ -1011,6 +1054,33 @@ impl Factored {
                 factor.factor(settings.rank_tolerance)
             }
             Factor::Dense(_) => false,
+            Factor::BodySpace { body } => {
+                // As `Factor::Singular`: singular whatever the numbers (the same components
+                // moved, `Gram::same_columns`, by the same rows: still more rows than
+                // components), G's pattern the same, else the plan is made again.
+                if !matches!(settings.method, Method::Auto | Method::Sparse) {
+                    return false;
+                }
+                // In the entry's own buffers: a grid's weights and ranges are large enough that
+                // allocating them at every substep pays for fresh pages.
+                let (weight, ranges) = &mut self.spare;
+                weight.clear();
+                weight.extend(self.index.iter().map(|&k| self.scaled.unscale(k, 1.0)));
+                ranges.clear();
+                ranges.extend(self.index.iter().map(|&k| self.scaled.range(k)));
+                let (weight, ranges) = (&*weight, &*ranges);
+                let gram = body.gram_mut();
+                if !(gram.same_columns(self.scaled.parts(), ranges, &rows.inverse_mass)
+                    && gram.fill(self.scaled.parts(), &rows.inverse_mass, weight, WEIGHT_RANGE))
+                {
+                    return false;
+                }
+                // G barely moved (a grid at rest, J changing in its last bits): the kept
+                // factor serves as the iteration's preconditioner (`solve_cached_into`
+                // factors after all if it does not reach rounding).
+                self.stale = body.change() <= STALE_CHANGE;
+                self.stale || body.refactor(settings.rank_tolerance, NULL_SHARE)
+            }
             Factor::Singular { regularised, terms } => {
                 // `plan`'s way to the regularised factor without a factorisation that fails:
                 // singular whatever the numbers, past the dense decomposition. Otherwise
@@ -1042,6 +1112,17 @@ impl Factored {
         let block = assemble(&scaled, &rows.inverse_mass, &index);
         let planned = plan(&block, settings);
         let sparse_method = matches!(settings.method, Method::Auto | Method::Sparse);
+        // A singular block's factor: the body-space one where it serves (as
+        // `sparse_minimum_norm` tries it first), the regularised one otherwise.
+        let singular = |analysed: Option<SparsePlan>| -> Option<Factor> {
+            if let Some(body) = body_space(&block, settings) {
+                return Some(Factor::BodySpace { body });
+            }
+            Some(Factor::Singular {
+                regularised: Regularised::new(&block, analysed)?,
+                terms: terms(&scaled, rows.inverse_mass.len(), &index),
+            })
+        };
         let factor = match planned {
             // Singular whatever its numbers within the dense bound (a small rigid grid): the
             // run takes the regularised sparse factor too, where the general solve takes the
@@ -1055,10 +1136,7 @@ impl Factored {
                     Plan::Singular(analysed) => Some(analysed),
                     _ => None,
                 };
-                Factor::Singular {
-                    regularised: Regularised::new(&block, analysed)?,
-                    terms: terms(&scaled, rows.inverse_mass.len(), &index),
-                }
+                singular(analysed)?
             }
             Plan::Band(Some(factor)) => {
                 let terms = terms(&scaled, rows.inverse_mass.len(), &index);
@@ -1077,14 +1155,8 @@ impl Factored {
             }
             Plan::Dense if block.n <= MAX_DENSE_ROWS => Factor::Dense(DenseFactor::new(&block, settings)?),
             // Singular past the dense decomposition: `equality`'s regularised factor.
-            Plan::Singular(analysed) if block.n > MAX_DENSE_ROWS => Factor::Singular {
-                regularised: Regularised::new(&block, Some(analysed))?,
-                terms: terms(&scaled, rows.inverse_mass.len(), &index),
-            },
-            Plan::Band(None) | Plan::Sparse(None) if block.n > MAX_DENSE_ROWS => Factor::Singular {
-                regularised: Regularised::new(&block, None)?,
-                terms: terms(&scaled, rows.inverse_mass.len(), &index),
-            },
+            Plan::Singular(analysed) if block.n > MAX_DENSE_ROWS => singular(Some(analysed))?,
+            Plan::Band(None) | Plan::Sparse(None) if block.n > MAX_DENSE_ROWS => singular(None)?,
             _ => return None,
         };
         Some(Factored {
@@ -1096,6 +1168,8 @@ impl Factored {
             scaled,
             index,
             factor,
+            stale: false,
+            spare: (Vec::new(), Vec::new()),
         })
     }
 }
@@ -1110,6 +1184,9 @@ pub enum Factorisation {
     /// The sparse factor of the regularised Ã of a singular block past [`MAX_DENSE_ROWS`],
     /// or within it when singular whatever its numbers (its minimum norm by iterated solves).
     RegularisedSparse,
+    /// The sparse factor of the Gram matrix of the velocity components of a block singular
+    /// whatever its numbers whose rows hold every component (`numeric::gram`).
+    BodySpace,
 }
 
 impl SolveCache {
@@ -1129,6 +1206,7 @@ impl SolveCache {
             Factor::Sparse { .. } => Factorisation::Sparse,
             Factor::Dense(_) => Factorisation::Dense,
             Factor::Singular { .. } => Factorisation::RegularisedSparse,
+            Factor::BodySpace { .. } => Factorisation::BodySpace,
         })
     }
 }
@@ -1169,9 +1247,10 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
         if !refactored {
             cache.entry = Factored::new(rows, settings);
         }
-        cache.path = SolvePath::Factored;
+        let stale = cache.entry.as_ref().is_some_and(|c| c.stale);
+        cache.path = if stale { SolvePath::Stale } else { SolvePath::Factored };
     }
-    let Some(c) = &cache.entry else {
+    let Some(c) = &mut cache.entry else {
         cache.path = SolvePath::General;
         *out = solve_holding(rows, settings, held);
         return;
@@ -1182,10 +1261,43 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
     if !c.index.is_empty() {
         // Every row takes part (`index` is 0..k): b̃ row by row along the scaled parts.
         negated_right_hand_side(rows, &c.scaled, &mut cache.rhs);
-        match &c.factor {
+        match &mut c.factor {
             Factor::Band { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.work, &mut cache.mu),
             Factor::Sparse { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.sparse_work, &mut cache.mu),
             Factor::Dense(factor) => cache.mu.extend(factor.solve(&cache.rhs)),
+            Factor::BodySpace { body } => {
+                // A stale factor starts from the last answer's ẑ (a grid at rest: at its
+                // answer); a fresh one from 0, as the general solve.
+                let mut done =
+                    body.minimum_norm(&cache.rhs, &body_bounds(settings), &mut cache.body_work, &mut cache.mu, c.stale);
+                if c.stale && !(done.converged && done.consistent) {
+                    // The kept factor is too far from this J: factored now, and solved as a
+                    // fresh factor solves (the general solve's numbers).
+                    c.stale = false;
+                    cache.path = SolvePath::Factored;
+                    if !body.refactor(settings.rank_tolerance, NULL_SHARE) {
+                        cache.entry = None;
+                        cache.path = SolvePath::General;
+                        *out = solve_holding(rows, settings, held);
+                        return;
+                    }
+                    done = body.minimum_norm(
+                        &cache.rhs,
+                        &body_bounds(settings),
+                        &mut cache.body_work,
+                        &mut cache.mu,
+                        false,
+                    );
+                }
+                if !done.consistent {
+                    // Rows that contradict each other here: the general solve says so.
+                    cache.path = SolvePath::General;
+                    *out = solve_holding(rows, settings, held);
+                    return;
+                }
+                diagnostics.push(body_diagnostic(body, &c.index, done.solves));
+                status = status.max(Status::MinimumNorm);
+            }
             Factor::Singular { regularised, .. } => {
                 match regularised.minimum_norm(&cache.rhs, settings, &mut cache.regularised_work, &mut cache.mu) {
                     Some(solves) => {
@@ -1430,6 +1542,8 @@ fn solve_subset(
         weight: rows.iter().map(|&p| block.weight[p]).collect(),
         // A subset of the rows moves a subset of the components: still a bound on the rank.
         columns: block.columns,
+        // The regularised factor serves a subset (the polish of a QP's active set).
+        gram: None,
     };
     let sub_b: Vec<f64> = rows.iter().map(|&p| b[p]).collect();
     let sub_index: Vec<usize> = rows.iter().map(|&p| index[p]).collect();
@@ -1851,7 +1965,9 @@ fn minimum_norm(
 
 /// The minimum-norm λ of a singular, consistent block too large for the dense
 /// eigendecomposition of [`minimum_norm`] (`analysed`: its sparse analysis, when the plan
-/// made one), by iterated Tikhonov regularisation on the
+/// made one): through the body-space factor when the block is singular whatever its numbers
+/// and its rows hold every component they move ([`body_space`]), otherwise by iterated
+/// Tikhonov regularisation on the
 /// sparse factor (the proximal-point iteration; Hanke and Groetsch, "Nonstationary
 /// iterated Tikhonov regularization", J. Optim. Theory Appl. 98, 1998):
 /// μ₀ = 0, μₖ₊₁ = μₖ + (Ã + ε W²)⁻¹ (rhs − Ã μₖ), with W the rows' weights (see
@@ -1875,12 +1991,63 @@ fn sparse_minimum_norm(
     diagnostics: &mut Vec<Diagnostic>,
     status: &mut Status,
 ) -> Option<Vec<f64>> {
-    let regularised = Regularised::new(block, analysed)?;
     let mut mu = Vec::new();
+    if let Some(mut body) = body_space(block, settings) {
+        let done = body.minimum_norm(rhs, &body_bounds(settings), &mut BodySpaceWork::default(), &mut mu, false);
+        if done.consistent {
+            diagnostics.push(body_diagnostic(&body, index, done.solves));
+            *status = (*status).max(Status::MinimumNorm);
+            return Some(mu);
+        }
+    }
+    let regularised = Regularised::new(block, analysed)?;
     let solves = regularised.minimum_norm(rhs, settings, &mut RegularisedWork::default(), &mut mu)?;
     diagnostics.push(regularised.diagnostic(index, solves));
     *status = (*status).max(Status::MinimumNorm);
     Some(mu)
+}
+
+/// The most pseudo-inverse applications of a body-space minimum norm
+/// ([`BodySpace::minimum_norm`]): with a fresh factor two reach rounding on the grids, a third
+/// finds it stopped improving.
+const BODY_SPACE_SOLVES: usize = 8;
+
+/// The body-space factor of `block` (`numeric::gram`: the minimum norm through the Gram
+/// matrix of the rows' velocity components) when the block is singular whatever its
+/// numbers and every component it moves is held (G of full column rank), within
+/// [`MAX_SPARSE_FLOPS`]; `None` otherwise, when the regularised factor serves.
+fn body_space(block: &Block, settings: &Settings) -> Option<BodySpace> {
+    if !matches!(settings.method, Method::Auto | Method::Sparse) {
+        return None;
+    }
+    let gram = block.gram.clone()?;
+    let body = BodySpace::new(gram, settings.rank_tolerance, NULL_SHARE)?;
+    (body.flops() <= MAX_SPARSE_FLOPS).then_some(body)
+}
+
+/// The largest change of the body-space G' (columns of unit norm) for which a run's cache
+/// keeps the factor made for another J of the same pattern ([`SolvePath::Stale`]): its
+/// pseudo-inverse is then off by about this times H's condition (1e4–1e6 on grids), so
+/// each application shrinks the error by that much and two or three reach rounding. A grid
+/// at rest changes J in its last bits (1e-16); a swinging one by 1e-3 a substep, and is
+/// factored.
+pub const STALE_CHANGE: f64 = 1e-11;
+
+/// [`BodySpace::minimum_norm`]'s thresholds: the consistency bound and rounding of
+/// [`Regularised::minimum_norm`].
+fn body_bounds(settings: &Settings) -> Bounds {
+    Bounds {
+        consistency: settings.contact_tolerance.sqrt() * CONSISTENCY,
+        rounding: ITERATE_ROUNDING,
+        solves: BODY_SPACE_SOLVES,
+    }
+}
+
+/// The diagnostic of a body-space minimum norm of `solves` applications, the rows named by
+/// `index`.
+fn body_diagnostic(body: &BodySpace, index: &[usize], solves: usize) -> Diagnostic {
+    let constraints = body.null_rows().iter().map(|&p| index[p]).collect();
+    Diagnostic::RedundantSparse { constraints, size: index.len(), solves }
 }
 
 /// The factor of Ã + ε W² of a singular block (see [`sparse_minimum_norm`]) and what its

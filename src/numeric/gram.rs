@@ -1,0 +1,476 @@
+//! The minimum-norm λ of a block that is singular whatever its numbers (more rows than the
+//! velocity components they move, a rigid joint grid's redundant loops), solved in the
+//! bodies' velocity space instead of the rows' space.
+//!
+//! Design note. With the rows scaled (`numeric::solve`: J̃, Ã = J̃ M⁻¹ J̃ᵀ with a unit
+//! diagonal) and the weights Ŵ that make the least ‖Ŵ μ‖ the least ‖λ‖ for C/κ, the
+//! minimum-norm μ of Ã μ = r is μ = Ŵ⁻¹ ν with ν the least-norm solution of B ν = c,
+//! B = G Gᵀ, c = Ŵ⁻¹ r, for G = Ŵ⁻¹ J̃ M^{-1/2} (rows × moved velocity components). When G
+//! has full column rank (every body held: rank Ã equals the number of components), its
+//! Gram matrix H = Gᵀ G is positive definite, of the size of the velocity space, and
+//! B⁺ = G H⁻² Gᵀ (the pseudo-inverse of G Gᵀ through G's own; Golub and Van Loan, *Matrix
+//! Computations*, §5.5). So
+//!
+//!   x = H⁻¹ Gᵀ c   (the velocity change, in M^{1/2} units: unique),
+//!   z = H⁻¹ x,     ν = G z   (the least-norm split of its impulse among the rows),
+//!
+//! two substitutions with one sparse factor of H (columns scaled to a unit diagonal, so the
+//! rank tolerance is relative) and no regularisation: every iterate μ = Ŵ⁻¹ G (…) lies in
+//! the subspace where the minimum norm lies, whatever the accuracy of the factor, so the
+//! split among redundant rows is the minimum-norm one to rounding (the regularised factor of
+//! `solve::sparse_minimum_norm` carries ε's share into it), and a factor made for another J
+//! of the same pattern still iterates to this J's answer where it is close enough (the
+//! run's solve cache keeps a stale factor that way). H's pattern is the bodies' adjacency
+//! (a grid's five-point stencil of 3 × 3 blocks), narrower than Ã's (every pair of rows
+//! sharing a body). Iterative refinement against Ã itself (computed as Ŵ G Gᵀ Ŵ μ, no Ã
+//! assembled) polishes the answer and checks consistency, as the regularised iteration does.
+//! When G lacks full column rank (a pendulum hanging from a redundant grid, a constraint
+//! written twice on point masses) a pivot of H falls to the rank tolerance and the caller
+//! takes the regularised factor instead.
+//!
+//! Not here: which blocks are singular whatever their numbers, diagnostics, the cache
+//! (`numeric::solve`).
+
+use super::sparse::{SparseFactor, SparseWork};
+
+/// A component of a row's part is stored in G when its slot moves (inverse mass not zero)
+/// and some row of the block has that axis non-zero: the moved components, G's columns.
+/// Rows' explicit zeros on a moved component are kept, so G's pattern (and H's) does not
+/// change with the numbers of a row whose component passes through zero.
+#[derive(Clone, Debug)]
+pub(crate) struct Gram {
+    /// moved[slot]: one bit per axis that is a column.
+    moved: Vec<u8>,
+    /// The number of columns.
+    columns: usize,
+    /// Row p's entries are `start[p]..start[p + 1]` of the vectors below.
+    start: Vec<usize>,
+    /// Each entry's column.
+    column: Vec<usize>,
+    /// Each entry's source: the place of its part in the scaled rows' buffer, and the axis.
+    source: Vec<(usize, usize)>,
+    /// G's entries times the column scale s (so G'ᵀ G' has a unit diagonal).
+    g: Vec<f64>,
+    /// Ŵ per row (relative weights, or ones when their range is too wide).
+    weight: Vec<f64>,
+    /// s² per column: 1/Hₐₐ.
+    scale2: Vec<f64>,
+    /// A buffer of [`fill`](Gram::fill): √(1/m) per slot, then s per column.
+    root: Vec<f64>,
+}
+
+/// The moved axes of every slot: `parts` are the scaled rows' parts (slot, J̃ᵢ) of the
+/// block's rows, given as ranges of `parts`.
+fn moved_axes(parts: &[(usize, [f64; 3])], rows: &[std::ops::Range<usize>], inverse_mass: &[f64]) -> Vec<u8> {
+    let mut moved = vec![0u8; inverse_mass.len()];
+    for range in rows {
+        for (b, j) in &parts[range.clone()] {
+            if inverse_mass[*b] != 0.0 {
+                moved[*b] |= u8::from(j[0] != 0.0) | (u8::from(j[1] != 0.0) << 1) | (u8::from(j[2] != 0.0) << 2);
+            }
+        }
+    }
+    moved
+}
+
+impl Gram {
+    /// G of the block rows whose parts are `parts[rows[p]]` (places in the scaled rows'
+    /// buffer), with the slots' `inverse_mass` and the rows' weights λₖ/λ̃ₖ; `None` when a
+    /// column's scale is not a normal number or a weight is not finite.
+    pub(crate) fn new(
+        parts: &[(usize, [f64; 3])],
+        rows: &[std::ops::Range<usize>],
+        inverse_mass: &[f64],
+        weight: &[f64],
+        weight_range: f64,
+    ) -> Option<Gram> {
+        let moved = moved_axes(parts, rows, inverse_mass);
+        // Columns numbered slot by slot, axis by axis.
+        let mut first = Vec::with_capacity(moved.len());
+        let mut columns = 0;
+        for m in &moved {
+            first.push(columns);
+            columns += m.count_ones() as usize;
+        }
+        let mut start = Vec::with_capacity(rows.len() + 1);
+        let (mut column, mut source) = (Vec::new(), Vec::new());
+        for range in rows {
+            start.push(column.len());
+            for (place, (b, _)) in range.clone().zip(&parts[range.clone()]) {
+                let bits = moved[*b];
+                if inverse_mass[*b] == 0.0 {
+                    continue;
+                }
+                let mut at = first[*b];
+                for axis in 0..3 {
+                    if bits & (1 << axis) != 0 {
+                        column.push(at);
+                        source.push((place, axis));
+                        at += 1;
+                    }
+                }
+            }
+        }
+        start.push(column.len());
+        let mut gram = Gram {
+            moved,
+            columns,
+            start,
+            g: vec![0.0; column.len()],
+            column,
+            source,
+            weight: Vec::new(),
+            scale2: Vec::new(),
+            root: Vec::new(),
+        };
+        gram.fill(parts, inverse_mass, weight, weight_range).then_some(gram)
+    }
+
+    /// The number of rows.
+    pub(crate) fn rows(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// Whether the rows `rows` of `parts` move the same components as those G was made from.
+    pub(crate) fn same_columns(
+        &self,
+        parts: &[(usize, [f64; 3])],
+        rows: &[std::ops::Range<usize>],
+        inverse_mass: &[f64],
+    ) -> bool {
+        moved_axes(parts, rows, inverse_mass) == self.moved
+    }
+
+    /// G's values from the rows' parts at the kept places (the same pattern), the masses and
+    /// weights; false when a column's scale is not a normal number or a weight not finite.
+    pub(crate) fn fill(
+        &mut self,
+        parts: &[(usize, [f64; 3])],
+        inverse_mass: &[f64],
+        weight: &[f64],
+        weight_range: f64,
+    ) -> bool {
+        let n = self.rows();
+        // Ŵ as `solve::Regularised` weighs the rows: relative to the largest, ones when
+        // their range leaves what ε·Ŵ² would see (kept here for the same minimum).
+        let top = weight.iter().fold(0.0f64, |m, w| m.max(w.abs()));
+        let relative = |p: usize| weight[p] / top;
+        let weighted = weight.len() == n && (0..n).all(|p| relative(p).is_finite() && relative(p) >= weight_range);
+        self.weight.clear();
+        self.weight.extend((0..n).map(|p| if weighted { relative(p) } else { 1.0 }));
+        // √(1/m) per slot once, 1/Ŵ per row once: the loop over the entries multiplies only.
+        let mut root = std::mem::take(&mut self.root);
+        root.clear();
+        root.extend(inverse_mass.iter().map(|w| w.sqrt()));
+        let mut diagonal = std::mem::take(&mut self.scale2);
+        diagonal.clear();
+        diagonal.resize(self.columns, 0.0);
+        for p in 0..n {
+            let inverse = 1.0 / self.weight[p];
+            let (from, to) = (self.start[p], self.start[p + 1]);
+            for ((g, &(place, axis)), &c) in
+                self.g[from..to].iter_mut().zip(&self.source[from..to]).zip(&self.column[from..to])
+            {
+                let (slot, j) = &parts[place];
+                *g = j[axis] * root[*slot] * inverse;
+                diagonal[c] += *g * *g;
+            }
+        }
+        // s = 1/√Hₐₐ into `root` (now per column), s² = 1/Hₐₐ kept.
+        root.clear();
+        root.extend(diagonal.iter().map(|d| 1.0 / d.sqrt()));
+        for d in diagonal.iter_mut() {
+            *d = 1.0 / *d;
+        }
+        self.scale2 = diagonal;
+        let mut finite = self.scale2.iter().all(|s| s.is_normal());
+        for (g, &c) in self.g.iter_mut().zip(&self.column) {
+            *g *= root[c];
+            finite &= g.is_finite();
+        }
+        self.root = root;
+        finite
+    }
+
+    /// The pairs of columns whose products H sums, in the order [`assemble`](Gram::assemble)
+    /// sums them: row by row, each pair of its entries once.
+    fn pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        (0..self.rows()).flat_map(move |p| {
+            let (from, to) = (self.start[p], self.start[p + 1]);
+            (from..to).flat_map(move |e| (e..to).map(move |f| (self.column[e], self.column[f])))
+        })
+    }
+
+    /// H' = G'ᵀ G' (unit diagonal) into `values` at `targets` (from
+    /// [`pairs`](Gram::pairs)'s analysis).
+    fn assemble(&self, values: &mut [f64], targets: &[usize]) {
+        values.fill(0.0);
+        let mut t = 0;
+        for p in 0..self.rows() {
+            let (from, to) = (self.start[p], self.start[p + 1]);
+            for e in from..to {
+                let ge = self.g[e];
+                for f in e..to {
+                    // Two entries of a row on one component: their cross term twice.
+                    let twice = if e != f && self.column[e] == self.column[f] { 2.0 } else { 1.0 };
+                    values[targets[t]] += twice * ge * self.g[f];
+                    t += 1;
+                }
+            }
+        }
+    }
+
+    /// y = G'ᵀ x (columns from rows).
+    fn transpose_mul(&self, x: &[f64], y: &mut Vec<f64>) {
+        y.clear();
+        y.resize(self.columns, 0.0);
+        for (p, &xp) in x.iter().enumerate() {
+            for e in self.start[p]..self.start[p + 1] {
+                y[self.column[e]] += self.g[e] * xp;
+            }
+        }
+    }
+
+    /// y = G' x (rows from columns).
+    fn mul(&self, x: &[f64], y: &mut Vec<f64>) {
+        y.clear();
+        y.extend(
+            (0..self.rows())
+                .map(|p| (self.start[p]..self.start[p + 1]).map(|e| self.g[e] * x[self.column[e]]).sum::<f64>()),
+        );
+    }
+}
+
+/// The factor of H' = G'ᵀ G' of a [`Gram`], and what its solves need.
+#[derive(Clone, Debug)]
+pub(crate) struct BodySpace {
+    gram: Gram,
+    factor: SparseFactor,
+    /// For each pair of [`Gram::pairs`], the place in `factor` it is summed into.
+    targets: Vec<usize>,
+    /// The block rows with a visible part in the null space.
+    null_rows: Vec<usize>,
+    /// G's values the factor was made from (a stale factor serves while G stays near them).
+    factored: Vec<f64>,
+    /// ẑ of the last minimum norm (μ = Ŵ⁻¹ G' ẑ): a warm start for the next.
+    last: Vec<f64>,
+}
+
+/// Buffers of [`BodySpace::minimum_norm`].
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BodySpaceWork {
+    residual: Vec<f64>,
+    step: Vec<f64>,
+    trial: Vec<f64>,
+    ax: Vec<f64>,
+    rows: Vec<f64>,
+    columns: Vec<f64>,
+    solved: Vec<f64>,
+    /// ẑ of the last pseudo-inverse application.
+    z: Vec<f64>,
+    sparse: SparseWork,
+}
+
+/// How a [`BodySpace::minimum_norm`] ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Iterated {
+    /// The pseudo-inverse applications (two substitutions each).
+    pub solves: usize,
+    /// Whether the residual reached the rounding of its own evaluation.
+    pub converged: bool,
+    /// Whether the residual is within the consistency bound.
+    pub consistent: bool,
+}
+
+/// Thresholds of [`BodySpace::minimum_norm`], from `numeric::solve`'s settings.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Bounds {
+    /// The residual allowed beside the rounding, relative to max |rhs|.
+    pub consistency: f64,
+    /// The rounding allowed, in ulps of max |Ã|·max |μ| (Ã's diagonal is one).
+    pub rounding: f64,
+    /// The most pseudo-inverse applications.
+    pub solves: usize,
+}
+
+/// The residual counts as at its rounding within this many ulps of max|μ| + max|rhs| (Ã's
+/// entries are at most one): a row of a grid sums a dozen terms, each rounded once.
+const CONVERGED_ULPS: f64 = 64.0;
+/// A residual within this many ulps (of the same) is at its rounding however the iteration
+/// ended: stopped improving there, or a warm start already there.
+const ROUNDING_ULPS: f64 = 4.0 * CONVERGED_ULPS;
+
+impl BodySpace {
+    /// The factor of `gram`'s H'; `None` when a pivot falls to `pivot_floor` (G lacks full
+    /// column rank: some body is not held, the rows' rank is below the components') or its
+    /// pattern is refused.
+    pub(crate) fn new(gram: Gram, pivot_floor: f64, null_share: f64) -> Option<BodySpace> {
+        let (factor, targets) = SparseFactor::analyse(gram.columns, gram.pairs())?;
+        let mut body =
+            BodySpace { gram, factor, targets, null_rows: Vec::new(), factored: Vec::new(), last: Vec::new() };
+        body.refactor(pivot_floor, null_share).then_some(body)
+    }
+
+    /// The factor's flops (for the caller's cost bounds).
+    pub(crate) fn flops(&self) -> f64 {
+        self.factor.flops()
+    }
+
+    /// G, for refilling in place.
+    pub(crate) fn gram_mut(&mut self) -> &mut Gram {
+        &mut self.gram
+    }
+
+    /// The largest change of G' (unit columns) since the factor was made: a stale factor's
+    /// relative error is about twice it, so each application of its pseudo-inverse shrinks
+    /// the error by about that times H's condition.
+    pub(crate) fn change(&self) -> f64 {
+        self.gram.g.iter().zip(&self.factored).fold(0.0f64, |m, (a, b)| m.max((a - b).abs()))
+    }
+
+    /// The block rows with a visible part in the null space (as of the last factorisation).
+    pub(crate) fn null_rows(&self) -> &[usize] {
+        &self.null_rows
+    }
+
+    /// H' from G's current values, factored, and the null space's rows found: false when a
+    /// pivot falls to `pivot_floor`.
+    pub(crate) fn refactor(&mut self, pivot_floor: f64, null_share: f64) -> bool {
+        self.gram.assemble(self.factor.values_mut(), &self.targets);
+        if !self.factor.factor(pivot_floor) {
+            return false;
+        }
+        self.factored.clone_from(&self.gram.g);
+        // A null vector of Ã in ν = Ŵ μ: y − G' H'⁻¹ G'ᵀ y (the projection onto null G'ᵀ)
+        // from a fixed random y; rows with a visible part in it are the redundant ones.
+        let n = self.gram.rows();
+        let mut rng = super::random::Rng::new(0x5EED_F00D);
+        let y: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let (mut columns, mut solved, mut back) = (Vec::new(), Vec::new(), Vec::new());
+        self.gram.transpose_mul(&y, &mut columns);
+        self.factor.substitute_into(&columns, &mut SparseWork::default(), &mut solved);
+        self.gram.mul(&solved, &mut back);
+        let null: Vec<f64> = y.iter().zip(&back).zip(&self.gram.weight).map(|((y, b), w)| (y - b) / w).collect();
+        let peak = null.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        self.null_rows.clear();
+        self.null_rows.extend((0..n).filter(|&p| null[p].abs() > null_share * peak));
+        true
+    }
+
+    /// step = Ŵ⁻¹ G' H'⁻¹ S² H'⁻¹ G'ᵀ Ŵ⁻¹ r: the weighted pseudo-inverse of Ã applied to r
+    /// (see the file's note; S² = 1/diag H undoes the column scaling between the solves).
+    fn pseudo_inverse(&self, r: &[f64], work: &mut BodySpaceWork) {
+        let BodySpaceWork { step, rows, columns, solved, z, sparse, .. } = work;
+        rows.clear();
+        rows.extend(r.iter().zip(&self.gram.weight).map(|(r, w)| r / w));
+        self.gram.transpose_mul(rows, columns);
+        self.factor.substitute_into(columns, sparse, solved);
+        for (x, s) in solved.iter_mut().zip(&self.gram.scale2) {
+            *x *= s;
+        }
+        self.factor.substitute_into(solved, sparse, z);
+        self.gram.mul(z, step);
+        for (x, w) in step.iter_mut().zip(&self.gram.weight) {
+            *x /= w;
+        }
+    }
+
+    /// ax = Ã x = Ŵ G' S⁻² G'ᵀ Ŵ x.
+    fn a_mul(&self, x: &[f64], ax: &mut Vec<f64>, rows: &mut Vec<f64>, columns: &mut Vec<f64>) {
+        rows.clear();
+        rows.extend(x.iter().zip(&self.gram.weight).map(|(x, w)| x * w));
+        self.gram.transpose_mul(rows, columns);
+        for (x, s) in columns.iter_mut().zip(&self.gram.scale2) {
+            *x /= s;
+        }
+        self.gram.mul(columns, ax);
+        for (x, w) in ax.iter_mut().zip(&self.gram.weight) {
+            *x *= w;
+        }
+    }
+
+    /// The minimum-norm μ of Ã μ = `rhs` into `mu`: μ₀ = 0, μₖ₊₁ = μₖ + Ã⁺(rhs − Ã μₖ) with
+    /// the pseudo-inverse through the factor, until the residual is at its rounding, stops
+    /// halving, or `bounds.solves` are spent; with how it ended. With the factor of this
+    /// G one application lands within rounding times H's condition, the next at rounding;
+    /// with a factor of a nearby G (stale) each application shrinks the error by about
+    /// the factor's relative error times that condition. `warm`: start from μ₀ = Ŵ⁻¹ G' ẑ
+    /// with the ẑ of the last call instead of 0 (in the subspace of this G's minimum norm
+    /// whatever ẑ is, so the limit is the same; a grid at rest starts at its answer).
+    pub(crate) fn minimum_norm(
+        &mut self,
+        rhs: &[f64],
+        bounds: &Bounds,
+        work: &mut BodySpaceWork,
+        mu: &mut Vec<f64>,
+        warm: bool,
+    ) -> Iterated {
+        let n = self.gram.rows();
+        let mut residual = std::mem::take(&mut work.residual);
+        let mut z = std::mem::take(&mut self.last);
+        let size = rhs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let mut left = f64::INFINITY;
+        if warm && z.len() == self.gram.columns {
+            let BodySpaceWork { ax, rows, columns, .. } = work;
+            self.gram.mul(&z, mu);
+            for (x, w) in mu.iter_mut().zip(&self.gram.weight) {
+                *x /= w;
+            }
+            self.a_mul(mu, ax, rows, columns);
+            left = rhs.iter().zip(ax.iter()).fold(0.0f64, |m, (r, a)| m.max((r - a).abs()));
+            residual.clear();
+            residual.extend(rhs.iter().zip(ax.iter()).map(|(r, a)| r - a));
+        }
+        if !(left.is_finite() && left <= size) {
+            // Cold: μ₀ = 0.
+            z.clear();
+            z.resize(self.gram.columns, 0.0);
+            mu.clear();
+            mu.resize(n, 0.0);
+            residual.clear();
+            residual.extend_from_slice(rhs);
+            left = size;
+        }
+        let top = mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        // A warm start within the bound the iteration stops at is an answer (cold: only when
+        // the right-hand side is zero). Not within the looser bound it may end at: a grid at
+        // rest starts a few hundred ulps off (its c terms move by rounding), and one more
+        // application takes it to one or two.
+        let (mut solves, mut converged) = (0, left <= CONVERGED_ULPS * f64::EPSILON * (top + size));
+        while solves < bounds.solves && !converged {
+            self.pseudo_inverse(&residual, work);
+            let BodySpaceWork { step, trial, ax, rows, columns, .. } = work;
+            trial.clear();
+            trial.extend(mu.iter().zip(step.iter()).map(|(m, s)| m + s));
+            self.a_mul(trial, ax, rows, columns);
+            let now = rhs.iter().zip(ax.iter()).fold(0.0f64, |m, (r, a)| m.max((r - a).abs()));
+            solves += 1;
+            let accept = |z: &mut Vec<f64>, step: &[f64]| z.iter_mut().zip(step).for_each(|(z, s)| *z += s);
+            if !now.is_finite() || now > 0.5 * left {
+                // No longer halving: the last iterate is at its rounding (or this one worse).
+                if now < left && now.is_finite() {
+                    std::mem::swap(mu, trial);
+                    accept(&mut z, &work.z);
+                    left = now;
+                }
+                break;
+            }
+            std::mem::swap(mu, trial);
+            accept(&mut z, &work.z);
+            residual.clear();
+            residual.extend(rhs.iter().zip(ax.iter()).map(|(r, a)| r - a));
+            left = now;
+            let top = mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            converged = left <= CONVERGED_ULPS * f64::EPSILON * (top + size);
+        }
+        work.residual = residual;
+        self.last = z;
+        let top = mu.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let rounding = bounds.rounding * f64::EPSILON * top;
+        let consistent =
+            (left <= bounds.consistency * size + rounding || size == 0.0) && mu.iter().all(|x| x.is_finite());
+        // Stopped by no longer halving: at the rounding too when within a few times its bound.
+        converged |= left <= ROUNDING_ULPS * f64::EPSILON * (top + size);
+        Iterated { solves, converged, consistent }
+    }
+}
