@@ -138,7 +138,7 @@ fn the_command_line_names_the_redundant_rows_and_stops_on_the_contradicting_ones
     let (code, stdout, stderr) = cli("1.0", &["solve"]);
     assert_eq!(code, Some(0), "{stdout}{stderr}");
     assert!(stdout.contains("minimum-norm"), "{stdout}");
-    let line = stdout.lines().find(|l| l.contains("regularised sparse solves")).unwrap_or_default();
+    let line = stdout.lines().find(|l| l.contains("sparse solves")).unwrap_or_default();
     assert!(line.contains("`h1_1`") && line.contains("`h1_1_twin`") && line.contains("1712 rows"), "{stdout}");
     let (code, stdout, stderr) = cli("1.5", &["simulate", "--steps", "3"]);
     assert_eq!(code, Some(2), "a simulation that stopped: {stdout}{stderr}");

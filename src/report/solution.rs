@@ -317,7 +317,7 @@ pub fn sentence(system: &System, diagnostic: &Diagnostic) -> String {
             list(constraints)
         ),
         Diagnostic::RedundantSparse { constraints, size, solves } => format!(
-            "redundant or singular constraints ({}) in a block of {size} rows, past the {MAX_DENSE_ROWS} of the dense decomposition: rank not computed; consistent: the λ of least norm √(Σ λ²), λ for C/κ, by {solves} regularised sparse solves",
+            "redundant or singular constraints ({}) in a block of {size} rows, past the {MAX_DENSE_ROWS} of the dense decomposition: rank not computed; consistent: the λ of least norm √(Σ λ²), λ for C/κ, by {solves} sparse solves",
             list(constraints)
         ),
         Diagnostic::Inconsistent { constraints, rank, size, condition, residual } => format!(
