@@ -33,7 +33,8 @@
 use super::banded::{forward_row, tridiagonal_backward, tridiagonal_factor_row, tridiagonal_mul_row};
 use super::rows::Rows;
 use super::solve::{
-    Diagnostic, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, row_sound, scale_row,
+    MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force, b_of,
+    out_of_range, row_sound, scale_row,
 };
 use super::vector::dot;
 
@@ -357,24 +358,10 @@ impl Chain {
         force.resize(rows.inverse_mass.len(), [0.0; 3]);
         for (q, (l, &m)) in out.lambda.iter_mut().zip(&self.y).enumerate() {
             *l = (m * self.jacobi[q]) / self.norm[q];
-            if m != 0.0 && !l.is_normal() {
-                diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: *l });
-            }
-            for (body, j) in &self.parts[self.start[q]..self.start[q + 1]] {
-                let f = &mut force[*body];
-                f[0] += m * j[0];
-                f[1] += m * j[1];
-                f[2] += m * j[2];
-            }
+            out_of_range(q, m, *l, &mut diagnostics);
+            add_row_force(force, m, &self.parts[self.start[q]..self.start[q + 1]]);
         }
-        out.acceleration.clear();
-        out.acceleration.extend(
-            rows.force
-                .iter()
-                .zip(force.iter())
-                .zip(&rows.inverse_mass)
-                .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
-        );
+        accelerations_into(rows, force, &mut out.acceleration);
         out.active.clear();
         out.active.resize(k, true);
         out.diagnostics = diagnostics;

@@ -1369,6 +1369,38 @@ fn finish(
     out
 }
 
+/// The diagnostic of row `q` whose λ = λ̃/(‖J‖√Â) left the normal f64 range while its μ
+/// did not: λ can leave it when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310) although the force
+/// λ̃ J̃ is exact, so say so rather than print a wrong 0 or ∞.
+pub(super) fn out_of_range(q: usize, m: f64, l: f64, diagnostics: &mut Vec<Diagnostic>) {
+    if m != 0.0 && !l.is_normal() {
+        diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: l });
+    }
+}
+
+/// Adds one row's force μ J̃ᵢ to each of its bodies: Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ, no raw J, no
+/// overflow; called row by row, each row's parts in order.
+pub(super) fn add_row_force(constraint_force: &mut [[f64; 3]], m: f64, parts: &[(usize, [f64; 3])]) {
+    for (body, j) in parts {
+        let f = &mut constraint_force[*body];
+        f[0] += m * j[0];
+        f[1] += m * j[1];
+        f[2] += m * j[2];
+    }
+}
+
+/// Each body's acceleration (Fᵢ + fᵢ) wᵢ from the applied and the constraint forces.
+pub(super) fn accelerations_into(rows: &Rows, constraint_force: &[[f64; 3]], acceleration: &mut Vec<[f64; 3]>) {
+    acceleration.clear();
+    acceleration.extend(
+        rows.force
+            .iter()
+            .zip(constraint_force)
+            .zip(&rows.inverse_mass)
+            .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
+    );
+}
+
 /// [`finish`] into `out`'s buffers (its contacts are left to the caller).
 fn finish_into(
     rows: &Rows,
@@ -1388,22 +1420,6 @@ fn finish_into(
     constraint_force.clear();
     constraint_force.resize(n_bodies, [0.0; 3]);
     debug_assert_eq!(index.len(), mu.len());
-    // λ = λ̃/(‖J‖√Â) can leave the f64 range when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310)
-    // although the force λ̃ J̃ is exact: say so rather than print a wrong 0 or ∞.
-    let out_of_range = |q: usize, m: f64, l: f64, diagnostics: &mut Vec<Diagnostic>| {
-        if m != 0.0 && !l.is_normal() {
-            diagnostics.push(Diagnostic::LambdaOutOfRange { constraint: q, lambda: l });
-        }
-    };
-    // Σₖ λₖ Jₖᵢ = Σₖ λ̃ₖ J̃ₖᵢ: no raw J, no overflow. Row by row, each row's parts in order.
-    let add = |constraint_force: &mut [[f64; 3]], m: f64, parts: &[(usize, [f64; 3])]| {
-        for (body, j) in parts {
-            let f = &mut constraint_force[*body];
-            f[0] += m * j[0];
-            f[1] += m * j[1];
-            f[2] += m * j[2];
-        }
-    };
     if index.len() == k {
         // Every row takes part (`index` is 0..k, as in every cached solve): one pass along
         // the scaled parts, the same numbers in the same order as the loop below.
@@ -1411,24 +1427,17 @@ fn finish_into(
         for (q, ((l, &m), to)) in lambda.iter_mut().zip(mu).zip(&scaled.start[1..]).enumerate() {
             *l = scaled.unscale(q, m);
             out_of_range(q, m, *l, &mut diagnostics);
-            add(constraint_force, m, &scaled.parts[from..*to]);
+            add_row_force(constraint_force, m, &scaled.parts[from..*to]);
             from = *to;
         }
     } else {
         for (&q, &m) in index.iter().zip(mu) {
             lambda[q] = scaled.unscale(q, m);
             out_of_range(q, m, lambda[q], &mut diagnostics);
-            add(constraint_force, m, scaled.jacobian(q));
+            add_row_force(constraint_force, m, scaled.jacobian(q));
         }
     }
-    out.acceleration.clear();
-    out.acceleration.extend(
-        rows.force
-            .iter()
-            .zip(constraint_force.iter())
-            .zip(&rows.inverse_mass)
-            .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
-    );
+    accelerations_into(rows, constraint_force, &mut out.acceleration);
     out.active.clear();
     out.active.extend(
         scaled
