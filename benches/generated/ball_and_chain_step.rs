@@ -4977,19 +4977,11 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
     s
 }
 
-/// a·b over the components `c` codes (two bits per component, as `ENTRY_CODE`: 0 a structural
-/// zero, left out; 2 a = +1, the product b; 3 a = −1, the product −b; 1 a·b), summed from the
-/// first of them, as the library's `velocity::dot_masked` sums them (1·b = b and (−1)·b = −b
-/// exactly: the same number, zero's sign included). Written out component by component (no
-/// loop), so that with `c` a constant every test folds away.
+/// Σ_d term(d) over the first D components, the terms `None` left out, summed from the first
+/// kept one (0 when none is), written out component by component: `dot_coded`'s and
+/// `square_coded`'s sum.
 #[inline(always)]
-fn dot_coded<const D: usize>(c: u8, a: &[f64; D], b: &[f64; D]) -> f64 {
-    let term = |d: usize| match c >> (2 * d) & 3 {
-        0 => None,
-        1 => Some(a[d] * b[d]),
-        2 => Some(b[d]),
-        _ => Some(-b[d]),
-    };
+fn sum_kept<const D: usize>(term: impl Fn(usize) -> Option<f64>) -> f64 {
     let add = |s: Option<f64>, x: Option<f64>| match (s, x) {
         (Some(s), Some(x)) => Some(s + x),
         (None, x) => x,
@@ -5005,6 +4997,22 @@ fn dot_coded<const D: usize>(c: u8, a: &[f64; D], b: &[f64; D]) -> f64 {
     s.unwrap_or(0.0)
 }
 
+/// a·b over the components `c` codes (two bits per component, as `ENTRY_CODE`: 0 a structural
+/// zero, left out; 2 a = +1, the product b; 3 a = −1, the product −b; 1 a·b), summed from the
+/// first of them, as the library's `velocity::dot_masked` sums them (1·b = b and (−1)·b = −b
+/// exactly: the same number, zero's sign included). Written out component by component (no
+/// loop), so that with `c` a constant every test folds away.
+#[inline(always)]
+fn dot_coded<const D: usize>(c: u8, a: &[f64; D], b: &[f64; D]) -> f64 {
+    let term = |d: usize| match c >> (2 * d) & 3 {
+        0 => None,
+        1 => Some(a[d] * b[d]),
+        2 => Some(b[d]),
+        _ => Some(-b[d]),
+    };
+    sum_kept::<D>(term)
+}
+
 /// |a|² over the components `c` codes (as `dot_coded`; a component ±1 adds 1 exactly), summed
 /// from the first of them, written out component by component.
 #[inline(always)]
@@ -5014,19 +5022,7 @@ fn square_coded<const D: usize>(c: u8, a: &[f64; D]) -> f64 {
         1 => Some(a[d] * a[d]),
         _ => Some(1.0),
     };
-    let add = |s: Option<f64>, x: Option<f64>| match (s, x) {
-        (Some(s), Some(x)) => Some(s + x),
-        (None, x) => x,
-        (s, None) => s,
-    };
-    let mut s = term(0);
-    if D > 1 {
-        s = add(s, term(1));
-    }
-    if D > 2 {
-        s = add(s, term(2));
-    }
-    s.unwrap_or(0.0)
+    sum_kept::<D>(term)
 }
 
 /// uᵢ += s·Jᵢ over the components `c` codes (as `dot_coded`: none for a structural zero, s for
