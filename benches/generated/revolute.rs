@@ -258,7 +258,7 @@ pub fn external_torques(s: &State) -> [f64; 2] {
 /// Per rigid body, in file order (`a`, `b`).
 pub fn applied_torques(s: &State) -> [f64; 2] {
     let _ = s;
-    [0.0, 0.0]
+    [0.2, 0.0]
 }
 
 /// 1/I of each rigid body.
