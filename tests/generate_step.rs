@@ -18,7 +18,7 @@
 //! step agrees **within round-off**: its solve is the module's port of `numeric::solve`
 //! (`solve_rows`), not the library's factorisations; 17 of its 56 files stay bitwise (`hard/huge`
 //! leaves f64's range at the library's first step), the others part by at most 5.2e-11 of the
-//! scene's scale after 1 000 steps (measured 2026-12-06 04:40 UTC, the 2D joints from random
+//! scene's scale after 1 000 steps (measured 2026-12-06 04:25 UTC, the 2D joints from random
 //! states under their scenes' forces: the pulley; the rigid 20-link chain 8.1e-12, the ball
 //! joint 4.8e-13, the 5-link chain 3.8e-13, the hinge 2.9e-13, the rest below 2.4e-13),
 //! asserted at 1e-9, with two files apart (see the test). The count was 47 in an earlier
