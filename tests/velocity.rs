@@ -170,6 +170,71 @@ fn runs_are_deterministic() {
 }
 
 #[test]
+fn huge_and_tiny_scenes_run_in_a_power_of_two_unit_with_every_solver() {
+    // `constraints/hard/huge.toml` and `tiny.toml` are `constraints/pendulum.toml` with every
+    // length scaled by l = 1e155 and 1e-150 (time unchanged). In metres the huge one's r·r =
+    // 1e310 overflows (C = ∞ − ∞: the velocity solvers stopped at step 0) and the tiny one's
+    // drift is subnormal (|C| came out 1e-305 … 1e-315, its last bits lost). Each solver runs
+    // them in a length unit of a power of two near l, where its steps are the unit
+    // pendulum's scaled (they are linear in the lengths): the figures it reports, converted
+    // back, are the unit pendulum's times the power of l of their dimension, to rounding (l
+    // itself is not a power of two).
+    let unit = scenario("constraints/pendulum.toml");
+    for (path, l) in [("constraints/hard/huge.toml", 1e155), ("constraints/hard/tiny.toml", 1e-150)] {
+        let s = scenario(path);
+        for solver in Solver::ALL {
+            let settings = Settings { steps: 300, ..Settings::new(solver, 1.0 / 60.0, 5.0) };
+            let (mut lambda, mut lambda_unit) = (Vec::new(), Vec::new());
+            let run = s
+                .simulate_velocity(settings, &mut |f| {
+                    lambda.push(f.lambda[0]);
+                    Ok(())
+                })
+                .unwrap_or_else(|f| panic!("{path}, {}: {}", solver.name(), f.error));
+            let reference = unit
+                .simulate_velocity(settings, &mut |f| {
+                    lambda_unit.push(f.lambda[0]);
+                    Ok(())
+                })
+                .expect("the unit pendulum runs");
+            let name = format!("{path}, {}", solver.name());
+            assert_ne!(run.unit_exponent, 0, "{name}: ran in a unit near l");
+            assert_eq!(reference.unit_exponent, 0);
+            let close = |x: f64, u: f64, what: &str| {
+                assert!(
+                    (x - u).abs() <= 1e-9 * u.abs().max(1e-3),
+                    "{name}: {what} {x:e} against the unit pendulum's {u:e}"
+                );
+            };
+            // C/κ = (r·r − l²)/2 has degree 2 (∞ where that is past f64's range, as for the
+            // huge pendulum's |Ċ| ≈ 1e308); the energy balance's ratio is unit-free.
+            for (x, u, what) in [
+                (run.max_abs_c, reference.max_abs_c, "max |C|/l²"),
+                (run.max_abs_c_dot, reference.max_abs_c_dot, "max |Ċ|/l²"),
+            ] {
+                if x.is_finite() {
+                    close(x / l / l, u, what);
+                } else {
+                    assert!(u * l > f64::MAX / l, "{name}: {what} ∞, the unit pendulum's {u:e}");
+                }
+            }
+            close(run.energy_rel_drift.expect("reported"), reference.energy_rel_drift.expect("reported"), "energy");
+            for (x, u) in run.final_position[0]
+                .iter()
+                .chain(&run.final_velocity[0])
+                .zip(reference.final_position[0].iter().chain(&reference.final_velocity[0]))
+            {
+                close(x / l, *u, "r/l, v/l");
+            }
+            // λ of `dot(r,r) = l^2`: the force λ r has dimension of a length, so λ is l⁰.
+            for (x, u) in lambda.iter().zip(&lambda_unit) {
+                close(*x, *u, "λ");
+            }
+        }
+    }
+}
+
+#[test]
 fn catto_two_particles_stability_limits() {
     // h = 1/60, ζ = 0, one substep, one iteration, rows in file order (DESIGN, Velocity level).
     let s = scenario("constraints/solvers/two_particles.toml");

@@ -220,6 +220,31 @@ impl Unit {
     }
 }
 
+/// A recorded state of a run in another unit, converted back to the caller's for an
+/// observer: positions, velocities (the bodies' slots; a run with rigid bodies keeps the
+/// scene's unit), rows and λ. The buffers are reused from step to step.
+#[derive(Default)]
+pub struct Shown {
+    pub q: Vec<[f64; 3]>,
+    pub v: Vec<[f64; 3]>,
+    pub rows: Rows,
+    pub lambda: Vec<f64>,
+}
+
+impl Shown {
+    /// `q`, `v`, `rows` and `lambda` (in `unit`) into the caller's unit.
+    pub fn convert(&mut self, unit: &Unit, q: &[[f64; 3]], v: &[[f64; 3]], rows: &Rows, lambda: &[f64]) {
+        self.q.clear();
+        self.q.extend(q.iter().map(|x| unit.vector(*x)));
+        self.v.clear();
+        self.v.extend(v.iter().map(|x| unit.vector(*x)));
+        self.rows.clone_from(rows);
+        unit.rows(&mut self.rows);
+        self.lambda.clear();
+        self.lambda.extend(lambda.iter().enumerate().map(|(k, l)| unit.lambda(k, *l)));
+    }
+}
+
 /// The independent blocks of a scene: per body and per row the index of its block (bodies
 /// joined, transitively, by the rows acting on both; a body no row acts on is a block of its
 /// own). Rows with no body get `usize::MAX`.

@@ -19,7 +19,7 @@
 
 use super::dynamics::{Dynamics, SimError, slot_name};
 use super::integrate::{Integrator, Stepper, Vectors, add_scaled};
-use super::rescale::Unit;
+use super::rescale::{Shown, Unit};
 use super::rotation::{fold, kick};
 use super::rows::Rows;
 use super::solve::CONTACT_TOLERANCE;
@@ -354,14 +354,6 @@ pub struct Simulation<'s> {
     has_inequalities: bool,
 }
 
-#[derive(Default)]
-struct Shown {
-    q: Vec<[f64; 3]>,
-    v: Vec<[f64; 3]>,
-    rows: Rows,
-    lambda: Vec<f64>,
-}
-
 impl<'s> Simulation<'s> {
     pub fn new(mut dynamics: Dynamics<'s>, env: &Env, settings: Settings) -> Result<Simulation<'s>, SimError> {
         settings.validate().map_err(SimError::Settings)?;
@@ -625,14 +617,7 @@ impl<'s> Simulation<'s> {
             },
             Some(u) => {
                 let shown = &mut self.shown;
-                shown.q.clear();
-                shown.q.extend(self.q.iter().map(|x| u.vector(*x)));
-                shown.v.clear();
-                shown.v.extend(self.v.iter().map(|x| u.vector(*x)));
-                shown.rows.clone_from(rows);
-                u.rows(&mut shown.rows);
-                shown.lambda.clear();
-                shown.lambda.extend(lambda.iter().enumerate().map(|(q, l)| u.lambda(q, *l)));
+                shown.convert(u, &self.q, &self.v, rows, lambda);
                 Frame {
                     step: n,
                     time: t,

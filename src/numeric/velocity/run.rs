@@ -20,6 +20,7 @@
 use super::{Settings, Solver, Stepper, stability};
 use crate::expr::eval::Env;
 use crate::numeric::dynamics::{Dynamics, Remedy, SimError, slot_name};
+use crate::numeric::rescale::{Shown, Unit};
 use crate::numeric::rotation;
 use crate::numeric::simulate::{
     Failure, Frame, Sample, Summary, final_state, initial_state, time_dependent, work_scale,
@@ -49,13 +50,28 @@ pub fn run(
         ..Summary::default()
     };
     let (mut q, mut v, t0) = initial_state(system, env);
-    let result = settings
-        .validate()
-        .and_then(|()| run_inner(&mut dynamics, settings, &mut q, &mut v, t0, &mut summary, observe));
+    // A scene far from unit size runs in a power-of-two length unit (`Dynamics::choose_unit`,
+    // as `numeric::simulate` does): the steps are linear in the lengths, so the run is the
+    // scene's, scaled exactly, and everything reported is converted back.
+    let mut unit = None;
+    let result = settings.validate().and_then(|()| {
+        unit = dynamics.choose_unit(env)?;
+        if let Some(u) = &unit {
+            (q, v, _) = initial_state(system, &u.to_unit(env));
+            summary.unit_exponent = u.exponent;
+        }
+        run_inner(&mut dynamics, settings, unit.as_ref(), &mut q, &mut v, t0, &mut summary, observe)
+    });
     summary.wall_seconds = start.elapsed().as_secs_f64();
     summary.evaluations = dynamics.evaluations;
     // 3D rigid bodies: the last step's rotation vectors into the orientations reported.
     dynamics.rebase(&mut q);
+    if let Some(u) = &unit {
+        // A run with rigid bodies keeps the scene's unit: every slot here is a body's.
+        for x in q.iter_mut().chain(v.iter_mut()) {
+            *x = u.vector(*x);
+        }
+    }
     summary.final_position.clone_from(&q);
     summary.final_velocity.clone_from(&v);
     summary.final_state = final_state(system, &q, &v, dynamics.orientations());
@@ -69,6 +85,7 @@ pub fn run(
 fn run_inner(
     dynamics: &mut Dynamics<'_>,
     s: Settings,
+    unit: Option<&Unit>,
     q: &mut Vec<[f64; 3]>,
     v: &mut Vec<[f64; 3]>,
     t0: f64,
@@ -76,6 +93,11 @@ fn run_inner(
     observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
 ) -> Result<(), SimError> {
     let system = dynamics.system();
+    // Numbers of the run (in its unit) → the caller's unit, for everything reported.
+    let row_back = |k: usize, x: f64| unit.map_or(x, |u| u.row_value(k, x));
+    let length_back = |x: f64| unit.map_or(x, |u| u.length(x));
+    let energy_back = |x: f64| unit.map_or(x, |u| u.energy(x));
+    let mut shown = Shown::default();
     let (q0, v0) = (q.clone(), v.clone());
     let mut stepper = Stepper::new(s, system.constraints.len(), q.len());
     let energy_reported = !time_dependent(system);
@@ -124,20 +146,21 @@ fn run_inner(
                     time: t,
                     solver: s.solver.name().into(),
                     constraint: system.constraints[k].name.clone(),
-                    value: row.value,
-                    distance: d,
-                    bound,
+                    value: row_back(k, row.value),
+                    distance: length_back(d),
+                    bound: length_back(bound),
                     remedy,
                 });
             }
+            let (value, rate) = (row_back(k, row.value), row_back(k, row.rate));
             if row.inequality {
-                c_max = c_max.max((-row.value).max(0.0));
-                if d <= touch && row.rate < 0.0 {
-                    c_dot_max = c_dot_max.max(-row.rate);
+                c_max = c_max.max((-value).max(0.0));
+                if d <= touch && rate < 0.0 {
+                    c_dot_max = c_dot_max.max(-rate);
                 }
             } else {
-                c_max = c_max.max(row.value.abs());
-                c_dot_max = c_dot_max.max(row.rate.abs());
+                c_max = c_max.max(value.abs());
+                c_dot_max = c_dot_max.max(rate.abs());
             }
         }
         summary.max_abs_c = summary.max_abs_c.max(c_max);
@@ -165,29 +188,48 @@ fn run_inner(
         let energy_error = (kinetic - kinetic0) - work;
         max_energy_error = max_energy_error.max(energy_error.abs());
         max_kinetic = max_kinetic.max(kinetic);
-        summary.max_kinetic = max_kinetic;
+        // The ratio is the same in any unit; the energies themselves may leave the f64 range
+        // in the caller's.
+        summary.max_kinetic = energy_back(max_kinetic);
+        let energy_error = energy_back(energy_error);
         summary.final_energy_error = energy_error;
         if n == 0 {
             scale0 = work_scale(&rows.force, bodies, length);
         }
         let scale = max_kinetic.max(scale0);
         summary.energy_rel_drift =
-            energy_reported.then(|| if scale > 0.0 { max_energy_error / scale } else { max_energy_error });
+            energy_reported.then(|| if scale > 0.0 { max_energy_error / scale } else { energy_back(max_energy_error) });
         if n.is_multiple_of(stride) || n == s.steps {
-            summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: q[..plotted].to_vec() });
+            let position = q[..plotted].iter().map(|x| unit.map_or(*x, |u| u.vector(*x))).collect();
+            summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position });
         }
         if n > 0 {
             stepper.lambda(&mut lambda);
         }
-        let frame = Frame {
-            step: n,
-            time: t,
-            position: q,
-            velocity: v,
-            orientations: dynamics.orientations(),
-            rows: &rows,
-            lambda: &lambda,
-            energy_error,
+        let frame = match unit {
+            None => Frame {
+                step: n,
+                time: t,
+                position: q,
+                velocity: v,
+                orientations: dynamics.orientations(),
+                rows: &rows,
+                lambda: &lambda,
+                energy_error,
+            },
+            Some(u) => {
+                shown.convert(u, q, v, &rows, &lambda);
+                Frame {
+                    step: n,
+                    time: t,
+                    position: &shown.q,
+                    velocity: &shown.v,
+                    orientations: &[],
+                    rows: &shown.rows,
+                    lambda: &shown.lambda,
+                    energy_error,
+                }
+            }
         };
         observe(&frame).map_err(SimError::Output)?;
         summary.steps = n;
