@@ -233,13 +233,28 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
         }
         tapes.push((Tape::compile(&system.graph, &roots, &syms).expect("compiles"), 0));
     }
-    // Shapes the random ones may miss: a square sum reading the previous result.
-    let square_sum = system.expression("(l + k)^2 + (k * l)^2").expect("expr");
-    tapes.push((Tape::compile(&system.graph, &[square_sum], &syms).expect("compiles"), 0));
+    // Shapes the random ones may miss: a square sum reading the previous result, a vector
+    // scaled by the previous result (plain and negated, as a force λ ∇C), two square sums
+    // side by side, dot products of three terms (the first product reading the previous
+    // result, or not), and the bead's force (7 inputs: the short input copy).
+    for text in [
+        "(l + k)^2 + (k * l)^2",
+        "((l + k) / m) * r",
+        "-(((l + k) / m) * r)",
+        "dot(r, r) * l + dot(v, v) * k",
+        "dot([l * k, m, t], r)",
+        "dot(u, r) * l",
+    ] {
+        let root = system.expression(text).expect("expr");
+        tapes.push((Tape::compile(&system.graph, &[root], &syms).expect("compiles"), 0));
+    }
     // Row tapes as simulations compile them (A and b of a chain, a rigid joint's rows), whose
     // step sequences the superinstructions were chosen from.
-    let files =
-        [include_str!("../benches/data/chain_10.toml"), include_str!("../constraints/rigid/door_two_hinges.toml")];
+    let files = [
+        include_str!("../benches/data/chain_10.toml"),
+        include_str!("../constraints/rigid/door_two_hinges.toml"),
+        include_str!("../constraints/bead_on_wire.toml"),
+    ];
     let mut graphs = Vec::new();
     for text in files {
         let d = derive(&load(text).expect("loads").system).expect("derives");
@@ -247,6 +262,8 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
         for dc in &d.constraints {
             sets.push(std::iter::once(dc.bias).chain(dc.jacobian.iter().map(|x| x.1)).collect());
         }
+        // The constraint forces (the bead's: λ r).
+        sets.extend(d.forces.iter().flatten().map(|f| vec![f.1]));
         for roots in sets {
             tapes.push((Tape::compile(&d.graph, &roots, &all_symbols(&d.graph)).expect("compiles"), graphs.len() + 1));
         }
@@ -278,6 +295,11 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
         "MulMulAddAMulAddCMulA",
         "SubMulAMulAddC",
         "MulAddCSubMulA",
+        "SqAddSq2",
+        "MulMulAddMulAddC",
+        "MulMulAddAMulAddC",
+        "MulA2",
+        "NegMulA2",
     ] {
         assert!(listed.contains(&format!("op: {kind},")), "no tape runs the step {kind}");
     }
@@ -429,14 +451,26 @@ fn batch_outputs_that_are_inputs_constants_or_repeated_agree() {
     for text in ["r", "dot(r, r)", "2", "dot(r, r)", "r", "sqrt(dot(r, r)) * r", "dot(r, r) + 1"] {
         roots.push(system.expression(text).expect(text));
     }
-    let tape = Tape::compile(&system.graph, &roots, &[r]).expect("compiles");
+    // Over `r` alone, single-state evaluation reads the inputs in place; over every symbol of
+    // the playground (more than 16 slots) it copies them into its registers first.
+    let few = Tape::compile(&system.graph, &roots, &[r]).expect("compiles");
+    let many = Tape::compile(&system.graph, &roots, &all_symbols(&system.graph)).expect("compiles");
+    assert!(few.input_len() <= 16 && many.input_len() > 16);
+    for tape in [few, many] {
+        outputs_agree(&tape);
+    }
+}
+
+/// `tape`'s single-state outputs are bitwise its batched ones, at random states.
+fn outputs_agree(tape: &Tape) {
     // Odd sizes: partial lanes, and past `PARALLEL_MIN` the parallel path.
     for n in [1, 3, 257, lagrange::numeric::tape::PARALLEL_MIN + 5] {
         let mut rng = Rng(n as u64);
         let inputs: Vec<f64> = (0..tape.input_len() * n).map(|_| rng.range(-2.0, 2.0)).collect();
         let mut batch = vec![f64::NAN; tape.output_len() * n];
         tape.eval_batch(n, &inputs, &mut tape.batch_scratch(), &mut batch);
-        let (mut scratch, mut one, mut out) = (tape.scratch(), vec![0.0; 3], vec![0.0; tape.output_len()]);
+        let (mut scratch, mut one, mut out) =
+            (tape.scratch(), vec![0.0; tape.input_len()], vec![0.0; tape.output_len()]);
         for s in 0..n {
             for (j, x) in one.iter_mut().enumerate() {
                 *x = inputs[j * n + s];

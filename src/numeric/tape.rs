@@ -17,9 +17,12 @@
 //! read from the accumulator, a local the compiler keeps in a machine register, rather
 //! than through a store and a load (each result is still stored for later readers). The
 //! sequences of steps frequent in row tapes (a chain's `d·d`, `−(dₖ·dₖ₊₁)/m`, joint rows'
-//! alternating multiply-adds) are merged into superinstructions, one dispatch each. What
-//! bounds a step is loads (its register numbers, then its operands), so a step's register
-//! numbers are read two at a time. The steps perform the instructions' operations on the
+//! alternating multiply-adds, a dot product of three terms, a vector scaled by the previous
+//! result as a force is λ ∇C) are merged into superinstructions, one dispatch each. A step's
+//! register numbers are read two at a time (one load for two). A tape of at most
+//! `IN_PLACE_MAX` input slots reads its inputs where the caller has them rather than
+//! copying them into the registers first: the copy is a fixed cost of every call, large
+//! beside a short tape's few steps. The steps perform the instructions' operations on the
 //! same operands in the same order (a commutative one may take them swapped): results are
 //! bitwise those of the lanes below.
 //!
@@ -49,6 +52,10 @@ use std::ops::Range;
 /// to 256 operations. (Narrower lanes that keep a big tape's register file in L1 were
 /// measured: a 10-link chain's A and b, 60 live temporaries, ran no faster at 32 lanes.)
 pub const LANES: usize = 256;
+/// Single-state evaluation reads the inputs in place (rather than copying them into the
+/// registers first) for tapes of at most this many input slots: the copy is a fixed cost of
+/// every call, large beside a short tape's few steps.
+const IN_PLACE_MAX: usize = 16;
 /// Batches smaller than this run on the calling thread.
 pub const PARALLEL_MIN: usize = 8192;
 /// States per parallel task.
@@ -172,6 +179,8 @@ enum S {
     Sub2,
     /// `r[d2] = a·b`, then `r[d] = c·e`.
     Mul2,
+    /// `r[d2] = a·a + b·b`, then `r[d] = c·c + e·e` (two squared lengths).
+    SqAddSq2,
     // Superinstructions: two or three steps that follow each other often in row tapes, the
     // later ones reading the earlier's result as their accumulator. Each part is computed
     // and stored in turn, as the separate steps would.
@@ -191,6 +200,17 @@ enum S {
     SubMulAMulAddC,
     /// `MulAddC`, `SubMulA`: `r[d2] = a·b + acc`, then `r[d] = r[d2] − g·h`.
     MulAddCSubMulA,
+    /// `MulMulAdd`, `MulAddC` (a dot product of three terms): `r[d2] = a·b + c·e`, then
+    /// `r[d] = g·h + r[d2]`.
+    MulMulAddMulAddC,
+    /// `MulMulAddA`, `MulAddC`: `r[d2] = acc·b + c·e`, then `r[d] = g·h + r[d2]`.
+    MulMulAddAMulAddC,
+    /// `MulA` and a product of the same accumulator (a vector scaled by the previous
+    /// result, as a force is λ times a gradient): `r[d2] = acc·b`, then `r[d] = acc·c`.
+    MulA2,
+    /// `NegMulA` and a negated product of the same accumulator: `r[d2] = −(acc·b)`, then
+    /// `r[d] = −(acc·c)`.
+    NegMulA2,
 }
 
 /// One instruction of single-state evaluation: `r[d] = op(a, b, c, e)` (operands as in
@@ -236,17 +256,12 @@ struct Packed {
 impl From<&Step> for Packed {
     fn from(s: &Step) -> Packed {
         let pair = |lo: u32, hi: u32| u64::from(lo) | (u64::from(hi) << 32);
-        Packed {
-            op: s.op,
-            f: s.f,
-            imm: s.imm,
-            d: s.d,
-            k: s.k,
-            ab: pair(s.a, s.b),
-            ce: pair(s.c, s.e),
-            gh: pair(s.g, s.h),
-            d23: pair(s.d2, s.d3),
-        }
+        // A square sum reads `a` and `c` only: both in one pair, one load.
+        let (ab, ce) = match s.op {
+            S::SqAddSq | S::SqAddSqA => (pair(s.a, s.c), pair(s.c, s.e)),
+            _ => (pair(s.a, s.b), pair(s.c, s.e)),
+        };
+        Packed { op: s.op, f: s.f, imm: s.imm, d: s.d, k: s.k, ab, ce, gh: pair(s.g, s.h), d23: pair(s.d2, s.d3) }
     }
 }
 
@@ -257,6 +272,8 @@ impl From<&Step> for Packed {
 /// the same number, bit for bit; only which NaN payload is returned may differ, which Rust
 /// leaves unspecified).
 fn steps(code: &[Inst]) -> Vec<Step> {
+    // `i` and `j` both read `prev`'s result.
+    let scale2 = |prev: &Inst, i: &Inst, j: &Inst| [i.a, i.b].contains(&prev.d) && [j.a, j.b].contains(&prev.d);
     let plain = |i: &Inst| {
         let (op, f) = match i.code {
             Code::Add => (S::Add, Func::Sqrt),
@@ -289,22 +306,29 @@ fn steps(code: &[Inst]) -> Vec<Step> {
         let pair = match (i.code, j) {
             (Code::Add, Some(j)) if j.code == Code::Add => Some((S::Add2, j)),
             (Code::Sub, Some(j)) if j.code == Code::Sub => Some((S::Sub2, j)),
-            (Code::Mul, Some(j)) if j.code == Code::Mul => Some((S::Mul2, j)),
+            // Two products of the previous result stay apart: as `MulA2` (below, `fuse`) both
+            // read it from the accumulator.
+            (Code::Mul, Some(j)) if j.code == Code::Mul && !(k > 0 && scale2(&code[k - 1], &i, j)) => {
+                Some((S::Mul2, j))
+            }
+            (Code::SqAddSq, Some(j)) if j.code == Code::SqAddSq => Some((S::SqAddSq2, j)),
             _ => None,
         };
+        // The second operands of a square sum are its `c` (its `b` and `e` repeat `a`, `c`).
+        let second = |x: &Inst| if x.code == Code::SqAddSq { x.c } else { x.b };
         // The second must not read the first's result: both are computed before either is
         // stored.
         match pair {
-            Some((op, j)) if j.a != i.d && j.b != i.d => {
+            Some((op, j)) if j.a != i.d && second(j) != i.d => {
                 out.push(Step {
                     op,
                     f: Func::Sqrt,
                     imm: 0,
                     d: j.d,
                     a: i.a,
-                    b: i.b,
+                    b: second(&i),
                     c: j.a,
-                    e: j.b,
+                    e: second(j),
                     d2: i.d,
                     d3: j.d,
                     g: i.a,
@@ -399,6 +423,21 @@ fn fuse(steps: Vec<Step>) -> Vec<Step> {
                 (Step { op, d3: s.d, d2: t.d, d: u.d, g: t.a, h: t.b, k: u.b, ..s }, 3)
             }
             ((S::MulA, Some(S::MulA), _), Some(t), _) => (Step { op: S::MulAMulA, d2: s.d, d: t.d, c: t.b, ..s }, 2),
+            // The second product reads the accumulator `s` read (its `a`, the result of the
+            // step before; `s.d` is never an operand of `s`, so that register still holds
+            // it), not `s`'s own result.
+            ((S::MulA, Some(S::Mul), _) | (S::NegMulA, Some(S::NegMul), _), Some(t), _)
+                if t.a != s.d && t.b != s.d && (t.a == s.a || t.b == s.a) =>
+            {
+                let op = if s.op == S::MulA { S::MulA2 } else { S::NegMulA2 };
+                // A product commutes: the other operand of `t` goes to `c`.
+                let c = if t.a == s.a { t.b } else { t.a };
+                (Step { op, d2: s.d, d: t.d, c, ..s }, 2)
+            }
+            ((S::MulMulAdd | S::MulMulAddA, Some(S::MulAddC), _), Some(t), _) => {
+                let op = if s.op == S::MulMulAdd { S::MulMulAddMulAddC } else { S::MulMulAddAMulAddC };
+                (Step { op, d2: s.d, d: t.d, g: t.a, h: t.b, ..s }, 2)
+            }
             ((S::MulMulAdd | S::MulMulAddA, Some(S::NegMulA), _), Some(t), _) => {
                 let op = if s.op == S::MulMulAdd { S::MulMulAddNegMulA } else { S::MulMulAddANegMulA };
                 (Step { op, d2: s.d, d: t.d, g: t.b, ..s }, 2)
@@ -789,29 +828,48 @@ impl Tape {
     /// [`output_len`](Tape::output_len) long, or `scratch` was made by a tape with another
     /// number of registers (one scratch may serve tapes of one size in turn).
     pub fn eval(&self, inputs: &[f64], scratch: &mut Scratch, outputs: &mut [f64]) {
-        assert_eq!(inputs.len(), self.n_inputs, "input length");
-        assert_eq!(outputs.len(), self.outputs.len(), "output length");
-        assert_eq!(scratch.regs.len(), self.n_regs, "scratch made by another tape");
+        if inputs.len() != self.n_inputs || outputs.len() != self.outputs.len() || scratch.regs.len() != self.n_regs {
+            self.misuse(inputs.len(), outputs.len(), scratch.regs.len());
+        }
         // The constants stay in the registers from one call to the next (no step writes
         // them): loaded when the scratch last served another tape.
         if scratch.tape != self.id {
             scratch.regs[self.n_inputs..self.n_inputs + self.consts.len()].copy_from_slice(&self.consts);
             scratch.tape = self.id;
         }
-        let r = scratch.regs.as_mut_slice();
-        if inputs.len() <= 16 {
-            // A short copy in line: a call to `memcpy` costs more than the copy (a profile of
-            // the pendulum's run put 7 % of its time in `memcpy`, most of it these copies).
-            // The loads are volatile so the compiler does not turn the loop back into that
-            // call, as it does with a plain loop (it recognises the idiom).
-            for k in 0..inputs.len() {
-                // SAFETY: `k < inputs.len() = n_inputs ≤ n_regs = r.len()` (asserted above);
-                // a volatile read of an element of `inputs` is a plain read of it.
-                unsafe { *r.get_unchecked_mut(k) = std::ptr::read_volatile(inputs.as_ptr().add(k)) };
-            }
+        if self.n_inputs <= IN_PLACE_MAX {
+            // SAFETY: the lengths are checked above.
+            unsafe { self.run_steps::<true>(inputs, &mut scratch.regs, outputs) }
         } else {
-            r[..self.n_inputs].copy_from_slice(inputs);
+            scratch.regs[..self.n_inputs].copy_from_slice(inputs);
+            // SAFETY: as above.
+            unsafe { self.run_steps::<false>(inputs, &mut scratch.regs, outputs) }
         }
+    }
+
+    /// The panic of a call of [`eval`](Tape::eval) with slices of the wrong lengths: out of
+    /// line, so the call's common path keeps nothing in memory for it.
+    #[cold]
+    #[inline(never)]
+    fn misuse(&self, inputs: usize, outputs: usize, regs: usize) -> ! {
+        assert_eq!(inputs, self.n_inputs, "input length");
+        assert_eq!(outputs, self.outputs.len(), "output length");
+        assert_eq!(regs, self.n_regs, "scratch made by another tape");
+        unreachable!("eval called with the right lengths")
+    }
+
+    /// The steps of [`eval`](Tape::eval) over the registers `r`, then the outputs. With
+    /// `IN_PLACE`, an operand that is an input slot is read from `inputs` (the registers of
+    /// the input slots are not written); otherwise the caller has copied `inputs` into `r`.
+    ///
+    /// # Safety
+    /// `inputs` must be [`input_len`](Tape::input_len) long, `r`
+    /// [`n_regs`](Tape::scratch) long with the constants in place, `outputs`
+    /// [`output_len`](Tape::output_len) long.
+    #[inline(always)]
+    unsafe fn run_steps<const IN_PLACE: bool>(&self, inputs: &[f64], r: &mut [f64], outputs: &mut [f64]) {
+        let n_inputs = self.n_inputs;
+        let at = inputs.as_ptr();
         // The previous step's result (`A`, `B`, `C` steps read it here rather than from `r`).
         let mut acc = 0.0;
         // Every register access of the loop goes through `regs`, so reads and stores of one
@@ -819,8 +877,12 @@ impl Tape {
         let regs = r.as_mut_ptr();
         for s in &self.steps {
             // SAFETY: `from_program` only writes register numbers below `n_regs` into `steps`
-            // (asserted there), and `r` has exactly `n_regs` registers (asserted above).
-            let reg = |k: u32| unsafe { *regs.add(k as usize) };
+            // (asserted there), and `r` has exactly `n_regs` registers (the caller's); an
+            // input slot `k < n_inputs` is an element of `inputs`.
+            let reg = |k: u32| unsafe {
+                let k = k as usize;
+                if IN_PLACE && k < n_inputs { *at.add(k) } else { *regs.add(k) }
+            };
             // SAFETY: as above.
             let set = |k: u32, x: f64| unsafe { *regs.add(k as usize) = x };
             // One load for two register numbers: volatile, so it is not split back into two.
@@ -908,14 +970,14 @@ impl Tape {
                     a * a
                 }
                 S::SqA => acc * acc,
+                // A square sum's `a` and `c` are one pair (`Packed::from`).
                 S::SqAddSq => {
-                    let (a, _) = pair(&s.ab);
-                    let (c, _) = pair(&s.ce);
+                    let (a, c) = pair(&s.ab);
                     let (a, c) = (reg(a), reg(c));
                     a * a + c * c
                 }
                 S::SqAddSqA => {
-                    let (c, _) = pair(&s.ce);
+                    let (_, c) = pair(&s.ab);
                     let c = reg(c);
                     acc * acc + c * c
                 }
@@ -998,7 +1060,7 @@ impl Tape {
                     let (a, _) = pair(&s.ab);
                     -(reg(a) / acc)
                 }
-                S::Add2 | S::Sub2 | S::Mul2 => {
+                S::Add2 | S::Sub2 | S::Mul2 | S::SqAddSq2 => {
                     let (a, b) = pair(&s.ab);
                     let (c, e) = pair(&s.ce);
                     let (d2, _) = pair(&s.d23);
@@ -1006,7 +1068,8 @@ impl Tape {
                     let (first, second) = match s.op {
                         S::Add2 => (a + b, c + e),
                         S::Sub2 => (a - b, c - e),
-                        _ => (a * b, c * e),
+                        S::Mul2 => (a * b, c * e),
+                        _ => (a * a + b * b, c * c + e * e),
                     };
                     set(d2, first);
                     second
@@ -1068,13 +1131,41 @@ impl Tape {
                     set(d2, x);
                     x - reg(g) * reg(h)
                 }
+                S::MulMulAddMulAddC | S::MulMulAddAMulAddC => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    let (g, h) = pair(&s.gh);
+                    let (d2, _) = pair(&s.d23);
+                    let first = if s.op == S::MulMulAddMulAddC { reg(a) } else { acc };
+                    let x = first * reg(b) + reg(c) * reg(e);
+                    set(d2, x);
+                    reg(g) * reg(h) + x
+                }
+                S::MulA2 => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    let (d2, _) = pair(&s.d23);
+                    let (b, c) = (reg(b), reg(c));
+                    set(d2, acc * b);
+                    acc * c
+                }
+                S::NegMulA2 => {
+                    let (_, b) = pair(&s.ab);
+                    let (c, _) = pair(&s.ce);
+                    let (d2, _) = pair(&s.d23);
+                    let (b, c) = (reg(b), reg(c));
+                    set(d2, -(acc * b));
+                    -(acc * c)
+                }
             };
             set(s.d, x);
             acc = x;
         }
-        for (o, &reg) in outputs.iter_mut().zip(&self.outputs) {
-            // SAFETY: `from_program` asserts every output register is below `n_regs`.
-            *o = unsafe { *r.get_unchecked(reg as usize) };
+        for (o, &k) in outputs.iter_mut().zip(&self.outputs) {
+            let k = k as usize;
+            // SAFETY: `from_program` asserts every output register is below `n_regs`, and
+            // `r` has that many (the caller's).
+            *o = if IN_PLACE && k < n_inputs { inputs[k] } else { unsafe { *r.get_unchecked(k) } };
         }
     }
 
