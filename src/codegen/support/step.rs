@@ -317,6 +317,22 @@ impl<const D: usize> Prepared<D> {
         self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
     }
 
+    /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, m = Σᵢ |Jᵢ|²/mᵢ over
+    /// the entries in the step's order from 0 (over every component: a structural zero's
+    /// square is +0 and (±1)² = 1, so `mass`'s number) and m_eff = 1/m (0 unless m is
+    /// positive and finite), from the entries as evaluated rather than read back.
+    #[inline(always)]
+    fn steady_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) {
+        let mut m = 0.0;
+        for (x, j) in j.iter().enumerate() {
+            m += self.inverse_mass[ROW_BODY[e + x]] * dot(j, j);
+        }
+        self.jacobian[e..e + N].copy_from_slice(&j);
+        self.time_rate[k] = 0.0;
+        self.effective_mass[k] = if m > 0.0 && m < f64::INFINITY { 1.0 / m } else { 0.0 };
+    }
+
     fn len(&self) -> usize {
         CONSTRAINTS
     }
