@@ -378,6 +378,9 @@ pub(super) fn step_by_shape(
     // Whether `finish` is left for some row (its C reads the time, or its shape's instances
     // keep their entries in different orders).
     let mut finish = false;
+    // The shapes whose rows' m_eff = 1/m is taken in a pass of its own (`Prepared::invert_mass`):
+    // where J takes a division or a root, so that the next rows' divisions need not wait on it.
+    let mut deferred = Vec::new();
     for (id, shape) in list.iter().enumerate() {
         if !moved && (shape.kind.is_row() || id + 1 == list.len()) {
             moved = true;
@@ -472,7 +475,16 @@ pub(super) fn step_by_shape(
                     }
                 }
                 if fused.is_some() {
-                    let _ = writeln!(out, "        p.steady_row(i, e, {});", array(&row));
+                    let divides = shape.ops.iter().any(|op| {
+                        matches!(op, Op::Div(..) | Op::Powf(..) | Op::Call(..) | Op::Norm2(..) | Op::Norm3(..))
+                    });
+                    let m = format!("p.steady_row(i, e, {})", array(&row));
+                    if divides {
+                        deferred.push(id);
+                        let _ = writeln!(out, "        p.effective_mass[i] = {m};");
+                    } else {
+                        let _ = writeln!(out, "        p.effective_mass[i] = effective_mass({m});");
+                    }
                 }
             }
         }
@@ -480,8 +492,14 @@ pub(super) fn step_by_shape(
     }
     if finish {
         let _ = writeln!(out, "    p.finish({});", if step.velocities { "&ev" } else { "&[]" });
-    } else if step.velocities {
-        let _ = writeln!(out, "    let _ = &ev;");
+    } else {
+        for id in &deferred {
+            let _ =
+                writeln!(out, "    for &i in SHAPE_{id}_ITEMS.iter() {{\n        p.invert_mass(i as usize);\n    }}");
+        }
+        if step.velocities {
+            let _ = writeln!(out, "    let _ = &ev;");
+        }
     }
     if three {
         // The body-frame ω the gyroscopic terms were taken at, for the kick.
