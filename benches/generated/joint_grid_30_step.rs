@@ -261,29 +261,38 @@ fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
         let (o, i) = (shape_2(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[e] = [o[1], o[2]];
+        p.effective_mass[i] = p.steady_row(i, e, [[o[1], o[2]]]);
     }
     for (&i, t) in SHAPE_3_ITEMS.iter().zip(SHAPE_3_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_3(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[e] = [o[1], o[2]];
+        p.effective_mass[i] = p.steady_row(i, e, [[o[1], o[2]]]);
     }
     for (&i, t) in SHAPE_4_ITEMS.iter().zip(SHAPE_4_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_4(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[e] = [o[1], o[2]];
-        p.jacobian[e + 1] = [o[3], o[4]];
+        p.effective_mass[i] = p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]]]);
     }
     for (&i, t) in SHAPE_5_ITEMS.iter().zip(SHAPE_5_TABLE.as_chunks::<2>().0) {
         let (o, i) = (shape_5(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[e] = [o[1], o[2]];
-        p.jacobian[e + 1] = [o[3], o[4]];
+        p.effective_mass[i] = p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]]]);
     }
-    p.finish(&[]);
+    for &i in SHAPE_2_ITEMS.iter() {
+        p.invert_mass(i as usize);
+    }
+    for &i in SHAPE_3_ITEMS.iter() {
+        p.invert_mass(i as usize);
+    }
+    for &i in SHAPE_4_ITEMS.iter() {
+        p.invert_mass(i as usize);
+    }
+    for &i in SHAPE_5_ITEMS.iter() {
+        p.invert_mass(i as usize);
+    }
 }
 
 /// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
@@ -1007,6 +1016,13 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
     s
 }
 
+/// m_eff = 1/m from m = Σᵢ |Jᵢ|²/mᵢ, 0 unless m is positive and finite (`finish`'s).
+#[allow(dead_code)]
+#[inline(always)]
+fn effective_mass(m: f64) -> f64 {
+    if m > 0.0 && m < f64::INFINITY { 1.0 / m } else { 0.0 }
+}
+
 /// Σ_d term(d) over the first D components, the terms `None` left out, summed from the first
 /// kept one (0 when none is), written out component by component: `dot_coded`'s and
 /// `square_coded`'s sum.
@@ -1163,6 +1179,28 @@ impl<const D: usize> Prepared<D> {
         self.value[k] = value;
         self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
         self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+    }
+
+    /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
+    /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
+    /// evaluated rather than read back; m_eff is `effective_mass(m)`.
+    #[inline(always)]
+    fn steady_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
+        let mut m = 0.0;
+        for (x, j) in j.iter().enumerate() {
+            m += self.inverse_mass[ROW_BODY[e + x]] * dot(j, j);
+        }
+        self.jacobian[e..e + N].copy_from_slice(&j);
+        self.time_rate[k] = 0.0;
+        m
+    }
+
+    /// Row k's m_eff from the m = Σᵢ |Jᵢ|²/mᵢ left in its place (`steady_row`).
+    #[inline(always)]
+    fn invert_mass(&mut self, k: usize) {
+        self.effective_mass[k] = effective_mass(self.effective_mass[k]);
     }
 
     fn len(&self) -> usize {

@@ -1946,125 +1946,98 @@ fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
         let (o, i) = (shape_4(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_5_ITEMS.iter().zip(SHAPE_5_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_5(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_6_ITEMS.iter().zip(SHAPE_6_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_6(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_7_ITEMS.iter().zip(SHAPE_7_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_7(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], o[4]];
-        p.jacobian[ENTRY_AT[e + 2]] = [o[5], 0.0];
-        p.jacobian[ENTRY_AT[e + 3]] = [o[6], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_8_ITEMS.iter().zip(SHAPE_8_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_8(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], o[4]];
-        p.jacobian[ENTRY_AT[e + 2]] = [o[5], 0.0];
-        p.jacobian[ENTRY_AT[e + 3]] = [o[6], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_9_ITEMS.iter().zip(SHAPE_9_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_9(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_10_ITEMS.iter().zip(SHAPE_10_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_10(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], o[4]];
-        p.jacobian[ENTRY_AT[e + 2]] = [o[5], 0.0];
-        p.jacobian[ENTRY_AT[e + 3]] = [o[6], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_11_ITEMS.iter().zip(SHAPE_11_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_11(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_12_ITEMS.iter().zip(SHAPE_12_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_12(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_13_ITEMS.iter().zip(SHAPE_13_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_13(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_14_ITEMS.iter().zip(SHAPE_14_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_14(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_15_ITEMS.iter().zip(SHAPE_15_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_15(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_16_ITEMS.iter().zip(SHAPE_16_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_16(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_17_ITEMS.iter().zip(SHAPE_17_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_17(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_18_ITEMS.iter().zip(SHAPE_18_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_18(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], o[4]];
-        p.jacobian[ENTRY_AT[e + 2]] = [o[5], 0.0];
-        p.jacobian[ENTRY_AT[e + 3]] = [o[6], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]], [o[5], 0.0], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_19_ITEMS.iter().zip(SHAPE_19_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_19(q, v, &x, t), i as usize);
         let e = ROW_START[i];
         p.value[i] = o[0] * INVERSE_SCALE[i];
-        p.jacobian[ENTRY_AT[e]] = [o[1], o[2]];
-        p.jacobian[ENTRY_AT[e + 1]] = [o[3], o[4]];
-        p.jacobian[ENTRY_AT[e + 2]] = [o[5], 0.0];
-        p.jacobian[ENTRY_AT[e + 3]] = [o[6], 0.0];
+        p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]], [o[5], 0.0], [o[6], 0.0]]));
     }
-    p.finish(&[]);
 }
 
 /// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
@@ -3476,6 +3449,13 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
     s
 }
 
+/// m_eff = 1/m from m = Σᵢ |Jᵢ|²/mᵢ, 0 unless m is positive and finite (`finish`'s).
+#[allow(dead_code)]
+#[inline(always)]
+fn effective_mass(m: f64) -> f64 {
+    if m > 0.0 && m < f64::INFINITY { 1.0 / m } else { 0.0 }
+}
+
 /// Σ_d term(d) over the first D components, the terms `None` left out, summed from the first
 /// kept one (0 when none is), written out component by component: `dot_coded`'s and
 /// `square_coded`'s sum.
@@ -3632,6 +3612,28 @@ impl<const D: usize> Prepared<D> {
         self.value[k] = value;
         self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
         self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+    }
+
+    /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
+    /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
+    /// evaluated rather than read back; m_eff is `effective_mass(m)`.
+    #[inline(always)]
+    fn steady_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
+        let mut m = 0.0;
+        for (x, j) in j.iter().enumerate() {
+            m += self.inverse_mass[ROW_BODY[e + x]] * dot(j, j);
+        }
+        self.jacobian[e..e + N].copy_from_slice(&j);
+        self.time_rate[k] = 0.0;
+        m
+    }
+
+    /// Row k's m_eff from the m = Σᵢ |Jᵢ|²/mᵢ left in its place (`steady_row`).
+    #[inline(always)]
+    fn invert_mass(&mut self, k: usize) {
+        self.effective_mass[k] = effective_mass(self.effective_mass[k]);
     }
 
     fn len(&self) -> usize {

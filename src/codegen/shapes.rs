@@ -293,7 +293,7 @@ pub(super) fn step_by_shape(
 ) -> Result<(), GenerateError> {
     let g = ctx.g;
     let (n, k, dim) = (layout.bodies, layout.constraints, layout.dim);
-    let (_, entry_at) = step_constants(out, solver, inverse_scales, step, formulas, layout);
+    let (starts, entry_at) = step_constants(out, solver, inverse_scales, step, formulas, layout);
     // Rows whose entries the step keeps in the derivation's order store entry e of a row at
     // `ROW_START[i] + e`, the others through `ENTRY_AT` (`velocity::entry_order`).
     let in_order = entry_at.iter().enumerate().all(|(e, &at)| e == at);
@@ -375,6 +375,12 @@ pub(super) fn step_by_shape(
     }
     let ev = |x: String| if step.velocities { x } else { String::new() };
     let mut moved = !split;
+    // Whether `finish` is left for some row (its C reads the time, or its shape's instances
+    // keep their entries in different orders).
+    let mut finish = false;
+    // The shapes whose rows' m_eff = 1/m is taken in a pass of its own (`Prepared::invert_mass`):
+    // where J takes a division or a root, so that the next rows' divisions need not wait on it.
+    let mut deferred = Vec::new();
     for (id, shape) in list.iter().enumerate() {
         if !moved && (shape.kind.is_row() || id + 1 == list.len()) {
             moved = true;
@@ -430,14 +436,29 @@ pub(super) fn step_by_shape(
                 let width = if three { 3 } else { 1 };
                 let base = if steady { 1 } else { 2 };
                 let angular = (shape.outputs.len() - base - linear * dim) / width;
+                let entries = linear + angular;
                 let _ = writeln!(out, "        let e = ROW_START[i];");
                 let _ = writeln!(out, "        p.value[i] = o[0] * INVERSE_SCALE[i];");
                 if !steady {
                     let _ = writeln!(out, "        p.time_rate[i] = o[1] * INVERSE_SCALE[i];");
                 }
-                for e in 0..linear + angular {
-                    let at = if e == 0 { "e".to_string() } else { format!("e + {e}") };
-                    let at = if in_order { at } else { format!("ENTRY_AT[{at}]") };
+                // Each entry's place in its row in the step's order, when every instance has
+                // the same: a row whose C reads no time then gets its m_eff in this pass, from
+                // its entries as evaluated (`Prepared::steady_row`), not in `finish`.
+                let place = |i: usize| (0..entries).map(|x| entry_at[starts[i] + x] - starts[i]).collect::<Vec<_>>();
+                let first = shape.items.first().map(|&i| place(i));
+                let common = first.filter(|p| shape.items.iter().all(|&i| place(i) == *p));
+                let fused = common.filter(|_| steady);
+                finish |= fused.is_none();
+                let mut row = vec![String::new(); entries];
+                for e in 0..entries {
+                    let at = match &fused {
+                        Some(place) if place[e] == 0 => "e".to_string(),
+                        Some(place) => format!("e + {}", place[e]),
+                        None if e == 0 => "e".to_string(),
+                        None => format!("e + {e}"),
+                    };
+                    let at = if in_order || fused.is_some() { at } else { format!("ENTRY_AT[{at}]") };
                     let value = if e < linear {
                         comps(base + e * dim)
                     } else if three {
@@ -446,13 +467,40 @@ pub(super) fn step_by_shape(
                     } else {
                         format!("[o[{}], 0.0]", base + linear * dim + (e - linear))
                     };
-                    let _ = writeln!(out, "        p.jacobian[{at}] = {value};");
+                    match &fused {
+                        Some(place) => row[place[e]] = value,
+                        None => {
+                            let _ = writeln!(out, "        p.jacobian[{at}] = {value};");
+                        }
+                    }
+                }
+                if fused.is_some() {
+                    let divides = shape.ops.iter().any(|op| {
+                        matches!(op, Op::Div(..) | Op::Powf(..) | Op::Call(..) | Op::Norm2(..) | Op::Norm3(..))
+                    });
+                    let m = format!("p.steady_row(i, e, {})", array(&row));
+                    if divides {
+                        deferred.push(id);
+                        let _ = writeln!(out, "        p.effective_mass[i] = {m};");
+                    } else {
+                        let _ = writeln!(out, "        p.effective_mass[i] = effective_mass({m});");
+                    }
                 }
             }
         }
         let _ = writeln!(out, "    }}");
     }
-    let _ = writeln!(out, "    p.finish({});", if step.velocities { "&ev" } else { "&[]" });
+    if finish {
+        let _ = writeln!(out, "    p.finish({});", if step.velocities { "&ev" } else { "&[]" });
+    } else {
+        for id in &deferred {
+            let _ =
+                writeln!(out, "    for &i in SHAPE_{id}_ITEMS.iter() {{\n        p.invert_mass(i as usize);\n    }}");
+        }
+        if step.velocities {
+            let _ = writeln!(out, "    let _ = &ev;");
+        }
+    }
     if three {
         // The body-frame ω the gyroscopic terms were taken at, for the kick.
         let _ = writeln!(out, "    p.velocity = ev;\n    p.first = first_angular(&p.axes);");
