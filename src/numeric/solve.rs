@@ -877,18 +877,21 @@ pub enum SolvePath {
 ///
 /// It serves only equality rows whose numbers are all finite and usable, on a block the
 /// band, sparse or dense factorisation factors, or a singular one past [`MAX_DENSE_ROWS`]
-/// whose minimum norm the regularised sparse factor iterates to (`sparse_minimum_norm`:
-/// the factor of Ã + ε W² is kept, refactored in place on a new J while the block is singular
-/// whatever its numbers, `Block::columns`, and each solve checks its residual, leaving
-/// rows that contradict each other to the general solve); anything else goes to
+/// whose minimum norm `sparse_minimum_norm` iterates to: the body-space factor
+/// (`numeric::gram`) where the rows hold every component they move, else the regularised
+/// factor of Ã + ε W², kept and refactored in place on a new J while the block is singular
+/// whatever its numbers (`Block::columns`); each solve checks its residual, leaving rows
+/// that contradict each other to the general solve. Anything else goes to
 /// [`solve_holding`] unchanged. A solve it serves is the one `solve_holding` would compute,
 /// number for number (the same scaling, assembly, factor and refinement, made from inputs
-/// equal bit for bit), with one exception: a block within [`MAX_DENSE_ROWS`] singular
-/// whatever its numbers (more rows than velocity components, a small rigid grid) takes the
-/// regularised sparse factor here, the eigendecomposition there (which reports the rank and
-/// condition `lagrange solve` shows): the same minimum-norm λ but for the regularisation's
-/// share in the redundant rows' split, [`Diagnostic::RedundantSparse`] instead of
-/// [`Diagnostic::Redundant`].
+/// equal bit for bit), with two exceptions: a body-space factor kept for a J that moved in
+/// its last bits ([`SolvePath::Stale`]) iterates to the same minimum norm to rounding, not
+/// bit for bit; and a block within [`MAX_DENSE_ROWS`] singular whatever its numbers (more
+/// rows than velocity components, a small rigid grid) takes the sparse minimum norm here,
+/// the eigendecomposition there (which reports the rank and condition `lagrange solve`
+/// shows): the same minimum-norm λ to rounding (the regularised factor: but for the
+/// regularisation's share in the redundant rows' split), [`Diagnostic::RedundantSparse`]
+/// instead of [`Diagnostic::Redundant`].
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
     entry: Option<Factored>,
