@@ -293,3 +293,52 @@ fn the_body_space_minimum_norm_is_the_eigendecomposition_s() {
         assert!(lambda < 1e-10, "seed {seed}: λ apart by {lambda:e} of the largest");
     }
 }
+
+/// `rows` with body `b`'s x components zero in every row (that component is no column of
+/// G), the c terms J u for the rows' velocities u (consistent).
+fn without_x_of(rows: &Rows, b: usize) -> Rows {
+    consistent(rows, Some(b))
+}
+
+/// `rows` with the c terms J u for the rows' velocities u, body `b`'s x components zeroed
+/// first when given.
+fn consistent(rows: &Rows, b: Option<usize>) -> Rows {
+    let mut out = rows.clone();
+    for row in &mut out.rows {
+        for (slot, j) in &mut row.jacobian {
+            if Some(*slot) == b {
+                j[0] = 0.0;
+            }
+        }
+        row.bias = row.jacobian.iter().map(|(s, j)| j[0] * rows.velocity[*s][0] + j[1] * rows.velocity[*s][1]).sum();
+    }
+    out
+}
+
+#[test]
+fn a_component_that_starts_or_stops_moving_makes_the_factor_anew() {
+    // The same slots in the same order (the cache refactors in place when it can), but the
+    // set of moved components changes: a new column (a component no row moved before) and
+    // a vanished one (no row moves it any more) each need G and its factor made anew; a J
+    // that keeps the set (the nudged grid) is refactored in place. Each answer is the
+    // general solve's, bit for bit.
+    let settings = Settings::default();
+    let mut cache = SolveCache::default();
+    let rows = braced(17, 13);
+    let b = rows.inverse_mass.len() / 2;
+    let fewer = without_x_of(&rows, b);
+    let solved = solve_cached(&fewer, &settings, &[], &mut cache);
+    assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace));
+    assert_general(&solved, &fewer, "without a column");
+    for (what, next) in [
+        ("a new column", consistent(&rows, None)),
+        ("a vanished column", fewer.clone()),
+        ("the same columns", without_x_of(&nudged(&rows, 1e-6, 3), b)),
+    ] {
+        let solved = solve_cached(&next, &settings, &[], &mut cache);
+        assert_eq!(cache.last_path(), SolvePath::Factored, "{what}");
+        assert_eq!(cache.factorisation(), Some(Factorisation::BodySpace), "{what}");
+        assert_eq!(solved.status, Status::MinimumNorm, "{what}: {:?}", solved.diagnostics);
+        assert_general(&solved, &next, what);
+    }
+}

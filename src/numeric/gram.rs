@@ -45,8 +45,8 @@ pub(crate) struct Gram {
     columns: usize,
     /// Row p's entries are `start[p]..start[p + 1]` of the vectors below.
     start: Vec<usize>,
-    /// Each entry's column.
-    column: Vec<usize>,
+    /// Each entry's column (32 bits: the products stream it beside G's values).
+    column: Vec<u32>,
     /// Each entry's source: the place of its part in the scaled rows' buffer, and the axis.
     source: Vec<(usize, usize)>,
     /// G's entries times the column scale s (so G'ᵀ G' has a unit diagonal).
@@ -66,11 +66,16 @@ fn moved_axes(parts: &[(usize, [f64; 3])], rows: &[std::ops::Range<usize>], inve
     for range in rows {
         for (b, j) in &parts[range.clone()] {
             if inverse_mass[*b] != 0.0 {
-                moved[*b] |= u8::from(j[0] != 0.0) | (u8::from(j[1] != 0.0) << 1) | (u8::from(j[2] != 0.0) << 2);
+                moved[*b] |= nonzero_axes(j);
             }
         }
     }
     moved
+}
+
+/// One bit per axis of `j` that is not zero.
+fn nonzero_axes(j: &[f64; 3]) -> u8 {
+    u8::from(j[0] != 0.0) | (u8::from(j[1] != 0.0) << 1) | (u8::from(j[2] != 0.0) << 2)
 }
 
 impl Gram {
@@ -93,7 +98,9 @@ impl Gram {
             columns += m.count_ones() as usize;
         }
         let mut start = Vec::with_capacity(rows.len() + 1);
-        let (mut column, mut source) = (Vec::new(), Vec::new());
+        let (mut column, mut source) = (Vec::<u32>::new(), Vec::new());
+        // Columns are numbered in 32 bits.
+        u32::try_from(columns).ok()?;
         for range in rows {
             start.push(column.len());
             for (place, (b, _)) in range.clone().zip(&parts[range.clone()]) {
@@ -104,7 +111,7 @@ impl Gram {
                 let mut at = first[*b];
                 for axis in 0..3 {
                     if bits & (1 << axis) != 0 {
-                        column.push(at);
+                        column.push(at as u32);
                         source.push((place, axis));
                         at += 1;
                     }
@@ -131,14 +138,23 @@ impl Gram {
         self.start.len() - 1
     }
 
-    /// Whether the rows `rows` of `parts` move the same components as those G was made from.
+    /// Whether the rows `rows` of `parts` move no component that is not one of G's columns
+    /// (without allocating: this runs at every substep of a run). With [`fill`](Gram::fill)
+    /// it says whether they move the same components as those G was made from: a column
+    /// that no row moves any more (its components zero, or its slot's inverse mass) leaves a
+    /// zero diagonal in H, which `fill` refuses.
     pub(crate) fn same_columns(
         &self,
         parts: &[(usize, [f64; 3])],
         rows: &[std::ops::Range<usize>],
         inverse_mass: &[f64],
     ) -> bool {
-        moved_axes(parts, rows, inverse_mass) == self.moved
+        inverse_mass.len() == self.moved.len()
+            && rows.iter().all(|range| {
+                parts[range.clone()]
+                    .iter()
+                    .all(|(b, j)| inverse_mass[*b] == 0.0 || nonzero_axes(j) & !self.moved[*b] == 0)
+            })
     }
 
     /// G's values from the rows' parts at the kept places (the same pattern), the masses and
@@ -173,7 +189,7 @@ impl Gram {
             {
                 let (slot, j) = &parts[place];
                 *g = j[axis] * root[*slot] * inverse;
-                diagonal[c] += *g * *g;
+                diagonal[c as usize] += *g * *g;
             }
         }
         // s = 1/√Hₐₐ into `root` (now per column), s² = 1/Hₐₐ kept.
@@ -185,7 +201,7 @@ impl Gram {
         self.scale2 = diagonal;
         let mut finite = self.scale2.iter().all(|s| s.is_normal());
         for (g, &c) in self.g.iter_mut().zip(&self.column) {
-            *g *= root[c];
+            *g *= root[c as usize];
             finite &= g.is_finite();
         }
         self.root = root;
@@ -197,7 +213,7 @@ impl Gram {
     fn pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
         (0..self.rows()).flat_map(move |p| {
             let (from, to) = (self.start[p], self.start[p + 1]);
-            (from..to).flat_map(move |e| (e..to).map(move |f| (self.column[e], self.column[f])))
+            (from..to).flat_map(move |e| (e..to).map(move |f| (self.column[e] as usize, self.column[f] as usize)))
         })
     }
 
@@ -222,22 +238,39 @@ impl Gram {
 
     /// y = G'ᵀ x (columns from rows).
     fn transpose_mul(&self, x: &[f64], y: &mut Vec<f64>) {
+        self.transpose_mul_by(|p| x[p], y);
+    }
+
+    /// y = G'ᵀ x with xₚ = `x(p)`, computed where the product needs it (a caller's row
+    /// weights in the same pass: the same numbers as a vector of them first).
+    #[inline(always)]
+    fn transpose_mul_by(&self, x: impl Fn(usize) -> f64, y: &mut Vec<f64>) {
         y.clear();
         y.resize(self.columns, 0.0);
-        for (p, &xp) in x.iter().enumerate() {
-            for e in self.start[p]..self.start[p + 1] {
-                y[self.column[e]] += self.g[e] * xp;
+        for (p, ends) in self.start.windows(2).enumerate() {
+            let xp = x(p);
+            let (from, to) = (ends[0], ends[1]);
+            for (&c, &g) in self.column[from..to].iter().zip(&self.g[from..to]) {
+                y[c as usize] += g * xp;
             }
         }
     }
 
     /// y = G' x (rows from columns).
     fn mul(&self, x: &[f64], y: &mut Vec<f64>) {
+        self.mul_then(x, y, |_, s| s);
+    }
+
+    /// yₚ = `then(p, (G' x)ₚ)`: [`mul`](Gram::mul) with each row's sum passed through
+    /// `then` (a caller's row weights) in the same pass.
+    #[inline(always)]
+    fn mul_then(&self, x: &[f64], y: &mut Vec<f64>, then: impl Fn(usize, f64) -> f64) {
         y.clear();
-        y.extend(
-            (0..self.rows())
-                .map(|p| (self.start[p]..self.start[p + 1]).map(|e| self.g[e] * x[self.column[e]]).sum::<f64>()),
-        );
+        y.extend(self.start.windows(2).enumerate().map(|(p, ends)| {
+            let (from, to) = (ends[0], ends[1]);
+            let sum = self.g[from..to].iter().zip(&self.column[from..to]).map(|(g, &c)| g * x[c as usize]).sum::<f64>();
+            then(p, sum)
+        }));
     }
 }
 
@@ -263,7 +296,6 @@ pub(crate) struct BodySpaceWork {
     step: Vec<f64>,
     trial: Vec<f64>,
     ax: Vec<f64>,
-    rows: Vec<f64>,
     columns: Vec<f64>,
     solved: Vec<f64>,
     /// ẑ of the last pseudo-inverse application.
@@ -360,33 +392,25 @@ impl BodySpace {
     /// step = Ŵ⁻¹ G' H'⁻¹ S² H'⁻¹ G'ᵀ Ŵ⁻¹ r: the weighted pseudo-inverse of Ã applied to r
     /// (see the file's note; S² = 1/diag H undoes the column scaling between the solves).
     fn pseudo_inverse(&self, r: &[f64], work: &mut BodySpaceWork) {
-        let BodySpaceWork { step, rows, columns, solved, z, sparse, .. } = work;
-        rows.clear();
-        rows.extend(r.iter().zip(&self.gram.weight).map(|(r, w)| r / w));
-        self.gram.transpose_mul(rows, columns);
+        let BodySpaceWork { step, columns, solved, z, sparse, .. } = work;
+        let weight = &self.gram.weight;
+        self.gram.transpose_mul_by(|p| r[p] / weight[p], columns);
         self.factor.substitute_into(columns, sparse, solved);
         for (x, s) in solved.iter_mut().zip(&self.gram.scale2) {
             *x *= s;
         }
         self.factor.substitute_into(solved, sparse, z);
-        self.gram.mul(z, step);
-        for (x, w) in step.iter_mut().zip(&self.gram.weight) {
-            *x /= w;
-        }
+        self.gram.mul_then(z, step, |p, x| x / weight[p]);
     }
 
     /// ax = Ã x = Ŵ G' S⁻² G'ᵀ Ŵ x.
-    fn a_mul(&self, x: &[f64], ax: &mut Vec<f64>, rows: &mut Vec<f64>, columns: &mut Vec<f64>) {
-        rows.clear();
-        rows.extend(x.iter().zip(&self.gram.weight).map(|(x, w)| x * w));
-        self.gram.transpose_mul(rows, columns);
+    fn a_mul(&self, x: &[f64], ax: &mut Vec<f64>, columns: &mut Vec<f64>) {
+        let weight = &self.gram.weight;
+        self.gram.transpose_mul_by(|p| x[p] * weight[p], columns);
         for (x, s) in columns.iter_mut().zip(&self.gram.scale2) {
             *x /= s;
         }
-        self.gram.mul(columns, ax);
-        for (x, w) in ax.iter_mut().zip(&self.gram.weight) {
-            *x *= w;
-        }
+        self.gram.mul_then(columns, ax, |p, x| x * weight[p]);
     }
 
     /// The minimum-norm μ of Ã μ = `rhs` into `mu`: μ₀ = 0, μₖ₊₁ = μₖ + Ã⁺(rhs − Ã μₖ) with
@@ -411,12 +435,10 @@ impl BodySpace {
         let size = rhs.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let mut left = f64::INFINITY;
         if warm && z.len() == self.gram.columns {
-            let BodySpaceWork { ax, rows, columns, .. } = work;
-            self.gram.mul(&z, mu);
-            for (x, w) in mu.iter_mut().zip(&self.gram.weight) {
-                *x /= w;
-            }
-            self.a_mul(mu, ax, rows, columns);
+            let BodySpaceWork { ax, columns, .. } = work;
+            let weight = &self.gram.weight;
+            self.gram.mul_then(&z, mu, |p, x| x / weight[p]);
+            self.a_mul(mu, ax, columns);
             left = rhs.iter().zip(ax.iter()).fold(0.0f64, |m, (r, a)| m.max((r - a).abs()));
             residual.clear();
             residual.extend(rhs.iter().zip(ax.iter()).map(|(r, a)| r - a));
@@ -439,10 +461,10 @@ impl BodySpace {
         let (mut solves, mut converged) = (0, left <= CONVERGED_ULPS * f64::EPSILON * (top + size));
         while solves < bounds.solves && !converged {
             self.pseudo_inverse(&residual, work);
-            let BodySpaceWork { step, trial, ax, rows, columns, .. } = work;
+            let BodySpaceWork { step, trial, ax, columns, .. } = work;
             trial.clear();
             trial.extend(mu.iter().zip(step.iter()).map(|(m, s)| m + s));
-            self.a_mul(trial, ax, rows, columns);
+            self.a_mul(trial, ax, columns);
             let now = rhs.iter().zip(ax.iter()).fold(0.0f64, |m, (r, a)| m.max((r - a).abs()));
             solves += 1;
             let accept = |z: &mut Vec<f64>, step: &[f64]| z.iter_mut().zip(step).for_each(|(z, s)| *z += s);

@@ -877,18 +877,21 @@ pub enum SolvePath {
 ///
 /// It serves only equality rows whose numbers are all finite and usable, on a block the
 /// band, sparse or dense factorisation factors, or a singular one past [`MAX_DENSE_ROWS`]
-/// whose minimum norm the regularised sparse factor iterates to (`sparse_minimum_norm`:
-/// the factor of Ã + ε W² is kept, refactored in place on a new J while the block is singular
-/// whatever its numbers, `Block::columns`, and each solve checks its residual, leaving
-/// rows that contradict each other to the general solve); anything else goes to
+/// whose minimum norm `sparse_minimum_norm` iterates to: the body-space factor
+/// (`numeric::gram`) where the rows hold every component they move, else the regularised
+/// factor of Ã + ε W², kept and refactored in place on a new J while the block is singular
+/// whatever its numbers (`Block::columns`); each solve checks its residual, leaving rows
+/// that contradict each other to the general solve. Anything else goes to
 /// [`solve_holding`] unchanged. A solve it serves is the one `solve_holding` would compute,
 /// number for number (the same scaling, assembly, factor and refinement, made from inputs
-/// equal bit for bit), with one exception: a block within [`MAX_DENSE_ROWS`] singular
-/// whatever its numbers (more rows than velocity components, a small rigid grid) takes the
-/// regularised sparse factor here, the eigendecomposition there (which reports the rank and
-/// condition `lagrange solve` shows): the same minimum-norm λ but for the regularisation's
-/// share in the redundant rows' split, [`Diagnostic::RedundantSparse`] instead of
-/// [`Diagnostic::Redundant`].
+/// equal bit for bit), with two exceptions: a body-space factor kept for a J that moved in
+/// its last bits ([`SolvePath::Stale`]) iterates to the same minimum norm to rounding, not
+/// bit for bit; and a block within [`MAX_DENSE_ROWS`] singular whatever its numbers (more
+/// rows than velocity components, a small rigid grid) takes the sparse minimum norm here,
+/// the eigendecomposition there (which reports the rank and condition `lagrange solve`
+/// shows): the same minimum-norm λ to rounding (the regularised factor: but for the
+/// regularisation's share in the redundant rows' split), [`Diagnostic::RedundantSparse`]
+/// instead of [`Diagnostic::Redundant`].
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
     entry: Option<Factored>,
@@ -1110,7 +1113,6 @@ impl Factored {
         }
         let index: Vec<usize> = (0..rows.rows.len()).collect();
         let block = assemble(&scaled, &rows.inverse_mass, &index);
-        let planned = plan(&block, settings);
         let sparse_method = matches!(settings.method, Method::Auto | Method::Sparse);
         // A singular block's factor: the body-space one where it serves (as
         // `sparse_minimum_norm` tries it first), the regularised one otherwise.
@@ -1123,41 +1125,49 @@ impl Factored {
                 terms: terms(&scaled, rows.inverse_mass.len(), &index),
             })
         };
+        // Singular whatever its numbers past the dense bound: `plan` would analyse Ã for the
+        // regularised factor, which the body-space factor, tried first, does not use (the
+        // regularised factor analyses Ã itself where the body space does not serve).
+        let past_dense = block.n > MAX_DENSE_ROWS && sparse_method && structurally_singular(&block);
+        let planned = if past_dense { None } else { Some(plan(&block, settings)) };
         let factor = match planned {
-            // Singular whatever its numbers within the dense bound (a small rigid grid): the
-            // run takes the regularised sparse factor too, where the general solve takes the
-            // eigendecomposition (for its rank and condition): the same minimum-norm λ to
-            // the regularisation's 1e-8 in the redundant rows' split, the same impulses to
-            // rounding, at a sparse factor's cost instead of n³ per solve.
-            Plan::Singular(_) | Plan::Band(None) | Plan::Sparse(None) | Plan::Dense
-                if block.n <= MAX_DENSE_ROWS && sparse_method && structurally_singular(&block) =>
-            {
-                let analysed = match planned {
-                    Plan::Singular(analysed) => Some(analysed),
-                    _ => None,
-                };
-                singular(analysed)?
-            }
-            Plan::Band(Some(factor)) => {
-                let terms = terms(&scaled, rows.inverse_mass.len(), &index);
-                let targets = terms
-                    .iter()
-                    .map(|t| {
-                        let (i, j) = (factor.position[t.hi], factor.position[t.lo]);
-                        factor.a.index(i.max(j), i.min(j))
-                    })
-                    .collect();
-                Factor::Band { factor, terms, targets }
-            }
-            Plan::Sparse(Some(SparsePlan { factor, targets })) => {
-                // `targets` follow `block.a`, which is `terms` in order.
-                Factor::Sparse { factor, terms: terms(&scaled, rows.inverse_mass.len(), &index), targets }
-            }
-            Plan::Dense if block.n <= MAX_DENSE_ROWS => Factor::Dense(DenseFactor::new(&block, settings)?),
-            // Singular past the dense decomposition: `equality`'s regularised factor.
-            Plan::Singular(analysed) if block.n > MAX_DENSE_ROWS => singular(Some(analysed))?,
-            Plan::Band(None) | Plan::Sparse(None) if block.n > MAX_DENSE_ROWS => singular(None)?,
-            _ => return None,
+            None => singular(None)?,
+            Some(planned) => match planned {
+                // Singular whatever its numbers within the dense bound (a small rigid grid): the
+                // run takes the regularised sparse factor too, where the general solve takes the
+                // eigendecomposition (for its rank and condition): the same minimum-norm λ to
+                // the regularisation's 1e-8 in the redundant rows' split, the same impulses to
+                // rounding, at a sparse factor's cost instead of n³ per solve.
+                Plan::Singular(_) | Plan::Band(None) | Plan::Sparse(None) | Plan::Dense
+                    if block.n <= MAX_DENSE_ROWS && sparse_method && structurally_singular(&block) =>
+                {
+                    let analysed = match planned {
+                        Plan::Singular(analysed) => Some(analysed),
+                        _ => None,
+                    };
+                    singular(analysed)?
+                }
+                Plan::Band(Some(factor)) => {
+                    let terms = terms(&scaled, rows.inverse_mass.len(), &index);
+                    let targets = terms
+                        .iter()
+                        .map(|t| {
+                            let (i, j) = (factor.position[t.hi], factor.position[t.lo]);
+                            factor.a.index(i.max(j), i.min(j))
+                        })
+                        .collect();
+                    Factor::Band { factor, terms, targets }
+                }
+                Plan::Sparse(Some(SparsePlan { factor, targets })) => {
+                    // `targets` follow `block.a`, which is `terms` in order.
+                    Factor::Sparse { factor, terms: terms(&scaled, rows.inverse_mass.len(), &index), targets }
+                }
+                Plan::Dense if block.n <= MAX_DENSE_ROWS => Factor::Dense(DenseFactor::new(&block, settings)?),
+                // Singular past the dense decomposition: `equality`'s regularised factor.
+                Plan::Singular(analysed) if block.n > MAX_DENSE_ROWS => singular(Some(analysed))?,
+                Plan::Band(None) | Plan::Sparse(None) if block.n > MAX_DENSE_ROWS => singular(None)?,
+                _ => return None,
+            },
         };
         Some(Factored {
             rank_tolerance: settings.rank_tolerance.to_bits(),
@@ -1625,6 +1635,14 @@ pub(crate) fn equality(
         *status = (*status).max(Status::Failed);
         vec![0.0; n]
     };
+    if n > MAX_DENSE_ROWS && matches!(settings.method, Method::Auto | Method::Sparse) && structurally_singular(block) {
+        // `plan`'s way for this block without its analysis of Ã, which the body-space factor
+        // (tried first) does not use; the regularised factor makes it where that fails.
+        return match sparse_minimum_norm(block, None, &rhs, index, settings, diagnostics, status) {
+            Some(x) => finite_or_zero(x, index, diagnostics, status),
+            None => too_large(diagnostics, status),
+        };
+    }
     // The sparse analysis of a block found singular, for its minimum norm.
     let mut sparse = None;
     match plan(block, settings) {
