@@ -171,7 +171,8 @@ impl Chain {
                 if slot != s {
                     return None;
                 }
-                same &= *bits == j.map(f64::to_bits);
+                let j = j.map(f64::to_bits);
+                same &= ((bits[0] ^ j[0]) | (bits[1] ^ j[1]) | (bits[2] ^ j[2])) == 0;
             }
             if !same && from == k {
                 from = q;
