@@ -54,8 +54,10 @@ pub(crate) struct Chain {
     start: Vec<usize>,
     /// J̃ per entry (slot, J/‖J‖/√Âₖₖ), as `solve::Scaled` keeps it.
     parts: Vec<(usize, [f64; 3])>,
-    /// The bits of J per entry and of 1/m per slot the scaling was made from.
-    bits: Vec<[u64; 3]>,
+    /// Per entry its slot and the bits of its J, and per slot the bits of 1/m, the scaling
+    /// was made from (slot and bits side by side: the check of a solve whose J is kept
+    /// walks one array).
+    bits: Vec<(usize, [u64; 3])>,
     mass_bits: Vec<u64>,
     /// ‖Jₖ‖ and 1/√Âₖₖ per row.
     norm: Vec<f64>,
@@ -159,20 +161,21 @@ impl Chain {
             return None;
         }
         let mut from = k;
-        for (q, row) in rows.rows.iter().enumerate() {
-            let (lo, hi) = (self.start[q], self.start[q + 1]);
-            if hi - lo != row.jacobian.len() {
+        for (q, (row, bounds)) in rows.rows.iter().zip(self.start.windows(2)).enumerate() {
+            let kept = &self.bits[bounds[0]..bounds[1]];
+            if kept.len() != row.jacobian.len() {
                 return None;
             }
-            for ((slot, bits), (s, j)) in
-                self.parts[lo..hi].iter().map(|p| p.0).zip(&self.bits[lo..hi]).zip(&row.jacobian)
-            {
-                if slot != *s {
+            let mut same = true;
+            for ((s, j), (slot, bits)) in row.jacobian.iter().zip(kept) {
+                if slot != s {
                     return None;
                 }
-                if from == k && *bits != j.map(f64::to_bits) {
-                    from = q;
-                }
+                let j = j.map(f64::to_bits);
+                same &= ((bits[0] ^ j[0]) | (bits[1] ^ j[1]) | (bits[2] ^ j[2])) == 0;
+            }
+            if !same && from == k {
+                from = q;
             }
         }
         let mut masses_same = true;
@@ -200,6 +203,9 @@ impl Chain {
         self.first.resize(slots, NONE);
         self.start.clear();
         self.parts.clear();
+        // Sized once: pushed one by one, a long chain's buffers were copied as they grew.
+        self.start.reserve(k + 1);
+        self.parts.reserve(rows.rows.iter().map(|row| row.jacobian.len()).sum());
         let mut shared = false;
         for (q, row) in rows.rows.iter().enumerate() {
             self.start.push(self.parts.len());
@@ -222,7 +228,7 @@ impl Chain {
             return false;
         }
         self.bits.clear();
-        self.bits.resize(self.parts.len(), [0; 3]);
+        self.bits.extend(self.parts.iter().map(|&(slot, _)| (slot, [0; 3])));
         self.mass_bits.clear();
         self.mass_bits.extend(rows.inverse_mass.iter().map(|w| w.to_bits()));
         for v in [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r] {
@@ -254,7 +260,7 @@ impl Chain {
         let Chain { start, parts, bits, norm, jacobi, a, .. } = self;
         for (q, row) in rows.rows.iter().enumerate().skip(from) {
             let (lo, hi) = (start[q], start[q + 1]);
-            for (bits, (_, j)) in bits[lo..hi].iter_mut().zip(&row.jacobian) {
+            for ((_, bits), (_, j)) in bits[lo..hi].iter_mut().zip(&row.jacobian) {
                 *bits = j.map(f64::to_bits);
             }
             // The motion is known finite (`servable`).
@@ -298,7 +304,9 @@ impl Chain {
         let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
         let (a, l, inverse) = (&a[..2 * k], &mut l[..2 * k], &mut inverse[..k]);
         let mut previous = 0.0;
-        for (q, (row, bounds)) in rows.rows.iter().zip(start.windows(2)).enumerate() {
+        let scaling = norm.iter().zip(jacobi.iter());
+        let each = rows.rows.iter().zip(start.windows(2)).zip(scaling).zip(rhs.iter_mut().zip(y.iter_mut()));
+        for (q, (((row, bounds), (&norm, &jacobi)), (rhs, y))) in each.enumerate() {
             if q >= from {
                 let above = if q > 0 { l[2 * q - 1] } else { 1.0 };
                 let (l_below, Some(l_diagonal)) = tridiagonal_factor_row(a[2 * q], a[2 * q + 1], above, q > 0, floor)
@@ -308,10 +316,10 @@ impl Chain {
                 (l[2 * q], l[2 * q + 1]) = (l_below, l_diagonal);
                 inverse[q] = 1.0 / l_diagonal;
             }
-            let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm[q], jacobi[q]);
-            rhs[q] = b;
+            let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm, jacobi);
+            *rhs = b;
             previous = forward_row(l, inverse, q, b, previous);
-            y[q] = previous;
+            *y = previous;
         }
         true
     }
@@ -356,10 +364,12 @@ impl Chain {
         let force = &mut out.constraint_force;
         force.clear();
         force.resize(rows.inverse_mass.len(), [0.0; 3]);
-        for (q, (l, &m)) in out.lambda.iter_mut().zip(&self.y).enumerate() {
-            *l = (m * self.jacobi[q]) / self.norm[q];
+        let scaling = self.jacobi.iter().zip(&self.norm);
+        let each = out.lambda.iter_mut().zip(&self.y).zip(scaling).zip(self.start.windows(2));
+        for (q, (((l, &m), (&jacobi, &norm)), bounds)) in each.enumerate() {
+            *l = (m * jacobi) / norm;
             out_of_range(q, m, *l, &mut diagnostics);
-            add_row_force(force, m, &self.parts[self.start[q]..self.start[q + 1]]);
+            add_row_force(force, m, &self.parts[bounds[0]..bounds[1]]);
         }
         accelerations_into(rows, force, &mut out.acceleration);
         out.active.clear();

@@ -645,8 +645,10 @@ fn placed(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
 
 /// Row `row`'s J entries on `slots` from `out` at `places` (one each, all of width `width`
 /// when it is not 0), in place when the row has that many already; whether every
-/// component is finite.
-#[inline]
+/// component is finite. The common case (in place, every entry 2 or 3 wide) is compiled
+/// into each fill's loop over the rows (a call per row cost more than the copy it makes);
+/// the rest is [`fill_entries_any`].
+#[inline(always)]
 fn fill_entries(row: &mut Row, slots: &[usize], places: &[(u32, u32)], width: u32, out: &[f64]) -> bool {
     if row.jacobian.len() == slots.len() {
         match width {
@@ -655,6 +657,12 @@ fn fill_entries(row: &mut Row, slots: &[usize], places: &[(u32, u32)], width: u3
             _ => {}
         }
     }
+    fill_entries_any(row, slots, places, out)
+}
+
+/// [`fill_entries`] for entries of any widths, or into a row of another length.
+#[inline(never)]
+fn fill_entries_any(row: &mut Row, slots: &[usize], places: &[(u32, u32)], out: &[f64]) -> bool {
     let mut finite = true;
     if row.jacobian.len() == slots.len() {
         for ((j, &slot), &at) in row.jacobian.iter_mut().zip(slots).zip(places) {
@@ -673,8 +681,9 @@ fn fill_entries(row: &mut Row, slots: &[usize], places: &[(u32, u32)], width: u3
     finite
 }
 
-/// [`fill_entries`] in place, every entry `W` wide: each read without a test of its width.
-#[inline]
+/// [`fill_entries`] in place, every entry `W` wide: each read without a test of its width,
+/// and only its `W` components tested (the zeros past them are finite).
+#[inline(always)]
 fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[(u32, u32)], out: &[f64]) -> bool {
     let mut finite = true;
     for ((j, &slot), &(start, _)) in row.jacobian.iter_mut().zip(slots).zip(places) {
@@ -682,7 +691,9 @@ fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[(u
         let x = &out[s..s + W];
         let mut v = [0.0; 3];
         v[..W].copy_from_slice(x);
-        finite &= finite3(&v);
+        for c in x {
+            finite &= c.is_finite();
+        }
         *j = (slot, v);
     }
     finite
@@ -1154,8 +1165,8 @@ impl RowProgram {
             // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
             let mut finite = true;
             let mut entries = places.jacobian.as_slice();
-            for (k, (layout, row)) in self.rows.iter().zip(rows.iter_mut()).enumerate() {
-                row.value = out[places.value[k] as usize] * layout.inverse_scale;
+            for ((layout, row), &value) in self.rows.iter().zip(rows.iter_mut()).zip(&places.value) {
+                row.value = out[value as usize] * layout.inverse_scale;
                 row.rate = 0.0;
                 row.bias = 0.0;
                 row.inequality = layout.inequality;
