@@ -197,6 +197,24 @@ pub struct Frame<'a> {
     pub energy_error: f64,
 }
 
+impl<'a> Frame<'a> {
+    /// This frame, its numbers in the run's unit, in the caller's: itself when the run works
+    /// in the scene's own unit, else converted through `shown` (buffers reused from step to
+    /// step; a run in another unit has no 3D rigid body).
+    pub fn shown(self, unit: Option<&Unit>, shown: &'a mut Shown) -> Frame<'a> {
+        let Some(u) = unit else { return self };
+        shown.convert(u, self.position, self.velocity, self.rows, self.lambda);
+        Frame {
+            position: &shown.q,
+            velocity: &shown.v,
+            orientations: &[],
+            rows: &shown.rows,
+            lambda: &shown.lambda,
+            ..self
+        }
+    }
+}
+
 /// A sample for plots.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Sample {
@@ -602,35 +620,17 @@ impl<'s> Simulation<'s> {
         energy_error: f64,
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<(), SimError> {
-        let lambda = &self.dynamics.solution().lambda;
-        let rows = &self.start;
-        let frame = match &self.unit {
-            None => Frame {
-                step: n,
-                time: t,
-                position: &self.q,
-                velocity: &self.v,
-                orientations: self.dynamics.orientations(),
-                rows,
-                lambda,
-                energy_error,
-            },
-            Some(u) => {
-                let shown = &mut self.shown;
-                shown.convert(u, &self.q, &self.v, rows, lambda);
-                Frame {
-                    step: n,
-                    time: t,
-                    position: &shown.q,
-                    velocity: &shown.v,
-                    orientations: &[],
-                    rows: &shown.rows,
-                    lambda: &shown.lambda,
-                    energy_error,
-                }
-            }
+        let frame = Frame {
+            step: n,
+            time: t,
+            position: &self.q,
+            velocity: &self.v,
+            orientations: self.dynamics.orientations(),
+            rows: &self.start,
+            lambda: &self.dynamics.solution().lambda,
+            energy_error,
         };
-        observe(&frame).map_err(SimError::Output)
+        observe(&frame.shown(self.unit.as_ref(), &mut self.shown)).map_err(SimError::Output)
     }
 
     /// From step `n` (its rows in `self.start`, its accelerations in `self.a`) to step

@@ -206,32 +206,17 @@ fn run_inner(
         if n > 0 {
             stepper.lambda(&mut lambda);
         }
-        let frame = match unit {
-            None => Frame {
-                step: n,
-                time: t,
-                position: q,
-                velocity: v,
-                orientations: dynamics.orientations(),
-                rows: &rows,
-                lambda: &lambda,
-                energy_error,
-            },
-            Some(u) => {
-                shown.convert(u, q, v, &rows, &lambda);
-                Frame {
-                    step: n,
-                    time: t,
-                    position: &shown.q,
-                    velocity: &shown.v,
-                    orientations: &[],
-                    rows: &shown.rows,
-                    lambda: &shown.lambda,
-                    energy_error,
-                }
-            }
+        let frame = Frame {
+            step: n,
+            time: t,
+            position: q,
+            velocity: v,
+            orientations: dynamics.orientations(),
+            rows: &rows,
+            lambda: &lambda,
+            energy_error,
         };
-        observe(&frame).map_err(SimError::Output)?;
+        observe(&frame.shown(unit, &mut shown)).map_err(SimError::Output)?;
         summary.steps = n;
         summary.duration = n as f64 * s.dt;
         if n == s.steps {
