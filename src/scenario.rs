@@ -44,7 +44,9 @@ pub struct Scenario {
 
 impl Scenario {
     /// Derives `loaded` and evaluates its initial state, with `overrides` (values checked
-    /// by `model::state`).
+    /// by `model::state`). A force or torque the scene's `[scene] forces` gives as an
+    /// expression is compiled into the rows: an override of that symbol does not change what
+    /// a run applies (set `loaded.scene` aside for forces of your own).
     pub fn new(loaded: Loaded, overrides: &[(Symbol, Value)]) -> Result<Scenario, ScenarioError> {
         let derivation = derive(&loaded.system)?;
         let scene = &loaded.scene;
