@@ -690,10 +690,18 @@ pub(crate) struct Block {
 
 /// Whether `block` has more rows than velocity components its rows move: Ã = J̃ M⁻¹ J̃ᵀ is
 /// then singular in exact arithmetic (rank Ã ≤ rank J̃ ≤ `columns`), so a factorisation
-/// that does not find it singular found a rounding accident, and [`plan`] goes to the
+/// that does not find it singular found a rounding accident, and the solve goes to the
 /// minimum norm without trying one (a rigid grid's redundant loops).
 fn structurally_singular(block: &Block) -> bool {
     block.n > block.columns
+}
+
+/// Whether `block` is [`structurally_singular`] past the dense decomposition under a method
+/// that allows the sparse factor: [`equality`] and the run's cache then take it to the sparse
+/// minimum norm (the body-space factor first) without [`plan`]'s analysis of Ã, which only
+/// the regularised factor uses (and makes itself where the body space does not serve).
+fn singular_past_dense(block: &Block, settings: &Settings) -> bool {
+    block.n > MAX_DENSE_ROWS && matches!(settings.method, Method::Auto | Method::Sparse) && structurally_singular(block)
 }
 
 /// [`Block::columns`] of the rows `index`.
@@ -1125,11 +1133,7 @@ impl Factored {
                 terms: terms(&scaled, rows.inverse_mass.len(), &index),
             })
         };
-        // Singular whatever its numbers past the dense bound: `plan` would analyse Ã for the
-        // regularised factor, which the body-space factor, tried first, does not use (the
-        // regularised factor analyses Ã itself where the body space does not serve).
-        let past_dense = block.n > MAX_DENSE_ROWS && sparse_method && structurally_singular(&block);
-        let planned = if past_dense { None } else { Some(plan(&block, settings)) };
+        let planned = if singular_past_dense(&block, settings) { None } else { Some(plan(&block, settings)) };
         let factor = match planned {
             None => singular(None)?,
             Some(planned) => match planned {
@@ -1635,9 +1639,7 @@ pub(crate) fn equality(
         *status = (*status).max(Status::Failed);
         vec![0.0; n]
     };
-    if n > MAX_DENSE_ROWS && matches!(settings.method, Method::Auto | Method::Sparse) && structurally_singular(block) {
-        // `plan`'s way for this block without its analysis of Ã, which the body-space factor
-        // (tried first) does not use; the regularised factor makes it where that fails.
+    if singular_past_dense(block, settings) {
         return match sparse_minimum_norm(block, None, &rhs, index, settings, diagnostics, status) {
             Some(x) => finite_or_zero(x, index, diagnostics, status),
             None => too_large(diagnostics, status),
@@ -1700,18 +1702,11 @@ pub(crate) struct SparsePlan {
 /// weighted count of multiply–adds is below both the band's (when under a quarter of the
 /// size) and the dense one's (up to [`MAX_DENSE_ROWS`]); otherwise band when it fits, dense
 /// when not. A block no factor serves (dense past the bound, sparse past
-/// [`MAX_SPARSE_FLOPS`]) is planned dense, which [`equality`] refuses as too large.
+/// [`MAX_SPARSE_FLOPS`]) is planned dense, which [`equality`] refuses as too large. A block
+/// [`singular_past_dense`] is not planned: its callers take it to the minimum norm (no
+/// factorisation that can only fail, or pass by a rounding accident).
 pub(crate) fn plan(block: &Block, settings: &Settings) -> Plan {
     let n = block.n;
-    if matches!(settings.method, Method::Auto | Method::Sparse) && n > MAX_DENSE_ROWS && structurally_singular(block) {
-        // Singular whatever the numbers, past the dense decomposition: straight to the
-        // regularised sparse factor (no factorisation that can only fail, or pass by a
-        // rounding accident).
-        return match SparseFactor::analyse(n, block.a.iter().map(|&(p, q, _)| (p, q))) {
-            Some((factor, targets)) => Plan::Singular(SparsePlan { factor, targets }),
-            None => Plan::Dense,
-        };
-    }
     let mut order: Option<Vec<usize>> = None;
     let mut bandwidth = block.bandwidth;
     let renumber = matches!(settings.method, Method::Banded | Method::Auto);
