@@ -4977,11 +4977,11 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
     s
 }
 
-/// m_eff = 1/m from m = Σᵢ |Jᵢ|²/mᵢ, 0 unless m is positive and finite (`finish`'s).
-#[allow(dead_code)]
+/// m_eff = 1/m from m = Σᵢ |Jᵢ|²/mᵢ, 0 unless m is positive and finite (a singular
+/// configuration: the row does nothing).
 #[inline(always)]
 fn effective_mass(m: f64) -> f64 {
-    if m > 0.0 && m < f64::INFINITY { 1.0 / m } else { 0.0 }
+    if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 }
 }
 
 /// Σ_d term(d) over the first D components, the terms `None` left out, summed from the first
@@ -5093,7 +5093,7 @@ impl Prepared<DIM> {
                 }
             }
             self.time_rate[k] = if STEADY[k] { 0.0 } else { self.time_rate[k] - jv };
-            self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+            self.effective_mass[k] = effective_mass(m);
         }
     }
 }
@@ -5139,7 +5139,7 @@ impl<const D: usize> Prepared<D> {
         }
         self.value[k] = value;
         self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
-        self.effective_mass[k] = if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 };
+        self.effective_mass[k] = effective_mass(m);
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
