@@ -34,9 +34,10 @@ use super::banded::{forward_row, tridiagonal_backward, tridiagonal_factor_row, t
 use super::rows::Rows;
 use super::solve::{
     MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force, b_of,
-    out_of_range, row_sound, scale_row,
+    out_of_range, scale_row,
 };
 use super::vector::dot;
+use std::cell::RefCell;
 
 /// No row yet, in [`Chain::first`].
 const NONE: usize = usize::MAX;
@@ -79,11 +80,22 @@ pub(crate) struct Chain {
 
 /// Whether every row is an equality with a finite c term and every velocity and force is
 /// finite: what `solve_cached_into` checks before anything is cached.
+///
+/// The numbers tested one by one along flat arrays (a test of an `[f64; 3]` at a time, or
+/// tests folded with `&`, compiled to several times the instructions): this runs at every
+/// solve.
 pub(crate) fn servable(rows: &Rows) -> bool {
-    let finite = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
+    let all_finite = |xs: &[[f64; 3]]| xs.as_flattened().iter().all(|x| x.is_finite());
     rows.rows.iter().all(|row| !row.inequality && row.bias.is_finite())
-        && rows.velocity.iter().all(finite)
-        && rows.force.iter().all(finite)
+        && all_finite(&rows.velocity)
+        && all_finite(&rows.force)
+}
+
+thread_local! {
+    /// The buffers of [`solve`]'s chains, kept between the calls on a thread: their sizes,
+    /// not their numbers (every call scales and factors afresh), so a solve of a chain the
+    /// size of the last one allocates only its answer.
+    static BUFFERS: RefCell<Chain> = RefCell::new(Chain::default());
 }
 
 /// The general solve's answer at `rows` when they form a chain it serves (module note), or
@@ -93,7 +105,24 @@ pub(crate) fn solve(rows: &Rows, settings: &Settings) -> Option<Solution> {
         return None;
     }
     let mut out = Solution::default();
-    Chain::default().solve_into(rows, settings, &mut out).map(|_| out)
+    let path = BUFFERS.with(|chain| match chain.try_borrow_mut() {
+        Ok(mut chain) => {
+            // No factor of an earlier call is reused: this solve's cost is a fresh one's.
+            chain.valid = false;
+            chain.solve_into(rows, settings, &mut out)
+        }
+        // Not reached (nothing here solves inside a solve), but a fresh chain would serve.
+        Err(_) => Chain::default().solve_into(rows, settings, &mut out),
+    });
+    path.map(|_| out)
+}
+
+/// Whether every slot's 1/m is finite and ≥ 0, as `solve::row_sound` asks of the slots a
+/// row acts on: checked once a solve here rather than once per entry (a slot no row acts
+/// on that fails it sends the rows to the general solve, which answers the same).
+fn masses_sound(inverse_mass: &[f64]) -> bool {
+    // A NaN is not in the range.
+    inverse_mass.iter().all(|w| (0.0..f64::INFINITY).contains(w))
 }
 
 /// Whether the general solve takes the tridiagonal band for a chain of `k` rows under
@@ -231,12 +260,12 @@ impl Chain {
         self.bits.extend(self.parts.iter().map(|&(slot, _)| (slot, [0; 3])));
         self.mass_bits.clear();
         self.mass_bits.extend(rows.inverse_mass.iter().map(|w| w.to_bits()));
+        // Sized, not cleared: a solve from a new pattern writes every entry (from row 0)
+        // before reading it, so a chain of the last call's size is not written twice.
         for v in [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r] {
-            v.clear();
             v.resize(k, 0.0);
         }
         for v in [&mut self.a, &mut self.l] {
-            v.clear();
             v.resize(2 * k, 0.0);
         }
         true
@@ -251,10 +280,16 @@ impl Chain {
     /// through every row (a division and a square root each, then 1/Lₖₖ). Interleaved in one
     /// pass they ran no faster (the `solve` benchmark's `chain_5_cached_refactored`).
     fn factor_and_forward(&mut self, rows: &Rows, settings: &Settings, from: usize) -> bool {
-        self.scale_and_assemble(rows, from) && self.factor_from(rows, settings.rank_tolerance, from)
+        (from == rows.rows.len() || masses_sound(&rows.inverse_mass))
+            && self.scale_and_assemble(rows, from)
+            && self.factor_from(rows, settings.rank_tolerance, from)
     }
 
-    /// Rows `from..` scaled and their entries of Ã assembled, their J's bits taken.
+    /// Rows `from..` scaled and their entries of Ã assembled, their J's bits taken; false
+    /// when a row is not usable. The rows' c terms are known finite ([`servable`]) and every
+    /// slot's 1/m finite and ≥ 0 ([`masses_sound`]), so what `solve::row_sound` would still
+    /// check is that J is finite, which a scaled row's is: a component that is not makes
+    /// ‖J‖ or Âₖₖ not finite, and `scale_row` refuses the row.
     fn scale_and_assemble(&mut self, rows: &Rows, from: usize) -> bool {
         let w = &rows.inverse_mass;
         let Chain { start, parts, bits, norm, jacobi, a, .. } = self;
@@ -262,10 +297,6 @@ impl Chain {
             let (lo, hi) = (start[q], start[q + 1]);
             for ((_, bits), (_, j)) in bits[lo..hi].iter_mut().zip(&row.jacobian) {
                 *bits = j.map(f64::to_bits);
-            }
-            // The motion is known finite (`servable`).
-            if !row_sound(rows, row, false, false) {
-                return false;
             }
             let Ok((n, d)) = scale_row(row, w, &mut parts[lo..hi]) else {
                 return false;

@@ -368,7 +368,7 @@ pub(super) enum Unscalable {
 /// Row `row` scaled into `parts` (one per J entry, in order; their slots left as they are):
 /// Ĵ = J/‖J‖ (times 1/‖J‖ where that is a normal number), Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ, J̃ = Ĵ/√Âₖₖ;
 /// returns ‖J‖ and 1/√Âₖₖ. `parts` holds Ĵ when the row is unscalable at Âₖₖ.
-#[inline]
+#[inline(always)]
 pub(super) fn scale_row(
     row: &super::rows::Row,
     inverse_mass: &[f64],
@@ -1236,11 +1236,7 @@ pub fn solve_cached(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut
 /// [`solve_cached`] into `out`, reusing its buffers: a run's solves allocate nothing once
 /// warm.
 pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut SolveCache, out: &mut Solution) {
-    let finite = |x: &[f64; 3]| x.iter().all(|c| c.is_finite());
-    let servable = rows.rows.iter().all(|row| !row.inequality && row.bias.is_finite())
-        && rows.velocity.iter().all(finite)
-        && rows.force.iter().all(finite);
-    if !servable {
+    if !super::chain::servable(rows) {
         cache.path = SolvePath::General;
         *out = solve_holding(rows, settings, held);
         return;
