@@ -284,8 +284,23 @@ pub(crate) fn tridiagonal_factor_row(
 /// −0 right-hand side into +0, as it always did).
 #[inline]
 pub(crate) fn forward_row(l: &[f64], inverse: &[f64], i: usize, x: f64, previous: f64) -> f64 {
-    let s = if i > 0 { -0.0 + l[2 * i] * previous } else { -0.0 };
-    (x - s) * inverse[i]
+    forward_step(l[2 * i], inverse[i], i > 0, x, previous)
+}
+
+/// [`forward_row`] from row i's numbers: Lᵢ,ᵢ₋₁ (`below`, read when `has_below`: i > 0) and
+/// 1/Lᵢᵢ, for a caller that walks the factor row by row rather than indexing it.
+#[inline(always)]
+pub(crate) fn forward_step(below: f64, inverse: f64, has_below: bool, x: f64, previous: f64) -> f64 {
+    let s = if has_below { -0.0 + below * previous } else { -0.0 };
+    (x - s) * inverse
+}
+
+/// Row i of the backward substitution Lᵀ x = y of a tridiagonal factor: xᵢ = (yᵢ − `next`)
+/// × 1/Lᵢᵢ, and the `next` of row i − 1, Lᵢ,ᵢ₋₁ xᵢ (0 at row 0: `has_below` is i > 0).
+#[inline(always)]
+pub(crate) fn backward_step(below: f64, inverse: f64, has_below: bool, y: f64, next: f64) -> (f64, f64) {
+    let v = (y - next) * inverse;
+    (v, if has_below { below * v } else { 0.0 })
 }
 
 /// The backward substitution Lᵀ x = y of a tridiagonal factor in place (after
@@ -294,9 +309,7 @@ pub(crate) fn forward_row(l: &[f64], inverse: &[f64], i: usize, x: f64, previous
 pub(crate) fn tridiagonal_backward(l: &[f64], inverse: &[f64], x: &mut [f64]) {
     let mut next = 0.0;
     for i in (0..x.len()).rev() {
-        let v = (x[i] - next) * inverse[i];
-        x[i] = v;
-        next = if i > 0 { l[2 * i] * v } else { 0.0 };
+        (x[i], next) = backward_step(l[2 * i], inverse[i], i > 0, x[i], next);
     }
 }
 

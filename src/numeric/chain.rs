@@ -8,8 +8,9 @@
 //! of terms, the band factor, the right-hand side, each substitution, then λ and the forces.
 //! Here one pass does, for each row, the check, the scaling and the row's two entries of Ã;
 //! a second the row of the factor (the factor of row k needs only rows up to k), −b̃ and the
-//! forward substitution; a third the backward substitution; a fourth the refinement's
-//! residual with its forward substitution; a fifth its backward substitution; a sixth λ and
+//! forward substitution; a third the backward substitution with the refinement's residual
+//! (a row's once the rows from it down are final); a fourth the residual's forward
+//! substitution; a fifth its backward substitution, adding the correction; a sixth λ and
 //! the forces. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
 //! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
 //! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
@@ -30,7 +31,7 @@
 //!
 //! Not here: evaluating rows (`numeric::rows`), inequality rows, other bandwidths.
 
-use super::banded::{forward_row, tridiagonal_backward, tridiagonal_factor_row, tridiagonal_mul_row};
+use super::banded::{backward_step, forward_step, tridiagonal_factor_row, tridiagonal_mul_row};
 use super::rows::Rows;
 use super::solve::{
     MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force, b_of,
@@ -80,15 +81,23 @@ pub(crate) struct Chain {
 
 /// Whether every row is an equality with a finite c term and every velocity and force is
 /// finite: what `solve_cached_into` checks before anything is cached.
-///
-/// The numbers tested one by one along flat arrays (a test of an `[f64; 3]` at a time, or
-/// tests folded with `&`, compiled to several times the instructions): this runs at every
-/// solve.
+/// (This runs at every solve: the slots' numbers are tested along flat arrays by
+/// [`all_finite`], without a branch each.)
 pub(crate) fn servable(rows: &Rows) -> bool {
-    let all_finite = |xs: &[[f64; 3]]| xs.as_flattened().iter().all(|x| x.is_finite());
     rows.rows.iter().all(|row| !row.inequality && row.bias.is_finite())
-        && all_finite(&rows.velocity)
-        && all_finite(&rows.force)
+        && all_finite(rows.velocity.as_flattened())
+        && all_finite(rows.force.as_flattened())
+}
+
+/// Whether every number of `xs` is finite: a number's exponent bits are all ones exactly
+/// when it is not (±∞, NaN), and adding one to them then carries into the sign bit, so
+/// the OR of every (bits & exponent) + 2⁵² has its top bit clear exactly when all are
+/// finite. Integer operations without a branch, which the compiler vectorises: a test and
+/// a branch per number cost several times the instructions.
+fn all_finite(xs: &[f64]) -> bool {
+    const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
+    const ONE: u64 = 1 << 52;
+    xs.iter().fold(0u64, |bad, x| bad | ((x.to_bits() & EXPONENT) + ONE)) >> 63 == 0
 }
 
 thread_local! {
@@ -329,45 +338,62 @@ impl Chain {
 
     /// The factor's rows `from..` (`banded`'s tridiagonal factor, row by row) and every
     /// row's −b̃ and forward substitution, in one pass: two chains through the rows side by
-    /// side.
+    /// side, each row's entries of Ã and L walked beside it (no index, no bounds check).
     fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize) -> bool {
         let k = rows.rows.len();
         let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
-        let (a, l, inverse) = (&a[..2 * k], &mut l[..2 * k], &mut inverse[..k]);
-        let mut previous = 0.0;
+        let band = a[..2 * k].chunks_exact(2).zip(l[..2 * k].chunks_exact_mut(2)).zip(&mut inverse[..k]);
         let scaling = norm.iter().zip(jacobi.iter());
         let each = rows.rows.iter().zip(start.windows(2)).zip(scaling).zip(rhs.iter_mut().zip(y.iter_mut()));
-        for (q, (((row, bounds), (&norm, &jacobi)), (rhs, y))) in each.enumerate() {
+        // Lₖ₋₁,ₖ₋₁ and the forward substitution's yₖ₋₁.
+        let (mut above, mut previous) = (1.0, 0.0);
+        for (q, ((((row, bounds), (&norm, &jacobi)), (rhs, y)), ((a, l), inverse))) in each.zip(band).enumerate() {
             if q >= from {
-                let above = if q > 0 { l[2 * q - 1] } else { 1.0 };
-                let (l_below, Some(l_diagonal)) = tridiagonal_factor_row(a[2 * q], a[2 * q + 1], above, q > 0, floor)
-                else {
+                let (l_below, Some(l_diagonal)) = tridiagonal_factor_row(a[0], a[1], above, q > 0, floor) else {
                     return false;
                 };
-                (l[2 * q], l[2 * q + 1]) = (l_below, l_diagonal);
-                inverse[q] = 1.0 / l_diagonal;
+                (l[0], l[1]) = (l_below, l_diagonal);
+                *inverse = 1.0 / l_diagonal;
             }
+            above = l[1];
             let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm, jacobi);
             *rhs = b;
-            previous = forward_row(l, inverse, q, b, previous);
+            previous = forward_step(l[0], *inverse, q > 0, b, previous);
             *y = previous;
         }
         true
     }
 
     /// The backward substitution, then one step of iterative refinement, y += Ã⁻¹ (−b̃ − Ã y),
-    /// as `solve::BandFactor::solve_into` takes it.
+    /// as `solve::BandFactor::solve_into` takes it, in three passes: the backward
+    /// substitution with the residual of each row once y is known on and around it (rows
+    /// below it are final by then), the residual's forward substitution, and its backward
+    /// substitution adding each correction to y. The same operations as one pass each.
     fn substitute(&mut self) {
-        let (l, inverse) = (&self.l, &self.inverse);
-        tridiagonal_backward(l, inverse, &mut self.y);
+        let Chain { a, l, inverse, rhs, y, r, .. } = self;
+        let k = y.len();
+        let (l, inverse, rhs, r) = (&l[..2 * k], &inverse[..k], &rhs[..k], &mut r[..k]);
+        let mut next = 0.0;
+        for i in (0..k).rev() {
+            (y[i], next) = backward_step(l[2 * i], inverse[i], i > 0, y[i], next);
+            if i + 1 < k {
+                r[i + 1] = rhs[i + 1] - tridiagonal_mul_row(a, y, i + 1);
+            }
+        }
+        if k > 0 {
+            r[0] = rhs[0] - tridiagonal_mul_row(a, y, 0);
+        }
         let mut previous = 0.0;
-        for (i, r) in self.r.iter_mut().enumerate() {
-            let residual = self.rhs[i] - tridiagonal_mul_row(&self.a, &self.y, i);
-            previous = forward_row(l, inverse, i, residual, previous);
+        for (i, (r, (l, &inverse))) in r.iter_mut().zip(l.chunks_exact(2).zip(inverse)).enumerate() {
+            previous = forward_step(l[0], inverse, i > 0, *r, previous);
             *r = previous;
         }
-        tridiagonal_backward(l, inverse, &mut self.r);
-        self.y.iter_mut().zip(&self.r).for_each(|(u, v)| *u += v);
+        let mut next = 0.0;
+        for i in (0..k).rev() {
+            let v;
+            (v, next) = backward_step(l[2 * i], inverse[i], i > 0, r[i], next);
+            y[i] += v;
+        }
     }
 
     /// [`Block::columns`](super::solve) of the kept scaled rows: the velocity components
@@ -409,5 +435,41 @@ impl Chain {
         out.status = Status::Solved;
         out.contacts.clear();
         out.contacts.resize(k, None);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::all_finite;
+
+    /// [`all_finite`]'s bit test answers as `f64::is_finite` number by number, on every kind
+    /// of number: zeros, subnormals, the largest, infinities and NaNs of either sign and
+    /// other payloads.
+    #[test]
+    fn all_finite_is_the_test_number_by_number() {
+        let special = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.5,
+            f64::MAX,
+            f64::MIN,
+            f64::MIN_POSITIVE,
+            5e-324,
+            -5e-324,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            f64::from_bits(0x7ff0_0000_0000_0001),
+            f64::from_bits(0xfff0_0000_0000_0001),
+        ];
+        assert!(all_finite(&[]));
+        for &a in &special {
+            for &b in &special {
+                let xs = [1.0, a, b, 2.0];
+                assert_eq!(all_finite(&xs), xs.iter().all(|x| x.is_finite()), "{a:e} {b:e}");
+            }
+        }
     }
 }
