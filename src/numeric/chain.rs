@@ -95,9 +95,15 @@ pub(crate) fn servable(rows: &Rows) -> bool {
 /// finite. Integer operations without a branch, which the compiler vectorises: a test and
 /// a branch per number cost several times the instructions.
 fn all_finite(xs: &[f64]) -> bool {
+    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
+}
+
+/// [`all_finite`]'s number: x's exponent bits plus one in their lowest place, whose top
+/// bit is set exactly when x is not finite.
+#[inline(always)]
+fn not_finite_bit(x: f64) -> u64 {
     const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
-    const ONE: u64 = 1 << 52;
-    xs.iter().fold(0u64, |bad, x| bad | ((x.to_bits() & EXPONENT) + ONE)) >> 63 == 0
+    (x.to_bits() & EXPONENT) + (1 << 52)
 }
 
 thread_local! {
@@ -129,9 +135,11 @@ pub(crate) fn solve(rows: &Rows, settings: &Settings) -> Option<Solution> {
 /// Whether every slot's 1/m is finite and ≥ 0, as `solve::row_sound` asks of the slots a
 /// row acts on: checked once a solve here rather than once per entry (a slot no row acts
 /// on that fails it sends the rows to the general solve, which answers the same).
+///
+/// By bits, as [`all_finite`] (which this adds to): w + 0 turns −0 (which is ≥ 0) into +0,
+/// so its sign bit is set exactly when w < 0 (or w is a NaN, which the exponent finds).
 fn masses_sound(inverse_mass: &[f64]) -> bool {
-    // A NaN is not in the range.
-    inverse_mass.iter().all(|w| (0.0..f64::INFINITY).contains(w))
+    inverse_mass.iter().fold(0u64, |bad, w| bad | (w + 0.0).to_bits() | not_finite_bit(*w)) >> 63 == 0
 }
 
 /// Whether the general solve takes the tridiagonal band for a chain of `k` rows under
@@ -440,13 +448,13 @@ impl Chain {
 
 #[cfg(test)]
 mod tests {
-    use super::all_finite;
+    use super::{all_finite, masses_sound};
 
-    /// [`all_finite`]'s bit test answers as `f64::is_finite` number by number, on every kind
-    /// of number: zeros, subnormals, the largest, infinities and NaNs of either sign and
-    /// other payloads.
+    /// [`all_finite`]'s and [`masses_sound`]'s bit tests answer as `f64::is_finite` and
+    /// `w >= 0.0` number by number, on every kind of number: zeros, subnormals, the largest,
+    /// infinities and NaNs of either sign and other payloads.
     #[test]
-    fn all_finite_is_the_test_number_by_number() {
+    fn the_bit_tests_are_the_tests_number_by_number() {
         let special = [
             0.0,
             -0.0,
@@ -469,6 +477,8 @@ mod tests {
             for &b in &special {
                 let xs = [1.0, a, b, 2.0];
                 assert_eq!(all_finite(&xs), xs.iter().all(|x| x.is_finite()), "{a:e} {b:e}");
+                let sound = xs.iter().all(|w| *w >= 0.0 && w.is_finite());
+                assert_eq!(masses_sound(&xs), sound, "{a:e} {b:e}");
             }
         }
     }
