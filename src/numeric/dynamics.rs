@@ -34,7 +34,7 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
-use super::single::{SingleScaling, solve_single_with};
+use super::single::{SingleScaling, correction_single, solve_single_with};
 use super::solve::{Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -547,6 +547,15 @@ impl<'s> Dynamics<'s> {
             }
         }
         &mut self.correction
+    }
+
+    /// [`correct`](Dynamics::correct) of a scene's one row on its only slot, with the row's
+    /// c set to `bias`, taken as an equality, and the forces zero — in closed form from the
+    /// rows as they are, which are neither written nor spent (`single::correction_single`).
+    /// Returns the step on the slot, bit for bit what `correct` would add; `None` where the
+    /// one-row solve declines, and the caller takes `correct`.
+    pub fn correct_single(&mut self, rows: &Rows, bias: f64) -> Option<[f64; 3]> {
+        correction_single(rows, bias, &mut self.single)
     }
 
     /// [`SimError::TooLarge`] once a solve has left a block unsolved.
