@@ -24,9 +24,14 @@
 //! [`SingleScaling`] and reuses it while J and 1/m are the same bit for bit, as the general
 //! solve's cache reuses its factor: the same numbers, computed once.
 //!
+//! A correction (SHAKE's iterations, the velocity projection) on a scene whose only slot the
+//! row acts on needs the step on that slot alone: [`correction_single`] gives it from the
+//! same multiplier ([`SingleScaling`]'s μ̃ and λ, one function for both) without writing a
+//! `Solution` or the rows.
+//!
 //! Not here: more than one row (the general solve), contacts, the decision of when to call
-//! it (`Dynamics::solve`, `Dynamics::correct`: at every solve, as the check is cheaper than
-//! any bookkeeping it saves).
+//! it (`Dynamics::solve`, `Dynamics::correct`, `Dynamics::correct_single`: at every solve,
+//! as the check is cheaper than any bookkeeping it saves).
 
 use super::rows::Rows;
 use super::solve::{Method, Settings, Solution, Status, row_norm};
