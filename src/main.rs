@@ -85,13 +85,8 @@ enum Command {
     Solve {
         /// The constraint file (TOML).
         file: PathBuf,
-        /// A state file (.toml or .json): a flat table symbol = number or [x, y(, z)], for
-        /// positions, velocities, forces, masses, parameters and `t`.
-        #[arg(long, value_name = "STATE")]
-        at: Option<PathBuf>,
-        /// Override one symbol: NAME=NUMBER or NAME=[x,y]; may repeat.
-        #[arg(long = "set", value_name = "NAME=VALUE")]
-        set: Vec<String>,
+        #[command(flatten)]
+        state: StateArgs,
         /// Output format.
         #[arg(long, value_enum, default_value_t = SolveFormat::Text)]
         format: SolveFormat,
@@ -103,6 +98,10 @@ enum Command {
         files: Vec<PathBuf>,
     },
     /// Run the scene: integrate, stabilise, report drift and energy.
+    ///
+    /// The run starts from the file's [parameters] and [scene] initial values, then `--at`,
+    /// then each `--set` (later wins), as `solve`; a force or torque given there replaces the
+    /// scene's expression for that body for the whole run.
     Simulate(SimulateArgs),
     /// Speed against error: a work-precision sweep and the formulas' f64 accuracy.
     Bench(BenchArgs),
@@ -143,6 +142,8 @@ enum SolveFormat {
 struct BenchArgs {
     /// The constraint file (TOML) with a [scene].
     file: PathBuf,
+    #[command(flatten)]
+    state: StateArgs,
     /// The middle step size; the sweep runs 4, 2, 1 and ½ times it (default: the scene's).
     #[arg(long, allow_negative_numbers = true)]
     dt: Option<f64>,
@@ -164,11 +165,27 @@ struct BenchArgs {
     solvers: bool,
 }
 
+/// The state a command starts from, over the file's [parameters] and [scene] initial values:
+/// `--at`, then each `--set` (later wins). A force or torque given here replaces the scene's
+/// expression for that body.
+#[derive(clap::Args, Debug, Default)]
+struct StateArgs {
+    /// A state file (.toml or .json): a flat table symbol = number or [x, y(, z)], for
+    /// positions, velocities, forces, masses, parameters and `t`.
+    #[arg(long, value_name = "STATE")]
+    at: Option<PathBuf>,
+    /// Override one symbol: NAME=NUMBER or NAME=[x,y]; may repeat.
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
+}
+
 /// Options of `simulate`.
 #[derive(clap::Args, Debug)]
 struct SimulateArgs {
     /// The constraint file (TOML) with a [scene].
     file: PathBuf,
+    #[command(flatten)]
+    state: StateArgs,
     #[arg(long, value_enum, default_value_t = IntegratorArg::Verlet)]
     integrator: IntegratorArg,
     /// Drift control: none, Baumgarte (--zeta, --omega-dt) or projection after each step.
@@ -489,7 +506,7 @@ fn run(cli: Cli) -> ExitCode {
             let options = Options { specialize, solver: solver.map(StepArg::solver), lang, step_only };
             cmd_generate(&file, output.as_deref(), &options)
         }
-        Command::Solve { file, at, set, format } => match cmd_solve(&file, at.as_deref(), &set, format) {
+        Command::Solve { file, state, format } => match cmd_solve(&file, &state, format) {
             Ok(()) => ExitCode::SUCCESS,
             Err(code) => code,
         },
@@ -635,7 +652,25 @@ fn parse_set(system: &System, arg: &str) -> Result<state::Given, String> {
     state::assignment(system, arg).map_err(|e| format!("error: --set {arg}: {e}"))
 }
 
-fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat) -> Result<(), ExitCode> {
+/// The values of `--at` and each `--set` for `system`, in order (later wins); an unreadable
+/// state file, a bad `--set` or a value that does not fit its symbol is an error (exit 1).
+fn overrides(system: &System, path: &Path, state: &StateArgs) -> Result<Vec<(Symbol, Value)>, ExitCode> {
+    let fail = |message: String| {
+        errln!("{message}");
+        ExitCode::from(1)
+    };
+    let mut given = match &state.at {
+        Some(p) => read_state(system, p).map_err(fail)?,
+        None => Vec::new(),
+    };
+    for arg in &state.set {
+        given.push(parse_set(system, arg).map_err(fail)?);
+    }
+    // A value that does not fit its symbol is said of the constraint file.
+    given.into_iter().collect::<Result<_, _>>().map_err(|e| fail(format!("error: {}: {e}", path.display())))
+}
+
+fn cmd_solve(path: &Path, state: &StateArgs, format: SolveFormat) -> Result<(), ExitCode> {
     let fail = |message: String| {
         errln!("{message}");
         ExitCode::from(1)
@@ -646,16 +681,7 @@ fn cmd_solve(path: &Path, at: Option<&Path>, set: &[String], format: SolveFormat
         ExitCode::from(1)
     })?;
     let system = &loaded.system;
-    let mut given = match at {
-        Some(p) => read_state(system, p).map_err(fail)?,
-        None => Vec::new(),
-    };
-    for arg in set {
-        given.push(parse_set(system, arg).map_err(fail)?);
-    }
-    // A value that does not fit its symbol is said of the constraint file.
-    let overrides: Vec<(Symbol, Value)> =
-        given.into_iter().collect::<Result<_, _>>().map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
+    let overrides = overrides(system, path, state)?;
     let env = environment(system, &loaded.values, &loaded.scene, &overrides)
         .map_err(|e| fail(format!("error: {}: {e}", path.display())))?;
     for symbol in unset_forces(system, &loaded.scene, &overrides) {
@@ -736,12 +762,16 @@ fn location(name: &str, text: &str, offset: usize) -> String {
 }
 
 /// Reads, loads and derives a file into a runnable scenario, or reports why not.
-fn scenario(path: &Path) -> Result<lagrange::scenario::Scenario, ExitCode> {
+/// The file's scene, derived, from its initial state with `state`'s values over it, and
+/// those values (for the notes on forces taken as zero).
+fn scenario(path: &Path, state: &StateArgs) -> Result<(lagrange::scenario::Scenario, Vec<(Symbol, Value)>), ExitCode> {
     let loaded = load_file(path)?;
-    lagrange::scenario::Scenario::new(loaded, &[]).map_err(|e| {
+    let overrides = overrides(&loaded.system, path, state)?;
+    let scenario = lagrange::scenario::Scenario::new(loaded, &overrides).map_err(|e| {
         errln!("error: {}: {e}", path.display());
         ExitCode::from(1)
-    })
+    })?;
+    Ok((scenario, overrides))
 }
 
 /// Whether writing `output` would replace `input`: the same file by canonical path, or on
@@ -782,7 +812,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     {
         return code;
     }
-    let scenario = match scenario(&args.file) {
+    let (scenario, overrides) = match scenario(&args.file, &args.state) {
         Ok(s) => s,
         Err(code) => return code,
     };
@@ -797,7 +827,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    for symbol in unset_forces(&scenario.system, &scenario.scene, &[]) {
+    for symbol in unset_forces(&scenario.system, &scenario.scene, &overrides) {
         errln!("{}", solution::zero_force_note(&scenario.system, symbol));
     }
     let projects = velocity.is_none() && matches!(settings.stabilize, Stabilize::Projection { .. });
@@ -958,7 +988,7 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
     if let Err(code) = refuse_overwrite(&args.file, &[("--plot", args.plot.as_deref())]) {
         return code;
     }
-    let scenario = match scenario(&args.file) {
+    let (scenario, _) = match scenario(&args.file, &args.state) {
         Ok(s) => s,
         Err(code) => return code,
     };

@@ -44,13 +44,17 @@ pub struct Scenario {
 
 impl Scenario {
     /// Derives `loaded` and evaluates its initial state, with `overrides` (values checked
-    /// by `model::state`). A force or torque the scene's `[scene] forces` gives as an
-    /// expression is compiled into the rows: an override of that symbol does not change what
-    /// a run applies (set `loaded.scene` aside for forces of your own).
-    pub fn new(loaded: Loaded, overrides: &[(Symbol, Value)]) -> Result<Scenario, ScenarioError> {
+    /// by `model::state`). The scene's `[scene] forces` expressions are compiled into the
+    /// rows, except for a force or torque symbol `overrides` gives: that body takes the
+    /// given value for the whole run (as `lagrange solve --set` takes it at one state), and
+    /// [`Scenario::scene`] no longer lists its expression.
+    pub fn new(mut loaded: Loaded, overrides: &[(Symbol, Value)]) -> Result<Scenario, ScenarioError> {
         let derivation = derive(&loaded.system)?;
-        let scene = &loaded.scene;
-        let program = RowProgram::with_torques(&loaded.system, &derivation, &scene.forces, &scene.torques);
+        let (system, scene) = (&loaded.system, &mut loaded.scene);
+        let given = |s: Symbol| overrides.iter().any(|&(g, _)| g == s);
+        scene.forces.retain(|&(b, _)| !given(system.bodies[b].force));
+        scene.torques.retain(|&(b, _)| !system.bodies[b].rigid.as_ref().is_some_and(|r| given(r.torque)));
+        let program = RowProgram::with_torques(system, &derivation, &scene.forces, &scene.torques);
         let env = environment(&loaded.system, &loaded.values, &loaded.scene, overrides)?;
         Ok(Scenario { system: loaded.system, derivation, program, env, scene: loaded.scene, values: loaded.values })
     }

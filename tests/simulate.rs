@@ -458,7 +458,7 @@ fn one_row_on_one_body_is_solved_as_the_general_solve_solves_it() {
     // zero gradients, zero and negative masses, infinite and NaN numbers), one to three
     // slots, the row on any of them.
     use lagrange::numeric::rows::{Row, Rows};
-    use lagrange::numeric::single::{SingleScaling, is_single, solve_single, solve_single_with};
+    use lagrange::numeric::single::{SingleScaling, correction_single, is_single, solve_single, solve_single_with};
     use lagrange::numeric::solve::{Settings, Solution, SolveCache, solve_cached, solve_holding};
     let mut rng = common::Rng::new(16);
     // A scaling kept across every case, as a simulation keeps it: reused where J and 1/m
@@ -516,6 +516,16 @@ fn one_row_on_one_body_is_solved_as_the_general_solve_solves_it() {
             assert_eq!(solve_single_with(&rows, &settings, &mut kept, &mut with), answered, "case {case}");
             assert_eq!((bits(&with), with.status), (bits(&single), single.status), "case {case}");
         }
+        // A correction in closed form (`correction_single`, one slot only): the acceleration
+        // of the same rows with the forces zeroed and the row an equality, whatever its flag.
+        let mut corrected = rows.clone();
+        corrected.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        let mut zeroed = Solution::default();
+        let want = solve_single(&corrected, &settings, &mut zeroed).then(|| zeroed.acceleration[0].map(f64::to_bits));
+        let mut flagged = rows.clone();
+        flagged.rows[0].inequality = case % 3 == 0;
+        let got = correction_single(&flagged, rows.rows[0].bias, &mut kept).map(|a| a.map(f64::to_bits));
+        assert_eq!(got, if slots == 1 { want } else { None }, "case {case}: {rows:?}");
         let mut moved = rows.clone();
         moved.rows[0].bias = wide(rng.next_u64(), special);
         moved.force[body] = [wide(rng.next_u64(), special), wide(rng.next_u64(), special), 0.0];

@@ -34,7 +34,7 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
-use super::single::{SingleScaling, solve_single_with};
+use super::single::{SingleScaling, correction_single, solve_single_with};
 use super::solve::{Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
@@ -360,7 +360,9 @@ impl<'s> Dynamics<'s> {
     /// and J only), read back with [`position_rows`](Dynamics::position_rows): what an
     /// iteration onto C = 0 needs. A number that is not finite is reported as
     /// [`rows`](Dynamics::rows) reports it (the full rows at the same state are evaluated
-    /// for the error).
+    /// for the error). In line: an iteration calls it on a scene of a row or two, where the
+    /// call's own instructions are a visible part of the evaluation.
+    #[inline]
     pub fn positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<(), SimError> {
         self.evaluations += 1;
         self.set_state(q, v);
@@ -377,9 +379,17 @@ impl<'s> Dynamics<'s> {
         let finite = self.scratch.finite();
         self.positions_finite = finite;
         if !finite {
-            let rows = self.rows(t, q, v)?;
-            self.recycle(rows);
+            return self.report_positions(t, q, v);
         }
+        Ok(())
+    }
+
+    /// [`positions`](Dynamics::positions) at a state where C or J is not finite: the full
+    /// rows at the same state, evaluated for the error they report.
+    #[inline(never)]
+    fn report_positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<(), SimError> {
+        let rows = self.rows(t, q, v)?;
+        self.recycle(rows);
         Ok(())
     }
 
@@ -419,7 +429,9 @@ impl<'s> Dynamics<'s> {
         self.moved(t, q, v, rows, true)
     }
 
-    /// [`rows_moved_into`](Dynamics::rows_moved_into); `checked`: C and J are known to be finite.
+    /// [`rows_moved_into`](Dynamics::rows_moved_into); `checked`: C and J are known to be
+    /// finite. In line, as [`positions`](Dynamics::positions), its checks apart.
+    #[inline]
     fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows, checked: bool) -> Result<(), SimError> {
         self.refusal()?;
         self.evaluations += 1;
@@ -434,7 +446,13 @@ impl<'s> Dynamics<'s> {
         if kept && checked && finite {
             return Ok(());
         }
-        // Kept C and J not known to be finite: every number is looked at.
+        self.check_moved(rows, t, kept, finite)
+    }
+
+    /// [`moved`](Dynamics::moved)'s check of rows whose C and J were kept unchecked (`kept`:
+    /// every number is looked at) or evaluated afresh (`finite` says).
+    #[inline(never)]
+    fn check_moved(&self, rows: &Rows, t: f64, kept: bool, finite: bool) -> Result<(), SimError> {
         let finite = if kept { all_finite(rows) } else { finite };
         self.check(rows, t, finite)
     }
@@ -547,6 +565,15 @@ impl<'s> Dynamics<'s> {
             }
         }
         &mut self.correction
+    }
+
+    /// [`correct`](Dynamics::correct) of a scene's one row on its only slot, with the row's
+    /// c set to `bias`, taken as an equality, and the forces zero — in closed form from the
+    /// rows as they are, which are neither written nor spent (`single::correction_single`).
+    /// Returns the step on the slot, bit for bit what `correct` would add; `None` where the
+    /// one-row solve declines, and the caller takes `correct`.
+    pub fn correct_single(&mut self, rows: &Rows, bias: f64) -> Option<[f64; 3]> {
+        correction_single(rows, bias, &mut self.single)
     }
 
     /// [`SimError::TooLarge`] once a solve has left a block unsolved.

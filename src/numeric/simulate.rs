@@ -548,8 +548,11 @@ impl<'s> Simulation<'s> {
                 if scale > 0.0 { balance.max_error / scale } else { energy_back(balance.max_error) }
             });
             self.dynamics.solve(&mut self.start);
-            // The active set for the step to come: contacts that push are held.
-            self.dynamics.hold_solved(&self.start);
+            // The active set for the step to come: contacts that push are held (without
+            // inequalities nothing is, and the set stays empty).
+            if self.has_inequalities {
+                self.dynamics.hold_solved(&self.start);
+            }
             let sampled = n == next_sample;
             if sampled {
                 next_sample += stride;

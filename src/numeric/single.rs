@@ -24,9 +24,14 @@
 //! [`SingleScaling`] and reuses it while J and 1/m are the same bit for bit, as the general
 //! solve's cache reuses its factor: the same numbers, computed once.
 //!
+//! A correction (SHAKE's iterations, the velocity projection) on a scene whose only slot the
+//! row acts on needs the step on that slot alone: [`correction_single`] gives it from the
+//! same multiplier ([`SingleScaling`]'s μ̃ and λ, one function for both) without writing a
+//! `Solution` or the rows.
+//!
 //! Not here: more than one row (the general solve), contacts, the decision of when to call
-//! it (`Dynamics::solve`, `Dynamics::correct`: at every solve, as the check is cheaper than
-//! any bookkeeping it saves).
+//! it (`Dynamics::solve`, `Dynamics::correct`, `Dynamics::correct_single`: at every solve,
+//! as the check is cheaper than any bookkeeping it saves).
 
 use super::rows::Rows;
 use super::solve::{Method, Settings, Solution, Status, row_norm};
@@ -99,6 +104,69 @@ impl SingleScaling {
     }
 }
 
+impl SingleScaling {
+    /// μ̃ and λ of the scaled row under the force `f` on its slot (of inverse mass `w`) and
+    /// the bias `bias`, in the general solve's order; `None` where it declines: the pivot Ã at
+    /// or below `rank_tolerance` (singular), μ̃ not finite, λ out of the f64 range.
+    #[inline(always)]
+    fn multiplier(&self, f: &[f64; 3], w: f64, bias: f64, rank_tolerance: f64) -> Option<(f64, f64)> {
+        let &SingleScaling { norm, jacobi, jt, a, l, .. } = self;
+        if a.is_nan() || a <= rank_tolerance {
+            return None;
+        }
+        // −b̃ = −(J̃·F w + c/‖J‖/√Â), the sum of the forces' part started from −0.
+        let b = (-0.0 + dot(&jt, f) * w) + (bias / norm) * jacobi;
+        let rhs = -b;
+        // L Lᵀ x = −b̃ (forward and back: a division each, after subtracting the empty sum
+        // −0), then one step of refinement x += A⁻¹(−b̃ − A x).
+        let mut mu = ((rhs - -0.0) / l) / l;
+        let residual = rhs - (0.0 + (0.0 + a * mu));
+        mu += ((residual - -0.0) / l) / l;
+        if !mu.is_finite() {
+            return None;
+        }
+        // λ = λ̃/(‖J‖√Â); out of the f64 range the general solve says so in a diagnostic.
+        let lambda = (mu * jacobi) / norm;
+        if mu != 0.0 && !lambda.is_normal() {
+            return None;
+        }
+        Some((mu, lambda))
+    }
+}
+
+/// Whether every component of `x` is finite (`is_finite` joined by `&`, as
+/// `dynamics::all_finite`: no chain of dependent additions).
+fn finite3(x: &[f64; 3]) -> bool {
+    x[0].is_finite() & x[1].is_finite() & x[2].is_finite()
+}
+
+/// A correction on a scene of one slot with one row acting on it (a pendulum, a bead): the
+/// step Δx = M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −`bias`, the forces zero — what SHAKE and the
+/// velocity projection ask of `Dynamics::correct` once they have set the row's c to
+/// `bias`, marked it an equality and zeroed the forces. The row is taken as an equality
+/// whatever its flag says (the caller decides that, as the projections do). Returns the
+/// step on the slot, bit for bit the acceleration [`solve_single_with`] gives those rows,
+/// or `None` where it declines them (or the scene has more than one slot), and the general
+/// solve must answer; `rows` is only read and no `Solution` written, so a step of a run
+/// that has one row on one body spends nothing on them.
+pub fn correction_single(rows: &Rows, bias: f64, scaling: &mut SingleScaling) -> Option<[f64; 3]> {
+    let [row] = rows.rows.as_slice() else { return None };
+    let [(0, j)] = row.jacobian.as_slice() else { return None };
+    let ([w], [velocity], [_]) = (rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice()) else {
+        return None;
+    };
+    let w = *w;
+    // As `solve_single_with` checks them, the zeroed force aside.
+    if !(finite3(velocity) & bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
+        return None;
+    }
+    let settings = Settings::default();
+    let scaled = scaling.of(&row.jacobian, j, w)?;
+    let (mu, _) = scaled.multiplier(&[0.0; 3], w, bias, settings.rank_tolerance)?;
+    // Σ λ J = λ̃ J̃, added to a zero force; a = (0 + Σ λ J) w.
+    Some(scaled.jt.map(|x| (0.0 + (0.0 + mu * x)) * w))
+}
+
 /// [`solve_single_with`] without a kept scaling: every call scales its row afresh.
 pub fn solve_single(rows: &Rows, settings: &Settings, out: &mut Solution) -> bool {
     solve_single_with(rows, settings, &mut SingleScaling::default(), out)
@@ -131,7 +199,6 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
     // Every number finite, every slot's velocity and force included: the general solve's
     // cache serves nothing less (`is_finite` joined by `&`, as `dynamics::all_finite`: no
     // chain of dependent additions).
-    let finite3 = |x: &[f64; 3]| x[0].is_finite() & x[1].is_finite() & x[2].is_finite();
     let mut slots = true;
     for i in 0..n {
         slots &= finite3(&rows.velocity[i]) & finite3(&rows.force[i]);
@@ -139,28 +206,13 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
     if !(slots & row.bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
         return false;
     }
-    let Some(&SingleScaling { norm, jacobi, jt, a, l, .. }) = scaling.of(&row.jacobian, j, w) else {
+    let Some(scaled) = scaling.of(&row.jacobian, j, w) else {
         return false;
     };
-    if a.is_nan() || a <= settings.rank_tolerance {
+    let jt = scaled.jt;
+    let Some((mu, lambda)) = scaled.multiplier(&rows.force[body], w, row.bias, settings.rank_tolerance) else {
         return false;
-    }
-    // −b̃ = −(J̃·F w + c/‖J‖/√Â), the sum of the forces' part started from −0.
-    let b = (-0.0 + dot(&jt, &rows.force[body]) * w) + (row.bias / norm) * jacobi;
-    let rhs = -b;
-    // L Lᵀ x = −b̃ (forward and back: a division each, after subtracting the empty sum −0),
-    // then one step of refinement x += A⁻¹(−b̃ − A x).
-    let mut mu = ((rhs - -0.0) / l) / l;
-    let residual = rhs - (0.0 + (0.0 + a * mu));
-    mu += ((residual - -0.0) / l) / l;
-    if !mu.is_finite() {
-        return false;
-    }
-    // λ = λ̃/(‖J‖√Â); out of the f64 range the general solve says so in a diagnostic.
-    let lambda = (mu * jacobi) / norm;
-    if mu != 0.0 && !lambda.is_normal() {
-        return false;
-    }
+    };
     // The answer in place when `out` has the shape already (the last solve's: a run solves
     // the same system again and again), else sized first.
     if out.lambda.len() != 1 || out.active.len() != 1 || out.contacts.len() != 1 {

@@ -184,8 +184,14 @@ fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dyna
     };
     let step = &mut solution.acceleration;
     fold(rows, step);
+    add_finite(x, step)
+}
+
+/// x += Δx slot by slot over the slots `step` has, the components that are finite, and the
+/// largest |Δx| component added.
+fn add_finite(x: &mut Vectors, step: &Vectors) -> f64 {
     let mut largest = 0.0f64;
-    for (x, dx) in x.iter_mut().zip(step.iter()) {
+    for (x, dx) in x.iter_mut().zip(step) {
         for d in 0..3 {
             if dx[d].is_finite() {
                 x[d] += dx[d];
@@ -194,6 +200,19 @@ fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dyna
         }
     }
     largest
+}
+
+/// SHAKE's update q += Δq, v½ += Δq/dt slot by slot over the slots `step` has, the
+/// components that are finite.
+fn shake_update(q: &mut Vectors, v_half: &mut Vectors, step: &Vectors, dt: f64) {
+    for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(step) {
+        for d in 0..3 {
+            if dq[d].is_finite() {
+                q[d] += dq[d];
+                v[d] += dq[d] / dt;
+            }
+        }
+    }
 }
 
 /// Which inequality rows a projection holds on their surface.
@@ -260,7 +279,7 @@ pub fn project_positions(
 /// step stays symplectic, so the energy error of a long run stays bounded. Equalities only:
 /// a contact's correction must not turn into a velocity (that would pre-empt its impulse
 /// and restitution), so violated inequalities are left to [`project_positions`]. `start` holds
-/// the rows at the start of the step (its C, Ċ and c are overwritten; its J is kept).
+/// the rows at the start of the step (its C, Ċ and c may be overwritten; its J is kept).
 /// An iteration reads C and J alone (`Dynamics::positions`), and its solve has the start's
 /// J, so the run's solve cache serves it with the start's factor; at the final positions
 /// the rows are completed from the last iteration's C and J
@@ -300,6 +319,17 @@ pub fn shake_positions(
             return Ok(iterations);
         }
         previous = residual;
+        // One constraint on the scene's only slot (a pendulum, a bead), an equality for the
+        // step: its correction in closed form, with `start` as it is.
+        let single = match (dynamics.position_rows(), system.constraints.as_slice()) {
+            ([new], [constraint]) if !constraint.inequality || dynamics.is_held(0) => Some(new.value),
+            _ => None,
+        };
+        if let Some(dq) = single.and_then(|c| dynamics.correct_single(start, c)) {
+            shake_update(q, v_half, std::slice::from_ref(&dq), dt);
+            iterations += 1;
+            continue;
+        }
         for (k, ((old, new), constraint)) in
             start.rows.iter_mut().zip(dynamics.position_rows()).zip(&system.constraints).enumerate()
         {
@@ -315,14 +345,7 @@ pub fn shake_positions(
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
         let step = &mut dynamics.correct(start).acceleration;
         fold(start, step);
-        for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(step.iter()) {
-            for d in 0..3 {
-                if dq[d].is_finite() {
-                    q[d] += dq[d];
-                    v[d] += dq[d] / dt;
-                }
-            }
-        }
+        shake_update(q, v_half, step, dt);
         iterations += 1;
     }
 }
@@ -460,7 +483,9 @@ pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
 /// within `touch` or `held`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
 /// `project` the equalities and the held contacts that are not closing go onto Ċ = 0 too,
 /// else they keep their Ċ; `dynamics` says which contacts are held and serves the solve.
-/// Returns whether anything was applied. `rows` is spent (its C, Ċ and c are overwritten).
+/// Returns whether anything was applied. `rows` is spent (its C, Ċ and c may be
+/// overwritten), but for one equality row on the scene's only slot (a pendulum, a bead),
+/// projected in closed form from the rows as they are (`Dynamics::correct_single`).
 pub fn velocity_step(
     rows: &mut Rows,
     v: &mut Vectors,
@@ -470,6 +495,14 @@ pub fn velocity_step(
     bounce_speed: f64,
     dynamics: &mut Dynamics<'_>,
 ) -> bool {
+    if let (true, [row]) = (project, rows.rows.as_slice())
+        && !row.inequality
+        && let Some(dv) = dynamics.correct_single(rows, row.rate)
+    {
+        // ΔĊ = −Ċ, as below.
+        add_finite(v, std::slice::from_ref(&dv));
+        return true;
+    }
     let mut any = false;
     for (k, row) in rows.rows.iter_mut().enumerate() {
         let is_held = dynamics.is_held(k);
