@@ -3465,10 +3465,11 @@ fn effective_mass(m: f64) -> f64 {
 
 /// |J_b|² of an entry of a `UNIT` row (every entry a unit vector, ±e/|e|: the library's
 /// `velocity::pattern::unit_square`): exactly 1 where J_b is a number, NaN where it is not
-/// (e = 0), so that `effective_mass` gives 0 there as from the numbers.
+/// (e = 0), so that `effective_mass` gives 0 there as from the numbers: 1 + 0·J₀ + 0·J₁ …,
+/// without a branch.
 #[inline(always)]
 fn unit_square<const D: usize>(j: &[f64; D]) -> f64 {
-    if j.iter().all(|x| x.is_finite()) { 1.0 } else { f64::NAN }
+    j.iter().fold(1.0, |s, x| s + 0.0 * x)
 }
 
 /// |J|² of an entry of row k as its m_eff takes it: `unit_square` on a `UNIT` row, else J·J
@@ -3667,7 +3668,9 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// `steady_row` for a `UNIT` row, returning its m_eff: `unit_mass` where every entry is a
-    /// number, else 0 (`effective_mass` of `mass`'s NaN), without a sum or a division.
+    /// number (each `unit_square` 1), else 0 (`effective_mass` of `mass`'s NaN), without a
+    /// sum of masses or a division. (A test per component, which a row of numbers passes
+    /// predictably: quicker here than `unit_square`'s products.)
     #[inline(always)]
     fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));

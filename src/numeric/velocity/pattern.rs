@@ -61,10 +61,11 @@ pub struct Pattern {
 /// |J_b|² of an entry of a row whose entries are unit vectors ([`Pattern::is_unit`]) over
 /// its first `dim` components: exactly 1 where J_b is a number, NaN where a component is not
 /// (J = d/|d| at d = 0), so that the effective mass 1/Σ |J_b|²/m_b is 0 there, as from the
-/// numbers (the row does nothing).
+/// numbers (the row does nothing). Without a branch: 1 + 0·J₀ + 0·J₁ …, each 0·x ±0 for a
+/// finite x and NaN otherwise.
 #[inline(always)]
 pub fn unit_square(dim: usize, j: &[f64; 3]) -> f64 {
-    if j[..dim.min(3)].iter().all(|x| x.is_finite()) { 1.0 } else { f64::NAN }
+    j[..dim.min(3)].iter().fold(1.0, |s, x| s + 0.0 * x)
 }
 
 impl Pattern {
