@@ -657,12 +657,9 @@ fn the_unit_rows_are_those_whose_derivation_gives_unit_entries() {
         }
     }
     assert!(units > 1711, "{units}");
-    for (file, every) in [
-        ("two_particles", true),
-        ("ball_and_chain", true),
-        ("joint_grid_30", true),
-        ("rigid_grid_10", false),
-    ] {
+    for (file, every) in
+        [("two_particles", true), ("ball_and_chain", true), ("joint_grid_30", true), ("rigid_grid_10", false)]
+    {
         let l = loaded(Path::new(&format!("constraints/solvers/{file}.toml")));
         let pattern = Pattern::of(&l.system);
         let rows = l.system.constraints.len();

@@ -122,9 +122,8 @@ impl Pattern {
 /// coefficient ±1, and k, a and everything else reading no body (only parameters and the
 /// time): then ∇_b C = ±e/|e|, a unit vector, for every body C reads.
 fn unit_row(g: &Graph, symbols: &mut SymbolWalk, c: Id) -> bool {
-    let mut free = |id: Id| {
-        symbols.free_symbols(g, id).iter().all(|&s| matches!(g.symbol(s).role, Role::Time | Role::Parameter))
-    };
+    let mut free =
+        |id: Id| symbols.free_symbols(g, id).iter().all(|&s| matches!(g.symbol(s).role, Role::Time | Role::Parameter));
     // The one term of C that reads a body.
     let term = match g.node(c) {
         Node::Add(xs) => {
