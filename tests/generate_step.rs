@@ -624,3 +624,45 @@ fn the_stepper_keeps_rows_that_read_neither_velocities_nor_time() {
     assert!(code.contains("same(&a.g, &b.g)") && code.contains("same(&a.r_p1, &b.r_p1)"));
     assert!(!code.contains("same(&a.v_p1"));
 }
+
+/// The rows the step takes as distance rows (`velocity::pattern`'s unit rows: |Jᵢ|² exactly
+/// 1, so m_eff = 1/Σᵢ 1/mᵢ) are rows whose derivation gives it: κ = 1, no angular entry, and
+/// each Jᵢ·Jᵢ simplifies to 1. Solver2D's point-mass scenes are all such rows; a pin of the
+/// rigid grid is not one.
+#[test]
+fn the_unit_rows_are_those_whose_derivation_gives_unit_entries() {
+    use lagrange::numeric::velocity::pattern::Pattern;
+    let mut units = 0;
+    for dir in ["constraints", "constraints/hard", "constraints/joints", "constraints/rigid", "constraints/solvers"] {
+        let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+            .expect("constraints/")
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "toml") && !p.ends_with("joint_grid_100.toml"))
+            .collect();
+        paths.sort();
+        for path in paths {
+            let Ok(l) = load(&std::fs::read_to_string(&path).expect("readable")) else { continue };
+            let Ok(mut d) = lagrange::derive(&l.system) else { continue };
+            let pattern = Pattern::of(&l.system);
+            for (k, c) in d.constraints.clone().iter().enumerate().filter(|&(k, _)| pattern.is_unit(k)) {
+                units += 1;
+                let at = format!("{} row {k}", path.display());
+                assert!(c.scale.is_one() && c.angular.is_empty(), "{at}");
+                for &(_, j) in &c.jacobian {
+                    let square = d.graph.dot(j, j).expect("a vector");
+                    let square = d.simplifier.simplify(&mut d.graph, square).expect("simplifies");
+                    assert!(d.graph.as_num(square).is_some_and(|q| q.is_one()), "{at}");
+                }
+            }
+        }
+    }
+    assert!(units > 1711, "{units}");
+    for (file, every) in
+        [("two_particles", true), ("ball_and_chain", true), ("joint_grid_30", true), ("rigid_grid_10", false)]
+    {
+        let l = loaded(Path::new(&format!("constraints/solvers/{file}.toml")));
+        let pattern = Pattern::of(&l.system);
+        let rows = l.system.constraints.len();
+        assert_eq!((0..rows).filter(|&k| pattern.is_unit(k)).count(), if every { rows } else { 0 }, "{file}");
+    }
+}

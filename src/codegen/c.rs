@@ -518,6 +518,15 @@ fn step_c(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>, step: &StepParts) -> R
         k.max(1),
         list(&steady, k)
     );
+    let unit: Vec<String> = (0..k).map(|r| i32::from(roots.pattern.is_unit(r)).to_string()).collect();
+    let _ = writeln!(
+        out,
+        "/* Per row, whether every entry of its J is a unit vector, +-e/|e| (velocity::pattern): its |J_i|^2 is\n   \
+         taken as exactly 1 (lg_unit_square), as the library and the Rust module take it. */\n\
+         static const int UNIT[{}] = {{{}}};\n",
+        k.max(1),
+        list(&unit, k)
+    );
     let _ = writeln!(
         out,
         "/* The rows of a state as the step reads them: per row C/kappa, its rate, c, J per entry; per slot\n   \

@@ -1268,7 +1268,11 @@ pub(super) fn step_constants(
          const ENTRY_AT: [usize; {}] = {};\n\
          /// Per row, whether its C reads no time: ∂C/∂t = 0 exactly (`numeric::velocity::steady_rows`).\n\
          #[allow(dead_code)]\n\
-         const STEADY: [bool; {k}] = {};\n",
+         const STEADY: [bool; {k}] = {};\n\
+         /// Per row, whether every entry of its J is a unit vector, ±e/|e| (`numeric::velocity::pattern`): its |Jᵢ|² is\n\
+         /// taken as exactly 1 (`unit_square`), so its m_eff is 1/Σᵢ 1/mᵢ, a constant of the masses.\n\
+         #[allow(dead_code)]\n\
+         const UNIT: [bool; {k}] = {};\n",
         bodies.len(),
         k + 1,
         list(&starts),
@@ -1276,7 +1280,8 @@ pub(super) fn step_constants(
         list(&bodies),
         at.len(),
         list(&at),
-        array(&step.steady.iter().map(bool::to_string).collect::<Vec<_>>())
+        array(&step.steady.iter().map(bool::to_string).collect::<Vec<_>>()),
+        array(&(0..k).map(|r| step.pattern.is_unit(r).to_string()).collect::<Vec<_>>())
     );
     row_kinds(out, &step.codes(&starts, &bodies, &at), &starts, layout.dim);
     (starts, at)

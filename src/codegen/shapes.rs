@@ -381,7 +381,18 @@ pub(super) fn step_by_shape(
     // The shapes whose rows' m_eff = 1/m is taken in a pass of its own (`Prepared::invert_mass`):
     // where J takes a division or a root, so that the next rows' divisions need not wait on it.
     let mut deferred = Vec::new();
+    // A shape whose rows are all `UNIT` and read no time takes each row's m_eff from
+    // `unit_mass` (`Prepared::unit_row`), which `prepare` fills from the bodies' 1/m before
+    // the first row's shape (in `prepare`, not `prepare_moved`, where the bodies stay).
+    let unit = |shape: &Shape| {
+        matches!(shape.kind, Kind::Row(_, true)) && shape.items.iter().all(|&i| step.pattern.is_unit(i))
+    };
+    let mut masses = list.iter().any(unit);
     for (id, shape) in list.iter().enumerate() {
+        if masses && shape.kind.is_row() {
+            masses = false;
+            let _ = writeln!(out, "    p.unit_masses();");
+        }
         if !moved && (shape.kind.is_row() || id + 1 == list.len()) {
             moved = true;
             let _ = writeln!(
@@ -474,7 +485,9 @@ pub(super) fn step_by_shape(
                         }
                     }
                 }
-                if fused.is_some() {
+                if fused.is_some() && unit(shape) {
+                    let _ = writeln!(out, "        p.effective_mass[i] = p.unit_row(i, e, {});", array(&row));
+                } else if fused.is_some() {
                     let divides = shape.ops.iter().any(|op| {
                         matches!(op, Op::Div(..) | Op::Powf(..) | Op::Call(..) | Op::Norm2(..) | Op::Norm3(..))
                     });

@@ -33,6 +33,17 @@ static double lg_dot(const double *a, const double *b) {
     return s;
 }
 
+/* |J_i|^2 of an entry of a UNIT row (every entry +-e/|e|), as the library's velocity::pattern::unit_square:
+   exactly 1 where J_i is a number, NaN where it is not (e = 0), so that m_eff is 0 there: 1 + 0 J_0 + 0 J_1 ... */
+static double lg_unit_square(const double *j) {
+    double s = 1.0;
+    int d;
+    for (d = 0; d < DIM; d++) {
+        s += 0.0 * j[d];
+    }
+    return s;
+}
+
 /* a.b over the components in m (bit d: component d), summed from the first of them, as the library's
    velocity::dot_masked: lg_dot without the products of J's structural zeros. */
 static double lg_dot_masked(int m, const double *a, const double *b) {
@@ -54,7 +65,8 @@ static void prepare(const State *s, Prepared *p) {
     for (k = 0; k < CONSTRAINTS; k++) {
         double m = 0.0, jv = 0.0;
         for (e = ROW_START[k]; e < ROW_START[k + 1]; e++) {
-            m += p->inverse_mass[ROW_BODY[e]] * lg_dot(p->jacobian[e], p->jacobian[e]);
+            const double square = UNIT[k] ? lg_unit_square(p->jacobian[e]) : lg_dot(p->jacobian[e], p->jacobian[e]);
+            m += p->inverse_mass[ROW_BODY[e]] * square;
             if (!STEADY[k]) {
                 jv += lg_dot_masked(ENTRY_MASK[e], p->jacobian[e], p->velocity[ROW_BODY[e]]);
             }

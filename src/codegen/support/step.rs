@@ -136,6 +136,9 @@ struct Prepared<const D: usize> {
     time_rate: [f64; CONSTRAINTS],
     /// m_eff = 1/(J M⁻¹ Jᵀ); 0 where J = 0 (a singular configuration: the row does nothing).
     effective_mass: [f64; CONSTRAINTS],
+    /// Per `UNIT` row, its m_eff where J is a number: 1/Σᵢ 1/mᵢ, a constant of the masses
+    /// (`unit_masses`), which `unit_row` reads where the positions move.
+    unit_mass: [f64; CONSTRAINTS],
     inequality: [bool; CONSTRAINTS],
     inverse_mass: [f64; SLOTS],
     force: [[f64; D]; SLOTS],
@@ -164,6 +167,22 @@ fn dot<const D: usize>(a: &[f64; D], b: &[f64; D]) -> f64 {
 #[inline(always)]
 fn effective_mass(m: f64) -> f64 {
     if m > 0.0 && m.is_finite() { 1.0 / m } else { 0.0 }
+}
+
+/// |J_b|² of an entry of a `UNIT` row (every entry a unit vector, ±e/|e|: the library's
+/// `velocity::pattern::unit_square`): exactly 1 where J_b is a number, NaN where it is not
+/// (e = 0), so that `effective_mass` gives 0 there as from the numbers: 1 + 0·J₀ + 0·J₁ …,
+/// without a branch.
+#[inline(always)]
+fn unit_square<const D: usize>(j: &[f64; D]) -> f64 {
+    j.iter().fold(1.0, |s, x| s + 0.0 * x)
+}
+
+/// |J|² of an entry of row k as its m_eff takes it: `unit_square` on a `UNIT` row, else J·J
+/// (`dot`, as the library's `velocity::dot_in`).
+#[inline(always)]
+fn square<const D: usize>(k: usize, j: &[f64; D]) -> f64 {
+    if UNIT[k] { unit_square(j) } else { dot(j, j) }
 }
 
 /// Σ_d term(d) over the first D components, the terms `None` left out, summed from the first
@@ -289,6 +308,7 @@ impl<const D: usize> Prepared<D> {
             value: [0.0; CONSTRAINTS],
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
+            unit_mass: [0.0; CONSTRAINTS],
             inequality: INEQUALITY,
             inverse_mass: [0.0; SLOTS],
             force: [[0.0; D]; SLOTS],
@@ -314,7 +334,7 @@ impl<const D: usize> Prepared<D> {
         let (mut m, mut jv) = (0.0, 0.0);
         for (e, (b, j)) in entries.iter().enumerate() {
             self.jacobian[first + e] = *j;
-            m += self.inverse_mass[*b] * dot(j, j);
+            m += self.inverse_mass[*b] * square(k, j);
             if !STEADY[k] {
                 jv += dot_coded(ENTRY_CODE[first + e], j, &velocity[*b]);
             }
@@ -333,11 +353,36 @@ impl<const D: usize> Prepared<D> {
     fn steady_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let mut m = 0.0;
         for (x, j) in j.iter().enumerate() {
-            m += self.inverse_mass[ROW_BODY[e + x]] * dot(j, j);
+            m += self.inverse_mass[ROW_BODY[e + x]] * square(k, j);
         }
         self.jacobian[e..e + N].copy_from_slice(&j);
         self.time_rate[k] = 0.0;
         m
+    }
+
+    /// Each `UNIT` row's m_eff where its J is a number, from its bodies' 1/m in place:
+    /// `effective_mass` of Σᵢ 1/mᵢ over its entries in the step's order from 0 (`mass`'s
+    /// number, each |Jᵢ|² exactly 1), once per state of the masses (`prepare`).
+    fn unit_masses(&mut self) {
+        for k in (0..CONSTRAINTS).filter(|&k| UNIT[k]) {
+            let mut m = 0.0;
+            for e in ROW_START[k]..ROW_START[k + 1] {
+                m += self.inverse_mass[ROW_BODY[e]];
+            }
+            self.unit_mass[k] = effective_mass(m);
+        }
+    }
+
+    /// `steady_row` for a `UNIT` row, returning its m_eff: `unit_mass` where every entry is a
+    /// number (each `unit_square` 1), else 0 (`effective_mass` of `mass`'s NaN), without a
+    /// sum of masses or a division. (A test per component, which a row of numbers passes
+    /// predictably: quicker here than `unit_square`'s products.)
+    #[inline(always)]
+    fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
+        let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));
+        self.jacobian[e..e + N].copy_from_slice(&j);
+        self.time_rate[k] = 0.0;
+        if number { self.unit_mass[k] } else { 0.0 }
     }
 
     /// Row k's m_eff from the m = Σᵢ |Jᵢ|²/mᵢ left in its place (`steady_row`).
@@ -383,13 +428,14 @@ impl<const D: usize> Prepared<D> {
     /// Σᵢ |Jᵢ|²/mᵢ of row k over its entries in the step's order, from 0 (`finish`): each
     /// |Jᵢ|² over the components `codes` keeps, a component ±1 adding 1 (`square_coded`; the
     /// structural zeros' squares are +0 and (±1)² = 1, so the same number as over every
-    /// component).
+    /// component); on a `UNIT` row `unit_square`.
     #[inline(always)]
     fn mass_in(&self, k: usize, codes: &[u8]) -> f64 {
         let first = ROW_START[k];
         let mut m = 0.0;
         for (e, &code) in codes.iter().enumerate() {
-            m += self.inverse_mass[ROW_BODY[first + e]] * square_coded(code, &self.jacobian[first + e]);
+            let j = &self.jacobian[first + e];
+            m += self.inverse_mass[ROW_BODY[first + e]] * if UNIT[k] { unit_square(j) } else { square_coded(code, j) };
         }
         m
     }
@@ -401,7 +447,8 @@ impl<const D: usize> Prepared<D> {
         let (j, b) = (&self.jacobian[first..first + N], &ROW_BODY[first..first + N]);
         let mut m = 0.0;
         for e in 0..N {
-            m += self.inverse_mass[b[e]] * square_coded((CODES >> (8 * e)) as u8, &j[e]);
+            let code = (CODES >> (8 * e)) as u8;
+            m += self.inverse_mass[b[e]] * if UNIT[k] { unit_square(&j[e]) } else { square_coded(code, &j[e]) };
         }
         m
     }
@@ -411,7 +458,7 @@ impl<const D: usize> Prepared<D> {
     fn mass_dense(&self, k: usize) -> f64 {
         let mut m = 0.0;
         for e in ROW_START[k]..ROW_START[k + 1] {
-            m += self.inverse_mass[ROW_BODY[e]] * dot(&self.jacobian[e], &self.jacobian[e]);
+            m += self.inverse_mass[ROW_BODY[e]] * square(k, &self.jacobian[e]);
         }
         m
     }

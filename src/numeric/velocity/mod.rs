@@ -69,7 +69,7 @@ use super::rows::Rows;
 use super::simulate::{MAX_ITERATIONS, MAX_STEPS, SettingsError};
 use crate::expr::graph::SymbolWalk;
 use crate::model::system::System;
-use pattern::{Pattern, full};
+use pattern::{Pattern, full, unit_square};
 
 /// Which velocity-level solver a run uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -424,6 +424,8 @@ impl Prepared {
             self.order.clear();
             entry_order(&self.body[previous..at], row.jacobian.len(), |e| row.jacobian[e].0, &mut self.order);
             previous = at;
+            // A distance row's |J_b|² is 1 exactly where J is a number (`unit_square`).
+            let unit = self.pattern.len() == rows.rows.len() && self.pattern.is_unit(r);
             let (mut k, mut jv) = (0.0, 0.0);
             for &e in &self.order {
                 let (b, j) = (&row.jacobian[e].0, &row.jacobian[e].1);
@@ -433,7 +435,7 @@ impl Prepared {
                 self.mask.push(mask);
                 // Every component: the squares of the structural zeros add +0 to a sum ≥ +0,
                 // so the mask would give the same bits.
-                k += rows.inverse_mass[*b] * dot_in(dim, j, j);
+                k += rows.inverse_mass[*b] * if unit { unit_square(dim, j) } else { dot_in(dim, j, j) };
                 if !steady {
                     jv += dot_masked(mask, j, &rows.velocity[*b]);
                 }

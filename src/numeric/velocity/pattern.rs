@@ -23,9 +23,16 @@
 //! derivation's J = ∇C/κ cannot be nonzero where C does not read. A row evaluated from
 //! another system (other rows) takes every component.
 //!
+//! The same reading of C finds the rows whose every entry is a unit vector: C = ±|e| + k,
+//! e = Σ ±r_b + a (each body's position once, with coefficient ±1; k and a read no body), a
+//! distance row. Each J_b = ±e/|e| then has |J_b|² = 1 identically (κ = 1: the ±1 in ∇C
+//! leaves no content to take out), so m_eff = 1/Σ_b (1/m_b) does not depend on the
+//! positions; the library and the generated step take |J_b|² as exactly 1 there
+//! ([`unit_square`]), where Σ |J_b|²/m_b from the numbers would round differently each step.
+//!
 //! Not here: the loops that use the masks (`Prepared`, the generated step), numbers.
 
-use crate::expr::graph::FastSet;
+use crate::expr::graph::{FastSet, SymbolWalk};
 use crate::expr::{Graph, Id, Node, Role, Ty};
 use crate::model::system::System;
 
@@ -46,6 +53,19 @@ pub struct Pattern {
     /// No structural zero anywhere and no angular slot: [`mask`](Pattern::mask) is every
     /// component throughout (point masses on distance rows), so a caller may skip it.
     dense: bool,
+    /// Per row, whether every entry of its J is a unit vector, structurally (the module's
+    /// note: a distance row).
+    unit: Vec<bool>,
+}
+
+/// |J_b|² of an entry of a row whose entries are unit vectors ([`Pattern::is_unit`]) over
+/// its first `dim` components: exactly 1 where J_b is a number, NaN where a component is not
+/// (J = d/|d| at d = 0), so that the effective mass 1/Σ |J_b|²/m_b is 0 there, as from the
+/// numbers (the row does nothing). Without a branch: 1 + 0·J₀ + 0·J₁ …, each 0·x ±0 for a
+/// finite x and NaN otherwise.
+#[inline(always)]
+pub fn unit_square(dim: usize, j: &[f64; 3]) -> f64 {
+    j[..dim.min(3)].iter().fold(1.0, |s, x| s + 0.0 * x)
 }
 
 impl Pattern {
@@ -56,7 +76,15 @@ impl Pattern {
         let rows: Vec<Vec<(usize, u8)>> = system.constraints.iter().map(|c| walk.reads(g, c.c)).collect();
         let all = full(g.dim());
         let dense = !system.has_rigid_bodies() && rows.iter().flatten().all(|&(_, m)| m & all == all);
-        Pattern { dim: g.dim(), bodies: system.bodies.len(), rows, dense }
+        let mut symbols = SymbolWalk::default();
+        let unit = system.constraints.iter().map(|c| unit_row(g, &mut symbols, c.c)).collect();
+        Pattern { dim: g.dim(), bodies: system.bodies.len(), rows, dense, unit }
+    }
+
+    /// Whether every entry of row `row`'s J is a unit vector (a distance row, the module's
+    /// note), so that |J_b|² is [`unit_square`]; false where the pattern does not know the row.
+    pub fn is_unit(&self, row: usize) -> bool {
+        self.unit.get(row).copied().unwrap_or(false)
     }
 
     /// Whether [`mask`](Pattern::mask) is every component of the dimension for every row and
@@ -87,6 +115,54 @@ impl Pattern {
             Some(&(_, m)) if m & all != 0 => m & all,
             _ => all,
         }
+    }
+}
+
+/// Whether C (`c`) is ±|e| + k with e = Σ ±r_b + a, each body's position once in e with
+/// coefficient ±1, and k, a and everything else reading no body (only parameters and the
+/// time): then ∇_b C = ±e/|e|, a unit vector, for every body C reads.
+fn unit_row(g: &Graph, symbols: &mut SymbolWalk, c: Id) -> bool {
+    let mut free =
+        |id: Id| symbols.free_symbols(g, id).iter().all(|&s| matches!(g.symbol(s).role, Role::Time | Role::Parameter));
+    // The one term of C that reads a body.
+    let term = match g.node(c) {
+        Node::Add(xs) => {
+            let mut reading = xs.iter().filter(|&&x| !free(x));
+            match (reading.next(), reading.next()) {
+                (Some(&x), None) => x,
+                _ => return false,
+            }
+        }
+        _ => c,
+    };
+    let norm = signed(g, term).unwrap_or(term);
+    let Node::Norm(e) = g.node(norm) else { return false };
+    let terms = match g.node(*e) {
+        Node::Add(xs) => &xs[..],
+        _ => std::slice::from_ref(e),
+    };
+    let mut bodies = Vec::new();
+    for &t in terms {
+        let x = signed(g, t).unwrap_or(t);
+        match g.node(x) {
+            Node::Sym(s) if matches!(g.symbol(*s).role, Role::Position { .. }) => {
+                if bodies.contains(s) {
+                    return false;
+                }
+                bodies.push(*s);
+            }
+            _ if free(t) => {}
+            _ => return false,
+        }
+    }
+    !bodies.is_empty()
+}
+
+/// `x` where `id` is −x (the product −1·x).
+fn signed(g: &Graph, id: Id) -> Option<Id> {
+    match g.node(id) {
+        Node::Mul(xs) if xs.len() == 2 && g.as_num(xs[0]).is_some_and(|q| q.neg().is_one()) => Some(xs[1]),
+        _ => None,
     }
 }
 
