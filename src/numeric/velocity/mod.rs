@@ -317,7 +317,7 @@ pub struct Prepared {
 }
 
 /// Per constraint of `system` (one row each), whether its C reads no time, so that
-/// ∂C/∂t = 0 exactly ([`Prepared::steady`]; a generated module's `STEADY`, which leaves such
+/// ∂C/∂t = 0 exactly ([`Prepared::set_system`]; a generated module's `STEADY`, which leaves such
 /// a row's Ċ out of its code).
 pub fn steady_rows(system: &System) -> Vec<bool> {
     let mut walk = SymbolWalk::default();
@@ -407,7 +407,7 @@ impl Prepared {
     }
 
     /// Fills from `rows`, reusing the buffers: the layout of the
-    /// entries ([`Prepared::lay_out`]) only when the rows' slots are not those of the last
+    /// entries (`Prepared::lay_out`) only when the rows' slots are not those of the last
     /// call, then per entry its J and per row its numbers.
     pub fn load(&mut self, rows: &Rows) {
         if !self.fits(rows) {
