@@ -413,7 +413,8 @@ impl Prepared {
         if !self.fits(rows) {
             self.lay_out(rows);
         }
-        self.jacobian.clear();
+        // Every entry's J is written below (the buffer keeps its length between substeps).
+        self.jacobian.resize(self.body.len(), [0.0; 3]);
         self.value.clear();
         self.time_rate.clear();
         self.effective_mass.clear();
@@ -432,9 +433,10 @@ impl Prepared {
             let steady = flags && self.steady[r];
             let (mut k, mut jv) = (0.0, 0.0);
             let entries = self.start[r]..self.start[r + 1];
-            for (&e, &mask) in self.source[entries.clone()].iter().zip(&self.mask[entries]) {
+            let layout = self.source[entries.clone()].iter().zip(&self.mask[entries.clone()]);
+            for ((&e, &mask), kept) in layout.zip(&mut self.jacobian[entries]) {
                 let (b, j) = (&row.jacobian[e].0, &row.jacobian[e].1);
-                self.jacobian.push(*j);
+                *kept = *j;
                 // Every component: the squares of the structural zeros add +0 to a sum ≥ +0,
                 // so the mask would give the same bits.
                 k += rows.inverse_mass[*b] * dot_in(dim, j, j);
