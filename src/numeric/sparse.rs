@@ -518,7 +518,6 @@ impl SparseFactor {
     }
 
     /// Supernode s's rows, block and number of columns.
-    #[inline(always)]
     fn supernode(&self, s: usize) -> (&[usize], &[f64], usize) {
         (
             &self.blocks.rows[self.blocks.rowptr[s]..self.blocks.rowptr[s + 1]],
