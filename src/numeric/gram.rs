@@ -45,7 +45,8 @@ pub(crate) struct Gram {
     columns: usize,
     /// Row p's entries are `start[p]..start[p + 1]` of the vectors below.
     start: Vec<usize>,
-    /// Each entry's column (32 bits: the products stream it beside G's values).
+    /// Each entry's column (32 bits: the products stream it beside G's values). Numbered slot
+    /// by slot, axis by axis, until [`relabel`](Gram::relabel) puts them in a factor's order.
     column: Vec<u32>,
     /// Each entry's source: the place of its part in the scaled rows' buffer, and the axis.
     source: Vec<(usize, usize)>,
@@ -208,6 +209,21 @@ impl Gram {
         finite
     }
 
+    /// Numbers the columns in `order` (`order[new] = old`, a factor's fill-reducing order of
+    /// H), so that G'ᵀ x comes out in the order the factor's substitutions take and G' x
+    /// reads it there: only where each column's numbers are kept changes, each product and
+    /// each sum is the same.
+    fn relabel(&mut self, order: &[usize]) {
+        let mut new = vec![0u32; order.len()];
+        for (n, &old) in order.iter().enumerate() {
+            new[old] = n as u32;
+        }
+        for c in &mut self.column {
+            *c = new[*c as usize];
+        }
+        self.scale2 = order.iter().map(|&old| self.scale2[old]).collect();
+    }
+
     /// The pairs of columns whose products H sums, in the order [`assemble`](Gram::assemble)
     /// sums them: row by row, each pair of its entries once.
     fn pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
@@ -297,7 +313,6 @@ pub(crate) struct BodySpaceWork {
     trial: Vec<f64>,
     ax: Vec<f64>,
     columns: Vec<f64>,
-    solved: Vec<f64>,
     /// ẑ of the last pseudo-inverse application.
     z: Vec<f64>,
     sparse: SparseWork,
@@ -336,8 +351,11 @@ impl BodySpace {
     /// The factor of `gram`'s H'; `None` when a pivot falls to `pivot_floor` (G lacks full
     /// column rank: some body is not held, the rows' rank is below the components') or its
     /// pattern is refused.
-    pub(crate) fn new(gram: Gram, pivot_floor: f64, null_share: f64) -> Option<BodySpace> {
+    pub(crate) fn new(mut gram: Gram, pivot_floor: f64, null_share: f64) -> Option<BodySpace> {
         let (factor, targets) = SparseFactor::analyse(gram.columns, gram.pairs())?;
+        // From here G's columns are in the factor's order (`assemble` reads only which
+        // entries share a column, and `targets`): no permutation around the substitutions.
+        gram.relabel(factor.order());
         let mut body =
             BodySpace { gram, factor, targets, null_rows: Vec::new(), factored: Vec::new(), last: Vec::new() };
         body.refactor(pivot_floor, null_share).then_some(body)
@@ -378,10 +396,10 @@ impl BodySpace {
         let n = self.gram.rows();
         let mut rng = super::random::Rng::new(0x5EED_F00D);
         let y: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
-        let (mut columns, mut solved, mut back) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut columns, mut back) = (Vec::new(), Vec::new());
         self.gram.transpose_mul(&y, &mut columns);
-        self.factor.substitute_into(&columns, &mut SparseWork::default(), &mut solved);
-        self.gram.mul(&solved, &mut back);
+        self.factor.substitute_in_order(&mut columns, &mut SparseWork::default());
+        self.gram.mul(&columns, &mut back);
         let null: Vec<f64> = y.iter().zip(&back).zip(&self.gram.weight).map(|((y, b), w)| (y - b) / w).collect();
         let peak = null.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         self.null_rows.clear();
@@ -390,16 +408,18 @@ impl BodySpace {
     }
 
     /// step = Ŵ⁻¹ G' H'⁻¹ S² H'⁻¹ G'ᵀ Ŵ⁻¹ r: the weighted pseudo-inverse of Ã applied to r
-    /// (see the file's note; S² = 1/diag H undoes the column scaling between the solves).
+    /// (see the file's note; S² = 1/diag H undoes the column scaling between the solves),
+    /// with ẑ = H'⁻¹ S² H'⁻¹ G'ᵀ Ŵ⁻¹ r left in `work.z` (the substitutions in place there, in
+    /// the factor's order, which G's columns are in).
     fn pseudo_inverse(&self, r: &[f64], work: &mut BodySpaceWork) {
-        let BodySpaceWork { step, columns, solved, z, sparse, .. } = work;
+        let BodySpaceWork { step, z, sparse, .. } = work;
         let weight = &self.gram.weight;
-        self.gram.transpose_mul_by(|p| r[p] / weight[p], columns);
-        self.factor.substitute_into(columns, sparse, solved);
-        for (x, s) in solved.iter_mut().zip(&self.gram.scale2) {
+        self.gram.transpose_mul_by(|p| r[p] / weight[p], z);
+        self.factor.substitute_in_order(z, sparse);
+        for (x, s) in z.iter_mut().zip(&self.gram.scale2) {
             *x *= s;
         }
-        self.factor.substitute_into(solved, sparse, z);
+        self.factor.substitute_in_order(z, sparse);
         self.gram.mul_then(z, step, |p, x| x / weight[p]);
     }
 

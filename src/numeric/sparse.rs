@@ -599,12 +599,30 @@ impl SparseFactor {
             return;
         }
         let perm = &self.blocks.perm;
-        let SparseWork { permuted, gathered, .. } = work;
+        let mut permuted = std::mem::take(&mut work.permuted);
         permuted.clear();
         permuted.extend(perm.iter().map(|&old| rhs[old]));
-        self.substitute(permuted, gathered);
+        self.substitute_in_order(&mut permuted, work);
         for (&old, &value) in perm.iter().zip(permuted.iter()) {
             x[old] = value;
+        }
+        work.permuted = permuted;
+    }
+
+    /// The fill-reducing order the factor is in: `order()[new] = old`.
+    pub fn order(&self) -> &[usize] {
+        &self.blocks.perm
+    }
+
+    /// [`substitute_into`](SparseFactor::substitute_into) in place, with the right-hand side
+    /// and the answer in the factor's own [`order`](SparseFactor::order): a caller that keeps
+    /// its vectors in that order permutes neither way (the same numbers as the permuted
+    /// vectors of `substitute_into`, bit for bit). Zero when there is no factor.
+    pub fn substitute_in_order(&self, x: &mut [f64], work: &mut SparseWork) {
+        if self.factored {
+            self.substitute(x, &mut work.gathered);
+        } else {
+            x.fill(0.0);
         }
     }
 

@@ -301,17 +301,23 @@ pub struct Prepared {
     pub first: Option<usize>,
     /// Per row, whether its C reads no time ([`steady_rows`]): its ∂C/∂t is 0 exactly, taken
     /// as 0 rather than as Ċ − J·v (round-off that reads the velocities). Empty, or not one
-    /// per row: none.
-    pub steady: Vec<bool>,
-    /// The system's structural zeros of J ([`Pattern::of`]; `Stepper::step` sets it once).
+    /// per row: none. Set with the pattern ([`Prepared::set_system`]).
+    steady: Vec<bool>,
+    /// The system's structural zeros of J ([`Pattern::of`]; [`Prepared::set_system`]).
     /// Empty, or not one row per row: every component.
-    pub pattern: Pattern,
+    pattern: Pattern,
+    /// Per entry, its index in its row's `Row::jacobian`. With `start`, `body` and `mask` it is
+    /// the layout of the entries, a function of the rows' slots (in the derivation's order),
+    /// the dimension and the pattern alone: [`Prepared::load`] keeps it while the rows' slots
+    /// are those it was made for (every substep of a run, J's pattern being fixed) and fills
+    /// only the numbers.
+    source: Vec<usize>,
     /// Scratch: one row's entries in [`entry_order`].
     order: Vec<usize>,
 }
 
 /// Per constraint of `system` (one row each), whether its C reads no time, so that
-/// ∂C/∂t = 0 exactly ([`Prepared::steady`]; a generated module's `STEADY`, which leaves such
+/// ∂C/∂t = 0 exactly ([`Prepared::set_system`]; a generated module's `STEADY`, which leaves such
 /// a row's Ċ out of its code).
 pub fn steady_rows(system: &System) -> Vec<bool> {
     let mut walk = SymbolWalk::default();
@@ -392,12 +398,23 @@ pub fn entry_orders(starts: &[usize], slots: &[usize]) -> Vec<usize> {
 }
 
 impl Prepared {
-    /// Fills from `rows`, evaluated at velocities `v`, reusing the buffers.
-    pub fn load(&mut self, rows: &Rows) {
+    /// Sets what is known of `system`'s rows before any number (which rows are steady, J's
+    /// structural zeros), once per run; the layout made without them goes.
+    pub fn set_system(&mut self, system: &System) {
+        self.steady = steady_rows(system);
+        self.pattern = Pattern::of(system);
         self.start.clear();
-        self.body.clear();
-        self.jacobian.clear();
-        self.mask.clear();
+    }
+
+    /// Fills from `rows`, reusing the buffers: the layout of the
+    /// entries (`Prepared::lay_out`) only when the rows' slots are not those of the last
+    /// call, then per entry its J and per row its numbers.
+    pub fn load(&mut self, rows: &Rows) {
+        if !self.fits(rows) {
+            self.lay_out(rows);
+        }
+        // Every entry's J is written below (the buffer keeps its length between substeps).
+        self.jacobian.resize(self.body.len(), [0.0; 3]);
         self.value.clear();
         self.time_rate.clear();
         self.effective_mass.clear();
@@ -409,30 +426,20 @@ impl Prepared {
         if self.first.is_some() {
             self.velocity.clone_from(&rows.velocity);
         }
-        self.dim = rows.dim;
         let dim = rows.dim;
-        let mut previous = 0;
-        // The flags and the pattern are the system's, one per row; rows of another count
-        // take neither.
+        // The flags are the system's, one per row; rows of another count take none.
         let flags = self.steady.len() == rows.rows.len();
-        // A dense pattern's masks are all `full(dim)`: no lookup per entry.
-        let pattern = self.pattern.len() == rows.rows.len() && !self.pattern.is_dense();
+        let known = self.pattern.len() == rows.rows.len();
         for (r, row) in rows.rows.iter().enumerate() {
             let steady = flags && self.steady[r];
-            let at = self.body.len();
-            self.start.push(at);
-            self.order.clear();
-            entry_order(&self.body[previous..at], row.jacobian.len(), |e| row.jacobian[e].0, &mut self.order);
-            previous = at;
             // A distance row's |J_b|² is 1 exactly where J is a number (`unit_square`).
-            let unit = self.pattern.len() == rows.rows.len() && self.pattern.is_unit(r);
+            let unit = known && self.pattern.is_unit(r);
             let (mut k, mut jv) = (0.0, 0.0);
-            for &e in &self.order {
+            let entries = self.start[r]..self.start[r + 1];
+            let layout = self.source[entries.clone()].iter().zip(&self.mask[entries.clone()]);
+            for ((&e, &mask), kept) in layout.zip(&mut self.jacobian[entries]) {
                 let (b, j) = (&row.jacobian[e].0, &row.jacobian[e].1);
-                let mask = if pattern { self.pattern.mask(r, *b) } else { full(dim) };
-                self.body.push(*b);
-                self.jacobian.push(*j);
-                self.mask.push(mask);
+                *kept = *j;
                 // Every component: the squares of the structural zeros add +0 to a sum ≥ +0,
                 // so the mask would give the same bits.
                 k += rows.inverse_mass[*b] * if unit { unit_square(dim, j) } else { dot_in(dim, j, j) };
@@ -444,6 +451,46 @@ impl Prepared {
             self.time_rate.push(if steady { 0.0 } else { row.rate - jv });
             self.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
             self.inequality.push(row.inequality);
+        }
+    }
+
+    /// Whether the layout (`start`, `body`, `mask`, `source`) is that of `rows`: the same
+    /// dimension, row count and, per row, the same slots in the same places of its J.
+    fn fits(&self, rows: &Rows) -> bool {
+        self.dim == rows.dim
+            && self.start.len() == rows.rows.len() + 1
+            && rows.rows.iter().zip(self.start.windows(2)).all(|(row, s)| {
+                row.jacobian.len() == s[1] - s[0]
+                    && self.source[s[0]..s[1]].iter().zip(&self.body[s[0]..s[1]]).all(|(&e, &b)| row.jacobian[e].0 == b)
+            })
+    }
+
+    /// The layout of `rows`' entries: per row its entries in [`entry_order`], each with its
+    /// slot, its mask (the pattern's, every component of the dimension for rows it does not
+    /// describe) and its index in the row's J.
+    fn lay_out(&mut self, rows: &Rows) {
+        self.start.clear();
+        self.body.clear();
+        self.mask.clear();
+        self.source.clear();
+        self.dim = rows.dim;
+        let dim = rows.dim;
+        let mut previous = 0;
+        // The pattern is the system's, one per row; rows of another count take none.
+        // A dense pattern's masks are all `full(dim)`: no lookup per entry.
+        let pattern = self.pattern.len() == rows.rows.len() && !self.pattern.is_dense();
+        for (r, row) in rows.rows.iter().enumerate() {
+            let at = self.body.len();
+            self.start.push(at);
+            self.order.clear();
+            entry_order(&self.body[previous..at], row.jacobian.len(), |e| row.jacobian[e].0, &mut self.order);
+            previous = at;
+            for &e in &self.order {
+                let b = row.jacobian[e].0;
+                self.body.push(b);
+                self.mask.push(if pattern { self.pattern.mask(r, b) } else { full(dim) });
+                self.source.push(e);
+            }
         }
         self.start.push(self.body.len());
     }
@@ -631,8 +678,7 @@ impl Stepper {
     ) -> Result<(), SimError> {
         // Once per stepper: which rows have ∂C/∂t = 0 exactly, and J's structural zeros.
         if self.prepared.steady.is_empty() {
-            self.prepared.steady = steady_rows(dynamics.system());
-            self.prepared.pattern = Pattern::of(dynamics.system());
+            self.prepared.set_system(dynamics.system());
         }
         match self.settings.solver {
             Solver::SoftStep => soft_step::step(self, dynamics, t, q, v, rows),
