@@ -761,9 +761,9 @@ fn location(name: &str, text: &str, offset: usize) -> String {
     format!("{name}:{line}:{col}")
 }
 
-/// Reads, loads and derives a file into a runnable scenario, or reports why not.
-/// The file's scene, derived, from its initial state with `state`'s values over it, and
-/// those values (for the notes on forces taken as zero).
+/// Reads, loads and derives a file into a runnable scenario starting from its initial state
+/// with `state`'s values over it, or reports why not; the values too (for the notes on
+/// forces taken as zero).
 fn scenario(path: &Path, state: &StateArgs) -> Result<(lagrange::scenario::Scenario, Vec<(Symbol, Value)>), ExitCode> {
     let loaded = load_file(path)?;
     let overrides = overrides(&loaded.system, path, state)?;
