@@ -27,7 +27,9 @@
 //! eigendecomposition or the regularised factor). Kept in a run's `SolveCache`, it keeps the
 //! bits of J and the masses it was made from and refactors from the first row whose J
 //! changed: the rows before keep their scaling, Ã and factor rows, which depend on nothing
-//! after them.
+//! after them; `solve_with`'s chains keep nothing and take no bits. The pattern check
+//! records each entry's partner, the entry of the row before on the same slot, which is
+//! all Ãₖ,ₖ₋₁ and the count of moved velocity components need from the pattern.
 //!
 //! Not here: evaluating rows (`numeric::rows`), inequality rows, other bandwidths.
 
