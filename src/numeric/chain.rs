@@ -27,7 +27,9 @@
 //! eigendecomposition or the regularised factor). Kept in a run's `SolveCache`, it keeps the
 //! bits of J and the masses it was made from and refactors from the first row whose J
 //! changed: the rows before keep their scaling, Ã and factor rows, which depend on nothing
-//! after them.
+//! after them; `solve_with`'s chains keep nothing and take no bits. The pattern check
+//! records each entry's partner, the entry of the row before on the same slot, which is
+//! all Ãₖ,ₖ₋₁ and the count of moved velocity components need from the pattern.
 //!
 //! Not here: evaluating rows (`numeric::rows`), inequality rows, other bandwidths.
 
@@ -73,10 +75,11 @@ pub(crate) struct Chain {
     rhs: Vec<f64>,
     y: Vec<f64>,
     r: Vec<f64>,
-    /// Per slot, the first row acting on it (the pattern check), and which of its velocity
-    /// components the rows move (`solve::columns`).
+    /// Per entry, the entry of the row before on the same slot (`NONE`: that row does not
+    /// act on it): the pairs whose products make Ãₖ,ₖ₋₁, found once with the pattern.
+    partner: Vec<usize>,
+    /// Per slot, the first entry on it (the pattern check).
     first: Vec<usize>,
-    moved: Vec<u8>,
 }
 
 /// Whether every row is an equality with a finite c term and every velocity and force is
@@ -121,13 +124,10 @@ pub(crate) fn solve(rows: &Rows, settings: &Settings) -> Option<Solution> {
     }
     let mut out = Solution::default();
     let path = BUFFERS.with(|chain| match chain.try_borrow_mut() {
-        Ok(mut chain) => {
-            // No factor of an earlier call is reused: this solve's cost is a fresh one's.
-            chain.valid = false;
-            chain.solve_into(rows, settings, &mut out)
-        }
+        // No factor of an earlier call is reused, none is kept: this solve's cost is a fresh one's.
+        Ok(mut chain) => chain.solve_fresh(rows, settings, &mut out),
         // Not reached (nothing here solves inside a solve), but a fresh chain would serve.
-        Err(_) => Chain::default().solve_into(rows, settings, &mut out),
+        Err(_) => Chain::default().solve_fresh(rows, settings, &mut out),
     });
     path.map(|_| out)
 }
@@ -163,6 +163,19 @@ impl Chain {
     /// reusing the kept scaling and factor up to the first row whose J changed; `None` (the
     /// kept factor dropped, `out` untouched) otherwise.
     pub(crate) fn solve_into(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<SolvePath> {
+        self.solve_keeping(rows, settings, out, true)
+    }
+
+    /// [`solve_into`](Chain::solve_into) from scratch, keeping no factor (the bits of J and
+    /// the masses are not taken): `solve_with`'s chains, which are never compared with a
+    /// next call's.
+    fn solve_fresh(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<SolvePath> {
+        self.valid = false;
+        self.solve_keeping(rows, settings, out, false)
+    }
+
+    /// [`solve_into`](Chain::solve_into), keeping the factor for the next call when `keep`.
+    fn solve_keeping(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution, keep: bool) -> Option<SolvePath> {
         let k = rows.rows.len();
         if !allowed(settings.method, k) {
             self.valid = false;
@@ -171,7 +184,7 @@ impl Chain {
         let from = match self.unchanged_rows(rows, settings) {
             Some(from) => from,
             None => {
-                if !self.take_pattern(rows) {
+                if !self.take_pattern(rows, keep) {
                     self.valid = false;
                     return None;
                 }
@@ -182,13 +195,13 @@ impl Chain {
         };
         // Invalid until the factor is whole again.
         self.valid = false;
-        if !self.factor_and_forward(rows, settings, from) {
+        if !self.factor_and_forward(rows, settings, from, keep) {
             return None;
         }
         if from < k && settings.method == Method::Auto && k > MAX_DENSE_ROWS && k > self.columns(rows) {
             return None;
         }
-        self.valid = true;
+        self.valid = keep;
         self.substitute();
         if !self.y.iter().all(|m| m.is_finite()) {
             // `solve::finite_in_place` has a diagnostic for it.
@@ -242,41 +255,60 @@ impl Chain {
     /// Takes the rows' pattern when it is a chain this path serves: each row's slots in
     /// increasing order, every slot acted on by one row or two consecutive ones, and two
     /// consecutive rows sharing a slot somewhere (the band is exactly 1 wide: a band of 0,
-    /// rows on disjoint slots, takes the general solve's diagonal kernels).
-    fn take_pattern(&mut self, rows: &Rows) -> bool {
+    /// rows on disjoint slots, takes the general solve's diagonal kernels). With `keep`, the
+    /// slots of the J bits and the masses' bits are taken too.
+    fn take_pattern(&mut self, rows: &Rows, keep: bool) -> bool {
         let (k, slots) = (rows.rows.len(), rows.inverse_mass.len());
         self.first.clear();
         self.first.resize(slots, NONE);
         self.start.clear();
         self.parts.clear();
+        self.partner.clear();
         // Sized once: pushed one by one, a long chain's buffers were copied as they grew.
+        let entries = rows.rows.iter().map(|row| row.jacobian.len()).sum();
         self.start.reserve(k + 1);
-        self.parts.reserve(rows.rows.iter().map(|row| row.jacobian.len()).sum());
+        self.parts.reserve(entries);
+        self.partner.reserve(entries);
         let mut shared = false;
-        for (q, row) in rows.rows.iter().enumerate() {
-            self.start.push(self.parts.len());
+        // The first entry of the row before (entries before it are of earlier rows).
+        let mut before = 0;
+        for row in &rows.rows {
+            let here = self.parts.len();
+            self.start.push(here);
             let mut previous = None;
             for &(s, _) in &row.jacobian {
                 if s >= slots || previous.is_some_and(|p| p >= s) {
                     return false;
                 }
                 previous = Some(s);
-                match self.first[s] {
-                    NONE => self.first[s] = q,
-                    f if f + 1 == q => shared = true,
+                // The slot's first entry is of this row only if the slot repeats in it
+                // (refused above), so one at or past `before` is of the row before.
+                let partner = match self.first[s] {
+                    NONE => {
+                        self.first[s] = self.parts.len();
+                        NONE
+                    }
+                    entry if entry >= before => {
+                        shared = true;
+                        entry
+                    }
                     _ => return false,
-                }
+                };
                 self.parts.push((s, [0.0; 3]));
+                self.partner.push(partner);
             }
+            before = here;
         }
         self.start.push(self.parts.len());
         if !shared {
             return false;
         }
-        self.bits.clear();
-        self.bits.extend(self.parts.iter().map(|&(slot, _)| (slot, [0; 3])));
-        self.mass_bits.clear();
-        self.mass_bits.extend(rows.inverse_mass.iter().map(|w| w.to_bits()));
+        if keep {
+            self.bits.clear();
+            self.bits.extend(self.parts.iter().map(|&(slot, _)| (slot, [0; 3])));
+            self.mass_bits.clear();
+            self.mass_bits.extend(rows.inverse_mass.iter().map(|w| w.to_bits()));
+        }
         // Sized, not cleared: a solve from a new pattern writes every entry (from row 0)
         // before reading it, so a chain of the last call's size is not written twice.
         for v in [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r] {
@@ -296,47 +328,44 @@ impl Chain {
     /// two divisions of its own, which overlap from row to row), the factor's rows one chain
     /// through every row (a division and a square root each, then 1/Lₖₖ). Interleaved in one
     /// pass they ran no faster (the `solve` benchmark's `chain_5_cached_refactored`).
-    fn factor_and_forward(&mut self, rows: &Rows, settings: &Settings, from: usize) -> bool {
+    fn factor_and_forward(&mut self, rows: &Rows, settings: &Settings, from: usize, keep: bool) -> bool {
         (from == rows.rows.len() || masses_sound(&rows.inverse_mass))
-            && self.scale_and_assemble(rows, from)
+            && self.scale_and_assemble(rows, from, keep)
             && self.factor_from(rows, settings.rank_tolerance, from)
     }
 
-    /// Rows `from..` scaled and their entries of Ã assembled, their J's bits taken; false
+    /// Rows `from..` scaled and their entries of Ã assembled, their J's bits taken when
+    /// `keep`; false
     /// when a row is not usable. The rows' c terms are known finite ([`servable`]) and every
     /// slot's 1/m finite and ≥ 0 ([`masses_sound`]), so what `solve::row_sound` would still
     /// check is that J is finite, which a scaled row's is: a component that is not makes
     /// ‖J‖ or Âₖₖ not finite, and `scale_row` refuses the row.
-    fn scale_and_assemble(&mut self, rows: &Rows, from: usize) -> bool {
+    fn scale_and_assemble(&mut self, rows: &Rows, from: usize, keep: bool) -> bool {
         let w = &rows.inverse_mass;
-        let Chain { start, parts, bits, norm, jacobi, a, .. } = self;
+        let Chain { start, parts, partner, bits, norm, jacobi, a, .. } = self;
         for (q, row) in rows.rows.iter().enumerate().skip(from) {
             let (lo, hi) = (start[q], start[q + 1]);
-            for ((_, bits), (_, j)) in bits[lo..hi].iter_mut().zip(&row.jacobian) {
-                *bits = j.map(f64::to_bits);
+            if keep {
+                for ((_, bits), (_, j)) in bits[lo..hi].iter_mut().zip(&row.jacobian) {
+                    *bits = j.map(f64::to_bits);
+                }
             }
             let Ok((n, d)) = scale_row(row, w, &mut parts[lo..hi]) else {
                 return false;
             };
             (norm[q], jacobi[q]) = (n, d);
             // Ãₖₖ and Ãₖ,ₖ₋₁ as `assemble`'s terms sum them: slot by slot in increasing
-            // order, from +0 (the band's zeros).
+            // order, from +0 (the band's zeros); the slots shared with the row before are
+            // this row's entries with a partner, in the same increasing order.
             let (before, mine) = parts[..hi].split_at(lo);
             let mut diagonal = 0.0;
             for (b, u) in mine {
                 diagonal += dot(u, u) * w[*b];
             }
             let mut below = 0.0;
-            if q > 0 {
-                let before = &before[start[q - 1]..];
-                let (mut x, mut y) = (0, 0);
-                while x < before.len() && y < mine.len() {
-                    let (s, t) = (before[x].0, mine[y].0);
-                    if s == t {
-                        below += dot(&before[x].1, &mine[y].1) * w[s];
-                    }
-                    x += usize::from(s <= t);
-                    y += usize::from(t <= s);
+            for (&p, (s, u)) in partner[lo..hi].iter().zip(mine) {
+                if p != NONE {
+                    below += dot(&before[p].1, u) * w[*s];
                 }
             }
             (a[2 * q], a[2 * q + 1]) = (below, diagonal);
@@ -405,16 +434,25 @@ impl Chain {
     }
 
     /// [`Block::columns`](super::solve) of the kept scaled rows: the velocity components
-    /// with a non-zero part of J̃ and a non-zero inverse mass.
-    fn columns(&mut self, rows: &Rows) -> usize {
-        self.moved.clear();
-        self.moved.resize(rows.inverse_mass.len(), 0);
-        for &(b, j) in &self.parts {
-            if rows.inverse_mass[b] != 0.0 {
-                self.moved[b] |= u8::from(j[0] != 0.0) | (u8::from(j[1] != 0.0) << 1) | (u8::from(j[2] != 0.0) << 2);
+    /// with a non-zero part of J̃ and a non-zero inverse mass. A slot has one entry or two
+    /// (an entry and its partner), so the count is each entry's components less those it
+    /// shares with its partner: no pass over the slots, no scatter into a mask per slot.
+    fn columns(&self, rows: &Rows) -> usize {
+        // How many bits of a three-bit mask are set.
+        const ONES: [usize; 8] = [0, 1, 1, 2, 1, 2, 2, 3];
+        let moved = |(b, j): &(usize, [f64; 3])| {
+            let mask = usize::from(j[0] != 0.0) | (usize::from(j[1] != 0.0) << 1) | (usize::from(j[2] != 0.0) << 2);
+            if rows.inverse_mass[*b] != 0.0 { mask } else { 0 }
+        };
+        let mut count = 0;
+        for (entry, &partner) in self.parts.iter().zip(&self.partner) {
+            let mask = moved(entry);
+            count += ONES[mask];
+            if partner != NONE {
+                count -= ONES[mask & moved(&self.parts[partner])];
             }
         }
-        self.moved.iter().map(|m| m.count_ones() as usize).sum()
+        count
     }
 
     /// λ, the forces and the accelerations from μ = `y`, as `solve::finish_into` makes them

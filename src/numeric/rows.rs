@@ -181,6 +181,16 @@ struct Places {
     /// they differ (2D rigid bodies' Jʷ is one number): the fill then reads each entry
     /// without testing its width.
     width: u32,
+    /// The same of every slot's v and F.
+    slot_width: u32,
+}
+
+/// The width every one of `places` has, or 0 when they differ (or there are none).
+fn common_width(places: &[(u32, u32)]) -> u32 {
+    match places.first() {
+        Some(&(_, w)) if places.iter().all(|&(_, x)| x == w) => w,
+        _ => 0,
+    }
 }
 
 /// A root a tape does not compute, in [`Places`].
@@ -195,19 +205,22 @@ impl Places {
         };
         let jacobian: Vec<(u32, u32)> =
             rows.iter().flat_map(|r| r.jacobian.clone()).map(|root| sub.place[root]).collect();
-        let width = match jacobian.first() {
-            Some(&(_, w)) if jacobian.iter().all(|&(_, x)| x == w) => w,
+        let velocity: Vec<(u32, u32)> = bodies.iter().map(|b| sub.place[b.velocity]).collect();
+        let force: Vec<(u32, u32)> = bodies.iter().map(|b| sub.place[b.force]).collect();
+        let slot_width = match (common_width(&velocity), common_width(&force)) {
+            (v, f) if v == f => v,
             _ => 0,
         };
         Places {
             value: rows.iter().map(|r| scalar(r.value)).collect(),
             rate: rows.iter().map(|r| scalar(r.rate)).collect(),
             bias: rows.iter().map(|r| scalar(r.bias)).collect(),
+            width: common_width(&jacobian),
             jacobian,
-            width,
             mass: bodies.iter().map(|b| scalar(b.mass)).collect(),
-            velocity: bodies.iter().map(|b| sub.place[b.velocity]).collect(),
-            force: bodies.iter().map(|b| sub.place[b.force]).collect(),
+            velocity,
+            force,
+            slot_width,
         }
     }
 }
@@ -699,6 +712,30 @@ fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[(u
     finite
 }
 
+/// [`RowProgram::fill_slots`] when every slot's v and F are `W` wide: each read without a
+/// test of its width, and only its `W` components tested (the zeros past them are finite).
+#[inline(always)]
+fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows) -> bool {
+    let read = |start: u32| {
+        let s = start as usize;
+        let mut v = [0.0; 3];
+        v[..W].copy_from_slice(&out[s..s + W]);
+        v
+    };
+    let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
+    let at = places.mass.iter().zip(&places.velocity).zip(&places.force);
+    let mut finite = true;
+    for (((w, u), f), ((&m, &(v, _)), &(force, _))) in slots.zip(at) {
+        *w = 1.0 / out[m as usize];
+        (*u, *f) = (read(v), read(force));
+        finite &= w.is_finite();
+        for k in 0..W {
+            finite &= u[k].is_finite() & f[k].is_finite();
+        }
+    }
+    finite
+}
+
 /// Whether every component of a row's J is finite.
 fn entries_finite(row: &Row) -> bool {
     row.jacobian.iter().fold(true, |ok, (_, j)| ok & finite3(j))
@@ -1003,16 +1040,22 @@ impl RowProgram {
             rows.velocity.resize(n, [0.0; 3]);
             rows.force.resize(n, [0.0; 3]);
         }
-        let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
-        let at = places.mass.iter().zip(&places.velocity).zip(&places.force);
-        let mut finite = true;
-        for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
-            *w = 1.0 / out[m as usize];
-            *u = vector_at(out, v);
-            *f = vector_at(out, force);
-            finite &= w.is_finite() & finite3(u) & finite3(f);
+        match places.slot_width {
+            2 => slots_of_width::<2>(places, out, rows),
+            3 => slots_of_width::<3>(places, out, rows),
+            _ => {
+                let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
+                let at = places.mass.iter().zip(&places.velocity).zip(&places.force);
+                let mut finite = true;
+                for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
+                    *w = 1.0 / out[m as usize];
+                    *u = vector_at(out, v);
+                    *f = vector_at(out, force);
+                    finite &= w.is_finite() & finite3(u) & finite3(f);
+                }
+                finite
+            }
         }
-        finite
     }
 
     /// Every row's C, Ċ, c and J and every slot's numbers from the full tape's outputs along
@@ -1024,10 +1067,11 @@ impl RowProgram {
         let mut finite = self.fill_slots(places, out, rows);
         rows.rows.resize_with(self.rows.len(), Row::default);
         let mut entries = places.jacobian.as_slice();
-        for (k, (layout, row)) in self.rows.iter().zip(&mut rows.rows).enumerate() {
-            row.value = out[places.value[k] as usize] * layout.inverse_scale;
-            row.rate = out[places.rate[k] as usize] * layout.inverse_scale;
-            row.bias = out[places.bias[k] as usize];
+        let at = places.value.iter().zip(&places.rate).zip(&places.bias);
+        for ((layout, row), ((&value, &rate), &bias)) in self.rows.iter().zip(&mut rows.rows).zip(at) {
+            row.value = out[value as usize] * layout.inverse_scale;
+            row.rate = out[rate as usize] * layout.inverse_scale;
+            row.bias = out[bias as usize];
             row.inequality = layout.inequality;
             finite &= row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite();
             let (here, rest) = entries.split_at(layout.bodies.len());
