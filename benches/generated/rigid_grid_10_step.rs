@@ -3472,6 +3472,13 @@ fn unit_square<const D: usize>(j: &[f64; D]) -> f64 {
     j.iter().fold(1.0, |s, x| s + 0.0 * x)
 }
 
+/// Whether every component of `js` is a number (x − x is +0 for a number, NaN for ±∞ and NaN):
+/// a `UNIT` row's test for its m_eff (`unit_square`), without a branch per component.
+#[inline(always)]
+fn numbers<'a, const D: usize>(js: impl Iterator<Item = &'a [f64; D]>) -> bool {
+    js.flatten().fold(0.0, |s, x| s + (x - x)) == 0.0
+}
+
 /// |J|² of an entry of row k as its m_eff takes it: `unit_square` on a `UNIT` row, else J·J
 /// (`dot`, as the library's `velocity::dot_in`).
 #[inline(always)]
@@ -3615,7 +3622,10 @@ impl<const D: usize> Prepared<D> {
     /// Row k at a state: C/κ `value`, Ċ/κ `rate` (not read on a `STEADY` row) and its
     /// Jacobian `entries` (body, Jᵢ), stored from entry `first` on, with its effective mass
     /// and ∂C/∂t = Ċ/κ − J·v at the evaluated velocities `velocity`: `finish`'s operations for
-    /// one row, its bodies' 1/m in place.
+    /// one row, its bodies' 1/m in place. A `UNIT` row's m_eff is `effective_mass` of
+    /// Σᵢ 1/mᵢ where every entry is a number, else 0 (`mass`'s number: each `unit_square` 1,
+    /// or NaN), so it waits on no J but a test: with the masses constants of the module, as
+    /// where `prepare` writes them out, the division folds away.
     #[inline(always)]
     fn row<const E: usize>(
         &mut self,
@@ -3628,14 +3638,14 @@ impl<const D: usize> Prepared<D> {
         let (mut m, mut jv) = (0.0, 0.0);
         for (e, (b, j)) in entries.iter().enumerate() {
             self.jacobian[first + e] = *j;
-            m += self.inverse_mass[*b] * square(k, j);
+            m += self.inverse_mass[*b] * if UNIT[k] { 1.0 } else { dot(j, j) };
             if !STEADY[k] {
                 jv += dot_coded(ENTRY_CODE[first + e], j, &velocity[*b]);
             }
         }
         self.value[k] = value;
         self.time_rate[k] = if STEADY[k] { 0.0 } else { rate - jv };
-        self.effective_mass[k] = effective_mass(m);
+        self.effective_mass[k] = if !UNIT[k] || numbers(entries.iter().map(|(_, j)| j)) { effective_mass(m) } else { 0.0 };
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
