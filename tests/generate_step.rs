@@ -1,10 +1,12 @@
 //! The generated step (`generate --solver soft-step|pgs|exact`) against the library's on
 //! every file in `constraints/` and `constraints/hard/`, and on the rigid bodies' files
 //! (`constraints/joints/` — the 2D joints from a random state off the joint —,
-//! `constraints/rigid/`, the rigid scenes of `constraints/solvers/`): each module is compiled (all of one solver in one rustc
-//! invocation, unoptimised but for the `--step-only` one: [`runs_of`]), runs 1 000 steps of the scene's dt from its initial state, and
-//! its positions, orientations (θ; a 3D body's q), velocities, angular velocities (ω) and
-//! impulses are compared with the library's at steps 1, 10, 100 and 1 000.
+//! `constraints/rigid/`, the rigid scenes of `constraints/solvers/`): each module is
+//! compiled (all of one solver in one rustc invocation, unoptimised but for the
+//! `--step-only` one: [`runs_of`]), runs 1 000 steps of the scene's dt from its initial
+//! state, and its positions, orientations (θ; a 3D body's q), velocities, angular
+//! velocities (ω) and impulses are compared with the library's at steps 1, 10, 100 and
+//! 1 000.
 //!
 //! The library's step is `numeric::velocity::Stepper` with its default settings, on the
 //! library's own rows (`numeric::dynamics`, the compiled tape); a 3D body's orientation there
@@ -336,7 +338,7 @@ fn runs_of(solver: Solver, step_only: bool, files: &[PathBuf]) -> Vec<(String, R
     let rustc = std::env::var("RUSTC").unwrap_or_else(|_| "rustc".into());
     // Rust's floating point is the same IEEE operations at every level (no contraction, no
     // reassociation), so the level only trades compile time for run time. Unoptimised, the
-    // harness of every module compiles in half the time, and runs in seconds; the
+    // harness of every module compiles in half the time and runs in 4–19 s; the
     // `--step-only` harness is small to compile but steps the 30 × 30 grid and the 13 × 13
     // rigid grid, 90 s unoptimised against 0.3 s at opt-level 1 (6 s to compile, measured
     // 2026-12-06).
