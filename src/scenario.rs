@@ -81,8 +81,12 @@ impl Scenario {
         settings: Settings,
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<Summary, Box<Failure>> {
-        let mut dynamics = Dynamics::new(&self.system, self.program.clone(), self.env.clone());
-        dynamics.velocity_dependent_forces = self.scene.forces.iter().chain(&self.scene.torques).any(|&(_, f)| {
+        let mut dynamics = Dynamics::borrowing(&self.system, &self.program, self.env.clone());
+        // Each distinct expression once (a chain's bodies share one `m*g`).
+        let mut forces: Vec<_> = self.scene.forces.iter().chain(&self.scene.torques).map(|&(_, f)| f).collect();
+        forces.sort_unstable();
+        forces.dedup();
+        dynamics.velocity_dependent_forces = forces.into_iter().any(|f| {
             let graph = &self.system.graph;
             graph
                 .free_symbols(f)

@@ -219,21 +219,27 @@ impl Chain {
         if !self.valid || self.start.len() != k + 1 || self.mass_bits.len() != rows.inverse_mass.len() {
             return None;
         }
+        // Row by row, its kept entries taken off the front of `bits`: the slots and the
+        // bits of J each OR-ed into one word per row, tested once a row (a branch per entry
+        // and a flag per row cost about half again as many instructions).
         let mut from = k;
+        let mut kept = self.bits.as_slice();
         for (q, (row, bounds)) in rows.rows.iter().zip(self.start.windows(2)).enumerate() {
-            let kept = &self.bits[bounds[0]..bounds[1]];
-            if kept.len() != row.jacobian.len() {
+            let n = row.jacobian.len();
+            if bounds[1] - bounds[0] != n || kept.len() < n {
                 return None;
             }
-            let mut same = true;
-            for ((s, j), (slot, bits)) in row.jacobian.iter().zip(kept) {
-                if slot != s {
-                    return None;
-                }
-                let j = j.map(f64::to_bits);
-                same &= ((bits[0] ^ j[0]) | (bits[1] ^ j[1]) | (bits[2] ^ j[2])) == 0;
+            let here;
+            (here, kept) = kept.split_at(n);
+            let (mut slots, mut changed) = (0, 0);
+            for ((s, j), (slot, bits)) in row.jacobian.iter().zip(here) {
+                slots |= s ^ slot;
+                changed |= (bits[0] ^ j[0].to_bits()) | (bits[1] ^ j[1].to_bits()) | (bits[2] ^ j[2].to_bits());
             }
-            if !same && from == k {
+            if slots != 0 {
+                return None;
+            }
+            if changed != 0 && from == k {
                 from = q;
             }
         }
@@ -373,30 +379,33 @@ impl Chain {
         true
     }
 
-    /// The factor's rows `from..` (`banded`'s tridiagonal factor, row by row) and every
-    /// row's −b̃ and forward substitution, in one pass: two chains through the rows side by
-    /// side, each row's entries of Ã and L walked beside it (no index, no bounds check).
+    /// The factor's rows `from..` (`banded`'s tridiagonal factor, row by row), then every
+    /// row's −b̃ and forward substitution: two chains through the rows, one after the other
+    /// (a reused factor, `from` = k, runs only the second), each loop indexing its arrays
+    /// sliced to the rows' count (one counter, no bounds check).
     fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize) -> bool {
         let k = rows.rows.len();
         let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
-        let band = a[..2 * k].chunks_exact(2).zip(l[..2 * k].chunks_exact_mut(2)).zip(&mut inverse[..k]);
-        let scaling = norm.iter().zip(jacobi.iter());
-        let each = rows.rows.iter().zip(start.windows(2)).zip(scaling).zip(rhs.iter_mut().zip(y.iter_mut()));
-        // Lₖ₋₁,ₖ₋₁ and the forward substitution's yₖ₋₁.
-        let (mut above, mut previous) = (1.0, 0.0);
-        for (q, ((((row, bounds), (&norm, &jacobi)), (rhs, y)), ((a, l), inverse))) in each.zip(band).enumerate() {
-            if q >= from {
-                let (l_below, Some(l_diagonal)) = tridiagonal_factor_row(a[0], a[1], above, q > 0, floor) else {
-                    return false;
-                };
-                (l[0], l[1]) = (l_below, l_diagonal);
-                *inverse = 1.0 / l_diagonal;
-            }
-            above = l[1];
-            let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm, jacobi);
-            *rhs = b;
-            previous = forward_step(l[0], *inverse, q > 0, b, previous);
-            *y = previous;
+        let (a, l) = (a[..2 * k].as_chunks::<2>().0, l[..2 * k].as_chunks_mut::<2>().0);
+        let inverse = &mut inverse[..k];
+        // Lₖ₋₁,ₖ₋₁ of the row before `from` (kept), 1 at row 0 (not read there).
+        let mut above = if from > 0 && from <= k { l[from - 1][1] } else { 1.0 };
+        for q in from..k {
+            let (l_below, Some(l_diagonal)) = tridiagonal_factor_row(a[q][0], a[q][1], above, q > 0, floor) else {
+                return false;
+            };
+            l[q] = [l_below, l_diagonal];
+            inverse[q] = 1.0 / l_diagonal;
+            above = l_diagonal;
+        }
+        let (norm, jacobi, rhs, y) = (&norm[..k], &jacobi[..k], &mut rhs[..k], &mut y[..k]);
+        // The forward substitution's yₖ₋₁.
+        let mut previous = 0.0;
+        for (q, (row, bounds)) in rows.rows.iter().zip(start.windows(2)).enumerate() {
+            let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm[q], jacobi[q]);
+            rhs[q] = b;
+            previous = forward_step(l[q][0], inverse[q], q > 0, b, previous);
+            y[q] = previous;
         }
         true
     }

@@ -38,6 +38,7 @@ use super::single::{SingleScaling, correction_single, solve_single_with};
 use super::solve::{Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, solve_cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
+use std::borrow::Cow;
 
 /// Why a simulation stopped.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -125,7 +126,9 @@ const SPARE_ROWS: usize = 4;
 /// The equations of motion of a system at any state.
 pub struct Dynamics<'s> {
     system: &'s System,
-    program: RowProgram,
+    /// The rows' program: owned, or borrowed from a `Scenario` that runs it many times (a
+    /// copy of its tapes per run is a visible part of a short run's cost).
+    program: Cow<'s, RowProgram>,
     scratch: RowScratch,
     /// Rows handed back by [`recycle`](Dynamics::recycle), refilled by the next evaluation
     /// so that a step allocates nothing once the pool is warm.
@@ -205,6 +208,17 @@ impl<'s> Dynamics<'s> {
     /// `env` gives every parameter and mass (e.g. [`crate::model::scene::environment`]);
     /// positions, velocities and `t` are overwritten at each evaluation.
     pub fn new(system: &'s System, program: RowProgram, env: Env) -> Dynamics<'s> {
+        Dynamics::with_program(system, Cow::Owned(program), env)
+    }
+
+    /// [`new`](Dynamics::new) with a program the caller keeps (`Scenario::simulate`: every
+    /// run of a scenario reads its one program).
+    pub fn borrowing(system: &'s System, program: &'s RowProgram, env: Env) -> Dynamics<'s> {
+        Dynamics::with_program(system, Cow::Borrowed(program), env)
+    }
+
+    /// [`new`](Dynamics::new) and [`borrowing`](Dynamics::borrowing)'s one body.
+    fn with_program(system: &'s System, program: Cow<'s, RowProgram>, env: Env) -> Dynamics<'s> {
         let mut scratch = program.scratch();
         // `env`'s parameters and masses stay until `reset` or `choose_unit` replaces them:
         // loaded at the first evaluation, not at every one.

@@ -27,7 +27,9 @@ const PLAIN_SQUARES: std::ops::RangeInclusive<f64> = 1.0e-144..=1.0e144;
 
 /// ‖J‖ of a whole row (all bodies' parts `(body, Jᵢ)`), without overflow: the plain
 /// √Σ J² when the largest component is of moderate size (the common case, no division),
-/// else part by part with [`safe_norm`].
+/// else part by part with [`safe_norm`]. In line (the plain path is a few instructions,
+/// the call was a visible part of SHAKE's residual), the rest apart.
+#[inline]
 pub fn row_norm(jacobian: &[(usize, [f64; 3])]) -> f64 {
     // The drift check, SHAKE's residual and the solve's scaling run this for every row, so
     // the plain sum comes first: when it lies well inside the normal range, the largest
@@ -42,6 +44,13 @@ pub fn row_norm(jacobian: &[(usize, [f64; 3])]) -> f64 {
     if sum < 1e286 && sum > components * 1e-286 {
         return sum.sqrt();
     }
+    row_norm_by_largest(jacobian, sum)
+}
+
+/// [`row_norm`] past its plain path: `sum` (Σ J²) when the largest component is of
+/// moderate size, else part by part with [`safe_norm`].
+#[inline(never)]
+fn row_norm_by_largest(jacobian: &[(usize, [f64; 3])], sum: f64) -> f64 {
     let mut big = 0.0f64;
     for (_, j) in jacobian {
         big = big.max(j[0].abs()).max(j[1].abs()).max(j[2].abs());
