@@ -36,7 +36,7 @@
 use super::banded::{backward_step, forward_step, tridiagonal_factor_row, tridiagonal_mul_row};
 use super::rows::Rows;
 use super::solve::{
-    MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force, b_of,
+    Answer, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force, b_of,
     out_of_range, scale_row,
 };
 use super::vector::dot;
@@ -101,6 +101,12 @@ fn all_finite(xs: &[f64]) -> bool {
     xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
 }
 
+/// Whether every number of `xs` is ±0: its bits but the sign's, OR-ed, are none (as
+/// [`all_finite`], without a branch each).
+fn all_zero(xs: &[f64]) -> bool {
+    xs.iter().fold(0u64, |bits, x| bits | (x.to_bits() << 1)) == 0
+}
+
 /// [`all_finite`]'s number: x's exponent bits plus one in their lowest place, whose top
 /// bit is set exactly when x is not finite.
 #[inline(always)]
@@ -161,9 +167,15 @@ impl Chain {
 
     /// Solves `rows` (already [`servable`]) into `out` when they are a chain this path serves,
     /// reusing the kept scaling and factor up to the first row whose J changed; `None` (the
-    /// kept factor dropped, `out` untouched) otherwise.
-    pub(crate) fn solve_into(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<SolvePath> {
-        self.solve_keeping(rows, settings, out, true)
+    /// kept factor dropped, `out` untouched) otherwise. `answer` says what is written.
+    pub(crate) fn solve_into(
+        &mut self,
+        rows: &Rows,
+        settings: &Settings,
+        out: &mut Solution,
+        answer: Answer,
+    ) -> Option<SolvePath> {
+        self.solve_keeping(rows, settings, out, true, answer)
     }
 
     /// [`solve_into`](Chain::solve_into) from scratch, keeping no factor (the bits of J and
@@ -171,11 +183,20 @@ impl Chain {
     /// next call's.
     fn solve_fresh(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<SolvePath> {
         self.valid = false;
-        self.solve_keeping(rows, settings, out, false)
+        self.solve_keeping(rows, settings, out, false, Answer::Solution)
     }
 
     /// [`solve_into`](Chain::solve_into), keeping the factor for the next call when `keep`.
-    fn solve_keeping(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution, keep: bool) -> Option<SolvePath> {
+    /// A correction's step (`Answer::Step`) whose forces are all zero (its caller zeroed
+    /// them) takes each row's b̃ as its c term where that is not zero ([`factor_from`]).
+    fn solve_keeping(
+        &mut self,
+        rows: &Rows,
+        settings: &Settings,
+        out: &mut Solution,
+        keep: bool,
+        answer: Answer,
+    ) -> Option<SolvePath> {
         let k = rows.rows.len();
         if !allowed(settings.method, k) {
             self.valid = false;
@@ -195,7 +216,8 @@ impl Chain {
         };
         // Invalid until the factor is whole again.
         self.valid = false;
-        if !self.factor_and_forward(rows, settings, from, keep) {
+        let zero_forces = answer == Answer::Step && all_zero(rows.force.as_flattened());
+        if !self.factor_and_forward(rows, settings, from, keep, zero_forces) {
             return None;
         }
         if from < k && settings.method == Method::Auto && k > MAX_DENSE_ROWS && k > self.columns(rows) {
@@ -207,7 +229,7 @@ impl Chain {
             // `solve::finite_in_place` has a diagnostic for it.
             return None;
         }
-        self.finish(rows, out);
+        self.finish(rows, out, answer);
         Some(if from == k { SolvePath::Reused } else { SolvePath::Factored })
     }
 
@@ -219,27 +241,21 @@ impl Chain {
         if !self.valid || self.start.len() != k + 1 || self.mass_bits.len() != rows.inverse_mass.len() {
             return None;
         }
-        // Row by row, its kept entries taken off the front of `bits`: the slots and the
-        // bits of J each OR-ed into one word per row, tested once a row (a branch per entry
-        // and a flag per row cost about half again as many instructions).
         let mut from = k;
-        let mut kept = self.bits.as_slice();
         for (q, (row, bounds)) in rows.rows.iter().zip(self.start.windows(2)).enumerate() {
-            let n = row.jacobian.len();
-            if bounds[1] - bounds[0] != n || kept.len() < n {
+            let kept = &self.bits[bounds[0]..bounds[1]];
+            if kept.len() != row.jacobian.len() {
                 return None;
             }
-            let here;
-            (here, kept) = kept.split_at(n);
-            let (mut slots, mut changed) = (0, 0);
-            for ((s, j), (slot, bits)) in row.jacobian.iter().zip(here) {
-                slots |= s ^ slot;
-                changed |= (bits[0] ^ j[0].to_bits()) | (bits[1] ^ j[1].to_bits()) | (bits[2] ^ j[2].to_bits());
+            let mut same = true;
+            for ((s, j), (slot, bits)) in row.jacobian.iter().zip(kept) {
+                if slot != s {
+                    return None;
+                }
+                let j = j.map(f64::to_bits);
+                same &= ((bits[0] ^ j[0]) | (bits[1] ^ j[1]) | (bits[2] ^ j[2])) == 0;
             }
-            if slots != 0 {
-                return None;
-            }
-            if changed != 0 && from == k {
+            if !same && from == k {
                 from = q;
             }
         }
@@ -334,10 +350,17 @@ impl Chain {
     /// two divisions of its own, which overlap from row to row), the factor's rows one chain
     /// through every row (a division and a square root each, then 1/Lₖₖ). Interleaved in one
     /// pass they ran no faster (the `solve` benchmark's `chain_5_cached_refactored`).
-    fn factor_and_forward(&mut self, rows: &Rows, settings: &Settings, from: usize, keep: bool) -> bool {
+    fn factor_and_forward(
+        &mut self,
+        rows: &Rows,
+        settings: &Settings,
+        from: usize,
+        keep: bool,
+        zero_forces: bool,
+    ) -> bool {
         (from == rows.rows.len() || masses_sound(&rows.inverse_mass))
             && self.scale_and_assemble(rows, from, keep)
-            && self.factor_from(rows, settings.rank_tolerance, from)
+            && self.factor_from(rows, settings.rank_tolerance, from, zero_forces)
     }
 
     /// Rows `from..` scaled and their entries of Ã assembled, their J's bits taken when
@@ -383,7 +406,11 @@ impl Chain {
     /// row's −b̃ and forward substitution: two chains through the rows, one after the other
     /// (a reused factor, `from` = k, runs only the second), each loop indexing its arrays
     /// sliced to the rows' count (one counter, no bounds check).
-    fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize) -> bool {
+    ///
+    /// With `zero_forces` (every slot's F is ±0) b̃ = Σᵢ J̃ᵢ·Fᵢ wᵢ + c̃ is a sum of zeros
+    /// (J̃ and w finite) plus c̃, which is c̃ itself when c̃ is not zero: then the sum is not
+    /// taken, and where c̃ is zero it is, for the sign of the zero.
+    fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize, zero_forces: bool) -> bool {
         let k = rows.rows.len();
         let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
         let (a, l) = (a[..2 * k].as_chunks::<2>().0, l[..2 * k].as_chunks_mut::<2>().0);
@@ -402,7 +429,12 @@ impl Chain {
         // The forward substitution's yₖ₋₁.
         let mut previous = 0.0;
         for (q, (row, bounds)) in rows.rows.iter().zip(start.windows(2)).enumerate() {
-            let b = -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm[q], jacobi[q]);
+            let c = (row.bias / norm[q]) * jacobi[q];
+            let b = if zero_forces && c != 0.0 {
+                -c
+            } else {
+                -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm[q], jacobi[q])
+            };
             rhs[q] = b;
             previous = forward_step(l[q][0], inverse[q], q > 0, b, previous);
             y[q] = previous;
@@ -466,30 +498,40 @@ impl Chain {
 
     /// λ, the forces and the accelerations from μ = `y`, as `solve::finish_into` makes them
     /// when every row takes part: λₖ = (μₖ/√Âₖₖ)/‖Jₖ‖ with a diagnostic where it leaves the
-    /// normal range, Σₖ μₖ J̃ₖᵢ row by row, (Fᵢ + fᵢ) wᵢ.
-    fn finish(&self, rows: &Rows, out: &mut Solution) {
+    /// normal range, Σₖ μₖ J̃ₖᵢ row by row, (Fᵢ + fᵢ) wᵢ. A step (`Answer::Step`) takes the
+    /// forces and accelerations alone: no λ (a division a row), active set or contact states.
+    fn finish(&self, rows: &Rows, out: &mut Solution, answer: Answer) {
         let k = rows.rows.len();
         let mut diagnostics = std::mem::take(&mut out.diagnostics);
         diagnostics.clear();
         out.lambda.clear();
-        out.lambda.resize(k, 0.0);
+        out.active.clear();
+        out.contacts.clear();
         let force = &mut out.constraint_force;
         force.clear();
         force.resize(rows.inverse_mass.len(), [0.0; 3]);
-        let scaling = self.jacobi.iter().zip(&self.norm);
-        let each = out.lambda.iter_mut().zip(&self.y).zip(scaling).zip(self.start.windows(2));
-        for (q, (((l, &m), (&jacobi, &norm)), bounds)) in each.enumerate() {
-            *l = (m * jacobi) / norm;
-            out_of_range(q, m, *l, &mut diagnostics);
-            add_row_force(force, m, &self.parts[bounds[0]..bounds[1]]);
+        match answer {
+            Answer::Solution => {
+                out.lambda.resize(k, 0.0);
+                let scaling = self.jacobi.iter().zip(&self.norm);
+                let each = out.lambda.iter_mut().zip(&self.y).zip(scaling).zip(self.start.windows(2));
+                for (q, (((l, &m), (&jacobi, &norm)), bounds)) in each.enumerate() {
+                    *l = (m * jacobi) / norm;
+                    out_of_range(q, m, *l, &mut diagnostics);
+                    add_row_force(force, m, &self.parts[bounds[0]..bounds[1]]);
+                }
+                out.active.resize(k, true);
+                out.contacts.resize(k, None);
+            }
+            Answer::Step => {
+                for (&m, bounds) in self.y.iter().zip(self.start.windows(2)) {
+                    add_row_force(force, m, &self.parts[bounds[0]..bounds[1]]);
+                }
+            }
         }
         accelerations_into(rows, force, &mut out.acceleration);
-        out.active.clear();
-        out.active.resize(k, true);
         out.diagnostics = diagnostics;
         out.status = Status::Solved;
-        out.contacts.clear();
-        out.contacts.resize(k, None);
     }
 }
 

@@ -35,7 +35,10 @@ use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
 use super::single::{SingleScaling, correction_single, solve_single_with};
-use super::solve::{Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, solve_cached_into};
+use super::solve::{
+    Answer, Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, correction_cached_into,
+    solve_cached_into,
+};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::system::System;
 use std::borrow::Cow;
@@ -572,8 +575,27 @@ impl<'s> Dynamics<'s> {
     /// buffer the dynamics keep (the caller may change it: it is scratch until the next
     /// correction).
     pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
+        self.correct_answering(rows, Answer::Solution)
+    }
+
+    /// [`correct`](Dynamics::correct)'s step alone, M⁻¹Jᵀμ (the solution's accelerations,
+    /// the same numbers), for a caller that reads nothing else (SHAKE, the projections, the
+    /// velocity step): a chain's solve then computes no λ (`solve::Answer::Step`).
+    pub fn correct_step(&mut self, rows: &Rows) -> &mut Vectors {
+        &mut self.correct_answering(rows, Answer::Step).acceleration
+    }
+
+    /// [`correct`](Dynamics::correct) writing what `answer` asks.
+    fn correct_answering(&mut self, rows: &Rows, answer: Answer) -> &mut Solution {
         if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut self.correction) {
-            solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction);
+            match answer {
+                Answer::Solution => {
+                    solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction)
+                }
+                Answer::Step => {
+                    correction_cached_into(rows, &Settings::default(), &mut self.solver, &mut self.correction)
+                }
+            }
             if self.refused.is_none() {
                 self.refused = refused_rows(&self.correction).map(|rows| (self.step, rows));
             }

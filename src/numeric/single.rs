@@ -34,7 +34,7 @@
 //! as the check is cheaper than any bookkeeping it saves).
 
 use super::rows::Rows;
-use super::solve::{Method, Settings, Solution, Status, row_norm};
+use super::solve::{Method, Settings, Solution, Status, positive_finite, row_norm};
 use super::vector::dot;
 
 /// Norms whose reciprocal is a normal number: the general solve scales Ĵ = J·(1/‖J‖) there
@@ -91,7 +91,7 @@ impl SingleScaling {
         let inverse = 1.0 / norm;
         let u = if RECIPROCAL_NORMS.contains(&norm) { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
         let a_hat = 0.0 + dot(&u, &u) * w;
-        if !(a_hat > 0.0 && a_hat.is_finite()) {
+        if !positive_finite(a_hat) {
             return None;
         }
         let jacobi = 1.0 / a_hat.sqrt();

@@ -365,6 +365,17 @@ pub(super) enum Unscalable {
     InfiniteMass,
 }
 
+/// Whether x is positive and finite (`x > 0.0 && x.is_finite()`), tested on its bits as one
+/// comparison: those of the positive finite numbers are 1 ..= the largest's, so less one
+/// they are below it, and +0 (less one, wrapping: the largest u64), every negative number
+/// (the sign bit), ±∞ and the NaNs are not. Written as comparisons, the compiler classified
+/// x by its bits in about fifteen instructions: SHAKE's residual runs this for every row's
+/// ‖J‖ at every iteration, the scaling for every Âₖₖ.
+#[inline(always)]
+pub(crate) fn positive_finite(x: f64) -> bool {
+    x.to_bits().wrapping_sub(1) < f64::MAX.to_bits()
+}
+
 /// Row `row` scaled into `parts` (one per J entry, in order; their slots left as they are):
 /// Ĵ = J/‖J‖ (times 1/‖J‖ where that is a normal number), Âₖₖ = Σᵢ ‖Ĵᵢ‖² wᵢ, J̃ = Ĵ/√Âₖₖ;
 /// returns ‖J‖ and 1/√Âₖₖ. `parts` holds Ĵ when the row is unscalable at Âₖₖ.
@@ -388,7 +399,7 @@ pub(super) fn scale_row(
         *u = if reciprocal { j.map(|x| x * inverse) } else { j.map(|x| x / norm) };
         a_kk += dot(u, u) * inverse_mass[*b];
     }
-    if !(a_kk > 0.0 && a_kk.is_finite()) {
+    if !positive_finite(a_kk) {
         return Err(Unscalable::InfiniteMass);
     }
     let d = 1.0 / a_kk.sqrt();
@@ -1236,13 +1247,45 @@ pub fn solve_cached(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut
 /// [`solve_cached`] into `out`, reusing its buffers: a run's solves allocate nothing once
 /// warm.
 pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut SolveCache, out: &mut Solution) {
+    cached_into(rows, settings, held, cache, out, Answer::Solution);
+}
+
+/// What a solve through the cache writes into its [`Solution`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Answer {
+    /// All of it: λ, the active set, the forces, the accelerations, the diagnostics, the
+    /// status and the contact states.
+    Solution,
+    /// A correction's step (SHAKE's iterations, the velocity projection: forces zeroed, c
+    /// the target), read from the accelerations alone: the chain path (`numeric::chain`)
+    /// writes only the forces and the accelerations — the same numbers — leaving λ, the
+    /// active set and the contact states empty and no diagnostic; every other path writes
+    /// the whole solution.
+    Step,
+}
+
+/// [`solve_cached_into`] with no contact held, writing what `answer` asks: the correction
+/// solves of a run (`Dynamics::correct_step`).
+pub(crate) fn correction_cached_into(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: &mut Solution) {
+    cached_into(rows, settings, &[], cache, out, Answer::Step);
+}
+
+/// [`solve_cached_into`]'s body, the chain path writing what `answer` asks.
+fn cached_into(
+    rows: &Rows,
+    settings: &Settings,
+    held: &[bool],
+    cache: &mut SolveCache,
+    out: &mut Solution,
+    answer: Answer,
+) {
     if !super::chain::servable(rows) {
         cache.path = SolvePath::General;
         *out = solve_holding(rows, settings, held);
         return;
     }
     // A chain in its order: the tridiagonal in place (`numeric::chain`), the same numbers.
-    if let Some(path) = cache.chain.solve_into(rows, settings, out) {
+    if let Some(path) = cache.chain.solve_into(rows, settings, out, answer) {
         cache.path = path;
         return;
     }
@@ -2312,6 +2355,35 @@ mod tests {
                 if general.diagnostics.is_empty() {
                     prop_assert_ne!(cache.last_path(), SolvePath::General);
                 }
+            }
+        }
+    }
+
+    /// [`positive_finite`]'s bit test answers as `n > 0.0 && n.is_finite()` on every kind of
+    /// number: zeros, subnormals, the ends of the normal range, infinities and NaNs of either
+    /// sign, and numbers around them.
+    #[test]
+    fn positive_finite_is_the_comparisons() {
+        let special = [
+            0.0,
+            -0.0,
+            5e-324,
+            -5e-324,
+            f64::MIN_POSITIVE,
+            1.0,
+            -1.0,
+            f64::MAX,
+            f64::MIN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::NAN,
+            -f64::NAN,
+            f64::from_bits(0x7ff0_0000_0000_0001),
+            f64::from_bits(0xfff0_0000_0000_0001),
+        ];
+        for &x in &special {
+            for n in [x, f64::from_bits(x.to_bits().wrapping_add(1)), f64::from_bits(x.to_bits().wrapping_sub(1))] {
+                assert_eq!(positive_finite(n), n > 0.0 && n.is_finite(), "{n:e} ({:#x})", n.to_bits());
             }
         }
     }

@@ -40,7 +40,7 @@ use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
-use super::solve::solve;
+use super::solve::{positive_finite, solve};
 use super::vector::row_norm;
 
 /// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
@@ -140,7 +140,7 @@ pub enum StabilizeError {
 /// singular configuration) it is 0 on the surface and ±∞ off it: no step along J reaches it.
 pub fn distance(row: &Row) -> f64 {
     let n = row_norm(&row.jacobian);
-    if usable_norm(n) {
+    if positive_finite(n) {
         row.value / n
     } else if row.value == 0.0 {
         0.0
@@ -152,15 +152,7 @@ pub fn distance(row: &Row) -> f64 {
 /// The normal speed of a row, Ċ/‖J‖ (signed; 0 when J = 0).
 pub fn normal_speed(row: &Row) -> f64 {
     let n = row_norm(&row.jacobian);
-    if usable_norm(n) { row.rate / n } else { 0.0 }
-}
-
-/// Whether a row's ‖J‖ divides: positive and finite (not a NaN), as two comparisons —
-/// written as `n > 0.0 && n.is_finite()` the compiler classified n by its bits, about twenty
-/// instructions in SHAKE's residual, which runs it for every row at every iteration.
-#[inline(always)]
-fn usable_norm(n: f64) -> bool {
-    n > 0.0 && n < f64::INFINITY
+    if positive_finite(n) { row.rate / n } else { 0.0 }
 }
 
 /// Marks a row as left out of a correction solve: an inactive inequality (λ = 0).
@@ -183,14 +175,13 @@ fn enforce(row: &mut Row, bias: f64) {
 fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dynamics<'_>>) -> f64 {
     rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
     let mut owned;
-    let solution = match dynamics {
-        Some(dynamics) => dynamics.correct(rows),
+    let step = match dynamics {
+        Some(dynamics) => dynamics.correct_step(rows),
         None => {
-            owned = solve(rows);
+            owned = solve(rows).acceleration;
             &mut owned
         }
     };
-    let step = &mut solution.acceleration;
     fold(rows, step);
     add_finite(x, step)
 }
@@ -353,7 +344,7 @@ pub fn shake_positions(
             }
         }
         start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        let step = &mut dynamics.correct(start).acceleration;
+        let step = dynamics.correct_step(start);
         fold(start, step);
         shake_update(q, v_half, step, dt);
         iterations += 1;
@@ -452,7 +443,7 @@ pub fn project_positions_along(
 /// q += M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −c for the rows `along` (c set), through the run's cache.
 fn step_along(dynamics: &mut Dynamics<'_>, q: &mut Vectors, along: &mut Rows) {
     along.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    let step = &mut dynamics.correct(along).acceleration;
+    let step = dynamics.correct_step(along);
     fold(along, step);
     for (x, dx) in q.iter_mut().zip(step.iter()) {
         for d in 0..3 {
