@@ -316,6 +316,12 @@ impl<'s> Dynamics<'s> {
         self.system
     }
 
+    /// Whether some constraint's C reads t (`RowProgram::time_dependent`, found when the
+    /// program was built).
+    pub fn time_dependent(&self) -> bool {
+        self.program.time_dependent()
+    }
+
     /// Moves to a length unit near the scene's size when `env`'s lengths are beyond 2^±[`NATURAL_RANGE`]
     /// and the rows are verifiably homogeneous (`numeric::rescale::Unit`): from then on
     /// [`rows`](Dynamics::rows) expects and returns numbers in that unit. Returns the unit,

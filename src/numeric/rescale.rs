@@ -69,7 +69,12 @@ fn rows_finite(rows: &Rows) -> bool {
 /// The symbols a change of length unit scales: positions, velocities, forces and the
 /// parameters that no mass depends on.
 fn length_symbols(system: &System) -> Vec<Symbol> {
-    let mass_symbols: Vec<Symbol> = system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect();
+    // Each distinct mass expression once (a chain's bodies share one `m`): a run asks this
+    // at its start, and a long chain's bodies collected the same free symbols each.
+    let mut masses: Vec<_> = system.bodies.iter().map(|b| b.mass).collect();
+    masses.sort_unstable();
+    masses.dedup();
+    let mass_symbols: Vec<Symbol> = masses.into_iter().flat_map(|m| system.graph.free_symbols(m)).collect();
     let mut out: Vec<Symbol> = system.bodies.iter().flat_map(|b| [b.position, b.velocity, b.force]).collect();
     out.extend(system.parameters.iter().map(|&(_, s)| s).filter(|s| !mass_symbols.contains(s)));
     out

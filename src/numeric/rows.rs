@@ -136,6 +136,10 @@ pub struct RowProgram {
     /// what changes when only the velocities do ([`RowProgram::evaluate_motion_state_into`]).
     /// `None` with 3D rigid bodies, whose slots read the principal axes too.
     motion: Option<Subprogram>,
+    /// Whether some constraint's C reads t (`simulate::time_dependent`), found once here:
+    /// a run asks at its start, and a run of a few steps of a long chain spent about a step
+    /// collecting each constraint's free symbols.
+    time_dependent: bool,
 }
 
 /// A tape of some of a [`RowProgram`]'s roots.
@@ -919,7 +923,14 @@ impl RowProgram {
                 sub.places = Some(Places::new(sub, &bodies, &rows));
             }
         }
-        RowProgram { roots, bodies, rows, all, positions, motion }
+        let time_dependent = super::simulate::time_dependent(system);
+        RowProgram { roots, bodies, rows, all, positions, motion, time_dependent }
+    }
+
+    /// Whether some constraint's C reads t (`simulate::time_dependent` of the system the
+    /// program was built for).
+    pub fn time_dependent(&self) -> bool {
+        self.time_dependent
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,

@@ -497,7 +497,7 @@ impl<'s> Simulation<'s> {
         // Numbers of the run (in its unit) → the caller's unit, for everything reported.
         let unit = self.unit.clone();
         let energy_back = |x: f64| unit.as_ref().map_or(x, |u| u.energy(x));
-        let energy_reported = !time_dependent(system);
+        let energy_reported = !self.dynamics.time_dependent();
         // The scene's length scale (in the run's unit): positions only, not a rigid body's angle.
         let length = length_scale(&self.q[..system.bodies.len()]);
         let mut reach =
