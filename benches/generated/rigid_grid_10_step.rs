@@ -1701,7 +1701,8 @@ const UNIT: [bool; 342] = [false, false, false, false, false, false, false, fals
 /// (`numeric::velocity::pattern`, left out of Ċ and an impulse), 2 the constant +1, 3 the constant −1, 1 any other.
 #[allow(dead_code)]
 const ENTRY_CODE: [u8; 1328] = [3, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1];
-/// Per row, its kind: the `ENTRY_CODE` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`).
+/// Per row, its kind: the `ENTRY_CODE` of its entries and whether it is an axis row (two entries J and −J), one
+/// pattern per kind (`Prepared::rate`, `Prepared::apply`).
 #[allow(dead_code)]
 const ROW_KIND: [u8; 342] = [0, 1, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3];
 
@@ -1949,97 +1950,97 @@ fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
     for (&i, t) in SHAPE_4_ITEMS.iter().zip(SHAPE_4_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_4(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_5_ITEMS.iter().zip(SHAPE_5_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_5(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_6_ITEMS.iter().zip(SHAPE_6_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_6(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_7_ITEMS.iter().zip(SHAPE_7_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_7(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_8_ITEMS.iter().zip(SHAPE_8_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_8(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_9_ITEMS.iter().zip(SHAPE_9_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_9(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_10_ITEMS.iter().zip(SHAPE_10_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_10(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_11_ITEMS.iter().zip(SHAPE_11_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_11(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_12_ITEMS.iter().zip(SHAPE_12_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_12(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_13_ITEMS.iter().zip(SHAPE_13_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_13(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_14_ITEMS.iter().zip(SHAPE_14_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_14(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_15_ITEMS.iter().zip(SHAPE_15_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_15(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_16_ITEMS.iter().zip(SHAPE_16_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_16(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_17_ITEMS.iter().zip(SHAPE_17_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_17(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_18_ITEMS.iter().zip(SHAPE_18_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_18(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]], [o[5], 0.0], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_19_ITEMS.iter().zip(SHAPE_19_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_19(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]], [o[5], 0.0], [o[6], 0.0]]));
     }
 }
@@ -3649,7 +3650,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
-    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0 (`time_rate`'s 0 from
+    /// `zeroed` on: nothing writes another on such a row), and the returned m =
     /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
     /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
     /// evaluated rather than read back; m_eff is `effective_mass(m)`.
@@ -3660,7 +3662,6 @@ impl<const D: usize> Prepared<D> {
             m += self.inverse_mass[ROW_BODY[e + x]] * square(k, j);
         }
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         m
     }
 
@@ -3685,7 +3686,6 @@ impl<const D: usize> Prepared<D> {
     fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         if number { self.unit_mass[k] } else { 0.0 }
     }
 
@@ -3776,6 +3776,32 @@ impl<const D: usize> Prepared<D> {
             c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
         }
         c
+    }
+
+    /// `rate_dense` for an axis row (`ROW_KIND`; `velocity::pattern`: its two entries J and −J,
+    /// bit for bit): n = its first entry's J, read once, and (∂C/∂t + n·u_a) − n·u_b, the same
+    /// number as the sum with −n ((−n)·u = −(n·u) exactly).
+    #[inline(always)]
+    fn rate_axis(&self, k: usize, u: &[[f64; D]]) -> f64 {
+        let e = ROW_START[k];
+        let n = &self.jacobian[e];
+        (self.time_rate[k] + dot(n, &u[ROW_BODY[e]])) - dot(n, &u[ROW_BODY[e + 1]])
+    }
+
+    /// `apply_dense` for an axis row (`rate_axis`): u_a += (p/m_a) n, u_b −= (p/m_b) n, the
+    /// same numbers as adding (p/m_b)·(−n).
+    #[inline(always)]
+    fn apply_axis(&self, k: usize, u: &mut [[f64; D]], p: f64) {
+        let e = ROW_START[k];
+        let (n, a, b) = (&self.jacobian[e], ROW_BODY[e], ROW_BODY[e + 1]);
+        let s = self.inverse_mass[a] * p;
+        for d in 0..D {
+            u[a][d] += s * n[d];
+        }
+        let s = self.inverse_mass[b] * p;
+        for d in 0..D {
+            u[b][d] -= s * n[d];
+        }
     }
 
     /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components `codes` keeps

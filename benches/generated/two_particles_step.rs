@@ -536,7 +536,8 @@ const UNIT: [bool; 2] = [true, true];
 /// (`numeric::velocity::pattern`, left out of Ċ and an impulse), 2 the constant +1, 3 the constant −1, 1 any other.
 #[allow(dead_code)]
 const ENTRY_CODE: [u8; 3] = [5, 5, 5];
-/// Per row, its kind: the `ENTRY_CODE` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`).
+/// Per row, its kind: the `ENTRY_CODE` of its entries and whether it is an axis row (two entries J and −J), one
+/// pattern per kind (`Prepared::rate`, `Prepared::apply`).
 #[allow(dead_code)]
 const ROW_KIND: [u8; 2] = [0, 1];
 
@@ -545,13 +546,19 @@ impl Prepared<DIM> {
     /// Ċₖ at velocities `u` (`rate_in`), with row k's codes as its kind's constants.
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; DIM]]) -> f64 {
-        self.rate_dense(k, u)
+        match ROW_KIND[k] {
+            0 => self.rate_dense(k, u),
+            _ => self.rate_axis(k, u),
+        }
     }
 
     /// Applies an impulse `p` of row k (`apply_in`), with its codes as its kind's constants.
     #[inline(always)]
     fn apply(&self, k: usize, u: &mut [[f64; DIM]], p: f64) {
-        self.apply_dense(k, u, p)
+        match ROW_KIND[k] {
+            0 => self.apply_dense(k, u, p),
+            _ => self.apply_axis(k, u, p),
+        }
     }
 
     /// Σᵢ |Jᵢ|²/mᵢ of row k (`mass_in`), with its codes as its kind's constants.
@@ -571,15 +578,20 @@ impl Prepared<DIM> {
 ///   J, body `p1`: −(r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J, body `p2`: (r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J M⁻¹ Jᵀ = A[1][1] = 157970804621911954375000000000/940330394487407031884723016279
-/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
-/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
-#[inline(always)]
-fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
-    prepare(s, p);
+/// The rows at the state, flattened for the step into `p` (nothing allocated): the bodies' 1/m and F (the
+/// scene's, `applied_forces`) and each `UNIT` row's m_eff, then the rows (`prepare_moved`).
+fn prepare(s: &State, p: &mut Prepared<DIM>) {
+    p.inverse_mass[0] = 1.0 / 5.988023952095808;
+    p.force[0] = [s.g[0] * 5.988023952095808, s.g[1] * 5.988023952095808];
+    p.inverse_mass[1] = 1.0 / 1005.0251256281408;
+    p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
+    p.unit_masses();
+    prepare_moved(s, p);
 }
 
-/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
-fn prepare(s: &State, p: &mut Prepared<DIM>) {
+/// The rows after the positions moved within a step: the rows alone (the bodies' 1/m and F read neither
+/// positions, velocities nor the time).
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.r_p1[0] - s.a1[0];
     let x1 = s.r_p1[1] - s.a1[1];
     let x2 = norm2(x0, x1);
@@ -589,15 +601,10 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x6 = 1.0 / x2;
     let x7 = 1.0 / x5;
     let x8 = -x7;
-    let mut v = [[0.0; DIM]; SLOTS];
-    p.inverse_mass[0] = 1.0 / 5.988023952095808;
-    v[0] = [s.v_p1[0], s.v_p1[1]];
-    p.force[0] = [s.g[0] * 5.988023952095808, s.g[1] * 5.988023952095808];
-    p.inverse_mass[1] = 1.0 / 1005.0251256281408;
-    v[1] = [s.v_p2[0], s.v_p2[1]];
-    p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
-    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], 0.0), 0, [(0, [x0 * x6, x1 * x6])], &v);
-    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], 0.0), 1, [(1, [x3 * x7, x4 * x7]), (0, [x3 * x8, x4 * x8])], &v);
+    p.value[0] = (x2 - 1.0) * INVERSE_SCALE[0];
+    p.effective_mass[0] = p.unit_row(0, 0, [[x0 * x6, x1 * x6]]);
+    p.value[1] = (x5 - 1.0) * INVERSE_SCALE[1];
+    p.effective_mass[1] = p.unit_row(1, 1, [[x3 * x7, x4 * x7], [x3 * x8, x4 * x8]]);
 }
 
 /// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
@@ -1492,7 +1499,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
-    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0 (`time_rate`'s 0 from
+    /// `zeroed` on: nothing writes another on such a row), and the returned m =
     /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
     /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
     /// evaluated rather than read back; m_eff is `effective_mass(m)`.
@@ -1503,7 +1511,6 @@ impl<const D: usize> Prepared<D> {
             m += self.inverse_mass[ROW_BODY[e + x]] * square(k, j);
         }
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         m
     }
 
@@ -1528,7 +1535,6 @@ impl<const D: usize> Prepared<D> {
     fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         if number { self.unit_mass[k] } else { 0.0 }
     }
 
@@ -1619,6 +1625,32 @@ impl<const D: usize> Prepared<D> {
             c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
         }
         c
+    }
+
+    /// `rate_dense` for an axis row (`ROW_KIND`; `velocity::pattern`: its two entries J and −J,
+    /// bit for bit): n = its first entry's J, read once, and (∂C/∂t + n·u_a) − n·u_b, the same
+    /// number as the sum with −n ((−n)·u = −(n·u) exactly).
+    #[inline(always)]
+    fn rate_axis(&self, k: usize, u: &[[f64; D]]) -> f64 {
+        let e = ROW_START[k];
+        let n = &self.jacobian[e];
+        (self.time_rate[k] + dot(n, &u[ROW_BODY[e]])) - dot(n, &u[ROW_BODY[e + 1]])
+    }
+
+    /// `apply_dense` for an axis row (`rate_axis`): u_a += (p/m_a) n, u_b −= (p/m_b) n, the
+    /// same numbers as adding (p/m_b)·(−n).
+    #[inline(always)]
+    fn apply_axis(&self, k: usize, u: &mut [[f64; D]], p: f64) {
+        let e = ROW_START[k];
+        let (n, a, b) = (&self.jacobian[e], ROW_BODY[e], ROW_BODY[e + 1]);
+        let s = self.inverse_mass[a] * p;
+        for d in 0..D {
+            u[a][d] += s * n[d];
+        }
+        let s = self.inverse_mass[b] * p;
+        for d in 0..D {
+            u[b][d] -= s * n[d];
+        }
     }
 
     /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components `codes` keeps
