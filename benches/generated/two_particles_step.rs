@@ -1283,7 +1283,6 @@ struct Prepared<const D: usize> {
     /// Per `UNIT` row, its m_eff where J is a number: 1/Σᵢ 1/mᵢ, a constant of the masses
     /// (`unit_masses`), which `unit_row` reads where the positions move.
     unit_mass: [f64; CONSTRAINTS],
-    inequality: [bool; CONSTRAINTS],
     inverse_mass: [f64; SLOTS],
     force: [[f64; D]; SLOTS],
     /// Per slot its principal axis (`AXES` is 0 without 3D rigid bodies).
@@ -1460,7 +1459,6 @@ impl<const D: usize> Prepared<D> {
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
             unit_mass: [0.0; CONSTRAINTS],
-            inequality: INEQUALITY,
             inverse_mass: [0.0; SLOTS],
             force: [[0.0; D]; SLOTS],
             axes: [[0.0; D]; AXES],
@@ -1797,7 +1795,7 @@ impl Prepared<DIM> {
             let rate = self.rate(k, u);
             let old = *impulse;
             let mut delta = -soft.mass_scale * m * (rate + bias) - soft.impulse_scale * old;
-            if self.inequality[k] {
+            if INEQUALITY[k] {
                 delta = (old + delta).max(0.0) - old;
             }
             *impulse = old + delta;
@@ -1864,7 +1862,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
             // Box2D's `useBias = true`.
             let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
-                if !pr.inequality[k] {
+                if !INEQUALITY[k] {
                     (joint.bias_rate * c, joint)
                 } else if c > 0.0 {
                     (c / h, Softness::RIGID)
@@ -1882,7 +1880,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
             let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
-                    if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
+                    if INEQUALITY[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
                 });
             }
         }
@@ -1891,7 +1889,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         for k in 0..p.len() {
             let m = p.effective_mass[k];
             let closing = start_rate[k];
-            if !p.inequality[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
+            if !INEQUALITY[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
                 continue;
             }
             let old = impulses[k];

@@ -49,7 +49,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         let pr = &*p;
         for _ in 0..settings.iterations {
             pr.sweep(&mut v, impulses, |k, c| {
-                let bias = if pr.inequality[k] && c > 0.0 { c / h } else { beta * c / h };
+                let bias = if INEQUALITY[k] && c > 0.0 { c / h } else { beta * c / h };
                 (bias, Softness::RIGID)
             });
         }
