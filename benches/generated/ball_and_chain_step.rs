@@ -4252,90 +4252,96 @@ fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIEN
 
 /// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).
 fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
+    put_moved(s, t, q, q0);
+    s.v_p1 = v[0];
+    s.v_p2 = v[1];
+    s.v_p3 = v[2];
+    s.v_p4 = v[3];
+    s.v_p5 = v[4];
+    s.v_p6 = v[5];
+    s.v_p7 = v[6];
+    s.v_p8 = v[7];
+    s.v_p9 = v[8];
+    s.v_p10 = v[9];
+    s.v_p11 = v[10];
+    s.v_p12 = v[11];
+    s.v_p13 = v[12];
+    s.v_p14 = v[13];
+    s.v_p15 = v[14];
+    s.v_p16 = v[15];
+    s.v_p17 = v[16];
+    s.v_p18 = v[17];
+    s.v_p19 = v[18];
+    s.v_p20 = v[19];
+    s.v_p21 = v[20];
+    s.v_p22 = v[21];
+    s.v_p23 = v[22];
+    s.v_p24 = v[23];
+    s.v_p25 = v[24];
+    s.v_p26 = v[25];
+    s.v_p27 = v[26];
+    s.v_p28 = v[27];
+    s.v_p29 = v[28];
+    s.v_p30 = v[29];
+    s.v_p31 = v[30];
+    s.v_p32 = v[31];
+    s.v_p33 = v[32];
+    s.v_p34 = v[33];
+    s.v_p35 = v[34];
+    s.v_p36 = v[35];
+    s.v_p37 = v[36];
+    s.v_p38 = v[37];
+    s.v_p39 = v[38];
+    s.v_p40 = v[39];
+    s.v_p41 = v[40];
+}
+
+/// `put` but for the velocities: the time and the positions (and orientations) after a substep's drift, all
+/// where the rows read no velocity (`KEEP`) need; the step writes the velocities once, after its last substep.
+fn put_moved(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
     s.t = t;
     let _ = q0;
     s.r_p1 = q[0];
-    s.v_p1 = v[0];
     s.r_p2 = q[1];
-    s.v_p2 = v[1];
     s.r_p3 = q[2];
-    s.v_p3 = v[2];
     s.r_p4 = q[3];
-    s.v_p4 = v[3];
     s.r_p5 = q[4];
-    s.v_p5 = v[4];
     s.r_p6 = q[5];
-    s.v_p6 = v[5];
     s.r_p7 = q[6];
-    s.v_p7 = v[6];
     s.r_p8 = q[7];
-    s.v_p8 = v[7];
     s.r_p9 = q[8];
-    s.v_p9 = v[8];
     s.r_p10 = q[9];
-    s.v_p10 = v[9];
     s.r_p11 = q[10];
-    s.v_p11 = v[10];
     s.r_p12 = q[11];
-    s.v_p12 = v[11];
     s.r_p13 = q[12];
-    s.v_p13 = v[12];
     s.r_p14 = q[13];
-    s.v_p14 = v[13];
     s.r_p15 = q[14];
-    s.v_p15 = v[14];
     s.r_p16 = q[15];
-    s.v_p16 = v[15];
     s.r_p17 = q[16];
-    s.v_p17 = v[16];
     s.r_p18 = q[17];
-    s.v_p18 = v[17];
     s.r_p19 = q[18];
-    s.v_p19 = v[18];
     s.r_p20 = q[19];
-    s.v_p20 = v[19];
     s.r_p21 = q[20];
-    s.v_p21 = v[20];
     s.r_p22 = q[21];
-    s.v_p22 = v[21];
     s.r_p23 = q[22];
-    s.v_p23 = v[22];
     s.r_p24 = q[23];
-    s.v_p24 = v[23];
     s.r_p25 = q[24];
-    s.v_p25 = v[24];
     s.r_p26 = q[25];
-    s.v_p26 = v[25];
     s.r_p27 = q[26];
-    s.v_p27 = v[26];
     s.r_p28 = q[27];
-    s.v_p28 = v[27];
     s.r_p29 = q[28];
-    s.v_p29 = v[28];
     s.r_p30 = q[29];
-    s.v_p30 = v[29];
     s.r_p31 = q[30];
-    s.v_p31 = v[30];
     s.r_p32 = q[31];
-    s.v_p32 = v[31];
     s.r_p33 = q[32];
-    s.v_p33 = v[32];
     s.r_p34 = q[33];
-    s.v_p34 = v[33];
     s.r_p35 = q[34];
-    s.v_p35 = v[34];
     s.r_p36 = q[35];
-    s.v_p36 = v[35];
     s.r_p37 = q[36];
-    s.v_p37 = v[36];
     s.r_p38 = q[37];
-    s.v_p38 = v[37];
     s.r_p39 = q[38];
-    s.v_p39 = v[38];
     s.r_p40 = q[39];
-    s.v_p40 = v[39];
     s.r_p41 = q[40];
-    s.v_p41 = v[40];
 }
 
 /// Where an inequality row stands (the contact states of `lagrange solve`).
@@ -5558,7 +5564,12 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         }
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        // The rows after the drift read no velocity where `KEEP`: written once, at the end.
+        if KEEP {
+            put_moved(s, t + (sub + 1) as f64 * h, &q, &q0);
+        } else {
+            put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        }
         prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {

@@ -360,10 +360,16 @@ fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIEN
 
 /// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).
 fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
+    put_moved(s, t, q, q0);
+    s.velocity.copy_from_slice(v);
+}
+
+/// `put` but for the velocities: the time and the positions (and orientations) after a substep's drift, all
+/// where the rows read no velocity (`KEEP`) need; the step writes the velocities once, after its last substep.
+fn put_moved(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
     s.t = t;
     let _ = q0;
     s.position.copy_from_slice(q);
-    s.velocity.copy_from_slice(v);
 }
 
 /// Where an inequality row stands (the contact states of `lagrange solve`).
@@ -1586,7 +1592,12 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         }
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        // The rows after the drift read no velocity where `KEEP`: written once, at the end.
+        if KEEP {
+            put_moved(s, t + (sub + 1) as f64 * h, &q, &q0);
+        } else {
+            put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        }
         prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {

@@ -1563,12 +1563,12 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
         if is_3d {
             q.extend(["[0.0; 3]".to_string(), "[0.0; 3]".to_string(), "[0.0; 3]".to_string()]);
             v.extend([format!("s.{w}"), "[0.0; 3]".to_string(), "[0.0; 3]".to_string()]);
-            put.push(format!("s.{o} = turned(q[{first}], q0[{r}]);\n    s.{w} = v[{first}];"));
+            put.push((format!("s.{o} = turned(q[{first}], q0[{r}]);"), format!("s.{w} = v[{first}];")));
             orientations.push(format!("s.{o}"));
         } else {
             q.push(format!("[s.{o}, 0.0]"));
             v.push(format!("[s.{w}, 0.0]"));
-            put.push(format!("s.{o} = q[{first}][0];\n    s.{w} = v[{first}][0];"));
+            put.push((format!("s.{o} = q[{first}][0];"), format!("s.{w} = v[{first}][0];")));
         }
     }
     let n = places.position.len();
@@ -1604,43 +1604,52 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
          fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIENTATIONS]) {{\n    \
          {slots}\n}}\n"
     );
-    let _ = writeln!(
-        out,
-        "/// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).\n\
-         fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {{"
-    );
-    match places.time {
-        Some(field) => {
-            let _ = writeln!(out, "    s.{field} = t;");
-        }
-        None => {
-            let _ = writeln!(out, "    let _ = t;");
-        }
-    }
+    // `put_moved`'s lines (the time, the positions with the orientations), then `put`'s own (the
+    // velocities).
+    let mut time_line = match places.time {
+        Some(field) => format!("    s.{field} = t;\n"),
+        None => "    let _ = t;\n".to_string(),
+    };
     if orientations.is_empty() {
-        let _ = writeln!(out, "    let _ = q0;");
+        time_line.push_str("    let _ = q0;\n");
     }
+    let (mut positions, mut velocities) = (String::new(), String::new());
     if arrays && step.turns.is_empty() {
-        let _ = writeln!(out, "    s.position.copy_from_slice(q);\n    s.velocity.copy_from_slice(v);");
+        positions.push_str("    s.position.copy_from_slice(q);\n");
+        velocities.push_str("    s.velocity.copy_from_slice(v);\n");
     } else if arrays {
-        let _ = writeln!(out, "    s.position.copy_from_slice(&q[..{n}]);\n    s.velocity.copy_from_slice(&v[..{n}]);");
+        let _ = writeln!(positions, "    s.position.copy_from_slice(&q[..{n}]);");
+        let _ = writeln!(velocities, "    s.velocity.copy_from_slice(&v[..{n}]);");
     } else {
         for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
-            let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+            let _ = writeln!(positions, "    s.{p} = q[{i}];");
+            let _ = writeln!(velocities, "    s.{v} = v[{i}];");
         }
     }
     if rigid_arrays {
+        let _ =
+            writeln!(positions, "    for (a, x) in s.angle.iter_mut().zip(&q[{n}..]) {{\n        *a = x[0];\n    }}");
         let _ = writeln!(
-            out,
-            "    for (a, x) in s.angle.iter_mut().zip(&q[{n}..]) {{\n        *a = x[0];\n    }}\n    \
-             for (w, x) in s.angular_velocity.iter_mut().zip(&v[{n}..]) {{\n        *w = x[0];\n    }}"
+            velocities,
+            "    for (w, x) in s.angular_velocity.iter_mut().zip(&v[{n}..]) {{\n        *w = x[0];\n    }}"
         );
     } else {
-        for line in &put {
-            let _ = writeln!(out, "    {line}");
+        for (o, w) in &put {
+            let _ = writeln!(positions, "    {o}");
+            let _ = writeln!(velocities, "    {w}");
         }
     }
-    let _ = writeln!(out, "}}\n");
+    let _ = writeln!(
+        out,
+        "/// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).\n\
+         fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {{\n    \
+         put_moved(s, t, q, q0);\n\
+         {velocities}}}\n\n\
+         /// `put` but for the velocities: the time and the positions (and orientations) after a substep's drift, all\n\
+         /// where the rows read no velocity (`KEEP`) need; the step writes the velocities once, after its last substep.\n\
+         fn put_moved(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {{\n\
+         {time_line}{positions}}}\n"
+    );
 }
 
 /// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a field,
