@@ -673,3 +673,55 @@ fn the_unit_rows_are_those_whose_derivation_gives_unit_entries() {
         assert_eq!((0..rows).filter(|&k| pattern.is_unit(k)).count(), if every { rows } else { 0 }, "{file}");
     }
 }
+
+/// The axis rows (`velocity::pattern`: a distance row between two bodies of opposite signs,
+/// whose sweep in a generated step reads one axis n and takes −n for the other entry) are
+/// rows whose two entries the library evaluates as J and −J bit for bit: on every file with a
+/// scene and on Solver2D's point-mass scenes, at the initial state and after each of 100
+/// library soft steps. Solver2D's point-mass scenes are all axis rows but for those on an
+/// anchor (one body); no rigid row is one.
+#[test]
+fn the_axis_rows_have_entries_j_and_minus_j_bit_for_bit() {
+    use lagrange::numeric::velocity::pattern::Pattern;
+    use lagrange::numeric::velocity::{Settings, Solver as Library, Stepper};
+    let solvers = ["two_particles", "ball_and_chain", "joint_grid_30", "hanging_chain", "stretched_chain", "stack"];
+    let mut axes = 0;
+    for path in
+        files().into_iter().chain(solvers.iter().map(|f| PathBuf::from(format!("constraints/solvers/{f}.toml"))))
+    {
+        let Some(s) = scenario(&path) else { continue };
+        let dim = s.system.dim();
+        let pattern = Pattern::of(&s.system);
+        let marked: Vec<usize> = (0..s.system.constraints.len()).filter(|&k| pattern.is_axis(k)).collect();
+        if marked.is_empty() {
+            continue;
+        }
+        let mut dynamics = Dynamics::new(&s.system, s.program.clone(), s.env.clone());
+        let (mut q, mut v, t0) = lagrange::numeric::simulate::initial_state(&s.system, &s.env);
+        let dt = s.scene.dt;
+        let settings = Settings::new(Library::SoftStep, dt, 100.0 * dt);
+        let mut stepper = Stepper::new(settings, s.system.constraints.len(), q.len());
+        for n in 0..=100 {
+            let t = t0 + n as f64 * dt;
+            let Ok(rows) = dynamics.rows(t, &q, &v) else { break };
+            for &k in &marked {
+                let j = &rows.rows[k].jacobian;
+                assert_eq!(j.len(), 2, "{} row {k}", path.display());
+                let bits = |x: &[f64; 3], sign: f64| x[..dim].iter().map(|x| (sign * x).to_bits()).collect::<Vec<_>>();
+                assert_eq!(bits(&j[0].1, 1.0), bits(&j[1].1, -1.0), "{} row {k} step {n}", path.display());
+                axes += 1;
+            }
+            if n == 100 || stepper.step(&mut dynamics, t, &mut q, &mut v, rows).is_err() {
+                break;
+            }
+        }
+    }
+    assert!(axes > 100 * 1711, "{axes}");
+    for (file, anchored) in [("two_particles", 1), ("ball_and_chain", 1), ("joint_grid_30", 30), ("rigid_grid_10", 342)]
+    {
+        let l = loaded(Path::new(&format!("constraints/solvers/{file}.toml")));
+        let pattern = Pattern::of(&l.system);
+        let rows = l.system.constraints.len();
+        assert_eq!((0..rows).filter(|&k| !pattern.is_axis(k)).count(), anchored, "{file}");
+    }
+}

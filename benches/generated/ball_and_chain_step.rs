@@ -3554,7 +3554,8 @@ const UNIT: [bool; 41] = [true, true, true, true, true, true, true, true, true, 
 /// (`numeric::velocity::pattern`, left out of Ċ and an impulse), 2 the constant +1, 3 the constant −1, 1 any other.
 #[allow(dead_code)]
 const ENTRY_CODE: [u8; 81] = [5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5, 5];
-/// Per row, its kind: the `ENTRY_CODE` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`).
+/// Per row, its kind: the `ENTRY_CODE` of its entries and whether it is an axis row (two entries J and −J), one
+/// pattern per kind (`Prepared::rate`, `Prepared::apply`).
 #[allow(dead_code)]
 const ROW_KIND: [u8; 41] = [0, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1, 1];
 
@@ -3563,13 +3564,19 @@ impl Prepared<DIM> {
     /// Ċₖ at velocities `u` (`rate_in`), with row k's codes as its kind's constants.
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; DIM]]) -> f64 {
-        self.rate_dense(k, u)
+        match ROW_KIND[k] {
+            0 => self.rate_dense(k, u),
+            _ => self.rate_axis(k, u),
+        }
     }
 
     /// Applies an impulse `p` of row k (`apply_in`), with its codes as its kind's constants.
     #[inline(always)]
     fn apply(&self, k: usize, u: &mut [[f64; DIM]], p: f64) {
-        self.apply_dense(k, u, p)
+        match ROW_KIND[k] {
+            0 => self.apply_dense(k, u, p),
+            _ => self.apply_axis(k, u, p),
+        }
     }
 
     /// Σᵢ |Jᵢ|²/mᵢ of row k (`mass_in`), with its codes as its kind's constants.
@@ -3745,15 +3752,100 @@ impl Prepared<DIM> {
 ///   J, body `p40`: −(r_p41 − r_p40)/|r_p41 − r_p40|
 ///   J, body `p41`: (r_p41 − r_p40)/|r_p41 − r_p40|
 ///   J M⁻¹ Jᵀ = A[40][40] = 4027/24126
-/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
-/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
-#[inline(always)]
-fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
-    prepare(s, p);
+/// The rows at the state, flattened for the step into `p` (nothing allocated): the bodies' 1/m and F (the
+/// scene's, `applied_forces`) and each `UNIT` row's m_eff, then the rows (`prepare_moved`).
+fn prepare(s: &State, p: &mut Prepared<DIM>) {
+    let x0 = s.g[0] * 6.0;
+    let x1 = s.g[1] * 6.0;
+    p.inverse_mass[0] = 1.0 / 6.0;
+    p.force[0] = [x0, x1];
+    p.inverse_mass[1] = 1.0 / 6.0;
+    p.force[1] = [x0, x1];
+    p.inverse_mass[2] = 1.0 / 6.0;
+    p.force[2] = [x0, x1];
+    p.inverse_mass[3] = 1.0 / 6.0;
+    p.force[3] = [x0, x1];
+    p.inverse_mass[4] = 1.0 / 6.0;
+    p.force[4] = [x0, x1];
+    p.inverse_mass[5] = 1.0 / 6.0;
+    p.force[5] = [x0, x1];
+    p.inverse_mass[6] = 1.0 / 6.0;
+    p.force[6] = [x0, x1];
+    p.inverse_mass[7] = 1.0 / 6.0;
+    p.force[7] = [x0, x1];
+    p.inverse_mass[8] = 1.0 / 6.0;
+    p.force[8] = [x0, x1];
+    p.inverse_mass[9] = 1.0 / 6.0;
+    p.force[9] = [x0, x1];
+    p.inverse_mass[10] = 1.0 / 6.0;
+    p.force[10] = [x0, x1];
+    p.inverse_mass[11] = 1.0 / 6.0;
+    p.force[11] = [x0, x1];
+    p.inverse_mass[12] = 1.0 / 6.0;
+    p.force[12] = [x0, x1];
+    p.inverse_mass[13] = 1.0 / 6.0;
+    p.force[13] = [x0, x1];
+    p.inverse_mass[14] = 1.0 / 6.0;
+    p.force[14] = [x0, x1];
+    p.inverse_mass[15] = 1.0 / 6.0;
+    p.force[15] = [x0, x1];
+    p.inverse_mass[16] = 1.0 / 6.0;
+    p.force[16] = [x0, x1];
+    p.inverse_mass[17] = 1.0 / 6.0;
+    p.force[17] = [x0, x1];
+    p.inverse_mass[18] = 1.0 / 6.0;
+    p.force[18] = [x0, x1];
+    p.inverse_mass[19] = 1.0 / 6.0;
+    p.force[19] = [x0, x1];
+    p.inverse_mass[20] = 1.0 / 6.0;
+    p.force[20] = [x0, x1];
+    p.inverse_mass[21] = 1.0 / 6.0;
+    p.force[21] = [x0, x1];
+    p.inverse_mass[22] = 1.0 / 6.0;
+    p.force[22] = [x0, x1];
+    p.inverse_mass[23] = 1.0 / 6.0;
+    p.force[23] = [x0, x1];
+    p.inverse_mass[24] = 1.0 / 6.0;
+    p.force[24] = [x0, x1];
+    p.inverse_mass[25] = 1.0 / 6.0;
+    p.force[25] = [x0, x1];
+    p.inverse_mass[26] = 1.0 / 6.0;
+    p.force[26] = [x0, x1];
+    p.inverse_mass[27] = 1.0 / 6.0;
+    p.force[27] = [x0, x1];
+    p.inverse_mass[28] = 1.0 / 6.0;
+    p.force[28] = [x0, x1];
+    p.inverse_mass[29] = 1.0 / 6.0;
+    p.force[29] = [x0, x1];
+    p.inverse_mass[30] = 1.0 / 6.0;
+    p.force[30] = [x0, x1];
+    p.inverse_mass[31] = 1.0 / 6.0;
+    p.force[31] = [x0, x1];
+    p.inverse_mass[32] = 1.0 / 6.0;
+    p.force[32] = [x0, x1];
+    p.inverse_mass[33] = 1.0 / 6.0;
+    p.force[33] = [x0, x1];
+    p.inverse_mass[34] = 1.0 / 6.0;
+    p.force[34] = [x0, x1];
+    p.inverse_mass[35] = 1.0 / 6.0;
+    p.force[35] = [x0, x1];
+    p.inverse_mass[36] = 1.0 / 6.0;
+    p.force[36] = [x0, x1];
+    p.inverse_mass[37] = 1.0 / 6.0;
+    p.force[37] = [x0, x1];
+    p.inverse_mass[38] = 1.0 / 6.0;
+    p.force[38] = [x0, x1];
+    p.inverse_mass[39] = 1.0 / 6.0;
+    p.force[39] = [x0, x1];
+    p.inverse_mass[40] = 1.0 / 4021.0;
+    p.force[40] = [s.g[0] * 4021.0, s.g[1] * 4021.0];
+    p.unit_masses();
+    prepare_moved(s, p);
 }
 
-/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
-fn prepare(s: &State, p: &mut Prepared<DIM>) {
+/// The rows after the positions moved within a step: the rows alone (the bodies' 1/m and F read neither
+/// positions, velocities nor the time).
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.r_p1[0] - s.a1[0];
     let x1 = s.r_p1[1] - s.a1[1];
     let x2 = norm2(x0, x1);
@@ -3877,254 +3969,169 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x120 = s.r_p41[0] - s.r_p40[0];
     let x121 = s.r_p41[1] - s.r_p40[1];
     let x122 = norm2(x120, x121);
-    let x123 = s.g[0] * 6.0;
-    let x124 = s.g[1] * 6.0;
-    let x125 = 1.0 / x2;
-    let x126 = 1.0 / x5;
+    let x123 = 1.0 / x2;
+    let x124 = 1.0 / x5;
+    let x125 = -x124;
+    let x126 = 1.0 / x8;
     let x127 = -x126;
-    let x128 = 1.0 / x8;
+    let x128 = 1.0 / x11;
     let x129 = -x128;
-    let x130 = 1.0 / x11;
+    let x130 = 1.0 / x14;
     let x131 = -x130;
-    let x132 = 1.0 / x14;
+    let x132 = 1.0 / x17;
     let x133 = -x132;
-    let x134 = 1.0 / x17;
+    let x134 = 1.0 / x20;
     let x135 = -x134;
-    let x136 = 1.0 / x20;
+    let x136 = 1.0 / x23;
     let x137 = -x136;
-    let x138 = 1.0 / x23;
+    let x138 = 1.0 / x26;
     let x139 = -x138;
-    let x140 = 1.0 / x26;
+    let x140 = 1.0 / x29;
     let x141 = -x140;
-    let x142 = 1.0 / x29;
+    let x142 = 1.0 / x32;
     let x143 = -x142;
-    let x144 = 1.0 / x32;
+    let x144 = 1.0 / x35;
     let x145 = -x144;
-    let x146 = 1.0 / x35;
+    let x146 = 1.0 / x38;
     let x147 = -x146;
-    let x148 = 1.0 / x38;
+    let x148 = 1.0 / x41;
     let x149 = -x148;
-    let x150 = 1.0 / x41;
+    let x150 = 1.0 / x44;
     let x151 = -x150;
-    let x152 = 1.0 / x44;
+    let x152 = 1.0 / x47;
     let x153 = -x152;
-    let x154 = 1.0 / x47;
+    let x154 = 1.0 / x50;
     let x155 = -x154;
-    let x156 = 1.0 / x50;
+    let x156 = 1.0 / x53;
     let x157 = -x156;
-    let x158 = 1.0 / x53;
+    let x158 = 1.0 / x56;
     let x159 = -x158;
-    let x160 = 1.0 / x56;
+    let x160 = 1.0 / x59;
     let x161 = -x160;
-    let x162 = 1.0 / x59;
+    let x162 = 1.0 / x62;
     let x163 = -x162;
-    let x164 = 1.0 / x62;
+    let x164 = 1.0 / x65;
     let x165 = -x164;
-    let x166 = 1.0 / x65;
+    let x166 = 1.0 / x68;
     let x167 = -x166;
-    let x168 = 1.0 / x68;
+    let x168 = 1.0 / x71;
     let x169 = -x168;
-    let x170 = 1.0 / x71;
+    let x170 = 1.0 / x74;
     let x171 = -x170;
-    let x172 = 1.0 / x74;
+    let x172 = 1.0 / x77;
     let x173 = -x172;
-    let x174 = 1.0 / x77;
+    let x174 = 1.0 / x80;
     let x175 = -x174;
-    let x176 = 1.0 / x80;
+    let x176 = 1.0 / x83;
     let x177 = -x176;
-    let x178 = 1.0 / x83;
+    let x178 = 1.0 / x86;
     let x179 = -x178;
-    let x180 = 1.0 / x86;
+    let x180 = 1.0 / x89;
     let x181 = -x180;
-    let x182 = 1.0 / x89;
+    let x182 = 1.0 / x92;
     let x183 = -x182;
-    let x184 = 1.0 / x92;
+    let x184 = 1.0 / x95;
     let x185 = -x184;
-    let x186 = 1.0 / x95;
+    let x186 = 1.0 / x98;
     let x187 = -x186;
-    let x188 = 1.0 / x98;
+    let x188 = 1.0 / x101;
     let x189 = -x188;
-    let x190 = 1.0 / x101;
+    let x190 = 1.0 / x104;
     let x191 = -x190;
-    let x192 = 1.0 / x104;
+    let x192 = 1.0 / x107;
     let x193 = -x192;
-    let x194 = 1.0 / x107;
+    let x194 = 1.0 / x110;
     let x195 = -x194;
-    let x196 = 1.0 / x110;
+    let x196 = 1.0 / x113;
     let x197 = -x196;
-    let x198 = 1.0 / x113;
+    let x198 = 1.0 / x116;
     let x199 = -x198;
-    let x200 = 1.0 / x116;
+    let x200 = 1.0 / x119;
     let x201 = -x200;
-    let x202 = 1.0 / x119;
+    let x202 = 1.0 / x122;
     let x203 = -x202;
-    let x204 = 1.0 / x122;
-    let x205 = -x204;
-    let mut v = [[0.0; DIM]; SLOTS];
-    p.inverse_mass[0] = 1.0 / 6.0;
-    v[0] = [s.v_p1[0], s.v_p1[1]];
-    p.force[0] = [x123, x124];
-    p.inverse_mass[1] = 1.0 / 6.0;
-    v[1] = [s.v_p2[0], s.v_p2[1]];
-    p.force[1] = [x123, x124];
-    p.inverse_mass[2] = 1.0 / 6.0;
-    v[2] = [s.v_p3[0], s.v_p3[1]];
-    p.force[2] = [x123, x124];
-    p.inverse_mass[3] = 1.0 / 6.0;
-    v[3] = [s.v_p4[0], s.v_p4[1]];
-    p.force[3] = [x123, x124];
-    p.inverse_mass[4] = 1.0 / 6.0;
-    v[4] = [s.v_p5[0], s.v_p5[1]];
-    p.force[4] = [x123, x124];
-    p.inverse_mass[5] = 1.0 / 6.0;
-    v[5] = [s.v_p6[0], s.v_p6[1]];
-    p.force[5] = [x123, x124];
-    p.inverse_mass[6] = 1.0 / 6.0;
-    v[6] = [s.v_p7[0], s.v_p7[1]];
-    p.force[6] = [x123, x124];
-    p.inverse_mass[7] = 1.0 / 6.0;
-    v[7] = [s.v_p8[0], s.v_p8[1]];
-    p.force[7] = [x123, x124];
-    p.inverse_mass[8] = 1.0 / 6.0;
-    v[8] = [s.v_p9[0], s.v_p9[1]];
-    p.force[8] = [x123, x124];
-    p.inverse_mass[9] = 1.0 / 6.0;
-    v[9] = [s.v_p10[0], s.v_p10[1]];
-    p.force[9] = [x123, x124];
-    p.inverse_mass[10] = 1.0 / 6.0;
-    v[10] = [s.v_p11[0], s.v_p11[1]];
-    p.force[10] = [x123, x124];
-    p.inverse_mass[11] = 1.0 / 6.0;
-    v[11] = [s.v_p12[0], s.v_p12[1]];
-    p.force[11] = [x123, x124];
-    p.inverse_mass[12] = 1.0 / 6.0;
-    v[12] = [s.v_p13[0], s.v_p13[1]];
-    p.force[12] = [x123, x124];
-    p.inverse_mass[13] = 1.0 / 6.0;
-    v[13] = [s.v_p14[0], s.v_p14[1]];
-    p.force[13] = [x123, x124];
-    p.inverse_mass[14] = 1.0 / 6.0;
-    v[14] = [s.v_p15[0], s.v_p15[1]];
-    p.force[14] = [x123, x124];
-    p.inverse_mass[15] = 1.0 / 6.0;
-    v[15] = [s.v_p16[0], s.v_p16[1]];
-    p.force[15] = [x123, x124];
-    p.inverse_mass[16] = 1.0 / 6.0;
-    v[16] = [s.v_p17[0], s.v_p17[1]];
-    p.force[16] = [x123, x124];
-    p.inverse_mass[17] = 1.0 / 6.0;
-    v[17] = [s.v_p18[0], s.v_p18[1]];
-    p.force[17] = [x123, x124];
-    p.inverse_mass[18] = 1.0 / 6.0;
-    v[18] = [s.v_p19[0], s.v_p19[1]];
-    p.force[18] = [x123, x124];
-    p.inverse_mass[19] = 1.0 / 6.0;
-    v[19] = [s.v_p20[0], s.v_p20[1]];
-    p.force[19] = [x123, x124];
-    p.inverse_mass[20] = 1.0 / 6.0;
-    v[20] = [s.v_p21[0], s.v_p21[1]];
-    p.force[20] = [x123, x124];
-    p.inverse_mass[21] = 1.0 / 6.0;
-    v[21] = [s.v_p22[0], s.v_p22[1]];
-    p.force[21] = [x123, x124];
-    p.inverse_mass[22] = 1.0 / 6.0;
-    v[22] = [s.v_p23[0], s.v_p23[1]];
-    p.force[22] = [x123, x124];
-    p.inverse_mass[23] = 1.0 / 6.0;
-    v[23] = [s.v_p24[0], s.v_p24[1]];
-    p.force[23] = [x123, x124];
-    p.inverse_mass[24] = 1.0 / 6.0;
-    v[24] = [s.v_p25[0], s.v_p25[1]];
-    p.force[24] = [x123, x124];
-    p.inverse_mass[25] = 1.0 / 6.0;
-    v[25] = [s.v_p26[0], s.v_p26[1]];
-    p.force[25] = [x123, x124];
-    p.inverse_mass[26] = 1.0 / 6.0;
-    v[26] = [s.v_p27[0], s.v_p27[1]];
-    p.force[26] = [x123, x124];
-    p.inverse_mass[27] = 1.0 / 6.0;
-    v[27] = [s.v_p28[0], s.v_p28[1]];
-    p.force[27] = [x123, x124];
-    p.inverse_mass[28] = 1.0 / 6.0;
-    v[28] = [s.v_p29[0], s.v_p29[1]];
-    p.force[28] = [x123, x124];
-    p.inverse_mass[29] = 1.0 / 6.0;
-    v[29] = [s.v_p30[0], s.v_p30[1]];
-    p.force[29] = [x123, x124];
-    p.inverse_mass[30] = 1.0 / 6.0;
-    v[30] = [s.v_p31[0], s.v_p31[1]];
-    p.force[30] = [x123, x124];
-    p.inverse_mass[31] = 1.0 / 6.0;
-    v[31] = [s.v_p32[0], s.v_p32[1]];
-    p.force[31] = [x123, x124];
-    p.inverse_mass[32] = 1.0 / 6.0;
-    v[32] = [s.v_p33[0], s.v_p33[1]];
-    p.force[32] = [x123, x124];
-    p.inverse_mass[33] = 1.0 / 6.0;
-    v[33] = [s.v_p34[0], s.v_p34[1]];
-    p.force[33] = [x123, x124];
-    p.inverse_mass[34] = 1.0 / 6.0;
-    v[34] = [s.v_p35[0], s.v_p35[1]];
-    p.force[34] = [x123, x124];
-    p.inverse_mass[35] = 1.0 / 6.0;
-    v[35] = [s.v_p36[0], s.v_p36[1]];
-    p.force[35] = [x123, x124];
-    p.inverse_mass[36] = 1.0 / 6.0;
-    v[36] = [s.v_p37[0], s.v_p37[1]];
-    p.force[36] = [x123, x124];
-    p.inverse_mass[37] = 1.0 / 6.0;
-    v[37] = [s.v_p38[0], s.v_p38[1]];
-    p.force[37] = [x123, x124];
-    p.inverse_mass[38] = 1.0 / 6.0;
-    v[38] = [s.v_p39[0], s.v_p39[1]];
-    p.force[38] = [x123, x124];
-    p.inverse_mass[39] = 1.0 / 6.0;
-    v[39] = [s.v_p40[0], s.v_p40[1]];
-    p.force[39] = [x123, x124];
-    p.inverse_mass[40] = 1.0 / 4021.0;
-    v[40] = [s.v_p41[0], s.v_p41[1]];
-    p.force[40] = [s.g[0] * 4021.0, s.g[1] * 4021.0];
-    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], 0.0), 0, [(0, [x0 * x125, x1 * x125])], &v);
-    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], 0.0), 1, [(1, [x3 * x126, x4 * x126]), (0, [x3 * x127, x4 * x127])], &v);
-    p.row(2, ((x8 - 1.0) * INVERSE_SCALE[2], 0.0), 3, [(2, [x6 * x128, x7 * x128]), (1, [x6 * x129, x7 * x129])], &v);
-    p.row(3, ((x11 - 1.0) * INVERSE_SCALE[3], 0.0), 5, [(3, [x9 * x130, x10 * x130]), (2, [x9 * x131, x10 * x131])], &v);
-    p.row(4, ((x14 - 1.0) * INVERSE_SCALE[4], 0.0), 7, [(4, [x12 * x132, x13 * x132]), (3, [x12 * x133, x13 * x133])], &v);
-    p.row(5, ((x17 - 1.0) * INVERSE_SCALE[5], 0.0), 9, [(5, [x15 * x134, x16 * x134]), (4, [x15 * x135, x16 * x135])], &v);
-    p.row(6, ((x20 - 1.0) * INVERSE_SCALE[6], 0.0), 11, [(6, [x18 * x136, x19 * x136]), (5, [x18 * x137, x19 * x137])], &v);
-    p.row(7, ((x23 - 1.0) * INVERSE_SCALE[7], 0.0), 13, [(7, [x21 * x138, x22 * x138]), (6, [x21 * x139, x22 * x139])], &v);
-    p.row(8, ((x26 - 1.0) * INVERSE_SCALE[8], 0.0), 15, [(8, [x24 * x140, x25 * x140]), (7, [x24 * x141, x25 * x141])], &v);
-    p.row(9, ((x29 - 1.0) * INVERSE_SCALE[9], 0.0), 17, [(9, [x27 * x142, x28 * x142]), (8, [x27 * x143, x28 * x143])], &v);
-    p.row(10, ((x32 - 1.0) * INVERSE_SCALE[10], 0.0), 19, [(10, [x30 * x144, x31 * x144]), (9, [x30 * x145, x31 * x145])], &v);
-    p.row(11, ((x35 - 1.0) * INVERSE_SCALE[11], 0.0), 21, [(11, [x33 * x146, x34 * x146]), (10, [x33 * x147, x34 * x147])], &v);
-    p.row(12, ((x38 - 1.0) * INVERSE_SCALE[12], 0.0), 23, [(12, [x36 * x148, x37 * x148]), (11, [x36 * x149, x37 * x149])], &v);
-    p.row(13, ((x41 - 1.0) * INVERSE_SCALE[13], 0.0), 25, [(13, [x39 * x150, x40 * x150]), (12, [x39 * x151, x40 * x151])], &v);
-    p.row(14, ((x44 - 1.0) * INVERSE_SCALE[14], 0.0), 27, [(14, [x42 * x152, x43 * x152]), (13, [x42 * x153, x43 * x153])], &v);
-    p.row(15, ((x47 - 1.0) * INVERSE_SCALE[15], 0.0), 29, [(15, [x45 * x154, x46 * x154]), (14, [x45 * x155, x46 * x155])], &v);
-    p.row(16, ((x50 - 1.0) * INVERSE_SCALE[16], 0.0), 31, [(16, [x48 * x156, x49 * x156]), (15, [x48 * x157, x49 * x157])], &v);
-    p.row(17, ((x53 - 1.0) * INVERSE_SCALE[17], 0.0), 33, [(17, [x51 * x158, x52 * x158]), (16, [x51 * x159, x52 * x159])], &v);
-    p.row(18, ((x56 - 1.0) * INVERSE_SCALE[18], 0.0), 35, [(18, [x54 * x160, x55 * x160]), (17, [x54 * x161, x55 * x161])], &v);
-    p.row(19, ((x59 - 1.0) * INVERSE_SCALE[19], 0.0), 37, [(19, [x57 * x162, x58 * x162]), (18, [x57 * x163, x58 * x163])], &v);
-    p.row(20, ((x62 - 1.0) * INVERSE_SCALE[20], 0.0), 39, [(20, [x60 * x164, x61 * x164]), (19, [x60 * x165, x61 * x165])], &v);
-    p.row(21, ((x65 - 1.0) * INVERSE_SCALE[21], 0.0), 41, [(21, [x63 * x166, x64 * x166]), (20, [x63 * x167, x64 * x167])], &v);
-    p.row(22, ((x68 - 1.0) * INVERSE_SCALE[22], 0.0), 43, [(22, [x66 * x168, x67 * x168]), (21, [x66 * x169, x67 * x169])], &v);
-    p.row(23, ((x71 - 1.0) * INVERSE_SCALE[23], 0.0), 45, [(23, [x69 * x170, x70 * x170]), (22, [x69 * x171, x70 * x171])], &v);
-    p.row(24, ((x74 - 1.0) * INVERSE_SCALE[24], 0.0), 47, [(24, [x72 * x172, x73 * x172]), (23, [x72 * x173, x73 * x173])], &v);
-    p.row(25, ((x77 - 1.0) * INVERSE_SCALE[25], 0.0), 49, [(25, [x75 * x174, x76 * x174]), (24, [x75 * x175, x76 * x175])], &v);
-    p.row(26, ((x80 - 1.0) * INVERSE_SCALE[26], 0.0), 51, [(26, [x78 * x176, x79 * x176]), (25, [x78 * x177, x79 * x177])], &v);
-    p.row(27, ((x83 - 1.0) * INVERSE_SCALE[27], 0.0), 53, [(27, [x81 * x178, x82 * x178]), (26, [x81 * x179, x82 * x179])], &v);
-    p.row(28, ((x86 - 1.0) * INVERSE_SCALE[28], 0.0), 55, [(28, [x84 * x180, x85 * x180]), (27, [x84 * x181, x85 * x181])], &v);
-    p.row(29, ((x89 - 1.0) * INVERSE_SCALE[29], 0.0), 57, [(29, [x87 * x182, x88 * x182]), (28, [x87 * x183, x88 * x183])], &v);
-    p.row(30, ((x92 - 1.0) * INVERSE_SCALE[30], 0.0), 59, [(30, [x90 * x184, x91 * x184]), (29, [x90 * x185, x91 * x185])], &v);
-    p.row(31, ((x95 - 1.0) * INVERSE_SCALE[31], 0.0), 61, [(31, [x93 * x186, x94 * x186]), (30, [x93 * x187, x94 * x187])], &v);
-    p.row(32, ((x98 - 1.0) * INVERSE_SCALE[32], 0.0), 63, [(32, [x96 * x188, x97 * x188]), (31, [x96 * x189, x97 * x189])], &v);
-    p.row(33, ((x101 - 1.0) * INVERSE_SCALE[33], 0.0), 65, [(33, [x99 * x190, x100 * x190]), (32, [x99 * x191, x100 * x191])], &v);
-    p.row(34, ((x104 - 1.0) * INVERSE_SCALE[34], 0.0), 67, [(34, [x102 * x192, x103 * x192]), (33, [x102 * x193, x103 * x193])], &v);
-    p.row(35, ((x107 - 1.0) * INVERSE_SCALE[35], 0.0), 69, [(35, [x105 * x194, x106 * x194]), (34, [x105 * x195, x106 * x195])], &v);
-    p.row(36, ((x110 - 1.0) * INVERSE_SCALE[36], 0.0), 71, [(36, [x108 * x196, x109 * x196]), (35, [x108 * x197, x109 * x197])], &v);
-    p.row(37, ((x113 - 1.0) * INVERSE_SCALE[37], 0.0), 73, [(37, [x111 * x198, x112 * x198]), (36, [x111 * x199, x112 * x199])], &v);
-    p.row(38, ((x116 - 1.0) * INVERSE_SCALE[38], 0.0), 75, [(38, [x114 * x200, x115 * x200]), (37, [x114 * x201, x115 * x201])], &v);
-    p.row(39, ((x119 - 1.0) * INVERSE_SCALE[39], 0.0), 77, [(39, [x117 * x202, x118 * x202]), (38, [x117 * x203, x118 * x203])], &v);
-    p.row(40, ((x122 - 1.0) * INVERSE_SCALE[40], 0.0), 79, [(40, [x120 * x204, x121 * x204]), (39, [x120 * x205, x121 * x205])], &v);
+    p.value[0] = (x2 - 1.0) * INVERSE_SCALE[0];
+    p.effective_mass[0] = p.unit_row(0, 0, [[x0 * x123, x1 * x123]]);
+    p.value[1] = (x5 - 1.0) * INVERSE_SCALE[1];
+    p.effective_mass[1] = p.unit_row(1, 1, [[x3 * x124, x4 * x124], [x3 * x125, x4 * x125]]);
+    p.value[2] = (x8 - 1.0) * INVERSE_SCALE[2];
+    p.effective_mass[2] = p.unit_row(2, 3, [[x6 * x126, x7 * x126], [x6 * x127, x7 * x127]]);
+    p.value[3] = (x11 - 1.0) * INVERSE_SCALE[3];
+    p.effective_mass[3] = p.unit_row(3, 5, [[x9 * x128, x10 * x128], [x9 * x129, x10 * x129]]);
+    p.value[4] = (x14 - 1.0) * INVERSE_SCALE[4];
+    p.effective_mass[4] = p.unit_row(4, 7, [[x12 * x130, x13 * x130], [x12 * x131, x13 * x131]]);
+    p.value[5] = (x17 - 1.0) * INVERSE_SCALE[5];
+    p.effective_mass[5] = p.unit_row(5, 9, [[x15 * x132, x16 * x132], [x15 * x133, x16 * x133]]);
+    p.value[6] = (x20 - 1.0) * INVERSE_SCALE[6];
+    p.effective_mass[6] = p.unit_row(6, 11, [[x18 * x134, x19 * x134], [x18 * x135, x19 * x135]]);
+    p.value[7] = (x23 - 1.0) * INVERSE_SCALE[7];
+    p.effective_mass[7] = p.unit_row(7, 13, [[x21 * x136, x22 * x136], [x21 * x137, x22 * x137]]);
+    p.value[8] = (x26 - 1.0) * INVERSE_SCALE[8];
+    p.effective_mass[8] = p.unit_row(8, 15, [[x24 * x138, x25 * x138], [x24 * x139, x25 * x139]]);
+    p.value[9] = (x29 - 1.0) * INVERSE_SCALE[9];
+    p.effective_mass[9] = p.unit_row(9, 17, [[x27 * x140, x28 * x140], [x27 * x141, x28 * x141]]);
+    p.value[10] = (x32 - 1.0) * INVERSE_SCALE[10];
+    p.effective_mass[10] = p.unit_row(10, 19, [[x30 * x142, x31 * x142], [x30 * x143, x31 * x143]]);
+    p.value[11] = (x35 - 1.0) * INVERSE_SCALE[11];
+    p.effective_mass[11] = p.unit_row(11, 21, [[x33 * x144, x34 * x144], [x33 * x145, x34 * x145]]);
+    p.value[12] = (x38 - 1.0) * INVERSE_SCALE[12];
+    p.effective_mass[12] = p.unit_row(12, 23, [[x36 * x146, x37 * x146], [x36 * x147, x37 * x147]]);
+    p.value[13] = (x41 - 1.0) * INVERSE_SCALE[13];
+    p.effective_mass[13] = p.unit_row(13, 25, [[x39 * x148, x40 * x148], [x39 * x149, x40 * x149]]);
+    p.value[14] = (x44 - 1.0) * INVERSE_SCALE[14];
+    p.effective_mass[14] = p.unit_row(14, 27, [[x42 * x150, x43 * x150], [x42 * x151, x43 * x151]]);
+    p.value[15] = (x47 - 1.0) * INVERSE_SCALE[15];
+    p.effective_mass[15] = p.unit_row(15, 29, [[x45 * x152, x46 * x152], [x45 * x153, x46 * x153]]);
+    p.value[16] = (x50 - 1.0) * INVERSE_SCALE[16];
+    p.effective_mass[16] = p.unit_row(16, 31, [[x48 * x154, x49 * x154], [x48 * x155, x49 * x155]]);
+    p.value[17] = (x53 - 1.0) * INVERSE_SCALE[17];
+    p.effective_mass[17] = p.unit_row(17, 33, [[x51 * x156, x52 * x156], [x51 * x157, x52 * x157]]);
+    p.value[18] = (x56 - 1.0) * INVERSE_SCALE[18];
+    p.effective_mass[18] = p.unit_row(18, 35, [[x54 * x158, x55 * x158], [x54 * x159, x55 * x159]]);
+    p.value[19] = (x59 - 1.0) * INVERSE_SCALE[19];
+    p.effective_mass[19] = p.unit_row(19, 37, [[x57 * x160, x58 * x160], [x57 * x161, x58 * x161]]);
+    p.value[20] = (x62 - 1.0) * INVERSE_SCALE[20];
+    p.effective_mass[20] = p.unit_row(20, 39, [[x60 * x162, x61 * x162], [x60 * x163, x61 * x163]]);
+    p.value[21] = (x65 - 1.0) * INVERSE_SCALE[21];
+    p.effective_mass[21] = p.unit_row(21, 41, [[x63 * x164, x64 * x164], [x63 * x165, x64 * x165]]);
+    p.value[22] = (x68 - 1.0) * INVERSE_SCALE[22];
+    p.effective_mass[22] = p.unit_row(22, 43, [[x66 * x166, x67 * x166], [x66 * x167, x67 * x167]]);
+    p.value[23] = (x71 - 1.0) * INVERSE_SCALE[23];
+    p.effective_mass[23] = p.unit_row(23, 45, [[x69 * x168, x70 * x168], [x69 * x169, x70 * x169]]);
+    p.value[24] = (x74 - 1.0) * INVERSE_SCALE[24];
+    p.effective_mass[24] = p.unit_row(24, 47, [[x72 * x170, x73 * x170], [x72 * x171, x73 * x171]]);
+    p.value[25] = (x77 - 1.0) * INVERSE_SCALE[25];
+    p.effective_mass[25] = p.unit_row(25, 49, [[x75 * x172, x76 * x172], [x75 * x173, x76 * x173]]);
+    p.value[26] = (x80 - 1.0) * INVERSE_SCALE[26];
+    p.effective_mass[26] = p.unit_row(26, 51, [[x78 * x174, x79 * x174], [x78 * x175, x79 * x175]]);
+    p.value[27] = (x83 - 1.0) * INVERSE_SCALE[27];
+    p.effective_mass[27] = p.unit_row(27, 53, [[x81 * x176, x82 * x176], [x81 * x177, x82 * x177]]);
+    p.value[28] = (x86 - 1.0) * INVERSE_SCALE[28];
+    p.effective_mass[28] = p.unit_row(28, 55, [[x84 * x178, x85 * x178], [x84 * x179, x85 * x179]]);
+    p.value[29] = (x89 - 1.0) * INVERSE_SCALE[29];
+    p.effective_mass[29] = p.unit_row(29, 57, [[x87 * x180, x88 * x180], [x87 * x181, x88 * x181]]);
+    p.value[30] = (x92 - 1.0) * INVERSE_SCALE[30];
+    p.effective_mass[30] = p.unit_row(30, 59, [[x90 * x182, x91 * x182], [x90 * x183, x91 * x183]]);
+    p.value[31] = (x95 - 1.0) * INVERSE_SCALE[31];
+    p.effective_mass[31] = p.unit_row(31, 61, [[x93 * x184, x94 * x184], [x93 * x185, x94 * x185]]);
+    p.value[32] = (x98 - 1.0) * INVERSE_SCALE[32];
+    p.effective_mass[32] = p.unit_row(32, 63, [[x96 * x186, x97 * x186], [x96 * x187, x97 * x187]]);
+    p.value[33] = (x101 - 1.0) * INVERSE_SCALE[33];
+    p.effective_mass[33] = p.unit_row(33, 65, [[x99 * x188, x100 * x188], [x99 * x189, x100 * x189]]);
+    p.value[34] = (x104 - 1.0) * INVERSE_SCALE[34];
+    p.effective_mass[34] = p.unit_row(34, 67, [[x102 * x190, x103 * x190], [x102 * x191, x103 * x191]]);
+    p.value[35] = (x107 - 1.0) * INVERSE_SCALE[35];
+    p.effective_mass[35] = p.unit_row(35, 69, [[x105 * x192, x106 * x192], [x105 * x193, x106 * x193]]);
+    p.value[36] = (x110 - 1.0) * INVERSE_SCALE[36];
+    p.effective_mass[36] = p.unit_row(36, 71, [[x108 * x194, x109 * x194], [x108 * x195, x109 * x195]]);
+    p.value[37] = (x113 - 1.0) * INVERSE_SCALE[37];
+    p.effective_mass[37] = p.unit_row(37, 73, [[x111 * x196, x112 * x196], [x111 * x197, x112 * x197]]);
+    p.value[38] = (x116 - 1.0) * INVERSE_SCALE[38];
+    p.effective_mass[38] = p.unit_row(38, 75, [[x114 * x198, x115 * x198], [x114 * x199, x115 * x199]]);
+    p.value[39] = (x119 - 1.0) * INVERSE_SCALE[39];
+    p.effective_mass[39] = p.unit_row(39, 77, [[x117 * x200, x118 * x200], [x117 * x201, x118 * x201]]);
+    p.value[40] = (x122 - 1.0) * INVERSE_SCALE[40];
+    p.effective_mass[40] = p.unit_row(40, 79, [[x120 * x202, x121 * x202], [x120 * x203, x121 * x203]]);
 }
 
 /// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
@@ -4245,90 +4252,96 @@ fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIEN
 
 /// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).
 fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
+    put_moved(s, t, q, q0);
+    s.v_p1 = v[0];
+    s.v_p2 = v[1];
+    s.v_p3 = v[2];
+    s.v_p4 = v[3];
+    s.v_p5 = v[4];
+    s.v_p6 = v[5];
+    s.v_p7 = v[6];
+    s.v_p8 = v[7];
+    s.v_p9 = v[8];
+    s.v_p10 = v[9];
+    s.v_p11 = v[10];
+    s.v_p12 = v[11];
+    s.v_p13 = v[12];
+    s.v_p14 = v[13];
+    s.v_p15 = v[14];
+    s.v_p16 = v[15];
+    s.v_p17 = v[16];
+    s.v_p18 = v[17];
+    s.v_p19 = v[18];
+    s.v_p20 = v[19];
+    s.v_p21 = v[20];
+    s.v_p22 = v[21];
+    s.v_p23 = v[22];
+    s.v_p24 = v[23];
+    s.v_p25 = v[24];
+    s.v_p26 = v[25];
+    s.v_p27 = v[26];
+    s.v_p28 = v[27];
+    s.v_p29 = v[28];
+    s.v_p30 = v[29];
+    s.v_p31 = v[30];
+    s.v_p32 = v[31];
+    s.v_p33 = v[32];
+    s.v_p34 = v[33];
+    s.v_p35 = v[34];
+    s.v_p36 = v[35];
+    s.v_p37 = v[36];
+    s.v_p38 = v[37];
+    s.v_p39 = v[38];
+    s.v_p40 = v[39];
+    s.v_p41 = v[40];
+}
+
+/// `put` but for the velocities: the time and the positions (and orientations) after a substep's drift, all
+/// where the rows read no velocity (`KEEP`) need; the step writes the velocities once, after its last substep.
+fn put_moved(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
     s.t = t;
     let _ = q0;
     s.r_p1 = q[0];
-    s.v_p1 = v[0];
     s.r_p2 = q[1];
-    s.v_p2 = v[1];
     s.r_p3 = q[2];
-    s.v_p3 = v[2];
     s.r_p4 = q[3];
-    s.v_p4 = v[3];
     s.r_p5 = q[4];
-    s.v_p5 = v[4];
     s.r_p6 = q[5];
-    s.v_p6 = v[5];
     s.r_p7 = q[6];
-    s.v_p7 = v[6];
     s.r_p8 = q[7];
-    s.v_p8 = v[7];
     s.r_p9 = q[8];
-    s.v_p9 = v[8];
     s.r_p10 = q[9];
-    s.v_p10 = v[9];
     s.r_p11 = q[10];
-    s.v_p11 = v[10];
     s.r_p12 = q[11];
-    s.v_p12 = v[11];
     s.r_p13 = q[12];
-    s.v_p13 = v[12];
     s.r_p14 = q[13];
-    s.v_p14 = v[13];
     s.r_p15 = q[14];
-    s.v_p15 = v[14];
     s.r_p16 = q[15];
-    s.v_p16 = v[15];
     s.r_p17 = q[16];
-    s.v_p17 = v[16];
     s.r_p18 = q[17];
-    s.v_p18 = v[17];
     s.r_p19 = q[18];
-    s.v_p19 = v[18];
     s.r_p20 = q[19];
-    s.v_p20 = v[19];
     s.r_p21 = q[20];
-    s.v_p21 = v[20];
     s.r_p22 = q[21];
-    s.v_p22 = v[21];
     s.r_p23 = q[22];
-    s.v_p23 = v[22];
     s.r_p24 = q[23];
-    s.v_p24 = v[23];
     s.r_p25 = q[24];
-    s.v_p25 = v[24];
     s.r_p26 = q[25];
-    s.v_p26 = v[25];
     s.r_p27 = q[26];
-    s.v_p27 = v[26];
     s.r_p28 = q[27];
-    s.v_p28 = v[27];
     s.r_p29 = q[28];
-    s.v_p29 = v[28];
     s.r_p30 = q[29];
-    s.v_p30 = v[29];
     s.r_p31 = q[30];
-    s.v_p31 = v[30];
     s.r_p32 = q[31];
-    s.v_p32 = v[31];
     s.r_p33 = q[32];
-    s.v_p33 = v[32];
     s.r_p34 = q[33];
-    s.v_p34 = v[33];
     s.r_p35 = q[34];
-    s.v_p35 = v[34];
     s.r_p36 = q[35];
-    s.v_p36 = v[35];
     s.r_p37 = q[36];
-    s.v_p37 = v[36];
     s.r_p38 = q[37];
-    s.v_p38 = v[37];
     s.r_p39 = q[38];
-    s.v_p39 = v[38];
     s.r_p40 = q[39];
-    s.v_p40 = v[39];
     s.r_p41 = q[40];
-    s.v_p41 = v[40];
 }
 
 /// Where an inequality row stands (the contact states of `lagrange solve`).
@@ -4961,7 +4974,6 @@ struct Prepared<const D: usize> {
     /// Per `UNIT` row, its m_eff where J is a number: 1/Σᵢ 1/mᵢ, a constant of the masses
     /// (`unit_masses`), which `unit_row` reads where the positions move.
     unit_mass: [f64; CONSTRAINTS],
-    inequality: [bool; CONSTRAINTS],
     inverse_mass: [f64; SLOTS],
     force: [[f64; D]; SLOTS],
     /// Per slot its principal axis (`AXES` is 0 without 3D rigid bodies).
@@ -5138,7 +5150,6 @@ impl<const D: usize> Prepared<D> {
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
             unit_mass: [0.0; CONSTRAINTS],
-            inequality: INEQUALITY,
             inverse_mass: [0.0; SLOTS],
             force: [[0.0; D]; SLOTS],
             axes: [[0.0; D]; AXES],
@@ -5177,7 +5188,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
-    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0 (`time_rate`'s 0 from
+    /// `zeroed` on: nothing writes another on such a row), and the returned m =
     /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
     /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
     /// evaluated rather than read back; m_eff is `effective_mass(m)`.
@@ -5188,7 +5200,6 @@ impl<const D: usize> Prepared<D> {
             m += self.inverse_mass[ROW_BODY[e + x]] * square(k, j);
         }
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         m
     }
 
@@ -5213,7 +5224,6 @@ impl<const D: usize> Prepared<D> {
     fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         if number { self.unit_mass[k] } else { 0.0 }
     }
 
@@ -5304,6 +5314,32 @@ impl<const D: usize> Prepared<D> {
             c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
         }
         c
+    }
+
+    /// `rate_dense` for an axis row (`ROW_KIND`; `velocity::pattern`: its two entries J and −J,
+    /// bit for bit): n = its first entry's J, read once, and (∂C/∂t + n·u_a) − n·u_b, the same
+    /// number as the sum with −n ((−n)·u = −(n·u) exactly).
+    #[inline(always)]
+    fn rate_axis(&self, k: usize, u: &[[f64; D]]) -> f64 {
+        let e = ROW_START[k];
+        let n = &self.jacobian[e];
+        (self.time_rate[k] + dot(n, &u[ROW_BODY[e]])) - dot(n, &u[ROW_BODY[e + 1]])
+    }
+
+    /// `apply_dense` for an axis row (`rate_axis`): u_a += (p/m_a) n, u_b −= (p/m_b) n, the
+    /// same numbers as adding (p/m_b)·(−n).
+    #[inline(always)]
+    fn apply_axis(&self, k: usize, u: &mut [[f64; D]], p: f64) {
+        let e = ROW_START[k];
+        let (n, a, b) = (&self.jacobian[e], ROW_BODY[e], ROW_BODY[e + 1]);
+        let s = self.inverse_mass[a] * p;
+        for d in 0..D {
+            u[a][d] += s * n[d];
+        }
+        let s = self.inverse_mass[b] * p;
+        for d in 0..D {
+            u[b][d] -= s * n[d];
+        }
     }
 
     /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components `codes` keeps
@@ -5450,7 +5486,7 @@ impl Prepared<DIM> {
             let rate = self.rate(k, u);
             let old = *impulse;
             let mut delta = -soft.mass_scale * m * (rate + bias) - soft.impulse_scale * old;
-            if self.inequality[k] {
+            if INEQUALITY[k] {
                 delta = (old + delta).max(0.0) - old;
             }
             *impulse = old + delta;
@@ -5517,7 +5553,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
             // Box2D's `useBias = true`.
             let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
-                if !pr.inequality[k] {
+                if !INEQUALITY[k] {
                     (joint.bias_rate * c, joint)
                 } else if c > 0.0 {
                     (c / h, Softness::RIGID)
@@ -5528,14 +5564,19 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         }
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        // The rows after the drift read no velocity where `KEEP`: written once, at the end.
+        if KEEP {
+            put_moved(s, t + (sub + 1) as f64 * h, &q, &q0);
+        } else {
+            put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        }
         prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
-                    if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
+                    if INEQUALITY[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
                 });
             }
         }
@@ -5544,7 +5585,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         for k in 0..p.len() {
             let m = p.effective_mass[k];
             let closing = start_rate[k];
-            if !p.inequality[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
+            if !INEQUALITY[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
                 continue;
             }
             let old = impulses[k];

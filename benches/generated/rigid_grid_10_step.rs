@@ -1701,7 +1701,8 @@ const UNIT: [bool; 342] = [false, false, false, false, false, false, false, fals
 /// (`numeric::velocity::pattern`, left out of Ċ and an impulse), 2 the constant +1, 3 the constant −1, 1 any other.
 #[allow(dead_code)]
 const ENTRY_CODE: [u8; 1328] = [3, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 3, 1, 12, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1, 2, 3, 1, 1, 8, 12, 1, 1, 2, 1, 3, 1, 8, 1, 12, 1];
-/// Per row, its kind: the `ENTRY_CODE` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`).
+/// Per row, its kind: the `ENTRY_CODE` of its entries and whether it is an axis row (two entries J and −J), one
+/// pattern per kind (`Prepared::rate`, `Prepared::apply`).
 #[allow(dead_code)]
 const ROW_KIND: [u8; 342] = [0, 1, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3, 4, 5, 2, 3];
 
@@ -1949,97 +1950,97 @@ fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
     for (&i, t) in SHAPE_4_ITEMS.iter().zip(SHAPE_4_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_4(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_5_ITEMS.iter().zip(SHAPE_5_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_5(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_6_ITEMS.iter().zip(SHAPE_6_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_6(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_7_ITEMS.iter().zip(SHAPE_7_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_7(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_8_ITEMS.iter().zip(SHAPE_8_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_8(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_9_ITEMS.iter().zip(SHAPE_9_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_9(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_10_ITEMS.iter().zip(SHAPE_10_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_10(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[5], 0.0], [o[3], o[4]], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_11_ITEMS.iter().zip(SHAPE_11_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_11(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_12_ITEMS.iter().zip(SHAPE_12_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_12(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_13_ITEMS.iter().zip(SHAPE_13_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_13(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_14_ITEMS.iter().zip(SHAPE_14_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_14(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_15_ITEMS.iter().zip(SHAPE_15_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_15(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_16_ITEMS.iter().zip(SHAPE_16_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_16(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_17_ITEMS.iter().zip(SHAPE_17_TABLE.as_chunks::<3>().0) {
         let (o, i) = (shape_17(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], 0.0]]));
     }
     for (&i, t) in SHAPE_18_ITEMS.iter().zip(SHAPE_18_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_18(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]], [o[5], 0.0], [o[6], 0.0]]));
     }
     for (&i, t) in SHAPE_19_ITEMS.iter().zip(SHAPE_19_TABLE.as_chunks::<6>().0) {
         let (o, i) = (shape_19(q, v, &x, t), i as usize);
         let e = ROW_START[i];
-        p.value[i] = o[0] * INVERSE_SCALE[i];
+        p.value[i] = o[0];
         p.effective_mass[i] = effective_mass(p.steady_row(i, e, [[o[1], o[2]], [o[3], o[4]], [o[5], 0.0], [o[6], 0.0]]));
     }
 }
@@ -2439,368 +2440,374 @@ fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIEN
 
 /// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).
 fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
+    put_moved(s, t, q, q0);
+    s.v_d1_0 = v[0];
+    s.v_d1_1 = v[1];
+    s.v_d1_2 = v[2];
+    s.v_d1_3 = v[3];
+    s.v_d1_4 = v[4];
+    s.v_d1_5 = v[5];
+    s.v_d1_6 = v[6];
+    s.v_d1_7 = v[7];
+    s.v_d1_8 = v[8];
+    s.v_d1_9 = v[9];
+    s.v_d2_0 = v[10];
+    s.v_d2_1 = v[11];
+    s.v_d2_2 = v[12];
+    s.v_d2_3 = v[13];
+    s.v_d2_4 = v[14];
+    s.v_d2_5 = v[15];
+    s.v_d2_6 = v[16];
+    s.v_d2_7 = v[17];
+    s.v_d2_8 = v[18];
+    s.v_d2_9 = v[19];
+    s.v_d3_0 = v[20];
+    s.v_d3_1 = v[21];
+    s.v_d3_2 = v[22];
+    s.v_d3_3 = v[23];
+    s.v_d3_4 = v[24];
+    s.v_d3_5 = v[25];
+    s.v_d3_6 = v[26];
+    s.v_d3_7 = v[27];
+    s.v_d3_8 = v[28];
+    s.v_d3_9 = v[29];
+    s.v_d4_0 = v[30];
+    s.v_d4_1 = v[31];
+    s.v_d4_2 = v[32];
+    s.v_d4_3 = v[33];
+    s.v_d4_4 = v[34];
+    s.v_d4_5 = v[35];
+    s.v_d4_6 = v[36];
+    s.v_d4_7 = v[37];
+    s.v_d4_8 = v[38];
+    s.v_d4_9 = v[39];
+    s.v_d5_0 = v[40];
+    s.v_d5_1 = v[41];
+    s.v_d5_2 = v[42];
+    s.v_d5_3 = v[43];
+    s.v_d5_4 = v[44];
+    s.v_d5_5 = v[45];
+    s.v_d5_6 = v[46];
+    s.v_d5_7 = v[47];
+    s.v_d5_8 = v[48];
+    s.v_d5_9 = v[49];
+    s.v_d6_0 = v[50];
+    s.v_d6_1 = v[51];
+    s.v_d6_2 = v[52];
+    s.v_d6_3 = v[53];
+    s.v_d6_4 = v[54];
+    s.v_d6_5 = v[55];
+    s.v_d6_6 = v[56];
+    s.v_d6_7 = v[57];
+    s.v_d6_8 = v[58];
+    s.v_d6_9 = v[59];
+    s.v_d7_0 = v[60];
+    s.v_d7_1 = v[61];
+    s.v_d7_2 = v[62];
+    s.v_d7_3 = v[63];
+    s.v_d7_4 = v[64];
+    s.v_d7_5 = v[65];
+    s.v_d7_6 = v[66];
+    s.v_d7_7 = v[67];
+    s.v_d7_8 = v[68];
+    s.v_d7_9 = v[69];
+    s.v_d8_0 = v[70];
+    s.v_d8_1 = v[71];
+    s.v_d8_2 = v[72];
+    s.v_d8_3 = v[73];
+    s.v_d8_4 = v[74];
+    s.v_d8_5 = v[75];
+    s.v_d8_6 = v[76];
+    s.v_d8_7 = v[77];
+    s.v_d8_8 = v[78];
+    s.v_d8_9 = v[79];
+    s.v_d9_0 = v[80];
+    s.v_d9_1 = v[81];
+    s.v_d9_2 = v[82];
+    s.v_d9_3 = v[83];
+    s.v_d9_4 = v[84];
+    s.v_d9_5 = v[85];
+    s.v_d9_6 = v[86];
+    s.v_d9_7 = v[87];
+    s.v_d9_8 = v[88];
+    s.v_d9_9 = v[89];
+    s.w_d1_0 = v[90][0];
+    s.w_d1_1 = v[91][0];
+    s.w_d1_2 = v[92][0];
+    s.w_d1_3 = v[93][0];
+    s.w_d1_4 = v[94][0];
+    s.w_d1_5 = v[95][0];
+    s.w_d1_6 = v[96][0];
+    s.w_d1_7 = v[97][0];
+    s.w_d1_8 = v[98][0];
+    s.w_d1_9 = v[99][0];
+    s.w_d2_0 = v[100][0];
+    s.w_d2_1 = v[101][0];
+    s.w_d2_2 = v[102][0];
+    s.w_d2_3 = v[103][0];
+    s.w_d2_4 = v[104][0];
+    s.w_d2_5 = v[105][0];
+    s.w_d2_6 = v[106][0];
+    s.w_d2_7 = v[107][0];
+    s.w_d2_8 = v[108][0];
+    s.w_d2_9 = v[109][0];
+    s.w_d3_0 = v[110][0];
+    s.w_d3_1 = v[111][0];
+    s.w_d3_2 = v[112][0];
+    s.w_d3_3 = v[113][0];
+    s.w_d3_4 = v[114][0];
+    s.w_d3_5 = v[115][0];
+    s.w_d3_6 = v[116][0];
+    s.w_d3_7 = v[117][0];
+    s.w_d3_8 = v[118][0];
+    s.w_d3_9 = v[119][0];
+    s.w_d4_0 = v[120][0];
+    s.w_d4_1 = v[121][0];
+    s.w_d4_2 = v[122][0];
+    s.w_d4_3 = v[123][0];
+    s.w_d4_4 = v[124][0];
+    s.w_d4_5 = v[125][0];
+    s.w_d4_6 = v[126][0];
+    s.w_d4_7 = v[127][0];
+    s.w_d4_8 = v[128][0];
+    s.w_d4_9 = v[129][0];
+    s.w_d5_0 = v[130][0];
+    s.w_d5_1 = v[131][0];
+    s.w_d5_2 = v[132][0];
+    s.w_d5_3 = v[133][0];
+    s.w_d5_4 = v[134][0];
+    s.w_d5_5 = v[135][0];
+    s.w_d5_6 = v[136][0];
+    s.w_d5_7 = v[137][0];
+    s.w_d5_8 = v[138][0];
+    s.w_d5_9 = v[139][0];
+    s.w_d6_0 = v[140][0];
+    s.w_d6_1 = v[141][0];
+    s.w_d6_2 = v[142][0];
+    s.w_d6_3 = v[143][0];
+    s.w_d6_4 = v[144][0];
+    s.w_d6_5 = v[145][0];
+    s.w_d6_6 = v[146][0];
+    s.w_d6_7 = v[147][0];
+    s.w_d6_8 = v[148][0];
+    s.w_d6_9 = v[149][0];
+    s.w_d7_0 = v[150][0];
+    s.w_d7_1 = v[151][0];
+    s.w_d7_2 = v[152][0];
+    s.w_d7_3 = v[153][0];
+    s.w_d7_4 = v[154][0];
+    s.w_d7_5 = v[155][0];
+    s.w_d7_6 = v[156][0];
+    s.w_d7_7 = v[157][0];
+    s.w_d7_8 = v[158][0];
+    s.w_d7_9 = v[159][0];
+    s.w_d8_0 = v[160][0];
+    s.w_d8_1 = v[161][0];
+    s.w_d8_2 = v[162][0];
+    s.w_d8_3 = v[163][0];
+    s.w_d8_4 = v[164][0];
+    s.w_d8_5 = v[165][0];
+    s.w_d8_6 = v[166][0];
+    s.w_d8_7 = v[167][0];
+    s.w_d8_8 = v[168][0];
+    s.w_d8_9 = v[169][0];
+    s.w_d9_0 = v[170][0];
+    s.w_d9_1 = v[171][0];
+    s.w_d9_2 = v[172][0];
+    s.w_d9_3 = v[173][0];
+    s.w_d9_4 = v[174][0];
+    s.w_d9_5 = v[175][0];
+    s.w_d9_6 = v[176][0];
+    s.w_d9_7 = v[177][0];
+    s.w_d9_8 = v[178][0];
+    s.w_d9_9 = v[179][0];
+}
+
+/// `put` but for the velocities: the time and the positions (and orientations) after a substep's drift, all
+/// where the rows read no velocity (`KEEP`) need; the step writes the velocities once, after its last substep.
+fn put_moved(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
     s.t = t;
     let _ = q0;
     s.x_d1_0 = q[0];
-    s.v_d1_0 = v[0];
     s.x_d1_1 = q[1];
-    s.v_d1_1 = v[1];
     s.x_d1_2 = q[2];
-    s.v_d1_2 = v[2];
     s.x_d1_3 = q[3];
-    s.v_d1_3 = v[3];
     s.x_d1_4 = q[4];
-    s.v_d1_4 = v[4];
     s.x_d1_5 = q[5];
-    s.v_d1_5 = v[5];
     s.x_d1_6 = q[6];
-    s.v_d1_6 = v[6];
     s.x_d1_7 = q[7];
-    s.v_d1_7 = v[7];
     s.x_d1_8 = q[8];
-    s.v_d1_8 = v[8];
     s.x_d1_9 = q[9];
-    s.v_d1_9 = v[9];
     s.x_d2_0 = q[10];
-    s.v_d2_0 = v[10];
     s.x_d2_1 = q[11];
-    s.v_d2_1 = v[11];
     s.x_d2_2 = q[12];
-    s.v_d2_2 = v[12];
     s.x_d2_3 = q[13];
-    s.v_d2_3 = v[13];
     s.x_d2_4 = q[14];
-    s.v_d2_4 = v[14];
     s.x_d2_5 = q[15];
-    s.v_d2_5 = v[15];
     s.x_d2_6 = q[16];
-    s.v_d2_6 = v[16];
     s.x_d2_7 = q[17];
-    s.v_d2_7 = v[17];
     s.x_d2_8 = q[18];
-    s.v_d2_8 = v[18];
     s.x_d2_9 = q[19];
-    s.v_d2_9 = v[19];
     s.x_d3_0 = q[20];
-    s.v_d3_0 = v[20];
     s.x_d3_1 = q[21];
-    s.v_d3_1 = v[21];
     s.x_d3_2 = q[22];
-    s.v_d3_2 = v[22];
     s.x_d3_3 = q[23];
-    s.v_d3_3 = v[23];
     s.x_d3_4 = q[24];
-    s.v_d3_4 = v[24];
     s.x_d3_5 = q[25];
-    s.v_d3_5 = v[25];
     s.x_d3_6 = q[26];
-    s.v_d3_6 = v[26];
     s.x_d3_7 = q[27];
-    s.v_d3_7 = v[27];
     s.x_d3_8 = q[28];
-    s.v_d3_8 = v[28];
     s.x_d3_9 = q[29];
-    s.v_d3_9 = v[29];
     s.x_d4_0 = q[30];
-    s.v_d4_0 = v[30];
     s.x_d4_1 = q[31];
-    s.v_d4_1 = v[31];
     s.x_d4_2 = q[32];
-    s.v_d4_2 = v[32];
     s.x_d4_3 = q[33];
-    s.v_d4_3 = v[33];
     s.x_d4_4 = q[34];
-    s.v_d4_4 = v[34];
     s.x_d4_5 = q[35];
-    s.v_d4_5 = v[35];
     s.x_d4_6 = q[36];
-    s.v_d4_6 = v[36];
     s.x_d4_7 = q[37];
-    s.v_d4_7 = v[37];
     s.x_d4_8 = q[38];
-    s.v_d4_8 = v[38];
     s.x_d4_9 = q[39];
-    s.v_d4_9 = v[39];
     s.x_d5_0 = q[40];
-    s.v_d5_0 = v[40];
     s.x_d5_1 = q[41];
-    s.v_d5_1 = v[41];
     s.x_d5_2 = q[42];
-    s.v_d5_2 = v[42];
     s.x_d5_3 = q[43];
-    s.v_d5_3 = v[43];
     s.x_d5_4 = q[44];
-    s.v_d5_4 = v[44];
     s.x_d5_5 = q[45];
-    s.v_d5_5 = v[45];
     s.x_d5_6 = q[46];
-    s.v_d5_6 = v[46];
     s.x_d5_7 = q[47];
-    s.v_d5_7 = v[47];
     s.x_d5_8 = q[48];
-    s.v_d5_8 = v[48];
     s.x_d5_9 = q[49];
-    s.v_d5_9 = v[49];
     s.x_d6_0 = q[50];
-    s.v_d6_0 = v[50];
     s.x_d6_1 = q[51];
-    s.v_d6_1 = v[51];
     s.x_d6_2 = q[52];
-    s.v_d6_2 = v[52];
     s.x_d6_3 = q[53];
-    s.v_d6_3 = v[53];
     s.x_d6_4 = q[54];
-    s.v_d6_4 = v[54];
     s.x_d6_5 = q[55];
-    s.v_d6_5 = v[55];
     s.x_d6_6 = q[56];
-    s.v_d6_6 = v[56];
     s.x_d6_7 = q[57];
-    s.v_d6_7 = v[57];
     s.x_d6_8 = q[58];
-    s.v_d6_8 = v[58];
     s.x_d6_9 = q[59];
-    s.v_d6_9 = v[59];
     s.x_d7_0 = q[60];
-    s.v_d7_0 = v[60];
     s.x_d7_1 = q[61];
-    s.v_d7_1 = v[61];
     s.x_d7_2 = q[62];
-    s.v_d7_2 = v[62];
     s.x_d7_3 = q[63];
-    s.v_d7_3 = v[63];
     s.x_d7_4 = q[64];
-    s.v_d7_4 = v[64];
     s.x_d7_5 = q[65];
-    s.v_d7_5 = v[65];
     s.x_d7_6 = q[66];
-    s.v_d7_6 = v[66];
     s.x_d7_7 = q[67];
-    s.v_d7_7 = v[67];
     s.x_d7_8 = q[68];
-    s.v_d7_8 = v[68];
     s.x_d7_9 = q[69];
-    s.v_d7_9 = v[69];
     s.x_d8_0 = q[70];
-    s.v_d8_0 = v[70];
     s.x_d8_1 = q[71];
-    s.v_d8_1 = v[71];
     s.x_d8_2 = q[72];
-    s.v_d8_2 = v[72];
     s.x_d8_3 = q[73];
-    s.v_d8_3 = v[73];
     s.x_d8_4 = q[74];
-    s.v_d8_4 = v[74];
     s.x_d8_5 = q[75];
-    s.v_d8_5 = v[75];
     s.x_d8_6 = q[76];
-    s.v_d8_6 = v[76];
     s.x_d8_7 = q[77];
-    s.v_d8_7 = v[77];
     s.x_d8_8 = q[78];
-    s.v_d8_8 = v[78];
     s.x_d8_9 = q[79];
-    s.v_d8_9 = v[79];
     s.x_d9_0 = q[80];
-    s.v_d9_0 = v[80];
     s.x_d9_1 = q[81];
-    s.v_d9_1 = v[81];
     s.x_d9_2 = q[82];
-    s.v_d9_2 = v[82];
     s.x_d9_3 = q[83];
-    s.v_d9_3 = v[83];
     s.x_d9_4 = q[84];
-    s.v_d9_4 = v[84];
     s.x_d9_5 = q[85];
-    s.v_d9_5 = v[85];
     s.x_d9_6 = q[86];
-    s.v_d9_6 = v[86];
     s.x_d9_7 = q[87];
-    s.v_d9_7 = v[87];
     s.x_d9_8 = q[88];
-    s.v_d9_8 = v[88];
     s.x_d9_9 = q[89];
-    s.v_d9_9 = v[89];
     s.th_d1_0 = q[90][0];
-    s.w_d1_0 = v[90][0];
     s.th_d1_1 = q[91][0];
-    s.w_d1_1 = v[91][0];
     s.th_d1_2 = q[92][0];
-    s.w_d1_2 = v[92][0];
     s.th_d1_3 = q[93][0];
-    s.w_d1_3 = v[93][0];
     s.th_d1_4 = q[94][0];
-    s.w_d1_4 = v[94][0];
     s.th_d1_5 = q[95][0];
-    s.w_d1_5 = v[95][0];
     s.th_d1_6 = q[96][0];
-    s.w_d1_6 = v[96][0];
     s.th_d1_7 = q[97][0];
-    s.w_d1_7 = v[97][0];
     s.th_d1_8 = q[98][0];
-    s.w_d1_8 = v[98][0];
     s.th_d1_9 = q[99][0];
-    s.w_d1_9 = v[99][0];
     s.th_d2_0 = q[100][0];
-    s.w_d2_0 = v[100][0];
     s.th_d2_1 = q[101][0];
-    s.w_d2_1 = v[101][0];
     s.th_d2_2 = q[102][0];
-    s.w_d2_2 = v[102][0];
     s.th_d2_3 = q[103][0];
-    s.w_d2_3 = v[103][0];
     s.th_d2_4 = q[104][0];
-    s.w_d2_4 = v[104][0];
     s.th_d2_5 = q[105][0];
-    s.w_d2_5 = v[105][0];
     s.th_d2_6 = q[106][0];
-    s.w_d2_6 = v[106][0];
     s.th_d2_7 = q[107][0];
-    s.w_d2_7 = v[107][0];
     s.th_d2_8 = q[108][0];
-    s.w_d2_8 = v[108][0];
     s.th_d2_9 = q[109][0];
-    s.w_d2_9 = v[109][0];
     s.th_d3_0 = q[110][0];
-    s.w_d3_0 = v[110][0];
     s.th_d3_1 = q[111][0];
-    s.w_d3_1 = v[111][0];
     s.th_d3_2 = q[112][0];
-    s.w_d3_2 = v[112][0];
     s.th_d3_3 = q[113][0];
-    s.w_d3_3 = v[113][0];
     s.th_d3_4 = q[114][0];
-    s.w_d3_4 = v[114][0];
     s.th_d3_5 = q[115][0];
-    s.w_d3_5 = v[115][0];
     s.th_d3_6 = q[116][0];
-    s.w_d3_6 = v[116][0];
     s.th_d3_7 = q[117][0];
-    s.w_d3_7 = v[117][0];
     s.th_d3_8 = q[118][0];
-    s.w_d3_8 = v[118][0];
     s.th_d3_9 = q[119][0];
-    s.w_d3_9 = v[119][0];
     s.th_d4_0 = q[120][0];
-    s.w_d4_0 = v[120][0];
     s.th_d4_1 = q[121][0];
-    s.w_d4_1 = v[121][0];
     s.th_d4_2 = q[122][0];
-    s.w_d4_2 = v[122][0];
     s.th_d4_3 = q[123][0];
-    s.w_d4_3 = v[123][0];
     s.th_d4_4 = q[124][0];
-    s.w_d4_4 = v[124][0];
     s.th_d4_5 = q[125][0];
-    s.w_d4_5 = v[125][0];
     s.th_d4_6 = q[126][0];
-    s.w_d4_6 = v[126][0];
     s.th_d4_7 = q[127][0];
-    s.w_d4_7 = v[127][0];
     s.th_d4_8 = q[128][0];
-    s.w_d4_8 = v[128][0];
     s.th_d4_9 = q[129][0];
-    s.w_d4_9 = v[129][0];
     s.th_d5_0 = q[130][0];
-    s.w_d5_0 = v[130][0];
     s.th_d5_1 = q[131][0];
-    s.w_d5_1 = v[131][0];
     s.th_d5_2 = q[132][0];
-    s.w_d5_2 = v[132][0];
     s.th_d5_3 = q[133][0];
-    s.w_d5_3 = v[133][0];
     s.th_d5_4 = q[134][0];
-    s.w_d5_4 = v[134][0];
     s.th_d5_5 = q[135][0];
-    s.w_d5_5 = v[135][0];
     s.th_d5_6 = q[136][0];
-    s.w_d5_6 = v[136][0];
     s.th_d5_7 = q[137][0];
-    s.w_d5_7 = v[137][0];
     s.th_d5_8 = q[138][0];
-    s.w_d5_8 = v[138][0];
     s.th_d5_9 = q[139][0];
-    s.w_d5_9 = v[139][0];
     s.th_d6_0 = q[140][0];
-    s.w_d6_0 = v[140][0];
     s.th_d6_1 = q[141][0];
-    s.w_d6_1 = v[141][0];
     s.th_d6_2 = q[142][0];
-    s.w_d6_2 = v[142][0];
     s.th_d6_3 = q[143][0];
-    s.w_d6_3 = v[143][0];
     s.th_d6_4 = q[144][0];
-    s.w_d6_4 = v[144][0];
     s.th_d6_5 = q[145][0];
-    s.w_d6_5 = v[145][0];
     s.th_d6_6 = q[146][0];
-    s.w_d6_6 = v[146][0];
     s.th_d6_7 = q[147][0];
-    s.w_d6_7 = v[147][0];
     s.th_d6_8 = q[148][0];
-    s.w_d6_8 = v[148][0];
     s.th_d6_9 = q[149][0];
-    s.w_d6_9 = v[149][0];
     s.th_d7_0 = q[150][0];
-    s.w_d7_0 = v[150][0];
     s.th_d7_1 = q[151][0];
-    s.w_d7_1 = v[151][0];
     s.th_d7_2 = q[152][0];
-    s.w_d7_2 = v[152][0];
     s.th_d7_3 = q[153][0];
-    s.w_d7_3 = v[153][0];
     s.th_d7_4 = q[154][0];
-    s.w_d7_4 = v[154][0];
     s.th_d7_5 = q[155][0];
-    s.w_d7_5 = v[155][0];
     s.th_d7_6 = q[156][0];
-    s.w_d7_6 = v[156][0];
     s.th_d7_7 = q[157][0];
-    s.w_d7_7 = v[157][0];
     s.th_d7_8 = q[158][0];
-    s.w_d7_8 = v[158][0];
     s.th_d7_9 = q[159][0];
-    s.w_d7_9 = v[159][0];
     s.th_d8_0 = q[160][0];
-    s.w_d8_0 = v[160][0];
     s.th_d8_1 = q[161][0];
-    s.w_d8_1 = v[161][0];
     s.th_d8_2 = q[162][0];
-    s.w_d8_2 = v[162][0];
     s.th_d8_3 = q[163][0];
-    s.w_d8_3 = v[163][0];
     s.th_d8_4 = q[164][0];
-    s.w_d8_4 = v[164][0];
     s.th_d8_5 = q[165][0];
-    s.w_d8_5 = v[165][0];
     s.th_d8_6 = q[166][0];
-    s.w_d8_6 = v[166][0];
     s.th_d8_7 = q[167][0];
-    s.w_d8_7 = v[167][0];
     s.th_d8_8 = q[168][0];
-    s.w_d8_8 = v[168][0];
     s.th_d8_9 = q[169][0];
-    s.w_d8_9 = v[169][0];
     s.th_d9_0 = q[170][0];
-    s.w_d9_0 = v[170][0];
     s.th_d9_1 = q[171][0];
-    s.w_d9_1 = v[171][0];
     s.th_d9_2 = q[172][0];
-    s.w_d9_2 = v[172][0];
     s.th_d9_3 = q[173][0];
-    s.w_d9_3 = v[173][0];
     s.th_d9_4 = q[174][0];
-    s.w_d9_4 = v[174][0];
     s.th_d9_5 = q[175][0];
-    s.w_d9_5 = v[175][0];
     s.th_d9_6 = q[176][0];
-    s.w_d9_6 = v[176][0];
     s.th_d9_7 = q[177][0];
-    s.w_d9_7 = v[177][0];
     s.th_d9_8 = q[178][0];
-    s.w_d9_8 = v[178][0];
     s.th_d9_9 = q[179][0];
-    s.w_d9_9 = v[179][0];
 }
 
 /// Where an inequality row stands (the contact states of `lagrange solve`).
@@ -3433,7 +3440,6 @@ struct Prepared<const D: usize> {
     /// Per `UNIT` row, its m_eff where J is a number: 1/Σᵢ 1/mᵢ, a constant of the masses
     /// (`unit_masses`), which `unit_row` reads where the positions move.
     unit_mass: [f64; CONSTRAINTS],
-    inequality: [bool; CONSTRAINTS],
     inverse_mass: [f64; SLOTS],
     force: [[f64; D]; SLOTS],
     /// Per slot its principal axis (`AXES` is 0 without 3D rigid bodies).
@@ -3610,7 +3616,6 @@ impl<const D: usize> Prepared<D> {
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
             unit_mass: [0.0; CONSTRAINTS],
-            inequality: INEQUALITY,
             inverse_mass: [0.0; SLOTS],
             force: [[0.0; D]; SLOTS],
             axes: [[0.0; D]; AXES],
@@ -3649,7 +3654,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
-    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0 (`time_rate`'s 0 from
+    /// `zeroed` on: nothing writes another on such a row), and the returned m =
     /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
     /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
     /// evaluated rather than read back; m_eff is `effective_mass(m)`.
@@ -3660,7 +3666,6 @@ impl<const D: usize> Prepared<D> {
             m += self.inverse_mass[ROW_BODY[e + x]] * square(k, j);
         }
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         m
     }
 
@@ -3685,7 +3690,6 @@ impl<const D: usize> Prepared<D> {
     fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         if number { self.unit_mass[k] } else { 0.0 }
     }
 
@@ -3776,6 +3780,32 @@ impl<const D: usize> Prepared<D> {
             c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
         }
         c
+    }
+
+    /// `rate_dense` for an axis row (`ROW_KIND`; `velocity::pattern`: its two entries J and −J,
+    /// bit for bit): n = its first entry's J, read once, and (∂C/∂t + n·u_a) − n·u_b, the same
+    /// number as the sum with −n ((−n)·u = −(n·u) exactly).
+    #[inline(always)]
+    fn rate_axis(&self, k: usize, u: &[[f64; D]]) -> f64 {
+        let e = ROW_START[k];
+        let n = &self.jacobian[e];
+        (self.time_rate[k] + dot(n, &u[ROW_BODY[e]])) - dot(n, &u[ROW_BODY[e + 1]])
+    }
+
+    /// `apply_dense` for an axis row (`rate_axis`): u_a += (p/m_a) n, u_b −= (p/m_b) n, the
+    /// same numbers as adding (p/m_b)·(−n).
+    #[inline(always)]
+    fn apply_axis(&self, k: usize, u: &mut [[f64; D]], p: f64) {
+        let e = ROW_START[k];
+        let (n, a, b) = (&self.jacobian[e], ROW_BODY[e], ROW_BODY[e + 1]);
+        let s = self.inverse_mass[a] * p;
+        for d in 0..D {
+            u[a][d] += s * n[d];
+        }
+        let s = self.inverse_mass[b] * p;
+        for d in 0..D {
+            u[b][d] -= s * n[d];
+        }
     }
 
     /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components `codes` keeps
@@ -3922,7 +3952,7 @@ impl Prepared<DIM> {
             let rate = self.rate(k, u);
             let old = *impulse;
             let mut delta = -soft.mass_scale * m * (rate + bias) - soft.impulse_scale * old;
-            if self.inequality[k] {
+            if INEQUALITY[k] {
                 delta = (old + delta).max(0.0) - old;
             }
             *impulse = old + delta;
@@ -3989,7 +4019,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
             // Box2D's `useBias = true`.
             let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
-                if !pr.inequality[k] {
+                if !INEQUALITY[k] {
                     (joint.bias_rate * c, joint)
                 } else if c > 0.0 {
                     (c / h, Softness::RIGID)
@@ -4000,14 +4030,19 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         }
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        // The rows after the drift read no velocity where `KEEP`: written once, at the end.
+        if KEEP {
+            put_moved(s, t + (sub + 1) as f64 * h, &q, &q0);
+        } else {
+            put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        }
         prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
-                    if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
+                    if INEQUALITY[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
                 });
             }
         }
@@ -4016,7 +4051,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         for k in 0..p.len() {
             let m = p.effective_mass[k];
             let closing = start_rate[k];
-            if !p.inequality[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
+            if !INEQUALITY[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
                 continue;
             }
             let old = impulses[k];

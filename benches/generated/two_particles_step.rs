@@ -536,7 +536,8 @@ const UNIT: [bool; 2] = [true, true];
 /// (`numeric::velocity::pattern`, left out of Ċ and an impulse), 2 the constant +1, 3 the constant −1, 1 any other.
 #[allow(dead_code)]
 const ENTRY_CODE: [u8; 3] = [5, 5, 5];
-/// Per row, its kind: the `ENTRY_CODE` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`).
+/// Per row, its kind: the `ENTRY_CODE` of its entries and whether it is an axis row (two entries J and −J), one
+/// pattern per kind (`Prepared::rate`, `Prepared::apply`).
 #[allow(dead_code)]
 const ROW_KIND: [u8; 2] = [0, 1];
 
@@ -545,13 +546,19 @@ impl Prepared<DIM> {
     /// Ċₖ at velocities `u` (`rate_in`), with row k's codes as its kind's constants.
     #[inline(always)]
     fn rate(&self, k: usize, u: &[[f64; DIM]]) -> f64 {
-        self.rate_dense(k, u)
+        match ROW_KIND[k] {
+            0 => self.rate_dense(k, u),
+            _ => self.rate_axis(k, u),
+        }
     }
 
     /// Applies an impulse `p` of row k (`apply_in`), with its codes as its kind's constants.
     #[inline(always)]
     fn apply(&self, k: usize, u: &mut [[f64; DIM]], p: f64) {
-        self.apply_dense(k, u, p)
+        match ROW_KIND[k] {
+            0 => self.apply_dense(k, u, p),
+            _ => self.apply_axis(k, u, p),
+        }
     }
 
     /// Σᵢ |Jᵢ|²/mᵢ of row k (`mass_in`), with its codes as its kind's constants.
@@ -571,15 +578,20 @@ impl Prepared<DIM> {
 ///   J, body `p1`: −(r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J, body `p2`: (r_p2 − r_p1)/|r_p2 − r_p1|
 ///   J M⁻¹ Jᵀ = A[1][1] = 157970804621911954375000000000/940330394487407031884723016279
-/// The rows after the positions moved within a step: `prepare` (a `--step-only` module leaves out there
-/// the bodies' 1/m and F where they read neither positions, velocities nor the time).
-#[inline(always)]
-fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
-    prepare(s, p);
+/// The rows at the state, flattened for the step into `p` (nothing allocated): the bodies' 1/m and F (the
+/// scene's, `applied_forces`) and each `UNIT` row's m_eff, then the rows (`prepare_moved`).
+fn prepare(s: &State, p: &mut Prepared<DIM>) {
+    p.inverse_mass[0] = 1.0 / 5.988023952095808;
+    p.force[0] = [s.g[0] * 5.988023952095808, s.g[1] * 5.988023952095808];
+    p.inverse_mass[1] = 1.0 / 1005.0251256281408;
+    p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
+    p.unit_masses();
+    prepare_moved(s, p);
 }
 
-/// The rows at the state, flattened for the step into `p` (nothing allocated), with the scene's forces (`applied_forces`).
-fn prepare(s: &State, p: &mut Prepared<DIM>) {
+/// The rows after the positions moved within a step: the rows alone (the bodies' 1/m and F read neither
+/// positions, velocities nor the time).
+fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {
     let x0 = s.r_p1[0] - s.a1[0];
     let x1 = s.r_p1[1] - s.a1[1];
     let x2 = norm2(x0, x1);
@@ -589,15 +601,10 @@ fn prepare(s: &State, p: &mut Prepared<DIM>) {
     let x6 = 1.0 / x2;
     let x7 = 1.0 / x5;
     let x8 = -x7;
-    let mut v = [[0.0; DIM]; SLOTS];
-    p.inverse_mass[0] = 1.0 / 5.988023952095808;
-    v[0] = [s.v_p1[0], s.v_p1[1]];
-    p.force[0] = [s.g[0] * 5.988023952095808, s.g[1] * 5.988023952095808];
-    p.inverse_mass[1] = 1.0 / 1005.0251256281408;
-    v[1] = [s.v_p2[0], s.v_p2[1]];
-    p.force[1] = [s.g[0] * 1005.0251256281408, s.g[1] * 1005.0251256281408];
-    p.row(0, ((x2 - 1.0) * INVERSE_SCALE[0], 0.0), 0, [(0, [x0 * x6, x1 * x6])], &v);
-    p.row(1, ((x5 - 1.0) * INVERSE_SCALE[1], 0.0), 1, [(1, [x3 * x7, x4 * x7]), (0, [x3 * x8, x4 * x8])], &v);
+    p.value[0] = (x2 - 1.0) * INVERSE_SCALE[0];
+    p.effective_mass[0] = p.unit_row(0, 0, [[x0 * x6, x1 * x6]]);
+    p.value[1] = (x5 - 1.0) * INVERSE_SCALE[1];
+    p.effective_mass[1] = p.unit_row(1, 1, [[x3 * x7, x4 * x7], [x3 * x8, x4 * x8]]);
 }
 
 /// Whether the rows read neither the velocities nor the time, so that the rows a step leaves serve the next
@@ -638,12 +645,18 @@ fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIEN
 
 /// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).
 fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
+    put_moved(s, t, q, q0);
+    s.v_p1 = v[0];
+    s.v_p2 = v[1];
+}
+
+/// `put` but for the velocities: the time and the positions (and orientations) after a substep's drift, all
+/// where the rows read no velocity (`KEEP`) need; the step writes the velocities once, after its last substep.
+fn put_moved(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {
     s.t = t;
     let _ = q0;
     s.r_p1 = q[0];
-    s.v_p1 = v[0];
     s.r_p2 = q[1];
-    s.v_p2 = v[1];
 }
 
 /// Where an inequality row stands (the contact states of `lagrange solve`).
@@ -1276,7 +1289,6 @@ struct Prepared<const D: usize> {
     /// Per `UNIT` row, its m_eff where J is a number: 1/Σᵢ 1/mᵢ, a constant of the masses
     /// (`unit_masses`), which `unit_row` reads where the positions move.
     unit_mass: [f64; CONSTRAINTS],
-    inequality: [bool; CONSTRAINTS],
     inverse_mass: [f64; SLOTS],
     force: [[f64; D]; SLOTS],
     /// Per slot its principal axis (`AXES` is 0 without 3D rigid bodies).
@@ -1453,7 +1465,6 @@ impl<const D: usize> Prepared<D> {
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
             unit_mass: [0.0; CONSTRAINTS],
-            inequality: INEQUALITY,
             inverse_mass: [0.0; SLOTS],
             force: [[0.0; D]; SLOTS],
             axes: [[0.0; D]; AXES],
@@ -1492,7 +1503,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
-    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0 (`time_rate`'s 0 from
+    /// `zeroed` on: nothing writes another on such a row), and the returned m =
     /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
     /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
     /// evaluated rather than read back; m_eff is `effective_mass(m)`.
@@ -1503,7 +1515,6 @@ impl<const D: usize> Prepared<D> {
             m += self.inverse_mass[ROW_BODY[e + x]] * square(k, j);
         }
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         m
     }
 
@@ -1528,7 +1539,6 @@ impl<const D: usize> Prepared<D> {
     fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         if number { self.unit_mass[k] } else { 0.0 }
     }
 
@@ -1619,6 +1629,32 @@ impl<const D: usize> Prepared<D> {
             c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
         }
         c
+    }
+
+    /// `rate_dense` for an axis row (`ROW_KIND`; `velocity::pattern`: its two entries J and −J,
+    /// bit for bit): n = its first entry's J, read once, and (∂C/∂t + n·u_a) − n·u_b, the same
+    /// number as the sum with −n ((−n)·u = −(n·u) exactly).
+    #[inline(always)]
+    fn rate_axis(&self, k: usize, u: &[[f64; D]]) -> f64 {
+        let e = ROW_START[k];
+        let n = &self.jacobian[e];
+        (self.time_rate[k] + dot(n, &u[ROW_BODY[e]])) - dot(n, &u[ROW_BODY[e + 1]])
+    }
+
+    /// `apply_dense` for an axis row (`rate_axis`): u_a += (p/m_a) n, u_b −= (p/m_b) n, the
+    /// same numbers as adding (p/m_b)·(−n).
+    #[inline(always)]
+    fn apply_axis(&self, k: usize, u: &mut [[f64; D]], p: f64) {
+        let e = ROW_START[k];
+        let (n, a, b) = (&self.jacobian[e], ROW_BODY[e], ROW_BODY[e + 1]);
+        let s = self.inverse_mass[a] * p;
+        for d in 0..D {
+            u[a][d] += s * n[d];
+        }
+        let s = self.inverse_mass[b] * p;
+        for d in 0..D {
+            u[b][d] -= s * n[d];
+        }
     }
 
     /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components `codes` keeps
@@ -1765,7 +1801,7 @@ impl Prepared<DIM> {
             let rate = self.rate(k, u);
             let old = *impulse;
             let mut delta = -soft.mass_scale * m * (rate + bias) - soft.impulse_scale * old;
-            if self.inequality[k] {
+            if INEQUALITY[k] {
                 delta = (old + delta).max(0.0) - old;
             }
             *impulse = old + delta;
@@ -1832,7 +1868,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
             // Box2D's `useBias = true`.
             let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
-                if !pr.inequality[k] {
+                if !INEQUALITY[k] {
                     (joint.bias_rate * c, joint)
                 } else if c > 0.0 {
                     (c / h, Softness::RIGID)
@@ -1843,14 +1879,19 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         }
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        // The rows after the drift read no velocity where `KEEP`: written once, at the end.
+        if KEEP {
+            put_moved(s, t + (sub + 1) as f64 * h, &q, &q0);
+        } else {
+            put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        }
         prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
-                    if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
+                    if INEQUALITY[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
                 });
             }
         }
@@ -1859,7 +1900,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         for k in 0..p.len() {
             let m = p.effective_mass[k];
             let closing = start_rate[k];
-            if !p.inequality[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
+            if !INEQUALITY[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
                 continue;
             }
             let old = impulses[k];

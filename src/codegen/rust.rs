@@ -965,6 +965,16 @@ fn step_fns(
     // rows its numbers, bit for bit. The acceleration-level term c is a root but only the
     // exact step reads it: the soft step's and PGS's code leaves it out.
     let exact = solver == Solver::Exact;
+    // Where the bodies' 1/m and F cannot change with the positions and no row reads the
+    // velocities, `prepare_moved` (the rows after a substep's drift) is the rows alone, as a
+    // `--step-only` module's: `prepare` writes the bodies' numbers and each `UNIT` row's m_eff
+    // (`unit_masses`), then calls it.
+    let split = !exact && step.still && !step.velocities;
+    if split {
+        split_prepare(out, ctx, step, formulas, &starts, &entry_at, layout)?;
+        step_accessors(out, places, step);
+        return Ok(());
+    }
     let (lets, exprs) = if exact { ctx.body(&step.roots)? } else { ctx.body_of(&step.roots, &step.swept)? };
     let dim = layout.dim;
     let mut at = 0;
@@ -1091,6 +1101,98 @@ fn step_fns(
         let _ = writeln!(out, "}}\n");
     }
     step_accessors(out, places, step);
+    Ok(())
+}
+
+/// `prepare` and `prepare_moved` of a written-out module whose bodies' 1/m and F stay while
+/// the positions move and whose rows read no velocity (`step_fns`): `prepare` writes the
+/// bodies' numbers and each `UNIT` row's m_eff (`unit_masses`), then calls `prepare_moved`,
+/// the rows alone (a `UNIT` row's m_eff by `unit_row`: no sum and no division). Each is
+/// lowered over all the roots (so its shared values, and its numbers, are the library's) with
+/// code for its part only.
+fn split_prepare(
+    out: &mut String,
+    ctx: &Ctx<'_>,
+    step: &StepRoots,
+    formulas: &Formulas,
+    starts: &[usize],
+    entry_at: &[usize],
+    layout: &Layout,
+) -> Result<(), GenerateError> {
+    let (n, dim) = (layout.bodies, layout.dim);
+    // Per body m, v, F and per rigid body I, ω, τ: three roots each, then the rows'.
+    let rows_from = 3 * (n + step.turns.len());
+    let bodies: Vec<bool> = step.swept.iter().enumerate().map(|(i, &w)| w && i < rows_from && i % 3 != 1).collect();
+    let rows: Vec<bool> = step.swept.iter().enumerate().map(|(i, &w)| w && i >= rows_from).collect();
+    // A function's text, `s` marked used where its code reads no field.
+    let function = |out: &mut String, head: &str, lets: &[String], body: &str| {
+        let mut text: String = lets.iter().map(|l| format!("    {l}\n")).collect();
+        text.push_str(body);
+        let unused = if text.contains("s.") { "" } else { "    let _ = s;\n" };
+        let _ = writeln!(out, "{head}\n{unused}{text}}}\n");
+    };
+    let (lets, exprs) = ctx.body_of(&step.roots, &bodies)?;
+    let mut body = String::new();
+    let mut at = 0;
+    for i in 0..n {
+        let _ = writeln!(body, "    p.inverse_mass[{i}] = 1.0 / {};", operand(&exprs[at]));
+        let _ = writeln!(body, "    p.force[{i}] = {};", array(&exprs[at + 1 + dim..at + 1 + 2 * dim]));
+        at += 1 + 2 * dim;
+    }
+    for &(first, _) in &step.turns {
+        let _ = writeln!(body, "    p.inverse_mass[{first}] = 1.0 / {};", operand(&exprs[at]));
+        let _ = writeln!(body, "    p.force[{first}] = [{}, 0.0];", exprs[at + 2]);
+        at += 3;
+    }
+    if (0..layout.constraints).any(|r| step.pattern.is_unit(r)) {
+        body.push_str("    p.unit_masses();\n");
+    }
+    body.push_str("    prepare_moved(s, p);\n");
+    function(
+        out,
+        "/// The rows at the state, flattened for the step into `p` (nothing allocated): the bodies' 1/m and F (the\n\
+         /// scene's, `applied_forces`) and each `UNIT` row's m_eff, then the rows (`prepare_moved`).\n\
+         fn prepare(s: &State, p: &mut Prepared<DIM>) {",
+        &lets,
+        &body,
+    );
+    let (lets, exprs) = ctx.body_of(&step.roots, &rows)?;
+    let mut body = String::new();
+    for (r, (angular, &start)) in step.angular_slots.iter().zip(starts).enumerate() {
+        let scalars = &exprs[at..at + 3];
+        at += 3;
+        let mut js = Vec::new();
+        for &(b, _) in &formulas.jacobian[r] {
+            js.push((b, array(&exprs[at..at + dim])));
+            at += dim;
+        }
+        for &slot in angular {
+            js.push((slot, format!("[{}, 0.0]", exprs[at])));
+            at += 1;
+        }
+        // The entries in the step's order (`ENTRY_AT`).
+        let mut kept = vec![(0, String::new()); js.len()];
+        for (e, j) in js.into_iter().enumerate() {
+            kept[entry_at[start + e] - start] = j;
+        }
+        let value = format!("{} * INVERSE_SCALE[{r}]", operand(&scalars[0]));
+        if step.pattern.is_unit(r) {
+            let js: Vec<String> = kept.into_iter().map(|(_, j)| j).collect();
+            let _ = writeln!(body, "    p.value[{r}] = {value};");
+            let _ = writeln!(body, "    p.effective_mass[{r}] = p.unit_row({r}, {start}, {});", array(&js));
+        } else {
+            let js: Vec<String> = kept.into_iter().map(|(b, j)| format!("({b}, {j})")).collect();
+            let _ = writeln!(body, "    p.row({r}, ({value}, 0.0), {start}, {}, &[]);", array(&js));
+        }
+    }
+    function(
+        out,
+        "/// The rows after the positions moved within a step: the rows alone (the bodies' 1/m and F read neither\n\
+         /// positions, velocities nor the time).\n\
+         fn prepare_moved(s: &State, p: &mut Prepared<DIM>) {",
+        &lets,
+        &body,
+    );
     Ok(())
 }
 
@@ -1283,7 +1385,8 @@ pub(super) fn step_constants(
         array(&step.steady.iter().map(bool::to_string).collect::<Vec<_>>()),
         array(&(0..k).map(|r| step.pattern.is_unit(r).to_string()).collect::<Vec<_>>())
     );
-    row_kinds(out, &step.codes(&starts, &bodies, &at), &starts, layout.dim);
+    let axis: Vec<bool> = (0..k).map(|r| step.pattern.is_axis(r)).collect();
+    row_kinds(out, &step.codes(&starts, &bodies, &at), &starts, &axis, layout.dim);
     (starts, at)
 }
 
@@ -1300,12 +1403,16 @@ pub(super) fn entry_mask(code: u8) -> u8 {
 /// and x·(−1) = −x exactly: the same bits without the multiplication). A kind whose every
 /// component is some other number keeps the loop over the row's entries (`rate_dense`:
 /// unrolled, the compiler packs two entries' products into one vector and lengthens the
-/// path from the row before's impulse).
-fn row_kinds(out: &mut String, codes: &[u8], starts: &[usize], dim: usize) {
-    let mut kinds: Vec<&[u8]> = Vec::new();
+/// path from the row before's impulse), but for an axis row (`axis`, `velocity::pattern`:
+/// two entries J and −J, bit for bit), whose Ċ and impulse read one axis (`rate_axis`,
+/// `apply_axis`), as a handwritten distance joint keeps one.
+fn row_kinds(out: &mut String, codes: &[u8], starts: &[usize], axis: &[bool], dim: usize) {
+    let dense = (0..dim).fold(0u8, |c, d| c | 1 << (2 * d));
+    let mut kinds: Vec<(&[u8], bool)> = Vec::new();
     let mut row_kind = Vec::with_capacity(starts.len().saturating_sub(1));
-    for w in starts.windows(2) {
+    for (r, w) in starts.windows(2).enumerate() {
         let c = &codes[w[0]..w[1]];
+        let c = (c, axis.get(r).copied().unwrap_or(false) && c.len() == 2 && c.iter().all(|&x| x == dense));
         let kind = match kinds.iter().position(|k| *k == c) {
             Some(i) => i,
             None if kinds.len() < MAX_ROW_KINDS => {
@@ -1317,14 +1424,14 @@ fn row_kinds(out: &mut String, codes: &[u8], starts: &[usize], dim: usize) {
         row_kind.push(kind);
     }
     let list = |xs: &mut dyn Iterator<Item = String>| array(&xs.collect::<Vec<_>>());
-    let dense = (0..dim).fold(0u8, |c, d| c | 1 << (2 * d));
     let _ = writeln!(
         out,
         "/// Per entry (in the step's order), two bits per component of its J: 0 a structural zero of the rows as written\n\
          /// (`numeric::velocity::pattern`, left out of Ċ and an impulse), 2 the constant +1, 3 the constant −1, 1 any other.\n\
          #[allow(dead_code)]\n\
          const ENTRY_CODE: [u8; {}] = {};\n\
-         /// Per row, its kind: the `ENTRY_CODE` of its entries, one pattern per kind (`Prepared::rate`, `Prepared::apply`){}.\n\
+         /// Per row, its kind: the `ENTRY_CODE` of its entries and whether it is an axis row (two entries J and −J), one\n\
+         /// pattern per kind (`Prepared::rate`, `Prepared::apply`){}.\n\
          #[allow(dead_code)]\n\
          const ROW_KIND: [u8; {}] = {};\n",
         codes.len(),
@@ -1340,9 +1447,11 @@ fn row_kinds(out: &mut String, codes: &[u8], starts: &[usize], dim: usize) {
     // The arms: each kind's codes; the last kind takes every other value when no row is past
     // the kinds written (one kind: no branch).
     let overflow = row_kind.contains(&MAX_ROW_KINDS);
-    let arms = |coded: &str, loop_: &str| {
-        let call = |k: &[u8]| {
-            if k.iter().all(|&c| c == dense) {
+    let arms = |coded: &str, loop_: &str, axis: &str| {
+        let call = |&(k, one_axis): &(&[u8], bool)| {
+            if one_axis {
+                axis.to_string()
+            } else if k.iter().all(|&c| c == dense) {
                 loop_.to_string()
             } else if k.len() <= 16 {
                 // The codes as one constant, a byte each from the lowest (`rate_of`).
@@ -1354,7 +1463,7 @@ fn row_kinds(out: &mut String, codes: &[u8], starts: &[usize], dim: usize) {
         };
         // Without rows past the kinds, the last kind's arm is `_` and takes every kind with
         // the same call (all dense kinds: the loop, no branch).
-        let last = (!overflow).then(|| kinds.last().map(|k| call(k))).flatten();
+        let last = (!overflow).then(|| kinds.last().map(&call)).flatten();
         let mut arms = Vec::new();
         for (i, k) in kinds.iter().enumerate() {
             let call = call(k);
@@ -1396,9 +1505,9 @@ fn row_kinds(out: &mut String, codes: &[u8], starts: &[usize], dim: usize) {
          {}    \
          }}\n\
          }}\n",
-        arms("self.rate_in(k, CODES, u)", "self.rate_dense(k, u)"),
-        arms("self.apply_in(k, CODES, u, p)", "self.apply_dense(k, u, p)"),
-        arms("self.mass_in(k, CODES)", "self.mass_dense(k)")
+        arms("self.rate_in(k, CODES, u)", "self.rate_dense(k, u)", "self.rate_axis(k, u)"),
+        arms("self.apply_in(k, CODES, u, p)", "self.apply_dense(k, u, p)", "self.apply_axis(k, u, p)"),
+        arms("self.mass_in(k, CODES)", "self.mass_dense(k)", "self.mass_dense(k)")
     );
 }
 
@@ -1454,12 +1563,12 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
         if is_3d {
             q.extend(["[0.0; 3]".to_string(), "[0.0; 3]".to_string(), "[0.0; 3]".to_string()]);
             v.extend([format!("s.{w}"), "[0.0; 3]".to_string(), "[0.0; 3]".to_string()]);
-            put.push(format!("s.{o} = turned(q[{first}], q0[{r}]);\n    s.{w} = v[{first}];"));
+            put.push((format!("s.{o} = turned(q[{first}], q0[{r}]);"), format!("s.{w} = v[{first}];")));
             orientations.push(format!("s.{o}"));
         } else {
             q.push(format!("[s.{o}, 0.0]"));
             v.push(format!("[s.{w}, 0.0]"));
-            put.push(format!("s.{o} = q[{first}][0];\n    s.{w} = v[{first}][0];"));
+            put.push((format!("s.{o} = q[{first}][0];"), format!("s.{w} = v[{first}][0];")));
         }
     }
     let n = places.position.len();
@@ -1495,43 +1604,52 @@ pub(super) fn step_accessors(out: &mut String, places: &StepPlaces<'_>, step: &S
          fn get(s: &State) -> ([[f64; DIM]; SLOTS], [[f64; DIM]; SLOTS], [[f64; 4]; ORIENTATIONS]) {{\n    \
          {slots}\n}}\n"
     );
-    let _ = writeln!(
-        out,
-        "/// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).\n\
-         fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {{"
-    );
-    match places.time {
-        Some(field) => {
-            let _ = writeln!(out, "    s.{field} = t;");
-        }
-        None => {
-            let _ = writeln!(out, "    let _ = t;");
-        }
-    }
+    // `put_moved`'s lines (the time, the positions with the orientations), then `put`'s own (the
+    // velocities).
+    let mut time_line = match places.time {
+        Some(field) => format!("    s.{field} = t;\n"),
+        None => "    let _ = t;\n".to_string(),
+    };
     if orientations.is_empty() {
-        let _ = writeln!(out, "    let _ = q0;");
+        time_line.push_str("    let _ = q0;\n");
     }
+    let (mut positions, mut velocities) = (String::new(), String::new());
     if arrays && step.turns.is_empty() {
-        let _ = writeln!(out, "    s.position.copy_from_slice(q);\n    s.velocity.copy_from_slice(v);");
+        positions.push_str("    s.position.copy_from_slice(q);\n");
+        velocities.push_str("    s.velocity.copy_from_slice(v);\n");
     } else if arrays {
-        let _ = writeln!(out, "    s.position.copy_from_slice(&q[..{n}]);\n    s.velocity.copy_from_slice(&v[..{n}]);");
+        let _ = writeln!(positions, "    s.position.copy_from_slice(&q[..{n}]);");
+        let _ = writeln!(velocities, "    s.velocity.copy_from_slice(&v[..{n}]);");
     } else {
         for (i, (p, v)) in places.position.iter().zip(&places.velocity).enumerate() {
-            let _ = writeln!(out, "    s.{p} = q[{i}];\n    s.{v} = v[{i}];");
+            let _ = writeln!(positions, "    s.{p} = q[{i}];");
+            let _ = writeln!(velocities, "    s.{v} = v[{i}];");
         }
     }
     if rigid_arrays {
+        let _ =
+            writeln!(positions, "    for (a, x) in s.angle.iter_mut().zip(&q[{n}..]) {{\n        *a = x[0];\n    }}");
         let _ = writeln!(
-            out,
-            "    for (a, x) in s.angle.iter_mut().zip(&q[{n}..]) {{\n        *a = x[0];\n    }}\n    \
-             for (w, x) in s.angular_velocity.iter_mut().zip(&v[{n}..]) {{\n        *w = x[0];\n    }}"
+            velocities,
+            "    for (w, x) in s.angular_velocity.iter_mut().zip(&v[{n}..]) {{\n        *w = x[0];\n    }}"
         );
     } else {
-        for line in &put {
-            let _ = writeln!(out, "    {line}");
+        for (o, w) in &put {
+            let _ = writeln!(positions, "    {o}");
+            let _ = writeln!(velocities, "    {w}");
         }
     }
-    let _ = writeln!(out, "}}\n");
+    let _ = writeln!(
+        out,
+        "/// Writes the time and the slots into the state (3D: the orientation exp(φ) ⊗ q₀).\n\
+         fn put(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], v: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {{\n    \
+         put_moved(s, t, q, q0);\n\
+         {velocities}}}\n\n\
+         /// `put` but for the velocities: the time and the positions (and orientations) after a substep's drift, all\n\
+         /// where the rows read no velocity (`KEEP`) need; the step writes the velocities once, after its last substep.\n\
+         fn put_moved(s: &mut State, t: f64, q: &[[f64; DIM]; SLOTS], q0: &[[f64; 4]; ORIENTATIONS]) {{\n\
+         {time_line}{positions}}}\n"
+    );
 }
 
 /// An expression as the operand of `*` or `/`: parenthesised unless it is a name, a field,

@@ -449,9 +449,16 @@ pub(super) fn step_by_shape(
                 let angular = (shape.outputs.len() - base - linear * dim) / width;
                 let entries = linear + angular;
                 let _ = writeln!(out, "        let e = ROW_START[i];");
-                let _ = writeln!(out, "        p.value[i] = o[0] * INVERSE_SCALE[i];");
+                // x·1 = x exactly: where every instance's 1/κ is 1, no product (and no load of
+                // it by the row's index, which the compiler cannot fold).
+                let scaled: fn(&str) -> String = if shape.items.iter().all(|&i| inverse_scales[i] == 1.0) {
+                    |x: &str| x.to_string()
+                } else {
+                    |x: &str| format!("{x} * INVERSE_SCALE[i]")
+                };
+                let _ = writeln!(out, "        p.value[i] = {};", scaled("o[0]"));
                 if !steady {
-                    let _ = writeln!(out, "        p.time_rate[i] = o[1] * INVERSE_SCALE[i];");
+                    let _ = writeln!(out, "        p.time_rate[i] = {};", scaled("o[1]"));
                 }
                 // Each entry's place in its row in the step's order, when every instance has
                 // the same: a row whose C reads no time then gets its m_eff in this pass, from

@@ -49,13 +49,21 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         let pr = &*p;
         for _ in 0..settings.iterations {
             pr.sweep(&mut v, impulses, |k, c| {
-                let bias = if pr.inequality[k] && c > 0.0 { c / h } else { beta * c / h };
+                let bias = if INEQUALITY[k] && c > 0.0 { c / h } else { beta * c / h };
                 (bias, Softness::RIGID)
             });
         }
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        // The rows after the drift read no velocity where `KEEP`: written once, at the end.
+        if KEEP {
+            put_moved(s, t + (sub + 1) as f64 * h, &q, &q0);
+        } else {
+            put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        }
         prepare_moved(s, p);
+    }
+    if KEEP {
+        put(s, time(s), &q, &v, &q0);
     }
 }

@@ -64,7 +64,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
             // Box2D's `useBias = true`.
             let pr = &*p;
             pr.sweep(&mut v, impulses, |k, c| {
-                if !pr.inequality[k] {
+                if !INEQUALITY[k] {
                     (joint.bias_rate * c, joint)
                 } else if c > 0.0 {
                     (c / h, Softness::RIGID)
@@ -75,14 +75,19 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         }
         p.to_world(&mut v);
         p.drift(&mut q, &v, h);
-        put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        // The rows after the drift read no velocity where `KEEP`: written once, at the end.
+        if KEEP {
+            put_moved(s, t + (sub + 1) as f64 * h, &q, &q0);
+        } else {
+            put(s, t + (sub + 1) as f64 * h, &q, &v, &q0);
+        }
         prepare_moved(s, p);
         p.to_axes(&mut v);
         if settings.relax {
             let pr = &*p;
             for _ in 0..iterations {
                 pr.sweep(&mut v, impulses, |k, c| {
-                    if pr.inequality[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
+                    if INEQUALITY[k] && c > 0.0 { (c / h, Softness::RIGID) } else { (0.0, Softness::RIGID) }
                 });
             }
         }
@@ -91,7 +96,7 @@ fn steps(s: &mut State, impulses: &mut [f64; CONSTRAINTS], p: &mut Prepared<DIM>
         for k in 0..p.len() {
             let m = p.effective_mass[k];
             let closing = start_rate[k];
-            if !p.inequality[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
+            if !INEQUALITY[k] || m == 0.0 || closing > -settings.restitution_threshold || impulses[k] <= 0.0 {
                 continue;
             }
             let old = impulses[k];

@@ -139,7 +139,6 @@ struct Prepared<const D: usize> {
     /// Per `UNIT` row, its m_eff where J is a number: 1/Σᵢ 1/mᵢ, a constant of the masses
     /// (`unit_masses`), which `unit_row` reads where the positions move.
     unit_mass: [f64; CONSTRAINTS],
-    inequality: [bool; CONSTRAINTS],
     inverse_mass: [f64; SLOTS],
     force: [[f64; D]; SLOTS],
     /// Per slot its principal axis (`AXES` is 0 without 3D rigid bodies).
@@ -316,7 +315,6 @@ impl<const D: usize> Prepared<D> {
             time_rate: [0.0; CONSTRAINTS],
             effective_mass: [0.0; CONSTRAINTS],
             unit_mass: [0.0; CONSTRAINTS],
-            inequality: INEQUALITY,
             inverse_mass: [0.0; SLOTS],
             force: [[0.0; D]; SLOTS],
             axes: [[0.0; D]; AXES],
@@ -355,7 +353,8 @@ impl<const D: usize> Prepared<D> {
     }
 
     /// Row k's entries `j` in the step's order, stored from entry `e` on, with `finish`'s
-    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0, and the returned m =
+    /// operations for a row whose C reads no time (`STEADY`): ∂C/∂t = 0 (`time_rate`'s 0 from
+    /// `zeroed` on: nothing writes another on such a row), and the returned m =
     /// Σᵢ |Jᵢ|²/mᵢ over the entries in the step's order from 0 (over every component: a
     /// structural zero's square is +0 and (±1)² = 1, so `mass`'s number), from the entries as
     /// evaluated rather than read back; m_eff is `effective_mass(m)`.
@@ -366,7 +365,6 @@ impl<const D: usize> Prepared<D> {
             m += self.inverse_mass[ROW_BODY[e + x]] * square(k, j);
         }
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         m
     }
 
@@ -391,7 +389,6 @@ impl<const D: usize> Prepared<D> {
     fn unit_row<const N: usize>(&mut self, k: usize, e: usize, j: [[f64; D]; N]) -> f64 {
         let number = j.iter().all(|j| j.iter().all(|x| x.is_finite()));
         self.jacobian[e..e + N].copy_from_slice(&j);
-        self.time_rate[k] = 0.0;
         if number { self.unit_mass[k] } else { 0.0 }
     }
 
@@ -482,6 +479,32 @@ impl<const D: usize> Prepared<D> {
             c += dot(&self.jacobian[e], &u[ROW_BODY[e]]);
         }
         c
+    }
+
+    /// `rate_dense` for an axis row (`ROW_KIND`; `velocity::pattern`: its two entries J and −J,
+    /// bit for bit): n = its first entry's J, read once, and (∂C/∂t + n·u_a) − n·u_b, the same
+    /// number as the sum with −n ((−n)·u = −(n·u) exactly).
+    #[inline(always)]
+    fn rate_axis(&self, k: usize, u: &[[f64; D]]) -> f64 {
+        let e = ROW_START[k];
+        let n = &self.jacobian[e];
+        (self.time_rate[k] + dot(n, &u[ROW_BODY[e]])) - dot(n, &u[ROW_BODY[e + 1]])
+    }
+
+    /// `apply_dense` for an axis row (`rate_axis`): u_a += (p/m_a) n, u_b −= (p/m_b) n, the
+    /// same numbers as adding (p/m_b)·(−n).
+    #[inline(always)]
+    fn apply_axis(&self, k: usize, u: &mut [[f64; D]], p: f64) {
+        let e = ROW_START[k];
+        let (n, a, b) = (&self.jacobian[e], ROW_BODY[e], ROW_BODY[e + 1]);
+        let s = self.inverse_mass[a] * p;
+        for d in 0..D {
+            u[a][d] += s * n[d];
+        }
+        let s = self.inverse_mass[b] * p;
+        for d in 0..D {
+            u[b][d] -= s * n[d];
+        }
     }
 
     /// Applies an impulse `p` of row k: uᵢ += (1/mᵢ) Jₖᵢ p, on the components `codes` keeps

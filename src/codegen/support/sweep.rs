@@ -80,7 +80,7 @@ impl Prepared<DIM> {
             let rate = self.rate(k, u);
             let old = *impulse;
             let mut delta = -soft.mass_scale * m * (rate + bias) - soft.impulse_scale * old;
-            if self.inequality[k] {
+            if INEQUALITY[k] {
                 delta = (old + delta).max(0.0) - old;
             }
             *impulse = old + delta;

@@ -30,6 +30,14 @@
 //! positions; the library and the generated step take |J_b|² as exactly 1 there
 //! ([`unit_square`]), where Σ |J_b|²/m_b from the numbers would round differently each step.
 //!
+//! Among those, a row of two bodies, one with coefficient +1 in e and the other −1 (e = r_b −
+//! r_a + a), is an axis row ([`Pattern::is_axis`]): ∇_a C = −∇_b C, so J_a = −J_b, and the
+//! derivation's code gives the same products with one factor negated (J_b = e·(1/|e|), J_a =
+//! e·(−1/|e|)), which round to the negated numbers, bit for bit (`tests/generate_step.rs`
+//! checks it on every such row of every file). A sweep may then read one axis n = J_b and take
+//! −n for the other entry: (−n)·u = −(n·u) and s·(−n) = −(s·n) exactly (round to nearest is
+//! symmetric), so c + J_a·u_a = c − n·u_a and u_a + s·J_a = u_a − s·n, the same bits.
+//!
 //! Not here: the loops that use the masks (`Prepared`, the generated step), numbers.
 
 use crate::expr::graph::{FastSet, SymbolWalk};
@@ -56,6 +64,9 @@ pub struct Pattern {
     /// Per row, whether every entry of its J is a unit vector, structurally (the module's
     /// note: a distance row).
     unit: Vec<bool>,
+    /// Per row, whether it is a unit row between two bodies of opposite signs (J_a = −J_b: an
+    /// axis row, the module's note).
+    axis: Vec<bool>,
 }
 
 /// |J_b|² of an entry of a row whose entries are unit vectors ([`Pattern::is_unit`]) over
@@ -77,8 +88,16 @@ impl Pattern {
         let all = full(g.dim());
         let dense = !system.has_rigid_bodies() && rows.iter().flatten().all(|&(_, m)| m & all == all);
         let mut symbols = SymbolWalk::default();
-        let unit = system.constraints.iter().map(|c| unit_row(g, &mut symbols, c.c)).collect();
-        Pattern { dim: g.dim(), bodies: system.bodies.len(), rows, dense, unit }
+        let signs: Vec<Option<Vec<bool>>> = system.constraints.iter().map(|c| unit_row(g, &mut symbols, c.c)).collect();
+        let unit = signs.iter().map(Option::is_some).collect();
+        let axis = signs.iter().map(|s| matches!(s.as_deref(), Some([a, b]) if a != b)).collect();
+        Pattern { dim: g.dim(), bodies: system.bodies.len(), rows, dense, unit, axis }
+    }
+
+    /// Whether row `row` is an axis row: a unit row whose two entries are J and −J, bit for
+    /// bit (the module's note); false where the pattern does not know the row.
+    pub fn is_axis(&self, row: usize) -> bool {
+        self.axis.get(row).copied().unwrap_or(false)
     }
 
     /// Whether every entry of row `row`'s J is a unit vector (a distance row, the module's
@@ -120,8 +139,9 @@ impl Pattern {
 
 /// Whether C (`c`) is ±|e| + k with e = Σ ±r_b + a, each body's position once in e with
 /// coefficient ±1, and k, a and everything else reading no body (only parameters and the
-/// time): then ∇_b C = ±e/|e|, a unit vector, for every body C reads.
-fn unit_row(g: &Graph, symbols: &mut SymbolWalk, c: Id) -> bool {
+/// time): then ∇_b C = ±e/|e|, a unit vector, for every body C reads. `Some` of each body's
+/// sign in e (true for −1), in the order e sums them, where it is; `None` where it is not.
+fn unit_row(g: &Graph, symbols: &mut SymbolWalk, c: Id) -> Option<Vec<bool>> {
     let mut free =
         |id: Id| symbols.free_symbols(g, id).iter().all(|&s| matches!(g.symbol(s).role, Role::Time | Role::Parameter));
     // The one term of C that reads a body.
@@ -130,32 +150,33 @@ fn unit_row(g: &Graph, symbols: &mut SymbolWalk, c: Id) -> bool {
             let mut reading = xs.iter().filter(|&&x| !free(x));
             match (reading.next(), reading.next()) {
                 (Some(&x), None) => x,
-                _ => return false,
+                _ => return None,
             }
         }
         _ => c,
     };
     let norm = signed(g, term).unwrap_or(term);
-    let Node::Norm(e) = g.node(norm) else { return false };
+    let Node::Norm(e) = g.node(norm) else { return None };
     let terms = match g.node(*e) {
         Node::Add(xs) => &xs[..],
         _ => std::slice::from_ref(e),
     };
-    let mut bodies = Vec::new();
+    let (mut bodies, mut signs) = (Vec::new(), Vec::new());
     for &t in terms {
-        let x = signed(g, t).unwrap_or(t);
-        match g.node(x) {
+        let negative = signed(g, t);
+        match g.node(negative.unwrap_or(t)) {
             Node::Sym(s) if matches!(g.symbol(*s).role, Role::Position { .. }) => {
                 if bodies.contains(s) {
-                    return false;
+                    return None;
                 }
                 bodies.push(*s);
+                signs.push(negative.is_some());
             }
             _ if free(t) => {}
-            _ => return false,
+            _ => return None,
         }
     }
-    !bodies.is_empty()
+    (!bodies.is_empty()).then_some(signs)
 }
 
 /// `x` where `id` is −x (the product −1·x).
