@@ -553,23 +553,26 @@ fn the_generated_exact_step_agrees_with_the_librarys_within_round_off() {
 
 /// A step-only module writes each repeated shape once: the 30 × 30 grid's 1 711 rows and 870
 /// bodies are a handful of shape functions and its module a small fraction of the row-by-row
-/// one (8 MB).
+/// one (9.5 MB). The bound, `SMALL`, leaves room for the support code and the per-row tables
+/// (`ROW_KIND`, `ROW_START`, `ROW_BODY`) to grow by a quarter; a module written row by row is
+/// five times it and more.
 #[test]
 fn a_step_only_module_writes_each_shape_once() {
+    const SMALL: usize = 250_000;
     let l = loaded(Path::new("constraints/solvers/joint_grid_30.toml"));
     let options = Options { solver: Some(Solver::SoftStep), step_only: true, ..Options::default() };
     let code = module(&l, &options).expect("generates").code;
     let shapes = code.matches("\nfn shape_").count();
     assert!((4..=8).contains(&shapes), "{shapes} shapes");
-    assert!(code.len() < 200_000, "{} bytes", code.len());
+    assert!(code.len() < SMALL, "{} bytes", code.len());
     assert!(!code.contains("pub fn lambda(") && code.contains("pub fn step("));
     // Rigid bodies: the 10 × 10 rigid grid's 342 revolute rows and 90 bodies are a few dozen
-    // shapes (bodies, rigid bodies and rows by where they sit), a ninth of the 1.4 MB module.
+    // shapes (bodies, rigid bodies and rows by where they sit), an eighth of the 1.6 MB module.
     let l = loaded(Path::new("constraints/solvers/rigid_grid_10.toml"));
     let code = module(&l, &options).expect("generates").code;
     let shapes = code.matches("\nfn shape_").count();
     assert!((3..=30).contains(&shapes), "{shapes} shapes");
-    assert!(code.len() < 200_000, "{} bytes", code.len());
+    assert!(code.len() < SMALL, "{} bytes", code.len());
     assert!(code.contains("pub fn orientations(") && code.contains("pub fn angular_velocities("));
 }
 
