@@ -537,30 +537,14 @@ impl Chain {
 
 #[cfg(test)]
 mod tests {
-    use super::{all_finite, masses_sound};
+    use super::{all_finite, all_zero, masses_sound};
 
-    /// [`all_finite`]'s and [`masses_sound`]'s bit tests answer as `f64::is_finite` and
-    /// `w >= 0.0` number by number, on every kind of number: zeros, subnormals, the largest,
-    /// infinities and NaNs of either sign and other payloads.
+    /// [`all_finite`]'s, [`masses_sound`]'s and [`all_zero`]'s bit tests answer as
+    /// `f64::is_finite`, `w >= 0.0` and `x == 0.0` number by number, on every kind of number:
+    /// zeros, subnormals, the largest, infinities and NaNs of either sign and other payloads.
     #[test]
     fn the_bit_tests_are_the_tests_number_by_number() {
-        let special = [
-            0.0,
-            -0.0,
-            1.0,
-            -1.5,
-            f64::MAX,
-            f64::MIN,
-            f64::MIN_POSITIVE,
-            5e-324,
-            -5e-324,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-            f64::from_bits(0x7ff0_0000_0000_0001),
-            f64::from_bits(0xfff0_0000_0000_0001),
-        ];
+        let special = crate::numeric::vector::SPECIAL_NUMBERS;
         assert!(all_finite(&[]));
         for &a in &special {
             for &b in &special {
@@ -568,6 +552,7 @@ mod tests {
                 assert_eq!(all_finite(&xs), xs.iter().all(|x| x.is_finite()), "{a:e} {b:e}");
                 let sound = xs.iter().all(|w| *w >= 0.0 && w.is_finite());
                 assert_eq!(masses_sound(&xs), sound, "{a:e} {b:e}");
+                assert_eq!(all_zero(&[a, b]), a == 0.0 && b == 0.0, "{a:e} {b:e}");
             }
         }
     }

@@ -2364,24 +2364,7 @@ mod tests {
     /// sign, and numbers around them.
     #[test]
     fn positive_finite_is_the_comparisons() {
-        let special = [
-            0.0,
-            -0.0,
-            5e-324,
-            -5e-324,
-            f64::MIN_POSITIVE,
-            1.0,
-            -1.0,
-            f64::MAX,
-            f64::MIN,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::NAN,
-            -f64::NAN,
-            f64::from_bits(0x7ff0_0000_0000_0001),
-            f64::from_bits(0xfff0_0000_0000_0001),
-        ];
-        for &x in &special {
+        for x in crate::numeric::vector::SPECIAL_NUMBERS {
             for n in [x, f64::from_bits(x.to_bits().wrapping_add(1)), f64::from_bits(x.to_bits().wrapping_sub(1))] {
                 assert_eq!(positive_finite(n), n > 0.0 && n.is_finite(), "{n:e} ({:#x})", n.to_bits());
             }

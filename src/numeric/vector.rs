@@ -69,6 +69,29 @@ pub fn length_scale<'a>(positions: impl IntoIterator<Item = &'a [f64; 3]>) -> f6
     if length > 0.0 && length.is_finite() { length } else { 1.0 }
 }
 
+/// The numbers at the edges of f64's classes — zeros of both signs, the smallest subnormals,
+/// the smallest normal, ±1, the largest finite, ±∞, NaNs of both signs and a signalling NaN
+/// of each sign — for the tests that hold a test by bits against the comparisons it replaces.
+#[cfg(test)]
+pub(crate) const SPECIAL_NUMBERS: [f64; 16] = [
+    0.0,
+    -0.0,
+    5e-324,
+    -5e-324,
+    f64::MIN_POSITIVE,
+    1.0,
+    -1.0,
+    -1.5,
+    f64::MAX,
+    f64::MIN,
+    f64::INFINITY,
+    f64::NEG_INFINITY,
+    f64::NAN,
+    -f64::NAN,
+    f64::from_bits(0x7ff0_0000_0000_0001),
+    f64::from_bits(0xfff0_0000_0000_0001),
+];
+
 #[cfg(test)]
 mod tests {
     use super::*;
