@@ -1454,7 +1454,8 @@ pub(super) fn zero_vectors(vectors: &mut Vec<[f64; 3]>, n: usize) {
 }
 
 /// Each body's acceleration (Fᵢ + fᵢ) wᵢ from the applied and the constraint forces, written
-/// in place (an `extend` of the zipped slices was a call of about 25 instructions a body).
+/// in place when `acceleration` has the bodies' count already (no `clear` and out-of-line
+/// `extend` per solve).
 pub(super) fn accelerations_into(rows: &Rows, constraint_force: &[[f64; 3]], acceleration: &mut Vec<[f64; 3]>) {
     let n = rows.force.len().min(constraint_force.len()).min(rows.inverse_mass.len());
     if acceleration.len() != n {
