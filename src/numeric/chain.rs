@@ -37,7 +37,7 @@ use super::banded::{backward_step, forward_step, tridiagonal_factor_row, tridiag
 use super::rows::Rows;
 use super::solve::{
     Answer, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force, b_of,
-    out_of_range, scale_row,
+    out_of_range, scale_row, zero_vectors,
 };
 use super::vector::dot;
 use std::cell::RefCell;
@@ -508,8 +508,7 @@ impl Chain {
         out.active.clear();
         out.contacts.clear();
         let force = &mut out.constraint_force;
-        force.clear();
-        force.resize(rows.inverse_mass.len(), [0.0; 3]);
+        zero_vectors(force, rows.inverse_mass.len());
         match answer {
             Answer::Solution => {
                 out.lambda.resize(k, 0.0);

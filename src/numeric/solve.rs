@@ -1442,16 +1442,29 @@ pub(super) fn add_row_force(constraint_force: &mut [[f64; 3]], m: f64, parts: &[
     }
 }
 
-/// Each body's acceleration (Fᵢ + fᵢ) wᵢ from the applied and the constraint forces.
+/// `vectors` as `n` zero vectors: in place when it holds `n` already (a run's answers keep
+/// their bodies' count, and a `clear` and `resize` was a call per solve).
+pub(super) fn zero_vectors(vectors: &mut Vec<[f64; 3]>, n: usize) {
+    if vectors.len() == n {
+        vectors.fill([0.0; 3]);
+    } else {
+        vectors.clear();
+        vectors.resize(n, [0.0; 3]);
+    }
+}
+
+/// Each body's acceleration (Fᵢ + fᵢ) wᵢ from the applied and the constraint forces, written
+/// in place when `acceleration` has the bodies' count already (no `clear` and out-of-line
+/// `extend` per solve).
 pub(super) fn accelerations_into(rows: &Rows, constraint_force: &[[f64; 3]], acceleration: &mut Vec<[f64; 3]>) {
-    acceleration.clear();
-    acceleration.extend(
-        rows.force
-            .iter()
-            .zip(constraint_force)
-            .zip(&rows.inverse_mass)
-            .map(|((f, fc), w)| [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w]),
-    );
+    let n = rows.force.len().min(constraint_force.len()).min(rows.inverse_mass.len());
+    if acceleration.len() != n {
+        acceleration.resize(n, [0.0; 3]);
+    }
+    let sources = rows.force.iter().zip(constraint_force).zip(&rows.inverse_mass);
+    for (a, ((f, fc), w)) in acceleration.iter_mut().zip(sources) {
+        *a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    }
 }
 
 /// [`finish`] into `out`'s buffers (its contacts are left to the caller).
@@ -1470,8 +1483,7 @@ fn finish_into(
     lambda.clear();
     lambda.resize(k, 0.0);
     let constraint_force = &mut out.constraint_force;
-    constraint_force.clear();
-    constraint_force.resize(n_bodies, [0.0; 3]);
+    zero_vectors(constraint_force, n_bodies);
     debug_assert_eq!(index.len(), mu.len());
     if index.len() == k {
         // Every row takes part (`index` is 0..k, as in every cached solve): one pass along
