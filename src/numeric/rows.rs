@@ -156,6 +156,11 @@ struct Subprogram {
     /// The inputs that are not constants of a run (`Source::Env`), with their slots: what
     /// a state evaluation loads once the constants are held ([`RowScratch::hold_constants`]).
     varying: Vec<Load>,
+    /// `varying` as copies from the state's arrays, when every one of them comes from there
+    /// (no rigid body's angle, which the environment gives) and the tape reads its own
+    /// layout (no batches): a state evaluation with the constants held is then
+    /// [`StateCopies::load`] alone.
+    copies: Option<StateCopies>,
     /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself),
     /// reading its inputs as `flat` lays them out.
     batched: Option<(Batched, Flat)>,
@@ -261,6 +266,9 @@ impl Subprogram {
         let batched =
             Batched::new(graph, roots, units, |r| self.tape.output_range(self.root[r]), flat.slots(&self.inputs));
         self.batched = batched.map(|b| (b, flat));
+        if self.batched.is_some() {
+            self.copies = None;
+        }
     }
 
     /// The input buffer: the tape's own layout, or the batches' (`Flat`).
@@ -279,7 +287,34 @@ impl Subprogram {
     /// The inputs from `state` and `env` into `scratch`'s buffer; the constants of a run
     /// (`Source::Env`) only when they are not held there already (`hold`: they are to be
     /// kept, see [`RowScratch::hold_constants`]).
+    ///
+    /// In line, its common case apart: with the constants held and every other input from
+    /// the state's arrays (a scene of point masses, once a run has started), only the state's
+    /// numbers are copied, by [`load_from_state`] (a copy of a few numbers, where the general
+    /// load — the environment, its errors, the batches — costs about a hundred instructions
+    /// a call for a one-body scene).
+    #[inline]
     fn load_state(
+        &self,
+        system: &System,
+        env: &Env,
+        state: State<'_>,
+        hold: bool,
+        scratch: &mut SubScratch,
+    ) -> Result<(), EvalError> {
+        if let Some(copies) = &self.copies
+            && hold
+            && scratch.constants
+        {
+            copies.load(state, &mut scratch.inputs);
+            return Ok(());
+        }
+        self.load_state_any(system, env, state, hold, scratch)
+    }
+
+    /// [`load_state`](Subprogram::load_state) in every case.
+    #[inline(never)]
+    fn load_state_any(
         &self,
         system: &System,
         env: &Env,
@@ -328,7 +363,7 @@ impl Subprogram {
         // As for the whole program: the inputs are the roots' free symbols.
         let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
         let sources = sources(system, &inputs);
-        let varying = (0..inputs.len())
+        let varying: Vec<Load> = (0..inputs.len())
             .filter(|&i| !matches!(sources[i], Source::Env))
             .map(|i| {
                 let range = tape.input_range(i);
@@ -345,7 +380,8 @@ impl Subprogram {
                 (range.start as u32, range.len() as u32)
             })
             .collect();
-        Subprogram { tape, inputs, root, place, sources, varying, batched: None, places: None }
+        let copies = StateCopies::new(&varying, system.dim());
+        Subprogram { tape, inputs, root, place, sources, varying, copies, batched: None, places: None }
     }
 }
 
@@ -650,6 +686,63 @@ fn load_varying(
         }
     }
     Ok(())
+}
+
+/// A [`Subprogram`]'s inputs that change from state to state, when all of them come from
+/// the state's arrays: each body position's and velocity's first input slot (`dim` slots
+/// each) and t's slot, so a load copies fixed-width blocks with no test of where each comes
+/// from (a copy of a variable length is a call).
+#[derive(Clone, Debug)]
+struct StateCopies {
+    /// `(body, first slot)`.
+    positions: Vec<(usize, usize)>,
+    velocities: Vec<(usize, usize)>,
+    time: Vec<usize>,
+    /// The dimension: every position and velocity is that many slots.
+    dim: usize,
+}
+
+impl StateCopies {
+    /// The copies of `loads` in a scene of dimension `dim` (2 or 3), or `None` when one of
+    /// them is read from the environment (a rigid body's angle) or is not `dim` slots wide.
+    fn new(loads: &[Load], dim: usize) -> Option<StateCopies> {
+        if !matches!(dim, 2 | 3) {
+            return None;
+        }
+        let mut copies = StateCopies { positions: Vec::new(), velocities: Vec::new(), time: Vec::new(), dim };
+        for load in loads {
+            match load.source {
+                Source::Position(b) if load.len == dim => copies.positions.push((b, load.start)),
+                Source::Velocity(b) if load.len == dim => copies.velocities.push((b, load.start)),
+                Source::Time if load.len == 1 => copies.time.push(load.start),
+                _ => return None,
+            }
+        }
+        Some(copies)
+    }
+
+    /// The inputs from `state` into `buffer` (the tape's input layout).
+    #[inline(never)]
+    fn load(&self, state: State<'_>, buffer: &mut [f64]) {
+        if self.dim == 2 {
+            self.load_of::<2>(state, buffer);
+        } else {
+            self.load_of::<3>(state, buffer);
+        }
+        for &at in &self.time {
+            buffer[at] = state.t;
+        }
+    }
+
+    /// [`load`](StateCopies::load)'s positions and velocities, `W` = `dim` slots each.
+    #[inline(always)]
+    fn load_of<const W: usize>(&self, state: State<'_>, buffer: &mut [f64]) {
+        for (copies, from) in [(&self.positions, state.q), (&self.velocities, state.v)] {
+            for &(b, at) in copies {
+                buffer[at..at + W].copy_from_slice(&from[b][..W]);
+            }
+        }
+    }
 }
 
 /// The `len` (one to three) components of `out` from `start`, zero past them.
