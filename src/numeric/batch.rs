@@ -30,7 +30,13 @@ use std::ops::Range;
 /// `tape::LANES` values per register) would be mostly idle.
 pub const BATCH_MIN: usize = 4;
 
-/// Roots evaluated shape by shape, into the places a caller's output layout gives them.
+/// Roots evaluated shape by shape, each left where the batch's lanes write it.
+///
+/// The outputs are one buffer: each batch's chunks of `LANES` members in turn, each chunk
+/// its tape's output rows (component k of the chunk's member s at `k · len + s`, `len` the
+/// chunk's members), then the `rest` tape's outputs. A root's components are then `stride`
+/// apart ([`place`](Batched::place)), and the caller reads them there: no scatter into
+/// another layout.
 #[derive(Clone, Debug)]
 pub struct Batched {
     batches: Vec<Batch>,
@@ -38,12 +44,13 @@ pub struct Batched {
     /// input slots is in the caller's flat inputs.
     rest: Tape,
     rest_source: Vec<usize>,
-    /// Where each of `rest`'s output components goes.
-    rest_dest: Vec<usize>,
-    /// One past the largest index of any `source` and any `dest`: the least lengths of the
-    /// caller's inputs and outputs, checked once per evaluation so the gathers and
-    /// scatters need no check per number.
+    /// Per root (an index into the roots `new` was given), its first output and the
+    /// distance between its components; `(0, 0)` for a root in no unit.
+    places: Vec<(usize, usize)>,
+    /// One past the largest index of any `source`: the least length of the caller's
+    /// inputs, checked once per evaluation so the gathers need no check per number.
     inputs_len: usize,
+    /// The outputs' length: every batch's members' outputs, then `rest`'s.
     outputs_len: usize,
 }
 
@@ -57,8 +64,6 @@ struct Batch {
     /// `LANES` members: in a chunk of `len` members from member c, slot j of member c + s
     /// at `j · len + s` (structure of arrays within the chunk).
     source: Vec<usize>,
-    /// Where each member's output components go, laid out as `source`.
-    dest: Vec<usize>,
 }
 
 /// `table` (slot j of member s at `j · members + s`) rearranged chunk by chunk of `LANES`
@@ -78,26 +83,24 @@ fn chunked(table: &[usize], members: usize) -> Vec<usize> {
 /// Buffers of [`Batched::eval`], reused across evaluations.
 #[derive(Clone, Debug)]
 pub struct BatchedScratch {
-    /// Per batch: inputs and outputs in structure of arrays, and the lanes' registers.
+    /// Per batch: a chunk's inputs in structure of arrays, and the lanes' registers.
     inputs: Vec<Vec<f64>>,
-    outputs: Vec<Vec<f64>>,
     lanes: Vec<BatchScratch>,
     rest_inputs: Vec<f64>,
-    rest_outputs: Vec<f64>,
     rest: Scratch,
 }
 
 impl Batched {
-    /// Batches the `units` of `roots` (each a list of indices into `roots`); the output
-    /// components of root r go to `dest(r)` (as many as the root has), and the inputs
-    /// are read from a flat buffer where symbol s occupies `source(s)` (a tape's input
-    /// layout over every symbol the roots read). `None` when no shape has [`BATCH_MIN`]
-    /// units: one tape serves as well.
+    /// Batches the `units` of `roots` (each a list of indices into `roots`, root r of
+    /// `width(r)` components, as the caller reads it); the inputs are read from a flat
+    /// buffer where symbol s occupies `source(s)` (a tape's input layout over every symbol
+    /// the roots read), and root r's outputs are at [`place(r)`](Batched::place). `None`
+    /// when no shape has [`BATCH_MIN`] units: one tape serves as well.
     pub fn new(
         graph: &Graph,
         roots: &[Id],
         units: &[Vec<usize>],
-        dest: impl Fn(usize) -> Range<usize>,
+        width: impl Fn(usize) -> usize,
         source: impl Fn(Symbol) -> Range<usize>,
     ) -> Option<Batched> {
         let mut shaper = Shaper::default();
@@ -123,6 +126,9 @@ impl Batched {
         }
         let mut batches = Vec::new();
         let mut rest_roots: Vec<usize> = Vec::new();
+        let mut places = vec![(0, 0); roots.len()];
+        // The first output of the next batch's members.
+        let mut base = 0;
         for group in &groups {
             if group.len() < BATCH_MIN {
                 rest_roots.extend(group.iter().flat_map(|(u, _)| units[*u].iter().copied()));
@@ -142,7 +148,7 @@ impl Batched {
                     .iter()
                     .enumerate()
                     .all(|(i, sym)| source(renamed(theirs, sym)).len() == tape.input_range(i).len())
-                    && units[*u].iter().enumerate().all(|(j, &r)| dest(r).len() == tape.output_range(j).len())
+                    && units[*u].iter().enumerate().all(|(j, &r)| width(r) == tape.output_range(j).len())
             });
             rest_roots.extend(odd.iter().flat_map(|(u, _)| units[*u].iter().copied()));
             if group.len() < BATCH_MIN {
@@ -160,19 +166,22 @@ impl Batched {
                     }
                 }
             }
-            let mut out = vec![0; tape.output_len() * members];
+            // Member s is number s − first of the chunk from `first` (every chunk before
+            // the last is `LANES` long), whose outputs start at `base + first · n_out`.
+            let n_out = tape.output_len();
             for (s, (u, _)) in group.iter().enumerate() {
+                let first = s - s % LANES;
+                let len = LANES.min(members - first);
+                let chunk = base + first * n_out;
                 for (j, &r) in units[*u].iter().enumerate() {
-                    let range = tape.output_range(j);
-                    for (k, c) in range.clone().enumerate() {
-                        out[c * members + s] = dest(r).start + k;
-                    }
+                    places[r] = (chunk + tape.output_range(j).start * len + (s - first), len);
                 }
             }
-            // Chunk by chunk of `LANES` members (`chunked`), so a chunk's inputs, lanes and
-            // outputs stay in cache from gather to scatter.
-            let (source, dest) = (chunked(&from, members), chunked(&out, members));
-            batches.push(Batch { tape, members, source, dest });
+            base += members * n_out;
+            // Chunk by chunk of `LANES` members (`chunked`), so a chunk's inputs and lanes
+            // stay in cache from gather to evaluation.
+            let source = chunked(&from, members);
+            batches.push(Batch { tape, members, source });
         }
         let ids: Vec<Id> = rest_roots.iter().map(|&r| roots[r]).collect();
         let rest_inputs = walk.free_symbols_of(graph, &ids).to_vec();
@@ -183,65 +192,66 @@ impl Batched {
                 rest_source[j] = at;
             }
         }
-        let mut rest_dest = vec![0; rest.output_len()];
         for (j, &r) in rest_roots.iter().enumerate() {
-            for (k, c) in rest.output_range(j).enumerate() {
-                rest_dest[c] = dest(r).start + k;
-            }
+            places[r] = (base + rest.output_range(j).start, 1);
         }
+        let outputs_len = base + rest.output_len();
         let past = |table: &[usize]| table.iter().max().map_or(0, |&m| m + 1);
         let inputs_len = batches.iter().map(|b| past(&b.source)).chain([past(&rest_source)]).max().unwrap_or(0);
-        let outputs_len = batches.iter().map(|b| past(&b.dest)).chain([past(&rest_dest)]).max().unwrap_or(0);
-        Some(Batched { batches, rest, rest_source, rest_dest, inputs_len, outputs_len })
+        Some(Batched { batches, rest, rest_source, places, inputs_len, outputs_len })
+    }
+
+    /// Where root `r`'s outputs are in [`eval`](Batched::eval)'s: its first component and
+    /// the distance between two.
+    pub fn place(&self, r: usize) -> (usize, usize) {
+        self.places[r]
+    }
+
+    /// How many numbers [`eval`](Batched::eval) writes.
+    pub fn output_len(&self) -> usize {
+        self.outputs_len
     }
 
     /// Buffers for [`eval`](Batched::eval).
     pub fn scratch(&self) -> BatchedScratch {
         BatchedScratch {
             inputs: self.batches.iter().map(|b| vec![0.0; b.tape.input_len() * b.members.min(LANES)]).collect(),
-            outputs: self.batches.iter().map(|b| vec![0.0; b.tape.output_len() * b.members.min(LANES)]).collect(),
             lanes: self.batches.iter().map(|b| b.tape.batch_scratch()).collect(),
             rest_inputs: vec![0.0; self.rest.input_len()],
-            rest_outputs: vec![0.0; self.rest.output_len()],
             rest: self.rest.scratch(),
         }
     }
 
-    /// Every root, from the flat `inputs` (laid out as `source` said), each written to its
-    /// place in `out`.
+    /// Every root, from the flat `inputs` (laid out as `source` said), into `out` (of
+    /// [`output_len`](Batched::output_len); root r at [`place(r)`](Batched::place)).
     ///
     /// # Panics
-    /// If `inputs` or `out` is shorter than the layouts [`new`](Batched::new) was given.
+    /// If `inputs` is shorter than the layout [`new`](Batched::new) was given, or `out` is
+    /// not [`output_len`](Batched::output_len) long.
     pub fn eval(&self, inputs: &[f64], scratch: &mut BatchedScratch, out: &mut [f64]) {
         assert!(inputs.len() >= self.inputs_len, "input length");
-        assert!(out.len() >= self.outputs_len, "output length");
+        assert_eq!(out.len(), self.outputs_len, "output length");
+        let mut out = out;
         for (b, batch) in self.batches.iter().enumerate() {
             let (n_in, n_out) = (batch.tape.input_len(), batch.tape.output_len());
-            let (mut source, mut dest) = (batch.source.as_slice(), batch.dest.as_slice());
+            let mut source = batch.source.as_slice();
             for first in (0..batch.members).step_by(LANES) {
                 let len = LANES.min(batch.members - first);
-                let (lanes, outputs) = (&mut scratch.inputs[b][..n_in * len], &mut scratch.outputs[b][..n_out * len]);
+                let lanes = &mut scratch.inputs[b][..n_in * len];
                 let (here, rest) = source.split_at(n_in * len);
                 for (x, &at) in lanes.iter_mut().zip(here) {
                     // SAFETY: every index of a `source` is below `inputs_len` (asserted).
                     *x = unsafe { *inputs.get_unchecked(at) };
                 }
                 source = rest;
-                batch.tape.eval_batch_serial(len, lanes, &mut scratch.lanes[b], outputs);
-                let (here, rest) = dest.split_at(n_out * len);
-                for (&d, &x) in here.iter().zip(outputs.iter()) {
-                    // SAFETY: every index of a `dest` is below `outputs_len` (asserted).
-                    unsafe { *out.get_unchecked_mut(d) = x };
-                }
-                dest = rest;
+                let (chunk, rest) = out.split_at_mut(n_out * len);
+                batch.tape.eval_batch_serial(len, lanes, &mut scratch.lanes[b], chunk);
+                out = rest;
             }
         }
         for (x, &at) in scratch.rest_inputs.iter_mut().zip(&self.rest_source) {
             *x = inputs[at];
         }
-        self.rest.eval(&scratch.rest_inputs, &mut scratch.rest, &mut scratch.rest_outputs);
-        for (&d, &x) in self.rest_dest.iter().zip(&scratch.rest_outputs) {
-            out[d] = x;
-        }
+        self.rest.eval(&scratch.rest_inputs, &mut scratch.rest, out);
     }
 }

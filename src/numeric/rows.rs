@@ -147,11 +147,9 @@ pub struct RowProgram {
 struct Subprogram {
     tape: Tape,
     inputs: Vec<Symbol>,
-    /// The tape's root of each of the program's roots (`usize::MAX`: not in it).
-    root: Vec<usize>,
-    /// Per program root, its first output component in the tape and how many it has (0:
-    /// not in it): the two lookups of `root` and `tape.output_range` in one.
-    place: Vec<(u32, u32)>,
+    /// Per program root, where its components are among the outputs (`len` 0: not in
+    /// them): in the tape's own layout, or the batches' when there are batches.
+    place: Vec<Place>,
     sources: Vec<Source>,
     /// The inputs that are not constants of a run (`Source::Env`), with their slots: what
     /// a state evaluation loads once the constants are held ([`RowScratch::hold_constants`]).
@@ -180,47 +178,119 @@ struct Places {
     value: Vec<u32>,
     rate: Vec<u32>,
     bias: Vec<u32>,
-    /// Every row's J entries in turn (`RowLayout::bodies.len()` a row): first output, width.
-    jacobian: Vec<(u32, u32)>,
-    /// Per slot: the output of 1/m's m, and v's and F's first output and width.
+    /// Every row's J entries in turn (`RowLayout::bodies.len()` a row).
+    jacobian: Vec<Place>,
+    /// Per slot: the output of 1/m's m, and the places of v and F.
     mass: Vec<u32>,
-    velocity: Vec<(u32, u32)>,
-    force: Vec<(u32, u32)>,
+    velocity: Vec<Place>,
+    force: Vec<Place>,
     /// The width every J entry has (the dimension, for point masses alone), or 0 when
     /// they differ (2D rigid bodies' Jʷ is one number): the fill then reads each entry
     /// without testing its width.
     width: u32,
     /// The same of every slot's v and F.
     slot_width: u32,
+    /// The outputs' length: every place of `jacobian`, `velocity` and `force` lies below it
+    /// (checked when they are listed), so a fill that has checked its outputs' length
+    /// ([`Places::outputs`]) reads them without a check per number.
+    outputs: usize,
+}
+
+/// A subprogram's outputs, checked to be as long as its [`Places`] say
+/// ([`Places::outputs`]).
+#[derive(Clone, Copy)]
+struct Outputs<'a>(&'a [f64]);
+
+/// Where a root's components are among a subprogram's outputs: the first, how many (one
+/// to three; 0: the root is not there), and the distance between two — 1 in a tape's own
+/// layout; a batch's members, evaluated in lanes, have their components a chunk's members
+/// apart (`numeric::batch`), and are read there rather than copied into the tape's layout.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Place {
+    start: u32,
+    len: u32,
+    stride: u32,
+}
+
+impl Place {
+    /// The root's components in `out` (zero past `len`).
+    #[inline]
+    fn read(self, out: &[f64]) -> [f64; 3] {
+        let (s, d) = (self.start as usize, self.stride as usize);
+        match self.len {
+            2 => [out[s], out[s + d], 0.0],
+            3 => [out[s], out[s + d], out[s + 2 * d]],
+            1 => [out[s], 0.0, 0.0],
+            _ => [0.0; 3],
+        }
+    }
+
+    /// [`read`](Place::read) of a root known to be `W` (2 or 3) wide, from outputs whose
+    /// length is checked: no test of the width, no bounds check (the fills' reads of J, v
+    /// and F, where a check per component cost about as much as the copy).
+    ///
+    /// # Safety
+    /// `self` is `W` wide and one of the places listed in the [`Places`] whose
+    /// [`outputs`](Places::outputs) made `out`.
+    #[inline(always)]
+    unsafe fn read_of<const W: usize>(self, out: Outputs<'_>) -> [f64; 3] {
+        let (s, d) = (self.start as usize, self.stride as usize);
+        let mut v = [0.0; 3];
+        for (k, x) in v.iter_mut().enumerate().take(W) {
+            // SAFETY: `Places::new` checked that each of its places' `len` components lies
+            // below its `outputs`, and `Places::outputs` that `out` is that long.
+            *x = unsafe { *out.0.get_unchecked(s + k * d) };
+        }
+        v
+    }
 }
 
 /// The width every one of `places` has, or 0 when they differ (or there are none).
-fn common_width(places: &[(u32, u32)]) -> u32 {
+fn common_width(places: &[Place]) -> u32 {
     match places.first() {
-        Some(&(_, w)) if places.iter().all(|&(_, x)| x == w) => w,
+        Some(p) if places.iter().all(|x| x.len == p.len) => p.len,
         _ => 0,
     }
+}
+
+/// The panic of [`Places::outputs`] given another subprogram's outputs: out of line.
+#[cold]
+#[inline(never)]
+fn outputs_misused(len: usize, expected: usize) -> ! {
+    panic!("outputs of length {len} read along places of {expected}")
 }
 
 /// A root a tape does not compute, in [`Places`].
 const ABSENT: u32 = u32::MAX;
 
 impl Places {
+    /// `out`, checked to be these places' outputs.
+    #[inline]
+    fn outputs<'a>(&self, out: &'a [f64]) -> Outputs<'a> {
+        if out.len() != self.outputs {
+            outputs_misused(out.len(), self.outputs);
+        }
+        Outputs(out)
+    }
+
     /// The places of `sub`'s outputs for `rows` and `bodies` (none of them a principal axis).
     fn new(sub: &Subprogram, bodies: &[BodySlots], rows: &[RowLayout]) -> Places {
         let scalar = |root: usize| match sub.place[root] {
-            (_, 0) => ABSENT,
-            (start, _) => start,
+            Place { len: 0, .. } => ABSENT,
+            Place { start, .. } => start,
         };
-        let jacobian: Vec<(u32, u32)> =
-            rows.iter().flat_map(|r| r.jacobian.clone()).map(|root| sub.place[root]).collect();
-        let velocity: Vec<(u32, u32)> = bodies.iter().map(|b| sub.place[b.velocity]).collect();
-        let force: Vec<(u32, u32)> = bodies.iter().map(|b| sub.place[b.force]).collect();
+        let jacobian: Vec<Place> = rows.iter().flat_map(|r| r.jacobian.clone()).map(|root| sub.place[root]).collect();
+        let velocity: Vec<Place> = bodies.iter().map(|b| sub.place[b.velocity]).collect();
+        let force: Vec<Place> = bodies.iter().map(|b| sub.place[b.force]).collect();
         let slot_width = match (common_width(&velocity), common_width(&force)) {
             (v, f) if v == f => v,
             _ => 0,
         };
+        let outputs = sub.output_len();
+        let inside = |p: &Place| p.len == 0 || (p.start as usize + (p.len as usize - 1) * p.stride as usize) < outputs;
+        assert!(jacobian.iter().chain(&velocity).chain(&force).all(inside), "a root's place lies past the outputs");
         Places {
+            outputs,
             value: rows.iter().map(|r| scalar(r.value)).collect(),
             rate: rows.iter().map(|r| scalar(r.rate)).collect(),
             bias: rows.iter().map(|r| scalar(r.bias)).collect(),
@@ -234,25 +304,6 @@ impl Places {
     }
 }
 
-/// The vector at `(start, len)` of `out` (one to three components, zero past them): what
-/// [`placed`] reads, with one test of the width rather than one per component.
-#[inline]
-fn vector_at(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
-    let s = start as usize;
-    match len {
-        2 => {
-            let x = &out[s..s + 2];
-            [x[0], x[1], 0.0]
-        }
-        3 => {
-            let x = &out[s..s + 3];
-            [x[0], x[1], x[2]]
-        }
-        1 => [out[s], 0.0, 0.0],
-        _ => [0.0; 3],
-    }
-}
-
 /// Whether the three components are finite (combined with `&`: no branch).
 #[inline]
 fn finite3(x: &[f64; 3]) -> bool {
@@ -263,12 +314,17 @@ impl Subprogram {
     /// Batches the roots in `units` (`numeric::batch`), when some shape repeats.
     fn batch(&mut self, system: &System, graph: &crate::expr::Graph, roots: &[Id], units: &[Vec<usize>]) {
         let flat = Flat::new(system, &self.tape, &self.sources);
-        let batched =
-            Batched::new(graph, roots, units, |r| self.tape.output_range(self.root[r]), flat.slots(&self.inputs));
-        self.batched = batched.map(|b| (b, flat));
-        if self.batched.is_some() {
-            self.copies = None;
+        let batched = Batched::new(graph, roots, units, |r| self.place[r].len as usize, flat.slots(&self.inputs));
+        let Some(batched) = batched else { return };
+        // The roots are read where the batches leave them.
+        for (r, place) in self.place.iter_mut().enumerate() {
+            if place.len > 0 {
+                let (start, stride) = batched.place(r);
+                (place.start, place.stride) = (start as u32, stride as u32);
+            }
         }
+        self.batched = Some((batched, flat));
+        self.copies = None;
     }
 
     /// The input buffer: the tape's own layout, or the batches' (`Flat`).
@@ -293,7 +349,7 @@ impl Subprogram {
     /// numbers are copied, by [`load_from_state`] (a copy of a few numbers, where the general
     /// load — the environment, its errors, the batches — costs about a hundred instructions
     /// a call for a one-body scene).
-    #[inline]
+    #[inline(always)]
     fn load_state(
         &self,
         system: &System,
@@ -336,11 +392,17 @@ impl Subprogram {
         Ok(())
     }
 
-    /// Every root from the loaded `inputs` into `outputs` (the tape's output layout).
+    /// The outputs' length: the tape's, or the batches'.
+    fn output_len(&self) -> usize {
+        self.batched.as_ref().map_or(self.tape.output_len(), |(b, _)| b.output_len())
+    }
+
+    /// Every root from the loaded `inputs` into `outputs` (laid out as `place` says).
     fn run(&self, inputs: &[f64], tape: &mut Scratch, batched: Option<&mut BatchedScratch>, outputs: &mut [f64]) {
         match (&self.batched, batched) {
             (Some((b, _)), Some(buffers)) => b.eval(inputs, buffers, outputs),
-            _ => self.tape.eval(inputs, tape, outputs),
+            (Some((b, _)), None) => evaluate_batched_without_scratch(b, inputs, outputs),
+            (None, _) => self.tape.eval(inputs, tape, outputs),
         }
     }
 
@@ -374,15 +436,23 @@ impl Subprogram {
             .iter()
             .map(|&r| {
                 if r == usize::MAX {
-                    return (0, 0);
+                    return Place::default();
                 }
                 let range = tape.output_range(r);
-                (range.start as u32, range.len() as u32)
+                Place { start: range.start as u32, len: range.len() as u32, stride: 1 }
             })
             .collect();
         let copies = StateCopies::new(&varying, system.dim());
-        Subprogram { tape, inputs, root, place, sources, varying, copies, batched: None, places: None }
+        Subprogram { tape, inputs, place, sources, varying, copies, batched: None, places: None }
     }
+}
+
+/// [`Subprogram::run`] with batches but a scratch without their buffers: never with a
+/// scratch of the subprogram (which has them), so out of line, with buffers of its own.
+#[cold]
+#[inline(never)]
+fn evaluate_batched_without_scratch(batched: &Batched, inputs: &[f64], outputs: &mut [f64]) {
+    batched.eval(inputs, &mut batched.scratch(), outputs);
 }
 
 /// Where a batched evaluation reads its inputs (`numeric::batch` gathers them by index
@@ -722,7 +792,7 @@ impl StateCopies {
     }
 
     /// The inputs from `state` into `buffer` (the tape's input layout).
-    #[inline(never)]
+    #[inline(always)]
     fn load(&self, state: State<'_>, buffer: &mut [f64]) {
         if self.dim == 2 {
             self.load_of::<2>(state, buffer);
@@ -745,21 +815,15 @@ impl StateCopies {
     }
 }
 
-/// The `len` (one to three) components of `out` from `start`, zero past them.
-#[inline]
-fn placed(out: &[f64], (start, len): (u32, u32)) -> [f64; 3] {
-    let (start, len) = (start as usize, len as usize);
-    let at = |k: usize| if k < len { out[start + k] } else { 0.0 };
-    [at(0), at(1), at(2)]
-}
-
 /// Row `row`'s J entries on `slots` from `out` at `places` (one each, all of width `width`
 /// when it is not 0), in place when the row has that many already; whether every
 /// component is finite. The common case (in place, every entry 2 or 3 wide) is compiled
 /// into each fill's loop over the rows (a call per row cost more than the copy it makes);
 /// the rest is [`fill_entries_any`].
+///
+/// `places` are some of the [`Places`] that made `out`, `width` their `width`.
 #[inline(always)]
-fn fill_entries(row: &mut Row, slots: &[usize], places: &[(u32, u32)], width: u32, out: &[f64]) -> bool {
+fn fill_entries(row: &mut Row, slots: &[usize], places: &[Place], width: u32, out: Outputs<'_>) -> bool {
     if row.jacobian.len() == slots.len() {
         match width {
             2 => return entries_of_width::<2>(row, slots, places, out),
@@ -767,23 +831,23 @@ fn fill_entries(row: &mut Row, slots: &[usize], places: &[(u32, u32)], width: u3
             _ => {}
         }
     }
-    fill_entries_any(row, slots, places, out)
+    fill_entries_any(row, slots, places, out.0)
 }
 
 /// [`fill_entries`] for entries of any widths, or into a row of another length.
 #[inline(never)]
-fn fill_entries_any(row: &mut Row, slots: &[usize], places: &[(u32, u32)], out: &[f64]) -> bool {
+fn fill_entries_any(row: &mut Row, slots: &[usize], places: &[Place], out: &[f64]) -> bool {
     let mut finite = true;
     if row.jacobian.len() == slots.len() {
         for ((j, &slot), &at) in row.jacobian.iter_mut().zip(slots).zip(places) {
-            let x = vector_at(out, at);
+            let x = at.read(out);
             finite &= finite3(&x);
             *j = (slot, x);
         }
     } else {
         row.jacobian.clear();
         for (&slot, &at) in slots.iter().zip(places) {
-            let x = vector_at(out, at);
+            let x = at.read(out);
             finite &= finite3(&x);
             row.jacobian.push((slot, x));
         }
@@ -794,14 +858,12 @@ fn fill_entries_any(row: &mut Row, slots: &[usize], places: &[(u32, u32)], out: 
 /// [`fill_entries`] in place, every entry `W` wide: each read without a test of its width,
 /// and only its `W` components tested (the zeros past them are finite).
 #[inline(always)]
-fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[(u32, u32)], out: &[f64]) -> bool {
+fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[Place], out: Outputs<'_>) -> bool {
     let mut finite = true;
-    for ((j, &slot), &(start, _)) in row.jacobian.iter_mut().zip(slots).zip(places) {
-        let s = start as usize;
-        let x = &out[s..s + W];
-        let mut v = [0.0; 3];
-        v[..W].copy_from_slice(x);
-        for c in x {
+    for ((j, &slot), &at) in row.jacobian.iter_mut().zip(slots).zip(places) {
+        // SAFETY: `at` is one of the places that made `out`, `W` wide (`fill_entries`).
+        let v = unsafe { at.read_of::<W>(out) };
+        for c in &v[..W] {
             finite &= c.is_finite();
         }
         *j = (slot, v);
@@ -813,18 +875,15 @@ fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[(u
 /// test of its width, and only its `W` components tested (the zeros past them are finite).
 #[inline(always)]
 fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows) -> bool {
-    let read = |start: u32| {
-        let s = start as usize;
-        let mut v = [0.0; 3];
-        v[..W].copy_from_slice(&out[s..s + W]);
-        v
-    };
+    let checked = places.outputs(out);
     let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
     let at = places.mass.iter().zip(&places.velocity).zip(&places.force);
     let mut finite = true;
-    for (((w, u), f), ((&m, &(v, _)), &(force, _))) in slots.zip(at) {
+    for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
         *w = 1.0 / out[m as usize];
-        (*u, *f) = (read(v), read(force));
+        // SAFETY: `places` made `checked`, and every v and F of theirs is `W` wide (the
+        // caller's `slot_width`).
+        (*u, *f) = unsafe { (v.read_of::<W>(checked), force.read_of::<W>(checked)) };
         finite &= w.is_finite();
         for k in 0..W {
             finite &= u[k].is_finite() & f[k].is_finite();
@@ -895,14 +954,16 @@ impl Subprogram {
     fn scratch(&self) -> SubScratch {
         SubScratch {
             inputs: vec![0.0; self.input_len()],
-            outputs: vec![0.0; self.tape.output_len()],
+            outputs: vec![0.0; self.output_len()],
             tape: self.tape.scratch(),
             batched: self.batched.as_ref().map(|(b, _)| b.scratch()),
             constants: false,
         }
     }
 
-    /// Every root from the inputs loaded in `scratch` into its outputs (the tape's layout).
+    /// Every root from the inputs loaded in `scratch` into its outputs (laid out as `place`
+    /// says).
+    #[inline]
     fn run_loaded(&self, scratch: &mut SubScratch) {
         self.run(&scratch.inputs, &mut scratch.tape, scratch.batched.as_mut(), &mut scratch.outputs);
     }
@@ -1099,6 +1160,10 @@ impl RowProgram {
     /// [`evaluate_positions_into`](RowProgram::evaluate_positions_into)). Evaluates every
     /// root when the program has no such tape (3D rigid bodies) or `rows` does not have
     /// the system's rows; returns whether C and J were kept.
+    ///
+    /// Out of line, with the load and the fill in it: one call per evaluation besides the
+    /// tape's (a simulation step of a small scene makes several).
+    #[inline(never)]
     pub fn evaluate_motion_state_into(
         &self,
         system: &System,
@@ -1137,6 +1202,7 @@ impl RowProgram {
 
     /// Each slot's 1/m, v and F from a tape's outputs along its [`Places`], in place when
     /// `rows` has the slots already; whether every one is finite.
+    #[inline(always)]
     fn fill_slots(&self, places: &Places, out: &[f64], rows: &mut Rows) -> bool {
         let n = self.bodies.len();
         if rows.inverse_mass.len() != n || rows.velocity.len() != n || rows.force.len() != n {
@@ -1153,8 +1219,8 @@ impl RowProgram {
                 let mut finite = true;
                 for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
                     *w = 1.0 / out[m as usize];
-                    *u = vector_at(out, v);
-                    *f = vector_at(out, force);
+                    *u = v.read(out);
+                    *f = force.read(out);
                     finite &= w.is_finite() & finite3(u) & finite3(f);
                 }
                 finite
@@ -1170,6 +1236,7 @@ impl RowProgram {
         rows.axes.clear();
         let mut finite = self.fill_slots(places, out, rows);
         rows.rows.resize_with(self.rows.len(), Row::default);
+        let checked = places.outputs(out);
         let mut entries = places.jacobian.as_slice();
         let at = places.value.iter().zip(&places.rate).zip(&places.bias);
         for ((layout, row), ((&value, &rate), &bias)) in self.rows.iter().zip(&mut rows.rows).zip(at) {
@@ -1180,7 +1247,7 @@ impl RowProgram {
             finite &= row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite();
             let (here, rest) = entries.split_at(layout.bodies.len());
             entries = rest;
-            finite &= fill_entries(row, &layout.bodies, here, places.width, out);
+            finite &= fill_entries(row, &layout.bodies, here, places.width, checked);
         }
         finite
     }
@@ -1194,8 +1261,8 @@ impl RowProgram {
             return;
         }
         let place = &self.all.place;
-        let scalar = |root: usize| out[place[root].0 as usize];
-        let vector = |root: usize| placed(out, place[root]);
+        let scalar = |root: usize| out[place[root].start as usize];
+        let vector = |root: usize| place[root].read(out);
         self.fill(system, rows, scalar, vector);
         scratch.finite = rows
             .rows
@@ -1289,6 +1356,10 @@ impl RowProgram {
 
     /// [`evaluate_positions_into`](RowProgram::evaluate_positions_into) at a state given as
     /// arrays (see [`evaluate_state_into`](RowProgram::evaluate_state_into)).
+    ///
+    /// Out of line, with the load and the fill in it, as
+    /// [`evaluate_motion_state_into`](RowProgram::evaluate_motion_state_into).
+    #[inline(never)]
     pub fn evaluate_positions_state_into(
         &self,
         system: &System,
@@ -1304,6 +1375,7 @@ impl RowProgram {
     }
 
     /// C/κ and J from the positions' inputs loaded in `scratch`.
+    #[inline(always)]
     fn positions_loaded(&self, scratch: &mut RowScratch, rows: &mut Vec<Row>) {
         let p = &self.positions;
         p.run_loaded(&mut scratch.positions);
@@ -1311,6 +1383,7 @@ impl RowProgram {
         rows.resize_with(self.rows.len(), Row::default);
         if let Some(places) = &p.places {
             // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
+            let checked = places.outputs(out);
             let mut finite = true;
             let mut entries = places.jacobian.as_slice();
             for ((layout, row), &value) in self.rows.iter().zip(rows.iter_mut()).zip(&places.value) {
@@ -1321,15 +1394,15 @@ impl RowProgram {
                 finite &= row.value.is_finite();
                 let (here, rest) = entries.split_at(layout.bodies.len());
                 entries = rest;
-                finite &= fill_entries(row, &layout.bodies, here, places.width, out);
+                finite &= fill_entries(row, &layout.bodies, here, places.width, checked);
             }
             scratch.finite = finite;
             return;
         }
-        let vector = |root: usize| placed(out, p.place[root]);
+        let vector = |root: usize| p.place[root].read(out);
         let plain = self.motion.is_some();
         for (layout, row) in self.rows.iter().zip(rows.iter_mut()) {
-            row.value = out[p.place[layout.value].0 as usize] * layout.inverse_scale;
+            row.value = out[p.place[layout.value].start as usize] * layout.inverse_scale;
             row.rate = 0.0;
             row.bias = 0.0;
             row.inequality = layout.inequality;
