@@ -174,12 +174,11 @@ struct Subprogram {
 /// whose every slot is a plain (1/m, v, F) and every J entry its root's value.
 #[derive(Clone, Debug, Default)]
 struct Places {
-    /// Per row: the output of C, Ċ, c (`ABSENT`: not a root of this tape).
-    value: Vec<u32>,
-    rate: Vec<u32>,
-    bias: Vec<u32>,
-    /// Every row's J entries in turn (`RowLayout::bodies.len()` a row).
-    jacobian: Vec<Place>,
+    /// Per row: where its numbers are and what the fill needs of its layout, in one
+    /// record (a fill's loop over the rows then walks two lists, these and the rows).
+    rows: Vec<RowPlaces>,
+    /// Every row's J entries in turn (`RowPlaces::entries` a row).
+    jacobian: Vec<Entry>,
     /// Per slot: the output of 1/m's m, and the places of v and F.
     mass: Vec<u32>,
     velocity: Vec<Place>,
@@ -194,6 +193,27 @@ struct Places {
     /// (checked when they are listed), so a fill that has checked its outputs' length
     /// ([`Places::outputs`]) reads them without a check per number.
     outputs: usize,
+}
+
+/// One row's part of [`Places`].
+#[derive(Clone, Copy, Debug)]
+struct RowPlaces {
+    /// The output of C, Ċ, c (`ABSENT`: not a root of this tape).
+    value: u32,
+    rate: u32,
+    bias: u32,
+    /// How many J entries the row has (`RowLayout::bodies.len()`).
+    entries: u32,
+    /// `RowLayout::inverse_scale` and `inequality`.
+    inverse_scale: f64,
+    inequality: bool,
+}
+
+/// One J entry of a row in [`Places`]: where it is among the outputs, and its slot.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    place: Place,
+    slot: u32,
 }
 
 /// A subprogram's outputs, checked to be as long as its [`Places`] say
@@ -279,7 +299,9 @@ impl Places {
             Place { len: 0, .. } => ABSENT,
             Place { start, .. } => start,
         };
-        let jacobian: Vec<Place> = rows.iter().flat_map(|r| r.jacobian.clone()).map(|root| sub.place[root]).collect();
+        let entry = |(&slot, root): (&usize, usize)| Entry { place: sub.place[root], slot: slot as u32 };
+        let jacobian: Vec<Entry> =
+            rows.iter().flat_map(|r| r.bodies.iter().zip(r.jacobian.clone()).map(entry)).collect();
         let velocity: Vec<Place> = bodies.iter().map(|b| sub.place[b.velocity]).collect();
         let force: Vec<Place> = bodies.iter().map(|b| sub.place[b.force]).collect();
         let slot_width = match (common_width(&velocity), common_width(&force)) {
@@ -288,13 +310,20 @@ impl Places {
         };
         let outputs = sub.output_len();
         let inside = |p: &Place| p.len == 0 || (p.start as usize + (p.len as usize - 1) * p.stride as usize) < outputs;
-        assert!(jacobian.iter().chain(&velocity).chain(&force).all(inside), "a root's place lies past the outputs");
+        let places: Vec<Place> = jacobian.iter().map(|e| e.place).collect();
+        assert!(places.iter().chain(&velocity).chain(&force).all(inside), "a root's place lies past the outputs");
+        let row = |r: &RowLayout| RowPlaces {
+            value: scalar(r.value),
+            rate: scalar(r.rate),
+            bias: scalar(r.bias),
+            entries: r.bodies.len() as u32,
+            inverse_scale: r.inverse_scale,
+            inequality: r.inequality,
+        };
         Places {
             outputs,
-            value: rows.iter().map(|r| scalar(r.value)).collect(),
-            rate: rows.iter().map(|r| scalar(r.rate)).collect(),
-            bias: rows.iter().map(|r| scalar(r.bias)).collect(),
-            width: common_width(&jacobian),
+            rows: rows.iter().map(row).collect(),
+            width: common_width(&places),
             jacobian,
             mass: bodies.iter().map(|b| scalar(b.mass)).collect(),
             velocity,
@@ -815,41 +844,40 @@ impl StateCopies {
     }
 }
 
-/// Row `row`'s J entries on `slots` from `out` at `places` (one each, all of width `width`
-/// when it is not 0), in place when the row has that many already; whether every
-/// component is finite. The common case (in place, every entry 2 or 3 wide) is compiled
-/// into each fill's loop over the rows (a call per row cost more than the copy it makes);
-/// the rest is [`fill_entries_any`].
+/// Row `row`'s J `entries` from `out` (all of width `width` when it is not 0), in place
+/// when the row has that many already; whether every component is finite. The common case
+/// (in place, every entry 2 or 3 wide) is compiled into each fill's loop over the rows (a
+/// call per row cost more than the copy it makes); the rest is [`fill_entries_any`].
 ///
-/// `places` are some of the [`Places`] that made `out`, `width` their `width`.
+/// `entries` are some of the [`Places`] that made `out`, `width` their `width`.
 #[inline(always)]
-fn fill_entries(row: &mut Row, slots: &[usize], places: &[Place], width: u32, out: Outputs<'_>) -> bool {
-    if row.jacobian.len() == slots.len() {
+fn fill_entries(row: &mut Row, entries: &[Entry], width: u32, out: Outputs<'_>) -> bool {
+    if row.jacobian.len() == entries.len() {
         match width {
-            2 => return entries_of_width::<2>(row, slots, places, out),
-            3 => return entries_of_width::<3>(row, slots, places, out),
+            2 => return entries_of_width::<2>(row, entries, out),
+            3 => return entries_of_width::<3>(row, entries, out),
             _ => {}
         }
     }
-    fill_entries_any(row, slots, places, out.0)
+    fill_entries_any(row, entries, out.0)
 }
 
 /// [`fill_entries`] for entries of any widths, or into a row of another length.
 #[inline(never)]
-fn fill_entries_any(row: &mut Row, slots: &[usize], places: &[Place], out: &[f64]) -> bool {
+fn fill_entries_any(row: &mut Row, entries: &[Entry], out: &[f64]) -> bool {
     let mut finite = true;
-    if row.jacobian.len() == slots.len() {
-        for ((j, &slot), &at) in row.jacobian.iter_mut().zip(slots).zip(places) {
-            let x = at.read(out);
+    if row.jacobian.len() == entries.len() {
+        for (j, e) in row.jacobian.iter_mut().zip(entries) {
+            let x = e.place.read(out);
             finite &= finite3(&x);
-            *j = (slot, x);
+            *j = (e.slot as usize, x);
         }
     } else {
         row.jacobian.clear();
-        for (&slot, &at) in slots.iter().zip(places) {
-            let x = at.read(out);
+        for e in entries {
+            let x = e.place.read(out);
             finite &= finite3(&x);
-            row.jacobian.push((slot, x));
+            row.jacobian.push((e.slot as usize, x));
         }
     }
     finite
@@ -858,15 +886,16 @@ fn fill_entries_any(row: &mut Row, slots: &[usize], places: &[Place], out: &[f64
 /// [`fill_entries`] in place, every entry `W` wide: each read without a test of its width,
 /// and only its `W` components tested (the zeros past them are finite).
 #[inline(always)]
-fn entries_of_width<const W: usize>(row: &mut Row, slots: &[usize], places: &[Place], out: Outputs<'_>) -> bool {
+fn entries_of_width<const W: usize>(row: &mut Row, entries: &[Entry], out: Outputs<'_>) -> bool {
     let mut finite = true;
-    for ((j, &slot), &at) in row.jacobian.iter_mut().zip(slots).zip(places) {
-        // SAFETY: `at` is one of the places that made `out`, `W` wide (`fill_entries`).
-        let v = unsafe { at.read_of::<W>(out) };
+    for (j, e) in row.jacobian.iter_mut().zip(entries) {
+        // SAFETY: `e` is one of the entries of the places that made `out`, `W` wide
+        // (`fill_entries`).
+        let v = unsafe { e.place.read_of::<W>(out) };
         for c in &v[..W] {
             finite &= c.is_finite();
         }
-        *j = (slot, v);
+        *j = (e.slot as usize, v);
     }
     finite
 }
@@ -1190,10 +1219,10 @@ impl RowProgram {
         rows.dim = system.dim();
         rows.axes.clear();
         let mut finite = self.fill_slots(places, out, rows);
-        for (k, (layout, row)) in self.rows.iter().zip(&mut rows.rows).enumerate() {
-            row.rate = out[places.rate[k] as usize] * layout.inverse_scale;
-            row.bias = out[places.bias[k] as usize];
-            row.inequality = layout.inequality;
+        for (row, at) in rows.rows.iter_mut().zip(&places.rows) {
+            row.rate = out[at.rate as usize] * at.inverse_scale;
+            row.bias = out[at.bias as usize];
+            row.inequality = at.inequality;
             finite &= row.rate.is_finite() & row.bias.is_finite();
         }
         scratch.finite = finite;
@@ -1238,16 +1267,15 @@ impl RowProgram {
         rows.rows.resize_with(self.rows.len(), Row::default);
         let checked = places.outputs(out);
         let mut entries = places.jacobian.as_slice();
-        let at = places.value.iter().zip(&places.rate).zip(&places.bias);
-        for ((layout, row), ((&value, &rate), &bias)) in self.rows.iter().zip(&mut rows.rows).zip(at) {
-            row.value = out[value as usize] * layout.inverse_scale;
-            row.rate = out[rate as usize] * layout.inverse_scale;
-            row.bias = out[bias as usize];
-            row.inequality = layout.inequality;
+        for (row, at) in rows.rows.iter_mut().zip(&places.rows) {
+            row.value = out[at.value as usize] * at.inverse_scale;
+            row.rate = out[at.rate as usize] * at.inverse_scale;
+            row.bias = out[at.bias as usize];
+            row.inequality = at.inequality;
             finite &= row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite();
-            let (here, rest) = entries.split_at(layout.bodies.len());
+            let (here, rest) = entries.split_at(at.entries as usize);
             entries = rest;
-            finite &= fill_entries(row, &layout.bodies, here, places.width, checked);
+            finite &= fill_entries(row, here, places.width, checked);
         }
         finite
     }
@@ -1386,15 +1414,15 @@ impl RowProgram {
             let checked = places.outputs(out);
             let mut finite = true;
             let mut entries = places.jacobian.as_slice();
-            for ((layout, row), &value) in self.rows.iter().zip(rows.iter_mut()).zip(&places.value) {
-                row.value = out[value as usize] * layout.inverse_scale;
+            for (row, at) in rows.iter_mut().zip(&places.rows) {
+                row.value = out[at.value as usize] * at.inverse_scale;
                 row.rate = 0.0;
                 row.bias = 0.0;
-                row.inequality = layout.inequality;
+                row.inequality = at.inequality;
                 finite &= row.value.is_finite();
-                let (here, rest) = entries.split_at(layout.bodies.len());
+                let (here, rest) = entries.split_at(at.entries as usize);
                 entries = rest;
-                finite &= fill_entries(row, &layout.bodies, here, places.width, checked);
+                finite &= fill_entries(row, here, places.width, checked);
             }
             scratch.finite = finite;
             return;
