@@ -312,3 +312,34 @@ fn simulate_refuses_a_bad_set_or_at_before_running() {
         assert!(out.stdout.is_empty(), "{args:?}: ran anyway");
     }
 }
+
+/// A run that overflows at its first step (dt = 1e300): the error gives the time in
+/// scientific notation (not three hundred digits), the JSON summary says why the run
+/// stopped beside the final state's `null`, and the text writes that number as `inf` or
+/// `NaN` rather than `null`.
+#[test]
+fn a_run_stopped_by_an_overflow_says_why_its_final_state_is_not_finite() {
+    for solver in ["exact", "exact-velocity"] {
+        let args = ["simulate", "constraints/pendulum.toml", "--solver", solver, "--dt", "1e300", "--steps", "3"];
+        let out = lagrange(&[&args[..], &["--format", "json"]].concat());
+        assert_eq!(out.status.code(), Some(2), "{solver}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains("`rod`") && (stderr.contains("e299") || stderr.contains("e300")), "{stderr}");
+        assert!(!stderr.contains("000000000000"), "{stderr}");
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+        let stopped = json["stopped"].as_str().unwrap_or_default();
+        assert!(stopped.contains("`rod`") && stderr.contains(stopped), "{json}");
+        let finals: Vec<&serde_json::Value> = json["final"]["r"].as_array().into_iter().flatten().collect();
+        assert!(finals.iter().any(|x| x.is_null()), "the overflow is in the final state: {json}");
+
+        let text = lagrange(&args);
+        assert_eq!(text.status.code(), Some(2), "{solver}");
+        let stdout = String::from_utf8_lossy(&text.stdout);
+        let last = stdout.lines().find(|l| l.trim_start().starts_with("final:")).unwrap_or_default();
+        assert!(!last.contains("null") && (last.contains("inf") || last.contains("NaN")), "{stdout}");
+    }
+    // A run that ends well has no "stopped".
+    let out = lagrange(&["simulate", "constraints/pendulum.toml", "--steps", "3", "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert!(json.get("stopped").is_none(), "{json}");
+}

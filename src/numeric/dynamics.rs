@@ -40,26 +40,30 @@ use super::solve::{
     solve_cached_into,
 };
 use crate::expr::eval::{Env, EvalError, Value};
+use crate::model::problem::shown;
 use crate::model::system::System;
 use std::borrow::Cow;
 
 /// Why a simulation stopped.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SimError {
-    #[error("cannot evaluate the rows at t = {time}: {error}")]
+    #[error("cannot evaluate the rows at t = {t}: {error}", t = shown(*.time))]
     Eval { time: f64, error: EvalError },
-    #[error("step {step} (t = {time}): the state or force of body `{body}` is not finite")]
+    #[error("step {step} (t = {t}): the state or force of body `{body}` is not finite", t = shown(*.time))]
     NonFinite { step: u64, time: f64, body: String },
     #[error(
-        "step {step} (t = {time}): constraint `{constraint}` evaluates to {value} — its formula overflows or is undefined at this state (check the scene's scale and the singular points of C)"
+        "step {step} (t = {t}): constraint `{constraint}` evaluates to {value} — its formula overflows or is undefined at this state (check the scene's scale and the singular points of C)",
+        t = shown(*.time)
     )]
     NonFiniteRow { step: u64, time: f64, constraint: String, value: f64 },
     #[error(
-        "step {step} (t = {time}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt (and --stabilize projection if it is off)"
+        "step {step} (t = {t}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt (and --stabilize projection if it is off)",
+        t = shown(*.time)
     )]
     Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
     #[error(
-        "step {step} (t = {time}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){remedy}"
+        "step {step} (t = {t}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){remedy}",
+        t = shown(*.time)
     )]
     Diverged {
         step: u64,
