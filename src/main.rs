@@ -212,8 +212,8 @@ struct SimulateArgs {
     /// Write t, state, λ, C, Ċ per recorded step to this CSV file.
     #[arg(long)]
     csv: Option<PathBuf>,
-    /// Write every k-th step to the CSV.
-    #[arg(long, default_value_t = 1)]
+    /// Write every k-th step to the CSV (and the last; k ≥ 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     every: u64,
     /// Write trajectory, |C| and energy error to this SVG file.
     #[arg(long)]

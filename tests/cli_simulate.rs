@@ -79,6 +79,8 @@ fn simulate_rejects_bad_settings_before_running() {
         (&["--omega-dt", "2"][..], "ω·dt (--omega-dt) must lie in (0, 1], found 2"),
         (&["--tolerance", "0", "--stabilize", "none"][..], "(--tolerance) must be finite and positive, found 0"),
         (&["--tolerance", "inf", "--solver", "pgs"][..], "(--tolerance) must be finite and positive, found inf"),
+        // Every 0th step was every step, silently.
+        (&["--every", "0", "--csv", "never-written.csv"][..], "invalid value '0' for '--every <EVERY>'"),
     ] {
         let mut all = vec!["simulate", "constraints/pendulum.toml", "--steps", "10"];
         all.extend_from_slice(args);
@@ -301,6 +303,9 @@ fn simulate_refuses_a_bad_set_or_at_before_running() {
         (&["--set", "nosuch=1"][..], "`nosuch` is not a symbol"),
         (&["--set", "l"][..], "--set l"),
         (&["--set", "m=-1"][..], "m"),
+        // Refused as in the file: 1/m of a subnormal mass overflows (it used to stop the run
+        // at step 0 with a body "not finite").
+        (&["--set", "m=1e-320"][..], "`bob` = 1e-320 (a subnormal number: 1/m overflows)"),
         (&["--at", "no/such/state.toml"][..], "cannot read"),
     ] {
         let mut all = vec!["simulate", "constraints/pendulum.toml", "--steps", "10"];

@@ -95,6 +95,9 @@ pub fn text(summary: &Summary, dim: usize) -> String {
     s += &format!("  max |C|   {:.3e}\n  max |Ċ|   {:.3e}\n", summary.max_abs_c, summary.max_abs_c_dot);
     match summary.energy_rel_drift {
         Some(e) => s += &format!("  energy balance  {e:.3e} of the energy scale (max kinetic energy or Σ|F|·size)\n"),
+        None if summary.samples.is_empty() => {
+            s += "  energy balance  not measured (the run stopped before its first state)\n"
+        }
         None => s += "  energy balance  not reported (a constraint depends on t and does work)\n",
     }
     if summary.unit_exponent != 0 {
