@@ -371,12 +371,6 @@ pub struct Simulation<'s> {
     /// solve along the start's J, and the next start's solve has the end rows' J.
     start_made: Option<FactorId>,
     end_made: Option<FactorId>,
-    /// Each end row's distance C/‖J‖ as SHAKE's last residual took it
-    /// (`stabilize::shake_positions`), and whether the end rows are still those SHAKE
-    /// left (no projection of contacts replaced them): the next start's drift check reads
-    /// them where the rows are carried with C and J unchanged.
-    distances: Vec<f64>,
-    shaken: bool,
     /// C/κ of the end rows, kept across the velocity step that overwrites it.
     values: Vec<f64>,
     /// Whether some constraint is an inequality (found once, not at every step).
@@ -417,8 +411,6 @@ impl<'s> Simulation<'s> {
             carried: false,
             start_made: None,
             end_made: None,
-            distances: Vec::new(),
-            shaken: false,
             values: Vec::new(),
             has_inequalities,
         })
@@ -534,15 +526,11 @@ impl<'s> Simulation<'s> {
             // they become the start's, and the start's buffers the end's for the step to come.
             // The end rows' mark goes with them while their J is kept.
             let end_made = self.end_made.take();
-            let shaken = std::mem::take(&mut self.shaken);
             self.start_made = None;
-            // SHAKE's distances of these rows, while their C and J are those it had.
-            let mut distances = None;
             if std::mem::take(&mut self.carried) {
                 std::mem::swap(&mut self.start, &mut self.end);
                 if self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)? {
                     self.start_made = end_made;
-                    distances = shaken.then_some(self.distances.as_slice());
                 }
             } else {
                 let rows = self.dynamics.rows(t, &self.q, &self.v)?;
@@ -550,7 +538,7 @@ impl<'s> Simulation<'s> {
                 self.dynamics.recycle(old);
             }
             let rows = &self.start;
-            let (c_max, c_dot_max) = self.drift(rows, distances, n, t, &reach)?;
+            let (c_max, c_dot_max) = self.drift(rows, n, t, &reach)?;
             summary.max_abs_c = summary.max_abs_c.max(c_max);
             summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
             let (energy_error, accel) = balance.record(rows, n, s.dt);
@@ -602,26 +590,14 @@ impl<'s> Simulation<'s> {
 
     /// |C| and |Ċ| of what should be zero at step `n` (in the caller's unit; an inequality
     /// counts only its violation and, near its surface, its closing rate); stops the run when
-    /// a value is not finite or a surface is out of reach. `distances`: each row's
-    /// [`distance`], where it is known already (SHAKE's, of these C and J).
-    fn drift(
-        &self,
-        rows: &Rows,
-        distances: Option<&[f64]>,
-        n: u64,
-        t: f64,
-        reach: &Reach,
-    ) -> Result<(f64, f64), SimError> {
+    /// a value is not finite or a surface is out of reach.
+    fn drift(&self, rows: &Rows, n: u64, t: f64, reach: &Reach) -> Result<(f64, f64), SimError> {
         let system = self.dynamics.system();
         let row_back = |q: usize, x: f64| self.unit.as_ref().map_or(x, |u| u.row_value(q, x));
         let length_back = |x: f64| self.unit.as_ref().map_or(x, |u| u.length(x));
         let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
-        let distances = distances.filter(|d| d.len() == rows.rows.len());
         for (k, row) in rows.rows.iter().enumerate() {
-            let d = match distances {
-                Some(d) => d[k],
-                None => distance(row),
-            };
+            let d = distance(row);
             if !(row.value.is_finite() && row.rate.is_finite()) {
                 let value = if row.value.is_finite() { row.rate } else { row.value };
                 let constraint = system.constraints[k].name.clone();
@@ -705,7 +681,6 @@ impl<'s> Simulation<'s> {
                 &mut self.start,
                 &mut self.end,
                 self.start_made,
-                &mut self.distances,
                 reach.length,
                 tolerance,
                 max_iterations,
@@ -714,7 +689,6 @@ impl<'s> Simulation<'s> {
                 let projected = self.project(t1, reach.length, tolerance, max_iterations)?;
                 self.replace_end(projected);
             }
-            self.shaken = !has_inequalities;
             copy_vectors(&mut self.half, &self.v);
             if self.three_d {
                 self.second_kick(t1, s.dt)?;

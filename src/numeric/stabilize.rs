@@ -287,10 +287,7 @@ pub fn project_positions(
 /// (`Dynamics::rows_after_positions_into`) into `end` (whatever it held: its buffers are
 /// reused). `made`: the mark of the factor the start's solve went through
 /// (`Dynamics::made`, `solve::FactorId`), so that the iterations' solves do not compare the
-/// start's J with it again. `distances` is left holding every end row's [`distance`] C/‖J‖,
-/// which the last iteration's residual took (the run's drift check at the next step reads
-/// them where the end rows' C and J are carried there unchanged). Returns the iterations
-/// taken.
+/// start's J with it again. Returns the iterations taken.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
@@ -301,7 +298,6 @@ pub fn shake_positions(
     start: &mut Rows,
     end: &mut Rows,
     made: Option<FactorId>,
-    distances: &mut Vec<f64>,
     length: f64,
     tolerance: f64,
     max_iterations: usize,
@@ -315,12 +311,9 @@ pub fn shake_positions(
         // C and J only (the iteration reads nothing else); the full rows once, at the end.
         dynamics.positions(t, q, v_half)?;
         let mut residual = 0.0f64;
-        let rows = dynamics.position_rows();
-        distances.resize(rows.len(), 0.0);
-        for (k, (row, s)) in rows.iter().zip(distances.iter_mut()).enumerate() {
-            *s = distance(row);
+        for (k, row) in dynamics.position_rows().iter().enumerate() {
             if !row.inequality || dynamics.is_held(k) {
-                residual = residual.max(s.abs());
+                residual = residual.max(distance(row).abs());
             }
         }
         // Stop when converged, out of iterations, or diverging (the step was too large for
