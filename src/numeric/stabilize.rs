@@ -307,6 +307,7 @@ pub fn shake_positions(
     let bound = tolerance * length;
     let mut iterations = 0;
     let mut previous = f64::INFINITY;
+    let mut zeroed = false;
     loop {
         // C and J only (the iteration reads nothing else); the full rows once, at the end.
         dynamics.positions(t, q, v_half)?;
@@ -347,7 +348,11 @@ pub fn shake_positions(
                 leave_out(old);
             }
         }
-        start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        // The forces once: nothing writes them between the iterations.
+        if !zeroed {
+            start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+            zeroed = true;
+        }
         // The start's J is kept (only C, Ċ, c and the forces are written above).
         let step = dynamics.correct_step(start, made);
         fold(start, step);
