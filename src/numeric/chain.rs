@@ -278,7 +278,10 @@ impl Chain {
             return None;
         }
         let mut from = k;
-        for (q, (row, bounds)) in rows.rows.iter().zip(self.start.windows(2)).enumerate() {
+        let mut each = rows.rows.iter().zip(self.start.windows(2)).enumerate();
+        // J bit for bit up to the first row that differs (a run's velocity projection: the
+        // first), the slots alone after it.
+        for (q, (row, bounds)) in each.by_ref() {
             let kept = &self.bits[bounds[0]..bounds[1]];
             if kept.len() != row.jacobian.len() {
                 return None;
@@ -291,8 +294,15 @@ impl Chain {
                 let j = j.map(f64::to_bits);
                 same &= ((bits[0] ^ j[0]) | (bits[1] ^ j[1]) | (bits[2] ^ j[2])) == 0;
             }
-            if !same && from == k {
+            if !same {
                 from = q;
+                break;
+            }
+        }
+        for (_, (row, bounds)) in each {
+            let kept = &self.bits[bounds[0]..bounds[1]];
+            if kept.len() != row.jacobian.len() || row.jacobian.iter().zip(kept).any(|((s, _), (slot, _))| slot != s) {
+                return None;
             }
         }
         let mut masses_same = true;
