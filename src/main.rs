@@ -212,8 +212,8 @@ struct SimulateArgs {
     /// Write t, state, λ, C, Ċ per recorded step to this CSV file.
     #[arg(long)]
     csv: Option<PathBuf>,
-    /// Write every k-th step to the CSV.
-    #[arg(long, default_value_t = 1)]
+    /// Write every k-th step to the CSV (and the last; k ≥ 1).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     every: u64,
     /// Write trajectory, |C| and energy error to this SVG file.
     #[arg(long)]
@@ -860,9 +860,9 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     } else {
         false
     };
-    let (summary, code) = match result {
-        Ok(s) if csv_failed => (s, ExitCode::from(1)),
-        Ok(s) => (s, ExitCode::SUCCESS),
+    let (summary, code, stopped) = match result {
+        Ok(s) if csv_failed => (s, ExitCode::from(1), None),
+        Ok(s) => (s, ExitCode::SUCCESS, None),
         // Refused before the first step: there is no summary to show.
         Err(failure) if failure.summary.integrator.is_empty() => {
             eprintln!("error: {}: {}", args.file.display(), failure.error);
@@ -870,10 +870,10 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         }
         Err(failure) => {
             errln!("error: {}: {}", args.file.display(), failure.error);
-            (failure.summary, ExitCode::from(2))
+            (failure.summary, ExitCode::from(2), Some(failure.error.to_string()))
         }
     };
-    if let Err(code) = show_simulation(args, &scenario, &summary) {
+    if let Err(code) = show_simulation(args, &scenario, &summary, stopped.as_deref()) {
         return code;
     }
     code
@@ -959,10 +959,11 @@ fn show_simulation(
     args: &SimulateArgs,
     scenario: &lagrange::scenario::Scenario,
     summary: &lagrange::numeric::simulate::Summary,
+    stopped: Option<&str>,
 ) -> Result<(), ExitCode> {
     let dim = scenario.system.dim();
     if args.format == SummaryArg::Json {
-        emit_json(&lagrange::report::simulation::json(summary, dim));
+        emit_json(&lagrange::report::simulation::json(summary, dim, stopped));
     } else {
         outln!("{}", lagrange::report::simulation::text(summary, dim));
     }

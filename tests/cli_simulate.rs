@@ -79,6 +79,8 @@ fn simulate_rejects_bad_settings_before_running() {
         (&["--omega-dt", "2"][..], "ω·dt (--omega-dt) must lie in (0, 1], found 2"),
         (&["--tolerance", "0", "--stabilize", "none"][..], "(--tolerance) must be finite and positive, found 0"),
         (&["--tolerance", "inf", "--solver", "pgs"][..], "(--tolerance) must be finite and positive, found inf"),
+        // Every 0th step was every step, silently.
+        (&["--every", "0", "--csv", "never-written.csv"][..], "invalid value '0' for '--every <EVERY>'"),
     ] {
         let mut all = vec!["simulate", "constraints/pendulum.toml", "--steps", "10"];
         all.extend_from_slice(args);
@@ -301,6 +303,9 @@ fn simulate_refuses_a_bad_set_or_at_before_running() {
         (&["--set", "nosuch=1"][..], "`nosuch` is not a symbol"),
         (&["--set", "l"][..], "--set l"),
         (&["--set", "m=-1"][..], "m"),
+        // Refused as in the file: 1/m of a subnormal mass overflows (it used to stop the run
+        // at step 0 with a body "not finite").
+        (&["--set", "m=1e-320"][..], "`bob` = 1e-320 (a subnormal number: 1/m overflows)"),
         (&["--at", "no/such/state.toml"][..], "cannot read"),
     ] {
         let mut all = vec!["simulate", "constraints/pendulum.toml", "--steps", "10"];
@@ -311,4 +316,35 @@ fn simulate_refuses_a_bad_set_or_at_before_running() {
         assert!(err.contains(says), "{args:?}: {err}");
         assert!(out.stdout.is_empty(), "{args:?}: ran anyway");
     }
+}
+
+/// A run that overflows at its first step (dt = 1e300): the error gives the time in
+/// scientific notation (not three hundred digits), the JSON summary says why the run
+/// stopped beside the final state's `null`, and the text writes that number as `inf` or
+/// `NaN` rather than `null`.
+#[test]
+fn a_run_stopped_by_an_overflow_says_why_its_final_state_is_not_finite() {
+    for solver in ["exact", "exact-velocity"] {
+        let args = ["simulate", "constraints/pendulum.toml", "--solver", solver, "--dt", "1e300", "--steps", "3"];
+        let out = lagrange(&[&args[..], &["--format", "json"]].concat());
+        assert_eq!(out.status.code(), Some(2), "{solver}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(stderr.contains("`rod`") && (stderr.contains("e299") || stderr.contains("e300")), "{stderr}");
+        assert!(!stderr.contains("000000000000"), "{stderr}");
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+        let stopped = json["stopped"].as_str().unwrap_or_default();
+        assert!(stopped.contains("`rod`") && stderr.contains(stopped), "{json}");
+        let finals: Vec<&serde_json::Value> = json["final"]["r"].as_array().into_iter().flatten().collect();
+        assert!(finals.iter().any(|x| x.is_null()), "the overflow is in the final state: {json}");
+
+        let text = lagrange(&args);
+        assert_eq!(text.status.code(), Some(2), "{solver}");
+        let stdout = String::from_utf8_lossy(&text.stdout);
+        let last = stdout.lines().find(|l| l.trim_start().starts_with("final:")).unwrap_or_default();
+        assert!(!last.contains("null") && (last.contains("inf") || last.contains("NaN")), "{stdout}");
+    }
+    // A run that ends well has no "stopped".
+    let out = lagrange(&["simulate", "constraints/pendulum.toml", "--steps", "3", "--format", "json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+    assert!(json.get("stopped").is_none(), "{json}");
 }

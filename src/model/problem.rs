@@ -253,10 +253,13 @@ pub fn shown(x: f64) -> String {
 
 /// The hint of a mass that is subnormal (shown in `e` notation, positive, tiny).
 fn subnormal(shown: &str) -> &'static str {
-    match shown.parse::<f64>() {
-        Ok(x) if x > 0.0 && !x.is_normal() => " (a subnormal number: 1/m overflows)",
-        _ => "",
-    }
+    shown.parse::<f64>().map_or("", subnormal_hint)
+}
+
+/// The hint of a mass or moment of inertia `x` that is positive but subnormal: its inverse
+/// overflows.
+pub fn subnormal_hint(x: f64) -> &'static str {
+    if x > 0.0 && !x.is_normal() { " (a subnormal number: 1/m overflows)" } else { "" }
 }
 
 /// Maps a byte range inside a string value to the file: exact when the string is written

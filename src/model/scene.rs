@@ -9,7 +9,7 @@
 //! Not here: the raw table (`model::raw`), checking a value against its symbol
 //! (`model::state`), reading files, the derivation, solving.
 
-use super::problem::{ForceError, Problem, locate};
+use super::problem::{ForceError, Problem, locate, shown, subnormal_hint};
 use super::raw::RawScene;
 use super::state::value;
 use super::system::{BuildError, System};
@@ -218,9 +218,13 @@ pub enum StateError {
     Missing(String),
     #[error("the force on body `{body}` is not finite ({value:?}) at this state")]
     NonFiniteForce { body: String, value: [f64; 3] },
-    #[error("a mass must be positive and finite: `{name}` = {value}")]
+    #[error("a mass must be positive and finite: `{name}` = {}{}", shown(*.value), subnormal_hint(*.value))]
     Mass { name: String, value: f64 },
-    #[error("a moment of inertia must be positive and finite: body `{name}` has {value}")]
+    #[error(
+        "a moment of inertia must be positive and finite: body `{name}` has {}{}",
+        shown(*.value),
+        if *.value > 0.0 && !.value.is_normal() { " (a subnormal number: 1/I overflows)" } else { "" }
+    )]
     Inertia { name: String, value: f64 },
     #[error("the force on body `{body}` cannot be evaluated: {error}")]
     Force { body: String, error: EvalError },
@@ -291,7 +295,7 @@ pub fn environment(
                 Value::Vector(v) if three => v.to_vec(),
                 _ => vec![f64::NAN],
             };
-            if let Some(&bad) = moments.iter().find(|x| !(x.is_finite() && **x > 0.0)) {
+            if let Some(&bad) = moments.iter().find(|x| !(x.is_normal() && **x > 0.0)) {
                 return Err(StateError::Inertia { name: body.name.clone(), value: bad });
             }
         }
@@ -302,7 +306,8 @@ pub fn environment(
     let masses = eval(&system.graph, &masses, &env).map_err(|EvalError::Missing(name)| StateError::Missing(name))?;
     for (body, m) in system.bodies.iter().zip(masses) {
         let m = m.scalar().unwrap_or(f64::NAN);
-        if !(m.is_finite() && m > 0.0) {
+        // A subnormal mass (1e-320) is refused as a file's is: 1/m overflows.
+        if !(m.is_normal() && m > 0.0) {
             return Err(StateError::Mass { name: body.name.clone(), value: m });
         }
     }

@@ -36,8 +36,8 @@
 use super::banded::{backward_step, forward_step, tridiagonal_factor_row, tridiagonal_mul_row};
 use super::rows::Rows;
 use super::solve::{
-    Answer, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force, b_of,
-    out_of_range, scale_row, zero_vectors,
+    Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force,
+    b_of, out_of_range, scale_row, zero_vectors,
 };
 use super::vector::dot;
 use std::cell::RefCell;
@@ -52,6 +52,10 @@ pub(crate) struct Chain {
     /// Whether the fields below hold the scaling and factor of `bits` and `mass_bits` under
     /// `rank_tolerance` and `method`.
     valid: bool,
+    /// How many factors have been begun: the mark of the one kept ([`FactorId`]), counted
+    /// up before every factor begun from a row that changed or on a new pattern (0, before
+    /// the first and after 2⁶⁴, marks nothing).
+    made: u64,
     rank_tolerance: u64,
     method: Method,
     /// Row k's entries are `start[k]..start[k + 1]` of `parts` and `bits`.
@@ -165,17 +169,26 @@ impl Chain {
         self.valid
     }
 
+    /// The mark of the kept factor ([`FactorId`]), `None` when none is kept.
+    pub(crate) fn made(&self) -> Option<FactorId> {
+        std::num::NonZeroU64::new(self.made).filter(|_| self.valid).map(FactorId)
+    }
+
     /// Solves `rows` (already [`servable`]) into `out` when they are a chain this path serves,
     /// reusing the kept scaling and factor up to the first row whose J changed; `None` (the
-    /// kept factor dropped, `out` untouched) otherwise. `answer` says what is written.
+    /// kept factor dropped, `out` untouched) otherwise. `answer` says what is written;
+    /// `known`, when it is the kept factor's mark, says the rows' J is the factor's bit for
+    /// bit (the caller's word: it has not changed since the solve that handed the mark out),
+    /// so only the masses and settings are compared.
     pub(crate) fn solve_into(
         &mut self,
         rows: &Rows,
         settings: &Settings,
         out: &mut Solution,
         answer: Answer,
+        known: Option<FactorId>,
     ) -> Option<SolvePath> {
-        self.solve_keeping(rows, settings, out, true, answer)
+        self.solve_keeping(rows, settings, out, true, answer, known)
     }
 
     /// [`solve_into`](Chain::solve_into) from scratch, keeping no factor (the bits of J and
@@ -183,7 +196,7 @@ impl Chain {
     /// next call's.
     fn solve_fresh(&mut self, rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<SolvePath> {
         self.valid = false;
-        self.solve_keeping(rows, settings, out, false, Answer::Solution)
+        self.solve_keeping(rows, settings, out, false, Answer::Solution, None)
     }
 
     /// [`solve_into`](Chain::solve_into), keeping the factor for the next call when `keep`.
@@ -196,13 +209,18 @@ impl Chain {
         out: &mut Solution,
         keep: bool,
         answer: Answer,
+        known: Option<FactorId>,
     ) -> Option<SolvePath> {
         let k = rows.rows.len();
         if !allowed(settings.method, k) {
             self.valid = false;
             return None;
         }
-        let from = match self.unchanged_rows(rows, settings) {
+        let from = match known {
+            Some(id) if self.is_made(id, rows, settings) => Some(k),
+            _ => self.unchanged_rows(rows, settings),
+        };
+        let from = match from {
             Some(from) => from,
             None => {
                 if !self.take_pattern(rows, keep) {
@@ -214,8 +232,12 @@ impl Chain {
                 0
             }
         };
-        // Invalid until the factor is whole again.
+        // Invalid until the factor is whole again, and another factor's from the first row
+        // that changed.
         self.valid = false;
+        if from < k {
+            self.made = self.made.wrapping_add(1);
+        }
         let zero_forces = answer == Answer::Step && all_zero(rows.force.as_flattened());
         if !self.factor_and_forward(rows, settings, from, keep, zero_forces) {
             return None;
@@ -233,6 +255,20 @@ impl Chain {
         Some(if from == k { SolvePath::Reused } else { SolvePath::Factored })
     }
 
+    /// Whether `id` marks the kept factor and the rows' masses and the settings are those it
+    /// was made from: with the caller's word that J is the factor's ([`FactorId`]), the rows
+    /// are the factor's bit for bit. The masses are compared by bits, without a branch each
+    /// (a motion evaluation fills them again even where J is kept).
+    fn is_made(&self, id: FactorId, rows: &Rows, settings: &Settings) -> bool {
+        self.valid
+            && id.0.get() == self.made
+            && self.start.len() == rows.rows.len() + 1
+            && self.rank_tolerance == settings.rank_tolerance.to_bits()
+            && self.method == settings.method
+            && self.mass_bits.len() == rows.inverse_mass.len()
+            && self.mass_bits.iter().zip(&rows.inverse_mass).fold(0, |d, (b, w)| d | (b ^ w.to_bits())) == 0
+    }
+
     /// The first row whose J differs from the kept one's bits (`k` when none does, 0 when a
     /// mass or the settings did), or `None` when no factor is kept or the rows act on other
     /// slots: a new pattern.
@@ -242,7 +278,10 @@ impl Chain {
             return None;
         }
         let mut from = k;
-        for (q, (row, bounds)) in rows.rows.iter().zip(self.start.windows(2)).enumerate() {
+        let mut each = rows.rows.iter().zip(self.start.windows(2)).enumerate();
+        // J bit for bit up to the first row that differs (a run's velocity projection: the
+        // first), the slots alone after it.
+        for (q, (row, bounds)) in each.by_ref() {
             let kept = &self.bits[bounds[0]..bounds[1]];
             if kept.len() != row.jacobian.len() {
                 return None;
@@ -255,8 +294,15 @@ impl Chain {
                 let j = j.map(f64::to_bits);
                 same &= ((bits[0] ^ j[0]) | (bits[1] ^ j[1]) | (bits[2] ^ j[2])) == 0;
             }
-            if !same && from == k {
+            if !same {
                 from = q;
+                break;
+            }
+        }
+        for (_, (row, bounds)) in each {
+            let kept = &self.bits[bounds[0]..bounds[1]];
+            if kept.len() != row.jacobian.len() || row.jacobian.iter().zip(kept).any(|((s, _), (slot, _))| slot != s) {
+                return None;
             }
         }
         let mut masses_same = true;

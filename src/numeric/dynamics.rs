@@ -35,31 +35,32 @@ use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
 use super::single::{SingleScaling, correction_single, solve_single_with};
-use super::solve::{
-    Answer, Diagnostic, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, correction_cached_into,
-    solve_cached_into,
-};
+use super::solve::{Answer, Diagnostic, FactorId, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
+use crate::model::problem::shown;
 use crate::model::system::System;
 use std::borrow::Cow;
 
 /// Why a simulation stopped.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SimError {
-    #[error("cannot evaluate the rows at t = {time}: {error}")]
+    #[error("cannot evaluate the rows at t = {t}: {error}", t = shown(*.time))]
     Eval { time: f64, error: EvalError },
-    #[error("step {step} (t = {time}): the state or force of body `{body}` is not finite")]
+    #[error("step {step} (t = {t}): the state or force of body `{body}` is not finite", t = shown(*.time))]
     NonFinite { step: u64, time: f64, body: String },
     #[error(
-        "step {step} (t = {time}): constraint `{constraint}` evaluates to {value} — its formula overflows or is undefined at this state (check the scene's scale and the singular points of C)"
+        "step {step} (t = {t}): constraint `{constraint}` evaluates to {value} — its formula overflows or is undefined at this state (check the scene's scale and the singular points of C)",
+        t = shown(*.time)
     )]
     NonFiniteRow { step: u64, time: f64, constraint: String, value: f64 },
     #[error(
-        "step {step} (t = {time}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt (and --stabilize projection if it is off)"
+        "step {step} (t = {t}): constraint `{constraint}` drifted to C = {value:.3e} (distance {distance:.3e}, bound {bound:.3e}); the run blew up — try a smaller --dt (and --stabilize projection if it is off)",
+        t = shown(*.time)
     )]
     Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
     #[error(
-        "step {step} (t = {time}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){remedy}"
+        "step {step} (t = {t}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){remedy}",
+        t = shown(*.time)
     )]
     Diverged {
         step: u64,
@@ -159,6 +160,10 @@ pub struct Dynamics<'s> {
     /// The factorisation shared by solves with the same J (`solve::SolveCache`): the step's
     /// acceleration solve, SHAKE's iterations, the velocity projection and the next start.
     solver: SolveCache,
+    /// The mark of the kept factor the last [`solve_known`](Dynamics::solve_known) or
+    /// [`correct_step`](Dynamics::correct_step) went through (`solve::FactorId`), `None` when
+    /// it went another way (the one-row solve, the general solve).
+    made: Option<FactorId>,
     /// The rows of the last [`positions`](Dynamics::positions), and whether all their
     /// numbers were finite.
     position_rows: Vec<Row>,
@@ -240,6 +245,7 @@ impl<'s> Dynamics<'s> {
             step: 0,
             held: Vec::new(),
             solver: SolveCache::default(),
+            made: None,
             position_rows: Vec::new(),
             positions_finite: false,
             orientations,
@@ -447,15 +453,16 @@ impl<'s> Dynamics<'s> {
 
     /// [`rows_moved`](Dynamics::rows_moved) in place: `rows` becomes the rows at (t, q, v)
     /// (what a run loop that keeps its rows in its own buffers calls: a `Rows` moved by
-    /// value through a `Result` is a copy of its header each time).
-    pub fn rows_moved_into(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows) -> Result<(), SimError> {
+    /// value through a `Result` is a copy of its header each time). Returns whether C and J
+    /// are `rows`' own, bit for bit (else every row was evaluated again, J too).
+    pub fn rows_moved_into(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows) -> Result<bool, SimError> {
         self.moved(t, q, v, rows, true)
     }
 
     /// [`rows_moved_into`](Dynamics::rows_moved_into); `checked`: C and J are known to be
     /// finite. In line, as [`positions`](Dynamics::positions), its checks apart.
     #[inline]
-    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows, checked: bool) -> Result<(), SimError> {
+    fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows, checked: bool) -> Result<bool, SimError> {
         self.refusal()?;
         self.evaluations += 1;
         self.set_state(q, v);
@@ -467,9 +474,10 @@ impl<'s> Dynamics<'s> {
         // they were filled), and all of them again only to name what is not finite.
         let finite = self.scratch.finite();
         if kept && checked && finite {
-            return Ok(());
+            return Ok(true);
         }
-        self.check_moved(rows, t, kept, finite)
+        self.check_moved(rows, t, kept, finite)?;
+        Ok(kept)
     }
 
     /// [`moved`](Dynamics::moved)'s check of rows whose C and J were kept unchecked (`kept`:
@@ -501,7 +509,8 @@ impl<'s> Dynamics<'s> {
         // `positions` reports a C or J that is not finite through a full evaluation, which
         // may round differently and pass: then they are checked again, as `rows` would.
         let finite = std::mem::replace(&mut self.positions_finite, false);
-        self.moved(t, q, v, rows, finite)
+        self.moved(t, q, v, rows, finite)?;
+        Ok(())
     }
 
     /// `rows` at time `t`, or the error that names the first number that is not finite
@@ -547,6 +556,14 @@ impl<'s> Dynamics<'s> {
     /// touching whatever their distance (`solve::solve_holding`): the solve at the start of
     /// a step, which decides what stays held ([`Dynamics::hold`]).
     pub fn solve(&mut self, rows: &mut Rows) -> &Solution {
+        self.solve_known(rows, None)
+    }
+
+    /// [`solve`](Dynamics::solve) of rows whose J has not changed since the solve that gave
+    /// [`made`](Dynamics::made) = `known` (a run's next start, whose J is the velocity
+    /// projection's): the kept factor serves them without comparing J again
+    /// (`solve::FactorId`).
+    pub fn solve_known(&mut self, rows: &mut Rows, known: Option<FactorId>) -> &Solution {
         if let Some(BaumgarteTerms { two_alpha, beta_squared }) = self.baumgarte {
             for (k, row) in rows.rows.iter_mut().enumerate() {
                 // A closing contact that is not held is the impulse's (Ċ⁺ = −eĊ at the step's
@@ -561,14 +578,24 @@ impl<'s> Dynamics<'s> {
             }
         }
         let solution = &mut self.solution;
+        self.made = None;
         // One row on one body: the same numbers in closed form (`numeric::single`).
         if !solve_single_with(rows, &Settings::default(), &mut self.single, solution) {
-            solve_cached_into(rows, &Settings::default(), &self.held, &mut self.solver, solution);
+            let held = &self.held;
+            cached_into(rows, &Settings::default(), held, &mut self.solver, solution, Answer::Solution, known);
+            self.made = self.solver.made();
             if self.refused.is_none() {
                 self.refused = refused_rows(solution).map(|rows| (self.step, rows));
             }
         }
         &self.solution
+    }
+
+    /// The mark of the kept factor the last [`solve_known`](Dynamics::solve_known) or
+    /// [`correct_step`](Dynamics::correct_step) went through, for a later solve of rows
+    /// with the same J (`solve::FactorId`); `None` when it went another way.
+    pub fn made(&self) -> Option<FactorId> {
+        self.made
     }
 
     /// The answer of the last [`solve`](Dynamics::solve) (empty before the first).
@@ -581,27 +608,24 @@ impl<'s> Dynamics<'s> {
     /// buffer the dynamics keep (the caller may change it: it is scratch until the next
     /// correction).
     pub fn correct(&mut self, rows: &Rows) -> &mut Solution {
-        self.correct_answering(rows, Answer::Solution)
+        self.correct_answering(rows, Answer::Solution, None)
     }
 
     /// [`correct`](Dynamics::correct)'s step alone, M⁻¹Jᵀμ (the solution's accelerations,
     /// the same numbers), for a caller that reads nothing else (SHAKE, the projections, the
-    /// velocity step): a chain's solve then computes no λ (`solve::Answer::Step`).
-    pub fn correct_step(&mut self, rows: &Rows) -> &mut Vectors {
-        &mut self.correct_answering(rows, Answer::Step).acceleration
+    /// velocity step): a chain's solve then computes no λ (`solve::Answer::Step`). `known`
+    /// as in [`solve_known`](Dynamics::solve_known): SHAKE's iterations along the start's J.
+    pub fn correct_step(&mut self, rows: &Rows, known: Option<FactorId>) -> &mut Vectors {
+        &mut self.correct_answering(rows, Answer::Step, known).acceleration
     }
 
     /// [`correct`](Dynamics::correct) writing what `answer` asks.
-    fn correct_answering(&mut self, rows: &Rows, answer: Answer) -> &mut Solution {
+    fn correct_answering(&mut self, rows: &Rows, answer: Answer, known: Option<FactorId>) -> &mut Solution {
+        self.made = None;
         if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut self.correction) {
-            match answer {
-                Answer::Solution => {
-                    solve_cached_into(rows, &Settings::default(), &[], &mut self.solver, &mut self.correction)
-                }
-                Answer::Step => {
-                    correction_cached_into(rows, &Settings::default(), &mut self.solver, &mut self.correction)
-                }
-            }
+            let out = &mut self.correction;
+            cached_into(rows, &Settings::default(), &[], &mut self.solver, out, answer, known);
+            self.made = self.solver.made();
             if self.refused.is_none() {
                 self.refused = refused_rows(&self.correction).map(|rows| (self.step, rows));
             }

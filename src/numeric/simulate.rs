@@ -22,7 +22,7 @@ use super::integrate::{Integrator, Stepper, Vectors, add_scaled};
 use super::rescale::{Shown, Unit};
 use super::rotation::{fold, kick};
 use super::rows::Rows;
-use super::solve::CONTACT_TOLERANCE;
+use super::solve::{CONTACT_TOLERANCE, FactorId};
 use super::stabilize::{
     Inequalities, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
 };
@@ -366,6 +366,11 @@ pub struct Simulation<'s> {
     /// Whether `end` serves the next step's start, which then evaluates only what the
     /// velocities change (`Dynamics::rows_moved_into`); else every row is evaluated.
     carried: bool,
+    /// The marks of the kept factors the last solves of `start` and `end` went through
+    /// (`Dynamics::made`, `solve::FactorId`), while their J is unchanged: SHAKE's iterations
+    /// solve along the start's J, and the next start's solve has the end rows' J.
+    start_made: Option<FactorId>,
+    end_made: Option<FactorId>,
     /// C/κ of the end rows, kept across the velocity step that overwrites it.
     values: Vec<f64>,
     /// Whether some constraint is an inequality (found once, not at every step).
@@ -404,6 +409,8 @@ impl<'s> Simulation<'s> {
             start: Rows::default(),
             end: Rows::default(),
             carried: false,
+            start_made: None,
+            end_made: None,
             values: Vec::new(),
             has_inequalities,
         })
@@ -517,9 +524,14 @@ impl<'s> Simulation<'s> {
             }
             // C and J at these positions came with the last step's end rows, if it kept them:
             // they become the start's, and the start's buffers the end's for the step to come.
+            // The end rows' mark goes with them while their J is kept.
+            let end_made = self.end_made.take();
+            self.start_made = None;
             if std::mem::take(&mut self.carried) {
                 std::mem::swap(&mut self.start, &mut self.end);
-                self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)?;
+                if self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)? {
+                    self.start_made = end_made;
+                }
             } else {
                 let rows = self.dynamics.rows(t, &self.q, &self.v)?;
                 let old = std::mem::replace(&mut self.start, rows);
@@ -547,7 +559,8 @@ impl<'s> Simulation<'s> {
                 let scale = balance.max_kinetic.max(balance.work_scale);
                 if scale > 0.0 { balance.max_error / scale } else { energy_back(balance.max_error) }
             });
-            self.dynamics.solve(&mut self.start);
+            self.dynamics.solve_known(&mut self.start, self.start_made);
+            self.start_made = self.dynamics.made();
             // The active set for the step to come: contacts that push are held (without
             // inequalities nothing is, and the set stays empty).
             if self.has_inequalities {
@@ -643,8 +656,10 @@ impl<'s> Simulation<'s> {
         let s = self.settings;
         let has_inequalities = self.has_inequalities;
         let (t, t1) = (self.t0 + n as f64 * s.dt, self.t0 + (n + 1) as f64 * s.dt);
+        // The end rows' mark, when the velocity step solved them through a kept factor.
         let velocity_step = |dynamics: &mut Dynamics<'_>, end: &mut Rows, v: &mut Vectors, equalities: bool| {
-            velocity_step(end, v, equalities, reach.touch, s.restitution, reach.bounce_speed, dynamics);
+            let applied = velocity_step(end, v, equalities, reach.touch, s.restitution, reach.bounce_speed, dynamics);
+            if applied { dynamics.made() } else { None }
         };
         // The velocity step spends the end rows' C, Ċ and c but keeps J, and the positions
         // stay where the rows were evaluated: with C put back they serve the next start
@@ -665,6 +680,7 @@ impl<'s> Simulation<'s> {
                 &mut self.v,
                 &mut self.start,
                 &mut self.end,
+                self.start_made,
                 reach.length,
                 tolerance,
                 max_iterations,
@@ -689,7 +705,7 @@ impl<'s> Simulation<'s> {
             }
             update_rates(&mut self.end, &self.half, &self.v);
             self.save_values();
-            velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
+            self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
             self.carry(keep);
             return self.check_finite(n + 1, t1);
         }
@@ -707,14 +723,14 @@ impl<'s> Simulation<'s> {
                 let projected = self.project(t1, reach.length, tolerance, max_iterations)?;
                 self.replace_end(projected);
                 self.save_values();
-                velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
+                self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
                 self.carry(keep);
             }
             _ if has_inequalities => {
                 let rows = self.dynamics.rows(t1, &self.q, &self.v)?;
                 self.replace_end(rows);
                 self.save_values();
-                velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, false);
+                self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, false);
                 self.carry(keep);
             }
             _ => {}

@@ -924,7 +924,23 @@ pub struct SolveCache {
     body_work: BodySpaceWork,
     /// The factor of rows that form a chain in their order (`numeric::chain`), tried first.
     chain: super::chain::Chain,
+    /// The kept chain factor the last solve went through, when it went through one
+    /// ([`SolveCache::made`]).
+    made: Option<FactorId>,
 }
+
+/// The mark of one factor a [`SolveCache`] made (of rows that form a chain, `numeric::chain`):
+/// a solve through the cache hands it out ([`SolveCache::made`]) when its rows were served
+/// by the kept chain factor, and a later solve of rows whose J is still bit for bit those
+/// rows' may pass it back, so that the factor's J is not compared with theirs again (the
+/// masses and settings still are). The cache marks every factor it begins anew, so a mark
+/// whose factor has since been replaced (another J, another pattern, a failed solve) no
+/// longer matches and the solve compares J as it would without one. The caller's word is
+/// only that J did not change since the solve that handed the mark out: rows evaluated
+/// again (even at the same state) do not keep a mark. A mark is of one cache. (Not zero,
+/// so that an `Option` of one is a word: the run loop passes them at every step.)
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FactorId(pub(crate) std::num::NonZeroU64);
 
 /// How a solve's rows compare with a cached entry's ([`Factored::compare_taking`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1220,6 +1236,12 @@ impl SolveCache {
         self.path
     }
 
+    /// The mark of the kept chain factor the last solve went through ([`FactorId`]); `None`
+    /// when it went another way or the factor was not kept.
+    pub fn made(&self) -> Option<FactorId> {
+        self.made
+    }
+
     /// The factorisation kept, `None` when none is (nothing solved, or the last solve was
     /// not a case the cache serves).
     pub fn factorisation(&self) -> Option<Factorisation> {
@@ -1247,7 +1269,7 @@ pub fn solve_cached(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut
 /// [`solve_cached`] into `out`, reusing its buffers: a run's solves allocate nothing once
 /// warm.
 pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache: &mut SolveCache, out: &mut Solution) {
-    cached_into(rows, settings, held, cache, out, Answer::Solution);
+    cached_into(rows, settings, held, cache, out, Answer::Solution, None);
 }
 
 /// What a solve through the cache writes into its [`Solution`].
@@ -1264,29 +1286,29 @@ pub(crate) enum Answer {
     Step,
 }
 
-/// [`solve_cached_into`] with no contact held, writing what `answer` asks: the correction
-/// solves of a run (`Dynamics::correct_step`).
-pub(crate) fn correction_cached_into(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: &mut Solution) {
-    cached_into(rows, settings, &[], cache, out, Answer::Step);
-}
-
-/// [`solve_cached_into`]'s body, the chain path writing what `answer` asks.
-fn cached_into(
+/// [`solve_cached_into`]'s body, the chain path writing what `answer` asks: `known`, the
+/// mark of the factor a solve of rows with this J went through ([`FactorId`]), spares the
+/// chain's comparison of J while that factor is the one kept. The run's solves
+/// (`Dynamics::solve_known`, `Dynamics::correct_step`).
+pub(crate) fn cached_into(
     rows: &Rows,
     settings: &Settings,
     held: &[bool],
     cache: &mut SolveCache,
     out: &mut Solution,
     answer: Answer,
+    known: Option<FactorId>,
 ) {
+    cache.made = None;
     if !super::chain::servable(rows) {
         cache.path = SolvePath::General;
         *out = solve_holding(rows, settings, held);
         return;
     }
     // A chain in its order: the tridiagonal in place (`numeric::chain`), the same numbers.
-    if let Some(path) = cache.chain.solve_into(rows, settings, out, answer) {
+    if let Some(path) = cache.chain.solve_into(rows, settings, out, answer, known) {
         cache.path = path;
+        cache.made = cache.chain.made();
         return;
     }
     let likeness = cache.entry.as_mut().map_or(Likeness::Different, |c| c.compare_taking(rows, settings));
@@ -2366,6 +2388,48 @@ mod tests {
                 prop_assert_eq!(cached.status, general.status);
                 if general.diagnostics.is_empty() {
                     prop_assert_ne!(cache.last_path(), SolvePath::General);
+                }
+            }
+        }
+    }
+
+    proptest! {
+        /// A mark of a factor ([`FactorId`]) serves only while that factor is kept: along a
+        /// run, each state's rows solved with the mark the state before had — its factor
+        /// since replaced by the next state's — give the general answer bit for bit; solved
+        /// again with the mark their own solve handed out they are `Reused` (J not compared)
+        /// with the same answer; and with one mass changed under that mark they are factored
+        /// again, the general answer of those masses.
+        #[test]
+        fn a_mark_serves_only_its_factor_and_masses(run in runs()) {
+            let settings = Settings::default();
+            let mut cache = SolveCache::default();
+            let bits3 = |x: &[[f64; 3]]| x.iter().flat_map(|v| v.map(f64::to_bits)).collect::<Vec<_>>();
+            let mut out = Solution::default();
+            let mut solve = |rows: &Rows, cache: &mut SolveCache, mark| {
+                cached_into(rows, &settings, &[], cache, &mut out, Answer::Solution, mark);
+                (bits3(&out.acceleration), out.lambda.iter().map(|x| x.to_bits()).collect::<Vec<_>>())
+            };
+            let general = |rows: &Rows| {
+                let g = solve_holding(rows, &settings, &[]);
+                (bits3(&g.acceleration), g.lambda.iter().map(|x| x.to_bits()).collect::<Vec<_>>())
+            };
+            for pair in run.windows(2) {
+                let (before, rows) = (&pair[0], &pair[1]);
+                solve(before, &mut cache, None);
+                let stale = cache.made();
+                solve(rows, &mut cache, None);
+                prop_assert_eq!(solve(before, &mut cache, stale), general(before));
+                let own = cache.made();
+                prop_assert_eq!(solve(before, &mut cache, own), general(before));
+                if own.is_some() {
+                    prop_assert_eq!(cache.last_path(), SolvePath::Reused);
+                }
+                let mut heavier = before.clone();
+                heavier.inverse_mass[0] *= 0.5;
+                prop_assert_eq!(solve(&heavier, &mut cache, own), general(&heavier));
+                if own.is_some() && cache.made().is_some() {
+                    prop_assert_eq!(cache.last_path(), SolvePath::Factored);
                 }
             }
         }

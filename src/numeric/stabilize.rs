@@ -40,7 +40,7 @@ use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
-use super::solve::{positive_finite, solve};
+use super::solve::{FactorId, positive_finite, solve};
 use super::vector::row_norm;
 
 /// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
@@ -176,7 +176,7 @@ fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dyna
     rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
     let mut owned;
     let step = match dynamics {
-        Some(dynamics) => dynamics.correct_step(rows),
+        Some(dynamics) => dynamics.correct_step(rows, None),
         None => {
             owned = solve(rows).acceleration;
             &mut owned
@@ -285,7 +285,9 @@ pub fn project_positions(
 /// J, so the run's solve cache serves it with the start's factor; at the final positions
 /// the rows are completed from the last iteration's C and J
 /// (`Dynamics::rows_after_positions_into`) into `end` (whatever it held: its buffers are
-/// reused). Returns the iterations taken.
+/// reused). `made`: the mark of the factor the start's solve went through
+/// (`Dynamics::made`, `solve::FactorId`), so that the iterations' solves do not compare the
+/// start's J with it again. Returns the iterations taken.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
@@ -295,14 +297,17 @@ pub fn shake_positions(
     v_half: &mut Vectors,
     start: &mut Rows,
     end: &mut Rows,
+    made: Option<FactorId>,
     length: f64,
     tolerance: f64,
     max_iterations: usize,
 ) -> Result<usize, SimError> {
+    let mut made = made;
     let system = dynamics.system();
     let bound = tolerance * length;
     let mut iterations = 0;
     let mut previous = f64::INFINITY;
+    let mut zeroed = false;
     loop {
         // C and J only (the iteration reads nothing else); the full rows once, at the end.
         dynamics.positions(t, q, v_half)?;
@@ -343,10 +348,16 @@ pub fn shake_positions(
                 leave_out(old);
             }
         }
-        start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-        let step = dynamics.correct_step(start);
+        // The forces once: nothing writes them between the iterations.
+        if !zeroed {
+            start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+            zeroed = true;
+        }
+        // The start's J is kept (only C, Ċ, c and the forces are written above).
+        let step = dynamics.correct_step(start, made);
         fold(start, step);
         shake_update(q, v_half, step, dt);
+        made = dynamics.made();
         iterations += 1;
     }
 }
@@ -443,7 +454,7 @@ pub fn project_positions_along(
 /// q += M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −c for the rows `along` (c set), through the run's cache.
 fn step_along(dynamics: &mut Dynamics<'_>, q: &mut Vectors, along: &mut Rows) {
     along.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-    let step = dynamics.correct_step(along);
+    let step = dynamics.correct_step(along, None);
     fold(along, step);
     for (x, dx) in q.iter_mut().zip(step.iter()) {
         for d in 0..3 {

@@ -13,13 +13,27 @@ fn value_json(v: &Value, dim: usize) -> Json {
     }
 }
 
-/// `{"steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "unit_exponent", "final": {symbol: value}}`.
-pub fn json(summary: &Summary, dim: usize) -> Json {
+/// A value as in the JSON (`[1.0,0.0]`), but a non-finite number as Rust writes it (`inf`,
+/// `NaN`) where JSON has `null`: a stopped run's last state shows what went wrong.
+fn value_text(v: &Value, dim: usize) -> String {
+    let number = |x: &f64| if x.is_finite() { json!(x).to_string() } else { x.to_string() };
+    match v {
+        Value::Scalar(x) => number(x),
+        Value::Vector(xs) => format!("[{}]", xs[..dim].iter().map(number).collect::<Vec<_>>().join(",")),
+        Value::Quaternion(q) => format!("[{}]", q.iter().map(number).collect::<Vec<_>>().join(",")),
+    }
+}
+
+/// `{"steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "unit_exponent", "final": {symbol: value}}`,
+/// and `"stopped"`: why, when the run stopped before its last step (`stopped`). The final
+/// state is where the run stopped, so a number in it may be non-finite: JSON writes it as
+/// `null`, and `"stopped"` says which body or constraint went so.
+pub fn json(summary: &Summary, dim: usize, stopped: Option<&str>) -> Json {
     let mut last = Map::new();
     for (name, v) in &summary.final_state {
         last.insert(name.clone(), value_json(v, dim));
     }
-    json!({
+    let mut out = json!({
         "integrator": summary.integrator,
         "stabilize": stabilization(summary),
         "dt": summary.dt,
@@ -32,7 +46,11 @@ pub fn json(summary: &Summary, dim: usize) -> Json {
         "evaluations": summary.evaluations,
         "unit_exponent": summary.unit_exponent,
         "final": last,
-    })
+    });
+    if let (Some(why), Some(fields)) = (stopped, out.as_object_mut()) {
+        fields.insert("stopped".into(), json!(why));
+    }
+    out
 }
 
 /// How the run held its constraints: the stabilisation's name, or a velocity-level solver's
@@ -77,6 +95,9 @@ pub fn text(summary: &Summary, dim: usize) -> String {
     s += &format!("  max |C|   {:.3e}\n  max |Ċ|   {:.3e}\n", summary.max_abs_c, summary.max_abs_c_dot);
     match summary.energy_rel_drift {
         Some(e) => s += &format!("  energy balance  {e:.3e} of the energy scale (max kinetic energy or Σ|F|·size)\n"),
+        None if summary.samples.is_empty() => {
+            s += "  energy balance  not measured (the run stopped before its first state)\n"
+        }
         None => s += "  energy balance  not reported (a constraint depends on t and does work)\n",
     }
     if summary.unit_exponent != 0 {
@@ -91,7 +112,7 @@ pub fn text(summary: &Summary, dim: usize) -> String {
         summary.wall_seconds, per_second, summary.evaluations
     );
     for (name, v) in summary.final_state.iter().take(FINAL_SHOWN) {
-        s += &format!(" {name} = {}", value_json(v, dim));
+        s += &format!(" {name} = {}", value_text(v, dim));
     }
     if let Some(more) = summary.final_state.len().checked_sub(FINAL_SHOWN).filter(|&n| n > 0) {
         s += &format!(" … and {more} more (all of them: --format json or --csv)");

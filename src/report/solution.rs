@@ -387,7 +387,7 @@ pub fn text(system: &System, derivation: &Derivation, rows: &Rows, solution: &So
     let dim = system.dim();
     let mut out = String::new();
     let title = if system.title.is_empty() { "lagrange solve" } else { system.title.as_str() };
-    let _ = writeln!(out, "{title} at t = {t}  (status: {})", solution.status.name());
+    let _ = writeln!(out, "{title} at t = {}  (status: {})", crate::model::problem::shown(t), solution.status.name());
     let _ = writeln!(out, "values, rates and λ refer to C/κ (κ: the constant taken out of ∇C, as in `derive`)\n");
     let width = system.constraints.iter().map(|c| c.name.chars().count()).max().unwrap_or(0).max(10);
     let _ = writeln!(

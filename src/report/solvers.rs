@@ -49,6 +49,8 @@ pub fn json(bench: &SolverBench) -> Json {
         "stable_hertz_not_computed": bench.not_analysed.map(|why| match why {
             NotAnalysed::TooLarge => "too large",
             NotAnalysed::Rigid3d => "3D rigid bodies",
+            NotAnalysed::Moving => "moving",
+            NotAnalysed::Contacts => "inequality rows",
         }),
     })
 }
@@ -68,11 +70,14 @@ fn label(e: &Entry) -> String {
     }
 }
 
-/// JSON's word for a limit: `"hertz"` (the number beside it), `"out of range"` or `"undefined"`.
+/// JSON's word for a limit: `"hertz"` (the number beside it), or why there is none.
 fn limit_kind(x: Limit) -> &'static str {
     match x {
         Limit::Hertz(_) => "hertz",
-        Limit::OutOfRange => "out of range",
+        Limit::UnstableAtAll => "unstable at any",
+        Limit::StableThroughout => "stable throughout",
+        Limit::Moving => "moving",
+        Limit::Contacts => "inequality rows",
         Limit::NoRadius => "no radius",
         Limit::Rigid3d => "3D rigid bodies",
     }
@@ -82,7 +87,10 @@ fn limit_kind(x: Limit) -> &'static str {
 fn stable(x: Limit) -> String {
     match x {
         Limit::Hertz(x) => format!("{x:.3} Hz"),
-        Limit::OutOfRange => format!("stable up to {MAX_HERTZ:e} Hz (or unstable at any)"),
+        Limit::UnstableAtAll => "unstable already at 1e-3 Hz".to_string(),
+        Limit::StableThroughout => format!("stable up to {MAX_HERTZ:e} Hz and beyond"),
+        Limit::Moving => "not analysed (the state is not at rest in equilibrium)".to_string(),
+        Limit::Contacts => "not analysed (inequality rows)".to_string(),
         Limit::NoRadius => {
             "not computed (the eigenvalue iteration did not converge, or the step is not finite there)".to_string()
         }
@@ -125,6 +133,12 @@ pub fn text(bench: &SolverBench) -> String {
             }
             NotAnalysed::Rigid3d => {
                 "largest stable hertz: not computed (3D rigid bodies: the linearised step's spectral radius does not decide their stability)\n"
+            }
+            NotAnalysed::Contacts => {
+                "largest stable hertz: not computed (inequality rows: at rest a contact touches, where the clamp P ≥ 0 makes the step not differentiable)\n"
+            }
+            NotAnalysed::Moving => {
+                "largest stable hertz: not computed (the initial state is not at rest in equilibrium: the linearised step there also grows with the motion itself, so its spectral radius does not single out the solver's stability)\n"
             }
         };
     } else {

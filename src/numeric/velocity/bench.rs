@@ -15,7 +15,9 @@
 //! Not here: text, JSON, CSV and SVG (`report::solvers`).
 
 use super::run::run;
-use super::stability::{Limit, has_rigid_3d, largest_stable_hertz, state_len};
+use super::stability::{
+    Limit, at_rest_in_equilibrium, has_inequalities, has_rigid_3d, largest_stable_hertz, state_len,
+};
 use super::{Settings, Solver};
 use crate::expr::eval::Env;
 use crate::model::system::System;
@@ -115,6 +117,10 @@ pub enum NotAnalysed {
     TooLarge,
     /// The scene has 3D rigid bodies ([`Limit::Rigid3d`]).
     Rigid3d,
+    /// The initial state is not at rest in equilibrium ([`Limit::Moving`]).
+    Moving,
+    /// The scene has inequality rows ([`Limit::Contacts`]).
+    Contacts,
 }
 
 /// Runs `settings`, recording λ over the second half; returns the entry and the final positions.
@@ -215,15 +221,19 @@ pub fn solver_bench(scene: Scene<'_>, plan: &Plan) -> Result<SolverBench, SimErr
     }
     let mut stable_hertz = Vec::new();
     let probe = settings_for(Solver::SoftStep, 1, 60.0);
+    let mut dynamics = Dynamics::new(scene.system, scene.program.clone(), scene.env.clone());
     let not_analysed = if has_rigid_3d(scene.system) {
         Some(NotAnalysed::Rigid3d)
     } else if state_len(scene.system, &probe) > plan.stability_max_state {
         Some(NotAnalysed::TooLarge)
+    } else if has_inequalities(scene.system) {
+        Some(NotAnalysed::Contacts)
+    } else if !at_rest_in_equilibrium(&mut dynamics, t0, &q0, &v0).unwrap_or(false) {
+        Some(NotAnalysed::Moving)
     } else {
         None
     };
     if not_analysed.is_none() {
-        let mut dynamics = Dynamics::new(scene.system, scene.program.clone(), scene.env.clone());
         for &substeps in &plan.substeps {
             let mut limit = |relax: bool| {
                 let s = Settings { relax, ..settings_for(Solver::SoftStep, substeps, 60.0) };

@@ -33,6 +33,17 @@
 //! gives 13.565 Hz without relax and 20.943 Hz with it; he found 13.5 and 20.5 by running
 //! the simulation, which overstates both (slow growth looks stable for 10⁴ steps).
 //!
+//! Only at a state of rest in equilibrium ([`at_rest_in_equilibrium`]): there the step's
+//! linearisation is the solver's own stability (Lyapunov's first method at a fixed point),
+//! and a stable stiffness keeps ρ ≤ 1. At a state in motion ρ also carries the growth of
+//! the motion itself — nearby trajectories of a pendulum released from the horizontal part
+//! by 10⁻⁷–10⁻⁴ a step, whatever the stiffness —, so a bound found there would be a number
+//! about the motion, not about the solver (it gave the pendulum "0.007 Hz" while every run
+//! at 60 Hz holds): [`Limit::Moving`] says so instead. Nor with inequality rows
+//! ([`Limit::Contacts`]): at rest a contact touches, where the clamp P ≥ 0 makes the step
+//! not differentiable, and the central differences straddle it (ρ came out 19 on the stack
+//! of three discs at every stiffness).
+//!
 //! Not here: the steps themselves (one file per solver), reports.
 
 use super::{Settings, Solver, Stepper};
@@ -40,6 +51,7 @@ use crate::model::system::System;
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::rotation::{between_orientations, turned};
 use crate::numeric::rows::{angular_bodies, angular_width};
+use crate::numeric::vector::safe_norm;
 use nalgebra::DMatrix;
 
 /// Spectral radii up to 1 + this count as stable (round-off of a neutral mode).
@@ -64,6 +76,11 @@ fn slot_components(system: &System) -> Vec<usize> {
 /// Whether `system` has a 3D rigid body (whose stability is not analysed, [`Limit::Rigid3d`]).
 pub fn has_rigid_3d(system: &System) -> bool {
     angular_width(system) == 3 && angular_bodies(system).next().is_some()
+}
+
+/// Whether `system` has an inequality row (a contact, a rope).
+pub fn has_inequalities(system: &System) -> bool {
+    system.constraints.iter().any(|c| c.inequality)
 }
 
 /// The length of the state vector x = (q, v[, P]) of `system`.
@@ -188,9 +205,14 @@ pub fn radius_at(
 pub enum Limit {
     /// Stable up to this stiffness (Hz, to 1e-6 relative), unstable just above it.
     Hertz(f64),
-    /// No limit between 10⁻³ Hz and [`MAX_HERTZ`]: unstable already at the lowest stiffness,
-    /// or still stable at the highest.
-    OutOfRange,
+    /// Unstable already at the softest stiffness searched, 10⁻³ Hz.
+    UnstableAtAll,
+    /// Still stable at [`MAX_HERTZ`].
+    StableThroughout,
+    /// The state is not at rest in equilibrium ([`at_rest_in_equilibrium`]): not analysed.
+    Moving,
+    /// The scene has inequality rows: not analysed (the module's note says why).
+    Contacts,
     /// At some stiffness of the search the radius could not be computed
     /// ([`spectral_radius`]: a step that is not finite, or a Schur iteration that did not
     /// converge within its bound, as on `constraints/solvers/hanging_chain.toml`'s 500
@@ -205,9 +227,39 @@ impl Limit {
     pub fn hertz(self) -> Option<f64> {
         match self {
             Limit::Hertz(h) => Some(h),
-            Limit::OutOfRange | Limit::NoRadius | Limit::Rigid3d => None,
+            Limit::UnstableAtAll
+            | Limit::StableThroughout
+            | Limit::Moving
+            | Limit::Contacts
+            | Limit::NoRadius
+            | Limit::Rigid3d => None,
         }
     }
+}
+
+/// Accelerations up to this fraction of the largest free acceleration |M⁻¹F| count as
+/// equilibrium: the exact solve balances the forces to round-off, some 10⁻¹⁵ of them.
+pub const EQUILIBRIUM_TOLERANCE: f64 = 1e-9;
+
+/// Whether (t, q, v) is at rest in equilibrium: every velocity zero, and the exact
+/// acceleration-level solve's accelerations within [`EQUILIBRIUM_TOLERANCE`] of the largest
+/// free acceleration |M⁻¹F| (zero where no force acts). Catto's two particles hanging in
+/// their line are; a pendulum released from the horizontal is not.
+pub fn at_rest_in_equilibrium(
+    dynamics: &mut Dynamics<'_>,
+    t: f64,
+    q: &[[f64; 3]],
+    v: &[[f64; 3]],
+) -> Result<bool, SimError> {
+    if v.iter().flatten().any(|&x| x != 0.0) {
+        return Ok(false);
+    }
+    let mut rows = dynamics.rows(t, q, v)?;
+    let free = rows.force.iter().zip(&rows.inverse_mass).map(|(f, w)| safe_norm(f) * w).fold(0.0, f64::max);
+    let largest = dynamics.solve(&mut rows).acceleration.iter().map(safe_norm).fold(0.0, f64::max);
+    dynamics.recycle(rows);
+    // A NaN (a failed solve) is no equilibrium.
+    Ok(largest <= EQUILIBRIUM_TOLERANCE * free)
 }
 
 /// Stiffnesses searched up to this (Hz): far beyond any substep rate an engine runs.
@@ -225,6 +277,12 @@ pub fn largest_stable_hertz(
     if has_rigid_3d(dynamics.system()) {
         return Ok(Limit::Rigid3d);
     }
+    if has_inequalities(dynamics.system()) {
+        return Ok(Limit::Contacts);
+    }
+    if !at_rest_in_equilibrium(dynamics, t, q, v)? {
+        return Ok(Limit::Moving);
+    }
     // Some(stable) at stiffness h, None where the step has no radius there.
     let stable = |h: f64, d: &mut Dynamics<'_>| -> Result<Option<bool>, SimError> {
         Ok(radius_at(d, t, q, v, s, h)?.map(|rho| rho <= 1.0 + STABLE_TOLERANCE))
@@ -232,7 +290,7 @@ pub fn largest_stable_hertz(
     let (mut lo, mut hi) = (1e-3, 1.0);
     match stable(lo, dynamics)? {
         None => return Ok(Limit::NoRadius),
-        Some(false) => return Ok(Limit::OutOfRange),
+        Some(false) => return Ok(Limit::UnstableAtAll),
         Some(true) => {}
     }
     // Bracket by doubling, then bisect.
@@ -245,7 +303,7 @@ pub fn largest_stable_hertz(
         lo = hi;
         hi *= 2.0;
         if hi > MAX_HERTZ {
-            return Ok(Limit::OutOfRange);
+            return Ok(Limit::StableThroughout);
         }
     }
     while hi - lo > 1e-6 * hi {
