@@ -513,6 +513,37 @@ impl<'s> Dynamics<'s> {
         Ok(())
     }
 
+    /// Whether RATTLE's SHAKE completes its end rows without a tape
+    /// ([`rows_after_positions_steady_into`](Dynamics::rows_after_positions_steady_into)):
+    /// `RowProgram::steady`.
+    pub fn steady(&self) -> bool {
+        self.program.steady()
+    }
+
+    /// [`rows_after_positions_into`](Dynamics::rows_after_positions_into) without an
+    /// evaluation, for a steady program (`RowProgram::steady`): `rows` keeps its slots' 1/m
+    /// and F, which the caller took from rows evaluated earlier in the run (constants of the
+    /// run, so the same numbers bit for bit), and takes the last positions' C/κ and J, `v`
+    /// as its velocities, and Ċ/κ = Σᵢ Jᵢ·vᵢ: with no C reading t, Ċ = Σᵢ ∇ᵢC·vᵢ, the
+    /// quantity the motion tape evaluates from its own expression (so equal to rounding).
+    /// c is not evaluated (it stays 0): RATTLE's velocity step sets every row's c itself,
+    /// and the next start evaluates the rows' motion part again. Returns false, with
+    /// nothing done, when the positions' numbers were not all finite (the general path
+    /// then checks them).
+    pub fn rows_after_positions_steady_into(&mut self, v: &Vectors, rows: &mut Rows) -> bool {
+        if !self.positions_finite {
+            return false;
+        }
+        self.positions_finite = false;
+        std::mem::swap(&mut rows.rows, &mut self.position_rows);
+        rows.velocity.clear();
+        rows.velocity.extend_from_slice(v);
+        for row in &mut rows.rows {
+            row.rate = row.jacobian.iter().map(|(b, j)| j[0] * v[*b][0] + j[1] * v[*b][1] + j[2] * v[*b][2]).sum();
+        }
+        true
+    }
+
     /// `rows` at time `t`, or the error that names the first number that is not finite
     /// (`finite`: whether every number of `rows` is, as `all_finite` says).
     fn checked(&self, rows: Rows, t: f64, finite: bool) -> Result<Rows, SimError> {

@@ -73,6 +73,18 @@ pub struct Rows {
     pub axes: Vec<[f64; 3]>,
 }
 
+impl Rows {
+    /// The slots' 1/m and F (and the dimension) of `from`, whose velocities and rows are
+    /// left as they are: for rows whose slots are constants of a run
+    /// (`RowProgram::steady`).
+    pub fn take_slots(&mut self, from: &Rows) {
+        self.dim = from.dim;
+        self.axes.clear();
+        self.inverse_mass.clone_from(&from.inverse_mass);
+        self.force.clone_from(&from.force);
+    }
+}
+
 /// The rigid bodies of `system` in the order of their angular slots: the r-th body this
 /// yields has the slots `system.bodies.len() + r·w ..` of [`angular_width`] w.
 pub fn angular_bodies(system: &System) -> impl Iterator<Item = usize> + '_ {
@@ -140,6 +152,8 @@ pub struct RowProgram {
     /// a run asks at its start, and a run of a few steps of a long chain spent about a step
     /// collecting each constraint's free symbols.
     time_dependent: bool,
+    /// [`steady`](RowProgram::steady), found once here.
+    steady: bool,
 }
 
 /// A tape of some of a [`RowProgram`]'s roots.
@@ -647,6 +661,20 @@ struct BodySlots {
     principal: Option<(usize, [usize; 3])>,
 }
 
+/// Whether every slot's mass and force (torque) of `bodies` reads only constants of a run
+/// (parameters, masses, inertias, the force and torque symbols the environment gives): no
+/// position, velocity, angle or time.
+fn constant_slots(graph: &crate::expr::graph::Graph, roots: &[Id], bodies: &[BodySlots]) -> bool {
+    use crate::expr::graph::Role;
+    let slots: Vec<Id> = bodies.iter().flat_map(|b| [roots[b.mass], roots[b.force]]).collect();
+    SymbolWalk::default().free_symbols_of(graph, &slots).iter().all(|&s| {
+        matches!(
+            graph.symbol(s).role,
+            Role::Parameter | Role::Mass { .. } | Role::Inertia { .. } | Role::Force { .. } | Role::Torque { .. }
+        )
+    })
+}
+
 /// One constraint row of a [`RowProgram`]: its kind, its bodies, 1/κ, and where its
 /// numbers are among the roots.
 #[derive(Clone, Debug)]
@@ -1107,13 +1135,26 @@ impl RowProgram {
             }
         }
         let time_dependent = super::simulate::time_dependent(system);
-        RowProgram { roots, bodies, rows, all, positions, motion, time_dependent }
+        let steady = motion.is_some()
+            && !time_dependent
+            && rows.iter().all(|r| !r.inequality)
+            && constant_slots(graph, &roots, &bodies);
+        RowProgram { roots, bodies, rows, all, positions, motion, time_dependent, steady }
     }
 
     /// Whether some constraint's C reads t (`simulate::time_dependent` of the system the
     /// program was built for).
     pub fn time_dependent(&self) -> bool {
         self.time_dependent
+    }
+
+    /// Whether what the motion tape gives after a positions evaluation follows from C and J
+    /// alone: every slot's 1/m and F (torque) reads no position, velocity or time (gravity
+    /// `F = m*g`), so they are constants of a run; no C reads t, so Ċ = Σᵢ Jᵢ·vᵢ; no row is
+    /// an inequality and there is a motion tape (no 3D rigid body). RATTLE's SHAKE then
+    /// completes its end rows without a tape (`Dynamics::rows_after_positions_steady_into`).
+    pub fn steady(&self) -> bool {
+        self.steady
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,

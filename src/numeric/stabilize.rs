@@ -285,7 +285,9 @@ pub fn project_positions(
 /// J, so the run's solve cache serves it with the start's factor; at the final positions
 /// the rows are completed from the last iteration's C and J
 /// (`Dynamics::rows_after_positions_into`) into `end` (whatever it held: its buffers are
-/// reused). `made`: the mark of the factor the start's solve went through
+/// reused); for a steady program (`RowProgram::steady`: constant forces and masses, no C
+/// reading t) without the motion tape, from the start's slots and Ċ = J·v½
+/// (`Dynamics::rows_after_positions_steady_into`), the same quantities. `made`: the mark of the factor the start's solve went through
 /// (`Dynamics::made`, `solve::FactorId`), so that the iterations' solves do not compare the
 /// start's J with it again. Returns the iterations taken.
 #[allow(clippy::too_many_arguments)]
@@ -304,6 +306,12 @@ pub fn shake_positions(
 ) -> Result<usize, SimError> {
     let mut made = made;
     let system = dynamics.system();
+    // A steady program's end rows need no motion tape: their slots' numbers are the
+    // start's, taken before the iterations zero its forces.
+    let steady = dynamics.steady();
+    if steady {
+        end.take_slots(start);
+    }
     let bound = tolerance * length;
     let mut iterations = 0;
     let mut previous = f64::INFINITY;
@@ -321,7 +329,9 @@ pub fn shake_positions(
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
             // C and J are those just evaluated: Ċ, c and the bodies' numbers are added.
-            dynamics.rows_after_positions_into(t, q, v_half, end)?;
+            if !(steady && dynamics.rows_after_positions_steady_into(v_half, end)) {
+                dynamics.rows_after_positions_into(t, q, v_half, end)?;
+            }
             return Ok(iterations);
         }
         previous = residual;
