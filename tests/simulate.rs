@@ -589,3 +589,40 @@ fn other_shapes_go_to_the_general_solve() {
         assert_eq!(out, Solution::default());
     }
 }
+
+/// RATTLE on a steady scene (constant forces and masses, no C reading t: the pendulum, a
+/// chain) completes SHAKE's end rows without the motion tape (`Dynamics::steady`, one
+/// evaluation a step fewer) and runs as the general path does, to round-off; a
+/// time-dependent constraint or a velocity-dependent force keeps the general path.
+#[test]
+fn steady_scenes_skip_a_motion_evaluation_with_the_same_run() {
+    use lagrange::numeric::dynamics::Dynamics;
+    use lagrange::numeric::simulate::{Simulation, Summary};
+    let steps = 2000;
+    for path in ["constraints/pendulum.toml", "constraints/chain_5.toml"] {
+        let s = scenario(path);
+        assert!(s.program.steady(), "{path}");
+        let run = |steady: bool| -> Summary {
+            let mut dynamics = Dynamics::borrowing(&s.system, &s.program, s.env.clone());
+            dynamics.velocity_dependent_forces = false;
+            assert!(dynamics.steady);
+            dynamics.steady = steady;
+            let settings = settings(&s, Integrator::Verlet, Stabilize::PROJECTION, 1e-3, steps);
+            Simulation::new(dynamics, &s.env, settings).expect("settings").run(&mut |_| Ok(())).expect("runs")
+        };
+        let (fast, general) = (run(true), run(false));
+        assert_eq!(general.evaluations - fast.evaluations, steps, "{path}: one evaluation a step fewer");
+        let states = fast.final_position.iter().chain(&fast.final_velocity);
+        let general_states = general.final_position.iter().chain(&general.final_velocity);
+        for (a, b) in states.flatten().zip(general_states.flatten()) {
+            assert!((a - b).abs() <= 1e-12, "{path}: {a} against {b}");
+        }
+        assert!((fast.max_abs_c - general.max_abs_c).abs() <= 1e-15, "{path}: max |C|");
+        assert!((fast.max_abs_c_dot - general.max_abs_c_dot).abs() <= 1e-15, "{path}: max |Ċ|");
+        let (e, g) = (fast.energy_rel_drift.expect("reported"), general.energy_rel_drift.expect("reported"));
+        assert!((e - g).abs() <= 1e-12, "{path}: energy {e} against {g}");
+    }
+    for path in ["constraints/driven_pendulum.toml", "constraints/damped_pendulum.toml"] {
+        assert!(!scenario(path).program.steady(), "{path}");
+    }
+}

@@ -29,7 +29,7 @@
 //! Not here: the run loop, projection, contacts (`numeric::stabilize`), files or text.
 
 use super::contact::ContactState;
-use super::integrate::{Field, Vectors};
+use super::integrate::{Field, Vectors, copy_slots};
 use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
@@ -147,6 +147,11 @@ pub struct Dynamics<'s> {
     /// second half needs no evaluation of its own (RATTLE takes F(q⁺) from the rows it has).
     /// `true` is always safe.
     pub velocity_dependent_forces: bool,
+    /// Whether RATTLE's SHAKE completes its end rows without the motion tape
+    /// ([`rows_after_positions_steady_into`](Dynamics::rows_after_positions_steady_into)):
+    /// the program's `RowProgram::steady` at the start. `false` is always safe (the
+    /// general path, one evaluation a step more); `true` only for a steady program.
+    pub steady: bool,
     /// Row evaluations so far (the cost unit).
     pub evaluations: u64,
     /// The step being computed, for diagnostics.
@@ -232,6 +237,7 @@ impl<'s> Dynamics<'s> {
         // loaded at the first evaluation, not at every one.
         scratch.hold_constants();
         let orientations = orientations_of(system, &env);
+        let steady = program.steady();
         Dynamics {
             system,
             program,
@@ -241,6 +247,7 @@ impl<'s> Dynamics<'s> {
             rigid: system.has_rigid_bodies(),
             baumgarte: None,
             velocity_dependent_forces: true,
+            steady,
             evaluations: 0,
             step: 0,
             held: Vec::new(),
@@ -513,13 +520,6 @@ impl<'s> Dynamics<'s> {
         Ok(())
     }
 
-    /// Whether RATTLE's SHAKE completes its end rows without a tape
-    /// ([`rows_after_positions_steady_into`](Dynamics::rows_after_positions_steady_into)):
-    /// `RowProgram::steady`.
-    pub fn steady(&self) -> bool {
-        self.program.steady()
-    }
-
     /// [`rows_after_positions_into`](Dynamics::rows_after_positions_into) without an
     /// evaluation, for a steady program (`RowProgram::steady`): `rows` keeps its slots' 1/m
     /// and F, which the caller took from rows evaluated earlier in the run (constants of the
@@ -536,8 +536,10 @@ impl<'s> Dynamics<'s> {
         }
         self.positions_finite = false;
         std::mem::swap(&mut rows.rows, &mut self.position_rows);
-        rows.velocity.clear();
-        rows.velocity.extend_from_slice(v);
+        if rows.velocity.len() != v.len() {
+            rows.velocity.resize(v.len(), [0.0; 3]);
+        }
+        copy_slots(&mut rows.velocity, v);
         for row in &mut rows.rows {
             row.rate = row.jacobian.iter().map(|(b, j)| j[0] * v[*b][0] + j[1] * v[*b][1] + j[2] * v[*b][2]).sum();
         }

@@ -17,6 +17,18 @@
 /// Positions or velocities or accelerations of all bodies; components past the dimension are 0.
 pub type Vectors = [[f64; 3]];
 
+/// `to = from` (of equal lengths): one or two slots (a pendulum, a bead, a double pendulum)
+/// by assignment, more as one block copy — a call to `memcpy` costs more than copying one
+/// slot, and the compiler makes one of any loop that copies.
+#[inline]
+pub fn copy_slots<T: Copy>(to: &mut [T], from: &[T]) {
+    match (to, from) {
+        ([t], [f]) => *t = *f,
+        ([t0, t1], [f0, f1]) => (*t0, *t1) = (*f0, *f1),
+        (to, from) => to.copy_from_slice(from),
+    }
+}
+
 /// Accelerations at a state.
 pub trait Field {
     type Error;

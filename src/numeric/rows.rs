@@ -34,6 +34,7 @@ use crate::expr::graph::SymbolWalk;
 use crate::expr::{Id, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
+use crate::numeric::integrate::copy_slots;
 use crate::numeric::tape::{Scratch, Tape};
 use crate::numeric::vector::dot;
 use std::ops::Range;
@@ -80,8 +81,13 @@ impl Rows {
     pub fn take_slots(&mut self, from: &Rows) {
         self.dim = from.dim;
         self.axes.clear();
-        self.inverse_mass.clone_from(&from.inverse_mass);
-        self.force.clone_from(&from.force);
+        let n = from.inverse_mass.len();
+        if self.inverse_mass.len() != n || self.force.len() != n {
+            self.inverse_mass.resize(n, 0.0);
+            self.force.resize(n, [0.0; 3]);
+        }
+        copy_slots(&mut self.inverse_mass, &from.inverse_mass);
+        copy_slots(&mut self.force, &from.force);
     }
 }
 

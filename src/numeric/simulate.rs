@@ -18,7 +18,7 @@
 //! Not here: files, text, printing (the observer does that), the λ solve.
 
 use super::dynamics::{Dynamics, SimError, slot_name};
-use super::integrate::{Integrator, Stepper, Vectors, add_scaled};
+use super::integrate::{Integrator, Stepper, Vectors, add_scaled, copy_slots};
 use super::rescale::{Shown, Unit};
 use super::rotation::{fold, kick};
 use super::rows::Rows;
@@ -580,7 +580,7 @@ impl<'s> Simulation<'s> {
             if n == s.steps {
                 break;
             }
-            copy_vectors(&mut self.a, &self.dynamics.solution().acceleration);
+            copy_slots(&mut self.a, &self.dynamics.solution().acceleration);
             fold(&self.start, &mut self.a);
             self.dynamics.step = n + 1;
             self.advance(n, &reach)?;
@@ -689,7 +689,7 @@ impl<'s> Simulation<'s> {
                 let projected = self.project(t1, reach.length, tolerance, max_iterations)?;
                 self.replace_end(projected);
             }
-            copy_vectors(&mut self.half, &self.v);
+            copy_slots(&mut self.half, &self.v);
             if self.three_d {
                 self.second_kick(t1, s.dt)?;
             } else if self.dynamics.velocity_dependent_forces {
@@ -761,17 +761,6 @@ impl Simulation<'_> {
             }
             self.carried = true;
         }
-    }
-}
-
-/// `to = from` (of equal lengths): one or two slots (a pendulum, a bead, a double pendulum)
-/// by assignment, more as one block copy — a call to `memcpy` costs more than copying one
-/// slot, and the compiler makes one of any loop that copies.
-fn copy_vectors(to: &mut Vectors, from: &Vectors) {
-    match (to, from) {
-        ([t], [f]) => *t = *f,
-        ([t0, t1], [f0, f1]) => (*t0, *t1) = (*f0, *f1),
-        (to, from) => to.copy_from_slice(from),
     }
 }
 

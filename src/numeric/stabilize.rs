@@ -308,7 +308,7 @@ pub fn shake_positions(
     let system = dynamics.system();
     // A steady program's end rows need no motion tape: their slots' numbers are the
     // start's, taken before the iterations zero its forces.
-    let steady = dynamics.steady();
+    let steady = dynamics.steady;
     if steady {
         end.take_slots(start);
     }
