@@ -252,6 +252,10 @@ pub struct Summary {
     pub max_kinetic: f64,
     /// Row evaluations (the cost unit).
     pub evaluations: u64,
+    /// Steps whose projection onto C = 0 (`--stabilize projection`) ended farther from it
+    /// than its tolerance, and how far; `None` when every projection reached it or the run
+    /// does not project.
+    pub unconverged: Option<Unconverged>,
     /// k when the run worked in a length unit of 2ᵏ (the scene's lengths were beyond
     /// 2^±[`NATURAL_RANGE`](super::dynamics::NATURAL_RANGE)); 0 when it ran in the scene's own. Every figure here is in the scene's unit.
     pub unit_exponent: i64,
@@ -260,6 +264,21 @@ pub struct Summary {
     pub final_position: Vec<[f64; 3]>,
     pub final_velocity: Vec<[f64; 3]>,
     pub samples: Vec<Sample>,
+}
+
+/// Projections that did not reach their tolerance: iterations spent or diverging, as
+/// where C = 0 has a vanishing gradient (`dot(r, r) = 0`) or a step too large for the
+/// quasi-Newton iteration. The run goes on from the positions reached (the drift check
+/// stops it when they are out of reach); the summary says how far they were.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Unconverged {
+    /// How many steps.
+    pub steps: u64,
+    /// The first one.
+    pub first: u64,
+    /// The largest distance |C|/‖∇C‖ left (in the scene's unit), and the tolerance's bound.
+    pub distance: f64,
+    pub bound: f64,
 }
 
 /// A run that stopped early: why, and what it measured until then.
@@ -504,6 +523,7 @@ impl<'s> Simulation<'s> {
         // Numbers of the run (in its unit) → the caller's unit, for everything reported.
         let unit = self.unit.clone();
         let energy_back = |x: f64| unit.as_ref().map_or(x, |u| u.energy(x));
+        let length_back = |x: f64| unit.as_ref().map_or(x, |u| u.length(x));
         let energy_reported = !self.dynamics.time_dependent();
         // The scene's length scale (in the run's unit): positions only, not a rigid body's angle.
         let length = length_scale(&self.q[..system.bodies.len()]);
@@ -538,7 +558,17 @@ impl<'s> Simulation<'s> {
                 self.dynamics.recycle(old);
             }
             let rows = &self.start;
-            let (c_max, c_dot_max) = self.drift(rows, n, t, &reach)?;
+            let (c_max, c_dot_max, left) = self.drift(rows, n, t, &reach)?;
+            // Every step's positions were projected to `bound` (the start's are as given).
+            if let (Stabilize::Projection { tolerance, .. }, true) = (s.stabilize, n > 0) {
+                let bound = tolerance * reach.length;
+                if left > bound {
+                    let (distance, bound) = (length_back(left), length_back(bound));
+                    let u = summary.unconverged.get_or_insert(Unconverged { steps: 0, first: n, distance, bound });
+                    u.steps += 1;
+                    u.distance = u.distance.max(distance);
+                }
+            }
             summary.max_abs_c = summary.max_abs_c.max(c_max);
             summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
             let (energy_error, accel) = balance.record(rows, n, s.dt);
@@ -589,13 +619,14 @@ impl<'s> Simulation<'s> {
     }
 
     /// |C| and |Ċ| of what should be zero at step `n` (in the caller's unit; an inequality
-    /// counts only its violation and, near its surface, its closing rate); stops the run when
-    /// a value is not finite or a surface is out of reach.
-    fn drift(&self, rows: &Rows, n: u64, t: f64, reach: &Reach) -> Result<(f64, f64), SimError> {
+    /// counts only its violation and, near its surface, its closing rate), and the largest
+    /// distance |C|/‖∇C‖ of the same (in the run's unit); stops the run when a value is not
+    /// finite or a surface is out of reach.
+    fn drift(&self, rows: &Rows, n: u64, t: f64, reach: &Reach) -> Result<(f64, f64, f64), SimError> {
         let system = self.dynamics.system();
         let row_back = |q: usize, x: f64| self.unit.as_ref().map_or(x, |u| u.row_value(q, x));
         let length_back = |x: f64| self.unit.as_ref().map_or(x, |u| u.length(x));
-        let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
+        let (mut c_max, mut c_dot_max, mut left) = (0.0f64, 0.0f64, 0.0f64);
         for (k, row) in rows.rows.iter().enumerate() {
             let d = distance(row);
             if !(row.value.is_finite() && row.rate.is_finite()) {
@@ -616,15 +647,17 @@ impl<'s> Simulation<'s> {
             let (value, rate) = (row_back(k, row.value), row_back(k, row.rate));
             if row.inequality {
                 c_max = c_max.max((-value).max(0.0));
+                left = left.max(-d);
                 if d <= reach.touch && rate < 0.0 {
                     c_dot_max = c_dot_max.max(-rate);
                 }
             } else {
                 c_max = c_max.max(value.abs());
+                left = left.max(d.abs());
                 c_dot_max = c_dot_max.max(rate.abs());
             }
         }
-        Ok((c_max, c_dot_max))
+        Ok((c_max, c_dot_max, left))
     }
 
     /// Hands the state of step `n` to the observer, in the caller's unit (its rows are the

@@ -258,8 +258,13 @@ pub fn project_positions(
         if residual <= bound || iterations >= max_iterations {
             return Ok((rows, iterations));
         }
+        // Contacts within reach of this correction (closer than twice the largest distance
+        // it closes) take part as inequalities, J Δq ≥ −C with μ ≥ 0, violated or not: left
+        // out, the correction of one contact pushes its neighbour through its surface (a
+        // stack: the iteration would ping-pong between them without converging).
+        let within = |k: usize, row: &Row, s: f64| enforced(k, row, s) || s <= 2.0 * residual;
         for (k, row) in rows.rows.iter_mut().enumerate() {
-            if enforced(k, row, distance(row)) {
+            if within(k, row, distance(row)) {
                 // (J M⁻¹ Jᵀ) μ = −C: c = C (μ ≥ 0 on violated contacts that are not held).
                 row.inequality &= !as_equality(k, row);
                 enforce(row, row.value);
@@ -502,7 +507,8 @@ pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
 }
 
 /// The velocity solve at the rows of the current positions: closing contacts (touching
-/// within `touch` or `held`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`); with
+/// within `touch` or `held`, approaching) take Ċ⁺ = −eĊ (e = 0 below `bounce_speed`), the
+/// other touching ones Ċ⁺ ≥ 0 (they may take an impulse, never pull); with
 /// `project` the equalities and the held contacts that are not closing go onto Ċ = 0 too,
 /// else they keep their Ċ; `dynamics` says which contacts are held and serves the solve.
 /// Returns whether anything was applied. `rows` is spent (its C, Ċ and c may be
@@ -541,6 +547,10 @@ pub fn velocity_step(
                 // ΔĊ = −(1+e)Ċ: c = (1+e)Ċ.
                 enforce(row, (1.0 + e) * row.rate);
                 any = true;
+            } else if s <= touch {
+                // Touching, not closing: Ċ⁺ ≥ 0 (μ ≥ 0), so that the impulses of its
+                // closing neighbours cannot drive it through its surface (a stack).
+                enforce(row, row.rate);
             } else {
                 leave_out(row);
             }

@@ -1,7 +1,7 @@
 //! A simulation's summary for people (text) and programs (JSON).
 
 use crate::expr::eval::Value;
-use crate::numeric::simulate::Summary;
+use crate::numeric::simulate::{Summary, Unconverged};
 use crate::numeric::velocity::{Settings as VelocitySettings, Solver};
 use serde_json::{Map, Value as Json, json};
 
@@ -47,8 +47,16 @@ pub fn json(summary: &Summary, dim: usize, stopped: Option<&str>) -> Json {
         "unit_exponent": summary.unit_exponent,
         "final": last,
     });
-    if let (Some(why), Some(fields)) = (stopped, out.as_object_mut()) {
-        fields.insert("stopped".into(), json!(why));
+    if let Some(fields) = out.as_object_mut() {
+        if let Some(why) = stopped {
+            fields.insert("stopped".into(), json!(why));
+        }
+        if let Some(u) = &summary.unconverged {
+            fields.insert(
+                "unconverged".into(),
+                json!({"steps": u.steps, "first_step": u.first, "max_distance": u.distance, "tolerance": u.bound}),
+            );
+        }
     }
     out
 }
@@ -93,6 +101,9 @@ pub fn text(summary: &Summary, dim: usize) -> String {
         stabilization(summary)
     );
     s += &format!("  max |C|   {:.3e}\n  max |Ċ|   {:.3e}\n", summary.max_abs_c, summary.max_abs_c_dot);
+    if let Some(u) = &summary.unconverged {
+        s += &unconverged_text(u, summary.steps);
+    }
     match summary.energy_rel_drift {
         Some(e) => s += &format!("  energy balance  {e:.3e} of the energy scale (max kinetic energy or Σ|F|·size)\n"),
         None if summary.samples.is_empty() => {
@@ -118,6 +129,18 @@ pub fn text(summary: &Summary, dim: usize) -> String {
         s += &format!(" … and {more} more (all of them: --format json or --csv)");
     }
     s
+}
+
+/// The summary's warning that the projection did not reach its tolerance: how often, from
+/// when, how far it stayed, and the likely causes.
+fn unconverged_text(u: &Unconverged, steps: u64) -> String {
+    format!(
+        "  warning   the projection onto C = 0 did not reach its tolerance {:.1e} in {} of {steps} steps \
+         (from step {}; largest distance |C|/‖∇C‖ left {:.3e}): the constraints are not held to it. \
+         A gradient that vanishes where C = 0 (a double root, such as dot(r,r) = 0) or a step too \
+         large for the projection does this\n",
+        u.bound, u.steps, u.first, u.distance
+    )
 }
 
 /// The text summary's `final:` line shows this many symbols: a 100 × 100 grid's 20 000
