@@ -370,9 +370,12 @@ fn a_projection_that_cannot_reach_its_tolerance_is_reported() {
 
 /// The stack of `constraints/solvers/stack.toml` (floor, then two disc contacts) stays at
 /// rest under `simulate`'s RATTLE step: its contacts are on their surfaces to the projection's
-/// tolerance at every step, their velocities at rounding, and the energy balance at rounding.
-/// (The contact projection once corrected one violated contact at a time, pushing its
-/// neighbour through: 5e-3 m of overlap, a third of the steps unconverged.)
+/// tolerance at every step, their velocities at rounding, the energy balance at rounding, and
+/// each contact carries the weight above it at every step (λ = (mass above)·g = 1020, 1010,
+/// 1000 N, by hand). Before: the contact projection corrected one violated contact at a
+/// time, pushing its neighbour through (5e-3 m of overlap, a third of the steps
+/// unconverged), and the rounding of Ċ at rest counted as opening, so every other step the
+/// contacts let go (λ = 0) and the stack fell for a step.
 #[test]
 fn a_stack_at_rest_stays_on_its_contacts() {
     let dir = std::env::temp_dir().join(format!("lagrange-cli-stack-{}", std::process::id()));
@@ -398,10 +401,15 @@ fn a_stack_at_rest_stays_on_its_contacts() {
     let header: Vec<&str> = text.lines().next().expect("a header").split(',').collect();
     let column = |name: &str| header.iter().position(|h| *h == name).expect(name);
     let heights = [column("r_bottom.y"), column("r_middle.y"), column("r_top.y")];
+    let weights =
+        [(column("lambda_floor"), 1020.0), (column("lambda_lower"), 1010.0), (column("lambda_upper"), 1000.0)];
     for line in text.lines().skip(1) {
         let x: Vec<f64> = line.split(',').map(|v| v.parse().expect("a number")).collect();
         for (k, &c) in heights.iter().enumerate() {
             assert!((x[c] - (0.5 + k as f64)).abs() <= 1e-12, "{line}");
+        }
+        for &(c, weight) in &weights {
+            assert!((x[c] - weight).abs() <= 1e-9 * weight, "{line}");
         }
     }
     let _ = std::fs::remove_dir_all(&dir);

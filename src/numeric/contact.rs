@@ -3,7 +3,8 @@
 //!
 //! A row is *touching* when its distance |C|/‖∇C‖ is within `contact_tolerance · length_scale`
 //! of zero (`Settings`), and its normal speed Ċ/‖∇C‖ counts as zero within
-//! `contact_tolerance` times the fastest body it involves. Apart (C > 0) or separating
+//! `contact_tolerance` times the fastest body it involves (or `Settings::speed_scale`, when
+//! faster: a simulation's speeds at rest are rounding). Apart (C > 0) or separating
 //! (Ċ > 0) rows carry λ = 0; resting and closing rows are candidates of the force solve;
 //! a closing row (Ċ < 0) also needs an impulse.
 //!
@@ -71,7 +72,8 @@ pub fn classify_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Vec<
                 return None;
             }
             let norm = row_norm(&row.jacobian);
-            let speed = row.jacobian.iter().map(|(b, _)| safe_norm(&rows.velocity[*b])).fold(0.0, f64::max);
+            let speed =
+                row.jacobian.iter().map(|(b, _)| safe_norm(&rows.velocity[*b])).fold(settings.speed_scale, f64::max);
             if !(norm > 0.0 && norm.is_finite()) {
                 // No direction: the row cannot push; whether it holds is C's business.
                 return Some(if row.value >= 0.0 { ContactState::Apart } else { ContactState::Penetrating });

@@ -154,6 +154,9 @@ pub struct Dynamics<'s> {
     pub steady: bool,
     /// Row evaluations so far (the cost unit).
     pub evaluations: u64,
+    /// The solves' settings: the defaults, with the speed scale of contacts
+    /// (`solve::Settings::speed_scale`) a simulation sets at its start.
+    pub settings: Settings,
     /// The step being computed, for diagnostics.
     pub step: u64,
     /// The active set kept between steps, per constraint: inequality rows that pushed
@@ -249,6 +252,7 @@ impl<'s> Dynamics<'s> {
             velocity_dependent_forces: true,
             steady,
             evaluations: 0,
+            settings: Settings::default(),
             step: 0,
             held: Vec::new(),
             solver: SolveCache::default(),
@@ -613,9 +617,9 @@ impl<'s> Dynamics<'s> {
         let solution = &mut self.solution;
         self.made = None;
         // One row on one body: the same numbers in closed form (`numeric::single`).
-        if !solve_single_with(rows, &Settings::default(), &mut self.single, solution) {
+        if !solve_single_with(rows, &self.settings, &mut self.single, solution) {
             let held = &self.held;
-            cached_into(rows, &Settings::default(), held, &mut self.solver, solution, Answer::Solution, known);
+            cached_into(rows, &self.settings, held, &mut self.solver, solution, Answer::Solution, known);
             self.made = self.solver.made();
             if self.refused.is_none() {
                 self.refused = refused_rows(solution).map(|rows| (self.step, rows));
@@ -655,9 +659,9 @@ impl<'s> Dynamics<'s> {
     /// [`correct`](Dynamics::correct) writing what `answer` asks.
     fn correct_answering(&mut self, rows: &Rows, answer: Answer, known: Option<FactorId>) -> &mut Solution {
         self.made = None;
-        if !solve_single_with(rows, &Settings::default(), &mut self.single, &mut self.correction) {
+        if !solve_single_with(rows, &self.settings, &mut self.single, &mut self.correction) {
             let out = &mut self.correction;
-            cached_into(rows, &Settings::default(), &[], &mut self.solver, out, answer, known);
+            cached_into(rows, &self.settings, &[], &mut self.solver, out, answer, known);
             self.made = self.solver.made();
             if self.refused.is_none() {
                 self.refused = refused_rows(&self.correction).map(|rows| (self.step, rows));

@@ -576,6 +576,9 @@ impl<'s> Simulation<'s> {
                 let speed = self.v.iter().map(safe_norm).fold(0.0, f64::max);
                 // Approaches slower than what ten steps of the external forces build up do not bounce.
                 reach.bounce_speed = BOUNCE_STEPS * s.dt * accel + BOUNCE_SPEED_SHARE * speed;
+                // A contact's rate counts as zero against what the forces build in a step
+                // too: at rest the bodies' speeds are rounding, and so are the rates.
+                self.dynamics.settings.speed_scale = s.dt * accel;
             }
             // The ratio is the same in any unit; the energies themselves may leave the f64
             // range in the caller's (a 1e155 m pendulum has T ≈ 1e311 J).

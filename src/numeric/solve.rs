@@ -148,6 +148,11 @@ pub struct Settings {
     pub contact_tolerance: f64,
     /// The length against which a contact distance |C|/‖∇C‖ counts as zero.
     pub length_scale: f64,
+    /// A speed against which a contact's normal speed Ċ/‖∇C‖ counts as zero beside the
+    /// fastest body it involves (`numeric::contact`): 0 by default, the bodies' speeds
+    /// alone. A simulation sets what its forces build up in a step, so that a scene at rest,
+    /// whose speeds are rounding, does not take the rounding of Ċ for opening or closing.
+    pub speed_scale: f64,
     pub method: Method,
 }
 
@@ -157,6 +162,7 @@ impl Default for Settings {
             rank_tolerance: RANK_TOLERANCE,
             contact_tolerance: CONTACT_TOLERANCE,
             length_scale: 1.0,
+            speed_scale: 0.0,
             method: Method::Auto,
         }
     }
@@ -169,6 +175,8 @@ pub enum SettingsError {
     Tolerance { name: &'static str, value: f64 },
     #[error("`length_scale` must be a finite positive number, found {0}")]
     Length(f64),
+    #[error("`speed_scale` must be a finite number, zero or positive, found {0}")]
+    Speed(f64),
 }
 
 impl Settings {
@@ -180,6 +188,9 @@ impl Settings {
         }
         if !(self.length_scale > 0.0 && self.length_scale.is_finite()) {
             return Err(SettingsError::Length(self.length_scale));
+        }
+        if !(self.speed_scale >= 0.0 && self.speed_scale.is_finite()) {
+            return Err(SettingsError::Speed(self.speed_scale));
         }
         Ok(())
     }
