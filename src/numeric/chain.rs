@@ -587,18 +587,20 @@ impl Chain {
         if acceleration.len() != n {
             acceleration.resize(n, [0.0; 3]);
         }
-        // μₖ J̃ₖᵢ of an entry, added to `f`.
-        let add = |f: [f64; 3], entry: usize| {
-            let (m, j) = (self.y[self.owner[entry]], &self.parts[entry].1);
+        // μₖ J̃ₖᵢ of row k's entry, added to `f`.
+        let add = |f: [f64; 3], k: usize, entry: usize| {
+            let (m, j) = (self.y[k], &self.parts[entry].1);
             [f[0] + m * j[0], f[1] + m * j[1], f[2] + m * j[2]]
         };
         let pairs = self.first.iter().zip(&self.second);
         for (i, (f_out, (&first, &second))) in force.iter_mut().zip(pairs).enumerate() {
             let mut f = [0.0; 3];
             if first != NONE {
-                f = add(f, first);
+                let k = self.owner[first];
+                f = add(f, k, first);
+                // The second entry on a slot is of the row after the first's.
                 if second != NONE {
-                    f = add(f, second);
+                    f = add(f, k + 1, second);
                 }
             }
             *f_out = f;
