@@ -91,10 +91,10 @@ pub(crate) struct Chain {
 
 /// Whether every row is an equality with a finite c term and every velocity and force is
 /// finite: what `solve_cached_into` checks before anything is cached.
-/// (This runs at every solve: the slots' numbers are tested along flat arrays by
-/// [`all_finite`], without a branch each.)
+/// (This runs at every solve: the rows' flags and c terms are tested joined by `&`, and the
+/// slots' numbers along flat arrays by [`all_finite`], without a branch each.)
 pub(crate) fn servable(rows: &Rows) -> bool {
-    rows.rows.iter().all(|row| !row.inequality && row.bias.is_finite())
+    rows.rows.iter().fold(true, |ok, row| ok & !row.inequality & row.bias.is_finite())
         && all_finite(rows.velocity.as_flattened())
         && all_finite(rows.force.as_flattened())
 }
