@@ -10,8 +10,9 @@
 //! a second the row of the factor (the factor of row k needs only rows up to k), −b̃ and the
 //! forward substitution; a third the backward substitution with the refinement's residual
 //! (a row's once the rows from it down are final); a fourth the residual's forward
-//! substitution; a fifth its backward substitution, adding the correction; a sixth λ and
-//! the forces. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
+//! substitution; a fifth its backward substitution, adding the correction; a sixth λ; a
+//! seventh, over the slots, each slot's force from its one or two rows and its
+//! acceleration. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
 //! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
 //! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
 //! terms go — which a property test over random chains holds it to (`tests/chain_solve.rs`).
