@@ -10,8 +10,9 @@
 //! a second the row of the factor (the factor of row k needs only rows up to k), −b̃ and the
 //! forward substitution; a third the backward substitution with the refinement's residual
 //! (a row's once the rows from it down are final); a fourth the residual's forward
-//! substitution; a fifth its backward substitution, adding the correction; a sixth λ and
-//! the forces. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
+//! substitution; a fifth its backward substitution, adding the correction; a sixth λ; a
+//! seventh, over the slots, each slot's force from its one or two rows and its
+//! acceleration. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
 //! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
 //! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
 //! terms go — which a property test over random chains holds it to (`tests/chain_solve.rs`).
@@ -36,8 +37,7 @@
 use super::banded::{backward_step, forward_step, tridiagonal_factor_row, tridiagonal_mul_row};
 use super::rows::Rows;
 use super::solve::{
-    Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, accelerations_into, add_row_force,
-    b_of, out_of_range, scale_row, zero_vectors,
+    Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, out_of_range, scale_row,
 };
 use super::vector::dot;
 use std::cell::RefCell;
@@ -82,16 +82,20 @@ pub(crate) struct Chain {
     /// Per entry, the entry of the row before on the same slot (`NONE`: that row does not
     /// act on it): the pairs whose products make Ãₖ,ₖ₋₁, found once with the pattern.
     partner: Vec<usize>,
-    /// Per slot, the first entry on it (the pattern check).
+    /// Per slot, the first entry on it (the pattern check) and the second (`NONE`: one row
+    /// acts on it, or none): what [`finish`](Chain::finish) sums a slot's force from.
     first: Vec<usize>,
+    second: Vec<usize>,
+    /// Per entry, its row.
+    owner: Vec<usize>,
 }
 
 /// Whether every row is an equality with a finite c term and every velocity and force is
 /// finite: what `solve_cached_into` checks before anything is cached.
-/// (This runs at every solve: the slots' numbers are tested along flat arrays by
-/// [`all_finite`], without a branch each.)
+/// (This runs at every solve: the rows' flags and c terms are tested joined by `&`, and the
+/// slots' numbers along flat arrays by [`all_finite`], without a branch each.)
 pub(crate) fn servable(rows: &Rows) -> bool {
-    rows.rows.iter().all(|row| !row.inequality && row.bias.is_finite())
+    rows.rows.iter().fold(true, |ok, row| ok & !row.inequality & row.bias.is_finite())
         && all_finite(rows.velocity.as_flattened())
         && all_finite(rows.force.as_flattened())
 }
@@ -329,18 +333,22 @@ impl Chain {
         let (k, slots) = (rows.rows.len(), rows.inverse_mass.len());
         self.first.clear();
         self.first.resize(slots, NONE);
+        self.second.clear();
+        self.second.resize(slots, NONE);
         self.start.clear();
         self.parts.clear();
         self.partner.clear();
+        self.owner.clear();
         // Sized once: pushed one by one, a long chain's buffers were copied as they grew.
         let entries = rows.rows.iter().map(|row| row.jacobian.len()).sum();
         self.start.reserve(k + 1);
         self.parts.reserve(entries);
         self.partner.reserve(entries);
+        self.owner.reserve(entries);
         let mut shared = false;
         // The first entry of the row before (entries before it are of earlier rows).
         let mut before = 0;
-        for row in &rows.rows {
+        for (q, row) in rows.rows.iter().enumerate() {
             let here = self.parts.len();
             self.start.push(here);
             let mut previous = None;
@@ -358,12 +366,14 @@ impl Chain {
                     }
                     entry if entry >= before => {
                         shared = true;
+                        self.second[s] = self.parts.len();
                         entry
                     }
                     _ => return false,
                 };
                 self.parts.push((s, [0.0; 3]));
                 self.partner.push(partner);
+                self.owner.push(q);
             }
             before = here;
         }
@@ -544,8 +554,14 @@ impl Chain {
 
     /// λ, the forces and the accelerations from μ = `y`, as `solve::finish_into` makes them
     /// when every row takes part: λₖ = (μₖ/√Âₖₖ)/‖Jₖ‖ with a diagnostic where it leaves the
-    /// normal range, Σₖ μₖ J̃ₖᵢ row by row, (Fᵢ + fᵢ) wᵢ. A step (`Answer::Step`) takes the
+    /// normal range, the forces Σₖ μₖ J̃ₖᵢ, (Fᵢ + fᵢ) wᵢ. A step (`Answer::Step`) takes the
     /// forces and accelerations alone: no λ (a division a row), active set or contact states.
+    ///
+    /// The forces are summed slot by slot, not row by row into zeroed slots: a slot's force
+    /// is +0 plus its first row's μJ̃ plus, where a second row acts on it, that row's — the
+    /// same two additions in the same order as `solve::add_row_force` row after row (each
+    /// row acts on a slot once, and the rows that do are consecutive) — and its
+    /// acceleration follows at once, as `solve::accelerations_into` takes it.
     fn finish(&self, rows: &Rows, out: &mut Solution, answer: Answer) {
         let k = rows.rows.len();
         let mut diagnostics = std::mem::take(&mut out.diagnostics);
@@ -553,28 +569,48 @@ impl Chain {
         out.lambda.clear();
         out.active.clear();
         out.contacts.clear();
-        let force = &mut out.constraint_force;
-        zero_vectors(force, rows.inverse_mass.len());
-        match answer {
-            Answer::Solution => {
-                out.lambda.resize(k, 0.0);
-                let scaling = self.jacobi.iter().zip(&self.norm);
-                let each = out.lambda.iter_mut().zip(&self.y).zip(scaling).zip(self.start.windows(2));
-                for (q, (((l, &m), (&jacobi, &norm)), bounds)) in each.enumerate() {
-                    *l = (m * jacobi) / norm;
-                    out_of_range(q, m, *l, &mut diagnostics);
-                    add_row_force(force, m, &self.parts[bounds[0]..bounds[1]]);
-                }
-                out.active.resize(k, true);
-                out.contacts.resize(k, None);
+        if answer == Answer::Solution {
+            out.lambda.resize(k, 0.0);
+            let scaling = self.jacobi.iter().zip(&self.norm);
+            for (q, ((l, &m), (&jacobi, &norm))) in out.lambda.iter_mut().zip(&self.y).zip(scaling).enumerate() {
+                *l = (m * jacobi) / norm;
+                out_of_range(q, m, *l, &mut diagnostics);
             }
-            Answer::Step => {
-                for (&m, bounds) in self.y.iter().zip(self.start.windows(2)) {
-                    add_row_force(force, m, &self.parts[bounds[0]..bounds[1]]);
+            out.active.resize(k, true);
+            out.contacts.resize(k, None);
+        }
+        let slots = rows.inverse_mass.len();
+        let (force, acceleration) = (&mut out.constraint_force, &mut out.acceleration);
+        if force.len() != slots {
+            force.resize(slots, [0.0; 3]);
+        }
+        let n = rows.force.len().min(slots);
+        if acceleration.len() != n {
+            acceleration.resize(n, [0.0; 3]);
+        }
+        // μₖ J̃ₖᵢ of row k's entry, added to `f`.
+        let add = |f: [f64; 3], k: usize, entry: usize| {
+            let (m, j) = (self.y[k], &self.parts[entry].1);
+            [f[0] + m * j[0], f[1] + m * j[1], f[2] + m * j[2]]
+        };
+        let pairs = self.first.iter().zip(&self.second);
+        for (i, (f_out, (&first, &second))) in force.iter_mut().zip(pairs).enumerate() {
+            let mut f = [0.0; 3];
+            if first != NONE {
+                let k = self.owner[first];
+                f = add(f, k, first);
+                // The second entry on a slot is of the row after the first's.
+                if second != NONE {
+                    f = add(f, k + 1, second);
                 }
+            }
+            *f_out = f;
+            if let (Some(a), Some(applied), Some(&w)) =
+                (acceleration.get_mut(i), rows.force.get(i), rows.inverse_mass.get(i))
+            {
+                *a = [(applied[0] + f[0]) * w, (applied[1] + f[1]) * w, (applied[2] + f[2]) * w];
             }
         }
-        accelerations_into(rows, force, &mut out.acceleration);
         out.diagnostics = diagnostics;
         out.status = Status::Solved;
     }

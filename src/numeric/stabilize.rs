@@ -170,9 +170,9 @@ fn enforce(row: &mut Row, bias: f64) {
     row.bias = bias;
 }
 
-/// Adds M⁻¹Jᵀμ for the rows to `x` and returns the largest |step| component; the solve
-/// goes through the run's cache when `dynamics` is given.
-fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dynamics<'_>>) -> f64 {
+/// Adds M⁻¹Jᵀμ for the rows to `x`; the solve goes through the run's cache when `dynamics`
+/// is given.
+fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dynamics<'_>>) {
     rows.force.iter_mut().for_each(|f| *f = [0.0; 3]);
     let mut owned;
     let step = match dynamics {
@@ -183,37 +183,40 @@ fn apply_correction(rows: &mut Rows, x: &mut Vectors, dynamics: Option<&mut Dyna
         }
     };
     fold(rows, step);
-    add_finite(x, step)
+    add_finite(x, step);
 }
 
-/// x += Δx slot by slot over the slots `step` has, the components that are finite, and the
-/// largest |Δx| component added.
-fn add_finite(x: &mut Vectors, step: &Vectors) -> f64 {
-    let mut largest = 0.0f64;
+/// x += Δx slot by slot over the slots `step` has, the components that are finite: chosen
+/// per component, not branched to (as [`shake_update`]).
+fn add_finite(x: &mut Vectors, step: &Vectors) {
     for (x, dx) in x.iter_mut().zip(step) {
+        let sum = add3(*x, *dx);
         for d in 0..3 {
-            if dx[d].is_finite() {
-                x[d] += dx[d];
-                largest = largest.max(dx[d].abs());
-            }
+            x[d] = if dx[d].is_finite() { sum[d] } else { x[d] };
         }
     }
-    largest
 }
 
 /// SHAKE's update q += Δq, v½ += Δq/dt slot by slot over the slots `step` has, the
-/// components that are finite. A zero Δq (a 2D scene's third components, a slot no row
-/// moves) is its own quotient, ±0/dt = ±0 for the run's dt > 0, so it is added without the
-/// division: the same bits, a division's latency less for each.
+/// components that are finite. Every component is divided (a zero Δq, as a 2D scene's
+/// third components, is its own quotient: ±0/dt = ±0 for the run's dt > 0) and the sums
+/// are chosen, not branched to, per component: the slot's three components then go as one
+/// vector operation rather than a test, a branch and a scalar division each.
 fn shake_update(q: &mut Vectors, v_half: &mut Vectors, step: &Vectors, dt: f64) {
     for ((q, v), dq) in q.iter_mut().zip(v_half.iter_mut()).zip(step) {
+        let (sum, rate) = (add3(*q, *dq), add3(*v, dq.map(|x| x / dt)));
         for d in 0..3 {
-            if dq[d].is_finite() {
-                q[d] += dq[d];
-                v[d] += if dq[d] == 0.0 { dq[d] } else { dq[d] / dt };
-            }
+            let finite = dq[d].is_finite();
+            q[d] = if finite { sum[d] } else { q[d] };
+            v[d] = if finite { rate[d] } else { v[d] };
         }
     }
+}
+
+/// x + y component by component.
+#[inline(always)]
+fn add3(x: [f64; 3], y: [f64; 3]) -> [f64; 3] {
+    [x[0] + y[0], x[1] + y[1], x[2] + y[2]]
 }
 
 /// Which inequality rows a projection holds on their surface.
