@@ -39,7 +39,7 @@
 
 use super::banded::{Banded, BandedCholesky};
 use super::contact::{ContactState, classify_holding};
-use super::gram::{BodySpace, BodySpaceWork, Bounds, Gram};
+use super::gram::{BodySpace, BodySpaceWork, Bounds, Gram, Iterated};
 use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use super::sparse::{SparseFactor, SparseWork};
@@ -927,6 +927,9 @@ pub struct SolveCache {
     /// The kept chain factor the last solve went through, when it went through one
     /// ([`SolveCache::made`]).
     made: Option<FactorId>,
+    /// A step (`Answer::Step`) on a body-space block is the velocity change alone
+    /// ([`SolveCache::set_velocity_space`]).
+    velocity_space: bool,
 }
 
 /// The mark of one factor a [`SolveCache`] made (of rows that form a chain, `numeric::chain`):
@@ -1231,6 +1234,16 @@ pub enum Factorisation {
 }
 
 impl SolveCache {
+    /// Whether a correction's step ([`solve_cached_step_into`], `Dynamics::correct_step`) on
+    /// a block the body-space factor serves (`numeric::gram`) takes the velocity change
+    /// alone, x = H⁻¹ Gᵀ c (one substitution an application), instead of the minimum-norm
+    /// λ's M⁻¹Jᵀλ (two): the same velocity change to rounding, not bit for bit, and no λ.
+    /// Off by default (every solve the general solve's numbers, as the type says); the
+    /// exact velocity step turns it on for its run.
+    pub fn set_velocity_space(&mut self, on: bool) {
+        self.velocity_space = on;
+    }
+
     /// The way the last solve went.
     pub fn last_path(&self) -> SolvePath {
         self.path
@@ -1272,6 +1285,15 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
     cached_into(rows, settings, held, cache, out, Answer::Solution, None);
 }
 
+/// [`solve_cached_into`]'s step alone, as a correction reads it (SHAKE's iterations, the
+/// projections, the velocity step: forces zeroed, c the target): `out.acceleration` holds
+/// M⁻¹(F + Jᵀλ); λ, the active set and the contact states are left empty where the path
+/// does not make them (the chain's, and the velocity change of
+/// [`SolveCache::set_velocity_space`], which leaves the constraint forces empty too).
+pub fn solve_cached_step_into(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: &mut Solution) {
+    cached_into(rows, settings, &[], cache, out, Answer::Step, None);
+}
+
 /// What a solve through the cache writes into its [`Solution`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Answer {
@@ -1281,8 +1303,10 @@ pub(crate) enum Answer {
     /// A correction's step (SHAKE's iterations, the velocity projection: forces zeroed, c
     /// the target), read from the accelerations alone: the chain path (`numeric::chain`)
     /// writes only the forces and the accelerations — the same numbers — leaving λ, the
-    /// active set and the contact states empty and no diagnostic; every other path writes
-    /// the whole solution.
+    /// active set and the contact states empty and no diagnostic; a body-space block with
+    /// [`SolveCache::set_velocity_space`] on writes the accelerations alone (the velocity
+    /// change, to rounding, [`BodySpace::velocity_change`]), the status and no diagnostic;
+    /// every other path writes the whole solution.
     Step,
 }
 
@@ -1341,37 +1365,33 @@ pub(crate) fn cached_into(
             Factor::Sparse { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.sparse_work, &mut cache.mu),
             Factor::Dense(factor) => cache.mu.extend(factor.solve(&cache.rhs)),
             Factor::BodySpace { body } => {
-                // A stale factor starts from the last answer's ẑ (a grid at rest: at its
-                // answer); a fresh one from 0, as the general solve.
-                let mut done =
-                    body.minimum_norm(&cache.rhs, &body_bounds(settings), &mut cache.body_work, &mut cache.mu, c.stale);
-                if c.stale && !(done.converged && done.consistent) {
-                    // The kept factor is too far from this J: factored now, and solved as a
-                    // fresh factor solves (the general solve's numbers).
-                    c.stale = false;
-                    cache.path = SolvePath::Factored;
-                    if !body.refactor(settings.rank_tolerance, NULL_SHARE) {
-                        cache.entry = None;
-                        cache.path = SolvePath::General;
-                        *out = solve_holding(rows, settings, held);
-                        return;
+                let velocity = answer == Answer::Step && cache.velocity_space;
+                let (rhs, work, mu, bounds) = (&cache.rhs, &mut cache.body_work, &mut cache.mu, body_bounds(settings));
+                // A stale factor starts from the last answer (a grid at rest: at its answer);
+                // a fresh minimum norm from 0, as the general solve.
+                let done = with_body_space(body, &mut c.stale, &mut cache.path, settings, |body, warm| {
+                    if velocity {
+                        body.velocity_change(rhs, &bounds, work)
+                    } else {
+                        body.minimum_norm(rhs, &bounds, work, mu, warm)
                     }
-                    done = body.minimum_norm(
-                        &cache.rhs,
-                        &body_bounds(settings),
-                        &mut cache.body_work,
-                        &mut cache.mu,
-                        false,
-                    );
-                }
-                if !done.consistent {
-                    // Rows that contradict each other here: the general solve says so.
+                });
+                let Some(done) = done.filter(|done| done.consistent) else {
+                    // The factor failed (the entry is spent), or rows that contradict each
+                    // other here: the general solve says so.
+                    if done.is_none() {
+                        cache.entry = None;
+                    }
                     cache.path = SolvePath::General;
                     *out = solve_holding(rows, settings, held);
                     return;
+                };
+                status = status.max(Status::MinimumNorm);
+                if velocity {
+                    velocity_step_into(rows, body, diagnostics, status, out);
+                    return;
                 }
                 diagnostics.push(body_diagnostic(body, &c.index, done.solves));
-                status = status.max(Status::MinimumNorm);
             }
             Factor::Singular { regularised, .. } => {
                 match regularised.minimum_norm(&cache.rhs, settings, &mut cache.regularised_work, &mut cache.mu) {
@@ -1393,6 +1413,43 @@ pub(crate) fn cached_into(
     finish_into(rows, &c.scaled, &c.index, &cache.mu, diagnostics, status, out);
     out.contacts.clear();
     out.contacts.resize(rows.rows.len(), None);
+}
+
+/// Runs `solve` (the kept body-space factor's iteration; its flag: whether a minimum norm
+/// may start from the last answer) and, when the factor was stale (kept for another J,
+/// `stale`) and the answer did not reach rounding, refactors and runs it again as a fresh
+/// factor solves, the path then [`SolvePath::Factored`]; `None` when that factorisation
+/// fails.
+fn with_body_space(
+    body: &mut BodySpace,
+    stale: &mut bool,
+    path: &mut SolvePath,
+    settings: &Settings,
+    mut solve: impl FnMut(&mut BodySpace, bool) -> Iterated,
+) -> Option<Iterated> {
+    let done = solve(body, *stale);
+    if !*stale || (done.converged && done.consistent) {
+        return Some(done);
+    }
+    // The kept factor is too far from this J: factored now.
+    *stale = false;
+    *path = SolvePath::Factored;
+    body.refactor(settings.rank_tolerance, NULL_SHARE).then(|| solve(body, false))
+}
+
+/// A step of the body-space velocity change into `out`: the accelerations Fᵢ wᵢ + Δuᵢ
+/// ([`BodySpace::velocity_into`]), everything else empty, `diagnostics` (none) and `status`.
+fn velocity_step_into(rows: &Rows, body: &BodySpace, diagnostics: Vec<Diagnostic>, status: Status, out: &mut Solution) {
+    out.lambda.clear();
+    out.active.clear();
+    out.contacts.clear();
+    out.constraint_force.clear();
+    let acceleration = &mut out.acceleration;
+    acceleration.clear();
+    acceleration.extend(rows.force.iter().zip(&rows.inverse_mass).map(|(f, w)| [f[0] * w, f[1] * w, f[2] * w]));
+    body.velocity_into(&rows.inverse_mass, acceleration);
+    out.diagnostics = diagnostics;
+    out.status = status;
 }
 
 /// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.
