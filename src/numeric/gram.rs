@@ -582,7 +582,7 @@ impl BodySpace {
         if x.len() == columns {
             (left, scale) = self.gram.residual(x, rhs, residual);
         }
-        if !(left <= size) {
+        if !(left.is_finite() && left <= size) {
             // Cold: x₀ = 0 (also when the last x' is not finite).
             x.clear();
             x.resize(columns, 0.0);

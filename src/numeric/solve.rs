@@ -1005,7 +1005,7 @@ enum Factor {
     /// the factor of the Gram matrix of its velocity components (`numeric::gram`), tried
     /// before [`Factor::Singular`].
     BodySpace {
-        body: BodySpace,
+        body: Box<BodySpace>,
     },
 }
 
@@ -1156,7 +1156,7 @@ impl Factored {
         // `sparse_minimum_norm` tries it first), the regularised one otherwise.
         let singular = |analysed: Option<SparsePlan>| -> Option<Factor> {
             if let Some(body) = body_space(&block, settings) {
-                return Some(Factor::BodySpace { body });
+                return Some(Factor::BodySpace { body: Box::new(body) });
             }
             Some(Factor::Singular {
                 regularised: Regularised::new(&block, analysed)?,
