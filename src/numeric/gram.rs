@@ -57,7 +57,7 @@ pub(crate) struct Gram {
     /// s² per column: 1/Hₐₐ.
     scale2: Vec<f64>,
     /// A buffer of [`fill`](Gram::fill): √(1/m) per slot, then s per column (what
-    /// [`BodySpace::velocity_into`] reads).
+    /// [`BodySpace::velocity_change`] reads).
     root: Vec<f64>,
     /// position[old] = the column numbered `old` slot by slot, axis by axis, in the
     /// factor's order once [`relabel`](Gram::relabel) has put them there.
@@ -279,30 +279,6 @@ impl Gram {
         }
     }
 
-    /// r = rhs − Ŵ G' x row by row into `r`, with max |rₚ| and the rounding scale of the
-    /// products, max Ŵₚ Σₑ |G'ₚₑ xₑ| (what each row's sum is rounded against): the residual of
-    /// a velocity change x ([`BodySpace::velocity_change`]) in the units of Ã μ = rhs, since
-    /// Ã μ = Ŵ G x for the μ whose velocity change is x.
-    fn residual(&self, x: &[f64], rhs: &[f64], r: &mut Vec<f64>) -> (f64, f64) {
-        let (mut left, mut scale) = (0.0f64, 0.0f64);
-        r.clear();
-        r.extend(self.start.windows(2).zip(rhs).zip(&self.weight).map(|((ends, b), w)| {
-            let (from, to) = (ends[0], ends[1]);
-            let (mut sum, mut size) = (0.0, 0.0);
-            for (g, &c) in self.g[from..to].iter().zip(&self.column[from..to]) {
-                let term = g * x[c as usize];
-                sum += term;
-                size += term.abs();
-            }
-            let rp = b - sum * w;
-            // A NaN counts as infinitely far (f64::max drops it).
-            left = if rp.is_nan() { f64::INFINITY } else { left.max(rp.abs()) };
-            scale = scale.max(size * w);
-            rp
-        }));
-        (left, scale)
-    }
-
     /// y = G' x (rows from columns).
     fn mul(&self, x: &[f64], y: &mut Vec<f64>) {
         self.mul_then(x, y, |_, s| s);
@@ -334,10 +310,6 @@ pub(crate) struct BodySpace {
     factored: Vec<f64>,
     /// ẑ of the last minimum norm (μ = Ŵ⁻¹ G' ẑ): a warm start for the next.
     last: Vec<f64>,
-    /// x' of the last velocity change ([`velocity_change`](BodySpace::velocity_change)),
-    /// the answer [`velocity_into`](BodySpace::velocity_into) writes and the next one's warm
-    /// start.
-    velocity: Vec<f64>,
 }
 
 /// Buffers of [`BodySpace::minimum_norm`].
@@ -350,8 +322,8 @@ pub(crate) struct BodySpaceWork {
     columns: Vec<f64>,
     /// ẑ of the last pseudo-inverse application.
     z: Vec<f64>,
-    /// [`BodySpace::velocity_change`]'s trial x' and its residual.
-    velocity_trial: Vec<f64>,
+    /// [`BodySpace::velocity_change`]'s trial Δu and its residual.
+    velocity_trial: Vec<[f64; 3]>,
     residual_trial: Vec<f64>,
     sparse: SparseWork,
 }
@@ -394,15 +366,8 @@ impl BodySpace {
         // From here G's columns are in the factor's order (`assemble` reads only which
         // entries share a column, and `targets`): no permutation around the substitutions.
         gram.relabel(factor.order());
-        let mut body = BodySpace {
-            gram,
-            factor,
-            targets,
-            null_rows: Vec::new(),
-            factored: Vec::new(),
-            last: Vec::new(),
-            velocity: Vec::new(),
-        };
+        let mut body =
+            BodySpace { gram, factor, targets, null_rows: Vec::new(), factored: Vec::new(), last: Vec::new() };
         body.refactor(pivot_floor, null_share).then_some(body)
     }
 
@@ -561,49 +526,55 @@ impl BodySpace {
         Iterated { solves, converged, consistent }
     }
 
-    /// The velocity change of the minimum-norm μ of Ã μ = `rhs`, without μ (see the file's
-    /// note): x' = H'⁻¹ G'ᵀ c with c = Ŵ⁻¹ rhs (M^{1/2} Δu = S x'), iterated as
-    /// xₖ₊₁ = xₖ + H'⁻¹ G'ᵀ Ŵ⁻¹ (rhs − Ŵ G' xₖ) until the residual is at the rounding of its
-    /// own evaluation, stops halving, or `bounds.solves` are spent; kept for
-    /// [`velocity_into`](BodySpace::velocity_into). One substitution an application (the
-    /// minimum norm's two, with S² between, are for the split among redundant rows, which
-    /// the velocity change does not depend on). The residual is the minimum norm's (Ã μ =
-    /// Ŵ G x), held to the same bounds, so rows that contradict each other are found as
-    /// there. It starts from the last call's x' when that leaves a smaller residual than 0
-    /// (a grid at rest: near its answer); with a factor of a nearby G (stale) each
-    /// application shrinks the error by about the factor's relative error times H's
-    /// condition.
-    pub(crate) fn velocity_change(&mut self, rhs: &[f64], bounds: &Bounds, work: &mut BodySpaceWork) -> Iterated {
-        let columns = self.gram.columns;
-        let BodySpaceWork { residual, z: step, velocity_trial: trial, residual_trial, sparse, .. } = work;
-        let x = &mut self.velocity;
-        let size = rhs.iter().fold(0.0f64, |m, b| m.max(b.abs()));
+    /// The velocity change Δu of the minimum-norm μ of this block's rows (see the file's
+    /// note), without μ, into `du`: the unique Δu on G's columns with J Δu = the rows'
+    /// target, since G has full column rank. `residual(Δu, r)` writes the scaled rows'
+    /// residual r = rhs − J̃ Δu (the minimum norm's rhs − Ã μ for the μ of that Δu) and
+    /// returns max |rₚ| and the rounding scale of its products (max over the rows of
+    /// Σ |J̃ₚᵢ Δuᵢ|); `size` is max |rhs|. The iteration Δu ← Δu + M^{-1/2} S H'⁻¹ G'ᵀ Ŵ⁻¹ r
+    /// (one substitution an application: the minimum norm's two, with S² between, are for
+    /// the split among redundant rows, which Δu does not depend on) runs until the residual
+    /// is at the rounding of its own evaluation, stops halving, or `bounds.solves` are
+    /// spent, held to the minimum norm's bounds (so rows that contradict each other are
+    /// found as there). Its limit is Δu whatever the factor, G and scaling it steps with
+    /// (a nearby J's, kept: they only precondition; each application then shrinks the error
+    /// by about their relative error times H's condition), as long as the residual is the
+    /// current rows'. It starts from `du` as given when that leaves a residual below `size`
+    /// (a grid at rest: near its answer), else from 0.
+    pub(crate) fn velocity_change(
+        &self,
+        size: f64,
+        mut residual: impl FnMut(&[[f64; 3]], &mut Vec<f64>) -> (f64, f64),
+        inverse_mass: &[f64],
+        bounds: &Bounds,
+        work: &mut BodySpaceWork,
+        du: &mut Vec<[f64; 3]>,
+    ) -> Iterated {
+        let BodySpaceWork { residual: r, z: step, velocity_trial: trial, residual_trial, sparse, .. } = work;
         let (mut left, mut scale) = (f64::INFINITY, 0.0);
-        if x.len() == columns {
-            (left, scale) = self.gram.residual(x, rhs, residual);
+        if du.len() == inverse_mass.len() {
+            (left, scale) = residual(du, r);
         }
         if !(left.is_finite() && left <= size) {
-            // Cold: x₀ = 0 (also when the last x' is not finite).
-            x.clear();
-            x.resize(columns, 0.0);
-            residual.clear();
-            residual.extend_from_slice(rhs);
-            (left, scale) = (size, 0.0);
+            // Cold: Δu₀ = 0 (also when the last Δu is not finite).
+            du.clear();
+            du.resize(inverse_mass.len(), [0.0; 3]);
+            (left, scale) = residual(du, r);
         }
         let at_rounding = |left: f64, scale: f64, ulps: f64| left <= ulps * f64::EPSILON * (scale + size);
         let (mut solves, mut converged) = (0, at_rounding(left, scale, CONVERGED_ULPS));
         while solves < bounds.solves && !converged {
             let weight = &self.gram.weight;
-            self.gram.transpose_mul_by(|p| residual[p] / weight[p], step);
+            self.gram.transpose_mul_by(|p| r[p] / weight[p], step);
             self.factor.substitute_in_order(step, sparse);
-            trial.clear();
-            trial.extend(x.iter().zip(step.iter()).map(|(x, s)| x + s));
-            let (now, now_scale) = self.gram.residual(trial, rhs, residual_trial);
+            trial.clone_from(du);
+            self.add_velocity(step, inverse_mass, trial);
+            let (now, now_scale) = residual(trial, residual_trial);
             solves += 1;
             let halved = now <= 0.5 * left;
             if now < left {
-                std::mem::swap(x, trial);
-                std::mem::swap(residual, residual_trial);
+                std::mem::swap(du, trial);
+                std::mem::swap(r, residual_trial);
                 (left, scale) = (now, now_scale);
             }
             if !halved {
@@ -613,19 +584,18 @@ impl BodySpace {
             converged = at_rounding(left, scale, CONVERGED_ULPS);
         }
         let consistent = (left <= bounds.consistency * size + bounds.rounding * f64::EPSILON * scale || size == 0.0)
-            && x.iter().all(|x| x.is_finite());
+            && du.iter().flatten().all(|x| x.is_finite());
         // Stopped by no longer halving: at the rounding too when within a few times its bound.
         converged |= at_rounding(left, scale, ROUNDING_ULPS);
         Iterated { solves, converged, consistent }
     }
 
-    /// Adds the last [`velocity_change`](BodySpace::velocity_change)'s Δu = M^{-1/2} S x' to
-    /// `delta` slot by slot (`inverse_mass` the slots' 1/m, as G was filled with); the
-    /// components that are no column of G get nothing.
-    pub(crate) fn velocity_into(&self, inverse_mass: &[f64], delta: &mut [[f64; 3]]) {
+    /// Adds M^{-1/2} S y (y in G's columns, the factor's order) to `du` slot by slot, with
+    /// the slots' `inverse_mass`; the components that are no column of G get nothing.
+    fn add_velocity(&self, y: &[f64], inverse_mass: &[f64], du: &mut [[f64; 3]]) {
         let gram = &self.gram;
         let mut old = 0;
-        for ((bits, w), d) in gram.moved.iter().zip(inverse_mass).zip(delta.iter_mut()) {
+        for ((bits, w), d) in gram.moved.iter().zip(inverse_mass).zip(du.iter_mut()) {
             if *bits == 0 {
                 continue;
             }
@@ -633,7 +603,7 @@ impl BodySpace {
             for (axis, d) in d.iter_mut().enumerate() {
                 if bits & (1 << axis) != 0 {
                     let c = gram.position[old] as usize;
-                    *d += root * gram.root[c] * self.velocity[c];
+                    *d += root * gram.root[c] * y[c];
                     old += 1;
                 }
             }

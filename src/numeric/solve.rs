@@ -930,6 +930,10 @@ pub struct SolveCache {
     /// A step (`Answer::Step`) on a body-space block is the velocity change alone
     /// ([`SolveCache::set_velocity_space`]).
     velocity_space: bool,
+    /// The rows' targets of that velocity change (`velocity_target`), and the last one, Δu
+    /// per slot (the next one's warm start).
+    target: Vec<f64>,
+    velocity: Vec<[f64; 3]>,
 }
 
 /// The mark of one factor a [`SolveCache`] made (of rows that form a chain, `numeric::chain`):
@@ -1016,6 +1020,33 @@ impl Factored {
             && self.lengths.len() == rows.rows.len()
             && self.inverse_mass.len() == rows.inverse_mass.len()
             && self.lengths.iter().zip(&rows.rows).all(|(n, row)| *n == row.jacobian.len())
+    }
+
+    /// Whether `rows` are near enough the entry's J for its kept body-space factor, scaling
+    /// and G to precondition their velocity change (`velocity_near`): the same settings and
+    /// slots, the same slots without mass and the same zero components (so the same columns
+    /// of G, all still moved), and every component within [`STALE_CHANGE`] of its row's
+    /// norm of the kept one (so J keeps G's full column rank). One walk, nothing stored.
+    fn near(&self, rows: &Rows, settings: &Settings) -> bool {
+        if !self.settings_match(rows, settings) {
+            return false;
+        }
+        let massless = |w: f64| w == 0.0;
+        if !self.inverse_mass.iter().zip(&rows.inverse_mass).all(|(b, w)| massless(f64::from_bits(*b)) == massless(*w))
+        {
+            return false;
+        }
+        let mut kept = self.jacobian.iter();
+        rows.rows.iter().zip(&self.scaled.norm).all(|(row, norm)| {
+            let bound = STALE_CHANGE * norm;
+            row.jacobian.iter().zip(kept.by_ref()).all(|((s, j), (t, bits))| {
+                s == t
+                    && j.iter().zip(bits).all(|(x, b)| {
+                        let y = f64::from_bits(*b);
+                        (*x == 0.0) == (y == 0.0) && (x - y).abs() <= bound
+                    })
+            })
+        })
     }
 
     /// How `rows` compare with the rows the entry was made from, in one walk along J (a run
@@ -1335,6 +1366,9 @@ pub(crate) fn cached_into(
         cache.made = cache.chain.made();
         return;
     }
+    if answer == Answer::Step && cache.velocity_space && velocity_near(rows, settings, cache, out) {
+        return;
+    }
     let likeness = cache.entry.as_mut().map_or(Likeness::Different, |c| c.compare_taking(rows, settings));
     if likeness == Likeness::Same {
         cache.path = SolvePath::Reused;
@@ -1367,11 +1401,16 @@ pub(crate) fn cached_into(
             Factor::BodySpace { body } => {
                 let velocity = answer == Answer::Step && cache.velocity_space;
                 let (rhs, work, mu, bounds) = (&cache.rhs, &mut cache.body_work, &mut cache.mu, body_bounds(settings));
+                let (scaled, target, du) = (&c.scaled, &mut cache.target, &mut cache.velocity);
+                let size = if velocity { velocity_target(rows, scaled, target) } else { 0.0 };
+                let target = &*target;
                 // A stale factor starts from the last answer (a grid at rest: at its answer);
                 // a fresh minimum norm from 0, as the general solve.
                 let done = with_body_space(body, &mut c.stale, &mut cache.path, settings, |body, warm| {
                     if velocity {
-                        body.velocity_change(rhs, &bounds, work)
+                        let residual =
+                            |du: &[[f64; 3]], r: &mut Vec<f64>| velocity_residual(rows, scaled, target, du, r);
+                        body.velocity_change(size, residual, &rows.inverse_mass, &bounds, work, du)
                     } else {
                         body.minimum_norm(rhs, &bounds, work, mu, warm)
                     }
@@ -1388,7 +1427,8 @@ pub(crate) fn cached_into(
                 };
                 status = status.max(Status::MinimumNorm);
                 if velocity {
-                    velocity_step_into(rows, body, diagnostics, status, out);
+                    out.diagnostics = diagnostics;
+                    velocity_step_into(rows, &cache.velocity, status, out);
                     return;
                 }
                 diagnostics.push(body_diagnostic(body, &c.index, done.solves));
@@ -1437,20 +1477,98 @@ fn with_body_space(
     body.refactor(settings.rank_tolerance, NULL_SHARE).then(|| solve(body, false))
 }
 
-/// A step of the body-space velocity change into `out`: the accelerations Fᵢ wᵢ + Δuᵢ
-/// ([`BodySpace::velocity_into`]), everything else empty, `diagnostics` (none) and `status`.
-fn velocity_step_into(rows: &Rows, body: &BodySpace, diagnostics: Vec<Diagnostic>, status: Status, out: &mut Solution) {
+/// A step of the body-space velocity change `du` into `out`: the accelerations Fᵢ wᵢ + Δuᵢ,
+/// no diagnostic, `status`, everything else empty.
+fn velocity_step_into(rows: &Rows, du: &[[f64; 3]], status: Status, out: &mut Solution) {
     out.lambda.clear();
     out.active.clear();
     out.contacts.clear();
     out.constraint_force.clear();
-    let acceleration = &mut out.acceleration;
-    acceleration.clear();
-    acceleration.extend(rows.force.iter().zip(&rows.inverse_mass).map(|(f, w)| [f[0] * w, f[1] * w, f[2] * w]));
-    body.velocity_into(&rows.inverse_mass, acceleration);
-    out.diagnostics = diagnostics;
+    out.diagnostics.clear();
+    out.acceleration.clear();
+    out.acceleration.extend(
+        rows.force
+            .iter()
+            .zip(&rows.inverse_mass)
+            .zip(du)
+            .map(|((f, w), d)| [f[0] * w + d[0], f[1] * w + d[1], f[2] * w + d[2]]),
+    );
     out.status = status;
 }
+
+/// The targets of a velocity change, tₖ = −(Jₖ·F w + cₖ) (J Δu = t is J̃ Δu = −b̃ unscaled),
+/// into `target`; returns max |tₖ| in the scaled rows (`scaled`'s, the minimum norm's max
+/// |rhs|).
+fn velocity_target(rows: &Rows, scaled: &Scaled, target: &mut Vec<f64>) -> f64 {
+    target.clear();
+    let mut size = 0.0f64;
+    for (k, row) in rows.rows.iter().enumerate() {
+        let mut ext = -0.0;
+        for (body, j) in &row.jacobian {
+            ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
+        }
+        let t = -(ext + row.bias);
+        size = size.max(scaled.scale(k, t).abs());
+        target.push(t);
+    }
+    size
+}
+
+/// The residual of a velocity change `du` of `rows` in the scaled rows, rₖ = (tₖ − Jₖ Δu)
+/// scaled by `scaled` (the kept entry's: a nearby J's, within rounding of these rows'), into
+/// `r`, with max |rₖ| (a NaN counting as infinite) and the rounding scale of the products,
+/// max Σ |Jₖᵢ Δuᵢ| scaled ([`BodySpace::velocity_change`]). From the rows' own J: the limit
+/// of the iteration is their Δu whatever the kept factor.
+fn velocity_residual(rows: &Rows, scaled: &Scaled, target: &[f64], du: &[[f64; 3]], r: &mut Vec<f64>) -> (f64, f64) {
+    let (mut left, mut scale) = (0.0f64, 0.0f64);
+    r.clear();
+    r.extend(rows.rows.iter().zip(target).enumerate().map(|(k, (row, t))| {
+        let (mut sum, mut size) = (0.0, 0.0);
+        for (body, j) in &row.jacobian {
+            for (a, d) in j.iter().zip(&du[*body]) {
+                let term = a * d;
+                sum += term;
+                size += term.abs();
+            }
+        }
+        let rk = scaled.scale(k, t - sum);
+        left = if rk.is_nan() { f64::INFINITY } else { left.max(rk.abs()) };
+        scale = scale.max(scaled.scale(k, size).abs());
+        rk
+    }));
+    (left, scale)
+}
+
+/// A step of the velocity change ([`SolveCache::set_velocity_space`]) with the kept
+/// body-space factor, scaling and G as they are, without comparing, rescaling or refilling
+/// anything ([`SolvePath::Stale`]): where the entry is stale already (a grid at rest, J
+/// moving in its last bits) and `rows` are near its J ([`Factored::near`]); the residual is
+/// the rows' own, so the answer is theirs. True when it answered into `out` (converged at
+/// rounding and consistent); false leaves the solve to the usual path, which compares,
+/// refills and refactors as needed and finds contradicting rows.
+fn velocity_near(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: &mut Solution) -> bool {
+    let SolveCache { entry: Some(c), target, velocity, body_work, .. } = cache else {
+        return false;
+    };
+    let Factor::BodySpace { body } = &c.factor else {
+        return false;
+    };
+    if !(c.stale && c.near(rows, settings)) {
+        return false;
+    }
+    let scaled = &c.scaled;
+    let size = velocity_target(rows, scaled, target);
+    let residual = |du: &[[f64; 3]], r: &mut Vec<f64>| velocity_residual(rows, scaled, target, du, r);
+    let done = body.velocity_change(size, residual, &rows.inverse_mass, &body_bounds(settings), body_work, velocity);
+    if !(done.converged && done.consistent) {
+        return false;
+    }
+    velocity_step_into(rows, velocity, Status::MinimumNorm, out);
+    cache.path = SolvePath::Stale;
+    true
+}
+
+/// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.
 
 /// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.
 fn right_hand_side(rows: &Rows, scaled: &Scaled, index: &[usize]) -> Vec<f64> {
