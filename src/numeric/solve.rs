@@ -1569,8 +1569,6 @@ fn velocity_near(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: 
 }
 
 /// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.
-
-/// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.
 fn right_hand_side(rows: &Rows, scaled: &Scaled, index: &[usize]) -> Vec<f64> {
     index.iter().map(|&q| b_entry(rows, scaled, q)).collect()
 }
