@@ -425,6 +425,9 @@ fn rows_that_contradict_each_other_are_refused_by_the_velocity_space_step() {
     assert_eq!(cache.last_path(), SolvePath::Reused);
 }
 
+/// One row's J: (slot, component per axis) per part.
+type Parts = Vec<(usize, [f64; 3])>;
+
 /// A rigid joint grid as the exact velocity step's rows: `k − 1` rows of `k` discs below a
 /// fixed top row, each pinned by a revolute joint (two rows) to its right and lower
 /// neighbours at the midpoint (the top row's joints to world points; J does not depend on
@@ -448,7 +451,7 @@ fn rigid_grid(k: usize, seed: u64, clash: bool) -> Rows {
             [(b, [0.0, sign, 0.0]), (n + b, [sign * r[0], 0.0, 0.0])],
         ]
     };
-    let mut joints: Vec<[Vec<(usize, [f64; 3])>; 2]> = Vec::new();
+    let mut joints: Vec<[Parts; 2]> = Vec::new();
     for i in 0..k - 1 {
         for j in 0..k {
             // Up: to the world point above (the top row) or the disc above.
