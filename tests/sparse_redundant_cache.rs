@@ -411,6 +411,10 @@ fn rows_that_contradict_each_other_are_refused_by_the_velocity_space_step() {
     let mut cache = SolveCache::default();
     let rows = braced(17, 37);
     velocity_step(&rows, &mut cache);
+    // A J moved in its last bits: the entry is stale, and the next step tries the kept
+    // factor as it is (no refill) first.
+    velocity_step(&nudged(&rows, 1e-15, 38), &mut cache);
+    assert_eq!(cache.last_path(), SolvePath::Stale);
     let mut clash = rows.clone();
     let mut mix = Rng::new(101);
     for row in &mut clash.rows {
@@ -420,9 +424,12 @@ fn rows_that_contradict_each_other_are_refused_by_the_velocity_space_step() {
     assert_eq!(cache.last_path(), SolvePath::General);
     assert_eq!(refused.status, Status::Failed);
     assert_general(&refused, &clash, "contradicting rows");
-    // The factor is kept and serves consistent rows again.
-    velocity_step(&rows, &mut cache);
+    // The factor is kept (made anew for this J when the stale one did not converge) and
+    // serves consistent rows again.
+    let served = velocity_step(&rows, &mut cache);
     assert_eq!(cache.last_path(), SolvePath::Reused);
+    let apart = gap(&flat(&served), &flat(&minimum_norm_step(&rows)));
+    assert!(apart < 1e-11, "consistent again: apart by {apart:e} of the largest");
 }
 
 /// One row's J: (slot, component per axis) per part.
