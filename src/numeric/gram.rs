@@ -28,6 +28,14 @@
 //! written twice on point masses) a pivot of H falls to the rank tolerance and the caller
 //! takes the regularised factor instead.
 //!
+//! A caller that needs the velocity change alone (the exact velocity step's velocity solves
+//! and projections: `BodySpace::velocity_change`) needs neither ẑ nor the second
+//! substitution: x = H⁻¹ Gᵀ c is M^{1/2} Δu, and since G has full column rank Δu is the one
+//! vector with J Δu = the rows' target, whatever the split among redundant rows. So it
+//! iterates Δu against the rows' own residual, each application one substitution; the
+//! factor, the scaling and G then only precondition, and a stale set of them (a nearby J's,
+//! not even refilled) still converges to this J's Δu.
+//!
 //! Not here: which blocks are singular whatever their numbers, diagnostics, the cache
 //! (`numeric::solve`).
 

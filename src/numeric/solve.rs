@@ -910,7 +910,9 @@ pub enum SolvePath {
 /// the eigendecomposition there (which reports the rank and condition `lagrange solve`
 /// shows): the same minimum-norm λ to rounding (the regularised factor: but for the
 /// regularisation's share in the redundant rows' split), [`Diagnostic::RedundantSparse`]
-/// instead of [`Diagnostic::Redundant`].
+/// instead of [`Diagnostic::Redundant`]. A third, only when asked for
+/// ([`SolveCache::set_velocity_space`]): a correction's step on a body-space block is the
+/// velocity change alone, the same step to rounding, no λ.
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
     entry: Option<Factored>,

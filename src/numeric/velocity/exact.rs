@@ -10,7 +10,12 @@
 //! grids, dense on small blocks, Clarabel and Murty for inequality rows, through the run's
 //! solve cache): the rows get F = 0 and the bias c set to the
 //! right-hand side, as `numeric::stabilize` does for its projections, so its "accelerations"
-//! M⁻¹JᵀP are the velocity changes. After each substep the positions are projected onto
+//! M⁻¹JᵀP are the velocity changes. Only the last substep's P is reported
+//! (`Stepper::lambda`), so the other substeps and the projections take the step alone
+//! (`Dynamics::correct_step`), and on a redundant block the body-space factor serves (a rigid
+//! grid) that step is the velocity change without its split among the rows
+//! (`Dynamics::set_velocity_space`, `numeric::gram`: one substitution an application
+//! instead of two, the same velocity change to rounding). After each substep the positions are projected onto
 //! C = 0 with the mass-weighted minimum-norm step, to 10⁻¹³ of the scene's size: the bias
 //! C/h alone leaves the O(h²) curvature error of the linearised step, the projection makes
 //! the joints exact. The projection first iterates along the substep's J
