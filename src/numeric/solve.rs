@@ -876,7 +876,9 @@ pub enum SolvePath {
     Factored,
     /// J changed by less than [`STALE_CHANGE`] on a block the body-space factor serves:
     /// scaled anew, the kept factor iterated to this J's minimum norm (at rounding, or it is
-    /// factored after all and the path is [`SolvePath::Factored`]).
+    /// factored after all and the path is [`SolvePath::Factored`]). A velocity change
+    /// ([`SolveCache::set_velocity_space`]) near a stale entry's J is not even scaled anew:
+    /// the entry as it is preconditions the rows' own residual.
     Stale,
     /// Not a case the cache serves (an inequality row, a number that is not finite, a row
     /// that cannot carry a force, a block within [`MAX_DENSE_ROWS`] singular by its numbers
@@ -1429,6 +1431,7 @@ pub(crate) fn cached_into(
                 };
                 status = status.max(Status::MinimumNorm);
                 if velocity {
+                    // The buffer handed back (the step has no diagnostic).
                     out.diagnostics = diagnostics;
                     velocity_step_into(rows, &cache.velocity, status, out);
                     return;
