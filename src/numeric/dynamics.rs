@@ -656,6 +656,14 @@ impl<'s> Dynamics<'s> {
         &mut self.correct_answering(rows, Answer::Step, known).acceleration
     }
 
+    /// Whether the corrections' steps ([`correct_step`](Dynamics::correct_step)) on a block
+    /// the body-space factor serves take the velocity change alone
+    /// (`solve::SolveCache::set_velocity_space`: the same step to rounding, not bit for
+    /// bit): the exact velocity step's run.
+    pub fn set_velocity_space(&mut self, on: bool) {
+        self.solver.set_velocity_space(on);
+    }
+
     /// [`correct`](Dynamics::correct) writing what `answer` asks.
     fn correct_answering(&mut self, rows: &Rows, answer: Answer, known: Option<FactorId>) -> &mut Solution {
         self.made = None;

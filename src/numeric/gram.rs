@@ -28,6 +28,14 @@
 //! written twice on point masses) a pivot of H falls to the rank tolerance and the caller
 //! takes the regularised factor instead.
 //!
+//! A caller that needs the velocity change alone (the exact velocity step's velocity solves
+//! and projections: `BodySpace::velocity_change`) needs neither ẑ nor the second
+//! substitution: x = H⁻¹ Gᵀ c is M^{1/2} Δu, and since G has full column rank Δu is the one
+//! vector with J Δu = the rows' target, whatever the split among redundant rows. So it
+//! iterates Δu against the rows' own residual, each application one substitution; the
+//! factor, the scaling and G then only precondition, and a stale set of them (a nearby J's,
+//! not even refilled) still converges to this J's Δu.
+//!
 //! Not here: which blocks are singular whatever their numbers, diagnostics, the cache
 //! (`numeric::solve`).
 
@@ -56,8 +64,12 @@ pub(crate) struct Gram {
     weight: Vec<f64>,
     /// s² per column: 1/Hₐₐ.
     scale2: Vec<f64>,
-    /// A buffer of [`fill`](Gram::fill): √(1/m) per slot, then s per column.
+    /// A buffer of [`fill`](Gram::fill): √(1/m) per slot, then s per column (what
+    /// [`BodySpace::velocity_change`] reads).
     root: Vec<f64>,
+    /// position[old] = the column numbered `old` slot by slot, axis by axis, in the
+    /// factor's order once [`relabel`](Gram::relabel) has put them there.
+    position: Vec<u32>,
 }
 
 /// The moved axes of every slot: `parts` are the scaled rows' parts (slot, J̃ᵢ) of the
@@ -130,6 +142,7 @@ impl Gram {
             weight: Vec::new(),
             scale2: Vec::new(),
             root: Vec::new(),
+            position: (0..columns as u32).collect(),
         };
         gram.fill(parts, inverse_mass, weight, weight_range).then_some(gram)
     }
@@ -222,6 +235,8 @@ impl Gram {
             *c = new[*c as usize];
         }
         self.scale2 = order.iter().map(|&old| self.scale2[old]).collect();
+        self.root = order.iter().map(|&old| self.root[old]).collect();
+        self.position = new;
     }
 
     /// The pairs of columns whose products H sums, in the order [`assemble`](Gram::assemble)
@@ -315,6 +330,9 @@ pub(crate) struct BodySpaceWork {
     columns: Vec<f64>,
     /// ẑ of the last pseudo-inverse application.
     z: Vec<f64>,
+    /// [`BodySpace::velocity_change`]'s trial Δu and its residual.
+    velocity_trial: Vec<[f64; 3]>,
+    residual_trial: Vec<f64>,
     sparse: SparseWork,
 }
 
@@ -514,5 +532,89 @@ impl BodySpace {
         // Stopped by no longer halving: at the rounding too when within a few times its bound.
         converged |= left <= ROUNDING_ULPS * f64::EPSILON * (top + size);
         Iterated { solves, converged, consistent }
+    }
+
+    /// The velocity change Δu of the minimum-norm μ of this block's rows (see the file's
+    /// note), without μ, into `du`: the unique Δu on G's columns with J Δu = the rows'
+    /// target, since G has full column rank. `residual(Δu, r)` writes the scaled rows'
+    /// residual r = rhs − J̃ Δu (the minimum norm's rhs − Ã μ for the μ of that Δu) and
+    /// returns max |rₚ| and the rounding scale of its products (max over the rows of
+    /// Σ |J̃ₚᵢ Δuᵢ|); `size` is max |rhs|. The iteration Δu ← Δu + M^{-1/2} S H'⁻¹ G'ᵀ Ŵ⁻¹ r
+    /// (one substitution an application: the minimum norm's two, with S² between, are for
+    /// the split among redundant rows, which Δu does not depend on) runs until the residual
+    /// is at the rounding of its own evaluation, stops halving, or `bounds.solves` are
+    /// spent, held to the minimum norm's bounds (so rows that contradict each other are
+    /// found as there). Its limit is Δu whatever the factor, G and scaling it steps with
+    /// (a nearby J's, kept: they only precondition; each application then shrinks the error
+    /// by about their relative error times H's condition), as long as the residual is the
+    /// current rows'. It starts from `du` as given when that leaves a residual below `size`
+    /// (a grid at rest: near its answer), else from 0.
+    pub(crate) fn velocity_change(
+        &self,
+        size: f64,
+        mut residual: impl FnMut(&[[f64; 3]], &mut Vec<f64>) -> (f64, f64),
+        inverse_mass: &[f64],
+        bounds: &Bounds,
+        work: &mut BodySpaceWork,
+        du: &mut Vec<[f64; 3]>,
+    ) -> Iterated {
+        let BodySpaceWork { residual: r, z: step, velocity_trial: trial, residual_trial, sparse, .. } = work;
+        let (mut left, mut scale) = (f64::INFINITY, 0.0);
+        if du.len() == inverse_mass.len() {
+            (left, scale) = residual(du, r);
+        }
+        if !(left.is_finite() && left <= size) {
+            // Cold: Δu₀ = 0 (also when the last Δu is not finite).
+            du.clear();
+            du.resize(inverse_mass.len(), [0.0; 3]);
+            (left, scale) = residual(du, r);
+        }
+        let at_rounding = |left: f64, scale: f64, ulps: f64| left <= ulps * f64::EPSILON * (scale + size);
+        let (mut solves, mut converged) = (0, at_rounding(left, scale, CONVERGED_ULPS));
+        while solves < bounds.solves && !converged {
+            let weight = &self.gram.weight;
+            self.gram.transpose_mul_by(|p| r[p] / weight[p], step);
+            self.factor.substitute_in_order(step, sparse);
+            trial.clone_from(du);
+            self.add_velocity(step, inverse_mass, trial);
+            let (now, now_scale) = residual(trial, residual_trial);
+            solves += 1;
+            let halved = now <= 0.5 * left;
+            if now < left {
+                std::mem::swap(du, trial);
+                std::mem::swap(r, residual_trial);
+                (left, scale) = (now, now_scale);
+            }
+            if !halved {
+                // No longer halving: the last iterate is at its rounding (or this one worse).
+                break;
+            }
+            converged = at_rounding(left, scale, CONVERGED_ULPS);
+        }
+        let consistent = (left <= bounds.consistency * size + bounds.rounding * f64::EPSILON * scale || size == 0.0)
+            && du.iter().flatten().all(|x| x.is_finite());
+        // Stopped by no longer halving: at the rounding too when within a few times its bound.
+        converged |= at_rounding(left, scale, ROUNDING_ULPS);
+        Iterated { solves, converged, consistent }
+    }
+
+    /// Adds M^{-1/2} S y (y in G's columns, the factor's order) to `du` slot by slot, with
+    /// the slots' `inverse_mass`; the components that are no column of G get nothing.
+    fn add_velocity(&self, y: &[f64], inverse_mass: &[f64], du: &mut [[f64; 3]]) {
+        let gram = &self.gram;
+        let mut old = 0;
+        for ((bits, w), d) in gram.moved.iter().zip(inverse_mass).zip(du.iter_mut()) {
+            if *bits == 0 {
+                continue;
+            }
+            let root = w.sqrt();
+            for (axis, d) in d.iter_mut().enumerate() {
+                if bits & (1 << axis) != 0 {
+                    let c = gram.position[old] as usize;
+                    *d += root * gram.root[c] * y[c];
+                    old += 1;
+                }
+            }
+        }
     }
 }

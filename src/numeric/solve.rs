@@ -39,7 +39,7 @@
 
 use super::banded::{Banded, BandedCholesky};
 use super::contact::{ContactState, classify_holding};
-use super::gram::{BodySpace, BodySpaceWork, Bounds, Gram};
+use super::gram::{BodySpace, BodySpaceWork, Bounds, Gram, Iterated};
 use super::qp::{Kkt, QpStatus, kkt, solve_qp};
 use super::rows::Rows;
 use super::sparse::{SparseFactor, SparseWork};
@@ -887,7 +887,9 @@ pub enum SolvePath {
     Factored,
     /// J changed by less than [`STALE_CHANGE`] on a block the body-space factor serves:
     /// scaled anew, the kept factor iterated to this J's minimum norm (at rounding, or it is
-    /// factored after all and the path is [`SolvePath::Factored`]).
+    /// factored after all and the path is [`SolvePath::Factored`]). A velocity change
+    /// ([`SolveCache::set_velocity_space`]) near a stale entry's J is not even scaled anew:
+    /// the entry as it is preconditions the rows' own residual.
     Stale,
     /// Not a case the cache serves (an inequality row, a number that is not finite, a row
     /// that cannot carry a force, a block within [`MAX_DENSE_ROWS`] singular by its numbers
@@ -921,7 +923,9 @@ pub enum SolvePath {
 /// the eigendecomposition there (which reports the rank and condition `lagrange solve`
 /// shows): the same minimum-norm λ to rounding (the regularised factor: but for the
 /// regularisation's share in the redundant rows' split), [`Diagnostic::RedundantSparse`]
-/// instead of [`Diagnostic::Redundant`].
+/// instead of [`Diagnostic::Redundant`]. A third, only when asked for
+/// ([`SolveCache::set_velocity_space`]): a correction's step on a body-space block is the
+/// velocity change alone, the same step to rounding, no λ.
 #[derive(Clone, Debug, Default)]
 pub struct SolveCache {
     entry: Option<Factored>,
@@ -938,6 +942,13 @@ pub struct SolveCache {
     /// The kept chain factor the last solve went through, when it went through one
     /// ([`SolveCache::made`]).
     made: Option<FactorId>,
+    /// A step (`Answer::Step`) on a body-space block is the velocity change alone
+    /// ([`SolveCache::set_velocity_space`]).
+    velocity_space: bool,
+    /// The rows' targets of that velocity change (`velocity_target`), and the last one, Δu
+    /// per slot (the next one's warm start).
+    target: Vec<f64>,
+    velocity: Vec<[f64; 3]>,
 }
 
 /// The mark of one factor a [`SolveCache`] made (of rows that form a chain, `numeric::chain`):
@@ -1013,7 +1024,7 @@ enum Factor {
     /// the factor of the Gram matrix of its velocity components (`numeric::gram`), tried
     /// before [`Factor::Singular`].
     BodySpace {
-        body: BodySpace,
+        body: Box<BodySpace>,
     },
 }
 
@@ -1024,6 +1035,33 @@ impl Factored {
             && self.lengths.len() == rows.rows.len()
             && self.inverse_mass.len() == rows.inverse_mass.len()
             && self.lengths.iter().zip(&rows.rows).all(|(n, row)| *n == row.jacobian.len())
+    }
+
+    /// Whether `rows` are near enough the entry's J for its kept body-space factor, scaling
+    /// and G to precondition their velocity change (`velocity_near`): the same settings and
+    /// slots, the same slots without mass and the same zero components (so the same columns
+    /// of G, all still moved), and every component within [`STALE_CHANGE`] of its row's
+    /// norm of the kept one (so J keeps G's full column rank). One walk, nothing stored.
+    fn near(&self, rows: &Rows, settings: &Settings) -> bool {
+        if !self.settings_match(rows, settings) {
+            return false;
+        }
+        let massless = |w: f64| w == 0.0;
+        if !self.inverse_mass.iter().zip(&rows.inverse_mass).all(|(b, w)| massless(f64::from_bits(*b)) == massless(*w))
+        {
+            return false;
+        }
+        let mut kept = self.jacobian.iter();
+        rows.rows.iter().zip(&self.scaled.norm).all(|(row, norm)| {
+            let bound = STALE_CHANGE * norm;
+            row.jacobian.iter().zip(kept.by_ref()).all(|((s, j), (t, bits))| {
+                s == t
+                    && j.iter().zip(bits).all(|(x, b)| {
+                        let y = f64::from_bits(*b);
+                        (*x == 0.0) == (y == 0.0) && (x - y).abs() <= bound
+                    })
+            })
+        })
     }
 
     /// How `rows` compare with the rows the entry was made from, in one walk along J (a run
@@ -1164,7 +1202,7 @@ impl Factored {
         // `sparse_minimum_norm` tries it first), the regularised one otherwise.
         let singular = |analysed: Option<SparsePlan>| -> Option<Factor> {
             if let Some(body) = body_space(&block, settings) {
-                return Some(Factor::BodySpace { body });
+                return Some(Factor::BodySpace { body: Box::new(body) });
             }
             Some(Factor::Singular {
                 regularised: Regularised::new(&block, analysed)?,
@@ -1242,6 +1280,16 @@ pub enum Factorisation {
 }
 
 impl SolveCache {
+    /// Whether a correction's step ([`solve_cached_step_into`], `Dynamics::correct_step`) on
+    /// a block the body-space factor serves (`numeric::gram`) takes the velocity change
+    /// alone, x = H⁻¹ Gᵀ c (one substitution an application), instead of the minimum-norm
+    /// λ's M⁻¹Jᵀλ (two): the same velocity change to rounding, not bit for bit, and no λ.
+    /// Off by default (every solve the general solve's numbers, as the type says); the
+    /// exact velocity step turns it on for its run.
+    pub fn set_velocity_space(&mut self, on: bool) {
+        self.velocity_space = on;
+    }
+
     /// The way the last solve went.
     pub fn last_path(&self) -> SolvePath {
         self.path
@@ -1283,6 +1331,15 @@ pub fn solve_cached_into(rows: &Rows, settings: &Settings, held: &[bool], cache:
     cached_into(rows, settings, held, cache, out, Answer::Solution, None);
 }
 
+/// [`solve_cached_into`]'s step alone, as a correction reads it (SHAKE's iterations, the
+/// projections, the velocity step: forces zeroed, c the target): `out.acceleration` holds
+/// M⁻¹(F + Jᵀλ); λ, the active set and the contact states are left empty where the path
+/// does not make them (the chain's, and the velocity change of
+/// [`SolveCache::set_velocity_space`], which leaves the constraint forces empty too).
+pub fn solve_cached_step_into(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: &mut Solution) {
+    cached_into(rows, settings, &[], cache, out, Answer::Step, None);
+}
+
 /// What a solve through the cache writes into its [`Solution`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Answer {
@@ -1292,8 +1349,10 @@ pub(crate) enum Answer {
     /// A correction's step (SHAKE's iterations, the velocity projection: forces zeroed, c
     /// the target), read from the accelerations alone: the chain path (`numeric::chain`)
     /// writes only the forces and the accelerations — the same numbers — leaving λ, the
-    /// active set and the contact states empty and no diagnostic; every other path writes
-    /// the whole solution.
+    /// active set and the contact states empty and no diagnostic; a body-space block with
+    /// [`SolveCache::set_velocity_space`] on writes the accelerations alone (the velocity
+    /// change, to rounding, [`BodySpace::velocity_change`]), the status and no diagnostic;
+    /// every other path writes the whole solution.
     Step,
 }
 
@@ -1320,6 +1379,9 @@ pub(crate) fn cached_into(
     if let Some(path) = cache.chain.solve_into(rows, settings, out, answer, known) {
         cache.path = path;
         cache.made = cache.chain.made();
+        return;
+    }
+    if answer == Answer::Step && cache.velocity_space && velocity_near(rows, settings, cache, out) {
         return;
     }
     let likeness = cache.entry.as_mut().map_or(Likeness::Different, |c| c.compare_taking(rows, settings));
@@ -1352,37 +1414,40 @@ pub(crate) fn cached_into(
             Factor::Sparse { factor, .. } => factor.solve_into(&cache.rhs, &mut cache.sparse_work, &mut cache.mu),
             Factor::Dense(factor) => cache.mu.extend(factor.solve(&cache.rhs)),
             Factor::BodySpace { body } => {
-                // A stale factor starts from the last answer's ẑ (a grid at rest: at its
-                // answer); a fresh one from 0, as the general solve.
-                let mut done =
-                    body.minimum_norm(&cache.rhs, &body_bounds(settings), &mut cache.body_work, &mut cache.mu, c.stale);
-                if c.stale && !(done.converged && done.consistent) {
-                    // The kept factor is too far from this J: factored now, and solved as a
-                    // fresh factor solves (the general solve's numbers).
-                    c.stale = false;
-                    cache.path = SolvePath::Factored;
-                    if !body.refactor(settings.rank_tolerance, NULL_SHARE) {
-                        cache.entry = None;
-                        cache.path = SolvePath::General;
-                        *out = solve_holding(rows, settings, held);
-                        return;
+                let velocity = answer == Answer::Step && cache.velocity_space;
+                let (rhs, work, mu, bounds) = (&cache.rhs, &mut cache.body_work, &mut cache.mu, body_bounds(settings));
+                let (scaled, target, du) = (&c.scaled, &mut cache.target, &mut cache.velocity);
+                let size = if velocity { velocity_target(rows, scaled, target) } else { 0.0 };
+                let target = &*target;
+                // A stale factor starts from the last answer (a grid at rest: at its answer);
+                // a fresh minimum norm from 0, as the general solve.
+                let done = with_body_space(body, &mut c.stale, &mut cache.path, settings, |body, warm| {
+                    if velocity {
+                        let residual =
+                            |du: &[[f64; 3]], r: &mut Vec<f64>| velocity_residual(rows, scaled, target, du, r);
+                        body.velocity_change(size, residual, &rows.inverse_mass, &bounds, work, du)
+                    } else {
+                        body.minimum_norm(rhs, &bounds, work, mu, warm)
                     }
-                    done = body.minimum_norm(
-                        &cache.rhs,
-                        &body_bounds(settings),
-                        &mut cache.body_work,
-                        &mut cache.mu,
-                        false,
-                    );
-                }
-                if !done.consistent {
-                    // Rows that contradict each other here: the general solve says so.
+                });
+                let Some(done) = done.filter(|done| done.consistent) else {
+                    // The factor failed (the entry is spent), or rows that contradict each
+                    // other here: the general solve says so.
+                    if done.is_none() {
+                        cache.entry = None;
+                    }
                     cache.path = SolvePath::General;
                     *out = solve_holding(rows, settings, held);
                     return;
+                };
+                status = status.max(Status::MinimumNorm);
+                if velocity {
+                    // The buffer handed back (the step has no diagnostic).
+                    out.diagnostics = diagnostics;
+                    velocity_step_into(rows, &cache.velocity, status, out);
+                    return;
                 }
                 diagnostics.push(body_diagnostic(body, &c.index, done.solves));
-                status = status.max(Status::MinimumNorm);
             }
             Factor::Singular { regularised, .. } => {
                 match regularised.minimum_norm(&cache.rhs, settings, &mut cache.regularised_work, &mut cache.mu) {
@@ -1404,6 +1469,119 @@ pub(crate) fn cached_into(
     finish_into(rows, &c.scaled, &c.index, &cache.mu, diagnostics, status, out);
     out.contacts.clear();
     out.contacts.resize(rows.rows.len(), None);
+}
+
+/// Runs `solve` (the kept body-space factor's iteration; its flag: whether a minimum norm
+/// may start from the last answer) and, when the factor was stale (kept for another J,
+/// `stale`) and the answer did not reach rounding, refactors and runs it again as a fresh
+/// factor solves, the path then [`SolvePath::Factored`]; `None` when that factorisation
+/// fails.
+fn with_body_space(
+    body: &mut BodySpace,
+    stale: &mut bool,
+    path: &mut SolvePath,
+    settings: &Settings,
+    mut solve: impl FnMut(&mut BodySpace, bool) -> Iterated,
+) -> Option<Iterated> {
+    let done = solve(body, *stale);
+    if !*stale || (done.converged && done.consistent) {
+        return Some(done);
+    }
+    // The kept factor is too far from this J: factored now.
+    *stale = false;
+    *path = SolvePath::Factored;
+    body.refactor(settings.rank_tolerance, NULL_SHARE).then(|| solve(body, false))
+}
+
+/// A step of the body-space velocity change `du` into `out`: the accelerations Fᵢ wᵢ + Δuᵢ,
+/// no diagnostic, `status`, everything else empty.
+fn velocity_step_into(rows: &Rows, du: &[[f64; 3]], status: Status, out: &mut Solution) {
+    out.lambda.clear();
+    out.active.clear();
+    out.contacts.clear();
+    out.constraint_force.clear();
+    out.diagnostics.clear();
+    out.acceleration.clear();
+    out.acceleration.extend(
+        rows.force
+            .iter()
+            .zip(&rows.inverse_mass)
+            .zip(du)
+            .map(|((f, w), d)| [f[0] * w + d[0], f[1] * w + d[1], f[2] * w + d[2]]),
+    );
+    out.status = status;
+}
+
+/// The targets of a velocity change, tₖ = −(Jₖ·F w + cₖ) (J Δu = t is J̃ Δu = −b̃ unscaled),
+/// into `target`; returns max |tₖ| in the scaled rows (`scaled`'s, the minimum norm's max
+/// |rhs|).
+fn velocity_target(rows: &Rows, scaled: &Scaled, target: &mut Vec<f64>) -> f64 {
+    target.clear();
+    let mut size = 0.0f64;
+    for (k, row) in rows.rows.iter().enumerate() {
+        let mut ext = -0.0;
+        for (body, j) in &row.jacobian {
+            ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
+        }
+        let t = -(ext + row.bias);
+        size = size.max(scaled.scale(k, t).abs());
+        target.push(t);
+    }
+    size
+}
+
+/// The residual of a velocity change `du` of `rows` in the scaled rows, rₖ = (tₖ − Jₖ Δu)
+/// scaled by `scaled` (the kept entry's: a nearby J's, within rounding of these rows'), into
+/// `r`, with max |rₖ| (a NaN counting as infinite) and the rounding scale of the products,
+/// max Σ |Jₖᵢ Δuᵢ| scaled ([`BodySpace::velocity_change`]). From the rows' own J: the limit
+/// of the iteration is their Δu whatever the kept factor.
+fn velocity_residual(rows: &Rows, scaled: &Scaled, target: &[f64], du: &[[f64; 3]], r: &mut Vec<f64>) -> (f64, f64) {
+    let (mut left, mut scale) = (0.0f64, 0.0f64);
+    r.clear();
+    r.extend(rows.rows.iter().zip(target).enumerate().map(|(k, (row, t))| {
+        let (mut sum, mut size) = (0.0, 0.0);
+        for (body, j) in &row.jacobian {
+            for (a, d) in j.iter().zip(&du[*body]) {
+                let term = a * d;
+                sum += term;
+                size += term.abs();
+            }
+        }
+        let rk = scaled.scale(k, t - sum);
+        left = if rk.is_nan() { f64::INFINITY } else { left.max(rk.abs()) };
+        scale = scale.max(scaled.scale(k, size).abs());
+        rk
+    }));
+    (left, scale)
+}
+
+/// A step of the velocity change ([`SolveCache::set_velocity_space`]) with the kept
+/// body-space factor, scaling and G as they are, without comparing, rescaling or refilling
+/// anything ([`SolvePath::Stale`]): where the entry is stale already (a grid at rest, J
+/// moving in its last bits) and `rows` are near its J ([`Factored::near`]); the residual is
+/// the rows' own, so the answer is theirs. True when it answered into `out` (converged at
+/// rounding and consistent); false leaves the solve to the usual path, which compares,
+/// refills and refactors as needed and finds contradicting rows.
+fn velocity_near(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: &mut Solution) -> bool {
+    let SolveCache { entry: Some(c), target, velocity, body_work, .. } = cache else {
+        return false;
+    };
+    let Factor::BodySpace { body } = &c.factor else {
+        return false;
+    };
+    if !(c.stale && c.near(rows, settings)) {
+        return false;
+    }
+    let scaled = &c.scaled;
+    let size = velocity_target(rows, scaled, target);
+    let residual = |du: &[[f64; 3]], r: &mut Vec<f64>| velocity_residual(rows, scaled, target, du, r);
+    let done = body.velocity_change(size, residual, &rows.inverse_mass, &body_bounds(settings), body_work, velocity);
+    if !(done.converged && done.consistent) {
+        return false;
+    }
+    velocity_step_into(rows, velocity, Status::MinimumNorm, out);
+    cache.path = SolvePath::Stale;
+    true
 }
 
 /// b̃ₚ = Σᵢ J̃ₚᵢ·Fᵢ wᵢ + c̃ₚ for the rows `index`.

@@ -10,7 +10,12 @@
 //! grids, dense on small blocks, Clarabel and Murty for inequality rows, through the run's
 //! solve cache): the rows get F = 0 and the bias c set to the
 //! right-hand side, as `numeric::stabilize` does for its projections, so its "accelerations"
-//! M⁻¹JᵀP are the velocity changes. After each substep the positions are projected onto
+//! M⁻¹JᵀP are the velocity changes. Only the last substep's P is reported
+//! (`Stepper::lambda`), so the other substeps and the projections take the step alone
+//! (`Dynamics::correct_step`), and on a redundant block the body-space factor serves (a rigid
+//! grid) that step is the velocity change without its split among the rows
+//! (`Dynamics::set_velocity_space`, `numeric::gram`: one substitution an application
+//! instead of two, the same velocity change to rounding). After each substep the positions are projected onto
 //! C = 0 with the mass-weighted minimum-norm step, to 10⁻¹³ of the scene's size: the bias
 //! C/h alone leaves the O(h²) curvature error of the linearised step, the projection makes
 //! the joints exact. The projection first iterates along the substep's J
@@ -60,6 +65,9 @@ pub fn step(
     let h = s.settings.substep();
     // Positions only: a rigid body's angle is no length.
     let length = length_scale(&q[..dynamics.system().bodies.len()]);
+    // The steps of the velocity solves and the projections need no λ: on a redundant block
+    // the velocity change alone (one substitution an application instead of two).
+    dynamics.set_velocity_space(true);
     for sub in 0..s.settings.substeps {
         // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
         dynamics.rebase(q);
@@ -86,15 +94,23 @@ pub fn step(
         // Through the run's solve cache (`Dynamics::correct`, the projection's too): rows
         // on the same bodies keep their factor's analysis (band places, or the sparse
         // order and pattern of L), so each substep's solve is a numeric factorisation.
-        let solution = dynamics.correct(&rows);
-        for (u, du) in v.iter_mut().zip(&solution.acceleration) {
+        // Only the last substep's impulses are reported (`Stepper::lambda`): the others
+        // take the step alone (on a redundant block the velocity change without its split
+        // among the rows, `Dynamics::set_velocity_space`).
+        let change = if sub + 1 == s.settings.substeps {
+            let solution = dynamics.correct(&rows);
+            s.impulse.copy_from_slice(&solution.lambda);
+            &solution.acceleration
+        } else {
+            &*dynamics.correct_step(&rows, None)
+        };
+        for (u, du) in v.iter_mut().zip(change) {
             for d in 0..3 {
                 if du[d].is_finite() {
                     u[d] += du[d];
                 }
             }
         }
-        s.impulse.copy_from_slice(&solution.lambda);
         s.prepared.to_world(v);
         s.prepared.drift(q, v, h);
         let t1 = t + (sub + 1) as f64 * h;
