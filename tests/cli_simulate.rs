@@ -378,19 +378,7 @@ fn a_projection_that_cannot_reach_its_tolerance_is_reported() {
 /// contacts let go (λ = 0) and the stack fell for a step.
 #[test]
 fn a_stack_at_rest_stays_on_its_contacts() {
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-stack-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("dir");
-    let csv = dir.join("run.csv");
-    let out = lagrange(&[
-        "simulate",
-        "constraints/solvers/stack.toml",
-        "--steps",
-        "600",
-        "--format",
-        "json",
-        "--csv",
-        csv.to_str().expect("utf-8"),
-    ]);
+    let (out, dir, csv, _) = simulate_with_files("stack", "constraints/solvers/stack.toml", &["--steps", "600"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
     assert!(json.get("unconverged").is_none(), "{json}");
