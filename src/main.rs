@@ -821,7 +821,12 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Err(code) => return code,
     };
     let velocity = match args.velocity.settings(settings.dt, settings.steps, settings.restitution) {
-        Ok(v) => v.map(|v| lagrange::numeric::velocity::Settings { samples: settings.samples, ..v }),
+        // λ only at the CSV's rows (the exact solve then skips it elsewhere; none without --csv).
+        Ok(v) => v.map(|v| lagrange::numeric::velocity::Settings {
+            samples: settings.samples,
+            lambda_every: if args.csv.is_some() { args.every.max(1) } else { 0 },
+            ..v
+        }),
         Err(e) => {
             errln!("error: {e}");
             return ExitCode::from(2);

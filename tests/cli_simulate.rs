@@ -402,3 +402,53 @@ fn a_stack_at_rest_stays_on_its_contacts() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The CSV of `path` as its header and its rows of numbers, by time.
+fn csv_table(path: &std::path::Path) -> (Vec<String>, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).expect("csv");
+    let mut lines = text.lines();
+    let header = lines.next().expect("a header").split(',').map(String::from).collect();
+    let rows = lines.map(|l| l.split(',').map(|v| v.parse().expect("a number")).collect()).collect();
+    (header, rows)
+}
+
+/// The exact velocity step computes λ only at the steps the CSV writes (`--every`): its
+/// rows have λ, the one a run that computes λ at every step writes there. On a chain (no
+/// body-space block) the whole row is that run's bit for bit; on the rigid grid, whose
+/// other steps take the velocity change alone (`Dynamics::set_velocity_space`), the
+/// states part in their last bits and λ agrees to rounding.
+#[test]
+fn an_exact_velocity_csv_has_lambda_at_its_rows() {
+    for (file, bitwise) in
+        [("constraints/solvers/hanging_chain.toml", true), ("constraints/solvers/rigid_grid_10.toml", false)]
+    {
+        let dir = std::env::temp_dir().join(format!("lagrange-cli-every-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let run = |every: &str| {
+            let csv = dir.join(format!("every{every}.csv"));
+            let args = ["simulate", file, "--solver", "exact-velocity", "--steps", "13", "--every", every];
+            let out = lagrange(&[&args[..], &["--csv", csv.to_str().expect("utf-8")]].concat());
+            assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+            csv_table(&csv)
+        };
+        let (header, all) = run("1");
+        let (header4, some) = run("4");
+        assert_eq!(header4, header);
+        // Steps 0, 4, 8, 12 and the last, 13.
+        assert_eq!(some.len(), 5, "{file}");
+        let lambdas: Vec<usize> = (0..header.len()).filter(|&i| header[i].starts_with("lambda_")).collect();
+        let largest = all.iter().flat_map(|r| lambdas.iter().map(|&i| r[i].abs())).fold(0.0, f64::max);
+        assert!(largest > 0.0, "{file}");
+        for (row, step) in some.iter().zip([0, 4, 8, 12, 13]) {
+            let full = &all[step];
+            assert_eq!(row.len(), full.len(), "{file} step {step}");
+            if bitwise {
+                assert_eq!(row, full, "{file} step {step}");
+            }
+            for &i in &lambdas {
+                assert!((row[i] - full[i]).abs() <= 1e-12 * largest, "{file} step {step} {}", header[i]);
+            }
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -11,7 +11,8 @@
 //! solve cache): the rows get F = 0 and the bias c set to the
 //! right-hand side, as `numeric::stabilize` does for its projections, so its "accelerations"
 //! M⁻¹JᵀP are the velocity changes. Only the last substep's P is reported
-//! (`Stepper::lambda`), so the other substeps and the projections take the step alone
+//! (`Stepper::lambda`), at the steps whose λ is wanted (`Settings::lambda_at`), so the other
+//! substeps (and the last where λ is not wanted) and the projections take the step alone
 //! (`Dynamics::correct_step`), and on a redundant block the body-space factor serves (a rigid
 //! grid) that step is the velocity change without its split among the rows
 //! (`Dynamics::set_velocity_space`, `numeric::gram`: one substitution an application
@@ -94,10 +95,11 @@ pub fn step(
         // Through the run's solve cache (`Dynamics::correct`, the projection's too): rows
         // on the same bodies keep their factor's analysis (band places, or the sparse
         // order and pattern of L), so each substep's solve is a numeric factorisation.
-        // Only the last substep's impulses are reported (`Stepper::lambda`): the others
-        // take the step alone (on a redundant block the velocity change without its split
-        // among the rows, `Dynamics::set_velocity_space`).
-        let change = if sub + 1 == s.settings.substeps {
+        // Only the last substep's impulses are reported (`Stepper::lambda`), and only when
+        // the step's λ is wanted (`Stepper::wants_impulse`): the others take the step alone
+        // (on a redundant block the velocity change without its split among the rows,
+        // `Dynamics::set_velocity_space`).
+        let change = if sub + 1 == s.settings.substeps && s.wants_impulse {
             let solution = dynamics.correct(&rows);
             s.impulse.copy_from_slice(&solution.lambda);
             &solution.acceleration

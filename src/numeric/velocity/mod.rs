@@ -170,6 +170,12 @@ pub struct Settings {
     pub blowup: f64,
     /// Samples kept for plots.
     pub samples: usize,
+    /// At which recorded states a frame carries λ: every `lambda_every`-th step and the last
+    /// (1, the default: every step; 0: none), as `--csv --every` writes them. Only the exact
+    /// solve saves work by it (on a redundant block the last substep of a step whose λ is not
+    /// wanted takes the velocity change alone, as its other substeps do); the other solvers
+    /// have λ for free and report it at every step ([`Settings::lambda_at`]).
+    pub lambda_every: u64,
 }
 
 /// Box2D v3's contact softness: 30 Hz (capped like the joints), ζ = 10, and the push-out
@@ -198,7 +204,15 @@ impl Settings {
             compliance: 0.0,
             blowup: 1.0,
             samples: 4000,
+            lambda_every: 1,
         }
+    }
+
+    /// Whether the frame of step `n` carries λ (`lambda_every`; always, but for the exact
+    /// solve). A frame without it has an empty `Frame::lambda`, never stale numbers.
+    pub fn lambda_at(&self, n: u64) -> bool {
+        self.solver != Solver::Exact
+            || (self.lambda_every > 0 && (n.is_multiple_of(self.lambda_every) || n == self.steps))
     }
 
     /// Bad settings, before any step runs.
@@ -638,6 +652,11 @@ pub struct Stepper {
     evaluated: Vec<[f64; 3]>,
     /// Ċ per row at the start of the step (restitution's relative velocity).
     start_rate: Vec<f64>,
+    /// Whether the step to come must leave its impulses in `impulse` (true from
+    /// [`Stepper::new`]; the run loop sets it from [`Settings::lambda_at`]). Only the exact
+    /// solve reads it: without, `impulse` keeps an older step's and [`Stepper::lambda`] is
+    /// not to be read.
+    pub wants_impulse: bool,
 }
 
 impl Stepper {
@@ -649,6 +668,7 @@ impl Stepper {
             saved: vec![[0.0; 3]; bodies],
             evaluated: vec![[0.0; 3]; bodies],
             start_rate: vec![0.0; rows],
+            wants_impulse: true,
         }
     }
 

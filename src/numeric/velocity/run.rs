@@ -4,7 +4,8 @@
 //! plots serve both.
 //!
 //! λ in a frame is the force each row applied over the last step, P/h (XPBD: λ/h²); at
-//! step 0 it is 0. The energy balance is E = (T − T₀) − W with T = Σ ½ v·v/w over the slots
+//! step 0 it is 0. The exact solve reports it only at the steps `Settings::lambda_at` names
+//! (the others' frames have an empty λ). The energy balance is E = (T − T₀) − W with T = Σ ½ v·v/w over the slots
 //! (a rigid body's ½ I ω² too) and the work W = Σ ½ (Fₙ + Fₙ₊₁)·(qₙ₊₁ − qₙ) summed over the
 //! recorded states (torques times the turn of the angles): the trapezoid rule along the
 //! path, exact for constant forces and linear springs whatever the integrator does between
@@ -203,7 +204,10 @@ fn run_inner(
             let position = q[..plotted].iter().map(|x| unit.map_or(*x, |u| u.vector(*x))).collect();
             summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position });
         }
-        if n > 0 {
+        // λ where it is wanted (`Settings::lambda_at`); elsewhere none, never a stale step's.
+        if !s.lambda_at(n) {
+            lambda.clear();
+        } else if n > 0 {
             stepper.lambda(&mut lambda);
         }
         let frame = Frame {
@@ -223,6 +227,7 @@ fn run_inner(
             dynamics.recycle(rows);
             break;
         }
+        stepper.wants_impulse = s.lambda_at(n + 1);
         stepper.step(dynamics, t, q, v, rows)?;
         for (i, (q, v)) in q.iter().zip(v.iter()).enumerate() {
             if !(q.iter().chain(v).all(|x| x.is_finite())) {
