@@ -578,7 +578,9 @@ impl<'s> Simulation<'s> {
                 reach.bounce_speed = BOUNCE_STEPS * s.dt * accel + BOUNCE_SPEED_SHARE * speed;
                 // A contact's rate counts as zero against what the forces build in a step
                 // too: at rest the bodies' speeds are rounding, and so are the rates.
-                self.dynamics.settings.speed_scale = s.dt * accel;
+                // (Not past f64's range: then the bodies' speeds alone, as before.)
+                let scale = s.dt * accel;
+                self.dynamics.settings.speed_scale = if scale.is_finite() { scale } else { 0.0 };
             }
             // The ratio is the same in any unit; the energies themselves may leave the f64
             // range in the caller's (a 1e155 m pendulum has T ≈ 1e311 J).
