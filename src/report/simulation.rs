@@ -25,6 +25,7 @@ fn value_text(v: &Value, dim: usize) -> String {
 }
 
 /// `{"steps", "duration", "wall_seconds", "max_abs_C", "max_abs_C_dot", "energy_rel_drift", "unit_exponent", "final": {symbol: value}}`,
+/// `"unconverged"` when some step's projection missed its tolerance (`Summary::unconverged`),
 /// and `"stopped"`: why, when the run stopped before its last step (`stopped`). The final
 /// state is where the run stopped, so a number in it may be non-finite: JSON writes it as
 /// `null`, and `"stopped"` says which body or constraint went so.
