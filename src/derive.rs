@@ -216,12 +216,9 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
     let mut shaper = Shaper::default();
     // With one constraint nothing repeats: shapes would be work for nothing.
     let repeats = system.constraints.len() > 1;
-    // Renaming follows positions along velocities and accelerations only: constraints on
-    // rigid bodies are each derived.
-    let reuse = repeats && !system.has_rigid_bodies();
     let name = |k: usize| move || format!("constraint `{}`", system.constraints[k].name);
     for k in 0..system.constraints.len() {
-        if !reuse {
+        if !repeats {
             constraints.push(derive_constraint(system, g, s, k).map_err(|e| located(e, Some(k), name(k)))?);
             continue;
         }
@@ -240,7 +237,7 @@ pub fn derive_with(system: &System, options: Options) -> Result<Derivation, Deri
         };
         constraints.push(dc);
     }
-    let (a, b) = assemble(system, g, s, &constraints, reuse)
+    let (a, b) = assemble(system, g, s, &constraints, repeats)
         .map_err(|e| located(e.into(), None, || "the multiplier equation A λ + b = 0".to_string()))?;
     let (mut lambda, mut forces, mut torques) = (None, None, None);
     if let [only] = constraints.as_slice() {
@@ -592,28 +589,42 @@ impl Scalars {
 }
 
 /// A derived constraint's expressions as one list, as a [`Reuse`] keeps and renames them:
-/// the [`Scalars`], then ∇C of each of its bodies, then J of each, in its body order.
+/// the [`Scalars`], then ∇C of each of its bodies, then J of each, in its body order, then
+/// ∂C/∂θ and Jʷ of each rigid body it turns.
 struct Roots {
     /// How many bodies ∇C and J have.
     bodies: usize,
+    /// How many rigid bodies ∂C/∂θ and Jʷ have.
+    turning: usize,
+}
+
+/// A derived constraint's per-body expressions, split out of a renamed [`Roots`] list.
+struct PerBody<'a> {
+    gradient: &'a [Id],
+    jacobian: &'a [Id],
+    angular_gradient: &'a [Id],
+    angular: &'a [Id],
 }
 
 impl Roots {
     fn of(dc: &DerivedConstraint) -> Vec<Id> {
         let mut roots = Scalars::of(dc).ids().to_vec();
-        roots.extend(dc.gradient.iter().map(|e| e.1));
-        roots.extend(dc.jacobian.iter().map(|e| e.1));
+        for parts in [&dc.gradient, &dc.jacobian, &dc.angular_gradient, &dc.angular] {
+            roots.extend(parts.iter().map(|e| e.1));
+        }
         roots
     }
 
-    /// The scalars, ∇C per body and J per body of `ids`; `None` if it is not of this layout.
-    fn split<'a>(&self, ids: &'a [Id]) -> Option<(Scalars, &'a [Id], &'a [Id])> {
+    /// The scalars and the per-body expressions of `ids`; `None` if it is not of this layout.
+    fn split<'a>(&self, ids: &'a [Id]) -> Option<(Scalars, PerBody<'a>)> {
         let (scalars, per_body) = ids.split_first_chunk::<{ Scalars::LEN }>()?;
-        if per_body.len() != 2 * self.bodies {
+        if per_body.len() != 2 * (self.bodies + self.turning) {
             return None;
         }
-        let (gradient, jacobian) = per_body.split_at(self.bodies);
-        Some((Scalars::from_ids(*scalars), gradient, jacobian))
+        let (linear, turning) = per_body.split_at(2 * self.bodies);
+        let (gradient, jacobian) = linear.split_at(self.bodies);
+        let (angular_gradient, angular) = turning.split_at(self.turning);
+        Some((Scalars::from_ids(*scalars), PerBody { gradient, jacobian, angular_gradient, angular }))
     }
 }
 
@@ -634,19 +645,38 @@ fn renamed(
         return None;
     }
     let new = reuse.renamed(g, to)?;
-    let (scalars, gradient, jacobian) = Roots { bodies: earlier.gradient.len() }.split(&new)?;
+    let roots = Roots { bodies: earlier.gradient.len(), turning: earlier.angular.len() };
+    let (scalars, per_body) = roots.split(&new)?;
     let from = reuse.slots();
-    // Bodies correspond through their positions' slots.
     let involved = &system.constraints[k].bodies;
-    let mut parts = Vec::new();
-    for ((&(body, _), &grad), &j) in earlier.gradient.iter().zip(gradient).zip(jacobian) {
-        let position = system.bodies[body].position;
-        let slot = from.iter().position(|&s| s == position)?;
-        let Role::Position { body } = g.symbol(*to.get(slot)?).role else { return None };
-        parts.push((involved.iter().position(|&b| b == body)?, body, grad, j));
+    // Bodies correspond through the slots of their positions (a rigid body's turning
+    // parts: of its orientation, which C holds wherever it has them); a slot renames a
+    // symbol to one of the same role.
+    let counterpart = |symbol: Symbol| -> Option<(usize, usize)> {
+        let slot = from.iter().position(|&s| s == symbol)?;
+        let body = match (g.symbol(symbol).role, g.symbol(*to.get(slot)?).role) {
+            (Role::Position { .. }, Role::Position { body }) => body,
+            (Role::Orientation { .. }, Role::Orientation { body }) => body,
+            _ => return None,
+        };
+        Some((involved.iter().position(|&b| b == body)?, body))
+    };
+    let mut linear = Vec::new();
+    for ((&(body, _), &grad), &j) in earlier.gradient.iter().zip(per_body.gradient).zip(per_body.jacobian) {
+        let (place, body) = counterpart(system.bodies[body].position)?;
+        linear.push((place, body, grad, j));
     }
-    parts.sort_by_key(|e| e.0);
-    for &id in scalars.simplified().iter().chain(gradient).chain(jacobian) {
+    let mut turning = Vec::new();
+    let angular = earlier.angular_gradient.iter().zip(per_body.angular_gradient).zip(per_body.angular);
+    for ((&(body, _), &grad), &j) in angular {
+        let (place, body) = counterpart(system.bodies[body].rigid.as_ref()?.orientation)?;
+        turning.push((place, body, grad, j));
+    }
+    // In the constraint's body order, as `derive_constraint` lists them.
+    linear.sort_by_key(|e| e.0);
+    turning.sort_by_key(|e| e.0);
+    let PerBody { gradient, jacobian, angular_gradient, angular } = per_body;
+    for &id in scalars.simplified().iter().chain(gradient).chain(jacobian).chain(angular_gradient).chain(angular) {
         s.adopt(id);
     }
     let Scalars { c, c_dot_raw, c_dot, c_ddot_raw, c_ddot, bias } = scalars;
@@ -656,13 +686,12 @@ fn renamed(
         c_dot,
         c_ddot_raw,
         c_ddot,
-        gradient: parts.iter().map(|e| (e.1, e.2)).collect(),
+        gradient: linear.iter().map(|e| (e.1, e.2)).collect(),
         scale: earlier.scale.clone(),
-        jacobian: parts.iter().map(|e| (e.1, e.3)).collect(),
+        jacobian: linear.iter().map(|e| (e.1, e.3)).collect(),
         bias,
-        // Renaming is used only for systems of point masses.
-        angular_gradient: Vec::new(),
-        angular: Vec::new(),
+        angular_gradient: turning.iter().map(|e| (e.1, e.2)).collect(),
+        angular: turning.iter().map(|e| (e.1, e.3)).collect(),
         over_scale: None,
     })
 }

@@ -22,12 +22,18 @@ use lagrange::model::system::{MassSpec, RigidSpec, System, SystemBuilder};
 /// Two rigid bodies `b1` (`x1 v1 a1 F1 m1`, `th1 w1 al1 T1 I1`) and `b2`, scalar
 /// parameters `k`, `l`, `c`, a vector parameter `n`, and the constraints `(name, text)`.
 fn two_rigid(constraints: &[(&str, &str)]) -> Result<System, String> {
-    let mut b = SystemBuilder::new("two rigid bodies", 2).map_err(|e| e.to_string())?;
+    rigid_bodies(2, 2, constraints)
+}
+
+/// [`two_rigid`] in `dim` dimensions with `count` bodies `b1` … (3D: `th` is a quaternion,
+/// `w`, `al`, `T` and `I` vectors).
+fn rigid_bodies(dim: i64, count: usize, constraints: &[(&str, &str)]) -> Result<System, String> {
+    let mut b = SystemBuilder::new("rigid bodies", dim).map_err(|e| e.to_string())?;
     for p in ["k", "l", "c"] {
         b.parameter(p, Ty::Scalar).map_err(|e| e.to_string())?;
     }
     b.parameter("n", Ty::Vector).map_err(|e| e.to_string())?;
-    for i in 1..=2 {
+    for i in 1..=count {
         let names: Vec<String> =
             ["x", "v", "a", "F", "m", "th", "w", "al", "T", "I"].iter().map(|s| format!("{s}{i}")).collect();
         let name = format!("b{i}");
@@ -194,6 +200,84 @@ fn derived_rigid_constraints_satisfy_the_velocity_and_acceleration_identities() 
         }
     }
     assert!(checked >= 6 * 9 * 20, "checked {checked} states");
+}
+
+/// A constraint that repeats another on other bodies (the next joint of a chain or grid)
+/// is derived by renaming the earlier derivation (`expr::shape`), its turning parts
+/// included: what comes out must be what deriving it alone gives, printed the same, for the
+/// joints above in 2D and joints through `rot(q, s)` in 3D, whether the renaming keeps the
+/// bodies' order (`b1, b2` → `b3, b4`) or reverses it (→ `b4, b3`).
+#[test]
+fn a_repeated_rigid_joint_derives_as_if_it_were_alone() {
+    let mut rng = Rng::new(0x0005_a3e5);
+    let mut p = || format!("{:.3}", rng.uniform(-1.0, 1.0));
+    let three = |p: &mut dyn FnMut() -> String| format!("[{}, {}, {}]", p(), p(), p());
+    let (s1, s2, d1) = (three(&mut p), three(&mut p), three(&mut p));
+    let mut cases: Vec<(i64, String)> = joints(&mut Rng::new(0x0005_a3e6)).into_iter().map(|j| (2, j)).collect();
+    cases.extend(
+        [
+            // ball joint, a distance between body points, a hinge's axis kept normal
+            format!("x1 + rot(th1, {s1}) = x2 + rot(th2, {s2})"),
+            format!("dot(x2 + rot(th2, {s2}) - x1, x2 + rot(th2, {s2}) - x1) = l^2"),
+            format!("dot(rot(th1, {d1}), rot(th2, [0, 0, 1])) = 0"),
+        ]
+        .map(|j| (3, j)),
+    );
+    let show = |d: &lagrange::derive::Derivation, id: Id| print(&d.graph, id, Style::Source).unwrap_or_default();
+    // Everything derived for constraint `first`.. of `d`, printed, with the bodies' names.
+    let fields = |d: &lagrange::derive::Derivation, system: &System, first: usize| {
+        let mut out = Vec::new();
+        for k in first..d.constraints.len() {
+            let dc = &d.constraints[k];
+            for id in [dc.c, dc.c_dot_raw, dc.c_dot, dc.c_ddot_raw, dc.c_ddot, dc.bias, d.b[k]] {
+                out.push(show(d, id));
+            }
+            out.push(dc.scale.to_string());
+            out.push(d.a_entry(k, k).map(|a| show(d, a)).unwrap_or_default());
+            for parts in [&dc.gradient, &dc.jacobian, &dc.angular_gradient, &dc.angular] {
+                for &(body, e) in parts {
+                    out.push(format!("{}: {}", system.bodies[body].name, show(d, e)));
+                }
+            }
+        }
+        out
+    };
+    let mut compared = 0;
+    for (dim, text) in &cases {
+        for (x, y) in [("3", "4"), ("4", "3")] {
+            let renamed = renamed_bodies(text, x, y);
+            let alone = rigid_bodies(*dim, 4, &[("j", &renamed)]).unwrap_or_else(|e| panic!("{renamed}: {e}"));
+            let one = derive(&alone).unwrap_or_else(|e| panic!("{renamed}: {e}"));
+            let together = rigid_bodies(*dim, 4, &[("i", text), ("j", &renamed)]).expect("two joints");
+            let both = derive(&together).unwrap_or_else(|e| panic!("{text}: {e}"));
+            let rows = one.constraints.len();
+            assert_eq!(both.constraints.len(), 2 * rows, "{text}");
+            assert_eq!(fields(&both, &together, rows), fields(&one, &alone, 0), "{text} then {renamed}");
+            compared += 1;
+        }
+    }
+    assert_eq!(compared, 2 * cases.len());
+}
+
+/// `text` with body 1's symbols renamed to body `x`'s and body 2's to body `y`'s (a digit
+/// after a letter of a body symbol: `x1`, `th2`, …).
+fn renamed_bodies(text: &str, x: &str, y: &str) -> String {
+    let mut out = String::new();
+    let mut previous = ' ';
+    for ch in text.chars() {
+        let renamed = match ch {
+            '1' if previous.is_ascii_alphabetic() => x,
+            '2' if previous.is_ascii_alphabetic() => y,
+            _ => {
+                out.push(ch);
+                previous = ch;
+                continue;
+            }
+        };
+        out.push_str(renamed);
+        previous = ch;
+    }
+    out
 }
 
 /// The simplified form of `text` in the two-body system, printed.

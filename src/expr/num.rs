@@ -3,7 +3,10 @@
 //! Every constant in a formula is an exact rational: `1.5e-3` is `3/2000`, `9.81` is
 //! `981/100`, and folding `2/4` gives `1/2`, so printed formulas carry no rounding. Small
 //! values live in an `i64` pair (the common case, no allocation); anything that overflows
-//! moves to a big rational. Both forms are canonical, so `Eq` and `Hash` are structural.
+//! moves to a big rational. Both forms are canonical, so `Eq` and `Hash` are structural
+//! (a big rational hashes its numerator and denominator as they are: `num_rational`'s own
+//! `Hash` expands the value as a continued fraction, so that unreduced ratios hash alike,
+//! 3 % of deriving a grid of bodies with 16-digit masses).
 //!
 //! Not here: floating point. Converting to `f64` happens only in [`Rational::to_f64`].
 
@@ -13,14 +16,27 @@ use num_rational::BigRational;
 use num_traits::{One, Signed, ToPrimitive, Zero};
 use std::cmp::Ordering;
 use std::fmt;
+use std::hash::{Hash, Hasher};
 
 /// An exact rational number in lowest terms with a positive denominator.
-#[derive(Clone, PartialEq, Eq, Hash)]
+#[derive(Clone, PartialEq, Eq)]
 pub enum Rational {
     /// `num / den` with `den > 0` and `gcd(num, den) = 1`.
     Small(i64, i64),
     /// Used only when the value does not fit `Small`.
     Big(Box<BigRational>),
+}
+
+impl Hash for Rational {
+    fn hash<H: Hasher>(&self, state: &mut H) {
+        match self {
+            Rational::Small(n, d) => (0u8, n, d).hash(state),
+            // In lowest terms with a positive denominator (`from_big`'s inputs come from
+            // `BigRational`'s reducing constructors and arithmetic), so equal values have
+            // equal parts.
+            Rational::Big(b) => (1u8, b.numer(), b.denom()).hash(state),
+        }
+    }
 }
 
 /// Literals and folded powers larger than this many bits are refused rather than built.
