@@ -214,6 +214,12 @@ impl Rational {
     }
 
     pub fn mul(&self, other: &Rational) -> Rational {
+        // A product's coefficient starts at 1: a big factor is then taken as it is, not
+        // multiplied and reduced by a big gcd again.
+        match (self, other) {
+            (Rational::Small(1, 1), x) | (x, Rational::Small(1, 1)) => return x.clone(),
+            _ => {}
+        }
         if let (Rational::Small(a, b), Rational::Small(c, d)) = (self, other) {
             if *b == 1
                 && *d == 1
@@ -308,6 +314,10 @@ impl Rational {
 
     /// The rational `n / d` from big parts.
     pub fn from_parts(n: BigInt, d: BigInt) -> Rational {
+        if d.is_one() {
+            // An integer: no gcd (a big one's binary gcd with 1 walks all its bits).
+            return Rational::from_big(BigRational::from_integer(n));
+        }
         Rational::from_big(BigRational::new(n, d))
     }
 
@@ -382,6 +392,29 @@ impl fmt::Display for Rational {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Two 16-digit masses multiply to a big rational: products with 1, integers built from
+    /// parts and hashes all give the reduced value's, whatever the route to it.
+    #[test]
+    fn big_values_multiply_hash_and_build_as_their_reduced_form() {
+        use std::hash::DefaultHasher;
+        let decimal = |s: &str| Rational::parse_decimal(s).expect("a decimal");
+        let big = decimal("0.5026548245743669").mul(&decimal("0.040212385965949365"));
+        assert!(matches!(big, Rational::Big(_)));
+        assert_eq!(Rational::ONE.mul(&big), big);
+        assert_eq!(big.mul(&Rational::ONE), big);
+        let around = big.mul(&Rational::int(6)).mul(&Rational::new(1, 6));
+        assert_eq!(around, big);
+        let hash = |r: &Rational| {
+            let mut h = DefaultHasher::new();
+            r.hash(&mut h);
+            h.finish()
+        };
+        assert_eq!(hash(&around), hash(&big));
+        let (n, d) = big.parts();
+        assert_eq!(Rational::from_parts(n.clone(), d), big);
+        assert_eq!(Rational::from_parts(n.clone() * 3, 3.into()), Rational::from_parts(n, 1.into()));
+    }
 
     #[test]
     fn decimals_are_exact() {
