@@ -424,9 +424,7 @@ impl Prepared {
     /// entries (`Prepared::lay_out`) only when the rows' slots are not those of the last
     /// call, then per entry its J and per row its numbers.
     pub fn load(&mut self, rows: &Rows) {
-        if !self.fits(rows) {
-            self.lay_out(rows);
-        }
+        self.fit(rows);
         // Every entry's J is written below (the buffer keeps its length between substeps).
         self.jacobian.resize(self.body.len(), [0.0; 3]);
         self.value.clear();
@@ -441,31 +439,62 @@ impl Prepared {
             self.velocity.clone_from(&rows.velocity);
         }
         let dim = rows.dim;
-        // The flags are the system's, one per row; rows of another count take none.
-        let flags = self.steady.len() == rows.rows.len();
+        // The pattern is the system's, one per row; rows of another count take none.
         let known = self.pattern.len() == rows.rows.len();
         for (r, row) in rows.rows.iter().enumerate() {
-            let steady = flags && self.steady[r];
             // A distance row's |J_b|² is 1 exactly where J is a number (`unit_square`).
             let unit = known && self.pattern.is_unit(r);
-            let (mut k, mut jv) = (0.0, 0.0);
+            let mut k = 0.0;
             let entries = self.start[r]..self.start[r + 1];
-            let layout = self.source[entries.clone()].iter().zip(&self.mask[entries.clone()]);
-            for ((&e, &mask), kept) in layout.zip(&mut self.jacobian[entries]) {
+            for (&e, kept) in self.source[entries.clone()].iter().zip(&mut self.jacobian[entries]) {
                 let (b, j) = (&row.jacobian[e].0, &row.jacobian[e].1);
                 *kept = *j;
                 // Every component: the squares of the structural zeros add +0 to a sum ≥ +0,
                 // so the mask would give the same bits.
                 k += rows.inverse_mass[*b] * if unit { unit_square(dim, j) } else { dot_in(dim, j, j) };
-                if !steady {
-                    jv += dot_masked(mask, j, &rows.velocity[*b]);
-                }
             }
             self.value.push(row.value);
-            self.time_rate.push(if steady { 0.0 } else { row.rate - jv });
+            self.time_rate.push(self.time_rate_of(rows, r));
             self.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
             self.inequality.push(row.inequality);
         }
+    }
+
+    /// Lays out `rows`' entries (`Prepared::lay_out`) unless their slots are those of the
+    /// last call: the layout alone, which [`Prepared::rate_of`] reads (the exact solve's
+    /// substeps, which read each row's numbers once and need no copy of them).
+    pub fn fit(&mut self, rows: &Rows) {
+        if !self.fits(rows) {
+            self.lay_out(rows);
+        }
+    }
+
+    /// ∂Cₖ/∂t of row k of `rows` (laid out by [`Prepared::fit`]): 0 on a steady row, else
+    /// Ċₖ − Σᵢ Jₖᵢ·vᵢ at the velocities the rows were evaluated at, summed from 0 over the
+    /// entries in [`entry_order`] (the [`Prepared::rate`] of its `time_rate`).
+    fn time_rate_of(&self, rows: &Rows, k: usize) -> f64 {
+        if self.steady.len() == rows.rows.len() && self.steady[k] {
+            return 0.0;
+        }
+        let row = &rows.rows[k];
+        let mut jv = 0.0;
+        for e in self.start[k]..self.start[k + 1] {
+            jv += dot_masked(self.mask[e], &row.jacobian[self.source[e]].1, &rows.velocity[self.body[e]]);
+        }
+        row.rate - jv
+    }
+
+    /// [`Prepared::rate`] of row k read from `rows` themselves (laid out by
+    /// [`Prepared::fit`]; J and ∂C/∂t not copied): the same numbers bit for bit, each
+    /// row's J read once where the exact solve reads it once.
+    #[inline(always)]
+    pub fn rate_of(&self, rows: &Rows, k: usize, u: &Vectors) -> f64 {
+        let row = &rows.rows[k];
+        let mut c = self.time_rate_of(rows, k);
+        for e in self.start[k]..self.start[k + 1] {
+            c += dot_masked(self.mask[e], &row.jacobian[self.source[e]].1, &u[self.body[e]]);
+        }
+        c
     }
 
     /// Whether the layout (`start`, `body`, `mask`, `source`) is that of `rows`: the same
@@ -560,20 +589,7 @@ impl Prepared {
     /// ([`Prepared::to_axes`]). A 3D rigid body's torque and gyroscopic term go through the
     /// implicit-midpoint kick in its principal frame (`rotation::kick_axes`).
     pub fn kick(&self, u: &mut Vectors, h: f64) {
-        let first = self.first.unwrap_or(u.len());
-        for ((u, f), w) in u[..first].iter_mut().zip(&self.force).zip(&self.inverse_mass) {
-            for d in 0..3 {
-                u[d] += h * w * f[d];
-            }
-        }
-        for g in (first..u.len()).step_by(3) {
-            let axis = |x: &[[f64; 3]]| [x[g][0], x[g + 1][0], x[g + 2][0]];
-            let w = [self.inverse_mass[g], self.inverse_mass[g + 1], self.inverse_mass[g + 2]];
-            let w1 = rotation::kick_axes(w, axis(&self.force), axis(&self.velocity), h, axis(u));
-            for k in 0..3 {
-                u[g + k] = [w1[k], 0.0, 0.0];
-            }
-        }
+        kick(u, h, self.first, &self.inverse_mass, &self.force, &self.velocity);
     }
 
     /// State slots (a 3D rigid body's world ω or rotation vector in its first slot) into the
@@ -591,11 +607,7 @@ impl Prepared {
     /// q += h u over state slots, a 3D rigid body's rotation vector (since the step's start)
     /// turned exactly by h ω: φ ← log(exp(h ω) ⊗ exp(φ)) (`rotation::compose`).
     pub fn drift(&self, q: &mut Vectors, u: &Vectors, h: f64) {
-        let Some(first) = self.first else { return drift(q, u, h) };
-        drift(&mut q[..first], &u[..first], h);
-        for g in (first..q.len()).step_by(3) {
-            q[g] = rotation::compose(u[g].map(|x| h * x), q[g]);
-        }
+        drift_turning(q, u, h, self.first);
     }
 
     /// Warm start: every row's accumulated impulse applied again.
@@ -627,6 +639,41 @@ impl Prepared {
             *impulse = old + delta;
             self.apply(k, u, delta);
         }
+    }
+}
+
+/// [`Prepared::kick`] with the slots' 1/m (1/I), F (τ) and velocities (3D rigid bodies:
+/// the rows' evaluated ω) given, from the slot `first` of the first 3D rigid body on.
+pub fn kick(
+    u: &mut Vectors,
+    h: f64,
+    first: Option<usize>,
+    inverse_mass: &[f64],
+    force: &[[f64; 3]],
+    velocity: &[[f64; 3]],
+) {
+    let first = first.unwrap_or(u.len());
+    for ((u, f), w) in u[..first].iter_mut().zip(force).zip(inverse_mass) {
+        for d in 0..3 {
+            u[d] += h * w * f[d];
+        }
+    }
+    for g in (first..u.len()).step_by(3) {
+        let axis = |x: &[[f64; 3]]| [x[g][0], x[g + 1][0], x[g + 2][0]];
+        let w = [inverse_mass[g], inverse_mass[g + 1], inverse_mass[g + 2]];
+        let w1 = rotation::kick_axes(w, axis(force), axis(velocity), h, axis(u));
+        for k in 0..3 {
+            u[g + k] = [w1[k], 0.0, 0.0];
+        }
+    }
+}
+
+/// [`Prepared::drift`] with the slot `first` of the first 3D rigid body given.
+pub fn drift_turning(q: &mut Vectors, u: &Vectors, h: f64, first: Option<usize>) {
+    let Some(first) = first else { return drift(q, u, h) };
+    drift(&mut q[..first], &u[..first], h);
+    for g in (first..q.len()).step_by(3) {
+        q[g] = rotation::compose(u[g].map(|x| h * x), q[g]);
     }
 }
 
