@@ -1051,15 +1051,16 @@ impl Factored {
         {
             return false;
         }
+        // Row by row, each row's entries without a branch (`&`, not `&&`: a test and a branch
+        // per component cost several times the instructions; every row is near at rest).
         let mut kept = self.jacobian.iter();
         rows.rows.iter().zip(&self.scaled.norm).all(|(row, norm)| {
             let bound = STALE_CHANGE * norm;
-            row.jacobian.iter().zip(kept.by_ref()).all(|((s, j), (t, bits))| {
-                s == t
-                    && j.iter().zip(bits).all(|(x, b)| {
-                        let y = f64::from_bits(*b);
-                        (*x == 0.0) == (y == 0.0) && (x - y).abs() <= bound
-                    })
+            row.jacobian.iter().zip(kept.by_ref()).fold(true, |near, ((s, j), (t, bits))| {
+                j.iter().zip(bits).fold(near & (s == t), |near, (x, b)| {
+                    let y = f64::from_bits(*b);
+                    near & ((*x == 0.0) == (y == 0.0)) & ((x - y).abs() <= bound)
+                })
             })
         })
     }
@@ -1515,19 +1516,32 @@ fn velocity_step_into(rows: &Rows, du: &[[f64; 3]], status: Status, out: &mut So
 /// The targets of a velocity change, tₖ = −(Jₖ·F w + cₖ) (J Δu = t is J̃ Δu = −b̃ unscaled),
 /// into `target`; returns max |tₖ| in the scaled rows (`scaled`'s, the minimum norm's max
 /// |rhs|).
+/// Its callers' rows have a finite J (scaled, or near the kept entry's, `Factored::near`)
+/// and finite forces (`chain::servable`). Without a force on any slot (a correction's rows)
+/// and with finite masses each Jₖ·F w is ±0, which leaves a c that is not 0 as it is, so
+/// the products are taken only where c is 0 (for the sign of that zero): the same targets.
 fn velocity_target(rows: &Rows, scaled: &Scaled, target: &mut Vec<f64>) -> f64 {
     target.clear();
+    let unforced = rows.force.as_flattened().iter().fold(true, |zero, f| zero & (*f == 0.0))
+        && rows.inverse_mass.iter().fold(true, |finite, w| finite & w.is_finite());
     let mut size = 0.0f64;
     for (k, row) in rows.rows.iter().enumerate() {
-        let mut ext = -0.0;
-        for (body, j) in &row.jacobian {
-            ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
-        }
-        let t = -(ext + row.bias);
+        let t = if unforced && row.bias != 0.0 { -row.bias } else { -(external(rows, &row.jacobian) + row.bias) };
         size = size.max(scaled.scale(k, t).abs());
         target.push(t);
     }
     size
+}
+
+/// Σᵢ Jᵢ·Fᵢ wᵢ over a row's parts (slot, Jᵢ), summed from −0 (as `Iterator::sum` of f64
+/// does): a row's part of the right-hand side from the external forces.
+#[inline(always)]
+fn external(rows: &Rows, parts: &[(usize, [f64; 3])]) -> f64 {
+    let mut ext = -0.0;
+    for (body, j) in parts {
+        ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
+    }
+    ext
 }
 
 /// The residual of a velocity change `du` of `rows` in the scaled rows, rₖ = (tₖ − Jₖ Δu)
@@ -1541,8 +1555,9 @@ fn velocity_residual(rows: &Rows, scaled: &Scaled, target: &[f64], du: &[[f64; 3
     r.extend(rows.rows.iter().zip(target).enumerate().map(|(k, (row, t))| {
         let (mut sum, mut size) = (0.0, 0.0);
         for (body, j) in &row.jacobian {
-            for (a, d) in j.iter().zip(&du[*body]) {
-                let term = a * d;
+            let d = &du[*body];
+            let terms = [j[0] * d[0], j[1] * d[1], j[2] * d[2]];
+            for term in terms {
                 sum += term;
                 size += term.abs();
             }
@@ -1597,11 +1612,7 @@ fn b_entry(rows: &Rows, scaled: &Scaled, q: usize) -> f64 {
 /// b̃ of a row from its scaled parts, its c term, ‖J‖ and 1/√Â: Σᵢ J̃ᵢ·Fᵢ wᵢ summed from −0
 /// (as `Iterator::sum` of f64 does), plus c̃ ([`Scaled::scale`]).
 pub(super) fn b_of(rows: &Rows, parts: &[(usize, [f64; 3])], bias: f64, norm: f64, jacobi: f64) -> f64 {
-    let mut ext = -0.0;
-    for (body, j) in parts {
-        ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
-    }
-    ext + (bias / norm) * jacobi
+    external(rows, parts) + (bias / norm) * jacobi
 }
 
 /// −b̃ of every row into `rhs` (the cached solve, where every row takes part): the numbers
