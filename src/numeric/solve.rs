@@ -689,8 +689,14 @@ impl Scaled {
 
     /// A row quantity of C/κ (a rate, a c term) in the scaled row: x/‖J‖/√Â.
     pub fn scale(&self, k: usize, x: f64) -> f64 {
-        (x / self.norm[k]) * self.jacobi[k]
+        scale_by(x, self.norm[k], self.jacobi[k])
     }
+}
+
+/// [`Scaled::scale`] with the row's ‖J‖ and 1/√Â given: x/‖J‖/√Â.
+#[inline(always)]
+fn scale_by(x: f64, norm: f64, jacobi: f64) -> f64 {
+    (x / norm) * jacobi
 }
 
 /// Ã restricted to some rows: upper-triangle triplets and the bandwidth in that order.
@@ -1552,7 +1558,9 @@ fn external(rows: &Rows, parts: &[(usize, [f64; 3])]) -> f64 {
 fn velocity_residual(rows: &Rows, scaled: &Scaled, target: &[f64], du: &[[f64; 3]], r: &mut Vec<f64>) -> (f64, f64) {
     let (mut left, mut scale) = (0.0f64, 0.0f64);
     r.clear();
-    r.extend(rows.rows.iter().zip(target).enumerate().map(|(k, (row, t))| {
+    // A plain loop over the rows beside their scales: the sums stay in registers.
+    let scales = scaled.norm.iter().zip(&scaled.jacobi);
+    for ((row, t), (&norm, &jacobi)) in rows.rows.iter().zip(target).zip(scales) {
         let (mut sum, mut size) = (0.0, 0.0);
         for (body, j) in &row.jacobian {
             let d = &du[*body];
@@ -1562,11 +1570,11 @@ fn velocity_residual(rows: &Rows, scaled: &Scaled, target: &[f64], du: &[[f64; 3
                 size += term.abs();
             }
         }
-        let rk = scaled.scale(k, t - sum);
+        let rk = scale_by(t - sum, norm, jacobi);
         left = if rk.is_nan() { f64::INFINITY } else { left.max(rk.abs()) };
-        scale = scale.max(scaled.scale(k, size).abs());
-        rk
-    }));
+        scale = scale.max(scale_by(size, norm, jacobi).abs());
+        r.push(rk);
+    }
     (left, scale)
 }
 

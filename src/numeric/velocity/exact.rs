@@ -73,18 +73,16 @@ pub fn step(
     for sub in 0..s.settings.substeps {
         // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
         dynamics.rebase(q);
-        // The rows are read where they are (each row's numbers once, no copy into
-        // `Prepared`): only the entries' layout is kept, for Ċ's order of summation.
-        s.prepared.fit(&rows);
-        let p = &s.prepared;
         let first = first_angular(&rows);
         // In the rows' slots (a 3D body's ω along its principal axes), as the solve's are.
         to_axes(&rows.axes, v);
         kick(v, h, first, &rows.inverse_mass, &rows.force, &rows.velocity);
-        for k in 0..rows.rows.len() {
+        // Ċ at u, read from the rows where they are (each row's numbers once, no copy into
+        // `Prepared`, which keeps only the entries' layout: Ċ's order of summation).
+        let rates = s.prepared.rates(&rows, v);
+        for (row, rate) in rows.rows.iter_mut().zip(rates) {
             // Target: ΔĊ = −(J u + ∂C/∂t + C/h), i.e. c = J u + ∂C/∂t + C/h.
-            let bias = p.rate_of(&rows, k, v) + rows.rows[k].value / h;
-            let row = &mut rows.rows[k];
+            let bias = rate + row.value / h;
             if row.inequality && bias >= 0.0 {
                 // Heading apart with the bias: P = 0 (left out of the solve).
                 row.value = f64::MAX;

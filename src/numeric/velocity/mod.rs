@@ -328,6 +328,8 @@ pub struct Prepared {
     source: Vec<usize>,
     /// Scratch: one row's entries in [`entry_order`].
     order: Vec<usize>,
+    /// Scratch: the rows' Ċ of [`Prepared::rates`].
+    rates: Vec<f64>,
 }
 
 /// Per constraint of `system` (one row each), whether its C reads no time, so that
@@ -424,7 +426,9 @@ impl Prepared {
     /// entries (`Prepared::lay_out`) only when the rows' slots are not those of the last
     /// call, then per entry its J and per row its numbers.
     pub fn load(&mut self, rows: &Rows) {
-        self.fit(rows);
+        if !self.fits(rows) {
+            self.lay_out(rows);
+        }
         // Every entry's J is written below (the buffer keeps its length between substeps).
         self.jacobian.resize(self.body.len(), [0.0; 3]);
         self.value.clear();
@@ -460,41 +464,70 @@ impl Prepared {
         }
     }
 
-    /// Lays out `rows`' entries (`Prepared::lay_out`) unless their slots are those of the
-    /// last call: the layout alone, which [`Prepared::rate_of`] reads (the exact solve's
-    /// substeps, which read each row's numbers once and need no copy of them).
-    pub fn fit(&mut self, rows: &Rows) {
-        if !self.fits(rows) {
-            self.lay_out(rows);
-        }
-    }
-
-    /// ∂Cₖ/∂t of row k of `rows` (laid out by [`Prepared::fit`]): 0 on a steady row, else
-    /// Ċₖ − Σᵢ Jₖᵢ·vᵢ at the velocities the rows were evaluated at, summed from 0 over the
-    /// entries in [`entry_order`] (the [`Prepared::rate`] of its `time_rate`).
+    /// ∂Cₖ/∂t of row k of `rows`, whose length is that of its entries in the layout: 0 on
+    /// a steady row, else Ċₖ − Σᵢ Jₖᵢ·vᵢ at the velocities the rows were evaluated at,
+    /// summed from 0 over the entries in [`entry_order`] (the [`Prepared::rate`] of its
+    /// `time_rate`). Each entry's velocity is that of its slot in the row, the layout's slot
+    /// where the layout is the row's.
+    #[inline(always)]
     fn time_rate_of(&self, rows: &Rows, k: usize) -> f64 {
         if self.steady.len() == rows.rows.len() && self.steady[k] {
             return 0.0;
         }
         let row = &rows.rows[k];
         let mut jv = 0.0;
-        for e in self.start[k]..self.start[k + 1] {
-            jv += dot_masked(self.mask[e], &row.jacobian[self.source[e]].1, &rows.velocity[self.body[e]]);
+        let entries = self.start[k]..self.start[k + 1];
+        for (&e, &mask) in self.source[entries.clone()].iter().zip(&self.mask[entries]) {
+            let (b, j) = &row.jacobian[e];
+            jv += dot_masked(mask, j, &rows.velocity[*b]);
         }
         row.rate - jv
     }
 
-    /// [`Prepared::rate`] of row k read from `rows` themselves (laid out by
-    /// [`Prepared::fit`]; J and ∂C/∂t not copied): the same numbers bit for bit, each
-    /// row's J read once where the exact solve reads it once.
-    #[inline(always)]
-    pub fn rate_of(&self, rows: &Rows, k: usize, u: &Vectors) -> f64 {
-        let row = &rows.rows[k];
-        let mut c = self.time_rate_of(rows, k);
-        for e in self.start[k]..self.start[k + 1] {
-            c += dot_masked(self.mask[e], &row.jacobian[self.source[e]].1, &u[self.body[e]]);
+    /// Ċ of every row of `rows` at velocities `u` (in the rows' slots), read from the rows
+    /// themselves: [`Prepared::load`] then [`Prepared::rate`] give the same numbers bit for
+    /// bit, but copy J and ∂C/∂t first and take the effective masses, which the exact solve
+    /// (each row read once a substep) does not need. The layout is checked in the same pass
+    /// (each row's length and each entry's slot against those it was made for) and made
+    /// again, and the rates taken again, where it is not `rows`'.
+    pub fn rates(&mut self, rows: &Rows, u: &Vectors) -> &[f64] {
+        let mut rates = std::mem::take(&mut self.rates);
+        rates.clear();
+        let fits = self.dim == rows.dim
+            && self.start.len() == rows.rows.len() + 1
+            && (0..rows.rows.len()).all(|k| {
+                let (rate, fits) = self.rate_checked(rows, k, u);
+                rates.push(rate);
+                fits
+            });
+        if !fits {
+            self.lay_out(rows);
+            rates.clear();
+            rates.extend((0..rows.rows.len()).map(|k| self.rate_checked(rows, k, u).0));
         }
-        c
+        self.rates = rates;
+        &self.rates
+    }
+
+    /// Ċₖ at `u` from row k of `rows` through the layout, and whether the layout is row k's
+    /// (its length, and each entry's slot): where it is not, the number is not to be read.
+    /// A layout of another length is found before any entry is read, and every entry reads
+    /// the velocities of its slot in the row, so no index leaves its slice.
+    #[inline(always)]
+    fn rate_checked(&self, rows: &Rows, k: usize, u: &Vectors) -> (f64, bool) {
+        let row = &rows.rows[k];
+        let entries = self.start[k]..self.start[k + 1];
+        if row.jacobian.len() != entries.len() {
+            return (0.0, false);
+        }
+        let (mut c, mut fits) = (self.time_rate_of(rows, k), true);
+        let layout = self.source[entries.clone()].iter().zip(&self.mask[entries.clone()]).zip(&self.body[entries]);
+        for ((&e, &mask), &slot) in layout {
+            let (b, j) = &row.jacobian[e];
+            fits &= *b == slot;
+            c += dot_masked(mask, j, &u[*b]);
+        }
+        (c, fits)
     }
 
     /// Whether the layout (`start`, `body`, `mask`, `source`) is that of `rows`: the same
