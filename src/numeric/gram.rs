@@ -336,6 +336,14 @@ pub(crate) struct BodySpaceWork {
     sparse: SparseWork,
 }
 
+impl BodySpaceWork {
+    /// The buffer of [`BodySpace::velocity_change`]'s residual, for a caller that takes the
+    /// residual of its start itself (its `start`).
+    pub(crate) fn residual_mut(&mut self) -> &mut Vec<f64> {
+        &mut self.residual
+    }
+}
+
 /// How a [`BodySpace::minimum_norm`] ended.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Iterated {
@@ -548,10 +556,14 @@ impl BodySpace {
     /// (a nearby J's, kept: they only precondition; each application then shrinks the error
     /// by about their relative error times H's condition), as long as the residual is the
     /// current rows'. It starts from `du` as given when that leaves a residual below `size`
-    /// (a grid at rest: near its answer), else from 0.
+    /// (a grid at rest: near its answer), else from 0; `start`, when given, is what
+    /// `residual` would return for `du` as given, its residual already in
+    /// [`BodySpaceWork::residual_mut`] (a caller that took it in a walk of its own).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn velocity_change(
         &self,
         size: f64,
+        start: Option<(f64, f64)>,
         mut residual: impl FnMut(&[[f64; 3]], &mut Vec<f64>) -> (f64, f64),
         inverse_mass: &[f64],
         bounds: &Bounds,
@@ -560,7 +572,9 @@ impl BodySpace {
     ) -> Iterated {
         let BodySpaceWork { residual: r, z: step, velocity_trial: trial, residual_trial, sparse, .. } = work;
         let (mut left, mut scale) = (f64::INFINITY, 0.0);
-        if du.len() == inverse_mass.len() {
+        if let Some(start) = start {
+            (left, scale) = start;
+        } else if du.len() == inverse_mass.len() {
             (left, scale) = residual(du, r);
         }
         if !(left.is_finite() && left <= size) {

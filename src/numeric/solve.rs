@@ -689,8 +689,14 @@ impl Scaled {
 
     /// A row quantity of C/κ (a rate, a c term) in the scaled row: x/‖J‖/√Â.
     pub fn scale(&self, k: usize, x: f64) -> f64 {
-        (x / self.norm[k]) * self.jacobi[k]
+        scale_by(x, self.norm[k], self.jacobi[k])
     }
+}
+
+/// [`Scaled::scale`] with the row's ‖J‖ and 1/√Â given: x/‖J‖/√Â.
+#[inline(always)]
+fn scale_by(x: f64, norm: f64, jacobi: f64) -> f64 {
+    (x / norm) * jacobi
 }
 
 /// Ã restricted to some rows: upper-triangle triplets and the bandwidth in that order.
@@ -1043,25 +1049,21 @@ impl Factored {
     /// of G, all still moved), and every component within [`STALE_CHANGE`] of its row's
     /// norm of the kept one (so J keeps G's full column rank). One walk, nothing stored.
     fn near(&self, rows: &Rows, settings: &Settings) -> bool {
-        if !self.settings_match(rows, settings) {
-            return false;
-        }
-        let massless = |w: f64| w == 0.0;
-        if !self.inverse_mass.iter().zip(&rows.inverse_mass).all(|(b, w)| massless(f64::from_bits(*b)) == massless(*w))
-        {
+        if !self.near_slots(rows, settings) {
             return false;
         }
         let mut kept = self.jacobian.iter();
         rows.rows.iter().zip(&self.scaled.norm).all(|(row, norm)| {
-            let bound = STALE_CHANGE * norm;
-            row.jacobian.iter().zip(kept.by_ref()).all(|((s, j), (t, bits))| {
-                s == t
-                    && j.iter().zip(bits).all(|(x, b)| {
-                        let y = f64::from_bits(*b);
-                        (*x == 0.0) == (y == 0.0) && (x - y).abs() <= bound
-                    })
-            })
+            row.jacobian.iter().fold(true, |near, part| near & part_near(STALE_CHANGE * norm, part, kept.next()))
         })
+    }
+
+    /// [`near`](Factored::near)'s test of everything but J's numbers: the same settings and
+    /// slots per row, the same slots without mass.
+    fn near_slots(&self, rows: &Rows, settings: &Settings) -> bool {
+        let massless = |w: f64| w == 0.0;
+        let same = |(b, w): (&u64, &f64)| massless(f64::from_bits(*b)) == massless(*w);
+        self.settings_match(rows, settings) && self.inverse_mass.iter().zip(&rows.inverse_mass).all(same)
     }
 
     /// How `rows` compare with the rows the entry was made from, in one walk along J (a run
@@ -1425,7 +1427,7 @@ pub(crate) fn cached_into(
                     if velocity {
                         let residual =
                             |du: &[[f64; 3]], r: &mut Vec<f64>| velocity_residual(rows, scaled, target, du, r);
-                        body.velocity_change(size, residual, &rows.inverse_mass, &bounds, work, du)
+                        body.velocity_change(size, None, residual, &rows.inverse_mass, &bounds, work, du)
                     } else {
                         body.minimum_norm(rhs, &bounds, work, mu, warm)
                     }
@@ -1515,19 +1517,32 @@ fn velocity_step_into(rows: &Rows, du: &[[f64; 3]], status: Status, out: &mut So
 /// The targets of a velocity change, tₖ = −(Jₖ·F w + cₖ) (J Δu = t is J̃ Δu = −b̃ unscaled),
 /// into `target`; returns max |tₖ| in the scaled rows (`scaled`'s, the minimum norm's max
 /// |rhs|).
+/// Its callers' rows have a finite J (scaled, or near the kept entry's, `Factored::near`)
+/// and finite forces (`chain::servable`). Without a force on any slot (a correction's rows)
+/// and with finite masses each Jₖ·F w is ±0, which leaves a c that is not 0 as it is, so
+/// the products are taken only where c is 0 (for the sign of that zero): the same targets.
 fn velocity_target(rows: &Rows, scaled: &Scaled, target: &mut Vec<f64>) -> f64 {
     target.clear();
+    let unforced = rows.force.as_flattened().iter().fold(true, |zero, f| zero & (*f == 0.0))
+        && rows.inverse_mass.iter().fold(true, |finite, w| finite & w.is_finite());
     let mut size = 0.0f64;
     for (k, row) in rows.rows.iter().enumerate() {
-        let mut ext = -0.0;
-        for (body, j) in &row.jacobian {
-            ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
-        }
-        let t = -(ext + row.bias);
+        let t = if unforced && row.bias != 0.0 { -row.bias } else { -(external(rows, &row.jacobian) + row.bias) };
         size = size.max(scaled.scale(k, t).abs());
         target.push(t);
     }
     size
+}
+
+/// Σᵢ Jᵢ·Fᵢ wᵢ over a row's parts (slot, Jᵢ), summed from −0 (as `Iterator::sum` of f64
+/// does): a row's part of the right-hand side from the external forces.
+#[inline(always)]
+fn external(rows: &Rows, parts: &[(usize, [f64; 3])]) -> f64 {
+    let mut ext = -0.0;
+    for (body, j) in parts {
+        ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
+    }
+    ext
 }
 
 /// The residual of a velocity change `du` of `rows` in the scaled rows, rₖ = (tₖ − Jₖ Δu)
@@ -1536,23 +1551,62 @@ fn velocity_target(rows: &Rows, scaled: &Scaled, target: &mut Vec<f64>) -> f64 {
 /// max Σ |Jₖᵢ Δuᵢ| scaled ([`BodySpace::velocity_change`]). From the rows' own J: the limit
 /// of the iteration is their Δu whatever the kept factor.
 fn velocity_residual(rows: &Rows, scaled: &Scaled, target: &[f64], du: &[[f64; 3]], r: &mut Vec<f64>) -> (f64, f64) {
+    let (left, scale, _) = residual_walk(rows, scaled, target, du, r, |_, _| true);
+    (left, scale)
+}
+
+/// [`velocity_residual`] with each part (slot, Jᵢ) of row k also passed to `near(‖Jₖ‖, part)`
+/// in the same walk along J (a test of the part against a kept J, [`part_near`]): the walk
+/// stops at the first row with a part not near, and the third number says whether every
+/// part was (the residual is complete only then).
+#[inline(always)]
+fn residual_walk(
+    rows: &Rows,
+    scaled: &Scaled,
+    target: &[f64],
+    du: &[[f64; 3]],
+    r: &mut Vec<f64>,
+    mut near: impl FnMut(f64, &(usize, [f64; 3])) -> bool,
+) -> (f64, f64, bool) {
     let (mut left, mut scale) = (0.0f64, 0.0f64);
     r.clear();
-    r.extend(rows.rows.iter().zip(target).enumerate().map(|(k, (row, t))| {
-        let (mut sum, mut size) = (0.0, 0.0);
-        for (body, j) in &row.jacobian {
-            for (a, d) in j.iter().zip(&du[*body]) {
-                let term = a * d;
+    // A plain loop over the rows beside their scales: the sums stay in registers.
+    let scales = scaled.norm.iter().zip(&scaled.jacobi);
+    for ((row, t), (&norm, &jacobi)) in rows.rows.iter().zip(target).zip(scales) {
+        let (mut sum, mut size, mut all_near) = (0.0, 0.0, true);
+        for part in &row.jacobian {
+            all_near &= near(norm, part);
+            let (j, d) = (&part.1, &du[part.0]);
+            let terms = [j[0] * d[0], j[1] * d[1], j[2] * d[2]];
+            for term in terms {
                 sum += term;
                 size += term.abs();
             }
         }
-        let rk = scaled.scale(k, t - sum);
+        if !all_near {
+            return (left, scale, false);
+        }
+        let rk = scale_by(t - sum, norm, jacobi);
         left = if rk.is_nan() { f64::INFINITY } else { left.max(rk.abs()) };
-        scale = scale.max(scaled.scale(k, size).abs());
-        rk
-    }));
-    (left, scale)
+        scale = scale.max(scale_by(size, norm, jacobi).abs());
+        r.push(rk);
+    }
+    (left, scale, true)
+}
+
+/// Whether a part (slot, Jᵢ) of a row whose kept ‖J‖ is `norm` is near its `kept` one
+/// (slot, bits of Jᵢ) for [`Factored::near`]: the same slot, the same zero components and
+/// each component within [`STALE_CHANGE`] ‖J‖; false without a kept one. Without a branch
+/// per component (`&`, not `&&`: a test and a branch each cost several times the
+/// instructions; every part is near at rest).
+#[inline(always)]
+fn part_near(norm: f64, (s, j): &(usize, [f64; 3]), kept: Option<&(usize, [u64; 3])>) -> bool {
+    let Some((t, bits)) = kept else { return false };
+    let bound = STALE_CHANGE * norm;
+    j.iter().zip(bits).fold(s == t, |near, (x, b)| {
+        let y = f64::from_bits(*b);
+        near & ((*x == 0.0) == (y == 0.0)) & ((x - y).abs() <= bound)
+    })
 }
 
 /// A step of the velocity change ([`SolveCache::set_velocity_space`]) with the kept
@@ -1569,13 +1623,28 @@ fn velocity_near(rows: &Rows, settings: &Settings, cache: &mut SolveCache, out: 
     let Factor::BodySpace { body } = &c.factor else {
         return false;
     };
-    if !(c.stale && c.near(rows, settings)) {
+    if !c.stale {
         return false;
     }
     let scaled = &c.scaled;
     let size = velocity_target(rows, scaled, target);
+    // With a last Δu to start from (`BodySpace::velocity_change`'s warm start), J is tested
+    // in the walk that takes that start's residual: each row's J read once, not twice.
+    let warm = velocity.len() == rows.inverse_mass.len();
+    let start = if warm && c.near_slots(rows, settings) {
+        let mut kept = c.jacobian.iter();
+        let near = |norm, part: &_| part_near(norm, part, kept.next());
+        let (left, scale, near) = residual_walk(rows, scaled, target, velocity, body_work.residual_mut(), near);
+        near.then_some((left, scale))
+    } else {
+        None
+    };
+    if start.is_none() && (warm || !c.near(rows, settings)) {
+        return false;
+    }
     let residual = |du: &[[f64; 3]], r: &mut Vec<f64>| velocity_residual(rows, scaled, target, du, r);
-    let done = body.velocity_change(size, residual, &rows.inverse_mass, &body_bounds(settings), body_work, velocity);
+    let bounds = body_bounds(settings);
+    let done = body.velocity_change(size, start, residual, &rows.inverse_mass, &bounds, body_work, velocity);
     if !(done.converged && done.consistent) {
         return false;
     }
@@ -1597,11 +1666,7 @@ fn b_entry(rows: &Rows, scaled: &Scaled, q: usize) -> f64 {
 /// b̃ of a row from its scaled parts, its c term, ‖J‖ and 1/√Â: Σᵢ J̃ᵢ·Fᵢ wᵢ summed from −0
 /// (as `Iterator::sum` of f64 does), plus c̃ ([`Scaled::scale`]).
 pub(super) fn b_of(rows: &Rows, parts: &[(usize, [f64; 3])], bias: f64, norm: f64, jacobi: f64) -> f64 {
-    let mut ext = -0.0;
-    for (body, j) in parts {
-        ext += dot(j, &rows.force[*body]) * rows.inverse_mass[*body];
-    }
-    ext + (bias / norm) * jacobi
+    external(rows, parts) + (bias / norm) * jacobi
 }
 
 /// −b̃ of every row into `rhs` (the cached solve, where every row takes part): the numbers

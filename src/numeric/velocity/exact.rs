@@ -31,9 +31,10 @@
 //!
 //! Not here: the iterative solvers; the acceleration-level run (`numeric::simulate`).
 
-use super::Stepper;
+use super::{Stepper, drift_turning, kick};
 use crate::numeric::dynamics::{Dynamics, SimError};
 use crate::numeric::integrate::Vectors;
+use crate::numeric::rotation::{first_angular, to_axes, to_world};
 use crate::numeric::rows::Rows;
 use crate::numeric::stabilize::{Inequalities, project_positions, project_positions_along};
 use crate::numeric::vector::length_scale;
@@ -72,14 +73,16 @@ pub fn step(
     for sub in 0..s.settings.substeps {
         // 3D rigid bodies: φ = 0 from here, the substep's turn exact (`Prepared::drift`).
         dynamics.rebase(q);
-        s.prepared.load(&rows);
-        let p = &s.prepared;
+        let first = first_angular(&rows);
         // In the rows' slots (a 3D body's ω along its principal axes), as the solve's are.
-        p.to_axes(v);
-        p.kick(v, h);
-        for (k, row) in rows.rows.iter_mut().enumerate() {
+        to_axes(&rows.axes, v);
+        kick(v, h, first, &rows.inverse_mass, &rows.force, &rows.velocity);
+        // Ċ at u, read from the rows where they are (each row's numbers once, no copy into
+        // `Prepared`, which keeps only the entries' layout: Ċ's order of summation).
+        let rates = s.prepared.rates(&rows, v);
+        for (row, rate) in rows.rows.iter_mut().zip(rates) {
             // Target: ΔĊ = −(J u + ∂C/∂t + C/h), i.e. c = J u + ∂C/∂t + C/h.
-            let bias = p.rate(k, v) + p.value[k] / h;
+            let bias = rate + row.value / h;
             if row.inequality && bias >= 0.0 {
                 // Heading apart with the bias: P = 0 (left out of the solve).
                 row.value = f64::MAX;
@@ -113,8 +116,8 @@ pub fn step(
                 }
             }
         }
-        s.prepared.to_world(v);
-        s.prepared.drift(q, v, h);
+        to_world(&rows.axes, v);
+        drift_turning(q, v, h, first);
         let t1 = t + (sub + 1) as f64 * h;
         let bound = PROJECTION_TOLERANCE * length;
         // Along the substep's J first: the cache serves each iteration with the velocity

@@ -328,6 +328,8 @@ pub struct Prepared {
     source: Vec<usize>,
     /// Scratch: one row's entries in [`entry_order`].
     order: Vec<usize>,
+    /// Scratch: the rows' Ċ of [`Prepared::rates`].
+    rates: Vec<f64>,
 }
 
 /// Per constraint of `system` (one row each), whether its C reads no time, so that
@@ -441,31 +443,91 @@ impl Prepared {
             self.velocity.clone_from(&rows.velocity);
         }
         let dim = rows.dim;
-        // The flags are the system's, one per row; rows of another count take none.
-        let flags = self.steady.len() == rows.rows.len();
+        // The pattern is the system's, one per row; rows of another count take none.
         let known = self.pattern.len() == rows.rows.len();
         for (r, row) in rows.rows.iter().enumerate() {
-            let steady = flags && self.steady[r];
             // A distance row's |J_b|² is 1 exactly where J is a number (`unit_square`).
             let unit = known && self.pattern.is_unit(r);
-            let (mut k, mut jv) = (0.0, 0.0);
+            let mut k = 0.0;
             let entries = self.start[r]..self.start[r + 1];
-            let layout = self.source[entries.clone()].iter().zip(&self.mask[entries.clone()]);
-            for ((&e, &mask), kept) in layout.zip(&mut self.jacobian[entries]) {
+            for (&e, kept) in self.source[entries.clone()].iter().zip(&mut self.jacobian[entries]) {
                 let (b, j) = (&row.jacobian[e].0, &row.jacobian[e].1);
                 *kept = *j;
                 // Every component: the squares of the structural zeros add +0 to a sum ≥ +0,
                 // so the mask would give the same bits.
                 k += rows.inverse_mass[*b] * if unit { unit_square(dim, j) } else { dot_in(dim, j, j) };
-                if !steady {
-                    jv += dot_masked(mask, j, &rows.velocity[*b]);
-                }
             }
             self.value.push(row.value);
-            self.time_rate.push(if steady { 0.0 } else { row.rate - jv });
+            self.time_rate.push(self.time_rate_of(rows, r));
             self.effective_mass.push(if k > 0.0 && k.is_finite() { 1.0 / k } else { 0.0 });
             self.inequality.push(row.inequality);
         }
+    }
+
+    /// ∂Cₖ/∂t of row k of `rows`, whose length is that of its entries in the layout: 0 on
+    /// a steady row, else Ċₖ − Σᵢ Jₖᵢ·vᵢ at the velocities the rows were evaluated at,
+    /// summed from 0 over the entries in [`entry_order`] (the [`Prepared::rate`] of its
+    /// `time_rate`). Each entry's velocity is that of its slot in the row, the layout's slot
+    /// where the layout is the row's.
+    #[inline(always)]
+    fn time_rate_of(&self, rows: &Rows, k: usize) -> f64 {
+        if self.steady.len() == rows.rows.len() && self.steady[k] {
+            return 0.0;
+        }
+        let row = &rows.rows[k];
+        let mut jv = 0.0;
+        let entries = self.start[k]..self.start[k + 1];
+        for (&e, &mask) in self.source[entries.clone()].iter().zip(&self.mask[entries]) {
+            let (b, j) = &row.jacobian[e];
+            jv += dot_masked(mask, j, &rows.velocity[*b]);
+        }
+        row.rate - jv
+    }
+
+    /// Ċ of every row of `rows` at velocities `u` (in the rows' slots), read from the rows
+    /// themselves: [`Prepared::load`] then [`Prepared::rate`] give the same numbers bit for
+    /// bit, but copy J and ∂C/∂t first and take the effective masses, which the exact solve
+    /// (each row read once a substep) does not need. The layout is checked in the same pass
+    /// (each row's length and each entry's slot against those it was made for) and made
+    /// again, and the rates taken again, where it is not `rows`'.
+    pub fn rates(&mut self, rows: &Rows, u: &Vectors) -> &[f64] {
+        let mut rates = std::mem::take(&mut self.rates);
+        rates.clear();
+        let fits = self.dim == rows.dim
+            && self.start.len() == rows.rows.len() + 1
+            && (0..rows.rows.len()).all(|k| {
+                let (rate, fits) = self.rate_checked(rows, k, u);
+                rates.push(rate);
+                fits
+            });
+        if !fits {
+            self.lay_out(rows);
+            rates.clear();
+            rates.extend((0..rows.rows.len()).map(|k| self.rate_checked(rows, k, u).0));
+        }
+        self.rates = rates;
+        &self.rates
+    }
+
+    /// Ċₖ at `u` from row k of `rows` through the layout, and whether the layout is row k's
+    /// (its length, and each entry's slot): where it is not, the number is not to be read.
+    /// A layout of another length is found before any entry is read, and every entry reads
+    /// the velocities of its slot in the row, so no index leaves its slice.
+    #[inline(always)]
+    fn rate_checked(&self, rows: &Rows, k: usize, u: &Vectors) -> (f64, bool) {
+        let row = &rows.rows[k];
+        let entries = self.start[k]..self.start[k + 1];
+        if row.jacobian.len() != entries.len() {
+            return (0.0, false);
+        }
+        let (mut c, mut fits) = (self.time_rate_of(rows, k), true);
+        let layout = self.source[entries.clone()].iter().zip(&self.mask[entries.clone()]).zip(&self.body[entries]);
+        for ((&e, &mask), &slot) in layout {
+            let (b, j) = &row.jacobian[e];
+            fits &= *b == slot;
+            c += dot_masked(mask, j, &u[*b]);
+        }
+        (c, fits)
     }
 
     /// Whether the layout (`start`, `body`, `mask`, `source`) is that of `rows`: the same
@@ -560,20 +622,7 @@ impl Prepared {
     /// ([`Prepared::to_axes`]). A 3D rigid body's torque and gyroscopic term go through the
     /// implicit-midpoint kick in its principal frame (`rotation::kick_axes`).
     pub fn kick(&self, u: &mut Vectors, h: f64) {
-        let first = self.first.unwrap_or(u.len());
-        for ((u, f), w) in u[..first].iter_mut().zip(&self.force).zip(&self.inverse_mass) {
-            for d in 0..3 {
-                u[d] += h * w * f[d];
-            }
-        }
-        for g in (first..u.len()).step_by(3) {
-            let axis = |x: &[[f64; 3]]| [x[g][0], x[g + 1][0], x[g + 2][0]];
-            let w = [self.inverse_mass[g], self.inverse_mass[g + 1], self.inverse_mass[g + 2]];
-            let w1 = rotation::kick_axes(w, axis(&self.force), axis(&self.velocity), h, axis(u));
-            for k in 0..3 {
-                u[g + k] = [w1[k], 0.0, 0.0];
-            }
-        }
+        kick(u, h, self.first, &self.inverse_mass, &self.force, &self.velocity);
     }
 
     /// State slots (a 3D rigid body's world ω or rotation vector in its first slot) into the
@@ -591,11 +640,7 @@ impl Prepared {
     /// q += h u over state slots, a 3D rigid body's rotation vector (since the step's start)
     /// turned exactly by h ω: φ ← log(exp(h ω) ⊗ exp(φ)) (`rotation::compose`).
     pub fn drift(&self, q: &mut Vectors, u: &Vectors, h: f64) {
-        let Some(first) = self.first else { return drift(q, u, h) };
-        drift(&mut q[..first], &u[..first], h);
-        for g in (first..q.len()).step_by(3) {
-            q[g] = rotation::compose(u[g].map(|x| h * x), q[g]);
-        }
+        drift_turning(q, u, h, self.first);
     }
 
     /// Warm start: every row's accumulated impulse applied again.
@@ -627,6 +672,41 @@ impl Prepared {
             *impulse = old + delta;
             self.apply(k, u, delta);
         }
+    }
+}
+
+/// [`Prepared::kick`] with the slots' 1/m (1/I), F (τ) and velocities (3D rigid bodies:
+/// the rows' evaluated ω) given, from the slot `first` of the first 3D rigid body on.
+pub fn kick(
+    u: &mut Vectors,
+    h: f64,
+    first: Option<usize>,
+    inverse_mass: &[f64],
+    force: &[[f64; 3]],
+    velocity: &[[f64; 3]],
+) {
+    let first = first.unwrap_or(u.len());
+    for ((u, f), w) in u[..first].iter_mut().zip(force).zip(inverse_mass) {
+        for d in 0..3 {
+            u[d] += h * w * f[d];
+        }
+    }
+    for g in (first..u.len()).step_by(3) {
+        let axis = |x: &[[f64; 3]]| [x[g][0], x[g + 1][0], x[g + 2][0]];
+        let w = [inverse_mass[g], inverse_mass[g + 1], inverse_mass[g + 2]];
+        let w1 = rotation::kick_axes(w, axis(force), axis(velocity), h, axis(u));
+        for k in 0..3 {
+            u[g + k] = [w1[k], 0.0, 0.0];
+        }
+    }
+}
+
+/// [`Prepared::drift`] with the slot `first` of the first 3D rigid body given.
+pub fn drift_turning(q: &mut Vectors, u: &Vectors, h: f64, first: Option<usize>) {
+    let Some(first) = first else { return drift(q, u, h) };
+    drift(&mut q[..first], &u[..first], h);
+    for g in (first..q.len()).step_by(3) {
+        q[g] = rotation::compose(u[g].map(|x| h * x), q[g]);
     }
 }
 
