@@ -283,6 +283,26 @@ impl Place {
         }
         v
     }
+
+    /// [`read_of`](Place::read_of) of a root `W` (2 or 3) wide, or, for `W` = 0, of any
+    /// width (a test of its `len`, still no bounds check: the fills of a 2D rigid body's
+    /// rows, whose linear J and v are 2 wide and angular ones 1).
+    ///
+    /// # Safety
+    /// As [`read_of`](Place::read_of); for `W` ≠ 0, `self` is `W` wide.
+    #[inline(always)]
+    unsafe fn read_width<const W: usize>(self, out: Outputs<'_>) -> [f64; 3] {
+        // SAFETY: the caller's: `self` is one of the places that made `out`, of the width read.
+        unsafe {
+            match (W, self.len) {
+                (0, 1) => self.read_of::<1>(out),
+                (0, 2) => self.read_of::<2>(out),
+                (0, 3) => self.read_of::<3>(out),
+                (0, _) => [0.0; 3],
+                _ => self.read_of::<W>(out),
+            }
+        }
+    }
 }
 
 /// The width every one of `places` has, or 0 when they differ (or there are none).
@@ -879,63 +899,46 @@ impl StateCopies {
 }
 
 /// Row `row`'s J `entries` from `out` (all of width `width` when it is not 0), in place
-/// when the row has that many already; whether every component is finite. The common case
-/// (in place, every entry 2 or 3 wide) is compiled into each fill's loop over the rows (a
-/// call per row cost more than the copy it makes); the rest is [`fill_entries_any`].
+/// when the row has that many already. The common case
+/// (in place) is compiled into each fill's loop over the rows (a call per row cost more
+/// than the copy it makes), the entries read without a bounds check and, when they are all
+/// 2 or 3 wide, without a test of their width; the rest is [`fill_entries_any`].
 ///
 /// `entries` are some of the [`Places`] that made `out`, `width` their `width`.
 #[inline(always)]
-fn fill_entries(row: &mut Row, entries: &[Entry], width: u32, out: Outputs<'_>) -> bool {
-    if row.jacobian.len() == entries.len() {
-        match width {
-            2 => return entries_of_width::<2>(row, entries, out),
-            3 => return entries_of_width::<3>(row, entries, out),
-            _ => {}
-        }
+fn fill_entries(row: &mut Row, entries: &[Entry], width: u32, out: Outputs<'_>) {
+    if row.jacobian.len() != entries.len() {
+        return fill_entries_any(row, entries, out.0);
     }
-    fill_entries_any(row, entries, out.0)
+    match width {
+        2 => entries_of_width::<2>(row, entries, out),
+        3 => entries_of_width::<3>(row, entries, out),
+        _ => entries_of_width::<0>(row, entries, out),
+    }
 }
 
-/// [`fill_entries`] for entries of any widths, or into a row of another length.
+/// [`fill_entries`] into a row of another length (the first fill of a scratch's rows).
+#[cold]
 #[inline(never)]
-fn fill_entries_any(row: &mut Row, entries: &[Entry], out: &[f64]) -> bool {
-    let mut finite = true;
-    if row.jacobian.len() == entries.len() {
-        for (j, e) in row.jacobian.iter_mut().zip(entries) {
-            let x = e.place.read(out);
-            finite &= finite3(&x);
-            *j = (e.slot as usize, x);
-        }
-    } else {
-        row.jacobian.clear();
-        for e in entries {
-            let x = e.place.read(out);
-            finite &= finite3(&x);
-            row.jacobian.push((e.slot as usize, x));
-        }
-    }
-    finite
+fn fill_entries_any(row: &mut Row, entries: &[Entry], out: &[f64]) {
+    row.jacobian.clear();
+    row.jacobian.extend(entries.iter().map(|e| (e.slot as usize, e.place.read(out))));
 }
 
-/// [`fill_entries`] in place, every entry `W` wide: each read without a test of its width,
-/// and only its `W` components tested (the zeros past them are finite).
+/// [`fill_entries`] in place, every entry `W` wide (`W` = 0: of any width, see
+/// [`Place::read_width`]): each read without a bounds check.
 #[inline(always)]
-fn entries_of_width<const W: usize>(row: &mut Row, entries: &[Entry], out: Outputs<'_>) -> bool {
-    let mut finite = true;
+fn entries_of_width<const W: usize>(row: &mut Row, entries: &[Entry], out: Outputs<'_>) {
     for (j, e) in row.jacobian.iter_mut().zip(entries) {
-        // SAFETY: `e` is one of the entries of the places that made `out`, `W` wide
-        // (`fill_entries`).
-        let v = unsafe { e.place.read_of::<W>(out) };
-        for c in &v[..W] {
-            finite &= c.is_finite();
-        }
-        *j = (e.slot as usize, v);
+        // SAFETY: `e` is one of the entries of the places that made `out`, `W` wide when
+        // `W` ≠ 0 (`fill_entries`).
+        *j = (e.slot as usize, unsafe { e.place.read_width::<W>(out) });
     }
-    finite
 }
 
-/// [`RowProgram::fill_slots`] when every slot's v and F are `W` wide: each read without a
-/// test of its width, and only its `W` components tested (the zeros past them are finite).
+/// [`RowProgram::fill_slots`] when every slot's v and F are `W` wide (`W` = 0: of any
+/// width, see [`Place::read_width`]): each read without a bounds check. Whether every 1/m
+/// is finite (v and F are outputs as they are: see [`finite_fill`]).
 #[inline(always)]
 fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows) -> bool {
     let checked = places.outputs(out);
@@ -944,15 +947,54 @@ fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows)
     let mut finite = true;
     for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
         *w = 1.0 / out[m as usize];
-        // SAFETY: `places` made `checked`, and every v and F of theirs is `W` wide (the
-        // caller's `slot_width`).
-        (*u, *f) = unsafe { (v.read_of::<W>(checked), force.read_of::<W>(checked)) };
+        // SAFETY: `places` made `checked`, and every v and F of theirs is `W` wide when
+        // `W` ≠ 0 (the caller's `slot_width`).
+        (*u, *f) = unsafe { (v.read_width::<W>(checked), force.read_width::<W>(checked)) };
         finite &= w.is_finite();
-        for k in 0..W {
-            finite &= u[k].is_finite() & f[k].is_finite();
-        }
     }
     finite
+}
+
+/// Whether every number in `xs` is finite: four at a time with no early exit, so the
+/// tests compile to vector compares (a sweep of a tape's outputs costs about a tenth of a
+/// test per number written).
+fn all_finite(xs: &[f64]) -> bool {
+    let mut chunks = xs.chunks_exact(4);
+    let mut finite = true;
+    for c in &mut chunks {
+        finite &= c[0].is_finite() & c[1].is_finite() & c[2].is_finite() & c[3].is_finite();
+    }
+    chunks.remainder().iter().fold(finite, |ok, x| ok & x.is_finite())
+}
+
+/// Whether every number a fill along [`Places`] wrote is finite, from `out` (the tape's
+/// outputs it read), `computed` (whether the numbers it computed from them — C/κ, Ċ/κ,
+/// 1/m — are finite) and `written` (a test of every number written, run only when some
+/// output is not finite). Every other number a fill writes is an output as it is, or a
+/// zero past a root's width; and every output is some root's component the fill reads. So
+/// with finite outputs `computed` decides, and otherwise `written` (a non-finite output
+/// may still give a finite number: 1/∞ = 0).
+#[inline]
+fn finite_fill(out: &[f64], computed: bool, written: impl FnOnce() -> bool) -> bool {
+    if all_finite(out) { computed } else { written() }
+}
+
+/// Whether every number of `rows`' slots (1/m, v, F) is finite.
+fn slots_finite(rows: &Rows) -> bool {
+    rows.inverse_mass.iter().all(|w| w.is_finite()) && rows.velocity.iter().chain(&rows.force).all(finite3)
+}
+
+/// Whether every number of `rows` is finite: each row's C/κ, Ċ/κ, c and J, each slot's.
+fn all_written_finite(rows: &Rows) -> bool {
+    rows.rows
+        .iter()
+        .all(|row| row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & entries_finite(row))
+        && slots_finite(rows)
+}
+
+/// Whether every row's C/κ and J is finite (what a positions evaluation writes, with zeros).
+fn positions_finite(rows: &[Row]) -> bool {
+    rows.iter().all(|row| row.value.is_finite() & entries_finite(row))
 }
 
 /// Whether every component of a row's J is finite.
@@ -1265,19 +1307,21 @@ impl RowProgram {
         // has the slots already (the rows of the last evaluation).
         rows.dim = system.dim();
         rows.axes.clear();
-        let mut finite = self.fill_slots(places, out, rows);
+        let mut computed = self.fill_slots(places, out, rows);
         for (row, at) in rows.rows.iter_mut().zip(&places.rows) {
             row.rate = out[at.rate as usize] * at.inverse_scale;
             row.bias = out[at.bias as usize];
             row.inequality = at.inequality;
-            finite &= row.rate.is_finite() & row.bias.is_finite();
+            computed &= row.rate.is_finite();
         }
-        scratch.finite = finite;
+        scratch.finite = finite_fill(out, computed, || {
+            slots_finite(rows) && rows.rows.iter().all(|row| row.rate.is_finite() & row.bias.is_finite())
+        });
         Ok(true)
     }
 
     /// Each slot's 1/m, v and F from a tape's outputs along its [`Places`], in place when
-    /// `rows` has the slots already; whether every one is finite.
+    /// `rows` has the slots already; whether every 1/m is finite (see [`finite_fill`]).
     #[inline(always)]
     fn fill_slots(&self, places: &Places, out: &[f64], rows: &mut Rows) -> bool {
         let n = self.bodies.len();
@@ -1289,18 +1333,7 @@ impl RowProgram {
         match places.slot_width {
             2 => slots_of_width::<2>(places, out, rows),
             3 => slots_of_width::<3>(places, out, rows),
-            _ => {
-                let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
-                let at = places.mass.iter().zip(&places.velocity).zip(&places.force);
-                let mut finite = true;
-                for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
-                    *w = 1.0 / out[m as usize];
-                    *u = v.read(out);
-                    *f = force.read(out);
-                    finite &= w.is_finite() & finite3(u) & finite3(f);
-                }
-                finite
-            }
+            _ => slots_of_width::<0>(places, out, rows),
         }
     }
 
@@ -1310,7 +1343,7 @@ impl RowProgram {
     fn fill_plain(&self, system: &System, places: &Places, out: &[f64], rows: &mut Rows) -> bool {
         rows.dim = system.dim();
         rows.axes.clear();
-        let mut finite = self.fill_slots(places, out, rows);
+        let mut computed = self.fill_slots(places, out, rows);
         rows.rows.resize_with(self.rows.len(), Row::default);
         let checked = places.outputs(out);
         let mut entries = places.jacobian.as_slice();
@@ -1319,12 +1352,12 @@ impl RowProgram {
             row.rate = out[at.rate as usize] * at.inverse_scale;
             row.bias = out[at.bias as usize];
             row.inequality = at.inequality;
-            finite &= row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite();
+            computed &= row.value.is_finite() & row.rate.is_finite();
             let (here, rest) = entries.split_at(at.entries as usize);
             entries = rest;
-            finite &= fill_entries(row, here, places.width, checked);
+            fill_entries(row, here, places.width, checked);
         }
-        finite
+        finite_fill(out, computed, || all_written_finite(rows))
     }
 
     /// The rows from the inputs loaded in `scratch`.
@@ -1339,12 +1372,7 @@ impl RowProgram {
         let scalar = |root: usize| out[place[root].start as usize];
         let vector = |root: usize| place[root].read(out);
         self.fill(system, rows, scalar, vector);
-        scratch.finite = rows
-            .rows
-            .iter()
-            .all(|row| row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & entries_finite(row))
-            && rows.inverse_mass.iter().all(|w| w.is_finite())
-            && rows.velocity.iter().chain(&rows.force).all(finite3);
+        scratch.finite = all_written_finite(rows);
     }
 
     /// `rows` from the roots' values (`scalar`, `vector` by root): the one assembly of the
@@ -1459,19 +1487,19 @@ impl RowProgram {
         if let Some(places) = &p.places {
             // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
             let checked = places.outputs(out);
-            let mut finite = true;
+            let mut computed = true;
             let mut entries = places.jacobian.as_slice();
             for (row, at) in rows.iter_mut().zip(&places.rows) {
                 row.value = out[at.value as usize] * at.inverse_scale;
                 row.rate = 0.0;
                 row.bias = 0.0;
                 row.inequality = at.inequality;
-                finite &= row.value.is_finite();
+                computed &= row.value.is_finite();
                 let (here, rest) = entries.split_at(at.entries as usize);
                 entries = rest;
-                finite &= fill_entries(row, here, places.width, checked);
+                fill_entries(row, here, places.width, checked);
             }
-            scratch.finite = finite;
+            scratch.finite = finite_fill(out, computed, || positions_finite(rows));
             return;
         }
         let vector = |root: usize| p.place[root].read(out);
@@ -1490,7 +1518,7 @@ impl RowProgram {
                 self.fill_jacobian(layout, row, &vector);
             }
         }
-        scratch.finite = rows.iter().all(|row| row.value.is_finite() & entries_finite(row));
+        scratch.finite = positions_finite(rows);
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of
