@@ -31,7 +31,7 @@
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
 use crate::expr::graph::SymbolWalk;
-use crate::expr::{Id, Rational, Symbol};
+use crate::expr::{Func, Id, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
@@ -382,8 +382,9 @@ fn finite3(x: &[f64; 3]) -> bool {
 impl Subprogram {
     /// Batches the roots in `units` (`numeric::batch`), when some shape repeats.
     fn batch(&mut self, system: &System, graph: &crate::expr::Graph, roots: &[Id], units: &[Vec<usize>]) {
-        let flat = Flat::new(system, &self.tape, &self.sources);
-        let batched = Batched::new(graph, roots, units, |r| self.place[r].len as usize, flat.slots(&self.inputs));
+        let flat = Flat::new(system, &self.tape, &self.inputs, &self.sources);
+        let width = |r: usize| self.place[r].len as usize;
+        let batched = Batched::new(graph, roots, units, width, flat.slots(&self.inputs), flat.trig_slots(&self.inputs));
         let Some(batched) = batched else { return };
         // The roots are read where the batches leave them.
         for (r, place) in self.place.iter_mut().enumerate() {
@@ -528,7 +529,9 @@ fn evaluate_batched_without_scratch(batched: &Batched, inputs: &[f64], outputs: 
 /// from one buffer): every body's position, then every body's velocity, three numbers a
 /// body as a simulation keeps them, so a state arrives in two block copies rather than
 /// symbol by symbol; then t; then the other input symbols (parameters, masses, rigid
-/// bodies' angles) one after the other.
+/// bodies' angles) one after the other, a 2D rigid body's angle θ followed by sin θ and
+/// cos θ, which the load computes once for the batches' tapes to read (`Batched::new`'s
+/// `trig`: a body's angle is turned by in each row of each of its joints).
 #[derive(Clone, Debug)]
 struct Flat {
     bodies: usize,
@@ -539,6 +542,8 @@ struct Flat {
     /// The rigid bodies' angles and angular velocities among the inputs (`Source::Angle`),
     /// which the environment gives per state.
     angles: Vec<usize>,
+    /// The slot of each 2D rigid body's angle among the inputs: its sine and cosine follow.
+    trig: Vec<usize>,
     /// Whether some input is a position, a velocity (else that block is not copied).
     positions: bool,
     velocities: bool,
@@ -546,10 +551,14 @@ struct Flat {
 }
 
 impl Flat {
-    fn new(system: &System, tape: &Tape, sources: &[Source]) -> Flat {
+    fn new(system: &System, tape: &Tape, inputs: &[Symbol], sources: &[Source]) -> Flat {
         let n = system.bodies.len();
         let mut len = 6 * n + 1;
-        let (mut env, mut angles) = (Vec::new(), Vec::new());
+        let (mut env, mut angles, mut trig) = (Vec::new(), Vec::new(), Vec::new());
+        let orientations: Vec<Symbol> = match system.dim() {
+            2 => system.bodies.iter().filter_map(|b| b.rigid.as_ref()).map(|r| r.orientation).collect(),
+            _ => Vec::new(),
+        };
         let places = sources
             .iter()
             .enumerate()
@@ -564,15 +573,41 @@ impl Flat {
                             Source::Env => env.push(i),
                             _ => angles.push(i),
                         }
+                        let at = len;
                         len += w;
-                        len - w..len
+                        if w == 1 && orientations.contains(&inputs[i]) {
+                            trig.push(at);
+                            len += 2;
+                        }
+                        at..at + w
                     }
                 }
             })
             .collect();
         let positions = sources.iter().any(|s| matches!(s, Source::Position(_)));
         let velocities = sources.iter().any(|s| matches!(s, Source::Velocity(_)));
-        Flat { bodies: n, places, env, angles, positions, velocities, len }
+        Flat { bodies: n, places, env, angles, trig, positions, velocities, len }
+    }
+
+    /// Symbol → the slots of its sine and cosine in the buffer, for the 2D rigid bodies'
+    /// angles (`inputs` are the tape's input symbols).
+    fn trig_slots<'f>(&'f self, inputs: &[Symbol]) -> impl Fn(Symbol) -> Option<Range<usize>> + 'f {
+        let slots = self.slots(inputs);
+        let angles: std::collections::HashSet<usize> = self.trig.iter().copied().collect();
+        move |s| {
+            let at = slots(s);
+            (at.len() == 1 && angles.contains(&at.start)).then(|| at.start + 1..at.start + 3)
+        }
+    }
+
+    /// The sine and cosine of each 2D rigid body's angle in `buffer`, from the angle there:
+    /// the tapes' own [`Func::apply`], so a tape reading them has the bits it would compute.
+    fn fill_trig(&self, buffer: &mut [f64]) {
+        for &at in &self.trig {
+            let theta = [buffer[at]];
+            buffer[at + 1] = Func::Sin.apply(&theta);
+            buffer[at + 2] = Func::Cos.apply(&theta);
+        }
     }
 
     /// Symbol → its slots in the buffer (`inputs` are the tape's input symbols).
@@ -586,6 +621,7 @@ impl Flat {
         for (i, &s) in inputs.iter().enumerate() {
             from_env(system, env, s, &mut buffer[self.places[i].clone()])?;
         }
+        self.fill_trig(buffer);
         Ok(())
     }
 
@@ -612,6 +648,7 @@ impl Flat {
         for &i in constants.iter().chain(&self.angles) {
             from_env(system, env, inputs[i], &mut buffer[self.places[i].clone()])?;
         }
+        self.fill_trig(buffer);
         Ok(())
     }
 }
