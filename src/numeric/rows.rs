@@ -555,9 +555,9 @@ impl Flat {
         let n = system.bodies.len();
         let mut len = 6 * n + 1;
         let (mut env, mut angles, mut trig) = (Vec::new(), Vec::new(), Vec::new());
-        let orientations: Vec<Symbol> = match system.dim() {
+        let orientations: std::collections::HashSet<Symbol> = match system.dim() {
             2 => system.bodies.iter().filter_map(|b| b.rigid.as_ref()).map(|r| r.orientation).collect(),
-            _ => Vec::new(),
+            _ => Default::default(),
         };
         let places = sources
             .iter()
