@@ -80,6 +80,23 @@ fn chunked(table: &[usize], members: usize) -> Vec<usize> {
     out
 }
 
+/// A tape of `ids` over their free symbols and the sine and cosine of those angles among
+/// them whose pair `trig` places ([`Tape::compile_with_trig`]), with what each of its input
+/// ranges holds: a symbol (`false`) or that symbol's pair (`true`).
+fn compile(
+    graph: &Graph,
+    walk: &mut SymbolWalk,
+    ids: &[Id],
+    trig: impl Fn(Symbol) -> Option<Range<usize>>,
+) -> (Tape, Vec<(Symbol, bool)>) {
+    let symbols = walk.free_symbols_of(graph, ids).to_vec();
+    let angles: Vec<Symbol> = symbols.iter().copied().filter(|&s| trig(s).is_some()).collect();
+    // The roots' free symbols are the inputs, so lowering cannot fail.
+    let tape = Tape::compile_with_trig(graph, ids, &symbols, &angles).expect("the inputs are the roots' free symbols");
+    let inputs = symbols.into_iter().map(|s| (s, false)).chain(angles.into_iter().map(|s| (s, true))).collect();
+    (tape, inputs)
+}
+
 /// Buffers of [`Batched::eval`], reused across evaluations.
 #[derive(Clone, Debug)]
 pub struct BatchedScratch {
@@ -96,13 +113,21 @@ impl Batched {
     /// buffer where symbol s occupies `source(s)` (a tape's input layout over every symbol
     /// the roots read), and root r's outputs are at [`place(r)`](Batched::place). `None`
     /// when no shape has [`BATCH_MIN`] units: one tape serves as well.
+    ///
+    /// `trig(s)`, when it is some, is where the buffer holds the sine and cosine of the
+    /// angle s (two slots): the tapes read them there rather than compute them, so an angle
+    /// many units turn by (a body's, in each of its joints' rows) has them computed once,
+    /// by the caller, with the tapes' own function ([`Func::apply`](crate::expr::Func::apply)).
     pub fn new(
         graph: &Graph,
         roots: &[Id],
         units: &[Vec<usize>],
         width: impl Fn(usize) -> usize,
         source: impl Fn(Symbol) -> Range<usize>,
+        trig: impl Fn(Symbol) -> Option<Range<usize>>,
     ) -> Option<Batched> {
+        // Where a tape's input range is in the buffer: a symbol's, or an angle's pair.
+        let at = |(sym, pair): (Symbol, bool)| if pair { trig(sym).unwrap_or(0..0) } else { source(sym) };
         let mut shaper = Shaper::default();
         let mut walk = SymbolWalk::default();
         // Units by shape, in order of first appearance (deterministic batches).
@@ -136,18 +161,17 @@ impl Batched {
             }
             let (first, template) = &group[0];
             let ids: Vec<Id> = units[*first].iter().map(|&r| roots[r]).collect();
-            let inputs = walk.free_symbols_of(graph, &ids).to_vec();
-            // The roots' free symbols are the inputs, so lowering cannot fail.
-            let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
-            let renamed =
-                |theirs: &[Symbol], sym: &Symbol| template.iter().position(|t| t == sym).map_or(*sym, |p| theirs[p]);
+            let (tape, inputs) = compile(graph, &mut walk, &ids, &trig);
+            let renamed = |theirs: &[Symbol], (sym, pair): (Symbol, bool)| {
+                (template.iter().position(|t| *t == sym).map_or(sym, |p| theirs[p]), pair)
+            };
             // Every member reads and writes as many numbers as the template: a guard, as the
             // types are in the key.
             let (group, odd): (Vec<_>, Vec<_>) = group.iter().partition(|(u, theirs)| {
                 inputs
                     .iter()
                     .enumerate()
-                    .all(|(i, sym)| source(renamed(theirs, sym)).len() == tape.input_range(i).len())
+                    .all(|(i, &input)| at(renamed(theirs, input)).len() == tape.input_range(i).len())
                     && units[*u].iter().enumerate().all(|(j, &r)| width(r) == tape.output_range(j).len())
             });
             rest_roots.extend(odd.iter().flat_map(|(u, _)| units[*u].iter().copied()));
@@ -160,8 +184,8 @@ impl Batched {
             // in that slot; the others (parameters, t) are shared.
             let mut from = vec![0; tape.input_len() * members];
             for (s, (_, theirs)) in group.iter().enumerate() {
-                for (i, sym) in inputs.iter().enumerate() {
-                    for (j, at) in tape.input_range(i).zip(source(renamed(theirs, sym))) {
+                for (i, &input) in inputs.iter().enumerate() {
+                    for (j, at) in tape.input_range(i).zip(at(renamed(theirs, input))) {
                         from[j * members + s] = at;
                     }
                 }
@@ -184,11 +208,10 @@ impl Batched {
             batches.push(Batch { tape, members, source });
         }
         let ids: Vec<Id> = rest_roots.iter().map(|&r| roots[r]).collect();
-        let rest_inputs = walk.free_symbols_of(graph, &ids).to_vec();
-        let rest = Tape::compile(graph, &ids, &rest_inputs).expect("the inputs are the roots' free symbols");
+        let (rest, rest_inputs) = compile(graph, &mut walk, &ids, &trig);
         let mut rest_source = vec![0; rest.input_len()];
-        for (i, &sym) in rest_inputs.iter().enumerate() {
-            for (j, at) in rest.input_range(i).zip(source(sym)) {
+        for (i, &input) in rest_inputs.iter().enumerate() {
+            for (j, at) in rest.input_range(i).zip(at(input)) {
                 rest_source[j] = at;
             }
         }

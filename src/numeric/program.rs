@@ -103,7 +103,8 @@ pub struct Program {
     pub ops: Vec<Op>,
     /// Number of input slots (a vector symbol takes `dim` slots).
     pub n_inputs: usize,
-    /// The slots of each input symbol, in the order given.
+    /// The slots of each input symbol, in the order given, then of each angle's sine and
+    /// cosine ([`Inputs::with_trig`]).
     pub input_ranges: Vec<Range<usize>>,
     /// The components of every root, concatenated.
     pub outputs: Vec<Val>,
@@ -119,12 +120,23 @@ pub struct Program {
 pub struct Inputs {
     /// Symbol → (first slot, width).
     slots: FastMap<Symbol, (u32, usize)>,
+    /// Angle → the slot of its sine, its cosine in the next ([`Inputs::with_trig`]).
+    trig: FastMap<Symbol, u32>,
     ranges: Vec<Range<usize>>,
     n: usize,
 }
 
 impl Inputs {
     pub fn new(g: &Graph, inputs: &[Symbol]) -> Result<Inputs, LowerError> {
+        Inputs::with_trig(g, inputs, &[])
+    }
+
+    /// [`new`](Inputs::new), then two slots for each scalar of `trig`: its sine and cosine,
+    /// which the lowering reads wherever it would compute them (a 2D rotation R(θ), a call
+    /// `sin(θ)`, `cos(θ)`), so a caller whose many roots turn by one body's angle computes
+    /// them once per body rather than once per root. Their ranges follow the symbols':
+    /// range `inputs.len() + k` is `trig[k]`'s (sine, cosine).
+    pub fn with_trig(g: &Graph, inputs: &[Symbol], trig: &[Symbol]) -> Result<Inputs, LowerError> {
         let mut slots = FastMap::default();
         let mut ranges = Vec::new();
         let mut n = 0usize;
@@ -142,7 +154,27 @@ impl Inputs {
             ranges.push(n..n + width);
             n += width;
         }
-        Ok(Inputs { slots, ranges, n })
+        let mut pairs = FastMap::default();
+        for &s in trig {
+            if pairs.insert(s, n as u32).is_some() {
+                return Err(LowerError::DuplicateInput(g.symbol(s).name.clone()));
+            }
+            ranges.push(n..n + 2);
+            n += 2;
+        }
+        Ok(Inputs { slots, trig: pairs, ranges, n })
+    }
+
+    /// The input slot of `f(x)` when `f` is sin or cos and `x` an angle whose sine and
+    /// cosine are inputs ([`with_trig`](Inputs::with_trig)).
+    fn trig_slot(&self, g: &Graph, f: Func, x: Id) -> Option<u32> {
+        let Node::Sym(s) = g.node(x) else { return None };
+        let sine = *self.trig.get(s)?;
+        match f {
+            Func::Sin => Some(sine),
+            Func::Cos => Some(sine + 1),
+            _ => None,
+        }
     }
 }
 
@@ -234,10 +266,13 @@ impl Program {
                     [b.norm(&x[..dim]), 0, 0]
                 }
                 Node::Comp(x, axis) => [get(x)[axis.index()], 0, 0],
-                Node::Call(f, args) => {
-                    let args: Vec<Val> = args[..f.arity()].iter().map(|a| get(a)[0]).collect();
-                    [b.call(*f, &args), 0, 0]
-                }
+                Node::Call(f, args) => match inputs.trig_slot(g, *f, args[0]) {
+                    Some(slot) => [b.push(Op::Input(slot)), 0, 0],
+                    None => {
+                        let args: Vec<Val> = args[..f.arity()].iter().map(|a| get(a)[0]).collect();
+                        [b.call(*f, &args), 0, 0]
+                    }
+                },
                 // R(q) s, the matrix of `eval::rotate` in its order of operations (3D).
                 Node::Rot([q, u]) if dim == 3 => {
                     let q = match g.node(*q) {
@@ -250,7 +285,11 @@ impl Program {
                 // R(θ) s = [cos θ s.x − sin θ s.y, sin θ s.x + cos θ s.y] (2D only).
                 Node::Rot([theta, u]) => {
                     let (th, u) = (get(theta)[0], get(u));
-                    let (sin, cos) = (b.call(Func::Sin, &[th]), b.call(Func::Cos, &[th]));
+                    let trig = |b: &mut Builder, f: Func| match inputs.trig_slot(g, f, *theta) {
+                        Some(slot) => b.push(Op::Input(slot)),
+                        None => b.call(f, &[th]),
+                    };
+                    let (sin, cos) = (trig(&mut b, Func::Sin), trig(&mut b, Func::Cos));
                     let (cx, sy) = (b.mul(cos, u[0]), b.mul(sin, u[1]));
                     let (sx, cy) = (b.mul(sin, u[0]), b.mul(cos, u[1]));
                     [b.sub(cx, sy), b.add(sx, cy), 0]

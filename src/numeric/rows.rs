@@ -31,7 +31,7 @@
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
 use crate::expr::graph::SymbolWalk;
-use crate::expr::{Id, Rational, Symbol};
+use crate::expr::{Func, Id, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
@@ -283,6 +283,26 @@ impl Place {
         }
         v
     }
+
+    /// [`read_of`](Place::read_of) of a root `W` (2 or 3) wide, or, for `W` = 0, of any
+    /// width (a test of its `len`, still no bounds check: the fills of a 2D rigid body's
+    /// rows, whose linear J and v are 2 wide and angular ones 1).
+    ///
+    /// # Safety
+    /// As [`read_of`](Place::read_of); for `W` ≠ 0, `self` is `W` wide.
+    #[inline(always)]
+    unsafe fn read_width<const W: usize>(self, out: Outputs<'_>) -> [f64; 3] {
+        // SAFETY: the caller's: `self` is one of the places that made `out`, of the width read.
+        unsafe {
+            match (W, self.len) {
+                (0, 1) => self.read_of::<1>(out),
+                (0, 2) => self.read_of::<2>(out),
+                (0, 3) => self.read_of::<3>(out),
+                (0, _) => [0.0; 3],
+                _ => self.read_of::<W>(out),
+            }
+        }
+    }
 }
 
 /// The width every one of `places` has, or 0 when they differ (or there are none).
@@ -362,8 +382,9 @@ fn finite3(x: &[f64; 3]) -> bool {
 impl Subprogram {
     /// Batches the roots in `units` (`numeric::batch`), when some shape repeats.
     fn batch(&mut self, system: &System, graph: &crate::expr::Graph, roots: &[Id], units: &[Vec<usize>]) {
-        let flat = Flat::new(system, &self.tape, &self.sources);
-        let batched = Batched::new(graph, roots, units, |r| self.place[r].len as usize, flat.slots(&self.inputs));
+        let flat = Flat::new(system, &self.tape, &self.inputs, &self.sources);
+        let width = |r: usize| self.place[r].len as usize;
+        let batched = Batched::new(graph, roots, units, width, flat.slots(&self.inputs), flat.trig_slots(&self.inputs));
         let Some(batched) = batched else { return };
         // The roots are read where the batches leave them.
         for (r, place) in self.place.iter_mut().enumerate() {
@@ -508,7 +529,9 @@ fn evaluate_batched_without_scratch(batched: &Batched, inputs: &[f64], outputs: 
 /// from one buffer): every body's position, then every body's velocity, three numbers a
 /// body as a simulation keeps them, so a state arrives in two block copies rather than
 /// symbol by symbol; then t; then the other input symbols (parameters, masses, rigid
-/// bodies' angles) one after the other.
+/// bodies' angles) one after the other, a 2D rigid body's angle θ followed by sin θ and
+/// cos θ, which the load computes once for the batches' tapes to read (`Batched::new`'s
+/// `trig`: a body's angle is turned by in each row of each of its joints).
 #[derive(Clone, Debug)]
 struct Flat {
     bodies: usize,
@@ -519,6 +542,8 @@ struct Flat {
     /// The rigid bodies' angles and angular velocities among the inputs (`Source::Angle`),
     /// which the environment gives per state.
     angles: Vec<usize>,
+    /// The slot of each 2D rigid body's angle among the inputs: its sine and cosine follow.
+    trig: Vec<usize>,
     /// Whether some input is a position, a velocity (else that block is not copied).
     positions: bool,
     velocities: bool,
@@ -526,10 +551,14 @@ struct Flat {
 }
 
 impl Flat {
-    fn new(system: &System, tape: &Tape, sources: &[Source]) -> Flat {
+    fn new(system: &System, tape: &Tape, inputs: &[Symbol], sources: &[Source]) -> Flat {
         let n = system.bodies.len();
         let mut len = 6 * n + 1;
-        let (mut env, mut angles) = (Vec::new(), Vec::new());
+        let (mut env, mut angles, mut trig) = (Vec::new(), Vec::new(), Vec::new());
+        let orientations: std::collections::HashSet<Symbol> = match system.dim() {
+            2 => system.bodies.iter().filter_map(|b| b.rigid.as_ref()).map(|r| r.orientation).collect(),
+            _ => Default::default(),
+        };
         let places = sources
             .iter()
             .enumerate()
@@ -544,15 +573,41 @@ impl Flat {
                             Source::Env => env.push(i),
                             _ => angles.push(i),
                         }
+                        let at = len;
                         len += w;
-                        len - w..len
+                        if w == 1 && orientations.contains(&inputs[i]) {
+                            trig.push(at);
+                            len += 2;
+                        }
+                        at..at + w
                     }
                 }
             })
             .collect();
         let positions = sources.iter().any(|s| matches!(s, Source::Position(_)));
         let velocities = sources.iter().any(|s| matches!(s, Source::Velocity(_)));
-        Flat { bodies: n, places, env, angles, positions, velocities, len }
+        Flat { bodies: n, places, env, angles, trig, positions, velocities, len }
+    }
+
+    /// Symbol → the slots of its sine and cosine in the buffer, for the 2D rigid bodies'
+    /// angles (`inputs` are the tape's input symbols).
+    fn trig_slots<'f>(&'f self, inputs: &[Symbol]) -> impl Fn(Symbol) -> Option<Range<usize>> + 'f {
+        let slots = self.slots(inputs);
+        let angles: std::collections::HashSet<usize> = self.trig.iter().copied().collect();
+        move |s| {
+            let at = slots(s);
+            (at.len() == 1 && angles.contains(&at.start)).then(|| at.start + 1..at.start + 3)
+        }
+    }
+
+    /// The sine and cosine of each 2D rigid body's angle in `buffer`, from the angle there:
+    /// the tapes' own [`Func::apply`], so a tape reading them has the bits it would compute.
+    fn fill_trig(&self, buffer: &mut [f64]) {
+        for &at in &self.trig {
+            let theta = [buffer[at]];
+            buffer[at + 1] = Func::Sin.apply(&theta);
+            buffer[at + 2] = Func::Cos.apply(&theta);
+        }
     }
 
     /// Symbol → its slots in the buffer (`inputs` are the tape's input symbols).
@@ -566,6 +621,7 @@ impl Flat {
         for (i, &s) in inputs.iter().enumerate() {
             from_env(system, env, s, &mut buffer[self.places[i].clone()])?;
         }
+        self.fill_trig(buffer);
         Ok(())
     }
 
@@ -592,6 +648,7 @@ impl Flat {
         for &i in constants.iter().chain(&self.angles) {
             from_env(system, env, inputs[i], &mut buffer[self.places[i].clone()])?;
         }
+        self.fill_trig(buffer);
         Ok(())
     }
 }
@@ -879,63 +936,46 @@ impl StateCopies {
 }
 
 /// Row `row`'s J `entries` from `out` (all of width `width` when it is not 0), in place
-/// when the row has that many already; whether every component is finite. The common case
-/// (in place, every entry 2 or 3 wide) is compiled into each fill's loop over the rows (a
-/// call per row cost more than the copy it makes); the rest is [`fill_entries_any`].
+/// when the row has that many already. The common case
+/// (in place) is compiled into each fill's loop over the rows (a call per row cost more
+/// than the copy it makes), the entries read without a bounds check and, when they are all
+/// 2 or 3 wide, without a test of their width; the rest is [`fill_entries_any`].
 ///
 /// `entries` are some of the [`Places`] that made `out`, `width` their `width`.
 #[inline(always)]
-fn fill_entries(row: &mut Row, entries: &[Entry], width: u32, out: Outputs<'_>) -> bool {
-    if row.jacobian.len() == entries.len() {
-        match width {
-            2 => return entries_of_width::<2>(row, entries, out),
-            3 => return entries_of_width::<3>(row, entries, out),
-            _ => {}
-        }
+fn fill_entries(row: &mut Row, entries: &[Entry], width: u32, out: Outputs<'_>) {
+    if row.jacobian.len() != entries.len() {
+        return fill_entries_any(row, entries, out.0);
     }
-    fill_entries_any(row, entries, out.0)
+    match width {
+        2 => entries_of_width::<2>(row, entries, out),
+        3 => entries_of_width::<3>(row, entries, out),
+        _ => entries_of_width::<0>(row, entries, out),
+    }
 }
 
-/// [`fill_entries`] for entries of any widths, or into a row of another length.
+/// [`fill_entries`] into a row of another length (the first fill of a scratch's rows).
+#[cold]
 #[inline(never)]
-fn fill_entries_any(row: &mut Row, entries: &[Entry], out: &[f64]) -> bool {
-    let mut finite = true;
-    if row.jacobian.len() == entries.len() {
-        for (j, e) in row.jacobian.iter_mut().zip(entries) {
-            let x = e.place.read(out);
-            finite &= finite3(&x);
-            *j = (e.slot as usize, x);
-        }
-    } else {
-        row.jacobian.clear();
-        for e in entries {
-            let x = e.place.read(out);
-            finite &= finite3(&x);
-            row.jacobian.push((e.slot as usize, x));
-        }
-    }
-    finite
+fn fill_entries_any(row: &mut Row, entries: &[Entry], out: &[f64]) {
+    row.jacobian.clear();
+    row.jacobian.extend(entries.iter().map(|e| (e.slot as usize, e.place.read(out))));
 }
 
-/// [`fill_entries`] in place, every entry `W` wide: each read without a test of its width,
-/// and only its `W` components tested (the zeros past them are finite).
+/// [`fill_entries`] in place, every entry `W` wide (`W` = 0: of any width, see
+/// [`Place::read_width`]): each read without a bounds check.
 #[inline(always)]
-fn entries_of_width<const W: usize>(row: &mut Row, entries: &[Entry], out: Outputs<'_>) -> bool {
-    let mut finite = true;
+fn entries_of_width<const W: usize>(row: &mut Row, entries: &[Entry], out: Outputs<'_>) {
     for (j, e) in row.jacobian.iter_mut().zip(entries) {
-        // SAFETY: `e` is one of the entries of the places that made `out`, `W` wide
-        // (`fill_entries`).
-        let v = unsafe { e.place.read_of::<W>(out) };
-        for c in &v[..W] {
-            finite &= c.is_finite();
-        }
-        *j = (e.slot as usize, v);
+        // SAFETY: `e` is one of the entries of the places that made `out`, `W` wide when
+        // `W` ≠ 0 (`fill_entries`).
+        *j = (e.slot as usize, unsafe { e.place.read_width::<W>(out) });
     }
-    finite
 }
 
-/// [`RowProgram::fill_slots`] when every slot's v and F are `W` wide: each read without a
-/// test of its width, and only its `W` components tested (the zeros past them are finite).
+/// [`RowProgram::fill_slots`] when every slot's v and F are `W` wide (`W` = 0: of any
+/// width, see [`Place::read_width`]): each read without a bounds check. Whether every 1/m
+/// is finite (v and F are outputs as they are: see [`finite_fill`]).
 #[inline(always)]
 fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows) -> bool {
     let checked = places.outputs(out);
@@ -944,15 +984,80 @@ fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows)
     let mut finite = true;
     for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
         *w = 1.0 / out[m as usize];
-        // SAFETY: `places` made `checked`, and every v and F of theirs is `W` wide (the
-        // caller's `slot_width`).
-        (*u, *f) = unsafe { (v.read_of::<W>(checked), force.read_of::<W>(checked)) };
+        // SAFETY: `places` made `checked`, and every v and F of theirs is `W` wide when
+        // `W` ≠ 0 (the caller's `slot_width`).
+        (*u, *f) = unsafe { (v.read_width::<W>(checked), force.read_width::<W>(checked)) };
         finite &= w.is_finite();
-        for k in 0..W {
-            finite &= u[k].is_finite() & f[k].is_finite();
-        }
     }
     finite
+}
+
+/// Whether every number in `xs` is finite, with the widest vector instructions the
+/// processor has (AVX2 on x86-64 when present): a sweep of a tape's outputs, cheaper than a
+/// test of each number as it is written.
+fn all_finite(xs: &[f64]) -> bool {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2 (checked).
+        return unsafe { all_finite_avx2(xs) };
+    }
+    all_finite_any(xs)
+}
+
+/// [`all_finite_any`] compiled for AVX2.
+///
+/// # Safety
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn all_finite_avx2(xs: &[f64]) -> bool {
+    all_finite_any(xs)
+}
+
+/// [`all_finite`]: x · 0 is ±0 for a finite x and NaN otherwise, and a NaN stays in a sum, so
+/// eight sums of such products (vector operations, no branch) are all 0 exactly when
+/// every number is finite.
+#[inline(always)]
+fn all_finite_any(xs: &[f64]) -> bool {
+    let mut sums = [0.0f64; 8];
+    let mut chunks = xs.chunks_exact(8);
+    for c in &mut chunks {
+        for (s, x) in sums.iter_mut().zip(c) {
+            *s += x * 0.0;
+        }
+    }
+    let rest = chunks.remainder().iter().fold(0.0, |s, x| s + x * 0.0);
+    sums.iter().fold(rest, |s, x| s + x) == 0.0
+}
+
+/// Whether every number a fill along [`Places`] wrote is finite, from `out` (the tape's
+/// outputs it read), `computed` (whether the numbers it computed from them — C/κ, Ċ/κ,
+/// 1/m — are finite) and `written` (a test of every number written, run only when some
+/// output is not finite). Every other number a fill writes is an output as it is, or a
+/// zero past a root's width; and every output is some root's component the fill reads. So
+/// with finite outputs `computed` decides, and otherwise `written` (a non-finite output
+/// may still give a finite number: 1/∞ = 0).
+#[inline]
+fn finite_fill(out: &[f64], computed: bool, written: impl FnOnce() -> bool) -> bool {
+    if all_finite(out) { computed } else { written() }
+}
+
+/// Whether every number of `rows`' slots (1/m, v, F) is finite.
+fn slots_finite(rows: &Rows) -> bool {
+    rows.inverse_mass.iter().all(|w| w.is_finite()) && rows.velocity.iter().chain(&rows.force).all(finite3)
+}
+
+/// Whether every number of `rows` is finite: each row's C/κ, Ċ/κ, c and J, each slot's.
+fn all_written_finite(rows: &Rows) -> bool {
+    rows.rows
+        .iter()
+        .all(|row| row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & entries_finite(row))
+        && slots_finite(rows)
+}
+
+/// Whether every row's C/κ and J is finite (what a positions evaluation writes, with zeros).
+fn positions_finite(rows: &[Row]) -> bool {
+    rows.iter().all(|row| row.value.is_finite() & entries_finite(row))
 }
 
 /// Whether every component of a row's J is finite.
@@ -1265,19 +1370,21 @@ impl RowProgram {
         // has the slots already (the rows of the last evaluation).
         rows.dim = system.dim();
         rows.axes.clear();
-        let mut finite = self.fill_slots(places, out, rows);
+        let mut computed = self.fill_slots(places, out, rows);
         for (row, at) in rows.rows.iter_mut().zip(&places.rows) {
             row.rate = out[at.rate as usize] * at.inverse_scale;
             row.bias = out[at.bias as usize];
             row.inequality = at.inequality;
-            finite &= row.rate.is_finite() & row.bias.is_finite();
+            computed &= row.rate.is_finite();
         }
-        scratch.finite = finite;
+        scratch.finite = finite_fill(out, computed, || {
+            slots_finite(rows) && rows.rows.iter().all(|row| row.rate.is_finite() & row.bias.is_finite())
+        });
         Ok(true)
     }
 
     /// Each slot's 1/m, v and F from a tape's outputs along its [`Places`], in place when
-    /// `rows` has the slots already; whether every one is finite.
+    /// `rows` has the slots already; whether every 1/m is finite (see [`finite_fill`]).
     #[inline(always)]
     fn fill_slots(&self, places: &Places, out: &[f64], rows: &mut Rows) -> bool {
         let n = self.bodies.len();
@@ -1289,18 +1396,7 @@ impl RowProgram {
         match places.slot_width {
             2 => slots_of_width::<2>(places, out, rows),
             3 => slots_of_width::<3>(places, out, rows),
-            _ => {
-                let slots = rows.inverse_mass.iter_mut().zip(&mut rows.velocity).zip(&mut rows.force);
-                let at = places.mass.iter().zip(&places.velocity).zip(&places.force);
-                let mut finite = true;
-                for (((w, u), f), ((&m, &v), &force)) in slots.zip(at) {
-                    *w = 1.0 / out[m as usize];
-                    *u = v.read(out);
-                    *f = force.read(out);
-                    finite &= w.is_finite() & finite3(u) & finite3(f);
-                }
-                finite
-            }
+            _ => slots_of_width::<0>(places, out, rows),
         }
     }
 
@@ -1310,7 +1406,7 @@ impl RowProgram {
     fn fill_plain(&self, system: &System, places: &Places, out: &[f64], rows: &mut Rows) -> bool {
         rows.dim = system.dim();
         rows.axes.clear();
-        let mut finite = self.fill_slots(places, out, rows);
+        let mut computed = self.fill_slots(places, out, rows);
         rows.rows.resize_with(self.rows.len(), Row::default);
         let checked = places.outputs(out);
         let mut entries = places.jacobian.as_slice();
@@ -1319,12 +1415,12 @@ impl RowProgram {
             row.rate = out[at.rate as usize] * at.inverse_scale;
             row.bias = out[at.bias as usize];
             row.inequality = at.inequality;
-            finite &= row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite();
+            computed &= row.value.is_finite() & row.rate.is_finite();
             let (here, rest) = entries.split_at(at.entries as usize);
             entries = rest;
-            finite &= fill_entries(row, here, places.width, checked);
+            fill_entries(row, here, places.width, checked);
         }
-        finite
+        finite_fill(out, computed, || all_written_finite(rows))
     }
 
     /// The rows from the inputs loaded in `scratch`.
@@ -1339,12 +1435,7 @@ impl RowProgram {
         let scalar = |root: usize| out[place[root].start as usize];
         let vector = |root: usize| place[root].read(out);
         self.fill(system, rows, scalar, vector);
-        scratch.finite = rows
-            .rows
-            .iter()
-            .all(|row| row.value.is_finite() & row.rate.is_finite() & row.bias.is_finite() & entries_finite(row))
-            && rows.inverse_mass.iter().all(|w| w.is_finite())
-            && rows.velocity.iter().chain(&rows.force).all(finite3);
+        scratch.finite = all_written_finite(rows);
     }
 
     /// `rows` from the roots' values (`scalar`, `vector` by root): the one assembly of the
@@ -1459,19 +1550,19 @@ impl RowProgram {
         if let Some(places) = &p.places {
             // Without 3D rigid bodies J is its roots as they are (no projection on an axis).
             let checked = places.outputs(out);
-            let mut finite = true;
+            let mut computed = true;
             let mut entries = places.jacobian.as_slice();
             for (row, at) in rows.iter_mut().zip(&places.rows) {
                 row.value = out[at.value as usize] * at.inverse_scale;
                 row.rate = 0.0;
                 row.bias = 0.0;
                 row.inequality = at.inequality;
-                finite &= row.value.is_finite();
+                computed &= row.value.is_finite();
                 let (here, rest) = entries.split_at(at.entries as usize);
                 entries = rest;
-                finite &= fill_entries(row, here, places.width, checked);
+                fill_entries(row, here, places.width, checked);
             }
-            scratch.finite = finite;
+            scratch.finite = finite_fill(out, computed, || positions_finite(rows));
             return;
         }
         let vector = |root: usize| p.place[root].read(out);
@@ -1490,7 +1581,7 @@ impl RowProgram {
                 self.fill_jacobian(layout, row, &vector);
             }
         }
-        scratch.finite = rows.iter().all(|row| row.value.is_finite() & entries_finite(row));
+        scratch.finite = positions_finite(rows);
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of

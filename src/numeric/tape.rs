@@ -42,7 +42,7 @@
 //!
 //! Not here: the lowering itself (`program.rs`), text, files.
 
-use super::program::{LowerError, Op, Program, Val, norm2, norm3};
+use super::program::{Inputs, LowerError, Op, Program, Val, norm2, norm3};
 use crate::expr::eval;
 use crate::expr::{Func, Graph, Id, Symbol};
 use rayon::prelude::*;
@@ -623,6 +623,20 @@ impl Tape {
     /// ```
     pub fn compile(graph: &Graph, roots: &[Id], inputs: &[Symbol]) -> Result<Tape, TapeError> {
         let p = Program::lower(graph, roots, inputs)?;
+        Ok(Tape::from_program(&p))
+    }
+
+    /// [`compile`](Tape::compile) over `inputs` and then, two slots each, the sine and cosine
+    /// of each angle of `trig` (scalars among `inputs`; [`Inputs::with_trig`]): input range
+    /// `inputs.len() + k` is `trig[k]`'s pair, which the caller fills, and the tape computes
+    /// no sine or cosine of those angles.
+    pub fn compile_with_trig(
+        graph: &Graph,
+        roots: &[Id],
+        inputs: &[Symbol],
+        trig: &[Symbol],
+    ) -> Result<Tape, TapeError> {
+        let p = Program::lower_in(graph, roots, &Inputs::with_trig(graph, inputs, trig)?)?;
         Ok(Tape::from_program(&p))
     }
 
