@@ -30,7 +30,7 @@
 
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
-use crate::expr::graph::SymbolWalk;
+use crate::expr::graph::{FastSet, SymbolWalk};
 use crate::expr::{Func, Id, Rational, Symbol};
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
@@ -555,7 +555,7 @@ impl Flat {
         let n = system.bodies.len();
         let mut len = 6 * n + 1;
         let (mut env, mut angles, mut trig) = (Vec::new(), Vec::new(), Vec::new());
-        let orientations: std::collections::HashSet<Symbol> = match system.dim() {
+        let orientations: FastSet<Symbol> = match system.dim() {
             2 => system.bodies.iter().filter_map(|b| b.rigid.as_ref()).map(|r| r.orientation).collect(),
             _ => Default::default(),
         };
@@ -593,7 +593,7 @@ impl Flat {
     /// angles (`inputs` are the tape's input symbols).
     fn trig_slots<'f>(&'f self, inputs: &[Symbol]) -> impl Fn(Symbol) -> Option<Range<usize>> + 'f {
         let slots = self.slots(inputs);
-        let angles: std::collections::HashSet<usize> = self.trig.iter().copied().collect();
+        let angles: FastSet<usize> = self.trig.iter().copied().collect();
         move |s| {
             let at = slots(s);
             (at.len() == 1 && angles.contains(&at.start)).then(|| at.start + 1..at.start + 3)

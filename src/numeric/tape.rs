@@ -622,8 +622,7 @@ impl Tape {
     /// assert_eq!(out[0], 25.0 - 4.0);
     /// ```
     pub fn compile(graph: &Graph, roots: &[Id], inputs: &[Symbol]) -> Result<Tape, TapeError> {
-        let p = Program::lower(graph, roots, inputs)?;
-        Ok(Tape::from_program(&p))
+        Tape::compile_with_trig(graph, roots, inputs, &[])
     }
 
     /// [`compile`](Tape::compile) over `inputs` and then, two slots each, the sine and cosine
