@@ -361,11 +361,18 @@ fn a_projection_that_cannot_reach_its_tolerance_is_reported() {
     assert_eq!(u["steps"], 200, "{json}");
     assert_eq!(u["first_step"], 1, "{json}");
     assert!(u["max_distance"].as_f64().expect("a number") > 1e6 * u["tolerance"].as_f64().expect("a number"), "{json}");
+    // The exact velocity solve projects after each substep, and says so too.
+    let json = summary("constraints/pendulum.toml", "200", &["--set", "l=0", "--solver", "exact-velocity"]);
+    let u = &json["unconverged"];
+    assert_eq!((&u["steps"], &u["first_step"]), (&200.into(), &1.into()), "{json}");
+    assert!(u["max_distance"].as_f64().expect("a number") > u["tolerance"].as_f64().expect("a number"), "{json}");
     // The pendulum as written reaches it at every step: no key, no warning.
-    let json = summary("constraints/pendulum.toml", "2000", &[]);
-    assert!(json.get("unconverged").is_none(), "{json}");
-    let out = lagrange(&["simulate", "constraints/pendulum.toml", "--steps", "2000"]);
-    assert!(!String::from_utf8_lossy(&out.stdout).contains("warning"));
+    for solver in ["exact", "exact-velocity"] {
+        let json = summary("constraints/pendulum.toml", "2000", &["--solver", solver]);
+        assert!(json.get("unconverged").is_none(), "{solver}: {json}");
+        let out = lagrange(&["simulate", "constraints/pendulum.toml", "--steps", "2000", "--solver", solver]);
+        assert!(!String::from_utf8_lossy(&out.stdout).contains("warning"), "{solver}");
+    }
 }
 
 /// The stack of `constraints/solvers/stack.toml` (floor, then two disc contacts) stays at

@@ -413,6 +413,17 @@ fn every_solver_runs_every_scene_and_the_exact_one_keeps_its_joints() {
             if solver == Solver::Exact && !name.contains("stretched") && !name.contains("stack") {
                 assert!(summary.max_abs_c <= 1e-9, "{name}: exact |C| = {:e}", summary.max_abs_c);
             }
+            // The exact solve's projections reach their tolerance, but from the stretched
+            // chain's start (twice its length), which 20 Newton iterations do not close at
+            // 60 Hz: the summary says so, from step 1. The other solvers do not project.
+            match (solver, name.contains("stretched")) {
+                (Solver::Exact, true) => {
+                    let u = summary.unconverged.unwrap_or_else(|| panic!("{name}: not reported"));
+                    assert_eq!(u.first, 1, "{name}: {u:?}");
+                    assert!(u.distance > u.bound, "{name}: {u:?}");
+                }
+                _ => assert_eq!(summary.unconverged, None, "{name}, {solver:?}"),
+            }
             if solver == Solver::Exact && name.contains("stack") {
                 assert!(summary.max_abs_c <= 1e-3, "{name}: exact |C| = {:e}", summary.max_abs_c);
             }

@@ -252,9 +252,9 @@ pub struct Summary {
     pub max_kinetic: f64,
     /// Row evaluations (the cost unit).
     pub evaluations: u64,
-    /// Steps whose projection onto C = 0 (`--stabilize projection`) ended farther from it
-    /// than its tolerance, and how far; `None` when every projection reached it or the run
-    /// does not project.
+    /// Steps whose projection onto C = 0 (`--stabilize projection`, or the exact velocity
+    /// solve's after each substep) ended farther from it than its tolerance, and how far;
+    /// `None` when every projection reached it or the run does not project.
     pub unconverged: Option<Unconverged>,
     /// k when the run worked in a length unit of 2ᵏ (the scene's lengths were beyond
     /// 2^±[`NATURAL_RANGE`](super::dynamics::NATURAL_RANGE)); 0 when it ran in the scene's own. Every figure here is in the scene's unit.
@@ -279,6 +279,16 @@ pub struct Unconverged {
     /// The largest distance |C|/‖∇C‖ left (in the scene's unit), and the tolerance's bound.
     pub distance: f64,
     pub bound: f64,
+}
+
+impl Unconverged {
+    /// Counts step `step`, whose projection ended `distance` from C = 0 against `bound`
+    /// (both in the scene's unit), into `unconverged`.
+    pub fn count(unconverged: &mut Option<Unconverged>, step: u64, distance: f64, bound: f64) {
+        let u = unconverged.get_or_insert(Unconverged { steps: 0, first: step, distance, bound });
+        u.steps += 1;
+        u.distance = u.distance.max(distance);
+    }
 }
 
 /// A run that stopped early: why, and what it measured until then.

@@ -67,6 +67,9 @@ pub fn step(
     let h = s.settings.substep();
     // Positions only: a rigid body's angle is no length.
     let length = length_scale(&q[..dynamics.system().bodies.len()]);
+    // Every substep's projection aims for it; the run loop reports a step that ends farther.
+    let bound = PROJECTION_TOLERANCE * length;
+    s.projection_bound = Some(bound);
     // The steps of the velocity solves and the projections need no λ: on a redundant block
     // the velocity change alone (one substitution an application instead of two).
     dynamics.set_velocity_space(true);
@@ -119,7 +122,6 @@ pub fn step(
         to_world(&rows.axes, v);
         drift_turning(q, v, h, first);
         let t1 = t + (sub + 1) as f64 * h;
-        let bound = PROJECTION_TOLERANCE * length;
         // Along the substep's J first: the cache serves each iteration with the velocity
         // solve's factor; Newton (a factorisation per iteration) where that is slow.
         let along = if rows.rows.len() >= ALONG_MIN_ROWS {

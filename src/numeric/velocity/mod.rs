@@ -737,6 +737,10 @@ pub struct Stepper {
     /// solve reads it: without, `impulse` keeps an older step's and [`Stepper::lambda`] is
     /// not to be read.
     pub wants_impulse: bool,
+    /// The exact solve's bound on the distance |C|/‖∇C‖ its last projection aimed for (the
+    /// last step's, in the run's unit); `None` for the solvers that do not project. The run
+    /// loop takes it to report a step whose positions stayed farther (`Summary::unconverged`).
+    pub projection_bound: Option<f64>,
 }
 
 impl Stepper {
@@ -749,6 +753,7 @@ impl Stepper {
             evaluated: vec![[0.0; 3]; bodies],
             start_rate: vec![0.0; rows],
             wants_impulse: true,
+            projection_bound: None,
         }
     }
 

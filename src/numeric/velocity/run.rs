@@ -24,7 +24,7 @@ use crate::numeric::dynamics::{Dynamics, Remedy, SimError, slot_name};
 use crate::numeric::rescale::{Shown, Unit};
 use crate::numeric::rotation;
 use crate::numeric::simulate::{
-    Failure, Frame, Sample, Summary, final_state, initial_state, time_dependent, work_scale,
+    Failure, Frame, Sample, Summary, Unconverged, final_state, initial_state, time_dependent, work_scale,
 };
 use crate::numeric::solve::CONTACT_TOLERANCE;
 use crate::numeric::stabilize::distance;
@@ -133,7 +133,8 @@ fn run_inner(
             }
         }
         let rows = dynamics.rows(t, q, v)?;
-        let (mut c_max, mut c_dot_max) = (0.0f64, 0.0f64);
+        // `left`: the largest distance to a surface to be held (an inequality's violation).
+        let (mut c_max, mut c_dot_max, mut left) = (0.0f64, 0.0f64, 0.0f64);
         for (k, row) in rows.rows.iter().enumerate() {
             let d = distance(row);
             if d.abs() > bound && (!row.inequality || d < 0.0) {
@@ -156,13 +157,19 @@ fn run_inner(
             let (value, rate) = (row_back(k, row.value), row_back(k, row.rate));
             if row.inequality {
                 c_max = c_max.max((-value).max(0.0));
+                left = left.max(-d);
                 if d <= touch && rate < 0.0 {
                     c_dot_max = c_dot_max.max(-rate);
                 }
             } else {
                 c_max = c_max.max(value.abs());
+                left = left.max(d.abs());
                 c_dot_max = c_dot_max.max(rate.abs());
             }
+        }
+        // The last step's projection (the exact solve's) ended farther than it aimed for.
+        if let Some(bound) = stepper.projection_bound.take().filter(|&bound| left > bound) {
+            Unconverged::count(&mut summary.unconverged, n, length_back(left), length_back(bound));
         }
         summary.max_abs_c = summary.max_abs_c.max(c_max);
         summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
