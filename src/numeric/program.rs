@@ -165,6 +165,12 @@ impl Inputs {
         Ok(Inputs { slots, trig: pairs, ranges, n })
     }
 
+    /// The slots of each input symbol, in the order given, then of each angle's sine and
+    /// cosine: a program's [`input_ranges`](Program::input_ranges) over this layout.
+    pub fn ranges(&self) -> &[Range<usize>] {
+        &self.ranges
+    }
+
     /// The input slot of `f(x)` when `f` is sin or cos and `x` an angle whose sine and
     /// cosine are inputs ([`with_trig`](Inputs::with_trig)).
     fn trig_slot(&self, g: &Graph, f: Func, x: Id) -> Option<u32> {

@@ -31,10 +31,11 @@
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
 use crate::expr::graph::{FastSet, SymbolWalk};
-use crate::expr::{Func, Id, Rational, Symbol};
+use crate::expr::{Func, Id, Rational, Symbol, Ty};
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
+use crate::numeric::program::{Inputs, Program};
 use crate::numeric::tape::{Scratch, Tape};
 use crate::numeric::vector::dot;
 use std::ops::Range;
@@ -162,26 +163,34 @@ pub struct RowProgram {
     steady: bool,
 }
 
-/// A tape of some of a [`RowProgram`]'s roots.
+/// How a [`Subprogram`] computes its roots.
+#[derive(Clone, Debug)]
+enum Kernel {
+    /// One tape of the roots over their free symbols, in its own layout.
+    Tape(Tape),
+    /// The same roots shape by shape (`numeric::batch`), reading their inputs as `Flat`
+    /// lays them out. No tape of all of them is compiled then: on a big scene it would cost
+    /// as much as the batches' lowering many times over and never run.
+    Batched(Box<Batched>, Flat),
+}
+
+/// Some of a [`RowProgram`]'s roots, and how they are evaluated.
 #[derive(Clone, Debug)]
 struct Subprogram {
-    tape: Tape,
+    kernel: Kernel,
     inputs: Vec<Symbol>,
     /// Per program root, where its components are among the outputs (`len` 0: not in
-    /// them): in the tape's own layout, or the batches' when there are batches.
+    /// them): in the tape's layout, or the batches'.
     place: Vec<Place>,
     sources: Vec<Source>,
     /// The inputs that are not constants of a run (`Source::Env`), with their slots: what
     /// a state evaluation loads once the constants are held ([`RowScratch::hold_constants`]).
     varying: Vec<Load>,
     /// `varying` as copies from the state's arrays, when every one of them comes from there
-    /// (no rigid body's angle, which the environment gives) and the tape reads its own
+    /// (no rigid body's angle, which the environment gives) and a tape reads them in its own
     /// layout (no batches): a state evaluation with the constants held is then
     /// [`StateCopies::load`] alone.
     copies: Option<StateCopies>,
-    /// The same roots shape by shape, into `tape`'s output layout (`None`: `tape` itself),
-    /// reading its inputs as `flat` lays them out.
-    batched: Option<(Batched, Flat)>,
     /// Where `tape` leaves each number `Rows` reads, in the order they are filled (`None`
     /// with 3D rigid bodies, whose slots are projected on their axes by `fill`).
     places: Option<Places>,
@@ -380,33 +389,19 @@ fn finite3(x: &[f64; 3]) -> bool {
 }
 
 impl Subprogram {
-    /// Batches the roots in `units` (`numeric::batch`), when some shape repeats.
-    fn batch(&mut self, system: &System, graph: &crate::expr::Graph, roots: &[Id], units: &[Vec<usize>]) {
-        let flat = Flat::new(system, &self.tape, &self.inputs, &self.sources);
-        let width = |r: usize| self.place[r].len as usize;
-        let batched = Batched::new(graph, roots, units, width, flat.slots(&self.inputs), flat.trig_slots(&self.inputs));
-        let Some(batched) = batched else { return };
-        // The roots are read where the batches leave them.
-        for (r, place) in self.place.iter_mut().enumerate() {
-            if place.len > 0 {
-                let (start, stride) = batched.place(r);
-                (place.start, place.stride) = (start as u32, stride as u32);
-            }
-        }
-        self.batched = Some((batched, flat));
-        self.copies = None;
-    }
-
     /// The input buffer: the tape's own layout, or the batches' (`Flat`).
     fn input_len(&self) -> usize {
-        self.batched.as_ref().map_or(self.tape.input_len(), |(_, flat)| flat.len)
+        match &self.kernel {
+            Kernel::Tape(tape) => tape.input_len(),
+            Kernel::Batched(_, flat) => flat.len,
+        }
     }
 
     /// The inputs from `env` into `buffer` (of [`input_len`](Subprogram::input_len)).
     fn load(&self, system: &System, env: &Env, buffer: &mut [f64]) -> Result<(), EvalError> {
-        match &self.batched {
-            Some((_, flat)) => flat.load(system, env, &self.inputs, buffer),
-            None => load(system, env, &self.tape, &self.inputs, buffer),
+        match &self.kernel {
+            Kernel::Batched(_, flat) => flat.load(system, env, &self.inputs, buffer),
+            Kernel::Tape(tape) => load(system, env, tape, &self.inputs, buffer),
         }
     }
 
@@ -450,12 +445,12 @@ impl Subprogram {
     ) -> Result<(), EvalError> {
         let buffer = &mut scratch.inputs;
         let held = hold && scratch.constants;
-        match &self.batched {
-            Some((_, flat)) => flat.load_state(system, env, state, &self.inputs, held, buffer)?,
-            None if held => load_varying(system, env, state, &self.inputs, &self.varying, buffer)?,
-            None => {
+        match &self.kernel {
+            Kernel::Batched(_, flat) => flat.load_state(system, env, state, &self.inputs, held, buffer)?,
+            Kernel::Tape(_) if held => load_varying(system, env, state, &self.inputs, &self.varying, buffer)?,
+            Kernel::Tape(tape) => {
                 let all = 0..self.inputs.len();
-                load_state(system, env, state, &self.tape, &self.inputs, &self.sources, all, buffer)?
+                load_state(system, env, state, tape, &self.inputs, &self.sources, all, buffer)?
             }
         }
         scratch.constants = hold;
@@ -464,24 +459,29 @@ impl Subprogram {
 
     /// The outputs' length: the tape's, or the batches'.
     fn output_len(&self) -> usize {
-        self.batched.as_ref().map_or(self.tape.output_len(), |(b, _)| b.output_len())
+        match &self.kernel {
+            Kernel::Tape(tape) => tape.output_len(),
+            Kernel::Batched(batched, _) => batched.output_len(),
+        }
     }
 
     /// Every root from the loaded `inputs` into `outputs` (laid out as `place` says).
     fn run(&self, inputs: &[f64], tape: &mut Scratch, batched: Option<&mut BatchedScratch>, outputs: &mut [f64]) {
-        match (&self.batched, batched) {
-            (Some((b, _)), Some(buffers)) => b.eval(inputs, buffers, outputs),
-            (Some((b, _)), None) => evaluate_batched_without_scratch(b, inputs, outputs),
-            (None, _) => self.tape.eval(inputs, tape, outputs),
+        match (&self.kernel, batched) {
+            (Kernel::Batched(b, _), Some(buffers)) => b.eval(inputs, buffers, outputs),
+            (Kernel::Batched(b, _), None) => evaluate_batched_without_scratch(b, inputs, outputs),
+            (Kernel::Tape(t), _) => t.eval(inputs, tape, outputs),
         }
     }
 
-    /// The roots `wanted` of `roots` (indices), compiled over their own free symbols.
+    /// The roots `wanted` of `roots` (indices) over their own free symbols: batched by the
+    /// `units` of `roots` (`numeric::batch`) where some shape repeats, else one tape.
     fn new(
         system: &System,
         graph: &crate::expr::Graph,
         roots: &[Id],
         wanted: impl IntoIterator<Item = usize>,
+        units: &[Vec<usize>],
     ) -> Subprogram {
         let mut root = vec![usize::MAX; roots.len()];
         let mut ids = Vec::new();
@@ -492,28 +492,54 @@ impl Subprogram {
             }
         }
         let inputs: Vec<Symbol> = SymbolWalk::default().free_symbols_of(graph, &ids).to_vec();
-        // As for the whole program: the inputs are the roots' free symbols.
-        let tape = Tape::compile(graph, &ids, &inputs).expect("the inputs are the roots' free symbols");
+        // The layout a tape of `ids` over `inputs` has: each input symbol's slots, and each
+        // root's components one after the other.
+        let layout = Inputs::new(graph, &inputs).expect("the free symbols are distinct");
+        let ranges = layout.ranges();
+        let width = |id: Id| if graph.ty(id) == Ty::Vector { graph.dim() } else { 1 };
+        let mut first = Vec::with_capacity(ids.len());
+        ids.iter().fold(0, |at, &id| {
+            first.push(at);
+            at + width(id)
+        });
         let sources = sources(system, &inputs);
         let varying: Vec<Load> = (0..inputs.len())
             .filter(|&i| !matches!(sources[i], Source::Env))
-            .map(|i| {
-                let range = tape.input_range(i);
-                Load { input: i, source: sources[i], start: range.start, len: range.len() }
-            })
+            .map(|i| Load { input: i, source: sources[i], start: ranges[i].start, len: ranges[i].len() })
             .collect();
-        let place = root
+        let mut place: Vec<Place> = root
             .iter()
-            .map(|&r| {
-                if r == usize::MAX {
-                    return Place::default();
-                }
-                let range = tape.output_range(r);
-                Place { start: range.start as u32, len: range.len() as u32, stride: 1 }
+            .map(|&r| match r {
+                usize::MAX => Place::default(),
+                r => Place { start: first[r] as u32, len: width(ids[r]) as u32, stride: 1 },
             })
             .collect();
-        let copies = StateCopies::new(&varying, system.dim());
-        Subprogram { tape, inputs, place, sources, varying, copies, batched: None, places: None }
+        let flat = Flat::new(system, ranges, &inputs, &sources);
+        let len = |r: usize| place[r].len as usize;
+        let batched = Batched::new(graph, roots, units, len, flat.slots(&inputs), flat.trig_slots(&inputs));
+        let (kernel, copies) = match batched {
+            Some(batched) => {
+                // The roots are read where the batches leave them.
+                for (r, place) in place.iter_mut().enumerate() {
+                    if place.len > 0 {
+                        let (start, stride) = batched.place(r);
+                        (place.start, place.stride) = (start as u32, stride as u32);
+                    }
+                }
+                (Kernel::Batched(Box::new(batched), flat), None)
+            }
+            None => {
+                // As for the whole program: the inputs are the roots' free symbols.
+                let program = Program::lower_in(graph, &ids, &layout).expect("the inputs are the roots' free symbols");
+                let tape = Tape::from_program(&program);
+                debug_assert!(
+                    root.iter().zip(&place).all(|(&r, p)| r == usize::MAX
+                        || tape.output_range(r) == (p.start as usize..(p.start + p.len) as usize))
+                );
+                (Kernel::Tape(tape), StateCopies::new(&varying, system.dim()))
+            }
+        };
+        Subprogram { kernel, inputs, place, sources, varying, copies, places: None }
     }
 }
 
@@ -551,7 +577,8 @@ struct Flat {
 }
 
 impl Flat {
-    fn new(system: &System, tape: &Tape, inputs: &[Symbol], sources: &[Source]) -> Flat {
+    /// `ranges`: each input symbol's slots in a tape's own layout (their widths count here).
+    fn new(system: &System, ranges: &[Range<usize>], inputs: &[Symbol], sources: &[Source]) -> Flat {
         let n = system.bodies.len();
         let mut len = 6 * n + 1;
         let (mut env, mut angles, mut trig) = (Vec::new(), Vec::new(), Vec::new());
@@ -563,7 +590,7 @@ impl Flat {
             .iter()
             .enumerate()
             .map(|(i, source)| {
-                let w = tape.input_range(i).len();
+                let w = ranges[i].len();
                 match *source {
                     Source::Position(b) => 3 * b..3 * b + w,
                     Source::Velocity(b) => 3 * (n + b)..3 * (n + b) + w,
@@ -1123,8 +1150,14 @@ impl Subprogram {
         SubScratch {
             inputs: vec![0.0; self.input_len()],
             outputs: vec![0.0; self.output_len()],
-            tape: self.tape.scratch(),
-            batched: self.batched.as_ref().map(|(b, _)| b.scratch()),
+            tape: match &self.kernel {
+                Kernel::Tape(tape) => tape.scratch(),
+                Kernel::Batched(..) => Scratch::default(),
+            },
+            batched: match &self.kernel {
+                Kernel::Batched(batched, _) => Some(batched.scratch()),
+                Kernel::Tape(_) => None,
+            },
             constants: false,
         }
     }
@@ -1226,18 +1259,16 @@ impl RowProgram {
                 jacobian: start..roots.len(),
             });
         }
-        let mut all = Subprogram::new(system, graph, &roots, 0..roots.len());
-        all.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::All));
+        let mut all =
+            Subprogram::new(system, graph, &roots, 0..roots.len(), &units(&bodies, &rows, roots.len(), Part::All));
         let axes = bodies.iter().filter_map(|b| b.principal).flat_map(|(_, axes)| axes);
         let c_and_j = rows.iter().flat_map(|r| std::iter::once(r.value).chain(r.jacobian.clone()));
-        let mut positions = Subprogram::new(system, graph, &roots, c_and_j.chain(axes).collect::<Vec<_>>());
-        positions.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::Positions));
+        let units_of = |part| units(&bodies, &rows, roots.len(), part);
+        let mut positions = Subprogram::new(system, graph, &roots, c_and_j.chain(axes), &units_of(Part::Positions));
         let motion = bodies.iter().all(|b| b.principal.is_none()).then(|| {
             let rates = rows.iter().flat_map(|r| [r.rate, r.bias]);
             let slots = bodies.iter().flat_map(|b| [b.mass, b.velocity, b.force]);
-            let mut m = Subprogram::new(system, graph, &roots, rates.chain(slots).collect::<Vec<_>>());
-            m.batch(system, graph, &roots, &units(&bodies, &rows, roots.len(), Part::Motion));
-            m
+            Subprogram::new(system, graph, &roots, rates.chain(slots), &units_of(Part::Motion))
         });
         let mut motion = motion;
         if bodies.iter().all(|b| b.principal.is_none()) {

@@ -587,6 +587,14 @@ pub struct Scratch {
     tape: u64,
 }
 
+/// Registers of no tape: a placeholder for a caller whose evaluation has no tape of its own
+/// (a tape refuses it as the scratch of another tape, unless it has no registers either).
+impl Default for Scratch {
+    fn default() -> Scratch {
+        Scratch { regs: Vec::new(), tape: NO_TAPE }
+    }
+}
+
 /// Registers for one lane of batched evaluation; make one with [`Tape::batch_scratch`].
 #[derive(Clone, Debug)]
 pub struct BatchScratch {
