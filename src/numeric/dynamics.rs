@@ -58,6 +58,13 @@ pub enum SimError {
         t = shown(*.time)
     )]
     Drift { step: u64, time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
+    /// A constraint out of reach at the initial state: no step has run, so no step size or
+    /// solver setting is the cause.
+    #[error(
+        "at the initial state (t = {t}) constraint `{constraint}` is C = {value:.3e}, a distance |C|/‖∇C‖ of {distance:.3e} from where it holds, beyond the bound {bound:.3e} (the scene's size): no step can start from there — check the initial state ([scene] initial, --set, --at); a gradient that nearly vanishes there, as near a singular point of C, makes this distance large too",
+        t = shown(*.time)
+    )]
+    FarStart { time: f64, constraint: String, value: f64, distance: f64, bound: f64 },
     #[error(
         "step {step} (t = {t}): the {solver} step diverged at constraint `{constraint}` (C = {value:.3e}, distance {distance:.3e}, bound {bound:.3e}){remedy}",
         t = shown(*.time)

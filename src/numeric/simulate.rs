@@ -650,13 +650,11 @@ impl<'s> Simulation<'s> {
                 return Err(SimError::NonFiniteRow { step: n, time: t, constraint, value });
             }
             if d.abs() > reach.bound && (!row.inequality || d < 0.0) {
-                return Err(SimError::Drift {
-                    step: n,
-                    time: t,
-                    constraint: system.constraints[k].name.clone(),
-                    value: row_back(k, row.value),
-                    distance: length_back(d),
-                    bound: length_back(reach.bound),
+                let (constraint, value) = (system.constraints[k].name.clone(), row_back(k, row.value));
+                let (distance, bound) = (length_back(d), length_back(reach.bound));
+                return Err(match n {
+                    0 => SimError::FarStart { time: t, constraint, value, distance: distance.abs(), bound },
+                    step => SimError::Drift { step, time: t, constraint, value, distance, bound },
                 });
             }
             let (value, rate) = (row_back(k, row.value), row_back(k, row.rate));

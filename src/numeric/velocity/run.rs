@@ -138,6 +138,11 @@ fn run_inner(
         for (k, row) in rows.rows.iter().enumerate() {
             let d = distance(row);
             if d.abs() > bound && (!row.inequality || d < 0.0) {
+                let (constraint, value) = (system.constraints[k].name.clone(), row_back(k, row.value));
+                let (distance, bound) = (length_back(d), length_back(bound));
+                if n == 0 {
+                    return Err(SimError::FarStart { time: t, constraint, value, distance: distance.abs(), bound });
+                }
                 let remedy = match s.solver {
                     Solver::SoftStep if !three_d => remedy(dynamics, t0, &q0, &v0, &s),
                     Solver::Pgs => Remedy::Iterations,
@@ -147,10 +152,10 @@ fn run_inner(
                     step: n,
                     time: t,
                     solver: s.solver.name().into(),
-                    constraint: system.constraints[k].name.clone(),
-                    value: row_back(k, row.value),
-                    distance: length_back(d),
-                    bound: length_back(bound),
+                    constraint,
+                    value,
+                    distance,
+                    bound,
                     remedy,
                 });
             }
