@@ -12,9 +12,9 @@
 use super::problem::{ForceError, Problem, locate, shown, subnormal_hint};
 use super::raw::RawScene;
 use super::state::value;
-use super::system::{BuildError, System};
+use super::system::{Body, BuildError, Rigid, System};
 use crate::expr::eval::{Env, EvalError, Value, eval, eval_one};
-use crate::expr::graph::NameMap;
+use crate::expr::graph::{FastSet, NameMap};
 use crate::expr::{Id, Role, Symbol, Ty};
 
 /// A validated scene.
@@ -239,20 +239,58 @@ pub enum StateError {
 /// body order, each body's force before its torque. The commands say so: a scene without
 /// gravity is more often a slip than a choice.
 pub fn unset_forces(system: &System, scene: &Scene, overrides: &[(Symbol, Value)]) -> Vec<Symbol> {
-    let given = |s: Symbol| scene.initial.iter().chain(overrides).any(|&(g, _)| g == s);
+    // Sets, not a scan of the scene per body: a grid has thousands of each.
+    let given: FastSet<Symbol> = scene.initial.iter().chain(overrides).map(|&(s, _)| s).collect();
+    let forced: FastSet<usize> = scene.forces.iter().map(|&(b, _)| b).collect();
+    let turned: FastSet<usize> = scene.torques.iter().map(|&(b, _)| b).collect();
     let mut unset = Vec::new();
     for (i, body) in system.bodies.iter().enumerate() {
-        if !given(body.force) && !scene.forces.iter().any(|&(b, _)| b == i) {
+        if !given.contains(&body.force) && !forced.contains(&i) {
             unset.push(body.force);
         }
         if let Some(rigid) = &body.rigid
-            && !given(rigid.torque)
-            && !scene.torques.iter().any(|&(b, _)| b == i)
+            && !given.contains(&rigid.torque)
+            && !turned.contains(&i)
         {
             unset.push(rigid.torque);
         }
     }
     unset
+}
+
+/// Per body, the value at `env` of its expression among `expressions` (`(body, expression)`,
+/// the first one a body has) where the body's `symbol` (its force, its torque; `None`: the
+/// body has none) has no value in `env` yet; all in one evaluation. The error names the
+/// first body whose own expression fails.
+fn per_body(
+    system: &System,
+    env: &Env,
+    expressions: &[(usize, Id)],
+    symbol: impl Fn(&Body) -> Option<Symbol>,
+) -> Result<Vec<Option<Value>>, (String, EvalError)> {
+    let mut expression: Vec<Option<Id>> = vec![None; system.bodies.len()];
+    for &(i, id) in expressions {
+        if let Some(slot) = expression.get_mut(i) {
+            slot.get_or_insert(id);
+        }
+    }
+    let wanted: Vec<(usize, Id)> = (system.bodies.iter().enumerate())
+        .filter(|(_, b)| symbol(b).is_some_and(|s| env.get(s).is_none()))
+        .filter_map(|(i, _)| expression[i].map(|id| (i, id)))
+        .collect();
+    let roots: Vec<Id> = wanted.iter().map(|&(_, id)| id).collect();
+    let values = eval(&system.graph, &roots, env).map_err(|error| {
+        let body = wanted
+            .iter()
+            .find(|&&(_, id)| eval_one(&system.graph, id, env).is_err())
+            .map_or_else(String::new, |&(i, _)| system.bodies[i].name.clone());
+        (body, error)
+    })?;
+    let mut computed: Vec<Option<Value>> = vec![None; system.bodies.len()];
+    for (&(i, _), v) in wanted.iter().zip(values) {
+        computed[i] = Some(v);
+    }
+    Ok(computed)
 }
 
 /// Numbers for every symbol of `system`: parameter values (`Loaded::values`), then the
@@ -287,21 +325,25 @@ pub fn environment(
             if env.get(rigid.angular_velocity).is_none() {
                 env.set(rigid.angular_velocity, if three { Value::Vector([0.0; 3]) } else { Value::Scalar(0.0) });
             }
-            let inertia = eval_one(&system.graph, rigid.inertia, &env)
-                .map_err(|EvalError::Missing(name)| StateError::Missing(name))?;
-            // 2D: one moment; 3D: the three principal moments, each positive and finite.
-            let moments = match inertia {
-                Value::Scalar(x) if !three => vec![x],
-                Value::Vector(v) if three => v.to_vec(),
-                _ => vec![f64::NAN],
-            };
-            if let Some(&bad) = moments.iter().find(|x| !(x.is_normal() && **x > 0.0)) {
-                return Err(StateError::Inertia { name: body.name.clone(), value: bad });
-            }
         }
     }
-    // Masses and forces are evaluated in one pass each (an evaluation walks the graph once,
-    // so one per body would cost bodies × graph size for a large scene).
+    // Inertias, masses, forces and torques are evaluated in one pass each (an evaluation
+    // walks the graph once, so one per body would cost bodies × graph size for a large scene).
+    let rigid: Vec<(&Body, &Rigid)> = system.bodies.iter().filter_map(|b| Some((b, b.rigid.as_ref()?))).collect();
+    let inertias: Vec<Id> = rigid.iter().map(|(_, r)| r.inertia).collect();
+    let inertias =
+        eval(&system.graph, &inertias, &env).map_err(|EvalError::Missing(name)| StateError::Missing(name))?;
+    for ((body, rigid), inertia) in rigid.iter().zip(inertias) {
+        // 2D: one moment; 3D: the three principal moments, each positive and finite.
+        let moments = match inertia {
+            Value::Scalar(x) if rigid.nodes.axes.is_none() => vec![x],
+            Value::Vector(v) if rigid.nodes.axes.is_some() => v.to_vec(),
+            _ => vec![f64::NAN],
+        };
+        if let Some(&bad) = moments.iter().find(|x| !(x.is_normal() && **x > 0.0)) {
+            return Err(StateError::Inertia { name: body.name.clone(), value: bad });
+        }
+    }
     let masses: Vec<Id> = system.bodies.iter().map(|b| b.mass).collect();
     let masses = eval(&system.graph, &masses, &env).map_err(|EvalError::Missing(name)| StateError::Missing(name))?;
     for (body, m) in system.bodies.iter().zip(masses) {
@@ -311,29 +353,8 @@ pub fn environment(
             return Err(StateError::Mass { name: body.name.clone(), value: m });
         }
     }
-    let mut expression: Vec<Option<Id>> = vec![None; system.bodies.len()];
-    for &(i, id) in &scene.forces {
-        if let Some(slot) = expression.get_mut(i) {
-            slot.get_or_insert(id);
-        }
-    }
-    let wanted: Vec<(usize, Id)> = (0..system.bodies.len())
-        .filter(|&i| env.get(system.bodies[i].force).is_none())
-        .filter_map(|i| expression[i].map(|id| (i, id)))
-        .collect();
-    let roots: Vec<Id> = wanted.iter().map(|&(_, id)| id).collect();
-    let values = eval(&system.graph, &roots, &env).map_err(|error| {
-        // Name the body: the first whose own expression fails.
-        let body = wanted
-            .iter()
-            .find(|&&(_, id)| eval_one(&system.graph, id, &env).is_err())
-            .map_or_else(String::new, |&(i, _)| system.bodies[i].name.clone());
-        StateError::Force { body, error }
-    })?;
-    let mut computed: Vec<Option<Value>> = vec![None; system.bodies.len()];
-    for (&(i, _), v) in wanted.iter().zip(values) {
-        computed[i] = Some(v);
-    }
+    let computed = per_body(system, &env, &scene.forces, |b| Some(b.force))
+        .map_err(|(body, error)| StateError::Force { body, error })?;
     let mut forces = Vec::new();
     for (i, body) in system.bodies.iter().enumerate() {
         if env.get(body.force).is_some() {
@@ -350,15 +371,16 @@ pub fn environment(
         env.set(s, v);
     }
     // Torques: the state's value, else the scene's expression at this state, else 0.
-    for (i, body) in system.bodies.iter().enumerate() {
+    let computed = per_body(system, &env, &scene.torques, |b| Some(b.rigid.as_ref()?.torque))
+        .map_err(|(body, error)| StateError::Torque { body, error })?;
+    for (body, computed) in system.bodies.iter().zip(computed) {
         let Some(rigid) = &body.rigid else { continue };
         if env.get(rigid.torque).is_some() {
             continue;
         }
         let three = rigid.nodes.axes.is_some();
-        let value = match scene.torques.iter().find(|(b, _)| *b == i) {
-            Some(&(_, id)) => eval_one(&system.graph, id, &env)
-                .map_err(|error| StateError::Torque { body: body.name.clone(), error })?,
+        let value = match computed {
+            Some(value) => value,
             None if three => Value::Vector([0.0; 3]),
             None => Value::Scalar(0.0),
         };
