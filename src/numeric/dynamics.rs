@@ -693,6 +693,13 @@ impl<'s> Dynamics<'s> {
         correction_single_multiplier(rows, bias, &mut self.single)
     }
 
+    /// The answer of the last correction ([`correct`](Dynamics::correct),
+    /// [`correct_known`](Dynamics::correct_known); after [`correct_step`](Dynamics::correct_step)
+    /// its accelerations alone).
+    pub fn correction(&self) -> &Solution {
+        &self.correction
+    }
+
     /// [`correct`](Dynamics::correct) with `known` as in [`correct_step`](Dynamics::correct_step):
     /// the step and the multipliers μ (`lambda`) of SHAKE's iterations along the start's J,
     /// when a run keeps them to predict the next step's.

@@ -300,43 +300,45 @@ const ORDER: usize = 3;
 /// changes breaks the smoothness; a rotation vector would need folding).
 #[derive(Clone, Debug, Default)]
 pub struct ShakeHistory {
-    /// The smooth part of μ per row of the last converged steps, the latest first.
-    past: [Vec<f64>; ORDER],
-    /// How many of `past` hold a step's, in a row of converged steps.
+    /// Per row, what the last steps kept.
+    rows: Vec<RowHistory>,
+    /// How many steps `rows` holds, in a row of converged steps that corrected their
+    /// positions (at most [`ORDER`]; 0: nothing known, and no prediction).
     known: usize,
-    /// C/(Jₙ M⁻¹ Jₙᵀ) per row at the last step's final positions: what this step's μ takes
-    /// back (with the sign of −μ); empty when not known.
-    left: Vec<f64>,
     /// This step's μ so far (the prediction's, then each iteration's added).
     total: Vec<f64>,
     /// The prediction's step M⁻¹Jₙᵀμ on the slots (scratch).
     step: Vec<[f64; 3]>,
 }
 
+/// One row's part of a [`ShakeHistory`].
+#[derive(Clone, Copy, Debug, Default)]
+struct RowHistory {
+    /// The smooth part of μ of the last steps, the latest first.
+    past: [f64; ORDER],
+    /// C/(Jₙ M⁻¹ Jₙᵀ) at the last step's final positions: what this step's μ takes back
+    /// (with the sign of −μ).
+    left: f64,
+}
+
 impl ShakeHistory {
     /// This step's prediction from the start's rows (J and 1/m) and its step on the slots,
-    /// returned when there is one (after a converged step) and every number of it is finite.
+    /// returned when there is one (after a converged step that corrected its positions) and
+    /// every number of it is finite.
     fn predict(&mut self, start: &Rows) -> Option<&Vectors> {
         let rows = start.rows.len();
         self.total.clear();
-        self.total.resize(rows, 0.0);
-        if self.known == 0 || self.past[0].len() != rows || self.left.len() != rows {
+        if self.known == 0 || self.rows.len() != rows {
+            self.total.resize(rows, 0.0);
             return None;
         }
         // The polynomial through the last `known` steps' smooth part, at this step.
-        let weights: &[f64] = match self.known {
-            1 => &[1.0],
-            2 => &[2.0, -1.0],
-            _ => &[3.0, -3.0, 1.0],
+        let [a, b, c] = match self.known {
+            1 => [1.0, 0.0, 0.0],
+            2 => [2.0, -1.0, 0.0],
+            _ => [3.0, -3.0, 1.0],
         };
-        for (past, &weight) in self.past.iter().zip(weights) {
-            for (total, mu) in self.total.iter_mut().zip(past) {
-                *total += weight * mu;
-            }
-        }
-        for (total, left) in self.total.iter_mut().zip(&self.left) {
-            *total -= left;
-        }
+        self.total.extend(self.rows.iter().map(|h| a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left));
         self.step.clear();
         self.step.resize(start.inverse_mass.len(), [0.0; 3]);
         for (row, &mu) in start.rows.iter().zip(&self.total) {
@@ -361,27 +363,32 @@ impl ShakeHistory {
         }
     }
 
-    /// The step's end: its smooth part kept when SHAKE converged, with the residual C left
-    /// at the final positions (`end`) over the diagonal of Jₙ M⁻¹ Jₙᵀ (`start`'s J and 1/m);
-    /// else the history forgotten.
-    fn finish(&mut self, converged: bool, end: &[Row], start: &Rows) {
-        if !converged || end.len() != self.total.len() {
+    /// The step's end (`kept`: SHAKE converged and corrected the positions, by a prediction
+    /// or an iteration): its smooth part kept, with the residual C left at the final
+    /// positions (`end`) over the diagonal of Jₙ M⁻¹ Jₙᵀ (`start`'s J and 1/m); else the
+    /// history forgotten (a step that needed no correction has no μ to go on from, and a
+    /// scene at rest none to predict).
+    fn finish(&mut self, kept: bool, end: &[Row], start: &Rows, exact: Option<&[f64]>) {
+        let rows = end.len();
+        if !kept || self.total.len() != rows {
             self.known = 0;
-            self.left.clear();
             return;
         }
-        let had_left = self.left.len() == end.len();
-        self.left.resize(end.len(), 0.0);
-        for (((mu, left), row), new) in self.total.iter_mut().zip(&mut self.left).zip(&start.rows).zip(end) {
-            let diagonal: f64 = row.jacobian.iter().map(|(b, j)| dot(j, j) * start.inverse_mass[*b]).sum();
-            let delta = new.value / diagonal;
-            let delta = if delta.is_finite() { delta } else { 0.0 };
-            // μ = smooth − (last step's left); the μ that meets C = 0 exactly is μ − δ.
-            *mu += if had_left { *left } else { 0.0 } - delta;
-            *left = delta;
+        let had_left = self.known > 0 && self.rows.len() == rows;
+        if !had_left {
+            self.rows.clear();
+            self.rows.resize(rows, RowHistory::default());
         }
-        self.past.rotate_right(1);
-        std::mem::swap(&mut self.past[0], &mut self.total);
+        for (k, (((h, mu), row), new)) in self.rows.iter_mut().zip(&self.total).zip(&start.rows).zip(end).enumerate() {
+            let delta = match exact {
+                Some(lambda) => -lambda[k],
+                None => new.value / row.jacobian.iter().map(|(b, j)| dot(j, j) * start.inverse_mass[*b]).sum::<f64>(),
+            };
+            let delta = if delta.is_finite() { delta } else { 0.0 };
+            // μ = smooth − (the last step's left); the μ that would meet C = 0 is μ − δ.
+            h.past = [mu + h.left - delta, h.past[0], h.past[1]];
+            h.left = delta;
+        }
         self.known = (self.known + 1).min(ORDER);
     }
 }
@@ -427,8 +434,10 @@ pub fn shake_positions(
         end.take_slots(start);
     }
     // The correction predicted from the last steps', along the start's J.
+    let mut predicted = false;
     if let Some(step) = history.as_deref_mut().and_then(|h| h.predict(start)) {
         shake_update(q, v_half, step, dt);
+        predicted = true;
     }
     let bound = tolerance * length;
     let mut iterations = 0;
@@ -447,7 +456,20 @@ pub fn shake_positions(
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
             if let Some(history) = history {
-                history.finish(residual <= bound, dynamics.position_rows(), start);
+                let kept = residual <= bound && (predicted || iterations > 0);
+                // The residual a prediction left alone, taken back exactly where rows couple
+                // (a chain's Jₙ M⁻¹ Jₙᵀ is far from its diagonal): a solve with the start's
+                // factor. After an iteration it is rounding, and the diagonal serves.
+                let exact = kept && iterations == 0 && start.rows.len() > 1;
+                if exact {
+                    for (old, new) in start.rows.iter_mut().zip(dynamics.position_rows()) {
+                        enforce(old, new.value);
+                    }
+                    start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+                    dynamics.correct_known(start, made);
+                }
+                let exact = exact.then(|| dynamics.correction().lambda.as_slice());
+                history.finish(kept, dynamics.position_rows(), start, exact);
             }
             // C and J are those just evaluated: Ċ, c and the bodies' numbers are added.
             if !(steady && dynamics.rows_after_positions_steady_into(v_half, end)) {
