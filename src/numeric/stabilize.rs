@@ -289,12 +289,14 @@ const ORDER: usize = 3;
 /// step's. The correction μ (Δq = M⁻¹Jₙᵀμ beyond the drift along the start's acceleration)
 /// is O(dt³) and smooth in time but for one part: the residual C that the last step left at
 /// its positions (within the tolerance, as rounding falls), which this step's correction
-/// takes back, about −C/(Jₙ M⁻¹ Jₙᵀ). So the history keeps the smooth part, μ less what
-/// the next step takes back of its own residual plus what it took back of the last one's,
-/// extrapolates it, and adds what this step must take back: extrapolated with the residuals
-/// in, they would be amplified from step to step up to the tolerance. The predicted
-/// positions then usually meet the tolerance at once (a chain's two iterations, a pendulum's
-/// one, become none). The prediction is along the start's J, as every SHAKE iteration is:
+/// takes back, −(Jₙ M⁻¹ Jₙᵀ)⁻¹C (by the diagonal for one row or after an iteration, where it
+/// is rounding; by a solve with the start's factor where rows couple). So the history keeps
+/// the smooth part, μ less what the next step takes back of its own residual plus what it
+/// took back of the last one's, extrapolates it, and adds what this step must take back:
+/// extrapolated with the residuals in, they would be amplified from step to step up to the
+/// tolerance. The predicted positions then usually meet the tolerance at once (a
+/// pendulum's one iteration becomes none; a 10-link chain's two, none on most steps). The
+/// prediction is along the start's J, as every SHAKE iteration is:
 /// the iteration that follows converges to the same solution, to its tolerance. Only for
 /// scenes without inequalities or 3D rigid bodies (a contact's impulse or a held set that
 /// changes breaks the smoothness; a rotation vector would need folding).
@@ -409,7 +411,9 @@ impl ShakeHistory {
 /// reading t) without the motion tape, from the start's slots and Ċ = J·v½
 /// (`Dynamics::rows_after_positions_steady_into`), the same quantities. `made`: the mark of the factor the start's solve went through
 /// (`Dynamics::made`, `solve::FactorId`), so that the iterations' solves do not compare the
-/// start's J with it again. Returns the iterations taken.
+/// start's J with it again. `history`: the run's [`ShakeHistory`], when its prediction is
+/// to start the iteration (`None`: from the drifted positions, as for a scene with contacts).
+/// Returns the iterations taken.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
