@@ -119,10 +119,13 @@ fn is_the_unit_pendulum_scaled(path: &str, l: f64) {
     let unit = run("constraints/pendulum.toml", Some(s.steps)).expect("runs");
     assert_eq!(unit.unit_exponent, 0);
     // Drift: C/κ = (r·r − l²)/2 has degree 2, so |C|/l² is the relative drift; the bound of
-    // the unit pendulum (1e-9), and the unit run's own figure to 1 %.
+    // the unit pendulum (1e-9), and the unit run's own figure to 1 % or to a few roundings
+    // of l² (SHAKE's predicted positions leave |C|/l² at some 50 of them, where the two
+    // runs' roundings, l not being a power of two, differ by one or two).
     let relative = s.max_abs_c / l / l;
     assert!(relative <= 1e-9, "|C|/l² = {relative:e}");
-    assert!((relative - unit.max_abs_c).abs() <= 1e-2 * unit.max_abs_c, "{relative:e} vs {:e}", unit.max_abs_c);
+    let near = 1e-2 * unit.max_abs_c + 4.0 * f64::EPSILON;
+    assert!((relative - unit.max_abs_c).abs() <= near, "{relative:e} vs {:e}", unit.max_abs_c);
     // Energy: the balance relative to the largest kinetic energy is unit-free.
     let (e, e_unit) = (s.energy_rel_drift.expect("reported"), unit.energy_rel_drift.expect("reported"));
     assert!(e <= 1e-5, "{e:e}");

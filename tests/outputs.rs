@@ -166,7 +166,16 @@ fn solve_json() {
 /// from the binary at the commit that added this test; a change that moves one on purpose
 /// says why in its commit.
 const GOLDEN_RUNS: [(&str, &[&str], u64, usize); 6] = [
-    ("constraints/pendulum.toml", &["--steps", "2000"], 0xff53_cbb7_f445_9320, 281_100),
+    (
+        "constraints/pendulum.toml",
+        &["--steps", "2000"],
+        // Moved when SHAKE began predicting its correction from the last steps' (2026-12-06):
+        // r, v and λ part from the old ones by at most 7e-13 of their largest values, C by
+        // 9e-14 (within the projection's tolerance; its values print longer: 281 100 →
+        // 282 634 bytes).
+        0xbcb4_0509_51eb_00cf,
+        282_634,
+    ),
     ("constraints/double_pendulum.toml", &["--integrator", "rk4", "--steps", "2000"], 0x053a_931c_f63d_e6ff, 543_871),
     (
         "constraints/chain_5.toml",

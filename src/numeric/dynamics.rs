@@ -34,7 +34,7 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::SettingsError;
-use super::single::{SingleScaling, correction_single, solve_single_with};
+use super::single::{SingleScaling, correction_single, correction_single_multiplier, solve_single_with};
 use super::solve::{Answer, Diagnostic, FactorId, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::problem::shown;
@@ -692,6 +692,26 @@ impl<'s> Dynamics<'s> {
     /// one-row solve declines, and the caller takes `correct`.
     pub fn correct_single(&mut self, rows: &Rows, bias: f64) -> Option<[f64; 3]> {
         correction_single(rows, bias, &mut self.single)
+    }
+
+    /// [`correct_single`](Dynamics::correct_single) with the correction's multiplier μ (the
+    /// step is M⁻¹Jᵀμ): SHAKE's, which a run keeps to predict the next step's.
+    pub fn correct_single_multiplier(&mut self, rows: &Rows, bias: f64) -> Option<([f64; 3], f64)> {
+        correction_single_multiplier(rows, bias, &mut self.single)
+    }
+
+    /// The answer of the last correction ([`correct`](Dynamics::correct),
+    /// [`correct_known`](Dynamics::correct_known); after [`correct_step`](Dynamics::correct_step)
+    /// its accelerations alone).
+    pub fn correction(&self) -> &Solution {
+        &self.correction
+    }
+
+    /// [`correct`](Dynamics::correct) with `known` as in [`correct_step`](Dynamics::correct_step):
+    /// the step and the multipliers μ (`lambda`) of SHAKE's iterations along the start's J,
+    /// when a run keeps them to predict the next step's.
+    pub fn correct_known(&mut self, rows: &Rows, known: Option<FactorId>) -> &mut Solution {
+        self.correct_answering(rows, Answer::Solution, known)
     }
 
     /// [`SimError::TooLarge`] once a solve has left a block unsolved.

@@ -24,7 +24,8 @@ use super::rotation::{fold, kick};
 use super::rows::Rows;
 use super::solve::{CONTACT_TOLERANCE, FactorId};
 use super::stabilize::{
-    Inequalities, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates, velocity_step,
+    Inequalities, ShakeHistory, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates,
+    velocity_step,
 };
 use super::vector::{dot, length_scale, safe_norm};
 use crate::expr::eval::{Env, Value};
@@ -404,6 +405,9 @@ pub struct Simulation<'s> {
     values: Vec<f64>,
     /// Whether some constraint is an inequality (found once, not at every step).
     has_inequalities: bool,
+    /// SHAKE's multipliers of the last steps, for its prediction (`stabilize::ShakeHistory`;
+    /// not used with inequalities or 3D rigid bodies).
+    shake: ShakeHistory,
 }
 
 impl<'s> Simulation<'s> {
@@ -442,6 +446,7 @@ impl<'s> Simulation<'s> {
             end_made: None,
             values: Vec::new(),
             has_inequalities,
+            shake: ShakeHistory::default(),
         })
     }
 
@@ -451,6 +456,7 @@ impl<'s> Simulation<'s> {
         let system = self.dynamics.system();
         let s = self.settings;
         self.carried = false;
+        self.shake = ShakeHistory::default();
         let mut summary = Summary {
             integrator: s.integrator.name().into(),
             stabilize: s.stabilize.name().into(),
@@ -730,6 +736,7 @@ impl<'s> Simulation<'s> {
                 reach.length,
                 tolerance,
                 max_iterations,
+                (!has_inequalities && !self.three_d).then_some(&mut self.shake),
             )?;
             if has_inequalities {
                 let projected = self.project(t1, reach.length, tolerance, max_iterations)?;

@@ -150,6 +150,12 @@ fn finite3(x: &[f64; 3]) -> bool {
 /// solve must answer; `rows` is only read and no `Solution` written, so a step of a run
 /// that has one row on one body spends nothing on them.
 pub fn correction_single(rows: &Rows, bias: f64, scaling: &mut SingleScaling) -> Option<[f64; 3]> {
+    correction_single_multiplier(rows, bias, scaling).map(|(step, _)| step)
+}
+
+/// [`correction_single`] with its multiplier μ (the step is M⁻¹Jᵀμ, to rounding): what
+/// SHAKE keeps to predict the next step's correction (`stabilize::ShakeHistory`).
+pub fn correction_single_multiplier(rows: &Rows, bias: f64, scaling: &mut SingleScaling) -> Option<([f64; 3], f64)> {
     let [row] = rows.rows.as_slice() else { return None };
     let [(0, j)] = row.jacobian.as_slice() else { return None };
     let ([w], [velocity], [_]) = (rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice()) else {
@@ -162,9 +168,9 @@ pub fn correction_single(rows: &Rows, bias: f64, scaling: &mut SingleScaling) ->
     }
     let settings = Settings::default();
     let scaled = scaling.of(&row.jacobian, j, w)?;
-    let (mu, _) = scaled.multiplier(&[0.0; 3], w, bias, settings.rank_tolerance)?;
+    let (mu, lambda) = scaled.multiplier(&[0.0; 3], w, bias, settings.rank_tolerance)?;
     // Σ λ J = λ̃ J̃, added to a zero force; a = (0 + Σ λ J) w.
-    Some(scaled.jt.map(|x| (0.0 + (0.0 + mu * x)) * w))
+    Some((scaled.jt.map(|x| (0.0 + (0.0 + mu * x)) * w), lambda))
 }
 
 /// [`solve_single_with`] without a kept scaling: every call scales its row afresh.

@@ -41,7 +41,7 @@ use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
 use super::solve::{FactorId, positive_finite, solve};
-use super::vector::row_norm;
+use super::vector::{dot, row_norm};
 
 /// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
 /// a few ulps of positions of that size, so a projected run keeps |C| at round-off.
@@ -281,6 +281,120 @@ pub fn project_positions(
     }
 }
 
+/// The steps of [`ShakeHistory`]: μ is predicted by the quadratic through the last three
+/// steps' (its error is a third difference of μ, O(dt³) relatively).
+const ORDER: usize = 3;
+
+/// SHAKE's multipliers of a run's last steps, from which [`shake_positions`] predicts the
+/// step's. The correction μ (Δq = M⁻¹Jₙᵀμ beyond the drift along the start's acceleration)
+/// is O(dt³) and smooth in time but for one part: the residual C that the last step left at
+/// its positions (within the tolerance, as rounding falls), which this step's correction
+/// takes back, −(Jₙ M⁻¹ Jₙᵀ)⁻¹C (by the diagonal for one row or after an iteration, where it
+/// is rounding; by a solve with the start's factor where rows couple). So the history keeps
+/// the smooth part, μ less what the next step takes back of its own residual plus what it
+/// took back of the last one's, extrapolates it, and adds what this step must take back:
+/// extrapolated with the residuals in, they would be amplified from step to step up to the
+/// tolerance. The predicted positions then usually meet the tolerance at once (a
+/// pendulum's one iteration becomes none; a 10-link chain's two, none on most steps). The
+/// prediction is along the start's J, as every SHAKE iteration is:
+/// the iteration that follows converges to the same solution, to its tolerance. Only for
+/// scenes without inequalities or 3D rigid bodies (a contact's impulse or a held set that
+/// changes breaks the smoothness; a rotation vector would need folding).
+#[derive(Clone, Debug, Default)]
+pub struct ShakeHistory {
+    /// Per row, what the last steps kept.
+    rows: Vec<RowHistory>,
+    /// How many steps `rows` holds, in a row of converged steps that corrected their
+    /// positions (at most [`ORDER`]; 0: nothing known, and no prediction).
+    known: usize,
+    /// This step's μ so far (the prediction's, then each iteration's added).
+    total: Vec<f64>,
+    /// The prediction's step M⁻¹Jₙᵀμ on the slots (scratch).
+    step: Vec<[f64; 3]>,
+}
+
+/// One row's part of a [`ShakeHistory`].
+#[derive(Clone, Copy, Debug, Default)]
+struct RowHistory {
+    /// The smooth part of μ of the last steps, the latest first.
+    past: [f64; ORDER],
+    /// C/(Jₙ M⁻¹ Jₙᵀ) at the last step's final positions: what this step's μ takes back
+    /// (with the sign of −μ).
+    left: f64,
+}
+
+impl ShakeHistory {
+    /// This step's prediction from the start's rows (J and 1/m) and its step on the slots,
+    /// returned when there is one (after a converged step that corrected its positions) and
+    /// every number of it is finite.
+    fn predict(&mut self, start: &Rows) -> Option<&Vectors> {
+        let rows = start.rows.len();
+        self.total.clear();
+        if self.known == 0 || self.rows.len() != rows {
+            self.total.resize(rows, 0.0);
+            return None;
+        }
+        // The polynomial through the last `known` steps' smooth part, at this step.
+        let [a, b, c] = match self.known {
+            1 => [1.0, 0.0, 0.0],
+            2 => [2.0, -1.0, 0.0],
+            _ => [3.0, -3.0, 1.0],
+        };
+        self.total.extend(self.rows.iter().map(|h| a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left));
+        self.step.clear();
+        self.step.resize(start.inverse_mass.len(), [0.0; 3]);
+        for (row, &mu) in start.rows.iter().zip(&self.total) {
+            for &(b, j) in &row.jacobian {
+                let (x, w) = (&mut self.step[b], start.inverse_mass[b]);
+                for d in 0..3 {
+                    x[d] += j[d] * mu * w;
+                }
+            }
+        }
+        if !self.step.iter().all(|x| x.iter().all(|c| c.is_finite())) {
+            self.total.iter_mut().for_each(|mu| *mu = 0.0);
+            return None;
+        }
+        Some(&self.step)
+    }
+
+    /// Adds an iteration's μ to the step's.
+    fn add(&mut self, mu: &[f64]) {
+        for (total, mu) in self.total.iter_mut().zip(mu) {
+            *total += mu;
+        }
+    }
+
+    /// The step's end (`kept`: SHAKE converged and corrected the positions, by a prediction
+    /// or an iteration): its smooth part kept, with the residual C left at the final
+    /// positions (`end`) over the diagonal of Jₙ M⁻¹ Jₙᵀ (`start`'s J and 1/m); else the
+    /// history forgotten (a step that needed no correction has no μ to go on from, and a
+    /// scene at rest none to predict).
+    fn finish(&mut self, kept: bool, end: &[Row], start: &Rows, exact: Option<&[f64]>) {
+        let rows = end.len();
+        if !kept || self.total.len() != rows {
+            self.known = 0;
+            return;
+        }
+        let had_left = self.known > 0 && self.rows.len() == rows;
+        if !had_left {
+            self.rows.clear();
+            self.rows.resize(rows, RowHistory::default());
+        }
+        for (k, (((h, mu), row), new)) in self.rows.iter_mut().zip(&self.total).zip(&start.rows).zip(end).enumerate() {
+            let delta = match exact {
+                Some(lambda) => -lambda[k],
+                None => new.value / row.jacobian.iter().map(|(b, j)| dot(j, j) * start.inverse_mass[*b]).sum::<f64>(),
+            };
+            let delta = if delta.is_finite() { delta } else { 0.0 };
+            // μ = smooth − (the last step's left); the μ that would meet C = 0 is μ − δ.
+            h.past = [mu + h.left - delta, h.past[0], h.past[1]];
+            h.left = delta;
+        }
+        self.known = (self.known + 1).min(ORDER);
+    }
+}
+
 /// SHAKE (Ryckaert, Ciccotti, Berendsen 1977; with the velocity step below it is RATTLE,
 /// Andersen 1983): corrects Verlet's drift q⁺ = q + dt v½ along the gradients at the
 /// *start* of the step, Δq = M⁻¹Jₙᵀμ with (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺) (a quasi-Newton
@@ -297,7 +411,9 @@ pub fn project_positions(
 /// reading t) without the motion tape, from the start's slots and Ċ = J·v½
 /// (`Dynamics::rows_after_positions_steady_into`), the same quantities. `made`: the mark of the factor the start's solve went through
 /// (`Dynamics::made`, `solve::FactorId`), so that the iterations' solves do not compare the
-/// start's J with it again. Returns the iterations taken.
+/// start's J with it again. `history`: the run's [`ShakeHistory`], when its prediction is
+/// to start the iteration (`None`: from the drifted positions, as for a scene with contacts).
+/// Returns the iterations taken.
 #[allow(clippy::too_many_arguments)]
 pub fn shake_positions(
     dynamics: &mut Dynamics<'_>,
@@ -311,6 +427,7 @@ pub fn shake_positions(
     length: f64,
     tolerance: f64,
     max_iterations: usize,
+    mut history: Option<&mut ShakeHistory>,
 ) -> Result<usize, SimError> {
     let mut made = made;
     let system = dynamics.system();
@@ -319,6 +436,12 @@ pub fn shake_positions(
     let steady = dynamics.steady;
     if steady {
         end.take_slots(start);
+    }
+    // The correction predicted from the last steps', along the start's J.
+    let mut predicted = false;
+    if let Some(step) = history.as_deref_mut().and_then(|h| h.predict(start)) {
+        shake_update(q, v_half, step, dt);
+        predicted = true;
     }
     let bound = tolerance * length;
     let mut iterations = 0;
@@ -336,6 +459,22 @@ pub fn shake_positions(
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
+            if let Some(history) = history {
+                let kept = residual <= bound && (predicted || iterations > 0);
+                // The residual a prediction left alone, taken back exactly where rows couple
+                // (a chain's Jₙ M⁻¹ Jₙᵀ is far from its diagonal): a solve with the start's
+                // factor. After an iteration it is rounding, and the diagonal serves.
+                let exact = kept && iterations == 0 && start.rows.len() > 1;
+                if exact {
+                    for (old, new) in start.rows.iter_mut().zip(dynamics.position_rows()) {
+                        enforce(old, new.value);
+                    }
+                    start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+                    dynamics.correct_known(start, made);
+                }
+                let exact = exact.then(|| dynamics.correction().lambda.as_slice());
+                history.finish(kept, dynamics.position_rows(), start, exact);
+            }
             // C and J are those just evaluated: Ċ, c and the bodies' numbers are added.
             if !(steady && dynamics.rows_after_positions_steady_into(v_half, end)) {
                 dynamics.rows_after_positions_into(t, q, v_half, end)?;
@@ -349,7 +488,10 @@ pub fn shake_positions(
             ([new], [constraint]) if !constraint.inequality || dynamics.is_held(0) => Some(new.value),
             _ => None,
         };
-        if let Some(dq) = single.and_then(|c| dynamics.correct_single(start, c)) {
+        if let Some((dq, mu)) = single.and_then(|c| dynamics.correct_single_multiplier(start, c)) {
+            if let Some(history) = history.as_deref_mut() {
+                history.add(&[mu]);
+            }
             shake_update(q, v_half, std::slice::from_ref(&dq), dt);
             iterations += 1;
             continue;
@@ -372,7 +514,14 @@ pub fn shake_positions(
             zeroed = true;
         }
         // The start's J is kept (only C, Ċ, c and the forces are written above).
-        let step = dynamics.correct_step(start, made);
+        let step = match history.as_deref_mut() {
+            Some(history) => {
+                let solution = dynamics.correct_known(start, made);
+                history.add(&solution.lambda);
+                &mut solution.acceleration
+            }
+            None => dynamics.correct_step(start, made),
+        };
         fold(start, step);
         shake_update(q, v_half, step, dt);
         made = dynamics.made();
