@@ -579,10 +579,7 @@ impl<'s> Simulation<'s> {
             if let (Stabilize::Projection { tolerance, .. }, true) = (s.stabilize, n > 0) {
                 let bound = tolerance * reach.length;
                 if left > bound {
-                    let (distance, bound) = (length_back(left), length_back(bound));
-                    let u = summary.unconverged.get_or_insert(Unconverged { steps: 0, first: n, distance, bound });
-                    u.steps += 1;
-                    u.distance = u.distance.max(distance);
+                    Unconverged::count(&mut summary.unconverged, n, length_back(left), length_back(bound));
                 }
             }
             summary.max_abs_c = summary.max_abs_c.max(c_max);
