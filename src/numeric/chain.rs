@@ -34,7 +34,7 @@
 //!
 //! Not here: evaluating rows (`numeric::rows`), inequality rows, other bandwidths.
 
-use super::banded::{backward_step, forward_step, tridiagonal_factor_row, tridiagonal_mul_row};
+use super::banded::{backward_step, forward_step, tridiagonal_factor_row};
 use super::rows::Rows;
 use super::solve::{
     Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, out_of_range, scale_row,
@@ -121,6 +121,15 @@ fn all_zero(xs: &[f64]) -> bool {
 fn not_finite_bit(x: f64) -> u64 {
     const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
     (x.to_bits() & EXPONENT) + (1 << 52)
+}
+
+/// Row j's residual −b̃ⱼ − (Ã y)ⱼ from its numbers, as `banded::tridiagonal_mul_row` sums
+/// (Ã y)ⱼ: `below` is +0 + Ãⱼ,ⱼ₋₁ yⱼ₋₁ (+0 at row 0), then Ãⱼⱼ yⱼ, then `above`, Ãⱼ₊₁,ⱼ yⱼ₊₁.
+/// At the last row, which has no row above, `above` is +0: the sum before it is +0 + (…),
+/// never −0, so adding +0 leaves its bits (a NaN stays a NaN) as leaving it out would.
+#[inline(always)]
+fn residual(rhs: f64, below: f64, diagonal: f64, y: f64, above: f64) -> f64 {
+    rhs - ((0.0 + (below + diagonal * y)) + above)
 }
 
 thread_local! {
@@ -502,30 +511,41 @@ impl Chain {
     /// as `solve::BandFactor::solve_into` takes it, in three passes: the backward
     /// substitution with the residual of each row once y is known on and around it (rows
     /// below it are final by then), the residual's forward substitution, and its backward
-    /// substitution adding each correction to y. The same operations as one pass each.
+    /// substitution adding each correction to y. The same operations as one pass each
+    /// (`banded`'s `backward_step`, `forward_step` and `tridiagonal_mul_row`), each pass over
+    /// slices of k rows (no bounds check left): the residual of row i + 1 is computed once yᵢ
+    /// is ([`residual`]), with yᵢ₊₁ and Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers.
     fn substitute(&mut self) {
         let Chain { a, l, inverse, rhs, y, r, .. } = self;
         let k = y.len();
-        let (l, inverse, rhs, r) = (&l[..2 * k], &inverse[..k], &rhs[..k], &mut r[..k]);
+        let (a, l) = (a[..2 * k].as_chunks::<2>().0, l[..2 * k].as_chunks::<2>().0);
+        let (inverse, rhs, r, y) = (&inverse[..k], &rhs[..k], &mut r[..k], &mut y[..k]);
+        // yᵢ₊₁ and Ãᵢ₊₁,ᵢ yᵢ₊₁ (row i's `above`; +0 at the last row) while row i is substituted.
+        let (mut y_up, mut above) = (0.0, 0.0);
         let mut next = 0.0;
         for i in (0..k).rev() {
-            (y[i], next) = backward_step(l[2 * i], inverse[i], i > 0, y[i], next);
+            let v;
+            (v, next) = backward_step(l[i][0], inverse[i], i > 0, y[i], next);
+            y[i] = v;
             if i + 1 < k {
-                r[i + 1] = rhs[i + 1] - tridiagonal_mul_row(a, y, i + 1);
+                let j = i + 1;
+                r[j] = residual(rhs[j], 0.0 + a[j][0] * v, a[j][1], y_up, above);
+                above = a[j][0] * y_up;
             }
+            y_up = v;
         }
         if k > 0 {
-            r[0] = rhs[0] - tridiagonal_mul_row(a, y, 0);
+            r[0] = residual(rhs[0], 0.0, a[0][1], y_up, above);
         }
         let mut previous = 0.0;
-        for (i, (r, (l, &inverse))) in r.iter_mut().zip(l.chunks_exact(2).zip(inverse)).enumerate() {
-            previous = forward_step(l[0], inverse, i > 0, *r, previous);
-            *r = previous;
+        for i in 0..k {
+            previous = forward_step(l[i][0], inverse[i], i > 0, r[i], previous);
+            r[i] = previous;
         }
         let mut next = 0.0;
         for i in (0..k).rev() {
             let v;
-            (v, next) = backward_step(l[2 * i], inverse[i], i > 0, r[i], next);
+            (v, next) = backward_step(l[i][0], inverse[i], i > 0, r[i], next);
             y[i] += v;
         }
     }
