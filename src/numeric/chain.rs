@@ -552,21 +552,20 @@ impl Chain {
 
     /// [`Block::columns`](super::solve) of the kept scaled rows: the velocity components
     /// with a non-zero part of J̃ and a non-zero inverse mass. A slot has one entry or two
-    /// (an entry and its partner), so the count is each entry's components less those it
-    /// shares with its partner: no pass over the slots, no scatter into a mask per slot.
+    /// (`first`, `second`), so the count is, slot by slot, the components of the union of
+    /// their masks: one mask per entry, no scatter into a mask per slot.
     fn columns(&self, rows: &Rows) -> usize {
         // How many bits of a three-bit mask are set.
         const ONES: [usize; 8] = [0, 1, 1, 2, 1, 2, 2, 3];
-        let moved = |(b, j): &(usize, [f64; 3])| {
-            let mask = usize::from(j[0] != 0.0) | (usize::from(j[1] != 0.0) << 1) | (usize::from(j[2] != 0.0) << 2);
-            if rows.inverse_mass[*b] != 0.0 { mask } else { 0 }
+        // The components of an entry's J̃ that are not ±0 (by bits, without a branch), as bits.
+        let mask = |entry: usize| {
+            let j = self.parts[entry].1.map(|x| usize::from(x.to_bits() << 1 != 0));
+            j[0] | (j[1] << 1) | (j[2] << 2)
         };
         let mut count = 0;
-        for (entry, &partner) in self.parts.iter().zip(&self.partner) {
-            let mask = moved(entry);
-            count += ONES[mask];
-            if partner != NONE {
-                count -= ONES[mask & moved(&self.parts[partner])];
+        for ((&first, &second), &w) in self.first.iter().zip(&self.second).zip(&rows.inverse_mass) {
+            if first != NONE && w != 0.0 {
+                count += ONES[mask(first) | if second != NONE { mask(second) } else { 0 }];
             }
         }
         count
