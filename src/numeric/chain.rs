@@ -28,7 +28,8 @@
 //! eigendecomposition or the regularised factor). Kept in a run's `SolveCache`, it keeps the
 //! bits of J and the masses it was made from and refactors from the first row whose J
 //! changed: the rows before keep their scaling, Ã and factor rows, which depend on nothing
-//! after them; `solve_with`'s chains keep nothing and take no bits. The pattern check
+//! after them; `solve_with`'s chains keep no factor and take no bits, only the last pattern,
+//! used again for rows on the same slots in the same order. The pattern check
 //! records each entry's partner, the entry of the row before on the same slot, which is
 //! all Ãₖ,ₖ₋₁ and the count of moved velocity components need from the pattern.
 //!
@@ -88,6 +89,10 @@ pub(crate) struct Chain {
     second: Vec<usize>,
     /// Per entry, its row.
     owner: Vec<usize>,
+    /// Whether `start`, the slots of `parts`, `partner`, `first`, `second` and `owner` hold
+    /// a whole chain's pattern (the last one taken), which a solve of rows on the same slots
+    /// in the same order uses again ([`same_pattern`](Chain::same_pattern)).
+    pattern: bool,
 }
 
 /// Whether every row is an equality with a finite c term and every velocity and force is
@@ -133,9 +138,10 @@ fn residual(rhs: f64, below: f64, diagonal: f64, y: f64, above: f64) -> f64 {
 }
 
 thread_local! {
-    /// The buffers of [`solve`]'s chains, kept between the calls on a thread: their sizes,
-    /// not their numbers (every call scales and factors afresh), so a solve of a chain the
-    /// size of the last one allocates only its answer.
+    /// The buffers of [`solve`]'s chains, kept between the calls on a thread: their sizes
+    /// and the last pattern, not their numbers (every call scales and factors afresh), so a
+    /// solve of a chain the size of the last one allocates only its answer, and one on the
+    /// same slots does not look for its pattern again.
     static BUFFERS: RefCell<Chain> = RefCell::new(Chain::default());
 }
 
@@ -236,7 +242,11 @@ impl Chain {
         let from = match from {
             Some(from) => from,
             None => {
-                if !self.take_pattern(rows, keep) {
+                // A fresh solve (`keep` false: no bits to take) of the last pattern again
+                // has nothing to find (a solve that keeps one compares the rows' slots in
+                // `unchanged_rows`).
+                let reused = !keep && self.same_pattern(rows);
+                if !reused && !self.take_pattern(rows, keep) {
                     self.valid = false;
                     return None;
                 }
@@ -333,6 +343,20 @@ impl Chain {
         Some(from)
     }
 
+    /// Whether the rows act on the slots of the kept pattern, row by row and in the same
+    /// order: then every pattern this path takes from them is that one.
+    fn same_pattern(&self, rows: &Rows) -> bool {
+        let k = rows.rows.len();
+        if !self.pattern || self.start.len() != k + 1 || self.first.len() != rows.inverse_mass.len() {
+            return false;
+        }
+        rows.rows.iter().zip(self.start.windows(2)).all(|(row, bounds)| {
+            let kept = &self.parts[bounds[0]..bounds[1]];
+            kept.len() == row.jacobian.len()
+                && row.jacobian.iter().zip(kept).fold(true, |same, ((s, _), (slot, _))| same & (s == slot))
+        })
+    }
+
     /// Takes the rows' pattern when it is a chain this path serves: each row's slots in
     /// increasing order, every slot acted on by one row or two consecutive ones, and two
     /// consecutive rows sharing a slot somewhere (the band is exactly 1 wide: a band of 0,
@@ -340,6 +364,7 @@ impl Chain {
     /// slots of the J bits and the masses' bits are taken too.
     fn take_pattern(&mut self, rows: &Rows, keep: bool) -> bool {
         let (k, slots) = (rows.rows.len(), rows.inverse_mass.len());
+        self.pattern = false;
         self.first.clear();
         self.first.resize(slots, NONE);
         self.second.clear();
@@ -404,6 +429,7 @@ impl Chain {
         for v in [&mut self.a, &mut self.l] {
             v.resize(2 * k, 0.0);
         }
+        self.pattern = true;
         true
     }
 
