@@ -638,6 +638,9 @@ impl Chain {
             let (m, j) = (self.y[k], &self.parts[entry].1);
             [f[0] + m * j[0], f[1] + m * j[1], f[2] + m * j[2]]
         };
+        // The slots with an applied force (all of them but in a malformed `Rows`) as slices
+        // of n: their accelerations are written without a bounds check.
+        let (acceleration, applied, w) = (&mut acceleration[..n], &rows.force[..n], &rows.inverse_mass[..n]);
         let pairs = self.first.iter().zip(&self.second);
         for (i, (f_out, (&first, &second))) in force.iter_mut().zip(pairs).enumerate() {
             let mut f = [0.0; 3];
@@ -650,10 +653,9 @@ impl Chain {
                 }
             }
             *f_out = f;
-            if let (Some(a), Some(applied), Some(&w)) =
-                (acceleration.get_mut(i), rows.force.get(i), rows.inverse_mass.get(i))
-            {
-                *a = [(applied[0] + f[0]) * w, (applied[1] + f[1]) * w, (applied[2] + f[2]) * w];
+            if i < n {
+                let (applied, w) = (applied[i], w[i]);
+                acceleration[i] = [(applied[0] + f[0]) * w, (applied[1] + f[1]) * w, (applied[2] + f[2]) * w];
             }
         }
         out.diagnostics = diagnostics;
