@@ -269,8 +269,7 @@ impl Chain {
             return None;
         }
         self.valid = keep;
-        self.substitute();
-        if !self.y.iter().all(|m| m.is_finite()) {
+        if !self.substitute() {
             // `solve::finite_in_place` has a diagnostic for it.
             return None;
         }
@@ -540,8 +539,9 @@ impl Chain {
     /// substitution adding each correction to y. The same operations as one pass each
     /// (`banded`'s `backward_step`, `forward_step` and `tridiagonal_mul_row`), each pass over
     /// slices of k rows (no bounds check left): the residual of row i + 1 is computed once yᵢ
-    /// is ([`residual`]), with yᵢ₊₁ and Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers.
-    fn substitute(&mut self) {
+    /// is ([`residual`]), with yᵢ₊₁ and Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers. Whether every μ is
+    /// finite (tested by bits as each is written, [`all_finite`]'s way: no pass of its own).
+    fn substitute(&mut self) -> bool {
         let Chain { a, l, inverse, rhs, y, r, .. } = self;
         let k = y.len();
         let (a, l) = (a[..2 * k].as_chunks::<2>().0, l[..2 * k].as_chunks::<2>().0);
@@ -569,11 +569,14 @@ impl Chain {
             r[i] = previous;
         }
         let mut next = 0.0;
+        let mut bad = 0;
         for i in (0..k).rev() {
             let v;
             (v, next) = backward_step(l[i][0], inverse[i], i > 0, r[i], next);
             y[i] += v;
+            bad |= not_finite_bit(y[i]);
         }
+        bad >> 63 == 0
     }
 
     /// [`Block::columns`](super::solve) of the kept scaled rows: the velocity components
