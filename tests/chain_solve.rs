@@ -263,3 +263,35 @@ fn the_cached_chain_refactors_from_the_first_changed_row_and_reuses_only_when_no
         solve(&rows, &settings, "back");
     }
 }
+
+/// `solve_with` keeps the last chain's pattern (its slots, row by row) between calls on a
+/// thread and uses it again only for rows on the same slots in the same order: chains of
+/// one pattern with new numbers, then the same count of rows on other slots (a row moved
+/// to another slot, two rows swapped, a slot added to a row) and back, each as the general
+/// solve answers it.
+#[test]
+fn a_fresh_solve_uses_the_last_pattern_only_for_rows_on_its_slots() {
+    let mut rng = Rng::new(31);
+    let auto = settings(Method::Auto);
+    let base = random_chain(&mut rng, 9, 2, false, false);
+    let other = |f: &dyn Fn(&mut Rows)| {
+        let mut rows = random_chain(&mut Rng::new(32), 9, 2, false, false);
+        f(&mut rows);
+        rows
+    };
+    let cases = [
+        ("base", base.clone(), true),
+        ("new numbers", other(&|_| {}), true),
+        ("a row on another slot", other(&|r| r.rows[6].jacobian[0].0 = 2), false),
+        ("base again", base.clone(), true),
+        ("two rows swapped", other(&|r| r.rows.swap(2, 3)), false),
+        ("new numbers again", other(&|_| {}), true),
+        ("a slot added to the first row", other(&|r| r.rows[0].jacobian.push((8, [1.0, 0.0, 0.0]))), false),
+        ("base once more", base.clone(), true),
+    ];
+    for (what, rows, served) in &cases {
+        let general = solve_general(rows, &auto, &[]);
+        assert_same(&solve_with(rows, &auto), &general, what);
+        assert_eq!(chain_serves(rows, &auto), *served, "{what}");
+    }
+}

@@ -28,13 +28,14 @@
 //! eigendecomposition or the regularised factor). Kept in a run's `SolveCache`, it keeps the
 //! bits of J and the masses it was made from and refactors from the first row whose J
 //! changed: the rows before keep their scaling, Ã and factor rows, which depend on nothing
-//! after them; `solve_with`'s chains keep nothing and take no bits. The pattern check
+//! after them; `solve_with`'s chains keep no factor and take no bits, only the last pattern,
+//! used again for rows on the same slots in the same order. The pattern check
 //! records each entry's partner, the entry of the row before on the same slot, which is
 //! all Ãₖ,ₖ₋₁ and the count of moved velocity components need from the pattern.
 //!
 //! Not here: evaluating rows (`numeric::rows`), inequality rows, other bandwidths.
 
-use super::banded::{backward_step, forward_step, tridiagonal_factor_row, tridiagonal_mul_row};
+use super::banded::{backward_step, forward_step, tridiagonal_factor_row};
 use super::rows::Rows;
 use super::solve::{
     Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, out_of_range, scale_row,
@@ -88,6 +89,10 @@ pub(crate) struct Chain {
     second: Vec<usize>,
     /// Per entry, its row.
     owner: Vec<usize>,
+    /// Whether `start`, the slots of `parts`, `partner`, `first`, `second` and `owner` hold
+    /// a whole chain's pattern (the last one taken), which a solve of rows on the same slots
+    /// in the same order uses again ([`same_pattern`](Chain::same_pattern)).
+    pattern: bool,
 }
 
 /// Whether every row is an equality with a finite c term and every velocity and force is
@@ -123,10 +128,20 @@ fn not_finite_bit(x: f64) -> u64 {
     (x.to_bits() & EXPONENT) + (1 << 52)
 }
 
+/// Row j's residual −b̃ⱼ − (Ã y)ⱼ from its numbers, as `banded::tridiagonal_mul_row` sums
+/// (Ã y)ⱼ: `below` is +0 + Ãⱼ,ⱼ₋₁ yⱼ₋₁ (+0 at row 0), then Ãⱼⱼ yⱼ, then `above`, Ãⱼ₊₁,ⱼ yⱼ₊₁.
+/// At the last row, which has no row above, `above` is +0: the sum before it is +0 + (…),
+/// never −0, so adding +0 leaves its bits (a NaN stays a NaN) as leaving it out would.
+#[inline(always)]
+fn residual(rhs: f64, below: f64, diagonal: f64, y: f64, above: f64) -> f64 {
+    rhs - ((0.0 + (below + diagonal * y)) + above)
+}
+
 thread_local! {
-    /// The buffers of [`solve`]'s chains, kept between the calls on a thread: their sizes,
-    /// not their numbers (every call scales and factors afresh), so a solve of a chain the
-    /// size of the last one allocates only its answer.
+    /// The buffers of [`solve`]'s chains, kept between the calls on a thread: their sizes
+    /// and the last pattern, not their numbers (every call scales and factors afresh), so a
+    /// solve of a chain the size of the last one allocates only its answer, and one on the
+    /// same slots does not look for its pattern again.
     static BUFFERS: RefCell<Chain> = RefCell::new(Chain::default());
 }
 
@@ -227,7 +242,11 @@ impl Chain {
         let from = match from {
             Some(from) => from,
             None => {
-                if !self.take_pattern(rows, keep) {
+                // A fresh solve (`keep` false: no bits to take) of the last pattern again
+                // has nothing to find (a solve that keeps one compares the rows' slots in
+                // `unchanged_rows`).
+                let reused = !keep && self.same_pattern(rows);
+                if !reused && !self.take_pattern(rows, keep) {
                     self.valid = false;
                     return None;
                 }
@@ -250,8 +269,7 @@ impl Chain {
             return None;
         }
         self.valid = keep;
-        self.substitute();
-        if !self.y.iter().all(|m| m.is_finite()) {
+        if !self.substitute() {
             // `solve::finite_in_place` has a diagnostic for it.
             return None;
         }
@@ -324,6 +342,20 @@ impl Chain {
         Some(from)
     }
 
+    /// Whether the rows act on the slots of the kept pattern, row by row and in the same
+    /// order: then every pattern this path takes from them is that one.
+    fn same_pattern(&self, rows: &Rows) -> bool {
+        let k = rows.rows.len();
+        if !self.pattern || self.start.len() != k + 1 || self.first.len() != rows.inverse_mass.len() {
+            return false;
+        }
+        rows.rows.iter().zip(self.start.windows(2)).all(|(row, bounds)| {
+            let kept = &self.parts[bounds[0]..bounds[1]];
+            kept.len() == row.jacobian.len()
+                && row.jacobian.iter().zip(kept).fold(true, |same, ((s, _), (slot, _))| same & (s == slot))
+        })
+    }
+
     /// Takes the rows' pattern when it is a chain this path serves: each row's slots in
     /// increasing order, every slot acted on by one row or two consecutive ones, and two
     /// consecutive rows sharing a slot somewhere (the band is exactly 1 wide: a band of 0,
@@ -331,6 +363,7 @@ impl Chain {
     /// slots of the J bits and the masses' bits are taken too.
     fn take_pattern(&mut self, rows: &Rows, keep: bool) -> bool {
         let (k, slots) = (rows.rows.len(), rows.inverse_mass.len());
+        self.pattern = false;
         self.first.clear();
         self.first.resize(slots, NONE);
         self.second.clear();
@@ -395,6 +428,7 @@ impl Chain {
         for v in [&mut self.a, &mut self.l] {
             v.resize(2 * k, 0.0);
         }
+        self.pattern = true;
         true
     }
 
@@ -502,51 +536,65 @@ impl Chain {
     /// as `solve::BandFactor::solve_into` takes it, in three passes: the backward
     /// substitution with the residual of each row once y is known on and around it (rows
     /// below it are final by then), the residual's forward substitution, and its backward
-    /// substitution adding each correction to y. The same operations as one pass each.
-    fn substitute(&mut self) {
+    /// substitution adding each correction to y. The same operations as one pass each
+    /// (`banded`'s `backward_step`, `forward_step` and `tridiagonal_mul_row`), each pass over
+    /// slices of k rows (no bounds check left): the residual of row i + 1 is computed once yᵢ
+    /// is ([`residual`]), with yᵢ₊₁ and Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers. Whether every μ is
+    /// finite (tested by bits as each is written, [`all_finite`]'s way: no pass of its own).
+    fn substitute(&mut self) -> bool {
         let Chain { a, l, inverse, rhs, y, r, .. } = self;
         let k = y.len();
-        let (l, inverse, rhs, r) = (&l[..2 * k], &inverse[..k], &rhs[..k], &mut r[..k]);
-        let mut next = 0.0;
-        for i in (0..k).rev() {
-            (y[i], next) = backward_step(l[2 * i], inverse[i], i > 0, y[i], next);
-            if i + 1 < k {
-                r[i + 1] = rhs[i + 1] - tridiagonal_mul_row(a, y, i + 1);
-            }
-        }
-        if k > 0 {
-            r[0] = rhs[0] - tridiagonal_mul_row(a, y, 0);
-        }
-        let mut previous = 0.0;
-        for (i, (r, (l, &inverse))) in r.iter_mut().zip(l.chunks_exact(2).zip(inverse)).enumerate() {
-            previous = forward_step(l[0], inverse, i > 0, *r, previous);
-            *r = previous;
-        }
+        let (a, l) = (a[..2 * k].as_chunks::<2>().0, l[..2 * k].as_chunks::<2>().0);
+        let (inverse, rhs, r, y) = (&inverse[..k], &rhs[..k], &mut r[..k], &mut y[..k]);
+        // yᵢ₊₁ and Ãᵢ₊₁,ᵢ yᵢ₊₁ (row i's `above`; +0 at the last row) while row i is substituted.
+        let (mut y_up, mut above) = (0.0, 0.0);
         let mut next = 0.0;
         for i in (0..k).rev() {
             let v;
-            (v, next) = backward_step(l[2 * i], inverse[i], i > 0, r[i], next);
-            y[i] += v;
+            (v, next) = backward_step(l[i][0], inverse[i], i > 0, y[i], next);
+            y[i] = v;
+            if i + 1 < k {
+                let j = i + 1;
+                r[j] = residual(rhs[j], 0.0 + a[j][0] * v, a[j][1], y_up, above);
+                above = a[j][0] * y_up;
+            }
+            y_up = v;
         }
+        if k > 0 {
+            r[0] = residual(rhs[0], 0.0, a[0][1], y_up, above);
+        }
+        let mut previous = 0.0;
+        for i in 0..k {
+            previous = forward_step(l[i][0], inverse[i], i > 0, r[i], previous);
+            r[i] = previous;
+        }
+        let mut next = 0.0;
+        let mut bad = 0;
+        for i in (0..k).rev() {
+            let v;
+            (v, next) = backward_step(l[i][0], inverse[i], i > 0, r[i], next);
+            y[i] += v;
+            bad |= not_finite_bit(y[i]);
+        }
+        bad >> 63 == 0
     }
 
     /// [`Block::columns`](super::solve) of the kept scaled rows: the velocity components
     /// with a non-zero part of J̃ and a non-zero inverse mass. A slot has one entry or two
-    /// (an entry and its partner), so the count is each entry's components less those it
-    /// shares with its partner: no pass over the slots, no scatter into a mask per slot.
+    /// (`first`, `second`), so the count is, slot by slot, the components of the union of
+    /// their masks: one mask per entry, no scatter into a mask per slot.
     fn columns(&self, rows: &Rows) -> usize {
         // How many bits of a three-bit mask are set.
         const ONES: [usize; 8] = [0, 1, 1, 2, 1, 2, 2, 3];
-        let moved = |(b, j): &(usize, [f64; 3])| {
-            let mask = usize::from(j[0] != 0.0) | (usize::from(j[1] != 0.0) << 1) | (usize::from(j[2] != 0.0) << 2);
-            if rows.inverse_mass[*b] != 0.0 { mask } else { 0 }
+        // The components of an entry's J̃ that are not ±0 (by bits, without a branch), as bits.
+        let mask = |entry: usize| {
+            let j = self.parts[entry].1.map(|x| usize::from(x.to_bits() << 1 != 0));
+            j[0] | (j[1] << 1) | (j[2] << 2)
         };
         let mut count = 0;
-        for (entry, &partner) in self.parts.iter().zip(&self.partner) {
-            let mask = moved(entry);
-            count += ONES[mask];
-            if partner != NONE {
-                count -= ONES[mask & moved(&self.parts[partner])];
+        for ((&first, &second), &w) in self.first.iter().zip(&self.second).zip(&rows.inverse_mass) {
+            if first != NONE && w != 0.0 {
+                count += ONES[mask(first) | if second != NONE { mask(second) } else { 0 }];
             }
         }
         count
@@ -593,6 +641,9 @@ impl Chain {
             let (m, j) = (self.y[k], &self.parts[entry].1);
             [f[0] + m * j[0], f[1] + m * j[1], f[2] + m * j[2]]
         };
+        // The slots with an applied force (all of them but in a malformed `Rows`) as slices
+        // of n: their accelerations are written without a bounds check.
+        let (acceleration, applied, w) = (&mut acceleration[..n], &rows.force[..n], &rows.inverse_mass[..n]);
         let pairs = self.first.iter().zip(&self.second);
         for (i, (f_out, (&first, &second))) in force.iter_mut().zip(pairs).enumerate() {
             let mut f = [0.0; 3];
@@ -605,10 +656,9 @@ impl Chain {
                 }
             }
             *f_out = f;
-            if let (Some(a), Some(applied), Some(&w)) =
-                (acceleration.get_mut(i), rows.force.get(i), rows.inverse_mass.get(i))
-            {
-                *a = [(applied[0] + f[0]) * w, (applied[1] + f[1]) * w, (applied[2] + f[2]) * w];
+            if i < n {
+                let (applied, w) = (applied[i], w[i]);
+                acceleration[i] = [(applied[0] + f[0]) * w, (applied[1] + f[1]) * w, (applied[2] + f[2]) * w];
             }
         }
         out.diagnostics = diagnostics;
