@@ -274,7 +274,10 @@ fn per_body(
             slot.get_or_insert(id);
         }
     }
-    let wanted: Vec<(usize, Id)> = (system.bodies.iter().enumerate())
+    let wanted: Vec<(usize, Id)> = system
+        .bodies
+        .iter()
+        .enumerate()
         .filter(|(_, b)| symbol(b).is_some_and(|s| env.get(s).is_none()))
         .filter_map(|(i, _)| expression[i].map(|id| (i, id)))
         .collect();
