@@ -19,10 +19,9 @@
 //! Not here: what the roots mean (`numeric::rows`), the tape itself (`numeric::tape`).
 
 use super::tape::{BatchScratch, LANES, Scratch, Tape};
-use crate::expr::graph::SymbolWalk;
+use crate::expr::graph::{FastMap, SymbolWalk};
 use crate::expr::shape::Shaper;
 use crate::expr::{Graph, Id, Symbol, Ty};
-use std::collections::HashMap;
 use std::ops::Range;
 
 /// Units of one shape are batched when there are at least this many: below, one tape of
@@ -131,7 +130,7 @@ impl Batched {
         let mut shaper = Shaper::default();
         let mut walk = SymbolWalk::default();
         // Units by shape, in order of first appearance (deterministic batches).
-        let mut by_key: HashMap<Vec<u32>, usize> = HashMap::new();
+        let mut by_key: FastMap<Vec<u32>, usize> = FastMap::default();
         let mut groups: Vec<Vec<(usize, Vec<Symbol>)>> = Vec::new();
         for (u, unit) in units.iter().enumerate() {
             let ids: Vec<Id> = unit.iter().map(|&r| roots[r]).collect();

@@ -30,7 +30,7 @@
 
 use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
-use crate::expr::graph::{FastSet, SymbolWalk};
+use crate::expr::graph::{FastMap, FastSet, SymbolWalk};
 use crate::expr::{Func, Id, Rational, Symbol, Ty};
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
@@ -639,7 +639,7 @@ impl Flat {
 
     /// Symbol → its slots in the buffer (`inputs` are the tape's input symbols).
     fn slots<'f>(&'f self, inputs: &[Symbol]) -> impl Fn(Symbol) -> Range<usize> + 'f {
-        let at: std::collections::HashMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+        let at: FastMap<Symbol, usize> = inputs.iter().enumerate().map(|(i, &s)| (s, i)).collect();
         move |s| at.get(&s).map_or(0..0, |&i| self.places[i].clone())
     }
 
@@ -810,7 +810,7 @@ enum Source {
 
 /// The [`Source`] of each of `inputs`.
 fn sources(system: &System, inputs: &[Symbol]) -> Vec<Source> {
-    let mut of = std::collections::HashMap::new();
+    let mut of = FastMap::default();
     for (i, body) in system.bodies.iter().enumerate() {
         of.insert(body.position, Source::Position(i));
         of.insert(body.velocity, Source::Velocity(i));
