@@ -26,9 +26,8 @@ use std::ops::Range;
 
 /// Units of one shape are batched when there are at least this many: below, one tape of
 /// them costs less than a batch (whose register file of `tape::LANES` values per register is
-/// mostly idle). Measured on chains' `simulate` steps (callgrind, 2026-12-06): at 9 units
-/// (10 links) one tape took 4.4 % fewer instructions a step than the batches, at 15 units
-/// the batches 1.9 % fewer than one tape.
+/// mostly idle). On chains' `simulate` steps the two cross between 9 and 15 units (the
+/// measurements are in docs/speed.md, "Small shapes as one tape").
 pub const BATCH_MIN: usize = 12;
 
 /// Roots evaluated shape by shape, each left where the batch's lanes write it.

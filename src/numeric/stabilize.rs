@@ -40,7 +40,7 @@ use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
-use super::solve::{FactorId, positive_finite, solve};
+use super::solve::{FactorId, positive_finite, solve, zero_vectors};
 use super::vector::{dot, row_norm};
 
 /// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
@@ -341,8 +341,7 @@ impl ShakeHistory {
             _ => [3.0, -3.0, 1.0],
         };
         self.total.extend(self.rows.iter().map(|h| a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left));
-        self.step.clear();
-        self.step.resize(start.inverse_mass.len(), [0.0; 3]);
+        zero_vectors(&mut self.step, start.inverse_mass.len());
         for (row, &mu) in start.rows.iter().zip(&self.total) {
             for &(b, j) in &row.jacobian {
                 let (x, w) = (&mut self.step[b], start.inverse_mass[b]);
