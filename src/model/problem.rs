@@ -111,6 +111,9 @@ pub enum Problem {
     /// A force expression that cannot be a force.
     #[error("in the force on `{name}`: {error}")]
     Force { span: Range<usize>, name: String, error: ForceError },
+    /// A rigid body's torque expression that cannot be its torque.
+    #[error("in the torque `{name}`: {error}")]
+    Torque { span: Range<usize>, name: String, error: ForceError },
     /// `dt`, `duration` or `restitution` out of range.
     #[error("`{key}` must be a finite {must} number, found {value}")]
     SceneNumber { span: Range<usize>, key: &'static str, must: &'static str, value: f64 },
@@ -176,7 +179,7 @@ pub enum ForceError {
     Build(BuildError),
     #[error("a force must be a vector, found a scalar")]
     Scalar,
-    #[error("a force may not depend on `{0}` (an acceleration or a force)")]
+    #[error("a force or torque may not depend on `{0}` (an acceleration, a force or a torque)")]
     Depends(String),
     /// A rigid body's torque written as a vector (a 2D torque is a scalar).
     #[error("a 2D torque must be a scalar, found a vector")]
@@ -214,6 +217,7 @@ impl Problem {
             | Value { span, .. }
             | UnknownForce { span, .. }
             | Force { span, .. }
+            | Torque { span, .. }
             | SceneNumber { span, .. }
             | Restitution { span, .. }
             | ToleranceWithoutAt { span }

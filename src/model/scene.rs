@@ -106,7 +106,7 @@ pub(super) fn validate(
                 Ok(id) => scene.torques.push((rigid, id)),
                 Err((inner, error)) => {
                     let span = inner.map_or(expr.span(), |s| locate(text, expr, s));
-                    problems.push(Problem::Force { span, name: name.get_ref().to_string(), error })
+                    problems.push(Problem::Torque { span, name: name.get_ref().to_string(), error })
                 }
             }
             continue;
