@@ -115,20 +115,100 @@ pub fn floor_char(text: &str, mut i: usize) -> usize {
 /// terminal raw, so it cannot move the cursor, erase a line or fake one. Line breaks are
 /// kept when `keep_newlines` (multi-line text), escaped otherwise (one line).
 pub fn escape_controls(s: &str, keep_newlines: bool) -> std::borrow::Cow<'_, str> {
-    let unsafe_char = |c: char| {
-        (c.is_control() && !(keep_newlines && (c == '\n' || c == '\t')))
-            || matches!(c, '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}')
-    };
-    if !s.contains(unsafe_char) {
+    if !has_unsafe_bytes(s.as_bytes(), keep_newlines) {
         return std::borrow::Cow::Borrowed(s);
     }
     let mut out = String::new();
     for c in s.chars() {
         match c {
             '\n' if !keep_newlines => out.push_str("\\n"),
-            c if unsafe_char(c) => out.extend(c.escape_unicode()),
+            c if is_unsafe(c, keep_newlines) => out.extend(c.escape_unicode()),
             c => out.push(c),
         }
     }
     std::borrow::Cow::Owned(out)
+}
+
+/// Whether [`escape_controls`] escapes `c`.
+fn is_unsafe(c: char, keep_newlines: bool) -> bool {
+    (c.is_control() && !(keep_newlines && (c == '\n' || c == '\t')))
+        || matches!(c, '\u{202a}'..='\u{202e}' | '\u{2066}'..='\u{2069}')
+}
+
+/// Whether UTF-8 text holds a character [`escape_controls`] escapes, read byte by byte (a
+/// derivation of a big scene is megabytes of text, mostly ASCII, which this passes without
+/// decoding): the C0 controls and DEL are bytes below 0x20 and 0x7F; the C1 controls
+/// U+0080–U+009F are 0xC2 0x80–0x9F; the bidirectional overrides U+202A–U+202E and
+/// U+2066–U+2069 are 0xE2 0x80 0xAA–0xAE and 0xE2 0x81 0xA6–0xA9. No other character's
+/// encoding holds these sequences (a lead byte is never a continuation byte).
+fn has_unsafe_bytes(bytes: &[u8], keep_newlines: bool) -> bool {
+    // Most bytes are none of these: one table lookup each, the rest only at a flagged byte.
+    const FLAGGED: [bool; 256] = {
+        let mut flagged = [false; 256];
+        let mut b = 0;
+        while b < 0x20 {
+            flagged[b] = true;
+            b += 1;
+        }
+        flagged[0x7f] = true;
+        flagged[0xc2] = true;
+        flagged[0xe2] = true;
+        flagged
+    };
+    let after = |i: usize| bytes.get(i + 1..).unwrap_or_default();
+    bytes.iter().enumerate().filter(|&(_, &b)| FLAGGED[usize::from(b)]).any(|(i, &b)| match (b, after(i)) {
+        (b'\n' | b'\t', _) => !keep_newlines,
+        (0xc2, [0x80..=0x9f, ..]) => true,
+        (0xe2, [0x80, 0xaa..=0xae, ..] | [0x81, 0xa6..=0xa9, ..]) => true,
+        (0xc2 | 0xe2, _) => false,
+        _ => true,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// The characters at the edges of what is escaped, and their UTF-8 neighbours.
+    const EDGES: [char; 24] = [
+        '\0',
+        '\t',
+        '\n',
+        '\r',
+        '\u{1f}',
+        ' ',
+        '~',
+        '\u{7f}',
+        '\u{80}',
+        '\u{9f}',
+        '\u{a0}',
+        '\u{ff}',
+        '\u{2029}',
+        '\u{202a}',
+        '\u{202e}',
+        '\u{202f}',
+        '\u{2065}',
+        '\u{2066}',
+        '\u{2069}',
+        '\u{206a}',
+        'λ',
+        '·',
+        '²',
+        '\u{1f600}',
+    ];
+
+    proptest! {
+        /// The byte test finds exactly the characters the escape replaces.
+        #[test]
+        fn the_byte_test_agrees_with_the_characters(
+            chars in prop::collection::vec(prop_oneof![any::<char>(), prop::sample::select(EDGES.to_vec())], 0..12),
+            keep_newlines in any::<bool>(),
+        ) {
+            let s: String = chars.iter().collect();
+            let by_char = s.chars().any(|c| is_unsafe(c, keep_newlines));
+            prop_assert_eq!(has_unsafe_bytes(s.as_bytes(), keep_newlines), by_char, "{:?}", s);
+            prop_assert_eq!(matches!(escape_controls(&s, keep_newlines), std::borrow::Cow::Owned(_)), by_char);
+        }
+    }
 }
