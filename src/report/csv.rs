@@ -3,8 +3,9 @@
 //! `q.w, q.x, q.y, q.z` and its world ω as `w.x, w.y, w.z`), then λ, C/κ and Ċ/κ per
 //! constraint.
 //!
-//! Numbers are written with Rust's shortest round-trip formatting, so two identical runs
-//! give byte-identical files and a file read back gives the same f64s.
+//! Numbers are written as their shortest round-trip digits (zmij's), laid out as Rust's
+//! `{}` and `{:e}` lay them out, so two identical runs give byte-identical files and a file
+//! read back gives the same f64s.
 //!
 //! The header is built from the file's names, so each field is quoted where it needs it
 //! and defused where a spreadsheet would read it as a formula ([`field`]).
