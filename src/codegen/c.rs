@@ -33,6 +33,7 @@ use super::rust::{
     Bodies, Ctx, Field, Formulas, GenerateError, LengthPlace, Names, Prec, ROLE_ARRAYS, StepRoots, Turns, formula,
     scalar_role,
 };
+use crate::expr::graph::FastMap;
 use crate::expr::{Graph, Id, Symbol, Ty};
 use std::fmt::Write;
 
@@ -706,12 +707,17 @@ fn a(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError
     let (lets, exprs) = ctx.body(p.a_code)?;
     let mut stores = Vec::new();
     let doc = ["A of A lambda + b = 0: A[k][j] = sum_i J[k][i].J[j][i] / m_i.".to_string()];
+    // Each entry's formula by its row and column (the first written, as a search would find).
+    let mut written: FastMap<(usize, usize), usize> = FastMap::default();
+    for (i, &(r, c, _)) in p.formulas.a.iter().enumerate() {
+        written.entry((r, c)).or_insert(i);
+    }
     match p.layout.a {
         AStorage::Band { bandwidth } => {
             for r in 0..k {
                 for d in 0..=bandwidth {
-                    let at = p.formulas.a.iter().position(|e| e.0 == r && e.1 == r + d);
-                    stores.push(format!("out[{r}][{d}] = {};", at.map_or("0.0".to_string(), |i| exprs[i].clone())));
+                    let at = written.get(&(r, r + d));
+                    stores.push(format!("out[{r}][{d}] = {};", at.map_or("0.0".to_string(), |&i| exprs[i].clone())));
                 }
             }
             let _ = writeln!(
@@ -724,8 +730,8 @@ fn a(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError
         AStorage::Dense | AStorage::Heap => {
             for r in 0..k {
                 for c in 0..k {
-                    let at = p.formulas.a.iter().position(|e| (e.0, e.1) == (r, c) || (e.0, e.1) == (c, r));
-                    stores.push(format!("out[{r}][{c}] = {};", at.map_or("0.0".to_string(), |i| exprs[i].clone())));
+                    let at = [written.get(&(r, c)), written.get(&(c, r))].into_iter().flatten().min();
+                    stores.push(format!("out[{r}][{c}] = {};", at.map_or("0.0".to_string(), |&i| exprs[i].clone())));
                 }
             }
             function(out, &doc, "a_matrix", &format!("double out[{0}][{0}]", k.max(1)), &lets, &stores);

@@ -4,7 +4,7 @@
 //!
 //! Not here: which names a module uses ([`super::rust`]).
 
-use std::collections::HashSet;
+use crate::expr::graph::NameSet;
 use std::fmt::Write;
 
 /// Text safe inside a `//` or `///` comment: one line, no control or bidirectional
@@ -174,7 +174,7 @@ pub fn c_reserved(name: &str) -> bool {
 
 /// Hands out distinct identifiers: a clash gets `_2`, `_3`, ….
 pub(super) struct Namer {
-    used: HashSet<String>,
+    used: NameSet<String>,
 }
 
 impl Namer {

@@ -54,12 +54,13 @@ use super::support::{
 };
 use crate::derive::{Derivation, DeriveError, derive};
 use crate::expr::eval::Value;
+use crate::expr::graph::{FastMap, FastSet};
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
 use crate::model::file::Loaded;
 use crate::numeric::program::{Inputs, LowerError, Op, Program};
 use std::cell::Cell;
-use std::collections::{HashMap, HashSet};
+
 use std::fmt::Write;
 
 /// What to generate.
@@ -223,9 +224,9 @@ pub fn module(loaded: &Loaded, options: &Options) -> Result<Module, GenerateErro
 struct Specialised {
     formulas: Formulas,
     /// The symbols replaced by their values (not fields of `State`).
-    substituted: HashSet<Symbol>,
+    substituted: FastSet<Symbol>,
     /// Each substituted symbol's node → its value's node.
-    map: HashMap<Id, Id>,
+    map: FastMap<Id, Id>,
 }
 
 /// The derivation's formulas; with `specialize`, each parameter's value substituted and the
@@ -243,8 +244,8 @@ fn specialise(loaded: &Loaded, d: &mut Derivation, specialize: bool) -> Result<S
         angular: d.constraints.iter().map(|c| c.angular.clone()).collect(),
         torques: d.torques.clone(),
     };
-    let mut substituted = HashSet::new();
-    let mut map = HashMap::new();
+    let mut substituted = FastSet::default();
+    let mut map = FastMap::default();
     if specialize {
         let g = &mut d.graph;
         let dim = g.dim();
@@ -276,7 +277,7 @@ fn specialise(loaded: &Loaded, d: &mut Derivation, specialize: bool) -> Result<S
         }
         let simplifier = &mut d.simplifier;
         // One memo for every formula: they share most of their nodes (λ in each force).
-        let mut memo = crate::expr::graph::FastMap::default();
+        let mut memo = FastMap::default();
         formulas = formulas.map(|id| {
             let replaced = g.substitute_memo(id, &map, &mut memo)?;
             let simplified = simplifier.simplify(g, replaced)?;
@@ -490,7 +491,7 @@ fn inverse_scales(d: &Derivation) -> Vec<f64> {
 }
 
 /// The symbols the masses depend on (never length-like).
-fn mass_symbols(system: &crate::model::system::System) -> HashSet<Symbol> {
+fn mass_symbols(system: &crate::model::system::System) -> FastSet<Symbol> {
     system.bodies.iter().flat_map(|b| system.graph.free_symbols(b.mass)).collect()
 }
 
@@ -945,6 +946,12 @@ fn step_fns(
             .to_string(),
         "and the impulse ΔP the solver gives (see `step_with`); ΔP moves slot i by Δuᵢ = Jᵢ ΔP / mᵢ.".to_string(),
     ];
+    let mut diagonal: FastMap<usize, Id> = FastMap::default();
+    for &(r, c, a) in &formulas.a {
+        if r == c {
+            diagonal.entry(r).or_insert(a);
+        }
+    }
     for (r, dirs) in formulas.jacobian.iter().enumerate() {
         doc.push(format!("- row {r}, `{}`: C = {}", comment_text(names.constraints[r]), formula(g, formulas.c[r])));
         for &(body, id) in dirs {
@@ -953,7 +960,7 @@ fn step_fns(
         for &(body, id) in &formulas.angular[r] {
             doc.push(format!("  Jʷ, body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
         }
-        if let Some(&(_, _, a)) = formulas.a.iter().find(|e| e.0 == r && e.1 == r) {
+        if let Some(&a) = diagonal.get(&r) {
             doc.push(format!("  J M⁻¹ Jᵀ = A[{r}][{r}] = {}", formula(g, a)));
         }
     }
@@ -1903,9 +1910,9 @@ pub(super) struct LengthPlace {
 
 /// The state's length-like places (positions, velocities, forces, and the parameters no mass
 /// depends on), as `numeric::rescale` chooses them, in field order (a role array once).
-pub(super) fn length_places(g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) -> Vec<LengthPlace> {
+pub(super) fn length_places(g: &Graph, fields: &[Field], mass_symbols: &FastSet<Symbol>) -> Vec<LengthPlace> {
     let mut places = Vec::new();
-    let mut arrays = HashSet::new();
+    let mut arrays = FastSet::default();
     for (i, f) in fields.iter().enumerate() {
         let info = g.symbol(f.symbol);
         let length = match info.role {
@@ -1931,7 +1938,7 @@ pub(super) fn length_places(g: &Graph, fields: &[Field], mass_symbols: &HashSet<
 /// `scaled_state` and `length_like`: the state's length-like fields (positions,
 /// velocities, forces, and the parameters no mass depends on), as `numeric::rescale`
 /// chooses them.
-fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &HashSet<Symbol>) {
+fn scaling_fns(out: &mut String, g: &Graph, fields: &[Field], mass_symbols: &FastSet<Symbol>) {
     let places: Vec<(String, bool, bool)> = length_places(g, fields, mass_symbols)
         .into_iter()
         .map(|p| match p.array {
@@ -2425,7 +2432,7 @@ impl Ctx<'_> {
             "A of A λ + b = 0: Aₖⱼ = Σᵢ Jₖᵢ·Jⱼᵢ / mᵢ (symmetric, positive semidefinite). Non-zero entries:".to_string(),
         ];
         let mut roots = Vec::new();
-        let mut where_: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut where_: FastMap<(usize, usize), usize> = FastMap::default();
         for (&(r, c, shown), &id) in formulas.a.iter().zip(a_code) {
             doc.push(format!("- A[{r}][{c}] = {}", formula(g, shown)));
             // Off the diagonal the entry is used twice (A is symmetric): listing it twice makes
@@ -2529,7 +2536,7 @@ impl Ctx<'_> {
              components at columns i·{dim} .. i·{dim} + {dim}."
         )];
         let mut roots = Vec::new();
-        let mut at: HashMap<(usize, usize), usize> = HashMap::new();
+        let mut at: FastMap<(usize, usize), usize> = FastMap::default();
         for (r, dirs) in formulas.jacobian.iter().enumerate() {
             for &(body, id) in dirs {
                 doc.push(format!("- J[{r}], body `{}`: {}", comment_text(names.bodies[body]), formula(g, id)));
@@ -2854,7 +2861,7 @@ impl Ctx<'_> {
         layout: &Layout,
     ) -> Result<(), GenerateError> {
         let (k, w) = (layout.constraints, layout.bandwidth);
-        let mut entry: HashMap<(usize, usize), Id> = HashMap::new();
+        let mut entry: FastMap<(usize, usize), Id> = FastMap::default();
         for (&(r, c, _), &id) in formulas.a.iter().zip(a_code) {
             entry.insert((r.min(c), r.max(c)), id);
         }
@@ -3277,7 +3284,7 @@ fn exact(x: f64) -> Option<Rational> {
 /// With `arrays`, the bodies' positions, velocities, forces and mass symbols, and the 2D
 /// rigid bodies' θ, ω, τ and inertia symbols, are entries of the role arrays [`ROLE_ARRAYS`]
 /// instead (whose names no field takes; the rigid ones only where there are 2D rigid bodies).
-fn state_fields(g: &Graph, bodies: &[&str], substituted: &HashSet<Symbol>, arrays: bool) -> Vec<Field> {
+fn state_fields(g: &Graph, bodies: &[&str], substituted: &FastSet<Symbol>, arrays: bool) -> Vec<Field> {
     // 2D rigid bodies' θ, ω, τ sit at their rigid body's place among the rigid bodies (the
     // order of the angular slots: body order); 3D ones (q, world ω, τ) keep their fields.
     let mut rigid: Vec<usize> = g
