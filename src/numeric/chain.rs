@@ -38,9 +38,9 @@
 use super::banded::{backward_step, forward_step, tridiagonal_factor_row};
 use super::rows::Rows;
 use super::solve::{
-    Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, out_of_range, scale_row,
+    Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, normalise_row, out_of_range,
 };
-use super::vector::dot;
+use super::vector::{all_finite, dot, not_finite_bit};
 use std::cell::RefCell;
 
 /// No row yet, in [`Chain::first`].
@@ -98,34 +98,17 @@ pub(crate) struct Chain {
 /// Whether every row is an equality with a finite c term and every velocity and force is
 /// finite: what `solve_cached_into` checks before anything is cached.
 /// (This runs at every solve: the rows' flags and c terms are tested joined by `&`, and the
-/// slots' numbers along flat arrays by [`all_finite`], without a branch each.)
+/// slots' numbers along flat arrays by `vector::all_finite`, without a branch each.)
 pub(crate) fn servable(rows: &Rows) -> bool {
     rows.rows.iter().fold(true, |ok, row| ok & !row.inequality & row.bias.is_finite())
         && all_finite(rows.velocity.as_flattened())
         && all_finite(rows.force.as_flattened())
 }
 
-/// Whether every number of `xs` is finite: a number's exponent bits are all ones exactly
-/// when it is not (±∞, NaN), and adding one to them then carries into the sign bit, so
-/// the OR of every (bits & exponent) + 2⁵² has its top bit clear exactly when all are
-/// finite. Integer operations without a branch, which the compiler vectorises: a test and
-/// a branch per number cost several times the instructions.
-fn all_finite(xs: &[f64]) -> bool {
-    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
-}
-
-/// Whether every number of `xs` is ±0: its bits but the sign's, OR-ed, are none (as
-/// [`all_finite`], without a branch each).
+/// Whether every number of `xs` is ±0: its bits but the sign's, OR-ed, are none (without
+/// a branch each).
 fn all_zero(xs: &[f64]) -> bool {
     xs.iter().fold(0u64, |bits, x| bits | (x.to_bits() << 1)) == 0
-}
-
-/// [`all_finite`]'s number: x's exponent bits plus one in their lowest place, whose top
-/// bit is set exactly when x is not finite.
-#[inline(always)]
-fn not_finite_bit(x: f64) -> u64 {
-    const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
-    (x.to_bits() & EXPONENT) + (1 << 52)
 }
 
 /// `v` cleared, with room for `n` elements: a vector of its own when it has less, allocated
@@ -175,7 +158,7 @@ pub(crate) fn solve(rows: &Rows, settings: &Settings) -> Option<Solution> {
 /// row acts on: checked once a solve here rather than once per entry (a slot no row acts
 /// on that fails it sends the rows to the general solve, which answers the same).
 ///
-/// By bits, as [`all_finite`] (which this adds to): w + 0 turns −0 (which is ≥ 0) into +0,
+/// By bits, as [`not_finite_bit`] (which this adds to): w + 0 turns −0 (which is ≥ 0) into +0,
 /// so its sign bit is set exactly when w < 0 (or w is a NaN, which the exponent finds).
 fn masses_sound(inverse_mass: &[f64]) -> bool {
     inverse_mass.iter().fold(0u64, |bad, w| bad | (w + 0.0).to_bits() | not_finite_bit(*w)) >> 63 == 0
@@ -479,22 +462,23 @@ impl Chain {
                     *bits = j.map(f64::to_bits);
                 }
             }
-            let Ok((n, d)) = scale_row(row, w, &mut parts[lo..hi]) else {
+            let (before, mine) = parts[..hi].split_at_mut(lo);
+            let Ok((n, d)) = normalise_row(row, w, mine) else {
                 return false;
             };
             (norm[q], jacobi[q]) = (n, d);
-            // Ãₖₖ and Ãₖ,ₖ₋₁ as `assemble`'s terms sum them: slot by slot in increasing
-            // order, from +0 (the band's zeros); the slots shared with the row before are
-            // this row's entries with a partner, in the same increasing order.
-            let (before, mine) = parts[..hi].split_at(lo);
-            let mut diagonal = 0.0;
-            for (b, u) in mine {
-                diagonal += dot(u, u) * w[*b];
-            }
-            let mut below = 0.0;
+            // J̃ = Ĵ/√Âₖₖ (`scale_row`'s last step), and at once Ãₖₖ and Ãₖ,ₖ₋₁ as
+            // `assemble`'s terms sum them: slot by slot in increasing order, from +0 (the
+            // band's zeros); the slots shared with the row before are this row's entries
+            // with a partner, in the same increasing order. (Two sums side by side, each in
+            // its order, in one walk of the row's entries rather than three.)
+            let (mut diagonal, mut below) = (0.0, 0.0);
             for (&p, (s, u)) in partner[lo..hi].iter().zip(mine) {
+                *u = u.map(|x| x * d);
+                let w = w[*s];
+                diagonal += dot(u, u) * w;
                 if p != NONE {
-                    below += dot(&before[p].1, u) * w[*s];
+                    below += dot(&before[p].1, u) * w;
                 }
             }
             (a[2 * q], a[2 * q + 1]) = (below, diagonal);
@@ -550,7 +534,7 @@ impl Chain {
     /// (`banded`'s `backward_step`, `forward_step` and `tridiagonal_mul_row`), each pass over
     /// slices of k rows (no bounds check left): the residual of row i + 1 is computed once yᵢ
     /// is ([`residual`]), with yᵢ₊₁ and Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers. Whether every μ is
-    /// finite (tested by bits as each is written, [`all_finite`]'s way: no pass of its own).
+    /// finite (tested by bits as each is written, [`not_finite_bit`]: no pass of its own).
     fn substitute(&mut self) -> bool {
         let Chain { a, l, inverse, rhs, y, r, .. } = self;
         let k = y.len();
@@ -699,19 +683,17 @@ impl Chain {
 
 #[cfg(test)]
 mod tests {
-    use super::{all_finite, all_zero, masses_sound};
+    use super::{all_zero, masses_sound};
 
-    /// [`all_finite`]'s, [`masses_sound`]'s and [`all_zero`]'s bit tests answer as
-    /// `f64::is_finite`, `w >= 0.0` and `x == 0.0` number by number, on every kind of number:
+    /// [`masses_sound`]'s and [`all_zero`]'s bit tests answer as `w >= 0.0 && w.is_finite()`
+    /// and `x == 0.0` number by number, on every kind of number:
     /// zeros, subnormals, the largest, infinities and NaNs of either sign and other payloads.
     #[test]
     fn the_bit_tests_are_the_tests_number_by_number() {
         let special = crate::numeric::vector::SPECIAL_NUMBERS;
-        assert!(all_finite(&[]));
         for &a in &special {
             for &b in &special {
                 let xs = [1.0, a, b, 2.0];
-                assert_eq!(all_finite(&xs), xs.iter().all(|x| x.is_finite()), "{a:e} {b:e}");
                 let sound = xs.iter().all(|w| *w >= 0.0 && w.is_finite());
                 assert_eq!(masses_sound(&xs), sound, "{a:e} {b:e}");
                 assert_eq!(all_zero(&[a, b]), a == 0.0 && b == 0.0, "{a:e} {b:e}");

@@ -37,7 +37,7 @@ use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
 use crate::numeric::program::{Inputs, Program};
 use crate::numeric::tape::{Scratch, Tape};
-use crate::numeric::vector::dot;
+use crate::numeric::vector::{all_finite, dot};
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -1030,44 +1030,6 @@ fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows)
         finite &= w.is_finite();
     }
     finite
-}
-
-/// Whether every number in `xs` is finite, with the widest vector instructions the
-/// processor has (AVX2 on x86-64 when present): a sweep of a tape's outputs, cheaper than a
-/// test of each number as it is written.
-fn all_finite(xs: &[f64]) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the processor has AVX2 (checked).
-        return unsafe { all_finite_avx2(xs) };
-    }
-    all_finite_any(xs)
-}
-
-/// [`all_finite_any`] compiled for AVX2.
-///
-/// # Safety
-/// The processor must have AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn all_finite_avx2(xs: &[f64]) -> bool {
-    all_finite_any(xs)
-}
-
-/// [`all_finite`]: x · 0 is ±0 for a finite x and NaN otherwise, and a NaN stays in a sum, so
-/// eight sums of such products (vector operations, no branch) are all 0 exactly when
-/// every number is finite.
-#[inline(always)]
-fn all_finite_any(xs: &[f64]) -> bool {
-    let mut sums = [0.0f64; 8];
-    let mut chunks = xs.chunks_exact(8);
-    for c in &mut chunks {
-        for (s, x) in sums.iter_mut().zip(c) {
-            *s += x * 0.0;
-        }
-    }
-    let rest = chunks.remainder().iter().fold(0.0, |s, x| s + x * 0.0);
-    sums.iter().fold(rest, |s, x| s + x) == 0.0
 }
 
 /// Whether every number a fill along [`Places`] wrote is finite, from `out` (the tape's
