@@ -76,6 +76,9 @@ pub(crate) struct Chain {
     a: Vec<f64>,
     l: Vec<f64>,
     inverse: Vec<f64>,
+    /// Per row Σᵢ J̃ᵢ·Fᵢ wᵢ, b̃ but its c̃, summed as the row is scaled (rows past the first
+    /// that changed; the rows before take it in [`factor_from`](Chain::factor_from)).
+    external: Vec<f64>,
     /// −b̃, the solution and the refinement's correction.
     rhs: Vec<f64>,
     y: Vec<f64>,
@@ -415,7 +418,8 @@ impl Chain {
         }
         // Sized, not cleared: a solve from a new pattern writes every entry (from row 0)
         // before reading it, so a chain of the last call's size is not written twice.
-        for v in [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r] {
+        let buffers = [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r];
+        for v in buffers.into_iter().chain([&mut self.external]) {
             v.resize(k, 0.0);
         }
         for v in [&mut self.a, &mut self.l] {
@@ -442,7 +446,7 @@ impl Chain {
         zero_forces: bool,
     ) -> bool {
         (from == rows.rows.len() || masses_sound(&rows.inverse_mass))
-            && self.scale_and_assemble(rows, from, keep)
+            && self.scale_and_assemble(rows, from, keep, !zero_forces)
             && self.factor_from(rows, settings.rank_tolerance, from, zero_forces)
     }
 
@@ -452,9 +456,9 @@ impl Chain {
     /// slot's 1/m finite and ≥ 0 ([`masses_sound`]), so what `solve::row_sound` would still
     /// check is that J is finite, which a scaled row's is: a component that is not makes
     /// ‖J‖ or Âₖₖ not finite, and `scale_row` refuses the row.
-    fn scale_and_assemble(&mut self, rows: &Rows, from: usize, keep: bool) -> bool {
-        let w = &rows.inverse_mass;
-        let Chain { start, parts, partner, bits, norm, jacobi, a, .. } = self;
+    fn scale_and_assemble(&mut self, rows: &Rows, from: usize, keep: bool, forces: bool) -> bool {
+        let (w, applied) = (&rows.inverse_mass, &rows.force);
+        let Chain { start, parts, partner, bits, norm, jacobi, a, external, .. } = self;
         for (q, row) in rows.rows.iter().enumerate().skip(from) {
             let (lo, hi) = (start[q], start[q + 1]);
             if keep {
@@ -472,7 +476,9 @@ impl Chain {
             // band's zeros); the slots shared with the row before are this row's entries
             // with a partner, in the same increasing order. (Two sums side by side, each in
             // its order, in one walk of the row's entries rather than three.)
-            let (mut diagonal, mut below) = (0.0, 0.0);
+            // With `forces`, b̃'s sum Σᵢ J̃ᵢ·Fᵢ wᵢ beside them, from −0 as `solve::b_of`
+            // sums it ([`factor_from`](Chain::factor_from) adds c̃).
+            let (mut diagonal, mut below, mut applied_sum) = (0.0, 0.0, -0.0);
             for (&p, (s, u)) in partner[lo..hi].iter().zip(mine) {
                 *u = u.map(|x| x * d);
                 let w = w[*s];
@@ -480,8 +486,12 @@ impl Chain {
                 if p != NONE {
                     below += dot(&before[p].1, u) * w;
                 }
+                if forces {
+                    applied_sum += dot(u, &applied[*s]) * w;
+                }
             }
             (a[2 * q], a[2 * q + 1]) = (below, diagonal);
+            external[q] = applied_sum;
         }
         true
     }
@@ -497,7 +507,7 @@ impl Chain {
     /// taken, and where c̃ is zero it is, for the sign of the zero.
     fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize, zero_forces: bool) -> bool {
         let k = rows.rows.len();
-        let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
+        let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, external, .. } = self;
         let band = a[..2 * k].chunks_exact(2).zip(l[..2 * k].chunks_exact_mut(2)).zip(&mut inverse[..k]);
         let scaling = norm.iter().zip(jacobi.iter());
         let each = rows.rows.iter().zip(start.windows(2)).zip(scaling).zip(rhs.iter_mut().zip(y.iter_mut()));
@@ -516,6 +526,9 @@ impl Chain {
             let c = (row.bias / norm) * jacobi;
             let b = if zero_forces && c != 0.0 {
                 -c
+            } else if q >= from && !zero_forces {
+                // Σᵢ J̃ᵢ·Fᵢ wᵢ from the scaling's pass, then `b_of`'s sum.
+                -(external[q] + c)
             } else {
                 -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm, jacobi)
             };
