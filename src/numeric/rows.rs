@@ -645,8 +645,8 @@ impl Flat {
 
     /// The buffer from `env` alone (`inputs` the tape's input symbols).
     fn load(&self, system: &System, env: &Env, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
-        for (i, &s) in inputs.iter().enumerate() {
-            from_env(system, env, s, &mut buffer[self.places[i].clone()])?;
+        for (&s, at) in inputs.iter().zip(&self.places) {
+            from_env(system, env, s, &mut buffer[at.clone()])?;
         }
         self.fill_trig(buffer);
         Ok(())
@@ -801,8 +801,8 @@ fn push(roots: &mut Vec<Id>, id: Id) -> usize {
 
 /// `tape`'s inputs (the symbols `inputs`) from `env` into `buffer`.
 fn load(system: &System, env: &Env, tape: &Tape, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
-    for (i, &s) in inputs.iter().enumerate() {
-        from_env(system, env, s, &mut buffer[tape.input_range(i)])?;
+    for (&s, at) in inputs.iter().zip(tape.input_ranges()) {
+        from_env(system, env, s, &mut buffer[at.clone()])?;
     }
     Ok(())
 }
