@@ -6,13 +6,14 @@
 //! Design note. The general solve of a chain is correct and linear but walks the rows many
 //! times: a finiteness check, the scaling (‖J‖, J/‖J‖, Jacobi), Ã term by term through a list
 //! of terms, the band factor, the right-hand side, each substitution, then λ and the forces.
-//! Here one pass does, for each row, the check, the scaling and the row's two entries of Ã;
-//! a second the row of the factor (the factor of row k needs only rows up to k), −b̃ and the
-//! forward substitution; a third the backward substitution with the refinement's residual
-//! (a row's once the rows from it down are final); a fourth the residual's forward
-//! substitution; a fifth its backward substitution, adding the correction; a sixth λ; a
-//! seventh, over the slots, each slot's force from its one or two rows and its
-//! acceleration. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
+//! Here one pass does, for each row, the check, the scaling, the row's two entries of Ã and
+//! b̃'s sum over its entries (one walk of them); a second the row of the factor (the factor
+//! of row k needs only rows up to k), −b̃ and the forward substitution; a third the backward
+//! substitution with the refinement's residual (a row's once the rows from it down are
+//! final); a fourth the residual's forward substitution; a fifth its backward substitution,
+//! adding the correction; a sixth λ; a seventh, over the slots, each slot's force from its
+//! one or two rows and its acceleration (a fresh answer's accelerations in a pass of their
+//! own). No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
 //! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
 //! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
 //! terms go — which a property test over random chains holds it to (`tests/chain_solve.rs`).
