@@ -6,13 +6,14 @@
 //! Design note. The general solve of a chain is correct and linear but walks the rows many
 //! times: a finiteness check, the scaling (‖J‖, J/‖J‖, Jacobi), Ã term by term through a list
 //! of terms, the band factor, the right-hand side, each substitution, then λ and the forces.
-//! Here one pass does, for each row, the check, the scaling and the row's two entries of Ã;
-//! a second the row of the factor (the factor of row k needs only rows up to k), −b̃ and the
-//! forward substitution; a third the backward substitution with the refinement's residual
-//! (a row's once the rows from it down are final); a fourth the residual's forward
-//! substitution; a fifth its backward substitution, adding the correction; a sixth λ; a
-//! seventh, over the slots, each slot's force from its one or two rows and its
-//! acceleration. No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
+//! Here one pass does, for each row, the check, the scaling, the row's two entries of Ã and
+//! b̃'s sum over its entries (one walk of them); a second the row of the factor (the factor
+//! of row k needs only rows up to k), −b̃ and the forward substitution; a third the backward
+//! substitution with the refinement's residual (a row's once the rows from it down are
+//! final); a fourth the residual's forward substitution; a fifth its backward substitution,
+//! adding the correction; a sixth λ; a seventh, over the slots, each slot's force from its
+//! one or two rows and its acceleration (a fresh answer's accelerations in a pass of their
+//! own). No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
 //! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
 //! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
 //! terms go — which a property test over random chains holds it to (`tests/chain_solve.rs`).
@@ -38,9 +39,9 @@
 use super::banded::{backward_step, forward_step, tridiagonal_factor_row};
 use super::rows::Rows;
 use super::solve::{
-    Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, out_of_range, scale_row,
+    Answer, FactorId, MAX_DENSE_ROWS, Method, Settings, Solution, SolvePath, Status, b_of, normalise_row, out_of_range,
 };
-use super::vector::dot;
+use super::vector::{all_finite, dot, not_finite_bit};
 use std::cell::RefCell;
 
 /// No row yet, in [`Chain::first`].
@@ -76,6 +77,9 @@ pub(crate) struct Chain {
     a: Vec<f64>,
     l: Vec<f64>,
     inverse: Vec<f64>,
+    /// Per row Σᵢ J̃ᵢ·Fᵢ wᵢ, b̃ but its c̃, summed as the row is scaled (rows past the first
+    /// that changed; the rows before take it in [`factor_from`](Chain::factor_from)).
+    external: Vec<f64>,
     /// −b̃, the solution and the refinement's correction.
     rhs: Vec<f64>,
     y: Vec<f64>,
@@ -98,34 +102,27 @@ pub(crate) struct Chain {
 /// Whether every row is an equality with a finite c term and every velocity and force is
 /// finite: what `solve_cached_into` checks before anything is cached.
 /// (This runs at every solve: the rows' flags and c terms are tested joined by `&`, and the
-/// slots' numbers along flat arrays by [`all_finite`], without a branch each.)
+/// slots' numbers along flat arrays by `vector::all_finite`, without a branch each.)
 pub(crate) fn servable(rows: &Rows) -> bool {
     rows.rows.iter().fold(true, |ok, row| ok & !row.inequality & row.bias.is_finite())
         && all_finite(rows.velocity.as_flattened())
         && all_finite(rows.force.as_flattened())
 }
 
-/// Whether every number of `xs` is finite: a number's exponent bits are all ones exactly
-/// when it is not (±∞, NaN), and adding one to them then carries into the sign bit, so
-/// the OR of every (bits & exponent) + 2⁵² has its top bit clear exactly when all are
-/// finite. Integer operations without a branch, which the compiler vectorises: a test and
-/// a branch per number cost several times the instructions.
-fn all_finite(xs: &[f64]) -> bool {
-    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
-}
-
-/// Whether every number of `xs` is ±0: its bits but the sign's, OR-ed, are none (as
-/// [`all_finite`], without a branch each).
+/// Whether every number of `xs` is ±0: its bits but the sign's, OR-ed, are none (without
+/// a branch each).
 fn all_zero(xs: &[f64]) -> bool {
     xs.iter().fold(0u64, |bits, x| bits | (x.to_bits() << 1)) == 0
 }
 
-/// [`all_finite`]'s number: x's exponent bits plus one in their lowest place, whose top
-/// bit is set exactly when x is not finite.
-#[inline(always)]
-fn not_finite_bit(x: f64) -> u64 {
-    const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
-    (x.to_bits() & EXPONENT) + (1 << 52)
+/// `v` cleared, with room for `n` elements: a vector of its own when it has less, allocated
+/// at that capacity at once (extending an empty vector took the growth path's two calls
+/// more, about 40 instructions a vector: a tenth of a 10-row solve's allocations).
+fn emptied<T>(v: &mut Vec<T>, n: usize) {
+    v.clear();
+    if v.capacity() < n {
+        *v = Vec::with_capacity(n);
+    }
 }
 
 /// Row j's residual −b̃ⱼ − (Ã y)ⱼ from its numbers, as `banded::tridiagonal_mul_row` sums
@@ -165,7 +162,7 @@ pub(crate) fn solve(rows: &Rows, settings: &Settings) -> Option<Solution> {
 /// row acts on: checked once a solve here rather than once per entry (a slot no row acts
 /// on that fails it sends the rows to the general solve, which answers the same).
 ///
-/// By bits, as [`all_finite`] (which this adds to): w + 0 turns −0 (which is ≥ 0) into +0,
+/// By bits, as [`not_finite_bit`] (which this adds to): w + 0 turns −0 (which is ≥ 0) into +0,
 /// so its sign bit is set exactly when w < 0 (or w is a NaN, which the exponent finds).
 fn masses_sound(inverse_mass: &[f64]) -> bool {
     inverse_mass.iter().fold(0u64, |bad, w| bad | (w + 0.0).to_bits() | not_finite_bit(*w)) >> 63 == 0
@@ -422,7 +419,8 @@ impl Chain {
         }
         // Sized, not cleared: a solve from a new pattern writes every entry (from row 0)
         // before reading it, so a chain of the last call's size is not written twice.
-        for v in [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r] {
+        let buffers = [&mut self.norm, &mut self.jacobi, &mut self.inverse, &mut self.rhs, &mut self.y, &mut self.r];
+        for v in buffers.into_iter().chain([&mut self.external]) {
             v.resize(k, 0.0);
         }
         for v in [&mut self.a, &mut self.l] {
@@ -449,7 +447,7 @@ impl Chain {
         zero_forces: bool,
     ) -> bool {
         (from == rows.rows.len() || masses_sound(&rows.inverse_mass))
-            && self.scale_and_assemble(rows, from, keep)
+            && self.scale_and_assemble(rows, from, keep, !zero_forces)
             && self.factor_from(rows, settings.rank_tolerance, from, zero_forces)
     }
 
@@ -459,9 +457,9 @@ impl Chain {
     /// slot's 1/m finite and ≥ 0 ([`masses_sound`]), so what `solve::row_sound` would still
     /// check is that J is finite, which a scaled row's is: a component that is not makes
     /// ‖J‖ or Âₖₖ not finite, and `scale_row` refuses the row.
-    fn scale_and_assemble(&mut self, rows: &Rows, from: usize, keep: bool) -> bool {
-        let w = &rows.inverse_mass;
-        let Chain { start, parts, partner, bits, norm, jacobi, a, .. } = self;
+    fn scale_and_assemble(&mut self, rows: &Rows, from: usize, keep: bool, forces: bool) -> bool {
+        let (w, applied) = (&rows.inverse_mass, &rows.force);
+        let Chain { start, parts, partner, bits, norm, jacobi, a, external, .. } = self;
         for (q, row) in rows.rows.iter().enumerate().skip(from) {
             let (lo, hi) = (start[q], start[q + 1]);
             if keep {
@@ -469,25 +467,32 @@ impl Chain {
                     *bits = j.map(f64::to_bits);
                 }
             }
-            let Ok((n, d)) = scale_row(row, w, &mut parts[lo..hi]) else {
+            let (before, mine) = parts[..hi].split_at_mut(lo);
+            let Ok((n, d)) = normalise_row(row, w, mine) else {
                 return false;
             };
             (norm[q], jacobi[q]) = (n, d);
-            // Ãₖₖ and Ãₖ,ₖ₋₁ as `assemble`'s terms sum them: slot by slot in increasing
-            // order, from +0 (the band's zeros); the slots shared with the row before are
-            // this row's entries with a partner, in the same increasing order.
-            let (before, mine) = parts[..hi].split_at(lo);
-            let mut diagonal = 0.0;
-            for (b, u) in mine {
-                diagonal += dot(u, u) * w[*b];
-            }
-            let mut below = 0.0;
+            // J̃ = Ĵ/√Âₖₖ (`scale_row`'s last step), and at once Ãₖₖ and Ãₖ,ₖ₋₁ as
+            // `assemble`'s terms sum them: slot by slot in increasing order, from +0 (the
+            // band's zeros); the slots shared with the row before are this row's entries
+            // with a partner, in the same increasing order. (Two sums side by side, each in
+            // its order, in one walk of the row's entries rather than three.)
+            // With `forces`, b̃'s sum Σᵢ J̃ᵢ·Fᵢ wᵢ beside them, from −0 as `solve::b_of`
+            // sums it ([`factor_from`](Chain::factor_from) adds c̃).
+            let (mut diagonal, mut below, mut applied_sum) = (0.0, 0.0, -0.0);
             for (&p, (s, u)) in partner[lo..hi].iter().zip(mine) {
+                *u = u.map(|x| x * d);
+                let w = w[*s];
+                diagonal += dot(u, u) * w;
                 if p != NONE {
-                    below += dot(&before[p].1, u) * w[*s];
+                    below += dot(&before[p].1, u) * w;
+                }
+                if forces {
+                    applied_sum += dot(u, &applied[*s]) * w;
                 }
             }
             (a[2 * q], a[2 * q + 1]) = (below, diagonal);
+            external[q] = applied_sum;
         }
         true
     }
@@ -503,7 +508,7 @@ impl Chain {
     /// taken, and where c̃ is zero it is, for the sign of the zero.
     fn factor_from(&mut self, rows: &Rows, floor: f64, from: usize, zero_forces: bool) -> bool {
         let k = rows.rows.len();
-        let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, .. } = self;
+        let Chain { start, parts, norm, jacobi, a, l, inverse, rhs, y, external, .. } = self;
         let band = a[..2 * k].chunks_exact(2).zip(l[..2 * k].chunks_exact_mut(2)).zip(&mut inverse[..k]);
         let scaling = norm.iter().zip(jacobi.iter());
         let each = rows.rows.iter().zip(start.windows(2)).zip(scaling).zip(rhs.iter_mut().zip(y.iter_mut()));
@@ -522,6 +527,9 @@ impl Chain {
             let c = (row.bias / norm) * jacobi;
             let b = if zero_forces && c != 0.0 {
                 -c
+            } else if q >= from && !zero_forces {
+                // Σᵢ J̃ᵢ·Fᵢ wᵢ from the scaling's pass, then `b_of`'s sum.
+                -(external[q] + c)
             } else {
                 -b_of(rows, &parts[bounds[0]..bounds[1]], row.bias, norm, jacobi)
             };
@@ -540,7 +548,7 @@ impl Chain {
     /// (`banded`'s `backward_step`, `forward_step` and `tridiagonal_mul_row`), each pass over
     /// slices of k rows (no bounds check left): the residual of row i + 1 is computed once yᵢ
     /// is ([`residual`]), with yᵢ₊₁ and Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers. Whether every μ is
-    /// finite (tested by bits as each is written, [`all_finite`]'s way: no pass of its own).
+    /// finite (tested by bits as each is written, [`not_finite_bit`]: no pass of its own).
     fn substitute(&mut self) -> bool {
         let Chain { a, l, inverse, rhs, y, r, .. } = self;
         let k = y.len();
@@ -614,38 +622,33 @@ impl Chain {
         let k = rows.rows.len();
         let mut diagnostics = std::mem::take(&mut out.diagnostics);
         diagnostics.clear();
-        out.lambda.clear();
-        out.active.clear();
-        out.contacts.clear();
+        emptied(&mut out.lambda, 0);
+        emptied(&mut out.active, 0);
+        emptied(&mut out.contacts, 0);
         if answer == Answer::Solution {
-            out.lambda.resize(k, 0.0);
+            // Written once each (extended, not zeroed first).
+            emptied(&mut out.lambda, k);
+            emptied(&mut out.active, k);
+            emptied(&mut out.contacts, k);
             let scaling = self.jacobi.iter().zip(&self.norm);
-            for (q, ((l, &m), (&jacobi, &norm))) in out.lambda.iter_mut().zip(&self.y).zip(scaling).enumerate() {
-                *l = (m * jacobi) / norm;
-                out_of_range(q, m, *l, &mut diagnostics);
-            }
+            out.lambda.extend(self.y[..k].iter().zip(scaling).enumerate().map(|(q, (&m, (&jacobi, &norm)))| {
+                let l = (m * jacobi) / norm;
+                out_of_range(q, m, l, &mut diagnostics);
+                l
+            }));
             out.active.resize(k, true);
             out.contacts.resize(k, None);
         }
         let slots = rows.inverse_mass.len();
-        let (force, acceleration) = (&mut out.constraint_force, &mut out.acceleration);
-        if force.len() != slots {
-            force.resize(slots, [0.0; 3]);
-        }
         let n = rows.force.len().min(slots);
-        if acceleration.len() != n {
-            acceleration.resize(n, [0.0; 3]);
-        }
+        let (force, acceleration) = (&mut out.constraint_force, &mut out.acceleration);
         // μₖ J̃ₖᵢ of row k's entry, added to `f`.
         let add = |f: [f64; 3], k: usize, entry: usize| {
             let (m, j) = (self.y[k], &self.parts[entry].1);
             [f[0] + m * j[0], f[1] + m * j[1], f[2] + m * j[2]]
         };
-        // The slots with an applied force (all of them but in a malformed `Rows`) as slices
-        // of n: their accelerations are written without a bounds check.
-        let (acceleration, applied, w) = (&mut acceleration[..n], &rows.force[..n], &rows.inverse_mass[..n]);
-        let pairs = self.first.iter().zip(&self.second);
-        for (i, (f_out, (&first, &second))) in force.iter_mut().zip(pairs).enumerate() {
+        // Slot i's force from its first and second entries.
+        let slot_force = |(&first, &second): (&usize, &usize)| {
             let mut f = [0.0; 3];
             if first != NONE {
                 let k = self.owner[first];
@@ -655,11 +658,37 @@ impl Chain {
                     f = add(f, k + 1, second);
                 }
             }
-            *f_out = f;
-            if i < n {
-                let (applied, w) = (applied[i], w[i]);
-                acceleration[i] = [(applied[0] + f[0]) * w, (applied[1] + f[1]) * w, (applied[2] + f[2]) * w];
+            f
+        };
+        // (Fᵢ + fᵢ) wᵢ.
+        let accelerate = |f: [f64; 3], applied: [f64; 3], w: f64| {
+            [(applied[0] + f[0]) * w, (applied[1] + f[1]) * w, (applied[2] + f[2]) * w]
+        };
+        // The slots with an applied force (all of them but in a malformed `Rows`) as slices
+        // of n: their accelerations are written without a bounds check.
+        let (applied, w) = (&rows.force[..n], &rows.inverse_mass[..n]);
+        let pairs = self.first.iter().zip(&self.second);
+        if force.len() == slots && acceleration.len() == n {
+            // The answer of the last solve of these slots (a run's cache): in place, each
+            // slot's force and acceleration at once.
+            let acceleration = &mut acceleration[..n];
+            for (i, (f_out, pair)) in force.iter_mut().zip(pairs).enumerate() {
+                let f = slot_force(pair);
+                *f_out = f;
+                if i < n {
+                    acceleration[i] = accelerate(f, applied[i], w[i]);
+                }
             }
+        } else {
+            // A new answer: each vector written once, in a pass of its own, rather than
+            // zeroed and then written (the zeroing cost as much as the accelerations).
+            emptied(force, slots);
+            force.extend(pairs.map(slot_force));
+            // (A no-op: the pattern has a first and a second entry per slot.)
+            force.resize(slots, [0.0; 3]);
+            emptied(acceleration, n);
+            let each = force[..n].iter().zip(applied).zip(w);
+            acceleration.extend(each.map(|((&f, &applied), &w)| accelerate(f, applied, w)));
         }
         out.diagnostics = diagnostics;
         out.status = Status::Solved;
@@ -668,19 +697,17 @@ impl Chain {
 
 #[cfg(test)]
 mod tests {
-    use super::{all_finite, all_zero, masses_sound};
+    use super::{all_zero, masses_sound};
 
-    /// [`all_finite`]'s, [`masses_sound`]'s and [`all_zero`]'s bit tests answer as
-    /// `f64::is_finite`, `w >= 0.0` and `x == 0.0` number by number, on every kind of number:
+    /// [`masses_sound`]'s and [`all_zero`]'s bit tests answer as `w >= 0.0 && w.is_finite()`
+    /// and `x == 0.0` number by number, on every kind of number:
     /// zeros, subnormals, the largest, infinities and NaNs of either sign and other payloads.
     #[test]
     fn the_bit_tests_are_the_tests_number_by_number() {
         let special = crate::numeric::vector::SPECIAL_NUMBERS;
-        assert!(all_finite(&[]));
         for &a in &special {
             for &b in &special {
                 let xs = [1.0, a, b, 2.0];
-                assert_eq!(all_finite(&xs), xs.iter().all(|x| x.is_finite()), "{a:e} {b:e}");
                 let sound = xs.iter().all(|w| *w >= 0.0 && w.is_finite());
                 assert_eq!(masses_sound(&xs), sound, "{a:e} {b:e}");
                 assert_eq!(all_zero(&[a, b]), a == 0.0 && b == 0.0, "{a:e} {b:e}");

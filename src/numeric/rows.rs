@@ -37,7 +37,7 @@ use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
 use crate::numeric::program::{Inputs, Program};
 use crate::numeric::tape::{Scratch, Tape};
-use crate::numeric::vector::dot;
+use crate::numeric::vector::{all_finite, dot};
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -645,8 +645,8 @@ impl Flat {
 
     /// The buffer from `env` alone (`inputs` the tape's input symbols).
     fn load(&self, system: &System, env: &Env, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
-        for (i, &s) in inputs.iter().enumerate() {
-            from_env(system, env, s, &mut buffer[self.places[i].clone()])?;
+        for (&s, at) in inputs.iter().zip(&self.places) {
+            from_env(system, env, s, &mut buffer[at.clone()])?;
         }
         self.fill_trig(buffer);
         Ok(())
@@ -682,15 +682,28 @@ impl Flat {
 
 /// `slots` from symbol `s`'s value in `env`, element by element (a copy of one to four
 /// numbers is cheaper inline than a call).
-#[inline]
+#[inline(always)]
 fn from_env(system: &System, env: &Env, s: Symbol, slots: &mut [f64]) -> Result<(), EvalError> {
     match env.get(s) {
         Some(Value::Scalar(x)) => slots.fill(x),
-        Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
-        Some(Value::Quaternion(q)) => slots.iter_mut().zip(q).for_each(|(d, x)| *d = x),
+        Some(Value::Vector(v)) => copy_prefix(slots, &v),
+        Some(Value::Quaternion(q)) => copy_prefix(slots, &q),
         None => return Err(EvalError::Missing(system.graph.symbol(s).name.clone())),
     }
     Ok(())
+}
+
+/// The first numbers of `from` into `slots`, as many as both have: at an input's usual
+/// widths (one to three) a copy of fixed length each, where a copy of the length at hand
+/// was a call of `memcpy` (about 10 instructions of the load's 35 a link of the chain).
+#[inline(always)]
+fn copy_prefix(slots: &mut [f64], from: &[f64]) {
+    match (slots, from) {
+        ([a, b], [x, y, ..]) => (*a, *b) = (*x, *y),
+        ([a, b, c], [x, y, z, ..]) => (*a, *b, *c) = (*x, *y, *z),
+        ([a], [x, ..]) => *a = *x,
+        (slots, from) => slots.iter_mut().zip(from).for_each(|(d, x)| *d = *x),
+    }
 }
 
 /// Which roots of a [`RowProgram`] a tape computes.
@@ -788,8 +801,8 @@ fn push(roots: &mut Vec<Id>, id: Id) -> usize {
 
 /// `tape`'s inputs (the symbols `inputs`) from `env` into `buffer`.
 fn load(system: &System, env: &Env, tape: &Tape, inputs: &[Symbol], buffer: &mut [f64]) -> Result<(), EvalError> {
-    for (i, &s) in inputs.iter().enumerate() {
-        from_env(system, env, s, &mut buffer[tape.input_range(i)])?;
+    for (&s, at) in inputs.iter().zip(tape.input_ranges()) {
+        from_env(system, env, s, &mut buffer[at.clone()])?;
     }
     Ok(())
 }
@@ -1017,44 +1030,6 @@ fn slots_of_width<const W: usize>(places: &Places, out: &[f64], rows: &mut Rows)
         finite &= w.is_finite();
     }
     finite
-}
-
-/// Whether every number in `xs` is finite, with the widest vector instructions the
-/// processor has (AVX2 on x86-64 when present): a sweep of a tape's outputs, cheaper than a
-/// test of each number as it is written.
-fn all_finite(xs: &[f64]) -> bool {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the processor has AVX2 (checked).
-        return unsafe { all_finite_avx2(xs) };
-    }
-    all_finite_any(xs)
-}
-
-/// [`all_finite_any`] compiled for AVX2.
-///
-/// # Safety
-/// The processor must have AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn all_finite_avx2(xs: &[f64]) -> bool {
-    all_finite_any(xs)
-}
-
-/// [`all_finite`]: x · 0 is ±0 for a finite x and NaN otherwise, and a NaN stays in a sum, so
-/// eight sums of such products (vector operations, no branch) are all 0 exactly when
-/// every number is finite.
-#[inline(always)]
-fn all_finite_any(xs: &[f64]) -> bool {
-    let mut sums = [0.0f64; 8];
-    let mut chunks = xs.chunks_exact(8);
-    for c in &mut chunks {
-        for (s, x) in sums.iter_mut().zip(c) {
-            *s += x * 0.0;
-        }
-    }
-    let rest = chunks.remainder().iter().fold(0.0, |s, x| s + x * 0.0);
-    sums.iter().fold(rest, |s, x| s + x) == 0.0
 }
 
 /// Whether every number a fill along [`Places`] wrote is finite, from `out` (the tape's

@@ -396,6 +396,22 @@ pub(super) fn scale_row(
     inverse_mass: &[f64],
     parts: &mut [(usize, [f64; 3])],
 ) -> Result<(f64, f64), Unscalable> {
+    let (norm, d) = normalise_row(row, inverse_mass, parts)?;
+    for (_, u) in parts.iter_mut() {
+        *u = u.map(|x| x * d);
+    }
+    Ok((norm, d))
+}
+
+/// [`scale_row`] but its last step: `parts` hold Ĵ; returns ‖J‖ and 1/√Âₖₖ, by which the
+/// caller multiplies each part for J̃ (the chain's solve does, with Ã's entries in the
+/// same pass).
+#[inline(always)]
+pub(super) fn normalise_row(
+    row: &super::rows::Row,
+    inverse_mass: &[f64],
+    parts: &mut [(usize, [f64; 3])],
+) -> Result<(f64, f64), Unscalable> {
     let norm = row_norm(&row.jacobian);
     if !norm.is_finite() {
         return Err(Unscalable::Overflow);
@@ -413,11 +429,7 @@ pub(super) fn scale_row(
     if !positive_finite(a_kk) {
         return Err(Unscalable::InfiniteMass);
     }
-    let d = 1.0 / a_kk.sqrt();
-    for (_, u) in parts.iter_mut() {
-        *u = u.map(|x| x * d);
-    }
-    Ok((norm, d))
+    Ok((norm, 1.0 / a_kk.sqrt()))
 }
 
 /// The first non-finite number of `row` (and the bodies it acts on), in the order the

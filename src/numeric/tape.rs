@@ -817,6 +817,12 @@ impl Tape {
         self.input_ranges[i].clone()
     }
 
+    /// The input slots of every input symbol, in order ([`input_range`](Tape::input_range)
+    /// of each).
+    pub fn input_ranges(&self) -> &[Range<usize>] {
+        &self.input_ranges
+    }
+
     /// The output components of the `i`-th root (one for a scalar, `dim` for a vector).
     pub fn output_range(&self, i: usize) -> Range<usize> {
         self.output_ranges[i].clone()
