@@ -776,7 +776,12 @@ impl<'s> Simulation<'s> {
             lambda: &self.dynamics.solution().lambda,
             energy_error,
         };
-        observe(&frame.shown(self.unit.as_ref(), &mut self.shown)).map_err(SimError::Output)
+        // In the scene's own unit the frame as it is (not moved through `Frame::shown`).
+        let shown = match &self.unit {
+            None => observe(&frame),
+            unit => observe(&frame.shown(unit.as_ref(), &mut self.shown)),
+        };
+        shown.map_err(SimError::Output)
     }
 
     /// From step `n` (its rows in `self.start`, its accelerations in `self.a`) to step

@@ -345,6 +345,28 @@ impl ShakeHistory {
             2 => [2.0, -1.0, 0.0],
             _ => [3.0, -3.0, 1.0],
         };
+        // One row on one slot (a pendulum, a bead): the numbers of the loops below, without them.
+        if let ([row], [h], [mu], [w]) =
+            (start.rows.as_slice(), self.rows.as_slice(), self.total.as_mut_slice(), start.inverse_mass.as_slice())
+            && let [(0, j)] = row.jacobian.as_slice()
+        {
+            *mu = a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left;
+            let (m, w) = (*mu, *w);
+            // 0 + J μ w: the loop's sum into a zeroed slot.
+            let x = [0.0 + j[0] * m * w, 0.0 + j[1] * m * w, 0.0 + j[2] * m * w];
+            if !(x[0].is_finite() & x[1].is_finite() & x[2].is_finite()) {
+                *mu = 0.0;
+                return None;
+            }
+            match self.step.as_mut_slice() {
+                [slot] => *slot = x,
+                _ => {
+                    self.step.clear();
+                    self.step.push(x);
+                }
+            }
+            return Some(&self.step);
+        }
         for (mu, h) in self.total.iter_mut().zip(&self.rows) {
             *mu = a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left;
         }
@@ -392,6 +414,17 @@ impl ShakeHistory {
             return;
         }
         let had_left = self.known > 0 && self.rows.len() == rows;
+        // One row (a pendulum, a bead) after the first steps: the loop below's numbers, in line.
+        if let (true, None, [h], [mu], [row], [new]) =
+            (had_left, exact, self.rows.as_mut_slice(), self.total.as_slice(), start.rows.as_slice(), end)
+        {
+            let delta = new.value / row.jacobian.iter().map(|(b, j)| dot(j, j) * start.inverse_mass[*b]).sum::<f64>();
+            let delta = if delta.is_finite() { delta } else { 0.0 };
+            h.past = [mu + h.left - delta, h.past[0], h.past[1]];
+            h.left = delta;
+            self.known = (self.known + 1).min(ORDER);
+            return;
+        }
         if !had_left {
             self.rows.clear();
             self.rows.resize(rows, RowHistory::default());
