@@ -441,9 +441,10 @@ pub struct Simulation<'s> {
     /// The rows of the step's start, and of its end (after the step: at the positions and
     /// time the next step starts from, C/κ and J; the rest was spent by the velocity step).
     /// Kept here and swapped, never moved by value: a `Rows` moved through a `Result` is a
-    /// copy each time, a few of them a step.
-    start: Rows,
-    end: Rows,
+    /// copy each time, a few of them a step. Boxed, so that the swap at every step's start
+    /// exchanges two pointers, not the two headers' sixteen words.
+    start: Box<Rows>,
+    end: Box<Rows>,
     /// Whether `end` serves the next step's start, which then evaluates only what the
     /// velocities change (`Dynamics::rows_moved_into`); else every row is evaluated.
     carried: bool,
@@ -490,8 +491,8 @@ impl<'s> Simulation<'s> {
             three_d,
             unit,
             shown: Shown::default(),
-            start: Rows::default(),
-            end: Rows::default(),
+            start: Box::default(),
+            end: Box::default(),
             carried: false,
             start_made: None,
             end_made: None,
@@ -654,7 +655,7 @@ impl<'s> Simulation<'s> {
                 }
             } else {
                 let rows = self.dynamics.rows(t, &self.q, &self.v)?;
-                let old = std::mem::replace(&mut self.start, rows);
+                let old = std::mem::replace(&mut *self.start, rows);
                 self.dynamics.recycle(old);
             }
             let rows = &self.start;
@@ -878,7 +879,7 @@ impl<'s> Simulation<'s> {
 impl Simulation<'_> {
     /// `rows` become the end rows; the buffers they replace go back to the dynamics.
     fn replace_end(&mut self, rows: Rows) {
-        let old = std::mem::replace(&mut self.end, rows);
+        let old = std::mem::replace(&mut *self.end, rows);
         self.dynamics.recycle(old);
     }
 
