@@ -223,7 +223,58 @@ pub struct Sample {
     pub max_abs_c: f64,
     pub energy_error: f64,
     /// Positions of the first few bodies.
-    pub position: Vec<[f64; 3]>,
+    pub position: Plotted,
+}
+
+/// The positions of the first bodies at a sample (at most `PLOTTED_BODIES`), held in
+/// place: a run with the default samples records one at every step of a short run, and a
+/// `Vec` each was an allocation a step (a few percent of a pendulum's). Read as a slice;
+/// built by `collect`, which keeps the first `PLOTTED_BODIES` positions.
+#[derive(Clone, Copy)]
+pub struct Plotted {
+    len: usize,
+    at: [[f64; 3]; PLOTTED_BODIES],
+}
+
+impl std::ops::Deref for Plotted {
+    type Target = [[f64; 3]];
+    fn deref(&self) -> &[[f64; 3]] {
+        &self.at[..self.len]
+    }
+}
+
+impl Plotted {
+    /// No position.
+    const EMPTY: Plotted = Plotted { len: 0, at: [[0.0; 3]; PLOTTED_BODIES] };
+
+    /// The first `PLOTTED_BODIES` of `positions`, in place of what it held.
+    fn fill(&mut self, positions: impl IntoIterator<Item = [f64; 3]>) {
+        self.len = 0;
+        for (to, x) in self.at.iter_mut().zip(positions) {
+            *to = x;
+            self.len += 1;
+        }
+    }
+}
+
+impl FromIterator<[f64; 3]> for Plotted {
+    fn from_iter<I: IntoIterator<Item = [f64; 3]>>(positions: I) -> Plotted {
+        let mut plotted = Plotted::EMPTY;
+        plotted.fill(positions);
+        plotted
+    }
+}
+
+impl PartialEq for Plotted {
+    fn eq(&self, other: &Plotted) -> bool {
+        **self == **other
+    }
+}
+
+impl std::fmt::Debug for Plotted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_list().entries(self.iter()).finish()
+    }
 }
 
 /// What a run measured.
@@ -390,9 +441,10 @@ pub struct Simulation<'s> {
     /// The rows of the step's start, and of its end (after the step: at the positions and
     /// time the next step starts from, C/κ and J; the rest was spent by the velocity step).
     /// Kept here and swapped, never moved by value: a `Rows` moved through a `Result` is a
-    /// copy each time, a few of them a step.
-    start: Rows,
-    end: Rows,
+    /// copy each time, a few of them a step. Boxed, so that the swap at every step's start
+    /// exchanges two pointers, not the two headers' sixteen words.
+    start: Box<Rows>,
+    end: Box<Rows>,
     /// Whether `end` serves the next step's start, which then evaluates only what the
     /// velocities change (`Dynamics::rows_moved_into`); else every row is evaluated.
     carried: bool,
@@ -439,8 +491,8 @@ impl<'s> Simulation<'s> {
             three_d,
             unit,
             shown: Shown::default(),
-            start: Rows::default(),
-            end: Rows::default(),
+            start: Box::default(),
+            end: Box::default(),
             carried: false,
             start_made: None,
             end_made: None,
@@ -535,19 +587,52 @@ impl<'s> Simulation<'s> {
         summary: &mut Summary,
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<(), SimError> {
+        let mut figures = Figures::default();
+        let mut balance = EnergyBalance::default();
+        let result = self.steps(s, summary, &mut figures, &mut balance, observe);
+        // What the steps recorded, whether the run ended or stopped.
+        let unit = self.unit.as_ref();
+        let energy_back = |x: f64| unit.map_or(x, |u| u.energy(x));
+        summary.max_abs_c = figures.max_abs_c;
+        summary.max_abs_c_dot = figures.max_abs_c_dot;
+        summary.steps = figures.steps;
+        summary.duration = figures.steps as f64 * s.dt;
+        if figures.recorded {
+            // The ratio is the same in any unit; the energies themselves may leave the f64
+            // range in the caller's (a 1e155 m pendulum has T ≈ 1e311 J).
+            summary.max_kinetic = energy_back(balance.max_kinetic);
+            summary.final_energy_error = figures.energy_error;
+            summary.energy_rel_drift = (!self.dynamics.time_dependent()).then(|| {
+                let scale = balance.max_kinetic.max(balance.work_scale);
+                if scale > 0.0 { balance.max_error / scale } else { energy_back(balance.max_error) }
+            });
+        }
+        result
+    }
+
+    /// The steps of [`run_inner`](Simulation::run_inner): the summary's running figures go
+    /// to `figures` and `balance`, which it writes into the summary once the steps end.
+    fn steps(
+        &mut self,
+        s: Settings,
+        summary: &mut Summary,
+        figures: &mut Figures,
+        balance: &mut EnergyBalance,
+        observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
+    ) -> Result<(), SimError> {
         let system = self.dynamics.system();
         // Numbers of the run (in its unit) → the caller's unit, for everything reported.
         let unit = self.unit.clone();
         let energy_back = |x: f64| unit.as_ref().map_or(x, |u| u.energy(x));
         let length_back = |x: f64| unit.as_ref().map_or(x, |u| u.length(x));
-        let energy_reported = !self.dynamics.time_dependent();
         // The scene's length scale (in the run's unit): positions only, not a rigid body's angle.
         let length = length_scale(&self.q[..system.bodies.len()]);
         let mut reach =
             Reach { length, bound: s.blowup * length, touch: CONTACT_TOLERANCE * length, bounce_speed: 0.0 };
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
         let plotted = system.bodies.len().min(PLOTTED_BODIES);
-        let mut balance = EnergyBalance::default();
+        // Every sample the run will keep, at once (a step's push never reallocates).
+        summary.samples.reserve((s.steps / stride).saturating_add(2).min(s.samples.saturating_add(2) as u64) as usize);
         // The next sampled step, a multiple of `stride` (counted, rather than a division
         // of n at every step).
         let mut next_sample = 0;
@@ -570,7 +655,7 @@ impl<'s> Simulation<'s> {
                 }
             } else {
                 let rows = self.dynamics.rows(t, &self.q, &self.v)?;
-                let old = std::mem::replace(&mut self.start, rows);
+                let old = std::mem::replace(&mut *self.start, rows);
                 self.dynamics.recycle(old);
             }
             let rows = &self.start;
@@ -582,8 +667,8 @@ impl<'s> Simulation<'s> {
                     Unconverged::count(&mut summary.unconverged, n, length_back(left), length_back(bound));
                 }
             }
-            summary.max_abs_c = summary.max_abs_c.max(c_max);
-            summary.max_abs_c_dot = summary.max_abs_c_dot.max(c_dot_max);
+            figures.max_abs_c = figures.max_abs_c.max(c_max);
+            figures.max_abs_c_dot = figures.max_abs_c_dot.max(c_dot_max);
             let (energy_error, accel) = balance.record(rows, n, s.dt);
             if n == 0 {
                 let speed = self.v.iter().map(safe_norm).fold(0.0, f64::max);
@@ -595,18 +680,12 @@ impl<'s> Simulation<'s> {
                 let scale = s.dt * accel;
                 self.dynamics.settings.speed_scale = if scale.is_finite() { scale } else { 0.0 };
             }
-            // The ratio is the same in any unit; the energies themselves may leave the f64
-            // range in the caller's (a 1e155 m pendulum has T ≈ 1e311 J).
-            summary.max_kinetic = energy_back(balance.max_kinetic);
             let energy_error = energy_back(energy_error);
-            summary.final_energy_error = energy_error;
+            figures.energy_error = energy_error;
+            figures.recorded = true;
             if n == 0 {
                 balance.work_scale = work_scale(&rows.force, system.bodies.len(), length);
             }
-            summary.energy_rel_drift = energy_reported.then(|| {
-                let scale = balance.max_kinetic.max(balance.work_scale);
-                if scale > 0.0 { balance.max_error / scale } else { energy_back(balance.max_error) }
-            });
             self.dynamics.solve_known(&mut self.start, self.start_made);
             self.start_made = self.dynamics.made();
             // The active set for the step to come: contacts that push are held (without
@@ -619,12 +698,15 @@ impl<'s> Simulation<'s> {
                 next_sample += stride;
             }
             if sampled || n == s.steps {
+                // Written where it is kept: a `Sample` built aside is a copy of its positions' room.
                 let position = self.q[..plotted].iter().map(|x| unit.as_ref().map_or(*x, |u| u.vector(*x)));
-                summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: position.collect() });
+                summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: Plotted::EMPTY });
+                if let Some(sample) = summary.samples.last_mut() {
+                    sample.position.fill(position);
+                }
             }
             self.show(n, t, energy_error, observe)?;
-            summary.steps = n;
-            summary.duration = n as f64 * s.dt;
+            figures.steps = n;
             if n == s.steps {
                 break;
             }
@@ -695,7 +777,12 @@ impl<'s> Simulation<'s> {
             lambda: &self.dynamics.solution().lambda,
             energy_error,
         };
-        observe(&frame.shown(self.unit.as_ref(), &mut self.shown)).map_err(SimError::Output)
+        // In the scene's own unit the frame as it is (not moved through `Frame::shown`).
+        let shown = match &self.unit {
+            None => observe(&frame),
+            unit => observe(&frame.shown(unit.as_ref(), &mut self.shown)),
+        };
+        shown.map_err(SimError::Output)
     }
 
     /// From step `n` (its rows in `self.start`, its accelerations in `self.a`) to step
@@ -706,10 +793,13 @@ impl<'s> Simulation<'s> {
         let has_inequalities = self.has_inequalities;
         let (t, t1) = (self.t0 + n as f64 * s.dt, self.t0 + (n + 1) as f64 * s.dt);
         // The end rows' mark, when the velocity step solved them through a kept factor.
-        let velocity_step = |dynamics: &mut Dynamics<'_>, end: &mut Rows, v: &mut Vectors, equalities: bool| {
-            let applied = velocity_step(end, v, equalities, reach.touch, s.restitution, reach.bounce_speed, dynamics);
-            if applied { dynamics.made() } else { None }
-        };
+        // The end rows' C/κ go to `values` before the step spends them (`Simulation::carry`).
+        let velocity_step =
+            |dynamics: &mut Dynamics<'_>, end: &mut Rows, v: &mut Vectors, values: &mut Vec<f64>, equalities: bool| {
+                let (touch, bounce) = (reach.touch, reach.bounce_speed);
+                let applied = velocity_step(end, v, equalities, touch, s.restitution, bounce, dynamics, values);
+                if applied { dynamics.made() } else { None }
+            };
         // The velocity step spends the end rows' C, Ċ and c but keeps J, and the positions
         // stay where the rows were evaluated: with C put back they serve the next start
         // (not with 3D rigid bodies, whose orientations are rebased there).
@@ -754,8 +844,7 @@ impl<'s> Simulation<'s> {
                 }
             }
             update_rates(&mut self.end, &self.half, &self.v);
-            self.save_values();
-            self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
+            self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, &mut self.values, true);
             self.carry(keep);
             return self.check_finite(n + 1, t1);
         }
@@ -772,15 +861,13 @@ impl<'s> Simulation<'s> {
             Stabilize::Projection { tolerance, max_iterations } => {
                 let projected = self.project(t1, reach.length, tolerance, max_iterations)?;
                 self.replace_end(projected);
-                self.save_values();
-                self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, true);
+                self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, &mut self.values, true);
                 self.carry(keep);
             }
             _ if has_inequalities => {
                 let rows = self.dynamics.rows(t1, &self.q, &self.v)?;
                 self.replace_end(rows);
-                self.save_values();
-                self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, false);
+                self.end_made = velocity_step(&mut self.dynamics, &mut self.end, &mut self.v, &mut self.values, false);
                 self.carry(keep);
             }
             _ => {}
@@ -792,26 +879,36 @@ impl<'s> Simulation<'s> {
 impl Simulation<'_> {
     /// `rows` become the end rows; the buffers they replace go back to the dynamics.
     fn replace_end(&mut self, rows: Rows) {
-        let old = std::mem::replace(&mut self.end, rows);
+        let old = std::mem::replace(&mut *self.end, rows);
         self.dynamics.recycle(old);
     }
 
-    /// Keeps C/κ of the end rows before a velocity step spends it ([`carry`](Simulation::carry)).
-    fn save_values(&mut self) {
-        self.values.clear();
-        self.values.extend(self.end.rows.iter().map(|row| row.value));
-    }
-
-    /// The end rows after the velocity step: with their C/κ put back, the next step's start
+    /// The end rows after the velocity step: with their C/κ put back where the step spent
+    /// them (`values` holds them then: `stabilize::velocity_step`), the next step's start
     /// (`keep`), else left as scratch.
     fn carry(&mut self, keep: bool) {
-        if keep && self.end.rows.len() == self.values.len() {
-            for (row, &c) in self.end.rows.iter_mut().zip(&self.values) {
-                row.value = c;
+        if keep {
+            if self.end.rows.len() == self.values.len() {
+                for (row, &c) in self.end.rows.iter_mut().zip(&self.values) {
+                    row.value = c;
+                }
             }
             self.carried = true;
         }
     }
+}
+
+/// The summary's figures as a run goes (in the caller's unit), written into it when the run
+/// ends or stops (`Simulation::run_inner`): the largest |C| and |Ċ| so far, the energy
+/// balance of the last recorded step, whether any step was recorded, and the last step
+/// handed to the observer.
+#[derive(Default)]
+struct Figures {
+    max_abs_c: f64,
+    max_abs_c_dot: f64,
+    energy_error: f64,
+    recorded: bool,
+    steps: u64,
 }
 
 /// The run's lengths (in its unit): the scene's scale, the distance from a surface that

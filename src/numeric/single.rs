@@ -51,8 +51,9 @@ pub fn is_single(rows: &Rows) -> bool {
 /// 1/m: ‖J‖, 1/√Â, J̃ = Ĵ/√Â and Ã = J̃·J̃ w with its root L.
 #[derive(Clone, Debug, Default)]
 pub struct SingleScaling {
-    /// The bits of J's components and of 1/m the numbers below are for (`None`: none yet).
-    key: Option<([u64; 3], u64)>,
+    /// The bits of J's components and of 1/m the numbers below are for, when `known`.
+    key: [u64; 4],
+    known: bool,
     norm: f64,
     jacobi: f64,
     jt: [f64; 3],
@@ -66,8 +67,9 @@ impl SingleScaling {
     /// not positive and finite); kept for the next call with the same bits.
     #[inline]
     fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
-        let key = (j.map(f64::to_bits), w.to_bits());
-        if self.key == Some(key) {
+        let key = [j[0].to_bits(), j[1].to_bits(), j[2].to_bits(), w.to_bits()];
+        // Compared whole, joined by `&`: one test, not four branches.
+        if self.known & (self.key == key) {
             return Some(self);
         }
         self.scale(row, j, w, key)
@@ -75,14 +77,8 @@ impl SingleScaling {
 
     /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits).
     #[inline(never)]
-    fn scale(
-        &mut self,
-        row: &[(usize, [f64; 3])],
-        j: &[f64; 3],
-        w: f64,
-        key: ([u64; 3], u64),
-    ) -> Option<&SingleScaling> {
-        self.key = None;
+    fn scale(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64, key: [u64; 4]) -> Option<&SingleScaling> {
+        self.known = false;
         // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
         let norm = row_norm(row);
         if !(norm.is_finite() && norm != 0.0) {
@@ -99,7 +95,7 @@ impl SingleScaling {
         // Ã = J̃·J̃ w (one term, added to a zero band) and its factor L = √Ã (used only when
         // Ã passes the caller's rank tolerance).
         let a = 0.0 + dot(&jt, &jt) * w;
-        *self = SingleScaling { key: Some(key), norm, jacobi, jt, a, l: a.sqrt() };
+        *self = SingleScaling { key, known: true, norm, jacobi, jt, a, l: a.sqrt() };
         Some(self)
     }
 }
@@ -237,6 +233,26 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
         out.acceleration.resize(n, [0.0; 3]);
     }
     // Σ λ J = λ̃ J̃ on the row's slot, added to a zero force; a = (F + Σ λ J) w per slot.
+    if let ([fc_out], [a_out], [f]) =
+        (out.constraint_force.as_mut_slice(), out.acceleration.as_mut_slice(), rows.force.as_slice())
+    {
+        // One slot (the row's): the loop below's numbers, in line.
+        let fc = [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]];
+        *fc_out = fc;
+        *a_out = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    } else {
+        solution_slots(rows, body, mu, &jt, out);
+    }
+    if !out.diagnostics.is_empty() {
+        out.diagnostics.clear();
+    }
+    out.status = Status::Solved;
+    true
+}
+
+/// [`solve_single_with`]'s forces and accelerations over every slot: Σ λ J = λ̃ J̃ on the row's
+/// slot `body`, zero elsewhere; a = (F + Σ λ J) w.
+fn solution_slots(rows: &Rows, body: usize, mu: f64, jt: &[f64; 3], out: &mut Solution) {
     let slots =
         out.constraint_force.iter_mut().zip(&mut out.acceleration).zip(rows.force.iter().zip(&rows.inverse_mass));
     for (i, ((fc_out, a_out), (f, &w))) in slots.enumerate() {
@@ -244,9 +260,4 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
         *fc_out = fc;
         *a_out = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
     }
-    if !out.diagnostics.is_empty() {
-        out.diagnostics.clear();
-    }
-    out.status = Status::Solved;
-    true
 }

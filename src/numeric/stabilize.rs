@@ -329,9 +329,14 @@ impl ShakeHistory {
     /// every number of it is finite.
     fn predict(&mut self, start: &Rows) -> Option<&Vectors> {
         let rows = start.rows.len();
-        self.total.clear();
-        if self.known == 0 || self.rows.len() != rows {
+        // μ so far, one a row: written in place when the last step had these rows (a run's
+        // every step but its first), not cleared and refilled.
+        if self.total.len() != rows {
+            self.total.clear();
             self.total.resize(rows, 0.0);
+        }
+        if self.known == 0 || self.rows.len() != rows {
+            self.total.fill(0.0);
             return None;
         }
         // The polynomial through the last `known` steps' smooth part, at this step.
@@ -340,8 +345,39 @@ impl ShakeHistory {
             2 => [2.0, -1.0, 0.0],
             _ => [3.0, -3.0, 1.0],
         };
-        self.total.extend(self.rows.iter().map(|h| a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left));
-        zero_vectors(&mut self.step, start.inverse_mass.len());
+        // One row on one slot (a pendulum, a bead): the numbers of the loops below, without them.
+        if let ([row], [h], [mu], [w]) =
+            (start.rows.as_slice(), self.rows.as_slice(), self.total.as_mut_slice(), start.inverse_mass.as_slice())
+            && let [(0, j)] = row.jacobian.as_slice()
+        {
+            *mu = a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left;
+            let (m, w) = (*mu, *w);
+            // 0 + J μ w: the loop's sum into a zeroed slot.
+            let x = [0.0 + j[0] * m * w, 0.0 + j[1] * m * w, 0.0 + j[2] * m * w];
+            if !(x[0].is_finite() & x[1].is_finite() & x[2].is_finite()) {
+                *mu = 0.0;
+                return None;
+            }
+            match self.step.as_mut_slice() {
+                [slot] => *slot = x,
+                _ => {
+                    self.step.clear();
+                    self.step.push(x);
+                }
+            }
+            return Some(&self.step);
+        }
+        for (mu, h) in self.total.iter_mut().zip(&self.rows) {
+            *mu = a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left;
+        }
+        let slots = start.inverse_mass.len();
+        if self.step.len() == slots {
+            for x in &mut self.step {
+                *x = [0.0; 3];
+            }
+        } else {
+            zero_vectors(&mut self.step, slots);
+        }
         for (row, &mu) in start.rows.iter().zip(&self.total) {
             for &(b, j) in &row.jacobian {
                 let (x, w) = (&mut self.step[b], start.inverse_mass[b]);
@@ -350,8 +386,10 @@ impl ShakeHistory {
                 }
             }
         }
-        if !self.step.iter().all(|x| x.iter().all(|c| c.is_finite())) {
-            self.total.iter_mut().for_each(|mu| *mu = 0.0);
+        // Every component finite, in one branch-free pass.
+        let finite = self.step.iter().fold(true, |ok, x| ok & x[0].is_finite() & x[1].is_finite() & x[2].is_finite());
+        if !finite {
+            self.total.fill(0.0);
             return None;
         }
         Some(&self.step)
@@ -376,6 +414,17 @@ impl ShakeHistory {
             return;
         }
         let had_left = self.known > 0 && self.rows.len() == rows;
+        // One row (a pendulum, a bead) after the first steps: the loop below's numbers, in line.
+        if let (true, None, [h], [mu], [row], [new]) =
+            (had_left, exact, self.rows.as_mut_slice(), self.total.as_slice(), start.rows.as_slice(), end)
+        {
+            let delta = new.value / row.jacobian.iter().map(|(b, j)| dot(j, j) * start.inverse_mass[*b]).sum::<f64>();
+            let delta = if delta.is_finite() { delta } else { 0.0 };
+            h.past = [mu + h.left - delta, h.past[0], h.past[1]];
+            h.left = delta;
+            self.known = (self.known + 1).min(ORDER);
+            return;
+        }
         if !had_left {
             self.rows.clear();
             self.rows.resize(rows, RowHistory::default());
@@ -663,8 +712,11 @@ pub fn project_velocities(rows: &mut Rows, v: &mut Vectors) {
 /// `project` the equalities and the held contacts that are not closing go onto Ċ = 0 too,
 /// else they keep their Ċ; `dynamics` says which contacts are held and serves the solve.
 /// Returns whether anything was applied. `rows` is spent (its C, Ċ and c may be
-/// overwritten), but for one equality row on the scene's only slot (a pendulum, a bead),
-/// projected in closed form from the rows as they are (`Dynamics::correct_single`).
+/// overwritten; their C/κ are first saved in `values`, for a caller that puts them back),
+/// but for one equality row on the scene's only slot (a pendulum, a bead), projected in
+/// closed form from the rows as they are (`Dynamics::correct_single`; `values` is then left
+/// empty: nothing was spent).
+#[allow(clippy::too_many_arguments)]
 pub fn velocity_step(
     rows: &mut Rows,
     v: &mut Vectors,
@@ -673,7 +725,9 @@ pub fn velocity_step(
     restitution: f64,
     bounce_speed: f64,
     dynamics: &mut Dynamics<'_>,
+    values: &mut Vec<f64>,
 ) -> bool {
+    values.clear();
     if let (true, [row]) = (project, rows.rows.as_slice())
         && !row.inequality
         && let Some(dv) = dynamics.correct_single(rows, row.rate)
@@ -682,6 +736,7 @@ pub fn velocity_step(
         add_finite(v, std::slice::from_ref(&dv));
         return true;
     }
+    values.extend(rows.rows.iter().map(|row| row.value));
     let mut any = false;
     for (k, row) in rows.rows.iter_mut().enumerate() {
         let is_held = dynamics.is_held(k);
