@@ -626,3 +626,62 @@ fn steady_scenes_skip_a_motion_evaluation_with_the_same_run() {
         assert!(!scenario(path).program.steady(), "{path}");
     }
 }
+
+#[test]
+fn a_state_evaluation_says_whether_every_number_it_wrote_is_finite() {
+    // What a run relies on to keep NaN out of its solves: after the positions' evaluation
+    // (C/κ and J) and the motion's (Ċ, c and each slot's 1/m, v and F), `finite` says
+    // whether every number written is finite. One row on one slot (the pendulum, a 3D bead)
+    // is filled without the general loops; the double pendulum takes them. Random states
+    // with one number of the state or of a parameter (a mass, the rod's length, g) made
+    // 0, huge, infinite or NaN; the rows are those of the last evaluation, as in a run.
+    use common::{Rng, random_env};
+    use lagrange::expr::eval::Value;
+    use lagrange::numeric::rows::{Rows, State};
+    use lagrange::numeric::simulate::initial_state;
+    let special = [0.0, -0.0, 1e300, -1e300, 1e-320, f64::INFINITY, f64::NEG_INFINITY, f64::NAN];
+    let finite3 = |x: &[f64; 3]| x.iter().all(|c| c.is_finite());
+    for path in ["constraints/pendulum.toml", "constraints/bead_on_sphere.toml", "constraints/double_pendulum.toml"] {
+        let s = scenario(path);
+        let mut rng = Rng::new(33);
+        let mut scratch = s.program.scratch();
+        let mut rows = Rows::default();
+        let (mut finite, mut not) = (0, 0);
+        let symbols: Vec<_> = s.system.graph.symbols().map(|(symbol, _)| symbol).collect();
+        for case in 0..3_000 {
+            let mut env = random_env(&s.system, &mut rng);
+            let (mut q, mut v, t) = initial_state(&s.system, &env);
+            let x = special[rng.next_u64() as usize % special.len()];
+            let (body, d) = (rng.next_u64() as usize % q.len(), rng.next_u64() as usize % s.system.dim());
+            match case % 4 {
+                0 => q[body][d] = x,
+                1 => v[body][d] = x,
+                2 => {
+                    let symbol = symbols[rng.next_u64() as usize % symbols.len()];
+                    let value = match env.get(symbol) {
+                        Some(Value::Vector(mut u)) => {
+                            u[d] = x;
+                            Value::Vector(u)
+                        }
+                        _ => Value::Scalar(x),
+                    };
+                    env.set(symbol, value);
+                }
+                _ => {}
+            }
+            let state = State { t, q: &q, v: &v };
+            s.program
+                .evaluate_positions_state_into(&s.system, &env, state, &mut scratch, &mut rows.rows)
+                .expect("rows");
+            let written = rows.rows.iter().all(|r| r.value.is_finite() && r.jacobian.iter().all(|(_, j)| finite3(j)));
+            assert_eq!(scratch.finite(), written, "{path} case {case}, positions: {:?}", rows.rows);
+            s.program.evaluate_motion_state_into(&s.system, &env, state, &mut scratch, &mut rows).expect("rows");
+            let written = rows.rows.iter().all(|r| r.rate.is_finite() && r.bias.is_finite())
+                && rows.inverse_mass.iter().all(|w| w.is_finite())
+                && rows.velocity.iter().chain(&rows.force).all(finite3);
+            assert_eq!(scratch.finite(), written, "{path} case {case}, motion: {rows:?}");
+            if written { finite += 1 } else { not += 1 }
+        }
+        assert!(finite > 1_000 && not > 300, "{path}: finite {finite}, not {not}");
+    }
+}

@@ -515,20 +515,21 @@ impl<'s> Dynamics<'s> {
     }
 
     /// [`rows_after_positions`](Dynamics::rows_after_positions) into `rows` (whatever it
-    /// held: its buffers are reused).
+    /// held: its buffers are reused). Returns whether `rows`' C/κ and J are the positions'
+    /// own, bit for bit (else every row was evaluated again, as
+    /// [`rows_moved_into`](Dynamics::rows_moved_into) says).
     pub fn rows_after_positions_into(
         &mut self,
         t: f64,
         q: &Vectors,
         v: &Vectors,
         rows: &mut Rows,
-    ) -> Result<(), SimError> {
+    ) -> Result<bool, SimError> {
         std::mem::swap(&mut rows.rows, &mut self.position_rows);
         // `positions` reports a C or J that is not finite through a full evaluation, which
         // may round differently and pass: then they are checked again, as `rows` would.
         let finite = std::mem::replace(&mut self.positions_finite, false);
-        self.moved(t, q, v, rows, finite)?;
-        Ok(())
+        self.moved(t, q, v, rows, finite)
     }
 
     /// [`rows_after_positions_into`](Dynamics::rows_after_positions_into) without an

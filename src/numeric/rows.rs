@@ -37,7 +37,7 @@ use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
 use crate::numeric::program::{Inputs, Program};
 use crate::numeric::tape::{Scratch, Tape};
-use crate::numeric::vector::{all_finite, dot};
+use crate::numeric::vector::{all_finite, dot, not_finite_bit};
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -78,7 +78,9 @@ pub struct Rows {
 impl Rows {
     /// The slots' 1/m and F (and the dimension) of `from`, whose velocities and rows are
     /// left as they are: for rows whose slots are constants of a run
-    /// (`RowProgram::steady`).
+    /// (`RowProgram::steady`). In line: SHAKE takes them at every step of a steady run, and
+    /// for a one-slot scene the call's own instructions were a third of the copy.
+    #[inline]
     pub fn take_slots(&mut self, from: &Rows) {
         self.dim = from.dim;
         self.axes.clear();
@@ -1044,6 +1046,66 @@ fn finite_fill(out: &[f64], computed: bool, written: impl FnOnce() -> bool) -> b
     if all_finite(out) { computed } else { written() }
 }
 
+/// Whether every one of `xs` is finite, by their exponent bits ([`not_finite_bit`]: a few
+/// integer operations a number, no branch): the single-row fills' test of the numbers they
+/// wrote, which is what [`finite_fill`] decides (every number such a fill writes is an
+/// output or computed from one, and every output is read), without a pass over the outputs.
+#[inline(always)]
+fn finite_all(parts: &[&[f64]]) -> bool {
+    let bad = |xs: &[f64]| xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x));
+    parts.iter().fold(0u64, |all, xs| all | bad(xs)) >> 63 == 0
+}
+
+/// [`RowProgram::evaluate_motion_state_into`]'s fill for one row on one slot whose J, v and
+/// F are `W` (2 or 3) wide (a pendulum, a bead), in place in rows of that shape: the loops'
+/// set-up and the outputs' sweep cost more than the numbers written (about 180 instructions
+/// of a pendulum's step in two fills, callgrind). `None`, with nothing written, for any
+/// other shape; else whether every number written is finite.
+#[inline(always)]
+fn motion_one<const W: usize>(places: &Places, out: Outputs<'_>, rows: &mut Rows) -> Option<bool> {
+    let ([at], [m], [velocity], [force]) =
+        (places.rows.as_slice(), places.mass.as_slice(), places.velocity.as_slice(), places.force.as_slice())
+    else {
+        return None;
+    };
+    let ([row], [w], [u], [f]) = (
+        rows.rows.as_mut_slice(),
+        rows.inverse_mass.as_mut_slice(),
+        rows.velocity.as_mut_slice(),
+        rows.force.as_mut_slice(),
+    ) else {
+        return None;
+    };
+    *w = 1.0 / out.0[*m as usize];
+    // SAFETY: `places` made `out`, and its v and F are `W` wide (the caller's `slot_width`).
+    (*u, *f) = unsafe { (velocity.read_of::<W>(out), force.read_of::<W>(out)) };
+    row.rate = out.0[at.rate as usize] * at.inverse_scale;
+    row.bias = out.0[at.bias as usize];
+    row.inequality = at.inequality;
+    // The components past `W` are zeros.
+    Some(finite_all(&[&[*w, row.rate, row.bias], &u[..W], &f[..W]]))
+}
+
+/// [`RowProgram::evaluate_positions_state_into`]'s fill for one row with one J entry `W`
+/// (2 or 3) wide, in place in rows of that shape, as [`motion_one`]: `None`, with nothing
+/// written, for any other shape; else whether C/κ and J are finite.
+#[inline(always)]
+fn positions_one<const W: usize>(places: &Places, out: Outputs<'_>, rows: &mut [Row]) -> Option<bool> {
+    let ([at], [entry], [row]) = (places.rows.as_slice(), places.jacobian.as_slice(), rows) else {
+        return None;
+    };
+    let [(slot, j)] = row.jacobian.as_mut_slice() else {
+        return None;
+    };
+    row.value = out.0[at.value as usize] * at.inverse_scale;
+    row.rate = 0.0;
+    row.bias = 0.0;
+    row.inequality = at.inequality;
+    // SAFETY: `places` made `out`, and its J entries are `W` wide (the caller's `width`).
+    (*slot, *j) = (entry.slot as usize, unsafe { entry.place.read_of::<W>(out) });
+    Some(finite_all(&[&[row.value], &j[..W]]))
+}
+
 /// Whether every number of `rows`' slots (1/m, v, F) is finite.
 fn slots_finite(rows: &Rows) -> bool {
     rows.inverse_mass.iter().all(|w| w.is_finite()) && rows.velocity.iter().chain(&rows.force).all(finite3)
@@ -1376,6 +1438,15 @@ impl RowProgram {
         // has the slots already (the rows of the last evaluation).
         rows.dim = system.dim();
         rows.axes.clear();
+        let one = match places.slot_width {
+            2 => motion_one::<2>(places, places.outputs(out), rows),
+            3 => motion_one::<3>(places, places.outputs(out), rows),
+            _ => None,
+        };
+        if let Some(finite) = one {
+            scratch.finite = finite;
+            return Ok(true);
+        }
         let mut computed = self.fill_slots(places, out, rows);
         for (row, at) in rows.rows.iter_mut().zip(&places.rows) {
             row.rate = out[at.rate as usize] * at.inverse_scale;
@@ -1552,6 +1623,17 @@ impl RowProgram {
         let p = &self.positions;
         p.run_loaded(&mut scratch.positions);
         let out = &scratch.positions.outputs;
+        if let Some(places) = &p.places {
+            let one = match places.width {
+                2 => positions_one::<2>(places, places.outputs(out), rows),
+                3 => positions_one::<3>(places, places.outputs(out), rows),
+                _ => None,
+            };
+            if let Some(finite) = one {
+                scratch.finite = finite;
+                return;
+            }
+        }
         rows.resize_with(self.rows.len(), Row::default);
         if let Some(places) = &p.places {
             // Without 3D rigid bodies J is its roots as they are (no projection on an axis).

@@ -648,9 +648,11 @@ impl<'s> Simulation<'s> {
             // The end rows' mark goes with them while their J is kept.
             let end_made = self.end_made.take();
             self.start_made = None;
+            let mut kept = false;
             if std::mem::take(&mut self.carried) {
                 std::mem::swap(&mut self.start, &mut self.end);
-                if self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)? {
+                kept = self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)?;
+                if kept {
                     self.start_made = end_made;
                 }
             } else {
@@ -658,8 +660,10 @@ impl<'s> Simulation<'s> {
                 let old = std::mem::replace(&mut *self.start, rows);
                 self.dynamics.recycle(old);
             }
+            // The rows' distances, when SHAKE measured them at these C and J.
+            let known = self.shake.end_distances(kept);
+            let (c_max, c_dot_max, left) = Self::drift(system, self.unit.as_ref(), &self.start, known, n, t, &reach)?;
             let rows = &self.start;
-            let (c_max, c_dot_max, left) = self.drift(rows, n, t, &reach)?;
             // Every step's positions were projected to `bound` (the start's are as given).
             if let (Stabilize::Projection { tolerance, .. }, true) = (s.stabilize, n > 0) {
                 let bound = tolerance * reach.length;
@@ -721,14 +725,26 @@ impl<'s> Simulation<'s> {
     /// |C| and |Ċ| of what should be zero at step `n` (in the caller's unit; an inequality
     /// counts only its violation and, near its surface, its closing rate), and the largest
     /// distance |C|/‖∇C‖ of the same (in the run's unit); stops the run when a value is not
-    /// finite or a surface is out of reach.
-    fn drift(&self, rows: &Rows, n: u64, t: f64, reach: &Reach) -> Result<(f64, f64, f64), SimError> {
-        let system = self.dynamics.system();
-        let row_back = |q: usize, x: f64| self.unit.as_ref().map_or(x, |u| u.row_value(q, x));
-        let length_back = |x: f64| self.unit.as_ref().map_or(x, |u| u.length(x));
+    /// finite or a surface is out of reach. `known`: each row's distance, when SHAKE measured
+    /// it at the same C and J (`ShakeHistory::end_distances`), else computed here.
+    fn drift(
+        system: &System,
+        unit: Option<&Unit>,
+        rows: &Rows,
+        known: Option<&[f64]>,
+        n: u64,
+        t: f64,
+        reach: &Reach,
+    ) -> Result<(f64, f64, f64), SimError> {
+        let row_back = |q: usize, x: f64| unit.map_or(x, |u| u.row_value(q, x));
+        let length_back = |x: f64| unit.map_or(x, |u| u.length(x));
         let (mut c_max, mut c_dot_max, mut left) = (0.0f64, 0.0f64, 0.0f64);
+        let known = known.filter(|d| d.len() == rows.rows.len());
         for (k, row) in rows.rows.iter().enumerate() {
-            let d = distance(row);
+            let d = match known {
+                Some(d) => d[k],
+                None => distance(row),
+            };
             if !(row.value.is_finite() && row.rate.is_finite()) {
                 let value = if row.value.is_finite() { row.rate } else { row.value };
                 let constraint = system.constraints[k].name.clone();

@@ -311,6 +311,13 @@ pub struct ShakeHistory {
     total: Vec<f64>,
     /// The prediction's step M⁻¹Jₙᵀμ on the slots (scratch).
     step: Vec<[f64; 3]>,
+    /// Each row's distance |C|/‖J‖ (signed, [`distance`]) at the last step's final
+    /// positions, as SHAKE's residual measured it.
+    distances: Vec<f64>,
+    /// Whether `distances` are those of the end rows the last SHAKE left (their C/κ and J
+    /// the positions' own, bit for bit), not yet taken by
+    /// [`end_distances`](ShakeHistory::end_distances).
+    ends: bool,
 }
 
 /// One row's part of a [`ShakeHistory`].
@@ -324,6 +331,16 @@ struct RowHistory {
 }
 
 impl ShakeHistory {
+    /// The distances of every row of the end rows the last [`shake_positions`] with this
+    /// history left, when those rows became the next step's start with their C/κ and J
+    /// unchanged (`kept`: `Dynamics::rows_moved_into` said so, and nothing wrote them in
+    /// between, as a run's RATTLE step writes none of them for good): the next start's drift
+    /// check need not compute them again (the same function of the same numbers). Once:
+    /// the mark is taken, so a step without SHAKE leaves none behind.
+    pub fn end_distances(&mut self, kept: bool) -> Option<&[f64]> {
+        (std::mem::take(&mut self.ends) && kept).then_some(self.distances.as_slice())
+    }
+
     /// This step's prediction from the start's rows (J and 1/m) and its step on the slots,
     /// returned when there is one (after a converged step that corrected its positions) and
     /// every number of it is finite.
@@ -495,19 +512,39 @@ pub fn shake_positions(
     let mut iterations = 0;
     let mut previous = f64::INFINITY;
     let mut zeroed = false;
+    if let Some(history) = history.as_deref_mut() {
+        history.ends = false;
+    }
     loop {
         // C and J only (the iteration reads nothing else); the full rows once, at the end.
         dynamics.positions(t, q, v_half)?;
         let mut residual = 0.0f64;
-        for (k, row) in dynamics.position_rows().iter().enumerate() {
-            if !row.inequality || dynamics.is_held(k) {
-                residual = residual.max(distance(row).abs());
+        match history.as_deref_mut() {
+            // Every row's distance kept, for the next start's drift check (`end_distances`).
+            Some(history) => {
+                let rows = dynamics.position_rows();
+                if history.distances.len() != rows.len() {
+                    history.distances.resize(rows.len(), 0.0);
+                }
+                for (k, (row, kept)) in rows.iter().zip(&mut history.distances).enumerate() {
+                    *kept = distance(row);
+                    if !row.inequality || dynamics.is_held(k) {
+                        residual = residual.max(kept.abs());
+                    }
+                }
+            }
+            None => {
+                for (k, row) in dynamics.position_rows().iter().enumerate() {
+                    if !row.inequality || dynamics.is_held(k) {
+                        residual = residual.max(distance(row).abs());
+                    }
+                }
             }
         }
         // Stop when converged, out of iterations, or diverging (the step was too large for
         // the quasi-Newton iteration; the run's drift check then reports it).
         if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
-            if let Some(history) = history {
+            if let Some(history) = history.as_deref_mut() {
                 let kept = residual <= bound && (predicted || iterations > 0);
                 // The residual a prediction left alone, taken back exactly where rows couple
                 // (a chain's Jₙ M⁻¹ Jₙᵀ is far from its diagonal): a solve with the start's
@@ -524,8 +561,11 @@ pub fn shake_positions(
                 history.finish(kept, dynamics.position_rows(), start, exact);
             }
             // C and J are those just evaluated: Ċ, c and the bodies' numbers are added.
-            if !(steady && dynamics.rows_after_positions_steady_into(v_half, end)) {
-                dynamics.rows_after_positions_into(t, q, v_half, end)?;
+            let kept = (steady && dynamics.rows_after_positions_steady_into(v_half, end))
+                || dynamics.rows_after_positions_into(t, q, v_half, end)?;
+            if let Some(history) = history {
+                // The distances just measured are the end rows'.
+                history.ends = kept;
             }
             return Ok(iterations);
         }
