@@ -534,10 +534,14 @@ impl Subprogram {
                 // As for the whole program: the inputs are the roots' free symbols.
                 let program = Program::lower_in(graph, &ids, &layout).expect("the inputs are the roots' free symbols");
                 let tape = Tape::from_program(&program);
-                debug_assert!(
-                    root.iter().zip(&place).all(|(&r, p)| r == usize::MAX
-                        || tape.output_range(r) == (p.start as usize..(p.start + p.len) as usize))
-                );
+                // The roots are read where the tape writes them (the layout above, which a
+                // tape of `ids` has, taken from the tape itself rather than assumed).
+                for (&r, place) in root.iter().zip(&mut place) {
+                    if r != usize::MAX {
+                        let range = tape.output_range(r);
+                        (place.start, place.len) = (range.start as u32, range.len() as u32);
+                    }
+                }
                 (Kernel::Tape(tape), StateCopies::new(&varying, system.dim()))
             }
         };
