@@ -37,7 +37,7 @@ use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
 use crate::numeric::program::{Inputs, Program};
 use crate::numeric::tape::{Scratch, Tape};
-use crate::numeric::vector::{all_finite, dot, not_finite_bit};
+use crate::numeric::vector::{all_finite, dot, not_finite_bits};
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -1050,14 +1050,13 @@ fn finite_fill(out: &[f64], computed: bool, written: impl FnOnce() -> bool) -> b
     if all_finite(out) { computed } else { written() }
 }
 
-/// Whether every one of `xs` is finite, by their exponent bits ([`not_finite_bit`]: a few
+/// Whether every one of `xs` is finite, by their exponent bits ([`not_finite_bits`]: a few
 /// integer operations a number, no branch): the single-row fills' test of the numbers they
 /// wrote, which is what [`finite_fill`] decides (every number such a fill writes is an
 /// output or computed from one, and every output is read), without a pass over the outputs.
 #[inline(always)]
 fn finite_all(parts: &[&[f64]]) -> bool {
-    let bad = |xs: &[f64]| xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x));
-    parts.iter().fold(0u64, |all, xs| all | bad(xs)) >> 63 == 0
+    parts.iter().fold(0u64, |all, xs| all | not_finite_bits(xs)) >> 63 == 0
 }
 
 /// [`RowProgram::evaluate_motion_state_into`]'s fill for one row on one slot whose J, v and

@@ -74,7 +74,7 @@ fn row_norm_by_largest(jacobian: &[(usize, [f64; 3])], sum: f64) -> f64 {
 #[inline]
 pub(crate) fn all_finite(xs: &[f64]) -> bool {
     if xs.len() < SHORT {
-        return xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0;
+        return not_finite_bits(xs) >> 63 == 0;
     }
     all_finite_long(xs)
 }
@@ -90,6 +90,13 @@ const SHORT: usize = 32;
 pub(crate) fn not_finite_bit(x: f64) -> u64 {
     const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
     (x.to_bits() & EXPONENT) + (1 << 52)
+}
+
+/// The OR of [`not_finite_bit`] over `xs`: its top bit is clear exactly when every number
+/// is finite (the short path of [`all_finite`]; callers that test several slices OR these).
+#[inline(always)]
+pub(crate) fn not_finite_bits(xs: &[f64]) -> u64 {
+    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x))
 }
 
 /// [`all_finite`] of a long array, with AVX2 when the processor has it.
@@ -191,7 +198,7 @@ mod tests {
                         assert_eq!(all_finite(&xs), want, "{xs:?}");
                         assert_eq!(all_finite_any(&xs), want, "{xs:?}");
                         assert_eq!(all_finite_long(&xs), want, "{xs:?}");
-                        let bits = xs.iter().fold(0, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0;
+                        let bits = not_finite_bits(&xs) >> 63 == 0;
                         assert_eq!(bits, want, "{xs:?}");
                     }
                 }
