@@ -10,7 +10,8 @@ fn lagrange(args: &[&str]) -> std::process::Output {
 /// `simulate FILE ARGS… --format json --csv DIR/run.csv --plot DIR/run.svg` in a fresh
 /// directory named by `tag`: the output, the directory, the CSV and the SVG paths.
 fn simulate_with_files(tag: &str, file: &str, args: &[&str]) -> (std::process::Output, PathBuf, PathBuf, PathBuf) {
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-{tag}-{}", std::process::id()));
+    let dir =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-cli-{tag}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let (csv, svg) = (dir.join("run.csv"), dir.join("run.svg"));
     let mut all = vec!["simulate", file];
@@ -40,7 +41,8 @@ fn simulate_prints_the_json_summary_and_writes_csv_and_svg() {
 
 #[test]
 fn a_run_that_blows_up_names_step_and_constraint_and_keeps_its_csv() {
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-fail-{}", std::process::id()));
+    let dir =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-cli-fail-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let csv = dir.join("run.csv");
     // Euler without stabilisation at a huge step: the rod stretches past the scene's size.
@@ -165,7 +167,8 @@ forces = { G = "[0, 0]", F = "[0, 0]" }
 dt = 1e-3
 duration = 1.0
 "#;
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-two-scales-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("lagrange-cli-two-scales-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let path = dir.join("two_scales.toml");
     std::fs::write(&path, scene).expect("write");
@@ -192,7 +195,8 @@ fn bench_says_what_ns_per_eval_times() {
 #[test]
 fn simulate_says_how_far_off_the_initial_state_is() {
     let bead = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-off-{}", std::process::id()));
+    let dir =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-cli-off-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let path = dir.join("off.toml");
     let off =
@@ -265,7 +269,8 @@ fn simulate_starts_from_set_and_at_values_as_an_edited_file_would() {
     let text = std::fs::read_to_string("constraints/pendulum.toml").expect("file");
     let edited = text.replace("l = 1.0", "l = 2.0").replace("r = [1.0, 0.0]", "r = [2.0, 0.0]");
     assert_ne!(edited, text);
-    let dir = std::env::temp_dir().join(format!("lagrange-cli-set-{}", std::process::id()));
+    let dir =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-cli-set-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let (file, state) = (dir.join("long.toml"), dir.join("state.json"));
     std::fs::write(&file, edited).expect("write");
@@ -429,7 +434,8 @@ fn an_exact_velocity_csv_has_lambda_at_its_rows() {
     for (file, bitwise) in
         [("constraints/solvers/hanging_chain.toml", true), ("constraints/solvers/rigid_grid_10.toml", false)]
     {
-        let dir = std::env::temp_dir().join(format!("lagrange-cli-every-{}", std::process::id()));
+        let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("lagrange-cli-every-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("dir");
         let run = |every: &str| {
             let csv = dir.join(format!("every{every}.csv"));

@@ -246,7 +246,8 @@ fn the_check_command_reports_and_exits() {
     assert!(last.ends_with(" passed, 0 failed"), "{last}");
 
     // A deliberately wrong number in a temporary copy: non-zero exit, the failure located.
-    let wrong = std::env::temp_dir().join(format!("lagrange-wrong-{}.toml", std::process::id()));
+    let wrong =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-wrong-{}.toml", std::process::id()));
     std::fs::write(&wrong, text(Path::new(WIRE)).replace("lambda = { wire = 1.3275 }", "lambda = { wire = 1.0 }"))
         .expect("writes");
     let path = wrong.display().to_string();

@@ -179,7 +179,8 @@ fn json_force_sums_parse_again() {
 #[test]
 fn a_long_chains_json_lists_the_sparse_upper_triangle_of_a() {
     let n = 300;
-    let path = std::env::temp_dir().join(format!("lagrange_json_chain_{}.toml", std::process::id()));
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("lagrange_json_chain_{}.toml", std::process::id()));
     std::fs::write(&path, lagrange::scenario::chain(n)).expect("temporary file");
     let out = derive(path.to_str().expect("UTF-8 path"), &["--format", "json"]);
     let _ = std::fs::remove_file(&path);

@@ -16,7 +16,7 @@ impl TempFile {
         static COUNTER: AtomicUsize = AtomicUsize::new(0);
         let n = COUNTER.fetch_add(1, Ordering::Relaxed);
         let name = format!("lagrange-hostile-{}-{n}-{tag}.toml", std::process::id());
-        let path = std::env::temp_dir().join(name);
+        let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);
         std::fs::write(&path, bytes).expect("temp file written");
         TempFile(path)
     }
@@ -167,7 +167,8 @@ fn invalid_utf8() {
 
 #[test]
 fn missing_file() {
-    let path = std::env::temp_dir().join(format!("lagrange-hostile-{}-does-not-exist.toml", std::process::id()));
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("lagrange-hostile-{}-does-not-exist.toml", std::process::id()));
     let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("derive").arg(&path).output().expect("binary runs");
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("cannot read"));
@@ -402,7 +403,8 @@ fn csv_headers_quote_and_defuse_names() {
     }
     let text = bead_scene().replace("name = \"wire\"", "name = \"a,b\\nc\"");
     let file = TempFile::new("csvname", text.as_bytes());
-    let csv = std::env::temp_dir().join(format!("lagrange-hostile-{}-names.csv", std::process::id()));
+    let csv = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("lagrange-hostile-{}-names.csv", std::process::id()));
     let (code, _, stderr) = run(&[
         "simulate".as_ref(),
         file.0.as_os_str(),

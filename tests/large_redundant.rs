@@ -125,7 +125,8 @@ fn contradicting_rows_past_the_dense_limit_stop_the_run_with_an_error() {
 /// Runs the command line on the grid with a twin of `length` written to a temporary file:
 /// exit code, stdout and stderr.
 fn cli(length: &str, args: &[&str]) -> (Option<i32>, String, String) {
-    let path = std::env::temp_dir().join(format!("lagrange-twin-{length}-{}.toml", std::process::id()));
+    let path = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("lagrange-twin-{length}-{}.toml", std::process::id()));
     std::fs::write(&path, twin_text(length)).expect("writes the file");
     let file = path.to_str().expect("utf-8");
     let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).args(args).arg(file).output().expect("runs");

@@ -104,7 +104,7 @@ fn states_from_the_command_line_are_validated_values() {
 
 #[test]
 fn solve_reports_every_syntax_error_of_a_state_before_a_value_that_does_not_fit() {
-    let dir = std::env::temp_dir().join(format!("lagrange-model-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-model-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a temporary directory");
     let at = dir.join("state.toml");
     std::fs::write(&at, "x = 1.0\n").expect("writes the state");

@@ -193,7 +193,7 @@ const GOLDEN_RUNS: [(&str, &[&str], u64, usize); 6] = [
 
 #[test]
 fn simulate_csv_matches_its_golden_hash() {
-    let dir = std::env::temp_dir().join(format!("lagrange-golden-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-golden-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a temporary folder");
     let mut report = Vec::new();
     for (i, (file, options, hash, len)) in GOLDEN_RUNS.iter().enumerate() {

@@ -308,7 +308,7 @@ fn simulate_swings_the_pinned_rod_as_a_physical_pendulum() {
 /// velocities, one number each.
 #[test]
 fn the_csv_has_the_angle_and_the_angular_velocity() {
-    let dir = std::env::temp_dir().join(format!("lagrange-rigid-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-rigid-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a temporary folder");
     let csv = dir.join("rod.csv");
     let path = csv.to_str().expect("UTF-8");

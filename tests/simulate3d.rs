@@ -250,7 +250,7 @@ fn lagrange(args: &[&str]) -> std::process::Output {
 
 #[test]
 fn the_command_line_simulates_a_3d_top_with_quaternion_columns() {
-    let dir = std::env::temp_dir().join(format!("lagrange-sim3d-{}", std::process::id()));
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-sim3d-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("a temporary folder");
     let csv = dir.join("top.csv");
     let out = lagrange(&[
