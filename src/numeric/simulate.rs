@@ -689,8 +689,10 @@ impl<'s> Simulation<'s> {
         // The next sampled step, a multiple of `stride` (counted, rather than a division
         // of n at every step).
         let mut next_sample = 0;
+        // Step n's time t₀ + n dt, computed once a step: the last step's t1 (the same
+        // formula), and at the start as at n = 0.
+        let mut t = self.t0 + 0.0 * s.dt;
         for n in 0..=s.steps {
-            let t = self.t0 + n as f64 * s.dt;
             self.dynamics.step = n;
             // 3D rigid bodies: the rotation vectors of the last step into the orientations.
             if self.three_d {
@@ -778,7 +780,9 @@ impl<'s> Simulation<'s> {
             copy_slots(&mut self.a, &self.dynamics.solution().acceleration);
             fold(&self.start, &mut self.a);
             self.dynamics.step = n + 1;
-            self.advance(n, &reach)?;
+            let t1 = self.t0 + (n + 1) as f64 * s.dt;
+            self.advance(&s, n, [t, t1], &reach)?;
+            t = t1;
         }
         Ok(())
     }
@@ -869,14 +873,12 @@ impl<'s> Simulation<'s> {
         shown.map_err(SimError::Output)
     }
 
-    /// From step `n` (its rows in `self.start`, its accelerations in `self.a`) to step
-    /// n + 1: integrate, then stabilise and resolve contacts as the settings say; the rows
-    /// at the end, where there are any, in `self.end`.
+    /// From step `n` at time `t` (its rows in `self.start`, its accelerations in `self.a`)
+    /// to step n + 1 at `t1`: integrate, then stabilise and resolve contacts as the
+    /// settings `s` (the run's) say; the rows at the end, where there are any, in `self.end`.
     #[inline(always)]
-    fn advance(&mut self, n: u64, reach: &Reach) -> Result<(), SimError> {
-        let s = self.settings;
+    fn advance(&mut self, s: &Settings, n: u64, [t, t1]: [f64; 2], reach: &Reach) -> Result<(), SimError> {
         let has_inequalities = self.has_inequalities;
-        let (t, t1) = (self.t0 + n as f64 * s.dt, self.t0 + (n + 1) as f64 * s.dt);
         // The end rows' mark, when the velocity step solved them through a kept factor.
         // The end rows' C/κ go to `values` before the step spends them (`Simulation::carry`).
         let velocity_step =
