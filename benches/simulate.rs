@@ -15,6 +15,7 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use lagrange::model::file::load;
 use lagrange::numeric::integrate::Integrator;
+use lagrange::numeric::simulate::Measure;
 use lagrange::numeric::stabilize::Stabilize;
 use lagrange::scenario::Scenario;
 
@@ -92,6 +93,21 @@ fn pendulum_steps(bencher: divan::Bencher, steps: u64) {
     bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
 }
 
+/// [`pendulum_steps`] asking for the steps alone (`Measure::Checks`: no energy balance,
+/// no samples, no largest |C| and |Ċ|; the checks that stop a run made as ever), as a
+/// library caller that wants the trajectory runs it: the same trajectory bit for bit.
+#[divan::bench(args = [STEPS, 1000], sample_count = 20)]
+fn pendulum_steps_lean(bencher: divan::Bencher, steps: u64) {
+    let text = std::fs::read_to_string("constraints/pendulum.toml").expect("file");
+    let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
+    let mut settings = s.settings();
+    settings.integrator = Integrator::Verlet;
+    settings.stabilize = Stabilize::PROJECTION;
+    settings.steps = steps;
+    settings.measure = Measure::Checks;
+    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+}
+
 /// The baseline of [`pendulum_steps`]: `steps` steps of [`handwritten_pendulum_step`]'s
 /// Verlet step with the closed-form λ and projection.
 #[divan::bench(args = [STEPS, 1000], sample_count = 20)]
@@ -134,6 +150,19 @@ fn chain_steps(bencher: divan::Bencher, n: usize) {
     settings.integrator = Integrator::Verlet;
     settings.stabilize = Stabilize::PROJECTION;
     settings.steps = STEPS;
+    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+}
+
+/// [`chain_steps`] asking for the steps alone (`Measure::Checks`, as
+/// [`pendulum_steps_lean`]).
+#[divan::bench(args = [10, 100, 1000], sample_count = 5, sample_size = 1)]
+fn chain_steps_lean(bencher: divan::Bencher, n: usize) {
+    let s = chain(n);
+    let mut settings = s.settings();
+    settings.integrator = Integrator::Verlet;
+    settings.stabilize = Stabilize::PROJECTION;
+    settings.steps = STEPS;
+    settings.measure = Measure::Checks;
     bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
 }
 

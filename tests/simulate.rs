@@ -685,3 +685,82 @@ fn a_state_evaluation_says_whether_every_number_it_wrote_is_finite() {
         assert!(finite > 1_000 && not > 300, "{path}: finite {finite}, not {not}");
     }
 }
+
+/// The bits of what an observer sees of a frame but its energy balance: step, time,
+/// positions, velocities, orientations, the rows' C/κ, Ċ/κ and J, λ.
+fn frame_bits(f: &lagrange::numeric::simulate::Frame) -> Vec<u64> {
+    let mut bits = vec![f.step, f.time.to_bits()];
+    let vectors = f.position.iter().chain(f.velocity).flatten();
+    bits.extend(vectors.chain(f.orientations.iter().flatten()).map(|x| x.to_bits()));
+    for row in &f.rows.rows {
+        bits.extend([row.value.to_bits(), row.rate.to_bits()]);
+        bits.extend(row.jacobian.iter().flat_map(|(b, j)| [*b as u64, j[0].to_bits(), j[1].to_bits(), j[2].to_bits()]));
+    }
+    bits.extend(f.lambda.iter().map(|x| x.to_bits()));
+    bits
+}
+
+#[test]
+fn a_run_that_measures_only_its_checks_has_the_same_trajectory_and_says_what_it_left_out() {
+    use lagrange::numeric::simulate::{Measure, Summary};
+    let bits = |s: &Summary| {
+        let states = s.final_position.iter().chain(&s.final_velocity).flatten();
+        states.map(|x| x.to_bits()).collect::<Vec<_>>()
+    };
+    let plans = [
+        (Integrator::Verlet, Stabilize::PROJECTION, 1.0),
+        (Integrator::Rk4, Stabilize::BAUMGARTE, 1.0),
+        (Integrator::Euler, Stabilize::None, 1.0),
+        // A bound so close that drift stops the run: the check stays under either measure.
+        (Integrator::Euler, Stabilize::None, 1e-9),
+    ];
+    let mut runs = (0, 0);
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard"]) {
+        // Contacts through their bounces and rests (the bounce speed and the contacts' rate
+        // scale come from the start's accelerations under either measure), the rest briefly.
+        let contacts = s.system.constraints.iter().any(|c| c.inequality);
+        let steps = if contacts { ((s.scene.duration / s.scene.dt) as u64).min(4000) } else { 60 };
+        for (integrator, stabilize, blowup) in plans {
+            let mut settings = settings(&s, integrator, stabilize, s.scene.dt, steps);
+            settings.blowup = blowup;
+            let mut run = |measure| {
+                settings.measure = measure;
+                let mut frames = Vec::new();
+                let mut energies = Vec::new();
+                let result = s.simulate(settings, &mut |f| {
+                    frames.push(frame_bits(f));
+                    energies.push(f.energy_error);
+                    Ok(())
+                });
+                (result, frames, energies)
+            };
+            let (full, full_frames, full_energies) = run(Measure::Everything);
+            let (lean, lean_frames, lean_energies) = run(Measure::Checks);
+            let at = format!("{} {integrator:?} {stabilize:?} blowup {blowup}", path.display());
+            assert_eq!(lean_frames, full_frames, "{at}: the frames");
+            assert!(full_energies.iter().all(|e| !e.is_nan()), "{at}: the full run's balance");
+            assert!(lean_energies.iter().all(|e| e.is_nan()), "{at}: the lean run keeps no balance");
+            let (full, lean, stopped) = match (full, lean) {
+                (Ok(full), Ok(lean)) => (full, lean, false),
+                (Err(full), Err(lean)) => {
+                    assert_eq!(lean.error, full.error, "{at}: the same stop");
+                    runs.1 += 1;
+                    (full.summary, lean.summary, true)
+                }
+                (full, lean) => panic!("{at}: {:?} against {:?}", full.map(|s| s.steps), lean.map(|s| s.steps)),
+            };
+            runs.0 += 1;
+            assert_eq!(bits(&lean), bits(&full), "{at}: the final state");
+            assert_eq!(lean.final_state, full.final_state, "{at}");
+            assert_eq!((lean.steps, lean.duration, lean.evaluations), (full.steps, full.duration, full.evaluations));
+            assert_eq!(lean.unconverged, full.unconverged, "{at}: unconverged projections are counted");
+            // What the lean run says it left out.
+            assert_eq!((full.measured, lean.measured), (Measure::Everything, Measure::Checks), "{at}");
+            assert!(lean.samples.is_empty() && lean.energy_rel_drift.is_none(), "{at}");
+            assert_eq!([lean.max_abs_c, lean.max_abs_c_dot, lean.final_energy_error, lean.max_kinetic], [0.0; 4]);
+            // The full run samples every state it records (none when stopped at its start).
+            assert!(!full.samples.is_empty() || (stopped && full.steps == 0), "{at}: the full run samples");
+        }
+    }
+    assert!(runs.0 > 100 && runs.1 > 10, "{runs:?} runs, of which stopped");
+}

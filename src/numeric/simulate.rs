@@ -57,6 +57,39 @@ pub struct Settings {
     pub blowup: f64,
     /// Samples kept for plots (trajectory, |C|, energy); the CSV sees every step.
     pub samples: usize,
+    /// What the run measures besides its steps and the checks that stop it: everything
+    /// `lagrange simulate` reports ([`Measure::Everything`], the default), or the checks
+    /// alone ([`Measure::Checks`]).
+    pub measure: Measure,
+}
+
+/// What a run measures besides its steps ([`Settings::measure`]): the figures of the summary
+/// and the frames, which cost a run of a few rows a fifth of its step.
+///
+/// The checks are made under either: a state or a row that is not finite and a constraint
+/// farther than `blowup` × the scene's length from its surface stop the run
+/// ([`SimError`]), projections short of their tolerance are counted
+/// ([`Summary::unconverged`]). The trajectory is the same bit for bit: nothing left out
+/// feeds a step.
+///
+/// ```
+/// use lagrange::numeric::simulate::{Measure, Settings};
+/// let mut settings = Settings::new(1e-3, 1.0);
+/// assert_eq!(settings.measure, Measure::Everything);
+/// settings.measure = Measure::Checks; // the steps, without the energy balance and samples
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Measure {
+    /// Everything `lagrange simulate` reports: the largest |C/κ| and |Ċ/κ|, the energy
+    /// balance (in the summary and in every [`Frame`]) and the plot samples.
+    #[default]
+    Everything,
+    /// The steps and their checks only. The summary says so ([`Summary::measured`]) and
+    /// leaves the figures out: `max_abs_c`, `max_abs_c_dot`, `final_energy_error` and
+    /// `max_kinetic` are not measured (0), `energy_rel_drift` is `None` and `samples` empty;
+    /// a [`Frame`]'s `energy_error` is NaN. `steps`, `duration`, `evaluations`,
+    /// `unconverged` and the final state are as under [`Measure::Everything`].
+    Checks,
 }
 
 impl Settings {
@@ -69,6 +102,7 @@ impl Settings {
             restitution: 0.0,
             blowup: 1.0,
             samples: SAMPLES,
+            measure: Measure::Everything,
         }
     }
 
@@ -194,7 +228,7 @@ pub struct Frame<'a> {
     /// The rows at this state (C/κ, Ċ/κ per constraint).
     pub rows: &'a Rows,
     pub lambda: &'a [f64],
-    /// (T − T₀) − W.
+    /// (T − T₀) − W; NaN when the run keeps no energy balance ([`Measure::Checks`]).
     pub energy_error: f64,
 }
 
@@ -291,15 +325,21 @@ pub struct Summary {
     /// Simulated time.
     pub duration: f64,
     pub wall_seconds: f64,
-    /// max over steps and constraints of |C/κ| (inequalities: their violation only).
+    /// What the run measured ([`Settings::measure`]): under [`Measure::Checks`] the
+    /// figures below that say so were not measured, and hold 0, `None` or nothing.
+    pub measured: Measure,
+    /// max over steps and constraints of |C/κ| (inequalities: their violation only); not
+    /// measured under [`Measure::Checks`].
     pub max_abs_c: f64,
-    /// max of |Ċ/κ| (inequalities: only while touching and closing).
+    /// max of |Ċ/κ| (inequalities: only while touching and closing); not measured under
+    /// [`Measure::Checks`].
     pub max_abs_c_dot: f64,
     /// max |E| / max(max T, `work_scale` at step 0) (max |E| where both are 0); None
-    /// when a constraint depends on time.
+    /// when a constraint depends on time, or under [`Measure::Checks`].
     pub energy_rel_drift: Option<f64>,
     /// The energy balance E at the end, and max T (±∞ when outside the f64 range in the
-    /// scene's unit; the ratio above is always finite).
+    /// scene's unit; the ratio above is always finite); not measured under
+    /// [`Measure::Checks`].
     pub final_energy_error: f64,
     pub max_kinetic: f64,
     /// Row evaluations (the cost unit).
@@ -315,6 +355,8 @@ pub struct Summary {
     pub final_state: Vec<(String, Value)>,
     pub final_position: Vec<[f64; 3]>,
     pub final_velocity: Vec<[f64; 3]>,
+    /// Samples for plots (at most [`Settings::samples`], and the last step); none under
+    /// [`Measure::Checks`].
     pub samples: Vec<Sample>,
 }
 
@@ -513,6 +555,7 @@ impl<'s> Simulation<'s> {
             integrator: s.integrator.name().into(),
             stabilize: s.stabilize.name().into(),
             dt: s.dt,
+            measured: s.measure,
             unit_exponent: self.unit.as_ref().map_or(0, |u| u.exponent),
             ..Summary::default()
         };
@@ -589,15 +632,19 @@ impl<'s> Simulation<'s> {
     ) -> Result<(), SimError> {
         let mut figures = Figures::default();
         let mut balance = EnergyBalance::default();
-        let result = self.steps(s, summary, &mut figures, &mut balance, observe);
+        // One loop for each measure, the figures' work compiled out of the other's.
+        let result = match s.measure {
+            Measure::Everything => self.steps::<true>(s, summary, &mut figures, &mut balance, observe),
+            Measure::Checks => self.steps::<false>(s, summary, &mut figures, &mut balance, observe),
+        };
         // What the steps recorded, whether the run ended or stopped.
         let unit = self.unit.as_ref();
         let energy_back = |x: f64| unit.map_or(x, |u| u.energy(x));
-        summary.max_abs_c = figures.max_abs_c;
-        summary.max_abs_c_dot = figures.max_abs_c_dot;
         summary.steps = figures.steps;
         summary.duration = figures.steps as f64 * s.dt;
-        if figures.recorded {
+        if figures.recorded && s.measure == Measure::Everything {
+            summary.max_abs_c = figures.max_abs_c;
+            summary.max_abs_c_dot = figures.max_abs_c_dot;
             // The ratio is the same in any unit; the energies themselves may leave the f64
             // range in the caller's (a 1e155 m pendulum has T ≈ 1e311 J).
             summary.max_kinetic = energy_back(balance.max_kinetic);
@@ -612,7 +659,9 @@ impl<'s> Simulation<'s> {
 
     /// The steps of [`run_inner`](Simulation::run_inner): the summary's running figures go
     /// to `figures` and `balance`, which it writes into the summary once the steps end.
-    fn steps(
+    /// `MEASURE`: whether the run measures them ([`Measure::Everything`]), else only the
+    /// checks are made, the steps counted and the start's largest acceleration taken.
+    fn steps<const MEASURE: bool>(
         &mut self,
         s: Settings,
         summary: &mut Summary,
@@ -632,12 +681,18 @@ impl<'s> Simulation<'s> {
         let stride = (s.steps / s.samples.max(1) as u64).max(1);
         let plotted = system.bodies.len().min(PLOTTED_BODIES);
         // Every sample the run will keep, at once (a step's push never reallocates).
-        summary.samples.reserve((s.steps / stride).saturating_add(2).min(s.samples.saturating_add(2) as u64) as usize);
+        if MEASURE {
+            summary
+                .samples
+                .reserve((s.steps / stride).saturating_add(2).min(s.samples.saturating_add(2) as u64) as usize);
+        }
         // The next sampled step, a multiple of `stride` (counted, rather than a division
         // of n at every step).
         let mut next_sample = 0;
+        // Step n's time t₀ + n dt, computed once a step: the last step's t1 (the same
+        // formula), and at the start as at n = 0.
+        let mut t = self.t0 + 0.0 * s.dt;
         for n in 0..=s.steps {
-            let t = self.t0 + n as f64 * s.dt;
             self.dynamics.step = n;
             // 3D rigid bodies: the rotation vectors of the last step into the orientations.
             if self.three_d {
@@ -662,7 +717,8 @@ impl<'s> Simulation<'s> {
             }
             // The rows' distances, when SHAKE measured them at these C and J.
             let known = self.shake.end_distances(kept);
-            let (c_max, c_dot_max, left) = Self::drift(system, self.unit.as_ref(), &self.start, known, n, t, &reach)?;
+            let (c_max, c_dot_max, left) =
+                Self::drift::<MEASURE>(system, self.unit.as_ref(), &self.start, known, n, t, &reach)?;
             let rows = &self.start;
             // Every step's positions were projected to `bound` (the start's are as given).
             if let (Stabilize::Projection { tolerance, .. }, true) = (s.stabilize, n > 0) {
@@ -671,9 +727,17 @@ impl<'s> Simulation<'s> {
                     Unconverged::count(&mut summary.unconverged, n, length_back(left), length_back(bound));
                 }
             }
-            figures.max_abs_c = figures.max_abs_c.max(c_max);
-            figures.max_abs_c_dot = figures.max_abs_c_dot.max(c_dot_max);
-            let (energy_error, accel) = balance.record(rows, n, s.dt);
+            // E(t) and, at step 0, the largest |M⁻¹F|, which the steps need (not E) under either.
+            let (energy_error, accel) = if MEASURE {
+                figures.max_abs_c = figures.max_abs_c.max(c_max);
+                figures.max_abs_c_dot = figures.max_abs_c_dot.max(c_dot_max);
+                let (energy_error, accel) = balance.record(rows, n, s.dt);
+                (energy_back(energy_error), accel)
+            } else if n == 0 {
+                (f64::NAN, largest_acceleration(rows))
+            } else {
+                (f64::NAN, 0.0)
+            };
             if n == 0 {
                 let speed = self.v.iter().map(safe_norm).fold(0.0, f64::max);
                 // Approaches slower than what ten steps of the external forces build up do not bounce.
@@ -684,10 +748,9 @@ impl<'s> Simulation<'s> {
                 let scale = s.dt * accel;
                 self.dynamics.settings.speed_scale = if scale.is_finite() { scale } else { 0.0 };
             }
-            let energy_error = energy_back(energy_error);
             figures.energy_error = energy_error;
             figures.recorded = true;
-            if n == 0 {
+            if MEASURE && n == 0 {
                 balance.work_scale = work_scale(&rows.force, system.bodies.len(), length);
             }
             self.dynamics.solve_known(&mut self.start, self.start_made);
@@ -701,7 +764,7 @@ impl<'s> Simulation<'s> {
             if sampled {
                 next_sample += stride;
             }
-            if sampled || n == s.steps {
+            if MEASURE && (sampled || n == s.steps) {
                 // Written where it is kept: a `Sample` built aside is a copy of its positions' room.
                 let position = self.q[..plotted].iter().map(|x| unit.as_ref().map_or(*x, |u| u.vector(*x)));
                 summary.samples.push(Sample { time: t, max_abs_c: c_max, energy_error, position: Plotted::EMPTY });
@@ -717,7 +780,9 @@ impl<'s> Simulation<'s> {
             copy_slots(&mut self.a, &self.dynamics.solution().acceleration);
             fold(&self.start, &mut self.a);
             self.dynamics.step = n + 1;
-            self.advance(n, &reach)?;
+            let t1 = self.t0 + (n + 1) as f64 * s.dt;
+            self.advance(&s, n, [t, t1], &reach)?;
+            t = t1;
         }
         Ok(())
     }
@@ -727,7 +792,9 @@ impl<'s> Simulation<'s> {
     /// distance |C|/‖∇C‖ of the same (in the run's unit); stops the run when a value is not
     /// finite or a surface is out of reach. `known`: each row's distance, when SHAKE measured
     /// it at the same C and J (`ShakeHistory::end_distances`), else computed here.
-    fn drift(
+    /// `FIGURES`: whether |C| and |Ċ| are wanted; else they are 0 and only the checks and the
+    /// distance are made.
+    fn drift<const FIGURES: bool>(
         system: &System,
         unit: Option<&Unit>,
         rows: &Rows,
@@ -758,6 +825,10 @@ impl<'s> Simulation<'s> {
                     step => SimError::Drift { step, time: t, constraint, value, distance, bound },
                 });
             }
+            if !FIGURES {
+                left = left.max(if row.inequality { -d } else { d.abs() });
+                continue;
+            }
             let (value, rate) = (row_back(k, row.value), row_back(k, row.rate));
             if row.inequality {
                 c_max = c_max.max((-value).max(0.0));
@@ -776,6 +847,7 @@ impl<'s> Simulation<'s> {
 
     /// Hands the state of step `n` to the observer, in the caller's unit (its rows are the
     /// start's, λ of the step's solve, `Dynamics::solution`).
+    #[inline(always)]
     fn show(
         &mut self,
         n: u64,
@@ -801,13 +873,12 @@ impl<'s> Simulation<'s> {
         shown.map_err(SimError::Output)
     }
 
-    /// From step `n` (its rows in `self.start`, its accelerations in `self.a`) to step
-    /// n + 1: integrate, then stabilise and resolve contacts as the settings say; the rows
-    /// at the end, where there are any, in `self.end`.
-    fn advance(&mut self, n: u64, reach: &Reach) -> Result<(), SimError> {
-        let s = self.settings;
+    /// From step `n` at time `t` (its rows in `self.start`, its accelerations in `self.a`)
+    /// to step n + 1 at `t1`: integrate, then stabilise and resolve contacts as the
+    /// settings `s` (the run's) say; the rows at the end, where there are any, in `self.end`.
+    #[inline(always)]
+    fn advance(&mut self, s: &Settings, n: u64, [t, t1]: [f64; 2], reach: &Reach) -> Result<(), SimError> {
         let has_inequalities = self.has_inequalities;
-        let (t, t1) = (self.t0 + n as f64 * s.dt, self.t0 + (n + 1) as f64 * s.dt);
         // The end rows' mark, when the velocity step solved them through a kept factor.
         // The end rows' C/κ go to `values` before the step spends them (`Simulation::carry`).
         let velocity_step =
@@ -946,6 +1017,13 @@ pub(crate) fn work_scale(force: &[[f64; 3]], bodies: usize, size: f64) -> f64 {
     forces.iter().map(safe_norm).sum::<f64>() * size + torques.iter().map(safe_norm).sum::<f64>()
 }
 
+/// The largest |M⁻¹F| over the rows' slots: what the step's start measures for the bounce
+/// speed and the contacts' rate scale (`Simulation::steps`).
+fn largest_acceleration(rows: &Rows) -> f64 {
+    let slots = rows.force.iter().zip(&rows.inverse_mass);
+    slots.fold(0.0f64, |accel, (f, w)| accel.max(safe_norm(f) * w))
+}
+
 /// The energy balance's running sums: E(t) = T − T₀ − ∫ F·v dt, the integral by the
 /// trapezoid with its Euler–Maclaurin end correction.
 #[derive(Default)]
@@ -967,17 +1045,15 @@ impl EnergyBalance {
     /// Records step `n` from its rows; returns E(t) in the run's unit and, at step 0, the
     /// largest |M⁻¹F| (0 at the other steps).
     fn record(&mut self, rows: &Rows, n: u64, dt: f64) -> (f64, f64) {
-        let (mut kinetic, mut power, mut accel) = (0.0, 0.0, 0.0f64);
+        let (mut kinetic, mut power) = (0.0, 0.0);
         // Over the rows' slots: a 3D rigid body's T = ½ Σₖ Iₖ (eₖ·ω)², and its forces
         // τₖ − (ω × Iω)ₖ, whose gyroscopic part does no work.
         for ((u, f), w) in rows.velocity.iter().zip(&rows.force).zip(&rows.inverse_mass) {
             kinetic += 0.5 * dot(u, u) / w;
             power += dot(f, u);
-            // The largest acceleration is wanted at step 0 only (the bounce speed).
-            if n == 0 {
-                accel = accel.max(safe_norm(f) * w);
-            }
         }
+        // The largest acceleration is wanted at step 0 only (the bounce speed).
+        let accel = if n == 0 { largest_acceleration(rows) } else { 0.0 };
         if n == 0 {
             self.kinetic0 = kinetic;
         } else {
