@@ -12,7 +12,7 @@
 //! equality solve on the rows Clarabel finds active. Not here: choosing the rows, scaling.
 
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus};
+use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, NonnegativeConeT, SolverStatus, SupportedConeT};
 
 /// What the QP solve came to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -115,19 +115,55 @@ pub fn solve_qp(a: &Triplets, b: &[f64], nonnegative: &[bool]) -> QpSolution {
     let h = vec![0.0; m];
     let cones = if m > 0 { vec![NonnegativeConeT(m)] } else { Vec::new() };
     let settings = DefaultSettings { verbose: false, ..DefaultSettings::default() };
-    let mut solver = match DefaultSolver::new(&p, b, &g, &h, &cones, settings) {
-        Ok(s) => s,
-        Err(_) => {
-            return QpSolution {
-                status: QpStatus::Rejected,
-                lambda: vec![0.0; n],
-                iterations: 0,
-                residuals: Kkt::default(),
-            };
-        }
+    let Some(mut solver) = clarabel_solve(&p, b, &g, &h, &cones, settings.clone()) else {
+        return QpSolution {
+            status: QpStatus::Rejected,
+            lambda: vec![0.0; n],
+            iterations: 0,
+            residuals: Kkt::default(),
+        };
     };
+    let mut status = qp_status(solver.solution.status);
+    if status == QpStatus::NumericalError {
+        // Clarabel's equilibration can stall it on a QP that is unbounded (contacts no
+        // acceleration satisfies): it stops without a verdict where the unscaled problem
+        // gives one (a 2D body held by four contacts that leave it no room, a case found by
+        // `tests/numeric_solve.rs`'s `contacts_are_complementary`). Once more without it; a
+        // verdict there is kept, else the first answer stands.
+        let again = DefaultSettings { equilibrate_enable: false, ..settings };
+        if let Some(retry) = clarabel_solve(&p, b, &g, &h, &cones, again) {
+            let verdict = qp_status(retry.solution.status);
+            if verdict != QpStatus::NumericalError {
+                (solver, status) = (retry, verdict);
+            }
+        }
+    }
+    let mut lambda = solver.solution.x.clone();
+    if !matches!(status, QpStatus::Solved | QpStatus::AlmostSolved) || lambda.iter().any(|x| !x.is_finite()) {
+        // Certificates are not answers: report zeros with the status.
+        lambda = vec![0.0; n];
+    }
+    let residuals = kkt(a, b, nonnegative, &lambda);
+    QpSolution { status, lambda, iterations: solver.solution.iterations, residuals }
+}
+
+/// Clarabel's solver for the QP, solved; `None` when Clarabel refuses the problem.
+fn clarabel_solve(
+    p: &CscMatrix<f64>,
+    q: &[f64],
+    g: &CscMatrix<f64>,
+    h: &[f64],
+    cones: &[SupportedConeT<f64>],
+    settings: DefaultSettings<f64>,
+) -> Option<DefaultSolver<f64>> {
+    let mut solver = DefaultSolver::new(p, q, g, h, cones, settings).ok()?;
     solver.solve();
-    let status = match solver.solution.status {
+    Some(solver)
+}
+
+/// What Clarabel's status says of the QP.
+fn qp_status(status: SolverStatus) -> QpStatus {
+    match status {
         SolverStatus::Solved => QpStatus::Solved,
         SolverStatus::AlmostSolved => QpStatus::AlmostSolved,
         SolverStatus::PrimalInfeasible | SolverStatus::AlmostPrimalInfeasible => QpStatus::Infeasible,
@@ -137,14 +173,7 @@ pub fn solve_qp(a: &Triplets, b: &[f64], nonnegative: &[bool]) -> QpSolution {
         | SolverStatus::InsufficientProgress
         | SolverStatus::Unsolved
         | SolverStatus::CallbackTerminated => QpStatus::NumericalError,
-    };
-    let mut lambda = solver.solution.x.clone();
-    if !matches!(status, QpStatus::Solved | QpStatus::AlmostSolved) || lambda.iter().any(|x| !x.is_finite()) {
-        // Certificates are not answers: report zeros with the status.
-        lambda = vec![0.0; n];
     }
-    let residuals = kkt(a, b, nonnegative, &lambda);
-    QpSolution { status, lambda, iterations: solver.solution.iterations, residuals }
 }
 
 #[cfg(test)]
