@@ -180,6 +180,31 @@ fn qp_status(status: SolverStatus) -> QpStatus {
 mod tests {
     use super::*;
 
+    /// Four contacts on one 2D body (and one on a second) that no acceleration satisfies: the
+    /// QP is unbounded. Clarabel with its equilibration stalls ("insufficient progress");
+    /// the retry without it finds the ray (the scaled Ã and b̃ of a case
+    /// `tests/numeric_solve.rs`'s `contacts_are_complementary` found).
+    #[test]
+    fn contacts_that_leave_no_room_are_unbounded_not_a_numerical_error() {
+        let a = [
+            (0, 0, 1.0),
+            (0, 1, -0.22181819579198353),
+            (0, 2, -0.4609347847105865),
+            (0, 3, -0.5762643121190506),
+            (1, 1, 0.15264734016268328),
+            (1, 1, 0.8473526598373166),
+            (1, 2, -0.6905827646367897),
+            (1, 3, 0.8579625188148635),
+            (2, 2, 1.0000000000000002),
+            (2, 3, -0.45964705846772874),
+            (3, 3, 1.0),
+        ];
+        let b = [9.477932665563854, -4.079051392407083, 4.937874387565541, -14.068890331778551];
+        let s = solve_qp(&a, &b, &[true; 4]);
+        assert_eq!(s.status, QpStatus::Unbounded);
+        assert!(s.lambda.iter().all(|x| *x == 0.0), "a certificate is not an answer: {:?}", s.lambda);
+    }
+
     #[test]
     fn one_pushing_and_one_pulling_contact() {
         // Uncoupled rows: λ₀ = 2 (pushes), λ₁ would be −3 so it is 0 with w₁ = 3.
