@@ -127,6 +127,31 @@ fn bead_jit_bench(b: Bencher) {
     });
 }
 
+#[cfg(feature = "jit")]
+#[divan::bench(name = "bead_5_jit_read_in_place")]
+fn bead_jit_in_place_bench(b: Bencher) {
+    let tape = bead_tape();
+    let jit = tape.jit().expect("this host compiles tapes");
+    let inputs = [R[0], R[1], V[0], V[1], F[0], F[1], M];
+    let mut out = [0.0; 2];
+    b.bench_local(|| {
+        jit.eval(black_box(&inputs), &mut out);
+        black_box(&out);
+    });
+}
+
+#[divan::bench(name = "bead_3_tape_read_in_place")]
+fn bead_tape_in_place_bench(b: Bencher) {
+    let tape = bead_tape();
+    let mut scratch = tape.scratch();
+    let inputs = [R[0], R[1], V[0], V[1], F[0], F[1], M];
+    let mut out = [0.0; 2];
+    b.bench_local(|| {
+        tape.eval(black_box(&inputs), &mut scratch, &mut out);
+        black_box(&out);
+    });
+}
+
 /// Compiling a tape to machine code: the bead's force, the chain's A and b.
 #[cfg(feature = "jit")]
 #[divan::bench(name = "jit_compile", args = ["bead", "chain10_ab"], sample_count = 30)]

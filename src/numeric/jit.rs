@@ -41,6 +41,9 @@ pub enum JitError {
     /// The tape reads a register no instruction wrote (tapes from `Tape::compile` never do).
     #[error("the tape reads register {0} before writing it")]
     Malformed(u32),
+    /// A slot lies past the 2 GiB a load's offset reaches (a tape of 2²⁸ inputs).
+    #[error("slot {0} lies past a load's 32-bit offset: use `Tape::eval`")]
+    Offset(usize),
     /// The tape holds too many values at once for the compiled code's stack frame.
     #[error("the tape holds {0} temporaries at once, more than compiled code keeps on a stack: use `Tape::eval`")]
     TooLarge(usize),
@@ -228,8 +231,7 @@ impl Tape {
         // the first read to the last would lengthen its life (a big tape's frame) for a load
         // that costs what a reload from the frame would.
         let mut regs: Vec<Option<Value>> = vec![None; self.jit_registers()];
-        let offset =
-            |k: usize| i32::try_from(8 * k).map_err(|_| JitError::Codegen(format!("slot {k} is past a 32-bit offset")));
+        let offset = |k: usize| i32::try_from(8 * k).map_err(|_| JitError::Offset(k));
         let read = |b: &mut FunctionBuilder, regs: &mut Vec<Option<Value>>, k: u32| -> Result<Value, JitError> {
             let slot = regs.get_mut(k as usize).ok_or(JitError::Malformed(k))?;
             if let Some(v) = *slot {
@@ -323,7 +325,7 @@ impl Tape {
                 }
                 Code::Call(f) => {
                     let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
-                    call(&mut b, binary, func(f)? as *const () as usize, &[a, x])
+                    call(&mut b, binary, func(f) as *const () as usize, &[a, x])
                 }
                 Code::Norm2 => {
                     let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
@@ -353,30 +355,37 @@ impl Tape {
     }
 }
 
-/// The wrappers of the functions of the table, in [`Func::ALL`]'s order (a table of
-/// another length does not compile).
-const FUNCS: [extern "C" fn(f64, f64) -> f64; Func::ALL.len()] = [
-    jit_func::<0>,
-    jit_func::<1>,
-    jit_func::<2>,
-    jit_func::<3>,
-    jit_func::<4>,
-    jit_func::<5>,
-    jit_func::<6>,
-    jit_func::<7>,
-    jit_func::<8>,
-    jit_func::<9>,
-];
-
-/// The wrapper of `f`: `f.apply(&[a, b])`, as the interpreter calls it.
-fn func(f: Func) -> Result<extern "C" fn(f64, f64) -> f64, JitError> {
-    let k = Func::ALL.iter().position(|&g| g == f);
-    k.map(|k| FUNCS[k]).ok_or_else(|| JitError::Codegen(format!("no wrapper for {f:?}")))
+/// `extern "C"` wrappers of the functions of the table, each `f.apply(&[a, b])` as the
+/// interpreter calls it, and `func`, which picks one (an exhaustive match: a new function
+/// of the table does not compile without its wrapper).
+macro_rules! wrappers {
+    ($($name:ident => $f:ident),* $(,)?) => {
+        $(
+            /// The function of the table of that name, as the interpreter calls it.
+            extern "C" fn $name(a: f64, b: f64) -> f64 {
+                Func::$f.apply(&[a, b])
+            }
+        )*
+        /// The wrapper of `f`.
+        fn func(f: Func) -> extern "C" fn(f64, f64) -> f64 {
+            match f {
+                $(Func::$f => $name,)*
+            }
+        }
+    };
 }
 
-/// `Func::ALL[F].apply(&[a, b])`.
-extern "C" fn jit_func<const F: usize>(a: f64, b: f64) -> f64 {
-    Func::ALL[F].apply(&[a, b])
+wrappers! {
+    jit_sqrt => Sqrt,
+    jit_sin => Sin,
+    jit_cos => Cos,
+    jit_tan => Tan,
+    jit_asin => Asin,
+    jit_acos => Acos,
+    jit_atan => Atan,
+    jit_exp => Exp,
+    jit_ln => Ln,
+    jit_atan2 => Atan2,
 }
 
 /// `a.powi(k)`, as the interpreter's `Powi`.
