@@ -11,8 +11,8 @@
 //! below. Temporary registers become SSA values: the function is one block, inputs and
 //! constants loaded from their slices where read, outputs stored at the end.
 //!
-//! Design note: one state per call, as [`Tape::eval`]. Compiling costs time at load (tens
-//! of microseconds for a small tape, more for a big one: `docs/speed.md`) and the feature
+//! Design note: one state per call, as [`Tape::eval`]. Compiling costs time at load (about
+//! 0.1 ms for a small tape, some 10 µs an instruction for a big one: `docs/speed.md`) and the feature
 //! costs Cranelift's build, so it is off by default; callers keep the interpreter as the
 //! fallback for a host Cranelift does not support ([`JitError::Host`]).
 //!
@@ -58,6 +58,10 @@ const MAX_TEMPORARIES: usize = 1 << 15;
 
 /// A tape compiled to machine code: [`eval`](JitTape::eval) gives [`Tape::eval`]'s results,
 /// bit for bit. Its code is freed when it is dropped.
+///
+/// `Send` and `Sync` without an `unsafe impl`: the code is immutable and touches only its
+/// arguments and its own frame, so threads may run it at once; the module that owns it
+/// (`Send`, not `Sync`) sits behind a mutex that only `drop` reaches.
 pub struct JitTape {
     entry: Entry,
     /// The tape's constants, read by the code where used (as inputs are).
@@ -99,10 +103,12 @@ impl JitTape {
             self.misuse(inputs.len(), outputs.len());
         }
         // SAFETY: the lengths are checked above. The code reads `inputs` only at offsets of
-        // input slots (below `n_inputs`), `consts` below its length, writes `outputs` only at offsets of output
-        // components (below `n_outputs`), touches no other memory but its own stack, and
-        // calls only the wrappers below (safe Rust that neither panics nor unwinds); it
-        // lives as long as `self` (`drop` frees it).
+        // input slots (below `n_inputs`) and `consts` below its length, writes `outputs`
+        // only at offsets of output components (below `n_outputs`), touches no other memory
+        // but its own stack frame (at most `MAX_TEMPORARIES` spilled values, probed inline,
+        // so an overflow meets the guard page as Rust's own frames do), and calls only the
+        // wrappers below (safe Rust that neither panics nor unwinds). It lives as long as
+        // `self` (`drop` frees it).
         unsafe { (self.entry)(inputs.as_ptr(), self.consts.as_ptr(), outputs.as_mut_ptr()) }
     }
 
@@ -130,8 +136,10 @@ impl JitTape {
 impl Tape {
     /// Compiles the tape to machine code for this processor (Cranelift).
     ///
-    /// Fails, rather than panicking, on a host Cranelift does not support: keep the tape
-    /// and call [`Tape::eval`] then.
+    /// Fails, rather than panicking, on a host Cranelift does not support
+    /// ([`JitError::Host`]) and for a tape holding more than 32 768 values at once
+    /// ([`JitError::TooLarge`]: its frame would not fit a thread's stack): keep the tape and
+    /// call [`Tape::eval`] then.
     ///
     /// ```
     /// # use lagrange::model::file::load;
