@@ -6,6 +6,10 @@
 //! `benches/generated/`, kept current by `tests/generate.rs`), the compiled tape for one
 //! state, and the tape batched over many states (structure of arrays).
 //!
+//! With the `jit` feature, the bead and the chain also run as the tape compiled to machine
+//! code (`bead_4_jit`, `chain10_ab_4_jit`: `Tape::jit`, one state a call), and `jit_compile`
+//! times the compilation itself (what loading a tape would cost).
+//!
 //! The bead also runs over a few states at once (`bead_few_*`: 1 to 8): the handwritten loop,
 //! `eval_batch_serial`, and `Tape::eval_few`, whose registers hold all the states' values.
 //!
@@ -108,6 +112,52 @@ fn bead_tape_bench(b: Bencher) {
         tape.eval(black_box(&inputs), &mut scratch, &mut out);
         black_box(out)
     });
+}
+
+#[cfg(feature = "jit")]
+#[divan::bench(name = "bead_4_jit")]
+fn bead_jit_bench(b: Bencher) {
+    let tape = bead_tape();
+    let jit = tape.jit().expect("this host compiles tapes");
+    let inputs = [R[0], R[1], V[0], V[1], F[0], F[1], M];
+    let mut out = [0.0; 2];
+    b.bench_local(|| {
+        jit.eval(black_box(&inputs), &mut out);
+        black_box(out)
+    });
+}
+
+#[cfg(feature = "jit")]
+#[divan::bench(name = "bead_5_jit_read_in_place")]
+fn bead_jit_in_place_bench(b: Bencher) {
+    let tape = bead_tape();
+    let jit = tape.jit().expect("this host compiles tapes");
+    let inputs = [R[0], R[1], V[0], V[1], F[0], F[1], M];
+    let mut out = [0.0; 2];
+    b.bench_local(|| {
+        jit.eval(black_box(&inputs), &mut out);
+        black_box(&out);
+    });
+}
+
+#[divan::bench(name = "bead_3_tape_read_in_place")]
+fn bead_tape_in_place_bench(b: Bencher) {
+    let tape = bead_tape();
+    let mut scratch = tape.scratch();
+    let inputs = [R[0], R[1], V[0], V[1], F[0], F[1], M];
+    let mut out = [0.0; 2];
+    b.bench_local(|| {
+        tape.eval(black_box(&inputs), &mut scratch, &mut out);
+        black_box(&out);
+    });
+}
+
+/// Compiling a tape to machine code: the bead's force, the chain's A and b.
+#[cfg(feature = "jit")]
+#[divan::bench(name = "jit_compile", args = ["bead", "chain10_ab"], sample_count = 30)]
+fn jit_compile(b: Bencher, what: &str) {
+    let tape = if what == "bead" { bead_tape() } else { chain_tape() };
+    b.bench_local(|| tape.jit().expect("this host compiles tapes"));
 }
 
 /// Random bead states, structure of arrays: rows rx, ry, vx, vy, Fx, Fy, m.
@@ -358,6 +408,16 @@ fn chain_tape_bench(b: Bencher) {
     let inputs = chain_inputs();
     let mut out = vec![0.0; tape.output_len()];
     b.bench_local(|| tape.eval(black_box(&inputs), &mut scratch, &mut out));
+}
+
+#[cfg(feature = "jit")]
+#[divan::bench(name = "chain10_ab_4_jit")]
+fn chain_jit_bench(b: Bencher) {
+    let tape = chain_tape();
+    let jit = tape.jit().expect("this host compiles tapes");
+    let inputs = chain_inputs();
+    let mut out = vec![0.0; tape.output_len()];
+    b.bench_local(|| jit.eval(black_box(&inputs), &mut out));
 }
 
 #[divan::bench(name = "chain10_ab_batch_tape", args = BATCHES)]

@@ -20,6 +20,8 @@ pub mod contact;
 pub mod dynamics;
 pub(crate) mod gram;
 pub mod integrate;
+#[cfg(feature = "jit")]
+pub mod jit;
 pub mod program;
 pub mod qp;
 pub mod random;
@@ -35,4 +37,6 @@ pub mod tape;
 pub mod vector;
 pub mod velocity;
 
+#[cfg(feature = "jit")]
+pub use jit::{JitError, JitTape};
 pub use tape::{BatchScratch, FewScratch, Scratch, Tape, TapeError};

@@ -75,7 +75,7 @@ pub enum TapeError {
 /// of a lowered dot product. They round exactly as the separate operations do (no FMA), so
 /// fusing changes the instruction count, never a result.
 #[derive(Clone, Copy, Debug, PartialEq)]
-enum Code {
+pub(crate) enum Code {
     Add,
     Sub,
     Mul,
@@ -113,14 +113,14 @@ enum Code {
 
 /// `r[d] = code(r[a], r[b], r[c], r[e])`. Unused operands repeat `a`; `d` is never an operand.
 #[derive(Clone, Copy, Debug)]
-struct Inst {
-    code: Code,
-    imm: i32,
-    d: u32,
-    a: u32,
-    b: u32,
-    c: u32,
-    e: u32,
+pub(crate) struct Inst {
+    pub(crate) code: Code,
+    pub(crate) imm: i32,
+    pub(crate) d: u32,
+    pub(crate) a: u32,
+    pub(crate) b: u32,
+    pub(crate) c: u32,
+    pub(crate) e: u32,
 }
 
 /// What a single-state [`Step`] computes. `A`, `B`, `C` variants read that operand from the
@@ -831,6 +831,30 @@ impl Tape {
     /// Number of instructions run per state.
     pub fn instructions(&self) -> usize {
         self.code.len()
+    }
+
+    /// The instructions in order (those of batched evaluation), for the `jit` feature.
+    #[cfg(feature = "jit")]
+    pub(crate) fn jit_code(&self) -> &[Inst] {
+        &self.code
+    }
+
+    /// The constants: register `input_len() + k` holds `jit_consts()[k]`.
+    #[cfg(feature = "jit")]
+    pub(crate) fn jit_consts(&self) -> &[f64] {
+        &self.consts
+    }
+
+    /// The register of each output component.
+    #[cfg(feature = "jit")]
+    pub(crate) fn jit_outputs(&self) -> &[u32] {
+        &self.outputs
+    }
+
+    /// Number of registers (inputs, constants, temporaries); every register number is below.
+    #[cfg(feature = "jit")]
+    pub(crate) fn jit_registers(&self) -> usize {
+        self.n_regs
     }
 
     /// Registers for [`eval`](Tape::eval).
