@@ -5,31 +5,15 @@
 //! of the wrong lengths as `eval` does.
 #![cfg(feature = "jit")]
 
+mod expressions;
+
+use expressions::{Rng, playground, scalar, vector};
 use lagrange::derive::derive;
 use lagrange::expr::{Graph, Id, Symbol};
 use lagrange::model::file::load;
-use lagrange::model::system::{BodySpec, MassSpec, SystemBuilder};
 use lagrange::numeric::tape::Tape;
 use lagrange::numeric::{JitError, JitTape};
 use std::path::{Path, PathBuf};
-
-/// A small deterministic generator (xorshift), so failures reproduce.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        self.0
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-}
 
 /// Numbers where IEEE operations and library functions take their special paths.
 const SPECIAL: [f64; 14] = [
@@ -171,68 +155,6 @@ fn compiled_tapes_of_every_file_agree_bitwise_with_eval() {
         derived >= 60 && tapes >= 350 && refused <= 4,
         "{derived} files derived, {tapes} tapes compiled, {refused} refused"
     );
-}
-
-/// A 3D system with every kind of symbol, for random expressions (as `tests/tape.rs`).
-fn playground() -> lagrange::model::system::System {
-    let mut b = SystemBuilder::new("play", 3).expect("3D");
-    b.parameter("l", lagrange::expr::Ty::Scalar).expect("l");
-    b.parameter("k", lagrange::expr::Ty::Scalar).expect("k");
-    b.parameter("u", lagrange::expr::Ty::Vector).expect("u");
-    b.body(&BodySpec {
-        name: "p",
-        position: "r",
-        velocity: "v",
-        acceleration: "a",
-        force: "F",
-        mass: MassSpec::Symbol("m"),
-    })
-    .expect("body");
-    b.constraint("c", "dot(r, r) = l^2").expect("constraint");
-    b.finish()
-}
-
-fn scalar(rng: &mut Rng, depth: u32) -> String {
-    if depth == 0 || rng.below(4) == 0 {
-        return ["l", "k", "m", "t", "2", "0.5", "3", "r.x", "v.z"][rng.below(9)].to_string();
-    }
-    let d = depth - 1;
-    match rng.below(16) {
-        0 => format!("({} + {})", scalar(rng, d), scalar(rng, d)),
-        1 => format!("({} - {})", scalar(rng, d), scalar(rng, d)),
-        2 => format!("({}) * ({})", scalar(rng, d), scalar(rng, d)),
-        3 => format!("({}) / ({})", scalar(rng, d), scalar(rng, d)),
-        4 => format!("({})^{}", scalar(rng, d), ["2", "3", "-1", "-2", "5", "7", "-9"][rng.below(7)]),
-        5 => format!("({})^{}", scalar(rng, d), ["0.5", "1.5", "-0.5", "2.25"][rng.below(4)]),
-        6 => format!("dot({}, {})", vector(rng, d), vector(rng, d)),
-        7 => format!("norm({})", vector(rng, d)),
-        8 => format!(
-            "{}({})",
-            ["sin", "cos", "tan", "atan", "exp", "sqrt", "ln", "asin", "acos"][rng.below(9)],
-            scalar(rng, d)
-        ),
-        9 => format!("atan2({}, {})", scalar(rng, d), scalar(rng, d)),
-        10 => format!("({}).{}", vector(rng, d), ["x", "y", "z"][rng.below(3)]),
-        11 => format!("-({})", scalar(rng, d)),
-        12 => format!("({})^({})", scalar(rng, d), scalar(rng, d)),
-        13 => format!("-(({}) / ({}))", scalar(rng, d), scalar(rng, d)),
-        _ => format!("({}) * ({}) - ({})", scalar(rng, d), scalar(rng, d), scalar(rng, d)),
-    }
-}
-
-fn vector(rng: &mut Rng, depth: u32) -> String {
-    if depth == 0 || rng.below(4) == 0 {
-        return ["r", "v", "F", "u", "[1, 0, 0]"][rng.below(5)].to_string();
-    }
-    let d = depth - 1;
-    match rng.below(6) {
-        0 => format!("({} + {})", vector(rng, d), vector(rng, d)),
-        1 => format!("({} - {})", vector(rng, d), vector(rng, d)),
-        2 => format!("({}) * ({})", scalar(rng, d), vector(rng, d)),
-        3 => format!("cross({}, {})", vector(rng, d), vector(rng, d)),
-        4 => format!("({}) / ({})", vector(rng, d), scalar(rng, d)),
-        _ => format!("[{}, {}, {}]", scalar(rng, d), scalar(rng, d), scalar(rng, d)),
-    }
 }
 
 #[test]
