@@ -87,7 +87,7 @@ pub enum Measure {
     /// The steps and their checks only. The summary says so ([`Summary::measured`]) and
     /// leaves the figures out: `max_abs_c`, `max_abs_c_dot`, `final_energy_error` and
     /// `max_kinetic` are not measured (0), `energy_rel_drift` is `None` and `samples` empty;
-    /// a [`Frame`]'s `energy_error` is NaN. `steps`, `duration`, `evaluations`,
+    /// a [`Frame`]'s `energy_error` is `None`. `steps`, `duration`, `evaluations`,
     /// `unconverged` and the final state are as under [`Measure::Everything`].
     Checks,
 }
@@ -228,8 +228,8 @@ pub struct Frame<'a> {
     /// The rows at this state (C/κ, Ċ/κ per constraint).
     pub rows: &'a Rows,
     pub lambda: &'a [f64],
-    /// (T − T₀) − W; NaN when the run keeps no energy balance ([`Measure::Checks`]).
-    pub energy_error: f64,
+    /// (T − T₀) − W; `None` when the run keeps no energy balance ([`Measure::Checks`]).
+    pub energy_error: Option<f64>,
 }
 
 impl<'a> Frame<'a> {
@@ -772,7 +772,7 @@ impl<'s> Simulation<'s> {
                     sample.position.fill(position);
                 }
             }
-            self.show(n, t, energy_error, observe)?;
+            self.show(n, t, MEASURE.then_some(energy_error), observe)?;
             figures.steps = n;
             if n == s.steps {
                 break;
@@ -852,7 +852,7 @@ impl<'s> Simulation<'s> {
         &mut self,
         n: u64,
         t: f64,
-        energy_error: f64,
+        energy_error: Option<f64>,
         observe: &mut dyn FnMut(&Frame) -> Result<(), String>,
     ) -> Result<(), SimError> {
         let frame = Frame {

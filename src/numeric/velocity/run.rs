@@ -230,7 +230,7 @@ fn run_inner(
             orientations: dynamics.orientations(),
             rows: &rows,
             lambda: &lambda,
-            energy_error,
+            energy_error: Some(energy_error),
         };
         observe(&frame.shown(unit, &mut shown)).map_err(SimError::Output)?;
         summary.steps = n;
