@@ -84,13 +84,7 @@ const STEPS: u64 = 100;
 /// ([`lagrange_pendulum_step`]) is a few percent of a sample; at 1 000 it is below one.
 #[divan::bench(args = [STEPS, 1000], sample_count = 20)]
 fn pendulum_steps(bencher: divan::Bencher, steps: u64) {
-    let text = std::fs::read_to_string("constraints/pendulum.toml").expect("file");
-    let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
-    let mut settings = s.settings();
-    settings.integrator = Integrator::Verlet;
-    settings.stabilize = Stabilize::PROJECTION;
-    settings.steps = steps;
-    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+    rattle(bencher, &pendulum(), steps, Measure::Everything);
 }
 
 /// [`pendulum_steps`] asking for the steps alone (`Measure::Checks`: no energy balance,
@@ -98,13 +92,22 @@ fn pendulum_steps(bencher: divan::Bencher, steps: u64) {
 /// library caller that wants the trajectory runs it: the same trajectory bit for bit.
 #[divan::bench(args = [STEPS, 1000], sample_count = 20)]
 fn pendulum_steps_lean(bencher: divan::Bencher, steps: u64) {
+    rattle(bencher, &pendulum(), steps, Measure::Checks);
+}
+
+/// `constraints/pendulum.toml`, derived.
+fn pendulum() -> Scenario {
     let text = std::fs::read_to_string("constraints/pendulum.toml").expect("file");
-    let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
+    Scenario::new(load(&text).expect("valid"), &[]).expect("derives")
+}
+
+/// Samples of `simulate` of `s` for `steps` Verlet + projection steps (RATTLE) under `measure`.
+fn rattle(bencher: divan::Bencher, s: &Scenario, steps: u64, measure: Measure) {
     let mut settings = s.settings();
     settings.integrator = Integrator::Verlet;
     settings.stabilize = Stabilize::PROJECTION;
     settings.steps = steps;
-    settings.measure = Measure::Checks;
+    settings.measure = measure;
     bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
 }
 
@@ -145,25 +148,14 @@ fn handwritten_pendulum_steps(bencher: divan::Bencher, steps: u64) {
 /// cost of a step; their ratio is the overhead of the general path.
 #[divan::bench(args = [10, 100, 1000, 10000], sample_count = 5, sample_size = 1)]
 fn chain_steps(bencher: divan::Bencher, n: usize) {
-    let s = chain(n);
-    let mut settings = s.settings();
-    settings.integrator = Integrator::Verlet;
-    settings.stabilize = Stabilize::PROJECTION;
-    settings.steps = STEPS;
-    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+    rattle(bencher, &chain(n), STEPS, Measure::Everything);
 }
 
 /// [`chain_steps`] asking for the steps alone (`Measure::Checks`, as
 /// [`pendulum_steps_lean`]).
 #[divan::bench(args = [10, 100, 1000], sample_count = 5, sample_size = 1)]
 fn chain_steps_lean(bencher: divan::Bencher, n: usize) {
-    let s = chain(n);
-    let mut settings = s.settings();
-    settings.integrator = Integrator::Verlet;
-    settings.stabilize = Stabilize::PROJECTION;
-    settings.steps = STEPS;
-    settings.measure = Measure::Checks;
-    bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
+    rattle(bencher, &chain(n), STEPS, Measure::Checks);
 }
 
 /// The baseline of [`chain_steps`]: the same chain (`lagrange::scenario::chain`: links of

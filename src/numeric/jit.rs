@@ -256,7 +256,6 @@ impl Tape {
         };
         for i in self.jit_code() {
             let [a, x, c, e] = [i.a, i.b, i.c, i.e];
-            let op = |b: &mut FunctionBuilder, regs: &mut Vec<Option<Value>>, k| read(b, regs, k);
             let call = |b: &mut FunctionBuilder, sig, f: usize, args: &[Value]| {
                 let f = b.ins().iconst(ptr, f as i64);
                 let call = b.ins().call_indirect(sig, f, args);
@@ -264,83 +263,86 @@ impl Tape {
             };
             let v = match i.code {
                 Code::Add => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     b.ins().fadd(a, x)
                 }
                 Code::Sub => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     b.ins().fsub(a, x)
                 }
                 Code::Mul => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     b.ins().fmul(a, x)
                 }
                 Code::Div => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     b.ins().fdiv(a, x)
                 }
                 Code::Neg => {
-                    let a = op(&mut b, &mut regs, a)?;
+                    let a = read(&mut b, &mut regs, a)?;
                     b.ins().fneg(a)
                 }
                 Code::Sq => {
-                    let a = op(&mut b, &mut regs, a)?;
+                    let a = read(&mut b, &mut regs, a)?;
                     b.ins().fmul(a, a)
                 }
                 Code::SqAddSq => {
-                    let (a, c) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, c)?);
+                    let (a, c) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, c)?);
                     let (p, q) = (b.ins().fmul(a, a), b.ins().fmul(c, c));
                     b.ins().fadd(p, q)
                 }
                 Code::MulMulAdd | Code::MulMulSub => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
-                    let (c, e) = (op(&mut b, &mut regs, c)?, op(&mut b, &mut regs, e)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
+                    let (c, e) = (read(&mut b, &mut regs, c)?, read(&mut b, &mut regs, e)?);
                     let (p, q) = (b.ins().fmul(a, x), b.ins().fmul(c, e));
                     if i.code == Code::MulMulAdd { b.ins().fadd(p, q) } else { b.ins().fsub(p, q) }
                 }
                 Code::MulAdd | Code::MulSub => {
-                    let (a, x, c) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?, op(&mut b, &mut regs, c)?);
+                    let (a, x, c) =
+                        (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?, read(&mut b, &mut regs, c)?);
                     let p = b.ins().fmul(a, x);
                     if i.code == Code::MulAdd { b.ins().fadd(p, c) } else { b.ins().fsub(p, c) }
                 }
                 Code::SubMul => {
-                    let (a, x, c) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?, op(&mut b, &mut regs, c)?);
+                    let (a, x, c) =
+                        (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?, read(&mut b, &mut regs, c)?);
                     let p = b.ins().fmul(x, c);
                     b.ins().fsub(a, p)
                 }
                 Code::NegMul => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     let p = b.ins().fmul(a, x);
                     b.ins().fneg(p)
                 }
                 Code::NegDiv => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     let p = b.ins().fdiv(a, x);
                     b.ins().fneg(p)
                 }
                 Code::Sqrt => {
-                    let a = op(&mut b, &mut regs, a)?;
+                    let a = read(&mut b, &mut regs, a)?;
                     b.ins().sqrt(a)
                 }
                 Code::Powi => {
-                    let a = op(&mut b, &mut regs, a)?;
+                    let a = read(&mut b, &mut regs, a)?;
                     let k = b.ins().iconst(types::I32, i64::from(i.imm));
                     call(&mut b, powi, jit_powi as *const () as usize, &[a, k])
                 }
                 Code::Powf => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     call(&mut b, binary, jit_powf as *const () as usize, &[a, x])
                 }
                 Code::Call(f) => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     call(&mut b, binary, func(f) as *const () as usize, &[a, x])
                 }
                 Code::Norm2 => {
-                    let (a, x) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?);
+                    let (a, x) = (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?);
                     call(&mut b, binary, jit_norm2 as *const () as usize, &[a, x])
                 }
                 Code::Norm3 => {
-                    let (a, x, c) = (op(&mut b, &mut regs, a)?, op(&mut b, &mut regs, x)?, op(&mut b, &mut regs, c)?);
+                    let (a, x, c) =
+                        (read(&mut b, &mut regs, a)?, read(&mut b, &mut regs, x)?, read(&mut b, &mut regs, c)?);
                     call(&mut b, ternary, jit_norm3 as *const () as usize, &[a, x, c])
                 }
             };
