@@ -89,6 +89,8 @@ fn files() -> Vec<PathBuf> {
         files.extend(here);
     }
     files.push(PathBuf::from("tests/data/hostile_names.toml"));
+    // A's band and J mostly zeros: written as their formulas over zeroed arrays.
+    files.push(PathBuf::from("tests/data/net_8x3.toml"));
     files
 }
 

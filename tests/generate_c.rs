@@ -34,7 +34,7 @@ use std::process::Command;
 const STATES: usize = 4;
 
 /// The files compared: `constraints/`, `constraints/hard/`, `constraints/joints/` and
-/// `constraints/rigid/`, and the hostile names.
+/// `constraints/rigid/`, the hostile names, and two scenes whose A and J are mostly zeros.
 fn files() -> Vec<PathBuf> {
     let mut files = Vec::new();
     let dirs = ["constraints", "constraints/hard", "constraints/joints", "constraints/rigid"];
@@ -48,6 +48,9 @@ fn files() -> Vec<PathBuf> {
         files.extend(here);
     }
     files.push(PathBuf::from("tests/data/hostile_names.toml"));
+    // A's band, A whole and J mostly zeros: written as their formulas over zeroed arrays.
+    files.push(PathBuf::from("tests/data/net_8x3.toml"));
+    files.push(PathBuf::from("tests/data/chain_20_interleaved.toml"));
     files
 }
 
@@ -588,4 +591,50 @@ fn the_c_step_gives_the_rust_steps_numbers_bit_for_bit() {
     }
     eprintln!("step: {compared} numbers equal bit for bit after {STEPS} steps, {} modules", c_runs.len());
     assert!(compared > 1000);
+}
+
+/// Where A's band, A whole or J is mostly zeros (a net's band, a chain listed out of order, a
+/// dense J of many bodies), the C module zeroes the array in one loop and writes only its
+/// formulas, and the Rust module writes only its formulas over the zeros it starts from: a
+/// grid's module stays proportional to its formulas, not to its band. A band with one zero (a
+/// chain's) is still written whole. (The numbers are compared in the two tests above and in
+/// tests/generate.rs.)
+#[test]
+fn arrays_of_mostly_zeros_are_written_as_their_formulas() {
+    // The body of function `name` (from its signature, which starts with `head`), if written.
+    let body = |code: &str, head: &str| {
+        let start = code.find(head)?;
+        Some(code[start..start + code[start..].find("\n}\n").expect("a function ends")].to_string())
+    };
+    // The statements `out[i][j] = 0.0;` with literal indices: a zero written in place.
+    let zeros_in_place = |body: &str| {
+        body.lines()
+            .filter(|l| {
+                let l = l.trim();
+                l.starts_with("out[") && l.ends_with("= 0.0;") && !l.starts_with("out[r]")
+            })
+            .count()
+    };
+    let arrays = ["a_band", "band_system", "a_matrix", "jacobian"];
+    for file in ["tests/data/net_8x3.toml", "tests/data/chain_20_interleaved.toml"] {
+        let l = loaded(Path::new(file));
+        let c = module(&l, &Options { lang: Lang::C, ..Options::default() }).expect("generates");
+        let rust = module(&l, &Options::default()).expect("generates");
+        let mut written = 0;
+        for f in arrays {
+            if let Some(b) = body(&c.code, &format!("void {f}(")) {
+                assert_eq!(zeros_in_place(&b), 0, "{file}: C's {f} writes a zero in place");
+                assert!(b.contains("out[r][d] = 0.0;"), "{file}: C's {f} zeroes its array in a loop");
+                written += 1;
+            }
+            if let Some(b) = body(&rust.code, &format!("pub fn {f}(")) {
+                assert!(!b.contains(" 0.0,") && !b.contains("[0.0, "), "{file}: Rust's {f} writes zeros:\n{b}");
+            }
+        }
+        assert!(written >= 2, "{file}: A and J are written");
+    }
+    let l = loaded(Path::new("constraints/chain_5.toml"));
+    let c = module(&l, &Options { lang: Lang::C, ..Options::default() }).expect("generates");
+    let a = body(&c.code, "void a_matrix(").expect("a small A is dense");
+    assert!(zeros_in_place(&a) > 0 && !a.contains("out[r][d] = 0.0;"), "a small A is written whole:\n{a}");
 }

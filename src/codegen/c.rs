@@ -27,7 +27,7 @@
 //! Not here: layout decisions (`codegen::layout`, shared with the Rust emitter), the λ path
 //! (`codegen::c_solve`), files or stdout.
 
-use super::layout::{AStorage, JStorage, Layout, Solver};
+use super::layout::{self, AStorage, JStorage, Layout, Solver};
 use super::names::{Namer, c_reserved, comment_text};
 use super::rust::{
     Bodies, Ctx, Field, Formulas, GenerateError, LengthPlace, Names, Prec, ROLE_ARRAYS, StepRoots, Turns, formula,
@@ -714,10 +714,17 @@ fn a(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError
     }
     match p.layout.a {
         AStorage::Band { bandwidth } => {
+            let sparse = layout::mostly_zero(k * (bandwidth + 1), written.len());
+            if sparse {
+                stores.push(zero_fill(k, bandwidth + 1));
+            }
             for r in 0..k {
                 for d in 0..=bandwidth {
-                    let at = written.get(&(r, r + d));
-                    stores.push(format!("out[{r}][{d}] = {};", at.map_or("0.0".to_string(), |&i| exprs[i].clone())));
+                    match written.get(&(r, r + d)) {
+                        Some(&i) => stores.push(format!("out[{r}][{d}] = {};", exprs[i])),
+                        None if !sparse => stores.push(format!("out[{r}][{d}] = 0.0;")),
+                        None => {}
+                    }
                 }
             }
             let _ = writeln!(
@@ -728,10 +735,19 @@ fn a(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError
             function(out, &doc, "a_band", &format!("double out[{}][{}]", k.max(1), bandwidth + 1), &lets, &stores);
         }
         AStorage::Dense | AStorage::Heap => {
+            let entry = |r: usize, c: usize| [written.get(&(r, c)), written.get(&(c, r))].into_iter().flatten().min();
+            let nonzero = (0..k).flat_map(|r| (0..k).map(move |c| (r, c))).filter(|&(r, c)| entry(r, c).is_some());
+            let sparse = layout::mostly_zero(k * k, nonzero.count());
+            if sparse {
+                stores.push(zero_fill(k, k));
+            }
             for r in 0..k {
                 for c in 0..k {
-                    let at = [written.get(&(r, c)), written.get(&(c, r))].into_iter().flatten().min();
-                    stores.push(format!("out[{r}][{c}] = {};", at.map_or("0.0".to_string(), |&i| exprs[i].clone())));
+                    match entry(r, c) {
+                        Some(&i) => stores.push(format!("out[{r}][{c}] = {};", exprs[i])),
+                        None if !sparse => stores.push(format!("out[{r}][{c}] = 0.0;")),
+                        None => {}
+                    }
                 }
             }
             function(out, &doc, "a_matrix", &format!("double out[{0}][{0}]", k.max(1)), &lets, &stores);
@@ -771,12 +787,19 @@ fn jacobian(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), Genera
             function(out, &doc, "jacobian_blocks", &format!("double out[{}][{dim}]", count.max(1)), &lets, &stores);
         }
         JStorage::Dense => {
+            let sparse = layout::mostly_zero(k * n * dim, blocks.len() * dim);
+            if sparse {
+                stores.push(zero_fill(k, n * dim));
+            }
             for r in 0..k {
                 for body in 0..n {
                     let at = blocks.iter().position(|b| b.0 == r && b.1 == body);
                     for d in 0..dim {
-                        let e = at.map_or("0.0".to_string(), |i| exprs[i * dim + d].clone());
-                        stores.push(format!("out[{r}][{}] = {e};", body * dim + d));
+                        match at {
+                            Some(i) => stores.push(format!("out[{r}][{}] = {};", body * dim + d, exprs[i * dim + d])),
+                            None if !sparse => stores.push(format!("out[{r}][{}] = 0.0;", body * dim + d)),
+                            None => {}
+                        }
                     }
                 }
             }
@@ -800,6 +823,15 @@ fn scalars(
     let stores: Vec<String> = exprs.iter().enumerate().map(|(i, e)| format!("out[{i}] = {e};")).collect();
     function(out, doc, name, &format!("double out[{}]", k.max(1)), &lets, &stores);
     Ok(())
+}
+
+/// The loop that sets every number of `out[rows][width]` to 0 (before a block's non-zero
+/// entries are stored: [`layout::mostly_zero`]).
+pub(super) fn zero_fill(rows: usize, width: usize) -> String {
+    format!(
+        "for (int r = 0; r < {rows}; r++) {{\n        for (int d = 0; d < {width}; d++) {{\n            \
+         out[r][d] = 0.0;\n        }}\n    }}"
+    )
 }
 
 /// `void name(const State *s, OUT) { lets; stores }`, its doc as a comment.

@@ -12,8 +12,8 @@
 //! Not here: the formulas' functions (`codegen::c`), layout decisions (`codegen::layout`),
 //! the velocity-level step (`codegen::c`, `support/step.c`).
 
-use super::c::{Parts, function, list, paren};
-use super::layout::{JStorage, Lambda};
+use super::c::{Parts, function, list, paren, zero_fill};
+use super::layout::{self, JStorage, Lambda};
 use super::names::comment_text;
 use super::rust::{Ctx, GenerateError, formula, lambda_sum, per_body_fns};
 use crate::expr::Id;
@@ -558,10 +558,20 @@ fn band_lambda(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), Gen
     let b_at = roots.len();
     roots.extend(p.b_code);
     let (lets, exprs) = ctx.body(&roots)?;
+    // The band's zeros (past the last column, and a grid's many) stored one by one, or one
+    // loop of them before the non-zero entries where the band is mostly zeros.
+    let sparse = layout::mostly_zero(k * (w + 1), at.iter().flatten().flatten().count());
     let mut stores = Vec::new();
+    if sparse {
+        stores.push(zero_fill(k, w + 1));
+    }
     for (r, row) in at.iter().enumerate() {
         for (d, e) in row.iter().enumerate() {
-            stores.push(format!("out[{r}][{d}] = {};", e.map_or("0.0".to_string(), |i| exprs[i].clone())));
+            match e {
+                Some(i) => stores.push(format!("out[{r}][{d}] = {};", exprs[*i])),
+                None if !sparse => stores.push(format!("out[{r}][{d}] = 0.0;")),
+                None => {}
+            }
         }
         stores.push(format!("out[{r}][{}] = -{};", w + 1, paren(&exprs[b_at + r])));
     }

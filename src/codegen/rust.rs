@@ -2445,14 +2445,27 @@ impl Ctx<'_> {
             }
         }
         match layout.a {
-            AStorage::Band { bandwidth } if layout::parted(formulas.a.len()) => {
+            AStorage::Band { bandwidth }
+                if layout::parted(formulas.a.len()) || layout::mostly_zero(k * (bandwidth + 1), formulas.a.len()) =>
+            {
                 // One item per band row, each entry once: the parts need no shared `let`s.
+                // A row is written whole, or (mostly zeros: a grid's band) only its non-zero
+                // entries over the zeros `out` starts with.
                 band_header(out, &mut doc, bandwidth);
+                let sparse = layout::mostly_zero(k * (bandwidth + 1), formulas.a.len());
                 let present =
                     |r: usize| (r..=r + bandwidth).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
                 let items: Vec<Vec<Id>> =
                     (0..k).map(|r| present(r).iter().map(|&c| roots[where_[&(r, c)]]).collect()).collect();
                 let store = |r: usize, exprs: &[String]| {
+                    if sparse {
+                        let stores: Vec<String> = present(r)
+                            .into_iter()
+                            .zip(exprs)
+                            .map(|(c, e)| format!("out[{r}][{}] = {e};", c - r))
+                            .collect();
+                        return stores.join("\n    ");
+                    }
                     let mut values = vec!["0.0".to_string(); bandwidth + 1];
                     for (c, e) in present(r).into_iter().zip(exprs) {
                         values[c - r] = e.clone();
@@ -2573,7 +2586,19 @@ impl Ctx<'_> {
             let elem = format!("(usize, usize, [f64; {dim}])");
             return self.emit_items(out, &doc, "jacobian_blocks", &ret, &init, &elem, &items, store);
         }
-        let (lets, exprs) = self.body(&roots)?;
+        let (mut lets, exprs) = self.body(&roots)?;
+        if layout::mostly_zero(k * n * dim, roots.len() * dim) {
+            // The blocks written one by one over a zeroed J.
+            lets.push(format!("let mut out = [[0.0; {}]; {k}];", n * dim));
+            for (r, dirs) in formulas.jacobian.iter().enumerate() {
+                for &(body, _) in dirs {
+                    let i = at[&(r, body)];
+                    lets.extend((0..dim).map(|d| format!("out[{r}][{}] = {};", body * dim + d, exprs[i * dim + d])));
+                }
+            }
+            emit_fn(out, &doc, "jacobian", &format!("[[f64; {}]; {k}]", n * dim), &lets, "out");
+            return Ok(());
+        }
         let rows: Vec<String> = (0..k)
             .map(|r| {
                 let mut row = Vec::new();
@@ -2869,13 +2894,23 @@ impl Ctx<'_> {
         let columns = |r: usize| (r..=(r + w).min(k - 1)).filter(|c| entry.contains_key(&(r, *c))).collect::<Vec<_>>();
         let items: Vec<Vec<Id>> =
             (0..k).map(|r| columns(r).iter().map(|c| entry[&(r, *c)]).chain([b_code[r]]).collect()).collect();
+        // A row written whole, or (where the band is mostly zeros: a grid's) only
+        // its non-zero entries over the zeros `out` starts with.
+        let sparse = layout::mostly_zero(k * (w + 1), entry.len());
         let store = |r: usize, exprs: &[String]| {
-            let mut values = vec!["0.0".to_string(); w + 2];
             let cols = columns(r);
+            let minus_b = format!("-{}", operand(&exprs[cols.len()]));
+            if sparse {
+                let mut stores: Vec<String> =
+                    cols.iter().zip(exprs).map(|(c, e)| format!("out[{r}][{}] = {e};", c - r)).collect();
+                stores.push(format!("out[{r}][{}] = {minus_b};", w + 1));
+                return stores.join("\n    ");
+            }
+            let mut values = vec!["0.0".to_string(); w + 2];
             for (c, e) in cols.iter().zip(exprs) {
                 values[c - r] = e.clone();
             }
-            values[w + 1] = format!("-{}", operand(&exprs[cols.len()]));
+            values[w + 1] = minus_b;
             format!("out[{r}] = {};", array(&values))
         };
         let band = match w {
@@ -3684,7 +3719,8 @@ fn emit_fn(out: &mut String, doc: &[String], name: &str, ret: &str, lets: &[Stri
         let _ = writeln!(out, "/// {line}");
     }
     let _ = writeln!(out, "pub fn {name}(s: &State) -> {ret} {{");
-    if lets.is_empty() && !value.contains("s.") && !value.contains("(s)") {
+    let reads = |t: &str| t.contains("s.") || t.contains("(s)");
+    if !lets.iter().any(|l| reads(l)) && !reads(value) {
         // Keep the parameter used in name only: the value does not depend on the state.
         let _ = writeln!(out, "    let _ = s;");
     }
