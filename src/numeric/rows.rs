@@ -22,7 +22,8 @@
 //! contact logic and the projections already compute over slots: none of them needs to know
 //! which slot is an angle (DESIGN.md, "Rigid bodies"; 2D has no gyroscopic term).
 //!
-//! Evaluation goes through one compiled [`Tape`] of every root (`evaluate`, `evaluate_into`);
+//! Evaluation goes through one compiled [`Tape`] of every root (`evaluate`, `evaluate_into`),
+//! run as machine code once `RowProgram::compile` has made it so (the `jit` feature);
 //! the interpreter (`expr::eval`, the reference semantics) stays available as
 //! `evaluate_interpreted`, and a test holds the two together on every constraint file.
 //!
@@ -169,7 +170,7 @@ pub struct RowProgram {
 #[derive(Clone, Debug)]
 enum Kernel {
     /// One tape of the roots over their free symbols, in its own layout, and the tape
-    /// compiled to machine code once [`RowProgram::compile`] has made it (the same numbers,
+    /// compiled to machine code once `RowProgram::compile` has made it (the same numbers,
     /// bit for bit, without the interpreter's dispatch).
     Tape(Tape, Option<Compiled>),
     /// The same roots shape by shape (`numeric::batch`), reading their inputs as `Flat`
@@ -1374,8 +1375,8 @@ impl RowProgram {
     }
 
     /// The single tapes not compiled yet (of every root, of C and J, of the motion): what
-    /// [`compile`](RowProgram::compile) would compile. Shapes batched by `numeric::batch`
-    /// are not among them (they stay interpreted, in lanes).
+    /// `compile` (the `jit` feature) would compile. Shapes batched by `numeric::batch` are
+    /// not among them (they stay interpreted, in lanes).
     fn interpreted_tapes(&self) -> impl Iterator<Item = &Tape> {
         self.subprograms().filter_map(|sub| match &sub.kernel {
             Kernel::Tape(tape, None) => Some(tape),
@@ -1383,22 +1384,23 @@ impl RowProgram {
         })
     }
 
-    /// How many tapes [`compile`](RowProgram::compile) would compile, and how many
-    /// instructions they hold in all ([`Tape::instructions`]): what compiling costs
+    /// How many tapes `compile` (the `jit` feature) would compile, and how many instructions
+    /// they hold in all ([`Tape::instructions`]): what compiling costs
     /// (`numeric::simulate::Compile::pays`). `(0, 0)` once compiled, or when every kernel is
-    /// batched.
+    /// batched; a tape `compile` could not compile is still counted.
     pub fn uncompiled(&self) -> (usize, usize) {
         self.interpreted_tapes().fold((0, 0), |(n, i), tape| (n + 1, i + tape.instructions()))
     }
 
-    /// How many of the program's kernels run as machine code ([`compile`](RowProgram::compile)
-    /// made them); 0 without the `jit` feature.
+    /// How many of the program's kernels run as machine code (`compile` made them); 0
+    /// without the `jit` feature.
     pub fn compiled_kernels(&self) -> usize {
         self.subprograms().filter(|sub| matches!(sub.kernel, Kernel::Tape(_, Some(_)))).count()
     }
 
     /// Compiles the program's single tapes to machine code ([`Tape::jit`]): the evaluations
-    /// then run them, with the same results bit for bit. Never done unless asked: compiling
+    /// then run them, with the same results bit for bit (but for the sign of a NaN, which
+    /// stops a run anyway: `Tape::jit`'s contract). Never done unless asked: compiling
     /// costs time at load (`numeric::simulate::Compile` weighs it against a run's length).
     ///
     /// A tape that cannot be compiled keeps the interpreter, and the others are compiled
