@@ -5,177 +5,186 @@
 
 mod common;
 
-use lagrange::numeric::simulate::{Compile, Frame, Settings, Summary};
-use lagrange::numeric::velocity::{Settings as VelocitySettings, Solver};
+use lagrange::numeric::simulate::{Compile, Settings};
 
-/// Every directory of constraint files with scenes.
-const DIRS: [&str; 5] =
-    ["constraints", "constraints/hard", "constraints/joints", "constraints/rigid", "constraints/solvers"];
-
-/// The bits of what an observer sees of a frame: step, time, positions, velocities,
-/// orientations, the rows' C/κ, Ċ/κ and J, λ, and the energy balance.
-fn frame_bits(f: &Frame) -> Vec<u64> {
-    let mut bits = vec![f.step, f.time.to_bits()];
-    let vectors = f.position.iter().chain(f.velocity).flatten();
-    bits.extend(vectors.chain(f.orientations.iter().flatten()).map(|x| x.to_bits()));
-    for row in &f.rows.rows {
-        bits.extend([row.value.to_bits(), row.rate.to_bits(), row.bias.to_bits()]);
-        bits.extend(row.jacobian.iter().flat_map(|(b, j)| [*b as u64, j[0].to_bits(), j[1].to_bits(), j[2].to_bits()]));
-    }
-    bits.extend(f.lambda.iter().map(|x| x.to_bits()));
-    bits.extend(f.energy_error.map(f64::to_bits));
-    bits
-}
-
-/// The bits of a summary's final state and figures (all but the wall time and whether it
-/// was compiled).
-fn summary_bits(s: &Summary) -> Vec<u64> {
-    let states = s.final_position.iter().chain(&s.final_velocity).flatten();
-    let mut bits: Vec<u64> = states.map(|x| x.to_bits()).collect();
-    bits.extend([s.steps, s.evaluations, s.max_abs_c.to_bits(), s.max_abs_c_dot.to_bits()]);
-    bits.extend([s.final_energy_error.to_bits(), s.max_kinetic.to_bits()]);
-    bits.extend(s.energy_rel_drift.map(f64::to_bits));
-    bits
-}
-
-/// A run's frames and its end (the summary, or the error and the summary so far), as bits.
-type Run = (Vec<Vec<u64>>, Result<Vec<u64>, String>, bool);
-
-fn observed(run: impl FnOnce(&mut dyn FnMut(&Frame) -> Result<(), String>) -> Result<Summary, String>) -> Run {
-    let mut frames = Vec::new();
-    let result = run(&mut |f| {
-        frames.push(frame_bits(f));
-        Ok(())
-    });
-    let compiled = result.as_ref().is_ok_and(|s| s.compiled);
-    (frames, result.map(|s| summary_bits(&s)), compiled)
-}
-
+/// Compiled against interpreted (the `jit` feature).
 #[cfg(feature = "jit")]
-#[test]
-fn every_file_runs_the_same_bit_for_bit_compiled_or_interpreted_under_every_solver() {
-    let (mut runs, mut compiled) = (0, 0);
-    for (path, s) in common::scenarios(&DIRS) {
-        let tapes = s.program.uncompiled().0;
-        // Contacts through some bounces and rests; the rest briefly.
-        let contacts = s.system.constraints.iter().any(|c| c.inequality);
-        let steps = if contacts { ((s.scene.duration / s.scene.dt) as u64).min(1500) } else { 60 };
-        let acceleration = |compile| {
-            let settings = Settings { steps, compile, ..s.settings() };
-            observed(|observe| {
-                s.simulate(settings, observe).map_err(|f| format!("{} at {:?}", f.error, f.summary.steps))
-            })
-        };
-        let velocity = |solver, compile| {
-            let base = VelocitySettings::new(solver, s.scene.dt, 0.0);
-            let settings = VelocitySettings { steps, restitution: s.scene.restitution, compile, ..base };
-            observed(|observe| {
-                s.simulate_velocity(settings, observe).map_err(|f| format!("{} at {:?}", f.error, f.summary.steps))
-            })
-        };
-        let plans: [(&str, &dyn Fn(Compile) -> Run); 4] = [
-            ("exact", &acceleration),
-            ("exact-velocity", &|c| velocity(Solver::Exact, c)),
-            ("soft-step", &|c| velocity(Solver::SoftStep, c)),
-            ("xpbd", &|c| velocity(Solver::Xpbd, c)),
-        ];
-        for (name, run) in plans {
-            let at = format!("{} under {name}", path.display());
-            let (never_frames, never, never_compiled) = run(Compile::Never);
-            let (always_frames, always, always_compiled) = run(Compile::Always);
-            assert!(!never_compiled, "{at}: compiled under Compile::Never");
-            // A run that stopped before its first step has no summary to say it.
-            assert_eq!(always_compiled, tapes > 0 && always.is_ok(), "{at}: compiled as asked");
-            assert_eq!(always_frames.len(), never_frames.len(), "{at}: the frames");
-            for (k, (a, n)) in always_frames.iter().zip(&never_frames).enumerate() {
-                assert_eq!(a, n, "{at}: frame {k}");
-            }
-            assert_eq!(always, never, "{at}: the end");
-            runs += 1;
-            compiled += usize::from(always_compiled);
-        }
-    }
-    assert!(runs >= 4 * 60 && compiled >= 4 * 50, "{runs} runs, {compiled} compiled");
-}
+mod bitwise {
+    use super::common;
+    use lagrange::numeric::simulate::{Compile, Frame, Settings, Summary};
+    use lagrange::numeric::velocity::{Settings as VelocitySettings, Solver};
 
-/// Every evaluation of the rows, compiled, gives the interpreter's bits at random states,
-/// NaN and infinities among them, on every file's program (a NaN matching any NaN).
-#[cfg(feature = "jit")]
-#[test]
-fn compiled_rows_are_the_interpreters_at_random_states() {
-    use lagrange::expr::eval::Value;
-    use lagrange::numeric::random::Rng;
-    use lagrange::numeric::rows::{Rows, State};
-    use lagrange::numeric::simulate::initial_state;
-    // A NaN matches any NaN (`tests/jit.rs`): which of two NaN operands an addition passes
-    // on, and so its sign, is the processor's choice, and Cranelift may swap the operands of
-    // a commutative operation. Every other number is compared bit for bit.
-    let bits_of = |x: f64| if x.is_nan() { f64::NAN.to_bits() } else { x.to_bits() };
-    let bits = |r: &Rows| {
-        let mut b: Vec<u64> = r.inverse_mass.iter().map(|&x| bits_of(x)).collect();
-        b.extend(r.velocity.iter().chain(&r.force).flatten().map(|&x| bits_of(x)));
-        for row in &r.rows {
-            b.extend([row.value, row.rate, row.bias].map(bits_of));
-            b.extend(row.jacobian.iter().flat_map(|(s, j)| [*s as u64, bits_of(j[0]), bits_of(j[1]), bits_of(j[2])]));
+    /// Every directory of constraint files with scenes.
+    const DIRS: [&str; 5] =
+        ["constraints", "constraints/hard", "constraints/joints", "constraints/rigid", "constraints/solvers"];
+
+    /// The bits of what an observer sees of a frame: step, time, positions, velocities,
+    /// orientations, the rows' C/κ, Ċ/κ and J, λ, and the energy balance.
+    fn frame_bits(f: &Frame) -> Vec<u64> {
+        let mut bits = vec![f.step, f.time.to_bits()];
+        let vectors = f.position.iter().chain(f.velocity).flatten();
+        bits.extend(vectors.chain(f.orientations.iter().flatten()).map(|x| x.to_bits()));
+        for row in &f.rows.rows {
+            bits.extend([row.value.to_bits(), row.rate.to_bits(), row.bias.to_bits()]);
+            bits.extend(
+                row.jacobian.iter().flat_map(|(b, j)| [*b as u64, j[0].to_bits(), j[1].to_bits(), j[2].to_bits()]),
+            );
         }
-        b
-    };
-    let mut rng = Rng::new(35);
-    let mut checked = 0;
-    for (path, s) in common::scenarios(&DIRS) {
-        let mut compiled = s.program.clone();
-        assert_eq!(compiled.compile(), Ok(()), "{}", path.display());
-        assert_eq!(compiled.uncompiled(), (0, 0), "{}", path.display());
-        let programs = [&s.program, &compiled];
-        let mut scratch = programs.map(|p| p.scratch());
-        let mut rows: [Rows; 2] = Default::default();
-        let specials = [0.0, -0.0, 1e300, -1e300, 5e-324, f64::INFINITY, f64::NEG_INFINITY, f64::NAN];
-        for case in 0..60 {
-            let mut env = common::random_env(&s.system, &mut rng);
-            let (mut q, mut v, t) = initial_state(&s.system, &env);
-            for x in q.iter_mut().chain(&mut v).flatten() {
-                *x += rng.uniform(-0.5, 0.5);
+        bits.extend(f.lambda.iter().map(|x| x.to_bits()));
+        bits.extend(f.energy_error.map(f64::to_bits));
+        bits
+    }
+
+    /// The bits of a summary's final state and figures (all but the wall time and whether it
+    /// was compiled).
+    fn summary_bits(s: &Summary) -> Vec<u64> {
+        let states = s.final_position.iter().chain(&s.final_velocity).flatten();
+        let mut bits: Vec<u64> = states.map(|x| x.to_bits()).collect();
+        bits.extend([s.steps, s.evaluations, s.max_abs_c.to_bits(), s.max_abs_c_dot.to_bits()]);
+        bits.extend([s.final_energy_error.to_bits(), s.max_kinetic.to_bits()]);
+        bits.extend(s.energy_rel_drift.map(f64::to_bits));
+        bits
+    }
+
+    /// A run's frames and its end (the summary, or the error and the summary so far), as bits.
+    type Run = (Vec<Vec<u64>>, Result<Vec<u64>, String>, bool);
+
+    fn observed(run: impl FnOnce(&mut dyn FnMut(&Frame) -> Result<(), String>) -> Result<Summary, String>) -> Run {
+        let mut frames = Vec::new();
+        let result = run(&mut |f| {
+            frames.push(frame_bits(f));
+            Ok(())
+        });
+        let compiled = result.as_ref().is_ok_and(|s| s.compiled);
+        (frames, result.map(|s| summary_bits(&s)), compiled)
+    }
+
+    #[test]
+    fn every_file_runs_the_same_bit_for_bit_compiled_or_interpreted_under_every_solver() {
+        let (mut runs, mut compiled) = (0, 0);
+        for (path, s) in common::scenarios(&DIRS) {
+            let tapes = s.program.uncompiled().0;
+            // Contacts through some bounces and rests; the rest briefly.
+            let contacts = s.system.constraints.iter().any(|c| c.inequality);
+            let steps = if contacts { ((s.scene.duration / s.scene.dt) as u64).min(1500) } else { 60 };
+            let acceleration = |compile| {
+                let settings = Settings { steps, compile, ..s.settings() };
+                observed(|observe| {
+                    s.simulate(settings, observe).map_err(|f| format!("{} at {:?}", f.error, f.summary.steps))
+                })
+            };
+            let velocity = |solver, compile| {
+                let base = VelocitySettings::new(solver, s.scene.dt, 0.0);
+                let settings = VelocitySettings { steps, restitution: s.scene.restitution, compile, ..base };
+                observed(|observe| {
+                    s.simulate_velocity(settings, observe).map_err(|f| format!("{} at {:?}", f.error, f.summary.steps))
+                })
+            };
+            let plans: [(&str, &dyn Fn(Compile) -> Run); 4] = [
+                ("exact", &acceleration),
+                ("exact-velocity", &|c| velocity(Solver::Exact, c)),
+                ("soft-step", &|c| velocity(Solver::SoftStep, c)),
+                ("xpbd", &|c| velocity(Solver::Xpbd, c)),
+            ];
+            for (name, run) in plans {
+                let at = format!("{} under {name}", path.display());
+                let (never_frames, never, never_compiled) = run(Compile::Never);
+                let (always_frames, always, always_compiled) = run(Compile::Always);
+                assert!(!never_compiled, "{at}: compiled under Compile::Never");
+                // A run that stopped before its first step has no summary to say it.
+                assert_eq!(always_compiled, tapes > 0 && always.is_ok(), "{at}: compiled as asked");
+                assert_eq!(always_frames.len(), never_frames.len(), "{at}: the frames");
+                for (k, (a, n)) in always_frames.iter().zip(&never_frames).enumerate() {
+                    assert_eq!(a, n, "{at}: frame {k}");
+                }
+                assert_eq!(always, never, "{at}: the end");
+                runs += 1;
+                compiled += usize::from(always_compiled);
             }
-            if case % 3 == 2 {
-                // A special number in a random state slot or symbol.
-                let special = specials[rng.next_u64() as usize % specials.len()];
-                let (n, d) = (rng.next_u64() as usize % q.len().max(1), rng.next_u64() as usize % 3);
-                if let Some(x) = q.get_mut(n) {
-                    x[d] = special;
-                }
-                let symbols: Vec<_> = s.system.graph.symbols().map(|(s, _)| s).collect();
-                let symbol = symbols[rng.next_u64() as usize % symbols.len()];
-                if let Some(Value::Scalar(_)) = env.get(symbol) {
-                    env.set(symbol, Value::Scalar(special));
-                }
+        }
+        assert!(runs >= 4 * 60 && compiled >= 4 * 50, "{runs} runs, {compiled} compiled");
+    }
+
+    /// Every evaluation of the rows, compiled, gives the interpreter's bits at random states,
+    /// NaN and infinities among them, on every file's program (a NaN matching any NaN).
+    #[test]
+    fn compiled_rows_are_the_interpreters_at_random_states() {
+        use lagrange::expr::eval::Value;
+        use lagrange::numeric::random::Rng;
+        use lagrange::numeric::rows::{Rows, State};
+        use lagrange::numeric::simulate::initial_state;
+        // A NaN matches any NaN (`tests/jit.rs`): which of two NaN operands an addition passes
+        // on, and so its sign, is the processor's choice, and Cranelift may swap the operands of
+        // a commutative operation. Every other number is compared bit for bit.
+        let bits_of = |x: f64| if x.is_nan() { f64::NAN.to_bits() } else { x.to_bits() };
+        let bits = |r: &Rows| {
+            let mut b: Vec<u64> = r.inverse_mass.iter().map(|&x| bits_of(x)).collect();
+            b.extend(r.velocity.iter().chain(&r.force).flatten().map(|&x| bits_of(x)));
+            for row in &r.rows {
+                b.extend([row.value, row.rate, row.bias].map(bits_of));
+                b.extend(
+                    row.jacobian.iter().flat_map(|(s, j)| [*s as u64, bits_of(j[0]), bits_of(j[1]), bits_of(j[2])]),
+                );
             }
-            let state = State { t, q: &q, v: &v };
-            let mut got: [Vec<u64>; 2] = Default::default();
-            for k in 0..2 {
-                let (p, sc, r) = (programs[k], &mut scratch[k], &mut rows[k]);
-                let mut out = Vec::new();
-                let ok = p.evaluate_into(&s.system, &env, sc, r).is_ok();
-                out.push(u64::from(ok));
-                out.extend(bits(r));
-                out.push(u64::from(sc.finite()));
-                if p.evaluate_state_into(&s.system, &env, state, sc, r).is_ok() {
-                    out.extend(bits(r));
+            b
+        };
+        let mut rng = Rng::new(35);
+        let mut checked = 0;
+        for (path, s) in common::scenarios(&DIRS) {
+            let mut compiled = s.program.clone();
+            assert_eq!(compiled.compile(), Ok(()), "{}", path.display());
+            assert_eq!(compiled.uncompiled(), (0, 0), "{}", path.display());
+            let programs = [&s.program, &compiled];
+            let mut scratch = programs.map(|p| p.scratch());
+            let mut rows: [Rows; 2] = Default::default();
+            let specials = [0.0, -0.0, 1e300, -1e300, 5e-324, f64::INFINITY, f64::NEG_INFINITY, f64::NAN];
+            for case in 0..60 {
+                let mut env = common::random_env(&s.system, &mut rng);
+                let (mut q, mut v, t) = initial_state(&s.system, &env);
+                for x in q.iter_mut().chain(&mut v).flatten() {
+                    *x += rng.uniform(-0.5, 0.5);
                 }
-                if p.evaluate_positions_state_into(&s.system, &env, state, sc, &mut r.rows).is_ok() {
+                if case % 3 == 2 {
+                    // A special number in a random state slot or symbol.
+                    let special = specials[rng.next_u64() as usize % specials.len()];
+                    let (n, d) = (rng.next_u64() as usize % q.len().max(1), rng.next_u64() as usize % 3);
+                    if let Some(x) = q.get_mut(n) {
+                        x[d] = special;
+                    }
+                    let symbols: Vec<_> = s.system.graph.symbols().map(|(s, _)| s).collect();
+                    let symbol = symbols[rng.next_u64() as usize % symbols.len()];
+                    if let Some(Value::Scalar(_)) = env.get(symbol) {
+                        env.set(symbol, Value::Scalar(special));
+                    }
+                }
+                let state = State { t, q: &q, v: &v };
+                let mut got: [Vec<u64>; 2] = Default::default();
+                for k in 0..2 {
+                    let (p, sc, r) = (programs[k], &mut scratch[k], &mut rows[k]);
+                    let mut out = Vec::new();
+                    let ok = p.evaluate_into(&s.system, &env, sc, r).is_ok();
+                    out.push(u64::from(ok));
                     out.extend(bits(r));
                     out.push(u64::from(sc.finite()));
+                    if p.evaluate_state_into(&s.system, &env, state, sc, r).is_ok() {
+                        out.extend(bits(r));
+                    }
+                    if p.evaluate_positions_state_into(&s.system, &env, state, sc, &mut r.rows).is_ok() {
+                        out.extend(bits(r));
+                        out.push(u64::from(sc.finite()));
+                    }
+                    if p.evaluate_motion_state_into(&s.system, &env, state, sc, r).is_ok() {
+                        out.extend(bits(r));
+                        out.push(u64::from(sc.finite()));
+                    }
+                    got[k] = out;
                 }
-                if p.evaluate_motion_state_into(&s.system, &env, state, sc, r).is_ok() {
-                    out.extend(bits(r));
-                    out.push(u64::from(sc.finite()));
-                }
-                got[k] = out;
+                assert_eq!(got[1], got[0], "{} case {case}", path.display());
+                checked += 1;
             }
-            assert_eq!(got[1], got[0], "{} case {case}", path.display());
-            checked += 1;
         }
+        assert!(checked > 3_000, "{checked} states");
     }
-    assert!(checked > 3_000, "{checked} states");
 }
 
 /// `Compile::Auto` compiles a run long enough to pay the compilation back and not a short
