@@ -7,6 +7,10 @@
 //! from the compiled tape and the λ solve is a band Cholesky (a chain's A is tridiagonal),
 //! so the cost per step grows linearly in N. Deriving the 10 000-link chain takes ~20 s
 //! before its samples start.
+//!
+//! With the `jit` feature the pendulum and the chains also run with their rows' tapes
+//! compiled to machine code (`*_jit`: `RowProgram::compile` before the samples), and
+//! `rows_compile` measures what that compilation costs a scene at load.
 
 /// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
 /// many small forms).
@@ -111,6 +115,51 @@ fn rattle(bencher: divan::Bencher, s: &Scenario, steps: u64, measure: Measure) {
     bencher.bench_local(|| s.simulate(settings, &mut |_| Ok(())).expect("runs").steps);
 }
 
+/// [`pendulum_steps`] with the rows' tapes compiled to machine code before the samples
+/// (`RowProgram::compile`, the `jit` feature): what a long run pays a step once the compile
+/// time at its start is spread over it (`rows_compile` measures that).
+#[cfg(feature = "jit")]
+#[divan::bench(args = [STEPS, 1000], sample_count = 20)]
+fn pendulum_steps_jit(bencher: divan::Bencher, steps: u64) {
+    rattle(bencher, &compiled(pendulum()), steps, Measure::Everything);
+}
+
+/// [`pendulum_steps_lean`] compiled, as [`pendulum_steps_jit`].
+#[cfg(feature = "jit")]
+#[divan::bench(args = [STEPS, 1000], sample_count = 20)]
+fn pendulum_steps_lean_jit(bencher: divan::Bencher, steps: u64) {
+    rattle(bencher, &compiled(pendulum()), steps, Measure::Checks);
+}
+
+/// `s` with its rows' tapes compiled (`RowProgram::compile`; its batched shapes stay
+/// interpreted): every run of it then runs them as machine code.
+#[cfg(feature = "jit")]
+fn compiled(mut s: Scenario) -> Scenario {
+    s.program.compile().expect("this host compiles tapes");
+    s
+}
+
+/// What compiling the rows' tapes costs a scene at load (`RowProgram::compile` of a fresh
+/// copy of its program): the pendulum, the 10- and 100-link chains (the 100's rows are
+/// batched: nothing to compile) and `constraints/solvers/rigid_grid_10.toml` (batched too).
+#[cfg(feature = "jit")]
+#[divan::bench(args = ["pendulum", "chain_10", "chain_100", "rigid_grid_10"], sample_count = 20)]
+fn rows_compile(bencher: divan::Bencher, scene: &str) {
+    let s = match scene {
+        "pendulum" => pendulum(),
+        "chain_10" => chain(10),
+        "chain_100" => chain(100),
+        _ => {
+            let text = std::fs::read_to_string("constraints/solvers/rigid_grid_10.toml").expect("file");
+            Scenario::new(load(&text).expect("valid"), &[]).expect("derives")
+        }
+    };
+    bencher.with_inputs(|| s.program.clone()).bench_local_values(|mut program| {
+        program.compile().expect("this host compiles tapes");
+        program
+    });
+}
+
 /// The baseline of [`pendulum_steps`]: `steps` steps of [`handwritten_pendulum_step`]'s
 /// Verlet step with the closed-form λ and projection.
 #[divan::bench(args = [STEPS, 1000], sample_count = 20)]
@@ -158,6 +207,15 @@ fn chain_steps_lean(bencher: divan::Bencher, n: usize) {
     rattle(bencher, &chain(n), STEPS, Measure::Checks);
 }
 
+/// [`chain_steps`] with the rows' tapes compiled before the samples (as
+/// [`pendulum_steps_jit`]; from N = 12 links a chain's rows are batched, and stay
+/// interpreted).
+#[cfg(feature = "jit")]
+#[divan::bench(args = [10, 100], sample_count = 5, sample_size = 1)]
+fn chain_steps_jit(bencher: divan::Bencher, n: usize) {
+    rattle(bencher, &compiled(chain(n)), STEPS, Measure::Everything);
+}
+
 /// The baseline of [`chain_steps`]: the same chain (`lagrange::scenario::chain`: links of
 /// l = 0.5, masses 1, g = [0, −9.81], straight along +x at rest, dt = 1e-3) stepped by a
 /// handwritten RATTLE with its tridiagonal solves, as an engine programmer would write it.
@@ -190,6 +248,20 @@ fn chain_solve_handwritten(bencher: divan::Bencher, n: usize) {
 #[divan::bench(name = "chain_solve_2_library", args = [10, 100, 1000, 10000])]
 fn chain_solve_library(bencher: divan::Bencher, n: usize) {
     let s = chain(n);
+    let mut scratch = s.program.scratch();
+    let mut rows = lagrange::numeric::rows::Rows::default();
+    let settings = lagrange::numeric::solve::Settings::default();
+    bencher.bench_local(|| {
+        s.program.evaluate_into(&s.system, &s.env, &mut scratch, &mut rows).expect("rows");
+        lagrange::numeric::solve::solve_with(&rows, &settings).acceleration[n - 1]
+    });
+}
+
+/// [`chain_solve_library`] with the rows' tapes compiled (as [`pendulum_steps_jit`]).
+#[cfg(feature = "jit")]
+#[divan::bench(name = "chain_solve_2_library_jit", args = [10, 100])]
+fn chain_solve_library_jit(bencher: divan::Bencher, n: usize) {
+    let s = compiled(chain(n));
     let mut scratch = s.program.scratch();
     let mut rows = lagrange::numeric::rows::Rows::default();
     let settings = lagrange::numeric::solve::Settings::default();

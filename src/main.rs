@@ -223,6 +223,23 @@ struct SimulateArgs {
     format: SummaryArg,
     #[command(flatten)]
     velocity: VelocityArgs,
+    #[arg(long, value_enum, default_value_t = CompileArg::Auto, help = COMPILE_HELP)]
+    compile: CompileArg,
+}
+
+/// `simulate --compile`'s help, which says what this build does with it.
+const COMPILE_HELP: &str = if cfg!(feature = "jit") {
+    "Run the rows' tapes as machine code (Cranelift): auto when the run is long enough to pay the compile time back, always, or never (the same results either way)"
+} else {
+    "Run the rows' tapes as machine code: this build has no compiler (the `jit` feature), so every choice means never (the same results either way)"
+};
+
+/// `simulate --compile`.
+#[derive(Clone, Copy, Debug, PartialEq, ValueEnum)]
+enum CompileArg {
+    Auto,
+    Always,
+    Never,
 }
 
 /// The velocity-level solver and its settings (`simulate`, `bench --solvers`).
@@ -825,6 +842,7 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Ok(v) => v.map(|v| lagrange::numeric::velocity::Settings {
             samples: settings.samples,
             lambda_every: if args.csv.is_some() { args.every.max(1) } else { 0 },
+            compile: settings.compile,
             ..v
         }),
         Err(e) => {
@@ -891,6 +909,7 @@ fn simulate_settings(
 ) -> Result<lagrange::numeric::simulate::Settings, ExitCode> {
     use lagrange::numeric::dynamics::SimError;
     use lagrange::numeric::integrate::Integrator;
+    use lagrange::numeric::simulate::Compile;
     use lagrange::numeric::stabilize::Stabilize;
     let mut settings = scenario.settings();
     settings.dt = args.dt.unwrap_or(settings.dt);
@@ -901,6 +920,11 @@ fn simulate_settings(
             errln!("error: {}", SimError::Settings(e));
             ExitCode::from(2)
         })?,
+    };
+    settings.compile = match args.compile {
+        CompileArg::Auto => Compile::Auto,
+        CompileArg::Always => Compile::Always,
+        CompileArg::Never => Compile::Never,
     };
     settings.integrator = match args.integrator {
         IntegratorArg::Euler => Integrator::Euler,

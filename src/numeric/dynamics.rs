@@ -33,7 +33,7 @@ use super::integrate::{Field, Vectors, copy_slots};
 use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
-use super::simulate::SettingsError;
+use super::simulate::{Compile, SettingsError};
 use super::single::{SingleScaling, correction_single, correction_single_multiplier, solve_single_with};
 use super::solve::{Answer, Diagnostic, FactorId, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -334,6 +334,20 @@ impl<'s> Dynamics<'s> {
     /// Releases every held contact (a new run, or a caller that keeps no active set).
     pub fn release(&mut self) {
         self.held.clear();
+    }
+
+    /// Compiles the rows' tapes to machine code when `compile` says that a run of
+    /// `evaluations` row evaluations should (`simulate::Compile::wanted`,
+    /// `RowProgram::compile`); a borrowed program is copied first, the copy's compiled code
+    /// shared by its later copies. Returns whether some tape runs compiled now. A tape that
+    /// cannot be compiled keeps the interpreter; the numbers are the same either way.
+    pub fn compile_rows(&mut self, compile: Compile, evaluations: u64) -> bool {
+        let (tapes, instructions) = self.program.uncompiled();
+        if tapes > 0 && compile.wanted(tapes, instructions, evaluations) {
+            #[cfg(feature = "jit")]
+            let _ = self.program.to_mut().compile();
+        }
+        self.program.compiled_kernels() > 0
     }
 
     pub fn system(&self) -> &'s System {

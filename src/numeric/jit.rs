@@ -16,7 +16,8 @@
 //! costs Cranelift's build, so it is off by default; callers keep the interpreter as the
 //! fallback for a host Cranelift does not support ([`JitError::Host`]).
 //!
-//! Not here: batches of states, and any caller (the rows, the simulation).
+//! Not here: batches of states; the callers (`numeric::rows`' `RowProgram::compile`, which
+//! a simulation asks for through `simulate::Compile`).
 
 use super::program::{norm2, norm3};
 use super::tape::{Code, Tape};

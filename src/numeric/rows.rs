@@ -22,7 +22,8 @@
 //! contact logic and the projections already compute over slots: none of them needs to know
 //! which slot is an angle (DESIGN.md, "Rigid bodies"; 2D has no gyroscopic term).
 //!
-//! Evaluation goes through one compiled [`Tape`] of every root (`evaluate`, `evaluate_into`);
+//! Evaluation goes through one compiled [`Tape`] of every root (`evaluate`, `evaluate_into`),
+//! run as machine code once `RowProgram::compile` has made it so (the `jit` feature);
 //! the interpreter (`expr::eval`, the reference semantics) stays available as
 //! `evaluate_interpreted`, and a test holds the two together on every constraint file.
 //!
@@ -168,12 +169,39 @@ pub struct RowProgram {
 /// How a [`Subprogram`] computes its roots.
 #[derive(Clone, Debug)]
 enum Kernel {
-    /// One tape of the roots over their free symbols, in its own layout.
-    Tape(Tape),
+    /// One tape of the roots over their free symbols, in its own layout, and the tape
+    /// compiled to machine code once `RowProgram::compile` has made it (the same numbers,
+    /// bit for bit, without the interpreter's dispatch).
+    Tape(Tape, Option<Compiled>),
     /// The same roots shape by shape (`numeric::batch`), reading their inputs as `Flat`
     /// lays them out. No tape of all of them is compiled then: on a big scene it would cost
     /// as much as the batches' lowering many times over and never run.
     Batched(Box<Batched>, Flat),
+}
+
+/// A tape compiled to machine code ([`Tape::jit`]), shared by the clones of its program
+/// (a simulation that borrows a scenario's program and one that owns a copy run one code).
+#[cfg(feature = "jit")]
+type Compiled = std::sync::Arc<crate::numeric::jit::JitTape>;
+
+/// Without the `jit` feature no tape is compiled: this type has no value, so a
+/// `Kernel::Tape`'s twin is always `None` and its test folds away.
+#[cfg(not(feature = "jit"))]
+#[derive(Clone, Debug)]
+enum Compiled {}
+
+/// The roots from `inputs` into `outputs` by the compiled twin of a tape.
+#[cfg(feature = "jit")]
+#[inline]
+fn run_compiled(compiled: &Compiled, inputs: &[f64], outputs: &mut [f64]) {
+    compiled.eval(inputs, outputs);
+}
+
+/// Never called: there is no value of [`Compiled`] without the `jit` feature.
+#[cfg(not(feature = "jit"))]
+#[inline]
+fn run_compiled(compiled: &Compiled, _: &[f64], _: &mut [f64]) {
+    match *compiled {}
 }
 
 /// Some of a [`RowProgram`]'s roots, and how they are evaluated.
@@ -394,7 +422,7 @@ impl Subprogram {
     /// The input buffer: the tape's own layout, or the batches' (`Flat`).
     fn input_len(&self) -> usize {
         match &self.kernel {
-            Kernel::Tape(tape) => tape.input_len(),
+            Kernel::Tape(tape, _) => tape.input_len(),
             Kernel::Batched(_, flat) => flat.len,
         }
     }
@@ -403,7 +431,7 @@ impl Subprogram {
     fn load(&self, system: &System, env: &Env, buffer: &mut [f64]) -> Result<(), EvalError> {
         match &self.kernel {
             Kernel::Batched(_, flat) => flat.load(system, env, &self.inputs, buffer),
-            Kernel::Tape(tape) => load(system, env, tape, &self.inputs, buffer),
+            Kernel::Tape(tape, _) => load(system, env, tape, &self.inputs, buffer),
         }
     }
 
@@ -449,8 +477,8 @@ impl Subprogram {
         let held = hold && scratch.constants;
         match &self.kernel {
             Kernel::Batched(_, flat) => flat.load_state(system, env, state, &self.inputs, held, buffer)?,
-            Kernel::Tape(_) if held => load_varying(system, env, state, &self.inputs, &self.varying, buffer)?,
-            Kernel::Tape(tape) => {
+            Kernel::Tape(..) if held => load_varying(system, env, state, &self.inputs, &self.varying, buffer)?,
+            Kernel::Tape(tape, _) => {
                 let all = 0..self.inputs.len();
                 load_state(system, env, state, tape, &self.inputs, &self.sources, all, buffer)?
             }
@@ -462,17 +490,19 @@ impl Subprogram {
     /// The outputs' length: the tape's, or the batches'.
     fn output_len(&self) -> usize {
         match &self.kernel {
-            Kernel::Tape(tape) => tape.output_len(),
+            Kernel::Tape(tape, _) => tape.output_len(),
             Kernel::Batched(batched, _) => batched.output_len(),
         }
     }
 
-    /// Every root from the loaded `inputs` into `outputs` (laid out as `place` says).
+    /// Every root from the loaded `inputs` into `outputs` (laid out as `place` says): by
+    /// the compiled tape when there is one, else by the interpreter.
     fn run(&self, inputs: &[f64], tape: &mut Scratch, batched: Option<&mut BatchedScratch>, outputs: &mut [f64]) {
         match (&self.kernel, batched) {
             (Kernel::Batched(b, _), Some(buffers)) => b.eval(inputs, buffers, outputs),
             (Kernel::Batched(b, _), None) => evaluate_batched_without_scratch(b, inputs, outputs),
-            (Kernel::Tape(t), _) => t.eval(inputs, tape, outputs),
+            (Kernel::Tape(_, Some(compiled)), _) => run_compiled(compiled, inputs, outputs),
+            (Kernel::Tape(t, None), _) => t.eval(inputs, tape, outputs),
         }
     }
 
@@ -542,7 +572,7 @@ impl Subprogram {
                         (place.start, place.len) = (range.start as u32, range.len() as u32);
                     }
                 }
-                (Kernel::Tape(tape), StateCopies::new(&varying, system.dim()))
+                (Kernel::Tape(tape, None), StateCopies::new(&varying, system.dim()))
             }
         };
         Subprogram { kernel, inputs, place, sources, varying, copies, places: None }
@@ -1191,12 +1221,12 @@ impl Subprogram {
             inputs: vec![0.0; self.input_len()],
             outputs: vec![0.0; self.output_len()],
             tape: match &self.kernel {
-                Kernel::Tape(tape) => tape.scratch(),
+                Kernel::Tape(tape, _) => tape.scratch(),
                 Kernel::Batched(..) => Scratch::default(),
             },
             batched: match &self.kernel {
                 Kernel::Batched(batched, _) => Some(batched.scratch()),
-                Kernel::Tape(_) => None,
+                Kernel::Tape(..) => None,
             },
             constants: false,
         }
@@ -1337,6 +1367,65 @@ impl RowProgram {
     /// completes its end rows without a tape (`Dynamics::rows_after_positions_steady_into`).
     pub fn steady(&self) -> bool {
         self.steady
+    }
+
+    /// The subprograms' kernels: every root's, the positions', and the motion's when there is one.
+    fn subprograms(&self) -> impl Iterator<Item = &Subprogram> {
+        [&self.all, &self.positions].into_iter().chain(self.motion.as_ref())
+    }
+
+    /// The single tapes not compiled yet (of every root, of C and J, of the motion): what
+    /// `compile` (the `jit` feature) would compile. Shapes batched by `numeric::batch` are
+    /// not among them (they stay interpreted, in lanes).
+    fn interpreted_tapes(&self) -> impl Iterator<Item = &Tape> {
+        self.subprograms().filter_map(|sub| match &sub.kernel {
+            Kernel::Tape(tape, None) => Some(tape),
+            _ => None,
+        })
+    }
+
+    /// How many tapes `compile` (the `jit` feature) would compile, and how many instructions
+    /// they hold in all ([`Tape::instructions`]): what compiling costs
+    /// (`numeric::simulate::Compile::pays`). `(0, 0)` once compiled, or when every kernel is
+    /// batched; a tape `compile` could not compile is still counted.
+    pub fn uncompiled(&self) -> (usize, usize) {
+        self.interpreted_tapes().fold((0, 0), |(n, i), tape| (n + 1, i + tape.instructions()))
+    }
+
+    /// How many of the program's kernels run as machine code (`compile` made them); 0
+    /// without the `jit` feature.
+    pub fn compiled_kernels(&self) -> usize {
+        self.subprograms().filter(|sub| matches!(sub.kernel, Kernel::Tape(_, Some(_)))).count()
+    }
+
+    /// Compiles the program's single tapes to machine code ([`Tape::jit`]): the evaluations
+    /// then run them, with the same results bit for bit (but for the sign of a NaN, which
+    /// stops a run anyway: `Tape::jit`'s contract). Never done unless asked: compiling
+    /// costs time at load (`numeric::simulate::Compile` weighs it against a run's length).
+    ///
+    /// A tape that cannot be compiled keeps the interpreter, and the others are compiled
+    /// still; the first failure is returned ([`JitError::Host`]: this processor has no code
+    /// generator, and nothing was compiled; [`JitError::TooLarge`]: a tape too big for
+    /// compiled code's stack frame). Either way the program evaluates as before. Batched
+    /// shapes (`numeric::batch`) stay interpreted; a tape compiled already is kept.
+    ///
+    /// [`JitError::Host`]: crate::numeric::jit::JitError::Host
+    /// [`JitError::TooLarge`]: crate::numeric::jit::JitError::TooLarge
+    #[cfg(feature = "jit")]
+    pub fn compile(&mut self) -> Result<(), crate::numeric::jit::JitError> {
+        use crate::numeric::jit::JitError;
+        let mut first = None;
+        for sub in [&mut self.all, &mut self.positions].into_iter().chain(self.motion.as_mut()) {
+            if let Kernel::Tape(tape, compiled @ None) = &mut sub.kernel {
+                match tape.jit() {
+                    Ok(jit) => *compiled = Some(std::sync::Arc::new(jit)),
+                    // No tape compiles on this host: do not try the others.
+                    Err(e @ JitError::Host(_)) => return Err(e),
+                    Err(e) => first = first.or(Some(e)),
+                }
+            }
+        }
+        first.map_or(Ok(()), Err)
     }
 
     /// [`new`](RowProgram::new) for a state that gives some forces itself (`solve --at`,

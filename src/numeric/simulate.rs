@@ -61,6 +61,8 @@ pub struct Settings {
     /// `lagrange simulate` reports ([`Measure::Everything`], the default), or the checks
     /// alone ([`Measure::Checks`]).
     pub measure: Measure,
+    /// Whether the rows' tapes run as machine code ([`Compile`]): never by default.
+    pub compile: Compile,
 }
 
 /// What a run measures besides its steps ([`Settings::measure`]): the figures of the summary
@@ -92,6 +94,97 @@ pub enum Measure {
     Checks,
 }
 
+/// Whether a run compiles its rows' tapes to machine code before its first step
+/// (`RowProgram::compile`, the `jit` feature): the steps are the same bit for bit either
+/// way, and only their speed and the time at load differ. Without the `jit` feature every
+/// choice means [`Compile::Never`], so a caller's settings work with either build.
+///
+/// [`Auto`](Compile::Auto) compiles when the run is long enough to pay the compilation
+/// back ([`Compile::pays`]); a program that cannot be compiled (a host without a code
+/// generator, a tape too big) keeps the interpreter, under any choice.
+///
+/// ```
+/// use lagrange::numeric::simulate::{Compile, Settings};
+/// let mut settings = Settings::new(1e-3, 100.0);
+/// assert_eq!(settings.compile, Compile::Never);
+/// settings.compile = Compile::Auto; // 100 000 steps: compiled, with the `jit` feature
+/// ```
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Compile {
+    /// When the run's evaluations save more time than compiling costs ([`Compile::pays`]).
+    Auto,
+    /// Always, whatever the run's length.
+    Always,
+    /// Never: the interpreter runs the tapes (the library's default).
+    #[default]
+    Never,
+}
+
+/// Compiling a tape with Cranelift costs a fixed time per tape (its module and function),
+/// about 90 µs, and about 7 µs per instruction of the tape ([`Tape::instructions`]); a
+/// compiled evaluation then saves about 2 ns per instruction against the interpreter. This
+/// machine's figures (2 cores, x86-64 with AVX2), measured on the pendulum, the double
+/// pendulum and the 5- and 10-link chains: `docs/speed.md` (jit35). They set where
+/// [`Compile::Auto`] turns, not any result.
+///
+/// [`Tape::instructions`]: crate::numeric::tape::Tape::instructions
+pub const COMPILE_NS_PER_TAPE: f64 = 90_000.0;
+/// The cost per tape instruction of compiling (see [`COMPILE_NS_PER_TAPE`]).
+pub const COMPILE_NS_PER_INSTRUCTION: f64 = 7_000.0;
+/// What an evaluation of a compiled tape saves per instruction (see [`COMPILE_NS_PER_TAPE`]).
+pub const SAVED_NS_PER_INSTRUCTION: f64 = 2.0;
+
+impl Compile {
+    /// Whether a run that evaluates a program's tapes `evaluations` times is worth compiling
+    /// them for, the rule of [`Compile::Auto`]: with `tapes` tapes of `instructions`
+    /// instructions in all, compiling costs
+    ///
+    /// `COMPILE_NS_PER_TAPE · tapes + COMPILE_NS_PER_INSTRUCTION · instructions`
+    ///
+    /// and each evaluation, which runs one tape (of `instructions / tapes` on average),
+    /// saves `SAVED_NS_PER_INSTRUCTION · instructions / tapes`; the run compiles when the
+    /// savings reach the cost. The figures are this machine's (`docs/speed.md`, jit35); a
+    /// wrong guess costs at most the compile time or the savings, never a result.
+    ///
+    /// ```
+    /// use lagrange::numeric::simulate::Compile;
+    /// // The pendulum's three tapes, 14 instructions in all: 0.37 ms to compile, 9 ns
+    /// // saved an evaluation, so some 40 000 evaluations (20 000 steps) to pay back.
+    /// assert!(!Compile::pays(3, 14, 2 * 10_000));
+    /// assert!(Compile::pays(3, 14, 2 * 25_000));
+    /// // The 10-link chain's, 232: 1.9 ms, 155 ns an evaluation, some 6 000 steps.
+    /// assert!(!Compile::pays(3, 232, 2 * 5_000));
+    /// assert!(Compile::pays(3, 232, 2 * 7_000));
+    /// ```
+    pub fn pays(tapes: usize, instructions: usize, evaluations: u64) -> bool {
+        if tapes == 0 || instructions == 0 {
+            return false;
+        }
+        let cost = COMPILE_NS_PER_TAPE * tapes as f64 + COMPILE_NS_PER_INSTRUCTION * instructions as f64;
+        let saved = SAVED_NS_PER_INSTRUCTION * instructions as f64 / tapes as f64;
+        evaluations as f64 * saved >= cost
+    }
+
+    /// Whether a run of `evaluations` row evaluations compiles under this choice: the rule
+    /// of [`pays`](Compile::pays) for [`Auto`](Compile::Auto), with `tapes` and
+    /// `instructions` those a compilation would compile; always `false` without the `jit`
+    /// feature.
+    pub fn wanted(self, tapes: usize, instructions: usize, evaluations: u64) -> bool {
+        cfg!(feature = "jit")
+            && match self {
+                Compile::Never => false,
+                Compile::Always => true,
+                Compile::Auto => Compile::pays(tapes, instructions, evaluations),
+            }
+    }
+}
+
+/// Row evaluations a step of [`Simulation`] makes, for [`Compile::Auto`]'s estimate: the
+/// start's rows (only those the velocities change, when the last step's end rows are
+/// carried) and SHAKE's end rows (C and J) — 2.0 a step on the pendulum and the chains
+/// (`Summary::evaluations`).
+pub const EVALUATIONS_PER_STEP: u64 = 2;
+
 impl Settings {
     pub fn new(dt: f64, duration: f64) -> Settings {
         Settings {
@@ -103,6 +196,7 @@ impl Settings {
             blowup: 1.0,
             samples: SAMPLES,
             measure: Measure::Everything,
+            compile: Compile::Never,
         }
     }
 
@@ -344,6 +438,9 @@ pub struct Summary {
     pub max_kinetic: f64,
     /// Row evaluations (the cost unit).
     pub evaluations: u64,
+    /// Whether some of the rows' tapes ran as machine code ([`Settings::compile`]); the
+    /// numbers are the same either way.
+    pub compiled: bool,
     /// Steps whose projection onto C = 0 (`--stabilize projection`, or the exact velocity
     /// solve's after each substep) ended farther from it than its tolerance, and how far;
     /// `None` when every projection reached it or the run does not project.
@@ -502,6 +599,8 @@ pub struct Simulation<'s> {
     /// SHAKE's multipliers of the last steps, for its prediction (`stabilize::ShakeHistory`;
     /// not used with inequalities or 3D rigid bodies).
     shake: ShakeHistory,
+    /// Whether some of the rows' tapes run as machine code ([`Settings::compile`]).
+    compiled: bool,
 }
 
 impl<'s> Simulation<'s> {
@@ -517,6 +616,7 @@ impl<'s> Simulation<'s> {
             None => initial_state(dynamics.system(), env),
         };
         dynamics.baumgarte = settings.stabilize.baumgarte_terms(settings.dt);
+        let compiled = dynamics.compile_rows(settings.compile, settings.steps.saturating_mul(EVALUATIONS_PER_STEP));
         let n = q.len();
         let three_d = !dynamics.orientations().is_empty();
         let has_inequalities = dynamics.system().constraints.iter().any(|c| c.inequality);
@@ -541,6 +641,7 @@ impl<'s> Simulation<'s> {
             values: Vec::new(),
             has_inequalities,
             shake: ShakeHistory::default(),
+            compiled,
         })
     }
 
@@ -556,6 +657,7 @@ impl<'s> Simulation<'s> {
             stabilize: s.stabilize.name().into(),
             dt: s.dt,
             measured: s.measure,
+            compiled: self.compiled,
             unit_exponent: self.unit.as_ref().map_or(0, |u| u.exponent),
             ..Summary::default()
         };

@@ -176,6 +176,8 @@ pub struct Settings {
     /// wanted takes the velocity change alone, as its other substeps do); the other solvers
     /// have λ for free and report it at every step ([`Settings::lambda_at`]).
     pub lambda_every: u64,
+    /// Whether the rows' tapes run as machine code (`simulate::Compile`): never by default.
+    pub compile: crate::numeric::simulate::Compile,
 }
 
 /// Box2D v3's contact softness: 30 Hz (capped like the joints), ζ = 10, and the push-out
@@ -205,6 +207,7 @@ impl Settings {
             blowup: 1.0,
             samples: 4000,
             lambda_every: 1,
+            compile: crate::numeric::simulate::Compile::Never,
         }
     }
 

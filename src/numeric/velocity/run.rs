@@ -57,6 +57,9 @@ pub fn run(
     let mut unit = None;
     let result = settings.validate().and_then(|()| {
         unit = dynamics.choose_unit(env)?;
+        // At least one row evaluation a substep (`simulate::Compile::Auto`'s estimate).
+        let evaluations = settings.steps.saturating_mul(settings.substeps as u64);
+        summary.compiled = dynamics.compile_rows(settings.compile, evaluations);
         if let Some(u) = &unit {
             (q, v, _) = initial_state(system, &u.to_unit(env));
             summary.unit_exponent = u.exponent;
