@@ -687,8 +687,8 @@ impl Chain {
                 out_of_range(q, m, l, &mut diagnostics);
                 l
             }));
-            out.active.resize(k, true);
-            out.contacts.resize(k, None);
+            out.active.extend(std::iter::repeat_n(true, k));
+            out.contacts.extend(std::iter::repeat_n(None, k));
         }
         let slots = rows.inverse_mass.len();
         let n = rows.force.len().min(slots);
