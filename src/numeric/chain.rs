@@ -10,13 +10,20 @@
 //! b̃'s sum over its entries (one walk of them); a second the row of the factor (the factor
 //! of row k needs only rows up to k), −b̃ and the forward substitution; a third the backward
 //! substitution with the refinement's residual (a row's once the rows from it down are
-//! final); a fourth the residual's forward substitution; a fifth its backward substitution,
-//! adding the correction; a sixth λ; a seventh, over the slots, each slot's force from its
-//! one or two rows and its acceleration (a fresh answer's accelerations in a pass of their
-//! own). No term list, no permutation, no buffer of the general solve's. Every number is the general solve's bit for bit: the same operations
-//! (`solve::scale_row`, `solve::b_of`, `banded`'s tridiagonal kernels) in the same order —
-//! Ã's entries summed over the slots in increasing order from +0, as `solve::assemble`'s
-//! terms go — which a property test over random chains holds it to (`tests/chain_solve.rs`).
+//! final) and the norms that decide whether a step of refinement is taken; only when it is,
+//! a fourth the residual's forward substitution and a fifth its backward substitution,
+//! adding the correction; then λ; and, over the slots, each slot's force from its one or two
+//! rows and its acceleration (a fresh answer's accelerations in a pass of their own). No term
+//! list, no permutation, no buffer of the general solve's. Every number up to the solution
+//! is the general solve's bit for bit: the same operations (`solve::scale_row`, `solve::b_of`,
+//! `banded`'s tridiagonal kernels) in the same order — Ã's entries summed over the slots in
+//! increasing order from +0, as `solve::assemble`'s terms go. The general solve always takes
+//! the step of refinement; this one takes it only when the first solution's residual is
+//! above what the backward stable tridiagonal Cholesky leaves ([`REFINE_BOUND`], with the
+//! analysis), which it practically never is: the solution is then the general one's before
+//! its step, within the same residual bound, and where the step is taken it is the general
+//! solve's bit for bit. A property test over random chains holds it to that
+//! (`tests/chain_solve.rs`).
 //!
 //! It serves only what the general solve would answer with the tridiagonal band Cholesky and
 //! no diagnostic but a λ out of range: equality rows, every number finite, every row usable
@@ -46,6 +53,34 @@ use std::cell::RefCell;
 
 /// No row yet, in [`Chain::first`].
 const NONE: usize = usize::MAX;
+
+/// The residual's bound under which [`Chain::substitute`] takes no step of refinement:
+/// ‖−b̃ − Ã y‖₁ ≤ 16 u (3 ‖y‖₁ + ‖b̃‖₁), u = 2⁻⁵³ the unit roundoff.
+///
+/// Why a step would not help there (Higham, *Accuracy and Stability of Numerical
+/// Algorithms*, 2nd ed. 2002: §9.6 for tridiagonals, ch. 10 for Cholesky, ch. 12 for
+/// refinement). The factor of a tridiagonal Ã is bidiagonal with a positive diagonal, so
+/// |L||Lᵀ| = |L Lᵀ| entry by entry (the diagonal's l²ᵢ,ᵢ₋₁ + l²ᵢᵢ has no cancellation, the
+/// off-diagonal is one product): the factor has no growth. Each factor row (a division, a
+/// square, a subtraction, a square root) gives L̂ L̂ᵀ = Ã + ΔÃ with |ΔÃ| ≤ γ₃ |L̂||L̂ᵀ| ≤
+/// γ₃ |Ã| (to first order), and each substitution row (a product, a subtraction, the
+/// rounded 1/Lᵢᵢ and the multiplication by it) (L̂ + ΔL) y = x with |ΔL| ≤ γ₃ |L̂|; together
+/// (Ã + E) ŷ = −b̃ with |E| ≤ 9u |Ã| to first order: the solve is backward stable
+/// componentwise, and the true residual is at most 9u |Ã||ŷ|. Its evaluation (three
+/// products, their sum, the subtraction) adds γ₄ (|b̃| + |Ã||ŷ|), so the computed residual
+/// is within 13u (|Ã||ŷ| + |b̃|) row by row, and summed over the rows within
+/// 13u (‖Ã‖₁ ‖ŷ‖₁ + ‖b̃‖₁), where ‖Ã‖₁ ≤ 3 (1 + O(u)): Ã is a Gram matrix J̃ M⁻¹ J̃ᵀ with a
+/// unit diagonal to rounding, so |Ãᵢⱼ| ≤ (Ãᵢᵢ Ãⱼⱼ)^½, and a column has three entries.
+/// 16u leaves room for the second-order terms and the sums' own rounding (n u, below 1e-10
+/// for a million rows). A residual within it is the rounding of a backward stable solve,
+/// which one step of fixed-precision refinement improves by no more than a small constant
+/// (Higham §12.2: the step brings the componentwise backward error to O(u) when the solver
+/// is not stable enough; here it already is, and the forward error is about κ(Ã) u either
+/// way — on ill-conditioned chains λ's errors without the step are 1.3× larger summed over
+/// cases, from 0.09× to 9× case by case, `tests/chain_solve.rs`): the step is taken only
+/// where the analysis does not hold — numbers near the underflow threshold (a subnormal's
+/// error is not relative), or a residual that is not finite.
+const REFINE_BOUND: f64 = 16.0 * (f64::EPSILON / 2.0);
 
 /// A chain's scaling, Ã and factor, with the J and masses they were made from and the
 /// buffers of its substitutions (see the module note).
@@ -80,6 +115,8 @@ pub(crate) struct Chain {
     /// Per row Σᵢ J̃ᵢ·Fᵢ wᵢ, b̃ but its c̃, summed as the row is scaled (rows past the first
     /// that changed; the rows before take it in [`factor_from`](Chain::factor_from)).
     external: Vec<f64>,
+    /// Whether the last substitution took the step of refinement ([`REFINE_BOUND`]).
+    refined: bool,
     /// −b̃, the solution and the refinement's correction.
     rhs: Vec<f64>,
     y: Vec<f64>,
@@ -541,35 +578,51 @@ impl Chain {
     }
 
     /// The backward substitution, then one step of iterative refinement, y += Ã⁻¹ (−b̃ − Ã y),
-    /// as `solve::BandFactor::solve_into` takes it, in three passes: the backward
-    /// substitution with the residual of each row once y is known on and around it (rows
-    /// below it are final by then), the residual's forward substitution, and its backward
-    /// substitution adding each correction to y. The same operations as one pass each
-    /// (`banded`'s `backward_step`, `forward_step` and `tridiagonal_mul_row`), each pass over
-    /// slices of k rows (no bounds check left): the residual of row i + 1 is computed once yᵢ
-    /// is ([`residual`]), with yᵢ₊₁ and Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers. Whether every μ is
-    /// finite (tested by bits as each is written, [`not_finite_bit`]: no pass of its own).
+    /// as `solve::BandFactor::solve_into` takes it, when the residual asks for it
+    /// ([`REFINE_BOUND`]), in up to three passes: the backward substitution with the residual
+    /// of each row once y is known on and around it (rows below it are final by then), and
+    /// with it ‖r‖₁, ‖y‖₁ and ‖b̃‖₁; then, only when the test fails, the residual's forward
+    /// substitution and its backward substitution adding each correction to y. The same
+    /// operations as one pass each (`banded`'s `backward_step`, `forward_step` and
+    /// `tridiagonal_mul_row`), each pass over slices of k rows (no bounds check left): the
+    /// residual of row i + 1 is computed once yᵢ is ([`residual`]), with yᵢ₊₁ and
+    /// Ãᵢ₊₂,ᵢ₊₁ yᵢ₊₂ kept in registers. Whether every μ is finite: by the norms when the
+    /// refinement is not taken (a finite ‖y‖₁ has every yᵢ finite), else tested by bits as
+    /// each is written ([`not_finite_bit`]: no pass of its own).
     fn substitute(&mut self) -> bool {
-        let Chain { a, l, inverse, rhs, y, r, .. } = self;
+        let Chain { a, l, inverse, rhs, y, r, refined, .. } = self;
         let k = y.len();
         let (a, l) = (a[..2 * k].as_chunks::<2>().0, l[..2 * k].as_chunks::<2>().0);
         let (inverse, rhs, r, y) = (&inverse[..k], &rhs[..k], &mut r[..k], &mut y[..k]);
         // yᵢ₊₁ and Ãᵢ₊₁,ᵢ yᵢ₊₁ (row i's `above`; +0 at the last row) while row i is substituted.
         let (mut y_up, mut above) = (0.0, 0.0);
         let mut next = 0.0;
+        // ‖r‖₁, ‖y‖₁ and ‖b̃‖₁, three sums beside the substitution's chain (a NaN or an
+        // infinity stays in its sum, which the test then fails).
+        let (mut r_norm, mut y_norm, mut b_norm) = (0.0f64, 0.0f64, 0.0f64);
         for i in (0..k).rev() {
             let v;
             (v, next) = backward_step(l[i][0], inverse[i], i > 0, y[i], next);
             y[i] = v;
+            y_norm += v.abs();
+            b_norm += rhs[i].abs();
             if i + 1 < k {
                 let j = i + 1;
                 r[j] = residual(rhs[j], 0.0 + a[j][0] * v, a[j][1], y_up, above);
+                r_norm += r[j].abs();
                 above = a[j][0] * y_up;
             }
             y_up = v;
         }
         if k > 0 {
             r[0] = residual(rhs[0], 0.0, a[0][1], y_up, above);
+            r_norm += r[0].abs();
+        }
+        // ‖Ã‖₁ ≤ 3 (below): the bound's scale, finite only when every yᵢ and b̃ᵢ is.
+        let scale = 3.0 * y_norm + b_norm;
+        *refined = !(r_norm <= REFINE_BOUND * scale && scale < f64::INFINITY);
+        if !*refined {
+            return true;
         }
         let mut previous = 0.0;
         for i in 0..k {
@@ -636,8 +689,8 @@ impl Chain {
                 out_of_range(q, m, l, &mut diagnostics);
                 l
             }));
-            out.active.resize(k, true);
-            out.contacts.resize(k, None);
+            out.active.extend(std::iter::repeat_n(true, k));
+            out.contacts.extend(std::iter::repeat_n(None, k));
         }
         let slots = rows.inverse_mass.len();
         let n = rows.force.len().min(slots);
@@ -697,7 +750,68 @@ impl Chain {
 
 #[cfg(test)]
 mod tests {
-    use super::{all_zero, masses_sound};
+    use super::{Chain, all_zero, masses_sound};
+    use crate::numeric::rows::{Row, Rows};
+    use crate::numeric::solve::{Settings, Solution, solve_general};
+
+    /// A zigzag chain of `n` unit masses in 2D, each row's c term `bias` (no velocities or
+    /// forces: b̃ is c̃).
+    fn zigzag(n: usize, bias: f64) -> Rows {
+        let rows = (0..n)
+            .map(|k| {
+                let d = [1.0, if k % 2 == 0 { 0.3 } else { -0.2 }, 0.0];
+                let jacobian = if k > 0 { vec![(k - 1, d.map(|x| -x)), (k, d)] } else { vec![(k, d)] };
+                Row { value: 0.0, rate: 0.0, bias: bias * (1.0 + k as f64 / 7.0), inequality: false, jacobian }
+            })
+            .collect();
+        Rows {
+            dim: 2,
+            inverse_mass: vec![1.0; n],
+            velocity: vec![[0.0; 3]; n],
+            force: vec![[0.0; 3]; n],
+            rows,
+            axes: Vec::new(),
+        }
+    }
+
+    /// λ's bits.
+    fn bits(s: &Solution) -> Vec<u64> {
+        s.lambda.iter().map(|x| x.to_bits()).collect()
+    }
+
+    /// The step of refinement is taken exactly where the residual asks for it, and then
+    /// gives the general solve's numbers: not on a chain of ordinary numbers; on the same
+    /// chain with its forward solution spoiled in one row (a residual far above the bound),
+    /// where the step brings y back to the unspoiled answer; and on a chain whose c terms
+    /// (so b̃ and λ) are subnormal, where rounding is not relative and the bound underflows,
+    /// solved as the general solve solves it, bit for bit.
+    #[test]
+    fn the_refinement_is_taken_where_the_residual_asks_for_it() {
+        let settings = Settings::default();
+        let rows = zigzag(12, 0.7);
+        let mut chain = Chain::default();
+        let mut out = Solution::default();
+        assert!(chain.solve_fresh(&rows, &settings, &mut out).is_some());
+        assert!(!chain.refined, "ordinary numbers: no step");
+        let plain = chain.y.clone();
+        // The forward substitution again, one row of it spoiled, then the substitution.
+        assert!(chain.factor_and_forward(&rows, &settings, 0, false, false));
+        chain.y[5] *= 1.0 + 1e-6;
+        assert!(chain.substitute());
+        assert!(chain.refined, "a spoiled solution's residual asks for the step");
+        let size = plain.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+        for (got, want) in chain.y.iter().zip(&plain) {
+            // One step takes a 1e-6 error to about 1e-6 · κ u below the rounding of the
+            // answer (κ of a few here): what is left is that rounding.
+            assert!((got - want).abs() <= 1e-14 * size, "{got:e} against {want:e}");
+        }
+        let tiny = zigzag(12, 3e-318);
+        let mut chain = Chain::default();
+        let mut out = Solution::default();
+        assert!(chain.solve_fresh(&tiny, &settings, &mut out).is_some());
+        assert!(chain.refined, "subnormal numbers: the step");
+        assert_eq!(bits(&out), bits(&solve_general(&tiny, &settings, &[])));
+    }
 
     /// [`masses_sound`]'s and [`all_zero`]'s bit tests answer as `w >= 0.0 && w.is_finite()`
     /// and `x == 0.0` number by number, on every kind of number:
