@@ -174,8 +174,9 @@ fn residual(rhs: f64, below: f64, diagonal: f64, y: f64, above: f64) -> f64 {
 thread_local! {
     /// The buffers of [`solve_into`]'s chains, kept between the calls on a thread: their sizes
     /// and the last pattern, not their numbers (every call scales and factors afresh), so a
-    /// solve of a chain the size of the last one allocates only its answer, and one on the
-    /// same slots does not look for its pattern again.
+    /// solve of a chain the size of the last one allocates only its answer (nothing into an
+    /// answer that held one of that size, `solve::solve_into`), and one on the same slots
+    /// does not look for its pattern again.
     static BUFFERS: RefCell<Chain> = RefCell::new(Chain::default());
 }
 
