@@ -242,11 +242,28 @@ fn chain_solve_handwritten(bencher: divan::Bencher, n: usize) {
     });
 }
 
-/// The same through the library: the rows by the compiled tape (`RowProgram::evaluate_into`)
-/// and the general solve (`solve_with`: scaling, contact classes, assembly, band Cholesky,
-/// refinement), to the accelerations.
+/// The same through the library, as an engine calls it: the rows by the compiled tape
+/// (`RowProgram::evaluate_into`) and the solve into an answer kept outside the loop
+/// (`solve_into`: scaling, assembly, tridiagonal Cholesky, the refinement where the residual
+/// asks, the answer's vectors reused), to the accelerations.
 #[divan::bench(name = "chain_solve_2_library", args = [10, 100, 1000, 10000])]
 fn chain_solve_library(bencher: divan::Bencher, n: usize) {
+    let s = chain(n);
+    let mut scratch = s.program.scratch();
+    let mut rows = lagrange::numeric::rows::Rows::default();
+    let mut answer = lagrange::numeric::solve::Solution::default();
+    let settings = lagrange::numeric::solve::Settings::default();
+    bencher.bench_local(|| {
+        s.program.evaluate_into(&s.system, &s.env, &mut scratch, &mut rows).expect("rows");
+        lagrange::numeric::solve::solve_into(&rows, &settings, &mut answer);
+        answer.acceleration[n - 1]
+    });
+}
+
+/// [`chain_solve_library`] with a fresh answer each call (`solve_with`: its five vectors
+/// allocated every time).
+#[divan::bench(name = "chain_solve_2_library_fresh", args = [10, 100, 1000, 10000])]
+fn chain_solve_library_fresh(bencher: divan::Bencher, n: usize) {
     let s = chain(n);
     let mut scratch = s.program.scratch();
     let mut rows = lagrange::numeric::rows::Rows::default();

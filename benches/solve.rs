@@ -11,7 +11,7 @@
 //! `chain_*` is the solve alone of the same chain's rows against a handwritten tridiagonal
 //! solve of them (`chain_1_handwritten`: A = J M⁻¹ Jᵀ and b = J M⁻¹ F + c assembled from the
 //! rows' J, Thomas's algorithm, the accelerations): the library's `solve_with` (the fast
-//! path for chains, `numeric::chain`), the general solve it stands in for (`solve_general`),
+//! path for chains, `numeric::chain`) and `solve_into` (the same into a kept answer), the general solve it stands in for (`solve_general`),
 //! and a run's cache with J kept (reused) or changing at every solve (refactored).
 
 /// The same allocator as the `lagrange` binary (mimalloc: a symbolic derivation allocates
@@ -21,7 +21,9 @@ static ALLOCATOR: mimalloc::MiMalloc = mimalloc::MiMalloc;
 
 use divan::{Bencher, black_box};
 use lagrange::numeric::rows::{Row, Rows};
-use lagrange::numeric::solve::{Method, Settings, SolveCache, solve_cached, solve_general, solve_with};
+use lagrange::numeric::solve::{
+    Method, Settings, Solution, SolveCache, solve_cached, solve_general, solve_into, solve_with,
+};
 
 fn main() {
     divan::main();
@@ -239,6 +241,19 @@ fn chain_solve_with(bencher: Bencher, n: usize) {
     let rows = chain(n);
     let settings = Settings::default();
     bencher.bench(|| solve_with(black_box(&rows), &settings).acceleration[n - 1]);
+}
+
+/// [`chain_solve_with`] into an answer kept outside the loop (`solve_into`): what an engine
+/// that solves every frame calls, the answer's vectors reused.
+#[divan::bench(name = "chain_2_solve_into", args = [10, 100, 1000, 10000])]
+fn chain_solve_into(bencher: Bencher, n: usize) {
+    let rows = chain(n);
+    let settings = Settings::default();
+    let mut answer = Solution::default();
+    bencher.bench_local(|| {
+        solve_into(black_box(&rows), &settings, &mut answer);
+        answer.acceleration[n - 1]
+    });
 }
 
 /// The general solve the fast path stands in for (`solve_general`: scaling buffers, terms of

@@ -172,27 +172,28 @@ fn residual(rhs: f64, below: f64, diagonal: f64, y: f64, above: f64) -> f64 {
 }
 
 thread_local! {
-    /// The buffers of [`solve`]'s chains, kept between the calls on a thread: their sizes
+    /// The buffers of [`solve_into`]'s chains, kept between the calls on a thread: their sizes
     /// and the last pattern, not their numbers (every call scales and factors afresh), so a
-    /// solve of a chain the size of the last one allocates only its answer, and one on the
-    /// same slots does not look for its pattern again.
+    /// solve of a chain the size of the last one allocates only its answer (nothing into an
+    /// answer that held one of that size, `solve::solve_into`), and one on the same slots
+    /// does not look for its pattern again.
     static BUFFERS: RefCell<Chain> = RefCell::new(Chain::default());
 }
 
-/// The general solve's answer at `rows` when they form a chain it serves (module note), or
-/// `None`: `solve_holding`'s fast path.
-pub(crate) fn solve(rows: &Rows, settings: &Settings) -> Option<Solution> {
+/// Writes the general solve's answer at `rows` into `out` when they form a chain it serves
+/// (module note), reusing `out`'s vectors, and returns true; returns false, `out`
+/// untouched, otherwise: `solve_holding_into`'s fast path.
+pub(crate) fn solve_into(rows: &Rows, settings: &Settings, out: &mut Solution) -> bool {
     if !servable(rows) || !allowed(settings.method, rows.rows.len()) {
-        return None;
+        return false;
     }
-    let mut out = Solution::default();
     let path = BUFFERS.with(|chain| match chain.try_borrow_mut() {
         // No factor of an earlier call is reused, none is kept: this solve's cost is a fresh one's.
-        Ok(mut chain) => chain.solve_fresh(rows, settings, &mut out),
+        Ok(mut chain) => chain.solve_fresh(rows, settings, out),
         // Not reached (nothing here solves inside a solve), but a fresh chain would serve.
-        Err(_) => Chain::default().solve_fresh(rows, settings, &mut out),
+        Err(_) => Chain::default().solve_fresh(rows, settings, out),
     });
-    path.map(|_| out)
+    path.is_some()
 }
 
 /// Whether every slot's 1/m is finite and ≥ 0, as `solve::row_sound` asks of the slots a

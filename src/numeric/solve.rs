@@ -832,37 +832,87 @@ pub fn solve(rows: &Rows) -> Solution {
     solve_with(rows, &Settings::default())
 }
 
-/// Solves for λ at `rows`.
+/// Solves for λ at `rows`: a fresh [`Solution`] and [`solve_into`].
 pub fn solve_with(rows: &Rows, settings: &Settings) -> Solution {
-    solve_holding(rows, settings, &[])
+    let mut out = Solution::default();
+    solve_into(rows, settings, &mut out);
+    out
+}
+
+/// [`solve_with`] into `out`, reusing its vectors: every field of `out` (λ, the active set,
+/// the contact states, the forces, the accelerations, the diagnostics and the status) is
+/// overwritten, and the answer is [`solve_with`]'s bit for bit whatever `out` held before
+/// (`tests/solve_into.rs`). What an engine that solves every frame calls, with the answer
+/// kept outside its loop: a chain's solve (`numeric::chain`) then allocates nothing once
+/// `out` has held an answer of that size; the general solve still allocates its own
+/// buffers (the scaling, the block, its factor), but not the vectors of the answer.
+///
+/// ```
+/// use lagrange::numeric::rows::{Row, Rows};
+/// use lagrange::numeric::solve::{Settings, Solution, solve_into, solve_with};
+///
+/// // A bead on a unit circle at rest, under gravity: C = x² + y² − 1, J = (2x, 2y).
+/// let rows = Rows {
+///     rows: vec![Row { value: 0.0, rate: 0.0, bias: 0.0, inequality: false, jacobian: vec![(0, [0.0, -2.0, 0.0])] }],
+///     inverse_mass: vec![1.0],
+///     velocity: vec![[0.0; 3]],
+///     force: vec![[0.0, -9.81, 0.0]],
+///     ..Rows::default()
+/// };
+/// let settings = Settings::default();
+/// let mut out = Solution::default();
+/// for _ in 0..3 {
+///     // The same answer each frame, in the same buffers.
+///     solve_into(&rows, &settings, &mut out);
+///     assert_eq!(out, solve_with(&rows, &settings));
+/// }
+/// ```
+pub fn solve_into(rows: &Rows, settings: &Settings, out: &mut Solution) {
+    solve_holding_into(rows, settings, &[], out);
 }
 
 /// Solves for λ at `rows`, with the inequality rows marked in `held` (a simulation's active
 /// set, `numeric::dynamics`) taken as touching whatever their distance
 /// (`contact::classify_holding`): they stay candidates, λ ≥ 0, and leave only when λ would
-/// turn negative or they open.
+/// turn negative or they open. A fresh [`Solution`] and [`solve_holding_into`].
 pub fn solve_holding(rows: &Rows, settings: &Settings, held: &[bool]) -> Solution {
+    let mut out = Solution::default();
+    solve_holding_into(rows, settings, held, &mut out);
+    out
+}
+
+/// [`solve_holding`] into `out`, reusing its vectors as [`solve_into`] does: every field is
+/// overwritten, the answer [`solve_holding`]'s bit for bit.
+pub fn solve_holding_into(rows: &Rows, settings: &Settings, held: &[bool], out: &mut Solution) {
     // Equality rows that form a chain in their order: the same numbers in a few passes
-    // (`numeric::chain`), declined wherever this solve would say more.
-    if let Some(solution) = super::chain::solve(rows, settings) {
-        return solution;
+    // (`numeric::chain`), declined (`out` untouched) wherever this solve would say more.
+    if !super::chain::solve_into(rows, settings, out) {
+        general_into(rows, settings, held, out);
     }
-    solve_general(rows, settings, held)
 }
 
 /// Whether [`solve_holding`] answers `rows` by its fast path for chains (`numeric::chain`):
 /// for the tests of the switch.
 #[doc(hidden)]
 pub fn chain_serves(rows: &Rows, settings: &Settings) -> bool {
-    super::chain::solve(rows, settings).is_some()
+    super::chain::solve_into(rows, settings, &mut Solution::default())
 }
 
 /// [`solve_holding`] without its fast path for chains (`numeric::chain`): the reference that
 /// path is held to, bit for bit (`tests/chain_solve.rs`).
 #[doc(hidden)]
 pub fn solve_general(rows: &Rows, settings: &Settings, held: &[bool]) -> Solution {
+    let mut out = Solution::default();
+    general_into(rows, settings, held, &mut out);
+    out
+}
+
+/// [`solve_general`] into `out`: its own buffers allocated afresh, the answer written into
+/// `out`'s vectors.
+fn general_into(rows: &Rows, settings: &Settings, held: &[bool], out: &mut Solution) {
     let k = rows.rows.len();
-    let mut diagnostics = Vec::new();
+    let mut diagnostics = std::mem::take(&mut out.diagnostics);
+    diagnostics.clear();
     let mut status = Status::Solved;
     let scaled = Scaled::new(rows, &mut diagnostics, &mut status);
     let contacts = classify_holding(rows, settings, held);
@@ -888,7 +938,9 @@ pub fn solve_general(rows: &Rows, settings: &Settings, held: &[bool]) -> Solutio
     let nonnegative: Vec<bool> = index.iter().map(|&q| rows.rows[q].inequality).collect();
     let block = assemble(&scaled, &rows.inverse_mass, &index);
     let mu = multipliers(&block, &b, &nonnegative, &index, settings, &mut diagnostics, &mut status);
-    finish(rows, &scaled, &index, &mu, diagnostics, status, contacts)
+    finish_into(rows, &scaled, &index, &mu, diagnostics, status, out);
+    out.contacts.clear();
+    out.contacts.extend_from_slice(&contacts);
 }
 
 /// Which way a [`solve_cached`] went (for tests of the switch, and for profiles).
@@ -1386,7 +1438,7 @@ pub(crate) fn cached_into(
     cache.made = None;
     if !super::chain::servable(rows) {
         cache.path = SolvePath::General;
-        *out = solve_holding(rows, settings, held);
+        solve_holding_into(rows, settings, held, out);
         return;
     }
     // A chain in its order: the tridiagonal in place (`numeric::chain`), the same numbers.
@@ -1414,7 +1466,7 @@ pub(crate) fn cached_into(
     }
     let Some(c) = &mut cache.entry else {
         cache.path = SolvePath::General;
-        *out = solve_holding(rows, settings, held);
+        solve_holding_into(rows, settings, held, out);
         return;
     };
     let (mut diagnostics, mut status) = (std::mem::take(&mut out.diagnostics), Status::Solved);
@@ -1451,7 +1503,7 @@ pub(crate) fn cached_into(
                         cache.entry = None;
                     }
                     cache.path = SolvePath::General;
-                    *out = solve_holding(rows, settings, held);
+                    solve_holding_into(rows, settings, held, out);
                     return;
                 };
                 status = status.max(Status::MinimumNorm);
@@ -1472,7 +1524,7 @@ pub(crate) fn cached_into(
                     None => {
                         // Rows that contradict each other here: the general solve says so.
                         cache.path = SolvePath::General;
-                        *out = solve_holding(rows, settings, held);
+                        solve_holding_into(rows, settings, held, out);
                         return;
                     }
                 }
@@ -1693,23 +1745,6 @@ fn negated_right_hand_side(rows: &Rows, scaled: &Scaled, rhs: &mut Vec<f64>) {
     }
 }
 
-/// The solution from the scaled multipliers `mu` of the rows `index`: λ, forces,
-/// accelerations (the one tail of the general and the reused solve).
-fn finish(
-    rows: &Rows,
-    scaled: &Scaled,
-    index: &[usize],
-    mu: &[f64],
-    diagnostics: Vec<Diagnostic>,
-    status: Status,
-    contacts: Vec<Option<ContactState>>,
-) -> Solution {
-    let mut out = Solution::default();
-    finish_into(rows, scaled, index, mu, diagnostics, status, &mut out);
-    out.contacts = contacts;
-    out
-}
-
 /// The diagnostic of row `q` whose λ = λ̃/(‖J‖√Â) left the normal f64 range while its μ
 /// did not: λ can leave it when ‖J‖ does (|r| ≈ 1e155 gives λ ≈ 1e-310) although the force
 /// λ̃ J̃ is exact, so say so rather than print a wrong 0 or ∞.
@@ -1755,7 +1790,9 @@ pub(super) fn accelerations_into(rows: &Rows, constraint_force: &[[f64; 3]], acc
     }
 }
 
-/// [`finish`] into `out`'s buffers (its contacts are left to the caller).
+/// λ, the active set, the forces, the accelerations, the diagnostics and the status of the
+/// scaled multipliers `mu` of the rows `index`, into `out`'s buffers (its contacts are left
+/// to the caller).
 fn finish_into(
     rows: &Rows,
     scaled: &Scaled,
