@@ -242,22 +242,13 @@ fn chain_solve_handwritten(bencher: divan::Bencher, n: usize) {
     });
 }
 
-/// The same through the library, as an engine calls it: the rows by the compiled tape
-/// (`RowProgram::evaluate_into`) and the solve into an answer kept outside the loop
-/// (`solve_into`: scaling, assembly, tridiagonal Cholesky, the refinement where the residual
-/// asks, the answer's vectors reused), to the accelerations.
+/// The same through the library, as an engine calls it: the rows by the tape
+/// (`RowProgram::evaluate_into`, interpreted) and the solve into an answer kept outside the
+/// loop (`solve_into`: scaling, assembly, tridiagonal Cholesky, the refinement where the
+/// residual asks, the answer's vectors reused), to the accelerations.
 #[divan::bench(name = "chain_solve_2_library", args = [10, 100, 1000, 10000])]
 fn chain_solve_library(bencher: divan::Bencher, n: usize) {
-    let s = chain(n);
-    let mut scratch = s.program.scratch();
-    let mut rows = lagrange::numeric::rows::Rows::default();
-    let mut answer = lagrange::numeric::solve::Solution::default();
-    let settings = lagrange::numeric::solve::Settings::default();
-    bencher.bench_local(|| {
-        s.program.evaluate_into(&s.system, &s.env, &mut scratch, &mut rows).expect("rows");
-        lagrange::numeric::solve::solve_into(&rows, &settings, &mut answer);
-        answer.acceleration[n - 1]
-    });
+    library_step(bencher, chain(n), n);
 }
 
 /// [`chain_solve_library`] with a fresh answer each call (`solve_with`: its five vectors
@@ -278,13 +269,20 @@ fn chain_solve_library_fresh(bencher: divan::Bencher, n: usize) {
 #[cfg(feature = "jit")]
 #[divan::bench(name = "chain_solve_2_library_jit", args = [10, 100])]
 fn chain_solve_library_jit(bencher: divan::Bencher, n: usize) {
-    let s = compiled(chain(n));
+    library_step(bencher, compiled(chain(n)), n);
+}
+
+/// The library's step of [`chain_solve_library`] on `s`, an `n`-link chain: its rows, then
+/// the solve into one answer.
+fn library_step(bencher: divan::Bencher, s: Scenario, n: usize) {
     let mut scratch = s.program.scratch();
     let mut rows = lagrange::numeric::rows::Rows::default();
+    let mut answer = lagrange::numeric::solve::Solution::default();
     let settings = lagrange::numeric::solve::Settings::default();
     bencher.bench_local(|| {
         s.program.evaluate_into(&s.system, &s.env, &mut scratch, &mut rows).expect("rows");
-        lagrange::numeric::solve::solve_with(&rows, &settings).acceleration[n - 1]
+        lagrange::numeric::solve::solve_into(&rows, &settings, &mut answer);
+        answer.acceleration[n - 1]
     });
 }
 
