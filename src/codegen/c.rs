@@ -714,7 +714,7 @@ fn a(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), GenerateError
     }
     match p.layout.a {
         AStorage::Band { bandwidth } => {
-            let sparse = layout::mostly_zero(k * (bandwidth + 1), written.len());
+            let sparse = p.layout.sparse_band;
             if sparse {
                 stores.push(zero_fill(k, bandwidth + 1));
             }

@@ -13,7 +13,7 @@
 //! the velocity-level step (`codegen::c`, `support/step.c`).
 
 use super::c::{Parts, function, list, paren, zero_fill};
-use super::layout::{self, JStorage, Lambda};
+use super::layout::{JStorage, Lambda};
 use super::names::comment_text;
 use super::rust::{Ctx, GenerateError, formula, lambda_sum, per_body_fns};
 use crate::expr::Id;
@@ -560,7 +560,7 @@ fn band_lambda(ctx: &Ctx<'_>, out: &mut String, p: &Parts<'_>) -> Result<(), Gen
     let (lets, exprs) = ctx.body(&roots)?;
     // The band's zeros (past the last column, and a grid's many) stored one by one, or one
     // loop of them before the non-zero entries where the band is mostly zeros.
-    let sparse = layout::mostly_zero(k * (w + 1), at.iter().flatten().flatten().count());
+    let sparse = p.layout.sparse_band;
     let mut stores = Vec::new();
     if sparse {
         stores.push(zero_fill(k, w + 1));

@@ -155,6 +155,10 @@ pub struct Layout {
     pub bandwidth: usize,
     /// Whether some output is filled by parts (said in the module's header).
     pub parted: bool,
+    /// Whether A's band (K rows of `bandwidth` + 1 numbers) is mostly zeros
+    /// ([`mostly_zero`]): `a_band` and `band_system` then write its formulas over a zeroed
+    /// band.
+    pub sparse_band: bool,
 }
 
 impl Layout {
@@ -192,7 +196,8 @@ impl Layout {
             AStorage::Dense => Lambda::Dense,
             AStorage::Heap => Lambda::Rows,
         };
-        Layout { dim, bodies, constraints, a: a_storage, j, lambda, bandwidth, parted }
+        let sparse_band = mostly_zero(k * (bandwidth + 1), a.len());
+        Layout { dim, bodies, constraints, a: a_storage, j, lambda, bandwidth, parted, sparse_band }
     }
 }
 

@@ -2445,14 +2445,12 @@ impl Ctx<'_> {
             }
         }
         match layout.a {
-            AStorage::Band { bandwidth }
-                if layout::parted(formulas.a.len()) || layout::mostly_zero(k * (bandwidth + 1), formulas.a.len()) =>
-            {
+            AStorage::Band { bandwidth } if layout::parted(formulas.a.len()) || layout.sparse_band => {
                 // One item per band row, each entry once: the parts need no shared `let`s.
                 // A row is written whole, or (mostly zeros: a grid's band) only its non-zero
                 // entries over the zeros `out` starts with.
                 band_header(out, &mut doc, bandwidth);
-                let sparse = layout::mostly_zero(k * (bandwidth + 1), formulas.a.len());
+                let sparse = layout.sparse_band;
                 let present =
                     |r: usize| (r..=r + bandwidth).filter(|c| where_.contains_key(&(r, *c))).collect::<Vec<_>>();
                 let items: Vec<Vec<Id>> =
@@ -2896,7 +2894,7 @@ impl Ctx<'_> {
             (0..k).map(|r| columns(r).iter().map(|c| entry[&(r, *c)]).chain([b_code[r]]).collect()).collect();
         // A row written whole, or (where the band is mostly zeros: a grid's) only
         // its non-zero entries over the zeros `out` starts with.
-        let sparse = layout::mostly_zero(k * (w + 1), entry.len());
+        let sparse = layout.sparse_band;
         let store = |r: usize, exprs: &[String]| {
             let cols = columns(r);
             let minus_b = format!("-{}", operand(&exprs[cols.len()]));
