@@ -311,7 +311,7 @@ fn band_step(bencher: divan::Bencher, s: Scenario, n: usize, compile: bool) {
     let mut band = BandLambda::new(&s.system, &s.derivation, &s.scene.forces).expect("a chain");
     #[cfg(feature = "jit")]
     if compile {
-        band.compile().expect("this host compiles tapes");
+        band.compile(&s.derivation).expect("this host compiles tapes");
     }
     assert!(!compile || band.is_compiled());
     let settings = Settings::default();

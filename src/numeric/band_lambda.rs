@@ -64,6 +64,8 @@ use crate::expr::eval::{Env, Value};
 use crate::expr::graph::SymbolWalk;
 use crate::expr::{Id, Symbol};
 use crate::model::system::System;
+use crate::numeric::batch::{Batched, BatchedScratch};
+use crate::numeric::program::Inputs;
 use crate::numeric::rows::{RowProgram, RowScratch, Rows};
 use crate::numeric::solve::{self, Method, Settings, Solution, Status};
 use crate::numeric::tape::{Scratch, Tape};
@@ -72,36 +74,56 @@ use crate::numeric::vector::all_finite;
 /// No entry: a row's A[k][k + 1] that is zero (the last row's, or a simplified zero).
 const ABSENT: u32 = u32::MAX;
 
-/// A chain's λ from one program of A's band, c, J, the masses and the forces (see the
+/// A chain's λ from one program of A's band, c, J, the masses and forces (see the
 /// module's note for what it serves and what its guard declines).
 #[derive(Clone, Debug)]
 pub struct BandLambda {
-    tape: Tape,
-    /// The tape compiled to machine code, once [`BandLambda::compile`] has made it.
+    kernel: Kernel,
+    /// The program's roots, in units (each row's, then each body's: indices into
+    /// `roots`), kept for `BandLambda::compile` (feature `jit`).
     #[cfg(feature = "jit")]
-    compiled: Option<std::sync::Arc<crate::numeric::jit::JitTape>>,
-    /// The tape's input symbols, in its layout's order.
-    inputs: Vec<Symbol>,
+    roots: Vec<Id>,
+    #[cfg(feature = "jit")]
+    units: Vec<Vec<usize>>,
+    /// Each input symbol, its first slot in the input buffer and its width (1, or the
+    /// dimension).
+    loads: Vec<(Symbol, u32, u32)>,
     dim: usize,
     /// Per row, where its numbers are among the outputs.
     rows: Vec<RowAt>,
-    /// Every row's J entries in turn: (first output, body).
-    entries: Vec<(u32, u32)>,
-    /// Per body: the output of its mass, of its force's first component.
-    bodies: Vec<(u32, u32)>,
+    /// Every row's J entries in turn.
+    entries: Vec<EntryAt>,
+    /// Per body, where its mass and force are.
+    bodies: Vec<BodyAt>,
     // Buffers of one call.
     input: Vec<f64>,
     output: Vec<f64>,
-    scratch: Scratch,
-    /// Per body: 1/m, and F/m.
+    /// Per body: 1/m, F, F/m.
     inverse_mass: Vec<f64>,
+    external: Vec<[f64; 3]>,
     weighted: Vec<[f64; 3]>,
     /// Per row: 1/dₖ, Lₖ = A[k − 1][k]/dₖ₋₁, y then λ.
     inverse_pivot: Vec<f64>,
     multiplier: Vec<f64>,
     lambda: Vec<f64>,
-    /// Per body: Σₖ λₖ Jₖᵢ.
+    /// Per body: Σₖ λₖ Jₖᵢ, and the acceleration (swapped with the answer's vectors when
+    /// the guard passes: no copy).
     force: Vec<[f64; 3]>,
+    acceleration: Vec<[f64; 3]>,
+}
+
+/// How the program's roots are computed: one tape of them all (and its compiled twin once
+/// [`BandLambda::compile`] has made it), or shape by shape (`numeric::batch`) where rows
+/// and bodies repeat a shape often enough, as the rows' program does.
+#[derive(Clone, Debug)]
+enum Kernel {
+    Tape {
+        tape: Tape,
+        scratch: Scratch,
+        #[cfg(feature = "jit")]
+        compiled: Option<std::sync::Arc<crate::numeric::jit::JitTape>>,
+    },
+    Batched(Box<Batched>, BatchedScratch),
 }
 
 /// One row's outputs: A[k][k], A[k][k + 1] (`ABSENT`: zero), c, and its J entries
@@ -115,6 +137,22 @@ struct RowAt {
     end: u32,
 }
 
+/// A J entry: its first component among the outputs, the distance between two, its body.
+#[derive(Clone, Copy, Debug)]
+struct EntryAt {
+    first: u32,
+    stride: u32,
+    body: u32,
+}
+
+/// A body's mass, and its force's first component and the distance between two.
+#[derive(Clone, Copy, Debug)]
+struct BodyAt {
+    mass: u32,
+    force: u32,
+    stride: u32,
+}
+
 /// Whether `method` lets a chain of `k` rows be solved by a band factor: the rule of the
 /// rows' chain path (`Auto` solves four rows or fewer densely).
 fn allowed(method: Method, k: usize) -> bool {
@@ -123,6 +161,12 @@ fn allowed(method: Method, k: usize) -> bool {
         Method::Auto => k > 4,
         Method::Dense | Method::Sparse => false,
     }
+}
+
+/// `D` components of a root from `first`, `stride` apart.
+#[inline(always)]
+fn read<const D: usize>(o: &[f64], first: u32, stride: u32) -> [f64; D] {
+    std::array::from_fn(|d| o[first as usize + d * stride as usize])
 }
 
 impl BandLambda {
@@ -158,74 +202,121 @@ impl BandLambda {
         if k > dim * moved.iter().filter(|m| **m).count() {
             return None;
         }
-        // The roots: per row A[k][k], A[k][k + 1], c, J; per body m, F.
+        // The roots in units: per row A[k][k], A[k][k + 1], c, J; per body m, F.
         let mut roots = Vec::new();
-        let mut at_root = Vec::with_capacity(k);
+        let mut units = Vec::with_capacity(k + system.bodies.len());
         for (r, d) in derivation.constraints.iter().enumerate() {
-            let diagonal = diagonal[r]?;
             let first = roots.len();
-            roots.push(diagonal);
+            roots.push(diagonal[r]?);
             roots.extend(upper[r]);
             roots.push(d.bias);
             roots.extend(d.jacobian.iter().map(|&(_, j)| j));
-            at_root.push((first, upper[r].is_some()));
+            units.push((first..roots.len()).collect::<Vec<_>>());
         }
-        let body_roots = roots.len();
         for (i, body) in system.bodies.iter().enumerate() {
             let f = forces.iter().find(|(b, _)| *b == i).map_or(body.nodes.force, |&(_, f)| f);
+            units.push(vec![roots.len(), roots.len() + 1]);
             roots.push(body.mass);
             roots.push(f);
         }
         let graph = &derivation.graph;
-        let inputs = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
-        let tape = Tape::compile(graph, &roots, &inputs).ok()?;
-        let out = |root: usize| tape.output_range(root).start as u32;
+        let symbols = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
+        let layout = Inputs::new(graph, &symbols).ok()?;
+        let ranges = layout.ranges();
+        let loads: Vec<(Symbol, u32, u32)> =
+            symbols.iter().zip(ranges).map(|(&s, r)| (s, r.start as u32, r.len() as u32)).collect();
+        let input_len = ranges.last().map_or(0, |r| r.end);
+        let position: crate::expr::graph::FastMap<Symbol, usize> =
+            symbols.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+        // Each root's width as a tape of it alone would give it: a scalar 1, a vector the
+        // dimension.
+        let width = |r: usize| if graph.ty(roots[r]) == crate::expr::Ty::Vector { dim } else { 1 };
+        let source = |s: Symbol| position.get(&s).map_or(0..0, |&i| ranges[i].clone());
+        let batched = Batched::new(graph, &roots, &units, width, source, |_| None);
+        let (kernel, output_len, place): (Kernel, usize, Vec<(usize, usize)>) = match batched {
+            Some(b) => {
+                let place = (0..roots.len()).map(|r| b.place(r)).collect();
+                let len = b.output_len();
+                let scratch = b.scratch();
+                (Kernel::Batched(Box::new(b), scratch), len, place)
+            }
+            None => {
+                let tape = Tape::compile(graph, &roots, &symbols).ok()?;
+                let place = (0..roots.len()).map(|r| (tape.output_range(r).start, 1)).collect();
+                let len = tape.output_len();
+                let scratch = tape.scratch();
+                #[cfg(feature = "jit")]
+                let kernel = Kernel::Tape { tape, scratch, compiled: None };
+                #[cfg(not(feature = "jit"))]
+                let kernel = Kernel::Tape { tape, scratch };
+                (kernel, len, place)
+            }
+        };
+        // Every place, with its last component, within the outputs, and every root as wide
+        // as a point mass's rows read it.
+        let fits = |r: usize, w: usize| {
+            let (first, stride) = place[r];
+            width(r) == w && first + (w - 1) * stride < output_len && output_len < ABSENT as usize
+        };
         let (mut rows, mut entries) = (Vec::with_capacity(k), Vec::new());
-        for (d, &(first, has_upper)) in derivation.constraints.iter().zip(&at_root) {
-            let bias = first + 1 + usize::from(has_upper);
+        for (unit, d) in units.iter().zip(&derivation.constraints) {
+            let has_upper = unit.len() == 3 + d.jacobian.len();
+            let bias = unit[1 + usize::from(has_upper)];
             let start = entries.len() as u32;
-            for (e, &(body, _)) in d.jacobian.iter().enumerate() {
-                // A J entry of another width than the dimension is not a point mass's.
-                if tape.output_range(bias + 1 + e).len() != dim {
+            for &r in &unit[unit.len() - d.jacobian.len()..] {
+                if !fits(r, dim) {
                     return None;
                 }
-                entries.push((out(bias + 1 + e), body as u32));
+                entries.push(EntryAt { first: place[r].0 as u32, stride: place[r].1 as u32, body: 0 });
+            }
+            for (e, &(body, _)) in entries[start as usize..].iter_mut().zip(&d.jacobian) {
+                e.body = body as u32;
+            }
+            if !(fits(unit[0], 1) && fits(bias, 1) && (!has_upper || fits(unit[1], 1))) {
+                return None;
             }
             rows.push(RowAt {
-                diagonal: out(first),
-                upper: if has_upper { out(first + 1) } else { ABSENT },
-                bias: out(bias),
+                diagonal: place[unit[0]].0 as u32,
+                upper: if has_upper { place[unit[1]].0 as u32 } else { ABSENT },
+                bias: place[bias].0 as u32,
                 start,
                 end: entries.len() as u32,
             });
         }
         let mut bodies = Vec::with_capacity(system.bodies.len());
-        for i in 0..system.bodies.len() {
-            let (mass, force) = (body_roots + 2 * i, body_roots + 2 * i + 1);
-            if tape.output_range(mass).len() != 1 || tape.output_range(force).len() != dim {
+        for unit in &units[k..] {
+            let (mass, force) = (unit[0], unit[1]);
+            if !(fits(mass, 1) && fits(force, dim)) {
                 return None;
             }
-            bodies.push((out(mass), out(force)));
+            bodies.push(BodyAt {
+                mass: place[mass].0 as u32,
+                force: place[force].0 as u32,
+                stride: place[force].1 as u32,
+            });
         }
         let n = bodies.len();
         Some(BandLambda {
-            input: vec![0.0; tape.input_len()],
-            output: vec![0.0; tape.output_len()],
-            scratch: tape.scratch(),
-            tape,
+            kernel,
             #[cfg(feature = "jit")]
-            compiled: None,
-            inputs,
+            roots,
+            #[cfg(feature = "jit")]
+            units,
+            loads,
             dim,
             rows,
             entries,
             bodies,
+            input: vec![0.0; input_len],
+            output: vec![0.0; output_len],
             inverse_mass: vec![0.0; n],
+            external: vec![[0.0; 3]; n],
             weighted: vec![[0.0; 3]; n],
             inverse_pivot: vec![0.0; k],
             multiplier: vec![0.0; k],
             lambda: vec![0.0; k],
             force: vec![[0.0; 3]; n],
+            acceleration: vec![[0.0; 3]; n],
         })
     }
 
@@ -239,18 +330,49 @@ impl BandLambda {
         self.rows.is_empty()
     }
 
-    /// How many instructions the program's tape holds ([`Tape::instructions`]).
-    pub fn instructions(&self) -> usize {
-        self.tape.instructions()
+    /// Whether the roots are evaluated shape by shape (`numeric::batch`) rather than by one
+    /// tape.
+    pub fn is_batched(&self) -> bool {
+        matches!(self.kernel, Kernel::Batched(..))
     }
 
-    /// Compiles the program's tape to machine code ([`Tape::jit`]), the same numbers bit for
-    /// bit; never done unless asked (as [`RowProgram::compile`]). On failure the tape stays
-    /// interpreted and the error is returned.
+    /// Compiles the program to machine code ([`Tape::jit`]), the same numbers bit for bit;
+    /// never done unless asked (as [`RowProgram::compile`]). A program evaluated shape by
+    /// shape is lowered again as one tape of every root (from `derivation`, the one it was
+    /// made from), which is compiled: compiled code has no dispatch to share among the
+    /// members of a shape. On failure (a tape too large for compiled code's frame, a host
+    /// without a code generator) the program evaluates as before and the error is returned.
     #[cfg(feature = "jit")]
-    pub fn compile(&mut self) -> Result<(), crate::numeric::jit::JitError> {
-        if self.compiled.is_none() {
-            self.compiled = Some(std::sync::Arc::new(self.tape.jit()?));
+    pub fn compile(&mut self, derivation: &Derivation) -> Result<(), crate::numeric::jit::JitError> {
+        match &mut self.kernel {
+            Kernel::Tape { tape, compiled: compiled @ None, .. } => *compiled = Some(std::sync::Arc::new(tape.jit()?)),
+            Kernel::Tape { .. } => {}
+            Kernel::Batched(..) => {
+                let symbols: Vec<Symbol> = self.loads.iter().map(|l| l.0).collect();
+                let Ok(tape) = Tape::compile(&derivation.graph, &self.roots, &symbols) else {
+                    return Err(crate::numeric::jit::JitError::Codegen("the roots do not lower".into()));
+                };
+                let jit = tape.jit()?;
+                // The single tape writes root r at its own place: every place moves.
+                let place = |r: usize| tape.output_range(r).start as u32;
+                for (row, unit) in self.rows.iter_mut().zip(&self.units) {
+                    row.diagonal = place(unit[0]);
+                    if row.upper != ABSENT {
+                        row.upper = place(unit[1]);
+                    }
+                    row.bias = place(unit[1 + usize::from(row.upper != ABSENT)]);
+                    let js = &unit[unit.len() - (row.end - row.start) as usize..];
+                    for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(js) {
+                        (entry.first, entry.stride) = (place(j), 1);
+                    }
+                }
+                for (body, unit) in self.bodies.iter_mut().zip(&self.units[self.rows.len()..]) {
+                    (body.mass, body.force, body.stride) = (place(unit[0]), place(unit[1]), 1);
+                }
+                self.output = vec![0.0; tape.output_len()];
+                let scratch = tape.scratch();
+                self.kernel = Kernel::Tape { tape, scratch, compiled: Some(std::sync::Arc::new(jit)) };
+            }
         }
         Ok(())
     }
@@ -258,69 +380,97 @@ impl BandLambda {
     /// Whether the tape runs as machine code ([`compile`](BandLambda::compile)).
     pub fn is_compiled(&self) -> bool {
         #[cfg(feature = "jit")]
-        return self.compiled.is_some();
+        return matches!(self.kernel, Kernel::Tape { compiled: Some(_), .. });
         #[cfg(not(feature = "jit"))]
         false
     }
 
     /// λ, the constraint forces and the accelerations at the state `env` (of the system the
-    /// program was made from) into `out`, its status `Solved` with no
-    /// diagnostic, when the guard passes (see the module's note); false, `out` untouched,
-    /// when it declines: the caller then evaluates the rows and takes
-    /// [`solve::solve_into`], which gives the answer or the diagnostic this path cannot
+    /// program was made from) into `out`, its status `Solved` with no diagnostic, when the
+    /// guard passes (see the module's note); false, `out` untouched, when it declines: the
+    /// caller then evaluates the rows and takes [`solve::solve_into`], which gives the
+    /// answer or the diagnostic this path cannot
     /// ([`solve_or_rows_into`](BandLambda::solve_or_rows_into) does both).
     pub fn solve_into(&mut self, env: &Env, settings: &Settings, out: &mut Solution) -> bool {
-        let k = self.rows.len();
-        if !allowed(settings.method, k) || !self.evaluate(env) {
+        if !allowed(settings.method, self.rows.len()) || !self.evaluate(env) {
             return false;
         }
-        let dim = self.dim;
+        let solved = if self.dim == 2 { self.solve::<2>(settings) } else { self.solve::<3>(settings) };
+        if !solved {
+            return false;
+        }
+        let k = self.rows.len();
+        // The answer's vectors and ours trade places (ours are the next call's buffers).
+        std::mem::swap(&mut out.lambda, &mut self.lambda);
+        std::mem::swap(&mut out.constraint_force, &mut self.force);
+        std::mem::swap(&mut out.acceleration, &mut self.acceleration);
+        let n = self.bodies.len();
+        self.lambda.resize(k, 0.0);
+        for v in [&mut self.force, &mut self.acceleration] {
+            v.resize(n, [0.0; 3]);
+        }
+        out.active.clear();
+        out.active.resize(k, true);
+        out.diagnostics.clear();
+        out.status = Status::Solved;
+        out.contacts.clear();
+        out.contacts.resize(k, None);
+        true
+    }
+
+    /// The factor, λ, the forces and the accelerations of the evaluated outputs, in the
+    /// dimension `D`, into this program's buffers: false where the guard declines.
+    fn solve<const D: usize>(&mut self, settings: &Settings) -> bool {
         let o = &self.output[..];
-        // 1/m and F/m per body: 1/m a positive normal number.
+        // 1/m, F and F/m per body: 1/m a positive normal number.
         let mut ok = true;
-        for (i, &(mass, force)) in self.bodies.iter().enumerate() {
-            let w = 1.0 / o[mass as usize];
+        let per_body = self.bodies.iter().zip(&mut self.inverse_mass).zip(&mut self.external).zip(&mut self.weighted);
+        for (((b, inverse_mass), external), weighted) in per_body {
+            let w = 1.0 / o[b.mass as usize];
             ok &= w.is_normal() & (w > 0.0);
-            let f = &o[force as usize..force as usize + dim];
-            let mut weighted = [0.0; 3];
-            for (x, f) in weighted.iter_mut().zip(f) {
-                *x = f * w;
+            let f: [f64; D] = read(o, b.force, b.stride);
+            *inverse_mass = w;
+            for d in 0..D {
+                external[d] = f[d];
+                weighted[d] = f[d] * w;
             }
-            self.inverse_mass[i] = w;
-            self.weighted[i] = weighted;
         }
         // Row by row: −bₖ = −(cₖ + Σᵢ Jₖᵢ·Fᵢ/mᵢ); dₖ = A[k][k] − A[k − 1][k]² / dₖ₋₁,
-        // Lₖ = A[k − 1][k] / dₖ₋₁, yₖ = −bₖ − Lₖ yₖ₋₁ (L y = −b).
+        // Lₖ = A[k − 1][k] / dₖ₋₁, yₖ = −bₖ − Lₖ yₖ₋₁ (L y = −b); the pivot above τ A[k][k].
         let tolerance = settings.rank_tolerance;
         let (mut e, mut inverse_prev, mut y_prev) = (0.0, 0.0, 0.0);
-        for (q, row) in self.rows.iter().enumerate() {
+        let per_row = self.rows.iter().zip(&mut self.inverse_pivot).zip(&mut self.multiplier).zip(&mut self.lambda);
+        for (((row, inverse_pivot), multiplier), y_out) in per_row {
             let mut b = o[row.bias as usize];
-            for &(at, body) in &self.entries[row.start as usize..row.end as usize] {
-                let (j, w) = (&o[at as usize..at as usize + dim], &self.weighted[body as usize]);
-                b += j.iter().zip(w).map(|(j, w)| j * w).sum::<f64>();
+            for entry in &self.entries[row.start as usize..row.end as usize] {
+                let j: [f64; D] = read(o, entry.first, entry.stride);
+                let w = &self.weighted[entry.body as usize];
+                for d in 0..D {
+                    b += j[d] * w[d];
+                }
             }
             let diagonal = o[row.diagonal as usize];
             let d = diagonal - e * e * inverse_prev;
             ok &= (diagonal >= f64::MIN_POSITIVE) & (d > tolerance * diagonal);
             let l = e * inverse_prev;
             let y = -b - l * y_prev;
-            self.inverse_pivot[q] = 1.0 / d;
-            self.multiplier[q] = l;
-            self.lambda[q] = y;
+            *inverse_pivot = 1.0 / d;
+            *multiplier = l;
+            *y_out = y;
             e = if row.upper == ABSENT { 0.0 } else { o[row.upper as usize] };
-            (inverse_prev, y_prev) = (self.inverse_pivot[q], y);
+            (inverse_prev, y_prev) = (*inverse_pivot, y);
         }
         if !ok {
             return false;
         }
         // D Lᵀ λ = y: λ_{K−1} = y_{K−1}/d_{K−1}, λₖ = yₖ/dₖ − Lₖ₊₁ λₖ₊₁; each λ zero or normal.
-        let mut next = 0.0;
-        let mut next_multiplier = 0.0;
-        for q in (0..k).rev() {
-            let x = self.lambda[q] * self.inverse_pivot[q] - next_multiplier * next;
-            ok &= (x == 0.0) | x.is_normal();
-            self.lambda[q] = x;
-            (next, next_multiplier) = (x, self.multiplier[q]);
+        let (mut next, mut next_multiplier) = (0.0, 0.0);
+        let per_row = self.lambda.iter_mut().zip(&self.inverse_pivot).zip(&self.multiplier).rev();
+        for ((x, inverse_pivot), multiplier) in per_row {
+            let lambda = *x * inverse_pivot - next_multiplier * next;
+            ok &= (lambda == 0.0) | lambda.is_normal();
+            *x = lambda;
+            (next, next_multiplier) = (lambda, *multiplier);
         }
         if !ok {
             return false;
@@ -328,44 +478,23 @@ impl BandLambda {
         // Σₖ λₖ Jₖᵢ per body, then aᵢ = (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ, finite.
         self.force.fill([0.0; 3]);
         for (row, &x) in self.rows.iter().zip(&self.lambda) {
-            for &(at, body) in &self.entries[row.start as usize..row.end as usize] {
-                let f = &mut self.force[body as usize];
-                for (f, j) in f.iter_mut().zip(&o[at as usize..at as usize + dim]) {
-                    *f += x * j;
+            for entry in &self.entries[row.start as usize..row.end as usize] {
+                let j: [f64; D] = read(o, entry.first, entry.stride);
+                let f = &mut self.force[entry.body as usize];
+                for d in 0..D {
+                    f[d] += x * j[d];
                 }
             }
         }
-        let n = self.bodies.len();
-        let mut acceleration_bits = 0.0;
-        for i in 0..n {
-            let (fc, w, force) = (self.force[i], self.inverse_mass[i], self.bodies[i].1 as usize);
-            for d in 0..dim {
-                acceleration_bits += ((o[force + d] + fc[d]) * w) * 0.0;
+        let mut not_finite = 0.0;
+        let per_body = self.acceleration.iter_mut().zip(&self.force).zip(&self.external).zip(&self.inverse_mass);
+        for (((a, fc), f), w) in per_body {
+            for d in 0..D {
+                a[d] = (f[d] + fc[d]) * w;
+                not_finite += a[d] * 0.0;
             }
         }
-        if acceleration_bits != 0.0 {
-            return false;
-        }
-        out.lambda.clear();
-        out.lambda.extend_from_slice(&self.lambda);
-        out.active.clear();
-        out.active.resize(k, true);
-        out.constraint_force.clear();
-        out.constraint_force.extend_from_slice(&self.force);
-        out.acceleration.clear();
-        for i in 0..n {
-            let (fc, w, force) = (self.force[i], self.inverse_mass[i], self.bodies[i].1 as usize);
-            let mut a = [0.0; 3];
-            for d in 0..dim {
-                a[d] = (o[force + d] + fc[d]) * w;
-            }
-            out.acceleration.push(a);
-        }
-        out.diagnostics.clear();
-        out.status = Status::Solved;
-        out.contacts.clear();
-        out.contacts.resize(k, None);
-        true
+        not_finite == 0.0
     }
 
     /// [`solve_into`](BandLambda::solve_into), and where it declines the rows of `program`
@@ -393,22 +522,25 @@ impl BandLambda {
     }
 
     /// The program's inputs from `env`, then its outputs: false when a symbol has no value
-    /// or a number is not finite.
+    /// (or one of another kind) or a number is not finite.
     fn evaluate(&mut self, env: &Env) -> bool {
-        for (&s, at) in self.inputs.iter().zip(self.tape.input_ranges()) {
-            let slots = &mut self.input[at.clone()];
-            match env.get(s) {
-                Some(Value::Scalar(x)) => slots.fill(x),
-                Some(Value::Vector(v)) => slots.iter_mut().zip(v).for_each(|(d, x)| *d = x),
-                Some(Value::Quaternion(_)) | None => return false,
+        let input = &mut self.input[..];
+        for &(s, start, width) in &self.loads {
+            let at = start as usize;
+            // One to three numbers, copied by hand (a copy of a variable length is a call).
+            match (env.get(s), width) {
+                (Some(Value::Scalar(x)), 1) => input[at] = x,
+                (Some(Value::Vector([x, y, _])), 2) => (input[at], input[at + 1]) = (x, y),
+                (Some(Value::Vector([x, y, z])), 3) => (input[at], input[at + 1], input[at + 2]) = (x, y, z),
+                _ => return false,
             }
         }
-        #[cfg(feature = "jit")]
-        if let Some(compiled) = &self.compiled {
-            compiled.eval(&self.input, &mut self.output);
-            return all_finite(&self.input) && all_finite(&self.output);
+        match &mut self.kernel {
+            Kernel::Batched(batched, scratch) => batched.eval(&self.input, scratch, &mut self.output),
+            #[cfg(feature = "jit")]
+            Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, &mut self.output),
+            Kernel::Tape { tape, scratch, .. } => tape.eval(&self.input, scratch, &mut self.output),
         }
-        self.tape.eval(&self.input, &mut self.scratch, &mut self.output);
         all_finite(&self.input) && all_finite(&self.output)
     }
 }
