@@ -288,6 +288,21 @@ fn every_declined_case_falls_back_to_the_rows_solve_exactly() {
         (1..=n).map(|i| (format!("r{i}"), Value::Vector([1e160 * i as f64, 0.0, 0.0]))).collect();
     let tiny: Vec<(String, Value)> =
         (1..=n).map(|i| (format!("r{i}"), Value::Vector([1e-160 * i as f64, 0.0, 0.0]))).collect();
+    let scaled = |scale: f64| -> Vec<(String, Value)> {
+        (1..=n).map(|i| (format!("r{i}"), Value::Vector([scale * i as f64, 0.0, 0.0]))).collect()
+    };
+    // Links 2^-250 long between positions about 2^-200 (inputs in range, d·d = 2^-500), and
+    // links 2^231 long on masses 2^-20 (Aₖₖ = 2^483).
+    let cancelled: Vec<(String, Value)> =
+        (1..=n).map(|i| (format!("r{i}"), Value::Vector([pow2(-200) + i as f64 * pow2(-250), 0.0, 0.0]))).collect();
+    let heavy: Vec<(String, Value)> = (1..=n)
+        .flat_map(|i| {
+            [
+                (format!("r{i}"), Value::Vector([i as f64 * pow2(231), 0.0, 0.0])),
+                (format!("m{i}"), Value::Scalar(pow2(-20))),
+            ]
+        })
+        .collect();
     let named = |list: &[(String, Value)]| with(&list.iter().map(|(n, v)| (n.as_str(), *v)).collect::<Vec<_>>());
     let cases: Vec<(&str, Env, Settings)> = vec![
         ("a link of zero length", with(&[("r4", Value::Vector(r3))]), auto),
@@ -299,6 +314,10 @@ fn every_declined_case_falls_back_to_the_rows_solve_exactly() {
         ("an infinite gravity", with(&[("g", Value::Vector([0.0, f64::INFINITY, 0.0]))]), auto),
         ("numbers that overflow", named(&huge), auto),
         ("numbers that underflow", named(&tiny), auto),
+        ("positions below the input range (1e-100)", named(&scaled(1e-100)), auto),
+        ("positions above the input range (1e100)", named(&scaled(1e100)), auto),
+        ("A's diagonal below its range (links of 2^-250 at 2^-200)", named(&cancelled), auto),
+        ("A's diagonal above its range (links of 2^231, masses 2^-20)", named(&heavy), auto),
         ("the dense method", base.clone(), setting(Method::Dense)),
         ("the sparse method", base.clone(), setting(Method::Sparse)),
     ];
