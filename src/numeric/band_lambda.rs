@@ -56,7 +56,7 @@ use crate::numeric::solve::{self, Method, Settings, Solution, Status};
 use crate::numeric::tape::{Scratch, Tape};
 use crate::numeric::vector::all_finite;
 
-/// No entry: a row's A[k][k + 1] that is zero (the last row's, or a simplified zero).
+/// No entry: a row's Aₖ,ₖ₊₁ that is zero (the last row's, or a simplified zero).
 const ABSENT: u32 = u32::MAX;
 
 /// The magnitudes of the inputs served (zero aside): 2^±240. Products of up to four of
@@ -69,9 +69,9 @@ pub const INPUT_RANGE: std::ops::RangeInclusive<f64> =
     f64::from_bits(0x30f0_0000_0000_0000)..=f64::from_bits(0x4ef0_0000_0000_0000);
 
 /// The diagonal entries served: 2^±480. There the factor's numbers stay normal: a product
-/// A[k − 1][k]² ≤ Aₖₖ Aₖ₋₁,ₖ₋₁ (Cauchy–Schwarz, A being a Gram matrix) below 2^960, a pivot
+/// Aₖ₋₁,ₖ² ≤ Aₖₖ Aₖ₋₁,ₖ₋₁ (Cauchy–Schwarz, A being a Gram matrix) below 2^960, a pivot
 /// dₖ in (τ Aₖₖ, Aₖₖ] so that 1/dₖ lies in [2^−480, 2^480/τ) (normal for any τ above
-/// 2^−543; the default τ = 1e-10 is about 2^−33), and a product A[k − 1][k]² that
+/// 2^−543; the default τ = 1e-10 is about 2^−33), and a product Aₖ₋₁,ₖ² that
 /// underflows is below 2^−1022, negligible against u Aₖₖ ≥ 2^−533: the rounding is the
 /// analysis' alone (`BandLambda::solve`).
 pub const DIAGONAL_RANGE: std::ops::RangeInclusive<f64> =
@@ -105,7 +105,7 @@ pub struct BandLambda {
     inverse_mass: Vec<f64>,
     external: Vec<[f64; 3]>,
     weighted: Vec<[f64; 3]>,
-    /// Per row: 1/dₖ, Lₖ = A[k − 1][k]/dₖ₋₁, y then λ.
+    /// Per row: 1/dₖ, Lₖ = Aₖ₋₁,ₖ/dₖ₋₁, y then λ.
     inverse_pivot: Vec<f64>,
     multiplier: Vec<f64>,
     lambda: Vec<f64>,
@@ -129,7 +129,7 @@ enum Kernel {
     Batched(Box<Batched>, BatchedScratch),
 }
 
-/// One row's outputs: A[k][k], A[k][k + 1] (`ABSENT`: zero), c, and its J entries
+/// One row's outputs: Aₖₖ, Aₖ,ₖ₊₁ (`ABSENT`: zero), c, and its J entries
 /// `entries[start..end]`.
 #[derive(Clone, Copy, Debug)]
 struct RowAt {
@@ -436,7 +436,7 @@ impl BandLambda {
     ///
     /// Accuracy: what λ loses against the rows' scaled solve. That solve factors the
     /// Jacobi-scaled Ã = D A D (D = diag(Aₖₖ)^−½, from ‖J‖ and the masses), this one A itself
-    /// (dₖ = Aₖₖ − A[k − 1][k]²/dₖ₋₁, L D Lᵀ without square roots). Cholesky is invariant
+    /// (dₖ = Aₖₖ − Aₖ₋₁,ₖ²/dₖ₋₁, L D Lᵀ without square roots). Cholesky is invariant
     /// under diagonal scaling, in exact arithmetic and in its rounding error (Higham,
     /// *Accuracy and Stability of Numerical Algorithms*, 2nd ed., §10.1): the computed factor
     /// of A is the exact factor of A + ΔA with |ΔA| ≤ γ₃ |L̂| D̂ |L̂ᵀ| componentwise, a bound
