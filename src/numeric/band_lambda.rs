@@ -226,8 +226,16 @@ impl BandLambda {
             roots.extend(d.jacobian.iter().map(|&(_, j)| j));
             units.push((first..roots.len()).collect::<Vec<_>>());
         }
-        for (i, body) in system.bodies.iter().enumerate() {
-            let f = forces.iter().find(|(b, _)| *b == i).map_or(body.nodes.force, |&(_, f)| f);
+        // Each body's force expression (the first `forces` gives, as `RowProgram::new`
+        // takes it), found in one pass: a search per body is quadratic in a long chain.
+        let mut given: Vec<Option<Id>> = vec![None; system.bodies.len()];
+        for &(b, f) in forces.iter().rev() {
+            if let Some(slot) = given.get_mut(b) {
+                *slot = Some(f);
+            }
+        }
+        for (body, f) in system.bodies.iter().zip(given) {
+            let f = f.unwrap_or(body.nodes.force);
             units.push(vec![roots.len(), roots.len() + 1]);
             roots.push(body.mass);
             roots.push(f);
