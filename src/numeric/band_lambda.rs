@@ -56,7 +56,7 @@ use crate::numeric::solve::{self, Method, Settings, Solution, Status};
 use crate::numeric::tape::{Scratch, Tape};
 use crate::numeric::vector::all_finite;
 
-/// No entry: a row's Aₖ,ₖ₊₁ that is zero (the last row's, or a simplified zero).
+/// Past every output index the program may have (checked when it is made).
 const ABSENT: u32 = u32::MAX;
 
 /// The magnitudes of the inputs served (zero aside): 2^±240. Products of up to four of
@@ -100,10 +100,11 @@ pub struct BandLambda {
     bodies: Vec<BodyAt>,
     // Buffers of one call.
     input: Vec<f64>,
+    /// The kernel's outputs, then one zero: the Aₖ,ₖ₊₁ of a row without one (the last
+    /// row's, or a simplified zero) is read there, with no test.
     output: Vec<f64>,
-    /// Per body: 1/m, F, F/m.
+    /// Per body: 1/m, F/m.
     inverse_mass: Vec<f64>,
-    external: Vec<[f64; 3]>,
     weighted: Vec<[f64; 3]>,
     /// Per row: 1/dₖ, Lₖ = Aₖ₋₁,ₖ/dₖ₋₁, y then λ.
     inverse_pivot: Vec<f64>,
@@ -129,7 +130,8 @@ enum Kernel {
     Batched(Box<Batched>, BatchedScratch),
 }
 
-/// One row's outputs: Aₖₖ, Aₖ,ₖ₊₁ (`ABSENT`: zero), c, and its J entries
+/// One row's outputs: Aₖₖ, Aₖ,ₖ₊₁ (the zero past the kernel's outputs when it has none), c,
+/// and its J entries
 /// `entries[start..end]`.
 #[derive(Clone, Copy, Debug)]
 struct RowAt {
@@ -298,7 +300,7 @@ impl BandLambda {
             }
             rows.push(RowAt {
                 diagonal: place[unit[0]].0 as u32,
-                upper: if has_upper { place[unit[1]].0 as u32 } else { ABSENT },
+                upper: if has_upper { place[unit[1]].0 as u32 } else { output_len as u32 },
                 bias: place[bias].0 as u32,
                 start,
                 end: entries.len() as u32,
@@ -329,9 +331,8 @@ impl BandLambda {
             entries,
             bodies,
             input: vec![0.0; input_len],
-            output: vec![0.0; output_len],
+            output: vec![0.0; output_len + 1],
             inverse_mass: vec![0.0; n],
-            external: vec![[0.0; 3]; n],
             weighted: vec![[0.0; 3]; n],
             inverse_pivot: vec![0.0; k],
             multiplier: vec![0.0; k],
@@ -377,11 +378,10 @@ impl BandLambda {
                 // The single tape writes root r at its own place: every place moves.
                 let place = |r: usize| tape.output_range(r).start as u32;
                 for (row, unit) in self.rows.iter_mut().zip(&self.units) {
+                    let has_upper = unit.len() == 3 + (row.end - row.start) as usize;
                     row.diagonal = place(unit[0]);
-                    if row.upper != ABSENT {
-                        row.upper = place(unit[1]);
-                    }
-                    row.bias = place(unit[1 + usize::from(row.upper != ABSENT)]);
+                    row.upper = if has_upper { place(unit[1]) } else { tape.output_len() as u32 };
+                    row.bias = place(unit[1 + usize::from(has_upper)]);
                     let js = &unit[unit.len() - (row.end - row.start) as usize..];
                     for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(js) {
                         (entry.first, entry.stride) = (place(j), 1);
@@ -390,7 +390,7 @@ impl BandLambda {
                 for (body, unit) in self.bodies.iter_mut().zip(&self.units[self.rows.len()..]) {
                     (body.mass, body.force, body.stride) = (place(unit[0]), place(unit[1]), 1);
                 }
-                self.output = vec![0.0; tape.output_len()];
+                self.output = vec![0.0; tape.output_len() + 1];
                 let scratch = tape.scratch();
                 self.kernel = Kernel::Tape { tape, scratch, compiled: Some(std::sync::Arc::new(jit)) };
             }
@@ -426,9 +426,15 @@ impl BandLambda {
         std::mem::swap(&mut out.constraint_force, &mut self.force);
         std::mem::swap(&mut out.acceleration, &mut self.acceleration);
         let n = self.bodies.len();
-        self.lambda.resize(k, 0.0);
+        // The answer's old vectors are the next call's buffers: of the size already but on
+        // the first call.
+        if self.lambda.len() != k {
+            self.lambda.resize(k, 0.0);
+        }
         for v in [&mut self.force, &mut self.acceleration] {
-            v.resize(n, [0.0; 3]);
+            if v.len() != n {
+                v.resize(n, [0.0; 3]);
+            }
         }
         out.active.clear();
         out.active.resize(k, true);
@@ -464,16 +470,16 @@ impl BandLambda {
     /// and within 1.5× summed (measured 1.10× and 1.14×).
     fn solve<const D: usize>(&mut self, settings: &Settings) -> bool {
         let o = &self.output[..];
-        // 1/m, F and F/m per body: 1/m a positive normal number.
+        debug_assert_eq!(o.last(), Some(&0.0), "the zero past the outputs");
+        // 1/m and F/m per body: 1/m a positive normal number.
         let mut ok = true;
-        let per_body = self.bodies.iter().zip(&mut self.inverse_mass).zip(&mut self.external).zip(&mut self.weighted);
-        for (((b, inverse_mass), external), weighted) in per_body {
+        let per_body = self.bodies.iter().zip(&mut self.inverse_mass).zip(&mut self.weighted);
+        for ((b, inverse_mass), weighted) in per_body {
             let w = 1.0 / o[b.mass as usize];
             ok &= w.is_normal() & (w > 0.0);
             let f: [f64; D] = read(o, b.force, b.stride);
             *inverse_mass = w;
             for d in 0..D {
-                external[d] = f[d];
                 weighted[d] = f[d] * w;
             }
         }
@@ -499,7 +505,7 @@ impl BandLambda {
             *inverse_pivot = 1.0 / d;
             *multiplier = l;
             *y_out = y;
-            e = if row.upper == ABSENT { 0.0 } else { o[row.upper as usize] };
+            e = o[row.upper as usize];
             (inverse_prev, y_prev) = (*inverse_pivot, y);
         }
         if !ok {
@@ -517,7 +523,7 @@ impl BandLambda {
         if !ok {
             return false;
         }
-        // Σₖ λₖ Jₖᵢ per body, then aᵢ = (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ, finite.
+        // Σₖ λₖ Jₖᵢ per body, then aᵢ = Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ, finite.
         self.force.fill([0.0; 3]);
         for (row, &x) in self.rows.iter().zip(&self.lambda) {
             for entry in &self.entries[row.start as usize..row.end as usize] {
@@ -529,10 +535,10 @@ impl BandLambda {
             }
         }
         let mut not_finite = 0.0;
-        let per_body = self.acceleration.iter_mut().zip(&self.force).zip(&self.external).zip(&self.inverse_mass);
-        for (((a, fc), f), w) in per_body {
+        let per_body = self.acceleration.iter_mut().zip(&self.force).zip(&self.weighted).zip(&self.inverse_mass);
+        for (((a, fc), weighted), w) in per_body {
             for d in 0..D {
-                a[d] = (f[d] + fc[d]) * w;
+                a[d] = weighted[d] + fc[d] * w;
                 not_finite += a[d] * 0.0;
             }
         }
@@ -577,12 +583,14 @@ impl BandLambda {
                 _ => return false,
             }
         }
+        let len = self.output.len() - 1;
+        let output = &mut self.output[..len];
         match &mut self.kernel {
-            Kernel::Batched(batched, scratch) => batched.eval(&self.input, scratch, &mut self.output),
+            Kernel::Batched(batched, scratch) => batched.eval(&self.input, scratch, output),
             #[cfg(feature = "jit")]
-            Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, &mut self.output),
-            Kernel::Tape { tape, scratch, .. } => tape.eval(&self.input, scratch, &mut self.output),
+            Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, output),
+            Kernel::Tape { tape, scratch, .. } => tape.eval(&self.input, scratch, output),
         }
-        in_range(&self.input) && all_finite(&self.output)
+        in_range(&self.input) && all_finite(output)
     }
 }
