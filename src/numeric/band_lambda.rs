@@ -1,8 +1,9 @@
 //! λ of a chain of equality rows from one program of the derivation's formulas: A's band
 //! entries (`Derivation::a`), each row's c and J and each body's mass and force, evaluated
-//! by one [`Tape`] (or its compiled twin), then L D Lᵀ written for the tridiagonal band under
-//! a pivot guard, to λ, the constraint forces and the accelerations. What the generated
-//! module's `band_system` and `solve_tridiagonal` do (`codegen::rust`), in the library.
+//! by one [`Tape`] (or its compiled twin) or shape by shape (`numeric::batch`, where rows
+//! repeat a shape), then L D Lᵀ written for the tridiagonal band under a pivot guard, to λ,
+//! the constraint forces and the accelerations. What the generated module's `band_system`
+//! and `solve_tridiagonal` do (`codegen::rust`), in the library.
 //!
 //! Design note. The rows' path (`RowProgram::evaluate_into`, then `solve::solve_into`)
 //! evaluates every row's C, Ċ, c and J, fills `Rows`, then scales each row by ‖J‖ and the
@@ -12,7 +13,9 @@
 //! band comes out of the tape as numbers, with no `Rows`, no scaling and no assembly; b is
 //! c + Σᵢ Jᵢ·Fᵢ/mᵢ from the same outputs (the derivation's b reads the force symbols,
 //! where a scene gives forces by expressions, which the program evaluates), and the
-//! accelerations (Fᵢ + Σₖ λₖ Jₖᵢ)/mᵢ from the same J. Only what this path can answer as the
+//! accelerations Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ from the same J. The factor is of A itself, not of
+//! the Jacobi-scaled Ã: no square root, no ‖J‖, and as accurate (the analysis is at the
+//! factor). Only what this path can answer as the
 //! general solve would is served; everything else is declined, and the caller takes the
 //! rows' solve ([`BandLambda::solve_or_rows_into`] does both).
 //!
