@@ -286,6 +286,53 @@ fn library_step(bencher: divan::Bencher, s: Scenario, n: usize) {
     });
 }
 
+/// The library's λ from one program of the derivation's formulas (`BandLambda`): A's band,
+/// c, J, the masses and forces, interpreted (one tape at N = 10, shape by shape from
+/// N = 100: `numeric::batch`), then L D Lᵀ of the tridiagonal under its pivot guard, to the
+/// accelerations. Its accelerations are asserted equal to [`chain_solve_library`]'s to
+/// 1e-12 of the largest before the samples.
+#[divan::bench(name = "chain_solve_2_band", args = [10, 100, 1000, 10000])]
+fn chain_solve_band(bencher: divan::Bencher, n: usize) {
+    band_step(bencher, chain(n), n, false);
+}
+
+/// [`chain_solve_band`] with the band program's tape compiled (`BandLambda::compile`); not at
+/// N = 10 000, whose one tape is too large for compiled code's stack frame (`JitError::TooLarge`).
+#[cfg(feature = "jit")]
+#[divan::bench(name = "chain_solve_2_band_jit", args = [10, 100, 1000])]
+fn chain_solve_band_jit(bencher: divan::Bencher, n: usize) {
+    band_step(bencher, chain(n), n, true);
+}
+
+/// The band program's step on `s`, an `n`-link chain (compiled first when `compile`), after
+/// checking its accelerations against the rows' solve.
+fn band_step(bencher: divan::Bencher, s: Scenario, n: usize, compile: bool) {
+    use lagrange::numeric::band_lambda::BandLambda;
+    use lagrange::numeric::solve::{Settings, Solution, solve_into};
+    let mut band = BandLambda::new(&s.system, &s.derivation, &s.scene.forces).expect("a chain");
+    #[cfg(feature = "jit")]
+    if compile {
+        band.compile(&s.derivation).expect("this host compiles tapes");
+    }
+    assert!(!compile || band.is_compiled());
+    let settings = Settings::default();
+    let mut answer = Solution::default();
+    assert!(band.solve_into(&s.env, &settings, &mut answer), "the guard passes on the chain");
+    let rows = s.program.evaluate(&s.system, &s.env).expect("rows");
+    let mut want = Solution::default();
+    solve_into(&rows, &settings, &mut want);
+    let scale = want.acceleration.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+    for (a, w) in answer.acceleration.iter().zip(&want.acceleration) {
+        for (a, w) in a.iter().zip(w) {
+            assert!((a - w).abs() <= 1e-12 * scale, "band {a} against rows {w}");
+        }
+    }
+    bencher.bench_local(|| {
+        band.solve_into(&s.env, &settings, &mut answer);
+        answer.acceleration[n - 1]
+    });
+}
+
 /// As [`chain_solve_library`] with the run's solve (`solve_cached`) warm at the same J: what
 /// a SHAKE iteration or the next step's start pays for its solve.
 #[divan::bench(name = "chain_solve_3_library_reused", args = [10, 100, 1000, 10000])]

@@ -13,6 +13,7 @@
 //! This module knows nothing of TOML, files or text: states arrive as
 //! [`crate::expr::eval::Env`], results leave as plain numbers and diagnostics.
 
+pub mod band_lambda;
 pub mod banded;
 pub mod batch;
 mod chain;

@@ -1,0 +1,599 @@
+//! λ of a chain of equality rows from one program of the derivation's formulas: A's band
+//! entries (`Derivation::a`), each row's c and J and each body's mass and force, evaluated
+//! by one [`Tape`] (or its compiled twin) or shape by shape (`numeric::batch`, where rows
+//! repeat a shape), then L D Lᵀ written for the tridiagonal band under a pivot guard, to λ,
+//! the constraint forces and the accelerations. What the generated module's `band_system`
+//! and `solve_tridiagonal` do (`codegen::rust`), in the library.
+//!
+//! Design note. The rows' path (`RowProgram::evaluate_into`, then `solve::solve_into`)
+//! evaluates every row's C, Ċ, c and J, fills `Rows`, then scales each row by ‖J‖ and the
+//! Jacobi factor, assembles Ã term by term and factors it, with the refinement's residual:
+//! general, and about 860 instructions a row of a chain. Here the formulas of A's entries
+//! are known when the program is made (the derivation assembled them symbolically), so A's
+//! band comes out of the tape as numbers, with no `Rows`, no scaling and no assembly; b is
+//! c + Σᵢ Jᵢ·Fᵢ/mᵢ from the same outputs (the derivation's b reads the force symbols,
+//! where a scene gives forces by expressions, which the program evaluates), and the
+//! accelerations Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ from the same J. The factor is of A itself, not of
+//! the Jacobi-scaled Ã: no square root, no ‖J‖, and as accurate (the analysis is at the
+//! factor). Only what this path can answer as the
+//! general solve would is served; everything else is declined, and the caller takes the
+//! rows' solve ([`BandLambda::solve_or_rows_into`] does both).
+//!
+//! Served: point masses only (no rigid body), every row an equality, A tridiagonal in the
+//! rows' listing order (every entry Aₖⱼ with |k − j| ≤ 1, every Aₖₖ a formula), no more
+//! rows than the velocity components they move. Declined at construction (`None`): rigid
+//! bodies, inequality rows, a wider band or a band only a renumbering finds (the rows' solve
+//! renumbers by reverse Cuthill–McKee), a zero diagonal formula.
+//!
+//! The guard, per call ([`BandLambda::solve_into`] returns false, `out` untouched):
+//! - the settings' [`Method`] is [`Method::Banded`], or [`Method::Auto`] with more than
+//!   four rows (`Auto` solves fewer densely; the same rule as the rows' chain path);
+//! - every input (the state, the parameters, the masses) is zero or of magnitude within
+//!   [`INPUT_RANGE`], every output of the program is finite, every mass m gives a positive
+//!   normal 1/m (a non-finite number is the general solve's `NonFiniteRow`, an infinite or
+//!   zero mass its `InfiniteMass`);
+//! - every Aₖₖ is within [`DIAGONAL_RANGE`] (a zero one is a zero gradient; one outside is
+//!   a state whose numbers the general solve may have to rescale), and every pivot
+//!   dₖ > τ Aₖₖ, τ the settings' `rank_tolerance` (the general solve's relative threshold on
+//!   the Jacobi-scaled Ã = D A D with D = diag(Aₖₖ)^−½, whose pivots are exactly dₖ/Aₖₖ: the
+//!   same test, so a state it calls singular or redundant is declined);
+//! - every λₖ is zero or a normal number (the general solve's `LambdaOutOfRange` and
+//!   `NonFiniteLambda`), and every acceleration is finite.
+//!
+//! Accuracy: λ here and the scaled solve's are equally accurate, to a small constant (the
+//! analysis is on the factor's function, `BandLambda::solve`, beside the guard;
+//! `tests/band_lambda.rs` measures it against a double-double reference).
+//!
+//! Not here: the rows' C and Ċ (a projection needs them: `numeric::rows`), inequality rows,
+//! wider bands, rigid bodies, diagnostics (a declined state gets them from the rows' solve).
+
+use crate::derive::Derivation;
+use crate::expr::eval::{Env, Value};
+use crate::expr::graph::SymbolWalk;
+use crate::expr::{Id, Symbol};
+use crate::model::system::System;
+use crate::numeric::batch::{Batched, BatchedScratch};
+use crate::numeric::program::Inputs;
+use crate::numeric::rows::{RowProgram, RowScratch, Rows};
+use crate::numeric::solve::{self, Method, Settings, Solution, Status};
+use crate::numeric::tape::{Scratch, Tape};
+use crate::numeric::vector::all_finite;
+
+/// Past every output index the program may have (checked when it is made).
+const ABSENT: u32 = u32::MAX;
+
+/// The magnitudes of the inputs served (zero aside): 2^±240. Products of up to four of
+/// them (within 2^±960: a chain's Aₖₖ = (d·d)(1/mₖ₋₁ + 1/mₖ) is of degree three) neither
+/// overflow nor underflow, so the formulas lose no digits to f64's range but where a
+/// difference cancels (d = rₖ − rₖ₋₁ tiny), which [`DIAGONAL_RANGE`] catches; a scene
+/// outside it (the article's bead at |r| = 1e-150 or 1e155) goes to the rows' solve, which
+/// changes its length unit where it must.
+pub const INPUT_RANGE: std::ops::RangeInclusive<f64> =
+    f64::from_bits(0x30f0_0000_0000_0000)..=f64::from_bits(0x4ef0_0000_0000_0000);
+
+/// The diagonal entries served: 2^±480. There the factor's numbers stay normal: a product
+/// Aₖ₋₁,ₖ² ≤ Aₖₖ Aₖ₋₁,ₖ₋₁ (Cauchy–Schwarz, A being a Gram matrix) below 2^960, a pivot
+/// dₖ in (τ Aₖₖ, Aₖₖ] so that 1/dₖ lies in [2^−480, 2^480/τ) (normal for any τ above
+/// 2^−543; the default τ = 1e-10 is about 2^−33), and a product Aₖ₋₁,ₖ² that
+/// underflows is below 2^−1022, negligible against u Aₖₖ ≥ 2^−533: the rounding is the
+/// analysis' alone (`BandLambda::solve`).
+pub const DIAGONAL_RANGE: std::ops::RangeInclusive<f64> =
+    f64::from_bits(0x21f0_0000_0000_0000)..=f64::from_bits(0x5df0_0000_0000_0000);
+
+/// A chain's λ from one program of A's band, c, J, the masses and forces (see the
+/// module's note for what it serves and what its guard declines).
+#[derive(Clone, Debug)]
+pub struct BandLambda {
+    kernel: Kernel,
+    /// The program's roots, in units (each row's, then each body's: indices into
+    /// `roots`), kept for `BandLambda::compile` (feature `jit`).
+    #[cfg(feature = "jit")]
+    roots: Vec<Id>,
+    #[cfg(feature = "jit")]
+    units: Vec<Vec<usize>>,
+    /// Each input symbol, its first slot in the input buffer and its width (1, or the
+    /// dimension).
+    loads: Vec<(Symbol, u32, u32)>,
+    dim: usize,
+    /// Per row, where its numbers are among the outputs.
+    rows: Vec<RowAt>,
+    /// Every row's J entries in turn.
+    entries: Vec<EntryAt>,
+    /// Per body, where its mass and force are.
+    bodies: Vec<BodyAt>,
+    // Buffers of one call.
+    input: Vec<f64>,
+    /// The kernel's outputs, then one zero: the Aₖ,ₖ₊₁ of a row without one (the last
+    /// row's, or a simplified zero) is read there, with no test.
+    output: Vec<f64>,
+    /// Per body: 1/m, F/m.
+    inverse_mass: Vec<f64>,
+    weighted: Vec<[f64; 3]>,
+    /// Per row: 1/dₖ, Lₖ = Aₖ₋₁,ₖ/dₖ₋₁, y then λ.
+    inverse_pivot: Vec<f64>,
+    multiplier: Vec<f64>,
+    lambda: Vec<f64>,
+    /// Per body: Σₖ λₖ Jₖᵢ, and the acceleration (swapped with the answer's vectors when
+    /// the guard passes: no copy).
+    force: Vec<[f64; 3]>,
+    acceleration: Vec<[f64; 3]>,
+}
+
+/// How the program's roots are computed: one tape of them all (and its compiled twin once
+/// [`BandLambda::compile`] has made it), or shape by shape (`numeric::batch`) where rows
+/// and bodies repeat a shape often enough, as the rows' program does.
+#[derive(Clone, Debug)]
+enum Kernel {
+    Tape {
+        tape: Tape,
+        scratch: Scratch,
+        #[cfg(feature = "jit")]
+        compiled: Option<std::sync::Arc<crate::numeric::jit::JitTape>>,
+    },
+    Batched(Box<Batched>, BatchedScratch),
+}
+
+/// One row's outputs: Aₖₖ, Aₖ,ₖ₊₁ (the zero past the kernel's outputs when it has none), c,
+/// and its J entries
+/// `entries[start..end]`.
+#[derive(Clone, Copy, Debug)]
+struct RowAt {
+    diagonal: u32,
+    upper: u32,
+    bias: u32,
+    start: u32,
+    end: u32,
+}
+
+/// A J entry: its first component among the outputs, the distance between two, its body.
+#[derive(Clone, Copy, Debug)]
+struct EntryAt {
+    first: u32,
+    stride: u32,
+    body: u32,
+}
+
+/// A body's mass, and its force's first component and the distance between two.
+#[derive(Clone, Copy, Debug)]
+struct BodyAt {
+    mass: u32,
+    force: u32,
+    stride: u32,
+}
+
+/// Whether `method` lets a chain of `k` rows be solved by a band factor: the rule of the
+/// rows' chain path (`Auto` solves four rows or fewer densely).
+fn allowed(method: Method, k: usize) -> bool {
+    match method {
+        Method::Banded => k > 0,
+        Method::Auto => k > 4,
+        Method::Dense | Method::Sparse => false,
+    }
+}
+
+/// Whether every number of `xs` is zero or of a magnitude in [`INPUT_RANGE`] (a NaN is
+/// not: its comparisons are false). Gathered, not branched on.
+fn in_range(xs: &[f64]) -> bool {
+    let (small, big) = (*INPUT_RANGE.start(), *INPUT_RANGE.end());
+    xs.iter().fold(true, |ok, x| {
+        let a = x.abs();
+        ok & (a <= big) & ((a >= small) | (a == 0.0))
+    })
+}
+
+/// `D` components of a root from `first`, `stride` apart.
+#[inline(always)]
+fn read<const D: usize>(o: &[f64], first: u32, stride: u32) -> [f64; D] {
+    std::array::from_fn(|d| o[first as usize + d * stride as usize])
+}
+
+impl BandLambda {
+    /// The program of `derivation`'s chain, with `forces` the scene's force expressions by
+    /// body (the others are the bodies' force symbols, as [`RowProgram::new`] takes them);
+    /// `None` for a system it does not serve (see the module's note).
+    pub fn new(system: &System, derivation: &Derivation, forces: &[(usize, Id)]) -> Option<BandLambda> {
+        let k = derivation.constraints.len();
+        let dim = system.dim();
+        let point_masses = system.bodies.iter().all(|b| b.rigid.is_none());
+        let equalities = system.constraints.iter().all(|c| !c.inequality);
+        if k == 0 || !point_masses || !equalities || !matches!(dim, 2 | 3) || k >= ABSENT as usize {
+            return None;
+        }
+        // A tridiagonal in the listing order, with a formula on every diagonal entry.
+        let mut diagonal = vec![None; k];
+        let mut upper = vec![None; k];
+        for &(r, c, id) in &derivation.a {
+            match c.checked_sub(r) {
+                Some(0) => diagonal[r] = Some(id),
+                Some(1) => upper[r] = Some(id),
+                _ => return None,
+            }
+        }
+        // No more rows than the velocity components they move: past that A is singular
+        // whatever the state (the general solve's `structurally_singular`).
+        let mut moved = vec![false; system.bodies.len()];
+        for d in &derivation.constraints {
+            for &(b, _) in &d.jacobian {
+                moved[b] = true;
+            }
+        }
+        if k > dim * moved.iter().filter(|m| **m).count() {
+            return None;
+        }
+        // The roots in units: per row A[k][k], A[k][k + 1], c, J; per body m, F.
+        let mut roots = Vec::new();
+        let mut units = Vec::with_capacity(k + system.bodies.len());
+        for (r, d) in derivation.constraints.iter().enumerate() {
+            let first = roots.len();
+            roots.push(diagonal[r]?);
+            roots.extend(upper[r]);
+            roots.push(d.bias);
+            roots.extend(d.jacobian.iter().map(|&(_, j)| j));
+            units.push((first..roots.len()).collect::<Vec<_>>());
+        }
+        // Each body's force expression (the first `forces` gives, as `RowProgram::new`
+        // takes it), found in one pass: a search per body is quadratic in a long chain.
+        let mut given: Vec<Option<Id>> = vec![None; system.bodies.len()];
+        for &(b, f) in forces.iter().rev() {
+            if let Some(slot) = given.get_mut(b) {
+                *slot = Some(f);
+            }
+        }
+        for (body, f) in system.bodies.iter().zip(given) {
+            let f = f.unwrap_or(body.nodes.force);
+            units.push(vec![roots.len(), roots.len() + 1]);
+            roots.push(body.mass);
+            roots.push(f);
+        }
+        let graph = &derivation.graph;
+        let symbols = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
+        let layout = Inputs::new(graph, &symbols).ok()?;
+        let ranges = layout.ranges();
+        let loads: Vec<(Symbol, u32, u32)> =
+            symbols.iter().zip(ranges).map(|(&s, r)| (s, r.start as u32, r.len() as u32)).collect();
+        let input_len = ranges.last().map_or(0, |r| r.end);
+        let position: crate::expr::graph::FastMap<Symbol, usize> =
+            symbols.iter().enumerate().map(|(i, &s)| (s, i)).collect();
+        // Each root's width as a tape of it alone would give it: a scalar 1, a vector the
+        // dimension.
+        let width = |r: usize| if graph.ty(roots[r]) == crate::expr::Ty::Vector { dim } else { 1 };
+        let source = |s: Symbol| position.get(&s).map_or(0..0, |&i| ranges[i].clone());
+        let batched = Batched::new(graph, &roots, &units, width, source, |_| None);
+        let (kernel, output_len, place): (Kernel, usize, Vec<(usize, usize)>) = match batched {
+            Some(b) => {
+                let place = (0..roots.len()).map(|r| b.place(r)).collect();
+                let len = b.output_len();
+                let scratch = b.scratch();
+                (Kernel::Batched(Box::new(b), scratch), len, place)
+            }
+            None => {
+                let tape = Tape::compile(graph, &roots, &symbols).ok()?;
+                let place = (0..roots.len()).map(|r| (tape.output_range(r).start, 1)).collect();
+                let len = tape.output_len();
+                let scratch = tape.scratch();
+                #[cfg(feature = "jit")]
+                let kernel = Kernel::Tape { tape, scratch, compiled: None };
+                #[cfg(not(feature = "jit"))]
+                let kernel = Kernel::Tape { tape, scratch };
+                (kernel, len, place)
+            }
+        };
+        // Every place, with its last component, within the outputs, and every root as wide
+        // as a point mass's rows read it.
+        let fits = |r: usize, w: usize| {
+            let (first, stride) = place[r];
+            width(r) == w && first + (w - 1) * stride < output_len && output_len < ABSENT as usize
+        };
+        let (mut rows, mut entries) = (Vec::with_capacity(k), Vec::new());
+        for (unit, d) in units.iter().zip(&derivation.constraints) {
+            let has_upper = unit.len() == 3 + d.jacobian.len();
+            let bias = unit[1 + usize::from(has_upper)];
+            let start = entries.len() as u32;
+            for &r in &unit[unit.len() - d.jacobian.len()..] {
+                if !fits(r, dim) {
+                    return None;
+                }
+                entries.push(EntryAt { first: place[r].0 as u32, stride: place[r].1 as u32, body: 0 });
+            }
+            for (e, &(body, _)) in entries[start as usize..].iter_mut().zip(&d.jacobian) {
+                e.body = body as u32;
+            }
+            if !(fits(unit[0], 1) && fits(bias, 1) && (!has_upper || fits(unit[1], 1))) {
+                return None;
+            }
+            rows.push(RowAt {
+                diagonal: place[unit[0]].0 as u32,
+                upper: if has_upper { place[unit[1]].0 as u32 } else { output_len as u32 },
+                bias: place[bias].0 as u32,
+                start,
+                end: entries.len() as u32,
+            });
+        }
+        let mut bodies = Vec::with_capacity(system.bodies.len());
+        for unit in &units[k..] {
+            let (mass, force) = (unit[0], unit[1]);
+            if !(fits(mass, 1) && fits(force, dim)) {
+                return None;
+            }
+            bodies.push(BodyAt {
+                mass: place[mass].0 as u32,
+                force: place[force].0 as u32,
+                stride: place[force].1 as u32,
+            });
+        }
+        let n = bodies.len();
+        Some(BandLambda {
+            kernel,
+            #[cfg(feature = "jit")]
+            roots,
+            #[cfg(feature = "jit")]
+            units,
+            loads,
+            dim,
+            rows,
+            entries,
+            bodies,
+            input: vec![0.0; input_len],
+            output: vec![0.0; output_len + 1],
+            inverse_mass: vec![0.0; n],
+            weighted: vec![[0.0; 3]; n],
+            inverse_pivot: vec![0.0; k],
+            multiplier: vec![0.0; k],
+            lambda: vec![0.0; k],
+            force: vec![[0.0; 3]; n],
+            acceleration: vec![[0.0; 3]; n],
+        })
+    }
+
+    /// How many rows the program solves.
+    pub fn len(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// Whether the program has no rows (never: [`new`](BandLambda::new) declines them).
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// Whether the roots are evaluated shape by shape (`numeric::batch`) rather than by one
+    /// tape.
+    pub fn is_batched(&self) -> bool {
+        matches!(self.kernel, Kernel::Batched(..))
+    }
+
+    /// Compiles the program to machine code ([`Tape::jit`]), the same numbers bit for bit;
+    /// never done unless asked (as [`RowProgram::compile`]). A program evaluated shape by
+    /// shape is lowered again as one tape of every root (from `derivation`, the one it was
+    /// made from), which is compiled: compiled code has no dispatch to share among the
+    /// members of a shape. On failure (a tape too large for compiled code's frame, a host
+    /// without a code generator) the program evaluates as before and the error is returned.
+    #[cfg(feature = "jit")]
+    pub fn compile(&mut self, derivation: &Derivation) -> Result<(), crate::numeric::jit::JitError> {
+        match &mut self.kernel {
+            Kernel::Tape { tape, compiled: compiled @ None, .. } => *compiled = Some(std::sync::Arc::new(tape.jit()?)),
+            Kernel::Tape { .. } => {}
+            Kernel::Batched(..) => {
+                let symbols: Vec<Symbol> = self.loads.iter().map(|l| l.0).collect();
+                let Ok(tape) = Tape::compile(&derivation.graph, &self.roots, &symbols) else {
+                    return Err(crate::numeric::jit::JitError::Codegen("the roots do not lower".into()));
+                };
+                let jit = tape.jit()?;
+                // The single tape writes root r at its own place: every place moves.
+                let place = |r: usize| tape.output_range(r).start as u32;
+                for (row, unit) in self.rows.iter_mut().zip(&self.units) {
+                    let has_upper = unit.len() == 3 + (row.end - row.start) as usize;
+                    row.diagonal = place(unit[0]);
+                    row.upper = if has_upper { place(unit[1]) } else { tape.output_len() as u32 };
+                    row.bias = place(unit[1 + usize::from(has_upper)]);
+                    let js = &unit[unit.len() - (row.end - row.start) as usize..];
+                    for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(js) {
+                        (entry.first, entry.stride) = (place(j), 1);
+                    }
+                }
+                for (body, unit) in self.bodies.iter_mut().zip(&self.units[self.rows.len()..]) {
+                    (body.mass, body.force, body.stride) = (place(unit[0]), place(unit[1]), 1);
+                }
+                self.output = vec![0.0; tape.output_len() + 1];
+                let scratch = tape.scratch();
+                self.kernel = Kernel::Tape { tape, scratch, compiled: Some(std::sync::Arc::new(jit)) };
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether the tape runs as machine code ([`compile`](BandLambda::compile)).
+    pub fn is_compiled(&self) -> bool {
+        #[cfg(feature = "jit")]
+        return matches!(self.kernel, Kernel::Tape { compiled: Some(_), .. });
+        #[cfg(not(feature = "jit"))]
+        false
+    }
+
+    /// λ, the constraint forces and the accelerations at the state `env` (of the system the
+    /// program was made from) into `out`, its status `Solved` with no diagnostic, when the
+    /// guard passes (see the module's note); false, `out` untouched, when it declines: the
+    /// caller then evaluates the rows and takes [`solve::solve_into`], which gives the
+    /// answer or the diagnostic this path cannot
+    /// ([`solve_or_rows_into`](BandLambda::solve_or_rows_into) does both).
+    pub fn solve_into(&mut self, env: &Env, settings: &Settings, out: &mut Solution) -> bool {
+        if !allowed(settings.method, self.rows.len()) || !self.evaluate(env) {
+            return false;
+        }
+        let solved = if self.dim == 2 { self.solve::<2>(settings) } else { self.solve::<3>(settings) };
+        if !solved {
+            return false;
+        }
+        let k = self.rows.len();
+        // The answer's vectors and ours trade places (ours are the next call's buffers).
+        std::mem::swap(&mut out.lambda, &mut self.lambda);
+        std::mem::swap(&mut out.constraint_force, &mut self.force);
+        std::mem::swap(&mut out.acceleration, &mut self.acceleration);
+        let n = self.bodies.len();
+        // The answer's old vectors are the next call's buffers: of the size already but on
+        // the first call.
+        if self.lambda.len() != k {
+            self.lambda.resize(k, 0.0);
+        }
+        for v in [&mut self.force, &mut self.acceleration] {
+            if v.len() != n {
+                v.resize(n, [0.0; 3]);
+            }
+        }
+        out.active.clear();
+        out.active.resize(k, true);
+        out.diagnostics.clear();
+        out.status = Status::Solved;
+        out.contacts.clear();
+        out.contacts.resize(k, None);
+        true
+    }
+
+    /// The factor, λ, the forces and the accelerations of the evaluated outputs, in the
+    /// dimension `D`, into this program's buffers: false where the guard declines.
+    ///
+    /// Accuracy: what λ loses against the rows' scaled solve. That solve factors the
+    /// Jacobi-scaled Ã = D A D (D = diag(Aₖₖ)^−½, from ‖J‖ and the masses), this one A itself
+    /// (dₖ = Aₖₖ − Aₖ₋₁,ₖ²/dₖ₋₁, L D Lᵀ without square roots). Cholesky is invariant
+    /// under diagonal scaling, in exact arithmetic and in its rounding error (Higham,
+    /// *Accuracy and Stability of Numerical Algorithms*, 2nd ed., §10.1): the computed factor
+    /// of A is the exact factor of A + ΔA with |ΔA| ≤ γ₃ |L̂| D̂ |L̂ᵀ| componentwise, a bound
+    /// that scales with A — factoring D A D instead multiplies ΔA's bound by D on both sides,
+    /// exactly for powers of two and to the rounding of D otherwise — and for an SPD
+    /// tridiagonal |L̂| D̂ |L̂ᵀ| = |L̂ D̂ L̂ᵀ| (no growth, §9.6), so |ΔAᵢⱼ| ≤ γ₃' (Aᵢᵢ Aⱼⱼ)^½:
+    /// a perturbation of Ã of order u, whichever matrix was factored. The substitutions add
+    /// the same componentwise backward error, and A's entries and b come from the formulas
+    /// with a few roundings each (relative to (Aᵢᵢ Aⱼⱼ)^½ and to the terms of b), again of
+    /// order u in Ã's terms. Hence the forward error of both is governed by κ₂(Ã) rather than
+    /// κ₂(A) (Thm 10.6 and the remark after it; van der Sluis: the Jacobi scaling is within
+    /// a factor of the rows' count of non-zeros, 3 here, of the best diagonal scaling):
+    /// ‖λ̂ − λ‖/‖λ‖ ≤ c n κ₂(Ã) u for a small c, the bound of the scaled solve. Not taking
+    /// the scaled solve's step of refinement loses nothing beyond a constant (`chain.rs`'s
+    /// `REFINE_BOUND`: a backward stable solve's error is already κ u). The test holds the
+    /// two errors against a double-double reference within 16× of each other case by case
+    /// and within 1.5× summed (measured 1.10× and 1.14×).
+    fn solve<const D: usize>(&mut self, settings: &Settings) -> bool {
+        let o = &self.output[..];
+        debug_assert_eq!(o.last(), Some(&0.0), "the zero past the outputs");
+        // 1/m and F/m per body: 1/m a positive normal number.
+        let mut ok = true;
+        let per_body = self.bodies.iter().zip(&mut self.inverse_mass).zip(&mut self.weighted);
+        for ((b, inverse_mass), weighted) in per_body {
+            let w = 1.0 / o[b.mass as usize];
+            ok &= w.is_normal() & (w > 0.0);
+            let f: [f64; D] = read(o, b.force, b.stride);
+            *inverse_mass = w;
+            for d in 0..D {
+                weighted[d] = f[d] * w;
+            }
+        }
+        // Row by row: −bₖ = −(cₖ + Σᵢ Jₖᵢ·Fᵢ/mᵢ); dₖ = A[k][k] − A[k − 1][k]² / dₖ₋₁,
+        // Lₖ = A[k − 1][k] / dₖ₋₁, yₖ = −bₖ − Lₖ yₖ₋₁ (L y = −b); the pivot above τ A[k][k].
+        let tolerance = settings.rank_tolerance;
+        let (mut e, mut inverse_prev, mut y_prev) = (0.0, 0.0, 0.0);
+        let per_row = self.rows.iter().zip(&mut self.inverse_pivot).zip(&mut self.multiplier).zip(&mut self.lambda);
+        for (((row, inverse_pivot), multiplier), y_out) in per_row {
+            let mut b = o[row.bias as usize];
+            for entry in &self.entries[row.start as usize..row.end as usize] {
+                let j: [f64; D] = read(o, entry.first, entry.stride);
+                let w = &self.weighted[entry.body as usize];
+                for d in 0..D {
+                    b += j[d] * w[d];
+                }
+            }
+            let diagonal = o[row.diagonal as usize];
+            let d = diagonal - e * e * inverse_prev;
+            ok &= DIAGONAL_RANGE.contains(&diagonal) & (d > tolerance * diagonal);
+            let l = e * inverse_prev;
+            let y = -b - l * y_prev;
+            *inverse_pivot = 1.0 / d;
+            *multiplier = l;
+            *y_out = y;
+            e = o[row.upper as usize];
+            (inverse_prev, y_prev) = (*inverse_pivot, y);
+        }
+        if !ok {
+            return false;
+        }
+        // D Lᵀ λ = y: λ_{K−1} = y_{K−1}/d_{K−1}, λₖ = yₖ/dₖ − Lₖ₊₁ λₖ₊₁; each λ zero or normal.
+        let (mut next, mut next_multiplier) = (0.0, 0.0);
+        let per_row = self.lambda.iter_mut().zip(&self.inverse_pivot).zip(&self.multiplier).rev();
+        for ((x, inverse_pivot), multiplier) in per_row {
+            let lambda = *x * inverse_pivot - next_multiplier * next;
+            ok &= (lambda == 0.0) | lambda.is_normal();
+            *x = lambda;
+            (next, next_multiplier) = (lambda, *multiplier);
+        }
+        if !ok {
+            return false;
+        }
+        // Σₖ λₖ Jₖᵢ per body, then aᵢ = Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ, finite.
+        self.force.fill([0.0; 3]);
+        for (row, &x) in self.rows.iter().zip(&self.lambda) {
+            for entry in &self.entries[row.start as usize..row.end as usize] {
+                let j: [f64; D] = read(o, entry.first, entry.stride);
+                let f = &mut self.force[entry.body as usize];
+                for d in 0..D {
+                    f[d] += x * j[d];
+                }
+            }
+        }
+        let mut not_finite = 0.0;
+        let per_body = self.acceleration.iter_mut().zip(&self.force).zip(&self.weighted).zip(&self.inverse_mass);
+        for (((a, fc), weighted), w) in per_body {
+            for d in 0..D {
+                a[d] = weighted[d] + fc[d] * w;
+                not_finite += a[d] * 0.0;
+            }
+        }
+        not_finite == 0.0
+    }
+
+    /// [`solve_into`](BandLambda::solve_into), and where it declines the rows of `program`
+    /// (the same system's, with the same forces) evaluated into `rows` and
+    /// [`solve::solve_into`]: the answer the caller would have had from the rows, with their
+    /// diagnostics. Returns whether the band path answered; an error when the rows could not
+    /// be evaluated (a symbol without a value).
+    #[allow(clippy::too_many_arguments)]
+    pub fn solve_or_rows_into(
+        &mut self,
+        system: &System,
+        env: &Env,
+        settings: &Settings,
+        program: &RowProgram,
+        scratch: &mut RowScratch,
+        rows: &mut Rows,
+        out: &mut Solution,
+    ) -> Result<bool, crate::expr::eval::EvalError> {
+        if self.solve_into(env, settings, out) {
+            return Ok(true);
+        }
+        program.evaluate_into(system, env, scratch, rows)?;
+        solve::solve_into(rows, settings, out);
+        Ok(false)
+    }
+
+    /// The program's inputs from `env`, then its outputs: false when a symbol has no value
+    /// (or one of another kind) or a number is not finite.
+    fn evaluate(&mut self, env: &Env) -> bool {
+        let input = &mut self.input[..];
+        for &(s, start, width) in &self.loads {
+            let at = start as usize;
+            // One to three numbers, copied by hand (a copy of a variable length is a call).
+            match (env.get(s), width) {
+                (Some(Value::Scalar(x)), 1) => input[at] = x,
+                (Some(Value::Vector([x, y, _])), 2) => (input[at], input[at + 1]) = (x, y),
+                (Some(Value::Vector([x, y, z])), 3) => (input[at], input[at + 1], input[at + 2]) = (x, y, z),
+                _ => return false,
+            }
+        }
+        let len = self.output.len() - 1;
+        let output = &mut self.output[..len];
+        match &mut self.kernel {
+            Kernel::Batched(batched, scratch) => batched.eval(&self.input, scratch, output),
+            #[cfg(feature = "jit")]
+            Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, output),
+            Kernel::Tape { tape, scratch, .. } => tape.eval(&self.input, scratch, output),
+        }
+        in_range(&self.input) && all_finite(output)
+    }
+}
