@@ -58,6 +58,7 @@ use crate::expr::graph::{FastMap, FastSet};
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
 use crate::model::file::Loaded;
+use crate::model::scene::by_body;
 use crate::numeric::program::{Inputs, LowerError, Op, Program};
 use std::cell::Cell;
 
@@ -317,10 +318,12 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
     // The scene's force expressions (`[scene] forces`); a body not listed feels none.
     let zero = g.num(Rational::int(0));
     let zero = g.vector(vec![zero; g.dim()])?;
+    let given_force = by_body(&loaded.scene.forces, system.bodies.len());
+    let given_torque = by_body(&loaded.scene.torques, system.bodies.len());
     let mut applied = Vec::with_capacity(system.bodies.len());
-    for i in 0..system.bodies.len() {
-        applied.push(match loaded.scene.forces.iter().find(|f| f.0 == i) {
-            Some(&(_, id)) => g.substitute(id, map)?,
+    for given in &given_force {
+        applied.push(match given {
+            Some(id) => g.substitute(*id, map)?,
             None => zero,
         });
     }
@@ -337,8 +340,8 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
         let (Some(rigid), Some(inertia)) = (&body.rigid, inertias[i]) else { continue };
         if let Some(axes) = rigid.nodes.axes {
             // 3D: three slots, one per principal axis eₖ = R(q) eₖ (`numeric::rows`).
-            let applied = match loaded.scene.torques.iter().find(|t| t.0 == i) {
-                Some(&(_, id)) => g.substitute(id, map)?,
+            let applied = match given_torque[i] {
+                Some(id) => g.substitute(id, map)?,
                 None => zero,
             };
             turns.three.push(Turn3 {
@@ -367,8 +370,8 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
         turns.orientation.push(rigid.nodes.orientation);
         turns.angular_velocity.push(rigid.nodes.angular_velocity);
         turns.torque.push(rigid.nodes.torque);
-        turns.applied.push(match loaded.scene.torques.iter().find(|t| t.0 == i) {
-            Some(&(_, id)) => g.substitute(id, map)?,
+        turns.applied.push(match given_torque[i] {
+            Some(id) => g.substitute(id, map)?,
             None => scalar_zero,
         });
         turns.inverse_inertia.push(g.powi(inertia, -1)?);

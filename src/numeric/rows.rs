@@ -33,6 +33,7 @@ use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
 use crate::expr::graph::{FastMap, FastSet, SymbolWalk};
 use crate::expr::{Func, Id, Rational, Symbol, Ty};
+use crate::model::scene::by_body;
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
@@ -1260,11 +1261,10 @@ impl RowProgram {
         let graph = &derivation.graph;
         let mut roots = Vec::new();
         let mut bodies = Vec::with_capacity(system.bodies.len());
-        for (i, body) in system.bodies.iter().enumerate() {
-            let f = match forces.iter().find(|(b, _)| *b == i) {
-                Some(&(_, expr)) => expr,
-                None => body.nodes.force,
-            };
+        let given_force = by_body(forces, system.bodies.len());
+        let given_torque = by_body(torques, system.bodies.len());
+        for (body, given) in system.bodies.iter().zip(&given_force) {
+            let f = given.unwrap_or(body.nodes.force);
             bodies.push(BodySlots {
                 mass: push(&mut roots, body.mass),
                 velocity: push(&mut roots, body.nodes.velocity),
@@ -1277,10 +1277,7 @@ impl RowProgram {
         for i in angular_bodies(system) {
             slot_of[i] = Some(bodies.len());
             let Some(rigid) = &system.bodies[i].rigid else { continue };
-            let tau = match torques.iter().find(|(b, _)| *b == i) {
-                Some(&(_, expr)) => expr,
-                None => rigid.nodes.torque,
-            };
+            let tau = given_torque[i].unwrap_or(rigid.nodes.torque);
             let (mass, velocity, force) = (
                 push(&mut roots, rigid.inertia),
                 push(&mut roots, rigid.nodes.angular_velocity),

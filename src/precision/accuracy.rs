@@ -21,6 +21,7 @@
 
 use super::reference::{Dd, eval_dd, solve_dense};
 use crate::expr::eval::{Env, Value, eval};
+use crate::model::scene::by_body;
 use crate::numeric::random::Rng;
 use crate::numeric::rows::{angular_bodies, angular_slots, angular_width, world_angular};
 use crate::numeric::solve::solve;
@@ -133,13 +134,13 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     let rigid: Vec<usize> = angular_bodies(&s.system).collect();
     let width = angular_width(&s.system);
     let mut roots: Vec<_> = s.system.bodies.iter().map(|b| b.mass).collect();
-    let force_expr: Vec<Option<_>> =
-        (0..n).map(|i| s.scene.forces.iter().find(|(b, _)| *b == i).map(|&(_, id)| id)).collect();
+    let force_expr = by_body(&s.scene.forces, n);
+    let given_torque = by_body(&s.scene.torques, n);
     roots.extend(force_expr.iter().flatten());
     let rigid_start = roots.len();
     for &i in &rigid {
         let r = s.system.bodies[i].rigid.as_ref()?;
-        let tau = s.scene.torques.iter().find(|(b, _)| *b == i).map_or(r.nodes.torque, |&(_, id)| id);
+        let tau = given_torque[i].unwrap_or(r.nodes.torque);
         roots.extend([r.inertia, tau, r.nodes.angular_velocity]);
         roots.extend(r.nodes.axes.iter().flatten());
     }
