@@ -24,8 +24,8 @@ use super::rotation::{fold, kick};
 use super::rows::Rows;
 use super::solve::{CONTACT_TOLERANCE, FactorId};
 use super::stabilize::{
-    Inequalities, ShakeHistory, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates,
-    velocity_step,
+    Inequalities, ShakeHistory, Stabilize, StabilizeError, distance, project_positions, rattle_one_row,
+    shake_positions, update_rates, velocity_step,
 };
 use super::vector::{dot, length_scale, safe_norm};
 use crate::expr::eval::{Env, Value};
@@ -601,6 +601,10 @@ pub struct Simulation<'s> {
     shake: ShakeHistory,
     /// Whether some of the rows' tapes run as machine code ([`Settings::compile`]).
     compiled: bool,
+    /// Whether RATTLE's steps may take the one-row step (`stabilize::rattle_one_row`) where
+    /// the scene has that shape ([`Simulation::set_one_row`]), and how many did.
+    one_row: bool,
+    one_row_steps: u64,
 }
 
 impl<'s> Simulation<'s> {
@@ -642,7 +646,22 @@ impl<'s> Simulation<'s> {
             has_inequalities,
             shake: ShakeHistory::default(),
             compiled,
+            one_row: true,
+            one_row_steps: 0,
         })
+    }
+
+    /// Whether RATTLE's steps (Verlet with projection) on a scene of one equality row on one
+    /// slot (the pendulum, a bead) take the step written for that shape
+    /// (`stabilize::rattle_one_row`), as they do unless told otherwise: the same numbers bit
+    /// for bit as the general step, which `false` forces (for tests that compare the two).
+    pub fn set_one_row(&mut self, on: bool) {
+        self.one_row = on;
+    }
+
+    /// How many steps of the runs so far took the one-row step ([`set_one_row`](Simulation::set_one_row)).
+    pub fn one_row_steps(&self) -> u64 {
+        self.one_row_steps
     }
 
     /// Runs all steps, calling `observe` at every recorded state (step 0 … steps).
@@ -994,6 +1013,32 @@ impl<'s> Simulation<'s> {
         // (not with 3D rigid bodies, whose orientations are rebased there).
         let keep = !self.three_d;
         if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) = (s.integrator, s.stabilize) {
+            // One equality row on the only slot: the same step written for that shape.
+            if self.one_row && !has_inequalities && !self.three_d {
+                let made = rattle_one_row(
+                    &mut self.dynamics,
+                    t1,
+                    s.dt,
+                    &mut self.q,
+                    &mut self.v,
+                    &mut self.half,
+                    &self.a,
+                    &mut self.start,
+                    &mut self.end,
+                    self.start_made,
+                    [reach.length, tolerance],
+                    max_iterations,
+                    &mut self.shake,
+                    [reach.touch, s.restitution, reach.bounce_speed],
+                    &mut self.values,
+                )?;
+                if let Some(made) = made {
+                    self.one_row_steps += 1;
+                    self.end_made = made;
+                    self.carry(keep);
+                    return self.check_finite(n + 1, t1);
+                }
+            }
             // RATTLE: drift, SHAKE along the start's gradients, kick, velocity projection.
             if self.three_d {
                 self.first_kick(0.5 * s.dt);
