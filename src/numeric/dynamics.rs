@@ -573,6 +573,31 @@ impl<'s> Dynamics<'s> {
         true
     }
 
+    /// [`rows_after_positions_steady_into`](Dynamics::rows_after_positions_steady_into) for
+    /// rows of one slot (`v` its velocity): the same numbers, without the loops. In line:
+    /// RATTLE's one-row step (`stabilize::rattle_one_row`) calls it at every step.
+    #[inline(always)]
+    pub fn rows_after_positions_one_slot(&mut self, v: &[f64; 3], rows: &mut Rows) -> bool {
+        let (true, [velocity], [_]) =
+            (self.positions_finite, rows.velocity.as_mut_slice(), self.position_rows.as_slice())
+        else {
+            return self.rows_after_positions_steady_into(std::slice::from_ref(v), rows);
+        };
+        *velocity = *v;
+        self.positions_finite = false;
+        std::mem::swap(&mut rows.rows, &mut self.position_rows);
+        for row in &mut rows.rows {
+            if let [(0, j)] = row.jacobian.as_slice() {
+                // The sum of one term, from −0: the term itself.
+                row.rate = j[0] * v[0] + j[1] * v[1] + j[2] * v[2];
+            } else {
+                let v = std::slice::from_ref(v);
+                row.rate = row.jacobian.iter().map(|(b, j)| j[0] * v[*b][0] + j[1] * v[*b][1] + j[2] * v[*b][2]).sum();
+            }
+        }
+        true
+    }
+
     /// `rows` at time `t`, or the error that names the first number that is not finite
     /// (`finite`: whether every number of `rows` is, as `all_finite` says).
     fn checked(&self, rows: Rows, t: f64, finite: bool) -> Result<Rows, SimError> {

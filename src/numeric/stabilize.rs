@@ -736,7 +736,7 @@ pub fn rattle_one_row(
             let kept = residual <= bound && (predicted || iterations > 0);
             // One row: the prediction's residual is taken back by the diagonal (no exact solve).
             finish_one_row(history, kept, dynamics.position_rows(), start);
-            let kept = dynamics.rows_after_positions_steady_into(v, end)
+            let kept = dynamics.rows_after_positions_one_slot(&v[0], end)
                 || dynamics.rows_after_positions_into(t, q, v, end)?;
             history.ends = kept;
             break;
@@ -761,7 +761,14 @@ pub fn rattle_one_row(
             v[d] += 0.5 * dt * f[d] * w;
         }
     }
-    update_rates(end, half, v);
+    // Ċ brought from v½ to v⁺ (`update_rates`; no 3D rigid body's slot to unfold).
+    match end.rows.as_mut_slice() {
+        [row] if end.axes.is_empty() && matches!(row.jacobian.as_slice(), [(0, _)]) => {
+            let (j, x, y) = (row.jacobian[0].1, half[0], v[0]);
+            row.rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
+        }
+        _ => update_rates(end, half, v),
+    }
     // The velocity projection onto Ċ = 0 (`velocity_step`'s one-row path, else the step).
     values.clear();
     let rate = match end.rows.as_slice() {
