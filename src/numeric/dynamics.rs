@@ -34,7 +34,9 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::{Compile, SettingsError};
-use super::single::{SingleScaling, correction_single, correction_single_multiplier, solve_single_with};
+use super::single::{
+    SingleScaling, correction_single, correction_single_multiplier, solve_one_slot, solve_single_with,
+};
 use super::solve::{Answer, Diagnostic, FactorId, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::problem::shown;
@@ -681,6 +683,21 @@ impl<'s> Dynamics<'s> {
     /// with the same J (`solve::FactorId`); `None` when it went another way.
     pub fn made(&self) -> Option<FactorId> {
         self.made
+    }
+
+    /// [`solve_known`](Dynamics::solve_known) of rows of one slot with one row on it (a
+    /// pendulum, a bead), in closed form (`single::solve_one_slot`): the same answer
+    /// ([`solution`](Dynamics::solution)) and the slot's acceleration, or `None`, with
+    /// nothing done, where that path declines (the caller then takes `solve_known`).
+    #[inline(always)]
+    pub fn solve_one_slot(&mut self, rows: &mut Rows) -> Option<[f64; 3]> {
+        // Baumgarte's terms change c first: `solve_known` adds them.
+        if self.baumgarte.is_some() {
+            return None;
+        }
+        let a = solve_one_slot(rows, &self.settings, &mut self.single, &mut self.solution)?;
+        self.made = None;
+        Some(a)
     }
 
     /// The answer of the last [`solve`](Dynamics::solve) (empty before the first).

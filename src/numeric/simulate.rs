@@ -874,7 +874,11 @@ impl<'s> Simulation<'s> {
             if MEASURE && n == 0 {
                 balance.work_scale = work_scale(&rows.force, system.bodies.len(), length);
             }
-            self.dynamics.solve_known(&mut self.start, self.start_made);
+            // One row on the only slot: its acceleration in closed form, else the solve's.
+            let one_slot = if self.one_row { self.dynamics.solve_one_slot(&mut self.start) } else { None };
+            if one_slot.is_none() {
+                self.dynamics.solve_known(&mut self.start, self.start_made);
+            }
             self.start_made = self.dynamics.made();
             // The active set for the step to come: contacts that push are held (without
             // inequalities nothing is, and the set stays empty).
@@ -898,8 +902,14 @@ impl<'s> Simulation<'s> {
             if n == s.steps {
                 break;
             }
-            copy_slots(&mut self.a, &self.dynamics.solution().acceleration);
-            fold(&self.start, &mut self.a);
+            match (one_slot, self.a.as_mut_slice()) {
+                // No 3D rigid body's slot to fold on one slot (`solve_one_slot`'s rows).
+                (Some(a), [to]) => *to = a,
+                _ => {
+                    copy_slots(&mut self.a, &self.dynamics.solution().acceleration);
+                    fold(&self.start, &mut self.a);
+                }
+            }
             self.dynamics.step = n + 1;
             let t1 = self.t0 + (n + 1) as f64 * s.dt;
             self.advance(&s, n, [t, t1], &reach)?;

@@ -250,6 +250,67 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
     true
 }
 
+/// [`solve_single_with`] for rows of one slot: the same answer in `out`, and the slot's
+/// acceleration returned (what a run's step takes from the answer), or `None`, with `out`
+/// untouched, where `solve_single_with` would decline or the rows have more than one slot.
+/// In line: a run's step calls it once, and the general function's checks of the shape
+/// and its loop over the slots were a fifth of it.
+#[inline(always)]
+pub fn solve_one_slot(
+    rows: &Rows,
+    settings: &Settings,
+    scaling: &mut SingleScaling,
+    out: &mut Solution,
+) -> Option<[f64; 3]> {
+    let ([row], [w], [velocity], [f]) =
+        (rows.rows.as_slice(), rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice())
+    else {
+        return None;
+    };
+    let [(0, j)] = row.jacobian.as_slice() else {
+        return None;
+    };
+    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) {
+        return None;
+    }
+    let w = *w;
+    // Every number finite, as `solve_single_with` checks them.
+    if !(finite3(velocity) & finite3(f) & row.bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
+        return None;
+    }
+    let scaled = scaling.of(&row.jacobian, j, w)?;
+    let jt = scaled.jt;
+    let (mu, lambda) = scaled.multiplier(f, w, row.bias, settings.rank_tolerance)?;
+    match (out.lambda.as_mut_slice(), out.active.as_mut_slice(), out.contacts.as_mut_slice()) {
+        ([l], [active], [contact]) => (*l, *active, *contact) = (lambda, true, None),
+        _ => {
+            out.lambda.clear();
+            out.lambda.push(lambda);
+            out.active.clear();
+            out.active.push(true);
+            out.contacts.clear();
+            out.contacts.push(None);
+        }
+    }
+    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w.
+    let fc = [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]];
+    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    match (out.constraint_force.as_mut_slice(), out.acceleration.as_mut_slice()) {
+        ([fc_out], [a_out]) => (*fc_out, *a_out) = (fc, a),
+        _ => {
+            out.constraint_force.clear();
+            out.constraint_force.push(fc);
+            out.acceleration.clear();
+            out.acceleration.push(a);
+        }
+    }
+    if !out.diagnostics.is_empty() {
+        out.diagnostics.clear();
+    }
+    out.status = Status::Solved;
+    Some(a)
+}
+
 /// [`solve_single_with`]'s forces and accelerations over every slot: Σ λ J = λ̃ J̃ on the row's
 /// slot `body`, zero elsewhere; a = (F + Σ λ J) w.
 fn solution_slots(rows: &Rows, body: usize, mu: f64, jt: &[f64; 3], out: &mut Solution) {
