@@ -601,8 +601,10 @@ pub struct Simulation<'s> {
     shake: ShakeHistory,
     /// Whether some of the rows' tapes run as machine code ([`Settings::compile`]).
     compiled: bool,
-    /// Whether RATTLE's steps may take the one-row step (`stabilize::rattle_one_row`) where
-    /// the scene has that shape ([`Simulation::set_one_row`]), and how many did.
+    /// Whether RATTLE's steps may take the one-row step (`stabilize::rattle_one_row`) and the
+    /// start's solve its closed form on one slot (`Dynamics::solve_one_slot`): a scene of one
+    /// slot and one constraint, unless told otherwise ([`Simulation::set_one_row`]); each
+    /// declines rows of another shape. And how many steps took the one-row step.
     one_row: bool,
     one_row_steps: u64,
 }
@@ -624,6 +626,7 @@ impl<'s> Simulation<'s> {
         let n = q.len();
         let three_d = !dynamics.orientations().is_empty();
         let has_inequalities = dynamics.system().constraints.iter().any(|c| c.inequality);
+        let one_constraint = dynamics.system().constraints.len() == 1;
         Ok(Simulation {
             dynamics,
             settings,
@@ -646,7 +649,7 @@ impl<'s> Simulation<'s> {
             has_inequalities,
             shake: ShakeHistory::default(),
             compiled,
-            one_row: true,
+            one_row: n == 1 && one_constraint,
             one_row_steps: 0,
         })
     }
@@ -656,7 +659,7 @@ impl<'s> Simulation<'s> {
     /// (`stabilize::rattle_one_row`), as they do unless told otherwise: the same numbers bit
     /// for bit as the general step, which `false` forces (for tests that compare the two).
     pub fn set_one_row(&mut self, on: bool) {
-        self.one_row = on;
+        self.one_row = on && self.q.len() == 1 && self.dynamics.system().constraints.len() == 1;
     }
 
     /// How many steps of the runs so far took the one-row step ([`set_one_row`](Simulation::set_one_row)).
