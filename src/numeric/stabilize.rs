@@ -654,6 +654,7 @@ fn shake_correction(
 /// declines (an iteration's one-row correction, the velocity projection's) the general
 /// stage answers, as it does inside those functions; errors are theirs.
 #[allow(clippy::too_many_arguments)]
+#[inline(always)]
 pub fn rattle_one_row(
     dynamics: &mut Dynamics<'_>,
     t: f64,
