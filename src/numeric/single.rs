@@ -35,7 +35,7 @@
 
 use super::rows::Rows;
 use super::solve::{Method, Settings, Solution, Status, positive_finite, row_norm};
-use super::vector::dot;
+use super::vector::{dot, not_finite_bit};
 
 /// Norms whose reciprocal is a normal number: the general solve scales Ĵ = J·(1/‖J‖) there
 /// and J/‖J‖ outside (`solve::Scaled`), and so does this one.
@@ -136,6 +136,13 @@ fn finite3(x: &[f64; 3]) -> bool {
     x[0].is_finite() & x[1].is_finite() & x[2].is_finite()
 }
 
+/// Whether every number of `xs` is finite: the OR of their `vector::not_finite_bit`s, one
+/// test (where `is_finite` joined by `&` became a branch for each).
+#[inline(always)]
+fn all_finite<const N: usize>(xs: [f64; N]) -> bool {
+    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
+}
+
 /// A correction on a scene of one slot with one row acting on it (a pendulum, a bead): the
 /// step Δx = M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −`bias`, the forces zero — what SHAKE and the
 /// velocity projection ask of `Dynamics::correct` once they have set the row's c to
@@ -159,7 +166,7 @@ pub fn correction_single_multiplier(rows: &Rows, bias: f64, scaling: &mut Single
     };
     let w = *w;
     // As `solve_single_with` checks them, the zeroed force aside.
-    if !(finite3(velocity) & bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
+    if !all_finite([velocity[0], velocity[1], velocity[2], bias, w, j[0], j[1], j[2]]) || w < 0.0 {
         return None;
     }
     let settings = Settings::default();
@@ -275,7 +282,8 @@ pub fn solve_one_slot(
     }
     let w = *w;
     // Every number finite, as `solve_single_with` checks them.
-    if !(finite3(velocity) & finite3(f) & row.bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
+    let (v, b) = (velocity, row.bias);
+    if !all_finite([v[0], v[1], v[2], f[0], f[1], f[2], b, w, j[0], j[1], j[2]]) || w < 0.0 {
         return None;
     }
     let scaled = scaling.of(&row.jacobian, j, w)?;

@@ -41,7 +41,7 @@ use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
 use super::solve::{FactorId, positive_finite, solve, zero_vectors};
-use super::vector::{dot, row_norm};
+use super::vector::{dot, not_finite_bit, row_norm};
 
 /// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
 /// a few ulps of positions of that size, so a projected run keeps |C| at round-off.
@@ -806,7 +806,8 @@ fn predict_one_row(history: &mut ShakeHistory, start: &Rows, j: &[f64; 3], w: f6
     let m = *mu;
     // 0 + J μ w: the loop's sum into a zeroed slot.
     let x = [0.0 + j[0] * m * w, 0.0 + j[1] * m * w, 0.0 + j[2] * m * w];
-    if !(x[0].is_finite() & x[1].is_finite() & x[2].is_finite()) {
+    // Every component finite: the OR of their `not_finite_bit`s, one test.
+    if (not_finite_bit(x[0]) | not_finite_bit(x[1]) | not_finite_bit(x[2])) >> 63 != 0 {
         *mu = 0.0;
         return None;
     }
