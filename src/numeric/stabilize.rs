@@ -777,7 +777,11 @@ pub fn rattle_one_row(
         _ => None,
     };
     if let Some(dv) = rate.and_then(|rate| dynamics.correct_single(end, rate)) {
-        add_finite(v, std::slice::from_ref(&dv));
+        // `add_finite` on the one slot: v += Δv, the components that are finite.
+        for d in 0..3 {
+            let sum = v[0][d] + dv[d];
+            v[0][d] = if dv[d].is_finite() { sum } else { v[0][d] };
+        }
         return Ok(Some(dynamics.made()));
     }
     let applied = velocity_step(end, v, true, touch, restitution, bounce_speed, dynamics, values);
