@@ -704,6 +704,7 @@ impl<'s> Simulation<'s> {
     }
 
     /// A NaN or infinity in the state stops the run, naming the body.
+    #[inline(always)]
     fn check_finite(&self, step: u64, time: f64) -> Result<(), SimError> {
         // One slot (a pendulum, a bead): its six numbers in one test, the loop only to name it.
         if let ([q], [v]) = (self.q.as_slice(), self.v.as_slice())
@@ -711,6 +712,12 @@ impl<'s> Simulation<'s> {
         {
             return Ok(());
         }
+        self.check_slots(step, time)
+    }
+
+    /// [`check_finite`](Simulation::check_finite) slot by slot.
+    #[inline(never)]
+    fn check_slots(&self, step: u64, time: f64) -> Result<(), SimError> {
         for (i, (q, v)) in self.q.iter().zip(&self.v).enumerate() {
             if !(q.iter().chain(v).all(|x| x.is_finite())) {
                 let body = slot_name(self.dynamics.system(), i);
