@@ -689,13 +689,16 @@ impl<'s> Dynamics<'s> {
     /// pendulum, a bead), in closed form (`single::solve_one_slot`): the same answer
     /// ([`solution`](Dynamics::solution)) and the slot's acceleration, or `None`, with
     /// nothing done, where that path declines (the caller then takes `solve_known`).
+    /// `rows` must be as [`rows`](Dynamics::rows) or
+    /// [`rows_moved_into`](Dynamics::rows_moved_into) returned them, every number finite
+    /// (they report any other as an error): they are not tested again.
     #[inline(always)]
-    pub fn solve_one_slot(&mut self, rows: &mut Rows) -> Option<[f64; 3]> {
+    pub(crate) fn solve_one_slot(&mut self, rows: &mut Rows) -> Option<[f64; 3]> {
         // Baumgarte's terms change c first: `solve_known` adds them.
         if self.baumgarte.is_some() {
             return None;
         }
-        let a = solve_one_slot(rows, &self.settings, &mut self.single, &mut self.solution)?;
+        let a = solve_one_slot(rows, &self.settings, &mut self.single, &mut self.solution, true)?;
         self.made = None;
         Some(a)
     }

@@ -260,6 +260,9 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
 /// [`solve_single_with`] for rows of one slot: the same answer in `out`, and the slot's
 /// acceleration returned (what a run's step takes from the answer), or `None`, with `out`
 /// untouched, where `solve_single_with` would decline or the rows have more than one slot.
+/// `finite`: every number of `rows` is known to be finite (a run's rows as
+/// `Dynamics::rows` and `Dynamics::rows_moved_into` return them: they report any other),
+/// so only the sign of 1/m is tested; else each is, as `solve_single_with` tests them.
 /// In line: a run's step calls it once, and the general function's checks of the shape
 /// and its loop over the slots were a fifth of it.
 #[inline(always)]
@@ -268,6 +271,7 @@ pub fn solve_one_slot(
     settings: &Settings,
     scaling: &mut SingleScaling,
     out: &mut Solution,
+    finite: bool,
 ) -> Option<[f64; 3]> {
     let ([row], [w], [velocity], [f]) =
         (rows.rows.as_slice(), rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice())
@@ -281,9 +285,9 @@ pub fn solve_one_slot(
         return None;
     }
     let w = *w;
-    // Every number finite, as `solve_single_with` checks them.
+    // Every number finite, as `solve_single_with` checks them (unless known).
     let (v, b) = (velocity, row.bias);
-    if !all_finite([v[0], v[1], v[2], f[0], f[1], f[2], b, w, j[0], j[1], j[2]]) || w < 0.0 {
+    if !(finite || all_finite([v[0], v[1], v[2], f[0], f[1], f[2], b, w, j[0], j[1], j[2]])) || w < 0.0 {
         return None;
     }
     let scaled = scaling.of(&row.jacobian, j, w)?;
