@@ -65,7 +65,7 @@ impl SingleScaling {
     /// The scaling of J on a slot of inverse mass `w` (finite, w ≥ 0), computed in the
     /// general solve's order, or `None` where it declines (a zero or overflowing gradient, Â
     /// not positive and finite); kept for the next call with the same bits.
-    #[inline]
+    #[inline(always)]
     fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
         let key = [j[0].to_bits(), j[1].to_bits(), j[2].to_bits(), w.to_bits()];
         // Compared whole, joined by `&`: one test, not four branches.
