@@ -764,3 +764,117 @@ fn a_run_that_measures_only_its_checks_has_the_same_trajectory_and_says_what_it_
     }
     assert!(runs.0 > 100 && runs.1 > 10, "{runs:?} runs, of which stopped");
 }
+
+/// A run of `s` from `env` under `settings`, with the one-row step allowed or not
+/// (`Simulation::set_one_row`): every frame's bits, the summary (its wall time zeroed) or the
+/// stop, and how many steps took the one-row step. The forces' velocity dependence is
+/// found as `Scenario::simulate` finds it.
+fn run_one_row(
+    s: &lagrange::scenario::Scenario,
+    env: &lagrange::expr::eval::Env,
+    settings: lagrange::numeric::simulate::Settings,
+    one_row: bool,
+) -> (Vec<Vec<u64>>, Result<lagrange::numeric::simulate::Summary, String>, u64) {
+    use lagrange::expr::Role;
+    use lagrange::numeric::dynamics::Dynamics;
+    use lagrange::numeric::simulate::Simulation;
+    let mut dynamics = Dynamics::borrowing(&s.system, &s.program, env.clone());
+    let graph = &s.system.graph;
+    dynamics.velocity_dependent_forces = s.scene.forces.iter().chain(&s.scene.torques).any(|&(_, f)| {
+        let velocity = |r| matches!(r, Role::Velocity { .. } | Role::AngularVelocity { .. });
+        graph.free_symbols(f).into_iter().any(|x| velocity(graph.symbol(x).role))
+    });
+    let mut simulation = match Simulation::new(dynamics, env, settings) {
+        Ok(simulation) => simulation,
+        Err(error) => return (Vec::new(), Err(format!("{error:?}")), 0),
+    };
+    simulation.set_one_row(one_row);
+    let mut frames = Vec::new();
+    let result = simulation.run(&mut |f| {
+        frames.push(frame_bits(f));
+        Ok(())
+    });
+    let result = match result {
+        Ok(summary) => Ok(lagrange::numeric::simulate::Summary { wall_seconds: 0.0, ..summary }),
+        Err(failure) => Err(format!("{:?} after {:?}", failure.error, failure.summary.final_state)),
+    };
+    (frames, result, simulation.one_row_steps())
+}
+
+/// One equality row on the scene's only slot (the pendulum, the beads on a wire, a circle,
+/// a sphere, a parabola, an ellipse, a cone): RATTLE takes the step written for that shape
+/// (`stabilize::rattle_one_row`) and every run the start's solve in closed form
+/// (`Dynamics::solve_one_slot`), with the general step's numbers bit for bit — every frame
+/// (state, C, Ċ, J, λ), the summary, and any stop with its error — under Verlet with
+/// projection, RK4 with Baumgarte and Euler without stabilisation, compiled or not, and from
+/// hostile parameters (a zero, NaN or infinite rod length, an infinite or zero mass, a NaN
+/// g, a length of 1e300) where a run stops or goes on the same way either way.
+#[test]
+fn one_row_scenes_take_the_one_row_step_with_the_general_steps_numbers() {
+    use lagrange::expr::eval::Value;
+    use lagrange::numeric::simulate::Compile;
+    let plans = [
+        (Integrator::Verlet, Stabilize::PROJECTION),
+        (Integrator::Rk4, Stabilize::BAUMGARTE),
+        (Integrator::Euler, Stabilize::None),
+    ];
+    let mut taken = Vec::new();
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard"]) {
+        let steps = 300;
+        for (integrator, stabilize) in plans {
+            for compile in [Compile::Never, Compile::Always] {
+                let mut settings = settings(&s, integrator, stabilize, s.scene.dt, steps);
+                settings.compile = compile;
+                let at = format!("{} {integrator:?} {stabilize:?} {compile:?}", path.display());
+                let (frames, result, one_row_steps) = run_one_row(&s, &s.env, settings, true);
+                let (general_frames, general, none) = run_one_row(&s, &s.env, settings, false);
+                assert_eq!(none, 0, "{at}: the general step forced");
+                assert_eq!(frames, general_frames, "{at}: the frames");
+                assert_eq!(result, general, "{at}: the summary");
+                if integrator != Integrator::Verlet {
+                    assert_eq!(one_row_steps, 0, "{at}: only RATTLE's step");
+                } else if one_row_steps > 0 {
+                    assert_eq!(Some(one_row_steps), result.as_ref().ok().map(|r| r.steps), "{at}: every step");
+                    if compile == Compile::Never {
+                        taken.push(path.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default());
+                    }
+                }
+            }
+        }
+    }
+    for scene in ["pendulum.toml", "bead_on_wire.toml", "bead_on_sphere.toml", "bead_on_parabola.toml"] {
+        assert!(taken.iter().any(|t| t == scene), "{scene} takes the one-row step: {taken:?}");
+    }
+    assert!(!taken.iter().any(|t| t == "double_pendulum.toml" || t == "chain_5.toml"), "{taken:?}");
+    // Hostile parameters of the pendulum: both paths stop, or go on, the same way.
+    let s = scenario("constraints/pendulum.toml");
+    let symbol = |name| s.system.graph.symbol_named(name).expect(name);
+    let hostile = [
+        ("l", Value::Scalar(0.0)),
+        ("l", Value::Scalar(f64::NAN)),
+        ("l", Value::Scalar(f64::INFINITY)),
+        ("l", Value::Scalar(1e300)),
+        ("l", Value::Scalar(1e-300)),
+        ("m", Value::Scalar(f64::INFINITY)),
+        ("m", Value::Scalar(0.0)),
+        ("m", Value::Scalar(-1.0)),
+        ("g", Value::Vector([f64::NAN, -9.81, 0.0])),
+        ("g", Value::Vector([0.0, f64::INFINITY, 0.0])),
+        ("g", Value::Vector([0.0, 1e308, 0.0])),
+    ];
+    let mut stopped = 0;
+    for (name, value) in hostile {
+        let mut env = s.env.clone();
+        env.set(symbol(name), value);
+        for steps in [1, 50] {
+            let settings = settings(&s, Integrator::Verlet, Stabilize::PROJECTION, s.scene.dt, steps);
+            let at = format!("pendulum with {name} = {value:?}, {steps} steps");
+            let (frames, result, _) = run_one_row(&s, &env, settings, true);
+            let (general_frames, general, _) = run_one_row(&s, &env, settings, false);
+            assert_eq!(frames, general_frames, "{at}: the frames");
+            assert_eq!(result, general, "{at}: the summary or the stop");
+            stopped += usize::from(result.is_err());
+        }
+    }
+    assert!(stopped >= 6, "hostile parameters stop runs: {stopped}");
+}

@@ -34,7 +34,9 @@ use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::{Compile, SettingsError};
-use super::single::{SingleScaling, correction_single, correction_single_multiplier, solve_single_with};
+use super::single::{
+    SingleScaling, correction_single, correction_single_multiplier, solve_one_slot, solve_single_with,
+};
 use super::solve::{Answer, Diagnostic, FactorId, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
 use crate::model::problem::shown;
@@ -573,6 +575,31 @@ impl<'s> Dynamics<'s> {
         true
     }
 
+    /// [`rows_after_positions_steady_into`](Dynamics::rows_after_positions_steady_into) for
+    /// rows of one slot (`v` its velocity): the same numbers, without the loops. In line:
+    /// RATTLE's one-row step (`stabilize::rattle_one_row`) calls it at every step.
+    #[inline(always)]
+    pub fn rows_after_positions_one_slot(&mut self, v: &[f64; 3], rows: &mut Rows) -> bool {
+        let (true, [velocity], [_]) =
+            (self.positions_finite, rows.velocity.as_mut_slice(), self.position_rows.as_slice())
+        else {
+            return self.rows_after_positions_steady_into(std::slice::from_ref(v), rows);
+        };
+        *velocity = *v;
+        self.positions_finite = false;
+        std::mem::swap(&mut rows.rows, &mut self.position_rows);
+        for row in &mut rows.rows {
+            if let [(0, j)] = row.jacobian.as_slice() {
+                // The sum of one term, from −0: the term itself.
+                row.rate = j[0] * v[0] + j[1] * v[1] + j[2] * v[2];
+            } else {
+                let v = std::slice::from_ref(v);
+                row.rate = row.jacobian.iter().map(|(b, j)| j[0] * v[*b][0] + j[1] * v[*b][1] + j[2] * v[*b][2]).sum();
+            }
+        }
+        true
+    }
+
     /// `rows` at time `t`, or the error that names the first number that is not finite
     /// (`finite`: whether every number of `rows` is, as `all_finite` says).
     fn checked(&self, rows: Rows, t: f64, finite: bool) -> Result<Rows, SimError> {
@@ -656,6 +683,24 @@ impl<'s> Dynamics<'s> {
     /// with the same J (`solve::FactorId`); `None` when it went another way.
     pub fn made(&self) -> Option<FactorId> {
         self.made
+    }
+
+    /// [`solve_known`](Dynamics::solve_known) of rows of one slot with one row on it (a
+    /// pendulum, a bead), in closed form (`single::solve_one_slot`): the same answer
+    /// ([`solution`](Dynamics::solution)) and the slot's acceleration, or `None`, with
+    /// nothing done, where that path declines (the caller then takes `solve_known`).
+    /// `rows` must be as [`rows`](Dynamics::rows) or
+    /// [`rows_moved_into`](Dynamics::rows_moved_into) returned them, every number finite
+    /// (they report any other as an error): they are not tested again.
+    #[inline(always)]
+    pub(crate) fn solve_one_slot(&mut self, rows: &mut Rows) -> Option<[f64; 3]> {
+        // Baumgarte's terms change c first: `solve_known` adds them.
+        if self.baumgarte.is_some() {
+            return None;
+        }
+        let a = solve_one_slot(rows, &self.settings, &mut self.single, &mut self.solution, true)?;
+        self.made = None;
+        Some(a)
     }
 
     /// The answer of the last [`solve`](Dynamics::solve) (empty before the first).

@@ -24,10 +24,10 @@ use super::rotation::{fold, kick};
 use super::rows::Rows;
 use super::solve::{CONTACT_TOLERANCE, FactorId};
 use super::stabilize::{
-    Inequalities, ShakeHistory, Stabilize, StabilizeError, distance, project_positions, shake_positions, update_rates,
-    velocity_step,
+    Inequalities, ShakeHistory, Stabilize, StabilizeError, distance, project_positions, rattle_one_row,
+    shake_positions, update_rates, velocity_step,
 };
-use super::vector::{dot, length_scale, safe_norm};
+use super::vector::{dot, length_scale, not_finite_bit, safe_norm};
 use crate::expr::eval::{Env, Value};
 use crate::model::system::System;
 use std::time::Instant;
@@ -601,6 +601,12 @@ pub struct Simulation<'s> {
     shake: ShakeHistory,
     /// Whether some of the rows' tapes run as machine code ([`Settings::compile`]).
     compiled: bool,
+    /// Whether RATTLE's steps may take the one-row step (`stabilize::rattle_one_row`) and the
+    /// start's solve its closed form on one slot (`Dynamics::solve_one_slot`): a scene of one
+    /// slot and one constraint, unless told otherwise ([`Simulation::set_one_row`]); each
+    /// declines rows of another shape. And how many steps took the one-row step.
+    one_row: bool,
+    one_row_steps: u64,
 }
 
 impl<'s> Simulation<'s> {
@@ -620,6 +626,7 @@ impl<'s> Simulation<'s> {
         let n = q.len();
         let three_d = !dynamics.orientations().is_empty();
         let has_inequalities = dynamics.system().constraints.iter().any(|c| c.inequality);
+        let one_constraint = dynamics.system().constraints.len() == 1;
         Ok(Simulation {
             dynamics,
             settings,
@@ -642,7 +649,22 @@ impl<'s> Simulation<'s> {
             has_inequalities,
             shake: ShakeHistory::default(),
             compiled,
+            one_row: n == 1 && one_constraint,
+            one_row_steps: 0,
         })
+    }
+
+    /// Whether RATTLE's steps (Verlet with projection) on a scene of one equality row on one
+    /// slot (the pendulum, a bead) take the step written for that shape
+    /// (`stabilize::rattle_one_row`), as they do unless told otherwise: the same numbers bit
+    /// for bit as the general step, which `false` forces (for tests that compare the two).
+    pub fn set_one_row(&mut self, on: bool) {
+        self.one_row = on && self.q.len() == 1 && self.dynamics.system().constraints.len() == 1;
+    }
+
+    /// How many steps of the runs so far took the one-row step ([`set_one_row`](Simulation::set_one_row)).
+    pub fn one_row_steps(&self) -> u64 {
+        self.one_row_steps
     }
 
     /// Runs all steps, calling `observe` at every recorded state (step 0 … steps).
@@ -682,7 +704,20 @@ impl<'s> Simulation<'s> {
     }
 
     /// A NaN or infinity in the state stops the run, naming the body.
+    #[inline(always)]
     fn check_finite(&self, step: u64, time: f64) -> Result<(), SimError> {
+        // One slot (a pendulum, a bead): its six numbers in one test, the loop only to name it.
+        if let ([q], [v]) = (self.q.as_slice(), self.v.as_slice())
+            && [q[0], q[1], q[2], v[0], v[1], v[2]].iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
+        {
+            return Ok(());
+        }
+        self.check_slots(step, time)
+    }
+
+    /// [`check_finite`](Simulation::check_finite) slot by slot.
+    #[inline(never)]
+    fn check_slots(&self, step: u64, time: f64) -> Result<(), SimError> {
         for (i, (q, v)) in self.q.iter().zip(&self.v).enumerate() {
             if !(q.iter().chain(v).all(|x| x.is_finite())) {
                 let body = slot_name(self.dynamics.system(), i);
@@ -855,7 +890,11 @@ impl<'s> Simulation<'s> {
             if MEASURE && n == 0 {
                 balance.work_scale = work_scale(&rows.force, system.bodies.len(), length);
             }
-            self.dynamics.solve_known(&mut self.start, self.start_made);
+            // One row on the only slot: its acceleration in closed form, else the solve's.
+            let one_slot = if self.one_row { self.dynamics.solve_one_slot(&mut self.start) } else { None };
+            if one_slot.is_none() {
+                self.dynamics.solve_known(&mut self.start, self.start_made);
+            }
             self.start_made = self.dynamics.made();
             // The active set for the step to come: contacts that push are held (without
             // inequalities nothing is, and the set stays empty).
@@ -879,8 +918,14 @@ impl<'s> Simulation<'s> {
             if n == s.steps {
                 break;
             }
-            copy_slots(&mut self.a, &self.dynamics.solution().acceleration);
-            fold(&self.start, &mut self.a);
+            match (one_slot, self.a.as_mut_slice()) {
+                // No 3D rigid body's slot to fold on one slot (`solve_one_slot`'s rows).
+                (Some(a), [to]) => *to = a,
+                _ => {
+                    copy_slots(&mut self.a, &self.dynamics.solution().acceleration);
+                    fold(&self.start, &mut self.a);
+                }
+            }
             self.dynamics.step = n + 1;
             let t1 = self.t0 + (n + 1) as f64 * s.dt;
             self.advance(&s, n, [t, t1], &reach)?;
@@ -994,6 +1039,32 @@ impl<'s> Simulation<'s> {
         // (not with 3D rigid bodies, whose orientations are rebased there).
         let keep = !self.three_d;
         if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) = (s.integrator, s.stabilize) {
+            // One equality row on the only slot: the same step written for that shape.
+            if self.one_row && !has_inequalities && !self.three_d {
+                let made = rattle_one_row(
+                    &mut self.dynamics,
+                    t1,
+                    s.dt,
+                    &mut self.q,
+                    &mut self.v,
+                    &mut self.half,
+                    &self.a,
+                    &mut self.start,
+                    &mut self.end,
+                    self.start_made,
+                    [reach.length, tolerance],
+                    max_iterations,
+                    &mut self.shake,
+                    [reach.touch, s.restitution, reach.bounce_speed],
+                    &mut self.values,
+                )?;
+                if let Some(made) = made {
+                    self.one_row_steps += 1;
+                    self.end_made = made;
+                    self.carry(keep);
+                    return self.check_finite(n + 1, t1);
+                }
+            }
             // RATTLE: drift, SHAKE along the start's gradients, kick, velocity projection.
             if self.three_d {
                 self.first_kick(0.5 * s.dt);

@@ -35,7 +35,7 @@
 
 use super::rows::Rows;
 use super::solve::{Method, Settings, Solution, Status, positive_finite, row_norm};
-use super::vector::dot;
+use super::vector::{dot, not_finite_bit};
 
 /// Norms whose reciprocal is a normal number: the general solve scales Ĵ = J·(1/‖J‖) there
 /// and J/‖J‖ outside (`solve::Scaled`), and so does this one.
@@ -65,7 +65,7 @@ impl SingleScaling {
     /// The scaling of J on a slot of inverse mass `w` (finite, w ≥ 0), computed in the
     /// general solve's order, or `None` where it declines (a zero or overflowing gradient, Â
     /// not positive and finite); kept for the next call with the same bits.
-    #[inline]
+    #[inline(always)]
     fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
         let key = [j[0].to_bits(), j[1].to_bits(), j[2].to_bits(), w.to_bits()];
         // Compared whole, joined by `&`: one test, not four branches.
@@ -136,6 +136,13 @@ fn finite3(x: &[f64; 3]) -> bool {
     x[0].is_finite() & x[1].is_finite() & x[2].is_finite()
 }
 
+/// Whether every number of `xs` is finite: the OR of their `vector::not_finite_bit`s, one
+/// test (where `is_finite` joined by `&` became a branch for each).
+#[inline(always)]
+fn all_finite<const N: usize>(xs: [f64; N]) -> bool {
+    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
+}
+
 /// A correction on a scene of one slot with one row acting on it (a pendulum, a bead): the
 /// step Δx = M⁻¹Jᵀμ with (J M⁻¹ Jᵀ) μ = −`bias`, the forces zero — what SHAKE and the
 /// velocity projection ask of `Dynamics::correct` once they have set the row's c to
@@ -159,7 +166,7 @@ pub fn correction_single_multiplier(rows: &Rows, bias: f64, scaling: &mut Single
     };
     let w = *w;
     // As `solve_single_with` checks them, the zeroed force aside.
-    if !(finite3(velocity) & bias.is_finite() & w.is_finite() & finite3(j)) || w < 0.0 {
+    if !all_finite([velocity[0], velocity[1], velocity[2], bias, w, j[0], j[1], j[2]]) || w < 0.0 {
         return None;
     }
     let settings = Settings::default();
@@ -248,6 +255,72 @@ pub fn solve_single_with(rows: &Rows, settings: &Settings, scaling: &mut SingleS
     }
     out.status = Status::Solved;
     true
+}
+
+/// [`solve_single_with`] for rows of one slot: the same answer in `out`, and the slot's
+/// acceleration returned (what a run's step takes from the answer), or `None`, with `out`
+/// untouched, where `solve_single_with` would decline or the rows have more than one slot.
+/// `finite`: every number of `rows` is known to be finite (a run's rows as
+/// `Dynamics::rows` and `Dynamics::rows_moved_into` return them: they report any other),
+/// so only the sign of 1/m is tested; else each is, as `solve_single_with` tests them.
+/// In line: a run's step calls it once, and the general function's checks of the shape
+/// and its loop over the slots were a fifth of it.
+#[inline(always)]
+pub fn solve_one_slot(
+    rows: &Rows,
+    settings: &Settings,
+    scaling: &mut SingleScaling,
+    out: &mut Solution,
+    finite: bool,
+) -> Option<[f64; 3]> {
+    let ([row], [w], [velocity], [f]) =
+        (rows.rows.as_slice(), rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice())
+    else {
+        return None;
+    };
+    let [(0, j)] = row.jacobian.as_slice() else {
+        return None;
+    };
+    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) {
+        return None;
+    }
+    let w = *w;
+    // Every number finite, as `solve_single_with` checks them (unless known).
+    let (v, b) = (velocity, row.bias);
+    if !(finite || all_finite([v[0], v[1], v[2], f[0], f[1], f[2], b, w, j[0], j[1], j[2]])) || w < 0.0 {
+        return None;
+    }
+    let scaled = scaling.of(&row.jacobian, j, w)?;
+    let jt = scaled.jt;
+    let (mu, lambda) = scaled.multiplier(f, w, row.bias, settings.rank_tolerance)?;
+    match (out.lambda.as_mut_slice(), out.active.as_mut_slice(), out.contacts.as_mut_slice()) {
+        ([l], [active], [contact]) => (*l, *active, *contact) = (lambda, true, None),
+        _ => {
+            out.lambda.clear();
+            out.lambda.push(lambda);
+            out.active.clear();
+            out.active.push(true);
+            out.contacts.clear();
+            out.contacts.push(None);
+        }
+    }
+    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w.
+    let fc = [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]];
+    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    match (out.constraint_force.as_mut_slice(), out.acceleration.as_mut_slice()) {
+        ([fc_out], [a_out]) => (*fc_out, *a_out) = (fc, a),
+        _ => {
+            out.constraint_force.clear();
+            out.constraint_force.push(fc);
+            out.acceleration.clear();
+            out.acceleration.push(a);
+        }
+    }
+    if !out.diagnostics.is_empty() {
+        out.diagnostics.clear();
+    }
+    out.status = Status::Solved;
+    Some(a)
 }
 
 /// [`solve_single_with`]'s forces and accelerations over every slot: Σ λ J = λ̃ J̃ on the row's

@@ -41,7 +41,7 @@ use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
 use super::solve::{FactorId, positive_finite, solve, zero_vectors};
-use super::vector::{dot, row_norm};
+use super::vector::{dot, not_finite_bit, row_norm};
 
 /// The projection's default relative tolerance: |C|/‖J‖ within 1e-13 of the scene's size is
 /// a few ulps of positions of that size, so a projected run keeps |C| at round-off.
@@ -584,37 +584,255 @@ pub fn shake_positions(
             iterations += 1;
             continue;
         }
-        for (k, ((old, new), constraint)) in
-            start.rows.iter_mut().zip(dynamics.position_rows()).zip(&system.constraints).enumerate()
-        {
-            let equality = !constraint.inequality || dynamics.is_held(k);
-            old.inequality = !equality;
-            if equality {
-                // (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺): c = C(q⁺).
-                enforce(old, new.value);
-            } else {
-                leave_out(old);
-            }
-        }
-        // The forces once: nothing writes them between the iterations.
-        if !zeroed {
-            start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
-            zeroed = true;
-        }
-        // The start's J is kept (only C, Ċ, c and the forces are written above).
-        let step = match history.as_deref_mut() {
-            Some(history) => {
-                let solution = dynamics.correct_known(start, made);
-                history.add(&solution.lambda);
-                &mut solution.acceleration
-            }
-            None => dynamics.correct_step(start, made),
-        };
-        fold(start, step);
-        shake_update(q, v_half, step, dt);
-        made = dynamics.made();
+        made = shake_correction(dynamics, dt, q, v_half, start, made, &mut zeroed, history.as_deref_mut());
         iterations += 1;
     }
+}
+
+/// One of SHAKE's iterations through the solve ([`shake_positions`]' general correction): the
+/// start's rows set to take back C at the positions just evaluated (equalities and held
+/// contacts; the other inequalities left out), their forces zeroed once (`zeroed`), the
+/// correction M⁻¹Jₙᵀμ solved with the start's J (`made`: the mark of its factor), added to
+/// q and, over dt, to v½, and μ added to `history`'s. Returns the mark of the factor the
+/// solve went through.
+#[allow(clippy::too_many_arguments)]
+fn shake_correction(
+    dynamics: &mut Dynamics<'_>,
+    dt: f64,
+    q: &mut Vectors,
+    v_half: &mut Vectors,
+    start: &mut Rows,
+    made: Option<FactorId>,
+    zeroed: &mut bool,
+    history: Option<&mut ShakeHistory>,
+) -> Option<FactorId> {
+    let system = dynamics.system();
+    for (k, ((old, new), constraint)) in
+        start.rows.iter_mut().zip(dynamics.position_rows()).zip(&system.constraints).enumerate()
+    {
+        let equality = !constraint.inequality || dynamics.is_held(k);
+        old.inequality = !equality;
+        if equality {
+            // (Jₙ M⁻¹ Jₙᵀ) μ = −C(q⁺): c = C(q⁺).
+            enforce(old, new.value);
+        } else {
+            leave_out(old);
+        }
+    }
+    // The forces once: nothing writes them between the iterations.
+    if !*zeroed {
+        start.force.iter_mut().for_each(|f| *f = [0.0; 3]);
+        *zeroed = true;
+    }
+    // The start's J is kept (only C, Ċ, c and the forces are written above).
+    let step = match history {
+        Some(history) => {
+            let solution = dynamics.correct_known(start, made);
+            history.add(&solution.lambda);
+            &mut solution.acceleration
+        }
+        None => dynamics.correct_step(start, made),
+    };
+    fold(start, step);
+    shake_update(q, v_half, step, dt);
+    dynamics.made()
+}
+
+/// RATTLE's step for one equality row on a scene's only slot (a pendulum, a bead on a
+/// curve or surface), with a steady program (`Dynamics::steady`) and no force reading a
+/// velocity: Verlet's drift v½ = v + dt/2 a, q⁺ = q + dt v½; SHAKE from its prediction
+/// ([`shake_positions`] with `history`); the kick v⁺ = v½ + dt/2 M⁻¹F(q⁺) into `v` (v½ kept
+/// in `half`); Ċ of the end rows brought to v⁺ ([`update_rates`]); the velocity projection
+/// ([`velocity_step`] with projection; `touch`, `restitution` and `bounce_speed` are its
+/// contacts' settings, for the general step). The same operations in the same order as those
+/// functions for this shape, so every number is theirs bit for bit, without their loops
+/// over rows and slots, their checks of the shape at every stage and their calls.
+///
+/// Returns `None`, with nothing touched, when the scene is not of that shape (the caller
+/// then takes the general step); else the mark of the factor the velocity projection went
+/// through (`Dynamics::made`, as `Simulation` keeps it). Where a stage's closed form
+/// declines (an iteration's one-row correction, the velocity projection's) the general
+/// stage answers, as it does inside those functions; errors are theirs.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn rattle_one_row(
+    dynamics: &mut Dynamics<'_>,
+    t: f64,
+    dt: f64,
+    q: &mut Vectors,
+    v: &mut Vectors,
+    half: &mut Vectors,
+    a: &Vectors,
+    start: &mut Rows,
+    end: &mut Rows,
+    made: Option<FactorId>,
+    [length, tolerance]: [f64; 2],
+    max_iterations: usize,
+    history: &mut ShakeHistory,
+    [touch, restitution, bounce_speed]: [f64; 3],
+    values: &mut Vec<f64>,
+) -> Result<Option<Option<FactorId>>, SimError> {
+    let one_slot = q.len() == 1 && v.len() == 1 && half.len() == 1 && a.len() == 1;
+    let one_row = matches!(
+        (start.rows.as_slice(), start.inverse_mass.len(), start.force.len(), dynamics.system().constraints.as_slice()),
+        ([row], 1, 1, [constraint]) if !row.inequality && !constraint.inequality && matches!(row.jacobian.as_slice(), [(0, _)])
+    );
+    if !(one_slot && one_row && start.axes.is_empty() && dynamics.steady && !dynamics.velocity_dependent_forces) {
+        return Ok(None);
+    }
+    // Verlet's drift (`Stepper::verlet_drift`): v½ = v + (dt/2) a; q⁺ = q + dt v½.
+    let h = 0.5 * dt;
+    for d in 0..3 {
+        v[0][d] += h * a[0][d];
+    }
+    for d in 0..3 {
+        q[0][d] += dt * v[0][d];
+    }
+    // SHAKE (`shake_positions`, steady, with the history): the end rows' slots are the
+    // start's (`Rows::take_slots`), the prediction along the start's J first.
+    end.dim = start.dim;
+    end.axes.clear();
+    match (end.inverse_mass.as_mut_slice(), end.force.as_mut_slice()) {
+        ([w], [f]) => (*w, *f) = (start.inverse_mass[0], start.force[0]),
+        _ => end.take_slots(start),
+    }
+    let (j, w) = (start.rows[0].jacobian[0].1, start.inverse_mass[0]);
+    let predicted = match predict_one_row(history, start, &j, w) {
+        Some(x) => {
+            // `shake_update` of a finite step: q += Δq, v½ += Δq/dt.
+            for d in 0..3 {
+                q[0][d] += x[d];
+                v[0][d] += x[d] / dt;
+            }
+            true
+        }
+        None => false,
+    };
+    let bound = tolerance * length;
+    let (mut iterations, mut previous, mut zeroed, mut made) = (0, f64::INFINITY, false, made);
+    history.ends = false;
+    loop {
+        dynamics.positions(t, q, v)?;
+        // The row's distance, kept for the next start's drift check; the residual from 0.
+        let mut residual = 0.0f64;
+        let rows = dynamics.position_rows();
+        match (rows, history.distances.as_mut_slice()) {
+            ([row], [kept]) => {
+                *kept = distance(row);
+                if !row.inequality || dynamics.is_held(0) {
+                    residual = residual.max(kept.abs());
+                }
+            }
+            _ => {
+                history.distances.resize(rows.len(), 0.0);
+                for (k, (row, kept)) in rows.iter().zip(&mut history.distances).enumerate() {
+                    *kept = distance(row);
+                    if !row.inequality || dynamics.is_held(k) {
+                        residual = residual.max(kept.abs());
+                    }
+                }
+            }
+        }
+        if residual <= bound || iterations >= max_iterations || residual > DIVERGENCE * previous {
+            let kept = residual <= bound && (predicted || iterations > 0);
+            // One row: the prediction's residual is taken back by the diagonal (no exact solve).
+            finish_one_row(history, kept, dynamics.position_rows(), start);
+            let kept = dynamics.rows_after_positions_one_slot(&v[0], end)
+                || dynamics.rows_after_positions_into(t, q, v, end)?;
+            history.ends = kept;
+            break;
+        }
+        previous = residual;
+        let c = match dynamics.position_rows() {
+            [new] => Some(new.value),
+            _ => None,
+        };
+        if let Some((dq, mu)) = c.and_then(|c| dynamics.correct_single_multiplier(start, c)) {
+            history.add(&[mu]);
+            shake_update(q, v, std::slice::from_ref(&dq), dt);
+        } else {
+            made = shake_correction(dynamics, dt, q, v, start, made, &mut zeroed, Some(&mut *history));
+        }
+        iterations += 1;
+    }
+    // The kick with F(q⁺) alone: its constraint part is what the projection below removes.
+    half[0] = v[0];
+    for ((v, f), w) in v.iter_mut().zip(&end.force).zip(&end.inverse_mass) {
+        for d in 0..3 {
+            v[d] += 0.5 * dt * f[d] * w;
+        }
+    }
+    // Ċ brought from v½ to v⁺ (`update_rates`; no 3D rigid body's slot to unfold).
+    match end.rows.as_mut_slice() {
+        [row] if end.axes.is_empty() && matches!(row.jacobian.as_slice(), [(0, _)]) => {
+            let (j, x, y) = (row.jacobian[0].1, half[0], v[0]);
+            row.rate += j[0] * (y[0] - x[0]) + j[1] * (y[1] - x[1]) + j[2] * (y[2] - x[2]);
+        }
+        _ => update_rates(end, half, v),
+    }
+    // The velocity projection onto Ċ = 0 (`velocity_step`'s one-row path, else the step).
+    values.clear();
+    let rate = match end.rows.as_slice() {
+        [row] if !row.inequality => Some(row.rate),
+        _ => None,
+    };
+    if let Some(dv) = rate.and_then(|rate| dynamics.correct_single(end, rate)) {
+        // `add_finite` on the one slot: v += Δv, the components that are finite.
+        for d in 0..3 {
+            let sum = v[0][d] + dv[d];
+            v[0][d] = if dv[d].is_finite() { sum } else { v[0][d] };
+        }
+        return Ok(Some(dynamics.made()));
+    }
+    let applied = velocity_step(end, v, true, touch, restitution, bounce_speed, dynamics, values);
+    Ok(Some(if applied { dynamics.made() } else { None }))
+}
+
+/// [`ShakeHistory::predict`] for one row on one slot (`start` holds it, J `j` and 1/m `w`):
+/// the prediction's step on the slot, every component finite, or `None` (the history's μ
+/// then as `predict` leaves it); in line where the history has the row's room.
+#[inline(always)]
+fn predict_one_row(history: &mut ShakeHistory, start: &Rows, j: &[f64; 3], w: f64) -> Option<[f64; 3]> {
+    let known = history.known;
+    let ([h], [mu]) = (history.rows.as_slice(), history.total.as_mut_slice()) else {
+        return history.predict(start).and_then(|step| step.first().copied());
+    };
+    if known == 0 {
+        *mu = 0.0;
+        return None;
+    }
+    let [a, b, c] = match known {
+        1 => [1.0, 0.0, 0.0],
+        2 => [2.0, -1.0, 0.0],
+        _ => [3.0, -3.0, 1.0],
+    };
+    *mu = a * h.past[0] + b * h.past[1] + c * h.past[2] - h.left;
+    let m = *mu;
+    // 0 + J μ w: the loop's sum into a zeroed slot.
+    let x = [0.0 + j[0] * m * w, 0.0 + j[1] * m * w, 0.0 + j[2] * m * w];
+    // Every component finite: the OR of their `not_finite_bit`s, one test.
+    if (not_finite_bit(x[0]) | not_finite_bit(x[1]) | not_finite_bit(x[2])) >> 63 != 0 {
+        *mu = 0.0;
+        return None;
+    }
+    Some(x)
+}
+
+/// [`ShakeHistory::finish`] for one row on one slot (`start` holds it, `end` the row at
+/// the final positions): the same numbers, in line where the history has the row's room.
+#[inline(always)]
+fn finish_one_row(history: &mut ShakeHistory, kept: bool, end: &[Row], start: &Rows) {
+    if let (true, true, [h], [mu], [row], [new]) =
+        (kept, history.known > 0, history.rows.as_mut_slice(), history.total.as_slice(), start.rows.as_slice(), end)
+    {
+        let delta = new.value / row.jacobian.iter().map(|(b, j)| dot(j, j) * start.inverse_mass[*b]).sum::<f64>();
+        let delta = if delta.is_finite() { delta } else { 0.0 };
+        h.past = [mu + h.left - delta, h.past[0], h.past[1]];
+        h.left = delta;
+        history.known = (history.known + 1).min(ORDER);
+        return;
+    }
+    history.finish(kept, end, start, None);
 }
 
 /// [`project_positions_along`] hands over to Newton when an iteration does not at least halve
