@@ -58,7 +58,6 @@ use crate::expr::graph::{FastMap, FastSet};
 use crate::expr::print::{Style, print};
 use crate::expr::{Graph, Id, Rational, Role, Symbol, Ty, TypeError};
 use crate::model::file::Loaded;
-use crate::model::scene::by_body;
 use crate::numeric::program::{Inputs, LowerError, Op, Program};
 use std::cell::Cell;
 
@@ -318,8 +317,8 @@ fn scene_numbers(loaded: &Loaded, g: &mut Graph, sp: &Specialised) -> Result<Sce
     // The scene's force expressions (`[scene] forces`); a body not listed feels none.
     let zero = g.num(Rational::int(0));
     let zero = g.vector(vec![zero; g.dim()])?;
-    let given_force = by_body(&loaded.scene.forces, system.bodies.len());
-    let given_torque = by_body(&loaded.scene.torques, system.bodies.len());
+    let given_force = system.by_body(&loaded.scene.forces);
+    let given_torque = system.by_body(&loaded.scene.torques);
     let mut applied = Vec::with_capacity(system.bodies.len());
     for given in &given_force {
         applied.push(match given {

@@ -37,21 +37,6 @@ impl Scene {
     pub const DEFAULT_DURATION: f64 = 1.0;
 }
 
-/// Per body (`0..bodies`), the expression `pairs` gives it first — `Scene::forces` or
-/// `Scene::torques`, `(body, expression)` — found in one pass over them (a search per body
-/// is quadratic in a big scene); `None` where none is given. A body index past `bodies` is
-/// ignored.
-pub fn by_body(pairs: &[(usize, Id)], bodies: usize) -> Vec<Option<Id>> {
-    let mut given = vec![None; bodies];
-    // Backwards, so that the first pair of a body is the one left.
-    for &(body, expr) in pairs.iter().rev() {
-        if let Some(slot) = given.get_mut(body) {
-            *slot = Some(expr);
-        }
-    }
-    given
-}
-
 impl Default for Scene {
     fn default() -> Scene {
         Scene {

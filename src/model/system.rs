@@ -98,6 +98,21 @@ pub struct System {
 }
 
 impl System {
+    /// Per body, the expression `pairs` gives it first — a scene's forces or torques,
+    /// `(body, expression)` (`model::scene::Scene`) — found in one pass over them (a search
+    /// per body is quadratic in a big scene); `None` where none is given. A body index past
+    /// the system's bodies is ignored.
+    pub fn by_body(&self, pairs: &[(usize, Id)]) -> Vec<Option<Id>> {
+        let mut given = vec![None; self.bodies.len()];
+        // Backwards, so that the first pair of a body is the one left.
+        for &(body, expr) in pairs.iter().rev() {
+            if let Some(slot) = given.get_mut(body) {
+                *slot = Some(expr);
+            }
+        }
+        given
+    }
+
     pub fn dim(&self) -> usize {
         self.graph.dim()
     }

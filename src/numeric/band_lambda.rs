@@ -232,14 +232,8 @@ impl BandLambda {
             units.push((first..roots.len()).collect::<Vec<_>>());
         }
         // Each body's force expression (the first `forces` gives, as `RowProgram::new`
-        // takes it), found in one pass: a search per body is quadratic in a long chain.
-        let mut given: Vec<Option<Id>> = vec![None; system.bodies.len()];
-        for &(b, f) in forces.iter().rev() {
-            if let Some(slot) = given.get_mut(b) {
-                *slot = Some(f);
-            }
-        }
-        for (body, f) in system.bodies.iter().zip(given) {
+        // takes it).
+        for (body, f) in system.bodies.iter().zip(system.by_body(forces)) {
             let f = f.unwrap_or(body.nodes.force);
             units.push(vec![roots.len(), roots.len() + 1]);
             roots.push(body.mass);

@@ -33,7 +33,6 @@ use crate::derive::Derivation;
 use crate::expr::eval::{Env, EvalError, Value, eval};
 use crate::expr::graph::{FastMap, FastSet, SymbolWalk};
 use crate::expr::{Func, Id, Rational, Symbol, Ty};
-use crate::model::scene::by_body;
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
@@ -1261,8 +1260,8 @@ impl RowProgram {
         let graph = &derivation.graph;
         let mut roots = Vec::new();
         let mut bodies = Vec::with_capacity(system.bodies.len());
-        let given_force = by_body(forces, system.bodies.len());
-        let given_torque = by_body(torques, system.bodies.len());
+        let given_force = system.by_body(forces);
+        let given_torque = system.by_body(torques);
         for (body, given) in system.bodies.iter().zip(&given_force) {
             let f = given.unwrap_or(body.nodes.force);
             bodies.push(BodySlots {

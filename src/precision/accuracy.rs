@@ -21,7 +21,6 @@
 
 use super::reference::{Dd, eval_dd, solve_dense};
 use crate::expr::eval::{Env, Value, eval};
-use crate::model::scene::by_body;
 use crate::numeric::random::Rng;
 use crate::numeric::rows::{angular_bodies, angular_slots, angular_width, world_angular};
 use crate::numeric::solve::solve;
@@ -134,8 +133,8 @@ fn forces_dd(s: &Scenario, env: &Env) -> Option<Vec<[TwoFloat; 3]>> {
     let rigid: Vec<usize> = angular_bodies(&s.system).collect();
     let width = angular_width(&s.system);
     let mut roots: Vec<_> = s.system.bodies.iter().map(|b| b.mass).collect();
-    let force_expr = by_body(&s.scene.forces, n);
-    let given_torque = by_body(&s.scene.torques, n);
+    let force_expr = s.system.by_body(&s.scene.forces);
+    let given_torque = s.system.by_body(&s.scene.torques);
     roots.extend(force_expr.iter().flatten());
     let rigid_start = roots.len();
     for &i in &rigid {
