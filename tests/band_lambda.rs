@@ -114,50 +114,6 @@ fn assert_same(a: &Solution, b: &Solution, what: &str) {
     );
 }
 
-/// λ of `rows` (a chain: row k on slots k − 1 and k, row 0 on slot 0) in double-double:
-/// A λ = −b with A = J M⁻¹ Jᵀ and b = J M⁻¹ F + c from the rows' f64 numbers (their products
-/// exact in double-double), by the tridiagonal's elimination (A is positive definite: no
-/// pivoting). About 32 digits: the reference the f64 solves are measured against. (The
-/// helper of `tests/chain_solve.rs`, copied: each test binary is its own crate.)
-fn reference_lambda(rows: &Rows) -> Vec<f64> {
-    use twofloat::TwoFloat;
-    let n = rows.rows.len();
-    let dd = TwoFloat::from;
-    let w = |s: usize| dd(rows.inverse_mass[s]);
-    let dot = |a: &[f64; 3], b: &[f64; 3]| (0..3).fold(dd(0.0), |sum, c| sum + TwoFloat::new_mul(a[c], b[c]));
-    let entry = |k: usize, l: usize| {
-        let mut sum = dd(0.0);
-        for (s, j) in &rows.rows[k].jacobian {
-            for (t, i) in &rows.rows[l].jacobian {
-                if s == t {
-                    sum += dot(j, i) * w(*s);
-                }
-            }
-        }
-        sum
-    };
-    let mut diagonal: Vec<TwoFloat> = (0..n).map(|k| entry(k, k)).collect();
-    let below: Vec<TwoFloat> = (0..n).map(|k| if k > 0 { entry(k, k - 1) } else { dd(0.0) }).collect();
-    let mut rhs: Vec<TwoFloat> = (0..n)
-        .map(|k| {
-            let row = &rows.rows[k];
-            -(row.jacobian.iter().fold(dd(0.0), |sum, (s, j)| sum + dot(j, &rows.force[*s]) * w(*s)) + dd(row.bias))
-        })
-        .collect();
-    for k in 1..n {
-        let m = below[k] / diagonal[k - 1];
-        diagonal[k] -= m * below[k];
-        let r = rhs[k - 1];
-        rhs[k] -= m * r;
-    }
-    let mut lambda = vec![dd(0.0); n];
-    for k in (0..n).rev() {
-        let next = if k + 1 < n { below[k + 1] * lambda[k + 1] } else { dd(0.0) };
-        lambda[k] = (rhs[k] - next) / diagonal[k];
-    }
-    lambda.into_iter().map(f64::from).collect()
-}
-
 /// The states of [`ill_conditioned_chains_lose_nothing_against_the_rows_solve`]: 12 for each
 /// of 3 lengths and 3 mass spreads.
 const CASES: usize = 108;
@@ -191,7 +147,7 @@ fn random_states_are_served_and_as_accurate_as_the_rows_solve() {
             assert!(band.solve_into(&env, &settings, &mut got), "{what}: served");
             assert_eq!((got.status, &got.diagnostics), (Status::Solved, &want.diagnostics), "{what}");
             assert_eq!((&got.active, &got.contacts), (&want.active, &want.contacts), "{what}");
-            let reference = reference_lambda(&rows);
+            let reference = common::reference_lambda(&rows);
             let (b, r) = (error(&got.lambda, &reference), error(&want.lambda, &reference));
             assert!(b <= 16.0 * r + 16.0 * U, "{what}: band {b:e}, rows {r:e}");
             (band_total, rows_total) = (band_total + b, rows_total + r);
@@ -225,7 +181,7 @@ fn ill_conditioned_chains_lose_nothing_against_the_rows_solve() {
                 let (rows, want) = rows_answer(&s, &env, &settings);
                 let mut got = Solution::default();
                 assert!(band.solve_into(&env, &settings, &mut got), "{what}: served");
-                let reference = reference_lambda(&rows);
+                let reference = common::reference_lambda(&rows);
                 let (b, r) = (error(&got.lambda, &reference), error(&want.lambda, &reference));
                 assert!(b <= 16.0 * r + 16.0 * U, "{what}: band {b:e}, rows {r:e}");
                 (band_total, rows_total) = (band_total + b, rows_total + r);
@@ -362,7 +318,7 @@ fn four_rows_go_dense_under_auto_and_band_when_asked() {
     let banded = Settings { method: Method::Banded, ..Settings::default() };
     assert!(band.solve_into(&env, &banded, &mut got));
     let (rows, want) = rows_answer(&s, &env, &banded);
-    let reference = reference_lambda(&rows);
+    let reference = common::reference_lambda(&rows);
     assert!(error(&got.lambda, &reference) <= 16.0 * error(&want.lambda, &reference) + 16.0 * U);
 }
 

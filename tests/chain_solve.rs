@@ -13,6 +13,8 @@
 //! singular whatever its numbers. The refinement's own switch (taken where the residual asks,
 //! and an ill-conditioned chain as accurate as with the step) is tested here too.
 
+mod common;
+
 use lagrange::numeric::random::Rng;
 use lagrange::numeric::rows::{Row, Rows};
 use lagrange::numeric::solve::{
@@ -377,49 +379,6 @@ fn a_fresh_solve_uses_the_last_pattern_only_for_rows_on_its_slots() {
     }
 }
 
-/// λ of `rows` (a chain: row k on slots k − 1 and k, row 0 on slot 0) in double-double:
-/// A λ = −b with A = J M⁻¹ Jᵀ and b = J M⁻¹ F + c from the rows' f64 numbers (their products
-/// exact in double-double), by the tridiagonal's elimination (A is positive definite: no
-/// pivoting). About 32 digits: the reference the f64 solves are measured against.
-fn reference_lambda(rows: &Rows) -> Vec<f64> {
-    use twofloat::TwoFloat;
-    let n = rows.rows.len();
-    let dd = TwoFloat::from;
-    let w = |s: usize| dd(rows.inverse_mass[s]);
-    let dot = |a: &[f64; 3], b: &[f64; 3]| (0..3).fold(dd(0.0), |sum, c| sum + TwoFloat::new_mul(a[c], b[c]));
-    let entry = |k: usize, l: usize| {
-        let mut sum = dd(0.0);
-        for (s, j) in &rows.rows[k].jacobian {
-            for (t, i) in &rows.rows[l].jacobian {
-                if s == t {
-                    sum += dot(j, i) * w(*s);
-                }
-            }
-        }
-        sum
-    };
-    let mut diagonal: Vec<TwoFloat> = (0..n).map(|k| entry(k, k)).collect();
-    let below: Vec<TwoFloat> = (0..n).map(|k| if k > 0 { entry(k, k - 1) } else { dd(0.0) }).collect();
-    let mut rhs: Vec<TwoFloat> = (0..n)
-        .map(|k| {
-            let row = &rows.rows[k];
-            -(row.jacobian.iter().fold(dd(0.0), |sum, (s, j)| sum + dot(j, &rows.force[*s]) * w(*s)) + dd(row.bias))
-        })
-        .collect();
-    for k in 1..n {
-        let m = below[k] / diagonal[k - 1];
-        diagonal[k] -= m * below[k];
-        let r = rhs[k - 1];
-        rhs[k] -= m * r;
-    }
-    let mut lambda = vec![dd(0.0); n];
-    for k in (0..n).rev() {
-        let next = if k + 1 < n { below[k + 1] * lambda[k + 1] } else { dd(0.0) };
-        lambda[k] = (rhs[k] - next) / diagonal[k];
-    }
-    lambda.into_iter().map(f64::from).collect()
-}
-
 /// A nearly straight chain of `n` links along x (each link turned by up to `bend` radians)
 /// with masses 2^±`spread` from slot to slot: Ã's off-diagonals near ±1 where a light link
 /// meets a heavy body, so the chain is ill-conditioned (κ(Ã) grows as n² and with the mass
@@ -458,7 +417,7 @@ fn ill_conditioned_chains_are_as_accurate_without_the_refinement() {
         let what = format!("case {case}, n = {n}, masses 2^±{spread}");
         let settings = settings(Method::Banded);
         assert!(chain_serves(&rows, &settings), "{what}");
-        let reference = reference_lambda(&rows);
+        let reference = common::reference_lambda(&rows);
         let size = reference.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let error =
             |s: &Solution| s.lambda.iter().zip(&reference).fold(0.0f64, |m, (x, r)| m.max((x - r).abs())) / size;

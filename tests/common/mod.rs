@@ -294,3 +294,46 @@ pub fn turned(q0: [f64; 4], n: [f64; 3], phi: f64) -> [f64; 4] {
         p[0] * q0[3] + p[1] * q0[2] - p[2] * q0[1] + p[3] * q0[0],
     ]
 }
+
+/// λ of `rows` (a chain: row k on slots k − 1 and k, row 0 on slot 0) in double-double:
+/// A λ = −b with A = J M⁻¹ Jᵀ and b = J M⁻¹ F + c from the rows' f64 numbers (their products
+/// exact in double-double), by the tridiagonal's elimination (A is positive definite: no
+/// pivoting). About 32 digits: the reference the f64 solves are measured against.
+pub fn reference_lambda(rows: &Rows) -> Vec<f64> {
+    use twofloat::TwoFloat;
+    let n = rows.rows.len();
+    let dd = TwoFloat::from;
+    let w = |s: usize| dd(rows.inverse_mass[s]);
+    let dot = |a: &[f64; 3], b: &[f64; 3]| (0..3).fold(dd(0.0), |sum, c| sum + TwoFloat::new_mul(a[c], b[c]));
+    let entry = |k: usize, l: usize| {
+        let mut sum = dd(0.0);
+        for (s, j) in &rows.rows[k].jacobian {
+            for (t, i) in &rows.rows[l].jacobian {
+                if s == t {
+                    sum += dot(j, i) * w(*s);
+                }
+            }
+        }
+        sum
+    };
+    let mut diagonal: Vec<TwoFloat> = (0..n).map(|k| entry(k, k)).collect();
+    let below: Vec<TwoFloat> = (0..n).map(|k| if k > 0 { entry(k, k - 1) } else { dd(0.0) }).collect();
+    let mut rhs: Vec<TwoFloat> = (0..n)
+        .map(|k| {
+            let row = &rows.rows[k];
+            -(row.jacobian.iter().fold(dd(0.0), |sum, (s, j)| sum + dot(j, &rows.force[*s]) * w(*s)) + dd(row.bias))
+        })
+        .collect();
+    for k in 1..n {
+        let m = below[k] / diagonal[k - 1];
+        diagonal[k] -= m * below[k];
+        let r = rhs[k - 1];
+        rhs[k] -= m * r;
+    }
+    let mut lambda = vec![dd(0.0); n];
+    for k in (0..n).rev() {
+        let next = if k + 1 < n { below[k + 1] * lambda[k + 1] } else { dd(0.0) };
+        lambda[k] = (rhs[k] - next) / diagonal[k];
+    }
+    lambda.into_iter().map(f64::from).collect()
+}
