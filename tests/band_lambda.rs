@@ -100,20 +100,6 @@ fn rows_answer(s: &Scenario, env: &Env, settings: &Settings) -> (Rows, Solution)
     (rows, out)
 }
 
-/// Equal number for number (bits, so a −0 for a +0 counts too), diagnostics and status too.
-fn assert_same(a: &Solution, b: &Solution, what: &str) {
-    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-    let bits3 = |x: &[[f64; 3]]| x.iter().flat_map(|v| v.map(f64::to_bits)).collect::<Vec<_>>();
-    assert_eq!(bits(&a.lambda), bits(&b.lambda), "{what}: λ");
-    assert_eq!(bits3(&a.acceleration), bits3(&b.acceleration), "{what}: accelerations");
-    assert_eq!(bits3(&a.constraint_force), bits3(&b.constraint_force), "{what}: forces");
-    assert_eq!(
-        (&a.active, &a.diagnostics, a.status, &a.contacts),
-        (&b.active, &b.diagnostics, b.status, &b.contacts),
-        "{what}"
-    );
-}
-
 /// The states of [`ill_conditioned_chains_lose_nothing_against_the_rows_solve`]: 12 for each
 /// of 3 lengths and 3 mass spreads.
 const CASES: usize = 108;
@@ -285,7 +271,7 @@ fn every_declined_case_falls_back_to_the_rows_solve_exactly() {
         let (mut scratch, mut rows, mut got) = (s.program.scratch(), Rows::default(), Solution::default());
         let served = band.solve_or_rows_into(&s.system, env, settings, &s.program, &mut scratch, &mut rows, &mut got);
         assert_eq!(served, Ok(false), "{what}");
-        assert_same(&got, &want, what);
+        common::assert_same(&got, &want, what);
     }
     // The band path declines the state the rows' solve calls singular at the rank tolerance,
     // and what that solve says of it.
@@ -297,7 +283,7 @@ fn every_declined_case_falls_back_to_the_rows_solve_exactly() {
     assert_eq!(served, Ok(true));
     let mut direct = Solution::default();
     assert!(band.solve_into(&base, &auto, &mut direct));
-    assert_same(&got, &direct, "served");
+    common::assert_same(&got, &direct, "served");
     // A missing value: declined, and the rows' evaluation reports it.
     let mut missing = Env::new();
     missing.set(s.system.graph.symbol_named("l").expect("l"), Value::Scalar(0.5));
@@ -361,7 +347,7 @@ fn the_compiled_program_answers_as_the_interpreted_one() {
             assert!(interpreted.solve_into(&env, &Settings::default(), &mut a), "case {case}");
             assert!(compiled.solve_into(&env, &Settings::default(), &mut b), "case {case}");
             if case < 2 {
-                assert_same(&a, &b, "one tape");
+                common::assert_same(&a, &b, "one tape");
             } else {
                 let size = a.lambda.iter().fold(0.0f64, |m, x| m.max(x.abs()));
                 for (x, y) in a.lambda.iter().zip(&b.lambda) {

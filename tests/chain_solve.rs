@@ -21,20 +21,6 @@ use lagrange::numeric::solve::{
     Method, Settings, Solution, SolveCache, SolvePath, chain_serves, solve_cached, solve_general, solve_with,
 };
 
-/// Equal number for number (bits, so a −0 for a +0 counts too), diagnostics and status too.
-fn assert_same(a: &Solution, b: &Solution, what: &str) {
-    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-    let bits3 = |x: &[[f64; 3]]| x.iter().flat_map(|v| v.map(f64::to_bits)).collect::<Vec<_>>();
-    assert_eq!(bits(&a.lambda), bits(&b.lambda), "{what}: λ");
-    assert_eq!(bits3(&a.acceleration), bits3(&b.acceleration), "{what}: accelerations");
-    assert_eq!(bits3(&a.constraint_force), bits3(&b.constraint_force), "{what}: forces");
-    assert_eq!(
-        (&a.active, &a.diagnostics, a.status, &a.contacts),
-        (&b.active, &b.diagnostics, b.status, &b.contacts),
-        "{what}"
-    );
-}
-
 /// 2^e for an integer e.
 fn pow2(e: i32) -> f64 {
     2f64.powi(e)
@@ -159,11 +145,11 @@ fn check(rows: &Rows, settings: &Settings, what: &str) -> bool {
     let cached = solve_cached(rows, settings, &[], &mut cache);
     let served = chain_serves(rows, settings);
     if served {
-        assert_same(&fresh, &cached, what);
+        common::assert_same(&fresh, &cached, what);
         assert_agree(&fresh, &general, rows, what);
     } else {
-        assert_same(&fresh, &general, what);
-        assert_same(&cached, &general, what);
+        common::assert_same(&fresh, &general, what);
+        common::assert_same(&cached, &general, what);
     }
     served
 }

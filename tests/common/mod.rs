@@ -337,3 +337,17 @@ pub fn reference_lambda(rows: &Rows) -> Vec<f64> {
     }
     lambda.into_iter().map(f64::from).collect()
 }
+
+/// Equal number for number (bits, so a −0 for a +0 counts too), diagnostics and status too.
+pub fn assert_same(a: &lagrange::numeric::solve::Solution, b: &lagrange::numeric::solve::Solution, what: &str) {
+    let bits = |x: &[f64]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let bits3 = |x: &[[f64; 3]]| x.iter().flat_map(|v| v.map(f64::to_bits)).collect::<Vec<_>>();
+    assert_eq!(bits(&a.lambda), bits(&b.lambda), "{what}: λ");
+    assert_eq!(bits3(&a.acceleration), bits3(&b.acceleration), "{what}: accelerations");
+    assert_eq!(bits3(&a.constraint_force), bits3(&b.constraint_force), "{what}: forces");
+    assert_eq!(
+        (&a.active, &a.diagnostics, a.status, &a.contacts),
+        (&b.active, &b.diagnostics, b.status, &b.contacts),
+        "{what}"
+    );
+}
