@@ -322,9 +322,10 @@ fn systems_it_does_not_serve_get_no_program() {
 }
 
 /// The compiled program gives the interpreted one's answer bit for bit where the
-/// interpreter runs one tape (10 links, and 40 links each of its own mass parameter: no two
-/// rows of one shape), and within rounding where it runs shape by shape (the benchmark's
-/// 40-link chain: a batch's lowering may round a quotient differently, `numeric::batch`).
+/// interpreter runs one tape (10 links: too few of a shape to batch), and within rounding
+/// where it runs shape by shape (40 links each of its own mass parameter, whose rows read no
+/// mass and share a shape while the bodies do not, and the benchmark's 40-link chain: a
+/// batch's lowering may round a quotient differently, `numeric::batch`).
 #[cfg(feature = "jit")]
 #[test]
 fn the_compiled_program_answers_as_the_interpreted_one() {
@@ -335,7 +336,7 @@ fn the_compiled_program_answers_as_the_interpreted_one() {
         let mut compiled = interpreted.clone();
         compiled.compile(&s.derivation).expect("this host compiles");
         assert!(compiled.is_compiled() && !interpreted.is_compiled());
-        assert_eq!(interpreted.is_batched(), case == 2, "case {case}");
+        assert_eq!(interpreted.is_batched(), case > 0, "case {case}");
         let mut rng = Rng::new(n as u64);
         for _ in 0..10 {
             let mut env = s.env.clone();
@@ -346,7 +347,7 @@ fn the_compiled_program_answers_as_the_interpreted_one() {
             let (mut a, mut b) = (Solution::default(), Solution::default());
             assert!(interpreted.solve_into(&env, &Settings::default(), &mut a), "case {case}");
             assert!(compiled.solve_into(&env, &Settings::default(), &mut b), "case {case}");
-            if case < 2 {
+            if case == 0 {
                 common::assert_same(&a, &b, "one tape");
             } else {
                 let size = a.lambda.iter().fold(0.0f64, |m, x| m.max(x.abs()));

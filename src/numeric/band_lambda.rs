@@ -99,16 +99,19 @@ pub struct BandLambda {
     rows: Vec<RowAt>,
     /// Every row's J entries in turn.
     entries: Vec<EntryAt>,
+    /// Per row in turn, the bodies it shares with the row before: Aₖ₋₁,ₖ's terms.
+    shared: Vec<Shared>,
     /// Per body, where its mass and force are.
     bodies: Vec<BodyAt>,
     // Buffers of one call.
     input: Vec<f64>,
-    /// The kernel's outputs, then one zero: the Aₖ,ₖ₊₁ of a row without one (the last
-    /// row's, or a simplified zero) is read there, with no test.
     output: Vec<f64>,
     /// Per body: 1/m, F/m.
     inverse_mass: Vec<f64>,
     weighted: Vec<[f64; 3]>,
+    /// Per J entry, its components read from the outputs once (the row's Aₖ₋₁,ₖ, and the
+    /// forces Σₖ λₖ Jₖᵢ, read them here).
+    jacobian: Vec<[f64; 3]>,
     /// Per row: 1/dₖ, Lₖ = Aₖ₋₁,ₖ/dₖ₋₁, y then λ.
     inverse_pivot: Vec<f64>,
     multiplier: Vec<f64>,
@@ -133,16 +136,24 @@ enum Kernel {
     Batched(Box<Batched>, BatchedScratch),
 }
 
-/// One row's outputs: Aₖₖ, Aₖ,ₖ₊₁ (the zero past the kernel's outputs when it has none), c,
-/// and its J entries
-/// `entries[start..end]`.
+/// One row's output c, its J entries `entries[start..end]` and the bodies it shares with
+/// the row before, `shared[first_shared..end_shared]`.
 #[derive(Clone, Copy, Debug)]
 struct RowAt {
-    diagonal: u32,
-    upper: u32,
     bias: u32,
     start: u32,
     end: u32,
+    first_shared: u32,
+    end_shared: u32,
+}
+
+/// A body two neighbouring rows move: its J entry in the row before and in this row (indices
+/// into `entries`), and the body.
+#[derive(Clone, Copy, Debug)]
+struct Shared {
+    before: u32,
+    this: u32,
+    body: u32,
 }
 
 /// A J entry: its first component among the outputs, the distance between two, its body.
@@ -199,34 +210,31 @@ impl BandLambda {
         if k == 0 || !point_masses || !equalities || !matches!(dim, 2 | 3) || k >= ABSENT as usize {
             return None;
         }
-        // A tridiagonal in the listing order, with a formula on every diagonal entry.
-        let mut diagonal = vec![None; k];
-        let mut upper = vec![None; k];
-        for &(r, c, id) in &derivation.a {
-            match c.checked_sub(r) {
-                Some(0) => diagonal[r] = Some(id),
-                Some(1) => upper[r] = Some(id),
-                _ => return None,
+        // A = J M⁻¹ Jᵀ is tridiagonal in the listing order when no body is moved by two rows
+        // further apart than neighbours: the rows acting on each body, first and last.
+        let mut acting: Vec<Option<(usize, usize)>> = vec![None; system.bodies.len()];
+        for (r, d) in derivation.constraints.iter().enumerate() {
+            if d.jacobian.is_empty() {
+                return None;
             }
+            for &(b, _) in &d.jacobian {
+                let span = acting.get_mut(b)?;
+                *span = Some(span.map_or((r, r), |(first, _)| (first, r)));
+            }
+        }
+        if acting.iter().flatten().any(|&(first, last)| last - first > 1) {
+            return None;
         }
         // No more rows than the velocity components they move: past that A is singular
         // whatever the state (the general solve's `structurally_singular`).
-        let mut moved = vec![false; system.bodies.len()];
-        for d in &derivation.constraints {
-            for &(b, _) in &d.jacobian {
-                moved[b] = true;
-            }
-        }
-        if k > dim * moved.iter().filter(|m| **m).count() {
+        if k > dim * acting.iter().flatten().count() {
             return None;
         }
-        // The roots in units: per row A[k][k], A[k][k + 1], c, J; per body m, F.
+        // The roots in units: per row c, J; per body m, F.
         let mut roots = Vec::new();
         let mut units = Vec::with_capacity(k + system.bodies.len());
-        for (r, d) in derivation.constraints.iter().enumerate() {
+        for d in &derivation.constraints {
             let first = roots.len();
-            roots.push(diagonal[r]?);
-            roots.extend(upper[r]);
             roots.push(d.bias);
             roots.extend(d.jacobian.iter().map(|&(_, j)| j));
             units.push((first..roots.len()).collect::<Vec<_>>());
@@ -278,29 +286,33 @@ impl BandLambda {
             let (first, stride) = place[r];
             width(r) == w && first + (w - 1) * stride < output_len && output_len < ABSENT as usize
         };
-        let (mut rows, mut entries) = (Vec::with_capacity(k), Vec::new());
+        let (mut rows, mut entries, mut shared) = (Vec::with_capacity(k), Vec::new(), Vec::new());
         for (unit, d) in units.iter().zip(&derivation.constraints) {
-            let has_upper = unit.len() == 3 + d.jacobian.len();
-            let bias = unit[1 + usize::from(has_upper)];
             let start = entries.len() as u32;
-            for &r in &unit[unit.len() - d.jacobian.len()..] {
+            for (&r, &(body, _)) in unit[1..].iter().zip(&d.jacobian) {
                 if !fits(r, dim) {
                     return None;
                 }
-                entries.push(EntryAt { first: place[r].0 as u32, stride: place[r].1 as u32, body: 0 });
+                entries.push(EntryAt { first: place[r].0 as u32, stride: place[r].1 as u32, body: body as u32 });
             }
-            for (e, &(body, _)) in entries[start as usize..].iter_mut().zip(&d.jacobian) {
-                e.body = body as u32;
-            }
-            if !(fits(unit[0], 1) && fits(bias, 1) && (!has_upper || fits(unit[1], 1))) {
+            if !fits(unit[0], 1) {
                 return None;
             }
+            // The bodies this row shares with the row before (its entries `before..start`).
+            let before = rows.last().map_or(start, |row: &RowAt| row.start);
+            let first_shared = shared.len() as u32;
+            for this in start..entries.len() as u32 {
+                let body = entries[this as usize].body;
+                if let Some(b) = (before..start).find(|&b| entries[b as usize].body == body) {
+                    shared.push(Shared { before: b, this, body });
+                }
+            }
             rows.push(RowAt {
-                diagonal: place[unit[0]].0 as u32,
-                upper: if has_upper { place[unit[1]].0 as u32 } else { output_len as u32 },
-                bias: place[bias].0 as u32,
+                bias: place[unit[0]].0 as u32,
                 start,
                 end: entries.len() as u32,
+                first_shared,
+                end_shared: shared.len() as u32,
             });
         }
         let mut bodies = Vec::with_capacity(system.bodies.len());
@@ -325,10 +337,12 @@ impl BandLambda {
             loads,
             dim,
             rows,
+            jacobian: vec![[0.0; 3]; entries.len()],
             entries,
+            shared,
             bodies,
             input: vec![0.0; input_len],
-            output: vec![0.0; output_len + 1],
+            output: vec![0.0; output_len],
             inverse_mass: vec![0.0; n],
             weighted: vec![[0.0; 3]; n],
             inverse_pivot: vec![0.0; k],
@@ -375,19 +389,15 @@ impl BandLambda {
                 // The single tape writes root r at its own place: every place moves.
                 let place = |r: usize| tape.output_range(r).start as u32;
                 for (row, unit) in self.rows.iter_mut().zip(&self.units) {
-                    let has_upper = unit.len() == 3 + (row.end - row.start) as usize;
-                    row.diagonal = place(unit[0]);
-                    row.upper = if has_upper { place(unit[1]) } else { tape.output_len() as u32 };
-                    row.bias = place(unit[1 + usize::from(has_upper)]);
-                    let js = &unit[unit.len() - (row.end - row.start) as usize..];
-                    for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(js) {
+                    row.bias = place(unit[0]);
+                    for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(&unit[1..]) {
                         (entry.first, entry.stride) = (place(j), 1);
                     }
                 }
                 for (body, unit) in self.bodies.iter_mut().zip(&self.units[self.rows.len()..]) {
                     (body.mass, body.force, body.stride) = (place(unit[0]), place(unit[1]), 1);
                 }
-                self.output = vec![0.0; tape.output_len() + 1];
+                self.output = vec![0.0; tape.output_len()];
                 let scratch = tape.scratch();
                 self.kernel = Kernel::Tape { tape, scratch, compiled: Some(std::sync::Arc::new(jit)) };
             }
@@ -467,34 +477,48 @@ impl BandLambda {
     /// and within 1.5× summed (measured 1.10× and 1.14×).
     fn solve<const D: usize>(&mut self, settings: &Settings) -> bool {
         let o = &self.output[..];
-        debug_assert_eq!(o.last(), Some(&0.0), "the zero past the outputs");
-        // 1/m and F/m per body: 1/m a positive normal number.
+        // 1/m and F/m per body: 1/m within the inputs' range.
         let mut ok = true;
         let per_body = self.bodies.iter().zip(&mut self.inverse_mass).zip(&mut self.weighted);
         for ((b, inverse_mass), weighted) in per_body {
             let w = 1.0 / o[b.mass as usize];
-            ok &= w.is_normal() & (w > 0.0);
+            ok &= INPUT_RANGE.contains(&w);
             let f: [f64; D] = read(o, b.force, b.stride);
             *inverse_mass = w;
             for d in 0..D {
                 weighted[d] = f[d] * w;
             }
         }
-        // Row by row: −bₖ = −(cₖ + Σᵢ Jₖᵢ·Fᵢ/mᵢ); dₖ = A[k][k] − A[k − 1][k]² / dₖ₋₁,
-        // Lₖ = A[k − 1][k] / dₖ₋₁, yₖ = −bₖ − Lₖ yₖ₋₁ (L y = −b); the pivot above τ A[k][k].
+        // Row by row: −bₖ = −(cₖ + Σᵢ Jₖᵢ·Fᵢ/mᵢ), Aₖₖ = Σᵢ (Jₖᵢ·Jₖᵢ)/mᵢ, Aₖ₋₁,ₖ =
+        // Σ over the shared bodies (Jₖ₋₁,ᵢ·Jₖᵢ)/mᵢ; dₖ = Aₖₖ − Aₖ₋₁,ₖ²/dₖ₋₁,
+        // Lₖ = Aₖ₋₁,ₖ/dₖ₋₁, yₖ = −bₖ − Lₖ yₖ₋₁ (L y = −b); the pivot above τ Aₖₖ.
         let tolerance = settings.rank_tolerance;
-        let (mut e, mut inverse_prev, mut y_prev) = (0.0, 0.0, 0.0);
+        let (mut inverse_prev, mut y_prev) = (0.0, 0.0);
         let per_row = self.rows.iter().zip(&mut self.inverse_pivot).zip(&mut self.multiplier).zip(&mut self.lambda);
         for (((row, inverse_pivot), multiplier), y_out) in per_row {
-            let mut b = o[row.bias as usize];
-            for entry in &self.entries[row.start as usize..row.end as usize] {
+            let (mut b, mut diagonal) = (o[row.bias as usize], 0.0);
+            let (start, end) = (row.start as usize, row.end as usize);
+            for (entry, kept) in self.entries[start..end].iter().zip(&mut self.jacobian[start..end]) {
                 let j: [f64; D] = read(o, entry.first, entry.stride);
-                let w = &self.weighted[entry.body as usize];
+                let body = entry.body as usize;
+                let weighted = &self.weighted[body];
+                let mut square = 0.0;
                 for d in 0..D {
-                    b += j[d] * w[d];
+                    b += j[d] * weighted[d];
+                    square += j[d] * j[d];
+                    kept[d] = j[d];
                 }
+                diagonal += square * self.inverse_mass[body];
             }
-            let diagonal = o[row.diagonal as usize];
+            let mut e = 0.0;
+            for s in &self.shared[row.first_shared as usize..row.end_shared as usize] {
+                let (before, this) = (&self.jacobian[s.before as usize], &self.jacobian[s.this as usize]);
+                let mut dot = 0.0;
+                for d in 0..D {
+                    dot += before[d] * this[d];
+                }
+                e += dot * self.inverse_mass[s.body as usize];
+            }
             let d = diagonal - e * e * inverse_prev;
             ok &= DIAGONAL_RANGE.contains(&diagonal) & (d > tolerance * diagonal);
             let l = e * inverse_prev;
@@ -502,7 +526,6 @@ impl BandLambda {
             *inverse_pivot = 1.0 / d;
             *multiplier = l;
             *y_out = y;
-            e = o[row.upper as usize];
             (inverse_prev, y_prev) = (*inverse_pivot, y);
         }
         if !ok {
@@ -523,8 +546,8 @@ impl BandLambda {
         // Σₖ λₖ Jₖᵢ per body, then aᵢ = Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ, finite.
         self.force.fill([0.0; 3]);
         for (row, &x) in self.rows.iter().zip(&self.lambda) {
-            for entry in &self.entries[row.start as usize..row.end as usize] {
-                let j: [f64; D] = read(o, entry.first, entry.stride);
+            let (start, end) = (row.start as usize, row.end as usize);
+            for (entry, j) in self.entries[start..end].iter().zip(&self.jacobian[start..end]) {
                 let f = &mut self.force[entry.body as usize];
                 for d in 0..D {
                     f[d] += x * j[d];
@@ -580,8 +603,7 @@ impl BandLambda {
                 _ => return false,
             }
         }
-        let len = self.output.len() - 1;
-        let output = &mut self.output[..len];
+        let output = &mut self.output[..];
         match &mut self.kernel {
             Kernel::Batched(batched, scratch) => batched.eval(&self.input, scratch, output),
             #[cfg(feature = "jit")]
