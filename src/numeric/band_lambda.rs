@@ -99,16 +99,13 @@ pub struct BandLambda {
     rows: Vec<RowAt>,
     /// Every row's J entries in turn.
     entries: Vec<EntryAt>,
-    /// Per row in turn, the bodies it shares with the row before: Aₖ₋₁,ₖ's terms.
-    shared: Vec<Shared>,
     /// Per body, where its mass and force are.
     bodies: Vec<BodyAt>,
     // Buffers of one call.
     input: Vec<f64>,
     output: Vec<f64>,
-    /// Per body: 1/m, F/m.
-    inverse_mass: Vec<f64>,
-    weighted: Vec<[f64; 3]>,
+    /// Per body: F/m, then 1/m.
+    per_body: Vec<[f64; 4]>,
     /// Per J entry, its components read from the outputs once (the row's Aₖ₋₁,ₖ, and the
     /// forces Σₖ λₖ Jₖᵢ, read them here).
     jacobian: Vec<[f64; 3]>,
@@ -120,6 +117,8 @@ pub struct BandLambda {
     /// the guard passes: no copy).
     force: Vec<[f64; 3]>,
     acceleration: Vec<[f64; 3]>,
+    /// The bodies no row moves (their Σₖ λₖ Jₖᵢ is zero).
+    still: Vec<u32>,
 }
 
 /// How the program's roots are computed: one tape of them all (and its compiled twin once
@@ -136,32 +135,25 @@ enum Kernel {
     Batched(Box<Batched>, BatchedScratch),
 }
 
-/// One row's output c, its J entries `entries[start..end]` and the bodies it shares with
-/// the row before, `shared[first_shared..end_shared]`.
+/// One row's output c and its J entries `entries[start..end]`.
 #[derive(Clone, Copy, Debug)]
 struct RowAt {
     bias: u32,
     start: u32,
     end: u32,
-    first_shared: u32,
-    end_shared: u32,
 }
 
-/// A body two neighbouring rows move: its J entry in the row before and in this row (indices
-/// into `entries`), and the body.
-#[derive(Clone, Copy, Debug)]
-struct Shared {
-    before: u32,
-    this: u32,
-    body: u32,
-}
-
-/// A J entry: its first component among the outputs, the distance between two, its body.
+/// A J entry: its first component among the outputs, the distance between two, its body,
+/// the entry of the same body in the row before (an index into `entries`; [`ABSENT`] when
+/// that row does not move the body): the pair's term of Aₖ₋₁,ₖ, and whether it is its
+/// body's first entry (it writes the body's Σₖ λₖ Jₖᵢ, the later ones add to it).
 #[derive(Clone, Copy, Debug)]
 struct EntryAt {
     first: u32,
     stride: u32,
     body: u32,
+    partner: u32,
+    opens: bool,
 }
 
 /// A body's mass, and its force's first component and the distance between two.
@@ -286,34 +278,25 @@ impl BandLambda {
             let (first, stride) = place[r];
             width(r) == w && first + (w - 1) * stride < output_len && output_len < ABSENT as usize
         };
-        let (mut rows, mut entries, mut shared) = (Vec::with_capacity(k), Vec::new(), Vec::new());
+        let (mut rows, mut entries) = (Vec::with_capacity(k), Vec::<EntryAt>::new());
         for (unit, d) in units.iter().zip(&derivation.constraints) {
             let start = entries.len() as u32;
+            // The row before's entries, where a body this row shares with it is found.
+            let before = rows.last().map_or(start, |row: &RowAt| row.start);
             for (&r, &(body, _)) in unit[1..].iter().zip(&d.jacobian) {
                 if !fits(r, dim) {
                     return None;
                 }
-                entries.push(EntryAt { first: place[r].0 as u32, stride: place[r].1 as u32, body: body as u32 });
+                let body = body as u32;
+                let partner = (before..start).find(|&b| entries[b as usize].body == body).unwrap_or(ABSENT);
+                let opens = partner == ABSENT && entries.iter().all(|e| e.body != body);
+                let (first, stride) = (place[r].0 as u32, place[r].1 as u32);
+                entries.push(EntryAt { first, stride, body, partner, opens });
             }
             if !fits(unit[0], 1) {
                 return None;
             }
-            // The bodies this row shares with the row before (its entries `before..start`).
-            let before = rows.last().map_or(start, |row: &RowAt| row.start);
-            let first_shared = shared.len() as u32;
-            for this in start..entries.len() as u32 {
-                let body = entries[this as usize].body;
-                if let Some(b) = (before..start).find(|&b| entries[b as usize].body == body) {
-                    shared.push(Shared { before: b, this, body });
-                }
-            }
-            rows.push(RowAt {
-                bias: place[unit[0]].0 as u32,
-                start,
-                end: entries.len() as u32,
-                first_shared,
-                end_shared: shared.len() as u32,
-            });
+            rows.push(RowAt { bias: place[unit[0]].0 as u32, start, end: entries.len() as u32 });
         }
         let mut bodies = Vec::with_capacity(system.bodies.len());
         for unit in &units[k..] {
@@ -328,6 +311,7 @@ impl BandLambda {
             });
         }
         let n = bodies.len();
+        let still = (0..n as u32).filter(|&b| entries.iter().all(|e| e.body != b)).collect();
         Some(BandLambda {
             kernel,
             #[cfg(feature = "jit")]
@@ -339,17 +323,16 @@ impl BandLambda {
             rows,
             jacobian: vec![[0.0; 3]; entries.len()],
             entries,
-            shared,
             bodies,
             input: vec![0.0; input_len],
             output: vec![0.0; output_len],
-            inverse_mass: vec![0.0; n],
-            weighted: vec![[0.0; 3]; n],
+            per_body: vec![[0.0; 4]; n],
             inverse_pivot: vec![0.0; k],
             multiplier: vec![0.0; k],
             lambda: vec![0.0; k],
             force: vec![[0.0; 3]; n],
             acceleration: vec![[0.0; 3]; n],
+            still,
         })
     }
 
@@ -479,15 +462,14 @@ impl BandLambda {
         let o = &self.output[..];
         // 1/m and F/m per body: 1/m within the inputs' range.
         let mut ok = true;
-        let per_body = self.bodies.iter().zip(&mut self.inverse_mass).zip(&mut self.weighted);
-        for ((b, inverse_mass), weighted) in per_body {
+        for (b, per_body) in self.bodies.iter().zip(&mut self.per_body) {
             let w = 1.0 / o[b.mass as usize];
             ok &= INPUT_RANGE.contains(&w);
             let f: [f64; D] = read(o, b.force, b.stride);
-            *inverse_mass = w;
             for d in 0..D {
-                weighted[d] = f[d] * w;
+                per_body[d] = f[d] * w;
             }
+            per_body[3] = w;
         }
         // Row by row: −bₖ = −(cₖ + Σᵢ Jₖᵢ·Fᵢ/mᵢ), Aₖₖ = Σᵢ (Jₖᵢ·Jₖᵢ)/mᵢ, Aₖ₋₁,ₖ =
         // Σ over the shared bodies (Jₖ₋₁,ᵢ·Jₖᵢ)/mᵢ; dₖ = Aₖₖ − Aₖ₋₁,ₖ²/dₖ₋₁,
@@ -496,28 +478,26 @@ impl BandLambda {
         let (mut inverse_prev, mut y_prev) = (0.0, 0.0);
         let per_row = self.rows.iter().zip(&mut self.inverse_pivot).zip(&mut self.multiplier).zip(&mut self.lambda);
         for (((row, inverse_pivot), multiplier), y_out) in per_row {
-            let (mut b, mut diagonal) = (o[row.bias as usize], 0.0);
-            let (start, end) = (row.start as usize, row.end as usize);
-            for (entry, kept) in self.entries[start..end].iter().zip(&mut self.jacobian[start..end]) {
+            let (mut b, mut diagonal, mut e) = (o[row.bias as usize], 0.0, 0.0);
+            for i in row.start as usize..row.end as usize {
+                let entry = self.entries[i];
                 let j: [f64; D] = read(o, entry.first, entry.stride);
-                let body = entry.body as usize;
-                let weighted = &self.weighted[body];
+                let body = &self.per_body[entry.body as usize];
                 let mut square = 0.0;
                 for d in 0..D {
-                    b += j[d] * weighted[d];
+                    b += j[d] * body[d];
                     square += j[d] * j[d];
-                    kept[d] = j[d];
                 }
-                diagonal += square * self.inverse_mass[body];
-            }
-            let mut e = 0.0;
-            for s in &self.shared[row.first_shared as usize..row.end_shared as usize] {
-                let (before, this) = (&self.jacobian[s.before as usize], &self.jacobian[s.this as usize]);
-                let mut dot = 0.0;
-                for d in 0..D {
-                    dot += before[d] * this[d];
+                diagonal += square * body[3];
+                // The body's term of Aₖ₋₁,ₖ, when the row before moves it too.
+                if let Some(before) = self.jacobian.get(entry.partner as usize) {
+                    let mut dot = 0.0;
+                    for d in 0..D {
+                        dot += before[d] * j[d];
+                    }
+                    e += dot * body[3];
                 }
-                e += dot * self.inverse_mass[s.body as usize];
+                self.jacobian[i][..D].copy_from_slice(&j);
             }
             let d = diagonal - e * e * inverse_prev;
             ok &= DIAGONAL_RANGE.contains(&diagonal) & (d > tolerance * diagonal);
@@ -544,22 +524,28 @@ impl BandLambda {
             return false;
         }
         // Σₖ λₖ Jₖᵢ per body, then aᵢ = Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ, finite.
-        self.force.fill([0.0; 3]);
+        // (A body no row moves keeps the zero it was given: `still`.)
         for (row, &x) in self.rows.iter().zip(&self.lambda) {
             let (start, end) = (row.start as usize, row.end as usize);
             for (entry, j) in self.entries[start..end].iter().zip(&self.jacobian[start..end]) {
                 let f = &mut self.force[entry.body as usize];
                 for d in 0..D {
-                    f[d] += x * j[d];
+                    f[d] = if entry.opens { x * j[d] } else { f[d] + x * j[d] };
                 }
             }
         }
+        for &body in &self.still {
+            self.force[body as usize] = [0.0; 3];
+        }
+        // (In 2D the third components are zeros: the buffers are the caller's old answer's.)
         let mut not_finite = 0.0;
-        let per_body = self.acceleration.iter_mut().zip(&self.force).zip(&self.weighted).zip(&self.inverse_mass);
-        for (((a, fc), weighted), w) in per_body {
+        for ((a, fc), body) in self.acceleration.iter_mut().zip(&mut self.force).zip(&self.per_body) {
             for d in 0..D {
-                a[d] = weighted[d] + fc[d] * w;
+                a[d] = body[d] + fc[d] * body[3];
                 not_finite += a[d] * 0.0;
+            }
+            for d in D..3 {
+                (a[d], fc[d]) = (0.0, 0.0);
             }
         }
         not_finite == 0.0
