@@ -292,6 +292,41 @@ fn every_declined_case_falls_back_to_the_rows_solve_exactly() {
     assert!(result.is_err(), "the rows cannot be evaluated either");
 }
 
+/// The answer's vectors are traded with the program's buffers: an answer of another scene
+/// (3D, its third components not zero), one spoiled with NaNs and a fresh one get the same
+/// answer, bit for bit, the 2D chain's third components zeros.
+#[test]
+fn an_old_answer_changes_nothing() {
+    let n = 7;
+    let (s, band) = chain(n, 2, None, false);
+    let mut band = band.expect("a chain is served");
+    let (s3, band3) = chain(n, 3, None, false);
+    let mut band3 = band3.expect("a chain is served");
+    let settings = Settings::default();
+    let mut rng = Rng::new(38);
+    for case in 0..5 {
+        let env = random_state(&s, &mut rng, n, 2, 0.5, 3.0);
+        let mut fresh = Solution::default();
+        assert!(band.solve_into(&env, &settings, &mut fresh), "case {case}");
+        let mut old = Solution::default();
+        let env3 = random_state(&s3, &mut rng, n, 3, 0.5, 3.0);
+        assert!(band3.solve_into(&env3, &settings, &mut old));
+        assert!(old.acceleration.iter().any(|a| a[2] != 0.0), "the 3D answer has third components");
+        let mut spoiled = Solution {
+            lambda: vec![f64::NAN; n],
+            acceleration: vec![[f64::NAN; 3]; n],
+            constraint_force: vec![[f64::NAN; 3]; n],
+            ..Solution::default()
+        };
+        for (what, answer) in [("a 3D answer", &mut old), ("NaNs", &mut spoiled)] {
+            assert!(band.solve_into(&env, &settings, answer), "case {case}, {what}");
+            common::assert_same(answer, &fresh, what);
+            let third = answer.acceleration.iter().chain(&answer.constraint_force).map(|v| v[2].to_bits());
+            assert!(third.into_iter().all(|z| z == 0), "case {case}, {what}: zeros");
+        }
+    }
+}
+
 /// `Auto` solves four rows or fewer densely, as the rows' chain path: declined there,
 /// served under `Banded`.
 #[test]
@@ -309,12 +344,26 @@ fn four_rows_go_dense_under_auto_and_band_when_asked() {
 }
 
 /// Systems the band path does not serve are never made: an inequality row, links listed
-/// out of chain order (A's band is wider in that order; reversed it is not), a rigid body.
+/// out of chain order (A's band is wider in that order; reversed it is not), a rigid body,
+/// and a band only the symbolic A shows: rows two apart that move one body with J's
+/// orthogonal by their formulas (`r1.x = 0` and `r1.y = 0` around a link), whose Aₖ,ₖ₊₂
+/// the derivation simplified to zero but J's numbers need not give as one.
 #[test]
 fn systems_it_does_not_serve_get_no_program() {
     assert!(chain(6, 2, None, true).1.is_none(), "a rope");
     assert!(chain(6, 2, Some(&[1, 3, 2, 4, 5, 6]), false).1.is_none(), "out of order");
     assert!(chain(6, 2, Some(&[6, 5, 4, 3, 2, 1]), false).1.is_some(), "reversed: the band kept");
+    let mut text = chain_text(2, 2, None, false);
+    let at = text.find("\n[[constraints]]").expect("the chain's constraints");
+    let rows = "\n[[constraints]]\nname = \"x\"\nexpr = \"r1.x = 0\"\n\n[[constraints]]\nname = \"link\"\n\
+                expr = \"dot(r2 - r1, r2 - r1) = l^2\"\n\n[[constraints]]\nname = \"y\"\nexpr = \"r1.y = 0\"\n";
+    let end = text.find("\n[scene]").expect("the scene");
+    text.replace_range(at..end, rows);
+    let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
+    assert_eq!(s.derivation.constraints.len(), 3);
+    let entries: Vec<(usize, usize)> = s.derivation.a.iter().map(|e| (e.0, e.1)).collect();
+    assert!(!entries.contains(&(0, 2)), "A's formulas are tridiagonal: {entries:?}");
+    assert!(BandLambda::new(&s.system, &s.derivation, &s.scene.forces).is_none(), "a band J does not keep");
     let text = std::fs::read_to_string("constraints/rigid/atwood_pulley.toml").expect("the file");
     let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
     assert!(s.system.bodies.iter().any(|b| b.rigid.is_some()), "the file has a rigid body");
