@@ -103,7 +103,11 @@ pub struct BandLambda {
     bodies: Vec<BodyAt>,
     // Buffers of one call.
     input: Vec<f64>,
+    /// The kernel's outputs, then one zero (an absent Aₖ₋₁,ₖ's, read with no test).
     output: Vec<f64>,
+    /// Whether A's band is among the outputs, from the derivation's formulas (compiled code,
+    /// where they cost less than forming A from J), rather than formed from J here.
+    formulas: bool,
     /// Per body: F/m, then 1/m.
     per_body: Vec<[f64; 4]>,
     /// Per J entry, its components read from the outputs once (the row's Aₖ₋₁,ₖ, and the
@@ -135,12 +139,16 @@ enum Kernel {
     Batched(Box<Batched>, BatchedScratch),
 }
 
-/// One row's output c and its J entries `entries[start..end]`.
+/// One row's output c and its J entries `entries[start..end]`; where A's band comes from
+/// the formulas (compiled code), Aₖₖ and Aₖ₋₁,ₖ among the outputs (the zero past them when
+/// the formula is zero or the row the first).
 #[derive(Clone, Copy, Debug)]
 struct RowAt {
     bias: u32,
     start: u32,
     end: u32,
+    diagonal: u32,
+    lower: u32,
 }
 
 /// A J entry: its first component among the outputs, the distance between two, its body,
@@ -296,7 +304,8 @@ impl BandLambda {
             if !fits(unit[0], 1) {
                 return None;
             }
-            rows.push(RowAt { bias: place[unit[0]].0 as u32, start, end: entries.len() as u32 });
+            let (diagonal, lower) = (output_len as u32, output_len as u32);
+            rows.push(RowAt { bias: place[unit[0]].0 as u32, start, end: entries.len() as u32, diagonal, lower });
         }
         let mut bodies = Vec::with_capacity(system.bodies.len());
         for unit in &units[k..] {
@@ -325,7 +334,8 @@ impl BandLambda {
             entries,
             bodies,
             input: vec![0.0; input_len],
-            output: vec![0.0; output_len],
+            output: vec![0.0; output_len + 1],
+            formulas: false,
             per_body: vec![[0.0; 4]; n],
             inverse_pivot: vec![0.0; k],
             multiplier: vec![0.0; k],
@@ -360,31 +370,55 @@ impl BandLambda {
     /// without a code generator) the program evaluates as before and the error is returned.
     #[cfg(feature = "jit")]
     pub fn compile(&mut self, derivation: &Derivation) -> Result<(), crate::numeric::jit::JitError> {
-        match &mut self.kernel {
-            Kernel::Tape { tape, compiled: compiled @ None, .. } => *compiled = Some(std::sync::Arc::new(tape.jit()?)),
-            Kernel::Tape { .. } => {}
-            Kernel::Batched(..) => {
-                let symbols: Vec<Symbol> = self.loads.iter().map(|l| l.0).collect();
-                let Ok(tape) = Tape::compile(&derivation.graph, &self.roots, &symbols) else {
-                    return Err(crate::numeric::jit::JitError::Codegen("the roots do not lower".into()));
-                };
-                let jit = tape.jit()?;
-                // The single tape writes root r at its own place: every place moves.
-                let place = |r: usize| tape.output_range(r).start as u32;
-                for (row, unit) in self.rows.iter_mut().zip(&self.units) {
-                    row.bias = place(unit[0]);
-                    for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(&unit[1..]) {
-                        (entry.first, entry.stride) = (place(j), 1);
-                    }
-                }
-                for (body, unit) in self.bodies.iter_mut().zip(&self.units[self.rows.len()..]) {
-                    (body.mass, body.force, body.stride) = (place(unit[0]), place(unit[1]), 1);
-                }
-                self.output = vec![0.0; tape.output_len()];
-                let scratch = tape.scratch();
-                self.kernel = Kernel::Tape { tape, scratch, compiled: Some(std::sync::Arc::new(jit)) };
+        if self.is_compiled() {
+            return Ok(());
+        }
+        // A's band from the formulas (`Derivation::a`): each row's Aₖₖ and Aₖ₋₁,ₖ, when every
+        // entry is within the band J's bodies gave (always, A being J M⁻¹ Jᵀ) and every
+        // diagonal has one; else A is formed from J as before.
+        let k = self.rows.len();
+        let (mut diagonal, mut lower) = (vec![None; k], vec![None; k]);
+        let mut within = true;
+        for &(r, c, id) in &derivation.a {
+            match c.checked_sub(r) {
+                Some(0) if r < k => diagonal[r] = Some(id),
+                Some(1) if c < k => lower[c] = Some(id),
+                _ => within = false,
             }
         }
+        let mut roots = self.roots.clone();
+        let mut band = Vec::with_capacity(k);
+        if within && diagonal.iter().all(Option::is_some) {
+            for (d, l) in diagonal.iter().flatten().zip(&lower) {
+                band.push((roots.len(), l.map(|_| roots.len() + 1)));
+                roots.push(*d);
+                roots.extend(l);
+            }
+        }
+        let symbols: Vec<Symbol> = self.loads.iter().map(|l| l.0).collect();
+        let Ok(tape) = Tape::compile(&derivation.graph, &roots, &symbols) else {
+            return Err(crate::numeric::jit::JitError::Codegen("the roots do not lower".into()));
+        };
+        let jit = tape.jit()?;
+        // The one tape writes root r at its own place: every place moves.
+        let place = |r: usize| tape.output_range(r).start as u32;
+        let zero = tape.output_len() as u32;
+        for (i, (row, unit)) in self.rows.iter_mut().zip(&self.units).enumerate() {
+            row.bias = place(unit[0]);
+            for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(&unit[1..]) {
+                (entry.first, entry.stride) = (place(j), 1);
+            }
+            if let Some(&(d, l)) = band.get(i) {
+                (row.diagonal, row.lower) = (place(d), l.map_or(zero, place));
+            }
+        }
+        for (body, unit) in self.bodies.iter_mut().zip(&self.units[k..]) {
+            (body.mass, body.force, body.stride) = (place(unit[0]), place(unit[1]), 1);
+        }
+        self.formulas = !band.is_empty();
+        self.output = vec![0.0; tape.output_len() + 1];
+        let scratch = tape.scratch();
+        self.kernel = Kernel::Tape { tape, scratch, compiled: Some(std::sync::Arc::new(jit)) };
         Ok(())
     }
 
@@ -406,7 +440,12 @@ impl BandLambda {
         if !allowed(settings.method, self.rows.len()) || !self.evaluate(env) {
             return false;
         }
-        let solved = if self.dim == 2 { self.solve::<2>(settings) } else { self.solve::<3>(settings) };
+        let solved = match (self.dim, self.formulas) {
+            (2, false) => self.solve::<2, false>(settings),
+            (2, true) => self.solve::<2, true>(settings),
+            (_, false) => self.solve::<3, false>(settings),
+            (_, true) => self.solve::<3, true>(settings),
+        };
         if !solved {
             return false;
         }
@@ -458,7 +497,7 @@ impl BandLambda {
     /// `REFINE_BOUND`: a backward stable solve's error is already κ u). The test holds the
     /// two errors against a double-double reference within 16× of each other case by case
     /// and within 1.5× summed (measured 1.10× and 1.14×).
-    fn solve<const D: usize>(&mut self, settings: &Settings) -> bool {
+    fn solve<const D: usize, const FORMULAS: bool>(&mut self, settings: &Settings) -> bool {
         let o = &self.output[..];
         // 1/m and F/m per body: 1/m within the inputs' range.
         let mut ok = true;
@@ -479,6 +518,9 @@ impl BandLambda {
         let per_row = self.rows.iter().zip(&mut self.inverse_pivot).zip(&mut self.multiplier).zip(&mut self.lambda);
         for (((row, inverse_pivot), multiplier), y_out) in per_row {
             let (mut b, mut diagonal, mut e) = (o[row.bias as usize], 0.0, 0.0);
+            if FORMULAS {
+                (diagonal, e) = (o[row.diagonal as usize], o[row.lower as usize]);
+            }
             for i in row.start as usize..row.end as usize {
                 let entry = self.entries[i];
                 let j: [f64; D] = read(o, entry.first, entry.stride);
@@ -488,14 +530,16 @@ impl BandLambda {
                     b += j[d] * body[d];
                     square += j[d] * j[d];
                 }
-                diagonal += square * body[3];
-                // The body's term of Aₖ₋₁,ₖ, when the row before moves it too.
-                if let Some(before) = self.jacobian.get(entry.partner as usize) {
-                    let mut dot = 0.0;
-                    for d in 0..D {
-                        dot += before[d] * j[d];
+                // The body's terms of Aₖₖ, and of Aₖ₋₁,ₖ when the row before moves it too.
+                if !FORMULAS {
+                    diagonal += square * body[3];
+                    if let Some(before) = self.jacobian.get(entry.partner as usize) {
+                        let mut dot = 0.0;
+                        for d in 0..D {
+                            dot += before[d] * j[d];
+                        }
+                        e += dot * body[3];
                     }
-                    e += dot * body[3];
                 }
                 self.jacobian[i][..D].copy_from_slice(&j);
             }
@@ -589,7 +633,8 @@ impl BandLambda {
                 _ => return false,
             }
         }
-        let output = &mut self.output[..];
+        let len = self.output.len() - 1;
+        let output = &mut self.output[..len];
         match &mut self.kernel {
             Kernel::Batched(batched, scratch) => batched.eval(&self.input, scratch, output),
             #[cfg(feature = "jit")]
