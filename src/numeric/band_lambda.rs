@@ -57,7 +57,6 @@ use crate::numeric::program::Inputs;
 use crate::numeric::rows::{RowProgram, RowScratch, Rows};
 use crate::numeric::solve::{self, Method, Settings, Solution, Status};
 use crate::numeric::tape::{Scratch, Tape};
-use crate::numeric::vector::all_finite;
 
 /// Past every output index the program may have (checked when it is made).
 const ABSENT: u32 = u32::MAX;
@@ -641,6 +640,6 @@ impl BandLambda {
             Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, output),
             Kernel::Tape { tape, scratch, .. } => tape.eval(&self.input, scratch, output),
         }
-        in_range(&self.input) && all_finite(output)
+        in_range(&self.input)
     }
 }
