@@ -327,6 +327,54 @@ fn an_old_answer_changes_nothing() {
     }
 }
 
+/// Outputs that are not finite at inputs that are (no finiteness pass looks at the outputs:
+/// each reaches a test of the guard): links written `norm(d) = l`, whose J = d/|d| is 0/0
+/// at a zero-length link, and forces `m g / s`, infinite and 0/0 at s = 0. Declined,
+/// interpreted and compiled, and the fallback gives `solve_into`'s answer bit for bit.
+#[test]
+fn outputs_that_are_not_finite_are_declined() {
+    let n = 6;
+    let mut text = chain_text(n, 2, None, false).replace("l = 0.5\n", "l = 0.5\ns = 1.0\n");
+    for i in 1..=n {
+        let d = if i == 1 { "r1".to_string() } else { format!("(r{i} - r{})", i - 1) };
+        text = text.replace(&format!("dot({d}, {d}) = l^2"), &format!("norm({d}) = l"));
+        text = text.replace(&format!("F{i} = \"m{i}*g\""), &format!("F{i} = \"m{i}*g/s\""));
+    }
+    assert!(text.contains("norm((r2 - r1)) = l") && text.contains("m3*g/s"), "{text}");
+    let s = Scenario::new(load(&text).expect("valid"), &[]).expect("derives");
+    let band = BandLambda::new(&s.system, &s.derivation, &s.scene.forces).expect("a chain is served");
+    #[allow(unused_mut)]
+    let mut programs = vec![("interpreted", band.clone())];
+    #[cfg(feature = "jit")]
+    {
+        let mut compiled = band;
+        compiled.compile(&s.derivation).expect("this host compiles");
+        programs.push(("compiled", compiled));
+    }
+    let base = random_state(&s, &mut Rng::new(11), n, 2, 0.3, 2.0);
+    let r2 = base.get(s.system.graph.symbol_named("r2").expect("r2")).expect("r2");
+    let mut zero_link = base.clone();
+    set(&s, &mut zero_link, "r3", r2);
+    let mut no_s = base.clone();
+    set(&s, &mut no_s, "s", Value::Scalar(0.0));
+    let settings = Settings::default();
+    for (name, mut band) in programs {
+        let mut served = Solution::default();
+        assert!(band.solve_into(&base, &settings, &mut served), "{name}: the state itself is served");
+        for (what, env) in [("a zero-length link", &zero_link), ("s = 0", &no_s)] {
+            let what = format!("{name}, {what}");
+            let (_, want) = rows_answer(&s, env, &settings);
+            let mut untouched = Solution { lambda: vec![42.0], ..Solution::default() };
+            assert!(!band.solve_into(env, &settings, &mut untouched), "{what}: declined");
+            assert_eq!(untouched.lambda, [42.0], "{what}: the answer untouched");
+            let (mut scratch, mut rows, mut got) = (s.program.scratch(), Rows::default(), Solution::default());
+            let served = band.solve_or_rows_into(&s.system, env, &settings, &s.program, &mut scratch, &mut rows, &mut got);
+            assert_eq!(served, Ok(false), "{what}");
+            common::assert_same(&got, &want, &what);
+        }
+    }
+}
+
 /// `Auto` solves four rows or fewer densely, as the rows' chain path: declined there,
 /// served under `Banded`.
 #[test]
