@@ -286,18 +286,19 @@ fn library_step(bencher: divan::Bencher, s: Scenario, n: usize) {
     });
 }
 
-/// The library's λ from one program of the derivation's formulas (`BandLambda`): A's band,
-/// c, J, the masses and forces, interpreted (one tape at N = 10, shape by shape from
-/// N = 100: `numeric::batch`), then L D Lᵀ of the tridiagonal under its pivot guard, to the
-/// accelerations. Its accelerations are asserted equal to [`chain_solve_library`]'s to
-/// 1e-12 of the largest before the samples.
+/// The library's λ from one program of the derivation's formulas (`BandLambda`): c, J, the
+/// masses and forces, interpreted (one tape at N = 10, shape by shape from N = 100:
+/// `numeric::batch`), A's band formed from J, then L D Lᵀ of the tridiagonal under its pivot
+/// guard, to the accelerations. Its accelerations are asserted equal to
+/// [`chain_solve_library`]'s to 1e-12 of the largest before the samples.
 #[divan::bench(name = "chain_solve_2_band", args = [10, 100, 1000, 10000])]
 fn chain_solve_band(bencher: divan::Bencher, n: usize) {
     band_step(bencher, chain(n), n, false);
 }
 
-/// [`chain_solve_band`] with the band program's tape compiled (`BandLambda::compile`); not at
-/// N = 10 000, whose one tape is too large for compiled code's stack frame (`JitError::TooLarge`).
+/// [`chain_solve_band`] with the band program's tape compiled, A's band from its formulas
+/// (`BandLambda::compile`); not at N = 10 000, whose one tape is too large for compiled
+/// code's stack frame (`JitError::TooLarge`).
 #[cfg(feature = "jit")]
 #[divan::bench(name = "chain_solve_2_band_jit", args = [10, 100, 1000])]
 fn chain_solve_band_jit(bencher: divan::Bencher, n: usize) {

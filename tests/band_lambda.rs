@@ -368,7 +368,8 @@ fn outputs_that_are_not_finite_are_declined() {
             assert!(!band.solve_into(env, &settings, &mut untouched), "{what}: declined");
             assert_eq!(untouched.lambda, [42.0], "{what}: the answer untouched");
             let (mut scratch, mut rows, mut got) = (s.program.scratch(), Rows::default(), Solution::default());
-            let served = band.solve_or_rows_into(&s.system, env, &settings, &s.program, &mut scratch, &mut rows, &mut got);
+            let served =
+                band.solve_or_rows_into(&s.system, env, &settings, &s.program, &mut scratch, &mut rows, &mut got);
             assert_eq!(served, Ok(false), "{what}");
             common::assert_same(&got, &want, &what);
         }

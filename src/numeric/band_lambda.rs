@@ -1,37 +1,44 @@
-//! λ of a chain of equality rows from one program of the derivation's formulas: A's band
-//! entries (`Derivation::a`), each row's c and J and each body's mass and force, evaluated
-//! by one [`Tape`] (or its compiled twin) or shape by shape (`numeric::batch`, where rows
-//! repeat a shape), then L D Lᵀ written for the tridiagonal band under a pivot guard, to λ,
-//! the constraint forces and the accelerations. What the generated module's `band_system`
-//! and `solve_tridiagonal` do (`codegen::rust`), in the library.
+//! λ of a chain of equality rows from one program of the derivation's formulas: each row's
+//! c and J and each body's mass and force, evaluated by one [`Tape`] (or its compiled twin)
+//! or shape by shape (`numeric::batch`, where rows repeat a shape); A's band formed from J
+//! (Aₖₖ = Σᵢ Jₖᵢ·Jₖᵢ/mᵢ, Aₖ₋₁,ₖ = Σ over the bodies both rows move of Jₖ₋₁,ᵢ·Jₖᵢ/mᵢ) or,
+//! compiled, taken from A's own formulas (`Derivation::a`); then L D Lᵀ written for the
+//! tridiagonal band under a pivot guard, to λ, the constraint forces and the accelerations.
+//! What the generated module's `band_system` and `solve_tridiagonal` do (`codegen::rust`),
+//! in the library.
 //!
 //! Design note. The rows' path (`RowProgram::evaluate_into`, then `solve::solve_into`)
 //! evaluates every row's C, Ċ, c and J, fills `Rows`, then scales each row by ‖J‖ and the
 //! Jacobi factor, assembles Ã term by term and factors it, with the refinement's residual:
-//! general, and about 860 instructions a row of a chain. Here the formulas of A's entries
-//! are known when the program is made (the derivation assembled them symbolically), so A's
-//! band comes out of the tape as numbers, with no `Rows`, no scaling and no assembly; b is
-//! c + Σᵢ Jᵢ·Fᵢ/mᵢ from the same outputs (the derivation's b reads the force symbols,
-//! where a scene gives forces by expressions, which the program evaluates), and the
-//! accelerations Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ from the same J. The factor is of A itself, not of
-//! the Jacobi-scaled Ã: no square root, no ‖J‖, and as accurate (the analysis is at the
-//! factor). Only what this path can answer as the
-//! general solve would is served; everything else is declined, and the caller takes the
-//! rows' solve ([`BandLambda::solve_or_rows_into`] does both).
+//! general, and about 860 instructions a row of a chain. Here the band's shape is known when
+//! the program is made, so A's band comes out as numbers with no `Rows`, no scaling and no
+//! assembly; b is c + Σᵢ Jᵢ·Fᵢ/mᵢ from the same outputs (the derivation's b reads the force
+//! symbols, where a scene gives forces by expressions, which the program evaluates), and the
+//! accelerations Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ from the same J. A's entries are formed from J, a
+//! few flops a row in Rust, rather than evaluated from their formulas, which an interpreter
+//! pays for op by op (about 70 instructions a row of a 10-link chain's tape, against some 35
+//! here); compiled code evaluates the formulas for less than that, so
+//! [`BandLambda::compile`] adds them to its tape. The factor is of A itself, not of the
+//! Jacobi-scaled Ã: no square root, no ‖J‖, and as accurate (the analysis is at the
+//! factor). Only what this path can answer as the general solve would is served; everything
+//! else is declined, and the caller takes the rows' solve
+//! ([`BandLambda::solve_or_rows_into`] does both).
 //!
-//! Served: point masses only (no rigid body), every row an equality, A tridiagonal in the
-//! rows' listing order (every entry Aₖⱼ with |k − j| ≤ 1, every Aₖₖ a formula), no more
-//! rows than the velocity components they move. Declined at construction (`None`): rigid
-//! bodies, inequality rows, a wider band or a band only a renumbering finds (the rows' solve
-//! renumbers by reverse Cuthill–McKee), a zero diagonal formula.
+//! Served: point masses only (no rigid body), every row an equality that moves some body,
+//! no body moved by two rows further apart than neighbours in the listing order (A = J M⁻¹ Jᵀ
+//! is then tridiagonal in that order), no more rows than the velocity components they move.
+//! Declined at construction (`None`): rigid bodies, inequality rows, a wider band or a band
+//! only a renumbering finds (the rows' solve renumbers by reverse Cuthill–McKee), and a band
+//! only A's formulas show: two rows further apart moving one body, whose Aₖⱼ the derivation
+//! simplified to zero (J's orthogonal by their formulas) but J's numbers need not give as
+//! one. A zero Aₖ,ₖ₊₁ within the band (orthogonal J's of neighbours) is a number like any.
 //!
 //! The guard, per call ([`BandLambda::solve_into`] returns false, `out` untouched):
 //! - the settings' [`Method`] is [`Method::Banded`], or [`Method::Auto`] with more than
 //!   four rows (`Auto` solves fewer densely; the same rule as the rows' chain path);
 //! - every input (the state, the parameters, the masses) is zero or of magnitude within
-//!   [`INPUT_RANGE`], every output of the program is finite, every mass m gives a positive
-//!   normal 1/m (a non-finite number is the general solve's `NonFiniteRow`, an infinite or
-//!   zero mass its `InfiniteMass`);
+//!   [`INPUT_RANGE`], and so is every 1/m (a NaN input is the general solve's `NonFiniteRow`,
+//!   an infinite or zero mass its `InfiniteMass`);
 //! - every Aₖₖ is within [`DIAGONAL_RANGE`] (a zero one is a zero gradient; one outside is
 //!   a state whose numbers the general solve may have to rescale), and every pivot
 //!   dₖ > τ Aₖₖ, τ the settings' `rank_tolerance` (the general solve's relative threshold on
@@ -39,6 +46,14 @@
 //!   same test, so a state it calls singular or redundant is declined);
 //! - every λₖ is zero or a normal number (the general solve's `LambdaOutOfRange` and
 //!   `NonFiniteLambda`), and every acceleration is finite.
+//!
+//! No test looks at the program's outputs as such: one that is not finite (a J of 0/0 at a
+//! zero-length `norm` link, a force over a zero) fails one of these. A non-finite mass fails
+//! 1/m's range; a force component makes its body's acceleration not finite; a J component
+//! makes its Aₖₖ not finite (formed from J) or its body's Σₖ λₖ Jₖᵢ, hence acceleration, not
+//! finite (λₖ finite times ±∞ or NaN, and a sum with one, is not finite); a c makes bₖ, yₖ
+//! and λₖ not finite (1/dₖ is finite and positive); from the formulas, an Aₖₖ fails its
+//! range and an Aₖ₋₁,ₖ makes dₖ −∞ or NaN, failing the pivot test.
 //!
 //! Accuracy: λ here and the scaled solve's are equally accurate, to a small constant (the
 //! analysis is on the factor's function, `BandLambda::solve`, beside the guard;
@@ -61,21 +76,33 @@ use crate::numeric::tape::{Scratch, Tape};
 /// Past every output index the program may have (checked when it is made).
 const ABSENT: u32 = u32::MAX;
 
-/// The magnitudes of the inputs served (zero aside): 2^±240. Products of up to four of
-/// them (within 2^±960: a chain's Aₖₖ = (d·d)(1/mₖ₋₁ + 1/mₖ) is of degree three) neither
-/// overflow nor underflow, so the formulas lose no digits to f64's range but where a
-/// difference cancels (d = rₖ − rₖ₋₁ tiny), which [`DIAGONAL_RANGE`] catches; a scene
+/// The magnitudes of the inputs served (zero aside), and of every 1/m: 2^±240. Products of
+/// up to four of them (within 2^±960) neither overflow nor underflow: a chain's J = d is of
+/// degree one, c = ḋ·ḋ and F = m g of degree two, the terms formed here of degree three
+/// (Jₖᵢ·Jⱼᵢ/mᵢ, A's) and four (Jₖᵢ·Fᵢ/mᵢ, b's), and A's formulas compiled of degree three
+/// (Aₖₖ = (d·d)(1/mₖ₋₁ + 1/mₖ)); so the numbers lose no digits to f64's range but where a
+/// difference cancels (d = rₖ − rₖ₋₁ tiny), which [`DIAGONAL_RANGE`] catches. A scene
 /// outside it (the article's bead at |r| = 1e-150 or 1e155) goes to the rows' solve, which
-/// changes its length unit where it must.
+/// changes its length unit where it must. (The bound on 1/m is the underflow argument's of
+/// [`DIAGONAL_RANGE`]; a mass that is an input in range has its 1/m in range.)
 pub const INPUT_RANGE: std::ops::RangeInclusive<f64> =
     f64::from_bits(0x30f0_0000_0000_0000)..=f64::from_bits(0x4ef0_0000_0000_0000);
 
-/// The diagonal entries served: 2^±480. There the factor's numbers stay normal: a product
-/// Aₖ₋₁,ₖ² ≤ Aₖₖ Aₖ₋₁,ₖ₋₁ (Cauchy–Schwarz, A being a Gram matrix) below 2^960, a pivot
-/// dₖ in (τ Aₖₖ, Aₖₖ] so that 1/dₖ lies in [2^−480, 2^480/τ) (normal for any τ above
-/// 2^−543; the default τ = 1e-10 is about 2^−33), and a product Aₖ₋₁,ₖ² that
-/// underflows is below 2^−1022, negligible against u Aₖₖ ≥ 2^−533: the rounding is the
-/// analysis' alone (`BandLambda::solve`).
+/// The diagonal entries served: 2^±480. There the factor's numbers stay normal, or the
+/// guard declines:
+/// - Aₖ₋₁,ₖ formed from J is at most (1 + γ)(Aₖₖ Aₖ₋₁,ₖ₋₁)^½, γ a few u (each shared body's
+///   term |Jₖ₋₁,ᵢ·Jₖᵢ|/mᵢ is at most the geometric mean of its terms in the two diagonals,
+///   Cauchy–Schwarz, and those terms are non-negative), so Aₖ₋₁,ₖ² stays below 2^961; from
+///   the formulas (compiled) an Aₖ₋₁,ₖ² that overflowed would make dₖ = −∞, which the pivot
+///   test declines. The computed A need not be a Gram matrix exactly: its pivots still lie
+///   in (τ Aₖₖ, Aₖₖ] (dₖ = Aₖₖ minus a non-negative number, rounded), so 1/dₖ lies in
+///   [2^−480, 2^480/τ) (normal for any τ above 2^−543; the default τ = 1e-10 is about 2^−33);
+/// - a product Aₖ₋₁,ₖ² that underflows is below 2^−1022, negligible against u Aₖₖ ≥ 2^−533;
+/// - A's terms formed from J: a component product Jₖᵢ Jⱼᵢ that underflows errs by at most
+///   2^−1075, times 1/mᵢ ≤ 2^240 ([`INPUT_RANGE`], checked): below 2^−834, negligible
+///   against u (Aₖₖ Aⱼⱼ)^½ ≥ 2^−533; a term that overflows makes its Aₖₖ infinite.
+///
+/// So the rounding is the analysis' alone (`BandLambda::solve`).
 pub const DIAGONAL_RANGE: std::ops::RangeInclusive<f64> =
     f64::from_bits(0x21f0_0000_0000_0000)..=f64::from_bits(0x5df0_0000_0000_0000);
 
@@ -361,12 +388,16 @@ impl BandLambda {
         matches!(self.kernel, Kernel::Batched(..))
     }
 
-    /// Compiles the program to machine code ([`Tape::jit`]), the same numbers bit for bit;
-    /// never done unless asked (as [`RowProgram::compile`]). A program evaluated shape by
-    /// shape is lowered again as one tape of every root (from `derivation`, the one it was
-    /// made from), which is compiled: compiled code has no dispatch to share among the
-    /// members of a shape. On failure (a tape too large for compiled code's frame, a host
-    /// without a code generator) the program evaluates as before and the error is returned.
+    /// Compiles the program to machine code ([`Tape::jit`]); never done unless asked (as
+    /// [`RowProgram::compile`]). The program is lowered again as one tape of every root (from
+    /// `derivation`, the one it was made from), with A's band's formulas added
+    /// (`Derivation::a`): compiled code has no dispatch to share among the members of a shape,
+    /// and evaluates the formulas for less than forming A from J costs (callgrind, the
+    /// 10-link chain: 421 instructions a row against 437 from J; 386 against 402 at 100 links).
+    /// λ is then the interpreted one's within rounding, not bit for bit (A's entries round
+    /// otherwise), and as accurate (`BandLambda::solve`). On failure (a tape too large for
+    /// compiled code's frame, a host without a code generator) the program evaluates as
+    /// before and the error is returned.
     #[cfg(feature = "jit")]
     pub fn compile(&mut self, derivation: &Derivation) -> Result<(), crate::numeric::jit::JitError> {
         if self.is_compiled() {
@@ -486,16 +517,31 @@ impl BandLambda {
     /// exactly for powers of two and to the rounding of D otherwise — and for an SPD
     /// tridiagonal |L̂| D̂ |L̂ᵀ| = |L̂ D̂ L̂ᵀ| (no growth, §9.6), so |ΔAᵢⱼ| ≤ γ₃' (Aᵢᵢ Aⱼⱼ)^½:
     /// a perturbation of Ã of order u, whichever matrix was factored. The substitutions add
-    /// the same componentwise backward error, and A's entries and b come from the formulas
-    /// with a few roundings each (relative to (Aᵢᵢ Aⱼⱼ)^½ and to the terms of b), again of
-    /// order u in Ã's terms. Hence the forward error of both is governed by κ₂(Ã) rather than
+    /// the same componentwise backward error, and b comes from c, J, F and 1/m with a few
+    /// roundings a term (relative to the terms of b), again of order u.
+    ///
+    /// A's entries, formed from J (interpreted; compiled code evaluates their formulas, a few
+    /// roundings each, as the rows' solve's assembly does): the computed Aₖₖ = Σᵢ
+    /// (Jₖᵢ·Jₖᵢ)/mᵢ sums non-negative terms, each a dot product of D components and one
+    /// product, so it is within γ_{D+p} relatively, p the row's bodies (Higham §3.1); the
+    /// computed Aₖ₋₁,ₖ = Σ over the shared bodies (Jₖ₋₁,ᵢ·Jₖᵢ)/mᵢ may cancel, and errs by at
+    /// most γ_{D+q} Σᵢ |Jₖ₋₁,ᵢ|·|Jₖᵢ|/mᵢ ≤ γ_{D+q} (Aₖ₋₁,ₖ₋₁ Aₖₖ)^½ (Cauchy–Schwarz), q the
+    /// shared bodies (underflows add less, `DIAGONAL_RANGE`). Both are perturbations of Ã's
+    /// entries of order u, as the formulas' roundings were (where the formula cancels,
+    /// −(dₖ·dₖ₊₁)/m, J's dot product cancels alike). The computed A is a Gram matrix only to
+    /// within them: where they make it indefinite, some pivot is ≤ 0 (Sylvester's law of
+    /// inertia, the factor's own rounding aside) and the guard declines, as the general solve
+    /// calls a matrix whose scaled pivot is below τ = 1e-10 ≫ u singular. Hence the forward
+    /// error of both is governed by κ₂(Ã) rather than
     /// κ₂(A) (Thm 10.6 and the remark after it; van der Sluis: the Jacobi scaling is within
     /// a factor of the rows' count of non-zeros, 3 here, of the best diagonal scaling):
     /// ‖λ̂ − λ‖/‖λ‖ ≤ c n κ₂(Ã) u for a small c, the bound of the scaled solve. Not taking
     /// the scaled solve's step of refinement loses nothing beyond a constant (`chain.rs`'s
     /// `REFINE_BOUND`: a backward stable solve's error is already κ u). The test holds the
     /// two errors against a double-double reference within 16× of each other case by case
-    /// and within 1.5× summed (measured 1.10× and 1.14×).
+    /// and within 1.5× summed; measured, with A formed from J, 1.14× summed on 100 random
+    /// states, 1.10× on 108 ill-conditioned chains (1.01× in geometric mean, from 0.04× to
+    /// 9.9× case by case), as with A's formulas (1.14×, 1.10×).
     fn solve<const D: usize, const FORMULAS: bool>(&mut self, settings: &Settings) -> bool {
         let o = &self.output[..];
         // 1/m and F/m per body: 1/m within the inputs' range.
