@@ -323,7 +323,9 @@ impl BandLambda {
                 }
                 let body = body as u32;
                 let partner = (before..start).find(|&b| entries[b as usize].body == body).unwrap_or(ABSENT);
-                let opens = partner == ABSENT && entries.iter().all(|e| e.body != body);
+                // A body's rows are neighbours (above): its first entry is the one with no
+                // partner.
+                let opens = partner == ABSENT;
                 let (first, stride) = (place[r].0 as u32, place[r].1 as u32);
                 entries.push(EntryAt { first, stride, body, partner, opens });
             }
@@ -346,7 +348,7 @@ impl BandLambda {
             });
         }
         let n = bodies.len();
-        let still = (0..n as u32).filter(|&b| entries.iter().all(|e| e.body != b)).collect();
+        let still = (0..n as u32).filter(|&b| acting[b as usize].is_none()).collect();
         Some(BandLambda {
             kernel,
             #[cfg(feature = "jit")]
