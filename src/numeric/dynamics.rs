@@ -32,7 +32,7 @@ use super::contact::ContactState;
 use super::integrate::{Field, Vectors, copy_slots};
 use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
-use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
+use super::rows::{OneSlot, Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::{Compile, SettingsError};
 use super::single::{
     SingleScaling, correction_single, correction_single_multiplier, solve_one_slot, solve_single_with,
@@ -198,6 +198,9 @@ pub struct Dynamics<'s> {
     solution: Solution,
     /// The one-row solve's last scaling (`numeric::single`), reused at the same J and 1/m.
     single: SingleScaling,
+    /// Where the tapes of a scene of one row on one point mass read q and v and leave their
+    /// numbers (`RowProgram::one_slot`): its evaluations at a step write and read there.
+    one_slot: Option<OneSlot>,
     /// A solve that left a block unsolved ([`Diagnostic::TooLarge`]): the step and its rows.
     /// The next evaluation stops the run with [`SimError::TooLarge`] instead of stepping on
     /// with λ = 0 on them, as if those constraints were not there.
@@ -250,6 +253,7 @@ impl<'s> Dynamics<'s> {
         scratch.hold_constants();
         let orientations = orientations_of(system, &env);
         let steady = program.steady();
+        let one_slot = program.one_slot();
         Dynamics {
             system,
             program,
@@ -273,6 +277,7 @@ impl<'s> Dynamics<'s> {
             correction: Solution::default(),
             solution: Solution::default(),
             single: SingleScaling::default(),
+            one_slot,
             refused: None,
         }
     }
@@ -427,6 +432,9 @@ impl<'s> Dynamics<'s> {
     /// call's own instructions are a visible part of the evaluation.
     #[inline]
     pub fn positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<(), SimError> {
+        if let Some(done) = self.positions_one_slot(t, q, v) {
+            return done;
+        }
         self.evaluations += 1;
         self.set_state(q, v);
         self.program
@@ -445,6 +453,29 @@ impl<'s> Dynamics<'s> {
             return self.report_positions(t, q, v);
         }
         Ok(())
+    }
+
+    /// [`positions`](Dynamics::positions) of a scene of one row on one point mass
+    /// (`RowProgram::positions_one_slot`): the same numbers into the same row, without the
+    /// general evaluation's fill; `None`, with nothing done, for another scene or shape of
+    /// the positions' rows (their first evaluation), or before the run's constants are loaded.
+    #[inline(always)]
+    fn positions_one_slot(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Option<Result<(), SimError>> {
+        let (Some(one), [x], [u], [row]) = (&self.one_slot, q, v, self.position_rows.as_mut_slice()) else {
+            return None;
+        };
+        let [(slot, j)] = row.jacobian.as_mut_slice() else {
+            return None;
+        };
+        let (value, jacobian, finite) = self.program.positions_one_slot(one, x, u, &mut self.scratch)?;
+        self.evaluations += 1;
+        (row.value, row.rate, row.bias, row.inequality) = (value, 0.0, 0.0, one.inequality());
+        (*slot, *j) = (0, jacobian);
+        self.positions_finite = finite;
+        if !finite {
+            return Some(self.report_positions(t, q, v));
+        }
+        Some(Ok(()))
     }
 
     /// [`positions`](Dynamics::positions) at a state where C or J is not finite: the full
@@ -499,6 +530,9 @@ impl<'s> Dynamics<'s> {
     #[inline(always)]
     fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows, checked: bool) -> Result<bool, SimError> {
         self.refusal()?;
+        if checked && self.moved_one_slot(q, v, rows) {
+            return Ok(true);
+        }
         self.evaluations += 1;
         self.set_state(q, v);
         let kept = self
@@ -513,6 +547,39 @@ impl<'s> Dynamics<'s> {
         }
         self.check_moved(rows, t, kept, finite)?;
         Ok(kept)
+    }
+
+    /// [`moved`](Dynamics::moved) of a scene of one row on one point mass whose C and J are
+    /// known to be finite (`RowProgram::motion_one_slot`): the same numbers into `rows`,
+    /// without the general evaluation's fill. Whether it was done and every number written
+    /// is finite; else nothing is counted or written but what the general path, which the
+    /// caller then takes, writes over again (the rows of another shape, a number that is
+    /// not finite, the constants not loaded yet).
+    #[inline(always)]
+    fn moved_one_slot(&mut self, q: &Vectors, v: &Vectors, rows: &mut Rows) -> bool {
+        let (Some(one), [x], [u]) = (&self.one_slot, q, v) else {
+            return false;
+        };
+        let ([row], [w], [velocity], [f]) = (
+            rows.rows.as_mut_slice(),
+            rows.inverse_mass.as_mut_slice(),
+            rows.velocity.as_mut_slice(),
+            rows.force.as_mut_slice(),
+        ) else {
+            return false;
+        };
+        let Some(motion) = self.program.motion_one_slot(one, x, u, &mut self.scratch) else {
+            return false;
+        };
+        if !motion.finite {
+            return false;
+        }
+        self.evaluations += 1;
+        (*w, *velocity, *f) = (motion.inverse_mass, motion.velocity, motion.force);
+        (row.rate, row.bias, row.inequality) = (motion.rate, motion.bias, one.inequality());
+        rows.dim = self.system.dim();
+        rows.axes.clear();
+        true
     }
 
     /// [`moved`](Dynamics::moved)'s check of rows whose C and J were kept unchecked (`kept`:
