@@ -478,6 +478,34 @@ impl<'s> Dynamics<'s> {
         Some(Ok(()))
     }
 
+    /// C/κ and J of a scene of one row on one point mass at the slot's `q` (and `v`) by the
+    /// positions' tape (`RowProgram::positions_one_slot`), with whether they are finite:
+    /// neither counted nor written into [`position_rows`](Dynamics::position_rows) (a
+    /// caller that keeps them counts the evaluation with
+    /// [`count_positions`](Dynamics::count_positions)). `None` for another scene, or before
+    /// the run's constants are loaded.
+    #[inline(always)]
+    pub(crate) fn one_slot_positions(&mut self, q: &[f64; 3], v: &[f64; 3]) -> Option<(f64, [f64; 3], bool)> {
+        let one = self.one_slot.as_ref()?;
+        self.program.positions_one_slot(one, q, v, &mut self.scratch)
+    }
+
+    /// Counts an evaluation of [`one_slot_positions`](Dynamics::one_slot_positions) whose
+    /// numbers a step kept, as [`positions`](Dynamics::positions) counts its own (and
+    /// leaves no positions' rows to be taken).
+    #[inline(always)]
+    pub(crate) fn count_positions(&mut self) {
+        self.evaluations += 1;
+        self.positions_finite = false;
+    }
+
+    /// The one-row solve's kept scaling (`numeric::single`), for a correction computed
+    /// from the numbers in hand (`single::correction_checked`).
+    #[inline(always)]
+    pub(crate) fn single_scaling(&mut self) -> &mut SingleScaling {
+        &mut self.single
+    }
+
     /// [`positions`](Dynamics::positions) at a state where C or J is not finite: the full
     /// rows at the same state, evaluated for the error they report.
     #[inline(never)]

@@ -25,7 +25,7 @@ use super::rows::Rows;
 use super::solve::{CONTACT_TOLERANCE, FactorId};
 use super::stabilize::{
     Inequalities, ShakeHistory, Stabilize, StabilizeError, distance, project_positions, rattle_one_row,
-    shake_positions, update_rates, velocity_step,
+    rattle_one_row_plain, shake_positions, update_rates, velocity_step,
 };
 use super::vector::{dot, length_scale, not_finite_bit, safe_norm};
 use crate::expr::eval::{Env, Value};
@@ -1041,6 +1041,27 @@ impl<'s> Simulation<'s> {
         if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) = (s.integrator, s.stabilize) {
             // One equality row on the only slot: the same step written for that shape.
             if self.one_row && !has_inequalities && !self.three_d {
+                // The plain step first, from the numbers in hand; else the one-row step's stages.
+                let plain = self.dynamics.steady && !self.dynamics.velocity_dependent_forces;
+                if let (true, [q], [v], [half], [a]) =
+                    (plain, self.q.as_mut_slice(), self.v.as_mut_slice(), self.half.as_mut_slice(), self.a.as_slice())
+                    && let Some(made) = rattle_one_row_plain(
+                        &mut self.dynamics,
+                        s.dt,
+                        [q, v, half],
+                        a,
+                        &self.start,
+                        &mut self.end,
+                        tolerance * reach.length,
+                        &mut self.shake,
+                        &mut self.values,
+                    )
+                {
+                    self.one_row_steps += 1;
+                    self.end_made = made;
+                    self.carry(keep);
+                    return Ok(());
+                }
                 let made = rattle_one_row(
                     &mut self.dynamics,
                     t1,

@@ -169,8 +169,17 @@ pub fn correction_single_multiplier(rows: &Rows, bias: f64, scaling: &mut Single
     if !all_finite([velocity[0], velocity[1], velocity[2], bias, w, j[0], j[1], j[2]]) || w < 0.0 {
         return None;
     }
+    correction_checked(j, w, bias, scaling)
+}
+
+/// [`correction_single_multiplier`] of a row whose J `j` on the slot of inverse mass `w`
+/// (and the slot's velocity) the caller has found finite, with w ≥ 0, and `bias` finite:
+/// the same step and multiplier, from the numbers alone (no `Rows`: RATTLE's one-row step,
+/// `stabilize::rattle_one_row`, has them in hand).
+#[inline(always)]
+pub fn correction_checked(j: &[f64; 3], w: f64, bias: f64, scaling: &mut SingleScaling) -> Option<([f64; 3], f64)> {
     let settings = Settings::default();
-    let scaled = scaling.of(&row.jacobian, j, w)?;
+    let scaled = scaling.of(&[(0, *j)], j, w)?;
     let (mu, lambda) = scaled.multiplier(&[0.0; 3], w, bias, settings.rank_tolerance)?;
     // Σ λ J = λ̃ J̃, added to a zero force; a = (0 + Σ λ J) w.
     Some((scaled.jt.map(|x| (0.0 + (0.0 + mu * x)) * w), lambda))
