@@ -38,7 +38,7 @@ use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
 use crate::numeric::program::{Inputs, Program};
 use crate::numeric::tape::{Scratch, Tape};
-use crate::numeric::vector::{all_finite, dot, not_finite_bits};
+use crate::numeric::vector::{all_finite, dot, not_finite_bit, not_finite_bits};
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -1089,6 +1089,13 @@ fn finite_all(parts: &[&[f64]]) -> bool {
     parts.iter().fold(0u64, |all, xs| all | not_finite_bits(xs)) >> 63 == 0
 }
 
+/// Whether every one of `xs` is finite: the OR of their exponent bits
+/// (`vector::not_finite_bit`), over an array of fixed length (no loop over slices).
+#[inline(always)]
+fn all_finite_bits<const N: usize>(xs: [f64; N]) -> bool {
+    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
+}
+
 /// [`RowProgram::evaluate_motion_state_into`]'s fill for one row on one slot whose J, v and
 /// F are `W` (2 or 3) wide (a pendulum, a bead), in place in rows of that shape: the loops'
 /// set-up and the outputs' sweep cost more than the numbers written (about 180 instructions
@@ -1926,8 +1933,9 @@ impl RowProgram {
         let out = &buffers.outputs;
         let value = *out.get(one.value)? * one.inverse_scale;
         let j = one.read(one.jacobian, out)?;
-        // As `positions_one`: C/κ and the components of J written.
-        let finite = finite_all(&[&[value], &j[..one.width]]);
+        // As `positions_one`: C/κ and the components of J written (those past the width
+        // are zeros, finite: tested with them, one OR of fixed length).
+        let finite = all_finite_bits([value, j[0], j[1], j[2]]);
         scratch.finite = finite;
         Some((value, j, finite))
     }
@@ -1957,9 +1965,10 @@ impl RowProgram {
         let (velocity, force) = (one.read(one.velocity, out)?, one.read(one.force, out)?);
         let rate = *out.get(one.rate)? * one.inverse_scale;
         let bias = *out.get(one.bias)?;
-        // As `motion_one`: every number written (the components past the width are zeros).
-        let w = one.width;
-        let finite = finite_all(&[&[inverse_mass, rate, bias], &velocity[..w], &force[..w]]);
+        // As `motion_one`: every number written (the components past the width are zeros,
+        // finite: tested with them).
+        let [u, f] = [velocity, force];
+        let finite = all_finite_bits([inverse_mass, rate, bias, u[0], u[1], u[2], f[0], f[1], f[2]]);
         scratch.finite = finite;
         Some(OneSlotMotion { rate, bias, inverse_mass, velocity, force, finite })
     }

@@ -67,20 +67,28 @@ impl SingleScaling {
     /// not positive and finite); kept for the next call with the same bits.
     #[inline(always)]
     fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
+        self.of_norm(j, w, || row_norm(row))
+    }
+
+    /// [`of`](SingleScaling::of) with the row's norm ‖J‖ (`vector::row_norm` of its J) from
+    /// `norm`, called only when the kept scaling is not J's: a caller that has the norm
+    /// already (SHAKE's residual measured the row's distance at the same J) hands it over.
+    #[inline(always)]
+    fn of_norm(&mut self, j: &[f64; 3], w: f64, norm: impl FnOnce() -> f64) -> Option<&SingleScaling> {
         let key = [j[0].to_bits(), j[1].to_bits(), j[2].to_bits(), w.to_bits()];
         // Compared whole, joined by `&`: one test, not four branches.
         if self.known & (self.key == key) {
             return Some(self);
         }
-        self.scale(row, j, w, key)
+        self.scale(j, w, key, norm())
     }
 
-    /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits).
+    /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits),
+    /// ‖J‖ = `norm`.
     #[inline(never)]
-    fn scale(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64, key: [u64; 4]) -> Option<&SingleScaling> {
+    fn scale(&mut self, j: &[f64; 3], w: f64, key: [u64; 4], norm: f64) -> Option<&SingleScaling> {
         self.known = false;
         // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
-        let norm = row_norm(row);
         if !(norm.is_finite() && norm != 0.0) {
             return None;
         }
@@ -178,8 +186,21 @@ pub fn correction_single_multiplier(rows: &Rows, bias: f64, scaling: &mut Single
 /// `stabilize::rattle_one_row`, has them in hand).
 #[inline(always)]
 pub fn correction_checked(j: &[f64; 3], w: f64, bias: f64, scaling: &mut SingleScaling) -> Option<([f64; 3], f64)> {
+    correction_with_norm(j, w, bias, || row_norm(&[(0, *j)]), scaling)
+}
+
+/// [`correction_checked`] with J's norm from `norm` (`vector::row_norm` of the row's J, the
+/// same number), called only when the kept scaling is not J's.
+#[inline(always)]
+pub fn correction_with_norm(
+    j: &[f64; 3],
+    w: f64,
+    bias: f64,
+    norm: impl FnOnce() -> f64,
+    scaling: &mut SingleScaling,
+) -> Option<([f64; 3], f64)> {
     let settings = Settings::default();
-    let scaled = scaling.of(&[(0, *j)], j, w)?;
+    let scaled = scaling.of_norm(j, w, norm)?;
     let (mu, lambda) = scaled.multiplier(&[0.0; 3], w, bias, settings.rank_tolerance)?;
     // Σ λ J = λ̃ J̃, added to a zero force; a = (0 + Σ λ J) w.
     Some((scaled.jt.map(|x| (0.0 + (0.0 + mu * x)) * w), lambda))

@@ -40,7 +40,7 @@ use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
-use super::single::correction_checked;
+use super::single::correction_with_norm;
 use super::solve::{FactorId, positive_finite, solve, zero_vectors};
 use super::vector::{dot, not_finite_bit, row_norm};
 
@@ -146,7 +146,12 @@ pub fn distance(row: &Row) -> f64 {
 /// [`distance`] of a row's C/κ `value` and J `jacobian`.
 #[inline(always)]
 fn distance_of(value: f64, jacobian: &[(usize, [f64; 3])]) -> f64 {
-    let n = row_norm(jacobian);
+    distance_at_norm(value, row_norm(jacobian))
+}
+
+/// [`distance_of`] with the row's norm ‖J‖ `n` (`vector::row_norm`).
+#[inline(always)]
+fn distance_at_norm(value: f64, n: f64) -> f64 {
     if positive_finite(n) {
         value / n
     } else if value == 0.0 {
@@ -865,7 +870,8 @@ pub fn rattle_one_row_plain(
     let (value, jn, true) = dynamics.one_slot_positions(&x, &u)? else {
         return None;
     };
-    let distance = distance_of(value, &[(0, jn)]);
+    let norm = row_norm(&[(0, jn)]);
+    let distance = distance_at_norm(value, norm);
     if 0.0f64.max(distance.abs()) > bound {
         return None;
     }
@@ -888,7 +894,8 @@ pub fn rattle_one_row_plain(
     {
         return None;
     }
-    let (dv, _) = correction_checked(&jn, w, rate, dynamics.single_scaling())?;
+    // J's scaling (when J is not the kept one's) from the norm the distance took.
+    let (dv, _) = correction_with_norm(&jn, w, rate, || norm, dynamics.single_scaling())?;
     for d in 0..3 {
         let sum = y[d] + dv[d];
         y[d] = if dv[d].is_finite() { sum } else { y[d] };
