@@ -552,6 +552,16 @@ impl<'s> Dynamics<'s> {
         self.moved(t, q, v, rows, true)
     }
 
+    /// [`rows_moved_into`](Dynamics::rows_moved_into) of a scene of one row on one point
+    /// mass, in line where the run's start calls it (`moved_one_slot`): whether it was done,
+    /// C and J kept and every number written finite. Else nothing is counted and the caller
+    /// takes [`rows_moved_into`](Dynamics::rows_moved_into), which says why (an error, a
+    /// number not finite, rows of another shape).
+    #[inline(always)]
+    pub(crate) fn rows_moved_one_slot(&mut self, q: &Vectors, v: &Vectors, rows: &mut Rows) -> bool {
+        self.refused.is_none() && self.moved_one_slot(q, v, rows)
+    }
+
     /// [`rows_moved_into`](Dynamics::rows_moved_into); `checked`: C and J are known to be
     /// finite. In line (always: the run loop's start calls it once a step, and its call
     /// was a fifth of its own cost), as [`positions`](Dynamics::positions), its checks apart.

@@ -1319,6 +1319,17 @@ impl Subprogram {
         }
     }
 
+    /// [`run_loaded`](Subprogram::run_loaded) with the compiled tape's call in line (the
+    /// one-slot evaluations': [`run`](Subprogram::run)'s own call and dispatch were a tenth
+    /// of such an evaluation).
+    #[inline(always)]
+    fn run_one(&self, scratch: &mut SubScratch) {
+        match &self.kernel {
+            Kernel::Tape(_, Some(compiled)) => run_compiled(compiled, &scratch.inputs, &mut scratch.outputs),
+            _ => self.run_loaded(scratch),
+        }
+    }
+
     /// Every root from the inputs loaded in `scratch` into its outputs (laid out as `place`
     /// says).
     #[inline]
@@ -1929,7 +1940,7 @@ impl RowProgram {
             return None;
         }
         one.load(q, v, [one.positions_q, one.positions_v], &mut buffers.inputs)?;
-        self.positions.run_loaded(buffers);
+        self.positions.run_one(buffers);
         let out = &buffers.outputs;
         let value = *out.get(one.value)? * one.inverse_scale;
         let j = one.read(one.jacobian, out)?;
@@ -1959,7 +1970,7 @@ impl RowProgram {
             return None;
         }
         one.load(q, v, [one.motion_q, one.motion_v], &mut buffers.inputs)?;
-        m.run_loaded(buffers);
+        m.run_one(buffers);
         let out = &buffers.outputs;
         let inverse_mass = 1.0 / *out.get(one.mass)?;
         let (velocity, force) = (one.read(one.velocity, out)?, one.read(one.force, out)?);

@@ -843,7 +843,9 @@ impl<'s> Simulation<'s> {
             let mut kept = false;
             if std::mem::take(&mut self.carried) {
                 std::mem::swap(&mut self.start, &mut self.end);
-                kept = self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)?;
+                // One row on one point mass: its motion's numbers in line.
+                kept = (self.one_row && self.dynamics.rows_moved_one_slot(&self.q, &self.v, &mut self.start))
+                    || self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)?;
                 if kept {
                     self.start_made = end_made;
                 }
