@@ -1227,11 +1227,14 @@ impl OneSlot {
             if at == usize::MAX {
                 continue;
             }
-            // Two or three components: copies of a known length, not a call.
+            // Two or three components: stores of arrays of a known length (a slice's copy
+            // was a call of `memcpy`).
             if self.width == 3 {
-                inputs.get_mut(at..at + 3)?.copy_from_slice(x);
+                let to: &mut [f64; 3] = inputs.get_mut(at..at + 3)?.try_into().ok()?;
+                *to = *x;
             } else {
-                inputs.get_mut(at..at + 2)?.copy_from_slice(&x[..2]);
+                let to: &mut [f64; 2] = inputs.get_mut(at..at + 2)?.try_into().ok()?;
+                *to = [x[0], x[1]];
             }
         }
         Some(())
