@@ -35,7 +35,8 @@ use super::rotation::{dexp_inv, fold, kick, rebase, turned};
 use super::rows::{OneSlot, Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::{Compile, SettingsError};
 use super::single::{
-    SingleScaling, correction_single, correction_single_multiplier, solve_one_slot, solve_single_with,
+    SingleScaling, correction_single, correction_single_multiplier, solve_one_slot, solve_one_slot_unscaled,
+    solve_single_with,
 };
 use super::solve::{Answer, Diagnostic, FactorId, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -804,6 +805,20 @@ impl<'s> Dynamics<'s> {
             return None;
         }
         let a = solve_one_slot(rows, &self.settings, &mut self.single, &mut self.solution, true)?;
+        self.made = None;
+        Some(a)
+    }
+
+    /// [`solve_one_slot`](Dynamics::solve_one_slot) without the scaling
+    /// (`single::solve_one_slot_unscaled`, under its guard), for RATTLE's one-row runs:
+    /// `None`, with nothing done, where it declines (the caller then takes
+    /// `solve_one_slot`, which answers as ever).
+    #[inline(always)]
+    pub(crate) fn solve_one_slot_unscaled(&mut self, rows: &Rows) -> Option<[f64; 3]> {
+        if self.baumgarte.is_some() {
+            return None;
+        }
+        let a = solve_one_slot_unscaled(rows, &self.settings, &mut self.solution)?;
         self.made = None;
         Some(a)
     }

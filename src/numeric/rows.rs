@@ -1173,7 +1173,7 @@ fn entries_finite(row: &Row) -> bool {
 /// pendulum, a bead: a point mass, its C reading no t) read the slot's q and v and leave
 /// the row's and the slot's numbers: found once ([`RowProgram::one_slot`]), so an
 /// evaluation at a step of such a scene writes two or four inputs and reads its outputs at
-/// these places, without the general fill's walk down its [`Places`] and tests of the
+/// these places, without the general fill's walk down its `Places` and tests of the
 /// shape (about a hundred instructions of an evaluation, callgrind). The numbers are the
 /// fills' bit for bit: the same tapes, the same inputs, the same outputs read, the same
 /// products.
@@ -1863,7 +1863,7 @@ impl RowProgram {
 
     /// The places of a program of one row with one J entry on one slot, a point mass whose
     /// tapes of the positions and the motion read only its q and v from the state (no t,
-    /// no angle: [`StateCopies`]), every root 2 or 3 wide as the dimension: what
+    /// no angle: `StateCopies`), every root 2 or 3 wide as the dimension: what
     /// [`positions_one_slot`](RowProgram::positions_one_slot) and
     /// [`motion_one_slot`](RowProgram::motion_one_slot) read. `None` for any other program.
     pub fn one_slot(&self) -> Option<OneSlot> {

@@ -607,6 +607,9 @@ pub struct Simulation<'s> {
     /// declines rows of another shape. And how many steps took the one-row step.
     one_row: bool,
     one_row_steps: u64,
+    /// Whether those runs' solves go without the scaling where its guard allows
+    /// (`single::unscaled_multiplier`; [`Simulation::set_unscaled`]).
+    unscaled: bool,
 }
 
 impl<'s> Simulation<'s> {
@@ -651,6 +654,7 @@ impl<'s> Simulation<'s> {
             compiled,
             one_row: n == 1 && one_constraint,
             one_row_steps: 0,
+            unscaled: true,
         })
     }
 
@@ -660,6 +664,16 @@ impl<'s> Simulation<'s> {
     /// for bit as the general step, which `false` forces (for tests that compare the two).
     pub fn set_one_row(&mut self, on: bool) {
         self.one_row = on && self.q.len() == 1 && self.dynamics.system().constraints.len() == 1;
+    }
+
+    /// Whether RATTLE's one-row runs (the plain step, `stabilize::rattle_one_row_plain`, and
+    /// each step's start before it) solve their one row without the scaling where the
+    /// magnitudes allow (`single::unscaled_multiplier`: one division where the scaled solve
+    /// chains three square roots and seven divisions; the same numbers to a few roundings), as
+    /// they do unless told otherwise; `false` keeps the scaled solve, whose numbers are the
+    /// general step's bit for bit (for tests that compare the two).
+    pub fn set_unscaled(&mut self, on: bool) {
+        self.unscaled = on;
     }
 
     /// How many steps of the runs so far took the one-row step ([`set_one_row`](Simulation::set_one_row)).
@@ -829,6 +843,15 @@ impl<'s> Simulation<'s> {
         // Step n's time t₀ + n dt, computed once a step: the last step's t1 (the same
         // formula), and at the start as at n = 0.
         let mut t = self.t0 + 0.0 * s.dt;
+        // RATTLE's step for one equality row on the only slot of a steady scene (the plain
+        // step's run: `stabilize::rattle_one_row_plain`), whose solves go without the scaling.
+        let plain_rattle = matches!((s.integrator, s.stabilize), (Integrator::Verlet, Stabilize::Projection { .. }))
+            && self.one_row
+            && self.unscaled
+            && !self.has_inequalities
+            && !self.three_d
+            && self.dynamics.steady
+            && !self.dynamics.velocity_dependent_forces;
         for n in 0..=s.steps {
             self.dynamics.step = n;
             // 3D rigid bodies: the rotation vectors of the last step into the orientations.
@@ -893,7 +916,15 @@ impl<'s> Simulation<'s> {
                 balance.work_scale = work_scale(&rows.force, system.bodies.len(), length);
             }
             // One row on the only slot: its acceleration in closed form, else the solve's.
-            let one_slot = if self.one_row { self.dynamics.solve_one_slot(&mut self.start) } else { None };
+            let one_slot = match (self.one_row, plain_rattle) {
+                // RATTLE's one-row run: without the scaling where the guard allows.
+                (true, true) => self
+                    .dynamics
+                    .solve_one_slot_unscaled(&self.start)
+                    .or_else(|| self.dynamics.solve_one_slot(&mut self.start)),
+                (true, false) => self.dynamics.solve_one_slot(&mut self.start),
+                _ => None,
+            };
             if one_slot.is_none() {
                 self.dynamics.solve_known(&mut self.start, self.start_made);
             }
@@ -1057,6 +1088,7 @@ impl<'s> Simulation<'s> {
                         tolerance * reach.length,
                         &mut self.shake,
                         &mut self.values,
+                        self.unscaled,
                     )
                 {
                     self.one_row_steps += 1;

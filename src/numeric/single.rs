@@ -323,6 +323,17 @@ pub fn solve_one_slot(
     let scaled = scaling.of(&row.jacobian, j, w)?;
     let jt = scaled.jt;
     let (mu, lambda) = scaled.multiplier(f, w, row.bias, settings.rank_tolerance)?;
+    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w.
+    let fc = [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]];
+    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    write_one_slot(out, lambda, fc, a);
+    Some(a)
+}
+
+/// [`solve_one_slot`]'s answer into `out`: λ, the constraint force `fc` and the
+/// acceleration `a` of the one slot, in place when `out` has that shape already.
+#[inline(always)]
+fn write_one_slot(out: &mut Solution, lambda: f64, fc: [f64; 3], a: [f64; 3]) {
     match (out.lambda.as_mut_slice(), out.active.as_mut_slice(), out.contacts.as_mut_slice()) {
         ([l], [active], [contact]) => (*l, *active, *contact) = (lambda, true, None),
         _ => {
@@ -334,9 +345,6 @@ pub fn solve_one_slot(
             out.contacts.push(None);
         }
     }
-    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w.
-    let fc = [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]];
-    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
     match (out.constraint_force.as_mut_slice(), out.acceleration.as_mut_slice()) {
         ([fc_out], [a_out]) => (*fc_out, *a_out) = (fc, a),
         _ => {
@@ -350,7 +358,72 @@ pub fn solve_one_slot(
         out.diagnostics.clear();
     }
     out.status = Status::Solved;
+}
+
+/// The magnitudes within which a one-row solve is taken without the scaling
+/// ([`unscaled_multiplier`]): |J|², 1/m, the right-hand side and μ each within 10^±100, so
+/// no product of the formula leaves the normal range and each is a few roundings of its
+/// value, as the scaled solve's are (the scaling serves the general solve's range and its
+/// many rows, not the accuracy of one).
+const UNSCALED: std::ops::RangeInclusive<f64> = 1e-100..=1e100;
+
+/// μ of one row on one slot without the scaling, μ = −(J·F w + c)/(J·J w): one division
+/// where [`solve_single_with`] takes three square roots and seven divisions in one chain
+/// (the scaling, the two substitutions, the refinement's two, the unscaling) — the same
+/// number to a few roundings (a 1 × 1 system: the scaled solve's λ is this quotient, each
+/// of its steps rounded). `None` outside the guard: J·J, w or |J·F w + c| outside
+/// 10^±100 (so also a zero J, an infinite or zero mass), μ neither zero nor a normal number
+/// within 10^±100; the caller then takes the scaled solve, which answers as ever. RATTLE's
+/// one-row step only (`stabilize::rattle_one_row_plain`, the run's start before it): its
+/// step is a chain of the two solves, and their roots and divisions were most of its time.
+#[inline(always)]
+pub fn unscaled_multiplier(j: &[f64; 3], w: f64, f: &[f64; 3], bias: f64) -> Option<f64> {
+    let square = dot(j, j);
+    let b = dot(j, f) * w + bias;
+    if !(UNSCALED.contains(&square) && UNSCALED.contains(&w) && b.abs() <= *UNSCALED.end()) {
+        return None;
+    }
+    let mu = -b / (square * w);
+    (mu == 0.0 || UNSCALED.contains(&mu.abs())).then_some(mu)
+}
+
+/// [`solve_one_slot`] without the scaling, for RATTLE's one-row runs: λ =
+/// [`unscaled_multiplier`], the constraint force λJ and a = (F + λJ) w, written as
+/// [`solve_one_slot`] writes its answer; `None`, with nothing written, where that solve
+/// would decline the rows or the guard does (every number finite is the caller's, as for
+/// `solve_one_slot` with `finite`).
+#[inline(always)]
+pub fn solve_one_slot_unscaled(rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<[f64; 3]> {
+    let ([row], [w], [_], [f]) =
+        (rows.rows.as_slice(), rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice())
+    else {
+        return None;
+    };
+    let [(0, j)] = row.jacobian.as_slice() else {
+        return None;
+    };
+    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) || *w < 0.0 {
+        return None;
+    }
+    let w = *w;
+    let lambda = unscaled_multiplier(j, w, f, row.bias)?;
+    let fc = [0.0 + lambda * j[0], 0.0 + lambda * j[1], 0.0 + lambda * j[2]];
+    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    if !all_finite([a[0], a[1], a[2], fc[0], fc[1], fc[2]]) {
+        return None;
+    }
+    write_one_slot(out, lambda, fc, a);
     Some(a)
+}
+
+/// The velocity projection of one row on one slot without the scaling ([`correction_checked`]'s
+/// step: Δv = J μ w with μ = −`bias`/(J·J w), [`unscaled_multiplier`] with the forces zero),
+/// every component finite; `None` outside the guard (the caller then takes the scaled one).
+#[inline(always)]
+pub fn correction_unscaled(j: &[f64; 3], w: f64, bias: f64) -> Option<[f64; 3]> {
+    let mu = unscaled_multiplier(j, w, &[0.0; 3], bias)?;
+    let dv = [(mu * j[0]) * w, (mu * j[1]) * w, (mu * j[2]) * w];
+    all_finite(dv).then_some(dv)
 }
 
 /// [`solve_single_with`]'s forces and accelerations over every slot: Σ λ J = λ̃ J̃ on the row's

@@ -40,7 +40,7 @@ use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
-use super::single::correction_with_norm;
+use super::single::{correction_unscaled, correction_with_norm};
 use super::solve::{FactorId, positive_finite, solve, zero_vectors};
 use super::vector::{dot, not_finite_bit, row_norm};
 
@@ -805,7 +805,9 @@ pub fn rattle_one_row(
 /// closed form answers —, computed from the numbers in hand into locals and written only
 /// once the step is known to be plain: the same operations in the same order, so the same
 /// numbers bit for bit, without the stages' tests of the rows' shape, their `Rows` and their
-/// calls (the positions' tape at the fixed places of `Dynamics::one_slot_positions`).
+/// calls (the positions' tape at the fixed places of `Dynamics::one_slot_positions`) — but
+/// for the velocity projection with `unscaled`: without the scaling where its guard allows
+/// (`single::correction_unscaled`, the same Δv to a few roundings), else the scaled one.
 ///
 /// Returns `None`, with nothing written (the tapes' scratch and the one-row solve's kept
 /// scaling aside, which hold no state of the run), where the step is not plain or the rows
@@ -826,6 +828,7 @@ pub fn rattle_one_row_plain(
     bound: f64,
     history: &mut ShakeHistory,
     values: &mut Vec<f64>,
+    unscaled: bool,
 ) -> Option<Option<FactorId>> {
     // The shapes the step writes in place, and the history's room for one row after a
     // converged step (a prediction to start from).
@@ -894,8 +897,12 @@ pub fn rattle_one_row_plain(
     {
         return None;
     }
-    // J's scaling (when J is not the kept one's) from the norm the distance took.
-    let (dv, _) = correction_with_norm(&jn, w, rate, || norm, dynamics.single_scaling())?;
+    // Without the scaling where the magnitudes allow (`single::correction_unscaled`), else
+    // with J's scaling (when J is not the kept one's) from the norm the distance took.
+    let dv = match unscaled.then(|| correction_unscaled(&jn, w, rate)).flatten() {
+        Some(dv) => dv,
+        None => correction_with_norm(&jn, w, rate, || norm, dynamics.single_scaling())?.0,
+    };
     for d in 0..3 {
         let sum = y[d] + dv[d];
         y[d] = if dv[d].is_finite() { sum } else { y[d] };
