@@ -433,9 +433,6 @@ impl<'s> Dynamics<'s> {
     /// call's own instructions are a visible part of the evaluation.
     #[inline]
     pub fn positions(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Result<(), SimError> {
-        if let Some(done) = self.positions_one_slot(t, q, v) {
-            return done;
-        }
         self.evaluations += 1;
         self.set_state(q, v);
         self.program
@@ -454,29 +451,6 @@ impl<'s> Dynamics<'s> {
             return self.report_positions(t, q, v);
         }
         Ok(())
-    }
-
-    /// [`positions`](Dynamics::positions) of a scene of one row on one point mass
-    /// (`RowProgram::positions_one_slot`): the same numbers into the same row, without the
-    /// general evaluation's fill; `None`, with nothing done, for another scene or shape of
-    /// the positions' rows (their first evaluation), or before the run's constants are loaded.
-    #[inline(always)]
-    fn positions_one_slot(&mut self, t: f64, q: &Vectors, v: &Vectors) -> Option<Result<(), SimError>> {
-        let (Some(one), [x], [u], [row]) = (&self.one_slot, q, v, self.position_rows.as_mut_slice()) else {
-            return None;
-        };
-        let [(slot, j)] = row.jacobian.as_mut_slice() else {
-            return None;
-        };
-        let (value, jacobian, finite) = self.program.positions_one_slot(one, x, u, &mut self.scratch)?;
-        self.evaluations += 1;
-        (row.value, row.rate, row.bias, row.inequality) = (value, 0.0, 0.0, one.inequality());
-        (*slot, *j) = (0, jacobian);
-        self.positions_finite = finite;
-        if !finite {
-            return Some(self.report_positions(t, q, v));
-        }
-        Some(Ok(()))
     }
 
     /// C/κ and J of a scene of one row on one point mass at the slot's `q` (and `v`) by the
@@ -569,9 +543,6 @@ impl<'s> Dynamics<'s> {
     #[inline(always)]
     fn moved(&mut self, t: f64, q: &Vectors, v: &Vectors, rows: &mut Rows, checked: bool) -> Result<bool, SimError> {
         self.refusal()?;
-        if checked && self.moved_one_slot(q, v, rows) {
-            return Ok(true);
-        }
         self.evaluations += 1;
         self.set_state(q, v);
         let kept = self

@@ -496,7 +496,9 @@ impl Subprogram {
     }
 
     /// Every root from the loaded `inputs` into `outputs` (laid out as `place` says): by
-    /// the compiled tape when there is one, else by the interpreter.
+    /// the compiled tape when there is one, else by the interpreter. In line (its callers
+    /// are few, and a call of it was a visible part of a small evaluation).
+    #[inline(always)]
     fn run(&self, inputs: &[f64], tape: &mut Scratch, batched: Option<&mut BatchedScratch>, outputs: &mut [f64]) {
         match (&self.kernel, batched) {
             (Kernel::Batched(b, _), Some(buffers)) => b.eval(inputs, buffers, outputs),
