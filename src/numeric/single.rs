@@ -29,6 +29,13 @@
 //! same multiplier ([`SingleScaling`]'s μ̃ and λ, one function for both) without writing a
 //! `Solution` or the rows.
 //!
+//! RATTLE's one-row runs (`stabilize::rattle_one_row_plain` and each step's start before it)
+//! take the row without the scaling where a guard allows ([`unscaled_multiplier`]: μ =
+//! −(J·F w + c)/(J·J w), one division where the scaled solve chains three square roots and
+//! seven divisions, the step's latency): the same number to a few roundings, not bit for
+//! bit; outside the guard (magnitudes past 10^±100, a zero gradient, a zero or infinite
+//! mass) the scaled solve answers, with its diagnostics.
+//!
 //! Not here: more than one row (the general solve), contacts, the decision of when to call
 //! it (`Dynamics::solve`, `Dynamics::correct`, `Dynamics::correct_single`: at every solve,
 //! as the check is cheaper than any bookkeeping it saves).
