@@ -766,14 +766,27 @@ fn a_run_that_measures_only_its_checks_has_the_same_trajectory_and_says_what_it_
 }
 
 /// A run of `s` from `env` under `settings`, with the one-row step allowed or not
-/// (`Simulation::set_one_row`): every frame's bits, the summary (its wall time zeroed) or the
-/// stop, and how many steps took the one-row step. The forces' velocity dependence is
-/// found as `Scenario::simulate` finds it.
+/// (`Simulation::set_one_row`) and its solves scaled (`Simulation::set_unscaled(false)`):
+/// every frame's bits, the summary (its wall time zeroed) or the stop, and how many steps
+/// took the one-row step. The forces' velocity dependence is found as `Scenario::simulate`
+/// finds it.
 fn run_one_row(
     s: &lagrange::scenario::Scenario,
     env: &lagrange::expr::eval::Env,
     settings: lagrange::numeric::simulate::Settings,
     one_row: bool,
+) -> (Vec<Vec<u64>>, Result<lagrange::numeric::simulate::Summary, String>, u64) {
+    run_one_row_solved(s, env, settings, one_row, false)
+}
+
+/// [`run_one_row`] with the one-row runs' solves without the scaling or not (`unscaled`:
+/// `Simulation::set_unscaled`, as a run takes them unless told otherwise).
+fn run_one_row_solved(
+    s: &lagrange::scenario::Scenario,
+    env: &lagrange::expr::eval::Env,
+    settings: lagrange::numeric::simulate::Settings,
+    one_row: bool,
+    unscaled: bool,
 ) -> (Vec<Vec<u64>>, Result<lagrange::numeric::simulate::Summary, String>, u64) {
     use lagrange::expr::Role;
     use lagrange::numeric::dynamics::Dynamics;
@@ -789,6 +802,7 @@ fn run_one_row(
         Err(error) => return (Vec::new(), Err(format!("{error:?}")), 0),
     };
     simulation.set_one_row(one_row);
+    simulation.set_unscaled(unscaled);
     let mut frames = Vec::new();
     let result = simulation.run(&mut |f| {
         frames.push(frame_bits(f));
@@ -803,8 +817,9 @@ fn run_one_row(
 
 /// One equality row on the scene's only slot (the pendulum, the beads on a wire, a circle,
 /// a sphere, a parabola, an ellipse, a cone): RATTLE takes the step written for that shape
-/// (`stabilize::rattle_one_row`) and every run the start's solve in closed form
-/// (`Dynamics::solve_one_slot`), with the general step's numbers bit for bit — every frame
+/// (`stabilize::rattle_one_row`, and its plain way, `rattle_one_row_plain`) and every run
+/// the start's solve in closed form (`Dynamics::solve_one_slot`), with the scaled solves
+/// (`Simulation::set_unscaled(false)`) the general step's numbers bit for bit — every frame
 /// (state, C, Ċ, J, λ), the summary, and any stop with its error — under Verlet with
 /// projection, RK4 with Baumgarte and Euler without stabilisation, compiled or not, and from
 /// hostile parameters (a zero, NaN or infinite rod length, an infinite or zero mass, a NaN
@@ -877,4 +892,196 @@ fn one_row_scenes_take_the_one_row_step_with_the_general_steps_numbers() {
         }
     }
     assert!(stopped >= 6, "hostile parameters stop runs: {stopped}");
+}
+
+/// The numbers of a frame whose bits [`frame_bits`] lists, as numbers (the step, time and
+/// slots' indices among them, which must agree exactly).
+fn frame_numbers(bits: &[u64]) -> Vec<f64> {
+    bits.iter().map(|&b| f64::from_bits(b)).collect()
+}
+
+/// The largest difference between two runs' frames ([`frame_bits`]) of one row on one slot,
+/// each number against its own size, but C and Ċ, which on the surface are rounding of the
+/// sizes they are made of: asserts at most 1e-11 for the state, J and λ, and for C and Ċ
+/// the largest of each over the run within 4× of the general run's (the drift the same);
+/// the same steps, and frames that differ only in their numbers.
+fn frames_close(frames: &[Vec<u64>], general_frames: &[Vec<u64>], at: &str) -> f64 {
+    assert_eq!(frames.len(), general_frames.len(), "{at}: the frames");
+    let mut worst = 0.0f64;
+    // The largest |C| and |Ċ| of each run.
+    let (mut drift, mut general_drift) = ([0.0f64; 2], [0.0f64; 2]);
+    for (frame, general) in frames.iter().zip(general_frames) {
+        assert_eq!((frame.len(), frame[0]), (general.len(), general[0]), "{at}: the frame's shape");
+        if frame == general {
+            continue;
+        }
+        // One row on one slot: t, q, v, then C, Ċ, the slot's index and J, then λ.
+        let (x, y) = (frame_numbers(frame), frame_numbers(general));
+        assert_eq!((frame.len(), frame[10], general[10]), (15, 0, 0), "{at}: one row on one slot");
+        let size = |r: std::ops::Range<usize>| y[r].iter().fold(1e-300f64, |m, v| m.max(v.abs()));
+        let (q, v, j, lambda) = (size(2..5), size(5..8), size(11..14), size(14..15));
+        let scales = [1.0, 1.0, q, q, q, v, v, v, 0.0, 0.0, 1.0, j, j, j, lambda];
+        for d in 0..2 {
+            drift[d] = drift[d].max(x[8 + d].abs());
+            general_drift[d] = general_drift[d].max(y[8 + d].abs());
+        }
+        for (k, ((a, b), scale)) in x.iter().zip(&y).zip(scales).enumerate().skip(1) {
+            if scale == 0.0 {
+                continue;
+            }
+            let off = (a - b).abs() / scale;
+            let step = frame[0];
+            assert!(off <= 1e-11 || a.to_bits() == b.to_bits(), "{at}: step {step}, number {k}: {a:e} against {b:e}");
+            worst = worst.max(if off.is_nan() { 0.0 } else { off });
+        }
+    }
+    for d in 0..2 {
+        let (a, b) = (drift[d], general_drift[d]);
+        assert!(
+            a <= 4.0 * b && b <= 4.0 * a || a == b,
+            "{at}: the largest |C| and |Ċ|: {drift:?} against {general_drift:?}"
+        );
+    }
+    worst
+}
+
+/// RATTLE's one-row runs solve their row without the scaling where the magnitudes allow
+/// (`single::unscaled_multiplier`, as `simulate` runs them): one division where the scaled
+/// solve chains three square roots and seven divisions. Against the general step (every
+/// solve scaled): the same frames to a few roundings a step — every number of every frame
+/// (state, C, Ċ, J, λ) within 1e-11 of its own size (C and Ċ: ‖J‖ times |q| and |v|) over
+/// 300 steps, the same steps
+/// and the same stops —, every step of the one-row scenes taken the plain way; and from the
+/// hostile parameters of [`one_row_scenes_take_the_one_row_step_with_the_general_steps_numbers`]:
+/// those outside the guard (infinite and zero masses, g = 1e308 or ∞, a NaN or infinite
+/// length) the general step's numbers bit for bit, stops and errors included; lengths of
+/// 1e±300, which the run's unit brings inside it, the same steps or stop.
+#[test]
+fn one_row_rattle_without_the_scaling_keeps_the_general_steps_numbers_to_rounding() {
+    use lagrange::expr::eval::Value;
+    use lagrange::numeric::simulate::Compile;
+    let mut worst = 0.0f64;
+    let mut taken = 0;
+    for (path, s) in common::scenarios(&["constraints", "constraints/hard"]) {
+        for compile in [Compile::Never, Compile::Always] {
+            let mut settings = settings(&s, Integrator::Verlet, Stabilize::PROJECTION, s.scene.dt, 300);
+            settings.compile = compile;
+            let at = format!("{} {compile:?}", path.display());
+            let (frames, result, one_row_steps) = run_one_row_solved(&s, &s.env, settings, true, true);
+            let (general_frames, general, _) = run_one_row_solved(&s, &s.env, settings, false, false);
+            worst = worst.max(frames_close(&frames, &general_frames, &at));
+            match (&result, &general) {
+                (Ok(a), Ok(b)) => {
+                    assert_eq!(a.steps, b.steps, "{at}: the steps");
+                    let states = |s: &lagrange::numeric::simulate::Summary| {
+                        s.final_position.iter().chain(&s.final_velocity).flatten().copied().collect::<Vec<f64>>()
+                    };
+                    let (x, y) = (states(a), states(b));
+                    let scale = y.iter().fold(1e-300f64, |m, v| m.max(v.abs()));
+                    assert!(x.iter().zip(&y).all(|(a, b)| (a - b).abs() <= 1e-9 * scale), "{at}: {x:?} {y:?}");
+                }
+                (a, b) => assert_eq!(a.is_err(), b.is_err(), "{at}: the stop: {a:?} against {b:?}"),
+            }
+            if one_row_steps > 0 {
+                assert_eq!(Some(one_row_steps), result.as_ref().ok().map(|r| r.steps), "{at}: every step");
+                taken += 1;
+            }
+        }
+    }
+    assert!(taken >= 20, "one-row scenes compiled and not: {taken}");
+    // (6e-14 at worst, the hard/ scenes' C and Ċ on their surfaces.)
+    assert!(worst < 1e-11, "largest difference {worst:e}");
+    // Outside the guard: the general step's numbers and stops, bit for bit (`exact`); the
+    // lengths the run's unit brings inside it, to rounding.
+    let s = scenario("constraints/pendulum.toml");
+    let symbol = |name| s.system.graph.symbol_named(name).expect(name);
+    let hostile = [
+        ("l", Value::Scalar(f64::NAN), true),
+        ("l", Value::Scalar(f64::INFINITY), true),
+        ("l", Value::Scalar(1e300), false),
+        ("l", Value::Scalar(1e-300), false),
+        ("m", Value::Scalar(f64::INFINITY), true),
+        ("m", Value::Scalar(0.0), true),
+        ("g", Value::Vector([0.0, f64::INFINITY, 0.0]), true),
+        ("g", Value::Vector([0.0, 1e308, 0.0]), true),
+    ];
+    for (name, value, exact) in hostile {
+        let mut env = s.env.clone();
+        env.set(symbol(name), value);
+        for steps in [1, 50] {
+            let settings = settings(&s, Integrator::Verlet, Stabilize::PROJECTION, s.scene.dt, steps);
+            let at = format!("pendulum with {name} = {value:?}, {steps} steps");
+            let (frames, result, _) = run_one_row_solved(&s, &env, settings, true, true);
+            let (general_frames, general, _) = run_one_row_solved(&s, &env, settings, false, false);
+            if exact {
+                assert_eq!(frames, general_frames, "{at}: the frames");
+                assert_eq!(result, general, "{at}: the summary or the stop");
+            } else {
+                // A rod of 1e±300 swings 1e±150 times a step of the run: its frames are
+                // rounding amplified either way; the run goes on or stops the same.
+                assert_eq!(frames.len(), general_frames.len(), "{at}: the frames");
+                assert_eq!(result.map(|r| r.steps), general.map(|r| r.steps), "{at}: the steps or the stop");
+            }
+        }
+    }
+}
+
+/// The one-row solve without the scaling (`single::unscaled_multiplier`, what RATTLE's
+/// one-row runs take) against the scaled one (`single::solve_single`, the general solve's
+/// numbers): random rows with J, 1/m, F and c over magnitudes 10^±60 — λ within 8 roundings
+/// of the scaled λ (relative to the terms of its right-hand side, where they cancel) wherever
+/// the guard takes the row, and the guard declining wherever |J|², 1/m or the right-hand
+/// side lies outside 10^±100 (a zero gradient, a zero or infinite mass among them).
+#[test]
+fn one_row_solve_without_the_scaling_is_the_scaled_solves_to_rounding() {
+    use lagrange::numeric::rows::{Row, Rows};
+    use lagrange::numeric::single::{solve_single, unscaled_multiplier};
+    use lagrange::numeric::solve::{Settings, Solution};
+    let mut rng = common::Rng::new(38);
+    let settings = Settings::default();
+    let (mut taken, mut declined, mut worst) = (0, 0, 0.0f64);
+    for case in 0..20_000 {
+        let magnitude = |rng: &mut common::Rng, spread: f64| 10f64.powf(rng.uniform(-spread, spread));
+        let spread = if case % 4 == 0 { 130.0 } else { 60.0 };
+        let size = magnitude(&mut rng, spread);
+        let j = rng.normal_vector(3, size);
+        let w = if case % 97 == 0 { [0.0, f64::INFINITY][case % 2] } else { magnitude(&mut rng, spread) };
+        let size = magnitude(&mut rng, spread);
+        let f = rng.normal_vector(3, size);
+        let c = rng.normal() * magnitude(&mut rng, spread);
+        let rows = Rows {
+            dim: 3,
+            inverse_mass: vec![w],
+            velocity: vec![[0.0; 3]],
+            force: vec![f],
+            rows: vec![Row { value: 0.0, rate: 0.0, bias: c, inequality: false, jacobian: vec![(0, j)] }],
+            axes: Vec::new(),
+        };
+        let dot = |a: &[f64; 3], b: &[f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let (square, b) = (dot(&j, &j), dot(&j, &f) * w + c);
+        let inside = |x: f64| (1e-100..=1e100).contains(&x);
+        let Some(mu) = unscaled_multiplier(&j, w, &f, c) else {
+            declined += 1;
+            continue;
+        };
+        taken += 1;
+        assert!(inside(square) && inside(w) && b.abs() <= 1e100, "case {case}: taken outside the guard");
+        let mut out = Solution::default();
+        if !solve_single(&rows, &settings, &mut out) {
+            continue;
+        }
+        let lambda = out.lambda[0];
+        // The right-hand side's terms, where they cancel, bound both answers' error.
+        let absolute = |x: &[f64; 3]| x.map(f64::abs);
+        let terms = (dot(&absolute(&j), &absolute(&f)) * w + c.abs()) / (square * w);
+        let off = (mu - lambda).abs() / terms.max(lambda.abs());
+        worst = worst.max(off / f64::EPSILON);
+        assert!(
+            off <= 8.0 * f64::EPSILON,
+            "case {case}: {mu:?} against {lambda:?} ({off:e}): J {j:?}, w {w:?}, F {f:?}, c {c:?}"
+        );
+    }
+    assert!(taken > 5_000 && declined > 1_000, "taken {taken}, declined {declined}");
+    // (At this seed: 3.9 roundings at worst.)
+    assert!(worst <= 8.0, "worst {worst}");
 }

@@ -32,10 +32,11 @@ use super::contact::ContactState;
 use super::integrate::{Field, Vectors, copy_slots};
 use super::rescale::{Unit, spread};
 use super::rotation::{dexp_inv, fold, kick, rebase, turned};
-use super::rows::{Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
+use super::rows::{OneSlot, Row, RowProgram, RowScratch, Rows, State, angular_bodies, angular_width};
 use super::simulate::{Compile, SettingsError};
 use super::single::{
-    SingleScaling, correction_single, correction_single_multiplier, solve_one_slot, solve_single_with,
+    SingleScaling, correction_single, correction_single_multiplier, solve_one_slot, solve_one_slot_unscaled,
+    solve_single_with,
 };
 use super::solve::{Answer, Diagnostic, FactorId, MAX_DENSE_ROWS, Settings, Solution, SolveCache, Status, cached_into};
 use crate::expr::eval::{Env, EvalError, Value};
@@ -198,6 +199,9 @@ pub struct Dynamics<'s> {
     solution: Solution,
     /// The one-row solve's last scaling (`numeric::single`), reused at the same J and 1/m.
     single: SingleScaling,
+    /// Where the tapes of a scene of one row on one point mass read q and v and leave their
+    /// numbers (`RowProgram::one_slot`): its evaluations at a step write and read there.
+    one_slot: Option<OneSlot>,
     /// A solve that left a block unsolved ([`Diagnostic::TooLarge`]): the step and its rows.
     /// The next evaluation stops the run with [`SimError::TooLarge`] instead of stepping on
     /// with λ = 0 on them, as if those constraints were not there.
@@ -250,6 +254,7 @@ impl<'s> Dynamics<'s> {
         scratch.hold_constants();
         let orientations = orientations_of(system, &env);
         let steady = program.steady();
+        let one_slot = program.one_slot();
         Dynamics {
             system,
             program,
@@ -273,6 +278,7 @@ impl<'s> Dynamics<'s> {
             correction: Solution::default(),
             solution: Solution::default(),
             single: SingleScaling::default(),
+            one_slot,
             refused: None,
         }
     }
@@ -447,6 +453,34 @@ impl<'s> Dynamics<'s> {
         Ok(())
     }
 
+    /// C/κ and J of a scene of one row on one point mass at the slot's `q` (and `v`) by the
+    /// positions' tape (`RowProgram::positions_one_slot`), with whether they are finite:
+    /// neither counted nor written into [`position_rows`](Dynamics::position_rows) (a
+    /// caller that keeps them counts the evaluation with
+    /// [`count_positions`](Dynamics::count_positions)). `None` for another scene, or before
+    /// the run's constants are loaded.
+    #[inline(always)]
+    pub(crate) fn one_slot_positions(&mut self, q: &[f64; 3], v: &[f64; 3]) -> Option<(f64, [f64; 3], bool)> {
+        let one = self.one_slot.as_ref()?;
+        self.program.positions_one_slot(one, q, v, &mut self.scratch)
+    }
+
+    /// Counts an evaluation of [`one_slot_positions`](Dynamics::one_slot_positions) whose
+    /// numbers a step kept, as [`positions`](Dynamics::positions) counts its own (and
+    /// leaves no positions' rows to be taken).
+    #[inline(always)]
+    pub(crate) fn count_positions(&mut self) {
+        self.evaluations += 1;
+        self.positions_finite = false;
+    }
+
+    /// The one-row solve's kept scaling (`numeric::single`), for a correction computed
+    /// from the numbers in hand (`single::correction_checked`).
+    #[inline(always)]
+    pub(crate) fn single_scaling(&mut self) -> &mut SingleScaling {
+        &mut self.single
+    }
+
     /// [`positions`](Dynamics::positions) at a state where C or J is not finite: the full
     /// rows at the same state, evaluated for the error they report.
     #[inline(never)]
@@ -493,6 +527,16 @@ impl<'s> Dynamics<'s> {
         self.moved(t, q, v, rows, true)
     }
 
+    /// [`rows_moved_into`](Dynamics::rows_moved_into) of a scene of one row on one point
+    /// mass, in line where the run's start calls it (`moved_one_slot`): whether it was done,
+    /// C and J kept and every number written finite. Else nothing is counted and the caller
+    /// takes [`rows_moved_into`](Dynamics::rows_moved_into), which says why (an error, a
+    /// number not finite, rows of another shape).
+    #[inline(always)]
+    pub(crate) fn rows_moved_one_slot(&mut self, q: &Vectors, v: &Vectors, rows: &mut Rows) -> bool {
+        self.refused.is_none() && self.moved_one_slot(q, v, rows)
+    }
+
     /// [`rows_moved_into`](Dynamics::rows_moved_into); `checked`: C and J are known to be
     /// finite. In line (always: the run loop's start calls it once a step, and its call
     /// was a fifth of its own cost), as [`positions`](Dynamics::positions), its checks apart.
@@ -513,6 +557,39 @@ impl<'s> Dynamics<'s> {
         }
         self.check_moved(rows, t, kept, finite)?;
         Ok(kept)
+    }
+
+    /// [`moved`](Dynamics::moved) of a scene of one row on one point mass whose C and J are
+    /// known to be finite (`RowProgram::motion_one_slot`): the same numbers into `rows`,
+    /// without the general evaluation's fill. Whether it was done and every number written
+    /// is finite; else nothing is counted or written but what the general path, which the
+    /// caller then takes, writes over again (the rows of another shape, a number that is
+    /// not finite, the constants not loaded yet).
+    #[inline(always)]
+    fn moved_one_slot(&mut self, q: &Vectors, v: &Vectors, rows: &mut Rows) -> bool {
+        let (Some(one), [x], [u]) = (&self.one_slot, q, v) else {
+            return false;
+        };
+        let ([row], [w], [velocity], [f]) = (
+            rows.rows.as_mut_slice(),
+            rows.inverse_mass.as_mut_slice(),
+            rows.velocity.as_mut_slice(),
+            rows.force.as_mut_slice(),
+        ) else {
+            return false;
+        };
+        let Some(motion) = self.program.motion_one_slot(one, x, u, &mut self.scratch) else {
+            return false;
+        };
+        if !motion.finite {
+            return false;
+        }
+        self.evaluations += 1;
+        (*w, *velocity, *f) = (motion.inverse_mass, motion.velocity, motion.force);
+        (row.rate, row.bias, row.inequality) = (motion.rate, motion.bias, one.inequality());
+        rows.dim = self.system.dim();
+        rows.axes.clear();
+        true
     }
 
     /// [`moved`](Dynamics::moved)'s check of rows whose C and J were kept unchecked (`kept`:
@@ -699,6 +776,20 @@ impl<'s> Dynamics<'s> {
             return None;
         }
         let a = solve_one_slot(rows, &self.settings, &mut self.single, &mut self.solution, true)?;
+        self.made = None;
+        Some(a)
+    }
+
+    /// [`solve_one_slot`](Dynamics::solve_one_slot) without the scaling
+    /// (`single::solve_one_slot_unscaled`, under its guard), for RATTLE's one-row runs:
+    /// `None`, with nothing done, where it declines (the caller then takes
+    /// `solve_one_slot`, which answers as ever).
+    #[inline(always)]
+    pub(crate) fn solve_one_slot_unscaled(&mut self, rows: &Rows) -> Option<[f64; 3]> {
+        if self.baumgarte.is_some() {
+            return None;
+        }
+        let a = solve_one_slot_unscaled(rows, &self.settings, &mut self.solution)?;
         self.made = None;
         Some(a)
     }

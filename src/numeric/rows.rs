@@ -38,7 +38,7 @@ use crate::numeric::batch::{Batched, BatchedScratch};
 use crate::numeric::integrate::copy_slots;
 use crate::numeric::program::{Inputs, Program};
 use crate::numeric::tape::{Scratch, Tape};
-use crate::numeric::vector::{all_finite, dot, not_finite_bits};
+use crate::numeric::vector::{all_finite, dot, not_finite_bit, not_finite_bits};
 use std::ops::Range;
 
 /// One constraint row at a state.
@@ -496,7 +496,9 @@ impl Subprogram {
     }
 
     /// Every root from the loaded `inputs` into `outputs` (laid out as `place` says): by
-    /// the compiled tape when there is one, else by the interpreter.
+    /// the compiled tape when there is one, else by the interpreter. In line (its callers
+    /// are few, and a call of it was a visible part of a small evaluation).
+    #[inline(always)]
     fn run(&self, inputs: &[f64], tape: &mut Scratch, batched: Option<&mut BatchedScratch>, outputs: &mut [f64]) {
         match (&self.kernel, batched) {
             (Kernel::Batched(b, _), Some(buffers)) => b.eval(inputs, buffers, outputs),
@@ -1089,6 +1091,13 @@ fn finite_all(parts: &[&[f64]]) -> bool {
     parts.iter().fold(0u64, |all, xs| all | not_finite_bits(xs)) >> 63 == 0
 }
 
+/// Whether every one of `xs` is finite: the OR of their exponent bits
+/// (`vector::not_finite_bit`), over an array of fixed length (no loop over slices).
+#[inline(always)]
+fn all_finite_bits<const N: usize>(xs: [f64; N]) -> bool {
+    xs.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 == 0
+}
+
 /// [`RowProgram::evaluate_motion_state_into`]'s fill for one row on one slot whose J, v and
 /// F are `W` (2 or 3) wide (a pendulum, a bead), in place in rows of that shape: the loops'
 /// set-up and the outputs' sweep cost more than the numbers written (about 180 instructions
@@ -1162,6 +1171,89 @@ fn entries_finite(row: &Row) -> bool {
     row.jacobian.iter().fold(true, |ok, (_, j)| ok & finite3(j))
 }
 
+/// Where the positions' and the motion's tapes of a program of one row on one slot (a
+/// pendulum, a bead: a point mass, its C reading no t) read the slot's q and v and leave
+/// the row's and the slot's numbers: found once ([`RowProgram::one_slot`]), so an
+/// evaluation at a step of such a scene writes two or four inputs and reads its outputs at
+/// these places, without the general fill's walk down its `Places` and tests of the
+/// shape (about a hundred instructions of an evaluation, callgrind). The numbers are the
+/// fills' bit for bit: the same tapes, the same inputs, the same outputs read, the same
+/// products.
+#[derive(Clone, Copy, Debug)]
+pub struct OneSlot {
+    /// The dimension: q, v, J and F are this many (2 or 3) components wide.
+    width: usize,
+    /// The first input slot of q and of v in the positions' tape and in the motion's
+    /// (`usize::MAX`: the tape does not read it).
+    positions_q: usize,
+    positions_v: usize,
+    motion_q: usize,
+    motion_v: usize,
+    /// The outputs of C and J (positions' tape), of Ċ, c, m, v and F (motion's).
+    value: usize,
+    jacobian: Place,
+    rate: usize,
+    bias: usize,
+    mass: usize,
+    velocity: Place,
+    force: Place,
+    /// `RowLayout::inverse_scale` and `inequality` of the row.
+    inverse_scale: f64,
+    inequality: bool,
+}
+
+/// The motion's numbers of a one-slot scene at a state ([`RowProgram::motion_one_slot`]):
+/// Ċ/κ, c, 1/m, v and F, as [`RowProgram::evaluate_motion_state_into`] writes them.
+#[derive(Clone, Copy, Debug)]
+pub struct OneSlotMotion {
+    pub rate: f64,
+    pub bias: f64,
+    pub inverse_mass: f64,
+    pub velocity: [f64; 3],
+    pub force: [f64; 3],
+    /// Whether every one of them is finite (as [`RowScratch::finite`] says of a fill).
+    pub finite: bool,
+}
+
+impl OneSlot {
+    /// Whether the row is an inequality (`RowLayout::inequality`).
+    pub fn inequality(&self) -> bool {
+        self.inequality
+    }
+
+    /// q and v into a tape's inputs at `q_at` and `v_at` (`usize::MAX`: not read); `None`
+    /// when the inputs are shorter than the places say (never, for the program's own scratch).
+    #[inline(always)]
+    fn load(&self, q: &[f64; 3], v: &[f64; 3], [q_at, v_at]: [usize; 2], inputs: &mut [f64]) -> Option<()> {
+        for (at, x) in [(q_at, q), (v_at, v)] {
+            if at == usize::MAX {
+                continue;
+            }
+            // Two or three components: stores of arrays of a known length (a slice's copy
+            // was a call of `memcpy`).
+            if self.width == 3 {
+                let to: &mut [f64; 3] = inputs.get_mut(at..at + 3)?.try_into().ok()?;
+                *to = *x;
+            } else {
+                let to: &mut [f64; 2] = inputs.get_mut(at..at + 2)?.try_into().ok()?;
+                *to = [x[0], x[1]];
+            }
+        }
+        Some(())
+    }
+
+    /// A root's components at `place` (zeros past the width), or `None` past `out`.
+    #[inline(always)]
+    fn read(&self, place: Place, out: &[f64]) -> Option<[f64; 3]> {
+        let (s, d) = (place.start as usize, place.stride as usize);
+        Some(if self.width == 3 {
+            [*out.get(s)?, *out.get(s + d)?, *out.get(s + 2 * d)?]
+        } else {
+            [*out.get(s)?, *out.get(s + d)?, 0.0]
+        })
+    }
+}
+
 /// Input and output buffers of [`RowProgram::evaluate_into`], reused across evaluations.
 #[derive(Clone, Debug)]
 pub struct RowScratch {
@@ -1229,6 +1321,17 @@ impl Subprogram {
                 Kernel::Tape(..) => None,
             },
             constants: false,
+        }
+    }
+
+    /// [`run_loaded`](Subprogram::run_loaded) with the compiled tape's call in line (the
+    /// one-slot evaluations': [`run`](Subprogram::run)'s own call and dispatch were a tenth
+    /// of such an evaluation).
+    #[inline(always)]
+    fn run_one(&self, scratch: &mut SubScratch) {
+        match &self.kernel {
+            Kernel::Tape(_, Some(compiled)) => run_compiled(compiled, &scratch.inputs, &mut scratch.outputs),
+            _ => self.run_loaded(scratch),
         }
     }
 
@@ -1758,6 +1861,132 @@ impl RowProgram {
             }
         }
         scratch.finite = positions_finite(rows);
+    }
+
+    /// The places of a program of one row with one J entry on one slot, a point mass whose
+    /// tapes of the positions and the motion read only its q and v from the state (no t,
+    /// no angle: `StateCopies`), every root 2 or 3 wide as the dimension: what
+    /// [`positions_one_slot`](RowProgram::positions_one_slot) and
+    /// [`motion_one_slot`](RowProgram::motion_one_slot) read. `None` for any other program.
+    pub fn one_slot(&self) -> Option<OneSlot> {
+        let ([row], [_], Some(motion)) = (self.rows.as_slice(), self.bodies.as_slice(), &self.motion) else {
+            return None;
+        };
+        let (Some(p), Some(m)) = (&self.positions.places, &motion.places) else {
+            return None;
+        };
+        let ([p_row], [m_row], [entry], [mass], [velocity], [force]) = (
+            p.rows.as_slice(),
+            m.rows.as_slice(),
+            p.jacobian.as_slice(),
+            m.mass.as_slice(),
+            m.velocity.as_slice(),
+            m.force.as_slice(),
+        ) else {
+            return None;
+        };
+        let width = p.width as usize;
+        let wide = |place: &Place| place.len as usize == width && place.stride == 1;
+        if !(matches!(width, 2 | 3) && wide(&entry.place) && wide(velocity) && wide(force) && entry.slot == 0) {
+            return None;
+        }
+        if [p_row.value, m_row.rate, m_row.bias, *mass].contains(&ABSENT) {
+            return None;
+        }
+        // Each tape's inputs from the slot's q and v alone, `width` wide.
+        let slots = |sub: &Subprogram| -> Option<[usize; 2]> {
+            let copies = sub.copies.as_ref()?;
+            if copies.dim != width || !copies.time.is_empty() {
+                return None;
+            }
+            let at = |list: &[(usize, usize)]| match list {
+                [] => Some(usize::MAX),
+                [(0, at)] => Some(*at),
+                _ => None,
+            };
+            Some([at(&copies.positions)?, at(&copies.velocities)?])
+        };
+        let ([positions_q, positions_v], [motion_q, motion_v]) = (slots(&self.positions)?, slots(motion)?);
+        Some(OneSlot {
+            width,
+            positions_q,
+            positions_v,
+            motion_q,
+            motion_v,
+            value: p_row.value as usize,
+            jacobian: entry.place,
+            rate: m_row.rate as usize,
+            bias: m_row.bias as usize,
+            mass: *mass as usize,
+            velocity: *velocity,
+            force: *force,
+            inverse_scale: row.inverse_scale,
+            inequality: row.inequality,
+        })
+    }
+
+    /// C/κ and J of the one row at the slot's `q` (and `v`, should the tape read it), by the
+    /// positions' tape at `one`'s places ([`one_slot`](RowProgram::one_slot) of this
+    /// program): the numbers [`evaluate_positions_state_into`](RowProgram::evaluate_positions_state_into)
+    /// writes into the row (its Ċ and c 0, its flag the row's), bit for bit, and whether they
+    /// are finite (also left in `scratch`, as the fill leaves it). `None`, with nothing
+    /// evaluated, until an evaluation with `scratch` has loaded the run's constants (the
+    /// caller then takes the general evaluation, which loads them).
+    #[inline(always)]
+    pub fn positions_one_slot(
+        &self,
+        one: &OneSlot,
+        q: &[f64; 3],
+        v: &[f64; 3],
+        scratch: &mut RowScratch,
+    ) -> Option<(f64, [f64; 3], bool)> {
+        let buffers = &mut scratch.positions;
+        if !(scratch.hold && buffers.constants) {
+            return None;
+        }
+        one.load(q, v, [one.positions_q, one.positions_v], &mut buffers.inputs)?;
+        self.positions.run_one(buffers);
+        let out = &buffers.outputs;
+        let value = *out.get(one.value)? * one.inverse_scale;
+        let j = one.read(one.jacobian, out)?;
+        // As `positions_one`: C/κ and the components of J written (those past the width
+        // are zeros, finite: tested with them, one OR of fixed length).
+        let finite = all_finite_bits([value, j[0], j[1], j[2]]);
+        scratch.finite = finite;
+        Some((value, j, finite))
+    }
+
+    /// Ċ/κ, c, 1/m, v and F of the one slot at its `q` and `v`, by the motion's tape at
+    /// `one`'s places: the numbers [`evaluate_motion_state_into`](RowProgram::evaluate_motion_state_into)
+    /// writes, bit for bit, with whether they are finite (also left in `scratch`). `None`, as
+    /// [`positions_one_slot`](RowProgram::positions_one_slot), until the constants are loaded.
+    #[inline(always)]
+    pub fn motion_one_slot(
+        &self,
+        one: &OneSlot,
+        q: &[f64; 3],
+        v: &[f64; 3],
+        scratch: &mut RowScratch,
+    ) -> Option<OneSlotMotion> {
+        let (Some(m), Some(buffers)) = (&self.motion, &mut scratch.motion) else {
+            return None;
+        };
+        if !(scratch.hold && buffers.constants) {
+            return None;
+        }
+        one.load(q, v, [one.motion_q, one.motion_v], &mut buffers.inputs)?;
+        m.run_one(buffers);
+        let out = &buffers.outputs;
+        let inverse_mass = 1.0 / *out.get(one.mass)?;
+        let (velocity, force) = (one.read(one.velocity, out)?, one.read(one.force, out)?);
+        let rate = *out.get(one.rate)? * one.inverse_scale;
+        let bias = *out.get(one.bias)?;
+        // As `motion_one`: every number written (the components past the width are zeros,
+        // finite: tested with them).
+        let [u, f] = [velocity, force];
+        let finite = all_finite_bits([inverse_mass, rate, bias, u[0], u[1], u[2], f[0], f[1], f[2]]);
+        scratch.finite = finite;
+        Some(OneSlotMotion { rate, bias, inverse_mass, velocity, force, finite })
     }
 
     /// The interpreter's rows at `env` (`expr::eval`, the reference semantics), for tests of

@@ -25,7 +25,7 @@ use super::rows::Rows;
 use super::solve::{CONTACT_TOLERANCE, FactorId};
 use super::stabilize::{
     Inequalities, ShakeHistory, Stabilize, StabilizeError, distance, project_positions, rattle_one_row,
-    shake_positions, update_rates, velocity_step,
+    rattle_one_row_plain, shake_positions, update_rates, velocity_step,
 };
 use super::vector::{dot, length_scale, not_finite_bit, safe_norm};
 use crate::expr::eval::{Env, Value};
@@ -607,6 +607,9 @@ pub struct Simulation<'s> {
     /// declines rows of another shape. And how many steps took the one-row step.
     one_row: bool,
     one_row_steps: u64,
+    /// Whether those runs' solves go without the scaling where its guard allows
+    /// (`single::unscaled_multiplier`; [`Simulation::set_unscaled`]).
+    unscaled: bool,
 }
 
 impl<'s> Simulation<'s> {
@@ -651,6 +654,7 @@ impl<'s> Simulation<'s> {
             compiled,
             one_row: n == 1 && one_constraint,
             one_row_steps: 0,
+            unscaled: true,
         })
     }
 
@@ -660,6 +664,16 @@ impl<'s> Simulation<'s> {
     /// for bit as the general step, which `false` forces (for tests that compare the two).
     pub fn set_one_row(&mut self, on: bool) {
         self.one_row = on && self.q.len() == 1 && self.dynamics.system().constraints.len() == 1;
+    }
+
+    /// Whether RATTLE's one-row runs (the plain step, `stabilize::rattle_one_row_plain`, and
+    /// each step's start before it) solve their one row without the scaling where the
+    /// magnitudes allow (`single::unscaled_multiplier`: one division where the scaled solve
+    /// chains three square roots and seven divisions; the same numbers to a few roundings), as
+    /// they do unless told otherwise; `false` keeps the scaled solve, whose numbers are the
+    /// general step's bit for bit (for tests that compare the two).
+    pub fn set_unscaled(&mut self, on: bool) {
+        self.unscaled = on;
     }
 
     /// How many steps of the runs so far took the one-row step ([`set_one_row`](Simulation::set_one_row)).
@@ -829,6 +843,15 @@ impl<'s> Simulation<'s> {
         // Step n's time t₀ + n dt, computed once a step: the last step's t1 (the same
         // formula), and at the start as at n = 0.
         let mut t = self.t0 + 0.0 * s.dt;
+        // RATTLE's step for one equality row on the only slot of a steady scene (the plain
+        // step's run: `stabilize::rattle_one_row_plain`), whose solves go without the scaling.
+        let plain_rattle = matches!((s.integrator, s.stabilize), (Integrator::Verlet, Stabilize::Projection { .. }))
+            && self.one_row
+            && self.unscaled
+            && !self.has_inequalities
+            && !self.three_d
+            && self.dynamics.steady
+            && !self.dynamics.velocity_dependent_forces;
         for n in 0..=s.steps {
             self.dynamics.step = n;
             // 3D rigid bodies: the rotation vectors of the last step into the orientations.
@@ -843,7 +866,9 @@ impl<'s> Simulation<'s> {
             let mut kept = false;
             if std::mem::take(&mut self.carried) {
                 std::mem::swap(&mut self.start, &mut self.end);
-                kept = self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)?;
+                // One row on one point mass: its motion's numbers in line.
+                kept = (self.one_row && self.dynamics.rows_moved_one_slot(&self.q, &self.v, &mut self.start))
+                    || self.dynamics.rows_moved_into(t, &self.q, &self.v, &mut self.start)?;
                 if kept {
                     self.start_made = end_made;
                 }
@@ -891,7 +916,15 @@ impl<'s> Simulation<'s> {
                 balance.work_scale = work_scale(&rows.force, system.bodies.len(), length);
             }
             // One row on the only slot: its acceleration in closed form, else the solve's.
-            let one_slot = if self.one_row { self.dynamics.solve_one_slot(&mut self.start) } else { None };
+            let one_slot = match (self.one_row, plain_rattle) {
+                // RATTLE's one-row run: without the scaling where the guard allows.
+                (true, true) => self
+                    .dynamics
+                    .solve_one_slot_unscaled(&self.start)
+                    .or_else(|| self.dynamics.solve_one_slot(&mut self.start)),
+                (true, false) => self.dynamics.solve_one_slot(&mut self.start),
+                _ => None,
+            };
             if one_slot.is_none() {
                 self.dynamics.solve_known(&mut self.start, self.start_made);
             }
@@ -1041,6 +1074,28 @@ impl<'s> Simulation<'s> {
         if let (Integrator::Verlet, Stabilize::Projection { tolerance, max_iterations }) = (s.integrator, s.stabilize) {
             // One equality row on the only slot: the same step written for that shape.
             if self.one_row && !has_inequalities && !self.three_d {
+                // The plain step first, from the numbers in hand; else the one-row step's stages.
+                let plain = self.dynamics.steady && !self.dynamics.velocity_dependent_forces;
+                if let (true, [q], [v], [half], [a]) =
+                    (plain, self.q.as_mut_slice(), self.v.as_mut_slice(), self.half.as_mut_slice(), self.a.as_slice())
+                    && let Some(made) = rattle_one_row_plain(
+                        &mut self.dynamics,
+                        s.dt,
+                        [q, v, half],
+                        a,
+                        &self.start,
+                        &mut self.end,
+                        tolerance * reach.length,
+                        &mut self.shake,
+                        &mut self.values,
+                        self.unscaled,
+                    )
+                {
+                    self.one_row_steps += 1;
+                    self.end_made = made;
+                    self.carry(keep);
+                    return Ok(());
+                }
                 let made = rattle_one_row(
                     &mut self.dynamics,
                     t1,

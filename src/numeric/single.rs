@@ -29,6 +29,13 @@
 //! same multiplier ([`SingleScaling`]'s μ̃ and λ, one function for both) without writing a
 //! `Solution` or the rows.
 //!
+//! RATTLE's one-row runs (`stabilize::rattle_one_row_plain` and each step's start before it)
+//! take the row without the scaling where a guard allows ([`unscaled_multiplier`]: μ =
+//! −(J·F w + c)/(J·J w), one division where the scaled solve chains three square roots and
+//! seven divisions, the step's latency): the same number to a few roundings, not bit for
+//! bit; outside the guard (magnitudes past 10^±100, a zero gradient, a zero or infinite
+//! mass) the scaled solve answers, with its diagnostics.
+//!
 //! Not here: more than one row (the general solve), contacts, the decision of when to call
 //! it (`Dynamics::solve`, `Dynamics::correct`, `Dynamics::correct_single`: at every solve,
 //! as the check is cheaper than any bookkeeping it saves).
@@ -67,20 +74,28 @@ impl SingleScaling {
     /// not positive and finite); kept for the next call with the same bits.
     #[inline(always)]
     fn of(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64) -> Option<&SingleScaling> {
+        self.of_norm(j, w, || row_norm(row))
+    }
+
+    /// [`of`](SingleScaling::of) with the row's norm ‖J‖ (`vector::row_norm` of its J) from
+    /// `norm`, called only when the kept scaling is not J's: a caller that has the norm
+    /// already (SHAKE's residual measured the row's distance at the same J) hands it over.
+    #[inline(always)]
+    fn of_norm(&mut self, j: &[f64; 3], w: f64, norm: impl FnOnce() -> f64) -> Option<&SingleScaling> {
         let key = [j[0].to_bits(), j[1].to_bits(), j[2].to_bits(), w.to_bits()];
         // Compared whole, joined by `&`: one test, not four branches.
         if self.known & (self.key == key) {
             return Some(self);
         }
-        self.scale(row, j, w, key)
+        self.scale(j, w, key, norm())
     }
 
-    /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits).
+    /// [`of`](SingleScaling::of) at a J or 1/m other than the kept one's (`key` their bits),
+    /// ‖J‖ = `norm`.
     #[inline(never)]
-    fn scale(&mut self, row: &[(usize, [f64; 3])], j: &[f64; 3], w: f64, key: [u64; 4]) -> Option<&SingleScaling> {
+    fn scale(&mut self, j: &[f64; 3], w: f64, key: [u64; 4], norm: f64) -> Option<&SingleScaling> {
         self.known = false;
         // Scaling: Ĵ = J/‖J‖, Â = ‖Ĵ‖² w, J̃ = Ĵ/√Â.
-        let norm = row_norm(row);
         if !(norm.is_finite() && norm != 0.0) {
             return None;
         }
@@ -169,8 +184,30 @@ pub fn correction_single_multiplier(rows: &Rows, bias: f64, scaling: &mut Single
     if !all_finite([velocity[0], velocity[1], velocity[2], bias, w, j[0], j[1], j[2]]) || w < 0.0 {
         return None;
     }
+    correction_checked(j, w, bias, scaling)
+}
+
+/// [`correction_single_multiplier`] of a row whose J `j` on the slot of inverse mass `w`
+/// (and the slot's velocity) the caller has found finite, with w ≥ 0, and `bias` finite:
+/// the same step and multiplier, from the numbers alone (no `Rows`: RATTLE's one-row step,
+/// `stabilize::rattle_one_row`, has them in hand).
+#[inline(always)]
+pub fn correction_checked(j: &[f64; 3], w: f64, bias: f64, scaling: &mut SingleScaling) -> Option<([f64; 3], f64)> {
+    correction_with_norm(j, w, bias, || row_norm(&[(0, *j)]), scaling)
+}
+
+/// [`correction_checked`] with J's norm from `norm` (`vector::row_norm` of the row's J, the
+/// same number), called only when the kept scaling is not J's.
+#[inline(always)]
+pub fn correction_with_norm(
+    j: &[f64; 3],
+    w: f64,
+    bias: f64,
+    norm: impl FnOnce() -> f64,
+    scaling: &mut SingleScaling,
+) -> Option<([f64; 3], f64)> {
     let settings = Settings::default();
-    let scaled = scaling.of(&row.jacobian, j, w)?;
+    let scaled = scaling.of_norm(j, w, norm)?;
     let (mu, lambda) = scaled.multiplier(&[0.0; 3], w, bias, settings.rank_tolerance)?;
     // Σ λ J = λ̃ J̃, added to a zero force; a = (0 + Σ λ J) w.
     Some((scaled.jt.map(|x| (0.0 + (0.0 + mu * x)) * w), lambda))
@@ -293,6 +330,17 @@ pub fn solve_one_slot(
     let scaled = scaling.of(&row.jacobian, j, w)?;
     let jt = scaled.jt;
     let (mu, lambda) = scaled.multiplier(f, w, row.bias, settings.rank_tolerance)?;
+    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w.
+    let fc = [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]];
+    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    write_one_slot(out, lambda, fc, a);
+    Some(a)
+}
+
+/// [`solve_one_slot`]'s answer into `out`: λ, the constraint force `fc` and the
+/// acceleration `a` of the one slot, in place when `out` has that shape already.
+#[inline(always)]
+fn write_one_slot(out: &mut Solution, lambda: f64, fc: [f64; 3], a: [f64; 3]) {
     match (out.lambda.as_mut_slice(), out.active.as_mut_slice(), out.contacts.as_mut_slice()) {
         ([l], [active], [contact]) => (*l, *active, *contact) = (lambda, true, None),
         _ => {
@@ -304,9 +352,6 @@ pub fn solve_one_slot(
             out.contacts.push(None);
         }
     }
-    // Σ λ J = λ̃ J̃, added to a zero force; a = (F + Σ λ J) w.
-    let fc = [0.0 + mu * jt[0], 0.0 + mu * jt[1], 0.0 + mu * jt[2]];
-    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
     match (out.constraint_force.as_mut_slice(), out.acceleration.as_mut_slice()) {
         ([fc_out], [a_out]) => (*fc_out, *a_out) = (fc, a),
         _ => {
@@ -320,7 +365,72 @@ pub fn solve_one_slot(
         out.diagnostics.clear();
     }
     out.status = Status::Solved;
+}
+
+/// The magnitudes within which a one-row solve is taken without the scaling
+/// ([`unscaled_multiplier`]): |J|², 1/m, the right-hand side and μ each within 10^±100, so
+/// no product of the formula leaves the normal range and each is a few roundings of its
+/// value, as the scaled solve's are (the scaling serves the general solve's range and its
+/// many rows, not the accuracy of one).
+const UNSCALED: std::ops::RangeInclusive<f64> = 1e-100..=1e100;
+
+/// μ of one row on one slot without the scaling, μ = −(J·F w + c)/(J·J w): one division
+/// where [`solve_single_with`] takes three square roots and seven divisions in one chain
+/// (the scaling, the two substitutions, the refinement's two, the unscaling) — the same
+/// number to a few roundings (a 1 × 1 system: the scaled solve's λ is this quotient, each
+/// of its steps rounded). `None` outside the guard: J·J, w or |J·F w + c| outside
+/// 10^±100 (so also a zero J, an infinite or zero mass), μ neither zero nor a normal number
+/// within 10^±100; the caller then takes the scaled solve, which answers as ever. RATTLE's
+/// one-row step only (`stabilize::rattle_one_row_plain`, the run's start before it): its
+/// step is a chain of the two solves, and their roots and divisions were most of its time.
+#[inline(always)]
+pub fn unscaled_multiplier(j: &[f64; 3], w: f64, f: &[f64; 3], bias: f64) -> Option<f64> {
+    let square = dot(j, j);
+    let b = dot(j, f) * w + bias;
+    if !(UNSCALED.contains(&square) && UNSCALED.contains(&w) && b.abs() <= *UNSCALED.end()) {
+        return None;
+    }
+    let mu = -b / (square * w);
+    (mu == 0.0 || UNSCALED.contains(&mu.abs())).then_some(mu)
+}
+
+/// [`solve_one_slot`] without the scaling, for RATTLE's one-row runs: λ =
+/// [`unscaled_multiplier`], the constraint force λJ and a = (F + λJ) w, written as
+/// [`solve_one_slot`] writes its answer; `None`, with nothing written, where that solve
+/// would decline the rows or the guard does (every number finite is the caller's, as for
+/// `solve_one_slot` with `finite`).
+#[inline(always)]
+pub fn solve_one_slot_unscaled(rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<[f64; 3]> {
+    let ([row], [w], [_], [f]) =
+        (rows.rows.as_slice(), rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice())
+    else {
+        return None;
+    };
+    let [(0, j)] = row.jacobian.as_slice() else {
+        return None;
+    };
+    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) || *w < 0.0 {
+        return None;
+    }
+    let w = *w;
+    let lambda = unscaled_multiplier(j, w, f, row.bias)?;
+    let fc = [0.0 + lambda * j[0], 0.0 + lambda * j[1], 0.0 + lambda * j[2]];
+    let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
+    if !all_finite([a[0], a[1], a[2], fc[0], fc[1], fc[2]]) {
+        return None;
+    }
+    write_one_slot(out, lambda, fc, a);
     Some(a)
+}
+
+/// The velocity projection of one row on one slot without the scaling ([`correction_checked`]'s
+/// step: Δv = J μ w with μ = −`bias`/(J·J w), [`unscaled_multiplier`] with the forces zero),
+/// every component finite; `None` outside the guard (the caller then takes the scaled one).
+#[inline(always)]
+pub fn correction_unscaled(j: &[f64; 3], w: f64, bias: f64) -> Option<[f64; 3]> {
+    let mu = unscaled_multiplier(j, w, &[0.0; 3], bias)?;
+    let dv = [(mu * j[0]) * w, (mu * j[1]) * w, (mu * j[2]) * w];
+    all_finite(dv).then_some(dv)
 }
 
 /// [`solve_single_with`]'s forces and accelerations over every slot: Σ λ J = λ̃ J̃ on the row's

@@ -40,6 +40,7 @@ use super::dynamics::{BaumgarteTerms, Dynamics, SimError};
 use super::integrate::Vectors;
 use super::rotation::{first_angular, fold, unfold};
 use super::rows::{Row, Rows};
+use super::single::{correction_unscaled, correction_with_norm};
 use super::solve::{FactorId, positive_finite, solve, zero_vectors};
 use super::vector::{dot, not_finite_bit, row_norm};
 
@@ -139,13 +140,24 @@ pub enum StabilizeError {
 /// The first-order distance of a row to its surface, C/‖J‖ (signed). Where J = 0 (a
 /// singular configuration) it is 0 on the surface and ±∞ off it: no step along J reaches it.
 pub fn distance(row: &Row) -> f64 {
-    let n = row_norm(&row.jacobian);
+    distance_of(row.value, &row.jacobian)
+}
+
+/// [`distance`] of a row's C/κ `value` and J `jacobian`.
+#[inline(always)]
+fn distance_of(value: f64, jacobian: &[(usize, [f64; 3])]) -> f64 {
+    distance_at_norm(value, row_norm(jacobian))
+}
+
+/// [`distance_of`] with the row's norm ‖J‖ `n` (`vector::row_norm`).
+#[inline(always)]
+fn distance_at_norm(value: f64, n: f64) -> f64 {
     if positive_finite(n) {
-        row.value / n
-    } else if row.value == 0.0 {
+        value / n
+    } else if value == 0.0 {
         0.0
     } else {
-        f64::INFINITY.copysign(row.value)
+        f64::INFINITY.copysign(value)
     }
 }
 
@@ -786,6 +798,152 @@ pub fn rattle_one_row(
     }
     let applied = velocity_step(end, v, true, touch, restitution, bounce_speed, dynamics, values);
     Ok(Some(if applied { dynamics.made() } else { None }))
+}
+
+/// [`rattle_one_row`]'s step when it goes the plain way — SHAKE's prediction meets the
+/// tolerance without an iteration, every number is finite, the velocity projection's
+/// closed form answers —, computed from the numbers in hand into locals and written only
+/// once the step is known to be plain: the same operations in the same order, so the same
+/// numbers bit for bit, without the stages' tests of the rows' shape, their `Rows` and their
+/// calls (the positions' tape at the fixed places of `Dynamics::one_slot_positions`) — but
+/// for the velocity projection with `unscaled`: without the scaling where its guard allows
+/// (`single::correction_unscaled`, the same Δv to a few roundings), else the scaled one.
+///
+/// Returns `None`, with nothing written (the tapes' scratch and the one-row solve's kept
+/// scaling aside, which hold no state of the run), where the step is not plain or the rows
+/// are not of that shape: the caller then takes [`rattle_one_row`], which computes the step
+/// again and answers for whatever made it other (an iteration, a number not finite, an
+/// error). Else the mark of the factor the velocity projection went through, as
+/// [`rattle_one_row`] returns it. `q`, `v` (and `half`, `a`) must hold one slot, and the
+/// scene must be as [`rattle_one_row`] requires (the caller's test, once a run).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub fn rattle_one_row_plain(
+    dynamics: &mut Dynamics<'_>,
+    dt: f64,
+    [q, v, half]: [&mut [f64; 3]; 3],
+    a: &[f64; 3],
+    start: &Rows,
+    end: &mut Rows,
+    bound: f64,
+    history: &mut ShakeHistory,
+    values: &mut Vec<f64>,
+    unscaled: bool,
+) -> Option<Option<FactorId>> {
+    // The shapes the step writes in place, and the history's room for one row after a
+    // converged step (a prediction to start from).
+    let ([row], [w], [f]) = (start.rows.as_slice(), start.inverse_mass.as_slice(), start.force.as_slice()) else {
+        return None;
+    };
+    let ([(0, j)], false, true) = (row.jacobian.as_slice(), row.inequality, start.axes.is_empty()) else {
+        return None;
+    };
+    let ([h], [_], [_], 1..) =
+        (history.rows.as_slice(), history.total.as_slice(), history.distances.as_slice(), history.known)
+    else {
+        return None;
+    };
+    let (j, w, f, h) = (*j, *w, *f, *h);
+    // Verlet's drift: v½ = v + (dt/2) a; q⁺ = q + dt v½.
+    let step = 0.5 * dt;
+    let mut u = *v;
+    for d in 0..3 {
+        u[d] += step * a[d];
+    }
+    let mut x = *q;
+    for d in 0..3 {
+        x[d] += dt * u[d];
+    }
+    // SHAKE's prediction (`predict_one_row`): μ from the last steps', Δq = 0 + J μ w.
+    let [pa, pb, pc] = match history.known {
+        1 => [1.0, 0.0, 0.0],
+        2 => [2.0, -1.0, 0.0],
+        _ => [3.0, -3.0, 1.0],
+    };
+    let mu = pa * h.past[0] + pb * h.past[1] + pc * h.past[2] - h.left;
+    let dq = [0.0 + j[0] * mu * w, 0.0 + j[1] * mu * w, 0.0 + j[2] * mu * w];
+    if (not_finite_bit(dq[0]) | not_finite_bit(dq[1]) | not_finite_bit(dq[2])) >> 63 != 0 {
+        return None;
+    }
+    for d in 0..3 {
+        x[d] += dq[d];
+        u[d] += dq[d] / dt;
+    }
+    // C/κ and J at q⁺, every number finite; the row's distance within the tolerance.
+    let (value, jn, true) = dynamics.one_slot_positions(&x, &u)? else {
+        return None;
+    };
+    let norm = row_norm(&[(0, jn)]);
+    let distance = distance_at_norm(value, norm);
+    if 0.0f64.max(distance.abs()) > bound {
+        return None;
+    }
+    // `finish_one_row`: the μ that would meet C = 0 is μ − δ, δ = C/(Jₙ M⁻¹ Jₙᵀ).
+    let delta = value / std::iter::once(dot(&j, &j) * w).sum::<f64>();
+    let delta = if delta.is_finite() { delta } else { 0.0 };
+    // The end rows' Ċ at v½ (`rows_after_positions_one_slot`); the kick with F(q⁺) = F;
+    // Ċ brought to v⁺ (`update_rates`).
+    let rate = jn[0] * u[0] + jn[1] * u[1] + jn[2] * u[2];
+    let mut y = u;
+    for d in 0..3 {
+        y[d] += 0.5 * dt * f[d] * w;
+    }
+    let rate = rate + (jn[0] * (y[0] - u[0]) + jn[1] * (y[1] - u[1]) + jn[2] * (y[2] - u[2]));
+    // The velocity projection onto Ċ = 0 (`correction_single`'s tests: v½, Ċ, 1/m and J
+    // finite, 1/m ≥ 0; J and 1/m are, from the tape and the start's checked rows).
+    if (not_finite_bit(u[0]) | not_finite_bit(u[1]) | not_finite_bit(u[2]) | not_finite_bit(rate)) >> 63 != 0
+        || w < 0.0
+        || !w.is_finite()
+    {
+        return None;
+    }
+    // Without the scaling where the magnitudes allow (`single::correction_unscaled`), else
+    // with J's scaling (when J is not the kept one's) from the norm the distance took.
+    let dv = match unscaled.then(|| correction_unscaled(&jn, w, rate)).flatten() {
+        Some(dv) => dv,
+        None => correction_with_norm(&jn, w, rate, || norm, dynamics.single_scaling())?.0,
+    };
+    for d in 0..3 {
+        let sum = y[d] + dv[d];
+        y[d] = if dv[d].is_finite() { sum } else { y[d] };
+    }
+    // The state the run checks next (`Simulation::check_finite`): else the general step says.
+    let state = [x[0], x[1], x[2], y[0], y[1], y[2]];
+    if state.iter().fold(0u64, |bad, x| bad | not_finite_bit(*x)) >> 63 != 0 {
+        return None;
+    }
+    // The step is plain: written.
+    let ([end_row], [end_w], [end_u], [end_f]) = (
+        end.rows.as_mut_slice(),
+        end.inverse_mass.as_mut_slice(),
+        end.velocity.as_mut_slice(),
+        end.force.as_mut_slice(),
+    ) else {
+        return None;
+    };
+    let [(slot, end_j)] = end_row.jacobian.as_mut_slice() else {
+        return None;
+    };
+    (*slot, *end_j) = (0, jn);
+    (end_row.value, end_row.rate, end_row.bias, end_row.inequality) = (value, rate, 0.0, false);
+    (*end_w, *end_u, *end_f) = (w, u, f);
+    end.dim = start.dim;
+    end.axes.clear();
+    (*q, *half, *v) = (x, u, y);
+    let known = history.known;
+    if let ([h], [total], [kept]) =
+        (history.rows.as_mut_slice(), history.total.as_mut_slice(), history.distances.as_mut_slice())
+    {
+        *total = mu;
+        *kept = distance;
+        h.past = [mu + h.left - delta, h.past[0], h.past[1]];
+        h.left = delta;
+    }
+    history.known = (known + 1).min(ORDER);
+    history.ends = true;
+    dynamics.count_positions();
+    values.clear();
+    Some(dynamics.made())
 }
 
 /// [`ShakeHistory::predict`] for one row on one slot (`start` holds it, J `j` and 1/m `w`):
