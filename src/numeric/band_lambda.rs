@@ -207,14 +207,13 @@ fn allowed(method: Method, k: usize) -> bool {
     }
 }
 
-/// Whether every number of `xs` is zero or of a magnitude in [`INPUT_RANGE`] (a NaN is
-/// not: its comparisons are false). Gathered, not branched on.
-fn in_range(xs: &[f64]) -> bool {
+/// Whether `x` is zero or of a magnitude in [`INPUT_RANGE`] (a NaN is not: its comparisons
+/// are false). Gathered, not branched on.
+#[inline(always)]
+fn in_range(x: f64) -> bool {
     let (small, big) = (*INPUT_RANGE.start(), *INPUT_RANGE.end());
-    xs.iter().fold(true, |ok, x| {
-        let a = x.abs();
-        ok & (a <= big) & ((a >= small) | (a == 0.0))
-    })
+    let a = x.abs();
+    (a <= big) & ((a >= small) | (a == 0.0))
 }
 
 /// `D` components of a root, from where they are.
@@ -697,17 +696,27 @@ impl BandLambda {
             Kernel::Tape { tape, scratch, .. } => tape.input_registers(scratch),
             Kernel::Batched(..) => &mut self.input[..],
         };
+        // Each number checked as it is loaded (the loads cover every input slot).
+        let mut in_range_all = true;
         for &(s, start, width) in &self.loads {
             let at = start as usize;
             // One to three numbers, copied by hand (a copy of a variable length is a call).
             match (env.get(s), width) {
-                (Some(Value::Scalar(x)), 1) => input[at] = x,
-                (Some(Value::Vector([x, y, _])), 2) => (input[at], input[at + 1]) = (x, y),
-                (Some(Value::Vector([x, y, z])), 3) => (input[at], input[at + 1], input[at + 2]) = (x, y, z),
+                (Some(Value::Scalar(x)), 1) => {
+                    input[at] = x;
+                    in_range_all &= in_range(x);
+                }
+                (Some(Value::Vector([x, y, _])), 2) => {
+                    (input[at], input[at + 1]) = (x, y);
+                    in_range_all &= in_range(x) & in_range(y);
+                }
+                (Some(Value::Vector([x, y, z])), 3) => {
+                    (input[at], input[at + 1], input[at + 2]) = (x, y, z);
+                    in_range_all &= in_range(x) & in_range(y) & in_range(z);
+                }
                 _ => return false,
             }
         }
-        let in_range = in_range(input);
         let len = self.output.len() - 1;
         let output = &mut self.output[..len];
         match &mut self.kernel {
@@ -716,6 +725,6 @@ impl BandLambda {
             Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, output),
             Kernel::Tape { tape, scratch, .. } => tape.eval_in_registers(scratch),
         }
-        in_range
+        in_range_all
     }
 }
