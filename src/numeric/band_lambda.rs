@@ -128,8 +128,12 @@ pub struct BandLambda {
     /// Per body, where its mass and force are.
     bodies: Vec<BodyAt>,
     // Buffers of one call.
+    /// The inputs of the batched and compiled kernels (the interpreted tape's are in its
+    /// registers: `Tape::input_registers`).
     input: Vec<f64>,
-    /// The kernel's outputs, then one zero (an absent Aₖ₋₁,ₖ's, read with no test).
+    /// The batched and compiled kernels' outputs, then one zero (an absent Aₖ₋₁,ₖ's, read
+    /// with no test); the interpreted tape leaves its outputs in its registers, where the
+    /// places of `rows`, `entries` and `bodies` point (`Tape::eval_in_registers`).
     output: Vec<f64>,
     /// Whether A's band is among the outputs, from the derivation's formulas (compiled code,
     /// where they cost less than forming A from J), rather than formed from J here.
