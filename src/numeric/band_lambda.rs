@@ -128,8 +128,12 @@ pub struct BandLambda {
     /// Per body, where its mass and force are.
     bodies: Vec<BodyAt>,
     // Buffers of one call.
+    /// The inputs of the batched and compiled kernels (the interpreted tape's are in its
+    /// registers: `Tape::input_registers`).
     input: Vec<f64>,
-    /// The kernel's outputs, then one zero (an absent Aₖ₋₁,ₖ's, read with no test).
+    /// The batched and compiled kernels' outputs, then one zero (an absent Aₖ₋₁,ₖ's, read
+    /// with no test); the interpreted tape leaves its outputs in its registers, where the
+    /// places of `rows`, `entries` and `bodies` point (`Tape::eval_in_registers`).
     output: Vec<f64>,
     /// Whether A's band is among the outputs, from the derivation's formulas (compiled code,
     /// where they cost less than forming A from J), rather than formed from J here.
@@ -177,25 +181,24 @@ struct RowAt {
     lower: u32,
 }
 
-/// A J entry: its first component among the outputs, the distance between two, its body,
+/// A J entry: where its components are among the outputs (the interpreted tape's
+/// registers), its body,
 /// the entry of the same body in the row before (an index into `entries`; [`ABSENT`] when
 /// that row does not move the body): the pair's term of Aₖ₋₁,ₖ, and whether it is its
 /// body's first entry (it writes the body's Σₖ λₖ Jₖᵢ, the later ones add to it).
 #[derive(Clone, Copy, Debug)]
 struct EntryAt {
-    first: u32,
-    stride: u32,
+    at: [u32; 3],
     body: u32,
     partner: u32,
     opens: bool,
 }
 
-/// A body's mass, and its force's first component and the distance between two.
+/// Where a body's mass and its force's components are.
 #[derive(Clone, Copy, Debug)]
 struct BodyAt {
     mass: u32,
-    force: u32,
-    stride: u32,
+    force: [u32; 3],
 }
 
 /// Whether `method` lets a chain of `k` rows be solved by a band factor: the rule of the
@@ -208,20 +211,30 @@ fn allowed(method: Method, k: usize) -> bool {
     }
 }
 
-/// Whether every number of `xs` is zero or of a magnitude in [`INPUT_RANGE`] (a NaN is
-/// not: its comparisons are false). Gathered, not branched on.
-fn in_range(xs: &[f64]) -> bool {
+/// Whether `x` is zero or of a magnitude in [`INPUT_RANGE`] (a NaN is not: its comparisons
+/// are false). Gathered, not branched on.
+#[inline(always)]
+fn in_range(x: f64) -> bool {
     let (small, big) = (*INPUT_RANGE.start(), *INPUT_RANGE.end());
-    xs.iter().fold(true, |ok, x| {
-        let a = x.abs();
-        ok & (a <= big) & ((a >= small) | (a == 0.0))
-    })
+    let a = x.abs();
+    (a <= big) & ((a >= small) | (a == 0.0))
 }
 
-/// `D` components of a root from `first`, `stride` apart.
+/// `D` components of a root, from where they are.
 #[inline(always)]
-fn read<const D: usize>(o: &[f64], first: u32, stride: u32) -> [f64; D] {
-    std::array::from_fn(|d| o[first as usize + d * stride as usize])
+fn read<const D: usize>(o: &[f64], at: &[u32; 3]) -> [f64; D] {
+    std::array::from_fn(|d| o[at[d] as usize])
+}
+
+/// Where the solve reads the outputs: the interpreted tape's registers (where it leaves
+/// them: `Tape::eval_in_registers`), else `output`.
+fn outputs<'a>(kernel: &'a Kernel, output: &'a [f64]) -> &'a [f64] {
+    match kernel {
+        #[cfg(feature = "jit")]
+        Kernel::Tape { compiled: Some(_), .. } => output,
+        Kernel::Tape { tape, scratch, .. } => tape.registers(scratch),
+        Kernel::Batched(..) => output,
+    }
 }
 
 impl BandLambda {
@@ -287,31 +300,47 @@ impl BandLambda {
         let width = |r: usize| if graph.ty(roots[r]) == crate::expr::Ty::Vector { dim } else { 1 };
         let source = |s: Symbol| position.get(&s).map_or(0..0, |&i| ranges[i].clone());
         let batched = Batched::new(graph, &roots, &units, width, source, |_| None);
-        let (kernel, output_len, place): (Kernel, usize, Vec<(usize, usize)>) = match batched {
+        // Each root's components' places (past its width, the first again), and how many
+        // numbers the solve reads them from: the batched outputs, or the interpreted tape's
+        // registers, where it leaves its outputs (`Tape::eval_in_registers`).
+        let (kernel, output_len, readable, place): (Kernel, usize, usize, Vec<[usize; 3]>) = match batched {
             Some(b) => {
-                let place = (0..roots.len()).map(|r| b.place(r)).collect();
+                let place = (0..roots.len())
+                    .map(|r| {
+                        let (first, stride) = b.place(r);
+                        let component = |d: usize| if d < width(r) { first + d * stride } else { first };
+                        [component(0), component(1), component(2)]
+                    })
+                    .collect();
                 let len = b.output_len();
                 let scratch = b.scratch();
-                (Kernel::Batched(Box::new(b), scratch), len, place)
+                (Kernel::Batched(Box::new(b), scratch), len, len, place)
             }
             None => {
                 let tape = Tape::compile(graph, &roots, &symbols).ok()?;
-                let place = (0..roots.len()).map(|r| (tape.output_range(r).start, 1)).collect();
+                let place = (0..roots.len())
+                    .map(|r| {
+                        let range = tape.output_range(r);
+                        let component = |d: usize| tape.output_register(range.start + d.min(range.len().max(1) - 1));
+                        [component(0), component(1), component(2)]
+                    })
+                    .collect();
                 let len = tape.output_len();
+                let registers = tape.registers(&tape.scratch()).len();
                 let scratch = tape.scratch();
                 #[cfg(feature = "jit")]
                 let kernel = Kernel::Tape { tape, scratch, compiled: None };
                 #[cfg(not(feature = "jit"))]
                 let kernel = Kernel::Tape { tape, scratch };
-                (kernel, len, place)
+                (kernel, len, registers, place)
             }
         };
         // Every place, with its last component, within the outputs, and every root as wide
         // as a point mass's rows read it.
         let fits = |r: usize, w: usize| {
-            let (first, stride) = place[r];
-            width(r) == w && first + (w - 1) * stride < output_len && output_len < ABSENT as usize
+            width(r) == w && place[r].iter().all(|&at| at < readable) && readable < ABSENT as usize
         };
+        let at = |r: usize| place[r].map(|at| at as u32);
         let (mut rows, mut entries) = (Vec::with_capacity(k), Vec::<EntryAt>::new());
         for (unit, d) in units.iter().zip(&derivation.constraints) {
             let start = entries.len() as u32;
@@ -326,14 +355,13 @@ impl BandLambda {
                 // A body's rows are neighbours (above): its first entry is the one with no
                 // partner.
                 let opens = partner == ABSENT;
-                let (first, stride) = (place[r].0 as u32, place[r].1 as u32);
-                entries.push(EntryAt { first, stride, body, partner, opens });
+                entries.push(EntryAt { at: at(r), body, partner, opens });
             }
             if !fits(unit[0], 1) {
                 return None;
             }
             let (diagonal, lower) = (output_len as u32, output_len as u32);
-            rows.push(RowAt { bias: place[unit[0]].0 as u32, start, end: entries.len() as u32, diagonal, lower });
+            rows.push(RowAt { bias: at(unit[0])[0], start, end: entries.len() as u32, diagonal, lower });
         }
         let mut bodies = Vec::with_capacity(system.bodies.len());
         for unit in &units[k..] {
@@ -341,11 +369,7 @@ impl BandLambda {
             if !(fits(mass, 1) && fits(force, dim)) {
                 return None;
             }
-            bodies.push(BodyAt {
-                mass: place[mass].0 as u32,
-                force: place[force].0 as u32,
-                stride: place[force].1 as u32,
-            });
+            bodies.push(BodyAt { mass: at(mass)[0], force: at(force) });
         }
         let n = bodies.len();
         let still = (0..n as u32).filter(|&b| acting[b as usize].is_none()).collect();
@@ -438,14 +462,14 @@ impl BandLambda {
         for (i, (row, unit)) in self.rows.iter_mut().zip(&self.units).enumerate() {
             row.bias = place(unit[0]);
             for (entry, &j) in self.entries[row.start as usize..row.end as usize].iter_mut().zip(&unit[1..]) {
-                (entry.first, entry.stride) = (place(j), 1);
+                entry.at = [place(j), place(j) + 1, place(j) + 2];
             }
             if let Some(&(d, l)) = band.get(i) {
                 (row.diagonal, row.lower) = (place(d), l.map_or(zero, place));
             }
         }
         for (body, unit) in self.bodies.iter_mut().zip(&self.units[k..]) {
-            (body.mass, body.force, body.stride) = (place(unit[0]), place(unit[1]), 1);
+            (body.mass, body.force) = (place(unit[0]), [place(unit[1]), place(unit[1]) + 1, place(unit[1]) + 2]);
         }
         self.formulas = !band.is_empty();
         self.output = vec![0.0; tape.output_len() + 1];
@@ -545,13 +569,13 @@ impl BandLambda {
     /// states, 1.10× on 108 ill-conditioned chains (1.01× in geometric mean, from 0.04× to
     /// 9.9× case by case), as with A's formulas (1.14×, 1.10×).
     fn solve<const D: usize, const FORMULAS: bool>(&mut self, settings: &Settings) -> bool {
-        let o = &self.output[..];
+        let o = outputs(&self.kernel, &self.output);
         // 1/m and F/m per body: 1/m within the inputs' range.
         let mut ok = true;
         for (b, per_body) in self.bodies.iter().zip(&mut self.per_body) {
             let w = 1.0 / o[b.mass as usize];
             ok &= INPUT_RANGE.contains(&w);
-            let f: [f64; D] = read(o, b.force, b.stride);
+            let f: [f64; D] = read(o, &b.force);
             for d in 0..D {
                 per_body[d] = f[d] * w;
             }
@@ -570,7 +594,7 @@ impl BandLambda {
             }
             for i in row.start as usize..row.end as usize {
                 let entry = self.entries[i];
-                let j: [f64; D] = read(o, entry.first, entry.stride);
+                let j: [f64; D] = read(o, &entry.at);
                 let body = &self.per_body[entry.body as usize];
                 let mut square = 0.0;
                 for d in 0..D {
@@ -669,14 +693,31 @@ impl BandLambda {
     /// The program's inputs from `env`, then its outputs: false when a symbol has no value
     /// (or one of another kind) or a number is not finite.
     fn evaluate(&mut self, env: &Env) -> bool {
-        let input = &mut self.input[..];
+        // The interpreted tape's inputs are written into its registers, where it reads them.
+        let input = match &mut self.kernel {
+            #[cfg(feature = "jit")]
+            Kernel::Tape { compiled: Some(_), .. } => &mut self.input[..],
+            Kernel::Tape { tape, scratch, .. } => tape.input_registers(scratch),
+            Kernel::Batched(..) => &mut self.input[..],
+        };
+        // Each number checked as it is loaded (the loads cover every input slot).
+        let mut in_range_all = true;
         for &(s, start, width) in &self.loads {
             let at = start as usize;
             // One to three numbers, copied by hand (a copy of a variable length is a call).
             match (env.get(s), width) {
-                (Some(Value::Scalar(x)), 1) => input[at] = x,
-                (Some(Value::Vector([x, y, _])), 2) => (input[at], input[at + 1]) = (x, y),
-                (Some(Value::Vector([x, y, z])), 3) => (input[at], input[at + 1], input[at + 2]) = (x, y, z),
+                (Some(Value::Scalar(x)), 1) => {
+                    input[at] = x;
+                    in_range_all &= in_range(x);
+                }
+                (Some(Value::Vector([x, y, _])), 2) => {
+                    (input[at], input[at + 1]) = (x, y);
+                    in_range_all &= in_range(x) & in_range(y);
+                }
+                (Some(Value::Vector([x, y, z])), 3) => {
+                    (input[at], input[at + 1], input[at + 2]) = (x, y, z);
+                    in_range_all &= in_range(x) & in_range(y) & in_range(z);
+                }
                 _ => return false,
             }
         }
@@ -686,8 +727,8 @@ impl BandLambda {
             Kernel::Batched(batched, scratch) => batched.eval(&self.input, scratch, output),
             #[cfg(feature = "jit")]
             Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, output),
-            Kernel::Tape { tape, scratch, .. } => tape.eval(&self.input, scratch, output),
+            Kernel::Tape { tape, scratch, .. } => tape.eval_in_registers(scratch),
         }
-        in_range(&self.input)
+        in_range_all
     }
 }

@@ -890,12 +890,59 @@ impl Tape {
         }
         if self.n_inputs <= IN_PLACE_MAX {
             // SAFETY: the lengths are checked above.
-            unsafe { self.run_steps::<true>(inputs, &mut scratch.regs, outputs) }
+            unsafe { self.run_steps::<true, true>(inputs, &mut scratch.regs, outputs) }
         } else {
             scratch.regs[..self.n_inputs].copy_from_slice(inputs);
             // SAFETY: as above.
-            unsafe { self.run_steps::<false>(inputs, &mut scratch.regs, outputs) }
+            unsafe { self.run_steps::<false, true>(inputs, &mut scratch.regs, outputs) }
         }
+    }
+
+    /// The registers of the input slots, where [`eval_in_registers`](Tape::eval_in_registers)
+    /// reads its inputs: the caller writes them here, slot by slot.
+    ///
+    /// # Panics
+    /// If `scratch` was made by a tape with another number of registers.
+    pub fn input_registers<'a>(&self, scratch: &'a mut Scratch) -> &'a mut [f64] {
+        if scratch.regs.len() != self.n_regs {
+            self.misuse(self.n_inputs, self.outputs.len(), scratch.regs.len());
+        }
+        &mut scratch.regs[..self.n_inputs]
+    }
+
+    /// [`eval`](Tape::eval) at the inputs in `scratch`'s input registers
+    /// ([`input_registers`](Tape::input_registers)), every output component left in its
+    /// register ([`output_register`](Tape::output_register), read with
+    /// [`registers`](Tape::registers)) rather than copied out: the same steps, the same
+    /// numbers, for a caller that reads each output once and would pay the copy for
+    /// nothing. An output that is an input or a constant is in that input's or constant's
+    /// register; the registers of the other outputs are written by no other step.
+    ///
+    /// # Panics
+    /// If `scratch` was made by a tape with another number of registers.
+    pub fn eval_in_registers(&self, scratch: &mut Scratch) {
+        if scratch.regs.len() != self.n_regs {
+            self.misuse(self.n_inputs, self.outputs.len(), scratch.regs.len());
+        }
+        if scratch.tape != self.id {
+            scratch.regs[self.n_inputs..self.n_inputs + self.consts.len()].copy_from_slice(&self.consts);
+            scratch.tape = self.id;
+        }
+        // SAFETY: the registers' length is checked above; with neither `IN_PLACE` nor the
+        // outputs' copy, `run_steps` reads neither `inputs` nor `outputs`.
+        unsafe { self.run_steps::<false, false>(&[], &mut scratch.regs, &mut []) }
+    }
+
+    /// The register that holds output component `k` after
+    /// [`eval_in_registers`](Tape::eval_in_registers): below the number of registers.
+    pub fn output_register(&self, k: usize) -> usize {
+        self.outputs[k] as usize
+    }
+
+    /// The registers of `scratch` (every one, input slots first), as
+    /// [`eval_in_registers`](Tape::eval_in_registers) left them.
+    pub fn registers<'a>(&self, scratch: &'a Scratch) -> &'a [f64] {
+        &scratch.regs
     }
 
     /// The panic of a call of [`eval`](Tape::eval) with slices of the wrong lengths: out of
@@ -909,16 +956,22 @@ impl Tape {
         unreachable!("eval called with the right lengths")
     }
 
-    /// The steps of [`eval`](Tape::eval) over the registers `r`, then the outputs. With
-    /// `IN_PLACE`, an operand that is an input slot is read from `inputs` (the registers of
-    /// the input slots are not written); otherwise the caller has copied `inputs` into `r`.
+    /// The steps of [`eval`](Tape::eval) over the registers `r`, then, with `COPY_OUT`, the
+    /// outputs. With `IN_PLACE`, an operand that is an input slot is read from `inputs` (the
+    /// registers of the input slots are not written); otherwise the caller has copied
+    /// `inputs` into `r`.
     ///
     /// # Safety
-    /// `inputs` must be [`input_len`](Tape::input_len) long, `r`
-    /// [`n_regs`](Tape::scratch) long with the constants in place, `outputs`
-    /// [`output_len`](Tape::output_len) long.
+    /// `inputs` must be [`input_len`](Tape::input_len) long with `IN_PLACE` or `COPY_OUT`,
+    /// `r` [`n_regs`](Tape::scratch) long with the constants in place, `outputs`
+    /// [`output_len`](Tape::output_len) long with `COPY_OUT`.
     #[inline(always)]
-    unsafe fn run_steps<const IN_PLACE: bool>(&self, inputs: &[f64], r: &mut [f64], outputs: &mut [f64]) {
+    unsafe fn run_steps<const IN_PLACE: bool, const COPY_OUT: bool>(
+        &self,
+        inputs: &[f64],
+        r: &mut [f64],
+        outputs: &mut [f64],
+    ) {
         let n_inputs = self.n_inputs;
         let at = inputs.as_ptr();
         // The previous step's result (`A`, `B`, `C` steps read it here rather than from `r`).
@@ -1211,6 +1264,9 @@ impl Tape {
             };
             set(s.d, x);
             acc = x;
+        }
+        if !COPY_OUT {
+            return;
         }
         for (o, &k) in outputs.iter_mut().zip(&self.outputs) {
             let k = k as usize;
@@ -1547,5 +1603,87 @@ fn zip3(out: &mut [f64], a: &[f64], b: &[f64], c: &[f64], f: impl Fn(f64, f64, f
 fn zip4(out: &mut [f64], a: &[f64], b: &[f64], c: &[f64], d: &[f64], f: impl Fn(f64, f64, f64, f64) -> f64) {
     for ((((o, &w), &x), &y), &z) in out.iter_mut().zip(a).zip(b).zip(c).zip(d) {
         *o = f(w, x, y, z);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// xorshift64: enough randomness for shapes of programs.
+    struct Rng(u64);
+
+    impl Rng {
+        fn next(&mut self) -> u64 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            self.0
+        }
+        fn below(&mut self, n: usize) -> usize {
+            (self.next() % n as u64) as usize
+        }
+        fn number(&mut self) -> f64 {
+            (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
+        }
+    }
+
+    /// A random program over `n_inputs` slots: a few constants, then sums, differences,
+    /// products (squares among them, and products read once: fused), quotients, negations and
+    /// powers of earlier values; its outputs any values, inputs and constants among them,
+    /// some repeated.
+    fn random_program(rng: &mut Rng, n_inputs: usize) -> Program {
+        let mut ops: Vec<Op> = (0..n_inputs as u32).map(Op::Input).collect();
+        for _ in 0..1 + rng.below(3) {
+            ops.push(Op::Const(rng.number().to_bits()));
+        }
+        for _ in 0..5 + rng.below(40) {
+            let n = ops.len();
+            let (a, b) = (rng.below(n) as Val, rng.below(n) as Val);
+            ops.push(match rng.below(7) {
+                0 => Op::Add(a, b),
+                1 => Op::Sub(a, b),
+                2 => Op::Mul(a, b),
+                3 => Op::Mul(a, a),
+                4 => Op::Div(a, b),
+                5 => Op::Neg(a),
+                _ => Op::Powi(a, 3),
+            });
+        }
+        let outputs: Vec<Val> = (0..1 + rng.below(12)).map(|_| rng.below(ops.len()) as Val).collect();
+        Program {
+            ops,
+            n_inputs,
+            input_ranges: (0..n_inputs).map(|j| j..j + 1).collect(),
+            output_ranges: (0..outputs.len()).map(|k| k..k + 1).collect(),
+            outputs,
+        }
+    }
+
+    /// `eval_in_registers` leaves in each output's register the bits `eval` writes to the
+    /// output, on random tapes (inputs in place and copied, outputs that are inputs or
+    /// constants), at random states, with one scratch serving the tapes in turn.
+    #[test]
+    fn outputs_in_registers_are_evals_outputs() {
+        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        for case in 0..300 {
+            let n_inputs = 1 + rng.below(2 * IN_PLACE_MAX);
+            let tape = Tape::from_program(&random_program(&mut rng, n_inputs));
+            let (mut scratch, mut theirs) = (tape.scratch(), tape.scratch());
+            let mut out = vec![0.0; tape.output_len()];
+            for _ in 0..4 {
+                let inputs: Vec<f64> = (0..n_inputs).map(|_| rng.number()).collect();
+                tape.eval(&inputs, &mut theirs, &mut out);
+                tape.input_registers(&mut scratch).copy_from_slice(&inputs);
+                tape.eval_in_registers(&mut scratch);
+                let registers = tape.registers(&scratch);
+                for (k, x) in out.iter().enumerate() {
+                    let got = registers[tape.output_register(k)];
+                    assert_eq!(got.to_bits(), x.to_bits(), "case {case} output {k}");
+                }
+                // The scratch serves `eval` in turn, as one of another tape would.
+                tape.eval(&inputs, &mut scratch, &mut out);
+            }
+        }
     }
 }
