@@ -1610,22 +1610,11 @@ fn zip4(out: &mut [f64], a: &[f64], b: &[f64], c: &[f64], d: &[f64], f: impl Fn(
 mod tests {
     use super::*;
 
-    /// xorshift64: enough randomness for shapes of programs.
-    struct Rng(u64);
+    use crate::numeric::random::Rng;
 
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            self.0
-        }
-        fn below(&mut self, n: usize) -> usize {
-            (self.next() % n as u64) as usize
-        }
-        fn number(&mut self) -> f64 {
-            (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 4.0 - 2.0
-        }
+    /// A draw below `n`.
+    fn below(rng: &mut Rng, n: usize) -> usize {
+        (rng.next_u64() % n as u64) as usize
     }
 
     /// A random program over `n_inputs` slots: a few constants, then sums, differences,
@@ -1634,13 +1623,13 @@ mod tests {
     /// some repeated.
     fn random_program(rng: &mut Rng, n_inputs: usize) -> Program {
         let mut ops: Vec<Op> = (0..n_inputs as u32).map(Op::Input).collect();
-        for _ in 0..1 + rng.below(3) {
-            ops.push(Op::Const(rng.number().to_bits()));
+        for _ in 0..1 + below(rng, 3) {
+            ops.push(Op::Const(rng.uniform(-2.0, 2.0).to_bits()));
         }
-        for _ in 0..5 + rng.below(40) {
+        for _ in 0..5 + below(rng, 40) {
             let n = ops.len();
-            let (a, b) = (rng.below(n) as Val, rng.below(n) as Val);
-            ops.push(match rng.below(7) {
+            let (a, b) = (below(rng, n) as Val, below(rng, n) as Val);
+            ops.push(match below(rng, 7) {
                 0 => Op::Add(a, b),
                 1 => Op::Sub(a, b),
                 2 => Op::Mul(a, b),
@@ -1650,7 +1639,7 @@ mod tests {
                 _ => Op::Powi(a, 3),
             });
         }
-        let outputs: Vec<Val> = (0..1 + rng.below(12)).map(|_| rng.below(ops.len()) as Val).collect();
+        let outputs: Vec<Val> = (0..1 + below(rng, 12)).map(|_| below(rng, ops.len()) as Val).collect();
         Program {
             ops,
             n_inputs,
@@ -1665,14 +1654,14 @@ mod tests {
     /// constants), at random states, with one scratch serving the tapes in turn.
     #[test]
     fn outputs_in_registers_are_evals_outputs() {
-        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
         for case in 0..300 {
-            let n_inputs = 1 + rng.below(2 * IN_PLACE_MAX);
+            let n_inputs = 1 + below(&mut rng, 2 * IN_PLACE_MAX);
             let tape = Tape::from_program(&random_program(&mut rng, n_inputs));
             let (mut scratch, mut theirs) = (tape.scratch(), tape.scratch());
             let mut out = vec![0.0; tape.output_len()];
             for _ in 0..4 {
-                let inputs: Vec<f64> = (0..n_inputs).map(|_| rng.number()).collect();
+                let inputs: Vec<f64> = (0..n_inputs).map(|_| rng.uniform(-2.0, 2.0)).collect();
                 tape.eval(&inputs, &mut theirs, &mut out);
                 tape.input_registers(&mut scratch).copy_from_slice(&inputs);
                 tape.eval_in_registers(&mut scratch);
