@@ -570,12 +570,7 @@ impl<'s> Dynamics<'s> {
         let (Some(one), [x], [u]) = (&self.one_slot, q, v) else {
             return false;
         };
-        let ([row], [w], [velocity], [f]) = (
-            rows.rows.as_mut_slice(),
-            rows.inverse_mass.as_mut_slice(),
-            rows.velocity.as_mut_slice(),
-            rows.force.as_mut_slice(),
-        ) else {
+        let Some((row, w, velocity, f)) = rows.one_slot_mut() else {
             return false;
         };
         let Some(motion) = self.program.motion_one_slot(one, x, u, &mut self.scratch) else {

@@ -93,6 +93,30 @@ impl Rows {
         copy_slots(&mut self.inverse_mass, &from.inverse_mass);
         copy_slots(&mut self.force, &from.force);
     }
+
+    /// The one row and the one slot's 1/m, v and F of rows of that shape (a pendulum, a
+    /// bead), else `None`.
+    #[inline(always)]
+    pub fn one_slot(&self) -> Option<(&Row, f64, &[f64; 3], &[f64; 3])> {
+        match (self.rows.as_slice(), self.inverse_mass.as_slice(), self.velocity.as_slice(), self.force.as_slice()) {
+            ([row], [w], [v], [f]) => Some((row, *w, v, f)),
+            _ => None,
+        }
+    }
+
+    /// [`one_slot`](Rows::one_slot), to write in place.
+    #[inline(always)]
+    pub fn one_slot_mut(&mut self) -> Option<(&mut Row, &mut f64, &mut [f64; 3], &mut [f64; 3])> {
+        match (
+            self.rows.as_mut_slice(),
+            self.inverse_mass.as_mut_slice(),
+            self.velocity.as_mut_slice(),
+            self.force.as_mut_slice(),
+        ) {
+            ([row], [w], [v], [f]) => Some((row, w, v, f)),
+            _ => None,
+        }
+    }
 }
 
 /// The rigid bodies of `system` in the order of their angular slots: the r-th body this
@@ -1110,14 +1134,7 @@ fn motion_one<const W: usize>(places: &Places, out: Outputs<'_>, rows: &mut Rows
     else {
         return None;
     };
-    let ([row], [w], [u], [f]) = (
-        rows.rows.as_mut_slice(),
-        rows.inverse_mass.as_mut_slice(),
-        rows.velocity.as_mut_slice(),
-        rows.force.as_mut_slice(),
-    ) else {
-        return None;
-    };
+    let (row, w, u, f) = rows.one_slot_mut()?;
     *w = 1.0 / out.0[*m as usize];
     // SAFETY: `places` made `out`, and its v and F are `W` wide (the caller's `slot_width`).
     (*u, *f) = unsafe { (velocity.read_of::<W>(out), force.read_of::<W>(out)) };

@@ -40,7 +40,7 @@
 //! it (`Dynamics::solve`, `Dynamics::correct`, `Dynamics::correct_single`: at every solve,
 //! as the check is cheaper than any bookkeeping it saves).
 
-use super::rows::Rows;
+use super::rows::{Row, Rows};
 use super::solve::{Method, Settings, Solution, Status, positive_finite, row_norm};
 use super::vector::{dot, not_finite_bit};
 
@@ -310,18 +310,7 @@ pub fn solve_one_slot(
     out: &mut Solution,
     finite: bool,
 ) -> Option<[f64; 3]> {
-    let ([row], [w], [velocity], [f]) =
-        (rows.rows.as_slice(), rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice())
-    else {
-        return None;
-    };
-    let [(0, j)] = row.jacobian.as_slice() else {
-        return None;
-    };
-    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) {
-        return None;
-    }
-    let w = *w;
+    let (row, j, w, velocity, f) = one_slot_equality(rows, settings)?;
     // Every number finite, as `solve_single_with` checks them (unless known).
     let (v, b) = (velocity, row.bias);
     if !(finite || all_finite([v[0], v[1], v[2], f[0], f[1], f[2], b, w, j[0], j[1], j[2]])) || w < 0.0 {
@@ -335,6 +324,24 @@ pub fn solve_one_slot(
     let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];
     write_one_slot(out, lambda, fc, a);
     Some(a)
+}
+
+/// A one-slot row's numbers: the row, J, 1/m, v and F ([`one_slot_equality`]).
+type OneSlotEquality<'a> = (&'a Row, &'a [f64; 3], f64, &'a [f64; 3], &'a [f64; 3]);
+
+/// The one equality row of `rows` with its one J entry on slot 0, that slot's J, 1/m, v
+/// and F, where `settings`' method lets the one-row solves answer (`Auto`, `Banded`):
+/// what [`solve_one_slot`] and [`solve_one_slot_unscaled`] serve; else `None`.
+#[inline(always)]
+fn one_slot_equality<'a>(rows: &'a Rows, settings: &Settings) -> Option<OneSlotEquality<'a>> {
+    let (row, w, v, f) = rows.one_slot()?;
+    let [(0, j)] = row.jacobian.as_slice() else {
+        return None;
+    };
+    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) {
+        return None;
+    }
+    Some((row, j, w, v, f))
 }
 
 /// [`solve_one_slot`]'s answer into `out`: λ, the constraint force `fc` and the
@@ -401,18 +408,10 @@ pub fn unscaled_multiplier(j: &[f64; 3], w: f64, f: &[f64; 3], bias: f64) -> Opt
 /// `solve_one_slot` with `finite`).
 #[inline(always)]
 pub fn solve_one_slot_unscaled(rows: &Rows, settings: &Settings, out: &mut Solution) -> Option<[f64; 3]> {
-    let ([row], [w], [_], [f]) =
-        (rows.rows.as_slice(), rows.inverse_mass.as_slice(), rows.velocity.as_slice(), rows.force.as_slice())
-    else {
-        return None;
-    };
-    let [(0, j)] = row.jacobian.as_slice() else {
-        return None;
-    };
-    if row.inequality || !matches!(settings.method, Method::Auto | Method::Banded) || *w < 0.0 {
+    let (row, j, w, _, f) = one_slot_equality(rows, settings)?;
+    if w < 0.0 {
         return None;
     }
-    let w = *w;
     let lambda = unscaled_multiplier(j, w, f, row.bias)?;
     let fc = [0.0 + lambda * j[0], 0.0 + lambda * j[1], 0.0 + lambda * j[2]];
     let a = [(f[0] + fc[0]) * w, (f[1] + fc[1]) * w, (f[2] + fc[2]) * w];

@@ -913,14 +913,7 @@ pub fn rattle_one_row_plain(
         return None;
     }
     // The step is plain: written.
-    let ([end_row], [end_w], [end_u], [end_f]) = (
-        end.rows.as_mut_slice(),
-        end.inverse_mass.as_mut_slice(),
-        end.velocity.as_mut_slice(),
-        end.force.as_mut_slice(),
-    ) else {
-        return None;
-    };
+    let (end_row, end_w, end_u, end_f) = end.one_slot_mut()?;
     let [(slot, end_j)] = end_row.jacobian.as_mut_slice() else {
         return None;
     };
