@@ -114,6 +114,22 @@ pub enum Problem {
     /// A rigid body's torque expression that cannot be its torque.
     #[error("in the torque `{name}`: {error}")]
     Torque { span: Range<usize>, name: String, error: ForceError },
+    /// A force or torque symbol given both a value in `[scene] initial` and an expression in
+    /// `[scene] forces`: located at the expression's key, the value's key a second label.
+    #[error(
+        "the {what} `{name}` is given twice: a value in [scene] initial (line {initial_line}) and an expression in [scene] forces (line {line}); keep one of them"
+    )]
+    GivenTwice {
+        span: Range<usize>,
+        /// The key of the value in `initial`.
+        initial: Range<usize>,
+        /// `"force"` or `"torque"`.
+        what: &'static str,
+        /// The force or torque symbol.
+        name: String,
+        line: usize,
+        initial_line: usize,
+    },
     /// `dt`, `duration` or `restitution` out of range.
     #[error("`{key}` must be a finite {must} number, found {value}")]
     SceneNumber { span: Range<usize>, key: &'static str, must: &'static str, value: f64 },
@@ -218,6 +234,7 @@ impl Problem {
             | UnknownForce { span, .. }
             | Force { span, .. }
             | Torque { span, .. }
+            | GivenTwice { span, .. }
             | SceneNumber { span, .. }
             | Restitution { span, .. }
             | ToleranceWithoutAt { span }
@@ -234,6 +251,22 @@ impl Problem {
             | ExpectedShape { span, .. } => Some(span.clone()),
         }
     }
+}
+
+impl Problem {
+    /// A second place the problem is at, with what it is there (the value of a force or
+    /// torque also given an expression).
+    pub fn also(&self) -> Option<(Range<usize>, &'static str)> {
+        match self {
+            Problem::GivenTwice { initial, .. } => Some((initial.clone(), "given a value here")),
+            _ => None,
+        }
+    }
+}
+
+/// The 1-based line of byte `offset` of `text`.
+pub fn line_of(text: &str, offset: usize) -> usize {
+    text.as_bytes()[..offset.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1
 }
 
 /// In file order, so the messages read top to bottom (unlocated ones first); a problem

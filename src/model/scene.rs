@@ -9,7 +9,7 @@
 //! Not here: the raw table (`model::raw`), checking a value against its symbol
 //! (`model::state`), reading files, the derivation, solving.
 
-use super::problem::{ForceError, Problem, locate, shown, subnormal_hint};
+use super::problem::{ForceError, Problem, line_of, locate, shown, subnormal_hint};
 use super::raw::RawScene;
 use super::state::value;
 use super::system::{Body, BuildError, Rigid, System};
@@ -98,10 +98,28 @@ pub(super) fn validate(
     let torque_of = |system: &System, name: &str| {
         system.bodies.iter().position(|b| b.rigid.as_ref().is_some_and(|r| system.graph.symbol(r.torque).name == name))
     };
+    // A symbol given both a value in `initial` and an expression here would leave the
+    // reader to guess which is used: one of them is an error, located at both.
+    let given: NameMap<&str, std::ops::Range<usize>> = if raw.forces.is_empty() {
+        NameMap::default()
+    } else {
+        raw.initial.keys().map(|k| (k.get_ref().as_ref(), k.span())).collect()
+    };
+    let given_twice = |span: std::ops::Range<usize>, what: &'static str, symbol: &str| {
+        given.get(symbol).map(|initial| Problem::GivenTwice {
+            line: line_of(text, span.start),
+            initial_line: line_of(text, initial.start),
+            span,
+            initial: initial.clone(),
+            what,
+            name: symbol.to_string(),
+        })
+    };
     for ((name, expr), body) in raw.forces.iter().zip(bodies) {
         if body.is_none()
             && let Some(rigid) = torque_of(system, name.get_ref().as_ref())
         {
+            problems.extend(given_twice(name.span(), "torque", name.get_ref().as_ref()));
             match torque_expression(system, expr.get_ref()) {
                 Ok(id) => scene.torques.push((rigid, id)),
                 Err((inner, error)) => {
@@ -122,6 +140,7 @@ pub(super) fn validate(
             problems.push(Problem::UnknownForce { span: name.span(), name: name.get_ref().to_string(), forces });
             continue;
         };
+        problems.extend(given_twice(name.span(), "force", &system.graph.symbol(system.bodies[body].force).name));
         let result =
             resolved.entry(expr.get_ref().as_ref()).or_insert_with(|| force_expression(system, expr.get_ref()));
         match result.clone() {

@@ -14,7 +14,7 @@ use codespan_reporting::term::{self, Config};
 
 /// Renders every problem of one file, in order.
 pub fn render(path: &str, text: &str, problems: &[Problem]) -> String {
-    problems.iter().map(|p| render_message(path, text, &p.to_string(), p.span())).collect()
+    problems.iter().map(|p| render_labelled(path, text, &p.to_string(), p.span(), p.also())).collect()
 }
 
 /// Renders an error about constraint `k` of the file (a formula past the work budget) at
@@ -37,6 +37,19 @@ fn constraint_expr_span(text: &str, k: usize) -> Option<std::ops::Range<usize>> 
 }
 
 fn render_message(path: &str, text: &str, message: &str, span: Option<std::ops::Range<usize>>) -> String {
+    render_labelled(path, text, message, span, None)
+}
+
+/// As [`render_message`], with a second place (a span and what is there) labelled under its
+/// own line when the problem has one (the message names its line too, for the long-line
+/// layout, which shows only the first place).
+fn render_labelled(
+    path: &str,
+    text: &str,
+    message: &str,
+    span: Option<std::ops::Range<usize>>,
+    also: Option<(std::ops::Range<usize>, &str)>,
+) -> String {
     let file = SimpleFile::new(path, text);
     let config = Config::default();
     // A name in a message (`in constraint `…``) never reaches the terminal raw.
@@ -51,7 +64,13 @@ fn render_message(path: &str, text: &str, message: &str, span: Option<std::ops::
         Some(span) => {
             let start = floor_char(text, span.start.min(text.len()));
             let end = floor_char(text, span.end.clamp(start, text.len()));
-            d = d.with_labels(vec![Label::primary((), start..end)]);
+            let mut labels = vec![Label::primary((), start..end)];
+            if let Some((also, what)) = also {
+                let start = floor_char(text, also.start.min(text.len()));
+                let end = floor_char(text, also.end.clamp(start, text.len()));
+                labels.push(Label::secondary((), start..end).with_message(what));
+            }
+            d = d.with_labels(labels);
         }
         None => d = d.with_notes(vec![format!("in {path}")]),
     }
