@@ -150,6 +150,33 @@ fn a_mistake_causes_no_follow_on_messages() {
     assert!(messages.iter().any(|m| m.contains("a constraint has no `name`")), "{messages:#?}");
 }
 
+/// A body field that cannot be read leaves a placeholder symbol in the model (so the body
+/// stays declared), and no message names it: with each symbol field of a rigid body left out
+/// in turn, and a scene that names a force the file lacks, every message names only what
+/// the file writes, and the unknown force's message says the body has no force symbol.
+#[test]
+fn no_message_names_a_placeholder() {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/rigid/rod_pinned.toml"))
+        .expect("the rod");
+    let fields =
+        ["position", "velocity", "acceleration", "force", "angular_velocity", "angular_acceleration", "torque"];
+    for field in fields {
+        let without: String =
+            text.lines().filter(|l| !l.starts_with(&format!("{field} = "))).map(|l| format!("{l}\n")).collect();
+        let without = without.replace("forces = { F = ", "forces = { Q = \"[1, 0]\", F = ");
+        let Err(problems) = load(&without) else { panic!("the rod without `{field}` is refused") };
+        let messages: Vec<String> = problems.iter().map(ToString::to_string).collect();
+        assert!(messages.iter().all(|m| !m.contains("unread_")), "without `{field}`: {messages:#?}");
+        let unknown = messages.iter().find(|m| m.starts_with("`Q` is not a body's force symbol"));
+        let unknown = unknown.unwrap_or_else(|| panic!("without `{field}`: {messages:#?}"));
+        if field == "force" {
+            assert!(unknown.contains("body `rod` has no force symbol"), "{unknown}");
+        } else {
+            assert!(unknown.contains("force symbols: F"), "{unknown}");
+        }
+    }
+}
+
 /// A state file that is not a flat table of numbers and vectors is refused with a message
 /// naming the key (never serde's "did not match any variant"), and a JSON key written
 /// twice is an error naming it, not a silent last value.

@@ -317,9 +317,13 @@ impl Reader<'_> {
         // body stays declared.
         self.bodies_read += 1;
         let n = self.bodies_read;
-        let symbol = |r: &mut Self, key: &str, example: &'static str| {
-            r.field(at, t, &label, key, example)
-                .unwrap_or_else(|| Spanned::new(at.span(), Cow::Owned(format!("unread_{key}_{n}"))))
+        let mut placeholders = Vec::new();
+        let mut symbol = |r: &mut Self, key: &str, example: &'static str| {
+            r.field(at, t, &label, key, example).unwrap_or_else(|| {
+                let placeholder = format!("unread_{key}_{n}");
+                placeholders.push(placeholder.clone());
+                Spanned::new(at.span(), Cow::Owned(placeholder))
+            })
         };
         let position = symbol(self, "position", "\"r\"");
         let velocity = symbol(self, "velocity", "\"v\"");
@@ -353,7 +357,7 @@ impl Reader<'_> {
             }
             None
         };
-        Some(RawBody { name: name?, position, velocity, acceleration, mass, force, rigid })
+        Some(RawBody { name: name?, position, velocity, acceleration, mass, force, rigid, placeholders })
     }
 
     /// A mass or an inertia: a number or a symbol's name (an inertia also a vector of

@@ -232,6 +232,7 @@ fn build<'t>(
             force: body.force.get_ref(),
             mass,
         };
+        refused.placeholders.extend(body.placeholders.iter().map(String::as_str));
         let declared = b.body(&spec);
         if let (Ok(index), Some(rigid)) = (&declared, &body.rigid) {
             declare_rigid(&mut b, *index, body, rigid, problems);

@@ -106,8 +106,15 @@ pub enum Problem {
     #[error("{error}")]
     Value { span: Range<usize>, error: ValueError },
     /// A `[scene] forces` key that names no body.
-    #[error("`{name}` is not a body's force symbol or a body's name ({})", force_symbols(.forces))]
-    UnknownForce { span: Range<usize>, name: String, forces: Vec<String> },
+    #[error("`{name}` is not a body's force symbol or a body's name ({})", force_symbols(.forces, .without))]
+    UnknownForce {
+        span: Range<usize>,
+        name: String,
+        /// The force and torque symbols the file writes.
+        forces: Vec<String>,
+        /// The bodies whose `force` could not be read (reported there): they have none.
+        without: Vec<String>,
+    },
     /// A force expression that cannot be a force.
     #[error("in the force on `{name}`: {error}")]
     Force { span: Range<usize>, name: String, error: ForceError },
@@ -327,11 +334,20 @@ fn hint(suggestion: &Option<String>, known: &[&str]) -> String {
     }
 }
 
-fn force_symbols(forces: &[String]) -> String {
-    if forces.is_empty() {
-        "the file declares no bodies".to_string()
-    } else {
-        format!("force symbols: {}", forces.join(", "))
+fn force_symbols(forces: &[String], without: &[String]) -> String {
+    let none = match without {
+        [] => String::new(),
+        [body] => format!("body `{body}` has no force symbol"),
+        bodies => format!(
+            "bodies {} have no force symbol",
+            bodies.iter().map(|b| format!("`{b}`")).collect::<Vec<_>>().join(", ")
+        ),
+    };
+    match (forces.is_empty(), none.is_empty()) {
+        (true, true) => "the file declares no bodies".to_string(),
+        (true, false) => none,
+        (false, true) => format!("force symbols: {}", forces.join(", ")),
+        (false, false) => format!("force symbols: {}; {none}", forces.join(", ")),
     }
 }
 

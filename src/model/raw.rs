@@ -61,6 +61,9 @@ pub struct RawBody<'a> {
     pub force: Text<'a>,
     /// The rotational keys of a rigid body, present when the body has an `orientation`.
     pub rigid: Option<RawRigid<'a>>,
+    /// The placeholder names among this body's symbols (empty when every one was read):
+    /// never shown to the user, who did not write them.
+    pub placeholders: Vec<String>,
 }
 
 /// A rigid body's rotational keys as written (placeholders as in [`RawBody`]).

@@ -58,6 +58,9 @@ pub(super) struct RefusedBodies<'t> {
     pub names: Vec<&'t str>,
     /// The refused bodies' force symbols, for the list of force symbols a message shows.
     pub forces: Vec<&'t str>,
+    /// The placeholder names standing in for symbols a body does not write readably (every
+    /// body's, refused or not): left out of the names a message lists.
+    pub placeholders: Vec<&'t str>,
 }
 
 /// Resolves a raw scene against `system`; every problem goes to `problems`.
@@ -133,11 +136,26 @@ pub(super) fn validate(
             if refused.names.contains(&name.get_ref().as_ref()) {
                 continue;
             }
+            // The names the user wrote: a placeholder (a body without a readable `force`,
+            // reported there) is not one; such a body is said to have none.
+            let placeholder: FastSet<&str> = refused.placeholders.iter().copied().collect();
             let rigid = system.bodies.iter().filter_map(|b| b.rigid.as_ref()).map(|r| r.torque);
             let declared = system.bodies.iter().map(|b| b.force).chain(rigid);
-            let declared = declared.map(|s| system.graph.symbol(s).name.clone());
-            let forces = declared.chain(refused.forces.iter().map(|f| f.to_string())).collect();
-            problems.push(Problem::UnknownForce { span: name.span(), name: name.get_ref().to_string(), forces });
+            let declared = declared.map(|s| system.graph.symbol(s).name.as_str());
+            let forces = declared
+                .chain(refused.forces.iter().copied())
+                .filter(|f| !placeholder.contains(f))
+                .map(str::to_string)
+                .collect();
+            let without =
+                system.bodies.iter().filter(|b| placeholder.contains(system.graph.symbol(b.force).name.as_str()));
+            let without = without.map(|b| b.name.clone()).collect();
+            problems.push(Problem::UnknownForce {
+                span: name.span(),
+                name: name.get_ref().to_string(),
+                forces,
+                without,
+            });
             continue;
         };
         problems.extend(given_twice(name.span(), "force", &system.graph.symbol(system.bodies[body].force).name));
