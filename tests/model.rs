@@ -177,6 +177,35 @@ fn no_message_names_a_placeholder() {
     }
 }
 
+/// The message refusing a quantity in an `[[expect]]` with `at` lists what can be checked
+/// there, and each quantity it lists is accepted there (the pinned rod at rest, each key in
+/// turn); a quantity it does not list is refused there.
+#[test]
+fn the_quantities_a_state_check_lists_are_the_ones_it_accepts() {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/rigid/rod_pinned.toml"))
+        .expect("the rod");
+    let with = |key: &str, name: &str, value: &str| {
+        format!(
+            "{text}\n[[expect]]\nat = {{ th = 0.0, w = 0.0, x = [1.0, 0.0], v = [0.0, 0.0], F = [0.0, -9.81], I = 0.3333333333333333 }}\ntolerance = 1e3\n{key} = {{ {name} = {value} }}\n"
+        )
+    };
+    let Err(problems) = load(&with("C_dot", "\"pin.x\"", "0.0")) else { panic!("C_dot at a state is refused") };
+    let message = problems.iter().map(ToString::to_string).find(|m| m.starts_with("only ")).expect("the message");
+    let listed: Vec<&str> =
+        message.split("can be checked").next().unwrap_or("").split('`').skip(1).step_by(2).collect();
+    assert_eq!(listed, ["force", "torque", "lambda"], "{message}");
+    for key in ["force", "torque", "lambda", "C_dot", "C_ddot", "A", "b"] {
+        let (name, value) = match key {
+            "force" => ("rod", "[0.0, 0.0]"),
+            "torque" => ("rod", "0.0"),
+            "A" => ("\"pin.x,pin.x\"", "0.0"),
+            _ => ("\"pin.x\"", "0.0"),
+        };
+        let loaded = load(&with(key, name, value));
+        assert_eq!(loaded.is_ok(), listed.contains(&key), "{key}: {:?}", loaded.err());
+    }
+}
+
 /// A state file that is not a flat table of numbers and vectors is refused with a message
 /// naming the key (never serde's "did not match any variant"), and a JSON key written
 /// twice is an error naming it, not a silent last value.

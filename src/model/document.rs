@@ -22,7 +22,7 @@
 use super::keys::unknown_keys;
 use super::problem::{Problem, shown};
 use super::raw::{
-    RawBody, RawConstraint, RawExpect, RawExpected, RawFile, RawMass, RawRigid, RawScene, RawValue, Text,
+    QUANTITIES, RawBody, RawConstraint, RawExpect, RawExpected, RawFile, RawMass, RawRigid, RawScene, RawValue, Text,
 };
 use std::borrow::Cow;
 use std::collections::BTreeMap;
@@ -433,8 +433,7 @@ impl Reader<'_> {
             }
         });
         let note = t.get("note").and_then(|x| self.string(x, "`note`")).map(|s| s.into_inner().into_owned());
-        let written =
-            ["force", "torque", "lambda", "C_dot", "C_ddot", "A", "b"].iter().filter(|k| t.contains_key(**k)).count();
+        let written = QUANTITIES.iter().filter(|k| t.contains_key(**k)).count();
         Some(RawExpect { force, torque, lambda, c_dot, c_ddot, a, b, at, tolerance, written, note })
     }
 

@@ -27,7 +27,7 @@
 //! Not here: judging the entries (`check`).
 
 use super::problem::{Problem, locate, shown};
-use super::raw::{Entries, RawExpect, RawExpected, Text};
+use super::raw::{AT_STATE, Entries, RawExpect, RawExpected, Text};
 use super::state::value;
 use super::system::{BuildError, System};
 use crate::expr::eval::Value;
@@ -181,7 +181,7 @@ impl Resolver<'_> {
             let Some(quantity) = self.quantity(key, what, target) else {
                 continue;
             };
-            if self.numeric && !matches!(quantity, Quantity::Force(_) | Quantity::Torque(_) | Quantity::Lambda(_)) {
+            if self.numeric && !AT_STATE.contains(&what) {
                 self.problem(Problem::NotAtState { span: key.span(), what: what.to_string() });
                 continue;
             }

@@ -9,6 +9,7 @@
 //!
 //! Not here: finding problems (the stages above), rendering them (`report::diagnostic`).
 
+use super::raw::{AT_STATE, QUANTITIES};
 use super::state::ValueError;
 use super::system::BuildError;
 use std::ops::Range;
@@ -154,10 +155,10 @@ pub enum Problem {
     #[error("`tolerance` must be a positive finite number, found {shown}")]
     Tolerance { span: Range<usize>, shown: String },
     /// An entry with none of the quantities.
-    #[error("this [[expect]] entry checks nothing: give `force`, `lambda`, `C_dot`, `C_ddot`, `A` or `b`")]
+    #[error("this [[expect]] entry checks nothing: give {}", listed(&QUANTITIES, "or"))]
     ChecksNothing { span: Range<usize> },
-    /// A quantity other than `force` and `lambda` in an entry with `at`.
-    #[error("only `force` and `lambda` can be checked at a state (`at`); `{what}` needs a formula check without `at`")]
+    /// A quantity other than those of [`AT_STATE`] in an entry with `at`.
+    #[error("only {} can be checked at a state (`at`); `{what}` needs a formula check without `at`", listed(&AT_STATE, "and"))]
     NotAtState { span: Range<usize>, what: String },
     /// An `A` key that is not `"k,j"`.
     #[error("an `A` key names two constraints as \"k,j\" (e.g. \"rod1,rod2\"), found \"{key}\"")]
@@ -321,6 +322,17 @@ pub fn locate<S: AsRef<str>>(text: &str, value: &Spanned<S>, inner: Range<usize>
         }
     }
     outer
+}
+
+/// Keys as a message lists them: `` `a`, `b` or `c` `` (with `and` for `conjunction`
+/// "and").
+fn listed(keys: &[&str], conjunction: &str) -> String {
+    let quoted: Vec<String> = keys.iter().map(|k| format!("`{k}`")).collect();
+    match quoted.split_last() {
+        None => String::new(),
+        Some((last, [])) => last.clone(),
+        Some((last, init)) => format!("{} {conjunction} {last}", init.join(", ")),
+    }
 }
 
 fn place(table: &str) -> String {

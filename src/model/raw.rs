@@ -107,6 +107,14 @@ pub struct RawScene<'a> {
     pub restitution: Option<Spanned<f64>>,
 }
 
+/// The quantities an `[[expect]]` entry can write, by key, in the order they are read and
+/// listed in messages.
+pub const QUANTITIES: [&str; 7] = ["force", "torque", "lambda", "C_dot", "C_ddot", "A", "b"];
+
+/// The quantities an entry with `at` can check: those the solve at a state gives numbers
+/// for. Validation refuses the others there, and its message lists these.
+pub const AT_STATE: [&str; 3] = ["force", "torque", "lambda"];
+
 /// The `name = expected` entries of one quantity of an `[[expect]]`.
 pub type Entries<'a> = BTreeMap<Text<'a>, Spanned<RawExpected<'a>>>;
 
@@ -126,8 +134,8 @@ pub struct RawExpect<'a> {
     pub b: Entries<'a>,
     pub at: Option<Spanned<BTreeMap<Text<'a>, Spanned<RawValue>>>>,
     pub tolerance: Option<Spanned<f64>>,
-    /// How many of `force`, `lambda`, `C_dot`, `C_ddot`, `A`, `b` the entry writes, read or
-    /// not (an entry whose quantities were all unreadable is not also "checking nothing").
+    /// How many of the [`QUANTITIES`] the entry writes, read or not (an entry whose
+    /// quantities were all unreadable is not also "checking nothing").
     pub written: usize,
     /// Free text, shown with the result.
     pub note: Option<String>,
