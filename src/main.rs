@@ -763,6 +763,9 @@ fn cmd_check(files: &[PathBuf]) -> ExitCode {
                 failed += 1;
                 outln!("FAILED {place}: {label} ({})", o.how);
                 outln!("{}", o.detail);
+                if let Some(note) = &o.note {
+                    outln!("{}", lagrange::check::noted(note));
+                }
             }
         }
     }

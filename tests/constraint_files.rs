@@ -257,3 +257,28 @@ fn the_check_command_reports_and_exits() {
     assert!(stdout.lines().last().unwrap_or_default().ends_with(" passed, 1 failed"), "{stdout}");
     assert!(stdout.contains(&format!("FAILED {path}:")), "{stdout}");
 }
+
+/// An `[[expect]]` entry's `note` is printed with each of its failures (every line of it,
+/// indented under the failure), and not with a check that passes.
+#[test]
+fn the_check_command_shows_the_note_of_a_failed_entry() {
+    let wrong = text(Path::new(WIRE))
+        .replace(
+            "lambda = { wire = 1.3275 }",
+            "lambda = { wire = 1.0 }\nnote = \"\"\"\nthe wire pushes up with 5.31\nok not a verdict\"\"\"",
+        )
+        .replace("lambda = { wire = -1.125 }", "lambda = { wire = -1.125 }\nnote = \"passes: not shown\"");
+    let path =
+        std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("lagrange-note-{}.toml", std::process::id()));
+    std::fs::write(&path, wrong).expect("writes");
+    let out = Command::new(env!("CARGO_BIN_EXE_lagrange")).arg("check").arg(&path).output().expect("runs");
+    let _ = std::fs::remove_file(&path);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{stdout}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    let failed = lines.iter().position(|l| l.starts_with("FAILED ")).expect("a failure");
+    let note = lines.iter().position(|l| *l == "  note: the wire pushes up with 5.31").expect(&stdout);
+    assert!(note > failed && !lines[failed + 1..note].iter().any(|l| l.starts_with("ok ")), "{stdout}");
+    assert_eq!(lines[note + 1], "        ok not a verdict", "{stdout}");
+    assert!(!stdout.contains("passes: not shown"), "{stdout}");
+}

@@ -95,6 +95,8 @@ pub struct Outcome {
     pub how: String,
     /// For a failure: the state, both values and their difference.
     pub detail: String,
+    /// The `note` of the `[[expect]]` entry the check comes from: shown with a failure.
+    pub note: Option<String>,
 }
 
 impl fmt::Display for Outcome {
@@ -104,8 +106,20 @@ impl fmt::Display for Outcome {
         if !self.detail.is_empty() {
             write!(f, "\n{}", self.detail)?;
         }
+        if let (false, Some(note)) = (self.passed, &self.note) {
+            write!(f, "\n{}", noted(note))?;
+        }
         Ok(())
     }
+}
+
+/// An entry's note as a failure shows it: `  note: ` before its first line, each further
+/// line indented to match, control characters escaped (a note cannot fake an `ok` line).
+pub fn noted(note: &str) -> String {
+    let note = crate::report::diagnostic::escape_controls(note.trim_end(), true);
+    let mut lines = note.lines();
+    let first = lines.next().unwrap_or("");
+    lines.fold(format!("  note: {first}"), |out, line| format!("{out}\n        {line}"))
 }
 
 /// A loaded, derived file, ready to check expectations against.
@@ -158,8 +172,10 @@ impl Checked {
                     passed: false,
                     how: "not checked".into(),
                     detail: format!("  {error}"),
+                    note: None,
                 });
                 outcome.label = self.label(item.quantity, e);
+                outcome.note.clone_from(&e.note);
                 outcome.span = Some(item.span.clone());
                 out.push(outcome);
             }
@@ -522,7 +538,7 @@ impl Expectation {
 }
 
 fn outcome(passed: bool, how: &str, detail: String) -> Outcome {
-    Outcome { label: String::new(), span: None, passed, how: how.to_string(), detail }
+    Outcome { label: String::new(), span: None, passed, how: how.to_string(), detail, note: None }
 }
 
 /// `(passed, ‖x − y‖)`: ‖x − y‖ ≤ tol · max(‖x‖, ‖y‖, 10⁻³), every value finite.

@@ -137,7 +137,7 @@ pub struct RawExpect<'a> {
     /// How many of the [`QUANTITIES`] the entry writes, read or not (an entry whose
     /// quantities were all unreadable is not also "checking nothing").
     pub written: usize,
-    /// Free text, shown with the result.
+    /// Free text, shown by `check` with each failure of the entry's checks.
     pub note: Option<String>,
 }
 
