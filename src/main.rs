@@ -866,11 +866,17 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
         Some(Err(code)) => return code,
     };
     let mut progress = Progress::new(settings.steps);
+    // The CSV's write error, kept here: the run stops at it and it is reported once, below.
+    let mut csv_error: Option<String> = None;
     let mut observe = |frame: &lagrange::numeric::simulate::Frame| {
         if let Some(progress) = &mut progress {
             progress.at(frame.step);
         }
-        csv.as_mut().map_or(Ok(()), |w| w.frame(frame)).map_err(|e| e.to_string())
+        csv.as_mut().map_or(Ok(()), |w| w.frame(frame)).map_err(|e| {
+            let e = e.to_string();
+            csv_error = Some(e.clone());
+            e
+        })
     };
     let result = match velocity {
         None => scenario.simulate(settings, &mut observe),
@@ -879,16 +885,21 @@ fn cmd_simulate(args: &SimulateArgs) -> ExitCode {
     if let Some(progress) = progress {
         progress.finish();
     }
-    // A CSV that could not be written whole (`--csv /dev/full`) is a failed write: exit 1.
-    let csv_failed = if let Some(Err(e)) = csv.as_mut().map(|w| w.flush()) {
-        errln!("error: cannot write the CSV: {e}");
-        true
-    } else {
-        false
-    };
+    // A CSV that could not be written whole (`--csv /dev/full`, a full disk) is one failed
+    // write, one message and exit 1, whether the buffer met it during the run (which stopped
+    // there: its summary is of the steps run) or when it was closed.
+    if csv_error.is_none()
+        && let Some(Err(e)) = csv.as_mut().map(|w| w.flush())
+    {
+        csv_error = Some(e.to_string());
+    }
+    if let (Some(e), Some(path)) = (&csv_error, &args.csv) {
+        errln!("error: cannot write the CSV {}: {e}", path.display());
+    }
     let (summary, code, stopped) = match result {
-        Ok(s) if csv_failed => (s, ExitCode::from(1), None),
+        Ok(s) if csv_error.is_some() => (s, ExitCode::from(1), None),
         Ok(s) => (s, ExitCode::SUCCESS, None),
+        Err(failure) if csv_error.is_some() => (failure.summary, ExitCode::from(1), Some(failure.error.to_string())),
         // Refused before the first step: there is no summary to show.
         Err(failure) if failure.summary.integrator.is_empty() => {
             eprintln!("error: {}: {}", args.file.display(), failure.error);

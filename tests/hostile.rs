@@ -334,23 +334,33 @@ fn outputs_never_overwrite_the_input() {
     assert_eq!(std::fs::read_to_string(&file.0).expect("still there"), text);
 }
 
-/// A CSV that cannot be written is a failed write: exit 1, not 0.
+/// A CSV that cannot be written is a failed write: exit 1, not 0, and one message, whether
+/// the buffer meets the failure when the file is closed (10 steps) or during the run (100 000
+/// steps, which stops there), under the exact and a velocity-level solver.
 #[test]
 fn a_csv_that_cannot_be_written_fails_the_command() {
     if !std::path::Path::new("/dev/full").exists() {
         return;
     }
     let file = TempFile::new("full", bead_scene().as_bytes());
-    let (code, _, stderr) = run(&[
-        "simulate".as_ref(),
-        file.0.as_os_str(),
-        "--steps".as_ref(),
-        "10".as_ref(),
-        "--csv".as_ref(),
-        "/dev/full".as_ref(),
-    ]);
-    assert_eq!(code, Some(1), "{stderr}");
-    assert!(stderr.contains("cannot write"), "{stderr}");
+    for steps in ["10", "100000"] {
+        for solver in ["exact", "soft-step"] {
+            let (code, _, stderr) = run(&[
+                "simulate".as_ref(),
+                file.0.as_os_str(),
+                "--steps".as_ref(),
+                steps.as_ref(),
+                "--solver".as_ref(),
+                solver.as_ref(),
+                "--csv".as_ref(),
+                "/dev/full".as_ref(),
+            ]);
+            assert_eq!(code, Some(1), "{steps} steps, {solver}: {stderr}");
+            let errors: Vec<&str> = stderr.lines().filter(|l| l.starts_with("error")).collect();
+            assert_eq!(errors.len(), 1, "{steps} steps, {solver}: {stderr}");
+            assert!(errors[0].starts_with("error: cannot write the CSV /dev/full: "), "{stderr}");
+        }
+    }
 }
 
 /// Names and titles never reach the terminal raw: an ANSI escape and a line break in a
