@@ -353,13 +353,16 @@ Exit codes:
   0  success
   1  bad input or a failed check: an unreadable or invalid file, a bad --at or --set value,
      a derivation or solve that cannot be done, an expectation that failed, or a failure to
-     write an output (standard output, -o, --plot, or creating the --csv file)
+     write an output (standard output, -o, --plot, or the --csv file: creating it, a row
+     during the run, which stops there with its summary printed, or its last rows when it
+     is closed; one message whichever)
   2  bad settings or a run that stopped: simulate's or bench's settings out of range (a run
-     of more than 10^8 steps or of none, bench --states above 100000), a simulation or
-     bench sweep that stopped (its summary is still printed; a CSV row that cannot be written
-     stops the run too), or arguments the command line refuses
+     of more than 10^8 steps, or a duration and step that give none; --steps 0 runs and
+     exits 0; bench --states above 100000), an output (-o, --csv, --plot) that is the input
+     file, a simulation or bench sweep that stopped (its summary is still printed), or
+     arguments the command line refuses
   3  internal failure (please report it with the input file)
-  4  no answer: solve's numbers are printed, but its status is failed or inconsistent, or
+  4  no answer: solve printed its numbers, but its status is failed or inconsistent, or
      a constraint with a zero gradient cannot hold (singular); the diagnostics name the
      cause (an undefined 0/0, an overflow, the constraints at fault)";
 

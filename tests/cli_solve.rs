@@ -164,6 +164,51 @@ fn long_help_documents_every_exit_code() {
     }
 }
 
+/// `--help`'s exit codes say what the README's table says, code by code (the same words,
+/// once backticks, line breaks and the README's typography — `10⁸`, `100 000` — are set
+/// aside), and each claim checked here holds: `--steps 0` runs and exits 0, a duration
+/// that gives no step and an output that is the input file exit 2.
+#[test]
+fn help_and_readme_give_the_same_exit_codes() {
+    let normal = |s: &str| {
+        let s = s.replace('`', "").replace("10⁸", "10^8").replace("100 000", "100000").replace("\\|", "|");
+        s.split_whitespace().collect::<Vec<_>>().join(" ")
+    };
+    let help = String::from_utf8_lossy(&lagrange(&["--help"]).stdout).into_owned();
+    let help = help.split("Exit codes:").nth(1).expect("an exit-code table in --help");
+    let mut from_help = Vec::new();
+    for line in help.lines().filter(|l| !l.trim().is_empty()) {
+        match line.strip_prefix("  ").and_then(|l| l.split_once("  ")) {
+            Some((code, text)) if code.len() == 1 => from_help.push((code.to_string(), text.to_string())),
+            _ => from_help.last_mut().expect("a code first").1.push_str(line),
+        }
+    }
+    let readme = std::fs::read_to_string("README.md").expect("the README");
+    let table = readme.split("Exit codes (also in `lagrange --help`):").nth(1).expect("the README's table");
+    let from_readme: Vec<(String, String)> = table
+        .lines()
+        .skip_while(|l| !l.starts_with("| 0"))
+        .take_while(|l| l.starts_with('|'))
+        .filter_map(|l| {
+            let (code, text) = l.trim_matches('|').split_once('|')?;
+            Some((code.trim().to_string(), text.trim().to_string()))
+        })
+        .collect();
+    assert_eq!(from_help.len(), 5, "{from_help:#?}");
+    assert_eq!(from_readme.len(), from_help.len(), "{from_readme:#?}");
+    for ((code, help), (readme_code, readme)) in from_help.iter().zip(&from_readme) {
+        assert_eq!(code, readme_code);
+        assert_eq!(normal(help), normal(readme), "exit code {code}");
+    }
+    let code = |args: &[&str]| lagrange(args).status.code();
+    assert_eq!(code(&["simulate", "constraints/pendulum.toml", "--steps", "0"]), Some(0));
+    assert_eq!(code(&["simulate", "constraints/pendulum.toml", "--duration", "1e-9"]), Some(2));
+    let input =
+        temp_file("exit_codes_input.toml", &std::fs::read_to_string("constraints/pendulum.toml").expect("file"));
+    let input = input.to_str().expect("utf-8");
+    assert_eq!(code(&["generate", input, "-o", input]), Some(2));
+}
+
 /// The bead of `bead_on_wire.toml` with its constraint replaced by `expr`.
 fn bead_with(name: &str, expr: &str) -> std::path::PathBuf {
     let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
