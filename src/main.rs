@@ -174,7 +174,8 @@ struct StateArgs {
     /// positions, velocities, forces, masses, parameters and `t`.
     #[arg(long, value_name = "STATE")]
     at: Option<PathBuf>,
-    /// Override one symbol: NAME=NUMBER or NAME=[x,y]; may repeat.
+    /// Override one symbol: NAME=NUMBER, a vector NAME=[x,y] (3D: [x,y,z]), or a 3D
+    /// orientation NAME=[w,x,y,z] (a unit quaternion); may repeat.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
 }
@@ -667,7 +668,8 @@ fn read_state(system: &System, path: &Path) -> Result<Vec<state::Given>, String>
     state::state_file(system, &text, format).map_err(|e| format!("error: {}: {e}", path.display()))
 }
 
-/// `NAME=VALUE` with VALUE a finite number or `[x, y]`, checked against `system`.
+/// `NAME=VALUE` with VALUE a finite number, a vector of the file's dimension or a 3D
+/// orientation's unit quaternion, checked against `system`.
 fn parse_set(system: &System, arg: &str) -> Result<state::Given, String> {
     state::assignment(system, arg).map_err(|e| format!("error: --set {arg}: {e}"))
 }

@@ -209,6 +209,26 @@ fn help_and_readme_give_the_same_exit_codes() {
     assert_eq!(code(&["generate", input, "-o", input]), Some(2));
 }
 
+/// `--set`'s help names every form of value it takes, and each form it names is taken: a
+/// number, a 2D and a 3D vector, a 3D orientation's quaternion.
+#[test]
+fn set_help_names_the_forms_it_takes() {
+    for command in ["solve", "simulate", "bench"] {
+        let help = String::from_utf8_lossy(&lagrange(&[command, "--help"]).stdout).into_owned();
+        let set = help.split("--set <NAME=VALUE>").nth(1).expect("--set in the help");
+        let set = set.split("\n\n").next().unwrap_or("").split_whitespace().collect::<Vec<_>>().join(" ");
+        for form in ["NAME=NUMBER", "NAME=[x,y]", "[x,y,z]", "NAME=[w,x,y,z]"] {
+            assert!(set.contains(form), "{command}: {form} not in {set}");
+        }
+    }
+    let ok = |args: &[&str]| {
+        let out = lagrange(args);
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    };
+    ok(&["solve", "constraints/pendulum.toml", "--set", "r=[0,-1]", "--set", "m=2"]);
+    ok(&["solve", "constraints/joints/ball_3d.toml", "--set", "x1=[0,0,0]", "--set", "q1=[0,1,0,0]"]);
+}
+
 /// The bead of `bead_on_wire.toml` with its constraint replaced by `expr`.
 fn bead_with(name: &str, expr: &str) -> std::path::PathBuf {
     let text = std::fs::read_to_string("constraints/bead_on_wire.toml").expect("file");
