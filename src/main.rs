@@ -1056,6 +1056,15 @@ fn cmd_bench(args: &BenchArgs) -> ExitCode {
         args.dt.unwrap_or(scenario.scene.dt),
         args.duration.unwrap_or(scenario.scene.duration),
     );
+    let runs = sweep.distinct_steps().len();
+    if runs < sweep.steps.len() && sweep.validate().is_ok() {
+        errln!(
+            "note: a duration of {} gives several of the {} step sizes (dt × 4, 2, 1, ½ of {}) the same number of steps: each distinct run is shown once ({runs} of them); a longer --duration or a smaller --dt sweeps all",
+            sweep.duration,
+            sweep.steps.len(),
+            args.dt.unwrap_or(scenario.scene.dt),
+        );
+    }
     let wp = match lagrange::precision::work_precision(&scenario, &sweep) {
         Ok(wp) => wp,
         Err(e) => {

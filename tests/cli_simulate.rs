@@ -115,6 +115,38 @@ fn bench_prints_rows_as_json() {
     assert!(json["accuracy"].as_array().map_or(0, Vec::len) >= 2);
 }
 
+/// Each run of the sweep is shown once: step sizes that give the duration the same number of
+/// steps are one run (a duration of one step gave four equal rows per method), and a note
+/// says so; a duration that separates them still shows all four.
+#[test]
+fn bench_shows_each_run_once() {
+    // dt = 1e-3: the step sizes 4e-3, 2e-3, 1e-3 and 5e-4 give 1, 1, 1, 1 steps in 1e-4,
+    // 1, 1, 2, 3 in 1.5e-3, and 1, 2, 3, 6 in 3e-3.
+    for (duration, runs) in [("0.0001", 1), ("0.0015", 3), ("0.003", 4)] {
+        let out = lagrange(&[
+            "bench",
+            "constraints/pendulum.toml",
+            "--duration",
+            duration,
+            "--states",
+            "10",
+            "--format",
+            "json",
+        ]);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{stderr}");
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).expect("json");
+        let rows = json["rows"].as_array().expect("rows");
+        let mut seen = std::collections::HashSet::new();
+        for row in rows {
+            let key = (row["integrator"].to_string(), row["stabilize"].to_string(), row["steps"].to_string());
+            assert!(seen.insert(key.clone()), "duration {duration}: {key:?} twice");
+        }
+        assert_eq!(rows.len(), 9 * runs, "duration {duration}: {rows:#?}");
+        assert_eq!(stderr.contains("each distinct run is shown once"), runs < 4, "{stderr}");
+    }
+}
+
 #[test]
 fn a_pendulum_of_1e155_metres_runs_in_its_own_unit_and_plots() {
     let (out, dir, csv, svg) = simulate_with_files("huge", "constraints/hard/huge.toml", &[]);
