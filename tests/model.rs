@@ -206,6 +206,28 @@ fn the_quantities_a_state_check_lists_are_the_ones_it_accepts() {
     }
 }
 
+/// A vector constraint's own name in an `[[expect]]` (where a row belongs) is an error at
+/// the key naming its rows, not a check left out in silence; its rows are checked.
+#[test]
+fn an_expectation_naming_a_vector_constraint_names_its_rows() {
+    let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("constraints/rigid/rod_pinned.toml"))
+        .expect("the rod");
+    for (key, name) in [("lambda", "pin"), ("C_dot", "pin"), ("A", "\"pin,pin.y\"")] {
+        let with = format!("{text}\n[[expect]]\n{key} = {{ {name} = \"42\" }}\n");
+        let Err(problems) = load(&with) else { panic!("{key} = {{ {name} }} is refused") };
+        let messages: Vec<String> = problems.iter().map(ToString::to_string).collect();
+        assert_eq!(
+            messages,
+            ["`pin` is a vector constraint, checked row by row: name its rows, `pin.x` and `pin.y`"],
+            "{key}"
+        );
+        let span = problems[0].span().expect("located");
+        assert_eq!(&with[span], name, "{key}");
+    }
+    let rows = format!("{text}\n[[expect]]\nC_dot = {{ \"pin.x\" = \"42\" }}\n");
+    assert!(load(&rows).is_ok());
+}
+
 /// A state file that is not a flat table of numbers and vectors is refused with a message
 /// naming the key (never serde's "did not match any variant"), and a JSON key written
 /// twice is an error naming it, not a silent last value.

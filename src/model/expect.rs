@@ -242,6 +242,20 @@ impl Resolver<'_> {
 
     fn constraint(&mut self, name: &str, span: Range<usize>) -> Option<usize> {
         let found = self.system.constraint_named(name);
+        // A vector constraint is its rows `NAME.x`, `NAME.y`(, `NAME.z`): its own name checks
+        // nothing, so it is an error naming the rows, not an item left out in silence.
+        let rows: Vec<String> = match found {
+            Some(_) => Vec::new(),
+            None => crate::expr::Axis::ALL[..self.system.dim()]
+                .iter()
+                .map(|axis| format!("{name}.{}", axis.name()))
+                .filter(|row| self.system.constraint_named(row).is_some())
+                .collect(),
+        };
+        if !rows.is_empty() {
+            self.problem(Problem::VectorConstraint { span, name: name.to_string(), rows });
+            return None;
+        }
         if found.is_none() && !self.written.contains(&name) {
             let names: Vec<&str> = self.system.constraints.iter().map(|c| c.name.as_str()).collect();
             self.problem(unknown(span, "constraint", name, &names));

@@ -174,6 +174,9 @@ pub enum Problem {
         /// The names of that kind the file declares.
         names: Vec<String>,
     },
+    /// A vector constraint named where one of its rows belongs (`lambda`, `C_dot`, `A`, …).
+    #[error("`{name}` is a vector constraint, checked row by row: name its rows, {}", listed_names(.rows))]
+    VectorConstraint { span: Range<usize>, name: String, rows: Vec<String> },
     /// An expected formula that does not parse or lower.
     #[error("in the expected `{what}`: {error}")]
     ExpectedFormula { span: Range<usize>, what: String, error: BuildError },
@@ -251,6 +254,7 @@ impl Problem {
             | NotAtState { span, .. }
             | PairKey { span, .. }
             | UnknownName { span, .. }
+            | VectorConstraint { span, .. }
             | ExpectedFormula { span, .. }
             | ExpectedType { span, .. }
             | ExpectedAcceleration { span, .. }
@@ -333,6 +337,12 @@ fn listed(keys: &[&str], conjunction: &str) -> String {
         Some((last, [])) => last.clone(),
         Some((last, init)) => format!("{} {conjunction} {last}", init.join(", ")),
     }
+}
+
+/// Names as a message lists them: `` `a.x` and `a.y` ``.
+fn listed_names(names: &[String]) -> String {
+    let names: Vec<&str> = names.iter().map(String::as_str).collect();
+    listed(&names, "and")
 }
 
 fn place(table: &str) -> String {
