@@ -146,8 +146,9 @@ pub struct BandLambda {
     /// Per J entry, its components read from the outputs once (the row's Aₖ₋₁,ₖ, and the
     /// forces Σₖ λₖ Jₖᵢ, read them here).
     jacobian: Vec<[f64; 3]>,
-    /// Per row: [1/dₖ, Lₖ = Aₖ₋₁,ₖ/dₖ₋₁] (the factor), then y, then λ.
-    factor: Vec<[f64; 2]>,
+    /// Per row: 1/dₖ, Lₖ = Aₖ₋₁,ₖ/dₖ₋₁, y then λ.
+    inverse_pivot: Vec<f64>,
+    multiplier: Vec<f64>,
     lambda: Vec<f64>,
     /// Per body: Σₖ λₖ Jₖᵢ, and the acceleration (swapped with the answer's vectors when
     /// the guard passes: no copy).
@@ -423,7 +424,8 @@ impl BandLambda {
             output: vec![0.0; output_len + 1],
             formulas: false,
             per_body: vec![[0.0; 4]; n],
-            factor: vec![[0.0; 2]; k],
+            inverse_pivot: vec![0.0; k],
+            multiplier: vec![0.0; k],
             lambda: vec![0.0; k],
             force: vec![[0.0; 3]; n],
             acceleration: vec![[0.0; 3]; n],
@@ -621,8 +623,8 @@ impl BandLambda {
         // Lₖ = Aₖ₋₁,ₖ/dₖ₋₁, yₖ = −bₖ − Lₖ yₖ₋₁ (L y = −b); the pivot above τ Aₖₖ.
         let tolerance = settings.rank_tolerance;
         let (mut inverse_prev, mut y_prev) = (0.0, 0.0);
-        let per_row = self.rows.iter().zip(&mut self.factor).zip(&mut self.lambda);
-        for ((row, factor), y_out) in per_row {
+        let per_row = self.rows.iter().zip(&mut self.inverse_pivot).zip(&mut self.multiplier).zip(&mut self.lambda);
+        for (((row, inverse_pivot_out), multiplier), y_out) in per_row {
             let (mut b, mut diagonal, mut e) = (o[row.bias as usize], 0.0, 0.0);
             if FORMULAS {
                 (diagonal, e) = (o[row.diagonal as usize], o[row.lower as usize]);
@@ -656,7 +658,8 @@ impl BandLambda {
             // The next row's 1/dₖ from here, not read back from the buffer (a store and a load
             // on the factor's chain of dependent operations).
             let inverse_pivot = 1.0 / d;
-            *factor = [inverse_pivot, l];
+            *inverse_pivot_out = inverse_pivot;
+            *multiplier = l;
             *y_out = y;
             (inverse_prev, y_prev) = (inverse_pivot, y);
         }
@@ -665,12 +668,12 @@ impl BandLambda {
         }
         // D Lᵀ λ = y: λ_{K−1} = y_{K−1}/d_{K−1}, λₖ = yₖ/dₖ − Lₖ₊₁ λₖ₊₁; each λ zero or normal.
         let (mut next, mut next_multiplier) = (0.0, 0.0);
-        let per_row = self.lambda.iter_mut().zip(&self.factor).rev();
-        for (x, &[inverse_pivot, multiplier]) in per_row {
+        let per_row = self.lambda.iter_mut().zip(&self.inverse_pivot).zip(&self.multiplier).rev();
+        for ((x, inverse_pivot), multiplier) in per_row {
             let lambda = *x * inverse_pivot - next_multiplier * next;
             ok &= (lambda == 0.0) | lambda.is_normal();
             *x = lambda;
-            (next, next_multiplier) = (lambda, multiplier);
+            (next, next_multiplier) = (lambda, *multiplier);
         }
         if !ok {
             return false;
