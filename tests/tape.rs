@@ -157,7 +157,9 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
     // Shapes the random ones may miss: a square sum reading the previous result, a vector
     // scaled by the previous result (plain and negated, as a force λ ∇C), two square sums
     // side by side, dot products of three terms (the first product reading the previous
-    // result, or not), and the bead's force (7 inputs: the short input copy).
+    // result, or not), the bead's force (7 inputs: the short input copy), and two differences
+    // squared and summed with no difference after them (in a chain's rows one follows:
+    // `Sub2SqAddSqASub2`).
     for text in [
         "(l + k)^2 + (k * l)^2",
         "((l + k) / m) * r",
@@ -165,6 +167,7 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
         "dot(r, r) * l + dot(v, v) * k",
         "dot([l * k, m, t], r)",
         "dot(u, r) * l",
+        "(l - k)^2 + (m - l)^2",
     ] {
         let root = system.expression(text).expect("expr");
         tapes.push((Tape::compile(&system.graph, &[root], &syms).expect("compiles"), 0));
@@ -221,6 +224,8 @@ fn single_state_steps_agree_bitwise_with_the_lanes() {
         "MulMulAddAMulAddC",
         "MulA2",
         "NegMulA2",
+        "Sub2Sub2",
+        "Sub2SqAddSqASub2",
     ] {
         assert!(listed.contains(&format!("op: {kind},")), "no tape runs the step {kind}");
     }

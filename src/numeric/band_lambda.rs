@@ -68,6 +68,7 @@ use crate::expr::graph::SymbolWalk;
 use crate::expr::{Id, Symbol};
 use crate::model::system::System;
 use crate::numeric::batch::{Batched, BatchedScratch};
+use crate::numeric::contact::ContactState;
 use crate::numeric::program::Inputs;
 use crate::numeric::rows::{RowProgram, RowScratch, Rows};
 use crate::numeric::solve::{self, Method, Settings, Solution, Status};
@@ -117,9 +118,11 @@ pub struct BandLambda {
     roots: Vec<Id>,
     #[cfg(feature = "jit")]
     units: Vec<Vec<usize>>,
-    /// Each input symbol, its first slot in the input buffer and its width (1, or the
-    /// dimension).
-    loads: Vec<(Symbol, u32, u32)>,
+    /// The input symbols: the vectors', whose components fill the input buffer's first
+    /// slots in turn (`dim` each), then the scalars', one slot each after them (checked when
+    /// the program is made): the loads are two runs of one width, no width or place to read.
+    vectors: Vec<Symbol>,
+    scalars: Vec<Symbol>,
     dim: usize,
     /// Per row, where its numbers are among the outputs.
     rows: Vec<RowAt>,
@@ -151,8 +154,12 @@ pub struct BandLambda {
     /// the guard passes: no copy).
     force: Vec<[f64; 3]>,
     acceleration: Vec<[f64; 3]>,
-    /// The bodies no row moves (their Σₖ λₖ Jₖᵢ is zero).
-    still: Vec<u32>,
+    /// Per body, the rows that move it and their J entries, in row order (none: the body's
+    /// Σₖ λₖ Jₖᵢ is zero).
+    movers: Vec<Movers>,
+    /// The answer's flags and contact states, one a row: every row active, none a contact.
+    active: Vec<bool>,
+    contacts: Vec<Option<ContactState>>,
 }
 
 /// How the program's roots are computed: one tape of them all (and its compiled twin once
@@ -182,16 +189,22 @@ struct RowAt {
 }
 
 /// A J entry: where its components are among the outputs (the interpreted tape's
-/// registers), its body,
-/// the entry of the same body in the row before (an index into `entries`; [`ABSENT`] when
-/// that row does not move the body): the pair's term of Aₖ₋₁,ₖ, and whether it is its
-/// body's first entry (it writes the body's Σₖ λₖ Jₖᵢ, the later ones add to it).
+/// registers), its body, and the entry of the same body in the row before (an index into
+/// `entries`; [`ABSENT`] when that row does not move the body): the pair's term of Aₖ₋₁,ₖ.
 #[derive(Clone, Copy, Debug)]
 struct EntryAt {
     at: [u32; 3],
     body: u32,
     partner: u32,
-    opens: bool,
+}
+
+/// The rows that move a body (at most two, neighbours: the band's condition) and the index
+/// of each one's J entry of it in `entries`, in row order; `count` of them are set.
+#[derive(Clone, Copy, Debug, Default)]
+struct Movers {
+    count: u32,
+    row: [u32; 2],
+    entry: [u32; 2],
 }
 
 /// Where a body's mass and its force's components are.
@@ -287,11 +300,23 @@ impl BandLambda {
             roots.push(f);
         }
         let graph = &derivation.graph;
-        let symbols = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
+        let found = SymbolWalk::default().free_symbols_of(graph, &roots).to_vec();
+        // The vectors' symbols first, then the scalars': the input buffer is then `dim`
+        // slots a vector from slot 0, one a scalar after them (checked).
+        let widths = Inputs::new(graph, &found).ok()?;
+        let (vectors, scalars): (Vec<_>, Vec<_>) = found.iter().zip(widths.ranges()).partition(|(_, r)| r.len() > 1);
+        let (vectors, scalars): (Vec<Symbol>, Vec<Symbol>) =
+            (vectors.iter().map(|v| *v.0).collect(), scalars.iter().map(|s| *s.0).collect());
+        let symbols: Vec<Symbol> = vectors.iter().chain(&scalars).copied().collect();
         let layout = Inputs::new(graph, &symbols).ok()?;
         let ranges = layout.ranges();
-        let loads: Vec<(Symbol, u32, u32)> =
-            symbols.iter().zip(ranges).map(|(&s, r)| (s, r.start as u32, r.len() as u32)).collect();
+        let first_scalar = vectors.len() * dim;
+        let expected = (0..vectors.len())
+            .map(|i| i * dim..(i + 1) * dim)
+            .chain((0..scalars.len()).map(|j| first_scalar + j..first_scalar + j + 1));
+        if !ranges.iter().cloned().eq(expected) {
+            return None;
+        }
         let input_len = ranges.last().map_or(0, |r| r.end);
         let position: crate::expr::graph::FastMap<Symbol, usize> =
             symbols.iter().enumerate().map(|(i, &s)| (s, i)).collect();
@@ -352,10 +377,7 @@ impl BandLambda {
                 }
                 let body = body as u32;
                 let partner = (before..start).find(|&b| entries[b as usize].body == body).unwrap_or(ABSENT);
-                // A body's rows are neighbours (above): its first entry is the one with no
-                // partner.
-                let opens = partner == ABSENT;
-                entries.push(EntryAt { at: at(r), body, partner, opens });
+                entries.push(EntryAt { at: at(r), body, partner });
             }
             if !fits(unit[0], 1) {
                 return None;
@@ -372,14 +394,27 @@ impl BandLambda {
             bodies.push(BodyAt { mass: at(mass)[0], force: at(force) });
         }
         let n = bodies.len();
-        let still = (0..n as u32).filter(|&b| acting[b as usize].is_none()).collect();
+        // Each body's rows and entries, in row order (the entries are): at most two rows,
+        // neighbours, and one entry of the body each, or the band's condition fails.
+        let mut movers = vec![Movers::default(); n];
+        for (r, row) in rows.iter().enumerate() {
+            for i in row.start..row.end {
+                let m = movers.get_mut(entries[i as usize].body as usize)?;
+                let slot = m.count as usize;
+                if slot >= 2 {
+                    return None;
+                }
+                (m.row[slot], m.entry[slot], m.count) = (r as u32, i, m.count + 1);
+            }
+        }
         Some(BandLambda {
             kernel,
             #[cfg(feature = "jit")]
             roots,
             #[cfg(feature = "jit")]
             units,
-            loads,
+            vectors,
+            scalars,
             dim,
             rows,
             jacobian: vec![[0.0; 3]; entries.len()],
@@ -394,7 +429,9 @@ impl BandLambda {
             lambda: vec![0.0; k],
             force: vec![[0.0; 3]; n],
             acceleration: vec![[0.0; 3]; n],
-            still,
+            movers,
+            active: vec![true; k],
+            contacts: vec![None; k],
         })
     }
 
@@ -451,7 +488,7 @@ impl BandLambda {
                 roots.extend(l);
             }
         }
-        let symbols: Vec<Symbol> = self.loads.iter().map(|l| l.0).collect();
+        let symbols: Vec<Symbol> = self.vectors.iter().chain(&self.scalars).copied().collect();
         let Ok(tape) = Tape::compile(&derivation.graph, &roots, &symbols) else {
             return Err(crate::numeric::jit::JitError::Codegen("the roots do not lower".into()));
         };
@@ -521,12 +558,12 @@ impl BandLambda {
                 v.resize(n, [0.0; 3]);
             }
         }
-        out.active.clear();
-        out.active.resize(k, true);
+        // Every row active, none a contact: copies of ours (a copy of bytes, where a resize
+        // writes them one by one).
+        out.active.clone_from(&self.active);
         out.diagnostics.clear();
         out.status = Status::Solved;
-        out.contacts.clear();
-        out.contacts.resize(k, None);
+        out.contacts.clone_from(&self.contacts);
         true
     }
 
@@ -587,7 +624,7 @@ impl BandLambda {
         let tolerance = settings.rank_tolerance;
         let (mut inverse_prev, mut y_prev) = (0.0, 0.0);
         let per_row = self.rows.iter().zip(&mut self.inverse_pivot).zip(&mut self.multiplier).zip(&mut self.lambda);
-        for (((row, inverse_pivot), multiplier), y_out) in per_row {
+        for (((row, inverse_pivot_out), multiplier), y_out) in per_row {
             let (mut b, mut diagonal, mut e) = (o[row.bias as usize], 0.0, 0.0);
             if FORMULAS {
                 (diagonal, e) = (o[row.diagonal as usize], o[row.lower as usize]);
@@ -618,10 +655,13 @@ impl BandLambda {
             ok &= DIAGONAL_RANGE.contains(&diagonal) & (d > tolerance * diagonal);
             let l = e * inverse_prev;
             let y = -b - l * y_prev;
-            *inverse_pivot = 1.0 / d;
+            // The next row's 1/dₖ from here, not read back from the buffer (a store and a load
+            // on the factor's chain of dependent operations).
+            let inverse_pivot = 1.0 / d;
+            *inverse_pivot_out = inverse_pivot;
             *multiplier = l;
             *y_out = y;
-            (inverse_prev, y_prev) = (*inverse_pivot, y);
+            (inverse_prev, y_prev) = (inverse_pivot, y);
         }
         if !ok {
             return false;
@@ -638,25 +678,29 @@ impl BandLambda {
         if !ok {
             return false;
         }
-        // Σₖ λₖ Jₖᵢ per body, then aᵢ = Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ, finite.
-        // (A body no row moves keeps the zero it was given: `still`.)
-        for (row, &x) in self.rows.iter().zip(&self.lambda) {
-            let (start, end) = (row.start as usize, row.end as usize);
-            for (entry, j) in self.entries[start..end].iter().zip(&self.jacobian[start..end]) {
-                let f = &mut self.force[entry.body as usize];
-                for d in 0..D {
-                    f[d] = if entry.opens { x * j[d] } else { f[d] + x * j[d] };
-                }
-            }
-        }
-        for &body in &self.still {
-            self.force[body as usize] = [0.0; 3];
-        }
-        // (In 2D the third components are zeros: the buffers are the caller's old answer's.)
+        // Per body Σₖ λₖ Jₖᵢ over the rows that move it, in row order (zero where none
+        // does), then aᵢ = Fᵢ/mᵢ + (Σₖ λₖ Jₖᵢ)/mᵢ, finite. (In 2D the third components are
+        // zeros: the buffers are the caller's old answer's.)
+        let (lambda, jacobian) = (&self.lambda, &self.jacobian);
+        let term = |movers: &Movers, m: usize| -> [f64; D] {
+            let x = lambda[movers.row[m] as usize];
+            let j = &jacobian[movers.entry[m] as usize];
+            std::array::from_fn(|d| x * j[d])
+        };
         let mut not_finite = 0.0;
-        for ((a, fc), body) in self.acceleration.iter_mut().zip(&mut self.force).zip(&self.per_body) {
+        let per_body = self.acceleration.iter_mut().zip(&mut self.force).zip(&self.per_body).zip(&self.movers);
+        for (((a, fc), body), movers) in per_body {
+            let f: [f64; D] = match movers.count {
+                0 => [0.0; D],
+                1 => term(movers, 0),
+                _ => {
+                    let (first, second) = (term(movers, 0), term(movers, 1));
+                    std::array::from_fn(|d| first[d] + second[d])
+                }
+            };
             for d in 0..D {
-                a[d] = body[d] + fc[d] * body[3];
+                fc[d] = f[d];
+                a[d] = body[d] + f[d] * body[3];
                 not_finite += a[d] * 0.0;
             }
             for d in D..3 {
@@ -700,26 +744,12 @@ impl BandLambda {
             Kernel::Tape { tape, scratch, .. } => tape.input_registers(scratch),
             Kernel::Batched(..) => &mut self.input[..],
         };
-        // Each number checked as it is loaded (the loads cover every input slot).
-        let mut in_range_all = true;
-        for &(s, start, width) in &self.loads {
-            let at = start as usize;
-            // One to three numbers, copied by hand (a copy of a variable length is a call).
-            match (env.get(s), width) {
-                (Some(Value::Scalar(x)), 1) => {
-                    input[at] = x;
-                    in_range_all &= in_range(x);
-                }
-                (Some(Value::Vector([x, y, _])), 2) => {
-                    (input[at], input[at + 1]) = (x, y);
-                    in_range_all &= in_range(x) & in_range(y);
-                }
-                (Some(Value::Vector([x, y, z])), 3) => {
-                    (input[at], input[at + 1], input[at + 2]) = (x, y, z);
-                    in_range_all &= in_range(x) & in_range(y) & in_range(z);
-                }
-                _ => return false,
-            }
+        let loaded = match self.dim {
+            2 => load::<2>(input, &self.vectors, &self.scalars, env),
+            _ => load::<3>(input, &self.vectors, &self.scalars, env),
+        };
+        if !loaded {
+            return false;
         }
         let len = self.output.len() - 1;
         let output = &mut self.output[..len];
@@ -729,6 +759,34 @@ impl BandLambda {
             Kernel::Tape { compiled: Some(compiled), .. } => compiled.eval(&self.input, output),
             Kernel::Tape { tape, scratch, .. } => tape.eval_in_registers(scratch),
         }
-        in_range_all
+        true
     }
+}
+
+/// The inputs from `env` into `input` (the vectors' `D` components from slot 0, then the
+/// scalars: `BandLambda`'s layout), each number checked as it is stored: false when a
+/// symbol has no value (or one of another kind), or a number is not zero or of a magnitude
+/// within [`INPUT_RANGE`].
+fn load<const D: usize>(input: &mut [f64], vectors: &[Symbol], scalars: &[Symbol], env: &Env) -> bool {
+    let Some((head, tail)) = input.split_at_mut_checked(vectors.len() * D) else {
+        return false;
+    };
+    let mut all = true;
+    for (slot, &s) in head.as_chunks_mut::<D>().0.iter_mut().zip(vectors) {
+        let Some(Value::Vector(v)) = env.get(s) else {
+            return false;
+        };
+        for d in 0..D {
+            slot[d] = v[d];
+            all &= in_range(v[d]);
+        }
+    }
+    for (slot, &s) in tail.iter_mut().zip(scalars) {
+        let Some(Value::Scalar(x)) = env.get(s) else {
+            return false;
+        };
+        *slot = x;
+        all &= in_range(x);
+    }
+    all
 }

@@ -211,6 +211,12 @@ enum S {
     /// `NegMulA` and a negated product of the same accumulator: `r[d2] = −(acc·b)`, then
     /// `r[d] = −(acc·c)`.
     NegMulA2,
+    // Superinstructions that run on into the next slot: its step (a `Sub2`, with its own
+    // operands and results) follows in the same dispatch, after this one's stores.
+    /// `Sub2`, then the next slot's `Sub2` (four differences: a chain's links).
+    Sub2Sub2,
+    /// `Sub2SqAddSqA`, then the next slot's `Sub2` (a chain's row: ḋ, c = ḋ·ḋ, then a J).
+    Sub2SqAddSqASub2,
 }
 
 /// One instruction of single-state evaluation: `r[d] = op(a, b, c, e)` (operands as in
@@ -417,7 +423,18 @@ fn fuse(steps: Vec<Step>) -> Vec<Step> {
         let s = steps[k];
         let (t, u) = (steps.get(k + 1), steps.get(k + 2));
         let ops = (s.op, t.map(|t| t.op), u.map(|u| u.op));
+        // The two that run on into the next slot push their own step here and leave the
+        // `Sub2` they run on into as the next slot's step (pushed below). Two differences
+        // before a square sum are left to pair with it (`Sub2SqAddSqASub2`).
         let (step, n) = match (ops, t, u) {
+            ((S::Sub2, Some(S::SqAddSqA), Some(S::Sub2)), Some(t), Some(u)) if t.c == s.d2 => {
+                out.push(Step { op: S::Sub2SqAddSqASub2, d3: s.d2, d2: s.d, d: t.d, ..s });
+                (*u, 3)
+            }
+            ((S::Sub2, Some(S::Sub2), u), Some(t), _) if u != Some(S::SqAddSqA) => {
+                out.push(Step { op: S::Sub2Sub2, ..s });
+                (*t, 2)
+            }
             ((S::MulMulAddA, Some(S::MulAddC), Some(S::MulA)), Some(t), Some(u)) => {
                 let op = S::MulMulAddAMulAddCMulA;
                 (Step { op, d3: s.d, d2: t.d, d: u.d, g: t.a, h: t.b, k: u.b, ..s }, 3)
@@ -979,7 +996,8 @@ impl Tape {
         // Every register access of the loop goes through `regs`, so reads and stores of one
         // step may interleave.
         let regs = r.as_mut_ptr();
-        for s in &self.steps {
+        let mut steps = self.steps.iter();
+        while let Some(mut s) = steps.next() {
             // SAFETY: `from_program` only writes register numbers below `n_regs` into `steps`
             // (asserted there), and `r` has exactly `n_regs` registers (the caller's); an
             // input slot `k < n_inputs` is an element of `inputs`.
@@ -1260,6 +1278,31 @@ impl Tape {
                     let (b, c) = (reg(b), reg(c));
                     set(d2, -(acc * b));
                     -(acc * c)
+                }
+                S::Sub2Sub2 | S::Sub2SqAddSqASub2 => {
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    let (d2, d3) = pair(&s.d23);
+                    let (x, y) = (reg(a) - reg(b), reg(c) - reg(e));
+                    if s.op == S::Sub2Sub2 {
+                        set(d2, x);
+                        set(s.d, y);
+                    } else {
+                        set(d3, x);
+                        set(d2, y);
+                        set(s.d, y * y + x * x);
+                    }
+                    // The next slot's `Sub2` (`fuse` put one there), read after these stores.
+                    let Some(next) = steps.next() else {
+                        break;
+                    };
+                    s = next;
+                    let (a, b) = pair(&s.ab);
+                    let (c, e) = pair(&s.ce);
+                    let (d2, _) = pair(&s.d23);
+                    let (a, b, c, e) = (reg(a), reg(b), reg(c), reg(e));
+                    set(d2, a - b);
+                    c - e
                 }
             };
             set(s.d, x);
@@ -1674,5 +1717,81 @@ mod tests {
                 tape.eval(&inputs, &mut scratch, &mut out);
             }
         }
+    }
+
+    /// Random programs of the shapes the steps that run on into the next slot merge (four
+    /// differences; two differences, their square sum and two more differences: a chain's
+    /// links and rows), among other operations, the operands inputs or earlier values (the
+    /// previous differences among them, read after they are stored): single-state
+    /// evaluation, copied out and left in the registers, gives the lanes' bits, and the
+    /// tapes run both kinds of step.
+    #[test]
+    fn steps_that_run_on_compute_the_lanes_numbers() {
+        // A difference of two earlier values, an output.
+        fn sub(rng: &mut Rng, ops: &mut Vec<Op>, outputs: &mut Vec<Val>) -> Val {
+            let (a, b) = (below(rng, ops.len()) as Val, below(rng, ops.len()) as Val);
+            ops.push(Op::Sub(a, b));
+            outputs.push(ops.len() as Val - 1);
+            ops.len() as Val - 1
+        }
+        let mut rng = Rng::new(0x2545_f491_4f6c_dd1d);
+        let (mut fours, mut rows) = (0, 0);
+        for case in 0..300 {
+            let n_inputs = 1 + below(&mut rng, 2 * IN_PLACE_MAX);
+            let mut ops: Vec<Op> = (0..n_inputs as u32).map(Op::Input).collect();
+            let mut outputs: Vec<Val> = Vec::new();
+            for _ in 0..1 + below(&mut rng, 10) {
+                match below(&mut rng, 3) {
+                    0 => {
+                        for _ in 0..4 {
+                            sub(&mut rng, &mut ops, &mut outputs);
+                        }
+                    }
+                    1 => {
+                        let (x, y) = (sub(&mut rng, &mut ops, &mut outputs), sub(&mut rng, &mut ops, &mut outputs));
+                        ops.push(Op::Mul(x, x));
+                        ops.push(Op::Mul(y, y));
+                        let n = ops.len() as Val;
+                        ops.push(Op::Add(n - 2, n - 1));
+                        outputs.push(n);
+                        sub(&mut rng, &mut ops, &mut outputs);
+                        sub(&mut rng, &mut ops, &mut outputs);
+                    }
+                    _ => {
+                        let (a, b) = (below(&mut rng, ops.len()) as Val, below(&mut rng, ops.len()) as Val);
+                        ops.push(if below(&mut rng, 2) == 0 { Op::Mul(a, b) } else { Op::Div(a, b) });
+                        outputs.push(ops.len() as Val - 1);
+                    }
+                }
+            }
+            let program = Program {
+                ops,
+                n_inputs,
+                input_ranges: (0..n_inputs).map(|j| j..j + 1).collect(),
+                output_ranges: (0..outputs.len()).map(|k| k..k + 1).collect(),
+                outputs,
+            };
+            let tape = Tape::from_program(&program);
+            fours += usize::from(tape.steps.iter().any(|s| s.op == S::Sub2Sub2));
+            rows += usize::from(tape.steps.iter().any(|s| s.op == S::Sub2SqAddSqASub2));
+            let (mut scratch, mut lanes) = (tape.scratch(), tape.batch_scratch());
+            let (mut out, mut want) = (vec![0.0; tape.output_len()], vec![0.0; tape.output_len()]);
+            for _ in 0..4 {
+                let inputs: Vec<f64> = (0..n_inputs).map(|_| rng.uniform(-2.0, 2.0)).collect();
+                tape.eval_batch(1, &inputs, &mut lanes, &mut want);
+                tape.eval(&inputs, &mut scratch, &mut out);
+                for (k, (x, w)) in out.iter().zip(&want).enumerate() {
+                    assert_eq!(x.to_bits(), w.to_bits(), "case {case} output {k}: eval against the lanes");
+                }
+                tape.input_registers(&mut scratch).copy_from_slice(&inputs);
+                tape.eval_in_registers(&mut scratch);
+                let registers = tape.registers(&scratch);
+                for (k, w) in want.iter().enumerate() {
+                    let got = registers[tape.output_register(k)];
+                    assert_eq!(got.to_bits(), w.to_bits(), "case {case} output {k}: in registers against the lanes");
+                }
+            }
+        }
+        assert!(fours > 30 && rows > 30, "tapes with Sub2Sub2 {fours}, with Sub2SqAddSqASub2 {rows}, of 300");
     }
 }
