@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Issue 17's hostile cases through the release binary, one row each: wall seconds, max RSS
 # (MB), exit code and the first line of the message (stderr, else stdout). The figures of
-# README.md's "Hostile input" table come from this script; the regression tests that pin the
-# answers are named in docs/fuzzing.md ("Issue 17 cases").
+# the table of issue 17's cases in README.md's "Constraint files" section come from this
+# script; the regression tests that pin the answers are named in docs/fuzzing.md ("Issue 17
+# cases").
 #
 # Not here: assertions (the tests in tests/hostile.rs, tests/cli_*.rs, tests/generate.rs,
 # tests/simulate.rs, tests/fuzz.rs and constraints/invalid/ hold them); any timer in the
