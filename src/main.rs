@@ -781,7 +781,7 @@ fn cmd_check(files: &[PathBuf]) -> ExitCode {
 /// `file:line:col` of a byte offset.
 fn location(name: &str, text: &str, offset: usize) -> String {
     let before = &text[..lagrange::report::diagnostic::floor_char(text, offset.min(text.len()))];
-    let line = before.matches('\n').count() + 1;
+    let line = lagrange::model::problem::line_of(text, before.len());
     let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
     format!("{name}:{line}:{col}")
 }

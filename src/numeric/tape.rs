@@ -1683,6 +1683,11 @@ mod tests {
             });
         }
         let outputs: Vec<Val> = (0..1 + below(rng, 12)).map(|_| below(rng, ops.len()) as Val).collect();
+        scalar_program(ops, n_inputs, outputs)
+    }
+
+    /// The program of `ops` whose `n_inputs` inputs and `outputs` are one number each.
+    fn scalar_program(ops: Vec<Op>, n_inputs: usize, outputs: Vec<Val>) -> Program {
         Program {
             ops,
             n_inputs,
@@ -1764,14 +1769,7 @@ mod tests {
                     }
                 }
             }
-            let program = Program {
-                ops,
-                n_inputs,
-                input_ranges: (0..n_inputs).map(|j| j..j + 1).collect(),
-                output_ranges: (0..outputs.len()).map(|k| k..k + 1).collect(),
-                outputs,
-            };
-            let tape = Tape::from_program(&program);
+            let tape = Tape::from_program(&scalar_program(ops, n_inputs, outputs));
             fours += usize::from(tape.steps.iter().any(|s| s.op == S::Sub2Sub2));
             rows += usize::from(tape.steps.iter().any(|s| s.op == S::Sub2SqAddSqASub2));
             let (mut scratch, mut lanes) = (tape.scratch(), tape.batch_scratch());

@@ -95,7 +95,7 @@ fn render_long_line(path: &str, text: &str, message: &str, span: &std::ops::Rang
     if line.chars().count() <= MAX_LINE_CHARS {
         return None;
     }
-    let number = text[..start].matches('\n').count() + 1;
+    let number = crate::model::problem::line_of(text, start);
     let before: Vec<char> = text[line_start..start].chars().collect();
     let column = before.len() + 1;
     let shown_before = before.len().min(MAX_LINE_CHARS / 3);
